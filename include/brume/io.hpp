@@ -1,0 +1,83 @@
+// brume — image and range-map files.
+//
+// Reading and writing go through OpenImageIO: PNG (8/16-bit), JPEG, TIFF
+// (integer and float), OpenEXR (any channel by name), PFM (Middlebury's: rows
+// stored bottom to top, the sign of the scale gives the byte order, 1 or 3
+// channels) and Radiance HDR.
+//
+// Colour convention: integer files (8/16-bit) are sRGB-encoded and float files
+// (EXR, PFM, float TIFF, HDR) are linear, unless a Transfer says otherwise.
+// Every effect works in linear light.
+//
+// Outputs are written to a temporary file beside the target and renamed into
+// place, so a failure never leaves a half-written file; OutputSet renames all
+// of a run's outputs only after every one of them has been written.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "brume/image.hpp"
+
+namespace brume {
+
+enum class Transfer { automatic, srgb, linear };
+Transfer parse_transfer(const std::string& s, const std::string& flag);  // throws brume::Error
+std::string to_string(Transfer t);
+
+struct FileInfo {
+  std::string path;
+  std::string format;  // OpenImageIO format name, e.g. "png", "openexr", "pnm"
+  bool integer = false;  // stored as 8/16/32-bit integers
+  int bits = 32;
+  std::vector<std::string> channel_names;
+  Transfer transfer = Transfer::linear;  // transfer function actually applied on read
+};
+
+// Colour image -> linear float RGB (grey is expanded to RGB, alpha dropped).
+Image read_color(const std::string& path, Transfer transfer = Transfer::automatic,
+                 FileInfo* info = nullptr);
+
+// One channel of raw values (no transfer function): integer files give their
+// counts (0..255 or 0..65535), float files their values. `channel` picks a
+// channel by name ("Z", "R", "depth.Z"); empty means the file must have one
+// channel (or several identical ones, like a grey PNG saved as RGB).
+Image read_scalar(const std::string& path, const std::string& channel = "",
+                  FileInfo* info = nullptr);
+
+// sRGB transfer (IEC 61966-2-1), exact piecewise form.
+float srgb_to_linear(float v);
+float linear_to_srgb(float v);
+
+struct WriteOptions {
+  std::string bits = "auto";   // auto | 8 | 16 | half | float
+  Transfer transfer = Transfer::automatic;  // automatic: sRGB for integer outputs of colour
+  bool is_color = true;        // false for data maps (transmission, scale): never sRGB-encoded
+  std::string description;     // embedded as ImageDescription where the format allows
+};
+
+// Check, before any work is done, that `path` can be written with `opts`
+// (known extension, existing writable directory, bit depth supported).
+void check_writable(const std::string& path, const WriteOptions& opts, const std::string& flag);
+
+class OutputSet {
+ public:
+  ~OutputSet();  // removes temporaries that were never committed
+  // Encode and write `img` to a temporary file beside `path`.
+  void write(const std::string& path, const Image& img, const WriteOptions& opts,
+             const std::string& flag);
+  // Rename every temporary into place.
+  void commit();
+
+ private:
+  std::vector<std::pair<std::string, std::string>> pending_;  // (temp, final)
+};
+
+// Convenience: write one file atomically.
+void write_image(const std::string& path, const Image& img, const WriteOptions& opts,
+                 const std::string& flag = "--out");
+
+// Lower-case hex SHA-256 of a file's bytes (for parameter records).
+std::string sha256_file(const std::string& path);
+
+}  // namespace brume

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# The single source of brume's dependencies: every Debian 12 package the build,
+# the demo, the tests and the benchmarks need. Idempotent; needs root (or sudo).
+set -euo pipefail
+PKGS=(
+  build-essential cmake pkg-config git
+  libopenimageio-dev openimageio-tools   # image I/O: PNG, JPEG, TIFF, OpenEXR, PFM, HDR
+  libopencv-imgproc-dev                  # benchmark peer (GaussianBlur); classic CV
+  libcli11-dev nlohmann-json3-dev        # command line, parameter records
+  libssl-dev                             # SHA-256 of input files in the records
+  libgtest-dev libbenchmark-dev          # tests, benchmarks
+)
+missing=()
+for p in "${PKGS[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PKGS[@]} packages present"
+  exit 0
+fi
+SUDO=""
+[ "$(id -u)" -eq 0 ] || SUDO="sudo"
+echo "install-deps: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -q
+$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"

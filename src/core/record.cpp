@@ -1,0 +1,64 @@
+// brume — parameter records (see brume/record.hpp).
+#include "brume/record.hpp"
+
+#include <chrono>
+#include <ctime>
+
+namespace brume {
+
+nlohmann::json record_header(const std::string& command, const std::vector<std::string>& argv) {
+  std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
+  return {{"tool", "brume"}, {"version", BRUME_VERSION}, {"command", command},
+          {"argv", argv}, {"time_utc", buf}};
+}
+
+nlohmann::json file_record(const std::string& path, const FileInfo& info, const Image& img) {
+  return {{"path", path},
+          {"sha256", sha256_file(path)},
+          {"format", info.format},
+          {"width", img.width},
+          {"height", img.height},
+          {"stored_bits", info.bits},
+          {"integer", info.integer},
+          {"channels", info.channel_names},
+          {"transfer_applied", to_string(info.transfer)}};
+}
+
+nlohmann::json diffusion_record(const DiffusionParams& p, const DiffusionPlan& plan) {
+  return {{"scheme", to_string(p.scheme)},
+          {"precision", to_string(p.precision)},
+          {"sigma0_px", p.sigma0},
+          {"rho_max", p.rho_max},
+          {"sigma_max_px", plan.sigma_max},
+          {"iterations", plan.iterations},
+          {"boundary", "half-sample mirror"}};
+}
+
+nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a) {
+  nlohmann::json j;
+  j["parameters"] = params_record(p, haze_param_table());
+  j["parameters"]["airlight"] = p.airlight_auto ? nlohmann::json("auto") : nlohmann::json(p.airlight);
+  j["parameters"]["composite"] = to_string(p.composite);
+  DiffusionParams dp = p.diffusion;
+  dp.sigma0 = p.sigma0;
+  j["diffusion"] = diffusion_record(dp, a.plan);
+  j["derived"] = {
+      {"range_max_m", a.range_max_m},
+      {"range_min_m", a.range_min_m},
+      {"unknown_range_pixels", a.unknown_pixels},
+      {"unknown_range_rule", "unknown (NaN, inf, 0) treated as R = R_max"},
+      {"kappa_a_normalised", a.kappa_a},
+      {"kappa_s_normalised", a.kappa_s},
+      {"extinction_per_m", a.extinction_per_m},
+      {"kappa_a_per_m", a.kappa_a / a.range_max_m},
+      {"kappa_s_per_m", a.kappa_s / a.range_max_m},
+      {"sigma_max_px", a.sigma_max},
+      {"airlight_linear_rgb", a.airlight},
+      {"airlight_source", a.airlight_source},
+  };
+  return j;
+}
+
+}  // namespace brume

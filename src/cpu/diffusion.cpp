@@ -1,0 +1,90 @@
+// brume — diffusion front end: planning (eq. 13 / eq. 18), validation of the
+// inputs, and dispatch to the CPU schedules.
+#include <cmath>
+#include <sstream>
+
+#include "brume/diffusion.hpp"
+#include "brume/error.hpp"
+#include "cpu/diffusion_kernels.hpp"
+
+namespace brume {
+
+std::string to_string(Scheme s) {
+  switch (s) {
+    case Scheme::standard: return "standard";
+    case Scheme::invariant: return "invariant";
+    case Scheme::invariant_exact: return "invariant-exact";
+  }
+  return "?";
+}
+
+std::string to_string(Precision p) { return p == Precision::f16 ? "f16" : "f32"; }
+
+Scheme parse_scheme(const std::string& s) {
+  if (s == "standard") return Scheme::standard;
+  if (s == "invariant") return Scheme::invariant;
+  if (s == "invariant-exact") return Scheme::invariant_exact;
+  throw Error("--scheme '" + s + "' is not a diffusion scheme; use standard, invariant or invariant-exact");
+}
+
+Precision parse_precision(const std::string& s) {
+  if (s == "f32") return Precision::f32;
+  if (s == "f16") return Precision::f16;
+  throw Error("--precision '" + s + "' is not supported; use f32 or f16");
+}
+
+DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max) {
+  if (!(p.sigma0 > 0.0) || !std::isfinite(p.sigma0))
+    throw Error("--sigma0 " + std::to_string(p.sigma0) + " px is not allowed; the inner scale must be a finite number > 0 (typically 0.5 to 1 px)");
+  if (!(p.rho_max > 0.0 && p.rho_max <= 0.25))
+    throw Error("rho_max " + std::to_string(p.rho_max) + " is outside (0, 0.25], the stability limit of the 2-D explicit scheme");
+  if (!std::isfinite(sigma_max) || sigma_max < p.sigma0) {
+    std::ostringstream m;
+    m << "largest target scale " << sigma_max << " px is below the inner scale --sigma0 "
+      << p.sigma0 << " px; diffusion can only add blur";
+    throw Error(m.str());
+  }
+  DiffusionPlan plan;
+  plan.sigma_max = sigma_max;
+  if (sigma_max == p.sigma0) return plan;  // nothing to do: N = 0
+  double t = p.scheme == Scheme::standard
+                 ? (sigma_max * sigma_max - p.sigma0 * p.sigma0) / (2.0 * p.rho_max)  // eq. 13
+                 : std::log(sigma_max / p.sigma0) / p.rho_max;                         // eq. 18
+  // A relative slack of 1e-12 keeps T = 1248.0000000001 (rounding noise) at 1248.
+  plan.iterations = static_cast<int>(std::ceil(t * (1.0 - 1e-12)));
+  if (plan.iterations < 1) plan.iterations = 1;
+  return plan;
+}
+
+DiffusionPlan diffuse(Image& f, const Image& sigma, double sigma_max,
+                      const DiffusionParams& p, const Exec& exec) {
+  if (f.channels != 4)
+    throw Error("diffusion needs a 4-channel image, got " + std::to_string(f.channels) + " channels");
+  if (sigma.channels != 1 || sigma.width != f.width || sigma.height != f.height)
+    throw Error("scale map " + sigma.size_string() + " (" + std::to_string(sigma.channels) +
+                " channels) does not match image " + f.size_string() + "; it must be one channel of the same size");
+  for (int y = 0; y < sigma.height; ++y) {
+    const float* s = sigma.row(y);
+    for (int x = 0; x < sigma.width; ++x) {
+      if (!std::isfinite(s[x]) || s[x] < p.sigma0 || s[x] > sigma_max) {
+        std::ostringstream m;
+        m << "scale map pixel (" << x << ", " << y << ") is " << s[x] << " px; every target scale must be finite and in [sigma0, sigma_max] = ["
+          << p.sigma0 << ", " << sigma_max << "] px";
+        if (s[x] < p.sigma0) m << " (a target below the inner scale --sigma0 would need sharpening; lower --sigma0 or raise the map)";
+        throw Error(m.str());
+      }
+    }
+  }
+  DiffusionPlan plan = plan_diffusion(p, sigma_max);
+  if (plan.iterations == 0) {
+    if (p.precision == Precision::f16) cpu::round_to_half(f.data.data(), f.data.size());
+    return plan;
+  }
+  if (exec.path == Path::reference)
+    cpu::diffuse_reference(f, sigma, plan, p);
+  else
+    cpu::diffuse_fast(f, sigma, plan, p, exec.threads);
+  return plan;
+}
+
+}  // namespace brume

@@ -1,0 +1,181 @@
+// brume — haze and fog with scattering blur (Hansard eq. 1-7); the equations
+// and units are stated in include/brume/haze.hpp. This file holds the
+// analysis step (image-wide statistics, once) and the per-pixel apply.
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "brume/error.hpp"
+#include "brume/haze.hpp"
+#include "shared/prelude_cpp.h"
+
+namespace brume {
+namespace sh = brume::shared;
+
+Composite parse_composite(const std::string& s) {
+  if (s == "premultiplied") return Composite::premultiplied;
+  if (s == "naive") return Composite::naive;
+  throw Error("--composite '" + s + "' is not a compositing mode; use premultiplied or naive");
+}
+
+std::string to_string(Composite c) { return c == Composite::naive ? "naive" : "premultiplied"; }
+
+const std::vector<ParamDecl<HazeParams>>& haze_param_table() {
+  static const double inf = INFINITY;
+  static const std::vector<ParamDecl<HazeParams>> t = {
+      {"kappa-a", "1 (per R_max)", &HazeParams::kappa_a, 0.0, inf, false,
+       "absorption coefficient times R_max (optical depth of absorption at the far end)"},
+      {"kappa-s", "1 (per R_max)", &HazeParams::kappa_s, 0.0, inf, false,
+       "scattering coefficient times R_max (optical depth of scattering at the far end)"},
+      {"lambda", "px", &HazeParams::lambda, 0.0, inf, false,
+       "blur gain: sigma_max = sigma0 + lambda sqrt(kappa_s)"},
+      {"sigma0", "px", &HazeParams::sigma0, 0.0, 1000.0, true, "inner scale of the input image"},
+      {"range-max", "m", &HazeParams::range_max_m, 0.0, inf, false,
+       "R_max, the range that normalises R and kappa; 0 = the largest finite range"},
+      {"visibility", "m", &HazeParams::visibility_m, 0.0, inf, false,
+       "meteorological visibility (extinction 3.912/V per metre); 0 = use --kappa-a/--kappa-s"},
+      {"albedo", "1", &HazeParams::albedo, 0.0, 1.0, false,
+       "single-scattering albedo splitting --visibility's extinction into kappa_s = albedo beta and "
+       "kappa_a = (1 - albedo) beta"},
+  };
+  return t;
+}
+
+namespace {
+
+bool known_range(float r) { return std::isfinite(r) && r != 0.0f; }
+
+float luminance(const float* c) { return 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2]; }
+
+}  // namespace
+
+HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const HazeParams& p) {
+  validate(p, haze_param_table());
+  if (rgb.channels != 3) throw Error("haze needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
+  if (range.channels != 1) throw Error("the range map must have one channel");
+  if (rgb.width != range.width || rgb.height != range.height)
+    throw Error("range map " + range.size_string() + " does not match image " + rgb.size_string() +
+                "; they must be the same size (resample the range map, or crop both)");
+  for (float c : p.airlight)
+    if (!p.airlight_auto && (!std::isfinite(c) || c < 0.0f))
+      throw Error("--airlight components must be finite and >= 0 (linear RGB), got " + std::to_string(c));
+
+  HazeAnalysis a;
+  double rmax = 0.0, rmin = INFINITY;
+  for (std::size_t i = 0; i < range.pixels(); ++i) {
+    const float r = range.data[i];
+    if (!known_range(r)) {
+      ++a.unknown_pixels;
+      continue;
+    }
+    if (r < 0.0f) {
+      std::ostringstream m;
+      m << "range map pixel (" << i % range.width << ", " << i / range.width << ") is " << r
+        << " m; ranges must be >= 0 (0, NaN and inf mark unknown pixels). Is this a signed depth "
+           "(OpenGL eye-space z is negative in front of the camera)?";
+      throw Error(m.str());
+    }
+    rmax = std::max(rmax, static_cast<double>(r));
+    rmin = std::min(rmin, static_cast<double>(r));
+  }
+  if (a.unknown_pixels == range.pixels())
+    throw Error("the range map has no known value (every pixel is NaN, inf or 0)");
+  a.range_min_m = rmin;
+  a.range_max_m = p.range_max_m > 0.0 ? p.range_max_m : rmax;
+  if (!(a.range_max_m > 0.0))
+    throw Error("R_max is 0: every known range is 0 m; give --range-max in metres");
+
+  if (p.visibility_m > 0.0) {
+    const double beta = 3.912 / p.visibility_m;  // Koschmieder, 2 % contrast
+    a.kappa_s = p.albedo * beta * a.range_max_m;
+    a.kappa_a = (1.0 - p.albedo) * beta * a.range_max_m;
+  } else {
+    a.kappa_a = p.kappa_a;
+    a.kappa_s = p.kappa_s;
+  }
+  a.extinction_per_m = (a.kappa_a + a.kappa_s) / a.range_max_m;
+  a.sigma_max = sh::brume_sigma_max(static_cast<float>(p.sigma0), static_cast<float>(p.lambda),
+                                    static_cast<float>(a.kappa_s));
+  DiffusionParams dp = p.diffusion;
+  dp.sigma0 = p.sigma0;
+  a.plan = plan_diffusion(dp, a.sigma_max);
+
+  if (!p.airlight_auto) {
+    a.airlight = p.airlight;
+    a.airlight_source = "given";
+  } else if (a.unknown_pixels >= std::max<std::size_t>(1, rgb.pixels() / 200)) {
+    // Sky (unknown range, >= 0.5 % of the frame): per-channel median colour.
+    std::array<std::vector<float>, 3> ch;
+    for (std::size_t i = 0; i < range.pixels(); ++i)
+      if (!known_range(range.data[i]))
+        for (int c = 0; c < 3; ++c) ch[c].push_back(rgb.data[i * 3 + c]);
+    for (int c = 0; c < 3; ++c) {
+      auto mid = ch[c].begin() + ch[c].size() / 2;
+      std::nth_element(ch[c].begin(), mid, ch[c].end());
+      a.airlight[c] = *mid;
+    }
+    a.airlight_source = "median colour of the unknown-range (sky) pixels";
+  } else {
+    // No sky in view: an achromatic airlight as bright as the 99th percentile
+    // of the image's luminance, the usual look of a bright overcast haze.
+    std::vector<float> y(rgb.pixels());
+    for (std::size_t i = 0; i < y.size(); ++i) y[i] = luminance(&rgb.data[i * 3]);
+    auto q = y.begin() + static_cast<std::ptrdiff_t>(0.99 * (y.size() - 1));
+    std::nth_element(y.begin(), q, y.end());
+    a.airlight = {*q, *q, *q};
+    a.airlight_source = "achromatic, 99th percentile of image luminance (no sky in view)";
+  }
+  return a;
+}
+
+HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p,
+                      const HazeAnalysis& a, const Exec& exec) {
+  const int W = rgb.width, H = rgb.height;
+  const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
+  const float kappa = static_cast<float>(a.kappa_a + a.kappa_s);
+  const float s0 = static_cast<float>(p.sigma0), smax = static_cast<float>(a.sigma_max);
+  const float inv_rmax = static_cast<float>(1.0 / a.range_max_m);
+  const bool naive = p.composite == Composite::naive;
+
+  HazeResult out;
+  Image f(W, H, 4);
+  Image tau0(W, H, 1);
+  out.scale = Image(W, H, 1);
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * W + x;
+      const float r = range.data[i];
+      const float rn = known_range(r) ? r * inv_rmax : 1.0f;  // unknown -> R_max
+      const float t = sh::brume_transmission(kappa, rn);
+      tau0.data[i] = t;
+      out.scale.data[i] = sh::brume_target_scale(rn, s0, smax);
+      const float w = naive ? 1.0f : t;  // eq. 2 premultiplies; naive blurs E itself
+      for (int c = 0; c < 3; ++c) f.data[i * 4 + c] = w * rgb.data[i * 3 + c];
+      f.data[i * 4 + 3] = t;
+    }
+
+  DiffusionParams dp = p.diffusion;
+  dp.sigma0 = p.sigma0;
+  diffuse(f, out.scale, a.sigma_max, dp, exec);
+
+  out.rgb = Image(W, H, 3);
+  out.transmission = Image(W, H, 1);
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * W + x;
+      const float alpha = f.data[i * 4 + 3];
+      out.transmission.data[i] = alpha;
+      for (int c = 0; c < 3; ++c) {
+        const float v = f.data[i * 4 + c];
+        out.rgb.data[i * 3 + c] = naive ? sh::brume_composite_naive(v, tau0.data[i], a.airlight[c])
+                                        : sh::brume_composite_premultiplied(v, alpha, a.airlight[c]);
+      }
+    }
+  return out;
+}
+
+}  // namespace brume

@@ -1,0 +1,278 @@
+// brume — image and range-map files through OpenImageIO (see brume/io.hpp).
+#include <OpenImageIO/imageio.h>
+#include <openssl/evp.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "brume/error.hpp"
+#include "brume/io.hpp"
+
+namespace brume {
+namespace fs = std::filesystem;
+
+Transfer parse_transfer(const std::string& s, const std::string& flag) {
+  if (s == "auto") return Transfer::automatic;
+  if (s == "srgb") return Transfer::srgb;
+  if (s == "linear") return Transfer::linear;
+  throw Error(flag + " '" + s + "' is not a transfer function; use auto, srgb or linear");
+}
+
+std::string to_string(Transfer t) {
+  switch (t) {
+    case Transfer::automatic: return "auto";
+    case Transfer::srgb: return "srgb";
+    case Transfer::linear: return "linear";
+  }
+  return "?";
+}
+
+float srgb_to_linear(float v) {
+  return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
+}
+
+float linear_to_srgb(float v) {
+  return v <= 0.0031308f ? v * 12.92f : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
+}
+
+namespace {
+
+struct Raw {
+  Image img;
+  FileInfo info;
+};
+
+// Read every channel of the first subimage as float. Integer files are read
+// as their raw counts (not normalised) when `counts` is set.
+Raw read_raw(const std::string& path, bool counts) {
+  std::error_code ec;
+  if (!fs::exists(path, ec))
+    throw Error("cannot read '" + path + "': no such file");
+  if (fs::is_directory(path, ec))
+    throw Error("cannot read '" + path + "': it is a directory, not an image file");
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) {
+    std::string e = OIIO::geterror();
+    throw Error("cannot read '" + path + "': " + (e.empty() ? "unknown or unsupported image format" : e));
+  }
+  const OIIO::ImageSpec& spec = in->spec();
+  Raw r;
+  r.info.path = path;
+  r.info.format = in->format_name();
+  r.info.integer = !spec.format.is_floating_point();
+  r.info.bits = static_cast<int>(spec.format.size() * 8);
+  if (spec.get_int_attribute("oiio:BitsPerSample", 0) > 0)
+    r.info.bits = spec.get_int_attribute("oiio:BitsPerSample");
+  r.info.channel_names.assign(spec.channelnames.begin(), spec.channelnames.end());
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
+    throw Error("cannot read '" + path + "': empty image");
+  r.img = Image(spec.width, spec.height, spec.nchannels);
+  bool ok = in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, r.img.data.data());
+  if (!ok) {
+    std::string e = in->geterror();
+    throw Error("cannot read '" + path + "': " + (e.empty() ? "read failed (truncated or corrupt file?)" : e));
+  }
+  in->close();
+  if (counts && r.info.integer) {
+    const double maxval = std::ldexp(1.0, static_cast<int>(spec.format.size() * 8)) - 1.0;
+    for (float& v : r.img.data) v = static_cast<float>(std::nearbyint(v * maxval));
+  }
+  return r;
+}
+
+}  // namespace
+
+Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
+  Raw r = read_raw(path, false);
+  Transfer t = transfer;
+  if (t == Transfer::automatic) t = r.info.integer ? Transfer::srgb : Transfer::linear;
+  r.info.transfer = t;
+  const Image& s = r.img;
+  Image out(s.width, s.height, 3);
+  const int c = s.channels;
+  for (std::size_t i = 0; i < s.pixels(); ++i) {
+    for (int k = 0; k < 3; ++k) {
+      float v = s.data[i * c + (c >= 3 ? k : 0)];
+      if (t == Transfer::srgb) v = srgb_to_linear(v);
+      out.data[i * 3 + k] = v;
+    }
+  }
+  if (info) *info = r.info;
+  return out;
+}
+
+Image read_scalar(const std::string& path, const std::string& channel, FileInfo* info) {
+  Raw r = read_raw(path, true);
+  const Image& s = r.img;
+  int pick = 0;
+  if (!channel.empty()) {
+    auto& names = r.info.channel_names;
+    auto it = std::find(names.begin(), names.end(), channel);
+    if (it == names.end()) {
+      std::string all;
+      for (auto& n : names) all += (all.empty() ? "" : ", ") + n;
+      throw Error("'" + path + "' has no channel named '" + channel + "'; its channels are: " + all);
+    }
+    pick = static_cast<int>(it - names.begin());
+  } else if (s.channels > 1) {
+    // A grey picture stored as RGB is one channel in disguise; anything else is ambiguous.
+    const int nc = std::min(s.channels, 3);
+    for (std::size_t i = 0; i < s.pixels(); ++i)
+      for (int k = 1; k < nc; ++k) {
+        float a = s.data[i * s.channels], b = s.data[i * s.channels + k];
+        if (!(a == b || (std::isnan(a) && std::isnan(b)))) {
+          std::string all;
+          for (auto& n : r.info.channel_names) all += (all.empty() ? "" : ", ") + n;
+          throw Error("'" + path + "' has " + std::to_string(s.channels) + " channels (" + all +
+                      ") that differ; say which one holds the values with --range-channel NAME");
+        }
+      }
+  }
+  Image out(s.width, s.height, 1);
+  for (std::size_t i = 0; i < s.pixels(); ++i) out.data[i] = s.data[i * s.channels + pick];
+  r.info.transfer = Transfer::linear;
+  if (info) *info = r.info;
+  return out;
+}
+
+namespace {
+
+std::string lower_ext(const std::string& path) {
+  std::string e = fs::path(path).extension().string();
+  std::transform(e.begin(), e.end(), e.begin(), [](unsigned char c) { return std::tolower(c); });
+  return e;
+}
+
+// The storage type for a file: explicit --bits, or the format's natural one.
+OIIO::TypeDesc storage_type(const std::string& path, const std::string& bits, const std::string& flag) {
+  const std::string e = lower_ext(path);
+  const bool is_png = e == ".png", is_jpg = e == ".jpg" || e == ".jpeg", is_tif = e == ".tif" || e == ".tiff";
+  const bool is_exr = e == ".exr", is_pfm = e == ".pfm", is_hdr = e == ".hdr";
+  std::string b = bits;
+  if (b == "auto") b = is_jpg ? "8" : (is_png || is_tif) ? "16" : "float";
+  auto bad = [&](const std::string& allowed) {
+    return Error(flag + " '" + path + "': bit depth '" + bits + "' is not available for " + e +
+                 " files; use " + allowed);
+  };
+  if (is_jpg && b != "8") throw bad("8");
+  if (is_png && b != "8" && b != "16") throw bad("8 or 16");
+  if (is_exr && b != "half" && b != "float") throw bad("half or float");
+  if ((is_pfm || is_hdr) && b != "float") throw bad("float");
+  if (b == "8") return OIIO::TypeDesc::UINT8;
+  if (b == "16") return OIIO::TypeDesc::UINT16;
+  if (b == "half") return OIIO::TypeDesc::HALF;
+  if (b == "float") return OIIO::TypeDesc::FLOAT;
+  throw Error("--bits '" + bits + "' is not a bit depth; use auto, 8, 16, half or float");
+}
+
+std::string temp_path_for(const std::string& path) {
+  fs::path p(path);
+  std::string name = "." + p.filename().string() + ".brume-tmp-" + std::to_string(::getpid()) + p.extension().string();
+  return (p.parent_path() / name).string();
+}
+
+}  // namespace
+
+void check_writable(const std::string& path, const WriteOptions& opts, const std::string& flag) {
+  if (path.empty()) throw Error(flag + " needs a file name");
+  const std::string e = lower_ext(path);
+  static const char* known[] = {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr", ".pfm", ".hdr"};
+  if (std::find(std::begin(known), std::end(known), e) == std::end(known))
+    throw Error(flag + " '" + path + "': unknown output type '" + e +
+                "'; use .png, .jpg, .tif, .exr, .pfm or .hdr");
+  storage_type(path, opts.bits, flag);
+  fs::path dir = fs::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec))
+    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
+  if (::access(dir.c_str(), W_OK) != 0)
+    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' is not writable");
+  if (fs::is_directory(path, ec)) throw Error(flag + " '" + path + "' is a directory");
+}
+
+OutputSet::~OutputSet() {
+  for (auto& [tmp, final_path] : pending_) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+  }
+}
+
+void OutputSet::write(const std::string& path, const Image& img, const WriteOptions& opts,
+                      const std::string& flag) {
+  check_writable(path, opts, flag);
+  const std::string e = lower_ext(path);
+  OIIO::TypeDesc type = storage_type(path, opts.bits, flag);
+  if ((e == ".hdr") && img.channels != 3)
+    throw Error(flag + " '" + path + "': Radiance HDR holds RGB only; write this " +
+                std::to_string(img.channels) + "-channel map as .exr, .pfm or .tif");
+  if (e == ".pfm" && img.channels != 1 && img.channels != 3)
+    throw Error(flag + " '" + path + "': PFM holds 1 or 3 channels");
+  const bool integer = type == OIIO::TypeDesc::UINT8 || type == OIIO::TypeDesc::UINT16;
+  Transfer t = opts.transfer;
+  if (t == Transfer::automatic) t = (integer && opts.is_color) ? Transfer::srgb : Transfer::linear;
+
+  std::vector<float> buf(img.data);
+  if (t == Transfer::srgb)
+    for (float& v : buf) v = linear_to_srgb(std::max(v, 0.0f));
+
+  auto out = OIIO::ImageOutput::create(path);
+  if (!out) throw Error(flag + " '" + path + "': cannot create a writer: " + OIIO::geterror());
+  OIIO::ImageSpec spec(img.width, img.height, img.channels, type);
+  if (img.channels == 1) spec.channelnames = {"Y"};
+  spec.attribute("oiio:ColorSpace", t == Transfer::srgb ? "sRGB" : "linear");
+  if (!opts.description.empty()) spec.attribute("ImageDescription", opts.description);
+  const std::string tmp = temp_path_for(path);
+  pending_.emplace_back(tmp, path);
+  if (!out->open(tmp, spec))
+    throw Error(flag + " '" + path + "': cannot open for writing: " + out->geterror());
+  if (!out->write_image(OIIO::TypeDesc::FLOAT, buf.data()))
+    throw Error(flag + " '" + path + "': write failed: " + out->geterror());
+  if (!out->close()) throw Error(flag + " '" + path + "': close failed: " + out->geterror());
+}
+
+void OutputSet::commit() {
+  for (auto& [tmp, final_path] : pending_) {
+    std::error_code ec;
+    fs::rename(tmp, final_path, ec);
+    if (ec) throw Error("cannot move the finished output into place at '" + final_path + "': " + ec.message());
+  }
+  pending_.clear();
+}
+
+void write_image(const std::string& path, const Image& img, const WriteOptions& opts,
+                 const std::string& flag) {
+  OutputSet set;
+  set.write(path, img, opts, flag);
+  set.commit();
+}
+
+std::string sha256_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error("cannot read '" + path + "' to hash it");
+  EVP_MD_CTX* ctx = EVP_MD_CTX_new();
+  EVP_DigestInit_ex(ctx, EVP_sha256(), nullptr);
+  std::vector<char> chunk(1 << 16);
+  while (in) {
+    in.read(chunk.data(), static_cast<std::streamsize>(chunk.size()));
+    if (in.gcount() > 0) EVP_DigestUpdate(ctx, chunk.data(), static_cast<std::size_t>(in.gcount()));
+  }
+  unsigned char md[EVP_MAX_MD_SIZE];
+  unsigned int len = 0;
+  EVP_DigestFinal_ex(ctx, md, &len);
+  EVP_MD_CTX_free(ctx);
+  std::ostringstream hex;
+  for (unsigned int i = 0; i < len; ++i) {
+    char b[3];
+    std::snprintf(b, sizeof b, "%02x", md[i]);
+    hex << b;
+  }
+  return hex.str();
+}
+
+}  // namespace brume

@@ -1,0 +1,75 @@
+// brume — per-pixel maths of the haze effect and the diffusion schemes.
+//
+// Written once in the common subset of C++ and GLSL ES 3.20 (float scalars,
+// no pointers, no templates, explicit float literals): the CPU backend
+// includes it through prelude_cpp.h and the GPU backend embeds the same text
+// in its shaders, so both backends share the physics and differ only in the
+// schedule. Units: ranges normalised by R_max (R' = R / R_max), coefficients
+// normalised the other way (kappa' = kappa R_max), scales in pixels.
+
+// Beer-Lambert transmission (Hansard eq. 1): tau = exp(-(kappa_a + kappa_s) R).
+BRUME_FN float brume_transmission(float kappa_total_norm, float range_norm) {
+  return exp(-kappa_total_norm * range_norm);
+}
+
+// Largest blur scale (Hansard eq. 7): sigma_max = sigma0 + lambda sqrt(kappa_s').
+BRUME_FN float brume_sigma_max(float sigma0, float lambda, float kappa_s_norm) {
+  return sigma0 + lambda * sqrt(kappa_s_norm);
+}
+
+// Target scale (Hansard eq. 7), the R^{3/2} law that approximates Premoze's
+// multiple-scattering blur (eq. 5-6). R' is clamped to [0, 1] here: points
+// beyond R_max (sky) get sigma_max, never more.
+BRUME_FN float brume_target_scale(float range_norm, float sigma0, float sigma_max) {
+  float r = clamp(range_norm, 0.0f, 1.0f);
+  return sigma0 + r * sqrt(r) * (sigma_max - sigma0);
+}
+
+// Per-pixel rate of the standard scheme (eq. 13): rho = (sigma^2 - s0^2)/(2N).
+BRUME_FN float brume_standard_rate(float sigma, float sigma0, float iterations) {
+  return (sigma * sigma - sigma0 * sigma0) / (2.0f * iterations);
+}
+
+// Per-pixel rate of the invariant schemes (eq. 18): rho = ln(sigma/s0)/N.
+BRUME_FN float brume_invariant_rate(float sigma, float sigma0, float iterations) {
+  return log(sigma / sigma0) / iterations;
+}
+
+// (e^{2 rho} - 1) / (2 rho) with its limit 1 at rho -> 0: the factor by which
+// the exact step variance sigma_k^2 (e^{2 rho} - 1) exceeds the published
+// scheme's 2 rho sigma_k^2. The series is used below 1e-3, where the direct
+// form loses digits to cancellation (error < 1e-9 there).
+BRUME_FN float brume_step_variance_ratio(float rho) {
+  float x = 2.0f * rho;
+  if (x < 1.0e-3f) return 1.0f + x * (0.5f + x / 6.0f);
+  return (exp(x) - 1.0f) / x;
+}
+
+// Offset h whose linearly interpolated two-tap sample has second moment m:
+// h^2 + f(1 - f) = m with f = frac(h). The left side is the piecewise-linear
+// interpolation of h^2 between integers, so with n = floor(sqrt(m)) the
+// solution is h = (m + n(n + 1)) / (2n + 1). Exact for every m >= 0.
+BRUME_FN float brume_offset_for_moment(float m) {
+  float n = floor(sqrt(m));
+  return (m + n * (n + 1.0f)) / (2.0f * n + 1.0f);
+}
+
+// Neighbour offset at iteration k for a pixel whose current scale is sigma_k
+// and whose rate is rho. Published scheme (eq. 18): h = sigma_k. Exact
+// variant: h such that 2 rho (h^2 + f(1-f)) = sigma_k^2 (e^{2 rho} - 1).
+BRUME_FN float brume_invariant_offset(float sigma_k, float rho, bool exact) {
+  if (!exact) return sigma_k;
+  return brume_offset_for_moment(sigma_k * sigma_k * brume_step_variance_ratio(rho));
+}
+
+// Premultiplied composite with airlight (Hansard eq. 4), one channel:
+// out = F + (1 - alpha) B, alpha the *blurred* transmission.
+BRUME_FN float brume_composite_premultiplied(float f, float alpha, float airlight) {
+  return f + (1.0f - alpha) * airlight;
+}
+
+// The naive, non-premultiplied composite the paper warns against (ghost
+// edges): out = tau0 E_blurred + (1 - tau0) B with the unblurred tau0.
+BRUME_FN float brume_composite_naive(float e_blurred, float tau0, float airlight) {
+  return tau0 * e_blurred + (1.0f - tau0) * airlight;
+}

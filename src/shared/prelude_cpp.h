@@ -1,0 +1,18 @@
+// Lets the per-pixel maths in src/shared/*.glsl compile as C++.
+// GLSL ES 3.20 has float scalars, exp/sqrt/floor/clamp/mix built in and
+// passes by value; this prelude gives C++ the same vocabulary, so the same
+// source text is compiled by the CPU backend and embedded in the shaders.
+#pragma once
+#include <cmath>
+
+namespace brume::shared {
+#define BRUME_FN inline
+using std::exp;
+using std::floor;
+using std::log;
+using std::sqrt;
+inline float clamp(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
+inline float mix(float a, float b, float t) { return a + t * (b - a); }
+#include "shared/haze_math.glsl"
+#undef BRUME_FN
+}  // namespace brume::shared

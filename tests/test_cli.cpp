@@ -1,0 +1,174 @@
+// The command-line tool end to end: a real run with every auxiliary output and
+// the parameter record, the demo, and the error paths (clear message naming
+// the file or flag, non-zero exit, no output left behind).
+#include <OpenImageIO/imageio.h>
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "brume/io.hpp"
+#include "test_util.hpp"
+
+using namespace brume;
+using namespace brume::test;
+namespace fs = std::filesystem;
+
+namespace {
+
+struct CliRun {
+  int status;
+  std::string output;
+};
+
+CliRun run(const std::string& args) {
+  std::string cmd = std::string(BRUME_CLI) + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  CliRun r{-1, ""};
+  std::array<char, 4096> buf;
+  while (std::fgets(buf.data(), buf.size(), p)) r.output += buf.data();
+  int st = pclose(p);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  return r;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  fs::path dir;
+  std::string img, range, range16;
+  void SetUp() override {
+    dir = fs::temp_directory_path() / ("brume_test_cli_" + std::to_string(::getpid()) + "_" +
+                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir);
+    Image rgb(48, 32, 3), r(48, 32, 1);
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 48; ++x) {
+        for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = ((x / 4 + y / 4 + c) % 2) ? 0.8f : 0.1f;
+        r.at(x, y) = y < 6 ? NAN : 2.0f + 0.5f * (32 - y);
+      }
+    img = (dir / "img.png").string();
+    range = (dir / "range.exr").string();
+    write_image(img, rgb, WriteOptions{});
+    WriteOptions data;
+    data.is_color = false;
+    write_image(range, r, data);
+    // The same range in millimetres as 16-bit counts.
+    Image mm = r;
+    for (float& v : mm.data) v = std::isfinite(v) ? v * 1000.0f / 65535.0f : 0.0f;
+    range16 = (dir / "range_mm.png").string();
+    write_image(range16, mm, data);
+  }
+  void TearDown() override { fs::remove_all(dir); }
+  std::string p(const std::string& name) const { return (dir / name).string(); }
+  bool only_inputs_left() const {
+    for (auto& e : fs::directory_iterator(dir)) {
+      std::string n = e.path().filename().string();
+      if (n != "img.png" && n != "range.exr" && n != "range_mm.png") return false;
+    }
+    return true;
+  }
+};
+
+}  // namespace
+
+TEST_F(Cli, HazeWritesEveryOutputAndARecord) {
+  CliRun r = run("haze --image " + img + " --range " + range + " --kappa-s 0.5 --lambda 8 --out " + p("out.png") +
+              " --transmission " + p("t.exr") + " --scale-map " + p("s.exr") + " --record " + p("rec.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* f : {"out.png", "t.exr", "s.exr", "rec.json"}) EXPECT_TRUE(fs::exists(p(f))) << f;
+  std::ifstream js(p("rec.json"));
+  nlohmann::json j = nlohmann::json::parse(js);
+  EXPECT_EQ(j["tool"], "brume");
+  EXPECT_EQ(j["haze"]["diffusion"]["iterations"], 10);  // ceil(ln(1 + 8 sqrt(0.5)) / 0.25)
+  EXPECT_NEAR(j["haze"]["derived"]["sigma_max_px"].get<double>(), 1 + 8 * std::sqrt(0.5), 1e-5);
+  EXPECT_NEAR(j["haze"]["derived"]["range_max_m"].get<double>(), 15.0, 1e-6);
+  EXPECT_EQ(j["haze"]["derived"]["unknown_range_pixels"], 6 * 48);
+  EXPECT_EQ(j["inputs"]["image"]["sha256"].get<std::string>().size(), 64u);
+  // The same record is embedded in the PNG.
+  auto in = OIIO::ImageInput::open(p("out.png"));
+  ASSERT_TRUE(in);
+  std::string desc = in->spec().get_string_attribute("ImageDescription");
+  EXPECT_NE(desc.find("\"sigma_max_px\""), std::string::npos);
+  // Scale map: sigma0 at R = 0 grows to sigma_max at R_max.
+  Image s = read_scalar(p("s.exr"));
+  const double smax = 1 + 8 * std::sqrt(0.5);
+  EXPECT_NEAR(s.at(0, 6), smax, 1e-5);                                   // R = 15 m = R_max
+  EXPECT_NEAR(s.at(0, 31), 1 + std::pow(2.5 / 15.0, 1.5) * (smax - 1), 1e-5);  // R = 2.5 m
+  EXPECT_NEAR(s.at(0, 0), smax, 1e-5);                                   // unknown -> R_max
+}
+
+TEST_F(Cli, IntegerRangeNeedsItsScale) {
+  CliRun r = run("haze --image " + img + " --range " + range16 + " --out " + p("o.png"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--range-scale"), std::string::npos) << r.output;
+  EXPECT_TRUE(only_inputs_left());
+  CliRun ok = run("haze --image " + img + " --range " + range16 + " --range-scale 0.001 --out " + p("o.exr") +
+               " --record " + p("r.json"));
+  ASSERT_EQ(ok.status, 0) << ok.output;
+  std::ifstream js(p("r.json"));
+  nlohmann::json j = nlohmann::json::parse(js);
+  EXPECT_NEAR(j["haze"]["derived"]["range_max_m"].get<double>(), 15.0, 1e-3);
+}
+
+TEST_F(Cli, ErrorPathsAreClearAndLeaveNothing) {
+  struct Case {
+    std::string args, must_contain;
+  };
+  const std::string io = " --out " + p("o.png");
+  std::ofstream(p("cut.png")) << "\x89PNG\r\n\x1a\n trunc";
+  Image small(20, 10, 1, 3.0f);
+  WriteOptions data;
+  data.is_color = false;
+  write_image(p("small.exr"), small, data);
+  const Case cases[] = {
+      {"haze --image " + p("nope.png") + " --range " + range + io, "nope.png"},
+      {"haze --image " + p("cut.png") + " --range " + range + io, "cut.png"},
+      {"haze --image " + img + " --range " + p("small.exr") + io, "20x10"},
+      {"haze --image " + img + " --range " + p("small.exr") + io, "48x32"},
+      {"haze --image " + img + " --range " + range + " --kappa-s -1" + io, "--kappa-s"},
+      {"haze --image " + img + " --range " + range + " --lambda nan" + io, "--lambda"},
+      {"haze --image " + img + " --range " + range + " --sigma0 0" + io, "--sigma0"},
+      {"haze --image " + img + " --range " + range + " --airlight 1,2" + io, "--airlight"},
+      {"haze --image " + img + " --range " + range + " --visibility 100 --kappa-s 1" + io, "--visibility"},
+      {"haze --image " + img + " --range " + range + " --scheme fast" + io, "--scheme"},
+      {"haze --image " + img + " --range " + range + " --out " + p("missing/dir/o.png"), "missing/dir"},
+      {"haze --image " + img + " --range " + range + " --out " + p("o.xyz"), "o.xyz"},
+      {"haze --image " + img + " --range " + range + " --out " + p("o.jpg") + " --bits 16", "--bits"},
+      {"haze --image " + img + " --range " + range + io + " --record " + p("no/r.json"), "--record"},
+      {"blur --image " + img + " --sigma 0.5" + io, "below the inner scale"},
+      {"blur --image " + img + io, "--sigma"},
+  };
+  for (const Case& c : cases) {
+    CliRun r = run(c.args);
+    EXPECT_NE(r.status, 0) << c.args << "\n" << r.output;
+    EXPECT_NE(r.output.find(c.must_contain), std::string::npos) << c.args << "\n" << r.output;
+    for (auto& e : fs::directory_iterator(dir)) {
+      std::string n = e.path().filename().string();
+      EXPECT_TRUE(n == "img.png" || n == "range.exr" || n == "range_mm.png" || n == "cut.png" || n == "small.exr")
+          << c.args << " left " << n;
+    }
+  }
+}
+
+TEST_F(Cli, BlurConstantScaleIsAGaussian) {
+  // brume blur --sigma S on a float file equals a true Gaussian of
+  // sqrt(S^2 - sigma0^2) (same 2e-3 RMS bound as the library test).
+  Image rgb(64, 48, 3);
+  for (std::size_t i = 0; i < rgb.data.size(); ++i) rgb.data[i] = static_cast<float>((i * 7919) % 1000) / 999.0f;
+  write_image(p("in.exr"), rgb, WriteOptions{});
+  CliRun r = run("blur --image " + p("in.exr") + " --sigma 4 --out " + p("b.exr"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  Image got = read_color(p("b.exr"));
+  Image ref = gaussian_reference(rgb, std::sqrt(15.0));
+  EXPECT_LE(compare(got, ref, 16).rms, 2e-3);
+}
+
+TEST_F(Cli, DemoWritesItsImages) {
+  CliRun r = run("demo --out-dir " + p("demo") + " --width 160 --height 112");
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* f : {"clean.png", "range.exr", "range-preview.png", "haze.png", "fog.png", "haze.json", "fog.json"})
+    EXPECT_TRUE(fs::exists(p("demo/" + std::string(f)))) << f;
+}

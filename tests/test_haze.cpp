@@ -1,0 +1,213 @@
+// Haze effect: closed forms (no medium, absorption only, Koschmieder
+// visibility), the airlight estimate, fast against reference, and real data.
+#include <cmath>
+#include <fstream>
+
+#include "brume/error.hpp"
+#include "brume/haze.hpp"
+#include "test_util.hpp"
+
+using namespace brume;
+using namespace brume::test;
+
+namespace {
+
+Image test_rgb(int w, int h) {
+  Image im(w, h, 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < 3; ++c)
+        im.at(x, y, c) = static_cast<float>(((x * (3 + c) + y * 7) % 23) / 22.0);
+  return im;
+}
+
+Image test_range(int w, int h, double near_m, double far_m) {
+  Image r(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) r.at(x, y) = static_cast<float>(near_m + (far_m - near_m) * (h - 1 - y) / (h - 1.0));
+  return r;
+}
+
+// Middlebury 2005 third-size scene -> linear RGB and range in metres.
+// Z[mm] = 160 * 3740 / (I + dmin) (SOURCES.md; f and disparity both scale by
+// 1/3 at third size), range = Z |ray| with f = 3740/3 px and the principal
+// point at the image centre. I = 0 is unknown.
+bool load_middlebury(const std::string& scene, Image& rgb, Image& range) {
+  const std::string dir = "middlebury2005_thirdsize/" + scene + "/";
+  if (!have_data(dir + "view1.png")) return false;
+  rgb = read_color(data_path(dir + "view1.png"));
+  Image disp = read_scalar(data_path(dir + "disp1.png"));
+  std::ifstream dm(data_path(dir + "dmin.txt"));
+  double dmin = 0;
+  dm >> dmin;
+  const double f = 3740.0 / 3.0, cx = (disp.width - 1) / 2.0, cy = (disp.height - 1) / 2.0;
+  range = Image(disp.width, disp.height, 1);
+  for (int y = 0; y < disp.height; ++y)
+    for (int x = 0; x < disp.width; ++x) {
+      const double I = disp.at(x, y);
+      if (I == 0) {
+        range.at(x, y) = NAN;
+        continue;
+      }
+      const double z = 160.0 * 3740.0 / (I + dmin) / 1000.0;
+      const double u = (x - cx) / f, v = (y - cy) / f;
+      range.at(x, y) = static_cast<float>(z * std::sqrt(1.0 + u * u + v * v));
+    }
+  return true;
+}
+
+// Mean squared 4-neighbour Laplacian of luminance over pixels whose mask is set.
+double hf_energy(const Image& im, const std::vector<char>& mask) {
+  auto Y = [&](int x, int y) { return 0.2126 * im.at(x, y, 0) + 0.7152 * im.at(x, y, 1) + 0.0722 * im.at(x, y, 2); };
+  double s = 0;
+  std::size_t n = 0;
+  for (int y = 1; y < im.height - 1; ++y)
+    for (int x = 1; x < im.width - 1; ++x) {
+      if (!mask[static_cast<std::size_t>(y) * im.width + x]) continue;
+      double l = Y(x - 1, y) + Y(x + 1, y) + Y(x, y - 1) + Y(x, y + 1) - 4 * Y(x, y);
+      s += l * l;
+      ++n;
+    }
+  return s / std::max<std::size_t>(n, 1);
+}
+
+}  // namespace
+
+TEST(Haze, NoMediumReturnsTheInput) {
+  // kappa_a = kappa_s = 0: tau = 1, sigma_max = sigma0 (no iterations), and
+  // eq. 4 adds (1 - 1) B = 0. Bit-exact.
+  Image rgb = test_rgb(40, 30), range = test_range(40, 30, 1, 50);
+  HazeParams p;
+  p.kappa_a = p.kappa_s = 0.0;
+  HazeAnalysis a = analyse_haze(rgb, range, p);
+  EXPECT_EQ(a.plan.iterations, 0);
+  HazeResult r = apply_haze(rgb, range, p, a);
+  EXPECT_EQ(r.rgb.data, rgb.data);
+  for (float t : r.transmission.data) EXPECT_EQ(t, 1.0f);
+}
+
+TEST(Haze, AbsorptionOnlyIsBeerLambertWithoutBlur) {
+  // kappa_s = 0: no blur (sigma_max = sigma0), out = E tau + (1 - tau) B with
+  // tau = exp(-kappa_a R / R_max), eq. 1 and 4, evaluated here in double.
+  // Tolerance 1e-6: float exp and two float products on values <= 1.
+  Image rgb = test_rgb(40, 30), range = test_range(40, 30, 2, 80);
+  HazeParams p;
+  p.kappa_a = 1.3;
+  p.kappa_s = 0.0;
+  p.airlight_auto = false;
+  p.airlight = {0.7f, 0.75f, 0.8f};
+  HazeAnalysis a = analyse_haze(rgb, range, p);
+  EXPECT_DOUBLE_EQ(a.range_max_m, 80.0);
+  HazeResult r = apply_haze(rgb, range, p, a);
+  for (std::size_t i = 0; i < rgb.pixels(); ++i) {
+    const double tau = std::exp(-1.3 * range.data[i] / 80.0);
+    EXPECT_NEAR(r.transmission.data[i], tau, 1e-6);
+    for (int c = 0; c < 3; ++c)
+      ASSERT_NEAR(r.rgb.data[i * 3 + c], rgb.data[i * 3 + c] * tau + (1 - tau) * p.airlight[c], 1e-6);
+  }
+}
+
+TEST(Haze, VisibilityIsTheTwoPercentContrastDistance) {
+  // Koschmieder: at R = V the transmission is exp(-3.912) = 0.0200. With
+  // lambda = 0 there is no blur, so the pixel at 1000 m shows it directly.
+  Image rgb = test_rgb(16, 16), range = test_range(16, 16, 100, 1000);
+  HazeParams p;
+  p.visibility_m = 1000.0;
+  p.albedo = 0.8;
+  p.lambda = 0.0;
+  HazeAnalysis a = analyse_haze(rgb, range, p);
+  EXPECT_NEAR(a.extinction_per_m, 3.912e-3, 1e-12);
+  EXPECT_NEAR(a.kappa_s / (a.kappa_a + a.kappa_s), 0.8, 1e-12);
+  HazeResult r = apply_haze(rgb, range, p, a);
+  EXPECT_NEAR(r.transmission.at(0, 0), 0.0200, 1e-4);  // top row is 1000 m
+  EXPECT_NEAR(r.transmission.at(0, 15), std::exp(-0.3912), 1e-6);
+}
+
+TEST(Haze, AirlightAutoIsTheSkyMedian) {
+  Image rgb = test_rgb(50, 40), range = test_range(50, 40, 1, 20);
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 50; ++x) {
+      range.at(x, y) = NAN;  // sky
+      rgb.at(x, y, 0) = 0.6f, rgb.at(x, y, 1) = 0.7f, rgb.at(x, y, 2) = 0.9f;
+    }
+  HazeAnalysis a = analyse_haze(rgb, range, HazeParams{});
+  EXPECT_EQ(a.unknown_pixels, 400u);
+  EXPECT_FLOAT_EQ(a.airlight[0], 0.6f);
+  EXPECT_FLOAT_EQ(a.airlight[2], 0.9f);
+  EXPECT_DOUBLE_EQ(a.range_max_m, 20.0);  // unknown pixels do not count
+}
+
+TEST(Haze, BadInputsAreErrors) {
+  Image rgb = test_rgb(10, 10), range = test_range(10, 12, 1, 5);
+  try {
+    analyse_haze(rgb, range, HazeParams{});
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("10x12"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("10x10"), std::string::npos) << e.what();
+  }
+  Image r2 = test_range(10, 10, 1, 5);
+  r2.at(3, 4) = -2.0f;
+  EXPECT_THROW(analyse_haze(rgb, r2, HazeParams{}), Error);
+  HazeParams p;
+  p.kappa_s = -0.1;
+  EXPECT_THROW(analyse_haze(rgb, test_range(10, 10, 1, 5), p), Error);
+  p.kappa_s = NAN;
+  EXPECT_THROW(analyse_haze(rgb, test_range(10, 10, 1, 5), p), Error);
+}
+
+TEST(Haze, FastPathMatchesReferenceOnRealData) {
+  Image rgb, range;
+  if (!load_middlebury("Moebius", rgb, range)) GTEST_SKIP() << "../shared/data/middlebury2005_thirdsize is absent";
+  HazeParams p;
+  p.kappa_s = 1.0;
+  p.lambda = 6.0;
+  HazeAnalysis a = analyse_haze(rgb, range, p);
+  Exec ref;
+  ref.path = Path::reference;
+  HazeResult fast = apply_haze(rgb, range, p, a), slow = apply_haze(rgb, range, p, a, ref);
+  // Same tolerance reasoning as DiffusionFastPath: float vs double rounding.
+  Diff d = compare(fast.rgb, slow.rgb);
+  EXPECT_LE(d.max_abs, 2e-5) << d;
+}
+
+TEST(Haze, RealSceneKeepsNearSharpAndBlursFar) {
+  // Middlebury 2005 Moebius (1.4-2.9 m): sigma grows as R'^{3/2}, so the
+  // nearest fifth of the scene keeps far more of its high-frequency energy
+  // than the farthest fifth. Energies are divided by the band's mean tau^2 so
+  // that only blur, not the loss of contrast, is measured.
+  Image rgb, range;
+  if (!load_middlebury("Moebius", rgb, range)) GTEST_SKIP() << "../shared/data/middlebury2005_thirdsize is absent";
+  HazeParams p;
+  p.kappa_s = 1.0;
+  p.lambda = 6.0;  // sigma_max = 7 px
+  HazeAnalysis a = analyse_haze(rgb, range, p);
+  HazeResult r = apply_haze(rgb, range, p, a);
+  for (float t : r.transmission.data) {
+    ASSERT_GE(t, 0.0f);
+    ASSERT_LE(t, 1.0f);
+  }
+  for (float v : r.rgb.data) ASSERT_TRUE(std::isfinite(v));
+  std::vector<float> known;
+  for (float v : range.data)
+    if (std::isfinite(v)) known.push_back(v);
+  std::sort(known.begin(), known.end());
+  const float q20 = known[known.size() / 5], q80 = known[known.size() * 4 / 5];
+  std::vector<char> near(range.pixels()), far(range.pixels());
+  double tn = 0, tf = 0;
+  std::size_t nn = 0, nf = 0;
+  for (std::size_t i = 0; i < range.pixels(); ++i) {
+    const float v = range.data[i];
+    near[i] = std::isfinite(v) && v <= q20;
+    far[i] = std::isfinite(v) && v >= q80;
+    const double t = r.transmission.data[i];
+    if (near[i]) tn += t * t, ++nn;
+    if (far[i]) tf += t * t, ++nf;
+  }
+  const double keep_near = hf_energy(r.rgb, near) / hf_energy(rgb, near) / (tn / nn);
+  const double keep_far = hf_energy(r.rgb, far) / hf_energy(rgb, far) / (tf / nf);
+  RecordProperty("keep_near", std::to_string(keep_near));
+  RecordProperty("keep_far", std::to_string(keep_far));
+  EXPECT_GT(keep_near, 4.0 * keep_far) << "near " << keep_near << ", far " << keep_far;
+  EXPECT_LT(keep_far, 0.1) << "far band should lose most high frequencies at sigma ~7 px";
+}

@@ -1,0 +1,104 @@
+// brume tests — shared helpers: data location, an independent Gaussian
+// reference, and comparison statistics.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "brume/image.hpp"
+#include "brume/io.hpp"
+
+namespace brume::test {
+
+inline std::string data_path(const std::string& rel) { return std::string(BRUME_DATA_DIR) + "/" + rel; }
+
+inline bool have_data(const std::string& rel) { return std::filesystem::exists(data_path(rel)); }
+
+#define BRUME_REQUIRE_DATA(rel)                                                              \
+  do {                                                                                       \
+    if (!::brume::test::have_data(rel))                                                      \
+      GTEST_SKIP() << "shared data '" << ::brume::test::data_path(rel)                       \
+                   << "' is absent; this real-data test needs ../shared/data beside the repo"; \
+  } while (0)
+
+// Half-sample mirror, written independently of the library's.
+inline int reflect(int i, int n) {
+  while (i < 0 || i >= n) i = i < 0 ? -1 - i : 2 * n - 1 - i;
+  return i;
+}
+
+// True Gaussian convolution in double precision: sampled kernel of radius
+// ceil(5 sigma) (truncation < 6e-7 of the mass), normalised, separable, with
+// the half-sample mirror boundary. Channels are independent.
+inline Image gaussian_reference(const Image& in, double sigma) {
+  const int W = in.width, H = in.height, C = in.channels;
+  if (sigma <= 0.0) return in;
+  const int r = static_cast<int>(std::ceil(5.0 * sigma));
+  std::vector<double> k(2 * r + 1);
+  double sum = 0.0;
+  for (int i = -r; i <= r; ++i) sum += k[i + r] = std::exp(-0.5 * i * i / (sigma * sigma));
+  for (double& v : k) v /= sum;
+  std::vector<double> tmp(in.data.size());
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      for (int c = 0; c < C; ++c) {
+        double a = 0.0;
+        for (int i = -r; i <= r; ++i) a += k[i + r] * in.data[(static_cast<size_t>(y) * W + reflect(x + i, W)) * C + c];
+        tmp[(static_cast<size_t>(y) * W + x) * C + c] = a;
+      }
+  Image out(W, H, C);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      for (int c = 0; c < C; ++c) {
+        double a = 0.0;
+        for (int i = -r; i <= r; ++i) a += k[i + r] * tmp[(static_cast<size_t>(reflect(y + i, H)) * W + x) * C + c];
+        out.data[(static_cast<size_t>(y) * W + x) * C + c] = static_cast<float>(a);
+      }
+  return out;
+}
+
+struct Diff {
+  double max_abs = 0.0, rms = 0.0, psnr = 0.0;
+  int worst_x = -1, worst_y = -1;
+};
+
+// Compare channels [0, nc) of a and b over the interior (border pixels excluded).
+inline Diff compare(const Image& a, const Image& b, int border = 0, int nc = -1) {
+  Diff d;
+  if (nc < 0) nc = a.channels;
+  double ss = 0.0;
+  std::size_t n = 0;
+  for (int y = border; y < a.height - border; ++y)
+    for (int x = border; x < a.width - border; ++x)
+      for (int c = 0; c < nc; ++c) {
+        double e = std::abs(static_cast<double>(a.at(x, y, c)) - b.at(x, y, c));
+        if (!(e <= d.max_abs)) d.max_abs = e, d.worst_x = x, d.worst_y = y;
+        ss += e * e;
+        ++n;
+      }
+  d.rms = n ? std::sqrt(ss / n) : 0.0;
+  d.psnr = d.rms > 0 ? -20.0 * std::log10(d.rms) : 999.0;
+  return d;
+}
+
+inline std::ostream& operator<<(std::ostream& o, const Diff& d) {
+  return o << "max " << d.max_abs << " at (" << d.worst_x << ", " << d.worst_y << "), rms " << d.rms << ", psnr "
+           << d.psnr << " dB";
+}
+
+// RGB -> RGBA with alpha 1 (the diffusion engine works on four channels).
+inline Image to_rgba(const Image& rgb) {
+  Image f(rgb.width, rgb.height, 4, 1.0f);
+  for (std::size_t i = 0; i < rgb.pixels(); ++i)
+    for (int c = 0; c < 3; ++c) f.data[i * 4 + c] = rgb.data[i * rgb.channels + c];
+  return f;
+}
+
+// A real [0,1] test image: Middlebury 2005 "Art", linear light, 463x370.
+inline const char* kArt = "middlebury2005_thirdsize/Art/view1.png";
+
+}  // namespace brume::test

@@ -1,0 +1,371 @@
+// brume — command-line tool: one subcommand per effect.
+//
+//   brume haze  --image IMG --range RANGE --out OUT [parameters]
+//   brume blur  --image IMG (--sigma S | --scale-map MAP) --out OUT
+//   brume demo  --out-dir DIR
+//
+// Every numeric effect parameter comes from its effect's declaration table
+// (brume/params.hpp): flag, unit, default, range and help are declared once.
+// Errors name the file or flag, the value, what is allowed and the fix; the
+// exit status is non-zero and no output file is left behind.
+#include <CLI/CLI.hpp>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <unistd.h>
+
+#include "brume/demo_scene.hpp"
+#include "brume/diffusion.hpp"
+#include "brume/error.hpp"
+#include "brume/haze.hpp"
+#include "brume/io.hpp"
+#include "brume/record.hpp"
+
+namespace fs = std::filesystem;
+using namespace brume;
+
+namespace {
+
+std::vector<std::string> g_argv;
+
+// Add every declared parameter of an effect as a --flag bound to its field.
+template <class P>
+void add_param_flags(CLI::App* app, P& p, const std::vector<ParamDecl<P>>& table,
+                     std::map<std::string, CLI::Option*>* opts = nullptr) {
+  for (const auto& d : table) {
+    CLI::Option* o = app->add_option(std::string("--") + d.name, p.*(d.field), describe(d))
+                         ->capture_default_str()
+                         ->type_name("NUM");
+    if (opts) (*opts)[d.name] = o;
+  }
+}
+
+std::array<float, 3> parse_rgb(const std::string& s, const std::string& flag) {
+  std::array<float, 3> v{};
+  std::stringstream ss(s);
+  std::string item;
+  int n = 0;
+  while (std::getline(ss, item, ',')) {
+    if (n >= 3) n = 4;
+    if (n < 3) {
+      try {
+        std::size_t used = 0;
+        v[n] = std::stof(item, &used);
+        if (used != item.size()) throw std::invalid_argument("junk");
+      } catch (const std::exception&) {
+        throw Error(flag + " '" + s + "': '" + item + "' is not a number; give R,G,B in linear light, e.g. 0.8,0.82,0.85, or auto");
+      }
+    }
+    ++n;
+  }
+  if (n != 3) throw Error(flag + " '" + s + "' must be three comma-separated numbers R,G,B (linear light) or auto");
+  for (float c : v)
+    if (!std::isfinite(c) || c < 0.0f)
+      throw Error(flag + " '" + s + "': components must be finite and >= 0");
+  return v;
+}
+
+// Write JSON atomically (temp + rename) after the images.
+struct JsonOut {
+  std::string path;
+  std::string tmp;
+  void write(const nlohmann::json& j) {
+    tmp = path + ".brume-tmp-" + std::to_string(::getpid());
+    std::ofstream f(tmp);
+    f << j.dump(2) << "\n";
+    f.close();
+    if (!f) throw Error("--record '" + path + "': write failed");
+  }
+  void commit() {
+    std::error_code ec;
+    fs::rename(tmp, path, ec);
+    if (ec) throw Error("--record '" + path + "': " + ec.message());
+    tmp.clear();
+  }
+  ~JsonOut() {
+    if (!tmp.empty()) {
+      std::error_code ec;
+      fs::remove(tmp, ec);
+    }
+  }
+};
+
+void check_record_path(const std::string& path) {
+  fs::path dir = fs::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec))
+    throw Error("--record '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
+  if (::access(dir.c_str(), W_OK) != 0)
+    throw Error("--record '" + path + "': directory '" + dir.string() + "' is not writable");
+}
+
+// Range map in metres: float files as stored, integer files scaled by --range-scale.
+Image load_range(const std::string& path, const std::string& channel, std::optional<double> scale,
+                 FileInfo* info) {
+  Image r = read_scalar(path, channel, info);
+  if (info->integer && !scale)
+    throw Error("--range '" + path + "' stores " + std::to_string(info->bits) +
+                "-bit integers; say how many metres one count is with --range-scale "
+                "(e.g. 0.001 for millimetres, 1/256 = 0.00390625 for KITTI depth PNGs)");
+  const double s = scale.value_or(1.0);
+  if (!(s > 0.0) || !std::isfinite(s))
+    throw Error("--range-scale " + std::to_string(s) + " is not allowed: metres per unit must be finite and > 0");
+  if (s != 1.0)
+    for (float& v : r.data) v = static_cast<float>(v * s);
+  return r;
+}
+
+struct Common {
+  std::string image, image_transfer = "auto", out, bits = "auto", out_transfer = "auto", record;
+  int threads = 0;
+  bool reference = false;
+};
+
+void add_common(CLI::App* app, Common& c) {
+  app->add_option("--image", c.image, "input colour image (PNG, JPEG, TIFF, EXR, PFM, HDR)")->required();
+  app->add_option("--image-transfer", c.image_transfer,
+                  "transfer function of the input: auto (integer files sRGB, float files linear), srgb, linear")
+      ->capture_default_str();
+  app->add_option("--out", c.out, "output image (.png .jpg .tif .exr .pfm .hdr)")->required();
+  app->add_option("--bits", c.bits, "output storage: auto (PNG/TIFF 16, JPEG 8, EXR/PFM/HDR float), 8, 16, half, float")
+      ->capture_default_str();
+  app->add_option("--out-transfer", c.out_transfer,
+                  "transfer function of the output: auto (sRGB for 8/16-bit, linear for float), srgb, linear")
+      ->capture_default_str();
+  app->add_option("--record", c.record, "write a JSON record of every parameter, derived value and input hash");
+  app->add_option("--threads", c.threads, "worker threads (0 = all cores); results do not depend on it")
+      ->capture_default_str();
+  app->add_flag("--reference", c.reference, "use the scalar double-precision reference path (slow; for checking)");
+}
+
+int run_haze(const Common& c, HazeParams p, const std::string& range_path, const std::string& range_channel,
+             std::optional<double> range_scale, const std::string& airlight, const std::string& scheme,
+             const std::string& precision, const std::string& composite, const std::string& transmission_out,
+             const std::string& scale_out, bool kappa_given, bool albedo_given) {
+  p.diffusion.scheme = parse_scheme(scheme);
+  p.diffusion.precision = parse_precision(precision);
+  p.composite = parse_composite(composite);
+  if (airlight == "auto") {
+    p.airlight_auto = true;
+  } else {
+    p.airlight_auto = false;
+    p.airlight = parse_rgb(airlight, "--airlight");
+  }
+  if (p.visibility_m > 0.0 && kappa_given)
+    throw Error("--visibility sets the extinction; do not also give --kappa-a/--kappa-s (use --albedo to split it)");
+  if (albedo_given && !(p.visibility_m > 0.0))
+    throw Error("--albedo only applies with --visibility; with --kappa-a/--kappa-s the split is explicit");
+  validate(p, haze_param_table());
+  const Transfer in_t = parse_transfer(c.image_transfer, "--image-transfer");
+  WriteOptions wo;
+  wo.bits = c.bits;
+  wo.transfer = parse_transfer(c.out_transfer, "--out-transfer");
+  WriteOptions data_opts;
+  data_opts.is_color = false;
+  data_opts.bits = "auto";
+  // Validate every output location before any work.
+  check_writable(c.out, wo, "--out");
+  if (!transmission_out.empty()) check_writable(transmission_out, data_opts, "--transmission");
+  if (!scale_out.empty()) {
+    check_writable(scale_out, data_opts, "--scale-map");
+    std::string e = fs::path(scale_out).extension().string();
+    if (e == ".png" || e == ".jpg" || e == ".jpeg")
+      throw Error("--scale-map '" + scale_out + "': sigma is in pixels and exceeds 1; write it to .exr, .pfm or .tif (float)");
+  }
+  if (!c.record.empty()) check_record_path(c.record);
+
+  FileInfo img_info, range_info;
+  Image rgb = read_color(c.image, in_t, &img_info);
+  Image range = load_range(range_path, range_channel, range_scale, &range_info);
+  HazeAnalysis a = analyse_haze(rgb, range, p);
+  Exec ex;
+  ex.threads = c.threads;
+  ex.path = c.reference ? Path::reference : Path::fast;
+  HazeResult r = apply_haze(rgb, range, p, a, ex);
+
+  nlohmann::json rec = record_header("haze", g_argv);
+  rec["inputs"] = {{"image", file_record(c.image, img_info, rgb)},
+                   {"range", file_record(range_path, range_info, range)}};
+  rec["inputs"]["range"]["scale_m_per_unit"] = range_scale.value_or(1.0);
+  if (!range_channel.empty()) rec["inputs"]["range"]["channel"] = range_channel;
+  rec["haze"] = haze_record(p, a);
+  rec["execution"] = {{"path", c.reference ? "reference" : "fast"}, {"threads", c.threads}};
+
+  if (wo.bits == "auto" && img_info.integer && (img_info.bits == 8 || img_info.bits == 16)) {
+    std::string e = fs::path(c.out).extension().string();
+    if (e == ".png" || e == ".tif" || e == ".tiff") wo.bits = std::to_string(img_info.bits);
+  }
+  wo.description = rec.dump();
+  OutputSet outs;
+  outs.write(c.out, r.rgb, wo, "--out");
+  if (!transmission_out.empty()) outs.write(transmission_out, r.transmission, data_opts, "--transmission");
+  if (!scale_out.empty()) outs.write(scale_out, r.scale, data_opts, "--scale-map");
+  JsonOut jr{c.record, ""};
+  if (!c.record.empty()) jr.write(rec);
+  outs.commit();
+  if (!c.record.empty()) jr.commit();
+  std::fprintf(stderr, "brume haze: %s  R_max %.4g m  sigma_max %.3g px  %d iterations (%s)\n", c.out.c_str(),
+               a.range_max_m, a.sigma_max, a.plan.iterations, to_string(p.diffusion.scheme).c_str());
+  return 0;
+}
+
+int run_blur(const Common& c, double sigma, const std::string& scale_map, double sigma0,
+             const std::string& scheme, const std::string& precision) {
+  DiffusionParams dp;
+  dp.scheme = parse_scheme(scheme);
+  dp.precision = parse_precision(precision);
+  dp.sigma0 = sigma0;
+  if (!(sigma0 > 0.0) || !std::isfinite(sigma0))
+    throw Error("--sigma0 " + std::to_string(sigma0) + " is not allowed: the inner scale must be finite and > 0 px");
+  if (scale_map.empty()) {
+    if (!std::isfinite(sigma) || sigma < sigma0) {
+      std::ostringstream m;
+      m << "--sigma " << sigma << " px is below the inner scale --sigma0 " << sigma0
+        << " px (or not finite); diffusion can only add blur. The Gaussian applied is sqrt(sigma^2 - sigma0^2): give --sigma >= --sigma0";
+      throw Error(m.str());
+    }
+  }
+  const Transfer in_t = parse_transfer(c.image_transfer, "--image-transfer");
+  WriteOptions wo;
+  wo.bits = c.bits;
+  wo.transfer = parse_transfer(c.out_transfer, "--out-transfer");
+  check_writable(c.out, wo, "--out");
+  if (!c.record.empty()) check_record_path(c.record);
+
+  FileInfo info, map_info;
+  Image rgb = read_color(c.image, in_t, &info);
+  Image smap;
+  double smax = sigma;
+  if (!scale_map.empty()) {
+    smap = read_scalar(scale_map, "", &map_info);
+    if (smap.width != rgb.width || smap.height != rgb.height)
+      throw Error("--scale-map '" + scale_map + "' is " + smap.size_string() + " but --image '" + c.image + "' is " +
+                  rgb.size_string() + "; they must be the same size");
+    smax = sigma0;
+    for (float v : smap.data)
+      if (std::isfinite(v)) smax = std::max(smax, static_cast<double>(v));
+  } else {
+    smap = Image(rgb.width, rgb.height, 1, static_cast<float>(sigma));
+  }
+  Image f(rgb.width, rgb.height, 4);
+  for (std::size_t i = 0; i < rgb.pixels(); ++i) {
+    for (int k = 0; k < 3; ++k) f.data[i * 4 + k] = rgb.data[i * 3 + k];
+    f.data[i * 4 + 3] = 1.0f;
+  }
+  Exec ex;
+  ex.threads = c.threads;
+  ex.path = c.reference ? Path::reference : Path::fast;
+  DiffusionPlan plan = diffuse(f, smap, smax, dp, ex);
+  for (std::size_t i = 0; i < rgb.pixels(); ++i)
+    for (int k = 0; k < 3; ++k) rgb.data[i * 3 + k] = f.data[i * 4 + k];
+
+  nlohmann::json rec = record_header("blur", g_argv);
+  rec["inputs"] = {{"image", file_record(c.image, info, rgb)}};
+  if (!scale_map.empty()) rec["inputs"]["scale_map"] = file_record(scale_map, map_info, smap);
+  else rec["sigma_px"] = sigma;
+  rec["diffusion"] = diffusion_record(dp, plan);
+  rec["effective_gaussian_px"] = scale_map.empty() ? std::sqrt(sigma * sigma - sigma0 * sigma0) : -1.0;
+  if (wo.bits == "auto" && info.integer && (info.bits == 8 || info.bits == 16)) {
+    std::string e = fs::path(c.out).extension().string();
+    if (e == ".png" || e == ".tif" || e == ".tiff") wo.bits = std::to_string(info.bits);
+  }
+  wo.description = rec.dump();
+  OutputSet outs;
+  outs.write(c.out, rgb, wo, "--out");
+  JsonOut jr{c.record, ""};
+  if (!c.record.empty()) jr.write(rec);
+  outs.commit();
+  if (!c.record.empty()) jr.commit();
+  std::fprintf(stderr, "brume blur: %s  sigma_max %.3g px  %d iterations (%s, %s)\n", c.out.c_str(), smax,
+               plan.iterations, to_string(dp.scheme).c_str(), to_string(dp.precision).c_str());
+  return 0;
+}
+
+}  // namespace
+
+int run_demo(const std::string& dir, int width, int height, int threads);
+
+int main(int argc, char** argv) {
+  for (int i = 0; i < argc; ++i) g_argv.emplace_back(argv[i]);
+  CLI::App app{"brume: physically based, depth-aware haze, fog and lens effects for RGB-D images"};
+  app.set_version_flag("--version", std::string("brume ") + BRUME_VERSION);
+  app.require_subcommand(1);
+
+  // haze
+  CLI::App* haze = app.add_subcommand("haze", "haze and fog with scattering blur (Hansard eq. 1-7)");
+  Common hc;
+  HazeParams hp;
+  std::string range_path, range_channel, airlight = "auto", scheme = "invariant-exact", precision = "f32",
+                                          composite = "premultiplied", transmission_out, scale_out;
+  std::optional<double> range_scale;
+  add_common(haze, hc);
+  haze->add_option("--range", range_path,
+                   "range map: metres from the camera centre along each pixel's ray; NaN, inf and 0 are unknown")
+      ->required();
+  haze->add_option("--range-scale", range_scale, "metres per stored unit (required for integer files, e.g. 0.001 for mm)");
+  haze->add_option("--range-channel", range_channel, "channel holding the range in a multi-channel file (e.g. Z in an EXR)");
+  std::map<std::string, CLI::Option*> hopts;
+  add_param_flags(haze, hp, haze_param_table(), &hopts);
+  haze->add_option("--airlight", airlight, "airlight B as linear R,G,B, or auto (median sky colour; else a bright grey)")
+      ->capture_default_str();
+  haze->add_option("--scheme", scheme, "diffusion scheme: standard, invariant, invariant-exact")->capture_default_str();
+  haze->add_option("--precision", precision, "storage between iterations: f32 or f16")->capture_default_str();
+  haze->add_option("--composite", composite, "premultiplied (eq. 4) or naive (comparison only)")->capture_default_str();
+  haze->add_option("--transmission", transmission_out, "write the blurred transmission (alpha after diffusion)");
+  haze->add_option("--scale-map", scale_out, "write the target scale sigma(x) in pixels (float file)");
+
+  // blur
+  CLI::App* blur = app.add_subcommand("blur", "the diffusion engine alone: Gaussian or space-variant blur");
+  Common bc;
+  double sigma = NAN, sigma0 = 1.0;
+  std::string scale_map, bscheme = "invariant-exact", bprecision = "f32";
+  add_common(blur, bc);
+  auto* o_sigma = blur->add_option("--sigma", sigma, "constant target scale in px (the result is a Gaussian of sqrt(sigma^2 - sigma0^2))");
+  auto* o_map = blur->add_option("--scale-map", scale_map, "per-pixel target scale in px (1-channel float file)");
+  o_sigma->excludes(o_map);
+  blur->add_option("--sigma0", sigma0, "inner scale of the input in px")->capture_default_str();
+  blur->add_option("--scheme", bscheme, "standard, invariant, invariant-exact")->capture_default_str();
+  blur->add_option("--precision", bprecision, "f32 or f16")->capture_default_str();
+
+  // demo
+  CLI::App* demo = app.add_subcommand("demo", "render the built-in RGB-D scene clean, with haze and with fog");
+  std::string demo_dir;
+  int demo_w = 960, demo_h = 672, demo_threads = 0;
+  demo->add_option("--out-dir", demo_dir, "directory for the images (created if missing)")->required();
+  demo->add_option("--width", demo_w, "width in pixels")->capture_default_str();
+  demo->add_option("--height", demo_h, "height in pixels")->capture_default_str();
+  demo->add_option("--threads", demo_threads, "worker threads (0 = all)")->capture_default_str();
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+
+  try {
+    if (*haze) {
+      bool kappa_given = hopts["kappa-a"]->count() > 0 || hopts["kappa-s"]->count() > 0;
+      bool albedo_given = hopts["albedo"]->count() > 0;
+      return run_haze(hc, hp, range_path, range_channel, range_scale, airlight, scheme, precision, composite,
+                      transmission_out, scale_out, kappa_given, albedo_given);
+    }
+    if (*blur) {
+      if (o_sigma->count() == 0 && o_map->count() == 0)
+        throw Error("blur needs a target scale: give --sigma S (px) or --scale-map FILE");
+      return run_blur(bc, sigma, scale_map, sigma0, bscheme, bprecision);
+    }
+    if (*demo) return run_demo(demo_dir, demo_w, demo_h, demo_threads);
+  } catch (const brume::Error& e) {
+    std::fprintf(stderr, "brume %s: error: %s\n", app.get_subcommands().front()->get_name().c_str(), e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "brume: internal error: %s\n", e.what());
+    return 3;
+  }
+  return 0;
+}
