@@ -82,7 +82,7 @@ TEST_F(Cli, HazeWritesEveryOutputAndARecord) {
   std::ifstream js(p("rec.json"));
   nlohmann::json j = nlohmann::json::parse(js);
   EXPECT_EQ(j["tool"], "brume");
-  EXPECT_EQ(j["haze"]["diffusion"]["iterations"], 10);  // ceil(ln(1 + 8 sqrt(0.5)) / 0.25)
+  EXPECT_EQ(j["haze"]["diffusion"]["iterations"], 10);  // ceil(ln(1 + 8 sqrt(0.5)) / 0.2), invariant-exact default
   EXPECT_NEAR(j["haze"]["derived"]["sigma_max_px"].get<double>(), 1 + 8 * std::sqrt(0.5), 1e-5);
   EXPECT_NEAR(j["haze"]["derived"]["range_max_m"].get<double>(), 15.0, 1e-6);
   EXPECT_EQ(j["haze"]["derived"]["unknown_range_pixels"], 6 * 48);

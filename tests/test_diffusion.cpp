@@ -79,7 +79,11 @@ TEST(DiffusionPlan, IterationCountsMatchThePaper) {
   // Hansard §5.3: ~13 iterations for sigma = 25 px with the invariant scheme;
   // the standard scheme needs (25^2 - 1)/(2 * 1/4) = 1248.
   EXPECT_EQ(plan_diffusion(params(Scheme::invariant), 25.0).iterations, 13);
-  EXPECT_EQ(plan_diffusion(params(Scheme::invariant_exact), 25.0).iterations, 13);
+  // invariant-exact defaults to rho_max = 0.2 (see DiffusionParams::rho_max).
+  EXPECT_EQ(plan_diffusion(params(Scheme::invariant_exact), 25.0).iterations, 17);
+  DiffusionParams paper = params(Scheme::invariant_exact);
+  paper.rho_max = 0.25;
+  EXPECT_EQ(plan_diffusion(paper, 25.0).iterations, 13);
   EXPECT_EQ(plan_diffusion(params(Scheme::standard), 25.0).iterations, 1248);
   EXPECT_EQ(plan_diffusion(params(Scheme::standard), 1.0).iterations, 0);
 }
@@ -272,8 +276,13 @@ TEST(DiffusionFastPath, IndependentOfThreadCount) {
 }
 
 TEST(DiffusionPrecision, StandardSchemeDriftsInF16AndInvariantDoesNot) {
-  // Hansard §5.2, Fig. 6: ~200 explicit iterations to sigma = 10 accumulate
-  // binary16 rounding; the invariant scheme's 10 iterations do not.
+  // Hansard §5.2, Fig. 6: binary16 storage between iterations. The ~200
+  // explicit iterations to sigma = 10 accumulate rounding, so the standard
+  // scheme's error grows from f32 to f16 ("drift"); the invariant scheme's 12
+  // iterations leave its error where f32 has it. What is asserted is the
+  // ordering of the drifts (f16 error minus f32 error). With round-to-nearest
+  // storage (IEEE, as here) the standard scheme's drift is ~4x its f32 error
+  // but not the paper's catastrophe; see the README's note on rounding modes.
   BRUME_REQUIRE_DATA(kArt);
   Image f = load_art();
   const double sigma = 10.0;
@@ -285,11 +294,14 @@ TEST(DiffusionPrecision, StandardSchemeDriftsInF16AndInvariantDoesNot) {
   };
   const double std16 = err(Scheme::standard, Precision::f16), std32 = err(Scheme::standard, Precision::f32);
   const double inv16 = err(Scheme::invariant_exact, Precision::f16), inv32 = err(Scheme::invariant_exact, Precision::f32);
+  RecordProperty("standard_f32", std::to_string(std32));
   RecordProperty("standard_f16", std::to_string(std16));
+  RecordProperty("invariant_exact_f32", std::to_string(inv32));
   RecordProperty("invariant_exact_f16", std::to_string(inv16));
-  EXPECT_GT(std16, 2.0 * inv16) << "standard f16 " << std16 << ", invariant-exact f16 " << inv16;
-  EXPECT_GT(std16, 2.0 * std32) << "standard f16 " << std16 << ", standard f32 " << std32;
-  EXPECT_LT(inv16, 2e-3) << "invariant-exact f16 " << inv16 << " (f32: " << inv32 << ")";
+  const double std_drift = std16 - std32, inv_drift = std::abs(inv16 - inv32);
+  EXPECT_GT(std16, 2.0 * std32) << "standard: f16 " << std16 << ", f32 " << std32;
+  EXPECT_GT(std_drift, 10.0 * inv_drift) << "standard drift " << std_drift << ", invariant-exact drift " << inv_drift;
+  EXPECT_LT(inv_drift, 0.05 * inv32) << "invariant-exact: f16 " << inv16 << ", f32 " << inv32;
 }
 
 // ---- Input checks ----------------------------------------------------------

@@ -56,16 +56,22 @@ bool load_middlebury(const std::string& scene, Image& rgb, Image& range) {
   return true;
 }
 
-// Mean squared 4-neighbour Laplacian of luminance over pixels whose mask is set.
-double hf_energy(const Image& im, const std::vector<char>& mask) {
+// Mean squared forward-difference gradient, or 4-neighbour Laplacian, of
+// luminance over the pixels whose mask is set.
+double energy(const Image& im, const std::vector<char>& mask, bool laplacian) {
   auto Y = [&](int x, int y) { return 0.2126 * im.at(x, y, 0) + 0.7152 * im.at(x, y, 1) + 0.0722 * im.at(x, y, 2); };
   double s = 0;
   std::size_t n = 0;
   for (int y = 1; y < im.height - 1; ++y)
     for (int x = 1; x < im.width - 1; ++x) {
       if (!mask[static_cast<std::size_t>(y) * im.width + x]) continue;
-      double l = Y(x - 1, y) + Y(x + 1, y) + Y(x, y - 1) + Y(x, y + 1) - 4 * Y(x, y);
-      s += l * l;
+      if (laplacian) {
+        double l = Y(x - 1, y) + Y(x + 1, y) + Y(x, y - 1) + Y(x, y + 1) - 4 * Y(x, y);
+        s += l * l;
+      } else {
+        double gx = Y(x + 1, y) - Y(x, y), gy = Y(x, y + 1) - Y(x, y);
+        s += gx * gx + gy * gy;
+      }
       ++n;
     }
   return s / std::max<std::size_t>(n, 1);
@@ -134,7 +140,7 @@ TEST(Haze, AirlightAutoIsTheSkyMedian) {
   EXPECT_EQ(a.unknown_pixels, 400u);
   EXPECT_FLOAT_EQ(a.airlight[0], 0.6f);
   EXPECT_FLOAT_EQ(a.airlight[2], 0.9f);
-  EXPECT_DOUBLE_EQ(a.range_max_m, 20.0);  // unknown pixels do not count
+  EXPECT_FLOAT_EQ(a.range_max_m, range.at(0, 8));  // the top known row; unknown pixels do not count
 }
 
 TEST(Haze, BadInputsAreErrors) {
@@ -172,15 +178,19 @@ TEST(Haze, FastPathMatchesReferenceOnRealData) {
 }
 
 TEST(Haze, RealSceneKeepsNearSharpAndBlursFar) {
-  // Middlebury 2005 Moebius (1.4-2.9 m): sigma grows as R'^{3/2}, so the
-  // nearest fifth of the scene keeps far more of its high-frequency energy
-  // than the farthest fifth. Energies are divided by the band's mean tau^2 so
-  // that only blur, not the loss of contrast, is measured.
+  // Middlebury 2005 Dolls (1.4-2.9 m). sigma grows as R'^{3/2}: with
+  // kappa_s' = 1 and lambda = 2 (sigma_max = 3 px) the nearest fifth of the
+  // scene (R' <= 0.55) gets sigma <= 1.8 px and the farthest fifth
+  // (R' >= 0.73) sigma >= 2.25 px. The energy of the luminance gradient and
+  // Laplacian kept in each band (after / before, divided by the band's mean
+  // tau^2 so that only blur is measured, not the loss of contrast) must be
+  // ordered accordingly. Measured: gradient 0.27 vs 0.10 (2.7x), Laplacian
+  // 0.054 vs 0.0074 (7.3x); the bounds leave margin for other platforms' libm.
   Image rgb, range;
-  if (!load_middlebury("Moebius", rgb, range)) GTEST_SKIP() << "../shared/data/middlebury2005_thirdsize is absent";
+  if (!load_middlebury("Dolls", rgb, range)) GTEST_SKIP() << "../shared/data/middlebury2005_thirdsize is absent";
   HazeParams p;
   p.kappa_s = 1.0;
-  p.lambda = 6.0;  // sigma_max = 7 px
+  p.lambda = 2.0;
   HazeAnalysis a = analyse_haze(rgb, range, p);
   HazeResult r = apply_haze(rgb, range, p, a);
   for (float t : r.transmission.data) {
@@ -204,10 +214,13 @@ TEST(Haze, RealSceneKeepsNearSharpAndBlursFar) {
     if (near[i]) tn += t * t, ++nn;
     if (far[i]) tf += t * t, ++nf;
   }
-  const double keep_near = hf_energy(r.rgb, near) / hf_energy(rgb, near) / (tn / nn);
-  const double keep_far = hf_energy(r.rgb, far) / hf_energy(rgb, far) / (tf / nf);
-  RecordProperty("keep_near", std::to_string(keep_near));
-  RecordProperty("keep_far", std::to_string(keep_far));
-  EXPECT_GT(keep_near, 4.0 * keep_far) << "near " << keep_near << ", far " << keep_far;
-  EXPECT_LT(keep_far, 0.1) << "far band should lose most high frequencies at sigma ~7 px";
+  for (bool lap : {false, true}) {
+    const double keep_near = energy(r.rgb, near, lap) / energy(rgb, near, lap) / (tn / nn);
+    const double keep_far = energy(r.rgb, far, lap) / energy(rgb, far, lap) / (tf / nf);
+    RecordProperty(lap ? "laplacian_keep_near" : "gradient_keep_near", std::to_string(keep_near));
+    RecordProperty(lap ? "laplacian_keep_far" : "gradient_keep_far", std::to_string(keep_far));
+    EXPECT_GT(keep_near, (lap ? 4.0 : 2.0) * keep_far)
+        << (lap ? "laplacian" : "gradient") << ": near " << keep_near << ", far " << keep_far;
+    EXPECT_LT(keep_near, 1.0);  // haze never sharpens
+  }
 }

@@ -51,7 +51,11 @@ Image parse_pfm(const std::string& path) {
 
 Image gradient(int w, int h, int c) {
   Image im(w, h, c);
-  for (std::size_t i = 0; i < im.data.size(); ++i) im.data[i] = static_cast<float>((i * 37) % 101) / 100.0f;
+  // Smooth, so that lossy JPEG is measured on content it is meant for.
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int k = 0; k < c; ++k)
+        im.at(x, y, k) = 0.6f * x / (w - 1) + 0.3f * y / (h - 1) + 0.05f * k;
   return im;
 }
 
@@ -94,7 +98,7 @@ TEST(IO, RoundTripsEveryFormat) {
   };
   for (Case c : {Case{"a.exr", "float", 0.0}, Case{"b.pfm", "float", 0.0}, Case{"c.tif", "float", 0.0},
                  Case{"d.exr", "half", 5e-4}, Case{"e.png", "16", 1e-4}, Case{"f.tif", "16", 1e-4},
-                 Case{"g.png", "8", 1e-2}, Case{"h.hdr", "float", 1e-2}, Case{"i.jpg", "8", 0.12}}) {
+                 Case{"g.png", "8", 1e-2}, Case{"h.hdr", "float", 1e-2}, Case{"i.jpg", "8", 0.03}}) {
     WriteOptions o;
     o.bits = c.bits;
     const std::string p = (d / c.name).string();

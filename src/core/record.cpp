@@ -30,7 +30,7 @@ nlohmann::json diffusion_record(const DiffusionParams& p, const DiffusionPlan& p
   return {{"scheme", to_string(p.scheme)},
           {"precision", to_string(p.precision)},
           {"sigma0_px", p.sigma0},
-          {"rho_max", p.rho_max},
+          {"rho_max", plan.rho_max},
           {"sigma_max_px", plan.sigma_max},
           {"iterations", plan.iterations},
           {"boundary", "half-sample mirror"}};

@@ -33,11 +33,17 @@ Precision parse_precision(const std::string& s) {
   throw Error("--precision '" + s + "' is not supported; use f32 or f16");
 }
 
+double effective_rho_max(const DiffusionParams& p) {
+  if (p.rho_max != 0.0) return p.rho_max;
+  return p.scheme == Scheme::invariant_exact ? 0.2 : 0.25;
+}
+
 DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max) {
+  const double rho_max = effective_rho_max(p);
   if (!(p.sigma0 > 0.0) || !std::isfinite(p.sigma0))
     throw Error("--sigma0 " + std::to_string(p.sigma0) + " px is not allowed; the inner scale must be a finite number > 0 (typically 0.5 to 1 px)");
-  if (!(p.rho_max > 0.0 && p.rho_max <= 0.25))
-    throw Error("rho_max " + std::to_string(p.rho_max) + " is outside (0, 0.25], the stability limit of the 2-D explicit scheme");
+  if (!(rho_max > 0.0 && rho_max <= 0.25))
+    throw Error("--rho-max " + std::to_string(rho_max) + " is not allowed: it must be in (0, 0.25], the stability limit of the 2-D explicit scheme (0 = the scheme's default)");
   if (!std::isfinite(sigma_max) || sigma_max < p.sigma0) {
     std::ostringstream m;
     m << "largest target scale " << sigma_max << " px is below the inner scale --sigma0 "
@@ -46,10 +52,11 @@ DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max) {
   }
   DiffusionPlan plan;
   plan.sigma_max = sigma_max;
+  plan.rho_max = rho_max;
   if (sigma_max == p.sigma0) return plan;  // nothing to do: N = 0
   double t = p.scheme == Scheme::standard
-                 ? (sigma_max * sigma_max - p.sigma0 * p.sigma0) / (2.0 * p.rho_max)  // eq. 13
-                 : std::log(sigma_max / p.sigma0) / p.rho_max;                         // eq. 18
+                 ? (sigma_max * sigma_max - p.sigma0 * p.sigma0) / (2.0 * rho_max)  // eq. 13
+                 : std::log(sigma_max / p.sigma0) / rho_max;                         // eq. 18
   // A relative slack of 1e-12 keeps T = 1248.0000000001 (rounding noise) at 1248.
   plan.iterations = static_cast<int>(std::ceil(t * (1.0 - 1e-12)));
   if (plan.iterations < 1) plan.iterations = 1;

@@ -149,14 +149,16 @@ std::string lower_ext(const std::string& path) {
 }
 
 // The storage type for a file: explicit --bits, or the format's natural one.
-OIIO::TypeDesc storage_type(const std::string& path, const std::string& bits, const std::string& flag) {
+// Data maps (is_color false) default to float where the format has it.
+OIIO::TypeDesc storage_type(const std::string& path, const std::string& bits, const std::string& flag,
+                            bool is_color) {
   const std::string e = lower_ext(path);
   const bool is_png = e == ".png", is_jpg = e == ".jpg" || e == ".jpeg", is_tif = e == ".tif" || e == ".tiff";
   const bool is_exr = e == ".exr", is_pfm = e == ".pfm", is_hdr = e == ".hdr";
   std::string b = bits;
-  if (b == "auto") b = is_jpg ? "8" : (is_png || is_tif) ? "16" : "float";
+  if (b == "auto") b = is_jpg ? "8" : is_png ? "16" : (is_tif && is_color) ? "16" : "float";
   auto bad = [&](const std::string& allowed) {
-    return Error(flag + " '" + path + "': bit depth '" + bits + "' is not available for " + e +
+    return Error(flag + " '" + path + "': --bits " + bits + " is not available for " + e +
                  " files; use " + allowed);
   };
   if (is_jpg && b != "8") throw bad("8");
@@ -168,6 +170,29 @@ OIIO::TypeDesc storage_type(const std::string& path, const std::string& bits, co
   if (b == "half") return OIIO::TypeDesc::HALF;
   if (b == "float") return OIIO::TypeDesc::FLOAT;
   throw Error("--bits '" + bits + "' is not a bit depth; use auto, 8, 16, half or float");
+}
+
+// PFM (Middlebury / Debevec): "Pf" (grey) or "PF" (RGB), "W H", a negative
+// scale for little-endian floats, then rows from the bottom of the picture up.
+// OpenImageIO 2.4 reads PFM but has no PFM writer.
+void write_pfm(const std::string& tmp, const Image& img) {
+  std::ofstream f(tmp, std::ios::binary);
+  f << (img.channels == 1 ? "Pf" : "PF") << "\n" << img.width << " " << img.height << "\n-1.0\n";
+  static_assert(sizeof(float) == 4);
+  const uint32_t probe = 1;
+  const bool little = *reinterpret_cast<const unsigned char*>(&probe) == 1;
+  std::vector<float> row(static_cast<std::size_t>(img.width) * img.channels);
+  for (int y = img.height - 1; y >= 0; --y) {
+    std::copy(img.row(y), img.row(y) + row.size(), row.begin());
+    if (!little)
+      for (float& v : row) {
+        unsigned char* b = reinterpret_cast<unsigned char*>(&v);
+        std::swap(b[0], b[3]), std::swap(b[1], b[2]);
+      }
+    f.write(reinterpret_cast<const char*>(row.data()), static_cast<std::streamsize>(row.size() * 4));
+  }
+  f.close();
+  if (!f) throw Error("write failed");
 }
 
 std::string temp_path_for(const std::string& path) {
@@ -185,7 +210,7 @@ void check_writable(const std::string& path, const WriteOptions& opts, const std
   if (std::find(std::begin(known), std::end(known), e) == std::end(known))
     throw Error(flag + " '" + path + "': unknown output type '" + e +
                 "'; use .png, .jpg, .tif, .exr, .pfm or .hdr");
-  storage_type(path, opts.bits, flag);
+  storage_type(path, opts.bits, flag, opts.is_color);
   fs::path dir = fs::path(path).parent_path();
   if (dir.empty()) dir = ".";
   std::error_code ec;
@@ -207,7 +232,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
                       const std::string& flag) {
   check_writable(path, opts, flag);
   const std::string e = lower_ext(path);
-  OIIO::TypeDesc type = storage_type(path, opts.bits, flag);
+  OIIO::TypeDesc type = storage_type(path, opts.bits, flag, opts.is_color);
   if ((e == ".hdr") && img.channels != 3)
     throw Error(flag + " '" + path + "': Radiance HDR holds RGB only; write this " +
                 std::to_string(img.channels) + "-channel map as .exr, .pfm or .tif");
@@ -221,13 +246,22 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   if (t == Transfer::srgb)
     for (float& v : buf) v = linear_to_srgb(std::max(v, 0.0f));
 
+  const std::string tmp = temp_path_for(path);
+  if (e == ".pfm") {
+    pending_.emplace_back(tmp, path);
+    try {
+      write_pfm(tmp, img);
+    } catch (const Error&) {
+      throw Error(flag + " '" + path + "': write failed (disk full?)");
+    }
+    return;
+  }
   auto out = OIIO::ImageOutput::create(path);
   if (!out) throw Error(flag + " '" + path + "': cannot create a writer: " + OIIO::geterror());
   OIIO::ImageSpec spec(img.width, img.height, img.channels, type);
   if (img.channels == 1) spec.channelnames = {"Y"};
   spec.attribute("oiio:ColorSpace", t == Transfer::srgb ? "sRGB" : "linear");
   if (!opts.description.empty()) spec.attribute("ImageDescription", opts.description);
-  const std::string tmp = temp_path_for(path);
   pending_.emplace_back(tmp, path);
   if (!out->open(tmp, spec))
     throw Error(flag + " '" + path + "': cannot open for writing: " + out->geterror());

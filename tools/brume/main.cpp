@@ -215,8 +215,9 @@ int run_haze(const Common& c, HazeParams p, const std::string& range_path, const
 }
 
 int run_blur(const Common& c, double sigma, const std::string& scale_map, double sigma0,
-             const std::string& scheme, const std::string& precision) {
+             const std::string& scheme, const std::string& precision, double rho_max) {
   DiffusionParams dp;
+  dp.rho_max = rho_max;
   dp.scheme = parse_scheme(scheme);
   dp.precision = parse_precision(precision);
   dp.sigma0 = sigma0;
@@ -314,6 +315,9 @@ int main(int argc, char** argv) {
   haze->add_option("--airlight", airlight, "airlight B as linear R,G,B, or auto (median sky colour; else a bright grey)")
       ->capture_default_str();
   haze->add_option("--scheme", scheme, "diffusion scheme: standard, invariant, invariant-exact")->capture_default_str();
+  haze->add_option("--rho-max", hp.diffusion.rho_max,
+                   "largest diffusion rate per iteration, (0, 0.25]; 0 = scheme default (0.2 invariant-exact, 0.25 others)")
+      ->capture_default_str();
   haze->add_option("--precision", precision, "storage between iterations: f32 or f16")->capture_default_str();
   haze->add_option("--composite", composite, "premultiplied (eq. 4) or naive (comparison only)")->capture_default_str();
   haze->add_option("--transmission", transmission_out, "write the blurred transmission (alpha after diffusion)");
@@ -331,6 +335,8 @@ int main(int argc, char** argv) {
   blur->add_option("--sigma0", sigma0, "inner scale of the input in px")->capture_default_str();
   blur->add_option("--scheme", bscheme, "standard, invariant, invariant-exact")->capture_default_str();
   blur->add_option("--precision", bprecision, "f32 or f16")->capture_default_str();
+  double brho = 0.0;
+  blur->add_option("--rho-max", brho, "largest rate per iteration, (0, 0.25]; 0 = scheme default")->capture_default_str();
 
   // demo
   CLI::App* demo = app.add_subcommand("demo", "render the built-in RGB-D scene clean, with haze and with fog");
@@ -357,7 +363,7 @@ int main(int argc, char** argv) {
     if (*blur) {
       if (o_sigma->count() == 0 && o_map->count() == 0)
         throw Error("blur needs a target scale: give --sigma S (px) or --scale-map FILE");
-      return run_blur(bc, sigma, scale_map, sigma0, bscheme, bprecision);
+      return run_blur(bc, sigma, scale_map, sigma0, bscheme, bprecision, brho);
     }
     if (*demo) return run_demo(demo_dir, demo_w, demo_h, demo_threads);
   } catch (const brume::Error& e) {
