@@ -70,14 +70,17 @@ DiffusionPlan diffuse(Image& f, const Image& sigma, double sigma_max,
   if (sigma.channels != 1 || sigma.width != f.width || sigma.height != f.height)
     throw Error("scale map " + sigma.size_string() + " (" + std::to_string(sigma.channels) +
                 " channels) does not match image " + f.size_string() + "; it must be one channel of the same size");
+  // Compared in float, the map's own precision: a map filled with
+  // float(sigma) must pass for sigma_max = sigma whichever way it rounded.
+  const float lo = static_cast<float>(p.sigma0), hi = static_cast<float>(sigma_max);
   for (int y = 0; y < sigma.height; ++y) {
     const float* s = sigma.row(y);
     for (int x = 0; x < sigma.width; ++x) {
-      if (!std::isfinite(s[x]) || s[x] < p.sigma0 || s[x] > sigma_max) {
+      if (!std::isfinite(s[x]) || s[x] < lo || s[x] > hi) {
         std::ostringstream m;
         m << "scale map pixel (" << x << ", " << y << ") is " << s[x] << " px; every target scale must be finite and in [sigma0, sigma_max] = ["
           << p.sigma0 << ", " << sigma_max << "] px";
-        if (s[x] < p.sigma0) m << " (a target below the inner scale --sigma0 would need sharpening; lower --sigma0 or raise the map)";
+        if (s[x] < lo) m << " (a target below the inner scale --sigma0 would need sharpening; lower --sigma0 or raise the map)";
         throw Error(m.str());
       }
     }

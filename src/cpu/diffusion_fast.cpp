@@ -20,6 +20,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <memory>
 #include <vector>
 
 #include "cpu/diffusion_kernels.hpp"
@@ -39,37 +40,51 @@ namespace {
 
 int thread_count(int requested) { return requested > 0 ? requested : omp_get_max_threads(); }
 
+// Four floats (one RGBA pixel) as one vector: GCC/Clang vector extensions
+// compile to SSE/AVX/NEON without intrinsics.
+typedef float v4 __attribute__((vector_size(16)));
+inline v4 load4(const float* p) {
+  v4 v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+inline void store4(float* p, v4 v) { std::memcpy(p, &v, sizeof v); }
+
 // One pixel of the general scheme (any offsets, any rates): eq. 11-12.
-// `h` is the pixel's neighbour offset, mirrored indices are used near borders.
-inline void update_pixel(const float* src, float* dst, const float* rho, int W, int H,
+// `h` is the pixel's neighbour offset; indices are mirrored only when a tap
+// falls outside the image. kUniform: every rate is `w_all` (a constant target
+// scale), so the eq. 12 weights need no look-up. The arithmetic, channel by
+// channel, is the same as uniform_row_interior's, so both give the same bits.
+template <bool kUniform>
+inline void update_pixel(const float* src, float* dst, const float* rho, float w_all, int W, int H,
                          int x, int y, float h) {
   const int n = static_cast<int>(h);
   const float fr = h - static_cast<float>(n);
-  const int xl0 = mirror(x - n, W), xl1 = mirror(x - n - 1, W);
-  const int xr0 = mirror(x + n, W), xr1 = mirror(x + n + 1, W);
-  const int yu0 = mirror(y - n, H), yu1 = mirror(y - n - 1, H);
-  const int yd0 = mirror(y + n, H), yd1 = mirror(y + n + 1, H);
-  const std::size_t Ws = static_cast<std::size_t>(W);
-  const float* rrow = rho + y * Ws;
-  const float rc = rrow[x];
-  const float wl = 0.5f * (rc + sh::mix(rrow[xl0], rrow[xl1], fr));
-  const float wr = 0.5f * (rc + sh::mix(rrow[xr0], rrow[xr1], fr));
-  const float wu = 0.5f * (rc + sh::mix(rho[yu0 * Ws + x], rho[yu1 * Ws + x], fr));
-  const float wd = 0.5f * (rc + sh::mix(rho[yd0 * Ws + x], rho[yd1 * Ws + x], fr));
-  const float* srow = src + y * Ws * 4;
-  const float* u0 = src + (yu0 * Ws + x) * 4;
-  const float* u1 = src + (yu1 * Ws + x) * 4;
-  const float* d0 = src + (yd0 * Ws + x) * 4;
-  const float* d1 = src + (yd1 * Ws + x) * 4;
-  float* o = dst + (y * Ws + x) * 4;
-  for (int c = 0; c < 4; ++c) {
-    const float fc = srow[x * 4 + c];
-    const float l = sh::mix(srow[xl0 * 4 + c], srow[xl1 * 4 + c], fr);
-    const float r = sh::mix(srow[xr0 * 4 + c], srow[xr1 * 4 + c], fr);
-    const float u = sh::mix(u0[c], u1[c], fr);
-    const float d = sh::mix(d0[c], d1[c], fr);
-    o[c] = fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc);
+  int xl0 = x - n, xl1 = x - n - 1, xr0 = x + n, xr1 = x + n + 1;
+  int yu0 = y - n, yu1 = y - n - 1, yd0 = y + n, yd1 = y + n + 1;
+  if (xl1 < 0 || xr1 >= W || yu1 < 0 || yd1 >= H) {
+    xl0 = mirror(xl0, W), xl1 = mirror(xl1, W), xr0 = mirror(xr0, W), xr1 = mirror(xr1, W);
+    yu0 = mirror(yu0, H), yu1 = mirror(yu1, H), yd0 = mirror(yd0, H), yd1 = mirror(yd1, H);
   }
+  const std::size_t Ws = static_cast<std::size_t>(W);
+  float wl = w_all, wr = w_all, wu = w_all, wd = w_all;
+  if constexpr (!kUniform) {
+    const float* rrow = rho + y * Ws;
+    const float rc = rrow[x];
+    wl = 0.5f * (rc + sh::mix(rrow[xl0], rrow[xl1], fr));
+    wr = 0.5f * (rc + sh::mix(rrow[xr0], rrow[xr1], fr));
+    wu = 0.5f * (rc + sh::mix(rho[yu0 * Ws + x], rho[yu1 * Ws + x], fr));
+    wd = 0.5f * (rc + sh::mix(rho[yd0 * Ws + x], rho[yd1 * Ws + x], fr));
+  }
+  const float* srow = src + y * Ws * 4;
+  const v4 fc = load4(srow + x * 4);
+  const v4 a = load4(srow + xl0 * 4), b = load4(srow + xr0 * 4);
+  const v4 l = a + fr * (load4(srow + xl1 * 4) - a);
+  const v4 r = b + fr * (load4(srow + xr1 * 4) - b);
+  const v4 c = load4(src + (yu0 * Ws + x) * 4), d = load4(src + (yd0 * Ws + x) * 4);
+  const v4 u = c + fr * (load4(src + (yu1 * Ws + x) * 4) - c);
+  const v4 dn = d + fr * (load4(src + (yd1 * Ws + x) * 4) - d);
+  store4(dst + (y * Ws + x) * 4, fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (dn - fc));
 }
 
 // Interior of a row when every pixel has the same offset h = n + fr and the
@@ -144,24 +159,17 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
   const bool standard = p.scheme == Scheme::standard;
   const bool exact = p.scheme == Scheme::invariant_exact;
   const int nt = thread_count(threads);
+  auto rate = [&](float s) {
+    return standard ? sh::brume_standard_rate(s, s0, Nf) : sh::brume_invariant_rate(s, s0, Nf);
+  };
+  // A constant target scale needs no per-pixel rate, offset or scale arrays.
+  const bool uniform = std::all_of(sigma.data.begin(), sigma.data.end(), [&](float v) { return v == sigma.data[0]; });
 
-  std::vector<float> rho(np);
-  float rmin = 0.0f, rmax = 0.0f;
-#pragma omp parallel for num_threads(nt) schedule(static)
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = y * Ws + x;
-      const float s = sigma.data[i];
-      rho[i] = standard ? sh::brume_standard_rate(s, s0, Nf) : sh::brume_invariant_rate(s, s0, Nf);
-    }
-  auto [lo, hi] = std::minmax_element(rho.begin(), rho.end());
-  rmin = *lo;
-  rmax = *hi;
-  const bool uniform = rmin == rmax;
-
-  std::vector<float> buf(f.data.size());
+  // Ping-pong partner, deliberately not zero-filled (every value is written
+  // before it is read).
+  std::unique_ptr<float[]> buf(new float[f.data.size()]);
   float* src = f.data.data();
-  float* dst = buf.data();
+  float* dst = buf.get();
   if (f16) round_to_half(src, f.data.size());
 
   if (standard) {
@@ -171,8 +179,9 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x) {
         const std::size_t i = y * Ws + x;
-        wr[i] = x < W - 1 ? 0.5f * (rho[i] + rho[i + 1]) : 0.0f;
-        wd[i] = y < H - 1 ? 0.5f * (rho[i] + rho[i + Ws]) : 0.0f;
+        const float rc = rate(sigma.data[i]);
+        wr[i] = x < W - 1 ? 0.5f * (rc + rate(sigma.data[i + 1])) : 0.0f;
+        wd[i] = y < H - 1 ? 0.5f * (rc + rate(sigma.data[i + Ws])) : 0.0f;
       }
     for (int k = 0; k < N; ++k) {
 #pragma omp parallel for num_threads(nt) schedule(static)
@@ -187,53 +196,59 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
       }
       std::swap(src, dst);
     }
+  } else if (uniform) {
+    const float rho = rate(sigma.data[0]);
+    const float growth = std::exp(rho);
+    float sig = s0;  // sigma_k, the same running product as the general path
+    for (int k = 0; k < N; ++k) {
+      const float h = sh::brume_invariant_offset(sig, rho, exact);
+      const int n = static_cast<int>(h);
+      const float fr = h - static_cast<float>(n);
+      const float w = 0.5f * (rho + sh::mix(rho, rho, fr));  // eq. 12, as the general path computes it
+      // Columns whose taps x-n-1 .. x+n+1 all lie inside the row.
+      const int xa = std::min(n + 1, W), xb = std::max(W - n - 1, xa);
+#pragma omp parallel for num_threads(nt) schedule(static)
+      for (int y = 0; y < H; ++y) {
+        const float* s = src + y * Ws * 4;
+        const float* u0 = src + mirror(y - n, H) * Ws * 4;
+        const float* u1 = src + mirror(y - n - 1, H) * Ws * 4;
+        const float* d0 = src + mirror(y + n, H) * Ws * 4;
+        const float* d1 = src + mirror(y + n + 1, H) * Ws * 4;
+        float* o = dst + y * Ws * 4;
+        uniform_row_interior(s, u0, u1, d0, d1, o, static_cast<std::size_t>(xa) * 4,
+                             static_cast<std::size_t>(xb) * 4, static_cast<std::ptrdiff_t>(n) * 4, fr, w);
+        for (int x = 0; x < xa; ++x) update_pixel<true>(src, dst, nullptr, w, W, H, x, y, h);
+        for (int x = xb; x < W; ++x) update_pixel<true>(src, dst, nullptr, w, W, H, x, y, h);
+        if (f16) round_to_half(o, Ws * 4);
+      }
+      sig *= growth;
+      std::swap(src, dst);
+    }
   } else {
-    // sigma_k(x) as a running product, and the exact scheme's variance ratio.
-    std::vector<float> sig(np, s0), growth(np), vratio(np);
+    // Per-pixel rate, sigma_k as a running product, and the exact scheme's
+    // variance ratio (e^{2 rho} - 1)/(2 rho).
+    std::vector<float> rho(np), sig(np, s0), growth(np), vratio(np);
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y)
-      for (int x = 0; x < W; ++x) {
-        const std::size_t i = y * Ws + x;
+      for (std::size_t i = y * Ws; i < (y + 1) * Ws; ++i) {
+        rho[i] = rate(sigma.data[i]);
         growth[i] = std::exp(rho[i]);
         vratio[i] = sh::brume_step_variance_ratio(rho[i]);
       }
     std::vector<float> hrow_all(static_cast<std::size_t>(nt) * Ws);
     for (int k = 0; k < N; ++k) {
-      if (uniform) {
-        const float h = sh::brume_invariant_offset(sig[0], rho[0], exact);
-        const int n = static_cast<int>(h);
-        const float fr = h - static_cast<float>(n);
-        const float w = 0.5f * (rho[0] + sh::mix(rho[0], rho[0], fr));
-        // Columns whose taps x-n-1 .. x+n+1 all lie inside the row.
-        const int xa = std::min(n + 1, W), xb = std::max(W - n - 1, xa);
 #pragma omp parallel for num_threads(nt) schedule(static)
-        for (int y = 0; y < H; ++y) {
-          const float* s = src + y * Ws * 4;
-          const float* u0 = src + mirror(y - n, H) * Ws * 4;
-          const float* u1 = src + mirror(y - n - 1, H) * Ws * 4;
-          const float* d0 = src + mirror(y + n, H) * Ws * 4;
-          const float* d1 = src + mirror(y + n + 1, H) * Ws * 4;
-          float* o = dst + y * Ws * 4;
-          uniform_row_interior(s, u0, u1, d0, d1, o, static_cast<std::size_t>(xa) * 4,
-                               static_cast<std::size_t>(xb) * 4, static_cast<std::ptrdiff_t>(n) * 4, fr, w);
-          for (int x = 0; x < xa; ++x) update_pixel(src, dst, rho.data(), W, H, x, y, h);
-          for (int x = xb; x < W; ++x) update_pixel(src, dst, rho.data(), W, H, x, y, h);
-          if (f16) round_to_half(o, Ws * 4);
+      for (int y = 0; y < H; ++y) {
+        float* hrow = hrow_all.data() + static_cast<std::size_t>(omp_get_thread_num()) * Ws;
+        const float* sg = sig.data() + y * Ws;
+        if (exact) {
+          const float* vr = vratio.data() + y * Ws;
+          for (int x = 0; x < W; ++x) hrow[x] = sh::brume_offset_for_moment(sg[x] * sg[x] * vr[x]);
+        } else {
+          for (int x = 0; x < W; ++x) hrow[x] = sg[x];
         }
-      } else {
-#pragma omp parallel for num_threads(nt) schedule(static)
-        for (int y = 0; y < H; ++y) {
-          float* hrow = hrow_all.data() + static_cast<std::size_t>(omp_get_thread_num()) * Ws;
-          const float* sg = sig.data() + y * Ws;
-          if (exact) {
-            const float* vr = vratio.data() + y * Ws;
-            for (int x = 0; x < W; ++x) hrow[x] = sh::brume_offset_for_moment(sg[x] * sg[x] * vr[x]);
-          } else {
-            for (int x = 0; x < W; ++x) hrow[x] = sg[x];
-          }
-          for (int x = 0; x < W; ++x) update_pixel(src, dst, rho.data(), W, H, x, y, hrow[x]);
-          if (f16) round_to_half(dst + y * Ws * 4, Ws * 4);
-        }
+        for (int x = 0; x < W; ++x) update_pixel<false>(src, dst, rho.data(), 0.0f, W, H, x, y, hrow[x]);
+        if (f16) round_to_half(dst + y * Ws * 4, Ws * 4);
       }
 #pragma omp parallel for num_threads(nt) schedule(static)
       for (int y = 0; y < H; ++y)
