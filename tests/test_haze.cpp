@@ -224,3 +224,31 @@ TEST(Haze, RealSceneKeepsNearSharpAndBlursFar) {
     EXPECT_LT(keep_near, 1.0);  // haze never sharpens
   }
 }
+
+TEST(Haze, NaiveCompositeShowsGhostEdgesPremultipliedDoesNot) {
+  // Hansard §2.1: far away, where the blur is large, a noisy range map makes
+  // tau0 vary from pixel to pixel. The premultiplied composite blurs tau
+  // together with the colour, so a uniform far surface stays smooth; the
+  // naive composite multiplies the blurred colour by the sharp tau0 and
+  // shows the range noise as a pattern ("ghost edges").
+  const int n = 64;
+  Image rgb(n, n, 3, 0.2f), range(n, n, 1);
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) range.at(x, y) = ((x + y) % 2) ? 100.0f : 90.0f;
+  HazeParams p;
+  p.kappa_s = 2.0;
+  p.lambda = 6.0;
+  p.airlight_auto = false;
+  p.airlight = {0.9f, 0.9f, 0.9f};
+  auto spread = [&](Composite c) {
+    p.composite = c;
+    HazeResult r = apply_haze(rgb, range, p, analyse_haze(rgb, range, p));
+    float lo = 1e9f, hi = -1e9f;
+    for (int y = 16; y < 48; ++y)
+      for (int x = 16; x < 48; ++x) lo = std::min(lo, r.rgb.at(x, y, 0)), hi = std::max(hi, r.rgb.at(x, y, 0));
+    return hi - lo;
+  };
+  const float premultiplied = spread(Composite::premultiplied), naive = spread(Composite::naive);
+  EXPECT_LT(premultiplied, 1e-3f);
+  EXPECT_GT(naive, 20.0f * premultiplied + 0.02f) << "naive " << naive << ", premultiplied " << premultiplied;
+}

@@ -104,6 +104,19 @@ void uniform_row_interior(const float* __restrict s, const float* __restrict u0,
   }
 }
 
+// One row of the general invariant scheme: offsets from sigma_k (and, for the
+// exact variant, the variance ratio), then the per-pixel update.
+BRUME_CLONES
+void general_row(const float* src, float* dst, const float* rho, const float* sg, const float* vr, bool exact,
+                 int W, int H, int y, float* hrow) {
+  if (exact) {
+    for (int x = 0; x < W; ++x) hrow[x] = sh::brume_offset_for_moment(sg[x] * sg[x] * vr[x]);
+  } else {
+    for (int x = 0; x < W; ++x) hrow[x] = sg[x];
+  }
+  for (int x = 0; x < W; ++x) update_pixel<false>(src, dst, rho, 0.0f, W, H, x, y, hrow[x]);
+}
+
 // One row of the standard scheme with precomputed edge weights:
 // wr[x] couples x and x+1 (0 at the last column: zero flux), wd couples rows.
 BRUME_CLONES
@@ -240,14 +253,7 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
 #pragma omp parallel for num_threads(nt) schedule(static)
       for (int y = 0; y < H; ++y) {
         float* hrow = hrow_all.data() + static_cast<std::size_t>(omp_get_thread_num()) * Ws;
-        const float* sg = sig.data() + y * Ws;
-        if (exact) {
-          const float* vr = vratio.data() + y * Ws;
-          for (int x = 0; x < W; ++x) hrow[x] = sh::brume_offset_for_moment(sg[x] * sg[x] * vr[x]);
-        } else {
-          for (int x = 0; x < W; ++x) hrow[x] = sg[x];
-        }
-        for (int x = 0; x < W; ++x) update_pixel<false>(src, dst, rho.data(), 0.0f, W, H, x, y, hrow[x]);
+        general_row(src, dst, rho.data(), sig.data() + y * Ws, vratio.data() + y * Ws, exact, W, H, y, hrow);
         if (f16) round_to_half(dst + y * Ws * 4, Ws * 4);
       }
 #pragma omp parallel for num_threads(nt) schedule(static)
