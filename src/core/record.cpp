@@ -41,6 +41,14 @@ nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a) {
   j["parameters"] = params_record(p, haze_param_table());
   j["parameters"]["airlight"] = p.airlight_auto ? nlohmann::json("auto") : nlohmann::json(p.airlight);
   j["parameters"]["composite"] = to_string(p.composite);
+  if (p.visibility_m > 0.0) {
+    // kappa-a/kappa-s were not used: the extinction came from the visibility.
+    for (const char* k : {"kappa-a", "kappa-s"}) j["parameters"][k]["value"] = nullptr;
+    j["parameters"]["kappa_source"] = "visibility and albedo (values in derived)";
+  } else {
+    j["parameters"].erase("albedo");
+    j["parameters"]["kappa_source"] = "kappa-a and kappa-s";
+  }
   DiffusionParams dp = p.diffusion;
   dp.sigma0 = p.sigma0;
   j["diffusion"] = diffusion_record(dp, a.plan);

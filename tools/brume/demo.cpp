@@ -68,9 +68,11 @@ int run_demo(const std::string& dir, int width, int height, int threads) {
   struct Setting {
     const char* name;
     double visibility_m, albedo, lambda;
+    bool airlight_auto;
   };
-  // Haze: 3 km visibility (light haze). Fog: 250 m (the fog class starts below 1 km).
-  const Setting settings[] = {{"haze", 3000.0, 0.9, 6.0}, {"fog", 250.0, 0.95, 4.0}};
+  // Haze: 3 km visibility (light haze), airlight from the sky. Fog: 250 m
+  // (the fog class starts below 1 km) under an overcast, grey airlight.
+  const Setting settings[] = {{"haze", 3000.0, 0.9, 6.0, true}, {"fog", 250.0, 0.95, 4.0, false}};
   Exec ex;
   ex.threads = threads;
   for (const Setting& s : settings) {
@@ -78,7 +80,8 @@ int run_demo(const std::string& dir, int width, int height, int threads) {
     p.visibility_m = s.visibility_m;
     p.albedo = s.albedo;
     p.lambda = s.lambda;
-    p.airlight_auto = true;
+    p.airlight_auto = s.airlight_auto;
+    p.airlight = {0.62f, 0.64f, 0.66f};
     HazeAnalysis a = analyse_haze(scene.rgb, scene.range, p);
     HazeResult r = apply_haze(scene.rgb, scene.range, p, a, ex);
     nlohmann::json rec = record_header("demo", {"brume", "demo", "--out-dir", dir});

@@ -132,7 +132,7 @@ void add_common(CLI::App* app, Common& c) {
                   "transfer function of the input: auto (integer files sRGB, float files linear), srgb, linear")
       ->capture_default_str();
   app->add_option("--out", c.out, "output image (.png .jpg .tif .exr .pfm .hdr)")->required();
-  app->add_option("--bits", c.bits, "output storage: auto (PNG/TIFF 16, JPEG 8, EXR/PFM/HDR float), 8, 16, half, float")
+  app->add_option("--bits", c.bits, "output storage: auto (PNG/TIFF: the input's 8 or 16 bits, else 16; JPEG 8; EXR/PFM/HDR float), 8, 16, half, float")
       ->capture_default_str();
   app->add_option("--out-transfer", c.out_transfer,
                   "transfer function of the output: auto (sRGB for 8/16-bit, linear for float), srgb, linear")
