@@ -23,8 +23,7 @@
 #include <memory>
 #include <vector>
 
-#include "cpu/diffusion_kernels.hpp"
-#include "shared/prelude_cpp.h"
+#include "cpu/diffusion_rows.hpp"
 
 #if defined(__x86_64__)
 #include <immintrin.h>
@@ -34,58 +33,10 @@
 #endif
 
 namespace brume::cpu {
-namespace sh = brume::shared;
 
 namespace {
 
 int thread_count(int requested) { return requested > 0 ? requested : omp_get_max_threads(); }
-
-// Four floats (one RGBA pixel) as one vector: GCC/Clang vector extensions
-// compile to SSE/AVX/NEON without intrinsics.
-typedef float v4 __attribute__((vector_size(16)));
-inline v4 load4(const float* p) {
-  v4 v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-inline void store4(float* p, v4 v) { std::memcpy(p, &v, sizeof v); }
-
-// One pixel of the general scheme (any offsets, any rates): eq. 11-12.
-// `h` is the pixel's neighbour offset; indices are mirrored only when a tap
-// falls outside the image. kUniform: every rate is `w_all` (a constant target
-// scale), so the eq. 12 weights need no look-up. The arithmetic, channel by
-// channel, is the same as uniform_row_interior's, so both give the same bits.
-template <bool kUniform>
-inline void update_pixel(const float* src, float* dst, const float* rho, float w_all, int W, int H,
-                         int x, int y, float h) {
-  const int n = static_cast<int>(h);
-  const float fr = h - static_cast<float>(n);
-  int xl0 = x - n, xl1 = x - n - 1, xr0 = x + n, xr1 = x + n + 1;
-  int yu0 = y - n, yu1 = y - n - 1, yd0 = y + n, yd1 = y + n + 1;
-  if (xl1 < 0 || xr1 >= W || yu1 < 0 || yd1 >= H) {
-    xl0 = mirror(xl0, W), xl1 = mirror(xl1, W), xr0 = mirror(xr0, W), xr1 = mirror(xr1, W);
-    yu0 = mirror(yu0, H), yu1 = mirror(yu1, H), yd0 = mirror(yd0, H), yd1 = mirror(yd1, H);
-  }
-  const std::size_t Ws = static_cast<std::size_t>(W);
-  float wl = w_all, wr = w_all, wu = w_all, wd = w_all;
-  if constexpr (!kUniform) {
-    const float* rrow = rho + y * Ws;
-    const float rc = rrow[x];
-    wl = 0.5f * (rc + sh::mix(rrow[xl0], rrow[xl1], fr));
-    wr = 0.5f * (rc + sh::mix(rrow[xr0], rrow[xr1], fr));
-    wu = 0.5f * (rc + sh::mix(rho[yu0 * Ws + x], rho[yu1 * Ws + x], fr));
-    wd = 0.5f * (rc + sh::mix(rho[yd0 * Ws + x], rho[yd1 * Ws + x], fr));
-  }
-  const float* srow = src + y * Ws * 4;
-  const v4 fc = load4(srow + x * 4);
-  const v4 a = load4(srow + xl0 * 4), b = load4(srow + xr0 * 4);
-  const v4 l = a + fr * (load4(srow + xl1 * 4) - a);
-  const v4 r = b + fr * (load4(srow + xr1 * 4) - b);
-  const v4 c = load4(src + (yu0 * Ws + x) * 4), d = load4(src + (yd0 * Ws + x) * 4);
-  const v4 u = c + fr * (load4(src + (yu1 * Ws + x) * 4) - c);
-  const v4 dn = d + fr * (load4(src + (yd1 * Ws + x) * 4) - d);
-  store4(dst + (y * Ws + x) * 4, fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (dn - fc));
-}
 
 // Interior of a row when every pixel has the same offset h = n + fr and the
 // same rate w (so every eq. 12 weight is w): a contiguous loop over floats.
@@ -185,7 +136,9 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
   float* dst = buf.get();
   if (f16) round_to_half(src, f.data.size());
 
-  if (standard) {
+  if (!standard && uniform && f16 && uniform_iterations_f16(src, W, H, N, s0, rate(sigma.data[0]), exact, nt)) {
+    // done in binary16 storage (result in f)
+  } else if (standard) {
     // Edge weights of eq. 12, fixed for all iterations.
     std::vector<float> wr(np), wd(np), zero(Ws, 0.0f);
 #pragma omp parallel for num_threads(nt) schedule(static)
@@ -214,10 +167,7 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
     const float growth = std::exp(rho);
     float sig = s0;  // sigma_k, the same running product as the general path
     for (int k = 0; k < N; ++k) {
-      const float h = sh::brume_invariant_offset(sig, rho, exact);
-      const int n = static_cast<int>(h);
-      const float fr = h - static_cast<float>(n);
-      const float w = 0.5f * (rho + sh::mix(rho, rho, fr));  // eq. 12, as the general path computes it
+      const auto [h, fr, w, n] = uniform_step(sig, rho, exact);
       // Columns whose taps x-n-1 .. x+n+1 all lie inside the row.
       const int xa = std::min(n + 1, W), xb = std::max(W - n - 1, xa);
 #pragma omp parallel for num_threads(nt) schedule(static)

@@ -1,0 +1,122 @@
+// brume — binary16 storage for the constant-scale diffusion path (x86-64 with
+// F16C). Compiled with -mavx2 -mf16c and only entered after a run-time check,
+// so the rest of the library keeps running on any x86-64.
+//
+// Hansard §5.3 measures RGBA16F about twice as fast as RGBA32F on a GPU; the
+// same holds here because the constant-scale iteration is memory-bound: F is
+// read and written as 8 bytes per pixel instead of 16. The arithmetic is the
+// float path's, term by term, and every stored value is rounded to nearest
+// binary16 exactly as round_to_half does, so the result is bit-identical to
+// the float-storage f16 path.
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <memory>
+
+#include "cpu/diffusion_rows.hpp"
+
+#if defined(__x86_64__) && defined(__F16C__) && defined(__AVX2__)
+#include <immintrin.h>
+
+namespace brume::cpu {
+namespace {
+
+struct StoreF16 {
+  using T = std::uint16_t;
+  static v4 load(const std::uint16_t* p) {
+    __m128 f = _mm_cvtph_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p)));
+    v4 v;
+    std::memcpy(&v, &f, sizeof v);
+    return v;
+  }
+  static void store(std::uint16_t* p, v4 v) {
+    __m128 f;
+    std::memcpy(&f, &v, sizeof f);
+    _mm_storel_epi64(reinterpret_cast<__m128i*>(p), _mm_cvtps_ph(f, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC));
+  }
+};
+
+inline __m256 ld8(const std::uint16_t* p) {
+  return _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
+}
+
+// uniform_row_interior of diffusion_fast.cpp on binary16 storage, 8 floats
+// (two RGBA pixels) per step, same operation order.
+void row_interior_f16(const std::uint16_t* s, const std::uint16_t* u0, const std::uint16_t* u1,
+                      const std::uint16_t* d0, const std::uint16_t* d1, std::uint16_t* o, std::size_t begin,
+                      std::size_t end, std::ptrdiff_t n4, float fr, float w) {
+  const __m256 vf = _mm256_set1_ps(fr), vw = _mm256_set1_ps(w);
+  auto lerp = [&](__m256 a, __m256 b) { return _mm256_add_ps(a, _mm256_mul_ps(vf, _mm256_sub_ps(b, a))); };
+  std::size_t i = begin;
+  for (; i + 8 <= end; i += 8) {
+    const __m256 fc = ld8(s + i);
+    const __m256 l = lerp(ld8(s + i - n4), ld8(s + i - n4 - 4));
+    const __m256 r = lerp(ld8(s + i + n4), ld8(s + i + n4 + 4));
+    const __m256 u = lerp(ld8(u0 + i), ld8(u1 + i));
+    const __m256 d = lerp(ld8(d0 + i), ld8(d1 + i));
+    __m256 acc = _mm256_add_ps(fc, _mm256_mul_ps(vw, _mm256_sub_ps(l, fc)));
+    acc = _mm256_add_ps(acc, _mm256_mul_ps(vw, _mm256_sub_ps(r, fc)));
+    acc = _mm256_add_ps(acc, _mm256_mul_ps(vw, _mm256_sub_ps(u, fc)));
+    acc = _mm256_add_ps(acc, _mm256_mul_ps(vw, _mm256_sub_ps(d, fc)));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(o + i), _mm256_cvtps_ph(acc, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC));
+  }
+  for (; i < end; i += 4) {  // (end - begin) is a multiple of 4: one pixel at a time
+    const v4 fc = StoreF16::load(s + i);
+    const v4 a = StoreF16::load(s + i - n4), b = StoreF16::load(s + i + n4);
+    const v4 l = a + fr * (StoreF16::load(s + i - n4 - 4) - a);
+    const v4 r = b + fr * (StoreF16::load(s + i + n4 + 4) - b);
+    const v4 c = StoreF16::load(u0 + i), e = StoreF16::load(d0 + i);
+    const v4 u = c + fr * (StoreF16::load(u1 + i) - c);
+    const v4 d = e + fr * (StoreF16::load(d1 + i) - e);
+    StoreF16::store(o + i, fc + w * (l - fc) + w * (r - fc) + w * (u - fc) + w * (d - fc));
+  }
+}
+
+}  // namespace
+
+bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, bool exact, int threads) {
+  static const bool supported = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("f16c");
+  if (!supported) return false;
+  const std::size_t Ws = static_cast<std::size_t>(W), n = Ws * H * 4;
+  std::unique_ptr<std::uint16_t[]> a(new std::uint16_t[n]), b(new std::uint16_t[n]);
+  std::uint16_t* src = a.get();
+  std::uint16_t* dst = b.get();
+  // F arrives rounded to binary16 already, so this conversion is exact.
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < H; ++y)
+    for (std::size_t i = y * Ws * 4; i < (y + 1) * Ws * 4; i += 4) StoreF16::store(src + i, StoreF32::load(f + i));
+  const float growth = std::exp(rho);
+  float sig = s0;
+  for (int k = 0; k < N; ++k) {
+    const auto [h, fr, w, nn] = uniform_step(sig, rho, exact);
+    const int xa = std::min(nn + 1, W), xb = std::max(W - nn - 1, xa);
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (int y = 0; y < H; ++y) {
+      const std::uint16_t* s = src + y * Ws * 4;
+      row_interior_f16(s, src + mirror(y - nn, H) * Ws * 4, src + mirror(y - nn - 1, H) * Ws * 4,
+                       src + mirror(y + nn, H) * Ws * 4, src + mirror(y + nn + 1, H) * Ws * 4, dst + y * Ws * 4,
+                       static_cast<std::size_t>(xa) * 4, static_cast<std::size_t>(xb) * 4,
+                       static_cast<std::ptrdiff_t>(nn) * 4, fr, w);
+      for (int x = 0; x < xa; ++x) update_pixel<true, StoreF16>(src, dst, nullptr, w, W, H, x, y, h);
+      for (int x = xb; x < W; ++x) update_pixel<true, StoreF16>(src, dst, nullptr, w, W, H, x, y, h);
+    }
+    sig *= growth;
+    std::swap(src, dst);
+  }
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (int y = 0; y < H; ++y)
+    for (std::size_t i = y * Ws * 4; i < (y + 1) * Ws * 4; i += 4) StoreF32::store(f + i, StoreF16::load(src + i));
+  return true;
+}
+
+}  // namespace brume::cpu
+
+#else  // no F16C build: the float-storage path rounds to binary16 instead
+
+namespace brume::cpu {
+bool uniform_iterations_f16(float*, int, int, int, float, float, bool, int) { return false; }
+}  // namespace brume::cpu
+
+#endif

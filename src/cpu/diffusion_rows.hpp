@@ -1,0 +1,88 @@
+// brume — the per-pixel update of the diffusion schemes, shared by the fast
+// CPU translation units (internal). Written once, templated on how F is
+// stored between iterations (float, or binary16 bits).
+#pragma once
+
+#include <cstring>
+
+#include "cpu/diffusion_kernels.hpp"
+#include "shared/prelude_cpp.h"
+
+namespace brume::cpu {
+namespace sh = brume::shared;
+
+// Four floats (one RGBA pixel) as one vector: GCC/Clang vector extensions
+// compile to SSE/AVX/NEON without intrinsics.
+typedef float v4 __attribute__((vector_size(16)));
+
+// Float storage of F between iterations (the f32 texture). The f16 storage
+// (binary16 bits, the RGBA16F texture) lives in diffusion_fast_f16.cpp.
+struct StoreF32 {
+  using T = float;
+  static v4 load(const float* p) {
+    v4 v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+  }
+  static void store(float* p, v4 v) { std::memcpy(p, &v, sizeof v); }
+};
+
+// One pixel of the general scheme (any offsets, any rates): eq. 11-12.
+// `h` is the pixel's neighbour offset; indices are mirrored only when a tap
+// falls outside the image. kUniform: every rate is `w_all` (a constant target
+// scale), so the eq. 12 weights need no look-up. The arithmetic, channel by
+// channel, is the same as uniform_row_interior's, so both give the same bits.
+template <bool kUniform, class S = StoreF32>
+inline void update_pixel(const typename S::T* src, typename S::T* dst, const float* rho, float w_all, int W,
+                         int H, int x, int y, float h) {
+  const int n = static_cast<int>(h);
+  const float fr = h - static_cast<float>(n);
+  int xl0 = x - n, xl1 = x - n - 1, xr0 = x + n, xr1 = x + n + 1;
+  int yu0 = y - n, yu1 = y - n - 1, yd0 = y + n, yd1 = y + n + 1;
+  if (xl1 < 0 || xr1 >= W || yu1 < 0 || yd1 >= H) {
+    xl0 = mirror(xl0, W), xl1 = mirror(xl1, W), xr0 = mirror(xr0, W), xr1 = mirror(xr1, W);
+    yu0 = mirror(yu0, H), yu1 = mirror(yu1, H), yd0 = mirror(yd0, H), yd1 = mirror(yd1, H);
+  }
+  const std::size_t Ws = static_cast<std::size_t>(W);
+  float wl = w_all, wr = w_all, wu = w_all, wd = w_all;
+  if constexpr (!kUniform) {
+    const float* rrow = rho + y * Ws;
+    const float rc = rrow[x];
+    wl = 0.5f * (rc + sh::mix(rrow[xl0], rrow[xl1], fr));
+    wr = 0.5f * (rc + sh::mix(rrow[xr0], rrow[xr1], fr));
+    wu = 0.5f * (rc + sh::mix(rho[yu0 * Ws + x], rho[yu1 * Ws + x], fr));
+    wd = 0.5f * (rc + sh::mix(rho[yd0 * Ws + x], rho[yd1 * Ws + x], fr));
+  }
+  const typename S::T* srow = src + y * Ws * 4;
+  const v4 fc = S::load(srow + x * 4);
+  const v4 a = S::load(srow + xl0 * 4), b = S::load(srow + xr0 * 4);
+  const v4 l = a + fr * (S::load(srow + xl1 * 4) - a);
+  const v4 r = b + fr * (S::load(srow + xr1 * 4) - b);
+  const v4 c = S::load(src + (yu0 * Ws + x) * 4), d = S::load(src + (yd0 * Ws + x) * 4);
+  const v4 u = c + fr * (S::load(src + (yu1 * Ws + x) * 4) - c);
+  const v4 dn = d + fr * (S::load(src + (yd1 * Ws + x) * 4) - d);
+  S::store(dst + (y * Ws + x) * 4, fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (dn - fc));
+}
+
+// Offset, interpolation fraction and eq. 12 weight of one iteration when the
+// target scale is the same everywhere (every pixel has the same sigma_k).
+struct UniformStep {
+  float h, fr, w;
+  int n;
+};
+inline UniformStep uniform_step(float sigma_k, float rho, bool exact) {
+  UniformStep st;
+  st.h = sh::brume_invariant_offset(sigma_k, rho, exact);
+  st.n = static_cast<int>(st.h);
+  st.fr = st.h - static_cast<float>(st.n);
+  st.w = 0.5f * (rho + sh::mix(rho, rho, st.fr));  // eq. 12, as update_pixel<false> computes it
+  return st;
+}
+
+// f16 storage of the constant-scale path on CPUs with F16C (x86-64): F is
+// kept as binary16 bits between iterations, halving the memory traffic, with
+// the same arithmetic and rounding as the float path + round_to_half. Returns
+// false (and does nothing) where F16C is missing.
+bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, bool exact, int threads);
+
+}  // namespace brume::cpu
