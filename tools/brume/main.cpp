@@ -19,6 +19,7 @@
 #include <unistd.h>
 
 #include "brume/demo_scene.hpp"
+#include "brume/depth_source.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
@@ -69,6 +70,38 @@ std::array<float, 3> parse_rgb(const std::string& s, const std::string& flag) {
   return v;
 }
 
+// The depth flags every command that takes depth shares (brume/depth_source.hpp).
+void add_depth_flags(CLI::App* app, DepthSource& d, bool with_size) {
+  auto* g = app->add_option_group("depth", "depth source (exactly one) and its conventions");
+  g->add_option("--range", d.range, "range map: metres from the camera centre along each pixel's ray; NaN, inf, 0 unknown");
+  g->add_option("--z", d.z, "planar depth map in metres (needs --fx.. or --fov-x/--fov-y or --calib)");
+  g->add_option("--disparity", d.disparity, "stereo disparity in px: PFM with --calib calib.txt, or a PNG with --fx --baseline");
+  g->add_option("--depth-buffer", d.depth_buffer, "rasteriser window depth in [0,1] (--near --far --convention, --fov-y..)");
+  g->add_option("--inverse-depth", d.inverse_depth, "monocular inverse depth: z = 1/(--inverse-scale v + --inverse-shift)");
+  g->add_option("--normalized-depth", d.normalized_depth, "monocular depth in [0,1]: z = --near + v (--far - --near)");
+  g->add_option("--velodyne", d.velodyne, "KITTI Velodyne scan (.bin) projected with --kitti-calib");
+  g->add_option("--depth-channel,--range-channel", d.channel, "channel holding the depth in a multi-channel file (e.g. Z)");
+  g->add_option("--depth-scale,--range-scale", d.depth_scale,
+                "metres per stored unit; required for integer range/z files (0.001 mm, 0.00390625 KITTI)");
+  g->add_option("--fx", d.k.fx, "focal length in px (x)");
+  g->add_option("--fy", d.k.fy, "focal length in px (y; default --fx)");
+  g->add_option("--cx", d.k.cx, "principal point x in px (default (W-1)/2; pixel centres at integers)");
+  g->add_option("--cy", d.k.cy, "principal point y in px (default (H-1)/2)");
+  g->add_option("--fov-x", d.fov_x_deg, "horizontal field of view in degrees, edge to edge");
+  g->add_option("--fov-y", d.fov_y_deg, "vertical field of view in degrees, edge to edge");
+  g->add_option("--calib", d.calib, "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm)");
+  g->add_option("--baseline", d.baseline_m, "stereo baseline in metres (without --calib)");
+  g->add_option("--disparity-scale", d.disparity_scale, "disparity = scale * stored value (+ --disparity-offset)")->capture_default_str();
+  g->add_option("--disparity-offset", d.disparity_offset, "doffs / Middlebury 2005 dmin, in px of the disparity map")->capture_default_str();
+  g->add_option("--convention", d.convention, "depth-buffer convention: opengl, d3d, reversed-z")->capture_default_str();
+  g->add_option("--near", d.near_m, "near plane in metres (depth buffers, normalised depth)");
+  g->add_option("--far", d.far_m, "far plane in metres; inf = infinite far plane (depth buffers)");
+  g->add_option("--inverse-scale", d.inverse_scale, "A in z = 1/(A v + B)");
+  g->add_option("--inverse-shift", d.inverse_shift, "B in z = 1/(A v + B)")->capture_default_str();
+  g->add_option("--kitti-calib", d.kitti_calib, "KITTI calibration file for --velodyne");
+  (void)with_size;
+}
+
 // Write JSON atomically (temp + rename) after the images.
 struct JsonOut {
   std::string path;
@@ -104,22 +137,6 @@ void check_record_path(const std::string& path) {
     throw Error("--record '" + path + "': directory '" + dir.string() + "' is not writable");
 }
 
-// Range map in metres: float files as stored, integer files scaled by --range-scale.
-Image load_range(const std::string& path, const std::string& channel, std::optional<double> scale,
-                 FileInfo* info) {
-  Image r = read_scalar(path, channel, info);
-  if (info->integer && !scale)
-    throw Error("--range '" + path + "' stores " + std::to_string(info->bits) +
-                "-bit integers; say how many metres one count is with --range-scale "
-                "(e.g. 0.001 for millimetres, 1/256 = 0.00390625 for KITTI depth PNGs)");
-  const double s = scale.value_or(1.0);
-  if (!(s > 0.0) || !std::isfinite(s))
-    throw Error("--range-scale " + std::to_string(s) + " is not allowed: metres per unit must be finite and > 0");
-  if (s != 1.0)
-    for (float& v : r.data) v = static_cast<float>(v * s);
-  return r;
-}
-
 struct Common {
   std::string image, image_transfer = "auto", out, bits = "auto", out_transfer = "auto", record;
   int threads = 0;
@@ -143,8 +160,7 @@ void add_common(CLI::App* app, Common& c) {
   app->add_flag("--reference", c.reference, "use the scalar double-precision reference path (slow; for checking)");
 }
 
-int run_haze(const Common& c, HazeParams p, const std::string& range_path, const std::string& range_channel,
-             std::optional<double> range_scale, const std::string& airlight, const std::string& scheme,
+int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std::string& airlight, const std::string& scheme,
              const std::string& precision, const std::string& composite, const std::string& transmission_out,
              const std::string& scale_out, bool kappa_given, bool albedo_given) {
   p.diffusion.scheme = parse_scheme(scheme);
@@ -179,9 +195,10 @@ int run_haze(const Common& c, HazeParams p, const std::string& range_path, const
   }
   if (!c.record.empty()) check_record_path(c.record);
 
-  FileInfo img_info, range_info;
+  FileInfo img_info;
   Image rgb = read_color(c.image, in_t, &img_info);
-  Image range = load_range(range_path, range_channel, range_scale, &range_info);
+  LoadedDepth depth_in = load_depth(depth, rgb.width, rgb.height);
+  const Image& range = depth_in.range;
   HazeAnalysis a = analyse_haze(rgb, range, p);
   Exec ex;
   ex.threads = c.threads;
@@ -189,10 +206,7 @@ int run_haze(const Common& c, HazeParams p, const std::string& range_path, const
   HazeResult r = apply_haze(rgb, range, p, a, ex);
 
   nlohmann::json rec = record_header("haze", g_argv);
-  rec["inputs"] = {{"image", file_record(c.image, img_info, rgb)},
-                   {"range", file_record(range_path, range_info, range)}};
-  rec["inputs"]["range"]["scale_m_per_unit"] = range_scale.value_or(1.0);
-  if (!range_channel.empty()) rec["inputs"]["range"]["channel"] = range_channel;
+  rec["inputs"] = {{"image", file_record(c.image, img_info, rgb)}, {"depth", depth_in.record}};
   rec["haze"] = haze_record(p, a);
   rec["execution"] = {{"path", c.reference ? "reference" : "fast"}, {"threads", c.threads}};
 
@@ -287,6 +301,55 @@ int run_blur(const Common& c, double sigma, const std::string& scale_map, double
   return 0;
 }
 
+int run_depth_convert(const DepthSource& d, const std::string& out, const std::string& kind, int width, int height,
+                      const std::string& like, const std::string& record) {
+  if (kind != "range" && kind != "z") throw Error("--kind '" + kind + "' is not a depth kind; use range or z");
+  WriteOptions data;
+  data.is_color = false;
+  check_writable(out, data, "--out");
+  const std::string e = fs::path(out).extension().string();
+  if (e == ".png" || e == ".jpg" || e == ".jpeg" || e == ".hdr")
+    throw Error("--out '" + out + "': depth in metres needs a float file; use .exr, .pfm or .tif");
+  if (!record.empty()) check_record_path(record);
+  if (!like.empty()) {
+    Image im = read_color(like);
+    width = im.width, height = im.height;
+  }
+  LoadedDepth ld = load_depth(d, width, height);
+  Image result = ld.range;
+  nlohmann::json rec = record_header("depth convert", g_argv);
+  rec["depth"] = ld.record;
+  rec["kind"] = kind;
+  if (kind == "z") {
+    Intrinsics k;
+    if (!d.velodyne.empty()) {
+      KittiCalib c = read_kitti_calib(d.kitti_calib);  // camera 2's K from P2
+      k.fx = c.P2[0], k.fy = c.P2[5], k.cx = c.P2[2], k.cy = c.P2[6];
+    } else {
+      k = depth_intrinsics(d, result.width, result.height);
+    }
+    result = range_to_z(result, k);
+    rec["z_intrinsics"] = {{"fx_px", k.fx}, {"fy_px", k.fy}, {"cx_px", k.cx}, {"cy_px", k.cy}};
+  }
+  data.description = rec.dump();
+  OutputSet outs;
+  outs.write(out, result, data, "--out");
+  JsonOut jr{record, ""};
+  if (!record.empty()) jr.write(rec);
+  outs.commit();
+  if (!record.empty()) jr.commit();
+  std::size_t unknown = ld.record.value("unknown_pixels", std::size_t{0});
+  if (!d.velodyne.empty()) unknown = result.pixels() - ld.record["pixels_hit"].get<std::size_t>();
+  std::fprintf(stderr, "brume depth convert: %s  %s  %dx%d  %.2f %% unknown", out.c_str(), kind.c_str(), result.width,
+               result.height, 100.0 * unknown / result.pixels());
+  if (!d.velodyne.empty())
+    std::fprintf(stderr, "  (lidar: %zu of %zu points in view, coverage %.2f %% of pixels)",
+                 ld.record["points_in_view"].get<std::size_t>(), ld.record["points"].get<std::size_t>(),
+                 100.0 * ld.record["coverage"].get<double>());
+  std::fprintf(stderr, "\n");
+  return 0;
+}
+
 }  // namespace
 
 int run_demo(const std::string& dir, int width, int height, int threads);
@@ -301,15 +364,11 @@ int main(int argc, char** argv) {
   CLI::App* haze = app.add_subcommand("haze", "haze and fog with scattering blur (Hansard eq. 1-7)");
   Common hc;
   HazeParams hp;
-  std::string range_path, range_channel, airlight = "auto", scheme = "invariant-exact", precision = "f32",
-                                          composite = "premultiplied", transmission_out, scale_out;
-  std::optional<double> range_scale;
+  std::string airlight = "auto", scheme = "invariant-exact", precision = "f32", composite = "premultiplied",
+              transmission_out, scale_out;
+  DepthSource hdepth;
   add_common(haze, hc);
-  haze->add_option("--range", range_path,
-                   "range map: metres from the camera centre along each pixel's ray; NaN, inf and 0 are unknown")
-      ->required();
-  haze->add_option("--range-scale", range_scale, "metres per stored unit (required for integer files, e.g. 0.001 for mm)");
-  haze->add_option("--range-channel", range_channel, "channel holding the range in a multi-channel file (e.g. Z in an EXR)");
+  add_depth_flags(haze, hdepth, false);
   std::map<std::string, CLI::Option*> hopts;
   add_param_flags(haze, hp, haze_param_table(), &hopts);
   haze->add_option("--airlight", airlight, "airlight B as linear R,G,B, or auto (median sky colour; else a bright grey)")
@@ -338,6 +397,21 @@ int main(int argc, char** argv) {
   double brho = 0.0;
   blur->add_option("--rho-max", brho, "largest rate per iteration, (0, 0.25]; 0 = scheme default")->capture_default_str();
 
+  // depth
+  CLI::App* depth = app.add_subcommand("depth", "depth maps: convert any depth source to range or planar z");
+  depth->require_subcommand(1);
+  CLI::App* dconv = depth->add_subcommand("convert", "convert a depth source to a range (or z) map in metres");
+  DepthSource cdepth;
+  std::string conv_out, conv_kind = "range", conv_like, conv_record;
+  int conv_w = 0, conv_h = 0;
+  add_depth_flags(dconv, cdepth, true);
+  dconv->add_option("--out", conv_out, "output float file (.exr, .pfm, .tif)")->required();
+  dconv->add_option("--kind", conv_kind, "range (metres along the ray) or z (planar depth)")->capture_default_str();
+  dconv->add_option("--width", conv_w, "image width for --velodyne");
+  dconv->add_option("--height", conv_h, "image height for --velodyne");
+  dconv->add_option("--like", conv_like, "take the image size from this image (for --velodyne)");
+  dconv->add_option("--record", conv_record, "write a JSON record of the conversion");
+
   // demo
   CLI::App* demo = app.add_subcommand("demo", "render the built-in RGB-D scene clean, with haze and with fog");
   std::string demo_dir;
@@ -357,8 +431,8 @@ int main(int argc, char** argv) {
     if (*haze) {
       bool kappa_given = hopts["kappa-a"]->count() > 0 || hopts["kappa-s"]->count() > 0;
       bool albedo_given = hopts["albedo"]->count() > 0;
-      return run_haze(hc, hp, range_path, range_channel, range_scale, airlight, scheme, precision, composite,
-                      transmission_out, scale_out, kappa_given, albedo_given);
+      return run_haze(hc, hp, hdepth, airlight, scheme, precision, composite, transmission_out, scale_out,
+                      kappa_given, albedo_given);
     }
     if (*blur) {
       if (o_sigma->count() == 0 && o_map->count() == 0)
@@ -366,8 +440,11 @@ int main(int argc, char** argv) {
       return run_blur(bc, sigma, scale_map, sigma0, bscheme, bprecision, brho);
     }
     if (*demo) return run_demo(demo_dir, demo_w, demo_h, demo_threads);
+    if (*dconv) return run_depth_convert(cdepth, conv_out, conv_kind, conv_w, conv_h, conv_like, conv_record);
   } catch (const brume::Error& e) {
-    std::fprintf(stderr, "brume %s: error: %s\n", app.get_subcommands().front()->get_name().c_str(), e.what());
+    std::string cmd = app.get_subcommands().front()->get_name();
+    if (*dconv) cmd = "depth convert";
+    std::fprintf(stderr, "brume %s: error: %s\n", cmd.c_str(), e.what());
     return 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "brume: internal error: %s\n", e.what());

@@ -1,0 +1,90 @@
+// brume — depth sources and their conversion to range maps.
+//
+// Every effect works on a RANGE map: metres from the camera centre along each
+// pixel's ray (not planar z: Beer-Lambert needs the distance light travels,
+// and range makes the fog independent of the camera's rotation). Unknown is
+// NaN. Every depth convention is converted explicitly from flags; nothing is
+// guessed.
+//
+// Pixel convention (OpenCV, Middlebury, KITTI): pixel (u, v) -- column u, row
+// v, 0-based, row 0 at the top -- is the point (u, v) in the coordinates of
+// the principal point (cx, cy); its ray is ((u - cx)/fx, (v - cy)/fy, 1) and
+// range = z |ray|. With only a field of view, the FOV spans the image from
+// edge to edge (fx = (W/2) / tan(fov_x/2)) and the principal point is the
+// image centre ((W-1)/2, (H-1)/2).
+#pragma once
+
+#include <cmath>
+#include <string>
+
+#include "brume/image.hpp"
+
+namespace brume {
+
+struct Intrinsics {
+  double fx = 0.0, fy = 0.0;  // [px] focal lengths, > 0
+  double cx = NAN, cy = NAN;  // [px] principal point; NaN = the image centre
+};
+
+// From fields of view in degrees (edge to edge); give one or both (square
+// pixels assumed for the missing one). Throws brume::Error on bad values.
+Intrinsics intrinsics_from_fov(int width, int height, double fov_x_deg, double fov_y_deg);
+// Validated copy with the principal point filled in for a width x height image.
+Intrinsics resolve(const Intrinsics& k, int width, int height);
+
+Image z_to_range(const Image& z, const Intrinsics& k);
+Image range_to_z(const Image& range, const Intrinsics& k);
+
+// ---- stereo disparity -------------------------------------------------------
+// Z = f B / (d + doffs) with f in pixels and B in metres; d not finite or
+// d + doffs <= 0 is unknown.
+struct StereoCalib {
+  double f_px = 0.0, cx = NAN, cy = NAN;  // cam0 of calib.txt
+  double baseline_m = 0.0;                // calib.txt gives millimetres
+  double doffs_px = 0.0;
+  int width = 0, height = 0;              // 0 when absent
+};
+// Middlebury 2014 / ETH3D calib.txt: cam0=[f 0 cx; 0 f cy; 0 0 1], doffs, baseline (mm).
+StereoCalib read_stereo_calib(const std::string& path);
+Image disparity_to_z(const Image& disparity, double f_px, double baseline_m, double doffs_px);
+
+// ---- rasteriser depth buffers ------------------------------------------------
+// Window depth d in [0, 1] -> planar depth (Zhou eq. 3-5 for OpenGL):
+//  opengl:   z_ndc = 2d - 1, z_e = -P34 / (z_ndc + P33), depth = -z_e
+//            = 2 f n / ((f + n) - z_ndc (f - n))
+//  d3d:      d = f (z - n) / (z (f - n))      ->  z = f n / (f - d (f - n))
+//  reversed: d = 1 at near, 0 at far (D3D)    ->  z = f n / (n + d (f - n))
+// With far = inf (infinite far plane): opengl z = 2n / (1 - z_ndc),
+// d3d z = n / (1 - d), reversed z = n / d. The cleared value (1, or 0 for
+// reversed) is background and becomes unknown.
+enum class DepthBufferConvention { opengl, d3d, reversed };
+DepthBufferConvention parse_depth_buffer_convention(const std::string& s);
+double depth_buffer_to_z(double d, DepthBufferConvention c, double near_m, double far_m);
+double z_to_depth_buffer(double z, DepthBufferConvention c, double near_m, double far_m);
+Image depth_buffer_to_z(const Image& d, DepthBufferConvention c, double near_m, double far_m);
+
+// ---- monocular estimates ------------------------------------------------------
+// Inverse depth (MiDaS-style, affine-invariant): z = 1 / (scale v + shift).
+Image inverse_depth_to_z(const Image& v, double scale, double shift);
+// Normalised depth v in [0, 1]: z = near + v (far - near).
+Image normalized_depth_to_z(const Image& v, double near_m, double far_m);
+
+// ---- lidar ----------------------------------------------------------------------
+struct KittiCalib {
+  double P2[12];  // 3x4 projection of camera 2 (rectified)
+  double R0[9];   // rectifying rotation
+  double Tr[12];  // velodyne -> camera 0
+};
+KittiCalib read_kitti_calib(const std::string& path);
+struct LidarImage {
+  Image range;  // metres from camera 2's centre, NaN where no point lands
+  Image z;      // planar depth in camera 2
+  std::size_t points = 0, points_in_view = 0, pixels_hit = 0;
+  double coverage = 0.0;  // pixels_hit / pixels
+};
+// Project a KITTI Velodyne scan (float32 x, y, z, reflectance per point)
+// through P2 R0_rect Tr_velo_to_cam into a width x height sparse image, the
+// nearest point winning where several land on one pixel.
+LidarImage project_velodyne(const std::string& bin_path, const KittiCalib& calib, int width, int height);
+
+}  // namespace brume

@@ -1,0 +1,57 @@
+// brume — one description of where a range map comes from, shared by every
+// command that takes depth (`brume depth convert`, `brume haze`, and the
+// effects to come): the same flags, the same explicit conventions, the same
+// record of what was done.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+
+#include "brume/depth.hpp"
+#include "brume/image.hpp"
+
+namespace brume {
+
+struct DepthSource {
+  // Exactly one source file:
+  std::string range;             // metres along the ray
+  std::string z;                 // planar depth in metres (needs intrinsics)
+  std::string disparity;         // stereo disparity in px (calib.txt, or --fx and --baseline)
+  std::string depth_buffer;      // rasteriser window depth in [0, 1] (--near, --far, --convention)
+  std::string inverse_depth;     // monocular inverse depth: z = 1 / (scale v + shift)
+  std::string normalized_depth;  // monocular normalised depth: z = near + v (far - near)
+  std::string velodyne;          // KITTI scan (.bin) with --kitti-calib
+
+  std::string channel;           // channel name in a multi-channel file (e.g. Z of an EXR)
+  std::optional<double> depth_scale;  // metres per count (integer range / z files; required there)
+  Intrinsics k;                  // --fx --fy --cx --cy
+  double fov_x_deg = NAN, fov_y_deg = NAN;
+  std::string calib;             // Middlebury 2014 / ETH3D calib.txt
+  double baseline_m = NAN;       // stereo baseline without calib.txt
+  double disparity_scale = 1.0;  // d = scale * stored + offset
+  double disparity_offset = 0.0; // Middlebury 2005 dmin, or doffs
+  std::string convention = "opengl";  // opengl | d3d | reversed-z
+  double near_m = NAN, far_m = NAN;   // depth buffer / normalised depth planes
+  double inverse_scale = NAN, inverse_shift = 0.0;
+  std::string kitti_calib;
+
+  bool given() const;
+};
+
+struct LoadedDepth {
+  Image range;           // metres along the ray, NaN unknown
+  nlohmann::json record; // what was read and how it was converted
+  std::string path;      // the source file
+};
+
+// Convert the source to a range map. width/height: the image the depth
+// belongs to (for the lidar projection and the default principal point; 0 if
+// unknown). Throws brume::Error naming the flag or file.
+LoadedDepth load_depth(const DepthSource& src, int width = 0, int height = 0);
+
+// Intrinsics from the source's flags (--fx.., --fov-x.., or calib.txt), for a
+// width x height image; throws when none were given.
+Intrinsics depth_intrinsics(const DepthSource& src, int width, int height);
+
+}  // namespace brume

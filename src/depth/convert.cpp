@@ -1,0 +1,288 @@
+// brume — depth conversions (see brume/depth.hpp for the conventions).
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <sstream>
+
+#include "brume/depth.hpp"
+#include "brume/error.hpp"
+
+namespace brume {
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+const float kUnknown = std::numeric_limits<float>::quiet_NaN();
+
+std::string num(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+void require_positive(double v, const std::string& what) {
+  if (!(v > 0.0) || !std::isfinite(v))
+    throw Error(what + " " + num(v) + " is not allowed: it must be a finite number > 0");
+}
+}  // namespace
+
+Intrinsics intrinsics_from_fov(int width, int height, double fov_x_deg, double fov_y_deg) {
+  auto check = [](double f, const char* flag) {
+    if (!std::isnan(f) && !(f > 0.0 && f < 180.0))
+      throw Error(std::string(flag) + " " + num(f) + " degrees is not a field of view; use (0, 180)");
+  };
+  check(fov_x_deg, "--fov-x");
+  check(fov_y_deg, "--fov-y");
+  if (std::isnan(fov_x_deg) && std::isnan(fov_y_deg)) throw Error("give --fov-x or --fov-y (degrees) or --fx/--fy (pixels)");
+  Intrinsics k;
+  if (!std::isnan(fov_x_deg)) k.fx = 0.5 * width / std::tan(0.5 * fov_x_deg * kPi / 180.0);
+  if (!std::isnan(fov_y_deg)) k.fy = 0.5 * height / std::tan(0.5 * fov_y_deg * kPi / 180.0);
+  if (k.fx == 0.0) k.fx = k.fy;
+  if (k.fy == 0.0) k.fy = k.fx;
+  return k;
+}
+
+Intrinsics resolve(const Intrinsics& k, int width, int height) {
+  Intrinsics r = k;
+  if (r.fy == 0.0) r.fy = r.fx;
+  if (r.fx == 0.0) r.fx = r.fy;
+  require_positive(r.fx, "--fx");
+  require_positive(r.fy, "--fy");
+  if (std::isnan(r.cx)) r.cx = (width - 1) / 2.0;
+  if (std::isnan(r.cy)) r.cy = (height - 1) / 2.0;
+  if (!std::isfinite(r.cx) || !std::isfinite(r.cy)) throw Error("--cx/--cy must be finite pixel coordinates");
+  return r;
+}
+
+namespace {
+Image scale_by_ray(const Image& in, const Intrinsics& k0, bool to_range) {
+  if (in.channels != 1) throw Error("depth maps must have one channel");
+  const Intrinsics k = resolve(k0, in.width, in.height);
+  Image out(in.width, in.height, 1);
+  for (int v = 0; v < in.height; ++v)
+    for (int u = 0; u < in.width; ++u) {
+      const double a = (u - k.cx) / k.fx, b = (v - k.cy) / k.fy;
+      const double ray = std::sqrt(1.0 + a * a + b * b);
+      const double x = in.at(u, v);
+      out.at(u, v) = static_cast<float>(to_range ? x * ray : x / ray);
+    }
+  return out;
+}
+}  // namespace
+
+Image z_to_range(const Image& z, const Intrinsics& k) { return scale_by_ray(z, k, true); }
+Image range_to_z(const Image& range, const Intrinsics& k) { return scale_by_ray(range, k, false); }
+
+StereoCalib read_stereo_calib(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw Error("--calib '" + path + "': cannot read the file");
+  std::map<std::string, std::string> kv;
+  std::string line;
+  while (std::getline(in, line)) {
+    auto eq = line.find('=');
+    if (eq == std::string::npos) continue;
+    std::string key = line.substr(0, eq);
+    key.erase(std::remove_if(key.begin(), key.end(), ::isspace), key.end());
+    kv[key] = line.substr(eq + 1);
+  }
+  for (const char* need : {"cam0", "baseline"})
+    if (!kv.count(need))
+      throw Error("--calib '" + path + "' has no '" + need +
+                  "=' line; a Middlebury 2014 / ETH3D calib.txt has cam0=[f 0 cx; 0 f cy; 0 0 1], doffs=, baseline= (mm)");
+  StereoCalib c;
+  std::string m = kv["cam0"];
+  std::replace_if(m.begin(), m.end(), [](char ch) { return ch == '[' || ch == ']' || ch == ';'; }, ' ');
+  std::istringstream ms(m);
+  std::array<double, 9> K{};
+  for (double& v : K)
+    if (!(ms >> v)) throw Error("--calib '" + path + "': cam0 must hold 9 numbers [f 0 cx; 0 f cy; 0 0 1]");
+  c.f_px = K[0];
+  c.cx = K[2];
+  c.cy = K[5];
+  auto number = [&](const std::string& key, double def) {
+    if (!kv.count(key)) return def;
+    try {
+      return std::stod(kv[key]);
+    } catch (const std::exception&) {
+      throw Error("--calib '" + path + "': '" + key + "=" + kv[key] + "' is not a number");
+    }
+  };
+  c.baseline_m = number("baseline", 0.0) / 1000.0;
+  c.doffs_px = number("doffs", 0.0);
+  c.width = static_cast<int>(number("width", 0));
+  c.height = static_cast<int>(number("height", 0));
+  require_positive(c.f_px, "--calib '" + path + "': focal length f in cam0");
+  require_positive(c.baseline_m, "--calib '" + path + "': baseline");
+  return c;
+}
+
+Image disparity_to_z(const Image& d, double f_px, double baseline_m, double doffs_px) {
+  require_positive(f_px, "focal length (--fx) in pixels");
+  require_positive(baseline_m, "--baseline in metres");
+  if (!std::isfinite(doffs_px)) throw Error("--disparity-offset must be finite");
+  Image z(d.width, d.height, 1);
+  for (std::size_t i = 0; i < d.data.size(); ++i) {
+    const double s = static_cast<double>(d.data[i]) + doffs_px;
+    z.data[i] = std::isfinite(s) && s > 0.0 ? static_cast<float>(f_px * baseline_m / s) : kUnknown;
+  }
+  return z;
+}
+
+DepthBufferConvention parse_depth_buffer_convention(const std::string& s) {
+  if (s == "opengl") return DepthBufferConvention::opengl;
+  if (s == "d3d") return DepthBufferConvention::d3d;
+  if (s == "reversed-z") return DepthBufferConvention::reversed;
+  throw Error("--convention '" + s + "' is not a depth-buffer convention; use opengl, d3d or reversed-z");
+}
+
+double depth_buffer_to_z(double d, DepthBufferConvention c, double n, double f) {
+  const bool inf = std::isinf(f);
+  switch (c) {
+    case DepthBufferConvention::opengl: {
+      const double zn = 2.0 * d - 1.0;  // Zhou eq. 3
+      if (inf) return 2.0 * n / (1.0 - zn);
+      const double P33 = (f + n) / (n - f), P34 = -2.0 * f * n / (f - n);  // eq. 4
+      return P34 / (zn + P33);  // depth = -z_e, z_e = -P34 / (z_ndc + P33) (eq. 5)
+    }
+    case DepthBufferConvention::d3d:
+      return inf ? n / (1.0 - d) : f * n / (f - d * (f - n));
+    case DepthBufferConvention::reversed:
+      return inf ? n / d : f * n / (n + d * (f - n));
+  }
+  return NAN;
+}
+
+double z_to_depth_buffer(double z, DepthBufferConvention c, double n, double f) {
+  const bool inf = std::isinf(f);
+  switch (c) {
+    case DepthBufferConvention::opengl: {
+      const double zn = inf ? 1.0 - 2.0 * n / z : ((f + n) - 2.0 * f * n / z) / (f - n);
+      return 0.5 * (zn + 1.0);
+    }
+    case DepthBufferConvention::d3d:
+      return inf ? 1.0 - n / z : f * (z - n) / (z * (f - n));
+    case DepthBufferConvention::reversed:
+      return inf ? n / z : n * (f - z) / (z * (f - n));
+  }
+  return NAN;
+}
+
+Image depth_buffer_to_z(const Image& d, DepthBufferConvention c, double n, double f) {
+  require_positive(n, "--near (metres)");
+  if (!(f > n)) throw Error("--far " + num(f) + " must be greater than --near " + num(n) + " (use inf for an infinite far plane)");
+  const float background = c == DepthBufferConvention::reversed ? 0.0f : 1.0f;
+  Image z(d.width, d.height, 1);
+  for (std::size_t i = 0; i < d.data.size(); ++i) {
+    const float v = d.data[i];
+    if (!std::isfinite(v) || v == background) {
+      z.data[i] = kUnknown;
+      continue;
+    }
+    if (v < 0.0f || v > 1.0f) {
+      throw Error("depth-buffer pixel (" + std::to_string(i % d.width) + ", " + std::to_string(i / d.width) +
+                  ") is " + num(v) + "; window depth must be in [0, 1] (for a 16/24-bit integer buffer give --scale 1/65535 or 1/16777215)");
+    }
+    z.data[i] = static_cast<float>(depth_buffer_to_z(v, c, n, f));
+  }
+  return z;
+}
+
+Image inverse_depth_to_z(const Image& v, double scale, double shift) {
+  if (!std::isfinite(scale) || scale == 0.0 || !std::isfinite(shift))
+    throw Error("--inverse-scale and --inverse-shift must be finite and the scale non-zero (z = 1 / (scale v + shift))");
+  Image z(v.width, v.height, 1);
+  for (std::size_t i = 0; i < v.data.size(); ++i) {
+    const double w = scale * v.data[i] + shift;
+    z.data[i] = std::isfinite(w) && w > 0.0 ? static_cast<float>(1.0 / w) : kUnknown;
+  }
+  return z;
+}
+
+Image normalized_depth_to_z(const Image& v, double n, double f) {
+  if (!(n >= 0.0) || !(f > n) || !std::isfinite(f))
+    throw Error("--near " + num(n) + " and --far " + num(f) + ": need 0 <= near < far, finite (z = near + v (far - near))");
+  Image z(v.width, v.height, 1);
+  for (std::size_t i = 0; i < v.data.size(); ++i) {
+    const float x = v.data[i];
+    z.data[i] = std::isfinite(x) ? static_cast<float>(n + x * (f - n)) : kUnknown;
+  }
+  return z;
+}
+
+KittiCalib read_kitti_calib(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw Error("--kitti-calib '" + path + "': cannot read the file");
+  KittiCalib c{};
+  bool got_p2 = false, got_r0 = false, got_tr = false;
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream s(line);
+    std::string key;
+    s >> key;
+    auto read = [&](double* dst, int n, bool& flag) {
+      for (int i = 0; i < n; ++i)
+        if (!(s >> dst[i])) throw Error("--kitti-calib '" + path + "': '" + key + "' needs " + std::to_string(n) + " numbers");
+      flag = true;
+    };
+    if (key == "P2:") read(c.P2, 12, got_p2);
+    else if (key == "R0_rect:" || key == "R_rect:") read(c.R0, 9, got_r0);
+    else if (key == "Tr_velo_to_cam:" || key == "Tr_velo_cam:") read(c.Tr, 12, got_tr);
+  }
+  if (!got_p2 || !got_r0 || !got_tr)
+    throw Error("--kitti-calib '" + path + "' lacks " + std::string(!got_p2 ? "P2: " : "") + (!got_r0 ? "R0_rect: " : "") +
+                (!got_tr ? "Tr_velo_to_cam: " : "") + "(a KITTI object calib file has all three)");
+  return c;
+}
+
+LidarImage project_velodyne(const std::string& bin_path, const KittiCalib& c, int width, int height) {
+  if (width <= 0 || height <= 0) throw Error("the lidar image size is not set; give --width/--height or --like IMAGE");
+  std::ifstream in(bin_path, std::ios::binary);
+  if (!in) throw Error("--velodyne '" + bin_path + "': cannot read the file");
+  in.seekg(0, std::ios::end);
+  const auto bytes = static_cast<std::size_t>(in.tellg());
+  if (bytes % 16 != 0 || bytes == 0)
+    throw Error("--velodyne '" + bin_path + "' is " + std::to_string(bytes) +
+                " bytes; a KITTI scan is float32 (x, y, z, reflectance) per point, a multiple of 16 bytes");
+  std::vector<float> buf(bytes / 4);
+  in.seekg(0);
+  in.read(reinterpret_cast<char*>(buf.data()), static_cast<std::streamsize>(bytes));
+  // Camera 2's centre in rectified camera-0 coordinates: P2 = K [I | t], C = -t.
+  const double* P = c.P2;
+  const double fx = P[0], s = P[1], cx = P[2], fy = P[5], cy = P[6];
+  const double tz = P[11];
+  const double ty = (P[7] - cy * tz) / fy;
+  const double tx = (P[3] - s * ty - cx * tz) / fx;
+  LidarImage out;
+  out.range = Image(width, height, 1, kUnknown);
+  out.z = Image(width, height, 1, kUnknown);
+  out.points = bytes / 16;
+  for (std::size_t i = 0; i < out.points; ++i) {
+    const double X[3] = {buf[i * 4], buf[i * 4 + 1], buf[i * 4 + 2]};
+    double cam[3], rect[3];
+    for (int r = 0; r < 3; ++r) cam[r] = c.Tr[r * 4] * X[0] + c.Tr[r * 4 + 1] * X[1] + c.Tr[r * 4 + 2] * X[2] + c.Tr[r * 4 + 3];
+    for (int r = 0; r < 3; ++r) rect[r] = c.R0[r * 3] * cam[0] + c.R0[r * 3 + 1] * cam[1] + c.R0[r * 3 + 2] * cam[2];
+    const double pz = P[8] * rect[0] + P[9] * rect[1] + P[10] * rect[2] + P[11];
+    if (!(pz > 0.0)) continue;  // behind camera 2
+    const double u = (P[0] * rect[0] + P[1] * rect[1] + P[2] * rect[2] + P[3]) / pz;
+    const double v = (P[4] * rect[0] + P[5] * rect[1] + P[6] * rect[2] + P[7]) / pz;
+    const long iu = std::lround(u), iv = std::lround(v);  // pixel centres at integers
+    if (iu < 0 || iv < 0 || iu >= width || iv >= height) continue;
+    ++out.points_in_view;
+    const double dx = rect[0] + tx, dy = rect[1] + ty, dz = rect[2] + tz;
+    const float range = static_cast<float>(std::sqrt(dx * dx + dy * dy + dz * dz));
+    float& cur = out.range.at(static_cast<int>(iu), static_cast<int>(iv));
+    if (std::isnan(cur) || range < cur) {
+      cur = range;
+      out.z.at(static_cast<int>(iu), static_cast<int>(iv)) = static_cast<float>(dz);
+    }
+  }
+  for (float r : out.range.data) out.pixels_hit += std::isfinite(r) ? 1 : 0;
+  out.coverage = static_cast<double>(out.pixels_hit) / out.range.pixels();
+  return out;
+}
+
+}  // namespace brume

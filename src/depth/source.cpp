@@ -1,0 +1,177 @@
+// brume — depth sources (see brume/depth_source.hpp).
+#include <cmath>
+#include <vector>
+
+#include "brume/depth_source.hpp"
+#include "brume/error.hpp"
+#include "brume/io.hpp"
+#include "brume/record.hpp"
+
+namespace brume {
+
+bool DepthSource::given() const {
+  return !(range.empty() && z.empty() && disparity.empty() && depth_buffer.empty() && inverse_depth.empty() &&
+           normalized_depth.empty() && velodyne.empty());
+}
+
+Intrinsics depth_intrinsics(const DepthSource& s, int width, int height) {
+  if (s.k.fx > 0.0 || s.k.fy > 0.0) return resolve(s.k, width, height);
+  if (!std::isnan(s.fov_x_deg) || !std::isnan(s.fov_y_deg)) {
+    Intrinsics k = intrinsics_from_fov(width, height, s.fov_x_deg, s.fov_y_deg);
+    k.cx = s.k.cx, k.cy = s.k.cy;
+    return resolve(k, width, height);
+  }
+  if (!s.calib.empty()) {
+    StereoCalib c = read_stereo_calib(s.calib);
+    Intrinsics k;
+    k.fx = k.fy = c.f_px;
+    k.cx = c.cx, k.cy = c.cy;
+    return resolve(k, width, height);
+  }
+  throw Error("planar depth needs the camera: give --fx (and --fy, --cx, --cy), or --fov-x/--fov-y, or --calib calib.txt");
+}
+
+namespace {
+
+nlohmann::json intrinsics_record(const Intrinsics& k) {
+  return {{"fx_px", k.fx}, {"fy_px", k.fy}, {"cx_px", k.cx}, {"cy_px", k.cy}};
+}
+
+// Integer files of values in [0, 1] (UNORM): count / (2^bits - 1).
+void unorm(Image& im, const FileInfo& info) {
+  if (!info.integer) return;
+  const double maxval = std::ldexp(1.0, info.bits) - 1.0;
+  for (float& v : im.data) v = static_cast<float>(v / maxval);
+}
+
+}  // namespace
+
+LoadedDepth load_depth(const DepthSource& s, int width, int height) {
+  int given = 0;
+  for (const std::string* f : {&s.range, &s.z, &s.disparity, &s.depth_buffer, &s.inverse_depth, &s.normalized_depth, &s.velodyne})
+    given += f->empty() ? 0 : 1;
+  if (given != 1)
+    throw Error(given == 0 ? "no depth given: use one of --range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne"
+                           : "give exactly one depth source (--range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth or --velodyne)");
+  LoadedDepth out;
+  nlohmann::json& rec = out.record;
+  FileInfo info;
+
+  if (!s.velodyne.empty()) {
+    if (s.kitti_calib.empty()) throw Error("--velodyne needs --kitti-calib FILE (P2, R0_rect, Tr_velo_to_cam)");
+    LidarImage li = project_velodyne(s.velodyne, read_kitti_calib(s.kitti_calib), width, height);
+    out.range = li.range;
+    out.path = s.velodyne;
+    rec = {{"source", "velodyne"},
+           {"path", s.velodyne},
+           {"sha256", sha256_file(s.velodyne)},
+           {"kitti_calib", s.kitti_calib},
+           {"projection", "P2 R0_rect Tr_velo_to_cam, nearest point per pixel, pixel centres at integers"},
+           {"points", li.points},
+           {"points_in_view", li.points_in_view},
+           {"pixels_hit", li.pixels_hit},
+           {"coverage", li.coverage}};
+    return out;
+  }
+
+  const std::string& path = !s.range.empty() ? s.range : !s.z.empty() ? s.z : !s.disparity.empty() ? s.disparity
+                          : !s.depth_buffer.empty() ? s.depth_buffer : !s.inverse_depth.empty() ? s.inverse_depth
+                          : s.normalized_depth;
+  out.path = path;
+  Image v = read_scalar(path, s.channel, &info);
+  if (width > 0 && (v.width != width || v.height != height))
+    throw Error("depth '" + path + "' is " + v.size_string() + " but the image is " + std::to_string(width) + "x" +
+                std::to_string(height) + "; they must be the same size (resample the depth, or crop both)");
+  rec = file_record(path, info, v);
+  if (!s.channel.empty()) rec["channel"] = s.channel;
+
+  auto metres = [&](const char* what) {
+    if (info.integer && !s.depth_scale)
+      throw Error(std::string(what) + " '" + path + "' stores " + std::to_string(info.bits) +
+                  "-bit integers; say how many metres one count is with --depth-scale (alias --range-scale), "
+                  "e.g. 0.001 for millimetres, 0.00390625 (1/256) for KITTI depth PNGs");
+    const double sc = s.depth_scale.value_or(1.0);
+    if (!(sc > 0.0) || !std::isfinite(sc))
+      throw Error("--depth-scale " + std::to_string(sc) + " is not allowed: metres per unit must be finite and > 0");
+    for (float& x : v.data) {
+      if (info.integer && x == 0.0f) x = NAN;  // 0 = no measurement in integer depth files
+      else x = static_cast<float>(x * sc);
+    }
+    rec["scale_m_per_unit"] = sc;
+  };
+
+  if (!s.range.empty()) {
+    rec["source"] = "range";
+    metres("--range");
+    out.range = std::move(v);
+  } else if (!s.z.empty()) {
+    rec["source"] = "planar z";
+    metres("--z");
+    Intrinsics k = depth_intrinsics(s, v.width, v.height);
+    rec["intrinsics"] = intrinsics_record(k);
+    out.range = z_to_range(v, k);
+  } else if (!s.disparity.empty()) {
+    rec["source"] = "disparity";
+    double f = s.k.fx, doffs = s.disparity_offset, baseline = s.baseline_m;
+    Intrinsics k;
+    if (!s.calib.empty()) {
+      StereoCalib c = read_stereo_calib(s.calib);
+      if (c.width > 0 && (c.width != v.width || c.height != v.height))
+        throw Error("--disparity '" + path + "' is " + v.size_string() + " but --calib '" + s.calib + "' says " +
+                    std::to_string(c.width) + "x" + std::to_string(c.height));
+      f = c.f_px, doffs = c.doffs_px, baseline = c.baseline_m;
+      k.fx = k.fy = c.f_px, k.cx = c.cx, k.cy = c.cy;
+      rec["calib"] = s.calib;
+    } else {
+      if (!(f > 0.0) || !(baseline > 0.0))
+        throw Error("--disparity without --calib needs --fx (focal length in pixels at the disparity map's size) and --baseline (metres)");
+      k = s.k;
+    }
+    k = resolve(k, v.width, v.height);
+    if (info.integer)  // Middlebury 2005/2006 PNGs: 0 = unknown, d = scale * I + offset
+      for (float& x : v.data) x = x == 0.0f ? NAN : static_cast<float>(s.disparity_scale * x);
+    else if (s.disparity_scale != 1.0)
+      for (float& x : v.data) x = static_cast<float>(s.disparity_scale * x);
+    Image zz = disparity_to_z(v, f, baseline, doffs);
+    rec["formula"] = "Z = f B / (d + doffs), d = disparity_scale * stored";
+    rec["f_px"] = f, rec["baseline_m"] = baseline, rec["doffs_px"] = doffs, rec["disparity_scale"] = s.disparity_scale;
+    rec["intrinsics"] = intrinsics_record(k);
+    out.range = z_to_range(zz, k);
+  } else if (!s.depth_buffer.empty()) {
+    rec["source"] = "depth buffer";
+    unorm(v, info);
+    const DepthBufferConvention c = parse_depth_buffer_convention(s.convention);
+    if (std::isnan(s.near_m) || std::isnan(s.far_m))
+      throw Error("--depth-buffer needs --near and --far (metres; --far inf for an infinite far plane)");
+    Intrinsics k = depth_intrinsics(s, v.width, v.height);
+    rec["convention"] = s.convention, rec["near_m"] = s.near_m;
+    rec["far_m"] = std::isinf(s.far_m) ? nlohmann::json("inf") : nlohmann::json(s.far_m);
+    rec["intrinsics"] = intrinsics_record(k);
+    out.range = z_to_range(depth_buffer_to_z(v, c, s.near_m, s.far_m), k);
+  } else if (!s.inverse_depth.empty()) {
+    rec["source"] = "inverse depth";
+    unorm(v, info);
+    if (std::isnan(s.inverse_scale))
+      throw Error("--inverse-depth needs --inverse-scale A (and --inverse-shift B): z = 1 / (A v + B); monocular "
+                  "estimates are defined only up to these, so brume never guesses them");
+    Intrinsics k = depth_intrinsics(s, v.width, v.height);
+    rec["formula"] = "z = 1 / (scale v + shift)", rec["scale"] = s.inverse_scale, rec["shift"] = s.inverse_shift;
+    rec["intrinsics"] = intrinsics_record(k);
+    out.range = z_to_range(inverse_depth_to_z(v, s.inverse_scale, s.inverse_shift), k);
+  } else {
+    rec["source"] = "normalized depth";
+    unorm(v, info);
+    if (std::isnan(s.near_m) || std::isnan(s.far_m))
+      throw Error("--normalized-depth needs --near and --far (metres): z = near + v (far - near)");
+    Intrinsics k = depth_intrinsics(s, v.width, v.height);
+    rec["formula"] = "z = near + v (far - near)", rec["near_m"] = s.near_m, rec["far_m"] = s.far_m;
+    rec["intrinsics"] = intrinsics_record(k);
+    out.range = z_to_range(normalized_depth_to_z(v, s.near_m, s.far_m), k);
+  }
+  std::size_t unknown = 0;
+  for (float x : out.range.data) unknown += std::isfinite(x) && x > 0.0f ? 0 : 1;
+  rec["unknown_pixels"] = unknown;
+  return out;
+}
+
+}  // namespace brume
