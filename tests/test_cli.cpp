@@ -172,3 +172,54 @@ TEST_F(Cli, DemoWritesItsImages) {
   for (const char* f : {"clean.png", "range.exr", "range-preview.png", "haze.png", "fog.png", "haze.json", "fog.json"})
     EXPECT_TRUE(fs::exists(p("demo/" + std::string(f)))) << f;
 }
+
+TEST_F(Cli, DepthConvertWritesRangeAndZ) {
+  // A planar z map of 4 m everywhere with fx = 40 px: range at the corner
+  // pixel (0, 0) is 4 sqrt(1 + ((0 - 23.5)/40)^2 + ((0 - 15.5)/40)^2).
+  Image z(48, 32, 1, 4.0f);
+  WriteOptions data;
+  data.is_color = false;
+  write_image(p("z.exr"), z, data);
+  CliRun r = run("depth convert --z " + p("z.exr") + " --fx 40 --out " + p("r.exr") + " --record " + p("r.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  Image range = read_scalar(p("r.exr"));
+  const double a = 23.5 / 40, b = 15.5 / 40;
+  EXPECT_NEAR(range.at(0, 0), 4.0 * std::sqrt(1 + a * a + b * b), 1e-5);
+  CliRun back = run("depth convert --range " + p("r.exr") + " --fx 40 --kind z --out " + p("z2.pfm"));
+  ASSERT_EQ(back.status, 0) << back.output;
+  for (float v : read_scalar(p("z2.pfm")).data) ASSERT_NEAR(v, 4.0f, 1e-5);
+}
+
+TEST_F(Cli, DepthErrorPathsAreClearAndLeaveNothing) {
+  std::ofstream(p("nokeys.txt")) << "cam0=[500 0 10; 0 500 10; 0 0 1]\n";
+  std::ofstream(p("badf.txt")) << "cam0=[-5 0 10; 0 -5 10; 0 0 1]\nbaseline=100\n";
+  std::ofstream(p("wrongsize.txt")) << "cam0=[500 0 10; 0 500 10; 0 0 1]\nbaseline=100\nwidth=640\nheight=480\n";
+  Image d(20, 10, 1, 5.0f);
+  WriteOptions data;
+  data.is_color = false;
+  write_image(p("d.pfm"), d, data);
+  write_image(p("buf.exr"), Image(48, 32, 1, 0.5f), data);
+  struct Case {
+    std::string args, must_contain;
+  };
+  const std::string out = " --out " + p("o.exr");
+  const Case cases[] = {
+      {"depth convert --disparity " + p("d.pfm") + " --calib " + p("nokeys.txt") + out, "baseline"},
+      {"depth convert --disparity " + p("d.pfm") + " --calib " + p("badf.txt") + out, "focal length"},
+      {"depth convert --disparity " + p("d.pfm") + " --calib " + p("wrongsize.txt") + out, "640x480"},
+      {"depth convert --disparity " + p("d.pfm") + " --fx 0 --baseline 0.1" + out, "--fx"},
+      {"depth convert --depth-buffer " + p("buf.exr") + " --near 5 --far 5 --fov-y 50" + out, "--far"},
+      {"depth convert --depth-buffer " + p("buf.exr") + " --near 1 --far 10" + out, "--fov"},
+      {"depth convert --depth-buffer " + p("buf.exr") + " --near 1 --far 10 --fov-y 50 --convention gl" + out, "--convention"},
+      {"depth convert --z " + p("buf.exr") + out, "--fx"},
+      {"depth convert --range " + p("buf.exr") + " --out " + p("o.png"), ".exr"},
+      {"depth convert --range " + p("buf.exr") + " --z " + p("buf.exr") + out, "exactly one"},
+      {"haze --image " + img + " --disparity " + p("d.pfm") + " --fx 500 --baseline 0.1 --out " + p("h.png"), "20x10"},
+  };
+  for (const Case& c : cases) {
+    CliRun r = run(c.args);
+    EXPECT_NE(r.status, 0) << c.args << "\n" << r.output;
+    EXPECT_NE(r.output.find(c.must_contain), std::string::npos) << c.args << "\n" << r.output;
+    for (const char* f : {"o.exr", "o.png", "h.png"}) EXPECT_FALSE(fs::exists(p(f))) << c.args;
+  }
+}
