@@ -87,4 +87,8 @@ struct LidarImage {
 // nearest point winning where several land on one pixel.
 LidarImage project_velodyne(const std::string& bin_path, const KittiCalib& calib, int width, int height);
 
+// Linear RGB false colour of log range (near = dark red, far = blue); unknown
+// pixels are black. For looking at range maps, not for measuring them.
+Image range_preview(const Image& range);
+
 }  // namespace brume

@@ -35,6 +35,8 @@ struct DepthSource {
   double near_m = NAN, far_m = NAN;   // depth buffer / normalised depth planes
   double inverse_scale = NAN, inverse_shift = 0.0;
   std::string kitti_calib;
+  int width = 0, height = 0;     // image size for --velodyne when no image is at hand
+  std::string like;              // ... or take it from this image
 
   bool given() const;
 };

@@ -15,6 +15,7 @@
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
 #include "brume/params.hpp"
+#include "brume/prepare.hpp"
 
 namespace brume {
 
@@ -33,5 +34,6 @@ nlohmann::json params_record(const P& p, const std::vector<ParamDecl<P>>& table)
 
 nlohmann::json diffusion_record(const DiffusionParams& p, const DiffusionPlan& plan);
 nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a);
+nlohmann::json prepare_record(const PrepareParams& p, const PrepareResult& r);
 
 }  // namespace brume

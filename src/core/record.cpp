@@ -69,4 +69,25 @@ nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a) {
   return j;
 }
 
+nlohmann::json prepare_record(const PrepareParams& p, const PrepareResult& r) {
+  const double n = static_cast<double>(r.range.pixels());
+  return {{"rule", "Hansard 4.1: holes filled by RANSAC from their boundary; unknown components touching the top "
+                   "(>= sky_min_fraction) or large (>= sky_large_fraction) are sky at S_max; Laplace margin of width mu"},
+          {"sky_margin_px", p.sky_margin_px},
+          {"sky_min_fraction", p.sky_min_fraction},
+          {"sky_large_fraction", p.sky_large_fraction},
+          {"s_max_factor", p.s_max_factor},
+          {"min_coverage", p.min_coverage},
+          {"seed", p.seed},
+          {"range_max_m", r.range_max_m},
+          {"s_max_m", r.s_max_m},
+          {"known_fraction", r.known_fraction},
+          {"holes", r.holes},
+          {"hole_fraction", r.hole_pixels / n},
+          {"sky_fraction", r.sky_pixels / n},
+          {"margin_fraction", r.margin_pixels / n},
+          {"margin_residual", r.margin_residual},
+          {"solver_iterations", r.solver_iterations}};
+}
+
 }  // namespace brume

@@ -58,6 +58,12 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
   FileInfo info;
 
   if (!s.velodyne.empty()) {
+    if (width <= 0 && !s.like.empty()) {
+      Image im = read_color(s.like);
+      width = im.width, height = im.height;
+    } else if (width <= 0) {
+      width = s.width, height = s.height;
+    }
     if (s.kitti_calib.empty()) throw Error("--velodyne needs --kitti-calib FILE (P2, R0_rect, Tr_velo_to_cam)");
     LidarImage li = project_velodyne(s.velodyne, read_kitti_calib(s.kitti_calib), width, height);
     out.range = li.range;

@@ -24,6 +24,7 @@
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
+#include "brume/prepare.hpp"
 #include "brume/record.hpp"
 
 namespace fs = std::filesystem;
@@ -71,7 +72,7 @@ std::array<float, 3> parse_rgb(const std::string& s, const std::string& flag) {
 }
 
 // The depth flags every command that takes depth shares (brume/depth_source.hpp).
-void add_depth_flags(CLI::App* app, DepthSource& d, bool with_size) {
+void add_depth_flags(CLI::App* app, DepthSource& d) {
   auto* g = app->add_option_group("depth", "depth source (exactly one) and its conventions");
   g->add_option("--range", d.range, "range map: metres from the camera centre along each pixel's ray; NaN, inf, 0 unknown");
   g->add_option("--z", d.z, "planar depth map in metres (needs --fx.. or --fov-x/--fov-y or --calib)");
@@ -99,7 +100,19 @@ void add_depth_flags(CLI::App* app, DepthSource& d, bool with_size) {
   g->add_option("--inverse-scale", d.inverse_scale, "A in z = 1/(A v + B)");
   g->add_option("--inverse-shift", d.inverse_shift, "B in z = 1/(A v + B)")->capture_default_str();
   g->add_option("--kitti-calib", d.kitti_calib, "KITTI calibration file for --velodyne");
-  (void)with_size;
+  g->add_option("--like", d.like, "image whose size the --velodyne scan is projected to (when no --image is given)");
+  g->add_option("--width", d.width, "image width for --velodyne (or --like)");
+  g->add_option("--height", d.height, "image height for --velodyne (or --like)");
+}
+
+// Flags of the range preparation (brume/prepare.hpp), shared by `depth
+// prepare` and every effect.
+void add_prepare_flags(CLI::App* app, PrepareParams& p) {
+  app->add_option("--sky-margin", p.sky_margin_px, "width mu of the matted horizon between scene and sky, px")
+      ->capture_default_str();
+  app->add_option("--s-max-factor", p.s_max_factor, "sky range S_max = factor * R_max (> 1)")->capture_default_str();
+  app->add_option("--min-coverage", p.min_coverage, "refuse maps whose known pixels cover less than this fraction")
+      ->capture_default_str();
 }
 
 // Write JSON atomically (temp + rename) after the images.
@@ -160,12 +173,15 @@ void add_common(CLI::App* app, Common& c) {
   app->add_flag("--reference", c.reference, "use the scalar double-precision reference path (slow; for checking)");
 }
 
-int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std::string& airlight, const std::string& scheme,
+int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std::string& prepare_mode,
+             const PrepareParams& pp, const std::string& airlight, const std::string& scheme,
              const std::string& precision, const std::string& composite, const std::string& transmission_out,
              const std::string& scale_out, bool kappa_given, bool albedo_given) {
   p.diffusion.scheme = parse_scheme(scheme);
   p.diffusion.precision = parse_precision(precision);
   p.composite = parse_composite(composite);
+  if (prepare_mode != "auto" && prepare_mode != "off")
+    throw Error("--prepare '" + prepare_mode + "' is not a mode; use auto (fill holes, identify and matte the sky) or off");
   if (airlight == "auto") {
     p.airlight_auto = true;
   } else {
@@ -198,16 +214,32 @@ int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std:
   FileInfo img_info;
   Image rgb = read_color(c.image, in_t, &img_info);
   LoadedDepth depth_in = load_depth(depth, rgb.width, rgb.height);
-  const Image& range = depth_in.range;
-  HazeAnalysis a = analyse_haze(rgb, range, p);
+  // Image-wide statistics (R_max, airlight from the sky) come from the
+  // measured range; the effect then runs on the prepared one, whose sky lies
+  // at S_max > R_max.
+  HazeAnalysis a = analyse_haze(rgb, depth_in.range, p);
+  nlohmann::json prep_rec = {{"mode", prepare_mode}, {"applied", false}};
+  Image prepared;
+  const Image* range = &depth_in.range;
+  if (prepare_mode == "auto" && a.unknown_pixels > 0) {
+    PrepareResult pr = prepare_range(depth_in.range, pp);
+    prepared = std::move(pr.range);
+    range = &prepared;
+    prep_rec = prepare_record(pp, pr);
+    prep_rec["mode"] = "auto";
+    prep_rec["applied"] = true;
+  }
   Exec ex;
   ex.threads = c.threads;
   ex.path = c.reference ? Path::reference : Path::fast;
-  HazeResult r = apply_haze(rgb, range, p, a, ex);
+  HazeResult r = apply_haze(rgb, *range, p, a, ex);
 
   nlohmann::json rec = record_header("haze", g_argv);
   rec["inputs"] = {{"image", file_record(c.image, img_info, rgb)}, {"depth", depth_in.record}};
   rec["haze"] = haze_record(p, a);
+  rec["prepare"] = prep_rec;
+  if (prep_rec["applied"].get<bool>())
+    rec["haze"]["derived"]["unknown_range_rule"] = "prepared: holes filled, sky at S_max, horizon margin matted (see prepare)";
   rec["execution"] = {{"path", c.reference ? "reference" : "fast"}, {"threads", c.threads}};
 
   if (wo.bits == "auto" && img_info.integer && (img_info.bits == 8 || img_info.bits == 16)) {
@@ -301,8 +333,8 @@ int run_blur(const Common& c, double sigma, const std::string& scale_map, double
   return 0;
 }
 
-int run_depth_convert(const DepthSource& d, const std::string& out, const std::string& kind, int width, int height,
-                      const std::string& like, const std::string& record) {
+int run_depth_convert(const DepthSource& d, const std::string& out, const std::string& kind,
+                      const std::string& record) {
   if (kind != "range" && kind != "z") throw Error("--kind '" + kind + "' is not a depth kind; use range or z");
   WriteOptions data;
   data.is_color = false;
@@ -311,11 +343,7 @@ int run_depth_convert(const DepthSource& d, const std::string& out, const std::s
   if (e == ".png" || e == ".jpg" || e == ".jpeg" || e == ".hdr")
     throw Error("--out '" + out + "': depth in metres needs a float file; use .exr, .pfm or .tif");
   if (!record.empty()) check_record_path(record);
-  if (!like.empty()) {
-    Image im = read_color(like);
-    width = im.width, height = im.height;
-  }
-  LoadedDepth ld = load_depth(d, width, height);
+  LoadedDepth ld = load_depth(d);
   Image result = ld.range;
   nlohmann::json rec = record_header("depth convert", g_argv);
   rec["depth"] = ld.record;
@@ -350,6 +378,52 @@ int run_depth_convert(const DepthSource& d, const std::string& out, const std::s
   return 0;
 }
 
+int run_depth_prepare(const DepthSource& d, const PrepareParams& pp, const std::string& out, const std::string& masks,
+                      const std::string& record) {
+  WriteOptions data;
+  data.is_color = false;
+  check_writable(out, data, "--out");
+  const std::string e = fs::path(out).extension().string();
+  if (e == ".png" || e == ".jpg" || e == ".jpeg" || e == ".hdr")
+    throw Error("--out '" + out + "': a range in metres needs a float file; use .exr, .pfm or .tif");
+  if (!record.empty()) check_record_path(record);
+  if (!masks.empty()) {
+    std::error_code ec;
+    fs::create_directories(masks, ec);
+    if (!fs::is_directory(masks)) throw Error("--masks '" + masks + "' cannot be created: " + ec.message());
+  }
+  LoadedDepth ld = load_depth(d, 0, 0);
+  PrepareResult pr = prepare_range(ld.range, pp);
+  nlohmann::json rec = record_header("depth prepare", g_argv);
+  rec["depth"] = ld.record;
+  rec["prepare"] = prepare_record(pp, pr);
+  data.description = rec.dump();
+  OutputSet outs;
+  outs.write(out, pr.range, data, "--out");
+  if (!masks.empty()) {
+    WriteOptions m;
+    m.is_color = false;
+    m.bits = "8";
+    outs.write((fs::path(masks) / "sky.png").string(), pr.sky_mask, m, "--masks");
+    outs.write((fs::path(masks) / "holes.png").string(), pr.hole_mask, m, "--masks");
+    outs.write((fs::path(masks) / "margin.png").string(), pr.margin_mask, m, "--masks");
+    WriteOptions c;
+    c.bits = "8";
+    outs.write((fs::path(masks) / "prepared-preview.png").string(), range_preview(pr.range), c, "--masks");
+  }
+  JsonOut jr{record, ""};
+  if (!record.empty()) jr.write(rec);
+  outs.commit();
+  if (!record.empty()) jr.commit();
+  std::fprintf(stderr,
+               "brume depth prepare: %s  known %.1f %%, %zu holes (%.2f %%), sky %.1f %% at S_max %.4g m (R_max %.4g m), "
+               "margin %.2f %% solved to residual %.2g in %d iterations\n",
+               out.c_str(), 100 * pr.known_fraction, pr.holes, 100.0 * pr.hole_pixels / pr.range.pixels(),
+               100.0 * pr.sky_pixels / pr.range.pixels(), pr.s_max_m, pr.range_max_m,
+               100.0 * pr.margin_pixels / pr.range.pixels(), pr.margin_residual, pr.solver_iterations);
+  return 0;
+}
+
 }  // namespace
 
 int run_demo(const std::string& dir, int width, int height, int threads);
@@ -367,8 +441,15 @@ int main(int argc, char** argv) {
   std::string airlight = "auto", scheme = "invariant-exact", precision = "f32", composite = "premultiplied",
               transmission_out, scale_out;
   DepthSource hdepth;
+  std::string prepare_mode = "auto";
+  PrepareParams hprep;
   add_common(haze, hc);
-  add_depth_flags(haze, hdepth, false);
+  add_depth_flags(haze, hdepth);
+  haze->add_option("--prepare", prepare_mode,
+                   "auto: fill holes, identify and matte the sky (Hansard 4.1) when the range has unknown pixels; "
+                   "off: treat unknown range as R_max")
+      ->capture_default_str();
+  add_prepare_flags(haze, hprep);
   std::map<std::string, CLI::Option*> hopts;
   add_param_flags(haze, hp, haze_param_table(), &hopts);
   haze->add_option("--airlight", airlight, "airlight B as linear R,G,B, or auto (median sky colour; else a bright grey)")
@@ -402,15 +483,21 @@ int main(int argc, char** argv) {
   depth->require_subcommand(1);
   CLI::App* dconv = depth->add_subcommand("convert", "convert a depth source to a range (or z) map in metres");
   DepthSource cdepth;
-  std::string conv_out, conv_kind = "range", conv_like, conv_record;
-  int conv_w = 0, conv_h = 0;
-  add_depth_flags(dconv, cdepth, true);
+  std::string conv_out, conv_kind = "range", conv_record;
+  add_depth_flags(dconv, cdepth);
   dconv->add_option("--out", conv_out, "output float file (.exr, .pfm, .tif)")->required();
   dconv->add_option("--kind", conv_kind, "range (metres along the ray) or z (planar depth)")->capture_default_str();
-  dconv->add_option("--width", conv_w, "image width for --velodyne");
-  dconv->add_option("--height", conv_h, "image height for --velodyne");
-  dconv->add_option("--like", conv_like, "take the image size from this image (for --velodyne)");
   dconv->add_option("--record", conv_record, "write a JSON record of the conversion");
+
+  CLI::App* dprep = depth->add_subcommand("prepare", "fill holes, identify the sky and matte the horizon (Hansard 4.1)");
+  DepthSource pdepth;
+  PrepareParams pparams;
+  std::string prep_out, prep_masks, prep_record;
+  add_depth_flags(dprep, pdepth);
+  add_prepare_flags(dprep, pparams);
+  dprep->add_option("--out", prep_out, "prepared range, float file (.exr, .pfm, .tif)")->required();
+  dprep->add_option("--masks", prep_masks, "directory for sky.png, holes.png, margin.png and prepared-preview.png");
+  dprep->add_option("--record", prep_record, "write a JSON record of what was done");
 
   // demo
   CLI::App* demo = app.add_subcommand("demo", "render the built-in RGB-D scene clean, with haze and with fog");
@@ -431,7 +518,7 @@ int main(int argc, char** argv) {
     if (*haze) {
       bool kappa_given = hopts["kappa-a"]->count() > 0 || hopts["kappa-s"]->count() > 0;
       bool albedo_given = hopts["albedo"]->count() > 0;
-      return run_haze(hc, hp, hdepth, airlight, scheme, precision, composite, transmission_out, scale_out,
+      return run_haze(hc, hp, hdepth, prepare_mode, hprep, airlight, scheme, precision, composite, transmission_out, scale_out,
                       kappa_given, albedo_given);
     }
     if (*blur) {
@@ -440,10 +527,12 @@ int main(int argc, char** argv) {
       return run_blur(bc, sigma, scale_map, sigma0, bscheme, bprecision, brho);
     }
     if (*demo) return run_demo(demo_dir, demo_w, demo_h, demo_threads);
-    if (*dconv) return run_depth_convert(cdepth, conv_out, conv_kind, conv_w, conv_h, conv_like, conv_record);
+    if (*dprep) return run_depth_prepare(pdepth, pparams, prep_out, prep_masks, prep_record);
+    if (*dconv) return run_depth_convert(cdepth, conv_out, conv_kind, conv_record);
   } catch (const brume::Error& e) {
     std::string cmd = app.get_subcommands().front()->get_name();
     if (*dconv) cmd = "depth convert";
+    if (*dprep) cmd = "depth prepare";
     std::fprintf(stderr, "brume %s: error: %s\n", cmd.c_str(), e.what());
     return 2;
   } catch (const std::exception& e) {
