@@ -223,3 +223,35 @@ TEST_F(Cli, DepthErrorPathsAreClearAndLeaveNothing) {
     for (const char* f : {"o.exr", "o.png", "h.png"}) EXPECT_FALSE(fs::exists(p(f))) << c.args;
   }
 }
+
+TEST_F(Cli, PrepareFromTheCommandLine) {
+  // The fixture's range has its top 6 rows unknown (sky). haze prepares it by
+  // default and records what it did; `depth prepare` writes the range and masks.
+  CliRun h = run("haze --image " + img + " --range " + range + " --out " + p("h.exr") + " --record " + p("h.json"));
+  ASSERT_EQ(h.status, 0) << h.output;
+  std::ifstream js(p("h.json"));
+  nlohmann::json j = nlohmann::json::parse(js);
+  EXPECT_EQ(j["prepare"]["applied"], true);
+  EXPECT_NEAR(j["prepare"]["sky_fraction"].get<double>(), 6.0 / 32.0, 1e-9);
+  EXPECT_NEAR(j["prepare"]["s_max_m"].get<double>(), 1.25 * 15.0, 1e-4);
+  CliRun off = run("haze --image " + img + " --range " + range + " --prepare off --out " + p("o.exr") + " --record " + p("o.json"));
+  ASSERT_EQ(off.status, 0) << off.output;
+  std::ifstream js2(p("o.json"));
+  EXPECT_EQ(nlohmann::json::parse(js2)["prepare"]["applied"], false);
+  CliRun bad = run("haze --image " + img + " --range " + range + " --prepare maybe --out " + p("b.exr"));
+  EXPECT_NE(bad.status, 0);
+  EXPECT_NE(bad.output.find("--prepare"), std::string::npos) << bad.output;
+  EXPECT_FALSE(fs::exists(p("b.exr")));
+
+  CliRun d = run("depth prepare --range " + range + " --out " + p("prep.exr") + " --masks " + p("masks") +
+                 " --sky-margin 3");
+  ASSERT_EQ(d.status, 0) << d.output;
+  Image prep = read_scalar(p("prep.exr"));
+  Image orig = read_scalar(range);
+  for (std::size_t i = 0; i < prep.data.size(); ++i) {
+    ASSERT_TRUE(std::isfinite(prep.data[i]));
+    if (std::isfinite(orig.data[i])) ASSERT_EQ(prep.data[i], orig.data[i]);  // known values untouched
+  }
+  for (const char* f : {"sky.png", "holes.png", "margin.png", "prepared-preview.png"})
+    EXPECT_TRUE(fs::exists(p("masks/" + std::string(f)))) << f;
+}

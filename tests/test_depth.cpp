@@ -11,6 +11,7 @@
 #include "brume/depth.hpp"
 #include "brume/depth_source.hpp"
 #include "brume/error.hpp"
+#include "brume/prepare.hpp"
 #include "test_util.hpp"
 
 using namespace brume;
@@ -223,4 +224,25 @@ TEST(Depth, SourceErrors) {
   DepthSource z;
   z.z = data_path(rel + "disp0.pfm");  // planar z without intrinsics
   EXPECT_THROW(load_depth(z), Error);
+}
+
+TEST(Depth, PrepareRefusesTheSparseKittiScan) {
+  // A projected Velodyne scan covers ~4 % of the pixels: prepare must refuse
+  // it with a message that says so and what to do, not "fill" it.
+  const std::string rel = "kitti_object_000001/";
+  BRUME_REQUIRE_DATA(rel + "velodyne/000001.bin");
+  DepthSource s;
+  s.velodyne = data_path(rel + "velodyne/000001.bin");
+  s.kitti_calib = data_path(rel + "calib/000001.txt");
+  s.like = data_path(rel + "image_2/000001.png");
+  LoadedDepth ld = load_depth(s);
+  EXPECT_NEAR(ld.record["coverage"].get<double>(), 0.04, 0.01);
+  try {
+    prepare_range(ld.range);
+    FAIL() << "sparse scan accepted";
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("3.99%"), std::string::npos) << m;
+    EXPECT_NE(m.find("--prepare off"), std::string::npos) << m;
+  }
 }
