@@ -250,7 +250,9 @@ TEST_F(Cli, PrepareFromTheCommandLine) {
   Image orig = read_scalar(range);
   for (std::size_t i = 0; i < prep.data.size(); ++i) {
     ASSERT_TRUE(std::isfinite(prep.data[i]));
-    if (std::isfinite(orig.data[i])) ASSERT_EQ(prep.data[i], orig.data[i]);  // known values untouched
+    if (std::isfinite(orig.data[i])) {
+      ASSERT_EQ(prep.data[i], orig.data[i]);  // known values untouched
+    }
   }
   for (const char* f : {"sky.png", "holes.png", "margin.png", "prepared-preview.png"})
     EXPECT_TRUE(fs::exists(p("masks/" + std::string(f)))) << f;

@@ -147,9 +147,10 @@ TEST(Prepare, SyntheticSceneRules) {
   const PrepareResult r = prepare_range(in, p);
   const int W = in.width, H = in.height;
 
-  // Own component analysis: the sky is the one top-touching component with
-  // area >= 0.5% (the area between the skyline and row 0, cut by the pole into
-  // two); the six small ones are holes.
+  // Own component analysis (8-connected flood fill): the sky is the one
+  // top-touching component with area >= 0.5% (between the skyline and row 0;
+  // the pole stops at row 20, so it does not cut it); the six small ones are
+  // holes.
   const auto comps = unknown_components(in);
   std::size_t sky_px = 0, hole_px = 0, holes = 0;
   for (const Comp& c : comps) {
@@ -493,10 +494,7 @@ TEST(Prepare, Eth3dPlaygroundDisparity) {
               100.0 * box, r.margin_pixels, r.solver_iterations, lap / r.s_max_m);
 }
 
-TEST(Prepare, KittiLidarIsForTheProjectionComponent) {
-  GTEST_SKIP() << "KITTI object 000001 (sparse lidar projected into the image) is covered by the lidar projection "
-                  "component's tests; prepare refuses sparse maps (see SparseInputIsRefused).";
-}
+// The KITTI scan's refusal is tested with the lidar projection: Depth.PrepareRefusesTheSparseKittiScan.
 
 TEST(Prepare, LongDiagonalHolesUseTheWholeImageScan) {
   // Five diagonal 1-px scratches across a 120x100 plane: their bounding boxes
