@@ -257,3 +257,30 @@ TEST_F(Cli, PrepareFromTheCommandLine) {
   for (const char* f : {"sky.png", "holes.png", "margin.png", "prepared-preview.png"})
     EXPECT_TRUE(fs::exists(p("masks/" + std::string(f)))) << f;
 }
+
+TEST_F(Cli, BackendFlags) {
+  CliRun bad = run("haze --image " + img + " --range " + range + " --backend cuda --out " + p("b.png"));
+  EXPECT_NE(bad.status, 0);
+  EXPECT_NE(bad.output.find("--backend"), std::string::npos) << bad.output;
+  EXPECT_FALSE(fs::exists(p("b.png")));
+  CliRun both = run("blur --image " + img + " --sigma 3 --backend gpu --reference --out " + p("b.png"));
+  EXPECT_NE(both.status, 0);
+  EXPECT_NE(both.output.find("--reference"), std::string::npos) << both.output;
+  // gpu: either it runs, or it fails saying there is no context and what to do.
+  CliRun g = run("haze --image " + img + " --range " + range + " --backend gpu --timing --out " + p("g.exr") +
+                 " --record " + p("g.json"));
+  if (g.status != 0) {
+    EXPECT_NE(g.output.find("no OpenGL ES 3.2 context"), std::string::npos) << g.output;
+    EXPECT_NE(g.output.find("--backend cpu"), std::string::npos) << g.output;
+    const char* req = std::getenv("BRUME_REQUIRE_GPU");
+    if (req && std::string(req) == "1") ADD_FAILURE() << "BRUME_REQUIRE_GPU=1 but: " << g.output;
+    return;
+  }
+  EXPECT_NE(g.output.find("diffusion"), std::string::npos) << g.output;  // --timing
+  std::ifstream js(p("g.json"));
+  nlohmann::json j = nlohmann::json::parse(js);
+  EXPECT_EQ(j["execution"]["backend"], "gpu");
+  CliRun c = run("haze --image " + img + " --range " + range + " --out " + p("c.exr"));
+  ASSERT_EQ(c.status, 0) << c.output;
+  EXPECT_LE(compare(read_color(p("g.exr")), read_color(p("c.exr"))).rms, 1e-3);
+}

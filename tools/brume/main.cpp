@@ -9,6 +9,8 @@
 // Errors name the file or flag, the value, what is allowed and the fix; the
 // exit status is non-zero and no output file is left behind.
 #include <CLI/CLI.hpp>
+#include <chrono>
+#include <memory>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -22,6 +24,7 @@
 #include "brume/depth_source.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/error.hpp"
+#include "brume/gpu.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
 #include "brume/prepare.hpp"
@@ -154,7 +157,47 @@ struct Common {
   std::string image, image_transfer = "auto", out, bits = "auto", out_transfer = "auto", record;
   int threads = 0;
   bool reference = false;
+  std::string backend = "cpu", gpu_filter = "auto";
+  bool timing = false;
 };
+
+GpuFilter parse_gpu_filter(const std::string& s) {
+  if (s == "auto") return GpuFilter::automatic;
+  if (s == "hardware") return GpuFilter::hardware;
+  if (s == "shader") return GpuFilter::shader;
+  throw Error("--gpu-filter '" + s + "' is not a filter mode; use auto, hardware or shader");
+}
+
+// The GPU context a run asks for: --backend gpu must get one (or fail with
+// the reason), auto takes one when it can and says so, cpu never opens one.
+std::unique_ptr<GpuContext> open_gpu(const Common& c, nlohmann::json& exec) {
+  const Backend b = parse_backend(c.backend);
+  parse_gpu_filter(c.gpu_filter);
+  exec["backend_requested"] = c.backend;
+  exec["backend"] = "cpu";
+  if (b == Backend::cpu) return nullptr;
+  if (c.reference) throw Error("--reference is the CPU's double-precision path; it cannot be combined with --backend " + c.backend);
+  try {
+    auto ctx = std::make_unique<GpuContext>();
+    exec["backend"] = "gpu";
+    exec["gpu"] = {{"renderer", ctx->info().renderer}, {"version", ctx->info().version}, {"platform", ctx->info().platform}};
+    return ctx;
+  } catch (const Error& e) {
+    if (b == Backend::gpu) throw;
+    std::fprintf(stderr, "brume: --backend auto: %s; running on the CPU\n", e.what());
+    exec["gpu_unavailable"] = e.what();
+    return nullptr;
+  }
+}
+
+void print_timing(const char* cmd, const GpuTiming& t, const GpuInfo& info) {
+  std::fprintf(stderr,
+               "brume %s: GPU %s (%s): upload %.3f ms, premultiply %.3f ms, diffusion %.3f ms (%d passes, %.4f ms each), "
+               "composite %.3f ms, read back %.3f ms\n",
+               cmd, info.renderer.c_str(), t.gpu_timer ? "timer queries" : "glFinish wall time", t.upload_ms,
+               t.premultiply_ms, t.diffuse_ms, t.iterations, t.iterations ? t.diffuse_ms / t.iterations : 0.0,
+               t.composite_ms, t.readback_ms);
+}
 
 void add_common(CLI::App* app, Common& c) {
   app->add_option("--image", c.image, "input colour image (PNG, JPEG, TIFF, EXR, PFM, HDR)")->required();
@@ -171,6 +214,12 @@ void add_common(CLI::App* app, Common& c) {
   app->add_option("--threads", c.threads, "worker threads (0 = all cores); results do not depend on it")
       ->capture_default_str();
   app->add_flag("--reference", c.reference, "use the scalar double-precision reference path (slow; for checking)");
+  app->add_option("--backend", c.backend, "cpu, gpu (OpenGL ES 3.2 over headless EGL) or auto (gpu when available)")
+      ->capture_default_str();
+  app->add_option("--gpu-filter", c.gpu_filter,
+                  "GPU interpolation between texels: auto, hardware (texture units), shader (exact float weights)")
+      ->capture_default_str();
+  app->add_flag("--timing", c.timing, "print the time of each pass (GPU timer queries where available)");
 }
 
 int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std::string& prepare_mode,
@@ -232,7 +281,22 @@ int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std:
   Exec ex;
   ex.threads = c.threads;
   ex.path = c.reference ? Path::reference : Path::fast;
-  HazeResult r = apply_haze(rgb, *range, p, a, ex);
+  nlohmann::json exec_rec = {{"path", c.reference ? "reference" : "fast"}, {"threads", c.threads}};
+  std::unique_ptr<GpuContext> gpu = open_gpu(c, exec_rec);
+  HazeResult r;
+  if (gpu) {
+    GpuHaze gh(*gpu, rgb, *range);
+    r = gh.render(p, a, parse_gpu_filter(c.gpu_filter));
+    if (c.timing) print_timing("haze", gh.timing(), gpu->info());
+  } else {
+    const auto t0 = std::chrono::steady_clock::now();
+    r = apply_haze(rgb, *range, p, a, ex);
+    if (c.timing)
+      std::fprintf(stderr, "brume haze: CPU (%s path): %.1f ms for premultiply, %d diffusion iterations and composite\n",
+                   c.reference ? "reference" : "fast",
+                   std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count(),
+                   a.plan.iterations);
+  }
 
   nlohmann::json rec = record_header("haze", g_argv);
   rec["inputs"] = {{"image", file_record(c.image, img_info, rgb)}, {"depth", depth_in.record}};
@@ -240,7 +304,7 @@ int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std:
   rec["prepare"] = prep_rec;
   if (prep_rec["applied"].get<bool>())
     rec["haze"]["derived"]["unknown_range_rule"] = "prepared: holes filled, sky at S_max, horizon margin matted (see prepare)";
-  rec["execution"] = {{"path", c.reference ? "reference" : "fast"}, {"threads", c.threads}};
+  rec["execution"] = exec_rec;
 
   if (wo.bits == "auto" && img_info.integer && (img_info.bits == 8 || img_info.bits == 16)) {
     std::string e = fs::path(c.out).extension().string();
@@ -307,7 +371,20 @@ int run_blur(const Common& c, double sigma, const std::string& scale_map, double
   Exec ex;
   ex.threads = c.threads;
   ex.path = c.reference ? Path::reference : Path::fast;
-  DiffusionPlan plan = diffuse(f, smap, smax, dp, ex);
+  nlohmann::json exec_rec = {{"path", c.reference ? "reference" : "fast"}, {"threads", c.threads}};
+  std::unique_ptr<GpuContext> gpu = open_gpu(c, exec_rec);
+  DiffusionPlan plan;
+  if (gpu) {
+    GpuTiming t;
+    plan = diffuse_gpu(*gpu, f, smap, smax, dp, parse_gpu_filter(c.gpu_filter), &t);
+    if (c.timing) print_timing("blur", t, gpu->info());
+  } else {
+    const auto t0 = std::chrono::steady_clock::now();
+    plan = diffuse(f, smap, smax, dp, ex);
+    if (c.timing)
+      std::fprintf(stderr, "brume blur: CPU: %.1f ms for %d iterations\n",
+                   std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count(), plan.iterations);
+  }
   for (std::size_t i = 0; i < rgb.pixels(); ++i)
     for (int k = 0; k < 3; ++k) rgb.data[i * 3 + k] = f.data[i * 4 + k];
 
@@ -316,6 +393,7 @@ int run_blur(const Common& c, double sigma, const std::string& scale_map, double
   if (!scale_map.empty()) rec["inputs"]["scale_map"] = file_record(scale_map, map_info, smap);
   else rec["sigma_px"] = sigma;
   rec["diffusion"] = diffusion_record(dp, plan);
+  rec["execution"] = exec_rec;
   rec["effective_gaussian_px"] = scale_map.empty() ? std::sqrt(sigma * sigma - sigma0 * sigma0) : -1.0;
   if (wo.bits == "auto" && info.integer && (info.bits == 8 || info.bits == 16)) {
     std::string e = fs::path(c.out).extension().string();

@@ -1,0 +1,71 @@
+// One diffusion iteration (Hansard eq. 11-12 with eq. 13 or 17-18):
+//   F <- F + sum_u rho(x,u) (F(x+u) - F(x)),  rho(x,u) = (rho(x+u) + rho(x)) / 2
+// with unit offsets (standard) or offsets h_k(x) from sigma_k = sigma0 e^{k rho}
+// (invariant, invariant-exact). Samples between texels are linear
+// interpolations: in hardware (uHardware = 1, textures set to LINEAR with
+// MIRRORED_REPEAT, which is exactly the half-sample mirror boundary) or here
+// in the shader with texelFetch (exact float weights).
+uniform highp sampler2D uF;     // F at iteration k
+uniform highp sampler2D uAux;   // .r = rho(x)
+uniform int uK;                 // iteration index k
+uniform int uScheme;            // 0 standard, 1 invariant, 2 invariant-exact
+uniform float uSigma0;
+uniform int uHardware;
+layout(location = 0) out vec4 oF;
+
+// Half-sample mirror of an index into [0, n). GLSL's % is undefined for
+// negative operands, so reflect negatives first (-1 -> 0, -2 -> 1, ...).
+int mirror_index(int i, int n) {
+  if (i >= 0 && i < n) return i;
+  if (i < 0) i = -1 - i;
+  int period = 2 * n;
+  i = i % period;
+  return i < n ? i : period - 1 - i;
+}
+
+// Linear interpolation along one axis at p + d * axis (d >= 0 or < 0).
+vec4 sample_f(ivec2 p, float d, ivec2 axis, ivec2 size) {
+  if (uHardware == 1) {
+    vec2 c = (vec2(p) + 0.5 + d * vec2(axis)) / vec2(size);
+    return texture(uF, c);
+  }
+  float fl = floor(d);
+  float fr = d - fl;
+  int i0 = int(fl);
+  ivec2 a = p + i0 * axis, b = p + (i0 + 1) * axis;
+  a = ivec2(mirror_index(a.x, size.x), mirror_index(a.y, size.y));
+  b = ivec2(mirror_index(b.x, size.x), mirror_index(b.y, size.y));
+  vec4 va = texelFetch(uF, a, 0), vb = texelFetch(uF, b, 0);
+  return va + fr * (vb - va);
+}
+
+float sample_rho(ivec2 p, float d, ivec2 axis, ivec2 size) {
+  if (uHardware == 1) {
+    vec2 c = (vec2(p) + 0.5 + d * vec2(axis)) / vec2(size);
+    return texture(uAux, c).r;
+  }
+  float fl = floor(d);
+  float fr = d - fl;
+  int i0 = int(fl);
+  ivec2 a = p + i0 * axis, b = p + (i0 + 1) * axis;
+  a = ivec2(mirror_index(a.x, size.x), mirror_index(a.y, size.y));
+  b = ivec2(mirror_index(b.x, size.x), mirror_index(b.y, size.y));
+  float va = texelFetch(uAux, a, 0).r, vb = texelFetch(uAux, b, 0).r;
+  return va + fr * (vb - va);
+}
+
+void main() {
+  ivec2 p = ivec2(gl_FragCoord.xy);
+  ivec2 size = textureSize(uF, 0);
+  float rho = texelFetch(uAux, p, 0).r;
+  float h = 1.0;
+  if (uScheme != 0) h = brume_invariant_offset(uSigma0 * exp(float(uK) * rho), rho, uScheme == 2);
+  vec4 fc = texelFetch(uF, p, 0);
+  vec4 l = sample_f(p, -h, ivec2(1, 0), size), r = sample_f(p, h, ivec2(1, 0), size);
+  vec4 u = sample_f(p, -h, ivec2(0, 1), size), d = sample_f(p, h, ivec2(0, 1), size);
+  float wl = 0.5 * (rho + sample_rho(p, -h, ivec2(1, 0), size));
+  float wr = 0.5 * (rho + sample_rho(p, h, ivec2(1, 0), size));
+  float wu = 0.5 * (rho + sample_rho(p, -h, ivec2(0, 1), size));
+  float wd = 0.5 * (rho + sample_rho(p, h, ivec2(0, 1), size));
+  oF = fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc);
+}
