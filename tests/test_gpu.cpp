@@ -15,6 +15,12 @@
 #include "brume/haze.hpp"
 #include "test_util.hpp"
 
+namespace brume {
+inline void PrintTo(GpuFilter f, std::ostream* os) {
+  *os << (f == GpuFilter::shader ? "shader" : f == GpuFilter::hardware ? "hardware" : "auto");
+}
+}  // namespace brume
+
 using namespace brume;
 using namespace brume::test;
 
@@ -121,16 +127,16 @@ TEST(Gpu, HazeMatchesCpuReferenceOnRealData) {
         Diff d = compare(gpu.rgb, cpu.rgb), dt = compare(gpu.transmission, cpu.transmission);
         RecordProperty(what, std::to_string(d.rms));
         EXPECT_LE(compare(gpu.scale, cpu.scale).max_abs, 1e-4) << what;  // sigma(x): one float formula on both sides
-        if (prec == Precision::f16 && s == Scheme::standard) {
-          // The standard scheme's 96 iterations in binary16 drift (Hansard
-          // Fig. 6) and how far depends on how the GPU rounds when it writes
-          // RGBA16F (llvmpipe: ~1e-2 against the CPU's round-to-nearest).
-          // Only a bound on the damage is asserted here.
-          EXPECT_LE(d.rms, 5e-2) << what << ": " << d;
-          continue;
-        }
         const double tol = prec == Precision::f32 ? 1e-3 : 4e-3;
         EXPECT_LE(d.rms, tol) << what << ": " << d;
+        if (prec == Precision::f16 && s == Scheme::standard) {
+          // The standard scheme's ~100 iterations in binary16 drift (Hansard
+          // Fig. 6), and how far depends on how the GPU rounds when it writes
+          // RGBA16F: llvmpipe's transmission ends ~1e-2 from the CPU's
+          // round-to-nearest one (colour 2.4e-3). Only a bound on the damage.
+          EXPECT_LE(dt.rms, 5e-2) << what << ": " << dt;
+          continue;
+        }
         EXPECT_LE(dt.rms, tol) << what << ": " << dt;
       }
     }

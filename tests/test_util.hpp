@@ -9,8 +9,15 @@
 #include <string>
 #include <vector>
 
+#include "brume/diffusion.hpp"
 #include "brume/image.hpp"
 #include "brume/io.hpp"
+
+namespace brume {
+// Readable parameter names in test output (found by argument-dependent lookup).
+inline void PrintTo(Scheme s, std::ostream* os) { *os << to_string(s); }
+inline void PrintTo(Precision p, std::ostream* os) { *os << to_string(p); }
+}  // namespace brume
 
 namespace brume::test {
 
