@@ -140,19 +140,13 @@ TEST(Depth, Eth3dPlaygroundConverts) {
 }
 
 TEST(Depth, Middlebury2005DisparityPng) {
-  // Z[mm] = 160 * 3740 / (I + dmin) (SOURCES.md); at third size f = 3740/3
-  // and d = (I + dmin)/3, so --disparity-scale 1/3 --disparity-offset dmin/3.
+  // The flags of test_util.hpp's middlebury2005() against SOURCES.md's
+  // formula Z[mm] = 160 * 3740 / (I + dmin), evaluated here directly.
   const std::string rel = "middlebury2005_thirdsize/Art/";
   BRUME_REQUIRE_DATA(rel + "disp1.png");
   double dmin = 0;
   std::ifstream(data_path(rel + "dmin.txt")) >> dmin;
-  DepthSource s;
-  s.disparity = data_path(rel + "disp1.png");
-  s.k.fx = 3740.0 / 3.0;
-  s.baseline_m = 0.160;
-  s.disparity_scale = 1.0 / 3.0;
-  s.disparity_offset = dmin / 3.0;
-  Image range = load_depth(s).range;
+  Image range = load_depth(middlebury2005("Art")).range;
   Image I = read_scalar(data_path(rel + "disp1.png"));
   Intrinsics k;
   k.fx = 3740.0 / 3.0;

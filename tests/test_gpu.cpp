@@ -52,17 +52,8 @@ GpuContext* context(std::string* why) {
   }
 
 Image middlebury_range(const std::string& scene, Image& rgb) {
-  const std::string dir = "middlebury2005_thirdsize/" + scene + "/";
-  rgb = read_color(data_path(dir + "view1.png"));
-  double dmin = 0;
-  std::ifstream(data_path(dir + "dmin.txt")) >> dmin;
-  DepthSource s;
-  s.disparity = data_path(dir + "disp1.png");
-  s.k.fx = 3740.0 / 3.0;
-  s.baseline_m = 0.160;
-  s.disparity_scale = 1.0 / 3.0;
-  s.disparity_offset = dmin / 3.0;
-  return load_depth(s, rgb.width, rgb.height).range;
+  rgb = read_color(data_path("middlebury2005_thirdsize/" + scene + "/view1.png"));
+  return load_depth(middlebury2005(scene), rgb.width, rgb.height).range;
 }
 
 }  // namespace

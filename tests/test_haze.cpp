@@ -30,31 +30,13 @@ Image test_range(int w, int h, double near_m, double far_m) {
   return r;
 }
 
-// Middlebury 2005 third-size scene -> linear RGB and range in metres.
-// Z[mm] = 160 * 3740 / (I + dmin) (SOURCES.md; f and disparity both scale by
-// 1/3 at third size), range = Z |ray| with f = 3740/3 px and the principal
-// point at the image centre. I = 0 is unknown.
+// Middlebury 2005 third-size scene -> linear RGB and range in metres (the
+// conversion itself is tested in test_depth.cpp).
 bool load_middlebury(const std::string& scene, Image& rgb, Image& range) {
-  const std::string dir = "middlebury2005_thirdsize/" + scene + "/";
-  if (!have_data(dir + "view1.png")) return false;
-  rgb = read_color(data_path(dir + "view1.png"));
-  Image disp = read_scalar(data_path(dir + "disp1.png"));
-  std::ifstream dm(data_path(dir + "dmin.txt"));
-  double dmin = 0;
-  dm >> dmin;
-  const double f = 3740.0 / 3.0, cx = (disp.width - 1) / 2.0, cy = (disp.height - 1) / 2.0;
-  range = Image(disp.width, disp.height, 1);
-  for (int y = 0; y < disp.height; ++y)
-    for (int x = 0; x < disp.width; ++x) {
-      const double I = disp.at(x, y);
-      if (I == 0) {
-        range.at(x, y) = NAN;
-        continue;
-      }
-      const double z = 160.0 * 3740.0 / (I + dmin) / 1000.0;
-      const double u = (x - cx) / f, v = (y - cy) / f;
-      range.at(x, y) = static_cast<float>(z * std::sqrt(1.0 + u * u + v * v));
-    }
+  const std::string view = "middlebury2005_thirdsize/" + scene + "/view1.png";
+  if (!have_data(view)) return false;
+  rgb = read_color(data_path(view));
+  range = load_depth(middlebury2005(scene), rgb.width, rgb.height).range;
   return true;
 }
 

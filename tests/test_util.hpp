@@ -6,9 +6,11 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
+#include "brume/depth_source.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/image.hpp"
 #include "brume/io.hpp"
@@ -103,6 +105,22 @@ inline Image to_rgba(const Image& rgb) {
   for (std::size_t i = 0; i < rgb.pixels(); ++i)
     for (int c = 0; c < 3; ++c) f.data[i * 4 + c] = rgb.data[i * rgb.channels + c];
   return f;
+}
+
+// Middlebury 2005 third-size disparity as a depth source: Z[mm] =
+// 160 * 3740 / (I + dmin) (SOURCES.md); at third size f = 3740/3 px and
+// d = (I + dmin)/3, i.e. --disparity-scale 1/3 --disparity-offset dmin/3.
+inline DepthSource middlebury2005(const std::string& scene) {
+  const std::string dir = "middlebury2005_thirdsize/" + scene + "/";
+  double dmin = 0;
+  std::ifstream(data_path(dir + "dmin.txt")) >> dmin;
+  DepthSource s;
+  s.disparity = data_path(dir + "disp1.png");
+  s.k.fx = 3740.0 / 3.0;
+  s.baseline_m = 0.160;
+  s.disparity_scale = 1.0 / 3.0;
+  s.disparity_offset = dmin / 3.0;
+  return s;
 }
 
 // A real [0,1] test image: Middlebury 2005 "Art", linear light, 463x370.

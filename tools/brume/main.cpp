@@ -190,6 +190,13 @@ std::unique_ptr<GpuContext> open_gpu(const Common& c, nlohmann::json& exec) {
   }
 }
 
+Exec cpu_exec(const Common& c) {
+  Exec ex;
+  ex.threads = c.threads;
+  ex.path = c.reference ? Path::reference : Path::fast;
+  return ex;
+}
+
 void print_timing(const char* cmd, const GpuTiming& t, const GpuInfo& info) {
   std::fprintf(stderr,
                "brume %s: GPU %s (%s): upload %.3f ms, premultiply %.3f ms, diffusion %.3f ms (%d passes, %.4f ms each), "
@@ -278,9 +285,7 @@ int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std:
     prep_rec["mode"] = "auto";
     prep_rec["applied"] = true;
   }
-  Exec ex;
-  ex.threads = c.threads;
-  ex.path = c.reference ? Path::reference : Path::fast;
+  const Exec ex = cpu_exec(c);
   nlohmann::json exec_rec = {{"path", c.reference ? "reference" : "fast"}, {"threads", c.threads}};
   std::unique_ptr<GpuContext> gpu = open_gpu(c, exec_rec);
   HazeResult r;
@@ -368,9 +373,7 @@ int run_blur(const Common& c, double sigma, const std::string& scale_map, double
     for (int k = 0; k < 3; ++k) f.data[i * 4 + k] = rgb.data[i * 3 + k];
     f.data[i * 4 + 3] = 1.0f;
   }
-  Exec ex;
-  ex.threads = c.threads;
-  ex.path = c.reference ? Path::reference : Path::fast;
+  const Exec ex = cpu_exec(c);
   nlohmann::json exec_rec = {{"path", c.reference ? "reference" : "fast"}, {"threads", c.threads}};
   std::unique_ptr<GpuContext> gpu = open_gpu(c, exec_rec);
   DiffusionPlan plan;
