@@ -197,13 +197,15 @@ Exec cpu_exec(const Common& c) {
   return ex;
 }
 
-void print_timing(const char* cmd, const GpuTiming& t, const GpuInfo& info) {
-  std::fprintf(stderr,
-               "brume %s: GPU %s (%s): upload %.3f ms, premultiply %.3f ms, diffusion %.3f ms (%d passes, %.4f ms each), "
-               "composite %.3f ms, read back %.3f ms\n",
-               cmd, info.renderer.c_str(), t.gpu_timer ? "timer queries" : "glFinish wall time", t.upload_ms,
-               t.premultiply_ms, t.diffuse_ms, t.iterations, t.iterations ? t.diffuse_ms / t.iterations : 0.0,
-               t.composite_ms, t.readback_ms);
+// blur has no premultiply or composite pass: only the stages a command ran are printed.
+void print_timing(const char* cmd, const GpuTiming& t, const GpuInfo& info, bool haze_passes) {
+  std::fprintf(stderr, "brume %s: GPU %s (%s): upload %.3f ms, ", cmd, info.renderer.c_str(),
+               t.gpu_timer ? "timer queries" : "glFinish wall time", t.upload_ms);
+  if (haze_passes) std::fprintf(stderr, "premultiply %.3f ms, ", t.premultiply_ms);
+  std::fprintf(stderr, "diffusion %.3f ms (%d passes, %.4f ms each), ", t.diffuse_ms, t.iterations,
+               t.iterations ? t.diffuse_ms / t.iterations : 0.0);
+  if (haze_passes) std::fprintf(stderr, "composite %.3f ms, ", t.composite_ms);
+  std::fprintf(stderr, "read back %.3f ms\n", t.readback_ms);
 }
 
 void add_common(CLI::App* app, Common& c) {
@@ -292,7 +294,7 @@ int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std:
   if (gpu) {
     GpuHaze gh(*gpu, rgb, *range);
     r = gh.render(p, a, parse_gpu_filter(c.gpu_filter));
-    if (c.timing) print_timing("haze", gh.timing(), gpu->info());
+    if (c.timing) print_timing("haze", gh.timing(), gpu->info(), true);
   } else {
     const auto t0 = std::chrono::steady_clock::now();
     r = apply_haze(rgb, *range, p, a, ex);
@@ -380,7 +382,7 @@ int run_blur(const Common& c, double sigma, const std::string& scale_map, double
   if (gpu) {
     GpuTiming t;
     plan = diffuse_gpu(*gpu, f, smap, smax, dp, parse_gpu_filter(c.gpu_filter), &t);
-    if (c.timing) print_timing("blur", t, gpu->info());
+    if (c.timing) print_timing("blur", t, gpu->info(), false);
   } else {
     const auto t0 = std::chrono::steady_clock::now();
     plan = diffuse(f, smap, smax, dp, ex);
