@@ -284,3 +284,32 @@ TEST_F(Cli, BackendFlags) {
   ASSERT_EQ(c.status, 0) << c.output;
   EXPECT_LE(compare(read_color(p("g.exr")), read_color(p("c.exr"))).rms, 1e-3);
 }
+
+TEST_F(Cli, StudyDiffusionQuickWritesItsTables) {
+  // `brume study diffusion --quick` (issue #5's smoke test): both CSVs with
+  // their columns, every scheme in f32 and f16, numbers that agree with the
+  // library tests (invariant-exact at sigma = 5 well under 2e-3).
+  BRUME_REQUIRE_DATA(kArt);
+  CliRun r = run("study diffusion --quick --backend cpu --image " + data_path(kArt) + " --out-dir " + p("study"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  std::ifstream acc(p("study/accuracy.csv")), spd(p("study/speed.csv"));
+  std::string header, line;
+  std::getline(acc, header);
+  EXPECT_EQ(header, "scheme,precision,backend,sigma,rms,iterations,spread");
+  int rows = 0;
+  bool seen_exact = false;
+  while (std::getline(acc, line)) {
+    ++rows;
+    if (line.rfind("invariant-exact,f32,cpu,5,", 0) == 0) {
+      seen_exact = true;
+      EXPECT_LT(std::stod(line.substr(std::string("invariant-exact,f32,cpu,5,").size())), 2e-3) << line;
+    }
+  }
+  EXPECT_EQ(rows, 3 * 2 * 3);  // 3 schemes x 2 precisions x 3 sigma
+  EXPECT_TRUE(seen_exact);
+  std::getline(spd, header);
+  EXPECT_EQ(header, "method,precision,backend,sigma,seconds,iterations");
+  int srows = 0;
+  while (std::getline(spd, line)) ++srows;
+  EXPECT_GT(srows, 6);
+}

@@ -510,6 +510,8 @@ int run_depth_prepare(const DepthSource& d, const PrepareParams& pp, const std::
 }  // namespace
 
 int run_demo(const std::string& dir, int width, int height, int threads);
+int run_study(const std::string& what, const std::string& out_dir, bool quick, const std::string& backend,
+              const std::string& image_path);
 
 int main(int argc, char** argv) {
   for (int i = 0; i < argc; ++i) g_argv.emplace_back(argv[i]);
@@ -591,6 +593,16 @@ int main(int argc, char** argv) {
   demo->add_option("--height", demo_h, "height in pixels")->capture_default_str();
   demo->add_option("--threads", demo_threads, "worker threads (0 = all)")->capture_default_str();
 
+  // study
+  CLI::App* study = app.add_subcommand("study", "accuracy and speed studies (Hansard 5.2-5.3)");
+  std::string study_what, study_dir, study_backend = "cpu", study_image;
+  bool study_quick = false;
+  study->add_option("what", study_what, "the study: diffusion")->required();
+  study->add_option("--out-dir", study_dir, "directory for accuracy.csv and speed.csv")->required();
+  study->add_flag("--quick", study_quick, "small image and a few sigma (a smoke test)");
+  study->add_option("--backend", study_backend, "cpu, gpu or all")->capture_default_str();
+  study->add_option("--image", study_image, "real image in [0,1] for the accuracy part (default Middlebury Art)");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -610,6 +622,7 @@ int main(int argc, char** argv) {
       return run_blur(bc, sigma, scale_map, sigma0, bscheme, bprecision, brho);
     }
     if (*demo) return run_demo(demo_dir, demo_w, demo_h, demo_threads);
+    if (*study) return run_study(study_what, study_dir, study_quick, study_backend, study_image);
     if (*dprep) return run_depth_prepare(pdepth, pparams, prep_out, prep_masks, prep_record);
     if (*dconv) return run_depth_convert(cdepth, conv_out, conv_kind, conv_record);
   } catch (const brume::Error& e) {
