@@ -29,14 +29,13 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
-#include <opencv2/core.hpp>
-#include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
 
 #include "brume/demo_scene.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/io.hpp"
+#include "depth/opencv.hpp"
 
 using namespace brume;
 using Clock = std::chrono::steady_clock;

@@ -1,9 +1,11 @@
 // brume — procedural RGB-D demo scene.
 //
 // A small ray-cast outdoor scene (paved path, fence, checkered ball and cube,
-// trees, houses, a tree line, hills and mountains under a blue sky) with exact
-// per-pixel range, used to demonstrate and test the haze effects without any
-// external data. See src/effects/demo_scene.cpp for its layout and units.
+// trees, a house, apartment blocks, a tree line, hills and mountains under a
+// blue sky; ranges from 3 m to about 1.25 km) with exact per-pixel range, used to
+// demonstrate and test the haze effects without any external data. The camera
+// is 1.6 m above the ground, pitched 5 degrees down, 55 degree vertical field
+// of view. See src/effects/demo_scene.cpp for its layout and units.
 #pragma once
 
 #include "brume/image.hpp"
@@ -16,8 +18,9 @@ struct DemoScene {
   double fov_y_deg;  // vertical field of view used
 };
 
-// Renders the scene at width x height (both > 0). Deterministic: the same
-// arguments give the same output on any machine and thread count.
+// Renders the scene at width x height; the horizontal field of view follows
+// from the aspect ratio. Non-positive sizes give empty images. Deterministic:
+// the same arguments give the same output on any machine and thread count.
 DemoScene render_demo_scene(int width, int height);
 
 }  // namespace brume
