@@ -35,10 +35,10 @@
 #include "brume/demo_scene.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/io.hpp"
+#include "bench_util.hpp"
 #include "depth/opencv.hpp"
 
 using namespace brume;
-using Clock = std::chrono::steady_clock;
 
 namespace {
 
@@ -48,25 +48,10 @@ struct Timing {
 };
 
 Timing measure(const std::function<void()>& fn, int runs) {
-  fn();  // warm-up
-  std::vector<double> t;
-  for (int i = 0; i < runs; ++i) {
-    auto a = Clock::now();
-    fn();
-    t.push_back(std::chrono::duration<double>(Clock::now() - a).count());
-  }
-  std::sort(t.begin(), t.end());
+  const bench::Spread t = bench::time_ms(fn, runs);
   struct rusage ru {};
   getrusage(RUSAGE_SELF, &ru);
-  return Timing{t[t.size() / 2], t.front(), t.back(), ru.ru_maxrss};
-}
-
-std::string cpu_name() {
-  std::ifstream f("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
-  return "unknown CPU";
+  return Timing{t.median * 1e-3, t.lo * 1e-3, t.hi * 1e-3, ru.ru_maxrss};
 }
 
 }  // namespace
@@ -192,7 +177,7 @@ int main(int argc, char** argv) {
   if (!tmp.empty()) std::filesystem::remove(tmp);
 
   std::printf("# brume_bench_blur\n\n- machine: %s, %d threads\n- image: %dx%d RGB float (%s)\n- runs: %d after one warm-up; time = median (min..max)\n- peak RSS: the whole process (input image, buffers, libraries)\n\n",
-              cpu_name().c_str(), threads, W, H, image == tmp ? "built-in demo scene" : image.c_str(), runs);
+              bench::cpu_name().c_str(), threads, W, H, image == tmp ? "built-in demo scene" : image.c_str(), runs);
   std::printf("| method | precision | scale map | sigma px | iterations | time ms | vs OpenCV same sigma | peak RSS MB |\n");
   std::printf("|---|---|---|---:|---:|---:|---:|---:|\n");
   for (const Row& r : rows) {

@@ -35,39 +35,18 @@
 
 #include "brume/prepare.hpp"
 
+#include "bench_util.hpp"
 #include "depth/opencv.hpp"
 
 using namespace brume;
-using Clock = std::chrono::steady_clock;
 
 namespace {
 
-struct Timing {
-  double median, lo, hi;
-};
+using Timing = brume::bench::Spread;
 
-Timing measure(const std::function<void()>& fn, int runs) {
-  fn();  // warm-up
-  std::vector<double> t;
-  for (int i = 0; i < runs; ++i) {
-    auto a = Clock::now();
-    fn();
-    t.push_back(std::chrono::duration<double>(Clock::now() - a).count() * 1e3);
-  }
-  std::sort(t.begin(), t.end());
-  return {t[t.size() / 2], t.front(), t.back()};
-}
+Timing measure(const std::function<void()>& fn, int runs) { return brume::bench::time_ms(fn, runs); }
 
-std::string machine() {
-  std::ifstream f("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("model name", 0) == 0) {
-      auto c = line.find(':');
-      return c == std::string::npos ? line : line.substr(c + 2);
-    }
-  return "unknown CPU";
-}
+std::string machine() { return brume::bench::cpu_name(); }
 
 Image scene(int W, int H) {
   const float nan = std::numeric_limits<float>::quiet_NaN();

@@ -74,6 +74,10 @@ struct DiffusionPlan {
 // N for a given largest target scale (eq. 13 / eq. 18).
 DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max);
 
+// Check a diffusion problem (channels, sizes, every target scale finite and
+// in [sigma0, sigma_max]) and plan it; every backend calls this first.
+DiffusionPlan validate_diffusion(const Image& f, const Image& sigma, double sigma_max, const DiffusionParams& p);
+
 // Diffuse `f` (4 channels, in place) to the per-pixel target scale `sigma`
 // (1 channel, same size, every value finite and in [sigma0, sigma_max]).
 // sigma_max sets the iteration count; pass the largest value of `sigma` or a

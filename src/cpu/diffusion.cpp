@@ -63,8 +63,8 @@ DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max) {
   return plan;
 }
 
-DiffusionPlan diffuse(Image& f, const Image& sigma, double sigma_max,
-                      const DiffusionParams& p, const Exec& exec) {
+DiffusionPlan validate_diffusion(const Image& f, const Image& sigma, double sigma_max,
+                                 const DiffusionParams& p) {
   if (f.channels != 4)
     throw Error("diffusion needs a 4-channel image, got " + std::to_string(f.channels) + " channels");
   if (sigma.channels != 1 || sigma.width != f.width || sigma.height != f.height)
@@ -85,7 +85,12 @@ DiffusionPlan diffuse(Image& f, const Image& sigma, double sigma_max,
       }
     }
   }
-  DiffusionPlan plan = plan_diffusion(p, sigma_max);
+  return plan_diffusion(p, sigma_max);
+}
+
+DiffusionPlan diffuse(Image& f, const Image& sigma, double sigma_max,
+                      const DiffusionParams& p, const Exec& exec) {
+  const DiffusionPlan plan = validate_diffusion(f, sigma, sigma_max, p);
   if (plan.iterations == 0) {
     if (p.precision == Precision::f16) cpu::round_to_half(f.data.data(), f.data.size());
     return plan;

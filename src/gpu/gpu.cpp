@@ -407,14 +407,7 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
 
 DiffusionPlan diffuse_gpu(GpuContext& ctx, Image& f, const Image& sigma, double sigma_max, const DiffusionParams& p,
                           GpuFilter filter, GpuTiming* timing) {
-  // Same validation as the CPU engine: run it on an empty problem first.
-  DiffusionPlan plan = plan_diffusion(p, sigma_max);
-  if (f.channels != 4 || sigma.channels != 1 || sigma.width != f.width || sigma.height != f.height)
-    throw Error("diffusion needs a 4-channel image and a 1-channel scale map of the same size");
-  const float lo = static_cast<float>(p.sigma0), hi = static_cast<float>(sigma_max);
-  for (float s : sigma.data)
-    if (!std::isfinite(s) || s < lo || s > hi)
-      throw Error("scale map value " + std::to_string(s) + " px is outside [sigma0, sigma_max]; a target below the inner scale would need sharpening");
+  const DiffusionPlan plan = validate_diffusion(f, sigma, sigma_max, p);
   GpuContext::Impl& g = ctx.impl();
   const int w = f.width, h = f.height;
   const bool f16 = p.precision == Precision::f16;

@@ -1,0 +1,42 @@
+// brume benchmarks — the one timing convention (STYLE.md #13): one warm-up,
+// then the median and the spread (min..max) of `runs` timed runs; and the
+// machine's name for the report.
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <fstream>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace brume::bench {
+
+struct Spread {
+  double median, lo, hi;  // milliseconds
+};
+
+inline Spread time_ms(const std::function<void()>& fn, int runs) {
+  fn();  // warm-up
+  std::vector<double> t;
+  for (int i = 0; i < runs; ++i) {
+    const auto a = std::chrono::steady_clock::now();
+    fn();
+    t.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a).count());
+  }
+  std::sort(t.begin(), t.end());
+  return {t[t.size() / 2], t.front(), t.back()};
+}
+
+inline std::string cpu_name() {
+  std::ifstream f("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("model name", 0) == 0) {
+      const auto c = line.find(':');
+      return c == std::string::npos ? line : line.substr(c + 2);
+    }
+  return "unknown CPU";
+}
+
+}  // namespace brume::bench
