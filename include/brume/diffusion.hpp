@@ -41,11 +41,18 @@ namespace brume {
 
 enum class Scheme { standard, invariant, invariant_exact };
 enum class Precision { f32, f16 };
+// How eq. 11's edge rate rho(x,u) is formed from the rates at the two ends
+// (src/shared/haze_math.glsl, brume_edge_rate): the paper's mean, or min or
+// harmonic mean, which stop a blurred background from leaking into the edge
+// of a sharp foreground object (measured by `brume study diffusion`).
+enum class EdgeRate { mean = 0, min = 1, harmonic = 2 };
 
 std::string to_string(Scheme s);
 std::string to_string(Precision p);
 Scheme parse_scheme(const std::string& s);        // throws brume::Error
 Precision parse_precision(const std::string& s);  // throws brume::Error
+std::string to_string(EdgeRate e);
+EdgeRate parse_edge_rate(const std::string& s);   // throws brume::Error
 
 struct DiffusionParams {
   Scheme scheme = Scheme::invariant_exact;
@@ -59,6 +66,7 @@ struct DiffusionParams {
   // Art against a true Gaussian, rho_max 0.2 halves the RMS at sigma = 25 px
   // (2.1e-3 -> 1.1e-3) for 17 instead of 13 iterations.
   double rho_max = 0.0;
+  EdgeRate edge_rate = EdgeRate::mean;
 };
 
 // The rate limit a run will use (resolves rho_max = 0 to the scheme default).

@@ -31,6 +31,7 @@ nlohmann::json diffusion_record(const DiffusionParams& p, const DiffusionPlan& p
           {"precision", to_string(p.precision)},
           {"sigma0_px", p.sigma0},
           {"rho_max", plan.rho_max},
+          {"edge_rate", to_string(p.edge_rate)},
           {"sigma_max_px", plan.sigma_max},
           {"iterations", plan.iterations},
           {"boundary", "half-sample mirror"}};

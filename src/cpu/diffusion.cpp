@@ -33,6 +33,22 @@ Precision parse_precision(const std::string& s) {
   throw Error("--precision '" + s + "' is not supported; use f32 or f16");
 }
 
+std::string to_string(EdgeRate e) {
+  switch (e) {
+    case EdgeRate::mean: return "mean";
+    case EdgeRate::min: return "min";
+    case EdgeRate::harmonic: return "harmonic";
+  }
+  return "?";
+}
+
+EdgeRate parse_edge_rate(const std::string& s) {
+  if (s == "mean") return EdgeRate::mean;
+  if (s == "min") return EdgeRate::min;
+  if (s == "harmonic") return EdgeRate::harmonic;
+  throw Error("--edge-rate '" + s + "' is not an edge rate; use mean (the paper's eq. 12), min or harmonic");
+}
+
 double effective_rho_max(const DiffusionParams& p) {
   if (p.rho_max != 0.0) return p.rho_max;
   return p.scheme == Scheme::invariant_exact ? 0.2 : 0.25;

@@ -59,13 +59,13 @@ void uniform_row_interior(const float* __restrict s, const float* __restrict u0,
 // exact variant, the variance ratio), then the per-pixel update.
 BRUME_CLONES
 void general_row(const float* src, float* dst, const float* rho, const float* sg, const float* vr, bool exact,
-                 int W, int H, int y, float* hrow) {
+                 int edge_mode, int W, int H, int y, float* hrow) {
   if (exact) {
     for (int x = 0; x < W; ++x) hrow[x] = sh::brume_offset_for_moment(sg[x] * sg[x] * vr[x]);
   } else {
     for (int x = 0; x < W; ++x) hrow[x] = sg[x];
   }
-  for (int x = 0; x < W; ++x) update_pixel<false>(src, dst, rho, 0.0f, W, H, x, y, hrow[x]);
+  for (int x = 0; x < W; ++x) update_pixel<false>(src, dst, rho, 0.0f, W, H, x, y, hrow[x], edge_mode);
 }
 
 // One row of the standard scheme with precomputed edge weights:
@@ -123,6 +123,7 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
   const bool standard = p.scheme == Scheme::standard;
   const bool exact = p.scheme == Scheme::invariant_exact;
   const int nt = thread_count(threads);
+  const int edge_mode = static_cast<int>(p.edge_rate);
   auto rate = [&](float s) {
     return standard ? sh::brume_standard_rate(s, s0, Nf) : sh::brume_invariant_rate(s, s0, Nf);
   };
@@ -136,7 +137,7 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
   float* dst = buf.get();
   if (f16) round_to_half(src, f.data.size());
 
-  if (!standard && uniform && f16 && uniform_iterations_f16(src, W, H, N, s0, rate(sigma.data[0]), exact, nt)) {
+  if (!standard && uniform && f16 && uniform_iterations_f16(src, W, H, N, s0, rate(sigma.data[0]), exact, edge_mode, nt)) {
     // done in binary16 storage (result in f)
   } else if (standard) {
     // Edge weights of eq. 12, fixed for all iterations.
@@ -146,8 +147,8 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
       for (int x = 0; x < W; ++x) {
         const std::size_t i = y * Ws + x;
         const float rc = rate(sigma.data[i]);
-        wr[i] = x < W - 1 ? 0.5f * (rc + rate(sigma.data[i + 1])) : 0.0f;
-        wd[i] = y < H - 1 ? 0.5f * (rc + rate(sigma.data[i + Ws])) : 0.0f;
+        wr[i] = x < W - 1 ? sh::brume_edge_rate(rc, rate(sigma.data[i + 1]), edge_mode) : 0.0f;
+        wd[i] = y < H - 1 ? sh::brume_edge_rate(rc, rate(sigma.data[i + Ws]), edge_mode) : 0.0f;
       }
     for (int k = 0; k < N; ++k) {
 #pragma omp parallel for num_threads(nt) schedule(static)
@@ -167,7 +168,7 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
     const float growth = std::exp(rho);
     float sig = s0;  // sigma_k, the same running product as the general path
     for (int k = 0; k < N; ++k) {
-      const auto [h, fr, w, n] = uniform_step(sig, rho, exact);
+      const auto [h, fr, w, n] = uniform_step(sig, rho, exact, edge_mode);
       // Columns whose taps x-n-1 .. x+n+1 all lie inside the row.
       const int xa = std::min(n + 1, W), xb = std::max(W - n - 1, xa);
 #pragma omp parallel for num_threads(nt) schedule(static)
@@ -203,7 +204,7 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
 #pragma omp parallel for num_threads(nt) schedule(static)
       for (int y = 0; y < H; ++y) {
         float* hrow = hrow_all.data() + static_cast<std::size_t>(omp_get_thread_num()) * Ws;
-        general_row(src, dst, rho.data(), sig.data() + y * Ws, vratio.data() + y * Ws, exact, W, H, y, hrow);
+        general_row(src, dst, rho.data(), sig.data() + y * Ws, vratio.data() + y * Ws, exact, edge_mode, W, H, y, hrow);
         if (f16) round_to_half(dst + y * Ws * 4, Ws * 4);
       }
 #pragma omp parallel for num_threads(nt) schedule(static)

@@ -76,7 +76,8 @@ void row_interior_f16(const std::uint16_t* s, const std::uint16_t* u0, const std
 
 }  // namespace
 
-bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, bool exact, int threads) {
+bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, bool exact, int edge_mode,
+                            int threads) {
   static const bool supported = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("f16c");
   if (!supported) return false;
   const std::size_t Ws = static_cast<std::size_t>(W), n = Ws * H * 4;
@@ -90,7 +91,7 @@ bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, 
   const float growth = std::exp(rho);
   float sig = s0;
   for (int k = 0; k < N; ++k) {
-    const auto [h, fr, w, nn] = uniform_step(sig, rho, exact);
+    const auto [h, fr, w, nn] = uniform_step(sig, rho, exact, edge_mode);
     const int xa = std::min(nn + 1, W), xb = std::max(W - nn - 1, xa);
 #pragma omp parallel for num_threads(threads) schedule(static)
     for (int y = 0; y < H; ++y) {
@@ -116,7 +117,7 @@ bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, 
 #else  // no F16C build: the float-storage path rounds to binary16 instead
 
 namespace brume::cpu {
-bool uniform_iterations_f16(float*, int, int, int, float, float, bool, int) { return false; }
+bool uniform_iterations_f16(float*, int, int, int, float, float, bool, int, int) { return false; }
 }  // namespace brume::cpu
 
 #endif

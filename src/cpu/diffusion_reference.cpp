@@ -6,6 +6,7 @@
 // form (exp, not the fast path's running product). It is the oracle the fast
 // path and, later, the GPU backend are tested against. f16 mode rounds the
 // stored values to binary16 after every iteration, as the fast path does.
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -41,6 +42,16 @@ struct Grid {
     return a + fr * (b - a);
   }
 };
+
+// brume_edge_rate in double (the shared float version is the one under test).
+double edge_rate(double a, double b, EdgeRate mode) {
+  switch (mode) {
+    case EdgeRate::min: return std::min(a, b);
+    case EdgeRate::harmonic: return a + b > 0.0 ? 2.0 * a * b / (a + b) : 0.0;
+    case EdgeRate::mean: break;
+  }
+  return 0.5 * (a + b);
+}
 
 }  // namespace
 
@@ -83,7 +94,7 @@ void diffuse_reference(Image& f, const Image& sigma, const DiffusionPlan& plan,
         }
         double w[4];
         for (int u = 0; u < 4; ++u)  // eq. 12, neighbour rate sampled like F
-          w[u] = 0.5 * (r + rgrid.sample(x, y, ux[u] * h, uy[u] * h, 0));
+          w[u] = edge_rate(r, rgrid.sample(x, y, ux[u] * h, uy[u] * h, 0), p.edge_rate);
         for (int c = 0; c < 4; ++c) {
           const double fc = cur[i * 4 + c];
           double acc = fc;

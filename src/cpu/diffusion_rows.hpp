@@ -34,7 +34,7 @@ struct StoreF32 {
 // channel, is the same as uniform_row_interior's, so both give the same bits.
 template <bool kUniform, class S = StoreF32>
 inline void update_pixel(const typename S::T* src, typename S::T* dst, const float* rho, float w_all, int W,
-                         int H, int x, int y, float h) {
+                         int H, int x, int y, float h, int edge_mode = 0) {
   const int n = static_cast<int>(h);
   const float fr = h - static_cast<float>(n);
   int xl0 = x - n, xl1 = x - n - 1, xr0 = x + n, xr1 = x + n + 1;
@@ -48,10 +48,10 @@ inline void update_pixel(const typename S::T* src, typename S::T* dst, const flo
   if constexpr (!kUniform) {
     const float* rrow = rho + y * Ws;
     const float rc = rrow[x];
-    wl = 0.5f * (rc + sh::mix(rrow[xl0], rrow[xl1], fr));
-    wr = 0.5f * (rc + sh::mix(rrow[xr0], rrow[xr1], fr));
-    wu = 0.5f * (rc + sh::mix(rho[yu0 * Ws + x], rho[yu1 * Ws + x], fr));
-    wd = 0.5f * (rc + sh::mix(rho[yd0 * Ws + x], rho[yd1 * Ws + x], fr));
+    wl = sh::brume_edge_rate(rc, sh::mix(rrow[xl0], rrow[xl1], fr), edge_mode);
+    wr = sh::brume_edge_rate(rc, sh::mix(rrow[xr0], rrow[xr1], fr), edge_mode);
+    wu = sh::brume_edge_rate(rc, sh::mix(rho[yu0 * Ws + x], rho[yu1 * Ws + x], fr), edge_mode);
+    wd = sh::brume_edge_rate(rc, sh::mix(rho[yd0 * Ws + x], rho[yd1 * Ws + x], fr), edge_mode);
   }
   const typename S::T* srow = src + y * Ws * 4;
   const v4 fc = S::load(srow + x * 4);
@@ -70,12 +70,12 @@ struct UniformStep {
   float h, fr, w;
   int n;
 };
-inline UniformStep uniform_step(float sigma_k, float rho, bool exact) {
+inline UniformStep uniform_step(float sigma_k, float rho, bool exact, int edge_mode) {
   UniformStep st;
   st.h = sh::brume_invariant_offset(sigma_k, rho, exact);
   st.n = static_cast<int>(st.h);
   st.fr = st.h - static_cast<float>(st.n);
-  st.w = 0.5f * (rho + sh::mix(rho, rho, st.fr));  // eq. 12, as update_pixel<false> computes it
+  st.w = sh::brume_edge_rate(rho, sh::mix(rho, rho, st.fr), edge_mode);  // eq. 12, as update_pixel<false> computes it
   return st;
 }
 
@@ -83,6 +83,7 @@ inline UniformStep uniform_step(float sigma_k, float rho, bool exact) {
 // kept as binary16 bits between iterations, halving the memory traffic, with
 // the same arithmetic and rounding as the float path + round_to_half. Returns
 // false (and does nothing) where F16C is missing.
-bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, bool exact, int threads);
+bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, bool exact, int edge_mode,
+                            int threads);
 
 }  // namespace brume::cpu

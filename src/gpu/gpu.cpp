@@ -278,7 +278,7 @@ void bind(GLuint prog, const char* name, int unit, GLuint tex) {
 
 // N diffusion passes from f[0]; returns the index of the texture holding the result.
 int run_diffusion(GpuContext::Impl& g, GLuint f[2], GLuint aux, int w, int h, int iterations, Scheme scheme,
-                  double sigma0, bool hardware) {
+                  EdgeRate edge, double sigma0, bool hardware) {
   set_filter(f[0], hardware);
   set_filter(f[1], hardware);
   set_filter(aux, hardware);
@@ -286,6 +286,7 @@ int run_diffusion(GpuContext::Impl& g, GLuint f[2], GLuint aux, int w, int h, in
   glUniform1i(glGetUniformLocation(g.prog_diffuse, "uScheme"), static_cast<int>(scheme));
   glUniform1f(glGetUniformLocation(g.prog_diffuse, "uSigma0"), static_cast<float>(sigma0));
   glUniform1i(glGetUniformLocation(g.prog_diffuse, "uHardware"), hardware ? 1 : 0);
+  glUniform1i(glGetUniformLocation(g.prog_diffuse, "uEdgeRate"), static_cast<int>(edge));
   const GLint loc_k = glGetUniformLocation(g.prog_diffuse, "uK");
   glViewport(0, 0, w, h);
   int src = 0;
@@ -369,7 +370,7 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
   timing_.premultiply_ms = t1.stop();
 
   StageTimer t2(g, &timing_.gpu_timer);
-  const int last = run_diffusion(g, f, aux, w_, h_, a.plan.iterations, p.diffusion.scheme, p.sigma0,
+  const int last = run_diffusion(g, f, aux, w_, h_, a.plan.iterations, p.diffusion.scheme, p.diffusion.edge_rate, p.sigma0,
                                  use_hardware(g, filter, f16));
   timing_.diffuse_ms = t2.stop();
 
@@ -429,7 +430,7 @@ DiffusionPlan diffuse_gpu(GpuContext& ctx, Image& f, const Image& sigma, double 
   t.upload_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
   glBindVertexArray(g.vao);
   StageTimer st(g, &t.gpu_timer);
-  const int last = run_diffusion(g, tex, ta, w, h, plan.iterations, p.scheme, p.sigma0, use_hardware(g, filter, f16));
+  const int last = run_diffusion(g, tex, ta, w, h, plan.iterations, p.scheme, p.edge_rate, p.sigma0, use_hardware(g, filter, f16));
   t.diffuse_ms = st.stop();
   const auto t1 = Clock::now();
   std::vector<float> out;

@@ -35,6 +35,10 @@ using namespace brume;
 
 namespace {
 
+const char* const kEdgeRateHelp =
+    "edge rate rho(x,u) between a pixel and its neighbour: mean (the paper's eq. 12), min or harmonic "
+    "(min and harmonic keep a blurred background from leaking into sharp foreground edges)";
+
 std::vector<std::string> g_argv;
 
 // Add every declared parameter of an effect as a --flag bound to its field.
@@ -233,10 +237,11 @@ void add_common(CLI::App* app, Common& c) {
 
 int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std::string& prepare_mode,
              const PrepareParams& pp, const std::string& airlight, const std::string& scheme,
-             const std::string& precision, const std::string& composite, const std::string& transmission_out,
-             const std::string& scale_out, bool kappa_given, bool albedo_given) {
+             const std::string& precision, const std::string& edge_rate, const std::string& composite,
+             const std::string& transmission_out, const std::string& scale_out, bool kappa_given, bool albedo_given) {
   p.diffusion.scheme = parse_scheme(scheme);
   p.diffusion.precision = parse_precision(precision);
+  p.diffusion.edge_rate = parse_edge_rate(edge_rate);
   p.composite = parse_composite(composite);
   if (prepare_mode != "auto" && prepare_mode != "off")
     throw Error("--prepare '" + prepare_mode + "' is not a mode; use auto (fill holes, identify and matte the sky) or off");
@@ -332,8 +337,9 @@ int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std:
 }
 
 int run_blur(const Common& c, double sigma, const std::string& scale_map, double sigma0,
-             const std::string& scheme, const std::string& precision, double rho_max) {
+             const std::string& scheme, const std::string& precision, const std::string& edge_rate, double rho_max) {
   DiffusionParams dp;
+  dp.edge_rate = parse_edge_rate(edge_rate);
   dp.rho_max = rho_max;
   dp.scheme = parse_scheme(scheme);
   dp.precision = parse_precision(precision);
@@ -524,7 +530,7 @@ int main(int argc, char** argv) {
   Common hc;
   HazeParams hp;
   std::string airlight = "auto", scheme = "invariant-exact", precision = "f32", composite = "premultiplied",
-              transmission_out, scale_out;
+              transmission_out, scale_out, edge_rate = to_string(DiffusionParams{}.edge_rate);
   DepthSource hdepth;
   std::string prepare_mode = "auto";
   PrepareParams hprep;
@@ -544,6 +550,7 @@ int main(int argc, char** argv) {
                    "largest diffusion rate per iteration, (0, 0.25]; 0 = scheme default (0.2 invariant-exact, 0.25 others)")
       ->capture_default_str();
   haze->add_option("--precision", precision, "storage between iterations: f32 or f16")->capture_default_str();
+  haze->add_option("--edge-rate", edge_rate, kEdgeRateHelp)->capture_default_str();
   haze->add_option("--composite", composite, "premultiplied (eq. 4) or naive (comparison only)")->capture_default_str();
   haze->add_option("--transmission", transmission_out, "write the blurred transmission (alpha after diffusion)");
   haze->add_option("--scale-map", scale_out, "write the target scale sigma(x) in pixels (float file)");
@@ -560,6 +567,8 @@ int main(int argc, char** argv) {
   blur->add_option("--sigma0", sigma0, "inner scale of the input in px")->capture_default_str();
   blur->add_option("--scheme", bscheme, "standard, invariant, invariant-exact")->capture_default_str();
   blur->add_option("--precision", bprecision, "f32 or f16")->capture_default_str();
+  std::string bedge = to_string(DiffusionParams{}.edge_rate);
+  blur->add_option("--edge-rate", bedge, kEdgeRateHelp)->capture_default_str();
   double brho = 0.0;
   blur->add_option("--rho-max", brho, "largest rate per iteration, (0, 0.25]; 0 = scheme default")->capture_default_str();
 
@@ -613,13 +622,13 @@ int main(int argc, char** argv) {
     if (*haze) {
       bool kappa_given = hopts["kappa-a"]->count() > 0 || hopts["kappa-s"]->count() > 0;
       bool albedo_given = hopts["albedo"]->count() > 0;
-      return run_haze(hc, hp, hdepth, prepare_mode, hprep, airlight, scheme, precision, composite, transmission_out, scale_out,
+      return run_haze(hc, hp, hdepth, prepare_mode, hprep, airlight, scheme, precision, edge_rate, composite, transmission_out, scale_out,
                       kappa_given, albedo_given);
     }
     if (*blur) {
       if (o_sigma->count() == 0 && o_map->count() == 0)
         throw Error("blur needs a target scale: give --sigma S (px) or --scale-map FILE");
-      return run_blur(bc, sigma, scale_map, sigma0, bscheme, bprecision, brho);
+      return run_blur(bc, sigma, scale_map, sigma0, bscheme, bprecision, bedge, brho);
     }
     if (*demo) return run_demo(demo_dir, demo_w, demo_h, demo_threads);
     if (*study) return run_study(study_what, study_dir, study_quick, study_backend, study_image);

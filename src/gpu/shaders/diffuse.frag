@@ -1,5 +1,6 @@
 // One diffusion iteration (Hansard eq. 11-12 with eq. 13 or 17-18):
 //   F <- F + sum_u rho(x,u) (F(x+u) - F(x)),  rho(x,u) = (rho(x+u) + rho(x)) / 2
+// (or the min or harmonic mean of the two rates: brume_edge_rate)
 // with unit offsets (standard) or offsets h_k(x) from sigma_k = sigma0 e^{k rho}
 // (invariant, invariant-exact). Samples between texels are linear
 // interpolations: in hardware (uHardware = 1, textures set to LINEAR with
@@ -11,6 +12,7 @@ uniform int uK;                 // iteration index k
 uniform int uScheme;            // 0 standard, 1 invariant, 2 invariant-exact
 uniform float uSigma0;
 uniform int uHardware;
+uniform int uEdgeRate;          // 0 mean (eq. 12), 1 min, 2 harmonic
 layout(location = 0) out vec4 oF;
 
 // Half-sample mirror of an index into [0, n). GLSL's % is undefined for
@@ -63,9 +65,9 @@ void main() {
   vec4 fc = texelFetch(uF, p, 0);
   vec4 l = sample_f(p, -h, ivec2(1, 0), size), r = sample_f(p, h, ivec2(1, 0), size);
   vec4 u = sample_f(p, -h, ivec2(0, 1), size), d = sample_f(p, h, ivec2(0, 1), size);
-  float wl = 0.5 * (rho + sample_rho(p, -h, ivec2(1, 0), size));
-  float wr = 0.5 * (rho + sample_rho(p, h, ivec2(1, 0), size));
-  float wu = 0.5 * (rho + sample_rho(p, -h, ivec2(0, 1), size));
-  float wd = 0.5 * (rho + sample_rho(p, h, ivec2(0, 1), size));
+  float wl = brume_edge_rate(rho, sample_rho(p, -h, ivec2(1, 0), size), uEdgeRate);
+  float wr = brume_edge_rate(rho, sample_rho(p, h, ivec2(1, 0), size), uEdgeRate);
+  float wu = brume_edge_rate(rho, sample_rho(p, -h, ivec2(0, 1), size), uEdgeRate);
+  float wd = brume_edge_rate(rho, sample_rho(p, h, ivec2(0, 1), size), uEdgeRate);
   oF = fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc);
 }
