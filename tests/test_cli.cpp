@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <sstream>
 #include <nlohmann/json.hpp>
 
 #include "brume/io.hpp"
@@ -286,13 +288,15 @@ TEST_F(Cli, BackendFlags) {
 }
 
 TEST_F(Cli, StudyDiffusionQuickWritesItsTables) {
-  // `brume study diffusion --quick` (issue #5's smoke test): both CSVs with
-  // their columns, every scheme in f32 and f16, numbers that agree with the
-  // library tests (invariant-exact at sigma = 5 well under 2e-3).
+  // `brume study diffusion --quick` (issue #5's smoke test): the three CSVs
+  // with their columns, every scheme in f32 and f16 and both peers, numbers
+  // that agree with the library tests (invariant-exact at sigma = 5 well
+  // under 2e-3; the leak-free edge rates leave no background in the sharp
+  // square, the paper's mean does), the summary and three readable plots.
   BRUME_REQUIRE_DATA(kArt);
   CliRun r = run("study diffusion --quick --backend cpu --image " + data_path(kArt) + " --out-dir " + p("study"));
   ASSERT_EQ(r.status, 0) << r.output;
-  std::ifstream acc(p("study/accuracy.csv")), spd(p("study/speed.csv"));
+  std::ifstream acc(p("study/accuracy.csv")), spd(p("study/speed.csv")), lk(p("study/leakage.csv"));
   std::string header, line;
   std::getline(acc, header);
   EXPECT_EQ(header, "scheme,precision,backend,sigma,rms,iterations,spread");
@@ -305,11 +309,29 @@ TEST_F(Cli, StudyDiffusionQuickWritesItsTables) {
       EXPECT_LT(std::stod(line.substr(std::string("invariant-exact,f32,cpu,5,").size())), 2e-3) << line;
     }
   }
-  EXPECT_EQ(rows, 3 * 2 * 3);  // 3 schemes x 2 precisions x 3 sigma
+  EXPECT_EQ(rows, (3 * 2 + 2) * 3);  // (3 schemes x 2 precisions + 2 peers) x 3 sigma
   EXPECT_TRUE(seen_exact);
   std::getline(spd, header);
-  EXPECT_EQ(header, "method,precision,backend,sigma,seconds,iterations");
+  EXPECT_EQ(header, "method,precision,backend,sigma,seconds,iterations,map,runs");
   int srows = 0;
   while (std::getline(spd, line)) ++srows;
   EXPECT_GT(srows, 6);
+  std::getline(lk, header);
+  EXPECT_EQ(header, "method,edge_rate,backend,sigma_far,into_near_mean,into_near_max,into_far_mean");
+  std::map<std::string, double> rim;
+  while (std::getline(lk, line)) {
+    std::stringstream ss(line);
+    std::string f[7];
+    for (auto& x : f) std::getline(ss, x, ',');
+    rim[f[0] + "/" + f[1]] = std::stod(f[4]);
+  }
+  EXPECT_GT(rim["invariant-exact/mean"], 0.1);
+  EXPECT_EQ(rim["invariant-exact/harmonic"], 0.0);
+  EXPECT_EQ(rim["standard/min"], 0.0);
+  EXPECT_EQ(rim.count("mipmap/-"), 1u);
+  for (const char* png : {"accuracy.png", "speed.png", "leakage.png"}) {
+    Image im = read_color(p(std::string("study/") + png));
+    EXPECT_GT(im.width, 300) << png;
+  }
+  EXPECT_TRUE(std::filesystem::exists(p("study/summary.md")));
 }

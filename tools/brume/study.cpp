@@ -1,21 +1,41 @@
-// brume study diffusion — the accuracy and speed study of Hansard §5.2-5.3
-// on brume's own code (issue #5, first part: the measurements; plots, the
-// space-variant gather and mip-map peers and the leakage study are to come).
+// brume study diffusion — Hansard §5.2-5.3 (Figs. 6-7) on brume's own code,
+// with the peers a user would pick instead and a leakage experiment.
 //
 // accuracy.csv: scheme,precision,backend,sigma,rms,iterations,spread
 //   RMS against a true double-precision Gaussian of sqrt(sigma^2 - sigma0^2)
-//   (sampled kernel of radius 5 sigma, normalised, half-sample mirror
-//   boundary) over the image without a 4 sigma border, on linear RGB in
-//   [0, 1]; "spread" is the per-axis standard deviation an impulse reaches
-//   (target sqrt(sigma^2 - sigma0^2)).
-// speed.csv: method,precision,backend,sigma,seconds,iterations
-//   brume's schemes, OpenCV's GaussianBlur at the same sigma (space-invariant)
-//   and a memory-streaming floor (copying the RGBA float image as many times
-//   as the scheme iterates), on a 1600x1120 image (timings do not depend on
-//   content), median of 3 after a warm-up.
+//   (sampled kernel of radius 5 sigma, normalised, half-sample mirror) over
+//   the image without a 4 sigma border, linear RGB in [0, 1]; "spread" is the
+//   per-axis standard deviation an impulse reaches (target
+//   sqrt(sigma^2 - sigma0^2)). Rows for brume's three schemes in f32 and f16
+//   on each backend, and for the peers "gather" (direct Gaussian, radius
+//   3 s) and "mipmap" (include/brume/peers.hpp).
+// speed.csv: method,precision,backend,sigma,seconds,iterations,map,runs
+//   on a 1600x1120 image (timings do not depend on content, except the
+//   gather's on the map): map "constant" is sigma everywhere (the paper's
+//   experiment; brume's uniform path), map "varying" is a haze-like map
+//   sigma0 + R'^{3/2}(sigma - sigma0) from the demo scene's range. Peers:
+//   OpenCV's GaussianBlur (space-invariant), the direct gather, the mip-map
+//   and a memory-streaming floor (copying the RGBA float image as many
+//   times as invariant-exact iterates). Median of 3 after a warm-up; a case
+//   whose first run takes over 2 s is timed once (runs = 1). GPU times are
+//   the diffusion passes alone (timer queries, else glFinish wall time).
+// leakage.csv: method,edge_rate,backend,sigma_far,into_near_mean,
+//   into_near_max,into_far_mean
+//   A sharp near square (sigma = sigma0, green) on a far flat background
+//   (sigma_far, red): the background colour found in the square's rim (the
+//   pixels within 2 px of its edge: mean, and max over the whole square),
+//   and the square's colour found in the background within sigma_far of it.
+// summary.md: the key figures as Markdown tables (RMS at 5, 10, 25; time and
+//   iterations at 25; ratios against each peer; leakage).
+// accuracy.png, speed.png (Figs. 6-7 layout, log scales), leakage.png
+//   (crops of the square's corner for each method).
 //
-// Accuracy uses Middlebury 2005 "Art" (463x370, the real [0,1] image the
-// tests use) from ../shared/data, or --image.
+// Images: the accuracy part uses a real 1600x1120 image in [0, 1], a 4x4
+// mosaic of 400x280 crops of the photographs in ../shared/data (Middlebury
+// 2005, KITTI, ETH3D; the paper used Middlebury "Pipes", which is not in the
+// data), or --image. --quick uses Middlebury Art at 463x370 and a few sigma.
+#include <omp.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -23,7 +43,10 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <map>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -32,7 +55,9 @@
 #include "brume/error.hpp"
 #include "brume/gpu.hpp"
 #include "brume/io.hpp"
+#include "brume/peers.hpp"
 #include "depth/opencv.hpp"
+#include "plot.hpp"
 
 namespace fs = std::filesystem;
 using namespace brume;
@@ -45,7 +70,7 @@ int reflect(int i, int n) {
   return i;
 }
 
-// True Gaussian reference in double (separable, radius 5 sigma, mirror).
+// True Gaussian reference in double (separable, radius 5 sigma, mirror), RGB only.
 Image gaussian(const Image& in, double sigma) {
   const int W = in.width, H = in.height, C = in.channels;
   const int r = static_cast<int>(std::ceil(5.0 * sigma));
@@ -53,17 +78,19 @@ Image gaussian(const Image& in, double sigma) {
   double sum = 0;
   for (int i = -r; i <= r; ++i) sum += k[i + r] = std::exp(-0.5 * i * i / (sigma * sigma));
   for (double& v : k) v /= sum;
+#pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x)
-      for (int c = 0; c < C; ++c) {
+      for (int c = 0; c < 3; ++c) {
         double a = 0;
         for (int i = -r; i <= r; ++i) a += k[i + r] * in.data[(static_cast<std::size_t>(y) * W + reflect(x + i, W)) * C + c];
         tmp[(static_cast<std::size_t>(y) * W + x) * C + c] = a;
       }
-  Image out(W, H, C);
+  Image out(W, H, C, 1.0f);
+#pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x)
-      for (int c = 0; c < C; ++c) {
+      for (int c = 0; c < 3; ++c) {
         double a = 0;
         for (int i = -r; i <= r; ++i) a += k[i + r] * tmp[(static_cast<std::size_t>(reflect(y + i, H)) * W + x) * C + c];
         out.data[(static_cast<std::size_t>(y) * W + x) * C + c] = static_cast<float>(a);
@@ -87,17 +114,9 @@ double rms_rgb(const Image& a, const Image& b, int border) {
 Image rgba(const Image& rgb) {
   Image f(rgb.width, rgb.height, 4, 1.0f);
   for (std::size_t i = 0; i < rgb.pixels(); ++i)
-    for (int c = 0; c < 3; ++c) f.data[i * 4 + c] = rgb.data[i * 3 + c];
+    for (int c = 0; c < 3; ++c) f.data[i * 4 + c] = rgb.data[i * rgb.channels + c];
   return f;
 }
-
-struct Runner {
-  GpuContext* gpu;
-  DiffusionPlan run(Image& f, double sigma, const DiffusionParams& p) const {
-    Image map(f.width, f.height, 1, static_cast<float>(sigma));
-    return gpu ? diffuse_gpu(*gpu, f, map, sigma, p) : diffuse(f, map, sigma, p);
-  }
-};
 
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -113,6 +132,330 @@ std::string data_dir() {
   return "";
 }
 
+// The 1600x1120 accuracy image: a 4x4 mosaic of 400x280 crops (x, y) of the
+// real photographs in ../shared/data, linear RGB in [0, 1].
+Image study_mosaic(const std::string& data) {
+  struct Tile {
+    const char* file;
+    int x, y;
+  };
+  const Tile tiles[16] = {
+      {"middlebury2005_thirdsize/Art/view1.png", 0, 0},      {"kitti_object_000001/image_2/000001.png", 0, 95},
+      {"middlebury2005_thirdsize/Books/view1.png", 47, 90},  {"eth3d_two_view/playground_1l/im0.png", 0, 100},
+      {"middlebury2005_thirdsize/Dolls/view1.png", 0, 45},   {"middlebury2005_thirdsize/Laundry/view1.png", 63, 0},
+      {"kitti_object_000001/image_2/000001.png", 421, 95},   {"middlebury2005_thirdsize/Moebius/view1.png", 0, 90},
+      {"eth3d_two_view/terrace/im0.png", 150, 80},           {"middlebury2005_thirdsize/Reindeer/view1.png", 30, 45},
+      {"middlebury2005_thirdsize/Art/view1.png", 63, 90},    {"kitti_object_000001/image_2/000001.png", 842, 95},
+      {"middlebury2005_thirdsize/Books/view1.png", 0, 0},    {"eth3d_two_view/playground_1l/im0.png", 541, 180},
+      {"middlebury2005_thirdsize/Moebius/view1.png", 63, 0}, {"middlebury2005_thirdsize/Dolls/view1.png", 47, 90},
+  };
+  Image out(1600, 1120, 3);
+  std::map<std::string, Image> cache;
+  for (int t = 0; t < 16; ++t) {
+    const std::string path = data + "/" + tiles[t].file;
+    if (!cache.count(path)) {
+      if (!fs::exists(path))
+        throw Error("study image: " + path + " not found (the mosaic needs ../shared/data); give --image FILE");
+      cache[path] = read_color(path);
+    }
+    const Image& src = cache[path];
+    const int ox = (t % 4) * 400, oy = (t / 4) * 280;
+    if (tiles[t].x + 400 > src.width || tiles[t].y + 280 > src.height)
+      throw Error("study image: " + path + " is smaller than the crop it is used for");
+    for (int y = 0; y < 280; ++y)
+      for (int x = 0; x < 400; ++x)
+        for (int c = 0; c < 3; ++c) out.at(ox + x, oy + y, c) = std::clamp(src.at(tiles[t].x + x, tiles[t].y + y, c), 0.0f, 1.0f);
+  }
+  return out;
+}
+
+struct StudyBackend {
+  std::string name;
+  GpuContext* gpu = nullptr;
+  bool software = false;  // a software rasteriser (llvmpipe): skip the standard scheme's long runs
+};
+
+// Runs brume's diffusion; returns the plan and, for the GPU, the diffusion
+// passes' time in seconds through *gpu_seconds.
+DiffusionPlan run_brume(const StudyBackend& b, Image& f, const Image& map, double smax, const DiffusionParams& p,
+                        double* gpu_seconds = nullptr) {
+  if (!b.gpu) return diffuse(f, map, smax, p);
+  GpuTiming t;
+  const DiffusionPlan plan = diffuse_gpu(*b.gpu, f, map, smax, p, GpuFilter::automatic, &t);
+  if (gpu_seconds) *gpu_seconds = t.diffuse_ms * 1e-3;
+  return plan;
+}
+
+// Median of 3 timed runs after a warm-up, or one run when it takes > 2 s.
+// `fn` returns its own time in seconds when it measures one (GPU), else < 0.
+struct Timed {
+  double seconds;
+  int runs;
+};
+bool g_quick = false;  // --quick: one timed run after the warm-up
+Timed time_it(const std::function<double()>& fn) {
+  auto once = [&] {
+    const auto t0 = Clock::now();
+    const double own = fn();
+    const double wall = std::chrono::duration<double>(Clock::now() - t0).count();
+    return own >= 0 ? own : wall;
+  };
+  const double first = once();
+  if (first > 2.0) return {first, 1};
+  std::vector<double> t;
+  for (int r = 0; r < (g_quick ? 1 : 3); ++r) t.push_back(once());
+  return {median(t), static_cast<int>(t.size())};
+}
+
+// Impulse spread (per-axis standard deviation) of a constant-scale blur.
+double impulse_spread(const std::function<void(Image&, const Image&)>& blur, double sigma) {
+  const int n = 2 * static_cast<int>(std::ceil(6 * sigma)) + 3;  // no mass reaches the border
+  Image imp(n, n, 4, 0.0f);
+  imp.at(n / 2, n / 2, 0) = 1.0f;
+  blur(imp, Image(n, n, 1, static_cast<float>(sigma)));
+  double m = 0, v = 0;
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) m += imp.at(x, y, 0), v += imp.at(x, y, 0) * (x - n / 2) * (x - n / 2);
+  return std::sqrt(v / m);
+}
+
+std::string fmt(double v, const char* f = "%.3g") {
+  char b[64];
+  std::snprintf(b, sizeof b, f, v);
+  return b;
+}
+
+// One CSV row as a record the summary and the plots read back.
+struct AccRow {
+  std::string scheme, precision, backend;
+  double sigma, rms;
+  int iterations;
+  double spread;
+};
+struct SpeedRow {
+  std::string method, precision, backend;
+  double sigma, seconds;
+  int iterations;
+  std::string map;
+};
+struct LeakRow {
+  std::string method, edge, backend;
+  double into_near_mean, into_near_max, into_far_mean;
+};
+
+// Copy of a float image as an 8-bit sRGB cv::Mat (BGR) for the crop figure.
+cv::Mat to_bgr8(const Image& f, int x0, int y0, int w, int h, int scale) {
+  cv::Mat m(h * scale, w * scale, CV_8UC3);
+  for (int y = 0; y < h * scale; ++y)
+    for (int x = 0; x < w * scale; ++x) {
+      cv::Vec3b& px = m.at<cv::Vec3b>(y, x);
+      for (int c = 0; c < 3; ++c) {
+        const float v = std::clamp(f.at(x0 + x / scale, y0 + y / scale, c), 0.0f, 1.0f);
+        px[2 - c] = static_cast<unsigned char>(std::lround(255.0f * linear_to_srgb(v)));
+      }
+    }
+  return m;
+}
+
+void write_bgr8(const std::string& path, const cv::Mat& m) {
+  Image img(m.cols, m.rows, 3);
+  for (int y = 0; y < m.rows; ++y)
+    for (int x = 0; x < m.cols; ++x)
+      for (int c = 0; c < 3; ++c) img.at(x, y, c) = srgb_to_linear(m.at<cv::Vec3b>(y, x)[2 - c] / 255.0f);
+  WriteOptions wo;  // sRGB-encoded on write: the same bytes back, tagged sRGB
+  wo.bits = "8";
+  wo.transfer = Transfer::srgb;
+  write_image(path, img, wo, "--out-dir");
+}
+
+struct Style {
+  unsigned char r, g, b;
+};
+Style style_of(const std::string& method, const std::string& prec) {
+  const bool f16 = prec == "f16";
+  if (method == "standard" || method == "brume-standard") return f16 ? Style{235, 120, 110} : Style{150, 0, 0};
+  if (method == "invariant" || method == "brume-invariant") return f16 ? Style{110, 160, 240} : Style{0, 40, 170};
+  if (method == "invariant-exact" || method == "brume-invariant-exact") return f16 ? Style{110, 200, 110} : Style{0, 115, 0};
+  if (method == "mipmap") return {230, 140, 0};
+  if (method == "gather") return {140, 0, 170};
+  if (method == "opencv-gaussianblur") return {0, 0, 0};
+  return {128, 128, 128};  // memory floor
+}
+
+std::string label_of(const std::string& method, const std::string& prec, const std::string& backend) {
+  std::string m = method.rfind("brume-", 0) == 0 ? method.substr(6) : method;
+  if (m == "opencv-gaussianblur") return "OpenCV GaussianBlur";
+  if (m == "memory-floor") return "memory floor (copy x N)";
+  if (m == "mipmap") return "mip-map (peer)";
+  if (m == "gather") return "direct gather (peer)";
+  return m + " " + prec + (backend == "gpu" ? " GPU" : "");
+}
+
+void write_figures(const fs::path& dir, const std::vector<AccRow>& acc, const std::vector<SpeedRow>& spd,
+                   const std::vector<std::pair<std::string, Image>>& crops, const std::vector<StudyBackend>& backends,
+                   int n, int q0) {
+  // Fig. 6: RMS against sigma; the standard scheme on top, the invariant
+  // schemes and the peers below, on the same (log) axis so they compare.
+  double lo = INFINITY, hi = 0;
+  for (const AccRow& r : acc)
+    if (r.rms > 0) lo = std::min(lo, r.rms), hi = std::max(hi, r.rms);
+  auto acc_series = [&](const std::string& scheme, const std::string& prec, const std::string& backend) {
+    plot::Series s;
+    const Style st = style_of(scheme, prec);
+    s.label = label_of(scheme, prec, backend), s.r = st.r, s.g = st.g, s.b = st.b, s.dashed = backend == "gpu";
+    for (const AccRow& r : acc)
+      if (r.scheme == scheme && r.precision == prec && r.backend == backend) s.x.push_back(r.sigma), s.y.push_back(r.rms);
+    return s;
+  };
+  plot::Panel top, bottom;
+  top.title = "Standard scheme (eq. 13): RMS error against a true Gaussian";
+  bottom.title = "Invariant schemes (eq. 18) and the peers";
+  for (plot::Panel* p : {&top, &bottom}) {
+    p->xlabel = "sigma_ref [px]";
+    p->ylabel = "RMS error";
+    if (hi > 0) p->ymin = std::pow(10.0, std::floor(std::log10(lo))), p->ymax = std::pow(10.0, std::ceil(std::log10(hi)));
+    p->xmin = 0;
+  }
+  for (const StudyBackend& b : backends)
+    for (const char* pr : {"f32", "f16"}) {
+      top.series.push_back(acc_series("standard", pr, b.name));
+      bottom.series.push_back(acc_series("invariant", pr, b.name));
+      bottom.series.push_back(acc_series("invariant-exact", pr, b.name));
+    }
+  bottom.series.push_back(acc_series("mipmap", "f32", "cpu"));
+  bottom.series.push_back(acc_series("gather", "f32", "cpu"));
+  plot::write_png((dir / "accuracy.png").string(), {top, bottom});
+
+  // Fig. 7: time against sigma.
+  auto spd_series = [&](const std::string& method, const std::string& prec, const std::string& backend,
+                        const std::string& map) {
+    plot::Series s;
+    const Style st = style_of(method, prec);
+    s.label = label_of(method, prec, backend), s.r = st.r, s.g = st.g, s.b = st.b, s.dashed = backend == "gpu";
+    for (const SpeedRow& r : spd)
+      if (r.method == method && r.precision == prec && r.backend == backend && r.map == map)
+        s.x.push_back(r.sigma), s.y.push_back(r.seconds);
+    return s;
+  };
+  plot::Panel st, inv, var;
+  st.title = "Standard scheme (eq. 13), constant sigma";
+  inv.title = "Invariant schemes (eq. 18) and the peers, constant sigma";
+  var.title = "Space-variant haze map (sigma0 + R'^1.5 (sigma - sigma0))";
+  double tlo = INFINITY, thi = 0;
+  for (const SpeedRow& r : spd)
+    if (r.seconds > 0) tlo = std::min(tlo, r.seconds), thi = std::max(thi, r.seconds);
+  for (plot::Panel* p : {&st, &inv, &var}) {
+    p->xlabel = "sigma_ref [px]";
+    p->ylabel = "time [s]";
+    if (thi > 0) p->ymin = std::pow(10.0, std::floor(std::log10(tlo))), p->ymax = std::pow(10.0, std::ceil(std::log10(thi)));
+    p->xmin = 0;
+  }
+  for (const StudyBackend& b : backends)
+    for (const char* pr : {"f32", "f16"}) {
+      st.series.push_back(spd_series("brume-standard", pr, b.name, "constant"));
+      inv.series.push_back(spd_series("brume-invariant", pr, b.name, "constant"));
+      inv.series.push_back(spd_series("brume-invariant-exact", pr, b.name, "constant"));
+      var.series.push_back(spd_series("brume-invariant-exact", pr, b.name, "varying"));
+    }
+  for (const char* m : {"opencv-gaussianblur", "mipmap", "gather", "memory-floor"})
+    inv.series.push_back(spd_series(m, "f32", "cpu", "constant"));
+  for (const char* m : {"mipmap", "gather"}) var.series.push_back(spd_series(m, "f32", "cpu", "varying"));
+  for (plot::Panel* p : {&st, &inv, &var})
+    p->series.erase(std::remove_if(p->series.begin(), p->series.end(), [](const plot::Series& s) { return s.x.empty(); }),
+                    p->series.end());
+  plot::write_png((dir / "speed.png").string(), {st, inv, var});
+
+  // Leakage: the near square's top-left corner, 2x, one tile per method.
+  const int c = n / 8, scale = std::max(2, 240 / (2 * c)), tile = 2 * c * scale, label_h = 26, cols = 4;
+  const int rows = static_cast<int>((crops.size() + cols - 1) / cols);
+  cv::Mat fig(rows * (tile + label_h) + 8, cols * (tile + 8) + 8, CV_8UC3, cv::Scalar(255, 255, 255));
+  for (std::size_t i = 0; i < crops.size(); ++i) {
+    const int cx = 8 + static_cast<int>(i % cols) * (tile + 8), cy = 8 + static_cast<int>(i / cols) * (tile + label_h);
+    to_bgr8(crops[i].second, q0 - c, q0 - c, 2 * c, 2 * c, scale).copyTo(fig(cv::Rect(cx, cy, tile, tile)));
+    double font = 0.5;  // shrink the label to the tile's width
+    int base = 0;
+    while (font > 0.3 && cv::getTextSize(crops[i].first, cv::FONT_HERSHEY_SIMPLEX, font, 1, &base).width > tile) font -= 0.02;
+    cv::putText(fig, crops[i].first, cv::Point(cx, cy + tile + 18), cv::FONT_HERSHEY_SIMPLEX, font, cv::Scalar(0, 0, 0), 1,
+                cv::LINE_AA);
+  }
+  write_bgr8((dir / "leakage.png").string(), fig);
+}
+
+// The key figures as Markdown tables.
+void write_summary(const fs::path& dir, const std::vector<AccRow>& acc, const std::vector<SpeedRow>& spd,
+                   const std::vector<LeakRow>& leak, const std::string& acc_name, const Image& acc_img, int W, int H,
+                   double sfar) {
+  std::ostringstream o;
+  std::vector<double> key;
+  for (double s : {5.0, 10.0, 25.0})
+    if (std::any_of(acc.begin(), acc.end(), [&](const AccRow& r) { return r.sigma == s; })) key.push_back(s);
+  double smax_acc = 0;
+  for (const AccRow& r : acc) smax_acc = std::max(smax_acc, r.sigma);
+  if (key.empty() || key.back() != smax_acc) key.push_back(smax_acc);
+  o << "Accuracy on " << acc_name << " (" << acc_img.width << "x" << acc_img.height
+    << "): RMS against a true Gaussian of sqrt(sigma^2 - 1).\n\n| method | precision | backend |";
+  for (double s : key) o << " RMS at " << s << " px |";
+  o << " iterations at " << smax_acc << " | impulse spread at " << smax_acc << " (target "
+    << fmt(std::sqrt(smax_acc * smax_acc - 1), "%.2f") << ") |\n|---|---|---|";
+  for (std::size_t i = 0; i < key.size() + 2; ++i) o << "---|";
+  o << "\n";
+  std::vector<std::tuple<std::string, std::string, std::string>> methods;
+  for (const AccRow& r : acc)
+    if (std::find(methods.begin(), methods.end(), std::make_tuple(r.scheme, r.precision, r.backend)) == methods.end())
+      methods.emplace_back(r.scheme, r.precision, r.backend);
+  for (const auto& [m, pr, b] : methods) {
+    o << "| " << m << " | " << pr << " | " << b << " |";
+    const AccRow* last = nullptr;
+    for (double s : key) {
+      const AccRow* hit = nullptr;
+      for (const AccRow& r : acc)
+        if (r.scheme == m && r.precision == pr && r.backend == b && r.sigma == s) hit = &r;
+      o << " " << (hit ? fmt(hit->rms, "%.2e") : "-") << " |";
+      if (s == smax_acc) last = hit;
+    }
+    o << " " << (last && last->iterations ? std::to_string(last->iterations) : "-") << " | "
+      << (last ? fmt(last->spread, "%.2f") : "-") << " |\n";
+  }
+
+  double smax_spd = 0;
+  for (const SpeedRow& r : spd) smax_spd = std::max(smax_spd, r.sigma);
+  auto find = [&](const std::string& m, const std::string& map) -> const SpeedRow* {
+    for (const SpeedRow& r : spd)
+      if (r.method == m && r.map == map && r.sigma == smax_spd && r.backend == "cpu" && r.precision == "f32") return &r;
+    return nullptr;
+  };
+  for (const char* map : {"constant", "varying"}) {
+    const std::string mp = map;
+    o << "\nSpeed at sigma = " << smax_spd << " px on " << W << "x" << H << ", "
+      << (mp == "constant" ? "constant sigma (the paper's experiment)" : "space-variant haze map")
+      << ": time, and brume's time as a ratio of each peer's (below 1: brume is faster).\n\n"
+      << "| method | precision | backend | time [ms] | iterations |";
+    std::vector<const SpeedRow*> peers;  // OpenCV and the floor exist for the constant map only
+    for (const char* p : {"opencv-gaussianblur", "gather", "mipmap", "memory-floor"})
+      if (const SpeedRow* r = find(p, mp)) peers.push_back(r);
+    for (const SpeedRow* p : peers) o << " / " << label_of(p->method, "f32", "cpu") << " |";
+    o << "\n|---|---|---|---|---|";
+    for (std::size_t i = 0; i < peers.size(); ++i) o << "---|";
+    o << "\n";
+    for (const SpeedRow& r : spd) {
+      if (r.sigma != smax_spd || r.map != mp) continue;
+      o << "| " << r.method << " | " << r.precision << " | " << r.backend << " | " << fmt(r.seconds * 1e3, "%.1f") << " | "
+        << (r.iterations ? std::to_string(r.iterations) : "-") << " |";
+      for (const SpeedRow* p : peers) o << " " << (r.method.rfind("brume-", 0) == 0 ? fmt(r.seconds / p->seconds, "%.2f") : "") << " |";
+      o << "\n";
+    }
+  }
+
+  o << "\nLeakage across a depth edge: a sharp near square (sigma0, green) on a flat far background (sigma "
+    << sfar << " px, red). Background colour in the square's 2 px rim (mean, and max over the square), and the "
+       "square's colour in the background within "
+    << sfar << " px of it.\n\n| method | edge rate | backend | background in near rim | max in near square | near colour in far ring |\n|---|---|---|---|---|---|\n";
+  for (const LeakRow& r : leak)
+    o << "| " << r.method << " | " << r.edge << " | " << r.backend << " | " << fmt(r.into_near_mean, "%.4f") << " | "
+      << fmt(r.into_near_max, "%.4f") << " | " << fmt(r.into_far_mean, "%.4f") << " |\n";
+  std::ofstream(dir / "summary.md") << o.str();
+}
+
 }  // namespace
 
 int run_study(const std::string& what, const std::string& out_dir, bool quick, const std::string& backend,
@@ -123,106 +466,237 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
   std::error_code ec;
   fs::create_directories(out_dir, ec);
   if (!fs::is_directory(out_dir)) throw Error("--out-dir '" + out_dir + "' cannot be created");
-  std::string img = image_path;
-  if (img.empty()) {
+  const fs::path dir(out_dir);
+  g_quick = quick;
+  Image acc_rgb;
+  std::string acc_name;
+  if (!image_path.empty()) {
+    acc_rgb = read_color(image_path);
+    acc_name = image_path;
+  } else {
     const std::string d = data_dir();
-    img = d.empty() ? "" : d + "/middlebury2005_thirdsize/Art/view1.png";
-    if (img.empty() || !fs::exists(img))
-      throw Error("no --image given and ../shared/data/middlebury2005_thirdsize/Art/view1.png not found; give --image FILE (a real image in [0,1])");
+    if (d.empty())
+      throw Error("no --image given and ../shared/data not found; give --image FILE (a real image in [0,1])");
+    if (quick) {
+      acc_name = d + "/middlebury2005_thirdsize/Art/view1.png";
+      if (!fs::exists(acc_name)) throw Error(acc_name + " not found; give --image FILE (a real image in [0,1])");
+      acc_rgb = read_color(acc_name);
+    } else {
+      acc_rgb = study_mosaic(d);
+      acc_name = "1600x1120 mosaic of ../shared/data photographs";
+    }
   }
-  const Image acc_img = rgba(read_color(img));
+  const Image acc_img = rgba(acc_rgb);
 
   std::unique_ptr<GpuContext> ctx;
-  std::vector<std::pair<std::string, GpuContext*>> backends;
-  if (backend != "gpu") backends.emplace_back("cpu", nullptr);
+  std::vector<StudyBackend> backends;
+  if (backend != "gpu") backends.push_back({"cpu", nullptr, false});
   if (backend != "cpu") {
     ctx = std::make_unique<GpuContext>();  // throws with the reason
-    backends.emplace_back("gpu", ctx.get());
+    const std::string r = ctx->info().renderer;
+    const bool soft = r.find("llvmpipe") != std::string::npos || r.find("softpipe") != std::string::npos ||
+                      r.find("SwiftShader") != std::string::npos;
+    backends.push_back({"gpu", ctx.get(), soft});
+    std::fprintf(stderr, "brume study: GPU %s%s\n", r.c_str(), soft ? " (software: standard scheme limited to 300 passes)" : "");
   }
-  const std::vector<double> sigmas = quick ? std::vector<double>{2, 5, 10} : std::vector<double>{1.5, 2, 3, 4, 5, 7, 10, 13, 16, 20, 25};
   const Scheme schemes[] = {Scheme::standard, Scheme::invariant, Scheme::invariant_exact};
   const Precision precs[] = {Precision::f32, Precision::f16};
-
-  std::ofstream acc(fs::path(out_dir) / "accuracy.csv");
-  acc << "scheme,precision,backend,sigma,rms,iterations,spread\n";
-  std::fprintf(stderr, "brume study: accuracy on %s (%dx%d)\n", img.c_str(), acc_img.width, acc_img.height);
-  for (double sigma : sigmas) {
-    const Image ref = gaussian(acc_img, std::sqrt(sigma * sigma - 1.0));
-    for (auto& [bname, g] : backends)
-      for (Scheme s : schemes)
-        for (Precision pr : precs) {
-          if (quick && g && s == Scheme::standard && sigma > 5) continue;  // software GPUs: minutes
-          DiffusionParams p;
-          p.scheme = s;
-          p.precision = pr;
-          Image f = acc_img;
-          const DiffusionPlan plan = Runner{g}.run(f, sigma, p);
-          // Impulse spread on a field big enough that no mass reaches the border.
-          const int n = 2 * static_cast<int>(std::ceil(6 * sigma)) + 3;
-          Image imp(n, n, 4, 0.0f);
-          imp.at(n / 2, n / 2, 0) = 1.0f;
-          Runner{g}.run(imp, sigma, p);
-          double m = 0, v = 0;
-          for (int y = 0; y < n; ++y)
-            for (int x = 0; x < n; ++x) m += imp.at(x, y, 0), v += imp.at(x, y, 0) * (x - n / 2) * (x - n / 2);
-          const double e = rms_rgb(f, ref, static_cast<int>(std::ceil(4 * sigma)));
-          acc << to_string(s) << "," << to_string(pr) << "," << bname << "," << sigma << "," << e << "," << plan.iterations
-              << "," << std::sqrt(v / m) << "\n";
-          std::fprintf(stderr, "  %-15s %s %s sigma %5.1f: rms %.3e, %4d iterations\n", to_string(s).c_str(),
-                       to_string(pr).c_str(), bname.c_str(), sigma, e, plan.iterations);
-        }
-  }
-  acc.close();
-
-  // Speed on 1600x1120.
-  const int W = quick ? 463 : 1600, H = quick ? 370 : 1120;
-  const Image big = rgba(render_demo_scene(W, H).rgb);
-  std::ofstream spd(fs::path(out_dir) / "speed.csv");
-  spd << "method,precision,backend,sigma,seconds,iterations\n";
-  const int runs = 3;
-  auto timeit = [&](auto&& fn) {
-    fn();
-    std::vector<double> t;
-    for (int r = 0; r < runs; ++r) {
-      const auto t0 = Clock::now();
-      fn();
-      t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
-    }
-    return median(t);
+  auto params = [](Scheme s, Precision pr, EdgeRate e = DiffusionParams{}.edge_rate) {
+    DiffusionParams p;
+    p.scheme = s;
+    p.precision = pr;
+    p.edge_rate = e;
+    return p;
   };
-  std::fprintf(stderr, "brume study: speed on %dx%d\n", W, H);
-  for (double sigma : quick ? std::vector<double>{5, 10} : std::vector<double>{5, 10, 15, 20, 25}) {
-    Image rgb3(W, H, 3);
-    for (std::size_t i = 0; i < big.pixels(); ++i) std::memcpy(&rgb3.data[i * 3], &big.data[i * 4], 12);
-    const cv::Mat src(H, W, CV_32FC3, rgb3.data.data());
-    cv::Mat dst;
-    const double tcv = timeit([&] { cv::GaussianBlur(src, dst, cv::Size(0, 0), sigma, sigma, cv::BORDER_REFLECT); });
-    spd << "opencv-gaussianblur,f32,cpu," << sigma << "," << tcv << ",1\n";
-    for (auto& [bname, g] : backends)
-      for (Scheme s : schemes)
-        for (Precision pr : precs) {
-          if (s == Scheme::standard && (g || (quick && sigma > 5))) continue;  // hundreds of passes
-          DiffusionParams p;
-          p.scheme = s;
-          p.precision = pr;
-          int iters = 0;
-          const double t = timeit([&] {
-            Image f = big;
-            iters = Runner{g}.run(f, sigma, p).iterations;
-          });
-          spd << "brume-" << to_string(s) << "," << to_string(pr) << "," << bname << "," << sigma << "," << t << "," << iters << "\n";
-          if (s == Scheme::invariant_exact && pr == Precision::f32 && !g) {
-            // Streaming floor: the same bytes copied as many times as the scheme iterates.
-            std::vector<float> a(big.data), b(big.data.size());
-            const double floor_t = timeit([&] {
-              for (int k = 0; k < iters; ++k) std::memcpy(b.data(), a.data(), a.size() * sizeof(float)), a.swap(b);
-            });
-            spd << "memory-floor,f32,cpu," << sigma << "," << floor_t << "," << iters << "\n";
+  auto too_long = [](const StudyBackend& b, Scheme s, double sigma) {
+    return b.software && s == Scheme::standard && plan_diffusion(DiffusionParams{s}, sigma).iterations > 300;
+  };
+
+  // ---- Accuracy (Fig. 6) ---------------------------------------------------
+  const std::vector<double> acc_sigmas =
+      quick ? std::vector<double>{2, 5, 10} : std::vector<double>{1.5, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 25};
+  std::vector<AccRow> acc_rows;
+  {
+    std::ofstream acc(dir / "accuracy.csv");
+    acc << "scheme,precision,backend,sigma,rms,iterations,spread\n";
+    std::fprintf(stderr, "brume study: accuracy on %s (%dx%d)\n", acc_name.c_str(), acc_img.width, acc_img.height);
+    auto emit = [&](const std::string& scheme, const std::string& prec, const std::string& bname, double sigma,
+                    double rms, int iters, double spread) {
+      acc << scheme << "," << prec << "," << bname << "," << sigma << "," << rms << "," << iters << "," << spread << "\n";
+      acc_rows.push_back({scheme, prec, bname, sigma, rms, iters, spread});
+      std::fprintf(stderr, "  %-15s %s %s sigma %5.1f: rms %.3e, %4d iterations, spread %.3f\n", scheme.c_str(),
+                   prec.c_str(), bname.c_str(), sigma, rms, iters, spread);
+    };
+    for (double sigma : acc_sigmas) {
+      const Image ref = gaussian(acc_img, std::sqrt(sigma * sigma - 1.0));
+      const int border = static_cast<int>(std::ceil(4 * sigma));
+      const Image map(acc_img.width, acc_img.height, 1, static_cast<float>(sigma));
+      for (const StudyBackend& b : backends)
+        for (Scheme s : schemes)
+          for (Precision pr : precs) {
+            if (too_long(b, s, sigma)) continue;
+            Image f = acc_img;
+            const DiffusionPlan plan = run_brume(b, f, map, sigma, params(s, pr));
+            const double spread = impulse_spread(
+                [&](Image& g, const Image& m) { run_brume(b, g, m, sigma, params(s, pr)); }, sigma);
+            emit(to_string(s), to_string(pr), b.name, sigma, rms_rgb(f, ref, border), plan.iterations, spread);
           }
-          std::fprintf(stderr, "  %-15s %s %s sigma %4.1f: %8.1f ms (%d iterations), OpenCV %6.1f ms\n",
-                       to_string(s).c_str(), to_string(pr).c_str(), bname.c_str(), sigma, t * 1e3, iters, tcv * 1e3);
-        }
+      {
+        Image f = acc_img;
+        peers::mipmap_blur(f, map, 1.0);
+        emit("mipmap", "f32", "cpu", sigma, rms_rgb(f, ref, border), 0,
+             impulse_spread([](Image& g, const Image& m) { peers::mipmap_blur(g, m, 1.0); }, sigma));
+      }
+      {
+        Image f = acc_img;
+        peers::gather_blur(f, map, 1.0);
+        emit("gather", "f32", "cpu", sigma, rms_rgb(f, ref, border), 0,
+             impulse_spread([](Image& g, const Image& m) { peers::gather_blur(g, m, 1.0); }, sigma));
+      }
+    }
   }
-  std::fprintf(stderr, "brume study: wrote %s/accuracy.csv and %s/speed.csv\n", out_dir.c_str(), out_dir.c_str());
+
+  // ---- Speed (Fig. 7) -------------------------------------------------------
+  const int W = quick ? 463 : 1600, H = quick ? 370 : 1120;
+  const DemoScene scene = render_demo_scene(W, H);
+  const Image big = rgba(scene.rgb);
+  double rmax = 0;
+  for (float r : scene.range.data)
+    if (std::isfinite(r)) rmax = std::max(rmax, static_cast<double>(r));
+  std::vector<SpeedRow> speed_rows;
+  {
+    std::ofstream spd(dir / "speed.csv");
+    spd << "method,precision,backend,sigma,seconds,iterations,map,runs\n";
+    auto emit = [&](const std::string& method, const std::string& prec, const std::string& bname, double sigma,
+                    Timed t, int iters, const std::string& map) {
+      spd << method << "," << prec << "," << bname << "," << sigma << "," << t.seconds << "," << iters << "," << map
+          << "," << t.runs << "\n";
+      speed_rows.push_back({method, prec, bname, sigma, t.seconds, iters, map});
+      std::fprintf(stderr, "  %-28s %s %s %-8s sigma %4.1f: %9.2f ms (%d iterations)\n", method.c_str(), prec.c_str(),
+                   bname.c_str(), map.c_str(), sigma, t.seconds * 1e3, iters);
+    };
+    std::fprintf(stderr, "brume study: speed on %dx%d\n", W, H);
+    for (double sigma : quick ? std::vector<double>{5, 10} : std::vector<double>{2, 5, 10, 15, 20, 25}) {
+      const Image cmap(W, H, 1, static_cast<float>(sigma));
+      Image vmap(W, H, 1);
+      for (std::size_t i = 0; i < vmap.pixels(); ++i) {
+        const float r = scene.range.data[i];
+        const double rn = std::isfinite(r) ? std::min(r / rmax, 1.0) : 1.0;
+        vmap.data[i] = static_cast<float>(1.0 + rn * std::sqrt(rn) * (sigma - 1.0));
+      }
+      // OpenCV GaussianBlur at the same sigma on RGBA float (the same bytes as brume).
+      const cv::Mat src(H, W, CV_32FC4, const_cast<float*>(big.data.data()));
+      cv::Mat dst;
+      const double eff = std::sqrt(sigma * sigma - 1.0);
+      emit("opencv-gaussianblur", "f32", "cpu", sigma, time_it([&] {
+             cv::GaussianBlur(src, dst, cv::Size(0, 0), eff, eff, cv::BORDER_REFLECT);
+             return -1.0;
+           }),
+           1, "constant");
+      int exact_iters = 0;
+      for (const StudyBackend& b : backends)
+        for (Scheme s : schemes)
+          for (Precision pr : precs)
+            for (const char* mapname : {"constant", "varying"}) {
+              const bool varying = std::string(mapname) == "varying";
+              if (s == Scheme::standard && (varying || too_long(b, s, sigma) || (quick && (b.gpu || sigma > 5))))
+                continue;  // hundreds of passes: the constant map is the paper's experiment
+              if (s == Scheme::invariant && varying) continue;
+              int iters = 0;
+              const Timed t = time_it([&] {
+                Image f = big;
+                double gs = -1.0;
+                iters = run_brume(b, f, varying ? vmap : cmap, sigma, params(s, pr), &gs).iterations;
+                return b.gpu ? gs : -1.0;
+              });
+              if (s == Scheme::invariant_exact && !b.gpu) exact_iters = iters;
+              emit("brume-" + to_string(s), to_string(pr), b.name, sigma, t, iters, mapname);
+            }
+      for (const char* mapname : {"constant", "varying"}) {
+        const Image& m = std::string(mapname) == "varying" ? vmap : cmap;
+        emit("mipmap", "f32", "cpu", sigma, time_it([&] {
+               Image f = big;
+               peers::mipmap_blur(f, m, 1.0);
+               return -1.0;
+             }),
+             0, mapname);
+        emit("gather", "f32", "cpu", sigma, time_it([&] {
+               Image f = big;
+               peers::gather_blur(f, m, 1.0);
+               return -1.0;
+             }),
+             0, mapname);
+      }
+      // Streaming floor: the same bytes copied as many times as invariant-exact iterates.
+      std::vector<float> a(big.data), bb(big.data.size());
+      emit("memory-floor", "f32", "cpu", sigma, time_it([&] {
+             for (int k = 0; k < exact_iters; ++k) std::memcpy(bb.data(), a.data(), a.size() * sizeof(float)), a.swap(bb);
+             return -1.0;
+           }),
+           exact_iters, "constant");
+    }
+  }
+
+  // ---- Leakage across a depth edge -----------------------------------------
+  const int n = quick ? 160 : 320;
+  const double sfar = quick ? 10.0 : 25.0;
+  const int q0 = n / 4, q1 = 3 * n / 4;  // the near square [q0, q1)^2
+  Image scene_f(n, n, 4, 0.0f), smap(n, n, 1, static_cast<float>(sfar));
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      const bool near = x >= q0 && x < q1 && y >= q0 && y < q1;
+      scene_f.at(x, y, near ? 1 : 0) = 1.0f;
+      scene_f.at(x, y, 3) = 1.0f;
+      if (near) smap.at(x, y) = 1.0f;
+    }
+  std::vector<LeakRow> leak_rows;
+  std::vector<std::pair<std::string, Image>> crops;
+  {
+    std::ofstream lk(dir / "leakage.csv");
+    lk << "method,edge_rate,backend,sigma_far,into_near_mean,into_near_max,into_far_mean\n";
+    std::fprintf(stderr, "brume study: leakage, near square on a far background at sigma %.0f\n", sfar);
+    auto measure = [&](const std::string& method, const std::string& edge, const std::string& bname, const Image& g) {
+      double rim = 0, rim_n = 0, nmax = 0, far = 0, far_n = 0;
+      for (int y = 0; y < n; ++y)
+        for (int x = 0; x < n; ++x) {
+          const int dx = std::max(q0 - x, x - (q1 - 1)), dy = std::max(q0 - y, y - (q1 - 1));
+          const int d = std::max(dx, dy);  // > 0 outside (Chebyshev distance), <= 0 inside
+          if (d <= 0) {
+            nmax = std::max(nmax, static_cast<double>(g.at(x, y, 0)));
+            if (d > -2) rim += g.at(x, y, 0), ++rim_n;
+          } else if (d <= sfar) {
+            far += g.at(x, y, 1), ++far_n;
+          }
+        }
+      lk << method << "," << edge << "," << bname << "," << sfar << "," << rim / rim_n << "," << nmax << ","
+         << far / far_n << "\n";
+      leak_rows.push_back({method, edge, bname, rim / rim_n, nmax, far / far_n});
+      std::fprintf(stderr, "  %-15s %-8s %s: background in near rim %.4f (max %.4f), near colour in far ring %.4f\n",
+                   method.c_str(), edge.c_str(), bname.c_str(), rim / rim_n, nmax, far / far_n);
+    };
+    for (const StudyBackend& b : backends)
+      for (Scheme s : schemes)
+        for (EdgeRate e : {EdgeRate::mean, EdgeRate::min, EdgeRate::harmonic}) {
+          if (too_long(b, s, sfar)) continue;
+          Image g = scene_f;
+          run_brume(b, g, smap, sfar, params(s, Precision::f32, e));
+          measure(to_string(s), to_string(e), b.name, g);
+          if (!b.gpu && s != Scheme::invariant) crops.emplace_back(to_string(s) + ", " + to_string(e), g);
+        }
+    Image g = scene_f;
+    peers::mipmap_blur(g, smap, 1.0);
+    measure("mipmap", "-", "cpu", g);
+    crops.emplace_back("mip-map", g);
+    g = scene_f;
+    peers::gather_blur(g, smap, 1.0);
+    measure("gather", "-", "cpu", g);
+    crops.emplace_back("direct gather", g);
+  }
+
+  // ---- Figures ---------------------------------------------------------------
+  write_figures(dir, acc_rows, speed_rows, crops, backends, n, q0);
+  write_summary(dir, acc_rows, speed_rows, leak_rows, acc_name, acc_img, W, H, sfar);
+  std::fprintf(stderr, "brume study: wrote accuracy.csv, speed.csv, leakage.csv, summary.md and the plots in %s\n",
+               out_dir.c_str());
   return 0;
 }
