@@ -142,7 +142,7 @@ Image study_mosaic(const std::string& data) {
   const Tile tiles[16] = {
       {"middlebury2005_thirdsize/Art/view1.png", 0, 0},      {"kitti_object_000001/image_2/000001.png", 0, 95},
       {"middlebury2005_thirdsize/Books/view1.png", 47, 90},  {"eth3d_two_view/playground_1l/im0.png", 0, 100},
-      {"middlebury2005_thirdsize/Dolls/view1.png", 0, 45},   {"middlebury2005_thirdsize/Laundry/view1.png", 63, 0},
+      {"middlebury2005_thirdsize/Dolls/view1.png", 0, 45},   {"middlebury2005_thirdsize/Laundry/view1.png", 47, 0},
       {"kitti_object_000001/image_2/000001.png", 421, 95},   {"middlebury2005_thirdsize/Moebius/view1.png", 0, 90},
       {"eth3d_two_view/terrace/im0.png", 150, 80},           {"middlebury2005_thirdsize/Reindeer/view1.png", 30, 45},
       {"middlebury2005_thirdsize/Art/view1.png", 63, 90},    {"kitti_object_000001/image_2/000001.png", 842, 95},
@@ -168,6 +168,35 @@ Image study_mosaic(const std::string& data) {
   }
   return out;
 }
+
+// The study's text outputs are written under a temporary name and renamed
+// into place only when the whole study has succeeded; on failure the
+// temporaries are removed, so a final name never holds a partial table.
+class PendingFiles {
+ public:
+  explicit PendingFiles(fs::path dir) : dir_(std::move(dir)) {}
+  ~PendingFiles() {
+    std::error_code ec;
+    if (!done_)
+      for (const std::string& n : names_) fs::remove(temp(n), ec);
+  }
+  std::ofstream open(const std::string& name) {
+    names_.push_back(name);
+    std::ofstream f(temp(name));
+    if (!f) throw Error("--out-dir: cannot write " + temp(name).string());
+    return f;
+  }
+  void commit() {
+    for (const std::string& n : names_) fs::rename(temp(n), dir_ / n);
+    done_ = true;
+  }
+
+ private:
+  fs::path temp(const std::string& n) const { return dir_ / ("." + n + ".partial"); }
+  fs::path dir_;
+  std::vector<std::string> names_;
+  bool done_ = false;
+};
 
 struct StudyBackend {
   std::string name;
@@ -382,7 +411,7 @@ void write_figures(const fs::path& dir, const std::vector<AccRow>& acc, const st
 }
 
 // The key figures as Markdown tables.
-void write_summary(const fs::path& dir, const std::vector<AccRow>& acc, const std::vector<SpeedRow>& spd,
+void write_summary(PendingFiles& out, const std::vector<AccRow>& acc, const std::vector<SpeedRow>& spd,
                    const std::vector<LeakRow>& leak, const std::string& acc_name, const Image& acc_img, int W, int H,
                    double sfar) {
   std::ostringstream o;
@@ -453,7 +482,7 @@ void write_summary(const fs::path& dir, const std::vector<AccRow>& acc, const st
   for (const LeakRow& r : leak)
     o << "| " << r.method << " | " << r.edge << " | " << r.backend << " | " << fmt(r.into_near_mean, "%.4f") << " | "
       << fmt(r.into_near_max, "%.4f") << " | " << fmt(r.into_far_mean, "%.4f") << " |\n";
-  std::ofstream(dir / "summary.md") << o.str();
+  out.open("summary.md") << o.str();
 }
 
 }  // namespace
@@ -468,6 +497,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
   if (!fs::is_directory(out_dir)) throw Error("--out-dir '" + out_dir + "' cannot be created");
   const fs::path dir(out_dir);
   g_quick = quick;
+  PendingFiles out(dir);
   Image acc_rgb;
   std::string acc_name;
   if (!image_path.empty()) {
@@ -517,7 +547,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
       quick ? std::vector<double>{2, 5, 10} : std::vector<double>{1.5, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 25};
   std::vector<AccRow> acc_rows;
   {
-    std::ofstream acc(dir / "accuracy.csv");
+    std::ofstream acc = out.open("accuracy.csv");
     acc << "scheme,precision,backend,sigma,rms,iterations,spread\n";
     std::fprintf(stderr, "brume study: accuracy on %s (%dx%d)\n", acc_name.c_str(), acc_img.width, acc_img.height);
     auto emit = [&](const std::string& scheme, const std::string& prec, const std::string& bname, double sigma,
@@ -565,7 +595,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
     if (std::isfinite(r)) rmax = std::max(rmax, static_cast<double>(r));
   std::vector<SpeedRow> speed_rows;
   {
-    std::ofstream spd(dir / "speed.csv");
+    std::ofstream spd = out.open("speed.csv");
     spd << "method,precision,backend,sigma,seconds,iterations,map,runs\n";
     auto emit = [&](const std::string& method, const std::string& prec, const std::string& bname, double sigma,
                     Timed t, int iters, const std::string& map) {
@@ -652,7 +682,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
   std::vector<LeakRow> leak_rows;
   std::vector<std::pair<std::string, Image>> crops;
   {
-    std::ofstream lk(dir / "leakage.csv");
+    std::ofstream lk = out.open("leakage.csv");
     lk << "method,edge_rate,backend,sigma_far,into_near_mean,into_near_max,into_far_mean\n";
     std::fprintf(stderr, "brume study: leakage, near square on a far background at sigma %.0f\n", sfar);
     auto measure = [&](const std::string& method, const std::string& edge, const std::string& bname, const Image& g) {
@@ -695,7 +725,8 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
 
   // ---- Figures ---------------------------------------------------------------
   write_figures(dir, acc_rows, speed_rows, crops, backends, n, q0);
-  write_summary(dir, acc_rows, speed_rows, leak_rows, acc_name, acc_img, W, H, sfar);
+  write_summary(out, acc_rows, speed_rows, leak_rows, acc_name, acc_img, W, H, sfar);
+  out.commit();
   std::fprintf(stderr, "brume study: wrote accuracy.csv, speed.csv, leakage.csv, summary.md and the plots in %s\n",
                out_dir.c_str());
   return 0;
