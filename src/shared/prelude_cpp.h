@@ -13,6 +13,7 @@ using std::log;
 using std::sqrt;
 inline float clamp(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
 inline float min(float a, float b) { return b < a ? b : a; }
+inline float max(float a, float b) { return a < b ? b : a; }
 inline float mix(float a, float b, float t) { return a + t * (b - a); }
 #include "shared/haze_math.glsl"
 #undef BRUME_FN
