@@ -96,30 +96,17 @@ __attribute__((always_inline)) inline void run_update(const float* s, const floa
   const float *fr = t.fr.data(), *wl = t.wl.data(), *wr = t.wr.data(), *wu = t.wu.data(), *wd = t.wd.data();
   for (int x = xa; x < xb; ++x) {
     const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(x) * 4;
-    const float f = fr[x];
-    const v4 fc = StoreF32::load(s + i);
-    const v4 a = StoreF32::load(s + i - n4), b = StoreF32::load(s + i + n4);
-    const v4 l = a + f * (StoreF32::load(s + i - n4 - 4) - a);
-    const v4 r = b + f * (StoreF32::load(s + i + n4 + 4) - b);
-    const v4 c = StoreF32::load(u0 + i), d = StoreF32::load(d0 + i);
-    const v4 u = c + f * (StoreF32::load(u1 + i) - c);
-    const v4 dn = d + f * (StoreF32::load(d1 + i) - d);
-    StoreF32::store(o + i, fc + wl[x] * (l - fc) + wr[x] * (r - fc) + wu[x] * (u - fc) + wd[x] * (dn - fc));
+    auto ld = [](const float* p) { return StoreF32::load(p); };
+    StoreF32::store(o + i, eq11(ld(s + i), ld(s + i - n4), ld(s + i - n4 - 4), ld(s + i + n4), ld(s + i + n4 + 4),
+                                ld(u0 + i), ld(u1 + i), ld(d0 + i), ld(d1 + i), fr[x], wl[x], wr[x], wu[x], wd[x]));
   }
 }
 
 // Offsets of the exact scheme for a row, and their integer and fractional
 // parts (separate restrict-qualified loops, so that both vectorise).
-// row_offsets is brume_offset_for_moment with floor(sqrt(m)) written as a
-// truncating conversion (the same value for 0 <= m < 2^62), which vectorises
-// on every x86-64 level where floor needs SSE4.1.
 __attribute__((always_inline)) inline void row_offsets(float* __restrict h, const float* __restrict sg,
                                                        const float* __restrict vr, int W) {
-  for (int x = 0; x < W; ++x) {
-    const float m = sg[x] * sg[x] * vr[x];
-    const float n = static_cast<float>(static_cast<int>(std::sqrt(m)));
-    h[x] = (m + n * (n + 1.0f)) / (2.0f * n + 1.0f);
-  }
+  for (int x = 0; x < W; ++x) h[x] = sh::brume_offset_for_moment(sg[x] * sg[x] * vr[x]);
 }
 __attribute__((always_inline)) inline void row_split(int* __restrict n, float* __restrict fr,
                                                      const float* __restrict h, int W) {

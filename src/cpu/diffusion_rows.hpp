@@ -27,6 +27,17 @@ struct StoreF32 {
   static void store(float* p, v4 v) { std::memcpy(p, &v, sizeof v); }
 };
 
+// Eq. 11 at one pixel from its taps: the centre fc and, per direction, the
+// two texels (a0 at offset n, a1 at n + 1) that linear interpolation at
+// fraction fr blends, with the four eq. 12 weights. The one formula every
+// CPU schedule of the general scheme evaluates, so they agree bit for bit.
+inline v4 eq11(v4 fc, v4 l0, v4 l1, v4 r0, v4 r1, v4 u0, v4 u1, v4 d0, v4 d1, float fr, float wl, float wr,
+               float wu, float wd) {
+  const v4 l = l0 + fr * (l1 - l0), r = r0 + fr * (r1 - r0);
+  const v4 u = u0 + fr * (u1 - u0), d = d0 + fr * (d1 - d0);
+  return fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc);
+}
+
 // One pixel of the general scheme (any offsets, any rates): eq. 11-12.
 // `h` is the pixel's neighbour offset; indices are mirrored only when a tap
 // falls outside the image. kUniform: every rate is `w_all` (a constant target
@@ -54,14 +65,10 @@ inline void update_pixel(const typename S::T* src, typename S::T* dst, const flo
     wd = sh::brume_edge_rate(rc, sh::mix(rho[yd0 * Ws + x], rho[yd1 * Ws + x], fr), edge_mode);
   }
   const typename S::T* srow = src + y * Ws * 4;
-  const v4 fc = S::load(srow + x * 4);
-  const v4 a = S::load(srow + xl0 * 4), b = S::load(srow + xr0 * 4);
-  const v4 l = a + fr * (S::load(srow + xl1 * 4) - a);
-  const v4 r = b + fr * (S::load(srow + xr1 * 4) - b);
-  const v4 c = S::load(src + (yu0 * Ws + x) * 4), d = S::load(src + (yd0 * Ws + x) * 4);
-  const v4 u = c + fr * (S::load(src + (yu1 * Ws + x) * 4) - c);
-  const v4 dn = d + fr * (S::load(src + (yd1 * Ws + x) * 4) - d);
-  S::store(dst + (y * Ws + x) * 4, fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (dn - fc));
+  S::store(dst + (y * Ws + x) * 4,
+           eq11(S::load(srow + x * 4), S::load(srow + xl0 * 4), S::load(srow + xl1 * 4), S::load(srow + xr0 * 4),
+                S::load(srow + xr1 * 4), S::load(src + (yu0 * Ws + x) * 4), S::load(src + (yu1 * Ws + x) * 4),
+                S::load(src + (yd0 * Ws + x) * 4), S::load(src + (yd1 * Ws + x) * 4), fr, wl, wr, wu, wd));
 }
 
 // Offset, interpolation fraction and eq. 12 weight of one iteration when the
