@@ -162,6 +162,39 @@ TEST(IO, ExrNamedChannelAndIntegerCounts) {
   fs::remove_all(d);
 }
 
+TEST(IO, FloatDataIsNeverWrittenToIntegerStorage) {
+  // Data outside [0, 1] (metres, pixels) with a float_reason: every integer
+  // storage (PNG, JPEG, 8/16-bit TIFF, whatever the extension's case) and
+  // Radiance HDR are refused with the reason; float files are accepted.
+  fs::path d = tmpdir();
+  WriteOptions o;
+  o.is_color = false;
+  o.float_reason = "metres";
+  for (const char* bad : {"a.png", "a.PNG", "a.jpeg", "a.hdr"})
+    EXPECT_THROW(check_writable((d / bad).string(), o, "--out"), Error) << bad;
+  WriteOptions o16 = o;
+  o16.bits = "16";
+  EXPECT_THROW(check_writable((d / "a.tif").string(), o16, "--out"), Error);
+  for (const char* good : {"a.exr", "a.pfm", "a.tif", "a.TIFF"})
+    EXPECT_NO_THROW(check_writable((d / good).string(), o, "--out")) << good;
+  fs::remove_all(d);
+}
+
+TEST(IO, ExplicitSrgbTransferAppliesToPfmToo) {
+  // --out-transfer srgb on a float file stores encoded values; the PFM writer
+  // (brume's own) must store the same values as the OpenImageIO formats.
+  fs::path d = tmpdir();
+  WriteOptions o;
+  o.transfer = Transfer::srgb;
+  const Image img(4, 3, 3, 0.25f);
+  write_image((d / "e.pfm").string(), img, o);
+  write_image((d / "e.exr").string(), img, o);
+  const float want = linear_to_srgb(0.25f);
+  EXPECT_FLOAT_EQ(read_color((d / "e.pfm").string(), Transfer::linear).at(1, 1, 0), want);
+  EXPECT_FLOAT_EQ(read_color((d / "e.exr").string(), Transfer::linear).at(1, 1, 0), want);
+  fs::remove_all(d);
+}
+
 TEST(IO, ErrorsNameTheFile) {
   fs::path d = tmpdir();
   try {

@@ -53,6 +53,9 @@ struct WriteOptions {
   std::string bits = "auto";   // auto | 8 | 16 | half | float
   Transfer transfer = Transfer::automatic;  // automatic: sRGB for integer outputs of colour
   bool is_color = true;        // false for data maps (transmission, scale): never sRGB-encoded
+  // Non-empty for data whose values leave [0, 1] (metres, pixels): integer
+  // storage and Radiance HDR are refused with this reason, never clipped.
+  std::string float_reason;
   std::string description;     // embedded as ImageDescription where the format allows
 };
 
@@ -66,6 +69,9 @@ class OutputSet {
   // Encode and write `img` to a temporary file beside `path`.
   void write(const std::string& path, const Image& img, const WriteOptions& opts,
              const std::string& flag);
+  // Write `text` (a parameter record, a CSV table) to a temporary file
+  // beside `path`; it is renamed into place with the rest by commit().
+  void write_text(const std::string& path, const std::string& text, const std::string& flag);
   // Rename every temporary into place.
   void commit();
 

@@ -197,7 +197,12 @@ void write_pfm(const std::string& tmp, const Image& img) {
 
 std::string temp_path_for(const std::string& path) {
   fs::path p(path);
-  std::string name = "." + p.filename().string() + ".brume-tmp-" + std::to_string(::getpid()) + p.extension().string();
+  // Appended piecewise: GCC 12's -Wrestrict misfires on the chained operator+ here (GCC bug 105329).
+  std::string name = ".";
+  name += p.filename().string();
+  name += ".brume-tmp-";
+  name += std::to_string(::getpid());
+  name += p.extension().string();
   return (p.parent_path() / name).string();
 }
 
@@ -210,7 +215,10 @@ void check_writable(const std::string& path, const WriteOptions& opts, const std
   if (std::find(std::begin(known), std::end(known), e) == std::end(known))
     throw Error(flag + " '" + path + "': unknown output type '" + e +
                 "'; use .png, .jpg, .tif, .exr, .pfm or .hdr");
-  storage_type(path, opts.bits, flag, opts.is_color);
+  const OIIO::TypeDesc type = storage_type(path, opts.bits, flag, opts.is_color);
+  if (!opts.float_reason.empty() &&
+      (type == OIIO::TypeDesc::UINT8 || type == OIIO::TypeDesc::UINT16 || e == ".hdr"))
+    throw Error(flag + " '" + path + "': " + opts.float_reason + "; write it to .exr, .pfm or .tif (float)");
   fs::path dir = fs::path(path).parent_path();
   if (dir.empty()) dir = ".";
   std::error_code ec;
@@ -242,15 +250,20 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   Transfer t = opts.transfer;
   if (t == Transfer::automatic) t = (integer && opts.is_color) ? Transfer::srgb : Transfer::linear;
 
-  std::vector<float> buf(img.data);
-  if (t == Transfer::srgb)
-    for (float& v : buf) v = linear_to_srgb(std::max(v, 0.0f));
+  // The values as stored: the image itself, or an sRGB-encoded copy.
+  Image encoded;
+  const Image* src = &img;
+  if (t == Transfer::srgb) {
+    encoded = img;
+    for (float& v : encoded.data) v = linear_to_srgb(std::max(v, 0.0f));
+    src = &encoded;
+  }
 
   const std::string tmp = temp_path_for(path);
   if (e == ".pfm") {
     pending_.emplace_back(tmp, path);
     try {
-      write_pfm(tmp, img);
+      write_pfm(tmp, *src);
     } catch (const Error&) {
       throw Error(flag + " '" + path + "': write failed (disk full?)");
     }
@@ -265,9 +278,23 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   pending_.emplace_back(tmp, path);
   if (!out->open(tmp, spec))
     throw Error(flag + " '" + path + "': cannot open for writing: " + out->geterror());
-  if (!out->write_image(OIIO::TypeDesc::FLOAT, buf.data()))
+  if (!out->write_image(OIIO::TypeDesc::FLOAT, src->data.data()))
     throw Error(flag + " '" + path + "': write failed: " + out->geterror());
   if (!out->close()) throw Error(flag + " '" + path + "': close failed: " + out->geterror());
+}
+
+void OutputSet::write_text(const std::string& path, const std::string& text, const std::string& flag) {
+  fs::path dir = fs::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec))
+    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
+  const std::string tmp = temp_path_for(path);
+  pending_.emplace_back(tmp, path);
+  std::ofstream f(tmp, std::ios::binary);
+  f << text;
+  f.close();
+  if (!f) throw Error(flag + " '" + path + "': write failed (directory not writable or disk full?)");
 }
 
 void OutputSet::commit() {

@@ -123,30 +123,6 @@ void add_prepare_flags(CLI::App* app, PrepareParams& p) {
 }
 
 // Write JSON atomically (temp + rename) after the images.
-struct JsonOut {
-  std::string path;
-  std::string tmp;
-  void write(const nlohmann::json& j) {
-    tmp = path + ".brume-tmp-" + std::to_string(::getpid());
-    std::ofstream f(tmp);
-    f << j.dump(2) << "\n";
-    f.close();
-    if (!f) throw Error("--record '" + path + "': write failed");
-  }
-  void commit() {
-    std::error_code ec;
-    fs::rename(tmp, path, ec);
-    if (ec) throw Error("--record '" + path + "': " + ec.message());
-    tmp.clear();
-  }
-  ~JsonOut() {
-    if (!tmp.empty()) {
-      std::error_code ec;
-      fs::remove(tmp, ec);
-    }
-  }
-};
-
 void check_record_path(const std::string& path) {
   fs::path dir = fs::path(path).parent_path();
   if (dir.empty()) dir = ".";
@@ -266,12 +242,9 @@ int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std:
   // Validate every output location before any work.
   check_writable(c.out, wo, "--out");
   if (!transmission_out.empty()) check_writable(transmission_out, data_opts, "--transmission");
-  if (!scale_out.empty()) {
-    check_writable(scale_out, data_opts, "--scale-map");
-    std::string e = fs::path(scale_out).extension().string();
-    if (e == ".png" || e == ".jpg" || e == ".jpeg")
-      throw Error("--scale-map '" + scale_out + "': sigma is in pixels and exceeds 1; write it to .exr, .pfm or .tif (float)");
-  }
+  WriteOptions scale_opts = data_opts;
+  scale_opts.float_reason = "sigma is in pixels and exceeds 1";
+  if (!scale_out.empty()) check_writable(scale_out, scale_opts, "--scale-map");
   if (!c.record.empty()) check_record_path(c.record);
 
   FileInfo img_info;
@@ -326,11 +299,9 @@ int run_haze(const Common& c, HazeParams p, const DepthSource& depth, const std:
   OutputSet outs;
   outs.write(c.out, r.rgb, wo, "--out");
   if (!transmission_out.empty()) outs.write(transmission_out, r.transmission, data_opts, "--transmission");
-  if (!scale_out.empty()) outs.write(scale_out, r.scale, data_opts, "--scale-map");
-  JsonOut jr{c.record, ""};
-  if (!c.record.empty()) jr.write(rec);
+  if (!scale_out.empty()) outs.write(scale_out, r.scale, scale_opts, "--scale-map");
+  if (!c.record.empty()) outs.write_text(c.record, rec.dump(2) + "\n", "--record");
   outs.commit();
-  if (!c.record.empty()) jr.commit();
   std::fprintf(stderr, "brume haze: %s  R_max %.4g m  sigma_max %.3g px  %d iterations (%s)\n", c.out.c_str(),
                a.range_max_m, a.sigma_max, a.plan.iterations, to_string(p.diffusion.scheme).c_str());
   return 0;
@@ -413,10 +384,8 @@ int run_blur(const Common& c, double sigma, const std::string& scale_map, double
   wo.description = rec.dump();
   OutputSet outs;
   outs.write(c.out, rgb, wo, "--out");
-  JsonOut jr{c.record, ""};
-  if (!c.record.empty()) jr.write(rec);
+  if (!c.record.empty()) outs.write_text(c.record, rec.dump(2) + "\n", "--record");
   outs.commit();
-  if (!c.record.empty()) jr.commit();
   std::fprintf(stderr, "brume blur: %s  sigma_max %.3g px  %d iterations (%s, %s)\n", c.out.c_str(), smax,
                plan.iterations, to_string(dp.scheme).c_str(), to_string(dp.precision).c_str());
   return 0;
@@ -427,10 +396,8 @@ int run_depth_convert(const DepthSource& d, const std::string& out, const std::s
   if (kind != "range" && kind != "z") throw Error("--kind '" + kind + "' is not a depth kind; use range or z");
   WriteOptions data;
   data.is_color = false;
+  data.float_reason = "depth in metres needs a float file";
   check_writable(out, data, "--out");
-  const std::string e = fs::path(out).extension().string();
-  if (e == ".png" || e == ".jpg" || e == ".jpeg" || e == ".hdr")
-    throw Error("--out '" + out + "': depth in metres needs a float file; use .exr, .pfm or .tif");
   if (!record.empty()) check_record_path(record);
   LoadedDepth ld = load_depth(d);
   Image result = ld.range;
@@ -451,10 +418,8 @@ int run_depth_convert(const DepthSource& d, const std::string& out, const std::s
   data.description = rec.dump();
   OutputSet outs;
   outs.write(out, result, data, "--out");
-  JsonOut jr{record, ""};
-  if (!record.empty()) jr.write(rec);
+  if (!record.empty()) outs.write_text(record, rec.dump(2) + "\n", "--record");
   outs.commit();
-  if (!record.empty()) jr.commit();
   std::size_t unknown = ld.record.value("unknown_pixels", std::size_t{0});
   if (!d.velodyne.empty()) unknown = result.pixels() - ld.record["pixels_hit"].get<std::size_t>();
   std::fprintf(stderr, "brume depth convert: %s  %s  %dx%d  %.2f %% unknown", out.c_str(), kind.c_str(), result.width,
@@ -471,10 +436,8 @@ int run_depth_prepare(const DepthSource& d, const PrepareParams& pp, const std::
                       const std::string& record) {
   WriteOptions data;
   data.is_color = false;
+  data.float_reason = "a range in metres needs a float file";
   check_writable(out, data, "--out");
-  const std::string e = fs::path(out).extension().string();
-  if (e == ".png" || e == ".jpg" || e == ".jpeg" || e == ".hdr")
-    throw Error("--out '" + out + "': a range in metres needs a float file; use .exr, .pfm or .tif");
   if (!record.empty()) check_record_path(record);
   if (!masks.empty()) {
     std::error_code ec;
@@ -500,10 +463,8 @@ int run_depth_prepare(const DepthSource& d, const PrepareParams& pp, const std::
     c.bits = "8";
     outs.write((fs::path(masks) / "prepared-preview.png").string(), range_preview(pr.range), c, "--masks");
   }
-  JsonOut jr{record, ""};
-  if (!record.empty()) jr.write(rec);
+  if (!record.empty()) outs.write_text(record, rec.dump(2) + "\n", "--record");
   outs.commit();
-  if (!record.empty()) jr.commit();
   std::fprintf(stderr,
                "brume depth prepare: %s  known %.1f %%, %zu holes (%.2f %%), sky %.1f %% at S_max %.4g m (R_max %.4g m), "
                "margin %.2f %% solved to residual %.2g in %d iterations\n",

@@ -623,27 +623,34 @@ Image render(const std::vector<Panel>& panels, int width, int panel_height) {
     if (panels.size() == 1) break;
     want = widest;
   }
+  return from_canvas(canvas);
+}
+
+Image from_canvas(const cv::Mat& bgr8) {
   // The drawing's bytes are sRGB-encoded colours; hand them over in linear light, as every brume Image holds (sRGB
   // encoding on write gives back exactly the same bytes).
   float lut[256];
   for (int v = 0; v < 256; ++v) lut[v] = srgb_to_linear(v / 255.0f);
-  Image out(width, canvas.rows, 3);
-  for (int yy = 0; yy < canvas.rows; ++yy) {
-    const cv::Vec3b* row = canvas.ptr<cv::Vec3b>(yy);
-    for (int xx = 0; xx < width; ++xx)
+  Image out(bgr8.cols, bgr8.rows, 3);
+  for (int yy = 0; yy < bgr8.rows; ++yy) {
+    const cv::Vec3b* row = bgr8.ptr<cv::Vec3b>(yy);
+    for (int xx = 0; xx < bgr8.cols; ++xx)
       for (int c = 0; c < 3; ++c) out.at(xx, yy, c) = lut[row[xx][2 - c]];  // BGR -> RGB
   }
   return out;
 }
 
-void write_png(const std::string& path, const std::vector<Panel>& panels, int width, int panel_height) {
+WriteOptions png_options() {
   WriteOptions opts;
   opts.bits = "8";
-  // sRGB, not linear: the bytes come out exactly as drawn either way, but a "linear" PNG carries gAMA 1.0, which
-  // colour-managed viewers honour by showing it washed out.
   opts.transfer = Transfer::srgb;
   opts.is_color = true;
-  write_image(path, render(panels, width, panel_height), opts, "plot");
+  return opts;
+}
+
+void write_png(OutputSet& outs, const std::string& path, const std::vector<Panel>& panels, int width,
+               int panel_height) {
+  outs.write(path, render(panels, width, panel_height), png_options(), "--out-dir");
 }
 
 }  // namespace brume::plot

@@ -11,6 +11,8 @@
 #include <vector>
 
 #include "brume/image.hpp"
+#include "brume/io.hpp"
+#include "depth/opencv.hpp"
 
 namespace brume::plot {
 
@@ -41,8 +43,17 @@ struct Panel {
 // explicit axis limits that cannot be used (lo >= hi, non-positive on a log axis).
 Image render(const std::vector<Panel>& panels, int width = 960, int panel_height = 440);
 
-// render + write_image atomically as 8-bit sRGB PNG, byte for byte as drawn;
-// throws brume::Error on failure.
-void write_png(const std::string& path, const std::vector<Panel>& panels, int width = 960, int panel_height = 440);
+// How the figures are stored: 8-bit PNG tagged sRGB (the drawn bytes come
+// back exactly; a "linear" PNG would carry gAMA 1.0 and look washed out).
+WriteOptions png_options();
+
+// render + queue as an 8-bit sRGB PNG in `outs` (renamed into place by its
+// commit()); throws brume::Error on failure.
+void write_png(OutputSet& outs, const std::string& path, const std::vector<Panel>& panels, int width = 960,
+               int panel_height = 440);
+
+// An 8-bit BGR OpenCV drawing (CV_8UC3, sRGB-encoded bytes) as linear float
+// RGB, the form render() returns and png_options() stores unchanged.
+Image from_canvas(const cv::Mat& bgr8);
 
 }  // namespace brume::plot

@@ -56,6 +56,7 @@
 #include "brume/gpu.hpp"
 #include "brume/io.hpp"
 #include "brume/peers.hpp"
+#include "cpu/diffusion_kernels.hpp"
 #include "depth/opencv.hpp"
 #include "plot.hpp"
 
@@ -64,11 +65,6 @@ using namespace brume;
 using Clock = std::chrono::steady_clock;
 
 namespace {
-
-int reflect(int i, int n) {
-  while (i < 0 || i >= n) i = i < 0 ? -1 - i : 2 * n - 1 - i;
-  return i;
-}
 
 // True Gaussian reference in double (separable, radius 5 sigma, mirror), RGB only.
 Image gaussian(const Image& in, double sigma) {
@@ -83,7 +79,7 @@ Image gaussian(const Image& in, double sigma) {
     for (int x = 0; x < W; ++x)
       for (int c = 0; c < 3; ++c) {
         double a = 0;
-        for (int i = -r; i <= r; ++i) a += k[i + r] * in.data[(static_cast<std::size_t>(y) * W + reflect(x + i, W)) * C + c];
+        for (int i = -r; i <= r; ++i) a += k[i + r] * in.data[(static_cast<std::size_t>(y) * W + cpu::mirror(x + i, W)) * C + c];
         tmp[(static_cast<std::size_t>(y) * W + x) * C + c] = a;
       }
   Image out(W, H, C, 1.0f);
@@ -92,7 +88,7 @@ Image gaussian(const Image& in, double sigma) {
     for (int x = 0; x < W; ++x)
       for (int c = 0; c < 3; ++c) {
         double a = 0;
-        for (int i = -r; i <= r; ++i) a += k[i + r] * tmp[(static_cast<std::size_t>(reflect(y + i, H)) * W + x) * C + c];
+        for (int i = -r; i <= r; ++i) a += k[i + r] * tmp[(static_cast<std::size_t>(cpu::mirror(y + i, H)) * W + x) * C + c];
         out.data[(static_cast<std::size_t>(y) * W + x) * C + c] = static_cast<float>(a);
       }
   return out;
@@ -168,35 +164,6 @@ Image study_mosaic(const std::string& data) {
   }
   return out;
 }
-
-// The study's text outputs are written under a temporary name and renamed
-// into place only when the whole study has succeeded; on failure the
-// temporaries are removed, so a final name never holds a partial table.
-class PendingFiles {
- public:
-  explicit PendingFiles(fs::path dir) : dir_(std::move(dir)) {}
-  ~PendingFiles() {
-    std::error_code ec;
-    if (!done_)
-      for (const std::string& n : names_) fs::remove(temp(n), ec);
-  }
-  std::ofstream open(const std::string& name) {
-    names_.push_back(name);
-    std::ofstream f(temp(name));
-    if (!f) throw Error("--out-dir: cannot write " + temp(name).string());
-    return f;
-  }
-  void commit() {
-    for (const std::string& n : names_) fs::rename(temp(n), dir_ / n);
-    done_ = true;
-  }
-
- private:
-  fs::path temp(const std::string& n) const { return dir_ / ("." + n + ".partial"); }
-  fs::path dir_;
-  std::vector<std::string> names_;
-  bool done_ = false;
-};
 
 struct StudyBackend {
   std::string name;
@@ -286,17 +253,6 @@ cv::Mat to_bgr8(const Image& f, int x0, int y0, int w, int h, int scale) {
   return m;
 }
 
-void write_bgr8(const std::string& path, const cv::Mat& m) {
-  Image img(m.cols, m.rows, 3);
-  for (int y = 0; y < m.rows; ++y)
-    for (int x = 0; x < m.cols; ++x)
-      for (int c = 0; c < 3; ++c) img.at(x, y, c) = srgb_to_linear(m.at<cv::Vec3b>(y, x)[2 - c] / 255.0f);
-  WriteOptions wo;  // sRGB-encoded on write: the same bytes back, tagged sRGB
-  wo.bits = "8";
-  wo.transfer = Transfer::srgb;
-  write_image(path, img, wo, "--out-dir");
-}
-
 struct Style {
   unsigned char r, g, b;
 };
@@ -320,7 +276,7 @@ std::string label_of(const std::string& method, const std::string& prec, const s
   return m + " " + prec + (backend == "gpu" ? " GPU" : "");
 }
 
-void write_figures(const fs::path& dir, const std::vector<AccRow>& acc, const std::vector<SpeedRow>& spd,
+void write_figures(OutputSet& outs, const fs::path& dir, const std::vector<AccRow>& acc, const std::vector<SpeedRow>& spd,
                    const std::vector<std::pair<std::string, Image>>& crops, const std::vector<StudyBackend>& backends,
                    int n, int q0) {
   // Fig. 6: RMS against sigma; the standard scheme on top, the invariant
@@ -353,7 +309,7 @@ void write_figures(const fs::path& dir, const std::vector<AccRow>& acc, const st
     }
   bottom.series.push_back(acc_series("mipmap", "f32", "cpu"));
   bottom.series.push_back(acc_series("gather", "f32", "cpu"));
-  plot::write_png((dir / "accuracy.png").string(), {top, bottom});
+  plot::write_png(outs, (dir / "accuracy.png").string(), {top, bottom});
 
   // Fig. 7: time against sigma.
   auto spd_series = [&](const std::string& method, const std::string& prec, const std::string& backend,
@@ -392,7 +348,7 @@ void write_figures(const fs::path& dir, const std::vector<AccRow>& acc, const st
   for (plot::Panel* p : {&st, &inv, &var})
     p->series.erase(std::remove_if(p->series.begin(), p->series.end(), [](const plot::Series& s) { return s.x.empty(); }),
                     p->series.end());
-  plot::write_png((dir / "speed.png").string(), {st, inv, var});
+  plot::write_png(outs, (dir / "speed.png").string(), {st, inv, var});
 
   // Leakage: the near square's top-left corner, 2x, one tile per method.
   const int c = n / 8, scale = std::max(2, 240 / (2 * c)), tile = 2 * c * scale, label_h = 26, cols = 4;
@@ -407,11 +363,11 @@ void write_figures(const fs::path& dir, const std::vector<AccRow>& acc, const st
     cv::putText(fig, crops[i].first, cv::Point(cx, cy + tile + 18), cv::FONT_HERSHEY_SIMPLEX, font, cv::Scalar(0, 0, 0), 1,
                 cv::LINE_AA);
   }
-  write_bgr8((dir / "leakage.png").string(), fig);
+  outs.write((dir / "leakage.png").string(), plot::from_canvas(fig), plot::png_options(), "--out-dir");
 }
 
 // The key figures as Markdown tables.
-void write_summary(PendingFiles& out, const std::vector<AccRow>& acc, const std::vector<SpeedRow>& spd,
+void write_summary(OutputSet& outs, const fs::path& dir, const std::vector<AccRow>& acc, const std::vector<SpeedRow>& spd,
                    const std::vector<LeakRow>& leak, const std::string& acc_name, const Image& acc_img, int W, int H,
                    double sfar) {
   std::ostringstream o;
@@ -482,7 +438,7 @@ void write_summary(PendingFiles& out, const std::vector<AccRow>& acc, const std:
   for (const LeakRow& r : leak)
     o << "| " << r.method << " | " << r.edge << " | " << r.backend << " | " << fmt(r.into_near_mean, "%.4f") << " | "
       << fmt(r.into_near_max, "%.4f") << " | " << fmt(r.into_far_mean, "%.4f") << " |\n";
-  out.open("summary.md") << o.str();
+  outs.write_text((dir / "summary.md").string(), o.str(), "--out-dir");
 }
 
 }  // namespace
@@ -497,7 +453,9 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
   if (!fs::is_directory(out_dir)) throw Error("--out-dir '" + out_dir + "' cannot be created");
   const fs::path dir(out_dir);
   g_quick = quick;
-  PendingFiles out(dir);
+  // Every output is written under a temporary name and renamed into place
+  // only when the whole study has succeeded.
+  OutputSet outs;
   Image acc_rgb;
   std::string acc_name;
   if (!image_path.empty()) {
@@ -547,7 +505,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
       quick ? std::vector<double>{2, 5, 10} : std::vector<double>{1.5, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 25};
   std::vector<AccRow> acc_rows;
   {
-    std::ofstream acc = out.open("accuracy.csv");
+    std::ostringstream acc;
     acc << "scheme,precision,backend,sigma,rms,iterations,spread\n";
     std::fprintf(stderr, "brume study: accuracy on %s (%dx%d)\n", acc_name.c_str(), acc_img.width, acc_img.height);
     auto emit = [&](const std::string& scheme, const std::string& prec, const std::string& bname, double sigma,
@@ -584,6 +542,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
              impulse_spread([](Image& g, const Image& m) { peers::gather_blur(g, m, 1.0); }, sigma));
       }
     }
+    outs.write_text((dir / "accuracy.csv").string(), acc.str(), "--out-dir");
   }
 
   // ---- Speed (Fig. 7) -------------------------------------------------------
@@ -595,7 +554,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
     if (std::isfinite(r)) rmax = std::max(rmax, static_cast<double>(r));
   std::vector<SpeedRow> speed_rows;
   {
-    std::ofstream spd = out.open("speed.csv");
+    std::ostringstream spd;
     spd << "method,precision,backend,sigma,seconds,iterations,map,runs\n";
     auto emit = [&](const std::string& method, const std::string& prec, const std::string& bname, double sigma,
                     Timed t, int iters, const std::string& map) {
@@ -665,6 +624,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
            }),
            exact_iters, "constant");
     }
+    outs.write_text((dir / "speed.csv").string(), spd.str(), "--out-dir");
   }
 
   // ---- Leakage across a depth edge -----------------------------------------
@@ -682,7 +642,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
   std::vector<LeakRow> leak_rows;
   std::vector<std::pair<std::string, Image>> crops;
   {
-    std::ofstream lk = out.open("leakage.csv");
+    std::ostringstream lk;
     lk << "method,edge_rate,backend,sigma_far,into_near_mean,into_near_max,into_far_mean\n";
     std::fprintf(stderr, "brume study: leakage, near square on a far background at sigma %.0f\n", sfar);
     auto measure = [&](const std::string& method, const std::string& edge, const std::string& bname, const Image& g) {
@@ -721,12 +681,13 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
     peers::gather_blur(g, smap, 1.0);
     measure("gather", "-", "cpu", g);
     crops.emplace_back("direct gather", g);
+    outs.write_text((dir / "leakage.csv").string(), lk.str(), "--out-dir");
   }
 
   // ---- Figures ---------------------------------------------------------------
-  write_figures(dir, acc_rows, speed_rows, crops, backends, n, q0);
-  write_summary(out, acc_rows, speed_rows, leak_rows, acc_name, acc_img, W, H, sfar);
-  out.commit();
+  write_figures(outs, dir, acc_rows, speed_rows, crops, backends, n, q0);
+  write_summary(outs, dir, acc_rows, speed_rows, leak_rows, acc_name, acc_img, W, H, sfar);
+  outs.commit();
   std::fprintf(stderr, "brume study: wrote accuracy.csv, speed.csv, leakage.csv, summary.md and the plots in %s\n",
                out_dir.c_str());
   return 0;
