@@ -97,7 +97,7 @@ TEST(Gpu, HazeMatchesCpuReferenceOnRealData) {
   // in f32 and <= 4e-3 in f16 (binary16 storage, with whatever rounding the
   // GPU applies when it writes RGBA16F) on Middlebury Moebius.
   BRUME_REQUIRE_GPU(ctx);
-  if (!have_data("middlebury2005_thirdsize/Moebius/view1.png")) GTEST_SKIP() << "../shared/data absent";
+  BRUME_REQUIRE_DATA("middlebury2005_thirdsize/Moebius/view1.png");
   Image rgb;
   Image range = middlebury_range("Moebius", rgb);
   GpuHaze gh(*ctx, rgb, range);

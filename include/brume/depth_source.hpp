@@ -38,7 +38,7 @@ struct DepthSource {
   int width = 0, height = 0;     // image size for --velodyne when no image is at hand
   std::string like;              // ... or take it from this image
 
-  bool given() const;
+  int sources() const;  // how many of the depth files above are given (load_depth needs exactly one)
 };
 
 struct LoadedDepth {

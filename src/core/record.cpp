@@ -80,6 +80,8 @@ nlohmann::json prepare_record(const PrepareParams& p, const PrepareResult& r) {
           {"s_max_factor", p.s_max_factor},
           {"min_coverage", p.min_coverage},
           {"seed", p.seed},
+          {"ransac_iterations", p.ransac_iterations},
+          {"residual_tol", p.residual_tol},
           {"range_max_m", r.range_max_m},
           {"s_max_m", r.s_max_m},
           {"known_fraction", r.known_fraction},

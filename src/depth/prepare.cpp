@@ -55,7 +55,6 @@
 // per-pixel passes are O(N), ~30 ms; CG on the 67k margin pixels ~25 ms.
 #include "brume/prepare.hpp"
 
-#include <omp.h>
 
 #include <algorithm>
 #include <cassert>
@@ -403,7 +402,6 @@ PrepareResult prepare_range(const Image& range, const PrepareParams& p) {
       hole_seed.push_back(h);
     }
   }
-  hole_id[0] = -1;
   const int nholes = static_cast<int>(hole_seed.size());
   res.holes = static_cast<std::size_t>(nholes);
 

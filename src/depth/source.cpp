@@ -9,9 +9,11 @@
 
 namespace brume {
 
-bool DepthSource::given() const {
-  return !(range.empty() && z.empty() && disparity.empty() && depth_buffer.empty() && inverse_depth.empty() &&
-           normalized_depth.empty() && velodyne.empty());
+int DepthSource::sources() const {
+  int n = 0;
+  for (const std::string* f : {&range, &z, &disparity, &depth_buffer, &inverse_depth, &normalized_depth, &velodyne})
+    n += f->empty() ? 0 : 1;
+  return n;
 }
 
 Intrinsics depth_intrinsics(const DepthSource& s, int width, int height) {
@@ -47,9 +49,7 @@ void unorm(Image& im, const FileInfo& info) {
 }  // namespace
 
 LoadedDepth load_depth(const DepthSource& s, int width, int height) {
-  int given = 0;
-  for (const std::string* f : {&s.range, &s.z, &s.disparity, &s.depth_buffer, &s.inverse_depth, &s.normalized_depth, &s.velodyne})
-    given += f->empty() ? 0 : 1;
+  const int given = s.sources();
   if (given != 1)
     throw Error(given == 0 ? "no depth given: use one of --range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne"
                            : "give exactly one depth source (--range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth or --velodyne)");

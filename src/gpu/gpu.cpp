@@ -120,14 +120,11 @@ struct GpuContext::Impl {
     info.version = reinterpret_cast<const char*>(glGetString(GL_VERSION));
     GLint n = 0;
     glGetIntegerv(GL_NUM_EXTENSIONS, &n);
-    bool color_float = false;
     for (GLint i = 0; i < n; ++i) {
       const std::string e = reinterpret_cast<const char*>(glGetStringi(GL_EXTENSIONS, static_cast<GLuint>(i)));
       if (e == "GL_OES_texture_float_linear") info.float_linear = true;
       if (e == "GL_EXT_disjoint_timer_query") info.timer_query = true;
-      if (e == "GL_EXT_color_buffer_float") color_float = true;
     }
-    (void)color_float;  // core in ES 3.2
     if (info.timer_query)
       get_query_ui64 = reinterpret_cast<PFNGLGETQUERYOBJECTUI64VEXTPROC>(eglGetProcAddress("glGetQueryObjectui64vEXT"));
     info.timer_query = info.timer_query && get_query_ui64;
@@ -252,11 +249,15 @@ struct StageTimer {
   }
 };
 
-bool use_hardware(const GpuContext::Impl& g, GpuFilter f, bool f16) {
+bool use_hardware(const GpuContext::Impl& g, GpuFilter f) {
   if (f == GpuFilter::shader) return false;
-  const bool can = f16 || g.info.float_linear;  // RGBA16F filtering is core; RGBA32F needs OES_texture_float_linear
+  // The rate texture is RGBA32F in either precision and is filtered too, so
+  // hardware filtering needs OES_texture_float_linear even for f16 (RGBA16F
+  // filtering alone, which is core, is not enough).
+  const bool can = g.info.float_linear;
   if (f == GpuFilter::hardware && !can)
-    throw Error("--gpu-filter hardware: this GPU cannot filter RGBA32F textures (no OES_texture_float_linear); use --gpu-filter shader");
+    throw Error("--gpu-filter hardware: this GPU cannot filter RGBA32F textures (no OES_texture_float_linear), "
+                "which the rate texture needs in f32 and f16; use --gpu-filter shader");
   return can;
 }
 
@@ -371,7 +372,7 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
 
   StageTimer t2(g, &timing_.gpu_timer);
   const int last = run_diffusion(g, f, aux, w_, h_, a.plan.iterations, p.diffusion.scheme, p.diffusion.edge_rate, p.sigma0,
-                                 use_hardware(g, filter, f16));
+                                 use_hardware(g, filter));
   timing_.diffuse_ms = t2.stop();
 
   StageTimer t3(g, &timing_.gpu_timer);
@@ -430,7 +431,7 @@ DiffusionPlan diffuse_gpu(GpuContext& ctx, Image& f, const Image& sigma, double 
   t.upload_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
   glBindVertexArray(g.vao);
   StageTimer st(g, &t.gpu_timer);
-  const int last = run_diffusion(g, tex, ta, w, h, plan.iterations, p.scheme, p.edge_rate, p.sigma0, use_hardware(g, filter, f16));
+  const int last = run_diffusion(g, tex, ta, w, h, plan.iterations, p.scheme, p.edge_rate, p.sigma0, use_hardware(g, filter));
   t.diffuse_ms = st.stop();
   const auto t1 = Clock::now();
   std::vector<float> out;
