@@ -13,14 +13,11 @@
 #include <string>
 
 #include "brume/diffusion.hpp"
+#include "brume/exec.hpp"
 #include "brume/haze.hpp"
 #include "brume/image.hpp"
 
 namespace brume {
-
-enum class Backend { cpu, gpu, automatic };
-Backend parse_backend(const std::string& s);  // cpu | gpu | auto; throws brume::Error
-std::string to_string(Backend b);
 
 struct GpuInfo {
   std::string platform;  // "surfaceless" or "device"
@@ -28,6 +25,10 @@ struct GpuInfo {
   std::string version;   // GL_VERSION
   bool float_linear = false;  // OES_texture_float_linear: hardware filtering of RGBA32F
   bool timer_query = false;   // EXT_disjoint_timer_query
+  // A software rasteriser (Mesa llvmpipe/softpipe, SwiftShader): --backend
+  // auto does not pick it, because it measured 1.7-30x slower than the CPU
+  // backend (README, GPU timings); --backend gpu still runs on it.
+  bool software = false;
 };
 
 // Per-pass times of the last render: GPU time from timer queries where
@@ -36,13 +37,6 @@ struct GpuTiming {
   bool gpu_timer = false;
   double upload_ms = 0.0, premultiply_ms = 0.0, diffuse_ms = 0.0, composite_ms = 0.0, readback_ms = 0.0;
   int iterations = 0;
-};
-
-// How samples between texels are interpolated in the diffusion passes.
-enum class GpuFilter {
-  automatic,  // hardware where float textures can be filtered linearly, else shader
-  hardware,   // texture() with LINEAR + MIRRORED_REPEAT (the half-sample mirror)
-  shader,     // texelFetch + mix in the shader (exact float weights)
 };
 
 class GpuContext {

@@ -1,6 +1,6 @@
 // brume — backend names (compiled with or without the GPU backend).
 #include "brume/error.hpp"
-#include "brume/gpu.hpp"
+#include "brume/exec.hpp"
 
 namespace brume {
 
@@ -12,5 +12,16 @@ Backend parse_backend(const std::string& s) {
 }
 
 std::string to_string(Backend b) { return b == Backend::gpu ? "gpu" : b == Backend::automatic ? "auto" : "cpu"; }
+
+GpuFilter parse_gpu_filter(const std::string& s) {
+  if (s == "auto") return GpuFilter::automatic;
+  if (s == "hardware") return GpuFilter::hardware;
+  if (s == "shader") return GpuFilter::shader;
+  throw Error("--gpu-filter '" + s + "' is not a filter mode; use auto, hardware or shader");
+}
+
+std::string to_string(GpuFilter f) {
+  return f == GpuFilter::hardware ? "hardware" : f == GpuFilter::shader ? "shader" : "auto";
+}
 
 }  // namespace brume

@@ -106,7 +106,8 @@ struct GpuContext::Impl {
             const char* dext = query_device_string ? query_device_string(devices[i], EGL_EXTENSIONS) : nullptr;
             const bool software = dext && std::strstr(dext, "EGL_MESA_device_software");
             if (software != (pass == 1)) continue;
-            try_display(get_display(EGL_PLATFORM_DEVICE_EXT, devices[i], nullptr), "device", why);
+            if (try_display(get_display(EGL_PLATFORM_DEVICE_EXT, devices[i], nullptr), "device", why))
+              info.software = software;
           }
       }
     }
@@ -118,6 +119,8 @@ struct GpuContext::Impl {
                   "install Mesa (libegl-mesa0, libgl1-mesa-dri) or a GPU driver, or use --backend cpu");
     info.renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
     info.version = reinterpret_cast<const char*>(glGetString(GL_VERSION));
+    for (const char* sw : {"llvmpipe", "softpipe", "SwiftShader", "swrast"})
+      if (info.renderer.find(sw) != std::string::npos) info.software = true;
     GLint n = 0;
     glGetIntegerv(GL_NUM_EXTENSIONS, &n);
     for (GLint i = 0; i < n; ++i) {

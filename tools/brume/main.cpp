@@ -141,13 +141,6 @@ struct Common {
   bool timing = false;
 };
 
-GpuFilter parse_gpu_filter(const std::string& s) {
-  if (s == "auto") return GpuFilter::automatic;
-  if (s == "hardware") return GpuFilter::hardware;
-  if (s == "shader") return GpuFilter::shader;
-  throw Error("--gpu-filter '" + s + "' is not a filter mode; use auto, hardware or shader");
-}
-
 // The GPU context a run asks for: --backend gpu must get one (or fail with
 // the reason), auto takes one when it can and says so, cpu never opens one.
 std::unique_ptr<GpuContext> open_gpu(const Common& c, nlohmann::json& exec) {
