@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 
 #include <array>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -25,6 +26,12 @@ struct CliRun {
   int status;
   std::string output;
 };
+
+// Every channel of an image file, as stored (colour files decoded to linear RGB).
+Image read_scalar_or_color(const std::string& path) {
+  const std::string n = fs::path(path).filename().string();
+  return n == "t.exr" || n == "z.exr" ? read_scalar(path) : read_color(path);
+}
 
 CliRun run(const std::string& args) {
   std::string cmd = std::string(BRUME_CLI) + " " + args + " 2>&1";
@@ -287,6 +294,89 @@ TEST_F(Cli, BackendFlags) {
   CliRun c = run("haze --image " + img + " --range " + range + " --out " + p("c.exr"));
   ASSERT_EQ(c.status, 0) << c.output;
   EXPECT_LE(compare(read_color(p("g.exr")), read_color(p("c.exr"))).rms, 1e-3);
+  // auto takes the GPU only when it is hardware: on a software rasteriser
+  // (llvmpipe in CI) it runs on the CPU and says why.
+  CliRun a = run("haze --image " + img + " --range " + range + " --backend auto --out " + p("a.exr") + " --record " +
+                 p("a.json"));
+  ASSERT_EQ(a.status, 0) << a.output;
+  std::ifstream ja(p("a.json"));
+  const nlohmann::json ra = nlohmann::json::parse(ja);
+  if (j["execution"]["gpu"]["software"].get<bool>()) {
+    EXPECT_EQ(ra["execution"]["backend"], "cpu");
+    EXPECT_NE(ra["execution"].value("gpu_skipped", "").find(j["execution"]["gpu"]["renderer"].get<std::string>()),
+              std::string::npos);
+    EXPECT_NE(a.output.find("software rasteriser"), std::string::npos) << a.output;
+  } else {
+    EXPECT_EQ(ra["execution"]["backend"], "gpu");
+  }
+}
+
+TEST_F(Cli, PreparationFlagsAreCheckedWhateverTheInput) {
+  // A range without unknown pixels is not prepared, but its preparation
+  // flags are still range-checked (they used to pass silently), and a
+  // preparation flag that --prepare off would ignore is refused.
+  CliRun d = run("depth prepare --range " + range + " --out " + p("prep.exr"));
+  ASSERT_EQ(d.status, 0) << d.output;
+  const std::string base = "haze --image " + img + " --range " + p("prep.exr") + " --out " + p("o.png");
+  struct Case {
+    std::string args, must_contain;
+  };
+  const Case cases[] = {
+      {base + " --s-max-factor 0.5", "--s-max-factor"},
+      {base + " --sky-margin -3", "--sky-margin"},
+      {base + " --min-coverage 7", "--min-coverage"},
+      {base + " --prepare off --sky-margin 4", "--prepare off"},
+      {base + " --prepare off --s-max-factor 1.25", "--s-max-factor"},  // given explicitly, even at its default
+      {"depth prepare --range " + range + " --out " + p("o.exr") + " --sky-margin -1", "--sky-margin"},
+      {base + " --range-max 0", "--range-max"},  // no 0 sentinel: auto is spelled auto
+  };
+  for (const Case& c : cases) {
+    CliRun r = run(c.args);
+    EXPECT_NE(r.status, 0) << c.args << "\n" << r.output;
+    EXPECT_NE(r.output.find(c.must_contain), std::string::npos) << c.args << "\n" << r.output;
+    EXPECT_EQ(r.output.find("PrepareParams"), std::string::npos) << r.output;  // user-facing names only
+    EXPECT_FALSE(fs::exists(p("o.png"))) << c.args;
+    EXPECT_FALSE(fs::exists(p("o.exr"))) << c.args;
+  }
+  CliRun ok = run(base + " --prepare off --range-max auto");
+  EXPECT_EQ(ok.status, 0) << ok.output;
+}
+
+TEST_F(Cli, RunRepeatsARecordBitForBit) {
+  // `brume run record.json` reads the job back through the same declarations
+  // that made the flags: the outputs must be identical to the last bit.
+  fs::create_directories(p("first"));
+  CliRun h = run("haze --image " + img + " --range " + range16 + " --range-scale 0.001 --visibility 30 --albedo 0.8" +
+                 " --lambda 6 --airlight 0.7,0.72,0.75 --scheme invariant --edge-rate min --sky-margin 3 --out " +
+                 p("first/h.png") + " --transmission " + p("first/t.exr") + " --record " + p("first/h.json"));
+  ASSERT_EQ(h.status, 0) << h.output;
+  CliRun b = run("blur --image " + img + " --sigma 4.5 --rho-max 0.15 --precision f16 --out " + p("first/b.exr") +
+                 " --record " + p("first/b.json"));
+  ASSERT_EQ(b.status, 0) << b.output;
+  CliRun c = run("depth convert --range " + range + " --kind z --fov-x 60 --out " + p("first/z.exr") + " --record " +
+                 p("first/z.json"));
+  ASSERT_EQ(c.status, 0) << c.output;
+  for (const char* rec : {"h.json", "b.json", "z.json"}) {
+    CliRun r = run("run " + p(std::string("first/") + rec) + " --out-dir " + p("again"));
+    ASSERT_EQ(r.status, 0) << rec << "\n" << r.output;
+  }
+  for (const char* f : {"h.png", "t.exr", "b.exr", "z.exr"}) {
+    const Image a = read_scalar_or_color(p(std::string("first/") + f)), b2 = read_scalar_or_color(p(std::string("again/") + f));
+    ASSERT_EQ(a.data.size(), b2.data.size()) << f;
+    EXPECT_EQ(std::memcmp(a.data.data(), b2.data.data(), a.data.size() * sizeof(float)), 0) << f << " differs";
+  }
+  // The repeated record has the same job.
+  std::ifstream j1(p("first/h.json")), j2(p("again/h.json"));
+  nlohmann::json r1 = nlohmann::json::parse(j1), r2 = nlohmann::json::parse(j2);
+  r1["job"]["output"] = r2["job"]["output"] = nullptr;  // the paths moved to --out-dir
+  EXPECT_EQ(r1["job"], r2["job"]);
+  EXPECT_EQ(r2["schema_version"], 2);
+  // A changed input is refused: the record describes a run on other bytes.
+  write_image(img, Image(48, 32, 3, 0.5f), WriteOptions{});
+  CliRun changed = run("run " + p("first/h.json") + " --out-dir " + p("third"));
+  EXPECT_NE(changed.status, 0);
+  EXPECT_NE(changed.output.find("has changed"), std::string::npos) << changed.output;
+  EXPECT_FALSE(fs::exists(p("third/h.png")));
 }
 
 TEST_F(Cli, StudyDiffusionQuickWritesItsTables) {

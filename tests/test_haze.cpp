@@ -84,8 +84,7 @@ TEST(Haze, AbsorptionOnlyIsBeerLambertWithoutBlur) {
   HazeParams p;
   p.kappa_a = 1.3;
   p.kappa_s = 0.0;
-  p.airlight_auto = false;
-  p.airlight = {0.7f, 0.75f, 0.8f};
+  p.airlight = Rgb{0.7f, 0.75f, 0.8f};
   HazeAnalysis a = analyse_haze(rgb, range, p);
   EXPECT_DOUBLE_EQ(a.range_max_m, 80.0);
   HazeResult r = apply_haze(rgb, range, p, a);
@@ -93,7 +92,7 @@ TEST(Haze, AbsorptionOnlyIsBeerLambertWithoutBlur) {
     const double tau = std::exp(-1.3 * range.data[i] / 80.0);
     EXPECT_NEAR(r.transmission.data[i], tau, 1e-6);
     for (int c = 0; c < 3; ++c)
-      ASSERT_NEAR(r.rgb.data[i * 3 + c], rgb.data[i * 3 + c] * tau + (1 - tau) * p.airlight[c], 1e-6);
+      ASSERT_NEAR(r.rgb.data[i * 3 + c], rgb.data[i * 3 + c] * tau + (1 - tau) * (*p.airlight)[c], 1e-6);
   }
 }
 
@@ -222,8 +221,7 @@ TEST(Haze, NaiveCompositeShowsGhostEdgesPremultipliedDoesNot) {
   HazeParams p;
   p.kappa_s = 2.0;
   p.lambda = 6.0;
-  p.airlight_auto = false;
-  p.airlight = {0.9f, 0.9f, 0.9f};
+  p.airlight = Rgb{0.9f, 0.9f, 0.9f};
   auto spread = [&](Composite c) {
     p.composite = c;
     HazeResult r = apply_haze(rgb, range, p, analyse_haze(rgb, range, p));

@@ -32,6 +32,7 @@
 // RGBA16F texture holds (the paper's 16-bit experiment).
 #pragma once
 
+#include <optional>
 #include <string>
 
 #include "brume/exec.hpp"
@@ -59,13 +60,13 @@ struct DiffusionParams {
   Precision precision = Precision::f32;
   double sigma0 = 1.0;   // [px] inner scale of the input, > 0
   // Largest rate per iteration, (0, 0.25] (0.25 is the 2-D stability limit);
-  // 0 picks the scheme's default: 0.25 for standard and invariant (the
+  // unset picks the scheme's default: 0.25 for standard and invariant (the
   // paper's setting, kept for reproduction) and 0.2 for invariant-exact. At
   // rho = 1/4 the stencil's centre weight 1 - 4 rho vanishes and the large
   // late offsets leave a visible kernel-shape error; measured on Middlebury
   // Art against a true Gaussian, rho_max 0.2 halves the RMS at sigma = 25 px
   // (2.1e-3 -> 1.1e-3) for 17 instead of 13 iterations.
-  double rho_max = 0.0;
+  std::optional<double> rho_max;  // unset: the scheme's default
   // Default harmonic: `brume study diffusion` measured the paper's mean
   // putting 26-47 % of a blurred background's colour into the 2 px rim of a
   // sharp foreground object (up to 95 % in single pixels) where harmonic and
@@ -75,7 +76,7 @@ struct DiffusionParams {
   EdgeRate edge_rate = EdgeRate::harmonic;
 };
 
-// The rate limit a run will use (resolves rho_max = 0 to the scheme default).
+// The rate limit a run will use (resolves an unset rho_max to the scheme default).
 double effective_rho_max(const DiffusionParams& p);
 
 // Iteration count and the derived quantities of a run (for parameter records).

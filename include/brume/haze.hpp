@@ -14,13 +14,15 @@
 // physical extinction 3.912 / V per metre instead; the single-scattering
 // albedo omega splits it into kappa_s = omega beta and kappa_a = (1-omega) beta.
 //
-// Unknown range (NaN, +-inf or 0, e.g. lidar sky) is, until the depth issue's
-// sky and hole processing lands, treated as the far end of the scene: R = R_max.
-// It then gets the largest blur and the far transmission, which is what sky
-// should look like under haze; the count is reported in the record.
+// Unknown range (NaN, +-inf or 0, e.g. lidar sky) that reaches apply_haze is
+// treated as the far end of the scene, R = R_max: the largest blur and the far
+// transmission, which is what sky looks like under haze. The pipeline
+// (run_haze) prepares the range first (brume/prepare.hpp) unless told not to.
 #pragma once
 
 #include <array>
+#include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -28,29 +30,34 @@
 #include "brume/exec.hpp"
 #include "brume/image.hpp"
 #include "brume/params.hpp"
+#include "brume/pipeline.hpp"
 
 namespace brume {
 
 enum class Composite { premultiplied, naive };
 Composite parse_composite(const std::string& s);
 std::string to_string(Composite c);
+const EnumNames<Composite>& composite_names();
 
 struct HazeParams {
   double kappa_a = 0.0;      // [1] absorption, normalised kappa_a R_max, >= 0
   double kappa_s = 0.25;     // [1] scattering, normalised kappa_s R_max, >= 0
-  double lambda = 15.0;      // [px] blur gain: sigma_max = sigma0 + lambda sqrt(kappa_s)
-  double sigma0 = 1.0;       // [px] inner scale of the input image, > 0
-  double range_max_m = 0.0;  // [m] R_max; 0 = the largest finite range in the map
-  double visibility_m = 0.0; // [m] meteorological visibility; 0 = use kappa_a/kappa_s
-  double albedo = 1.0;       // [1] single-scattering albedo with --visibility, [0, 1]
-  bool airlight_auto = true;
-  std::array<float, 3> airlight{0.8f, 0.8f, 0.8f};  // linear RGB when !airlight_auto
+  double lambda = 15.0;      // [px] blur gain: sigma_max = sigma0 + lambda sqrt(kappa_s), >= 0
+  std::optional<double> range_max_m;   // [m] R_max, > 0; unset: the largest finite range in the map
+  std::optional<double> visibility_m;  // [m] meteorological visibility, > 0; unset: use kappa_a/kappa_s
+  double albedo = 1.0;       // [1] single-scattering albedo with visibility, [0, 1]
+  std::optional<Rgb> airlight;         // linear RGB, >= 0; unset: estimated (analyse_haze)
   Composite composite = Composite::premultiplied;
-  DiffusionParams diffusion;  // scheme, precision (sigma0 is copied from above)
+  DiffusionParams diffusion;  // scheme, precision, sigma0 (the image's inner scale), rho_max, edge rate
 };
 
-// The declaration table of HazeParams' numeric fields (flags, checks, record).
-const std::vector<ParamDecl<HazeParams>>& haze_param_table();
+// The declaration of HazeParams (with the diffusion block nested): flags,
+// checks, record and `brume run`.
+const ParamTable<HazeParams>& haze_param_table();
+
+// Range checks of every field, and combinations a run would silently ignore
+// (kappa with visibility, albedo without it). `given`: names set explicitly.
+void validate_haze(const HazeParams& p, const std::set<std::string>& given = {});
 
 // Image-wide statistics, computed once before the per-pixel apply.
 struct HazeAnalysis {
@@ -75,7 +82,32 @@ struct HazeResult {
   Image scale;         // target scale sigma(x) in px, 1 channel
 };
 
+// The per-pixel apply on the CPU (exec.path: fast or reference).
 HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p,
                       const HazeAnalysis& a, const Exec& exec = {});
+
+// ---- the pipeline -----------------------------------------------------------------
+// Everything `brume haze` does, as a library call: analysis on the measured
+// range (R_max, airlight from the sky), preparation, the effect on the
+// backend Exec chooses, the record. In memory:
+struct HazeRun {
+  HazeResult result;
+  HazeAnalysis analysis;
+  nlohmann::json record;  // {"haze": ..., "prepare": ..., "execution": ...}
+};
+HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams& p, const RangeStep& prepare,
+                 const Exec& exec = {}, const std::set<std::string>& given = {});
+
+// From files to files (the CLI's `brume haze` and `brume run`):
+struct HazeJob {
+  InputFiles input;
+  RangeStep prepare;
+  HazeParams haze;
+  OutputFiles output;  // maps: transmission, scale-map
+};
+const std::vector<MapOutput>& haze_map_outputs();
+const ParamTable<HazeJob>& haze_job_table();
+// Returns the record it wrote (also embedded in the outputs).
+nlohmann::json run_haze_job(const HazeJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

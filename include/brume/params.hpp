@@ -1,57 +1,299 @@
-// brume — parameter declarations.
+// brume — typed parameter declarations.
 //
-// Each effect declares its numeric parameters once, in a table of
-// (name, unit, default, allowed range, help, member). The command-line flags,
-// the range checks with their error messages and the JSON parameter record
-// are all generated from that table (libvips / darktable style), so the three
-// can never disagree.
+// Every parameter of every effect and shared block (diffusion, preparation,
+// depth source, output, execution) is declared once, in a ParamTable: its
+// user-facing name (the CLI flag without dashes, the record's key and later
+// the Python keyword), type, unit, default (the struct's member initialiser),
+// valid range or name table, and help. From that one declaration come
+//   - the command-line flags and their help text (tools/brume/cli.hpp),
+//   - every range check, with the flag's name in the message (validate),
+//   - the JSON parameter record, re-runnable by `brume run record.json`
+//     (to_json / from_json),
+// so the four can never disagree (libvips' argument declarations; darktable's
+// $MIN/$MAX/$DEFAULT).
+//
+// Types: real, integer, boolean, choice (an enum with one name table), RGB
+// triple, text (file paths), each optionally "unset" (std::optional; the user
+// writes `auto`, the record null) instead of a 0 sentinel; tables nest, so a
+// block such as DiffusionParams is declared once and reused by every effect.
+// Values travel as JSON: a number, an integer, a bool, a string, [r, g, b],
+// or null for an unset optional.
 #pragma once
 
+#include <array>
 #include <cmath>
-#include <sstream>
+#include <functional>
+#include <map>
+#include <optional>
+#include <set>
 #include <string>
+#include <utility>
 #include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include "brume/error.hpp"
 
 namespace brume {
 
-template <class P>
-struct ParamDecl {
-  const char* name;   // flag name without dashes, also the record's key
-  const char* unit;   // "m", "px", "1" (dimensionless), ...
-  double P::*field;
-  double min;         // allowed range [min, max] (or (min, max] if min_open)
-  double max;
-  bool min_open;
-  const char* help;
+using Rgb = std::array<float, 3>;
+
+enum class ParamKind { real, integer, boolean, choice, rgb, text };
+
+// Allowed interval of a real or integer parameter (and of each RGB component).
+struct Range {
+  double min = -INFINITY, max = INFINITY;
+  bool min_open = false, max_open = false;
+  static Range any() { return {}; }
+  static Range at_least(double lo) { return {lo, INFINITY, false, false}; }
+  static Range above(double lo) { return {lo, INFINITY, true, false}; }
+  static Range closed(double lo, double hi) { return {lo, hi, false, false}; }
+  static Range left_open(double lo, double hi) { return {lo, hi, true, false}; }
+  bool contains(double v) const;
+  std::string text() const;  // "[0, inf)", "(0, 0.25]"
 };
 
-// "--name V is out of range: allowed [min, max] (unit). help"
-template <class P>
-void validate(const P& p, const std::vector<ParamDecl<P>>& table) {
-  for (const auto& d : table) {
-    const double v = p.*(d.field);
-    const bool low = d.min_open ? !(v > d.min) : !(v >= d.min);
-    if (!std::isfinite(v) || low || v > d.max) {
-      std::ostringstream m;
-      m << "--" << d.name << " " << v << " is not allowed: it must be a finite number in "
-        << (d.min_open ? "(" : "[") << d.min << ", ";
-      if (std::isinf(d.max)) m << "inf)"; else m << d.max << "]";
-      m << " (" << d.unit << "); " << d.help;
-      throw Error(m.str());
-    }
-  }
+// One parameter, independent of the struct that holds it.
+struct ParamSpec {
+  std::string name;                  // flag name without dashes; record key; Python keyword
+  std::vector<std::string> aliases;  // other accepted flag names (e.g. fog-color for airlight)
+  ParamKind kind = ParamKind::real;
+  std::string unit;                  // "m", "px", "1" (dimensionless); empty for text/choice/boolean
+  std::string help;
+  Range range;                       // real, integer, rgb components
+  std::vector<std::string> choices;  // choice: the names, in declaration order
+  bool optional = false;             // may be unset (no 0 sentinels)
+  std::string unset_word = "auto";   // what the user writes for "unset"
+  std::string block;                 // the declaring block: "haze", "diffusion", "prepare", ...
+  bool allow_inf = false;            // real: +inf is a meaningful value (an infinite far plane)
+
+  // Help with unit, range or choices, for --help and docs.
+  std::string describe() const;
+  // Text a user would type for this value (for defaults in --help).
+  std::string format(const nlohmann::json& v) const;
+  // Parse what a user typed (CLI) into a value; throws Error naming --name.
+  nlohmann::json parse(const std::string& text) const;
+  // Check a value's type and range; throws Error naming --name, the value,
+  // what is allowed and the fix.
+  void check(const nlohmann::json& v) const;
+};
+
+template <class E>
+using EnumNames = std::vector<std::pair<E, const char*>>;
+
+// Name <-> value through one name table; parse errors list the names.
+template <class E>
+std::string enum_name(const EnumNames<E>& names, E v) {
+  for (const auto& [e, n] : names)
+    if (e == v) return n;
+  return "?";
+}
+template <class E>
+E parse_enum(const EnumNames<E>& names, const std::string& s, const std::string& flag) {
+  for (const auto& [e, n] : names)
+    if (s == n) return e;
+  std::string all;
+  for (const auto& [e, n] : names) all += (all.empty() ? "" : ", ") + std::string(n);
+  throw Error(flag + " '" + s + "' is not allowed; use one of: " + all);
 }
 
-// Help text with unit and range, for the CLI.
 template <class P>
-std::string describe(const ParamDecl<P>& d) {
-  std::ostringstream m;
-  m << d.help << " [" << d.unit << ", " << (d.min_open ? "(" : "[") << d.min << ", ";
-  if (std::isinf(d.max)) m << "inf)"; else m << d.max << "]";
-  m << "]";
-  return m.str();
-}
+struct Param {
+  ParamSpec spec;
+  std::function<nlohmann::json(const P&)> get;
+  std::function<void(P&, const nlohmann::json&)> set;  // the value has passed spec.check
+};
+
+template <class P>
+class ParamTable {
+ public:
+  explicit ParamTable(std::string block) : block_(std::move(block)) {}
+  const std::string& block() const { return block_; }
+  const std::vector<Param<P>>& params() const { return params_; }
+
+  ParamTable& real(const char* name, double P::*m, const char* unit, Range r, const char* help) {
+    return add(spec(name, ParamKind::real, unit, help, r),
+               [m](const P& p) { return nlohmann::json(p.*m); },
+               [m](P& p, const nlohmann::json& v) { p.*m = v.get<double>(); });
+  }
+  ParamTable& real(const char* name, std::optional<double> P::*m, const char* unit, Range r, const char* help,
+                   const char* unset_word = "auto") {
+    ParamSpec s = spec(name, ParamKind::real, unit, help, r);
+    s.optional = true;
+    s.unset_word = unset_word;
+    return add(std::move(s), [m](const P& p) { return (p.*m) ? nlohmann::json(*(p.*m)) : nlohmann::json(); },
+               [m](P& p, const nlohmann::json& v) {
+                 if (v.is_null()) p.*m = std::nullopt; else p.*m = v.get<double>();
+               });
+  }
+  // A struct field that stores "unset" as a sentinel (NaN, or 0 where 0 is not
+  // a valid value) for API compatibility; users and records see unset.
+  ParamTable& real_or_unset(const char* name, double P::*m, const char* unit, Range r, const char* help,
+                            double sentinel, const char* unset_word = "auto") {
+    ParamSpec s = spec(name, ParamKind::real, unit, help, r);
+    s.optional = true;
+    s.unset_word = unset_word;
+    const bool nan = std::isnan(sentinel);
+    return add(std::move(s),
+               [m, sentinel, nan](const P& p) {
+                 const double v = p.*m;
+                 return (nan ? std::isnan(v) : v == sentinel) ? nlohmann::json() : nlohmann::json(v);
+               },
+               [m, sentinel](P& p, const nlohmann::json& v) { p.*m = v.is_null() ? sentinel : v.get<double>(); });
+  }
+  ParamTable& integer(const char* name, int P::*m, const char* unit, Range r, const char* help) {
+    return add(spec(name, ParamKind::integer, unit, help, r),
+               [m](const P& p) { return nlohmann::json(p.*m); },
+               [m](P& p, const nlohmann::json& v) { p.*m = v.get<int>(); });
+  }
+  template <class I>
+  ParamTable& count(const char* name, I P::*m, const char* unit, Range r, const char* help) {
+    return add(spec(name, ParamKind::integer, unit, help, r),
+               [m](const P& p) { return nlohmann::json(p.*m); },
+               [m](P& p, const nlohmann::json& v) { p.*m = v.get<I>(); });
+  }
+  ParamTable& boolean(const char* name, bool P::*m, const char* help) {
+    return add(spec(name, ParamKind::boolean, "", help, {}),
+               [m](const P& p) { return nlohmann::json(p.*m); },
+               [m](P& p, const nlohmann::json& v) { p.*m = v.get<bool>(); });
+  }
+  template <class E>
+  ParamTable& choice(const char* name, E P::*m, const EnumNames<E>& names, const char* help) {
+    ParamSpec s = spec(name, ParamKind::choice, "", help, {});
+    for (const auto& [e, n] : names) s.choices.emplace_back(n);
+    return add(std::move(s), [m, names](const P& p) { return nlohmann::json(enum_name(names, p.*m)); },
+               [m, names, flag = std::string("--") + name](P& p, const nlohmann::json& v) {
+                 p.*m = parse_enum(names, v.get<std::string>(), flag);
+               });
+  }
+  // A choice stored as its name (a struct field that is a string).
+  ParamTable& choice(const char* name, std::string P::*m, const std::vector<const char*>& names, const char* help) {
+    ParamSpec s = spec(name, ParamKind::choice, "", help, {});
+    for (const char* n : names) s.choices.emplace_back(n);
+    return add(std::move(s), [m](const P& p) { return nlohmann::json(p.*m); },
+               [m](P& p, const nlohmann::json& v) { p.*m = v.get<std::string>(); });
+  }
+  ParamTable& rgb(const char* name, std::optional<Rgb> P::*m, const char* unit, Range r, const char* help,
+                  const char* unset_word = "auto") {
+    ParamSpec s = spec(name, ParamKind::rgb, unit, help, r);
+    s.optional = true;
+    s.unset_word = unset_word;
+    return add(std::move(s), [m](const P& p) { return (p.*m) ? nlohmann::json(*(p.*m)) : nlohmann::json(); },
+               [m](P& p, const nlohmann::json& v) {
+                 if (v.is_null()) p.*m = std::nullopt; else p.*m = v.get<Rgb>();
+               });
+  }
+  ParamTable& text(const char* name, std::string P::*m, const char* help) {
+    return add(spec(name, ParamKind::text, "", help, {}),
+               [m](const P& p) { return nlohmann::json(p.*m); },
+               [m](P& p, const nlohmann::json& v) { p.*m = v.get<std::string>(); });
+  }
+  // Any other mapping between a value and P (the spec's block is set here).
+  ParamTable& custom(ParamSpec s, std::function<nlohmann::json(const P&)> g,
+                     std::function<void(P&, const nlohmann::json&)> st) {
+    s.block = block_;
+    return add(std::move(s), std::move(g), std::move(st));
+  }
+  // +inf is allowed for the last declared parameter.
+  ParamTable& infinite() {
+    params_.back().spec.allow_inf = true;
+    return *this;
+  }
+  // Other accepted flag names for the last declared parameter.
+  ParamTable& alias(const char* a) {
+    params_.back().spec.aliases.emplace_back(a);
+    return *this;
+  }
+  // Every parameter of a nested block (declared once, reused by every effect).
+  template <class Q>
+  ParamTable& nest(Q P::*m, const ParamTable<Q>& sub) {
+    for (const Param<Q>& q : sub.params()) {
+      if (find(q.spec.name)) throw Error("internal: parameter '" + q.spec.name + "' declared twice in " + block_);
+      params_.push_back({q.spec, [m, g = q.get](const P& p) { return g(p.*m); },
+                         [m, s = q.set](P& p, const nlohmann::json& v) { s(p.*m, v); }});
+    }
+    return *this;
+  }
+
+  const Param<P>* find(const std::string& name) const {
+    for (const auto& p : params_)
+      if (p.spec.name == name) return &p;
+    return nullptr;
+  }
+  const Param<P>& at(const std::string& name) const {
+    const Param<P>* p = find(name);
+    if (!p) throw Error("internal: parameter '" + name + "' is not declared in block " + block_);
+    return *p;
+  }
+
+  // Range- and type-check every parameter's current value.
+  void validate(const P& p) const {
+    for (const auto& d : params_) d.spec.check(d.get(p));
+  }
+  // Set one parameter from what a user typed, checked.
+  void set_text(P& p, const std::string& name, const std::string& text) const {
+    const Param<P>& d = at(name);
+    const nlohmann::json v = d.spec.parse(text);
+    d.spec.check(v);
+    d.set(p, v);
+  }
+  // True when `name` was given explicitly or differs from its default: a
+  // value the run would ignore must be refused, not dropped.
+  bool is_set(const P& p, const std::string& name, const std::set<std::string>& given) const {
+    return given.count(name) > 0 || at(name).get(p) != at(name).get(P{});
+  }
+  // {"block": {"name": value, ...}, ...}: nested blocks keep their own key.
+  nlohmann::json to_json(const P& p) const {
+    nlohmann::json j = nlohmann::json::object();
+    for (const auto& d : params_) j[d.spec.block][d.spec.name] = d.get(p);
+    return j;
+  }
+  // {"block": {"name": unit}} for the record.
+  nlohmann::json units() const {
+    nlohmann::json j = nlohmann::json::object();
+    for (const auto& d : params_)
+      if (!d.spec.unit.empty()) j[d.spec.block][d.spec.name] = d.spec.unit;
+    return j;
+  }
+  // Inverse of to_json: every key must be declared; absent keys keep their
+  // value; every value is checked. `where` names the source in messages.
+  std::set<std::string> from_json(P& p, const nlohmann::json& j, const std::string& where) const {
+    std::set<std::string> given;
+    if (!j.is_object()) throw Error(where + ": expected an object of parameter blocks");
+    for (const auto& [block, vals] : j.items()) {
+      if (!vals.is_object()) throw Error(where + ": block '" + block + "' is not an object");
+      for (const auto& [name, v] : vals.items()) {
+        const Param<P>* d = find(name);
+        if (!d || d->spec.block != block)
+          throw Error(where + ": '" + block + "." + name + "' is not a parameter of this command");
+        d->spec.check(v);
+        d->set(p, v);
+        given.insert(name);
+      }
+    }
+    return given;
+  }
+
+ private:
+  ParamSpec spec(const char* name, ParamKind k, const char* unit, const char* help, Range r) const {
+    ParamSpec s;
+    s.name = name;
+    s.kind = k;
+    s.unit = unit;
+    s.help = help;
+    s.range = r;
+    s.block = block_;
+    return s;
+  }
+  ParamTable& add(ParamSpec s, std::function<nlohmann::json(const P&)> g,
+                  std::function<void(P&, const nlohmann::json&)> st) {
+    for (const auto& d : params_)
+      if (d.spec.name == s.name) throw Error("internal: parameter '" + s.name + "' declared twice in " + block_);
+    params_.push_back({std::move(s), std::move(g), std::move(st)});
+    return *this;
+  }
+  std::string block_;
+  std::vector<Param<P>> params_;
+};
 
 }  // namespace brume

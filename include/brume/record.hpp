@@ -25,13 +25,6 @@ nlohmann::json record_header(const std::string& command, const std::vector<std::
 // path, size, format, bits, transfer applied, sha256
 nlohmann::json file_record(const std::string& path, const FileInfo& info, const Image& img);
 
-template <class P>
-nlohmann::json params_record(const P& p, const std::vector<ParamDecl<P>>& table) {
-  nlohmann::json j;
-  for (const auto& d : table) j[d.name] = {{"value", p.*(d.field)}, {"unit", d.unit}};
-  return j;
-}
-
 nlohmann::json diffusion_record(const DiffusionParams& p, const DiffusionPlan& plan);
 nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a);
 nlohmann::json prepare_record(const PrepareParams& p, const PrepareResult& r);

@@ -1,6 +1,8 @@
 // brume — parameter records (see brume/record.hpp).
 #include "brume/record.hpp"
 
+#include "brume/pipeline.hpp"
+
 #include <chrono>
 #include <ctime>
 
@@ -27,11 +29,11 @@ nlohmann::json file_record(const std::string& path, const FileInfo& info, const 
 }
 
 nlohmann::json diffusion_record(const DiffusionParams& p, const DiffusionPlan& plan) {
-  return {{"scheme", to_string(p.scheme)},
-          {"precision", to_string(p.precision)},
+  return {{"scheme", enum_name(scheme_names(), p.scheme)},
+          {"precision", enum_name(precision_names(), p.precision)},
           {"sigma0_px", p.sigma0},
           {"rho_max", plan.rho_max},
-          {"edge_rate", to_string(p.edge_rate)},
+          {"edge_rate", enum_name(edge_rate_names(), p.edge_rate)},
           {"sigma_max_px", plan.sigma_max},
           {"iterations", plan.iterations},
           {"boundary", "half-sample mirror"}};
@@ -39,20 +41,11 @@ nlohmann::json diffusion_record(const DiffusionParams& p, const DiffusionPlan& p
 
 nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a) {
   nlohmann::json j;
-  j["parameters"] = params_record(p, haze_param_table());
-  j["parameters"]["airlight"] = p.airlight_auto ? nlohmann::json("auto") : nlohmann::json(p.airlight);
-  j["parameters"]["composite"] = to_string(p.composite);
-  if (p.visibility_m > 0.0) {
-    // kappa-a/kappa-s were not used: the extinction came from the visibility.
-    for (const char* k : {"kappa-a", "kappa-s"}) j["parameters"][k]["value"] = nullptr;
-    j["parameters"]["kappa_source"] = "visibility and albedo (values in derived)";
-  } else {
-    j["parameters"].erase("albedo");
-    j["parameters"]["kappa_source"] = "kappa-a and kappa-s";
-  }
-  DiffusionParams dp = p.diffusion;
-  dp.sigma0 = p.sigma0;
-  j["diffusion"] = diffusion_record(dp, a.plan);
+  j["parameters"] = haze_param_table().to_json(p);
+  j["parameters"]["haze"]["kappa_source"] =
+      p.visibility_m ? "visibility and albedo (values in derived)" : "kappa-a and kappa-s";
+  j["units"] = haze_param_table().units();
+  j["diffusion"] = diffusion_record(p.diffusion, a.plan);
   j["derived"] = {
       {"range_max_m", a.range_max_m},
       {"range_min_m", a.range_min_m},

@@ -50,7 +50,7 @@ EdgeRate parse_edge_rate(const std::string& s) {
 }
 
 double effective_rho_max(const DiffusionParams& p) {
-  if (p.rho_max != 0.0) return p.rho_max;
+  if (p.rho_max) return *p.rho_max;
   return p.scheme == Scheme::invariant_exact ? 0.2 : 0.25;
 }
 
@@ -59,7 +59,7 @@ DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max) {
   if (!(p.sigma0 > 0.0) || !std::isfinite(p.sigma0))
     throw Error("--sigma0 " + std::to_string(p.sigma0) + " px is not allowed; the inner scale must be a finite number > 0 (typically 0.5 to 1 px)");
   if (!(rho_max > 0.0 && rho_max <= 0.25))
-    throw Error("--rho-max " + std::to_string(rho_max) + " is not allowed: it must be in (0, 0.25], the stability limit of the 2-D explicit scheme (0 = the scheme's default)");
+    throw Error("--rho-max " + std::to_string(rho_max) + " is not allowed: it must be in (0, 0.25], the stability limit of the 2-D explicit scheme (auto = the scheme's default)");
   if (!std::isfinite(sigma_max) || sigma_max < p.sigma0) {
     std::ostringstream m;
     m << "largest target scale " << sigma_max << " px is below the inner scale --sigma0 "

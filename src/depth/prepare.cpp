@@ -53,6 +53,7 @@
 //
 // Cost (bench/bench_prepare.cpp, 1600x1120, 2 threads): labelling, EDT and the
 // per-pixel passes are O(N), ~30 ms; CG on the 67k margin pixels ~25 ms.
+#include "brume/pipeline.hpp"
 #include "brume/prepare.hpp"
 
 
@@ -75,7 +76,6 @@ namespace {
 
 constexpr double kTukey = 4.685;            // 95% efficiency at the normal
 constexpr double kMadToSigma = 1.482602218;  // 1 / Phi^-1(3/4)
-constexpr double kMinResidualTol = 1e-6;     // float32 rounding floor, see header comment
 
 inline bool is_unknown(float r) { return !std::isfinite(r) || r == 0.0f; }
 
@@ -85,44 +85,9 @@ std::string fmt(double v) {
   return buf;
 }
 
-void check_param(const char* name, double v, double lo, double hi, bool lo_open, const char* meaning) {
-  const bool ok = std::isfinite(v) && (lo_open ? v > lo : v >= lo) && v <= hi;
-  if (ok) return;
-  std::ostringstream m;
-  m << "prepare: PrepareParams::" << name << " = " << fmt(v) << " is not allowed; it must be finite and "
-    << (lo_open ? "> " : ">= ") << fmt(lo);
-  if (std::isfinite(hi)) m << " and <= " << fmt(hi);
-  m << " (" << meaning << "). Pass a value in that range (default: " << name << " = ";
-  const PrepareParams d;
-  const std::string n = name;
-  if (n == "sky_margin_px") m << fmt(d.sky_margin_px);
-  else if (n == "sky_min_fraction") m << fmt(d.sky_min_fraction);
-  else if (n == "sky_large_fraction") m << fmt(d.sky_large_fraction);
-  else if (n == "s_max_factor") m << fmt(d.s_max_factor);
-  else if (n == "min_coverage") m << fmt(d.min_coverage);
-  else if (n == "residual_tol") m << fmt(d.residual_tol);
-  m << ").";
-  throw Error(m.str());
-}
-
-void validate(const PrepareParams& p) {
-  const double inf = std::numeric_limits<double>::infinity();
-  check_param("sky_margin_px", p.sky_margin_px, 0.0, inf, false,
-              "width in pixels of the matted horizon; 0 disables the margin");
-  check_param("sky_min_fraction", p.sky_min_fraction, 0.0, 1.0, false,
-              "fraction of the image a top-touching unknown region needs to count as sky");
-  check_param("sky_large_fraction", p.sky_large_fraction, 0.0, 1.0, false,
-              "fraction of the image an unknown region anywhere needs to count as sky");
-  check_param("s_max_factor", p.s_max_factor, 1.0, 1e6, true, "S_max = s_max_factor * R_max must exceed R_max");
-  check_param("min_coverage", p.min_coverage, 0.0, 1.0, false, "smallest fraction of pixels with a known range");
-  check_param("residual_tol", p.residual_tol, kMinResidualTol, 0.1, false,
-              "margin solve stops at max |discrete Laplacian| <= residual_tol * S_max; below 1e-6 the float32 "
-              "output cannot hold it");
-  if (p.ransac_iterations < 1 || p.ransac_iterations > 1000000)
-    throw Error("prepare: PrepareParams::ransac_iterations = " + std::to_string(p.ransac_iterations) +
-                " is not allowed; it must be between 1 and 1000000 (candidate fill values tried per hole). Pass a "
-                "value in that range (default: 64).");
-}
+// Every parameter through its declaration (brume/pipeline.hpp): messages name
+// the flag (--sky-margin), the value, the allowed range and the meaning.
+void validate(const PrepareParams& p) { prepare_param_table().validate(p); }
 
 std::uint64_t splitmix64(std::uint64_t x) {
   x += 0x9E3779B97F4A7C15ull;
@@ -349,8 +314,8 @@ PrepareResult prepare_range(const Image& range, const PrepareParams& p) {
     char pct[32];
     std::snprintf(pct, sizeof pct, "%.2f%%", 100.0 * res.known_fraction);
     m << "prepare: the range map (" << range.size_string() << ") has known values at only " << known << " of " << N
-      << " pixels, i.e. it covers " << pct << " of the pixels, below min_coverage = " << fmt(100.0 * p.min_coverage)
-      << "%. This looks like a sparse map (e.g. a projected lidar scan); prepare fills holes and sky in dense "
+      << " pixels, i.e. it covers " << pct << " of the pixels, below --min-coverage " << fmt(p.min_coverage) << " (" << fmt(100.0 * p.min_coverage)
+      << "%). This looks like a sparse map (e.g. a projected lidar scan); prepare fills holes and sky in dense "
          "maps only and would invent most of this one. Densify/complete the depth first (depth completion, "
          "stereo, a mesh render), or run the effect with --prepare off.";
     throw Error(m.str());
@@ -359,8 +324,8 @@ PrepareResult prepare_range(const Image& range, const PrepareParams& p) {
   float smax = static_cast<float>(p.s_max_factor * static_cast<double>(rmax));
   if (!(smax > rmax)) smax = std::nextafter(rmax, std::numeric_limits<float>::infinity());
   if (!std::isfinite(smax))
-    throw Error("prepare: S_max = s_max_factor * R_max = " + fmt(p.s_max_factor) + " * " + fmt(rmax) +
-                " m overflows float; the map's largest range is implausible (check its units) or s_max_factor is "
+    throw Error("prepare: S_max = --s-max-factor * R_max = " + fmt(p.s_max_factor) + " * " + fmt(rmax) +
+                " m overflows float; the map's largest range is implausible (check its units) or --s-max-factor is "
                 "too large (lower it).");
   res.s_max_m = smax;
 

@@ -14,33 +14,49 @@
 namespace brume {
 namespace sh = brume::shared;
 
-Composite parse_composite(const std::string& s) {
-  if (s == "premultiplied") return Composite::premultiplied;
-  if (s == "naive") return Composite::naive;
-  throw Error("--composite '" + s + "' is not a compositing mode; use premultiplied or naive");
+const EnumNames<Composite>& composite_names() {
+  static const EnumNames<Composite> n = {{Composite::premultiplied, "premultiplied"}, {Composite::naive, "naive"}};
+  return n;
+}
+Composite parse_composite(const std::string& s) { return parse_enum(composite_names(), s, "--composite"); }
+std::string to_string(Composite c) { return enum_name(composite_names(), c); }
+
+const ParamTable<HazeParams>& haze_param_table() {
+  static const ParamTable<HazeParams> t = [] {
+    ParamTable<HazeParams> d("haze");
+    d.real("kappa-a", &HazeParams::kappa_a, "1 (per R_max)", Range::at_least(0.0),
+           "absorption coefficient times R_max (optical depth of absorption at the far end)")
+        .real("kappa-s", &HazeParams::kappa_s, "1 (per R_max)", Range::at_least(0.0),
+              "scattering coefficient times R_max (optical depth of scattering at the far end)")
+        .real("visibility", &HazeParams::visibility_m, "m", Range::above(0.0),
+              "meteorological visibility (extinction 3.912/V per metre, Koschmieder); auto: use --kappa-a/--kappa-s")
+        .real("albedo", &HazeParams::albedo, "1", Range::closed(0.0, 1.0),
+              "single-scattering albedo splitting --visibility's extinction into kappa_s = albedo beta and "
+              "kappa_a = (1 - albedo) beta")
+        .real("lambda", &HazeParams::lambda, "px", Range::at_least(0.0),
+              "blur gain: sigma_max = sigma0 + lambda sqrt(kappa_s)")
+        .real("range-max", &HazeParams::range_max_m, "m", Range::above(0.0),
+              "R_max, the range that normalises R and kappa; auto: the largest finite range")
+        .rgb("airlight", &HazeParams::airlight, "linear RGB", Range::at_least(0.0),
+             "colour of the medium B; auto: the median sky colour (unknown range >= 0.5 % of the frame), else a "
+             "grey at the 99th percentile of luminance")
+        .alias("fog-color")
+        .alias("horizon")
+        .choice("composite", &HazeParams::composite, composite_names(),
+                "premultiplied (eq. 4), or naive (the ghost-edged composite the paper warns against, for comparison)")
+        .nest(&HazeParams::diffusion, diffusion_param_table());
+    return d;
+  }();
+  return t;
 }
 
-std::string to_string(Composite c) { return c == Composite::naive ? "naive" : "premultiplied"; }
-
-const std::vector<ParamDecl<HazeParams>>& haze_param_table() {
-  static const double inf = INFINITY;
-  static const std::vector<ParamDecl<HazeParams>> t = {
-      {"kappa-a", "1 (per R_max)", &HazeParams::kappa_a, 0.0, inf, false,
-       "absorption coefficient times R_max (optical depth of absorption at the far end)"},
-      {"kappa-s", "1 (per R_max)", &HazeParams::kappa_s, 0.0, inf, false,
-       "scattering coefficient times R_max (optical depth of scattering at the far end)"},
-      {"lambda", "px", &HazeParams::lambda, 0.0, inf, false,
-       "blur gain: sigma_max = sigma0 + lambda sqrt(kappa_s)"},
-      {"sigma0", "px", &HazeParams::sigma0, 0.0, 1000.0, true, "inner scale of the input image"},
-      {"range-max", "m", &HazeParams::range_max_m, 0.0, inf, false,
-       "R_max, the range that normalises R and kappa; 0 = the largest finite range"},
-      {"visibility", "m", &HazeParams::visibility_m, 0.0, inf, false,
-       "meteorological visibility (extinction 3.912/V per metre); 0 = use --kappa-a/--kappa-s"},
-      {"albedo", "1", &HazeParams::albedo, 0.0, 1.0, false,
-       "single-scattering albedo splitting --visibility's extinction into kappa_s = albedo beta and "
-       "kappa_a = (1 - albedo) beta"},
-  };
-  return t;
+void validate_haze(const HazeParams& p, const std::set<std::string>& given) {
+  const auto& t = haze_param_table();
+  t.validate(p);
+  if (p.visibility_m && (t.is_set(p, "kappa-a", given) || t.is_set(p, "kappa-s", given)))
+    throw Error("--visibility sets the extinction; do not also give --kappa-a/--kappa-s (use --albedo to split it)");
+  if (!p.visibility_m && t.is_set(p, "albedo", given))
+    throw Error("--albedo only applies with --visibility; with --kappa-a/--kappa-s the split is explicit");
 }
 
 namespace {
@@ -52,15 +68,12 @@ float luminance(const float* c) { return 0.2126f * c[0] + 0.7152f * c[1] + 0.072
 }  // namespace
 
 HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const HazeParams& p) {
-  validate(p, haze_param_table());
+  validate_haze(p);
   if (rgb.channels != 3) throw Error("haze needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
   if (range.channels != 1) throw Error("the range map must have one channel");
   if (rgb.width != range.width || rgb.height != range.height)
     throw Error("range map " + range.size_string() + " does not match image " + rgb.size_string() +
                 "; they must be the same size (resample the range map, or crop both)");
-  for (float c : p.airlight)
-    if (!p.airlight_auto && (!std::isfinite(c) || c < 0.0f))
-      throw Error("--airlight components must be finite and >= 0 (linear RGB), got " + std::to_string(c));
 
   HazeAnalysis a;
   double rmax = 0.0, rmin = INFINITY;
@@ -83,12 +96,12 @@ HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const HazeParams
   if (a.unknown_pixels == range.pixels())
     throw Error("the range map has no known value (every pixel is NaN, inf or 0)");
   a.range_min_m = rmin;
-  a.range_max_m = p.range_max_m > 0.0 ? p.range_max_m : rmax;
+  a.range_max_m = p.range_max_m ? *p.range_max_m : rmax;
   if (!(a.range_max_m > 0.0))
     throw Error("R_max is 0: every known range is 0 m; give --range-max in metres");
 
-  if (p.visibility_m > 0.0) {
-    const double beta = 3.912 / p.visibility_m;  // Koschmieder, 2 % contrast
+  if (p.visibility_m) {
+    const double beta = 3.912 / *p.visibility_m;  // Koschmieder, 2 % contrast
     a.kappa_s = p.albedo * beta * a.range_max_m;
     a.kappa_a = (1.0 - p.albedo) * beta * a.range_max_m;
   } else {
@@ -96,14 +109,12 @@ HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const HazeParams
     a.kappa_s = p.kappa_s;
   }
   a.extinction_per_m = (a.kappa_a + a.kappa_s) / a.range_max_m;
-  a.sigma_max = sh::brume_sigma_max(static_cast<float>(p.sigma0), static_cast<float>(p.lambda),
+  a.sigma_max = sh::brume_sigma_max(static_cast<float>(p.diffusion.sigma0), static_cast<float>(p.lambda),
                                     static_cast<float>(a.kappa_s));
-  DiffusionParams dp = p.diffusion;
-  dp.sigma0 = p.sigma0;
-  a.plan = plan_diffusion(dp, a.sigma_max);
+  a.plan = plan_diffusion(p.diffusion, a.sigma_max);
 
-  if (!p.airlight_auto) {
-    a.airlight = p.airlight;
+  if (p.airlight) {
+    a.airlight = *p.airlight;
     a.airlight_source = "given";
   } else if (a.unknown_pixels >= std::max<std::size_t>(1, rgb.pixels() / 200)) {
     // Sky (unknown range, >= 0.5 % of the frame): per-channel median colour.
@@ -135,7 +146,7 @@ HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p,
   const int W = rgb.width, H = rgb.height;
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const float kappa = static_cast<float>(a.kappa_a + a.kappa_s);
-  const float s0 = static_cast<float>(p.sigma0), smax = static_cast<float>(a.sigma_max);
+  const float s0 = static_cast<float>(p.diffusion.sigma0), smax = static_cast<float>(a.sigma_max);
   const float inv_rmax = static_cast<float>(1.0 / a.range_max_m);
   const bool naive = p.composite == Composite::naive;
 
@@ -157,9 +168,7 @@ HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p,
       f.data[i * 4 + 3] = t;
     }
 
-  DiffusionParams dp = p.diffusion;
-  dp.sigma0 = p.sigma0;
-  diffuse(f, out.scale, a.sigma_max, dp, exec);
+  diffuse(f, out.scale, a.sigma_max, p.diffusion, exec);
 
   out.rgb = Image(W, H, 3);
   out.transmission = Image(W, H, 1);

@@ -364,7 +364,7 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
   bind(pr, "uRange", 1, tex_range_);
   glUniform1f(glGetUniformLocation(pr, "uInvRangeMax"), static_cast<float>(1.0 / a.range_max_m));
   glUniform1f(glGetUniformLocation(pr, "uKappa"), static_cast<float>(a.kappa_a + a.kappa_s));
-  glUniform1f(glGetUniformLocation(pr, "uSigma0"), static_cast<float>(p.sigma0));
+  glUniform1f(glGetUniformLocation(pr, "uSigma0"), static_cast<float>(p.diffusion.sigma0));
   glUniform1f(glGetUniformLocation(pr, "uSigmaMax"), static_cast<float>(a.sigma_max));
   glUniform1f(glGetUniformLocation(pr, "uIterations"), static_cast<float>(a.plan.iterations));
   glUniform1i(glGetUniformLocation(pr, "uScheme"), static_cast<int>(p.diffusion.scheme));
@@ -374,7 +374,7 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
   timing_.premultiply_ms = t1.stop();
 
   StageTimer t2(g, &timing_.gpu_timer);
-  const int last = run_diffusion(g, f, aux, w_, h_, a.plan.iterations, p.diffusion.scheme, p.diffusion.edge_rate, p.sigma0,
+  const int last = run_diffusion(g, f, aux, w_, h_, a.plan.iterations, p.diffusion.scheme, p.diffusion.edge_rate, p.diffusion.sigma0,
                                  use_hardware(g, filter));
   timing_.diffuse_ms = t2.stop();
 

@@ -60,8 +60,7 @@ int run_demo(const std::string& dir, int width, int height, int threads) {
     p.visibility_m = s.visibility_m;
     p.albedo = s.albedo;
     p.lambda = s.lambda;
-    p.airlight_auto = s.airlight_auto;
-    p.airlight = {0.62f, 0.64f, 0.66f};
+    if (!s.airlight_auto) p.airlight = Rgb{0.62f, 0.64f, 0.66f};
     HazeAnalysis a = analyse_haze(scene.rgb, scene.range, p);
     HazeResult r = apply_haze(scene.rgb, scene.range, p, a, ex);
     nlohmann::json rec = record_header("demo", {"brume", "demo", "--out-dir", dir});

@@ -1,0 +1,27 @@
+// brume — the diffusion engine as a command: a Gaussian (constant target
+// scale) or a space-variant blur (a scale map) of a colour image, in the
+// pipeline shape of every effect (brume/pipeline.hpp).
+//
+// With a constant --sigma S the result is a Gaussian of sqrt(S^2 - sigma0^2)
+// per axis (diffusion cannot sharpen: S < sigma0 is an error, never a clamp).
+#pragma once
+
+#include <optional>
+#include <string>
+
+#include "brume/diffusion.hpp"
+#include "brume/pipeline.hpp"
+
+namespace brume {
+
+struct BlurJob {
+  InputFiles input;              // image only
+  std::optional<double> sigma;   // [px] constant target scale, >= sigma0; or:
+  std::string scale_map;         // per-pixel target scale in px (1-channel float file)
+  DiffusionParams diffusion;
+  OutputFiles output;
+};
+const ParamTable<BlurJob>& blur_job_table();
+nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& exec, const RunContext& ctx = {});
+
+}  // namespace brume

@@ -1,0 +1,160 @@
+// brume — what every effect's pipeline shares: the declared parameter blocks
+// (diffusion, preparation, depth source, input, output, execution), loading
+// the inputs, preparing the range, choosing the backend, and writing the
+// outputs with the parameter record. An effect adds only its own parameter
+// block, its pipeline function (analysis + apply on each backend) and its
+// passes; the CLI, `brume run` and later the Python module call the pipeline.
+//
+//   files ──► load_inputs (decode, depth → range) ──► prepare_step ──► effect
+//         ──► write_outputs (encoding rules, record, atomic rename)
+//
+// Records (schema_version 2) hold the whole job — every declared parameter
+// of every block, under "job" — next to what the run derived and measured,
+// so `brume run record.json` repeats the run.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "brume/depth_source.hpp"
+#include "brume/diffusion.hpp"
+#include "brume/exec.hpp"
+#include "brume/image.hpp"
+#include "brume/io.hpp"
+#include "brume/params.hpp"
+#include "brume/prepare.hpp"
+
+namespace brume {
+
+constexpr int kRecordSchemaVersion = 2;
+
+// ---- name tables (one per enum: flags, records and messages use them) ----
+const EnumNames<Scheme>& scheme_names();
+const EnumNames<Precision>& precision_names();
+const EnumNames<EdgeRate>& edge_rate_names();
+const EnumNames<Transfer>& transfer_names();
+const EnumNames<Backend>& backend_names();
+const EnumNames<GpuFilter>& gpu_filter_names();
+
+// ---- shared parameter blocks --------------------------------------------------
+const ParamTable<DiffusionParams>& diffusion_param_table();  // scheme, precision, sigma0, rho-max, edge-rate
+const ParamTable<PrepareParams>& prepare_param_table();      // all eight preparation parameters
+const ParamTable<DepthSource>& depth_param_table();          // every depth source and convention flag
+
+// Execution: how, not what (results do not depend on it, except the GPU's
+// float rounding); recorded, but not part of a job.
+struct ExecOptions {
+  int threads = 0;        // 0 = all cores
+  bool reference = false; // the scalar double-precision path
+  Backend backend = Backend::cpu;
+  GpuFilter gpu_filter = GpuFilter::automatic;
+  bool timing = false;    // print per-pass times
+  Exec exec() const;      // checked: --reference only on the CPU
+};
+const ParamTable<ExecOptions>& exec_param_table();
+
+// The colour image and the depth of an effect's input.
+struct InputFiles {
+  std::string image;                       // colour image
+  Transfer image_transfer = Transfer::automatic;
+  DepthSource depth;                       // needs_depth effects only
+};
+const ParamTable<InputFiles>& input_param_table(bool with_depth);
+
+// Range preparation before an effect (Hansard §4.1).
+enum class PrepareMode { automatic, off };
+const EnumNames<PrepareMode>& prepare_mode_names();
+struct RangeStep {
+  PrepareMode mode = PrepareMode::automatic;  // auto: prepare when the range has unknown pixels
+  PrepareParams params;
+};
+const ParamTable<RangeStep>& range_step_param_table();
+
+// An output map besides the main image, declared by the effect.
+struct MapOutput {
+  const char* name;          // flag and record key, e.g. "transmission"
+  const char* help;
+  const char* float_reason;  // non-empty: values leave [0, 1]; integer files are refused
+};
+
+struct OutputFiles {
+  std::string out;                       // main image
+  std::string bits = "auto";             // auto | 8 | 16 | half | float
+  Transfer transfer = Transfer::automatic;
+  std::string record;                    // JSON record (optional)
+  std::map<std::string, std::string> maps;  // declared map outputs that were asked for
+};
+const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& maps, bool main_required = true);
+
+// ---- the shared steps -------------------------------------------------------------
+struct LoadedInputs {
+  Image rgb;              // linear RGB
+  FileInfo image_info;
+  LoadedDepth depth;      // measured range (metres along the ray, NaN unknown) and its record
+  nlohmann::json record;  // {"image": file record, "depth": ...}
+};
+LoadedInputs load_inputs(const InputFiles& in, bool with_depth);
+
+// Unknown pixels (NaN, +-inf, 0) of a range map.
+std::size_t unknown_range_pixels(const Image& range);
+
+struct PreparedRange {
+  Image range;            // the range the effect runs on (a copy of the measured one when not prepared)
+  bool applied = false;
+  nlohmann::json record;  // {"mode", "applied", and the preparation's record when applied}
+};
+// Validates every preparation parameter whatever the input, refuses
+// parameters that `--prepare off` would ignore (`given` names the ones set
+// explicitly), and prepares when the mode is auto and the range has unknown
+// pixels.
+void check_range_step(const RangeStep& step, const std::set<std::string>& given = {});
+PreparedRange prepare_step(const Image& measured, const RangeStep& step, const std::set<std::string>& given = {});
+
+// The GPU context a run uses: Exec::gpu if the caller passed one; for
+// Backend::gpu a new context or an error saying why; for Backend::automatic
+// a new context only when its renderer is hardware (a software rasteriser
+// measured 1.7-30x slower than the CPU backend), else none with a note.
+struct BackendChoice {
+  GpuContext* gpu = nullptr;  // null: run on the CPU
+  std::unique_ptr<GpuContext> owned;
+  nlohmann::json record;      // execution.backend, execution.gpu.renderer, ...
+  BackendChoice();
+  ~BackendChoice();
+  BackendChoice(BackendChoice&&) noexcept;
+  BackendChoice& operator=(BackendChoice&&) noexcept;
+};
+BackendChoice choose_backend(const Exec& exec);
+
+// The record's directory exists and is writable (before any work).
+void check_record_path(const std::string& path);
+// Before any work: every output location writable with its options.
+void check_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl);
+// Encoding rules shared by every effect: `bits auto` keeps an 8/16-bit
+// input's depth in PNG/TIFF (JPEG 8, EXR/PFM/HDR float); maps are data,
+// never sRGB-encoded; the record is embedded as ImageDescription and written
+// beside; everything is renamed into place together or not at all.
+void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, const Image& main,
+                   const std::map<std::string, Image>& maps, const FileInfo* input_info, const nlohmann::json& record);
+
+// tool, version, schema_version, command, argv, time
+nlohmann::json run_record_header(const std::string& command, const std::vector<std::string>& argv);
+
+// `brume run`: repeat the run a record describes (schema_version 2). Inputs
+// must still have the SHA-256 the record names; with a non-empty out_dir,
+// every output goes into out_dir under its recorded file name. Returns the
+// new record.
+nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, const std::string& out_dir,
+                     const std::vector<std::string>& argv);
+
+// What a pipeline needs to know about the run beyond its job.
+struct RunContext {
+  std::vector<std::string> argv;  // for the record
+  std::set<std::string> given;    // parameter names set explicitly (CLI flags, record keys)
+};
+
+}  // namespace brume

@@ -1,0 +1,184 @@
+// brume — typed parameter declarations (see brume/params.hpp): parsing what a
+// user typed, checking a value, and describing a parameter.
+#include "brume/params.hpp"
+
+#include <cstdlib>
+#include <sstream>
+
+namespace brume {
+
+namespace {
+
+std::string num(double v) {
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  std::ostringstream o;
+  o << v;
+  return o.str();
+}
+
+// strtod over the whole text ("1e-3", "inf", "nan"), nothing left over.
+bool parse_double(const std::string& t, double& v) {
+  if (t.empty()) return false;
+  char* end = nullptr;
+  v = std::strtod(t.c_str(), &end);
+  return end == t.c_str() + t.size();
+}
+
+}  // namespace
+
+bool Range::contains(double v) const {
+  if (std::isnan(v)) return false;
+  const bool lo = min_open ? v > min : v >= min;
+  const bool hi = max_open ? v < max : v <= max;
+  return lo && hi;
+}
+
+std::string Range::text() const {
+  return std::string(min_open || std::isinf(min) ? "(" : "[") + num(min) + ", " + num(max) +
+         (max_open || std::isinf(max) ? ")" : "]");
+}
+
+std::string ParamSpec::format(const nlohmann::json& v) const {
+  if (v.is_null()) return unset_word;
+  switch (kind) {
+    case ParamKind::real: return num(v.get<double>());
+    case ParamKind::integer: return v.dump();
+    case ParamKind::boolean: return v.get<bool>() ? "true" : "false";
+    case ParamKind::rgb: {
+      const Rgb c = v.get<Rgb>();
+      return num(c[0]) + "," + num(c[1]) + "," + num(c[2]);
+    }
+    case ParamKind::choice:
+    case ParamKind::text: return v.get<std::string>();
+  }
+  return v.dump();
+}
+
+std::string ParamSpec::describe() const {
+  std::ostringstream m;
+  m << help;
+  switch (kind) {
+    case ParamKind::real:
+    case ParamKind::integer:
+      m << " [" << (unit.empty() ? "" : unit + ", ") << range.text() << "]";
+      break;
+    case ParamKind::rgb:
+      m << " [" << (unit.empty() ? "" : unit + ", ") << "R,G,B each in " << range.text() << "]";
+      break;
+    case ParamKind::choice: {
+      m << " [";
+      for (std::size_t i = 0; i < choices.size(); ++i) m << (i ? "|" : "") << choices[i];
+      m << "]";
+      break;
+    }
+    default: break;
+  }
+  if (optional) m << " ('" << unset_word << "' to leave unset)";
+  return m.str();
+}
+
+nlohmann::json ParamSpec::parse(const std::string& t) const {
+  const std::string flag = "--" + name;
+  if (optional && t == unset_word) return nullptr;
+  switch (kind) {
+    case ParamKind::real: {
+      double v = 0;
+      if (!parse_double(t, v))
+        throw Error(flag + " '" + t + "' is not a number" + (optional ? " (or " + unset_word + ")" : "") + "; " +
+                    describe());
+      return v;
+    }
+    case ParamKind::integer: {
+      char* end = nullptr;
+      const long long v = std::strtoll(t.c_str(), &end, 10);
+      if (t.empty() || end != t.c_str() + t.size())
+        throw Error(flag + " '" + t + "' is not a whole number; " + describe());
+      return v;
+    }
+    case ParamKind::boolean:
+      if (t == "true" || t == "1" || t == "yes" || t == "on") return true;
+      if (t == "false" || t == "0" || t == "no" || t == "off") return false;
+      throw Error(flag + " '" + t + "' is not true or false");
+    case ParamKind::choice: return t;  // checked against the name table by check()
+    case ParamKind::rgb: {
+      Rgb c{};
+      std::stringstream ss(t);
+      std::string item;
+      int n = 0;
+      while (std::getline(ss, item, ',')) {
+        double v = 0;
+        if (n < 3 && !parse_double(item, v))
+          throw Error(flag + " '" + t + "': '" + item + "' is not a number; give R,G,B in linear light, e.g. "
+                      "0.8,0.82,0.85" + (optional ? ", or " + unset_word : std::string()));
+        if (n < 3) c[n] = static_cast<float>(v);
+        ++n;
+      }
+      if (n != 3)
+        throw Error(flag + " '" + t + "' must be three comma-separated numbers R,G,B (linear light)" +
+                    (optional ? " or " + unset_word : std::string()));
+      return c;
+    }
+    case ParamKind::text: return t;
+  }
+  return t;
+}
+
+void ParamSpec::check(const nlohmann::json& v) const {
+  const std::string flag = "--" + name;
+  if (v.is_null()) {
+    if (optional) return;
+    throw Error(flag + " has no value; it must be given (" + describe() + ")");
+  }
+  auto bad_type = [&](const char* what) {
+    throw Error(flag + " " + v.dump() + " is not " + what + "; " + describe());
+  };
+  switch (kind) {
+    case ParamKind::real: {
+      if (!v.is_number()) bad_type("a number");
+      const double x = v.get<double>();
+      if (!std::isfinite(x) && !(allow_inf && x > 0 && std::isinf(x)))
+        throw Error(flag + " " + num(x) + " is not allowed: it must be a finite number in " + range.text() +
+                    (unit.empty() ? "" : " (" + unit + ")") + "; " + help);
+      if (!range.contains(x))
+        throw Error(flag + " " + num(x) + " is not allowed: it must be in " + range.text() +
+                    (unit.empty() ? "" : " (" + unit + ")") + "; " + help);
+      return;
+    }
+    case ParamKind::integer: {
+      if (!v.is_number_integer()) bad_type("a whole number");
+      const double x = static_cast<double>(v.get<long long>());
+      if (!range.contains(x))
+        throw Error(flag + " " + v.dump() + " is not allowed: it must be a whole number in " + range.text() +
+                    (unit.empty() ? "" : " (" + unit + ")") + "; " + help);
+      return;
+    }
+    case ParamKind::boolean:
+      if (!v.is_boolean()) bad_type("true or false");
+      return;
+    case ParamKind::choice: {
+      if (!v.is_string()) bad_type("a name");
+      const std::string s = v.get<std::string>();
+      for (const auto& c : choices)
+        if (c == s) return;
+      std::string all;
+      for (const auto& c : choices) all += (all.empty() ? "" : ", ") + c;
+      throw Error(flag + " '" + s + "' is not allowed; use one of: " + all);
+    }
+    case ParamKind::rgb: {
+      if (!v.is_array() || v.size() != 3) bad_type("three numbers R,G,B");
+      for (const auto& c : v) {
+        if (!c.is_number()) bad_type("three numbers R,G,B");
+        const double x = c.get<double>();
+        if (!std::isfinite(x) || !range.contains(x))
+          throw Error(flag + " " + format(v) + ": every component must be finite and in " + range.text() +
+                      (unit.empty() ? "" : " (" + unit + ")") + "; " + help);
+      }
+      return;
+    }
+    case ParamKind::text:
+      if (!v.is_string()) bad_type("text");
+      return;
+  }
+}
+
+}  // namespace brume

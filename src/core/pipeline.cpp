@@ -1,0 +1,401 @@
+// brume — the steps every effect's pipeline shares (see brume/pipeline.hpp).
+#include "brume/pipeline.hpp"
+
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <unistd.h>
+
+#include "brume/error.hpp"
+#include "brume/gpu.hpp"
+#include "brume/record.hpp"
+
+namespace fs = std::filesystem;
+
+namespace brume {
+
+// ---- name tables ------------------------------------------------------------------
+const EnumNames<Scheme>& scheme_names() {
+  static const EnumNames<Scheme> n = {
+      {Scheme::standard, "standard"}, {Scheme::invariant, "invariant"}, {Scheme::invariant_exact, "invariant-exact"}};
+  return n;
+}
+const EnumNames<Precision>& precision_names() {
+  static const EnumNames<Precision> n = {{Precision::f32, "f32"}, {Precision::f16, "f16"}};
+  return n;
+}
+const EnumNames<EdgeRate>& edge_rate_names() {
+  static const EnumNames<EdgeRate> n = {{EdgeRate::harmonic, "harmonic"}, {EdgeRate::mean, "mean"}, {EdgeRate::min, "min"}};
+  return n;
+}
+const EnumNames<Transfer>& transfer_names() {
+  static const EnumNames<Transfer> n = {{Transfer::automatic, "auto"}, {Transfer::srgb, "srgb"}, {Transfer::linear, "linear"}};
+  return n;
+}
+const EnumNames<Backend>& backend_names() {
+  static const EnumNames<Backend> n = {{Backend::cpu, "cpu"}, {Backend::gpu, "gpu"}, {Backend::automatic, "auto"}};
+  return n;
+}
+const EnumNames<GpuFilter>& gpu_filter_names() {
+  static const EnumNames<GpuFilter> n = {
+      {GpuFilter::automatic, "auto"}, {GpuFilter::hardware, "hardware"}, {GpuFilter::shader, "shader"}};
+  return n;
+}
+const EnumNames<PrepareMode>& prepare_mode_names() {
+  static const EnumNames<PrepareMode> n = {{PrepareMode::automatic, "auto"}, {PrepareMode::off, "off"}};
+  return n;
+}
+
+// ---- shared blocks -----------------------------------------------------------------
+const ParamTable<DiffusionParams>& diffusion_param_table() {
+  static const ParamTable<DiffusionParams> t = [] {
+    ParamTable<DiffusionParams> d("diffusion");
+    d.choice("scheme", &DiffusionParams::scheme, scheme_names(),
+             "diffusion scheme: standard (explicit Euler, eq. 11-13), invariant (eq. 17-18 as published), "
+             "invariant-exact (offsets that reach the target variance exactly)")
+        .choice("precision", &DiffusionParams::precision, precision_names(),
+                "storage between iterations: f32, or f16 rounded like an RGBA16F texture")
+        .real("sigma0", &DiffusionParams::sigma0, "px", Range::left_open(0.0, 1000.0),
+              "inner scale of the input image (its own blur)")
+        .real("rho-max", &DiffusionParams::rho_max, "1", Range::left_open(0.0, 0.25),
+              "largest diffusion rate per iteration (0.25 is the 2-D stability limit); auto: 0.2 for "
+              "invariant-exact, 0.25 for the others")
+        .choice("edge-rate", &DiffusionParams::edge_rate, edge_rate_names(),
+                "rate on the edge between a pixel and its neighbour sample: harmonic (default; leak-free), "
+                "mean (the paper's eq. 12), min");
+    return d;
+  }();
+  return t;
+}
+
+const ParamTable<PrepareParams>& prepare_param_table() {
+  static const ParamTable<PrepareParams> t = [] {
+    ParamTable<PrepareParams> d("prepare");
+    d.real("sky-margin", &PrepareParams::sky_margin_px, "px", Range::at_least(0.0),
+           "width mu of the matted horizon between scene and sky; 0 disables the margin")
+        .real("s-max-factor", &PrepareParams::s_max_factor, "1", Range::left_open(1.0, 1e6),
+              "sky range S_max = factor * R_max; must exceed 1 so the sky lies beyond the scene")
+        .real("min-coverage", &PrepareParams::min_coverage, "1", Range::closed(0.0, 1.0),
+              "refuse maps whose known pixels cover less than this fraction (a projected lidar scan)")
+        .real("sky-min-fraction", &PrepareParams::sky_min_fraction, "1", Range::closed(0.0, 1.0),
+              "area fraction a top-touching unknown region needs to count as sky")
+        .real("sky-large-fraction", &PrepareParams::sky_large_fraction, "1", Range::closed(0.0, 1.0),
+              "area fraction an unknown region anywhere needs to count as sky")
+        .real("residual-tol", &PrepareParams::residual_tol, "1", Range::closed(1e-6, 0.1),
+              "the margin solve stops at max |discrete Laplacian| <= tol * S_max (below 1e-6 a float32 "
+              "output cannot hold it)")
+        .integer("ransac-iterations", &PrepareParams::ransac_iterations, "1", Range::closed(1, 1e6),
+                 "candidate fill values tried per hole")
+        .count("seed", &PrepareParams::seed, "1", Range::at_least(0.0),
+               "seed of the hole-filling RANSAC (results are deterministic for a seed)");
+    return d;
+  }();
+  return t;
+}
+
+namespace {
+
+ParamTable<Intrinsics> intrinsics_table() {
+  ParamTable<Intrinsics> k("depth");
+  k.real_or_unset("fx", &Intrinsics::fx, "px", Range::above(0.0), "focal length in pixels (x)", 0.0)
+      .real_or_unset("fy", &Intrinsics::fy, "px", Range::above(0.0), "focal length in pixels (y); auto: --fx", 0.0)
+      .real_or_unset("cx", &Intrinsics::cx, "px", Range::any(),
+                     "principal point x; auto: (W-1)/2 (pixel centres at integers)", NAN)
+      .real_or_unset("cy", &Intrinsics::cy, "px", Range::any(), "principal point y; auto: (H-1)/2", NAN);
+  return k;
+}
+
+}  // namespace
+
+const ParamTable<DepthSource>& depth_param_table() {
+  static const ParamTable<DepthSource> t = [] {
+    ParamTable<DepthSource> d("depth");
+    d.text("range", &DepthSource::range, "range map: metres from the camera centre along each pixel's ray; NaN, inf, 0 unknown")
+        .text("z", &DepthSource::z, "planar depth map in metres (needs --fx.. or --fov-x/--fov-y or --calib)")
+        .text("disparity", &DepthSource::disparity, "stereo disparity in px: PFM with --calib calib.txt, or a PNG with --fx --baseline")
+        .text("depth-buffer", &DepthSource::depth_buffer, "rasteriser window depth in [0,1] (--near --far --convention, --fov-y..)")
+        .text("inverse-depth", &DepthSource::inverse_depth, "monocular inverse depth: z = 1/(--inverse-scale v + --inverse-shift)")
+        .text("normalized-depth", &DepthSource::normalized_depth, "monocular depth in [0,1]: z = --near + v (--far - --near)")
+        .text("velodyne", &DepthSource::velodyne, "KITTI Velodyne scan (.bin) projected with --kitti-calib")
+        .text("depth-channel", &DepthSource::channel, "channel holding the depth in a multi-channel file (e.g. Z)")
+        .alias("range-channel")
+        .real("depth-scale", &DepthSource::depth_scale, "m", Range::above(0.0),
+              "metres per stored unit; required for integer range/z files (0.001 mm, 0.00390625 KITTI)")
+        .alias("range-scale")
+        .nest(&DepthSource::k, intrinsics_table())
+        .real_or_unset("fov-x", &DepthSource::fov_x_deg, "deg", Range::left_open(0.0, 180.0),
+                       "horizontal field of view, edge to edge", NAN)
+        .real_or_unset("fov-y", &DepthSource::fov_y_deg, "deg", Range::left_open(0.0, 180.0),
+                       "vertical field of view, edge to edge", NAN)
+        .text("calib", &DepthSource::calib, "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm)")
+        .real_or_unset("baseline", &DepthSource::baseline_m, "m", Range::above(0.0),
+                       "stereo baseline (without --calib)", NAN)
+        .real("disparity-scale", &DepthSource::disparity_scale, "1", Range::any(),
+              "disparity = scale * stored value + --disparity-offset")
+        .real("disparity-offset", &DepthSource::disparity_offset, "px", Range::any(),
+              "doffs / Middlebury 2005 dmin, in px of the disparity map")
+        .choice("convention", &DepthSource::convention, {"opengl", "d3d", "reversed-z"}, "depth-buffer convention")
+        .real_or_unset("near", &DepthSource::near_m, "m", Range::any(), "near plane (depth buffers, normalised depth)", NAN)
+        .real_or_unset("far", &DepthSource::far_m, "m", Range::any(),
+                       "far plane; inf = infinite far plane (depth buffers)", NAN)
+        .infinite()
+        .real_or_unset("inverse-scale", &DepthSource::inverse_scale, "1/m", Range::any(), "A in z = 1/(A v + B)", NAN)
+        .real("inverse-shift", &DepthSource::inverse_shift, "1/m", Range::any(), "B in z = 1/(A v + B)")
+        .text("kitti-calib", &DepthSource::kitti_calib, "KITTI calibration file for --velodyne")
+        .text("like", &DepthSource::like, "image whose size a --velodyne scan is projected to (when no --image is given)")
+        .integer("width", &DepthSource::width, "px", Range::closed(0, 65535), "image width for --velodyne; 0: from --like")
+        .integer("height", &DepthSource::height, "px", Range::closed(0, 65535), "image height for --velodyne; 0: from --like");
+    return d;
+  }();
+  return t;
+}
+
+Exec ExecOptions::exec() const {
+  Exec e;
+  e.threads = threads;
+  e.path = reference ? Path::reference : Path::fast;
+  e.backend = backend;
+  e.gpu_filter = gpu_filter;
+  if (reference && backend != Backend::cpu)
+    throw Error("--reference is the CPU's double-precision path; it cannot be combined with --backend " +
+                enum_name(backend_names(), backend));
+  return e;
+}
+
+const ParamTable<ExecOptions>& exec_param_table() {
+  static const ParamTable<ExecOptions> t = [] {
+    ParamTable<ExecOptions> d("execution");
+    d.integer("threads", &ExecOptions::threads, "1", Range::closed(0, 4096),
+              "worker threads (0 = all cores); results do not depend on it")
+        .boolean("reference", &ExecOptions::reference, "use the scalar double-precision reference path (slow; for checking)")
+        .choice("backend", &ExecOptions::backend, backend_names(),
+                "cpu, gpu (any OpenGL ES 3.2 context, software ones included) or auto (a hardware GPU when there "
+                "is one, else the CPU)")
+        .choice("gpu-filter", &ExecOptions::gpu_filter, gpu_filter_names(),
+                "GPU interpolation between texels: auto, hardware (texture units), shader (exact float weights)")
+        .boolean("timing", &ExecOptions::timing, "print the time of each pass (GPU timer queries where available)");
+    return d;
+  }();
+  return t;
+}
+
+const ParamTable<InputFiles>& input_param_table(bool with_depth) {
+  static const auto make = [](bool depth) {
+    ParamTable<InputFiles> d("input");
+    d.text("image", &InputFiles::image, "input colour image (PNG, JPEG, TIFF, EXR, PFM, HDR)")
+        .choice("image-transfer", &InputFiles::image_transfer, transfer_names(),
+                "transfer function of the input: auto (integer files sRGB, float files linear), srgb, linear");
+    if (depth) d.nest(&InputFiles::depth, depth_param_table());
+    return d;
+  };
+  static const ParamTable<InputFiles> with = make(true), without = make(false);
+  return with_depth ? with : without;
+}
+
+const ParamTable<RangeStep>& range_step_param_table() {
+  static const ParamTable<RangeStep> t = [] {
+    ParamTable<RangeStep> d("prepare");
+    d.choice("prepare", &RangeStep::mode, prepare_mode_names(),
+             "auto: fill holes, identify and matte the sky (Hansard 4.1) when the range has unknown pixels; "
+             "off: treat unknown range as R_max")
+        .nest(&RangeStep::params, prepare_param_table());
+    return d;
+  }();
+  return t;
+}
+
+const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& maps, bool main_required) {
+  // One table per distinct declaration list (effects keep theirs static).
+  static std::map<std::string, ParamTable<OutputFiles>> cache;
+  std::string key = main_required ? "1" : "0";
+  for (const auto& m : maps) key += std::string("|") + m.name;
+  auto it = cache.find(key);
+  if (it != cache.end()) return it->second;
+  ParamTable<OutputFiles> d("output");
+  d.text("out", &OutputFiles::out, "output image (.png .jpg .tif .exr .pfm .hdr)")
+      .choice("bits", &OutputFiles::bits, {"auto", "8", "16", "half", "float"},
+              "output storage: auto (PNG/TIFF: the input's 8 or 16 bits, else 16; JPEG 8; EXR/PFM/HDR float)")
+      .choice("out-transfer", &OutputFiles::transfer, transfer_names(),
+              "transfer function of the output: auto (sRGB for 8/16-bit, linear for float), srgb, linear")
+      .text("record", &OutputFiles::record, "write a JSON record of every parameter, derived value and input hash");
+  for (const MapOutput& m : maps) {
+    ParamSpec s;
+    s.name = m.name;
+    s.kind = ParamKind::text;
+    s.help = m.help;
+    const std::string name = m.name;
+    d.custom(
+        s,
+        [name](const OutputFiles& o) {
+          auto f = o.maps.find(name);
+          return nlohmann::json(f == o.maps.end() ? std::string() : f->second);
+        },
+        [name](OutputFiles& o, const nlohmann::json& v) {
+          const std::string path = v.get<std::string>();
+          if (path.empty()) o.maps.erase(name); else o.maps[name] = path;
+        });
+  }
+  return cache.emplace(key, std::move(d)).first->second;
+}
+
+// ---- steps ---------------------------------------------------------------------------
+LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
+  if (in.image.empty()) throw Error("no colour image given: use --image FILE");
+  LoadedInputs L;
+  L.rgb = read_color(in.image, in.image_transfer, &L.image_info);
+  L.record["image"] = file_record(in.image, L.image_info, L.rgb);
+  if (with_depth) {
+    L.depth = load_depth(in.depth, L.rgb.width, L.rgb.height);
+    if (L.depth.range.width != L.rgb.width || L.depth.range.height != L.rgb.height)
+      throw Error("depth '" + L.depth.path + "' is " + L.depth.range.size_string() + " but --image '" + in.image +
+                  "' is " + L.rgb.size_string() + "; they must be the same size (resample the depth map, or crop both)");
+    L.record["depth"] = L.depth.record;
+  }
+  return L;
+}
+
+std::size_t unknown_range_pixels(const Image& range) {
+  std::size_t n = 0;
+  for (float r : range.data) n += (std::isfinite(r) && r != 0.0f) ? 0 : 1;
+  return n;
+}
+
+void check_range_step(const RangeStep& step, const std::set<std::string>& given) {
+  prepare_param_table().validate(step.params);
+  if (step.mode == PrepareMode::off)
+    for (const auto& d : prepare_param_table().params())
+      if (prepare_param_table().is_set(step.params, d.spec.name, given))
+        throw Error("--" + d.spec.name + " is a preparation parameter, but --prepare off skips the preparation; "
+                    "drop --" + d.spec.name + " or use --prepare auto");
+}
+
+PreparedRange prepare_step(const Image& measured, const RangeStep& step, const std::set<std::string>& given) {
+  check_range_step(step, given);
+  PreparedRange out;
+  out.record = {{"mode", enum_name(prepare_mode_names(), step.mode)}, {"applied", false}};
+  if (step.mode == PrepareMode::automatic && unknown_range_pixels(measured) > 0) {
+    PrepareResult pr = prepare_range(measured, step.params);
+    out.record = prepare_record(step.params, pr);
+    out.range = std::move(pr.range);
+    out.applied = true;
+    out.record["mode"] = "auto";
+    out.record["applied"] = true;
+  } else {
+    out.range = measured;
+  }
+  return out;
+}
+
+BackendChoice::BackendChoice() = default;
+BackendChoice::~BackendChoice() = default;
+BackendChoice::BackendChoice(BackendChoice&&) noexcept = default;
+BackendChoice& BackendChoice::operator=(BackendChoice&&) noexcept = default;
+
+BackendChoice choose_backend(const Exec& exec) {
+  BackendChoice c;
+  c.record = {{"backend_requested", enum_name(backend_names(), exec.backend)},
+              {"backend", "cpu"},
+              {"path", exec.path == Path::reference ? "reference" : "fast"},
+              {"threads", exec.threads}};
+  if (exec.backend == Backend::cpu) return c;
+  if (exec.path == Path::reference)
+    throw Error("--reference is the CPU's double-precision path; it cannot be combined with --backend " +
+                enum_name(backend_names(), exec.backend));
+  GpuContext* g = exec.gpu;
+  if (!g) {
+    try {
+      c.owned = std::make_unique<GpuContext>();
+      g = c.owned.get();
+    } catch (const Error& e) {
+      if (exec.backend == Backend::gpu) throw;
+      std::fprintf(stderr, "brume: --backend auto: %s; running on the CPU\n", e.what());
+      c.record["gpu_unavailable"] = e.what();
+      return c;
+    }
+  }
+  if (exec.backend == Backend::automatic && g->info().software) {
+    // Measured here: llvmpipe ran haze 1.7-6x (blur up to 30x) slower than the CPU backend.
+    std::fprintf(stderr, "brume: --backend auto: the GPU '%s' is a software rasteriser, slower than the CPU backend; "
+                 "running on the CPU (--backend gpu forces it)\n", g->info().renderer.c_str());
+    c.record["gpu_skipped"] = "software renderer: " + g->info().renderer;
+    c.owned.reset();
+    return c;
+  }
+  c.gpu = g;
+  c.record["backend"] = "gpu";
+  c.record["gpu_filter"] = enum_name(gpu_filter_names(), exec.gpu_filter);
+  c.record["gpu"] = {{"renderer", g->info().renderer}, {"version", g->info().version},
+                     {"platform", g->info().platform}, {"software", g->info().software}};
+  return c;
+}
+
+void check_record_path(const std::string& path) {
+  fs::path dir = fs::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec))
+    throw Error("--record '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
+  if (::access(dir.c_str(), W_OK) != 0)
+    throw Error("--record '" + path + "': directory '" + dir.string() + "' is not writable");
+}
+
+namespace {
+
+WriteOptions map_options(const MapOutput& m) {
+  WriteOptions w;
+  w.is_color = false;
+  w.bits = "auto";
+  w.float_reason = m.float_reason ? m.float_reason : "";
+  return w;
+}
+
+const MapOutput& declared(const std::vector<MapOutput>& decl, const std::string& name) {
+  for (const auto& m : decl)
+    if (name == m.name) return m;
+  throw Error("internal: output map '" + name + "' is not declared");
+}
+
+WriteOptions main_options(const OutputFiles& o) {
+  WriteOptions w;
+  w.bits = o.bits;
+  w.transfer = o.transfer;
+  return w;
+}
+
+}  // namespace
+
+void check_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl) {
+  if (o.out.empty()) throw Error("no output given: use --out FILE");
+  check_writable(o.out, main_options(o), "--out");
+  for (const auto& [name, path] : o.maps) check_writable(path, map_options(declared(decl, name)), "--" + name);
+  if (!o.record.empty()) check_record_path(o.record);
+}
+
+void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, const Image& main,
+                   const std::map<std::string, Image>& maps, const FileInfo* input_info, const nlohmann::json& record) {
+  WriteOptions wo = main_options(o);
+  if (wo.bits == "auto" && input_info && input_info->integer && (input_info->bits == 8 || input_info->bits == 16)) {
+    std::string e = fs::path(o.out).extension().string();
+    for (char& ch : e) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    if (e == ".png" || e == ".tif" || e == ".tiff") wo.bits = std::to_string(input_info->bits);
+  }
+  wo.description = record.dump();
+  OutputSet outs;
+  outs.write(o.out, main, wo, "--out");
+  for (const auto& [name, path] : o.maps) {
+    auto it = maps.find(name);
+    if (it == maps.end()) throw Error("internal: the pipeline made no '" + name + "' map");
+    outs.write(path, it->second, map_options(declared(decl, name)), "--" + name);
+  }
+  if (!o.record.empty()) outs.write_text(o.record, record.dump(2) + "\n", "--record");
+  outs.commit();
+}
+
+nlohmann::json run_record_header(const std::string& command, const std::vector<std::string>& argv) {
+  nlohmann::json j = record_header(command, argv);
+  j["schema_version"] = kRecordSchemaVersion;
+  return j;
+}
+
+}  // namespace brume

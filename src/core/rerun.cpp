@@ -1,0 +1,95 @@
+// brume — `brume run record.json`: repeat the run a parameter record
+// describes. The record's "job" holds every declared parameter of the
+// command (brume/params.hpp), so the same declaration that made the flags
+// reads it back; nothing here knows an effect's parameters.
+#include <filesystem>
+#include <functional>
+#include <map>
+
+#include "brume/blur.hpp"
+#include "brume/depth_pipeline.hpp"
+#include "brume/error.hpp"
+#include "brume/haze.hpp"
+#include "brume/io.hpp"
+#include "brume/pipeline.hpp"
+
+namespace fs = std::filesystem;
+
+namespace brume {
+
+namespace {
+
+// Every {"path", "sha256"} below `j` must still match the file on disk: a
+// record describes a run on those bytes, not on whatever now has the name.
+void verify_inputs(const nlohmann::json& j) {
+  if (j.is_object()) {
+    if (j.contains("path") && j.contains("sha256") && j["path"].is_string() && j["sha256"].is_string()) {
+      const std::string path = j["path"].get<std::string>();
+      std::error_code ec;
+      if (!fs::exists(path, ec))
+        throw Error("the record's input '" + path + "' does not exist; run from the directory the record was made "
+                    "in, or restore the file");
+      if (sha256_file(path) != j["sha256"].get<std::string>())
+        throw Error("the record's input '" + path + "' has changed since the record was made (SHA-256 differs); "
+                    "the run would not be the one recorded");
+    }
+    for (const auto& [k, v] : j.items()) verify_inputs(v);
+  } else if (j.is_array()) {
+    for (const auto& v : j) verify_inputs(v);
+  }
+}
+
+// Outputs are the text parameters of the "output" block (and depth
+// prepare's --masks directory): moved into out_dir under their file names.
+template <class J>
+void redirect_outputs(J& job, const ParamTable<J>& t, const std::string& out_dir) {
+  if (out_dir.empty()) return;
+  std::error_code ec;
+  fs::create_directories(out_dir, ec);
+  if (!fs::is_directory(out_dir)) throw Error("--out-dir '" + out_dir + "' cannot be created: " + ec.message());
+  for (const auto& d : t.params()) {
+    if (d.spec.block != "output" || d.spec.kind != ParamKind::text) continue;
+    const std::string v = d.get(job).template get<std::string>();
+    if (v.empty()) continue;
+    fs::path p(v);
+    d.set(job, (fs::path(out_dir) / p.filename()).string());
+  }
+}
+
+// Every parameter is recorded, so none counts as "given": conflicts are
+// judged against the defaults, as for a library caller.
+template <class J>
+J job_from(const nlohmann::json& record, const ParamTable<J>& t, const std::string& out_dir) {
+  J job;
+  t.from_json(job, record.at("job"), "record 'job'");
+  redirect_outputs(job, t, out_dir);
+  return job;
+}
+
+}  // namespace
+
+nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, const std::string& out_dir,
+                     const std::vector<std::string>& argv) {
+  if (!record.is_object() || record.value("tool", "") != "brume")
+    throw Error("not a brume parameter record (no \"tool\": \"brume\")");
+  const int version = record.value("schema_version", 1);
+  if (version != kRecordSchemaVersion || !record.contains("job"))
+    throw Error("this record has schema_version " + std::to_string(version) + "; brume run reads version " +
+                std::to_string(kRecordSchemaVersion) + " (records written by brume " BRUME_VERSION
+                " and later, which hold the whole job)");
+  const std::string cmd = record.value("command", "");
+  if (record.contains("inputs")) verify_inputs(record["inputs"]);
+  if (record.contains("depth")) verify_inputs(record["depth"]);
+  RunContext ctx;
+  ctx.argv = argv;
+  if (cmd == "haze") return run_haze_job(job_from(record, haze_job_table(), out_dir), exec, ctx);
+  if (cmd == "blur") return run_blur_job(job_from(record, blur_job_table(), out_dir), exec, ctx);
+  if (cmd == "depth convert")
+    return run_depth_convert_job(job_from(record, depth_convert_job_table(), out_dir), ctx);
+  if (cmd == "depth prepare")
+    return run_depth_prepare_job(job_from(record, depth_prepare_job_table(), out_dir), ctx);
+  throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, blur, depth convert, "
+              "depth prepare can)");
+}
+
+}  // namespace brume

@@ -1,0 +1,123 @@
+// brume — depth conversion and preparation as pipelines (brume/depth_pipeline.hpp).
+#include "brume/depth_pipeline.hpp"
+
+#include <cstdio>
+#include <filesystem>
+
+#include "brume/depth.hpp"
+#include "brume/error.hpp"
+#include "brume/io.hpp"
+#include "brume/record.hpp"
+
+namespace fs = std::filesystem;
+
+namespace brume {
+
+namespace {
+
+WriteOptions metres(const char* why) {
+  WriteOptions w;
+  w.is_color = false;
+  w.float_reason = why;
+  return w;
+}
+
+}  // namespace
+
+const ParamTable<DepthConvertJob>& depth_convert_job_table() {
+  static const ParamTable<DepthConvertJob> t = [] {
+    ParamTable<DepthConvertJob> d("output");
+    d.nest(&DepthConvertJob::depth, depth_param_table())
+        .choice("kind", &DepthConvertJob::kind, {"range", "z"}, "range (metres along the ray) or z (planar depth)")
+        .text("out", &DepthConvertJob::out, "output float file (.exr, .pfm, .tif)")
+        .text("record", &DepthConvertJob::record, "write a JSON record of the conversion");
+    return d;
+  }();
+  return t;
+}
+
+nlohmann::json run_depth_convert_job(const DepthConvertJob& job, const RunContext& ctx) {
+  depth_convert_job_table().validate(job);
+  const WriteOptions data = metres("depth in metres needs a float file");
+  if (job.out.empty()) throw Error("no output given: use --out FILE");
+  check_writable(job.out, data, "--out");
+  if (!job.record.empty()) check_record_path(job.record);
+  LoadedDepth ld = load_depth(job.depth);
+  Image result = ld.range;
+  nlohmann::json rec = run_record_header("depth convert", ctx.argv);
+  rec["job"] = depth_convert_job_table().to_json(job);
+  rec["depth"] = ld.record;
+  rec["kind"] = job.kind;
+  if (job.kind == "z") {
+    Intrinsics k;
+    if (!job.depth.velodyne.empty()) {
+      KittiCalib c = read_kitti_calib(job.depth.kitti_calib);  // camera 2's K from P2
+      k.fx = c.P2[0], k.fy = c.P2[5], k.cx = c.P2[2], k.cy = c.P2[6];
+    } else {
+      k = depth_intrinsics(job.depth, result.width, result.height);
+    }
+    result = range_to_z(result, k);
+    rec["z_intrinsics"] = {{"fx_px", k.fx}, {"fy_px", k.fy}, {"cx_px", k.cx}, {"cy_px", k.cy}};
+  }
+  rec["result"] = {{"width", result.width}, {"height", result.height},
+                   {"unknown_pixels", unknown_range_pixels(result)}};
+  WriteOptions w = data;
+  w.description = rec.dump();
+  OutputSet outs;
+  outs.write(job.out, result, w, "--out");
+  if (!job.record.empty()) outs.write_text(job.record, rec.dump(2) + "\n", "--record");
+  outs.commit();
+  return rec;
+}
+
+const ParamTable<DepthPrepareJob>& depth_prepare_job_table() {
+  static const ParamTable<DepthPrepareJob> t = [] {
+    ParamTable<DepthPrepareJob> d("output");
+    d.nest(&DepthPrepareJob::depth, depth_param_table())
+        .nest(&DepthPrepareJob::prepare, prepare_param_table())
+        .text("out", &DepthPrepareJob::out, "prepared range, float file (.exr, .pfm, .tif)")
+        .text("masks", &DepthPrepareJob::masks, "directory for sky.png, holes.png, margin.png and prepared-preview.png")
+        .text("record", &DepthPrepareJob::record, "write a JSON record of what was done");
+    return d;
+  }();
+  return t;
+}
+
+nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContext& ctx) {
+  depth_prepare_job_table().validate(job);
+  const WriteOptions data = metres("a range in metres needs a float file");
+  if (job.out.empty()) throw Error("no output given: use --out FILE");
+  check_writable(job.out, data, "--out");
+  if (!job.record.empty()) check_record_path(job.record);
+  if (!job.masks.empty()) {
+    std::error_code ec;
+    fs::create_directories(job.masks, ec);
+    if (!fs::is_directory(job.masks)) throw Error("--masks '" + job.masks + "' cannot be created: " + ec.message());
+  }
+  LoadedDepth ld = load_depth(job.depth, 0, 0);
+  PrepareResult pr = prepare_range(ld.range, job.prepare);
+  nlohmann::json rec = run_record_header("depth prepare", ctx.argv);
+  rec["job"] = depth_prepare_job_table().to_json(job);
+  rec["depth"] = ld.record;
+  rec["prepare"] = prepare_record(job.prepare, pr);
+  WriteOptions w = data;
+  w.description = rec.dump();
+  OutputSet outs;
+  outs.write(job.out, pr.range, w, "--out");
+  if (!job.masks.empty()) {
+    WriteOptions m;
+    m.is_color = false;
+    m.bits = "8";
+    outs.write((fs::path(job.masks) / "sky.png").string(), pr.sky_mask, m, "--masks");
+    outs.write((fs::path(job.masks) / "holes.png").string(), pr.hole_mask, m, "--masks");
+    outs.write((fs::path(job.masks) / "margin.png").string(), pr.margin_mask, m, "--masks");
+    WriteOptions c;
+    c.bits = "8";
+    outs.write((fs::path(job.masks) / "prepared-preview.png").string(), range_preview(pr.range), c, "--masks");
+  }
+  if (!job.record.empty()) outs.write_text(job.record, rec.dump(2) + "\n", "--record");
+  outs.commit();
+  return rec;
+}
+
+}  // namespace brume

@@ -1,0 +1,94 @@
+// brume — the haze pipeline: what `brume haze` does, as a library call, in
+// the shape every effect follows (brume/pipeline.hpp): analyse the measured
+// range, prepare it, dispatch once on Exec, record.
+#include <chrono>
+#include <cstdio>
+
+#include "brume/error.hpp"
+#include "brume/gpu.hpp"
+#include "brume/haze.hpp"
+#include "brume/record.hpp"
+
+namespace brume {
+
+const std::vector<MapOutput>& haze_map_outputs() {
+  static const std::vector<MapOutput> m = {
+      {"transmission", "write the blurred transmission (alpha after diffusion), 1 channel", ""},
+      {"scale-map", "write the target scale sigma(x) in pixels (float file)", "sigma is in pixels and exceeds 1"},
+  };
+  return m;
+}
+
+const ParamTable<HazeJob>& haze_job_table() {
+  static const ParamTable<HazeJob> t = [] {
+    ParamTable<HazeJob> d("haze");
+    d.nest(&HazeJob::input, input_param_table(true))
+        .nest(&HazeJob::prepare, range_step_param_table())
+        .nest(&HazeJob::haze, haze_param_table())
+        .nest(&HazeJob::output, output_param_table(haze_map_outputs()));
+    return d;
+  }();
+  return t;
+}
+
+HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams& p, const RangeStep& prepare,
+                 const Exec& exec, const std::set<std::string>& given) {
+  validate_haze(p, given);
+  HazeRun run;
+  // Image-wide statistics (R_max, the airlight from the sky) come from the
+  // measured range; the effect then runs on the prepared one, whose sky lies
+  // at S_max > R_max (so it gets the far transmission and sigma_max).
+  run.analysis = analyse_haze(rgb, measured_range, p);
+  PreparedRange prep = prepare_step(measured_range, prepare, given);
+  BackendChoice backend = choose_backend(exec);
+  const auto t0 = std::chrono::steady_clock::now();
+  nlohmann::json timing;
+  if (backend.gpu) {
+    GpuHaze gh(*backend.gpu, rgb, prep.range);
+    run.result = gh.render(p, run.analysis, exec.gpu_filter);
+    const GpuTiming& t = gh.timing();
+    timing = {{"clock", t.gpu_timer ? "timer queries" : "glFinish wall time"}, {"upload_ms", t.upload_ms},
+              {"premultiply_ms", t.premultiply_ms}, {"diffusion_ms", t.diffuse_ms}, {"passes", t.iterations},
+              {"composite_ms", t.composite_ms}, {"read_back_ms", t.readback_ms}};
+  } else {
+    run.result = apply_haze(rgb, prep.range, p, run.analysis, exec);
+    timing = {{"clock", "wall"}, {"total_ms", std::chrono::duration<double, std::milli>(
+                                                  std::chrono::steady_clock::now() - t0).count()},
+              {"iterations", run.analysis.plan.iterations}};
+  }
+  run.record["haze"] = haze_record(p, run.analysis);
+  if (prep.applied)
+    run.record["haze"]["derived"]["unknown_range_rule"] =
+        "prepared: holes filled, sky at S_max, horizon margin matted (see prepare)";
+  run.record["prepare"] = prep.record;
+  run.record["execution"] = backend.record;
+  run.record["execution"]["timing"] = timing;
+  return run;
+}
+
+nlohmann::json run_haze_job(const HazeJob& job, const ExecOptions& eo, const RunContext& ctx) {
+  // Every parameter is checked before any file is touched, whatever the input.
+  haze_job_table().validate(job);
+  validate_haze(job.haze, ctx.given);
+  check_range_step(job.prepare, ctx.given);
+  const Exec exec = eo.exec();
+  check_outputs(job.output, haze_map_outputs());
+
+  LoadedInputs in = load_inputs(job.input, true);
+  HazeRun run = run_haze(in.rgb, in.depth.range, job.haze, job.prepare, exec, ctx.given);
+
+  nlohmann::json rec = run_record_header("haze", ctx.argv);
+  rec["job"] = haze_job_table().to_json(job);
+  rec["inputs"] = in.record;
+  rec.update(run.record);
+  if (eo.timing) {
+    const auto& t = run.record["execution"]["timing"];
+    std::fprintf(stderr, "brume haze: %s: %s\n", rec["execution"]["backend"].get<std::string>().c_str(),
+                 t.dump().c_str());
+  }
+  write_outputs(job.output, haze_map_outputs(), run.result.rgb,
+                {{"transmission", run.result.transmission}, {"scale-map", run.result.scale}}, &in.image_info, rec);
+  return rec;
+}
+
+}  // namespace brume

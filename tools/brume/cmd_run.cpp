@@ -1,0 +1,36 @@
+// brume run — repeat a run from its parameter record.
+#include <cstdio>
+#include <fstream>
+
+#include "brume/error.hpp"
+#include "cli.hpp"
+
+namespace brume::cli {
+
+Command add_run(CLI::App& app) {
+  CLI::App* sub = app.add_subcommand(
+      "run", "repeat the run a parameter record describes (--record FILE.json of haze, blur, depth convert/prepare)");
+  auto path = std::make_shared<std::string>();
+  auto out_dir = std::make_shared<std::string>();
+  sub->add_option("record", *path, "the JSON record (or a record embedded in nothing else: the file itself)")->required();
+  sub->add_option("--out-dir", *out_dir, "write every output into this directory under its recorded file name "
+                                         "(default: the recorded paths)");
+  auto exec = std::make_shared<ExecOptions>();
+  auto eflags = std::make_shared<Flags<ExecOptions>>(sub, exec_param_table());
+  return {sub, "run", [=](const std::vector<std::string>& argv) {
+            eflags->apply(*exec);
+            std::ifstream in(*path);
+            if (!in) throw Error("record '" + *path + "' cannot be read");
+            nlohmann::json rec;
+            try {
+              rec = nlohmann::json::parse(in);
+            } catch (const nlohmann::json::exception& e) {
+              throw Error("record '" + *path + "' is not JSON: " + e.what());
+            }
+            const nlohmann::json out = rerun(rec, *exec, *out_dir, argv);
+            std::fprintf(stderr, "brume run: repeated '%s' from %s\n", out.value("command", "?").c_str(), path->c_str());
+            return 0;
+          }};
+}
+
+}  // namespace brume::cli
