@@ -8,6 +8,7 @@
 #include <optional>
 #include <string>
 
+#include "brume/camera.hpp"
 #include "brume/depth.hpp"
 #include "brume/image.hpp"
 
@@ -55,5 +56,12 @@ LoadedDepth load_depth(const DepthSource& src, int width = 0, int height = 0);
 // Intrinsics from the source's flags (--fx.., --fov-x.., or calib.txt), for a
 // width x height image; throws when none were given.
 Intrinsics depth_intrinsics(const DepthSource& src, int width, int height);
+
+// The camera the depth was seen from, for a width x height image (both > 0):
+// KITTI lidar (--velodyne with --kitti-calib) takes camera 2's K from P2
+// (fx = P2[0], fy = P2[5], cx = P2[2], cy = P2[6]); every other source its
+// depth_intrinsics. The pose comes from `pose` (default: level, looking north,
+// height unknown); make_camera validates it.
+Camera depth_camera(const DepthSource& src, int width, int height, const CameraPose& pose = {});
 
 }  // namespace brume

@@ -33,6 +33,18 @@ Intrinsics depth_intrinsics(const DepthSource& s, int width, int height) {
   throw Error("planar depth needs the camera: give --fx (and --fy, --cx, --cy), or --fov-x/--fov-y, or --calib calib.txt");
 }
 
+Camera depth_camera(const DepthSource& s, int width, int height, const CameraPose& pose) {
+  if (!s.velodyne.empty()) {
+    if (s.kitti_calib.empty()) throw Error("--velodyne needs --kitti-calib FILE (P2, R0_rect, Tr_velo_to_cam)");
+    // The lidar is projected into rectified camera 2: P2 = K [I | t], so K is P2's left 3x3.
+    const KittiCalib c = read_kitti_calib(s.kitti_calib);
+    Intrinsics k;
+    k.fx = c.P2[0], k.fy = c.P2[5], k.cx = c.P2[2], k.cy = c.P2[6];
+    return make_camera(k, width, height, pose);
+  }
+  return make_camera(depth_intrinsics(s, width, height), width, height, pose);
+}
+
 namespace {
 
 nlohmann::json intrinsics_record(const Intrinsics& k) {
