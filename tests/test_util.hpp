@@ -14,6 +14,7 @@
 #include "brume/diffusion.hpp"
 #include "brume/image.hpp"
 #include "brume/io.hpp"
+#include "brume_reference.hpp"
 
 namespace brume {
 // Readable parameter names in test output (found by argument-dependent lookup).
@@ -34,41 +35,10 @@ inline bool have_data(const std::string& rel) { return std::filesystem::exists(d
                    << "' is absent; this real-data test needs ../shared/data beside the repo"; \
   } while (0)
 
-// Half-sample mirror, written independently of the library's.
-inline int reflect(int i, int n) {
-  while (i < 0 || i >= n) i = i < 0 ? -1 - i : 2 * n - 1 - i;
-  return i;
-}
-
-// True Gaussian convolution in double precision: sampled kernel of radius
-// ceil(5 sigma) (truncation < 6e-7 of the mass), normalised, separable, with
-// the half-sample mirror boundary. Channels are independent.
-inline Image gaussian_reference(const Image& in, double sigma) {
-  const int W = in.width, H = in.height, C = in.channels;
-  if (sigma <= 0.0) return in;
-  const int r = static_cast<int>(std::ceil(5.0 * sigma));
-  std::vector<double> k(2 * r + 1);
-  double sum = 0.0;
-  for (int i = -r; i <= r; ++i) sum += k[i + r] = std::exp(-0.5 * i * i / (sigma * sigma));
-  for (double& v : k) v /= sum;
-  std::vector<double> tmp(in.data.size());
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x)
-      for (int c = 0; c < C; ++c) {
-        double a = 0.0;
-        for (int i = -r; i <= r; ++i) a += k[i + r] * in.data[(static_cast<size_t>(y) * W + reflect(x + i, W)) * C + c];
-        tmp[(static_cast<size_t>(y) * W + x) * C + c] = a;
-      }
-  Image out(W, H, C);
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x)
-      for (int c = 0; c < C; ++c) {
-        double a = 0.0;
-        for (int i = -r; i <= r; ++i) a += k[i + r] * tmp[(static_cast<size_t>(reflect(y + i, H)) * W + x) * C + c];
-        out.data[(static_cast<size_t>(y) * W + x) * C + c] = static_cast<float>(a);
-      }
-  return out;
-}
+// The independent mirror and Gaussian references (study/reference), shared
+// with `brume study`.
+using reference::gaussian_reference;
+using reference::reflect;
 
 struct Diff {
   double max_abs = 0.0, rms = 0.0, psnr = 0.0;

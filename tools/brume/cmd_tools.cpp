@@ -3,11 +3,9 @@
 // declared here (run_demo and run_study live with their modules).
 #include <memory>
 
+#include "brume_study/study.hpp"
 #include "cli.hpp"
-
-int run_demo(const std::string& dir, int width, int height, int threads);
-int run_study(const std::string& what, const std::string& out_dir, bool quick, const std::string& backend,
-              const std::string& image_path);
+#include "demo.hpp"
 
 namespace brume::cli {
 

@@ -12,6 +12,7 @@
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
 #include "brume/record.hpp"
+#include "demo.hpp"
 
 namespace fs = std::filesystem;
 using namespace brume;

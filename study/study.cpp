@@ -8,7 +8,7 @@
 //   per-axis standard deviation an impulse reaches (target
 //   sqrt(sigma^2 - sigma0^2)). Rows for brume's three schemes in f32 and f16
 //   on each backend, and for the peers "gather" (direct Gaussian, radius
-//   3 s) and "mipmap" (include/brume/peers.hpp).
+//   3 s) and "mipmap" (study/include/brume/peers.hpp).
 // speed.csv: method,precision,backend,sigma,seconds,iterations,map,runs
 //   on a 1600x1120 image (timings do not depend on content, except the
 //   gather's on the map): map "constant" is sigma everywhere (the paper's
@@ -56,8 +56,9 @@
 #include "brume/gpu.hpp"
 #include "brume/io.hpp"
 #include "brume/peers.hpp"
-#include "cpu/diffusion_kernels.hpp"
-#include "depth/opencv.hpp"
+#include "brume_reference.hpp"
+#include "brume_study/study.hpp"
+#include "opencv.hpp"
 #include "plot.hpp"
 
 namespace fs = std::filesystem;
@@ -66,33 +67,9 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-// True Gaussian reference in double (separable, radius 5 sigma, mirror), RGB only.
-Image gaussian(const Image& in, double sigma) {
-  const int W = in.width, H = in.height, C = in.channels;
-  const int r = static_cast<int>(std::ceil(5.0 * sigma));
-  std::vector<double> k(2 * r + 1), tmp(in.data.size());
-  double sum = 0;
-  for (int i = -r; i <= r; ++i) sum += k[i + r] = std::exp(-0.5 * i * i / (sigma * sigma));
-  for (double& v : k) v /= sum;
-#pragma omp parallel for schedule(static)
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x)
-      for (int c = 0; c < 3; ++c) {
-        double a = 0;
-        for (int i = -r; i <= r; ++i) a += k[i + r] * in.data[(static_cast<std::size_t>(y) * W + cpu::mirror(x + i, W)) * C + c];
-        tmp[(static_cast<std::size_t>(y) * W + x) * C + c] = a;
-      }
-  Image out(W, H, C, 1.0f);
-#pragma omp parallel for schedule(static)
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x)
-      for (int c = 0; c < 3; ++c) {
-        double a = 0;
-        for (int i = -r; i <= r; ++i) a += k[i + r] * tmp[(static_cast<std::size_t>(cpu::mirror(y + i, H)) * W + x) * C + c];
-        out.data[(static_cast<std::size_t>(y) * W + x) * C + c] = static_cast<float>(a);
-      }
-  return out;
-}
+// True Gaussian reference in double (separable, radius 5 sigma, mirror), RGB
+// only: the tests' independent reference (study/reference).
+Image gaussian(const Image& in, double sigma) { return reference::gaussian_reference(in, sigma, 3); }
 
 double rms_rgb(const Image& a, const Image& b, int border) {
   double ss = 0;

@@ -1,4 +1,4 @@
-// brume — peers of the diffusion engine, for the study (include/brume/peers.hpp).
+// brume — peers of the diffusion engine, for the study (study/include/brume/peers.hpp).
 //
 // Written to be fair competitors, not straw men: the gather is vectorised
 // over the four channels and threaded over rows; the mip-map uses
@@ -14,11 +14,20 @@
 
 #include "brume/error.hpp"
 #include "brume/peers.hpp"
-#include "cpu/diffusion_kernels.hpp"
-#include "depth/opencv.hpp"
+#include "opencv.hpp"
 
 namespace brume::peers {
 namespace {
+
+// Half-sample mirror of an index into [0, n): ... 2 1 0 | 0 1 2 ... n-1 | n-1 ...
+// (the library's boundary, so the peers and diffusion see the same picture).
+int mirror(int i, int n) {
+  if (i >= 0 && i < n) return i;
+  const int period = 2 * n;
+  i %= period;
+  if (i < 0) i += period;
+  return i < n ? i : period - 1 - i;
+}
 
 typedef float v4 __attribute__((vector_size(16)));
 
@@ -70,13 +79,13 @@ void gather_blur(Image& f, const Image& sigma, double sigma0, double radius_sigm
         const bool inside_x = x - r >= 0 && x + r < W;
         v4 acc = {0, 0, 0, 0};
         for (int dy = -r; dy <= r; ++dy) {
-          const float* row = src.row(cpu::mirror(y + dy, H));
+          const float* row = src.row(mirror(y + dy, H));
           v4 racc = {0, 0, 0, 0};
           if (inside_x) {
             const float* p = row + (x - r) * 4;
             for (int i = 0; i <= 2 * r; ++i) racc += g[i] * load4(p + 4 * i);
           } else {
-            for (int i = -r; i <= r; ++i) racc += g[i + r] * load4(row + 4 * cpu::mirror(x + i, W));
+            for (int i = -r; i <= r; ++i) racc += g[i + r] * load4(row + 4 * mirror(x + i, W));
           }
           acc += g[dy + r] * racc;
         }

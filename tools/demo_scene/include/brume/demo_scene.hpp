@@ -5,7 +5,10 @@
 // blue sky; ranges from 3 m to about 1.25 km) with exact per-pixel range, used to
 // demonstrate and test the haze effects without any external data. The camera
 // is 1.6 m above the ground, pitched 5 degrees down, 55 degree vertical field
-// of view. See src/effects/demo_scene.cpp for its layout and units.
+// of view. See tools/demo_scene/demo_scene.cpp for its layout and units.
+//
+// Not part of the installed library: the static library brume_demo_scene,
+// linked by the CLI, the study, the tests and the benchmarks.
 #pragma once
 
 #include "brume/image.hpp"

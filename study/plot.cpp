@@ -17,7 +17,7 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
-#include "depth/opencv.hpp"
+#include "opencv.hpp"
 
 namespace brume::plot {
 namespace {

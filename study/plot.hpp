@@ -12,7 +12,7 @@
 
 #include "brume/image.hpp"
 #include "brume/io.hpp"
-#include "depth/opencv.hpp"
+#include "opencv.hpp"
 
 namespace brume::plot {
 
