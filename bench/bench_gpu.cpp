@@ -52,8 +52,7 @@ int main(int argc, char** argv) {
               ctx.info().renderer.c_str(), ctx.info().version.c_str(), ctx.info().platform.c_str(), runs);
   std::printf("| size | scheme | precision | sigma_max px | passes | GPU premultiply+diffusion+composite ms | per pass ms | re-render ms | timer | CPU backend ms |\n");
   std::printf("|---|---|---|---:|---:|---:|---:|---:|---|---:|\n");
-  const bool software = ctx.info().renderer.find("llvmpipe") != std::string::npos ||
-                        ctx.info().renderer.find("softpipe") != std::string::npos;
+  const bool software = ctx.info().software;
   for (auto [w, h] : sizes) {
     DemoScene scene = render_demo_scene(w, h);
     struct Case {
