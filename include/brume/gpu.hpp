@@ -1,7 +1,8 @@
 // brume — GPU backend: the haze pipeline as OpenGL ES 3.2 fragment passes
-// over a headless EGL context (Hansard §4.2): one premultiply pass, N
-// diffusion passes ping-ponging between two full-resolution RGBA32F (f32) or
-// RGBA16F (f16) textures, one composite pass. The per-pixel maths is
+// over a headless EGL context (Hansard §4.2): one premultiply pass, one rate
+// pass (sigma -> rho, R32F), N diffusion passes ping-ponging between two
+// full-resolution RGBA32F (f32) or RGBA16F (f16) textures, one composite
+// pass. The per-pixel maths is
 // src/shared/*.glsl (diffusion_math, haze_math), the same text the CPU
 // backend compiles as C++.
 //

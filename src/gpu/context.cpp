@@ -374,11 +374,9 @@ GpuImage::GpuImage(GpuContext& ctx, const Image& img, Precision storage) : chann
 GpuImage::GpuImage(GpuImage&& o) noexcept : tex_(std::exchange(o.tex_, {})), channels_(o.channels_) {}
 
 GpuImage& GpuImage::operator=(GpuImage&& o) noexcept {
-  if (this != &o) {
-    this->~GpuImage();
-    tex_ = std::exchange(o.tex_, {});
-    channels_ = o.channels_;
-  }
+  // o takes our texture and deletes it when it goes.
+  std::swap(tex_, o.tex_);
+  std::swap(channels_, o.channels_);
   return *this;
 }
 
