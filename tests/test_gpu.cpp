@@ -191,3 +191,146 @@ TEST(Gpu, ReRenderWithoutReuploadEqualsAFreshRender) {
   EXPECT_EQ(second.rgb.data, direct.rgb.data);
   EXPECT_GT(reused.timing().iterations, 0);
 }
+
+TEST(Gpu, SoftwareRasteriserIsMarkedSoftware) {
+  // --backend auto must not pick llvmpipe (it measured slower than the CPU
+  // backend): GpuInfo::software, set at context creation from the EGL device
+  // extension or the renderer string, has to say so. CI's renderer is llvmpipe.
+  BRUME_REQUIRE_GPU(ctx);
+  const std::string& r = ctx->info().renderer;
+  if (r.find("llvmpipe") == std::string::npos && r.find("softpipe") == std::string::npos)
+    GTEST_SKIP() << "renderer '" << r << "' is not Mesa's software rasteriser";
+  EXPECT_TRUE(ctx->info().software) << r;
+}
+
+namespace {
+// A small scene for the pass-layer tests: a checker with a range ramp.
+void small_scene(int w, int h, Image& rgb, Image& range) {
+  rgb = Image(w, h, 3);
+  range = Image(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = ((x / 4 + y / 4 + c) % 2) ? 0.8f : 0.2f;
+      range.at(x, y) = 1.0f + 0.5f * y;
+    }
+}
+}  // namespace
+
+TEST(Gpu, ThrowMidRenderLeaksNoGlObject) {
+  // A render that throws after it has made targets and started a timer query
+  // (here: an analysis planned for another scheme, refused by the rate pass
+  // after the premultiply pass ran) must leave every GL object owned: the
+  // GpuHaze's own textures and targets while it lives, nothing once it is
+  // gone, and the context usable (no query left running) for the next render.
+  BRUME_REQUIRE_GPU(ctx);
+  Image rgb, range;
+  small_scene(40, 30, rgb, range);
+  HazeParams p;
+  p.kappa_s = 1.0;
+  p.lambda = 6.0;
+  const HazeAnalysis a = analyse_haze(rgb, range, p);
+  HazeParams wrong = p;
+  wrong.diffusion.scheme = Scheme::standard;  // a.plan is invariant-exact's N
+  ASSERT_NE(plan_diffusion(wrong.diffusion, a.sigma_max).iterations, a.plan.iterations);
+  HazeResult clean;
+  {
+    GpuHaze warm(*ctx, rgb, range);  // compiles every program the render uses (they stay cached)
+    clean = warm.render(p, a);
+  }
+  const GpuObjectCounts before = gpu_live_objects();
+  {
+    GpuHaze gh(*ctx, rgb, range);
+    EXPECT_THROW(gh.render(wrong, a), Error);
+    const GpuObjectCounts during = gpu_live_objects();
+    // Inputs (2) + targets (F ping/pong, aux, rates, out) stay with the
+    // GpuHaze, and its two framebuffers; the rate pass's framebuffer and the
+    // stage timer's query were released by the throw.
+    EXPECT_EQ(during.textures, before.textures + 7);
+    EXPECT_EQ(during.framebuffers, before.framebuffers + 2);
+    EXPECT_EQ(during.queries, before.queries);
+    const HazeResult after = gh.render(p, a);  // the context still renders, to the same bits
+    EXPECT_EQ(after.rgb.data, clean.rgb.data);
+  }
+  EXPECT_EQ(gpu_live_objects(), before);
+  {
+    // The texture-level pass: a refused call leaves the caller's textures as
+    // the only objects, and they go with their GpuImages.
+    GpuImage f0(*ctx, 40, 30, 4), f1(*ctx, 40, 30, 4), small_rates(*ctx, 20, 30, 1);
+    DiffusionParams dp;
+    EXPECT_THROW(gpu_diffuse_textures(*ctx, f0.texture(), f1.texture(), small_rates.texture(), dp,
+                                      plan_diffusion(dp, 5.0)),
+                 Error);
+    EXPECT_EQ(gpu_live_objects().textures, before.textures + 3);
+  }
+  EXPECT_EQ(gpu_live_objects(), before);
+}
+
+TEST(Gpu, TexturePassesMatchCpuReference) {
+  // The public texture-level layer (gpu_diffusion_rates + gpu_diffuse_textures
+  // on GpuImages) against brume::diffuse's double reference on a non-square
+  // image with a space-variant scale and a sharp step: RMS <= 1e-3 as for the
+  // other f32 GPU-vs-CPU tests (float storage and the GPU's own exp/log; the
+  // hardware filter's fixed-point weights stay within it, as in the haze
+  // test). The result must be in the texture result_index names.
+  BRUME_REQUIRE_GPU(ctx);
+  const int w = 97, h = 61;
+  Image f(w, h, 4, 1.0f), map(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c) f.at(x, y, c) = 0.5f + 0.45f * std::sin(0.9f * x + 0.6f * y + 2.0f * c);
+      map.at(x, y) = x < 40 ? 1.0f + 0.08f * x : 7.0f - 0.05f * y;  // a step at x = 40
+    }
+  for (Scheme s : {Scheme::invariant_exact, Scheme::standard})
+    for (GpuFilter filt : {GpuFilter::shader, GpuFilter::hardware}) {
+      if (filt == GpuFilter::hardware && !ctx->info().float_linear) continue;
+      DiffusionParams dp;
+      dp.scheme = s;
+      const DiffusionPlan plan = plan_diffusion(dp, 7.0);
+      Image cpu = f;
+      Exec ref;
+      ref.path = Path::reference;
+      diffuse(cpu, map, 7.0, dp, ref);
+      GpuImage ping(*ctx, f), pong(*ctx, w, h, 4), sigma(*ctx, map), rates(*ctx, w, h, 1);
+      gpu_diffusion_rates(*ctx, sigma.texture(), rates.texture(), dp, plan);
+      int index = -1;
+      gpu_diffuse_textures(*ctx, ping.texture(), pong.texture(), rates.texture(), dp, plan, filt, &index);
+      ASSERT_EQ(index, plan.iterations % 2);
+      const Image gpu = (index == 0 ? ping : pong).read();
+      const std::string what = to_string(s) + (filt == GpuFilter::shader ? " shader" : " hardware");
+      EXPECT_GT(compare(cpu, f).rms, 2e-2) << what << ": the blur must be far larger than the tolerance";
+      const Diff d = compare(gpu, cpu);
+      EXPECT_LE(d.rms, 1e-3) << what << ": " << d;
+    }
+}
+
+TEST(Gpu, TexturePassesRefuseBadArguments) {
+  // Mismatched sizes, a plan for other parameters and a texture that is not
+  // one are refused with the argument named, before any pass runs.
+  BRUME_REQUIRE_GPU(ctx);
+  GpuImage a(*ctx, 16, 8, 4), b(*ctx, 16, 8, 4), r(*ctx, 16, 8, 1), small(*ctx, 8, 8, 1);
+  DiffusionParams dp;
+  const DiffusionPlan plan = plan_diffusion(dp, 5.0);
+  auto message = [](auto&& fn) {
+    try {
+      fn();
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message([&] { gpu_diffuse_textures(*ctx, a.texture(), b.texture(), small.texture(), dp, plan); })
+                .find("rates"),
+            std::string::npos);
+  DiffusionPlan other = plan;
+  other.iterations += 1;
+  EXPECT_NE(message([&] { gpu_diffuse_textures(*ctx, a.texture(), b.texture(), r.texture(), dp, other); })
+                .find("iterations"),
+            std::string::npos);
+  GpuTexture bogus = a.texture();
+  bogus.width = 17;
+  EXPECT_NE(message([&] { gpu_diffusion_rates(*ctx, r.texture(), bogus, dp, plan); }).find("16x8 on the GPU"),
+            std::string::npos);
+  EXPECT_NE(message([&] { gpu_diffuse_textures(*ctx, a.texture(), a.texture(), r.texture(), dp, plan); })
+                .find("distinct"),
+            std::string::npos);
+}

@@ -1,8 +1,15 @@
 // brume — GPU backend: the haze pipeline as OpenGL ES 3.2 fragment passes
-// over a headless EGL context (Hansard §4.2): one premultiply pass, N
-// diffusion passes ping-ponging between two full-resolution RGBA32F (f32) or
-// RGBA16F (f16) textures, one composite pass. The per-pixel maths is
-// src/shared/haze_math.glsl, the same text the CPU backend compiles as C++.
+// over a headless EGL context (Hansard §4.2): one premultiply pass, one rate
+// pass (sigma -> rho, R32F), N diffusion passes ping-ponging between two
+// full-resolution RGBA32F (f32) or RGBA16F (f16) textures, one composite
+// pass. The per-pixel maths is
+// src/shared/*.glsl (diffusion_math, haze_math), the same text the CPU
+// backend compiles as C++.
+//
+// Two levels: the effects over Images (GpuHaze, diffuse_gpu), and the
+// diffusion engine as passes over textures (gpu_diffusion_rates,
+// gpu_diffuse_textures) for a renderer that already holds its frame on the
+// GPU; GpuImage uploads and reads back textures for callers without GL code.
 //
 // Context: EGL's Mesa surfaceless platform (llvmpipe in CI, any Mesa driver)
 // or the EGL device platform (NVIDIA), no window system. All calls must come
@@ -23,7 +30,7 @@ struct GpuInfo {
   std::string platform;  // "surfaceless" or "device"
   std::string renderer;  // GL_RENDERER, e.g. "llvmpipe (LLVM 15.0.6, 256 bits)"
   std::string version;   // GL_VERSION
-  bool float_linear = false;  // OES_texture_float_linear: hardware filtering of RGBA32F
+  bool float_linear = false;  // OES_texture_float_linear: hardware filtering of 32-bit float textures
   bool timer_query = false;   // EXT_disjoint_timer_query
   // A software rasteriser (Mesa llvmpipe/softpipe, SwiftShader): --backend
   // auto does not pick it, because it measured 1.7-30x slower than the CPU
@@ -32,7 +39,8 @@ struct GpuInfo {
 };
 
 // Per-pass times of the last render: GPU time from timer queries where
-// available, otherwise glFinish-bracketed wall time.
+// available, otherwise glFinish-bracketed wall time. The rate pass (sigma ->
+// rho) counts in premultiply_ms for haze and in diffuse_ms for diffuse_gpu.
 struct GpuTiming {
   bool gpu_timer = false;
   double upload_ms = 0.0, premultiply_ms = 0.0, diffuse_ms = 0.0, composite_ms = 0.0, readback_ms = 0.0;
@@ -53,6 +61,69 @@ class GpuContext {
   std::unique_ptr<Impl> impl_;
 };
 
+// GL objects brume holds right now, by kind, over every context of the
+// process (contexts, GpuHaze, GpuImage, and the temporaries of a render):
+// a render that throws must leave these as they were before it.
+struct GpuObjectCounts {
+  int textures = 0, framebuffers = 0, programs = 0, queries = 0, samplers = 0, vertex_arrays = 0;
+  bool operator==(const GpuObjectCounts&) const = default;
+};
+GpuObjectCounts gpu_live_objects();
+
+// A texture as the pass layer sees it: a GL texture name on the context's
+// thread and its size in texels. The caller owns it (or a GpuImage does).
+struct GpuTexture {
+  unsigned id = 0;
+  int width = 0, height = 0;
+};
+
+// A texture brume owns: an Image uploaded, or an uninitialised render target;
+// read() returns it as an Image with the same channel count. Channels 1, 2, 4
+// are stored R32F, RG32F, RGBA32F (RGBA16F for 4 channels in f16: every value
+// rounded to binary16 on upload, as the diffusion passes store it).
+// Move-only; deletes its texture when destroyed (on the context's thread).
+class GpuImage {
+ public:
+  GpuImage(GpuContext& ctx, const Image& img, Precision storage = Precision::f32);
+  GpuImage(GpuContext& ctx, int width, int height, int channels, Precision storage = Precision::f32);
+  GpuImage(GpuImage&& o) noexcept;
+  GpuImage& operator=(GpuImage&& o) noexcept;
+  GpuImage(const GpuImage&) = delete;
+  GpuImage& operator=(const GpuImage&) = delete;
+  ~GpuImage();
+  GpuTexture texture() const { return tex_; }
+  int channels() const { return channels_; }
+  Image read() const;
+
+ private:
+  GpuTexture tex_;
+  int channels_ = 0;
+};
+
+// Pass: the per-pixel diffusion rate rho(x) (eq. 13 standard, eq. 18
+// invariant schemes) into rates.r from the target scale sigma(x) in sigma.r
+// (px). This pass is the one place the GPU computes rates, for GpuHaze,
+// diffuse_gpu and any caller. `rates` must be colour-renderable float (R32F
+// is enough) and sigma's size. The sigma values are on the GPU and are not
+// checked: keep them in [p.sigma0, plan.sigma_max] (validate_diffusion checks
+// an Image on the host). `plan` must be plan_diffusion(p, plan.sigma_max).
+void gpu_diffusion_rates(GpuContext& ctx, GpuTexture sigma, GpuTexture rates, const DiffusionParams& p,
+                         const DiffusionPlan& plan);
+
+// The diffusion engine on textures the caller owns: plan.iterations passes of
+// eq. 11 ping-ponging from f_ping (the input; four channels, RGBA32F, or
+// RGBA16F for p.precision == f16) through f_pong, with rates from
+// gpu_diffusion_rates. The result is in f_ping when the iteration count is
+// even, else in f_pong; *result_index (when not null) says which: 0 or 1.
+// The other texture holds the previous iteration. Every texture must be
+// size-equal and distinct; the pass samples through its own samplers, so the
+// textures' filter and wrap parameters are neither needed nor changed.
+// Throws brume::Error on mismatched sizes, a plan that does not match p, or
+// hardware filtering where the GPU cannot filter float textures.
+DiffusionPlan gpu_diffuse_textures(GpuContext& ctx, GpuTexture f_ping, GpuTexture f_pong, GpuTexture rates,
+                                   const DiffusionParams& p, const DiffusionPlan& plan,
+                                   GpuFilter filter = GpuFilter::automatic, int* result_index = nullptr);
+
 // The haze passes over a colour image and a range map uploaded once: change
 // the parameters and call render() again without re-uploading (the paper's
 // interactive control).
@@ -60,13 +131,18 @@ class GpuHaze {
  public:
   GpuHaze(GpuContext& ctx, const Image& rgb, const Image& range);
   ~GpuHaze();
+  GpuHaze(const GpuHaze&) = delete;
+  GpuHaze& operator=(const GpuHaze&) = delete;
+  // Render targets are kept between renders (remade when the precision
+  // changes); `a` must come from analyse_haze for these inputs and `p`.
   HazeResult render(const HazeParams& p, const HazeAnalysis& a, GpuFilter filter = GpuFilter::automatic);
   const GpuTiming& timing() const { return timing_; }
+  struct State;
 
  private:
   GpuContext& ctx_;
   int w_, h_;
-  unsigned tex_image_ = 0, tex_range_ = 0;
+  std::unique_ptr<State> s_;
   GpuTiming timing_;
 };
 

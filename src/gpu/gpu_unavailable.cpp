@@ -13,9 +13,24 @@ namespace {
 }  // namespace
 
 struct GpuContext::Impl {};
+struct GpuHaze::State {};
 GpuContext::GpuContext() { unavailable(); }
 GpuContext::~GpuContext() = default;
 const GpuInfo& GpuContext::info() const { unavailable(); }
+GpuObjectCounts gpu_live_objects() { return {}; }  // nothing can have been made
+GpuImage::GpuImage(GpuContext&, const Image&, Precision) { unavailable(); }
+GpuImage::GpuImage(GpuContext&, int, int, int, Precision) { unavailable(); }
+GpuImage::GpuImage(GpuImage&&) noexcept {}
+GpuImage& GpuImage::operator=(GpuImage&&) noexcept { return *this; }
+GpuImage::~GpuImage() = default;
+Image GpuImage::read() const { unavailable(); }
+void gpu_diffusion_rates(GpuContext&, GpuTexture, GpuTexture, const DiffusionParams&, const DiffusionPlan&) {
+  unavailable();
+}
+DiffusionPlan gpu_diffuse_textures(GpuContext&, GpuTexture, GpuTexture, GpuTexture, const DiffusionParams&,
+                                   const DiffusionPlan&, GpuFilter, int*) {
+  unavailable();
+}
 GpuHaze::GpuHaze(GpuContext& ctx, const Image&, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
 GpuHaze::~GpuHaze() = default;
 HazeResult GpuHaze::render(const HazeParams&, const HazeAnalysis&, GpuFilter) { unavailable(); }

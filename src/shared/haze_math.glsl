@@ -1,10 +1,12 @@
-// brume — per-pixel maths of the haze effect and the diffusion schemes.
+// brume — per-pixel maths of the haze effect (Hansard eq. 1, 4, 7).
 //
 // Written once in the common subset of C++ and GLSL ES 3.20 (float scalars,
 // no pointers, no templates, explicit float literals): the CPU backend
 // includes it through prelude_cpp.h and the GPU backend embeds the same text
-// in its shaders, so both backends share the physics and differ only in the
-// schedule. Units: ranges normalised by R_max (R' = R / R_max), coefficients
+// in the shaders of the passes that declare this topic, so both backends
+// share the maths and differ only in the schedule.
+//
+// Units: ranges normalised by R_max (R' = R / R_max), coefficients
 // normalised the other way (kappa' = kappa R_max), scales in pixels.
 
 // Beer-Lambert transmission (Hansard eq. 1): tau = exp(-(kappa_a + kappa_s) R).
@@ -23,65 +25,6 @@ BRUME_FN float brume_sigma_max(float sigma0, float lambda, float kappa_s_norm) {
 BRUME_FN float brume_target_scale(float range_norm, float sigma0, float sigma_max) {
   float r = clamp(range_norm, 0.0f, 1.0f);
   return sigma0 + r * sqrt(r) * (sigma_max - sigma0);
-}
-
-// Per-pixel rate of the standard scheme (eq. 13): rho = (sigma^2 - s0^2)/(2N).
-BRUME_FN float brume_standard_rate(float sigma, float sigma0, float iterations) {
-  return (sigma * sigma - sigma0 * sigma0) / (2.0f * iterations);
-}
-
-// Rate on the edge between a pixel (rate rho_c) and its neighbour sample
-// (rate rho_n): the coefficient of the flux F(x+u) - F(x) in eq. 11.
-//   mode 0, mean (eq. 12, the paper): (rho_c + rho_n) / 2. A near pixel with
-//     rate 0 still receives half its far neighbour's rate, so a blurred
-//     background leaks into the edge of a sharp foreground object.
-//   mode 1, min: min(rho_c, rho_n). No flux into or out of a pixel whose
-//     rate is 0: the sharp side stays sharp and unmixed.
-//   mode 2, harmonic: 2 rho_c rho_n / (rho_c + rho_n), the series
-//     conductance of finite-volume schemes for heterogeneous media; 0 when
-//     either rate is 0, close to the mean where the rates vary smoothly.
-// All three equal rho where rho_c = rho_n, so a constant target scale gives
-// the same Gaussian whatever the mode.
-// (Harmonic: the denominator is kept >= 1e-30 so that two zero rates give 0
-// without a branch; any sum above that is used as is.)
-BRUME_FN float brume_edge_rate(float rho_c, float rho_n, int mode) {
-  if (mode == 1) return min(rho_c, rho_n);
-  if (mode == 2) return 2.0f * rho_c * rho_n / max(rho_c + rho_n, 1.0e-30f);
-  return 0.5f * (rho_c + rho_n);
-}
-
-// Per-pixel rate of the invariant schemes (eq. 18): rho = ln(sigma/s0)/N.
-BRUME_FN float brume_invariant_rate(float sigma, float sigma0, float iterations) {
-  return log(sigma / sigma0) / iterations;
-}
-
-// (e^{2 rho} - 1) / (2 rho) with its limit 1 at rho -> 0: the factor by which
-// the exact step variance sigma_k^2 (e^{2 rho} - 1) exceeds the published
-// scheme's 2 rho sigma_k^2. The series is used below 1e-3, where the direct
-// form loses digits to cancellation (error < 1e-9 there).
-BRUME_FN float brume_step_variance_ratio(float rho) {
-  float x = 2.0f * rho;
-  if (x < 1.0e-3f) return 1.0f + x * (0.5f + x / 6.0f);
-  return (exp(x) - 1.0f) / x;
-}
-
-// Offset h whose linearly interpolated two-tap sample has second moment m:
-// h^2 + f(1 - f) = m with f = frac(h). The left side is the piecewise-linear
-// interpolation of h^2 between integers, so with n = floor(sqrt(m)) the
-// solution is h = (m + n(n + 1)) / (2n + 1). Exact for every m >= 0.
-// (floor(sqrt(m)) is written as a truncating conversion, equal for m >= 0,
-// so that the CPU loop over a row vectorises without SSE4.1's round.)
-BRUME_FN float brume_offset_for_moment(float m) {
-  float n = float(int(sqrt(m)));
-  return (m + n * (n + 1.0f)) / (2.0f * n + 1.0f);
-}
-
-// Neighbour offset at iteration k for a pixel whose current scale is sigma_k
-// and whose rate is rho. Published scheme (eq. 18): h = sigma_k. Exact
-// variant: h such that 2 rho (h^2 + f(1-f)) = sigma_k^2 (e^{2 rho} - 1).
-BRUME_FN float brume_invariant_offset(float sigma_k, float rho, bool exact) {
-  if (!exact) return sigma_k;
-  return brume_offset_for_moment(sigma_k * sigma_k * brume_step_variance_ratio(rho));
 }
 
 // Premultiplied composite with airlight (Hansard eq. 4), one channel:

@@ -2,6 +2,10 @@
 // GLSL ES 3.20 has float scalars, exp/sqrt/floor/clamp/mix built in and
 // passes by value; this prelude gives C++ the same vocabulary, so the same
 // source text is compiled by the CPU backend and embedded in the shaders.
+// C++ sees every topic at once (brume::shared::...); a GPU pass declares the
+// topics it needs (src/gpu/context.hpp, PassSpec). A new topic file is added
+// here, to BRUME_SHADERS in CMakeLists.txt and to the topic table in
+// src/gpu/context.cpp.
 #pragma once
 #include <cmath>
 
@@ -15,6 +19,7 @@ inline float clamp(float x, float lo, float hi) { return x < lo ? lo : (x > hi ?
 inline float min(float a, float b) { return b < a ? b : a; }
 inline float max(float a, float b) { return a < b ? b : a; }
 inline float mix(float a, float b, float t) { return a + t * (b - a); }
+#include "shared/diffusion_math.glsl"
 #include "shared/haze_math.glsl"
 #undef BRUME_FN
 }  // namespace brume::shared

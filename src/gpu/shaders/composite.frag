@@ -1,7 +1,8 @@
-// Pass N + 2 (Hansard eq. 4): out = F.rgb + (1 - F.a) B with the blurred
+// Last haze pass (Hansard eq. 4): out = F.rgb + (1 - F.a) B with the blurred
 // transmission F.a (premultiplied), or the naive tau0 E_blurred + (1 - tau0) B.
-uniform highp sampler2D uF;
-uniform highp sampler2D uAux;  // .b = tau0
+// Topics: haze_math.
+layout(binding = 0) uniform highp sampler2D uF;
+layout(binding = 1) uniform highp sampler2D uAux;  // .g = tau0
 uniform vec3 uAirlight;        // linear RGB
 uniform int uNaive;
 layout(location = 0) out vec4 oColor;  // rgb: result, a: blurred transmission
@@ -11,7 +12,7 @@ void main() {
   vec4 f = texelFetch(uF, p, 0);
   vec3 c;
   if (uNaive == 1) {
-    float t0 = texelFetch(uAux, p, 0).b;
+    float t0 = texelFetch(uAux, p, 0).g;
     c = vec3(brume_composite_naive(f.r, t0, uAirlight.r), brume_composite_naive(f.g, t0, uAirlight.g),
              brume_composite_naive(f.b, t0, uAirlight.b));
   } else {

@@ -3,11 +3,12 @@
 // (or the min or harmonic mean of the two rates: brume_edge_rate)
 // with unit offsets (standard) or offsets h_k(x) from sigma_k = sigma0 e^{k rho}
 // (invariant, invariant-exact). Samples between texels are linear
-// interpolations: in hardware (uHardware = 1, textures set to LINEAR with
+// interpolations: in hardware (uHardware = 1, samplers set to LINEAR with
 // MIRRORED_REPEAT, which is exactly the half-sample mirror boundary) or here
 // in the shader with texelFetch (exact float weights).
-uniform highp sampler2D uF;     // F at iteration k
-uniform highp sampler2D uAux;   // .r = rho(x)
+// Topics: diffusion_math.
+layout(binding = 0) uniform highp sampler2D uF;      // F at iteration k
+layout(binding = 1) uniform highp sampler2D uRates;  // .r = rho(x) (gpu_diffusion_rates)
 uniform int uK;                 // iteration index k
 uniform int uScheme;            // 0 standard, 1 invariant, 2 invariant-exact
 uniform float uSigma0;
@@ -25,49 +26,33 @@ int mirror_index(int i, int n) {
   return i < n ? i : period - 1 - i;
 }
 
-// Linear interpolation along one axis at p + d * axis (d >= 0 or < 0).
-vec4 sample_f(ivec2 p, float d, ivec2 axis, ivec2 size) {
-  if (uHardware == 1) {
-    vec2 c = (vec2(p) + 0.5 + d * vec2(axis)) / vec2(size);
-    return texture(uF, c);
-  }
+// `tex` linearly interpolated at p + d * axis (d of either sign), with the
+// half-sample mirror outside the image: one helper for F and for the rates.
+vec4 sample_axis(highp sampler2D tex, ivec2 p, float d, ivec2 axis, ivec2 size) {
+  if (uHardware == 1) return texture(tex, (vec2(p) + 0.5 + d * vec2(axis)) / vec2(size));
   float fl = floor(d);
   float fr = d - fl;
   int i0 = int(fl);
   ivec2 a = p + i0 * axis, b = p + (i0 + 1) * axis;
   a = ivec2(mirror_index(a.x, size.x), mirror_index(a.y, size.y));
   b = ivec2(mirror_index(b.x, size.x), mirror_index(b.y, size.y));
-  vec4 va = texelFetch(uF, a, 0), vb = texelFetch(uF, b, 0);
-  return va + fr * (vb - va);
-}
-
-float sample_rho(ivec2 p, float d, ivec2 axis, ivec2 size) {
-  if (uHardware == 1) {
-    vec2 c = (vec2(p) + 0.5 + d * vec2(axis)) / vec2(size);
-    return texture(uAux, c).r;
-  }
-  float fl = floor(d);
-  float fr = d - fl;
-  int i0 = int(fl);
-  ivec2 a = p + i0 * axis, b = p + (i0 + 1) * axis;
-  a = ivec2(mirror_index(a.x, size.x), mirror_index(a.y, size.y));
-  b = ivec2(mirror_index(b.x, size.x), mirror_index(b.y, size.y));
-  float va = texelFetch(uAux, a, 0).r, vb = texelFetch(uAux, b, 0).r;
+  vec4 va = texelFetch(tex, a, 0), vb = texelFetch(tex, b, 0);
   return va + fr * (vb - va);
 }
 
 void main() {
   ivec2 p = ivec2(gl_FragCoord.xy);
   ivec2 size = textureSize(uF, 0);
-  float rho = texelFetch(uAux, p, 0).r;
+  float rho = texelFetch(uRates, p, 0).r;
   float h = 1.0;
   if (uScheme != 0) h = brume_invariant_offset(uSigma0 * exp(float(uK) * rho), rho, uScheme == 2);
   vec4 fc = texelFetch(uF, p, 0);
-  vec4 l = sample_f(p, -h, ivec2(1, 0), size), r = sample_f(p, h, ivec2(1, 0), size);
-  vec4 u = sample_f(p, -h, ivec2(0, 1), size), d = sample_f(p, h, ivec2(0, 1), size);
-  float wl = brume_edge_rate(rho, sample_rho(p, -h, ivec2(1, 0), size), uEdgeRate);
-  float wr = brume_edge_rate(rho, sample_rho(p, h, ivec2(1, 0), size), uEdgeRate);
-  float wu = brume_edge_rate(rho, sample_rho(p, -h, ivec2(0, 1), size), uEdgeRate);
-  float wd = brume_edge_rate(rho, sample_rho(p, h, ivec2(0, 1), size), uEdgeRate);
+  const ivec2 X = ivec2(1, 0), Y = ivec2(0, 1);
+  vec4 l = sample_axis(uF, p, -h, X, size), r = sample_axis(uF, p, h, X, size);
+  vec4 u = sample_axis(uF, p, -h, Y, size), d = sample_axis(uF, p, h, Y, size);
+  float wl = brume_edge_rate(rho, sample_axis(uRates, p, -h, X, size).r, uEdgeRate);
+  float wr = brume_edge_rate(rho, sample_axis(uRates, p, h, X, size).r, uEdgeRate);
+  float wu = brume_edge_rate(rho, sample_axis(uRates, p, -h, Y, size).r, uEdgeRate);
+  float wd = brume_edge_rate(rho, sample_axis(uRates, p, h, Y, size).r, uEdgeRate);
   oF = fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc);
 }

@@ -1,0 +1,399 @@
+// brume — the GPU context over headless EGL + OpenGL ES 3.2, the program
+// cache and the texture/target plumbing every pass shares (src/gpu/context.hpp).
+#include "gpu/context.hpp"
+
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "brume/error.hpp"
+#include "gpu/shaders_embedded.hpp"
+
+namespace brume {
+namespace shaders = gpu::shaders;
+
+namespace {
+
+// The shared topic files a pass can declare (src/shared/*.glsl), by name.
+struct Topic {
+  const char* name;
+  const char* text;
+};
+constexpr Topic kTopics[] = {
+    {"diffusion_math", shaders::diffusion_math_glsl},
+    {"haze_math", shaders::haze_math_glsl},
+};
+
+std::string hex(unsigned v) {
+  char b[16];
+  std::snprintf(b, sizeof b, "%x", v);
+  return b;
+}
+
+void compile(const gl::Shader& s, const std::string& src, const char* pass) {
+  const char* p = src.c_str();
+  glShaderSource(s.id(), 1, &p, nullptr);
+  glCompileShader(s.id());
+  GLint ok = 0;
+  glGetShaderiv(s.id(), GL_COMPILE_STATUS, &ok);
+  if (!ok) {
+    char log[4096];
+    glGetShaderInfoLog(s.id(), sizeof log, nullptr, log);
+    throw Error(std::string("GPU backend: shader of pass '") + pass +
+                "' failed to compile (a brume bug; use --backend cpu): " + log);
+  }
+}
+
+}  // namespace
+
+GpuObjectCounts gpu_live_objects() {
+  GpuObjectCounts c;
+  c.textures = gl::live(gl::kTexture);
+  c.framebuffers = gl::live(gl::kFramebuffer);
+  c.programs = gl::live(gl::kProgram);
+  c.queries = gl::live(gl::kQuery);
+  c.samplers = gl::live(gl::kSampler);
+  c.vertex_arrays = gl::live(gl::kVertexArray);
+  return c;
+}
+
+// ---------------------------------------------------------------- context
+
+GpuContext::Impl::~Impl() {
+  if (dpy == EGL_NO_DISPLAY) return;
+  if (ctx != EGL_NO_CONTEXT) {
+    programs.clear();
+    nearest.reset();
+    linear.reset();
+    vao.reset();
+    eglMakeCurrent(dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+    eglDestroyContext(dpy, ctx);
+  }
+  eglTerminate(dpy);
+}
+
+// Try one display: initialise, make an ES 3.2 context current without a surface.
+bool GpuContext::Impl::try_display(EGLDisplay d, const char* platform, std::string& why) {
+  EGLint major = 0, minor = 0;
+  if (d == EGL_NO_DISPLAY || !eglInitialize(d, &major, &minor)) {
+    why += std::string(platform) + ": eglInitialize failed; ";
+    return false;
+  }
+  eglBindAPI(EGL_OPENGL_ES_API);
+  const EGLint cfg_attr[] = {EGL_RENDERABLE_TYPE, EGL_OPENGL_ES3_BIT, EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_NONE};
+  EGLConfig cfg = nullptr;
+  EGLint n = 0;
+  eglChooseConfig(d, cfg_attr, &cfg, 1, &n);
+  const EGLint ctx_attr[] = {EGL_CONTEXT_MAJOR_VERSION, 3, EGL_CONTEXT_MINOR_VERSION, 2, EGL_NONE};
+  EGLContext c = eglCreateContext(d, n > 0 ? cfg : EGL_NO_CONFIG_KHR, EGL_NO_CONTEXT, ctx_attr);
+  if (c == EGL_NO_CONTEXT) {
+    why += std::string(platform) + ": no OpenGL ES 3.2 context (EGL error 0x" + hex(static_cast<unsigned>(eglGetError())) +
+           "); ";
+    eglTerminate(d);
+    return false;
+  }
+  if (!eglMakeCurrent(d, EGL_NO_SURFACE, EGL_NO_SURFACE, c)) {
+    why += std::string(platform) + ": cannot make the context current without a surface; ";
+    eglDestroyContext(d, c);
+    eglTerminate(d);
+    return false;
+  }
+  dpy = d;
+  ctx = c;
+  info.platform = platform;
+  return true;
+}
+
+void GpuContext::Impl::create() {
+  std::string why;
+  const char* client = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
+  const std::string ext = client ? client : "";
+  auto get_display = reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
+  const char* want = std::getenv("BRUME_EGL_PLATFORM");  // device | surfaceless: force one
+  // The EGL device platform (NVIDIA, and Mesa's devices): prefer hardware
+  // devices over Mesa's software device.
+  if (get_display && ext.find("EGL_EXT_platform_device") != std::string::npos &&
+      (!want || std::string(want) == "device")) {
+    auto query_devices = reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
+    auto query_device_string =
+        reinterpret_cast<PFNEGLQUERYDEVICESTRINGEXTPROC>(eglGetProcAddress("eglQueryDeviceStringEXT"));
+    EGLDeviceEXT devices[16];
+    EGLint count = 0;
+    if (query_devices && query_devices(16, devices, &count)) {
+      for (int pass = 0; pass < 2 && ctx == EGL_NO_CONTEXT; ++pass)
+        for (int i = 0; i < count && ctx == EGL_NO_CONTEXT; ++i) {
+          const char* dext = query_device_string ? query_device_string(devices[i], EGL_EXTENSIONS) : nullptr;
+          const bool software = dext && std::strstr(dext, "EGL_MESA_device_software");
+          if (software != (pass == 1)) continue;
+          if (try_display(get_display(EGL_PLATFORM_DEVICE_EXT, devices[i], nullptr), "device", why))
+            info.software = software;
+        }
+    }
+  }
+  if (ctx == EGL_NO_CONTEXT && get_display && ext.find("EGL_MESA_platform_surfaceless") != std::string::npos &&
+      (!want || std::string(want) == "surfaceless"))
+    try_display(get_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr), "surfaceless", why);
+  if (ctx == EGL_NO_CONTEXT)
+    throw Error("no OpenGL ES 3.2 context: " +
+                (why.empty() ? std::string("no headless EGL platform (device or Mesa surfaceless)") : why) +
+                "install Mesa (libegl-mesa0, libgl1-mesa-dri) or a GPU driver, or use --backend cpu");
+  info.renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
+  info.version = reinterpret_cast<const char*>(glGetString(GL_VERSION));
+  for (const char* sw : {"llvmpipe", "softpipe", "SwiftShader", "swrast"})
+    if (info.renderer.find(sw) != std::string::npos) info.software = true;
+  GLint n = 0;
+  glGetIntegerv(GL_NUM_EXTENSIONS, &n);
+  for (GLint i = 0; i < n; ++i) {
+    const std::string e = reinterpret_cast<const char*>(glGetStringi(GL_EXTENSIONS, static_cast<GLuint>(i)));
+    if (e == "GL_OES_texture_float_linear") info.float_linear = true;
+    if (e == "GL_EXT_disjoint_timer_query") info.timer_query = true;
+  }
+  if (info.timer_query)
+    get_query_ui64 = reinterpret_cast<PFNGLGETQUERYOBJECTUI64VEXTPROC>(eglGetProcAddress("glGetQueryObjectui64vEXT"));
+  info.timer_query = info.timer_query && get_query_ui64;
+  vao = gl::VertexArray::make();
+  nearest = gl::Sampler::make();
+  linear = gl::Sampler::make();
+  for (GLuint s : {nearest.id(), linear.id()}) {
+    const GLint f = s == linear.id() ? GL_LINEAR : GL_NEAREST;
+    glSamplerParameteri(s, GL_TEXTURE_MIN_FILTER, f);
+    glSamplerParameteri(s, GL_TEXTURE_MAG_FILTER, f);
+    glSamplerParameteri(s, GL_TEXTURE_WRAP_S, GL_MIRRORED_REPEAT);
+    glSamplerParameteri(s, GL_TEXTURE_WRAP_T, GL_MIRRORED_REPEAT);
+  }
+  gpu::check_gl("context creation");
+}
+
+const gpu::Program& GpuContext::Impl::program(const gpu::PassSpec& spec) {
+  if (auto it = programs.find(spec.name); it != programs.end()) return *it->second;
+  std::string fs = "#version 320 es\nprecision highp float;\nprecision highp int;\nprecision highp sampler2D;\n"
+                   "#define BRUME_FN\n";
+  for (const char* topic : spec.topics) {
+    const Topic* found = nullptr;
+    for (const Topic& t : kTopics)
+      if (std::strcmp(t.name, topic) == 0) found = &t;
+    if (!found)
+      throw Error(std::string("GPU backend: pass '") + spec.name + "' needs unknown shared topic '" + topic +
+                  "' (a brume bug: add it to kTopics in src/gpu/context.cpp)");
+    fs += found->text;
+    fs += "\n";
+  }
+  fs += spec.body;
+  gl::Shader vs(GL_VERTEX_SHADER), frag(GL_FRAGMENT_SHADER);
+  compile(vs, shaders::fullscreen_vert, spec.name);
+  compile(frag, fs, spec.name);
+  gl::Program p = gl::Program::make();
+  glAttachShader(p.id(), vs.id());
+  glAttachShader(p.id(), frag.id());
+  glLinkProgram(p.id());
+  GLint ok = 0;
+  glGetProgramiv(p.id(), GL_LINK_STATUS, &ok);
+  if (!ok) {
+    char log[4096];
+    glGetProgramInfoLog(p.id(), sizeof log, nullptr, log);
+    throw Error(std::string("GPU backend: program of pass '") + spec.name + "' failed to link (a brume bug): " + log);
+  }
+  auto prog = std::make_unique<gpu::Program>(std::move(p), spec.name);
+  return *programs.emplace(spec.name, std::move(prog)).first->second;
+}
+
+void GpuContext::Impl::begin(const gpu::Target& t) const {
+  glBindVertexArray(vao.id());
+  t.bind();
+  glViewport(0, 0, t.width, t.height);
+}
+
+GpuContext::GpuContext() : impl_(std::make_unique<Impl>()) { impl_->create(); }
+GpuContext::~GpuContext() = default;
+const GpuInfo& GpuContext::info() const { return impl_->info; }
+
+namespace gpu {
+
+// ---------------------------------------------------------------- programs
+
+Program::Program(gl::Program p, std::string name) : prog_(std::move(p)), name_(std::move(name)) {
+  GLint count = 0;
+  glGetProgramiv(prog_.id(), GL_ACTIVE_UNIFORMS, &count);
+  for (GLint i = 0; i < count; ++i) {
+    char buf[256];
+    GLsizei len = 0;
+    GLint size = 0;
+    GLenum type = 0;
+    glGetActiveUniform(prog_.id(), static_cast<GLuint>(i), sizeof buf, &len, &size, &type, buf);
+    std::string n(buf, static_cast<std::size_t>(len));
+    if (n.size() > 3 && n.compare(n.size() - 3, 3, "[0]") == 0) n.resize(n.size() - 3);
+    locations_[n] = glGetUniformLocation(prog_.id(), n.c_str());
+  }
+}
+
+GLint Program::loc(const char* uniform) const {
+  auto it = locations_.find(uniform);
+  if (it == locations_.end())
+    throw Error("GPU backend: pass '" + name_ + "' has no active uniform '" + uniform + "' (a brume bug)");
+  return it->second;
+}
+
+// ---------------------------------------------------------------- textures and targets
+
+gl::Texture make_texture(GLenum internal, int w, int h, GLenum format, GLenum type, const void* data) {
+  gl::Texture t = gl::Texture::make();
+  glBindTexture(GL_TEXTURE_2D, t.id());
+  glTexStorage2D(GL_TEXTURE_2D, 1, internal, w, h);
+  if (data) {
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+    glTexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, w, h, format, type, data);
+  }
+  // Sampled through texelFetch (or the diffusion pass's own samplers); NEAREST
+  // keeps the one-level texture complete for either.
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+  glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+  check_gl("texture allocation");
+  return t;
+}
+
+void Target::bind() const { glBindFramebuffer(GL_FRAMEBUFFER, fbo.id()); }
+
+Target make_target(std::initializer_list<GpuTexture> colour) {
+  Target t;
+  t.fbo = gl::Framebuffer::make();
+  t.width = colour.begin()->width;
+  t.height = colour.begin()->height;
+  glBindFramebuffer(GL_FRAMEBUFFER, t.fbo.id());
+  GLenum bufs[4];
+  GLsizei n = 0;
+  for (const GpuTexture& c : colour) {
+    bufs[n] = GL_COLOR_ATTACHMENT0 + static_cast<GLenum>(n);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, bufs[n], GL_TEXTURE_2D, c.id, 0);
+    ++n;
+  }
+  glDrawBuffers(n, bufs);
+  glReadBuffer(GL_COLOR_ATTACHMENT0);
+  const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  if (status != GL_FRAMEBUFFER_COMPLETE)
+    throw Error("GPU backend: this GPU cannot render to the float texture (framebuffer status 0x" + hex(status) +
+                "); use --backend cpu");
+  return t;
+}
+
+std::vector<float> read_rgba(GpuTexture tex) {
+  Target t = make_target({tex});
+  t.bind();
+  std::vector<float> out(static_cast<std::size_t>(tex.width) * tex.height * 4);
+  glPixelStorei(GL_PACK_ALIGNMENT, 4);
+  // RGBA/FLOAT is the read format every float colour buffer accepts.
+  glReadPixels(0, 0, tex.width, tex.height, GL_RGBA, GL_FLOAT, out.data());
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  check_gl("read back");
+  return out;
+}
+
+void check_gl(const char* where) {
+  const GLenum e = glGetError();
+  if (e != GL_NO_ERROR) throw Error(std::string("GPU backend: OpenGL error 0x") + hex(e) + " in " + where);
+}
+
+double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+// ---------------------------------------------------------------- timing
+
+StageTimer::StageTimer(GpuContext::Impl& g, bool* used_query) : g_(g), used_query_(used_query) {
+  glFinish();
+  t0_ = Clock::now();
+  if (g_.info.timer_query) {
+    q_ = gl::Query::make();
+    glBeginQuery(GL_TIME_ELAPSED_EXT, q_.id());
+    running_ = true;
+  }
+}
+
+StageTimer::~StageTimer() {
+  // Only one time query may be active: end an abandoned one before the next
+  // stage (or render) begins its own.
+  if (running_) glEndQuery(GL_TIME_ELAPSED_EXT);
+}
+
+double StageTimer::stop() {
+  if (running_) glEndQuery(GL_TIME_ELAPSED_EXT);
+  running_ = false;
+  glFinish();
+  const double wall = ms_since(t0_);
+  double ms = wall;
+  bool ok = false;
+  if (q_) {
+    GLuint64 ns = 0;
+    g_.get_query_ui64(q_.id(), GL_QUERY_RESULT, &ns);
+    GLint disjoint = 0;
+    glGetIntegerv(GL_GPU_DISJOINT_EXT, &disjoint);
+    q_.reset();
+    const double gpu = static_cast<double>(ns) * 1e-6;
+    ok = !disjoint && gpu > 0.0 && gpu <= wall * 1.05 + 0.05;
+    if (ok) ms = gpu;
+  }
+  *used_query_ = ok && *used_query_;
+  return ms;
+}
+
+}  // namespace gpu
+
+// ---------------------------------------------------------------- GpuImage
+
+namespace {
+GLenum float_format(int channels, Precision p) {
+  const bool h = p == Precision::f16;
+  switch (channels) {
+    case 1: return h ? GL_R16F : GL_R32F;
+    case 2: return h ? GL_RG16F : GL_RG32F;
+    case 4: return h ? GL_RGBA16F : GL_RGBA32F;
+    default:
+      throw Error("GpuImage: " + std::to_string(channels) +
+                  " channels cannot be a float render target; use 1, 2 or 4 (to_rgba for RGB)");
+  }
+}
+GLenum pixel_format(int channels) { return channels == 1 ? GL_RED : channels == 2 ? GL_RG : GL_RGBA; }
+}  // namespace
+
+GpuImage::GpuImage(GpuContext& ctx, int width, int height, int channels, Precision storage) : channels_(channels) {
+  (void)ctx;  // textures belong to the current context; ctx names it for the reader
+  if (width <= 0 || height <= 0)
+    throw Error("GpuImage: size " + std::to_string(width) + "x" + std::to_string(height) + " must be positive");
+  tex_ = {gpu::make_texture(float_format(channels, storage), width, height).release(), width, height};
+}
+
+GpuImage::GpuImage(GpuContext& ctx, const Image& img, Precision storage) : channels_(img.channels) {
+  (void)ctx;
+  if (img.width <= 0 || img.height <= 0) throw Error("GpuImage: image " + img.size_string() + " is empty");
+  tex_ = {gpu::make_texture(float_format(img.channels, storage), img.width, img.height, pixel_format(img.channels),
+                            GL_FLOAT, img.data.data())
+              .release(),
+          img.width, img.height};
+}
+
+GpuImage::GpuImage(GpuImage&& o) noexcept : tex_(std::exchange(o.tex_, {})), channels_(o.channels_) {}
+
+GpuImage& GpuImage::operator=(GpuImage&& o) noexcept {
+  // o takes our texture and deletes it when it goes.
+  std::swap(tex_, o.tex_);
+  std::swap(channels_, o.channels_);
+  return *this;
+}
+
+GpuImage::~GpuImage() {
+  if (tex_.id) {
+    glDeleteTextures(1, &tex_.id);
+    --gl::live(gl::kTexture);
+    tex_ = {};
+  }
+}
+
+Image GpuImage::read() const {
+  const std::vector<float> px = gpu::read_rgba(tex_);
+  Image out(tex_.width, tex_.height, channels_);
+  for (std::size_t i = 0; i < out.pixels(); ++i)
+    for (int c = 0; c < channels_; ++c) out.data[i * channels_ + c] = px[i * 4 + c];
+  return out;
+}
+
+}  // namespace brume

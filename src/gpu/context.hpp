@@ -1,0 +1,136 @@
+// brume — the GPU pass layer (private to src/gpu): the context, its program
+// cache, render targets and stage timers. An effect on the GPU is a set of
+// passes: each pass is a fragment shader body (src/gpu/shaders/*.frag) run
+// over one full-screen triangle, plus the list of shared topic files
+// (src/shared/*.glsl) whose per-pixel maths it calls. Adding an effect means
+// writing its passes and their PassSpecs, not copying this plumbing.
+//
+// Conventions every pass follows: pixel (x, y) of an Image is texel (x, y) of
+// its texture and fragment (x + 0.5, y + 0.5) — rows are never flipped, so no
+// pass needs to know which way is up; samplers are bound with
+// layout(binding = unit) in the shader, so only value uniforms are set from
+// the host, through locations cached when the program is linked.
+#pragma once
+
+#include <EGL/egl.h>
+#include <EGL/eglext.h>
+#include <GLES3/gl32.h>
+
+// gl2ext.h after gl32.h: it needs GL_APIENTRYP (EXT_disjoint_timer_query).
+#include <GLES2/gl2ext.h>
+
+#include <chrono>
+#include <initializer_list>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "brume/gpu.hpp"
+#include "gpu/gl.hpp"
+
+namespace brume {
+namespace gpu {
+
+// A pass's program: a name that identifies it in the cache, the shared topics
+// it needs (by name: "diffusion_math", "haze_math"; see kTopics in
+// context.cpp) and its fragment body. Specs are static constants beside the
+// code that runs the pass.
+struct PassSpec {
+  const char* name;
+  std::initializer_list<const char*> topics;
+  const char* body;
+};
+
+// A linked program and its active uniforms' locations, found once at link.
+class Program {
+ public:
+  Program(gl::Program p, std::string name);
+  GLuint id() const { return prog_.id(); }
+  // The location of an active uniform; a name the shader does not use is a
+  // brume bug (a typo, or a uniform the compiler dropped) and throws, rather
+  // than silently setting nothing.
+  GLint loc(const char* uniform) const;
+
+ private:
+  gl::Program prog_;
+  std::string name_;
+  std::map<std::string, GLint, std::less<>> locations_;
+};
+
+// A framebuffer with its colour attachments fixed: attached, draw buffers set
+// and completeness checked once, when it is made; a pass then only binds it.
+struct Target {
+  gl::Framebuffer fbo;
+  int width = 0, height = 0;
+  void bind() const;
+};
+Target make_target(std::initializer_list<GpuTexture> colour);
+
+// A texture with immutable storage (one level). data: width * height texels
+// of `format`/`type`, or null for a render target.
+gl::Texture make_texture(GLenum internal, int w, int h, GLenum format = GL_RGBA, GLenum type = GL_FLOAT,
+                         const void* data = nullptr);
+
+// Reads `tex` (any float colour format) back as RGBA floats, w * h * 4.
+std::vector<float> read_rgba(GpuTexture tex);
+
+// Throws brume::Error naming `where` if GL has recorded an error.
+void check_gl(const char* where);
+
+}  // namespace gpu
+
+struct GpuContext::Impl {
+  EGLDisplay dpy = EGL_NO_DISPLAY;
+  EGLContext ctx = EGL_NO_CONTEXT;
+  GpuInfo info;
+  PFNGLGETQUERYOBJECTUI64VEXTPROC get_query_ui64 = nullptr;
+  // The GL objects below must go before the context: members are destroyed
+  // after ~Impl's body, so the body releases them first.
+  gl::VertexArray vao;
+  // Samplers for the diffusion passes, bound to their texture units so that
+  // the caller's own texture parameters are neither needed nor changed:
+  // MIRRORED_REPEAT is exactly the half-sample mirror boundary; `linear`
+  // filters in hardware, `nearest` serves texelFetch (which ignores
+  // filtering but needs a complete texture, which NEAREST guarantees).
+  gl::Sampler nearest, linear;
+  std::map<std::string, std::unique_ptr<gpu::Program>, std::less<>> programs;
+
+  ~Impl();
+  void create();
+  bool try_display(EGLDisplay d, const char* platform, std::string& why);
+
+  // The program of a pass, compiled and linked on first use.
+  const gpu::Program& program(const gpu::PassSpec& spec);
+  // Binds the empty VAO and the target, sets the viewport: ready to draw().
+  void begin(const gpu::Target& t) const;
+  static void draw() { glDrawArrays(GL_TRIANGLES, 0, 3); }
+};
+
+namespace gpu {
+
+using Clock = std::chrono::steady_clock;
+
+// Stage timer: GPU time from a GL_TIME_ELAPSED_EXT query where the driver has
+// one, checked against the glFinish-bracketed wall time of the same stage (a
+// query can be disjoint or, as seen on llvmpipe, return garbage); the wall
+// time is used when the query is missing or implausible. The query is owned,
+// so a stage that throws leaves none behind.
+class StageTimer {
+ public:
+  StageTimer(GpuContext::Impl& g, bool* used_query);
+  ~StageTimer();
+  double stop();
+
+ private:
+  GpuContext::Impl& g_;
+  gl::Query q_;
+  Clock::time_point t0_;
+  bool* used_query_;
+  bool running_ = false;
+};
+
+double ms_since(Clock::time_point t0);
+
+}  // namespace gpu
+}  // namespace brume

@@ -1,0 +1,108 @@
+// brume — owners of OpenGL ES objects (private to src/gpu).
+//
+// Every GL object brume creates is held by one of these move-only owners, so
+// that an exception anywhere in a render (a bad parameter found by a later
+// pass, a driver error, std::bad_alloc while reading back) deletes what the
+// render had made instead of leaking it on the context. Each kind keeps a
+// process-wide count of live objects (brume::gpu_live_objects()), which the
+// leak tests compare before and after a throwing render.
+//
+// Destructors call GL, so an owner must die on the thread, and while the
+// context, that created it is current (GpuContext's rule for everything).
+#pragma once
+
+#include <GLES3/gl32.h>
+
+#include <atomic>
+#include <utility>
+
+namespace brume::gl {
+
+enum Kind { kTexture, kFramebuffer, kProgram, kQuery, kSampler, kVertexArray, kKinds };
+
+inline std::atomic<int>& live(Kind k) {
+  static std::atomic<int> counts[kKinds];
+  return counts[k];
+}
+
+template <Kind K>
+class Object {
+ public:
+  Object() = default;
+  ~Object() { reset(); }
+  Object(const Object&) = delete;
+  Object& operator=(const Object&) = delete;
+  Object(Object&& o) noexcept : id_(std::exchange(o.id_, 0)) {}
+  Object& operator=(Object&& o) noexcept {
+    if (this != &o) {
+      reset();
+      id_ = std::exchange(o.id_, 0);
+    }
+    return *this;
+  }
+
+  // A new GL object of this kind (programs: glCreateProgram).
+  static Object make() {
+    Object o;
+    switch (K) {
+      case kTexture: glGenTextures(1, &o.id_); break;
+      case kFramebuffer: glGenFramebuffers(1, &o.id_); break;
+      case kProgram: o.id_ = glCreateProgram(); break;
+      case kQuery: glGenQueries(1, &o.id_); break;
+      case kSampler: glGenSamplers(1, &o.id_); break;
+      case kVertexArray: glGenVertexArrays(1, &o.id_); break;
+      default: break;
+    }
+    if (o.id_) ++live(K);
+    return o;
+  }
+
+  GLuint id() const { return id_; }
+  explicit operator bool() const { return id_ != 0; }
+  // Hands the object to an owner outside this layer (GpuImage), which must
+  // delete it and decrement live(K) itself: it stays counted as live.
+  GLuint release() { return std::exchange(id_, 0); }
+
+  void reset() {
+    if (!id_) return;
+    switch (K) {
+      case kTexture: glDeleteTextures(1, &id_); break;
+      case kFramebuffer: glDeleteFramebuffers(1, &id_); break;
+      case kProgram: glDeleteProgram(id_); break;
+      case kQuery: glDeleteQueries(1, &id_); break;
+      case kSampler: glDeleteSamplers(1, &id_); break;
+      case kVertexArray: glDeleteVertexArrays(1, &id_); break;
+      default: break;
+    }
+    --live(K);
+    id_ = 0;
+  }
+
+ private:
+  GLuint id_ = 0;
+};
+
+using Texture = Object<kTexture>;
+using Framebuffer = Object<kFramebuffer>;
+using Program = Object<kProgram>;
+using Query = Object<kQuery>;
+using Sampler = Object<kSampler>;
+using VertexArray = Object<kVertexArray>;
+
+// Shaders live only between compile and link; owned all the same, so that a
+// failed compile of the second stage does not leak the first.
+class Shader {
+ public:
+  explicit Shader(GLenum type) : id_(glCreateShader(type)) {}
+  ~Shader() {
+    if (id_) glDeleteShader(id_);
+  }
+  Shader(const Shader&) = delete;
+  Shader& operator=(const Shader&) = delete;
+  GLuint id() const { return id_; }
+
+ private:
+  GLuint id_;
+};
+
+}  // namespace brume::gl
