@@ -16,12 +16,12 @@
 //    I <- I + 1/4 div^-(g grad^+ I), i.e. w = g/4 on each edge) and N.
 // Channels are independent (no rate depends on F). The fast CPU path keeps
 // F as one four-float vector per pixel and runs other channel counts as
-// groups of four channels (the last padded with zeros), sharing nothing
-// between groups: 6 channels cost two 4-channel runs (measured on 1600x1120,
-// invariant-exact sigma = 25: see diffusion.cpp), where a kernel generalised
-// to C channels could at best save the padding (a quarter of the work for 6,
-// none for 4 and 8), and would give up the vector-per-pixel layout that the
-// run and f16 schedules are built on. The reference path takes any C as is.
+// groups of four channels (the last padded with zeros): 6 channels cost two
+// 4-channel runs (measured, see by_groups_of_four in src/cpu/diffusion.cpp),
+// where a kernel generalised to C channels could at best save the padding
+// (a quarter of the work for 6, none for 4 and 8) and would give up the
+// vector-per-pixel layout that the run and f16 schedules are built on. The
+// reference path takes any C as is.
 //
 // Schemes (equation numbers from the paper):
 //  - standard (eq. 11-13): explicit Euler on the 4-neighbour Laplacian,

@@ -153,6 +153,12 @@ DiffusionPlan check_scale_problem(const Image& f, const Image& sigma, double sig
 // has four channels (no copy), else each group of four channels in turn, the
 // last padded with zeros. The rates never depend on F, so the groups are
 // independent and the result is what one C-channel kernel would give.
+// Measured (one thread, CPU time, median of 9, 800x560, invariant-exact,
+// sigma ramp 1..25 px, 17 iterations; 2-core host shared with other builds):
+// C = 1: 55 ms, 2: 54, 4: 53, 6: 110, 8: 109. The copies in and out are
+// noise; 6 channels cost 2.07x four, where a C-channel kernel could at best
+// reach ~1.5x. A 1-channel map pays for four lanes: a scalar kernel would be
+// the thing to write if single-channel blurs ever matter for speed.
 template <class Run>
 void by_groups_of_four(Image& f, Run&& run) {
   const int C = f.channels;
@@ -227,8 +233,10 @@ DiffusionPlan diffuse_rates(Image& f, const Image& rho, int iterations, const Di
   check_iterations(iterations);
   const double rho_hi = check_unit_quarter(rho, "rate map", "rate per iteration");
   const bool standard = p.scheme == Scheme::standard;
-  if (!standard && (!(p.sigma0 > 0.0) || !std::isfinite(p.sigma0)))
-    throw Error("--sigma0 " + std::to_string(p.sigma0) + " px is not allowed; the invariant schemes' offsets start at the inner scale, which must be a finite number > 0");
+  // sigma0 places the invariant schemes' first offsets and, for every
+  // scheme, the scale the plan reports.
+  if (!(p.sigma0 > 0.0) || !std::isfinite(p.sigma0))
+    throw Error("--sigma0 " + std::to_string(p.sigma0) + " px is not allowed; the inner scale must be a finite number > 0 (typically 0.5 to 1 px)");
   DiffusionPlan plan;
   plan.iterations = iterations;
   plan.rho_max = rho_hi;
