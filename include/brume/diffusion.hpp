@@ -1,11 +1,27 @@
 // brume — space-variant Gaussian blur by inhomogeneous diffusion
 // (Hansard, "Fast synthesis of atmospheric image effects", §3).
 //
-// Input: a four-channel image F (premultiplied RGBA for haze; any four
-// channels otherwise) at inner scale sigma0, and a target scale map sigma(x)
-// in pixels, sigma(x) >= sigma0. Output: F diffused so that, where sigma is
-// locally constant, F has been convolved with a Gaussian of standard
-// deviation sqrt(sigma(x)^2 - sigma0^2) (per axis).
+// Input: an image F with any number of channels >= 1 (premultiplied RGBA for
+// haze; six channels Gamma_c E_c, Gamma_c for spectral aerial perspective)
+// at inner scale sigma0, and one of three descriptions of the blur, the same
+// for every channel:
+//  - diffuse: a target scale map sigma(x) in pixels, sigma(x) >= sigma0.
+//    Where sigma is locally constant, F is convolved with a Gaussian of
+//    standard deviation sqrt(sigma(x)^2 - sigma0^2) (per axis). This is
+//    "compute the rate rho(x) from sigma (eq. 13 / eq. 18), then diffuse_rates".
+//  - diffuse_rates: a per-pixel rate map rho(x) and the iteration count N,
+//    for the standard and invariant schemes (edge rates from the two ends by
+//    DiffusionParams::edge_rate, as for the sigma map).
+//  - diffuse_conductance: a weight per edge (depth of field, Bertalmio et al.:
+//    I <- I + 1/4 div^-(g grad^+ I), i.e. w = g/4 on each edge) and N.
+// Channels are independent (no rate depends on F). The fast CPU path keeps
+// F as one four-float vector per pixel and runs other channel counts as
+// groups of four channels (the last padded with zeros): 6 channels cost two
+// 4-channel runs (measured, see by_groups_of_four in src/cpu/diffusion.cpp),
+// where a kernel generalised to C channels could at best save the padding
+// (a quarter of the work for 6, none for 4 and 8) and would give up the
+// vector-per-pixel layout that the run and f16 schedules are built on. The
+// reference path takes any C as is.
 //
 // Schemes (equation numbers from the paper):
 //  - standard (eq. 11-13): explicit Euler on the 4-neighbour Laplacian,
@@ -89,16 +105,48 @@ struct DiffusionPlan {
 // N for a given largest target scale (eq. 13 / eq. 18).
 DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max);
 
-// Check a diffusion problem (channels, sizes, every target scale finite and
-// in [sigma0, sigma_max]) and plan it; every backend calls this first.
+// Check a target-scale problem for the GPU backend (which takes exactly 4
+// channels; the CPU takes any count) — sizes, every target scale finite and
+// in [sigma0, sigma_max] — and plan it. Throws brume::Error.
 DiffusionPlan validate_diffusion(const Image& f, const Image& sigma, double sigma_max, const DiffusionParams& p);
 
-// Diffuse `f` (4 channels, in place) to the per-pixel target scale `sigma`
-// (1 channel, same size, every value finite and in [sigma0, sigma_max]).
-// sigma_max sets the iteration count; pass the largest value of `sigma` or a
-// larger a-priori bound (haze uses sigma0 + lambda sqrt(kappa_s) so that N
-// does not depend on image content). Throws brume::Error on bad input.
+// Diffuse `f` (any channel count >= 1, in place) to the per-pixel target
+// scale `sigma` (1 channel, same size, every value finite and in [sigma0,
+// sigma_max]). sigma_max sets the iteration count; pass the largest value of
+// `sigma` or a larger a-priori bound (haze uses sigma0 + lambda sqrt(kappa_s)
+// so that N does not depend on image content). Throws brume::Error on bad
+// input. CPU only (the GPU entry point is diffuse_gpu in gpu.hpp).
 DiffusionPlan diffuse(Image& f, const Image& sigma, double sigma_max,
                       const DiffusionParams& p, const Exec& exec = {});
+
+// Diffuse `f` (any channel count >= 1, in place) for `iterations` steps of
+// the per-pixel rate `rho` (1 channel, same size, every value finite and in
+// [0, 1/4], the 2-D stability limit; 0 = this pixel's own rate is zero, so
+// with min or harmonic edge rates it exchanges nothing). Each standard step
+// adds per-axis variance 2 rho where rho is locally constant; the invariant
+// schemes sample their neighbours at +-h_k from sigma_k = sigma0 e^{k rho(x)}
+// (so they still use p.sigma0). p.rho_max is not used: N is the caller's.
+// Returns the plan: N, the largest rate, and the scale it reaches,
+// sqrt(sigma0^2 + 2 N rho) (standard) or sigma0 e^{N rho} (invariant).
+// Throws brume::Error naming the map, the pixel and the value.
+DiffusionPlan diffuse_rates(Image& f, const Image& rho, int iterations, const DiffusionParams& p,
+                            const Exec& exec = {});
+
+// Diffuse `f` (any channel count >= 1, in place) for `iterations` explicit
+// steps with one weight per edge: F(x) += sum over its 4 edges of
+// w (F(neighbour) - F(x)). wx and wy are W x H, 1 channel: wx(x, y) is the
+// weight of the edge between (x, y) and (x+1, y), wy(x, y) that between
+// (x, y) and (x, y+1). The last column of wx and the last row of wy name
+// edges onto the half-sample mirror, which carry no flux (the pixel's mirror
+// neighbour is itself): they are unused, but still checked like every other
+// value, so that maps filled from a per-pixel formula need no special case.
+// Every weight finite and in [0, 1/4] (Bertalmio's w = g/4 with g in [0, 1];
+// 1/4 is the stability limit). The flux is antisymmetric, so mass is
+// conserved, and a pixel whose four edges have w = 0 never changes
+// (leak-free). Where w is locally constant, N steps add per-axis variance
+// 2 w N. `precision` f16 rounds F to binary16 after every step, as the other
+// paths do. Throws brume::Error naming the map, the pixel and the value.
+void diffuse_conductance(Image& f, const Image& wx, const Image& wy, int iterations,
+                         Precision precision = Precision::f32, const Exec& exec = {});
 
 }  // namespace brume

@@ -1,6 +1,11 @@
 // brume — fast CPU schedule of the diffusion schemes.
 //
-// Same algorithm as diffusion_reference.cpp, scheduled for speed:
+// Same algorithm as diffusion_reference.cpp, scheduled for speed. Input is
+// the per-pixel rate map (the sigma front end computes it, brume_standard_rate
+// or brume_invariant_rate) on four interleaved channels; the front end feeds
+// other channel counts as groups of four. The standard scheme forms its edge
+// weights once and runs the conductance stencil, which is also the public
+// per-edge (depth-of-field) path.
 //  - rows in parallel (OpenMP, static schedule); every output pixel depends
 //    only on the previous iteration, so results do not depend on the thread
 //    count;
@@ -10,7 +15,7 @@
 //    sigma_{k+1} = sigma_k e^{rho} (one multiply instead of an exp per pixel
 //    and iteration; relative drift < 1e-6 after 13 steps, covered by the
 //    fast-vs-reference test);
-//  - a constant target scale (the accuracy experiment, `brume blur --sigma`)
+//  - a constant rate (a constant target scale: the accuracy experiment, `brume blur --sigma`)
 //    makes every offset and weight equal, and the interior of each row is
 //    then a contiguous 5-tap loop over floats that the compiler vectorises
 //    (AVX2 clone selected at run time). It performs the same arithmetic in
@@ -56,7 +61,7 @@ void uniform_row_interior(const float* __restrict s, const float* __restrict u0,
     const float r = s[i + n4] + fr * (s[i + n4 + 4] - s[i + n4]);
     const float u = u0[i] + fr * (u1[i] - u0[i]);
     const float d = d0[i] + fr * (d1[i] - d0[i]);
-    o[i] = fc + w * (l - fc) + w * (r - fc) + w * (u - fc) + w * (d - fc);
+    o[i] = brume_diffusion_update(fc, l, r, u, d, w, w, w, w);
   }
 }
 
@@ -162,8 +167,9 @@ void general_row(const float* src, float* dst, const float* rho, const float* sg
   }
 }
 
-// One row of the standard scheme with precomputed edge weights:
-// wr[x] couples x and x+1 (0 at the last column: zero flux), wd couples rows.
+// One row of the conductance stencil (the standard scheme once its edge
+// rates are formed): wr[x] couples x and x+1 (0 at the last column: zero
+// flux), wd couples rows.
 BRUME_CLONES
 void standard_row(const float* __restrict s, const float* __restrict up,
                   const float* __restrict dn, const float* __restrict wr,
@@ -173,11 +179,9 @@ void standard_row(const float* __restrict s, const float* __restrict up,
     const float wl = x > 0 ? wr[x - 1] : 0.0f;
     const int xl = x > 0 ? x - 1 : 0, xr = x < W - 1 ? x + 1 : x;
     const float a = wl, b = wr[x], c = wd_up[x], e = wd[x];
-    for (int ch = 0; ch < 4; ++ch) {
-      const float fc = s[x * 4 + ch];
-      o[x * 4 + ch] = fc + a * (s[xl * 4 + ch] - fc) + b * (s[xr * 4 + ch] - fc) +
-                      c * (up[x * 4 + ch] - fc) + e * (dn[x * 4 + ch] - fc);
-    }
+    for (int ch = 0; ch < 4; ++ch)
+      o[x * 4 + ch] = brume_diffusion_update(s[x * 4 + ch], s[xl * 4 + ch], s[xr * 4 + ch], up[x * 4 + ch],
+                                             dn[x * 4 + ch], a, b, c, e);
   }
 }
 
@@ -206,23 +210,75 @@ void round_to_half(float* v, std::size_t n) {
   for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<float>(static_cast<_Float16>(v[i]));
 }
 
-void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
-                  const DiffusionParams& p, int threads) {
-  const int W = f.width, H = f.height, N = plan.iterations;
+Image rates_from_scale(const Image& sigma, const DiffusionParams& p, int iterations, int threads) {
+  const float s0 = static_cast<float>(p.sigma0), Nf = static_cast<float>(iterations);
+  const bool standard = p.scheme == Scheme::standard;
+  Image rho(sigma.width, sigma.height, 1);
+  const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(sigma.data.size());
+#pragma omp parallel for num_threads(thread_count(threads)) schedule(static)
+  for (std::ptrdiff_t i = 0; i < n; ++i) {
+    const float s = sigma.data[i];
+    rho.data[i] = standard ? sh::brume_standard_rate(s, s0, Nf) : sh::brume_invariant_rate(s, s0, Nf);
+  }
+  return rho;
+}
+
+void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16,
+                              int threads) {
+  const int W = f.width, H = f.height;
+  const std::size_t Ws = static_cast<std::size_t>(W);
+  const int nt = thread_count(threads);
+  // Ping-pong partner, deliberately not zero-filled (every value is written
+  // before it is read).
+  std::unique_ptr<float[]> buf(new float[f.data.size()]);
+  float* src = f.data.data();
+  float* dst = buf.get();
+  if (f16) round_to_half(src, f.data.size());
+  const std::vector<float> zero(Ws, 0.0f);
+  for (int k = 0; k < iterations; ++k) {
+#pragma omp parallel for num_threads(nt) schedule(static)
+    for (int y = 0; y < H; ++y) {
+      const float* s = src + y * Ws * 4;
+      const float* up = src + (y > 0 ? y - 1 : 0) * Ws * 4;
+      const float* dn = src + (y < H - 1 ? y + 1 : y) * Ws * 4;
+      const float* wdu = y > 0 ? wy + (y - 1) * Ws : zero.data();
+      float* o = dst + y * Ws * 4;
+      standard_row(s, up, dn, wx + y * Ws, wdu, wy + y * Ws, o, W);
+      if (f16) round_to_half(o, Ws * 4);
+    }
+    std::swap(src, dst);
+  }
+  if (src != f.data.data()) std::memcpy(f.data.data(), src, f.data.size() * sizeof(float));
+}
+
+void diffuse_fast(Image& f, const Image& rho_map, int iterations, const DiffusionParams& p, int threads) {
+  const int W = f.width, H = f.height, N = iterations;
   const std::size_t np = f.pixels();
   const std::size_t Ws = static_cast<std::size_t>(W);
   const float s0 = static_cast<float>(p.sigma0);
-  const float Nf = static_cast<float>(N);
   const bool f16 = p.precision == Precision::f16;
-  const bool standard = p.scheme == Scheme::standard;
   const bool exact = p.scheme == Scheme::invariant_exact;
   const int nt = thread_count(threads);
   const int edge_mode = static_cast<int>(p.edge_rate);
-  auto rate = [&](float s) {
-    return standard ? sh::brume_standard_rate(s, s0, Nf) : sh::brume_invariant_rate(s, s0, Nf);
-  };
-  // A constant target scale needs no per-pixel rate, offset or scale arrays.
-  const bool uniform = std::all_of(sigma.data.begin(), sigma.data.end(), [&](float v) { return v == sigma.data[0]; });
+  const std::vector<float>& rates = rho_map.data;
+
+  if (p.scheme == Scheme::standard) {
+    // Edge weights of eq. 12, fixed for all iterations: the conductance path.
+    std::vector<float> wr(np), wd(np);
+#pragma omp parallel for num_threads(nt) schedule(static)
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const std::size_t i = y * Ws + x;
+        const float rc = rates[i];
+        wr[i] = x < W - 1 ? sh::brume_edge_rate(rc, rates[i + 1], edge_mode) : 0.0f;
+        wd[i] = y < H - 1 ? sh::brume_edge_rate(rc, rates[i + Ws], edge_mode) : 0.0f;
+      }
+    diffuse_conductance_fast(f, wr.data(), wd.data(), N, f16, threads);
+    return;
+  }
+
+  // A constant rate needs no per-pixel rate, offset or scale arrays.
+  const bool uniform = std::all_of(rates.begin(), rates.end(), [&](float v) { return v == rates[0]; });
 
   // Ping-pong partner, deliberately not zero-filled (every value is written
   // before it is read).
@@ -231,34 +287,10 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
   float* dst = buf.get();
   if (f16) round_to_half(src, f.data.size());
 
-  if (!standard && uniform && f16 && uniform_iterations_f16(src, W, H, N, s0, rate(sigma.data[0]), exact, edge_mode, nt)) {
+  if (uniform && f16 && uniform_iterations_f16(src, W, H, N, s0, rates[0], exact, edge_mode, nt)) {
     // done in binary16 storage (result in f)
-  } else if (standard) {
-    // Edge weights of eq. 12, fixed for all iterations.
-    std::vector<float> wr(np), wd(np), zero(Ws, 0.0f);
-#pragma omp parallel for num_threads(nt) schedule(static)
-    for (int y = 0; y < H; ++y)
-      for (int x = 0; x < W; ++x) {
-        const std::size_t i = y * Ws + x;
-        const float rc = rate(sigma.data[i]);
-        wr[i] = x < W - 1 ? sh::brume_edge_rate(rc, rate(sigma.data[i + 1]), edge_mode) : 0.0f;
-        wd[i] = y < H - 1 ? sh::brume_edge_rate(rc, rate(sigma.data[i + Ws]), edge_mode) : 0.0f;
-      }
-    for (int k = 0; k < N; ++k) {
-#pragma omp parallel for num_threads(nt) schedule(static)
-      for (int y = 0; y < H; ++y) {
-        const float* s = src + y * Ws * 4;
-        const float* up = src + (y > 0 ? y - 1 : 0) * Ws * 4;
-        const float* dn = src + (y < H - 1 ? y + 1 : y) * Ws * 4;
-        const float* wdu = y > 0 ? wd.data() + (y - 1) * Ws : zero.data();
-        float* o = dst + y * Ws * 4;
-        standard_row(s, up, dn, wr.data() + y * Ws, wdu, wd.data() + y * Ws, o, W);
-        if (f16) round_to_half(o, Ws * 4);
-      }
-      std::swap(src, dst);
-    }
   } else if (uniform) {
-    const float rho = rate(sigma.data[0]);
+    const float rho = rates[0];
     const float growth = std::exp(rho);
     float sig = s0;  // sigma_k, the same running product as the general path
     for (int k = 0; k < N; ++k) {
@@ -285,11 +317,11 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
   } else {
     // Per-pixel rate, sigma_k as a running product, and the exact scheme's
     // variance ratio (e^{2 rho} - 1)/(2 rho).
-    std::vector<float> rho(np), sig(np, s0), growth(np), vratio(np);
+    const float* rho = rates.data();
+    std::vector<float> sig(np, s0), growth(np), vratio(np);
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y)
       for (std::size_t i = y * Ws; i < (y + 1) * Ws; ++i) {
-        rho[i] = rate(sigma.data[i]);
         growth[i] = std::exp(rho[i]);
         vratio[i] = sh::brume_step_variance_ratio(rho[i]);
       }
@@ -297,7 +329,7 @@ void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
     for (int k = 0; k < N; ++k) {
 #pragma omp parallel for num_threads(nt) schedule(static)
       for (int y = 0; y < H; ++y) {
-        general_row(src, dst, rho.data(), sig.data() + y * Ws, vratio.data() + y * Ws, exact, edge_mode, W, H, y,
+        general_row(src, dst, rho, sig.data() + y * Ws, vratio.data() + y * Ws, exact, edge_mode, W, H, y,
                     scratch[static_cast<std::size_t>(omp_get_thread_num())]);
         if (f16) round_to_half(dst + y * Ws * 4, Ws * 4);
         // sigma_k is read only by its own pixel's offset: advance it here.

@@ -56,10 +56,8 @@ void row_interior_f16(const std::uint16_t* s, const std::uint16_t* u0, const std
     const __m256 r = lerp(ld8(s + i + n4), ld8(s + i + n4 + 4));
     const __m256 u = lerp(ld8(u0 + i), ld8(u1 + i));
     const __m256 d = lerp(ld8(d0 + i), ld8(d1 + i));
-    __m256 acc = _mm256_add_ps(fc, _mm256_mul_ps(vw, _mm256_sub_ps(l, fc)));
-    acc = _mm256_add_ps(acc, _mm256_mul_ps(vw, _mm256_sub_ps(r, fc)));
-    acc = _mm256_add_ps(acc, _mm256_mul_ps(vw, _mm256_sub_ps(u, fc)));
-    acc = _mm256_add_ps(acc, _mm256_mul_ps(vw, _mm256_sub_ps(d, fc)));
+    // GCC's __m256 is a vector type, so the shared update applies as is.
+    const __m256 acc = brume_diffusion_update(fc, l, r, u, d, vw, vw, vw, vw);
     _mm_storeu_si128(reinterpret_cast<__m128i*>(o + i), _mm256_cvtps_ph(acc, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC));
   }
   for (; i < end; i += 4) {  // (end - begin) is a multiple of 4: one pixel at a time
@@ -70,7 +68,7 @@ void row_interior_f16(const std::uint16_t* s, const std::uint16_t* u0, const std
     const v4 c = StoreF16::load(u0 + i), e = StoreF16::load(d0 + i);
     const v4 u = c + fr * (StoreF16::load(u1 + i) - c);
     const v4 d = e + fr * (StoreF16::load(d1 + i) - e);
-    StoreF16::store(o + i, fc + w * (l - fc) + w * (r - fc) + w * (u - fc) + w * (d - fc));
+    StoreF16::store(o + i, brume_diffusion_update(fc, l, r, u, d, w, w, w, w));
   }
 }
 

@@ -1,9 +1,12 @@
 // brume — CPU schedules of the diffusion schemes (internal).
 //
 // The algorithm is stated in include/brume/diffusion.hpp and the per-pixel
-// formulas in src/shared/haze_math.glsl; this header declares the two CPU
-// schedules of it: a plain double-precision reference and the fast float path.
+// formulas in src/shared/haze_math.glsl and diffusion_stencil.hpp; this
+// header declares the two CPU schedules of it: a plain double-precision
+// reference and the fast float path.
 #pragma once
+
+#include <vector>
 
 #include "brume/diffusion.hpp"
 
@@ -18,11 +21,29 @@ inline int mirror(int i, int n) {
   return i < n ? i : period - 1 - i;
 }
 
-// Both take a validated F (4 channels), sigma map, plan and parameters.
-void diffuse_reference(Image& f, const Image& sigma, const DiffusionPlan& plan,
-                       const DiffusionParams& p);
-void diffuse_fast(Image& f, const Image& sigma, const DiffusionPlan& plan,
-                  const DiffusionParams& p, int threads);
+// The CPU schedules take validated inputs (the checks are in diffusion.cpp).
+//
+// Rate path: F with any channel count for the reference, four channels for
+// the fast path (the front end feeds it groups of four); one rate per pixel
+// (double in the reference, the float map in the fast path) and the
+// iteration count N. The standard scheme is the conductance path below with
+// edge weights formed from the two ends' rates (eq. 12 or its min/harmonic
+// variants); the invariant schemes take offsets from sigma_k = s0 e^{k rho}.
+void diffuse_reference(Image& f, const std::vector<double>& rho, int iterations, const DiffusionParams& p);
+void diffuse_fast(Image& f, const Image& rho, int iterations, const DiffusionParams& p, int threads);
+
+// The float rate map of a target-scale map, per pixel: brume_standard_rate
+// or brume_invariant_rate with N as a float (the sigma front end of the fast
+// path; threaded).
+Image rates_from_scale(const Image& sigma, const DiffusionParams& p, int iterations, int threads);
+
+// Conductance path: wx[y W + x] is the weight of the edge between (x, y) and
+// (x+1, y), wy[y W + x] that of the edge between (x, y) and (x, y+1); the
+// last column of wx and the last row of wy must be 0 (the half-sample mirror
+// boundary carries no flux). Same channel rules as the rate path.
+void diffuse_conductance_reference(Image& f, const std::vector<double>& wx, const std::vector<double>& wy,
+                                   int iterations, bool f16);
+void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16, int threads);
 
 // Round n floats to the nearest IEEE binary16 value (ties to even), in place.
 void round_to_half(float* v, std::size_t n);

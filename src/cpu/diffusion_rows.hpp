@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "cpu/diffusion_kernels.hpp"
+#include "cpu/diffusion_stencil.hpp"
 #include "shared/prelude_cpp.h"
 
 namespace brume::cpu {
@@ -29,13 +30,13 @@ struct StoreF32 {
 
 // Eq. 11 at one pixel from its taps: the centre fc and, per direction, the
 // two texels (a0 at offset n, a1 at n + 1) that linear interpolation at
-// fraction fr blends, with the four eq. 12 weights. The one formula every
-// CPU schedule of the general scheme evaluates, so they agree bit for bit.
+// fraction fr blends, with the four eq. 12 weights: the interpolation, then
+// the shared stencil update (diffusion_stencil.hpp).
 inline v4 eq11(v4 fc, v4 l0, v4 l1, v4 r0, v4 r1, v4 u0, v4 u1, v4 d0, v4 d1, float fr, float wl, float wr,
                float wu, float wd) {
   const v4 l = l0 + fr * (l1 - l0), r = r0 + fr * (r1 - r0);
   const v4 u = u0 + fr * (u1 - u0), d = d0 + fr * (d1 - d0);
-  return fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc);
+  return brume_diffusion_update(fc, l, r, u, d, wl, wr, wu, wd);
 }
 
 // One pixel of the general scheme (any offsets, any rates): eq. 11-12.
