@@ -459,8 +459,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
   if (backend != "cpu") {
     ctx = std::make_unique<GpuContext>();  // throws with the reason
     const std::string r = ctx->info().renderer;
-    const bool soft = r.find("llvmpipe") != std::string::npos || r.find("softpipe") != std::string::npos ||
-                      r.find("SwiftShader") != std::string::npos;
+    const bool soft = ctx->info().software;
     backends.push_back({"gpu", ctx.get(), soft});
     std::fprintf(stderr, "brume study: GPU %s%s\n", r.c_str(), soft ? " (software: standard scheme limited to 300 passes)" : "");
   }
@@ -473,8 +472,8 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
     p.edge_rate = e;
     return p;
   };
-  auto too_long = [](const StudyBackend& b, Scheme s, double sigma) {
-    return b.software && s == Scheme::standard && plan_diffusion(DiffusionParams{s}, sigma).iterations > 300;
+  auto too_long = [&params](const StudyBackend& b, Scheme s, double sigma) {
+    return b.software && s == Scheme::standard && plan_diffusion(params(s, Precision::f32), sigma).iterations > 300;
   };
 
   // ---- Accuracy (Fig. 6) ---------------------------------------------------

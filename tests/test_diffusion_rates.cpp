@@ -70,7 +70,7 @@ DiffusionParams params(Scheme s, Precision p = Precision::f32) {
   return d;
 }
 
-Exec reference() {
+Exec reference_exec() {
   Exec e;
   e.path = Path::reference;
   return e;
@@ -180,7 +180,7 @@ TEST(DiffusionConductance, MassIsConservedForAnyWeights) {
   for (const bool ref : {false, true}) {
     Image f = texture(71, 67, 5);
     Image g = f;
-    diffuse_conductance(g, wx, wy, 60, Precision::f32, ref ? reference() : Exec{});
+    diffuse_conductance(g, wx, wy, 60, Precision::f32, ref ? reference_exec() : Exec{});
     for (int c = 0; c < 5; ++c)
       EXPECT_NEAR(channel_sum(g, c) / channel_sum(f, c), 1.0, ref ? 1e-8 : 1e-5) << (ref ? "reference" : "fast")
                                                                                << " channel " << c;
@@ -200,7 +200,7 @@ TEST(DiffusionConductance, PixelWithFourZeroEdgesNeverChanges) {
   for (const bool ref : {false, true})
     for (Precision p : {Precision::f32, Precision::f16}) {
       Image g = f;
-      diffuse_conductance(g, wx, wy, 50, p, ref ? reference() : Exec{});
+      diffuse_conductance(g, wx, wy, 50, p, ref ? reference_exec() : Exec{});
       for (int c = 0; c < 4; ++c) EXPECT_EQ(g.at(px, py, c), f.at(px, py, c)) << (ref ? "reference " : "fast ") << to_string(p);
       // Its neighbours did change (the test is not vacuous).
       EXPECT_NE(g.at(px + 1, py, 0), f.at(px + 1, py, 0));
@@ -222,7 +222,7 @@ TEST(DiffusionConductance, ZeroEdgeBetweenRegionsIsLeakFree) {
     for (int x = 32; x < W; ++x) a.at(x, y, 0) = b.at(x, y, 0) = 0.0f;
   for (const bool ref : {false, true}) {
     Image ga = a, gb = b;
-    const Exec ex = ref ? reference() : Exec{};
+    const Exec ex = ref ? reference_exec() : Exec{};
     diffuse_conductance(ga, wx, wy, 200, Precision::f32, ex);
     diffuse_conductance(gb, wx, wy, 200, Precision::f32, ex);
     for (int y = 0; y < H; ++y)
@@ -249,7 +249,7 @@ TEST(DiffusionConductance, FastMatchesReference) {
     Image f = texture(73, 51, 6);
     Image fast = f, ref = f;
     diffuse_conductance(fast, wx, wy, 80, c.p);
-    diffuse_conductance(ref, wx, wy, 80, c.p, reference());
+    diffuse_conductance(ref, wx, wy, 80, c.p, reference_exec());
     const Diff d = compare(fast, ref);
     EXPECT_LE(d.max_abs, c.max_tol) << to_string(c.p) << ": " << d;
     EXPECT_LE(d.rms, c.rms_tol) << to_string(c.p) << ": " << d;
@@ -309,8 +309,8 @@ TEST(DiffusionRates, RatesFromSigmaGiveTheSigmaPathBitForBit) {
         EXPECT_EQ(a.data, b.data) << to_string(s) << " " << to_string(p) << (uniform ? " uniform" : "");
         if (p == Precision::f32) {
           Image ra = texture(W, H, 4), rb = ra;
-          diffuse(ra, sigma, smax, dp, reference());
-          diffuse_rates(rb, rho, N, dp, reference());
+          diffuse(ra, sigma, smax, dp, reference_exec());
+          diffuse_rates(rb, rho, N, dp, reference_exec());
           EXPECT_LE(compare(ra, rb).max_abs, 1e-6) << "reference " << to_string(s);
         }
       }
@@ -329,7 +329,7 @@ TEST(DiffusionRates, FastMatchesReferenceOnAnArbitraryRateMap) {
       const int N = s == Scheme::standard ? 30 : 12;
       Image fast = texture(67, 53, 4), ref = fast;
       diffuse_rates(fast, rho, N, dp);
-      diffuse_rates(ref, rho, N, dp, reference());
+      diffuse_rates(ref, rho, N, dp, reference_exec());
       const Diff d = compare(fast, ref);
       EXPECT_LE(d.max_abs, 2e-5) << to_string(s) << " " << to_string(e) << ": " << d;
       EXPECT_LE(d.rms, 2e-6) << to_string(s) << " " << to_string(e) << ": " << d;
@@ -399,7 +399,7 @@ TEST(DiffusionChannels, SixChannelFastMatchesReference) {
   for (Scheme s : {Scheme::standard, Scheme::invariant_exact}) {
     Image fast = texture(61, 45, 6), ref = fast;
     diffuse(fast, sigma, 6.0, params(s));
-    diffuse(ref, sigma, 6.0, params(s), reference());
+    diffuse(ref, sigma, 6.0, params(s), reference_exec());
     const Diff d = compare(fast, ref);
     EXPECT_LE(d.max_abs, 2e-5) << to_string(s) << ": " << d;
     EXPECT_LE(d.rms, 2e-6) << to_string(s) << ": " << d;

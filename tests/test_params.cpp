@@ -79,6 +79,7 @@ TEST(Params, EveryCommandIsDeclaredCompletely) {
   expect_complete(depth_convert_job_table(), "depth convert");
   expect_complete(depth_prepare_job_table(), "depth prepare");
   expect_complete(exec_param_table(), "execution");
+  expect_complete(camera_pose_param_table(), "camera");
 }
 
 TEST(Params, RangeErrorsNameTheFlag) {
@@ -86,6 +87,22 @@ TEST(Params, RangeErrorsNameTheFlag) {
   expect_range_errors_name_the_flag(blur_job_table());
   expect_range_errors_name_the_flag(depth_prepare_job_table());
   expect_range_errors_name_the_flag(exec_param_table());
+  expect_range_errors_name_the_flag(camera_pose_param_table());
+}
+
+TEST(Params, CameraPoseBlockDrivesTheCamera) {
+  // The declared pose block feeds make_camera: pitch 30 raises the optical
+  // axis by 30 degrees (closed form: axis y = sin 30), heights are kept.
+  CameraPose pose;
+  const auto& t = camera_pose_param_table();
+  t.set_text(pose, "pitch", "30");
+  t.set_text(pose, "camera-height", "1.6");
+  Intrinsics k;
+  k.fx = k.fy = 100.0;
+  const Camera c = make_camera(k, 101, 81, pose);
+  EXPECT_NEAR(c.world_ray(50.0, 40.0).y, 0.5, 1e-12);
+  EXPECT_DOUBLE_EQ(c.position_m.y, 1.6);
+  EXPECT_TRUE(t.to_json(CameraPose{})["camera"]["camera-height"].is_null());  // unknown, not 0
 }
 
 TEST(Params, PrepareMessagesUseFlagNamesNotCppNames) {

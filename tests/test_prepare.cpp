@@ -403,18 +403,18 @@ TEST(Prepare, BadInputsAndParametersNameTheProblem) {
   const Image ok(8, 8, 1, 1.0f);
   const double nan = std::numeric_limits<double>::quiet_NaN();
   struct Case {
-    const char* field;
+    const char* field;  // the user-facing flag name, not the C++ member
     void (*set)(PrepareParams&, double);
     std::vector<double> bad;
   };
   const std::vector<Case> cases = {
-      {"sky_margin_px", [](PrepareParams& p, double v) { p.sky_margin_px = v; }, {-1.0, nan, INFINITY}},
-      {"sky_min_fraction", [](PrepareParams& p, double v) { p.sky_min_fraction = v; }, {-0.1, 1.5, nan}},
-      {"sky_large_fraction", [](PrepareParams& p, double v) { p.sky_large_fraction = v; }, {-0.1, 2.0, nan}},
-      {"s_max_factor", [](PrepareParams& p, double v) { p.s_max_factor = v; }, {1.0, 0.5, nan, INFINITY}},
-      {"min_coverage", [](PrepareParams& p, double v) { p.min_coverage = v; }, {-0.5, 1.01, nan}},
-      {"residual_tol", [](PrepareParams& p, double v) { p.residual_tol = v; }, {0.0, 1e-9, 1.0, nan}},
-      {"ransac_iterations", [](PrepareParams& p, double v) { p.ransac_iterations = static_cast<int>(v); }, {0.0, -3.0}},
+      {"--sky-margin", [](PrepareParams& p, double v) { p.sky_margin_px = v; }, {-1.0, nan, INFINITY}},
+      {"--sky-min-fraction", [](PrepareParams& p, double v) { p.sky_min_fraction = v; }, {-0.1, 1.5, nan}},
+      {"--sky-large-fraction", [](PrepareParams& p, double v) { p.sky_large_fraction = v; }, {-0.1, 2.0, nan}},
+      {"--s-max-factor", [](PrepareParams& p, double v) { p.s_max_factor = v; }, {1.0, 0.5, nan, INFINITY}},
+      {"--min-coverage", [](PrepareParams& p, double v) { p.min_coverage = v; }, {-0.5, 1.01, nan}},
+      {"--residual-tol", [](PrepareParams& p, double v) { p.residual_tol = v; }, {0.0, 1e-9, 1.0, nan}},
+      {"--ransac-iterations", [](PrepareParams& p, double v) { p.ransac_iterations = static_cast<int>(v); }, {0.0, -3.0}},
   };
   for (const Case& c : cases)
     for (double v : c.bad) {

@@ -21,6 +21,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "brume/camera.hpp"
 #include "brume/depth_source.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/exec.hpp"
@@ -45,6 +46,12 @@ const EnumNames<GpuFilter>& gpu_filter_names();
 const ParamTable<DiffusionParams>& diffusion_param_table();  // scheme, precision, sigma0, rho-max, edge-rate
 const ParamTable<PrepareParams>& prepare_param_table();      // all eight preparation parameters
 const ParamTable<DepthSource>& depth_param_table();          // every depth source and convention flag
+
+// The camera's pose (brume/camera.hpp: conventions fixed once for every
+// effect): --yaw, --pitch, --roll, --camera-height, --camera-x, --camera-z,
+// --view-matrix. For the effects that need world heights or directions
+// (layered fog, sky); an effect that does not use the pose does not bind it.
+const ParamTable<CameraPose>& camera_pose_param_table();
 
 // Execution: how, not what (results do not depend on it, except the GPU's
 // float rounding); recorded, but not part of a job.

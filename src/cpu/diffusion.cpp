@@ -9,49 +9,18 @@
 
 #include "brume/diffusion.hpp"
 #include "brume/error.hpp"
+#include "brume/pipeline.hpp"
 #include "cpu/diffusion_kernels.hpp"
 
 namespace brume {
 
-std::string to_string(Scheme s) {
-  switch (s) {
-    case Scheme::standard: return "standard";
-    case Scheme::invariant: return "invariant";
-    case Scheme::invariant_exact: return "invariant-exact";
-  }
-  return "?";
-}
-
-std::string to_string(Precision p) { return p == Precision::f16 ? "f16" : "f32"; }
-
-Scheme parse_scheme(const std::string& s) {
-  if (s == "standard") return Scheme::standard;
-  if (s == "invariant") return Scheme::invariant;
-  if (s == "invariant-exact") return Scheme::invariant_exact;
-  throw Error("--scheme '" + s + "' is not a diffusion scheme; use standard, invariant or invariant-exact");
-}
-
-Precision parse_precision(const std::string& s) {
-  if (s == "f32") return Precision::f32;
-  if (s == "f16") return Precision::f16;
-  throw Error("--precision '" + s + "' is not supported; use f32 or f16");
-}
-
-std::string to_string(EdgeRate e) {
-  switch (e) {
-    case EdgeRate::mean: return "mean";
-    case EdgeRate::min: return "min";
-    case EdgeRate::harmonic: return "harmonic";
-  }
-  return "?";
-}
-
-EdgeRate parse_edge_rate(const std::string& s) {
-  if (s == "mean") return EdgeRate::mean;
-  if (s == "min") return EdgeRate::min;
-  if (s == "harmonic") return EdgeRate::harmonic;
-  throw Error("--edge-rate '" + s + "' is not an edge rate; use mean (the paper's eq. 12), min or harmonic");
-}
+// Names come from the one name table of each enum (brume/pipeline.hpp).
+std::string to_string(Scheme s) { return enum_name(scheme_names(), s); }
+std::string to_string(Precision p) { return enum_name(precision_names(), p); }
+std::string to_string(EdgeRate e) { return enum_name(edge_rate_names(), e); }
+Scheme parse_scheme(const std::string& s) { return parse_enum(scheme_names(), s, "--scheme"); }
+Precision parse_precision(const std::string& s) { return parse_enum(precision_names(), s, "--precision"); }
+EdgeRate parse_edge_rate(const std::string& s) { return parse_enum(edge_rate_names(), s, "--edge-rate"); }
 
 double effective_rho_max(const DiffusionParams& p) {
   if (p.rho_max) return *p.rho_max;

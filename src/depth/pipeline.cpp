@@ -49,13 +49,7 @@ nlohmann::json run_depth_convert_job(const DepthConvertJob& job, const RunContex
   rec["depth"] = ld.record;
   rec["kind"] = job.kind;
   if (job.kind == "z") {
-    Intrinsics k;
-    if (!job.depth.velodyne.empty()) {
-      KittiCalib c = read_kitti_calib(job.depth.kitti_calib);  // camera 2's K from P2
-      k.fx = c.P2[0], k.fy = c.P2[5], k.cx = c.P2[2], k.cy = c.P2[6];
-    } else {
-      k = depth_intrinsics(job.depth, result.width, result.height);
-    }
+    const Intrinsics k = depth_camera(job.depth, result.width, result.height).k;  // KITTI: camera 2's K from P2
     result = range_to_z(result, k);
     rec["z_intrinsics"] = {{"fx_px", k.fx}, {"fy_px", k.fy}, {"cx_px", k.cx}, {"cy_px", k.cy}};
   }

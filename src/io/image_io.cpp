@@ -12,25 +12,13 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
+#include "brume/pipeline.hpp"
 
 namespace brume {
 namespace fs = std::filesystem;
 
-Transfer parse_transfer(const std::string& s, const std::string& flag) {
-  if (s == "auto") return Transfer::automatic;
-  if (s == "srgb") return Transfer::srgb;
-  if (s == "linear") return Transfer::linear;
-  throw Error(flag + " '" + s + "' is not a transfer function; use auto, srgb or linear");
-}
-
-std::string to_string(Transfer t) {
-  switch (t) {
-    case Transfer::automatic: return "auto";
-    case Transfer::srgb: return "srgb";
-    case Transfer::linear: return "linear";
-  }
-  return "?";
-}
+Transfer parse_transfer(const std::string& s, const std::string& flag) { return parse_enum(transfer_names(), s, flag); }
+std::string to_string(Transfer t) { return enum_name(transfer_names(), t); }
 
 float srgb_to_linear(float v) {
   return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);

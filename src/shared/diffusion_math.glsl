@@ -2,7 +2,8 @@
 // the rates, the edge rate and the neighbour offsets of the stencil.
 //
 // Written once in the common subset of C++ and GLSL ES 3.20 (float scalars,
-// no pointers, no templates, explicit float literals): the CPU backend
+// no pointers, explicit float literals; the one template, the stencil update
+// below, is spelled with macros that are empty in GLSL): the CPU backend
 // includes it through prelude_cpp.h and the GPU backend embeds the same text
 // in the shaders of the passes that declare this topic, so both backends
 // share the maths and differ only in the schedule.
@@ -66,4 +67,21 @@ BRUME_FN float brume_offset_for_moment(float m) {
 BRUME_FN float brume_invariant_offset(float sigma_k, float rho, bool exact) {
   if (!exact) return sigma_k;
   return brume_offset_for_moment(sigma_k * sigma_k * brume_step_variance_ratio(rho));
+}
+
+// The one update of every diffusion stencil (Hansard eq. 11; Bertalmio et
+// al.'s I <- I + 1/4 div^-(g grad^+ I) with per-edge conductance):
+//   F' = F + w_l (F_l - F) + w_r (F_r - F) + w_u (F_u - F) + w_d (F_d - F)
+// F_l .. F_d the four neighbour samples (unit offsets, or interpolated at
+// +-h_k for the invariant schemes), w_l .. w_d the weights on the four edges.
+// Written as differences against the centre (never (1 - sum w) F + sum w F_n)
+// so that a pixel whose four weights are 0 comes back bit for bit and a
+// constant image stays constant. Evaluated left to right (l, r, u, d) with
+// no contraction, so every path that feeds it equal inputs agrees bit for
+// bit. brume_vec/brume_weight are vec4/float in GLSL; in C++ they are
+// template parameters (float, double, four- and eight-float vectors), so the
+// reference, fast and f16 paths evaluate this very expression.
+BRUME_STENCIL_FN brume_vec brume_diffusion_update(brume_vec fc, brume_vec l, brume_vec r, brume_vec u, brume_vec d,
+                                                  brume_weight wl, brume_weight wr, brume_weight wu, brume_weight wd) {
+  return fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc);
 }

@@ -11,6 +11,8 @@
 
 namespace brume::shared {
 #define BRUME_FN inline
+// The stencil update takes any vector and weight type on the CPU (see diffusion_math.glsl).
+#define BRUME_STENCIL_FN template <class brume_vec, class brume_weight> inline
 using std::exp;
 using std::floor;
 using std::log;
@@ -22,4 +24,5 @@ inline float mix(float a, float b, float t) { return a + t * (b - a); }
 #include "shared/diffusion_math.glsl"
 #include "shared/haze_math.glsl"
 #undef BRUME_FN
+#undef BRUME_STENCIL_FN
 }  // namespace brume::shared

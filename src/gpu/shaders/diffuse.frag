@@ -54,5 +54,5 @@ void main() {
   float wr = brume_edge_rate(rho, sample_axis(uRates, p, h, X, size).r, uEdgeRate);
   float wu = brume_edge_rate(rho, sample_axis(uRates, p, -h, Y, size).r, uEdgeRate);
   float wd = brume_edge_rate(rho, sample_axis(uRates, p, h, Y, size).r, uEdgeRate);
-  oF = fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc);
+  oF = brume_diffusion_update(fc, l, r, u, d, wl, wr, wu, wd);
 }
