@@ -36,7 +36,7 @@
 #include "brume/diffusion.hpp"
 #include "brume/io.hpp"
 #include "bench_util.hpp"
-#include "depth/opencv.hpp"
+#include "brume_opencv.hpp"
 
 using namespace brume;
 

@@ -36,7 +36,7 @@
 #include "brume/prepare.hpp"
 
 #include "bench_util.hpp"
-#include "depth/opencv.hpp"
+#include "brume_opencv.hpp"
 
 using namespace brume;
 

@@ -14,7 +14,7 @@
 
 #include "brume/error.hpp"
 #include "brume/peers.hpp"
-#include "opencv.hpp"
+#include "brume_opencv.hpp"
 
 namespace brume::peers {
 namespace {

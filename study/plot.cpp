@@ -17,7 +17,7 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
-#include "opencv.hpp"
+#include "brume_opencv.hpp"
 
 namespace brume::plot {
 namespace {

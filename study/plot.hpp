@@ -12,7 +12,7 @@
 
 #include "brume/image.hpp"
 #include "brume/io.hpp"
-#include "opencv.hpp"
+#include "brume_opencv.hpp"
 
 namespace brume::plot {
 

@@ -58,7 +58,7 @@
 #include "brume/peers.hpp"
 #include "brume_reference.hpp"
 #include "brume_study/study.hpp"
-#include "opencv.hpp"
+#include "brume_opencv.hpp"
 #include "plot.hpp"
 
 namespace fs = std::filesystem;

@@ -24,18 +24,6 @@ DiffusionParams params(Scheme s, Precision p = Precision::f32, double sigma0 = 1
 
 Image constant_map(const Image& f, double s) { return Image(f.width, f.height, 1, static_cast<float>(s)); }
 
-// A space-variant scale map: a horizontal ramp from sigma0 to smax with a
-// step in the middle rows (a depth edge).
-Image ramp_map(int w, int h, double s0, double smax) {
-  Image m(w, h, 1);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      double t = static_cast<double>(x) / (w - 1);
-      if (y > h / 3 && y < 2 * h / 3) t = x < w / 2 ? 0.1 : 0.9;
-      m.at(x, y) = static_cast<float>(s0 + t * (smax - s0));
-    }
-  return m;
-}
 
 // A deterministic textured RGBA test image in [0, 1] (no data needed).
 Image texture(int w, int h) {

@@ -52,16 +52,6 @@ Image weight_map(int w, int h, int seed) {
   return m;
 }
 
-Image ramp_map(int w, int h, double s0, double smax) {
-  Image m(w, h, 1);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      double t = static_cast<double>(x) / (w - 1);
-      if (y > h / 3 && y < 2 * h / 3) t = x < w / 2 ? 0.1 : 0.9;
-      m.at(x, y) = static_cast<float>(s0 + t * (smax - s0));
-    }
-  return m;
-}
 
 DiffusionParams params(Scheme s, Precision p = Precision::f32) {
   DiffusionParams d;

@@ -96,4 +96,17 @@ inline DepthSource middlebury2005(const std::string& scene) {
 // A real [0,1] test image: Middlebury 2005 "Art", linear light, 463x370.
 inline const char* kArt = "middlebury2005_thirdsize/Art/view1.png";
 
+// A space-variant scale map: a horizontal ramp from sigma0 to smax with a
+// step in the middle rows (a depth edge).
+inline Image ramp_map(int w, int h, double s0, double smax) {
+  Image m(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      double t = static_cast<double>(x) / (w - 1);
+      if (y > h / 3 && y < 2 * h / 3) t = x < w / 2 ? 0.1 : 0.9;
+      m.at(x, y) = static_cast<float>(s0 + t * (smax - s0));
+    }
+  return m;
+}
+
 }  // namespace brume::test

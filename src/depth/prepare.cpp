@@ -69,7 +69,7 @@
 
 #include "brume/error.hpp"
 
-#include "depth/opencv.hpp"
+#include "brume_opencv.hpp"
 
 namespace brume {
 namespace {

@@ -1,5 +1,5 @@
-// brume study — OpenCV imgproc, included once with the warnings its headers raise
-// under C++20 silenced (private to the study module).
+// brume — OpenCV imgproc, included once with the warnings its headers raise under C++20 silenced
+// (target brume_opencv: the library, the study and the benchmarks share it).
 #pragma once
 
 // OpenCV 4.x headers mix enum types in arithmetic (deprecated in C++20) and
