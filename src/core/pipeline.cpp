@@ -121,7 +121,7 @@ const ParamTable<DepthSource>& depth_param_table() {
         .text("depth-channel", &DepthSource::channel, "channel holding the depth in a multi-channel file (e.g. Z)")
         .alias("range-channel")
         .real("depth-scale", &DepthSource::depth_scale, "m", Range::above(0.0),
-              "metres per stored unit; required for integer range/z files (0.001 mm, 0.00390625 KITTI)")
+              "metres per stored unit; required for integer range/z files (0.001 mm, 0.00390625 KITTI)", "none")
         .alias("range-scale")
         .nest(&DepthSource::k, intrinsics_table())
         .real_or_unset("fov-x", &DepthSource::fov_x_deg, "deg", Range::left_open(0.0, 180.0),
