@@ -22,26 +22,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct CliRun {
-  int status;
-  std::string output;
-};
-
 // Every channel of an image file, as stored (colour files decoded to linear RGB).
 Image read_scalar_or_color(const std::string& path) {
   const std::string n = fs::path(path).filename().string();
   return n == "t.exr" || n == "z.exr" ? read_scalar(path) : read_color(path);
-}
-
-CliRun run(const std::string& args) {
-  std::string cmd = std::string(BRUME_CLI) + " " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  CliRun r{-1, ""};
-  std::array<char, 4096> buf;
-  while (std::fgets(buf.data(), buf.size(), p)) r.output += buf.data();
-  int st = pclose(p);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  return r;
 }
 
 class Cli : public ::testing::Test {

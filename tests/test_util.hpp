@@ -3,6 +3,10 @@
 #pragma once
 
 #include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
 
 #include <cmath>
 #include <filesystem>
@@ -107,6 +111,24 @@ inline Image ramp_map(int w, int h, double s0, double smax) {
       m.at(x, y) = static_cast<float>(s0 + t * (smax - s0));
     }
   return m;
+}
+
+// The command-line tool (BRUME_CLI) run through the shell, stderr folded into
+// the output: its exit status and everything it printed.
+struct CliRun {
+  int status;
+  std::string output;
+};
+inline CliRun run(const std::string& args) {
+  const std::string cmd = std::string(BRUME_CLI) + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  CliRun r{-1, ""};
+  if (!p) return r;
+  std::array<char, 4096> buf;
+  while (std::fgets(buf.data(), buf.size(), p)) r.output += buf.data();
+  const int st = pclose(p);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  return r;
 }
 
 }  // namespace brume::test

@@ -96,7 +96,12 @@ struct AttenuationTable {
     return t;
   }
 };
-// Gamma for (T, h0, q) tabulated over [0, s_max_m].
+// Gamma for (T, h0, q) tabulated over [0, s_max_m]; node i holds
+// attenuation_direct(a, q, i step) itself. Interpolation error (max |table -
+// direct|, measured, tests/test_aerial_spectral.cpp) grows as step^2 and with
+// T: over 0..100 km with 4096 samples 4.8e-8 (T 1) .. 2.0e-5 (T 20, near
+// s = 0), with 16384 samples <= 1.3e-6; over a 2 km scene with 4096 samples
+// <= 4.5e-8 for T = 1..20 (the float output's own rounding).
 AttenuationTable attenuation_table(const Atmosphere& a, const SpectralSensitivity& q, double s_max_m,
                                    int samples = 4096);
 

@@ -25,6 +25,9 @@ int main(int argc, char** argv) {
   commands.push_back(add_run(app));
   commands.push_back(add_demo(app));
   commands.push_back(add_study(app));
+  CLI::App* aerial = app.add_subcommand("aerial", "spectral aerial perspective (temporary parent; the lead wires the final one)");  // TEMPORARY
+  aerial->require_subcommand(1);  // TEMPORARY
+  commands.push_back(add_aerial_coefficients(aerial));  // TEMPORARY
 
   try {
     app.parse(argc, argv);
