@@ -20,7 +20,7 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("brume ") + BRUME_VERSION);
   app.require_subcommand(1);
 
-  std::vector<Command> commands = {add_haze(app), add_blur(app)};
+  std::vector<Command> commands = {add_haze(app), add_aerial(app), add_blur(app)};
   for (Command& c : add_depth(app)) commands.push_back(std::move(c));
   commands.push_back(add_run(app));
   commands.push_back(add_demo(app));
