@@ -22,7 +22,7 @@ const ParamTable<Atmosphere>& atmosphere_param_table() {
   static const ParamTable<Atmosphere> t = [] {
     ParamTable<Atmosphere> d("aerial");  // the aerial block's own fields, not a block of their own
     d.real("turbidity", &Atmosphere::turbidity, "1", Range::closed(1.0, 20.0),
-           "atmospheric turbidity T (1: pure air; clear from about 2.7, haze from about 15.7)")
+           "atmospheric turbidity T (1: pure air; by Table 3.1 corrected: clear from about 2.7, light haze 4.5, haze 9.8, fog 19.3)")
         .real("altitude", &Atmosphere::altitude_m, "m", Range::closed(-500.0, 9000.0),
               "observer altitude h0 above sea level (scales beta_R by e^{-h0/7994 m}, beta_M by e^{-h0/1200 m})");
     return d;
