@@ -19,10 +19,16 @@
 #include <array>
 #include <cmath>
 #include <functional>
+#include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
+#include "brume/diffusion.hpp"
+#include "brume/exec.hpp"
+#include "brume/image.hpp"
 #include "brume/params.hpp"
+#include "brume/pipeline.hpp"
 
 namespace brume {
 
@@ -104,5 +110,111 @@ struct AttenuationTable {
 // <= 4.5e-8 for T = 1..20 (the float output's own rounding).
 AttenuationTable attenuation_table(const Atmosphere& a, const SpectralSensitivity& q, double s_max_m,
                                    int samples = 4096);
+
+// ==== brume aerial: render, re-render, remove (Morales eq. 3.11-3.13) =================
+// With s = R distance_scale the physical distance of a pixel and Gamma_c(s)
+// its table look-up (per channel c of the sensitivity's space):
+//   render     I_c  = I0_c Gamma_c + Iinf_c (1 - Gamma_c)                   (eq. 3.11)
+//   re-render  I2_c = I1_c (Iinf2_c Gamma2_c)/(Iinf1_c Gamma1_c)
+//                     + Iinf2_c (1 - Gamma2_c/Gamma1_c)                       (eq. 3.13)
+//              Gamma1 at --from-turbidity, Gamma2 at --turbidity; the photo's
+//              own horizon Iinf1 (--from-horizon) and the new one Iinf2
+//              (--horizon). Exact for the model: it equals rendering the clean
+//              image, its illumination scaled by Iinf2/Iinf1, at T2.
+//   remove     I0_c = (I_c - Iinf_c (1 - Gamma_c)) / max(Gamma_c, gamma_floor)
+// Every mode is "rho E' + (1 - rho) A" except remove: render rho = Gamma,
+// E' = I0, A = Iinf; re-render rho = Gamma2 / max(Gamma1, gamma_floor),
+// E' = I1 Iinf2/Iinf1, A = Iinf2. That is the form the scattering blur
+// (Hansard eq. 2-4, as haze) diffuses, premultiplied PER CHANNEL:
+//   F = (rho_r E'_r, rho_g E'_g, rho_b E'_b, rho_r, rho_g, rho_b)   six channels,
+//   F diffused with one sigma map,  out_c = F_c + (1 - F_{3+c}) A_c,
+// so distant objects blur and take the sky's colour together. The sigma law
+// is haze's: sigma = sigma0 + R'^{3/2} (sigma_max - sigma0), R' = R/R_max,
+// sigma_max = sigma0 + lambda sqrt(kappa_s'), kappa_s' = (beta_R + beta_M)(550 nm)
+// R_max distance_scale (the optical depth at the far end). Remove cannot
+// undo a blur: --lambda > 0 with --remove is refused.
+// In XYZ sensitivity space the image (and Iinf) are taken to XYZ with the
+// IEC 61966-2-1 matrix M (linear sRGB, D65) first and back after, so the
+// operator on linear sRGB is M diag(Gamma) M^-1.
+// Sky pixels -- unknown in the MEASURED range (NaN, inf, 0), whether or not
+// preparation later gave them S_max -- are left exactly as they are by every
+// mode: the sky already is the horizon colour; in the blur they still
+// contribute F at the far end, so the edge of distant land fades smoothly.
+struct AerialParams {
+  Atmosphere atmosphere;                 // --turbidity [1, 20], --altitude [m] [-500, 9000]
+  std::string sensitivity = "default";   // --sensitivity default | FILE.csv | DATABASE#CAMERA
+  std::optional<Rgb> airlight;           // Iinf, linear RGB, >= 0; unset: estimated (analyse_aerial)
+  double distance_scale = 1.0;           // [1] s = R distance_scale (models, miniatures), > 0
+  std::optional<double> from_turbidity;  // [1] T1 of the photo for a re-render, [1, 20]; unset: render
+  std::optional<Rgb> from_airlight;      // Iinf1, linear RGB, > 0; unset: the same as airlight
+  bool remove = false;                   // recover I0 instead of rendering
+  double gamma_floor = 1e-3;             // [1] smallest Gamma divided by (remove, Gamma1), (0, 1)
+  double lambda = 0.0;                   // [px] blur gain, >= 0 (0: the thesis, no blur)
+  DiffusionParams diffusion;             // sigma0, scheme, precision, rho-max, edge-rate
+};
+const ParamTable<AerialParams>& aerial_param_table();
+
+// Range checks, and combinations a run would ignore or cannot do (remove
+// with --from-turbidity or --lambda; --from-horizon without --from-turbidity).
+void validate_aerial(const AerialParams& p, const std::set<std::string>& given = {});
+
+enum class AerialMode { render, rerender, remove };
+std::string to_string(AerialMode m);
+
+struct AerialAnalysis {
+  AerialMode mode = AerialMode::render;
+  double range_max_m = 0.0, range_min_m = 0.0;  // of the measured range's known pixels
+  std::size_t unknown_pixels = 0;
+  Image sky;                                // 1 where the measured range is unknown: left unchanged
+  SpectralSensitivity sensitivity;
+  AttenuationTable gamma;                   // at T, over [0, R_max distance_scale]
+  AttenuationTable gamma_from;              // at T1 (re-render only)
+  std::array<float, 3> airlight{};          // Iinf (Iinf2 of a re-render), linear RGB
+  std::string airlight_source;
+  std::array<float, 3> from_airlight{};     // Iinf1 (re-render only), linear RGB
+  std::string from_airlight_source;
+  double beta_550_per_m = 0.0;              // (beta_R + beta_M)(550 nm, T, h0)
+  double kappa_s = 0.0;                     // kappa_s' = beta_550 R_max distance_scale
+  double sigma_max = 0.0;                   // [px]
+  DiffusionPlan plan;
+};
+// Validates parameters and inputs (throws brume::Error), loads the
+// sensitivity, tabulates Gamma, estimates Iinf. `range` is the MEASURED
+// range in metres (1 channel, rgb's size). Iinf auto: the per-channel median
+// of the sky pixels (unknown range) when they are >= 0.5 % of the frame, else
+// the per-channel median of the brightest 10 % (by luminance) of the 1 %
+// most distant known pixels -- the thesis' "brightest pixels near the horizon".
+AerialAnalysis analyse_aerial(const Image& rgb, const Image& range, const AerialParams& p);
+
+struct AerialResult {
+  Image rgb;          // linear RGB
+  Image attenuation;  // 3 channels: rho per channel after the blur (Gamma; Gamma2/Gamma1 for a
+                      // re-render; the unfloored Gamma divided out by remove); 1 on sky pixels
+  Image scale;        // target scale sigma(x) in px, 1 channel
+  std::size_t floored_pixels = 0;  // pixels where a Gamma below gamma_floor was floored
+};
+// The per-pixel apply on the CPU. `range` is the range the effect runs on
+// (the prepared one in the pipeline); unknown pixels in it are sky too.
+AerialResult apply_aerial(const Image& rgb, const Image& range, const AerialParams& p, const AerialAnalysis& a,
+                          const Exec& exec = {});
+
+// ---- the pipeline ---------------------------------------------------------------------
+struct AerialRun {
+  AerialResult result;
+  AerialAnalysis analysis;
+  nlohmann::json record;  // {"aerial": ..., "prepare": ..., "execution": ...}
+};
+AerialRun run_aerial(const Image& rgb, const Image& measured_range, const AerialParams& p, const RangeStep& prepare,
+                     const Exec& exec = {}, const std::set<std::string>& given = {});
+
+struct AerialJob {
+  InputFiles input;
+  RangeStep prepare;
+  AerialParams aerial;
+  OutputFiles output;  // maps: attenuation, scale-map
+};
+const std::vector<MapOutput>& aerial_map_outputs();
+const ParamTable<AerialJob>& aerial_job_table();
+nlohmann::json run_aerial_job(const AerialJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

@@ -19,6 +19,7 @@
 #include <memory>
 #include <string>
 
+#include "brume/aerial.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/exec.hpp"
 #include "brume/haze.hpp"
@@ -136,6 +137,30 @@ class GpuHaze {
   // Render targets are kept between renders (remade when the precision
   // changes); `a` must come from analyse_haze for these inputs and `p`.
   HazeResult render(const HazeParams& p, const HazeAnalysis& a, GpuFilter filter = GpuFilter::automatic);
+  const GpuTiming& timing() const { return timing_; }
+  struct State;
+
+ private:
+  GpuContext& ctx_;
+  int w_, h_;
+  std::unique_ptr<State> s_;
+  GpuTiming timing_;
+};
+
+// The aerial passes (brume/aerial.hpp) over a colour image and a range map
+// uploaded once: the Gamma table(s) as N x 1 RGBA32F textures read with the
+// CPU's own interpolation in ln Gamma (AttenuationTable::at), a premultiply
+// pass writing the six channels as two RGBA targets F0 = (rho E', rho_r),
+// F1 = (rho_g, rho_b, 0, 0), the rate pass and the diffusion passes on both
+// with the same rates, and a composite pass. Render, re-render and remove.
+class GpuAerial {
+ public:
+  GpuAerial(GpuContext& ctx, const Image& rgb, const Image& range);
+  ~GpuAerial();
+  GpuAerial(const GpuAerial&) = delete;
+  GpuAerial& operator=(const GpuAerial&) = delete;
+  // `a` must come from analyse_aerial for these inputs and `p`.
+  AerialResult render(const AerialParams& p, const AerialAnalysis& a, GpuFilter filter = GpuFilter::automatic);
   const GpuTiming& timing() const { return timing_; }
   struct State;
 

@@ -24,6 +24,7 @@ struct Topic {
 constexpr Topic kTopics[] = {
     {"diffusion_math", shaders::diffusion_math_glsl},
     {"haze_math", shaders::haze_math_glsl},
+    {"aerial_math", shaders::aerial_math_glsl},
 };
 
 std::string hex(unsigned v) {

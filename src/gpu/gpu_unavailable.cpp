@@ -14,6 +14,7 @@ namespace {
 
 struct GpuContext::Impl {};
 struct GpuHaze::State {};
+struct GpuAerial::State {};
 GpuContext::GpuContext() { unavailable(); }
 GpuContext::~GpuContext() = default;
 const GpuInfo& GpuContext::info() const { unavailable(); }
@@ -34,6 +35,9 @@ DiffusionPlan gpu_diffuse_textures(GpuContext&, GpuTexture, GpuTexture, GpuTextu
 GpuHaze::GpuHaze(GpuContext& ctx, const Image&, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
 GpuHaze::~GpuHaze() = default;
 HazeResult GpuHaze::render(const HazeParams&, const HazeAnalysis&, GpuFilter) { unavailable(); }
+GpuAerial::GpuAerial(GpuContext& ctx, const Image&, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
+GpuAerial::~GpuAerial() = default;
+AerialResult GpuAerial::render(const AerialParams&, const AerialAnalysis&, GpuFilter) { unavailable(); }
 DiffusionPlan diffuse_gpu(GpuContext&, Image&, const Image&, double, const DiffusionParams&, GpuFilter, GpuTiming*) {
   unavailable();
 }

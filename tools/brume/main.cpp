@@ -20,14 +20,14 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("brume ") + BRUME_VERSION);
   app.require_subcommand(1);
 
-  std::vector<Command> commands = {add_haze(app), add_blur(app)};
+  // A parsed subcommand marks its parent parsed too: `aerial coefficients`
+  // comes before `aerial` so that the first parsed command is the one asked for.
+  Command aerial = add_aerial(app);
+  std::vector<Command> commands = {add_haze(app), add_aerial_coefficients(aerial.app), aerial, add_blur(app)};
   for (Command& c : add_depth(app)) commands.push_back(std::move(c));
   commands.push_back(add_run(app));
   commands.push_back(add_demo(app));
   commands.push_back(add_study(app));
-  CLI::App* aerial = app.add_subcommand("aerial", "spectral aerial perspective (temporary parent; the lead wires the final one)");  // TEMPORARY
-  aerial->require_subcommand(1);  // TEMPORARY
-  commands.push_back(add_aerial_coefficients(aerial));  // TEMPORARY
 
   try {
     app.parse(argc, argv);

@@ -1,0 +1,146 @@
+// brume — the aerial pipeline: what `brume aerial` does, as a library call,
+// in the shape every effect follows (brume/pipeline.hpp): analyse the
+// measured range (R_max, Iinf from the sky, the Gamma tables), prepare it,
+// dispatch once on Exec, record.
+#include <chrono>
+#include <cstdio>
+
+#include "brume/aerial.hpp"
+#include "brume/error.hpp"
+#include "brume/gpu.hpp"
+#include "brume/record.hpp"
+
+namespace brume {
+
+namespace {
+
+nlohmann::json gamma_json(const std::array<double, 3>& g) { return {g[0], g[1], g[2]}; }
+
+nlohmann::json aerial_record(const AerialParams& p, const AerialAnalysis& a, std::size_t floored) {
+  nlohmann::json j;
+  j["parameters"] = aerial_param_table().to_json(p);
+  j["units"] = aerial_param_table().units();
+  j["diffusion"] = diffusion_record(p.diffusion, a.plan);
+  nlohmann::json g = nlohmann::json::object(), g1 = nlohmann::json::object();
+  Atmosphere from = p.atmosphere;
+  if (p.from_turbidity) from.turbidity = *p.from_turbidity;
+  for (double s : {100.0, 1000.0, 10000.0}) {
+    const std::string k = std::to_string(static_cast<int>(s)) + "_m";
+    g[k] = gamma_json(attenuation_direct(p.atmosphere, a.sensitivity, s));
+    if (p.from_turbidity) g1[k] = gamma_json(attenuation_direct(from, a.sensitivity, s));
+  }
+  j["derived"] = {
+      {"mode", to_string(a.mode)},
+      {"range_max_m", a.range_max_m},
+      {"range_min_m", a.range_min_m},
+      {"distance_max_m", a.range_max_m * p.distance_scale},
+      {"unknown_range_pixels", a.unknown_pixels},
+      {"sky_rule", "pixels unknown in the measured range (NaN, inf, 0) are left unchanged by every mode"},
+      {"sensitivity", {{"source", a.sensitivity.source},
+                       {"sha256", a.sensitivity.sha256},
+                       {"space", a.sensitivity.space == SensitivitySpace::xyz ? "xyz (M diag(Gamma) M^-1 on linear sRGB)"
+                                                                              : "camera_rgb"}}},
+      {"gamma_at", g},
+      {"gamma_table", {{"samples", a.gamma.log_gamma.size()}, {"step_m", a.gamma.step_m},
+                       {"interpolation", "linear in ln Gamma; beyond the table along its last slope"}}},
+      {"airlight_linear_rgb", a.airlight},
+      {"airlight_source", a.airlight_source},
+      {"beta_550_per_m", a.beta_550_per_m},
+      {"kappa_s_normalised", a.kappa_s},
+      {"sigma_max_px", a.sigma_max},
+  };
+  if (a.mode == AerialMode::rerender) {
+    j["derived"]["from_gamma_at"] = g1;
+    j["derived"]["from_airlight_linear_rgb"] = a.from_airlight;
+    j["derived"]["from_airlight_source"] = a.from_airlight_source;
+  }
+  if (a.mode != AerialMode::render) {
+    j["derived"]["gamma_floor_rule"] = a.mode == AerialMode::remove ? "divides by max(Gamma, gamma_floor)"
+                                                                    : "Gamma1 floored at gamma_floor";
+    j["derived"]["floored_pixels"] = floored;
+  }
+  return j;
+}
+
+}  // namespace
+
+const std::vector<MapOutput>& aerial_map_outputs() {
+  static const std::vector<MapOutput> m = {
+      {"attenuation", "write Gamma per channel after the blur (Gamma2/Gamma1 for a re-render), 3 channels, float",
+       "Gamma2/Gamma1 of a re-render exceeds 1, and an integer file would quantise a measured transfer"},
+      {"scale-map", "write the target scale sigma(x) in pixels (float file)", "sigma is in pixels and exceeds 1"},
+  };
+  return m;
+}
+
+const ParamTable<AerialJob>& aerial_job_table() {
+  static const ParamTable<AerialJob> t = [] {
+    ParamTable<AerialJob> d("aerial");
+    d.nest(&AerialJob::input, input_param_table(true))
+        .nest(&AerialJob::prepare, range_step_param_table())
+        .nest(&AerialJob::aerial, aerial_param_table())
+        .nest(&AerialJob::output, output_param_table(aerial_map_outputs()));
+    return d;
+  }();
+  return t;
+}
+
+AerialRun run_aerial(const Image& rgb, const Image& measured_range, const AerialParams& p, const RangeStep& prepare,
+                     const Exec& exec, const std::set<std::string>& given) {
+  validate_aerial(p, given);
+  AerialRun run;
+  // Statistics (R_max, Iinf, the sky mask) from the measured range; the
+  // effect runs on the prepared one, whose smooth sky margin only shapes the
+  // blur near the horizon (sky pixels themselves stay unchanged).
+  run.analysis = analyse_aerial(rgb, measured_range, p);
+  PreparedRange prep = prepare_step(measured_range, prepare, given);
+  BackendChoice backend = choose_backend(exec);
+  const auto t0 = std::chrono::steady_clock::now();
+  nlohmann::json timing;
+  if (backend.gpu) {
+    GpuAerial ga(*backend.gpu, rgb, prep.range);
+    run.result = ga.render(p, run.analysis, exec.gpu_filter);
+    const GpuTiming& t = ga.timing();
+    timing = {{"clock", t.gpu_timer ? "timer queries" : "glFinish wall time"}, {"upload_ms", t.upload_ms},
+              {"premultiply_ms", t.premultiply_ms}, {"diffusion_ms", t.diffuse_ms}, {"passes", t.iterations},
+              {"composite_ms", t.composite_ms}, {"read_back_ms", t.readback_ms}};
+  } else {
+    run.result = apply_aerial(rgb, prep.range, p, run.analysis, exec);
+    timing = {{"clock", "wall"},
+              {"total_ms",
+               std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count()},
+              {"iterations", run.analysis.plan.iterations}};
+  }
+  run.record["aerial"] = aerial_record(p, run.analysis, run.result.floored_pixels);
+  run.record["prepare"] = prep.record;
+  run.record["execution"] = backend.record;
+  run.record["execution"]["timing"] = timing;
+  return run;
+}
+
+nlohmann::json run_aerial_job(const AerialJob& job, const ExecOptions& eo, const RunContext& ctx) {
+  // Every parameter is checked before any file is touched, whatever the input.
+  aerial_job_table().validate(job);
+  validate_aerial(job.aerial, ctx.given);
+  check_range_step(job.prepare, ctx.given);
+  const Exec exec = eo.exec();
+  check_outputs(job.output, aerial_map_outputs());
+
+  LoadedInputs in = load_inputs(job.input, true);
+  AerialRun run = run_aerial(in.rgb, in.depth.range, job.aerial, job.prepare, exec, ctx.given);
+
+  nlohmann::json rec = run_record_header("aerial", ctx.argv);
+  rec["job"] = aerial_job_table().to_json(job);
+  rec["inputs"] = in.record;
+  rec.update(run.record);
+  if (eo.timing) {
+    const auto& t = run.record["execution"]["timing"];
+    std::fprintf(stderr, "brume aerial: %s: %s\n", rec["execution"]["backend"].get<std::string>().c_str(),
+                 t.dump().c_str());
+  }
+  write_outputs(job.output, aerial_map_outputs(), run.result.rgb,
+                {{"attenuation", run.result.attenuation}, {"scale-map", run.result.scale}}, &in.image_info, rec);
+  return rec;
+}
+
+}  // namespace brume

@@ -1,0 +1,196 @@
+// brume — aerial perspective on the GPU (include/brume/aerial.hpp): N + 3
+// full-screen passes over a colour image and a range map uploaded once:
+//   premultiply  Gamma from the N x 1 ln-Gamma table(s), F0 = (rho E', rho_r),
+//                F1 = (rho_g, rho_b, 0, 0), aux = sigma
+//   rates        rho_diffusion from sigma (the diffusion layer's pass)
+//   N diffusion  F0 and F1 each ping-pong with the SAME rates: together they
+//                are the CPU's six channels diffused with one sigma map
+//   composite    out = F + (1 - rho) A per channel, XYZ -> sRGB, sky kept
+// Remove skips the diffusion (a blur cannot be undone).
+#include <cmath>
+#include <vector>
+
+#include "brume/error.hpp"
+#include "gpu/context.hpp"
+#include "gpu/shaders_embedded.hpp"
+#include "shared/prelude_cpp.h"
+
+namespace brume {
+namespace {
+
+const gpu::PassSpec kPremultiplyPass{"aerial.premultiply", {"haze_math", "aerial_math"},
+                                     gpu::shaders::aerial_premultiply_frag};
+const gpu::PassSpec kCompositePass{"aerial.composite", {"haze_math", "aerial_math"},
+                                   gpu::shaders::aerial_composite_frag};
+
+GpuTexture tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
+
+// ln Gamma as an N x 1 RGBA32F texture, read with texelFetch only.
+gl::Texture table_texture(const AttenuationTable& t) {
+  const std::size_t n = std::max<std::size_t>(2, t.log_gamma.size());
+  std::vector<float> px(n * 4, 0.0f);
+  for (std::size_t i = 0; i < t.log_gamma.size(); ++i)
+    for (int c = 0; c < 3; ++c) px[i * 4 + c] = t.log_gamma[i][c];
+  return gpu::make_texture(GL_RGBA32F, static_cast<int>(n), 1, GL_RGBA, GL_FLOAT, px.data());
+}
+
+}  // namespace
+
+struct GpuAerial::State {
+  gl::Texture image, range;  // inputs, uploaded once
+  std::vector<float> range_host;  // the uploaded range (-1 = unknown), for the floored count
+  Precision precision = Precision::f32;
+  gl::Texture f0[2], f1[2], aux, rates, out, att;
+  gpu::Target premultiply, composite;
+};
+
+GpuAerial::GpuAerial(GpuContext& ctx, const Image& rgb, const Image& range)
+    : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
+  if (rgb.channels != 3 || range.channels != 1 || range.width != w_ || range.height != h_)
+    throw Error("GPU aerial: range map " + range.size_string() + " does not match image " + rgb.size_string());
+  const auto t0 = gpu::Clock::now();
+  std::vector<float> px(static_cast<std::size_t>(w_) * h_ * 4, 1.0f);
+  std::vector<float> r(range.pixels());
+  for (std::size_t i = 0; i < rgb.pixels(); ++i) {
+    for (int c = 0; c < 3; ++c) px[i * 4 + c] = rgb.data[i * 3 + c];
+    const float v = range.data[i];
+    r[i] = std::isfinite(v) && v != 0.0f ? v : -1.0f;  // unknown sentinel (GLSL may fold isnan away)
+  }
+  s_->image = gpu::make_texture(GL_RGBA32F, w_, h_, GL_RGBA, GL_FLOAT, px.data());
+  s_->range = gpu::make_texture(GL_R32F, w_, h_, GL_RED, GL_FLOAT, r.data());
+  s_->range_host = std::move(r);
+  glFinish();
+  timing_.upload_ms = gpu::ms_since(t0);
+}
+
+GpuAerial::~GpuAerial() = default;
+
+AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, GpuFilter filter) {
+  namespace sh = brume::shared;
+  GpuContext::Impl& g = ctx_.impl();
+  State& s = *s_;
+  if (!a.sky.data.empty() && (a.sky.width != w_ || a.sky.height != h_))
+    throw Error("GPU aerial: the analysis was made for another image size (" + a.sky.size_string() + ")");
+  if (!s.composite.fbo || s.precision != p.diffusion.precision) {
+    s.premultiply = {};
+    s.composite = {};
+    const GLenum fmt = p.diffusion.precision == Precision::f16 ? GL_RGBA16F : GL_RGBA32F;
+    for (int k = 0; k < 2; ++k) {
+      s.f0[k] = gpu::make_texture(fmt, w_, h_);
+      s.f1[k] = gpu::make_texture(fmt, w_, h_);
+    }
+    s.aux = gpu::make_texture(GL_RG32F, w_, h_);
+    s.rates = gpu::make_texture(GL_R32F, w_, h_);
+    s.out = gpu::make_texture(GL_RGBA32F, w_, h_);
+    s.att = gpu::make_texture(GL_RGBA32F, w_, h_);
+    s.premultiply = gpu::make_target({tex(s.f0[0], w_, h_), tex(s.f1[0], w_, h_), tex(s.aux, w_, h_)});
+    s.composite = gpu::make_target({tex(s.out, w_, h_), tex(s.att, w_, h_)});
+    s.precision = p.diffusion.precision;
+  }
+  // Per render: the tables and the sky mask belong to the analysis.
+  gl::Texture table = table_texture(a.gamma);
+  gl::Texture table_from = table_texture(a.mode == AerialMode::rerender ? a.gamma_from : a.gamma);
+  std::vector<float> sky(static_cast<std::size_t>(w_) * h_, 0.0f);
+  if (!a.sky.data.empty()) sky = a.sky.data;
+  gl::Texture sky_tex = gpu::make_texture(GL_R32F, w_, h_, GL_RED, GL_FLOAT, sky.data());
+
+  const bool xyz = a.sensitivity.space == SensitivitySpace::xyz;
+  auto to_space = [xyz](const std::array<float, 3>& c) {
+    if (!xyz) return c;
+    return std::array<float, 3>{sh::brume_srgb_to_x(c[0], c[1], c[2]), sh::brume_srgb_to_y(c[0], c[1], c[2]),
+                                sh::brume_srgb_to_z(c[0], c[1], c[2])};
+  };
+  const std::array<float, 3> A = to_space(a.airlight), A1 = to_space(a.from_airlight);
+  const int mode = a.mode == AerialMode::render ? 0 : (a.mode == AerialMode::rerender ? 1 : 2);
+  const bool blur = a.plan.iterations > 0 && a.mode != AerialMode::remove;
+  timing_.iterations = blur ? a.plan.iterations : 0;
+  timing_.gpu_timer = g.info.timer_query;
+
+  gpu::StageTimer t1(g, &timing_.gpu_timer);
+  const gpu::Program& pr = g.program(kPremultiplyPass);
+  g.begin(s.premultiply);
+  glUseProgram(pr.id());
+  const GLuint inputs[] = {s.image.id(), s.range.id(), table.id(), table_from.id()};
+  for (int k = 0; k < 4; ++k) {
+    glActiveTexture(GL_TEXTURE0 + k);
+    glBindTexture(GL_TEXTURE_2D, inputs[k]);
+  }
+  const AttenuationTable& tf = a.mode == AerialMode::rerender ? a.gamma_from : a.gamma;
+  glUniform1f(pr.loc("uStep"), static_cast<float>(a.gamma.step_m));
+  glUniform1i(pr.loc("uLast"), static_cast<int>(a.gamma.log_gamma.size()) - 1);
+  if (mode == 1) {
+    glUniform1f(pr.loc("uStepFrom"), static_cast<float>(tf.step_m));
+    glUniform1i(pr.loc("uLastFrom"), static_cast<int>(tf.log_gamma.size()) - 1);
+    glUniform3f(pr.loc("uA1"), A1[0], A1[1], A1[2]);
+  }
+  glUniform1f(pr.loc("uDistanceScale"), static_cast<float>(p.distance_scale));
+  glUniform1f(pr.loc("uFar"), static_cast<float>(a.range_max_m * p.distance_scale));
+  glUniform1f(pr.loc("uInvRangeMax"), static_cast<float>(1.0 / a.range_max_m));
+  glUniform1f(pr.loc("uSigma0"), static_cast<float>(p.diffusion.sigma0));
+  glUniform1f(pr.loc("uSigmaMax"), static_cast<float>(a.sigma_max));
+  glUniform1i(pr.loc("uMode"), mode);
+  glUniform1i(pr.loc("uXyz"), xyz ? 1 : 0);
+  glUniform3f(pr.loc("uA"), A[0], A[1], A[2]);
+  glUniform1f(pr.loc("uFloor"), static_cast<float>(p.gamma_floor));
+  GpuContext::Impl::draw();
+  gpu::check_gl("aerial premultiply");
+  if (blur) gpu_diffusion_rates(ctx_, tex(s.aux, w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan);
+  timing_.premultiply_ms = t1.stop();
+
+  gpu::StageTimer t2(g, &timing_.gpu_timer);
+  int last0 = 0, last1 = 0;
+  if (blur) {
+    gpu_diffuse_textures(ctx_, tex(s.f0[0], w_, h_), tex(s.f0[1], w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan,
+                         filter, &last0);
+    gpu_diffuse_textures(ctx_, tex(s.f1[0], w_, h_), tex(s.f1[1], w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan,
+                         filter, &last1);
+  }
+  timing_.diffuse_ms = t2.stop();
+
+  gpu::StageTimer t3(g, &timing_.gpu_timer);
+  const gpu::Program& pc = g.program(kCompositePass);
+  g.begin(s.composite);
+  glUseProgram(pc.id());
+  const GLuint cin[] = {s.f0[last0].id(), s.f1[last1].id(), s.image.id(), s.range.id(), sky_tex.id()};
+  for (int k = 0; k < 5; ++k) {
+    glActiveTexture(GL_TEXTURE0 + k);
+    glBindTexture(GL_TEXTURE_2D, cin[k]);
+  }
+  glUniform3f(pc.loc("uA"), A[0], A[1], A[2]);
+  glUniform1i(pc.loc("uMode"), mode);
+  glUniform1i(pc.loc("uXyz"), xyz ? 1 : 0);
+  GpuContext::Impl::draw();
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  gpu::check_gl("aerial composite");
+  timing_.composite_ms = t3.stop();
+
+  const auto t4 = gpu::Clock::now();
+  const std::vector<float> o = gpu::read_rgba(tex(s.out, w_, h_)), at = gpu::read_rgba(tex(s.att, w_, h_)),
+                           x = gpu::read_rgba(tex(s.aux, w_, h_));
+  timing_.readback_ms = gpu::ms_since(t4);
+  AerialResult res;
+  res.rgb = Image(w_, h_, 3);
+  res.attenuation = Image(w_, h_, 3);
+  res.scale = Image(w_, h_, 1);
+  const float floor_g = static_cast<float>(p.gamma_floor);
+  for (std::size_t i = 0; i < res.rgb.pixels(); ++i) {
+    for (int c = 0; c < 3; ++c) {
+      res.rgb.data[i * 3 + c] = o[i * 4 + c];
+      res.attenuation.data[i * 3 + c] = at[i * 4 + c];
+    }
+    res.scale.data[i] = x[i * 4];
+  }
+  // The floored count is a statistic of the record: the host's table gives
+  // it (the same look-up the pass made), without a GPU reduction.
+  if (a.mode != AerialMode::render)
+    for (std::size_t i = 0; i < s.range_host.size(); ++i) {
+      const float r = s.range_host[i];
+      if (!(r > 0.0f) || (!a.sky.data.empty() && a.sky.data[i] > 0.0f)) continue;
+      const std::array<float, 3> gl = (a.mode == AerialMode::rerender ? a.gamma_from : a.gamma)
+                                          .at(static_cast<double>(r) * p.distance_scale);
+      res.floored_pixels += (gl[0] < floor_g || gl[1] < floor_g || gl[2] < floor_g) ? 1 : 0;
+    }
+  return res;
+}
+
+}  // namespace brume
