@@ -412,3 +412,91 @@ TEST_F(Cli, StudyDiffusionQuickWritesItsTables) {
   }
   EXPECT_TRUE(std::filesystem::exists(p("study/summary.md")));
 }
+
+TEST_F(Cli, UnknownValueTurnsASkySentinelIntoSky) {
+  // The fixture's range with its 6 sky rows stored as -1 (GeoPose3K's
+  // convention) instead of NaN: with --unknown-value -1, haze prepares it as
+  // the NaN version would be; without it, the map is refused and the message
+  // names the flag.
+  Image r = read_scalar(range);
+  for (float& v : r.data)
+    if (std::isnan(v)) v = -1.0f;
+  WriteOptions data;
+  data.is_color = false;
+  write_image(p("geo.exr"), r, data);
+  CliRun bad = run("haze --image " + img + " --range " + p("geo.exr") + " --out " + p("o.exr"));
+  EXPECT_NE(bad.status, 0);
+  EXPECT_NE(bad.output.find("--unknown-value -1"), std::string::npos) << bad.output;
+  EXPECT_NE(bad.output.find("geo.exr"), std::string::npos) << bad.output;
+  EXPECT_FALSE(fs::exists(p("o.exr")));
+
+  CliRun ok = run("haze --image " + img + " --range " + p("geo.exr") + " --unknown-value -1 --out " + p("o.exr") +
+                  " --record " + p("o.json"));
+  ASSERT_EQ(ok.status, 0) << ok.output;
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(p("o.json")));
+  EXPECT_EQ(j["job"]["depth"]["unknown-value"], -1.0);
+  EXPECT_EQ(j["inputs"]["depth"]["unknown_value_pixels"], 6 * 48);
+  EXPECT_EQ(j["haze"]["derived"]["unknown_range_pixels"], 6 * 48);
+  EXPECT_EQ(j["prepare"]["applied"], true);
+  EXPECT_NEAR(j["prepare"]["sky_fraction"].get<double>(), 6.0 / 32.0, 1e-9);
+  // The same pixels as the NaN-marked original.
+  CliRun nan = run("haze --image " + img + " --range " + range + " --out " + p("n.exr"));
+  ASSERT_EQ(nan.status, 0) << nan.output;
+  const Image a = read_color(p("o.exr")), b = read_color(p("n.exr"));
+  EXPECT_EQ(a.data, b.data);
+  // `brume run` repeats it (the flag is part of the record's job).
+  CliRun again = run("run " + p("o.json") + " --out-dir " + p("again"));
+  ASSERT_EQ(again.status, 0) << again.output;
+  EXPECT_EQ(read_color(p("again/o.exr")).data, a.data);
+}
+
+TEST_F(Cli, DepthConvertWithUnknownValueComparesStoredCounts) {
+  // 16-bit millimetre counts with 65535 as "no data": compared before
+  // --range-scale, so 65535 (not 65.535 m) is what the user writes.
+  Image mm = read_scalar(range16);  // counts; the sky rows are 0 (unknown already)
+  for (int x = 0; x < 48; ++x) mm.at(x, 31) = 65535.0f / 65535.0f;  // bottom row: the sentinel
+  for (int y = 6; y < 31; ++y)
+    for (int x = 0; x < 48; ++x) mm.at(x, y) /= 65535.0f;
+  WriteOptions data;
+  data.is_color = false;
+  write_image(p("mm.png"), mm, data);
+  CliRun r = run("depth convert --range " + p("mm.png") + " --range-scale 0.001 --unknown-value 65535 --out " +
+                 p("r.exr") + " --record " + p("r.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const Image out = read_scalar(p("r.exr"));
+  for (int x = 0; x < 48; ++x) {
+    EXPECT_TRUE(std::isnan(out.at(x, 31))) << x;
+    EXPECT_NEAR(out.at(x, 30), 3.0, 1e-3) << x;  // 2 + 0.5 (32 - 30) m, 1 mm counts
+  }
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(p("r.json")));
+  EXPECT_EQ(j["depth"]["unknown_value_pixels"], 48);
+  EXPECT_EQ(j["result"]["unknown_pixels"], 7 * 48);  // 6 sky rows (0 counts) + the sentinel row
+}
+
+TEST_F(Cli, CompareWritesJsonAndNamesItsInputs) {
+  CliRun same = run("compare --a " + img + " --b " + img + " --json " + p("c.json"));
+  ASSERT_EQ(same.status, 0) << same.output;
+  EXPECT_NE(same.output.find("inf dB"), std::string::npos) << same.output;
+  nlohmann::json j = nlohmann::json::parse(std::ifstream(p("c.json")));
+  EXPECT_EQ(j["command"], "compare");
+  EXPECT_NEAR(j["result"]["hue_saturation_correlation"].get<double>(), 1.0, 1e-12);
+  EXPECT_EQ(j["result"]["psnr_linear_db"], "inf");
+  EXPECT_EQ(j["result"]["pixels_compared"], 48 * 32);
+  EXPECT_EQ(j["inputs"]["a"]["sha256"].get<std::string>().size(), 64u);
+  // A hazed copy differs; the mask (a grey PNG) restricts the pixels.
+  ASSERT_EQ(run("haze --image " + img + " --range " + range + " --out " + p("h.png")).status, 0);
+  Image mask(48, 32, 1, 0.0f);
+  for (int x = 0; x < 10; ++x) mask.at(x, 20) = 1.0f;
+  WriteOptions grey;
+  grey.is_color = false;
+  write_image(p("m.png"), mask, grey);
+  CliRun diff = run("compare --a " + img + " --b " + p("h.png") + " --mask " + p("m.png") + " --json " + p("d.json"));
+  ASSERT_EQ(diff.status, 0) << diff.output;
+  nlohmann::json d = nlohmann::json::parse(std::ifstream(p("d.json")));
+  EXPECT_EQ(d["result"]["pixels_compared"], 10);
+  EXPECT_TRUE(d["result"]["psnr_linear_db"].is_number());
+  CliRun bad = run("compare --a " + img + " --b " + p("nope.png") + " --json " + p("e.json"));
+  EXPECT_NE(bad.status, 0);
+  EXPECT_NE(bad.output.find("nope.png"), std::string::npos) << bad.output;
+  EXPECT_FALSE(fs::exists(p("e.json")));
+}

@@ -2,6 +2,8 @@
 // image corners, depth-buffer round trips for every convention, the
 // Middlebury / ETH3D disparity formula and its unknowns, the KITTI lidar
 // projection against the dataset's own object labels, and the error paths.
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -246,4 +248,57 @@ TEST(Depth, PrepareRefusesTheSparseKittiScan) {
     EXPECT_NE(m.find("3.99%"), std::string::npos) << m;
     EXPECT_NE(m.find("--prepare off"), std::string::npos) << m;
   }
+}
+
+TEST(Depth, UnknownValueMarksStoredSentinels) {
+  // A GeoPose3K-like range map: -1 marks the sky. Stored values equal to
+  // --unknown-value become NaN before any scaling; other negatives are refused
+  // with a message that names the file, the value and the flag that fixes it.
+  const fs::path dir = fs::temp_directory_path() / ("brume_test_unknown_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string path = (dir / "r.exr").string();
+  Image r(6, 4, 1, 250.0f);
+  for (int x = 0; x < 6; ++x) r.at(x, 0) = -1.0f;  // sky row
+  WriteOptions data;
+  data.is_color = false;
+  write_image(path, r, data);
+
+  DepthSource s;
+  s.range = path;
+  try {
+    load_depth(s);
+    ADD_FAILURE() << "a negative range was accepted";
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find(path), std::string::npos) << m;
+    EXPECT_NE(m.find("--unknown-value -1"), std::string::npos) << m;
+    EXPECT_NE(m.find("(0, 0)"), std::string::npos) << m;
+  }
+  s.unknown_value = -1.0;
+  s.depth_scale = 2.0;  // compared in file units: -1 still matches, not -1 / 2 or -1 * 2
+  LoadedDepth d = load_depth(s);
+  for (int x = 0; x < 6; ++x) EXPECT_TRUE(std::isnan(d.range.at(x, 0)));
+  EXPECT_EQ(d.range.at(0, 1), 500.0f);  // 250 stored x 2 m per unit
+  EXPECT_EQ(d.record["unknown_value"], -1.0);
+  EXPECT_EQ(d.record["unknown_value_pixels"], 6);
+  EXPECT_EQ(d.record["unknown_pixels"], 6);
+  // A sentinel that matches nothing leaves the negatives refused, and says so.
+  s.unknown_value = -2.0;
+  try {
+    load_depth(s);
+    ADD_FAILURE() << "accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("--unknown-value -2"), std::string::npos) << e.what();
+  }
+  // A lidar scan has no stored grid: the flag is refused, not ignored.
+  DepthSource v;
+  v.velodyne = (dir / "scan.bin").string();
+  v.unknown_value = -1.0;
+  try {
+    load_depth(v, 10, 10);
+    ADD_FAILURE() << "accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("--velodyne"), std::string::npos) << e.what();
+  }
+  fs::remove_all(dir);
 }

@@ -26,6 +26,14 @@ struct DepthSource {
 
   std::string channel;           // channel name in a multi-channel file (e.g. Z of an EXR)
   std::optional<double> depth_scale;  // metres per count (integer range / z files; required there)
+  // A stored value that means "no measurement" (GeoPose3K range maps mark the
+  // sky with -1): pixels whose stored value equals it exactly become unknown
+  // (NaN). Compared with the file's values as read (counts of an integer file,
+  // the float of a float file; V rounded to float32 like the file's values)
+  // before --depth-scale, --disparity-scale or any conversion. Every source
+  // read from an image file (range, z, disparity, depth buffer, inverse and
+  // normalised depth); refused with --velodyne, whose scan has no stored grid.
+  std::optional<double> unknown_value;
   Intrinsics k;                  // --fx --fy --cx --cy
   double fov_x_deg = NAN, fov_y_deg = NAN;
   std::string calib;             // Middlebury 2014 / ETH3D calib.txt

@@ -123,6 +123,8 @@ const ParamTable<DepthSource>& depth_param_table() {
         .real("depth-scale", &DepthSource::depth_scale, "m", Range::above(0.0),
               "metres per stored unit; required for integer range/z files (0.001 mm, 0.00390625 KITTI)", "none")
         .alias("range-scale")
+        .real("unknown-value", &DepthSource::unknown_value, "file units", Range::any(),
+              "stored value marking unknown pixels (sky, no data; GeoPose3K: -1), exact match before any scaling", "none")
         .nest(&DepthSource::k, intrinsics_table())
         .real_or_unset("fov-x", &DepthSource::fov_x_deg, "deg", Range::left_open(0.0, 180.0),
                        "horizontal field of view, edge to edge", NAN)

@@ -1,5 +1,6 @@
 // brume — depth sources (see brume/depth_source.hpp).
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 #include "brume/depth_source.hpp"
@@ -58,6 +59,30 @@ void unorm(Image& im, const FileInfo& info) {
   for (float& v : im.data) v = static_cast<float>(v / maxval);
 }
 
+std::string fmt(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.9g", v);
+  return buf;
+}
+
+// A range or planar depth is a distance: a negative stored value is either a
+// no-data sentinel (GeoPose3K marks the sky with -1) or a signed convention
+// (OpenGL eye-space z), and guessing which would be wrong half the time.
+void refuse_negative(const Image& stored, const char* flag, const std::string& path, const DepthSource& s) {
+  std::size_t negatives = 0, first = 0;
+  for (std::size_t i = 0; i < stored.data.size(); ++i)
+    if (stored.data[i] < 0.0f && std::isfinite(stored.data[i]))
+      if (negatives++ == 0) first = i;
+  if (!negatives) return;
+  const float v = stored.data[first];
+  throw Error(std::string(flag) + " '" + path + "' stores " + std::to_string(negatives) + " negative value(s), the first " +
+              fmt(v) + " at pixel (" + std::to_string(first % stored.width) + ", " + std::to_string(first / stored.width) +
+              "); distances must be > 0 where known (NaN, inf or 0 mark unknown pixels). If " + fmt(v) +
+              " marks the sky or missing data (GeoPose3K uses -1), pass --unknown-value " + fmt(v) +
+              (s.unknown_value ? " (the --unknown-value " + fmt(*s.unknown_value) + " given matches other values, not this one)" : "") +
+              "; if the map is signed (OpenGL eye-space z is negative in front of the camera), negate it first.");
+}
+
 }  // namespace
 
 LoadedDepth load_depth(const DepthSource& s, int width, int height) {
@@ -70,6 +95,10 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
   FileInfo info;
 
   if (!s.velodyne.empty()) {
+    if (s.unknown_value)
+      throw Error("--unknown-value " + fmt(*s.unknown_value) + " does not apply to --velodyne '" + s.velodyne +
+                  "': a lidar scan stores points, not a grid with a no-data value (pixels no point hits are "
+                  "unknown already); drop --unknown-value");
     if (width <= 0 && !s.like.empty()) {
       Image im = read_color(s.like);
       width = im.width, height = im.height;
@@ -102,6 +131,16 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
                 std::to_string(height) + "; they must be the same size (resample the depth, or crop both)");
   rec = file_record(path, info, v);
   if (!s.channel.empty()) rec["channel"] = s.channel;
+  if (s.unknown_value) {
+    // Before any scaling or conversion, so V is what the file stores (and what
+    // a dataset's documentation names), whatever the --depth-scale.
+    const float sentinel = static_cast<float>(*s.unknown_value);
+    std::size_t marked = 0;
+    for (float& x : v.data)
+      if (x == sentinel) x = NAN, ++marked;
+    rec["unknown_value"] = *s.unknown_value;
+    rec["unknown_value_pixels"] = marked;
+  }
 
   auto metres = [&](const char* what) {
     if (info.integer && !s.depth_scale)
@@ -120,10 +159,12 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
 
   if (!s.range.empty()) {
     rec["source"] = "range";
+    refuse_negative(v, "--range", path, s);
     metres("--range");
     out.range = std::move(v);
   } else if (!s.z.empty()) {
     rec["source"] = "planar z";
+    refuse_negative(v, "--z", path, s);
     metres("--z");
     Intrinsics k = depth_intrinsics(s, v.width, v.height);
     rec["intrinsics"] = intrinsics_record(k);
