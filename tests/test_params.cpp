@@ -6,7 +6,10 @@
 
 #include <set>
 
+#include "brume/aerial.hpp"
+#include "brume/aerial_coefficients.hpp"
 #include "brume/blur.hpp"
+#include "brume/compare.hpp"
 #include "brume/depth_pipeline.hpp"
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
@@ -80,6 +83,9 @@ TEST(Params, EveryCommandIsDeclaredCompletely) {
   expect_complete(depth_prepare_job_table(), "depth prepare");
   expect_complete(exec_param_table(), "execution");
   expect_complete(camera_pose_param_table(), "camera");
+  expect_complete(aerial_job_table(), "aerial");
+  expect_complete(coefficients_job_table(), "aerial coefficients");
+  expect_complete(compare_job_table(), "compare");
 }
 
 TEST(Params, RangeErrorsNameTheFlag) {
@@ -88,6 +94,8 @@ TEST(Params, RangeErrorsNameTheFlag) {
   expect_range_errors_name_the_flag(depth_prepare_job_table());
   expect_range_errors_name_the_flag(exec_param_table());
   expect_range_errors_name_the_flag(camera_pose_param_table());
+  expect_range_errors_name_the_flag(aerial_job_table());
+  expect_range_errors_name_the_flag(coefficients_job_table());
 }
 
 TEST(Params, CameraPoseBlockDrivesTheCamera) {
