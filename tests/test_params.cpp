@@ -13,6 +13,7 @@
 #include "brume/depth_pipeline.hpp"
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
+#include "brume/insert.hpp"
 #include "brume/pipeline.hpp"
 
 using namespace brume;
@@ -86,6 +87,7 @@ TEST(Params, EveryCommandIsDeclaredCompletely) {
   expect_complete(aerial_job_table(), "aerial");
   expect_complete(coefficients_job_table(), "aerial coefficients");
   expect_complete(compare_job_table(), "compare");
+  expect_complete(insert_job_table(), "insert");
 }
 
 TEST(Params, RangeErrorsNameTheFlag) {
@@ -96,6 +98,7 @@ TEST(Params, RangeErrorsNameTheFlag) {
   expect_range_errors_name_the_flag(camera_pose_param_table());
   expect_range_errors_name_the_flag(aerial_job_table());
   expect_range_errors_name_the_flag(coefficients_job_table());
+  expect_range_errors_name_the_flag(insert_job_table());
 }
 
 TEST(Params, CameraPoseBlockDrivesTheCamera) {

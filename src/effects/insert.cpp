@@ -42,7 +42,7 @@ const ParamTable<InsertObject>& insert_object_param_table() {
               "channel of a multi-channel object range file (e.g. Z); empty: the file's only channel")
         .real("object-depth-scale", &InsertObject::object_depth_scale, "m", Range::above(0.0),
               "metres per count of an integer object range file (required there)", "none")
-        .real("object-unknown-value", &InsertObject::object_unknown_value, "", Range::any(),
+        .real("object-unknown-value", &InsertObject::object_unknown_value, "file units", Range::any(),
               "a stored value of the object range file that means 'no object here' (e.g. -1)", "none");
     return d;
   }();

@@ -9,7 +9,7 @@ namespace brume::cli {
 
 Command add_run(CLI::App& app) {
   CLI::App* sub = app.add_subcommand(
-      "run", "repeat the run a parameter record describes (--record FILE.json of haze, blur, depth convert/prepare)");
+      "run", "repeat the run a parameter record describes (--record FILE.json of haze, aerial, insert, blur, depth convert/prepare)");
   auto path = std::make_shared<std::string>();
   auto out_dir = std::make_shared<std::string>();
   sub->add_option("record", *path, "the JSON record (or a record embedded in nothing else: the file itself)")->required();
