@@ -49,6 +49,10 @@ Scene scene(int w, int h, int sky_rows, unsigned seed = 7) {
 // The analysis with the closed-form tables in place of the spectral ones.
 AerialAnalysis analysis(const Scene& s, const AerialParams& p, const double* beta, const double* beta_from = nullptr) {
   AerialAnalysis a = analyse_aerial(s.rgb, s.range, p);
+  // The closed forms are per channel of the image itself (camera-RGB space);
+  // the default sensitivity is XYZ since the spectral branch landed, and the
+  // XYZ path is tested on its own (XyzSpaceIsMDiagGammaMInverse).
+  a.sensitivity.space = SensitivitySpace::camera_rgb;
   a.gamma = exp_table(beta, a.range_max_m * p.distance_scale);
   if (beta_from) a.gamma_from = exp_table(beta_from, a.range_max_m * p.distance_scale);
   return a;
@@ -78,7 +82,7 @@ TEST(Aerial, RenderIsTheTableLookUpOfEachPixel) {
   const AerialParams p = given_airlight({0.7f, 0.75f, 0.8f});
   const AerialAnalysis a = analysis(s, p, kBeta1);
   const AerialResult r = apply_aerial(s.rgb, s.range, p, a);
-  ASSERT_EQ(a.sensitivity.space, SensitivitySpace::camera_rgb);  // the stand-in; xyz is tested below
+  ASSERT_EQ(a.sensitivity.space, SensitivitySpace::camera_rgb);  // set by analysis(); xyz is tested below
   // Independent double arithmetic: I = I0 e^{-beta s} + A (1 - e^{-beta s}).
   // ln Gamma is linear in s for one exponential, so the table interpolation is
   // exact up to f32 storage of ln Gamma (|ln G| <= 3: 3 ulp ~ 1e-6 relative):
