@@ -99,6 +99,28 @@ TEST(Aerial, RenderIsTheTableLookUpOfEachPixel) {
   EXPECT_LT(worst_g, 2e-6);
 }
 
+TEST(Aerial, ApplyLooksUpGammaExactlyAsAt) {
+  // apply_aerial splits AttenuationTable::at (log_at per pixel, exp_f over a
+  // row) for speed: the attenuation map must be at(R) bit for bit, in render
+  // (Gamma) and in re-render (Gamma2 / max(Gamma1, floor), f32 division).
+  const Scene s = scene(40, 30, 4);
+  AerialParams p = given_airlight({0.7f, 0.75f, 0.8f});
+  const AerialAnalysis a = analysis(s, p, kBeta1);
+  const AerialResult r = apply_aerial(s.rgb, s.range, p, a);
+  p.from_turbidity = 3.0;
+  const AerialAnalysis b = analysis(s, p, kBeta2, kBeta1);
+  const AerialResult re = apply_aerial(s.rgb, s.range, p, b);
+  for (std::size_t i = 0; i < s.range.pixels(); ++i) {
+    if (!std::isfinite(s.range.data[i])) continue;
+    const auto g = a.gamma.at(s.range.data[i]);
+    const auto g2 = b.gamma.at(s.range.data[i]), g1 = b.gamma_from.at(s.range.data[i]);
+    for (int c = 0; c < 3; ++c) {
+      ASSERT_EQ(r.attenuation.data[i * 3 + c], g[c]) << "pixel " << i << " channel " << c;
+      ASSERT_EQ(re.attenuation.data[i * 3 + c], g2[c] / std::max(g1[c], 1e-3f)) << "pixel " << i << " channel " << c;
+    }
+  }
+}
+
 TEST(Aerial, DistanceScaleMultipliesTheRange) {
   // A 1:100 model at 10 m is the landscape at 1 km.
   const Scene s = scene(16, 12, 0);
