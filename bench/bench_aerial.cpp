@@ -1,24 +1,36 @@
-// brume benchmark — aerial perspective with the tabulated Gamma against
+// brume benchmark — `brume aerial` render as the library runs it, against
 // integrating the 1 nm spectrum per pixel (issue #10: >= 100 Mpx/s on 2 cores
-// including the table, >= 50x the per-pixel integral).
+// including the Gamma table, >= 50x the per-pixel integral, in one run).
 //
-// On the demo scene's 1600x1120 range map (3 m .. 1.25 km, sky NaN), with the
-// render formula I = I0 Gamma + I_inf (1 - Gamma) applied in CIE XYZ (the
-// default sensitivity's space: linear sRGB -> XYZ, per-channel Gamma, back),
-// sky pixels left unchanged, OpenMP over rows, the same threads for all:
-//   (a) table:  attenuation_table over [0, R_max] (4096 samples) + a look-up per pixel;
-//   (b) peer:   attenuation_direct per pixel (the 1 nm Simpson sum, which also
-//               re-evaluates beta(lambda) per call);
-//   (c) peer':  the same 1 nm sum per pixel with beta and the weights hoisted
-//               out of the pixel loop (the fairest per-pixel integral).
-// The peers run on every 16th row and are extrapolated to the full frame (x16);
-// median of 5 runs for (a), of 3 for the peers, after one warm-up.
+// On the demo scene's 1600x1120 frame (range 3 m .. 1.25 km, sky NaN), render
+// mode, lambda 0, --horizon auto (the sky's median), for T = 2 and 8 and two
+// sensitivities (the default CIE fit, worked in XYZ, and a camera CSV, worked
+// in camera RGB), the threads OpenMP gives (all cores):
+//   (a) library: analyse_aerial (range scan, sensitivity, Gamma table, horizon
+//       estimate) + apply_aerial (every output map it returns) -- the CLI's work
+//       minus file I/O;
+//   (b) peer:    attenuation_direct per pixel (the 1 nm Simpson sum; it also
+//       re-evaluates beta(lambda) and the weights per call) + the same formula,
+//       I = I0 Gamma + Iinf (1 - Gamma) in the sensitivity's space;
+//   (c) peer':   the same 1 nm sum per pixel with beta and the weights hoisted
+//       out of the pixel loop (the fairest per-pixel integral).
+// The peers run on every 16th row and are scaled to the full frame (x16).
+// Rounds interleave (a), (b), (c) (one warm-up round first), so a busy host
+// slows all three alike; each figure is the median (min..max) of its rounds.
+//
+// Usage: brume_bench_aerial [CAMERA.csv] [ROUNDS] [library-only]; the CSV defaults to
+// ../shared/data/spectral/Canon_5DMarkII_camspec.csv (run from the repo root).
 #include <omp.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
-#include <functional>
+#include <fstream>
+#include <string>
+#include <vector>
 
 #include "bench_util.hpp"
 #include "brume/aerial.hpp"
@@ -28,126 +40,173 @@ using namespace brume;
 
 namespace {
 
-// Linear sRGB (D65) <-> CIE XYZ, IEC 61966-2-1.
-constexpr double kToXyz[3][3] = {{0.4124, 0.3576, 0.1805}, {0.2126, 0.7152, 0.0722}, {0.0193, 0.1192, 0.9505}};
-constexpr double kToRgb[3][3] = {
-    {3.2406, -1.5372, -0.4986}, {-0.9689, 1.8758, 0.0415}, {0.0557, -0.2040, 1.0570}};
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
 
-inline void apply(const float* in, float* out, const float g[3], const double inf_xyz[3]) {
-  double xyz[3];
-  for (int r = 0; r < 3; ++r) {
-    const double v = kToXyz[r][0] * in[0] + kToXyz[r][1] * in[1] + kToXyz[r][2] * in[2];
-    xyz[r] = v * g[r] + inf_xyz[r] * (1.0 - g[r]);
+bench::Spread spread(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return {v[v.size() / 2], v.front(), v.back()};
+}
+
+// Linear sRGB (D65) <-> CIE XYZ: the library's matrices (src/shared/aerial_math.glsl).
+constexpr float kToXyz[3][3] = {{0.4124f, 0.3576f, 0.1805f}, {0.2126f, 0.7152f, 0.0722f}, {0.0193f, 0.1192f, 0.9505f}};
+constexpr float kToRgb[3][3] = {{3.2406255f, -1.5372080f, -0.4986286f},
+                                {-0.9689307f, 1.8757561f, 0.0415175f},
+                                {0.0557101f, -0.2040211f, 1.0569959f}};
+
+// The render formula of one pixel in the sensitivity's space (eq. 3.11).
+inline void render_pixel(const float* in, float* out, const double g[3], const float inf[3], bool xyz) {
+  float e[3] = {in[0], in[1], in[2]};
+  if (xyz)
+    for (int r = 0; r < 3; ++r) e[r] = kToXyz[r][0] * in[0] + kToXyz[r][1] * in[1] + kToXyz[r][2] * in[2];
+  float o[3];
+  for (int c = 0; c < 3; ++c) {
+    const float gc = static_cast<float>(g[c]);
+    o[c] = gc * e[c] + (1.0f - gc) * inf[c];
   }
   for (int r = 0; r < 3; ++r)
-    out[r] = static_cast<float>(kToRgb[r][0] * xyz[0] + kToRgb[r][1] * xyz[1] + kToRgb[r][2] * xyz[2]);
+    out[r] = xyz ? kToRgb[r][0] * o[0] + kToRgb[r][1] * o[1] + kToRgb[r][2] * o[2] : o[r];
 }
+
+struct Case {
+  std::string sensitivity;
+  double turbidity;
+};
+
+struct Figures {
+  std::vector<double> lib, analyse, apply, table, peer_b, peer_c;
+};
 
 }  // namespace
 
-int main() {
+int main(int argc, char** argv) {
+  const std::string camera = argc > 1 ? argv[1] : "../shared/data/spectral/Canon_5DMarkII_camspec.csv";
+  const int rounds = argc > 2 ? std::max(1, std::atoi(argv[2])) : 7;
+  const bool peers = !(argc > 3 && std::string(argv[3]) == "library-only");  // for profiling the library
   const int w = 1600, h = 1120, row_step = 16;
   const DemoScene scene = render_demo_scene(w, h);
-  const Atmosphere atm{8.0, 0.0};
-  const SpectralSensitivity q = load_sensitivity("default");
-  const double inf_rgb[3] = {0.75, 0.80, 0.90};
-  double inf_xyz[3];
-  for (int r = 0; r < 3; ++r)
-    inf_xyz[r] = kToXyz[r][0] * inf_rgb[0] + kToXyz[r][1] * inf_rgb[1] + kToXyz[r][2] * inf_rgb[2];
-  double r_max = 0.0;
-  for (float s : scene.range.data)
-    if (std::isfinite(s)) r_max = std::max(r_max, static_cast<double>(s));
-  Image out(w, h, 3);
   const int threads = omp_get_max_threads();
 
-  auto render = [&](int step, const std::function<void(double, float*)>& gamma) {
-#pragma omp parallel for schedule(static)
-    for (int y = 0; y < h; y += step)
-      for (int x = 0; x < w; ++x) {
-        const float* in = scene.rgb.row(y) + 3 * x;
-        float* o = &out.at(x, y, 0);
-        const float s = scene.range.at(x, y);
-        if (!std::isfinite(s) || s <= 0.0f) {  // sky: left unchanged
-          o[0] = in[0], o[1] = in[1], o[2] = in[2];
-          continue;
-        }
-        float g[3];
-        gamma(s, g);
-        apply(in, o, g, inf_xyz);
-      }
-  };
+  std::vector<Case> cases = {{"default", 2.0}, {"default", 8.0}};
+  if (std::ifstream(camera).good())
+    cases.push_back({camera, 2.0}), cases.push_back({camera, 8.0});
+  else
+    std::printf("(camera CSV %s not found: camera cases skipped; pass its path as the first argument)\n",
+                camera.c_str());
 
-  // (a) table + look-up, the loop written out (no std::function per pixel).
-  AttenuationTable table;
-  const bench::Spread ta = bench::time_ms(
-      [&] {
-        table = attenuation_table(atm, q, r_max);
-#pragma omp parallel for schedule(static)
-        for (int y = 0; y < h; ++y)
+  std::vector<Figures> fig(cases.size());
+  Image peer_out(w, h, 3);
+  double checksum = 0.0;  // keeps every result alive
+  for (int round = 0; round <= rounds; ++round)  // round 0: warm-up, not recorded
+    for (std::size_t k = 0; k < cases.size(); ++k) {
+      AerialParams p;
+      p.sensitivity = cases[k].sensitivity;
+      p.atmosphere.turbidity = cases[k].turbidity;
+
+      // (a) the library.
+      auto t0 = Clock::now();
+      const AerialAnalysis a = analyse_aerial(scene.rgb, scene.range, p);
+      const double ms_an = ms_since(t0);
+      auto t1 = Clock::now();
+      const AerialResult r = apply_aerial(scene.rgb, scene.range, p, a);
+      const double ms_ap = ms_since(t1), ms_lib = ms_since(t0);
+      checksum += r.rgb.data[r.rgb.data.size() / 2] + r.attenuation.data[7] + r.scale.data[11];
+      // The table alone (inside (a) already), for the breakdown.
+      auto t2 = Clock::now();
+      const AttenuationTable tab = attenuation_table(p.atmosphere, a.sensitivity, a.range_max_m);
+      const double ms_tab = ms_since(t2);
+      checksum += tab.log_gamma.back()[0];
+
+      const bool xyz = a.sensitivity.space == SensitivitySpace::xyz;
+      float inf[3] = {a.airlight[0], a.airlight[1], a.airlight[2]};
+      if (xyz)
+        for (int r2 = 0; r2 < 3; ++r2)
+          inf[r2] = kToXyz[r2][0] * a.airlight[0] + kToXyz[r2][1] * a.airlight[1] + kToXyz[r2][2] * a.airlight[2];
+      auto peer = [&](auto&& gamma) {
+        if (!peers) return;
+#pragma omp parallel for schedule(dynamic, 1)
+        for (int y = 0; y < h; y += row_step)
           for (int x = 0; x < w; ++x) {
             const float* in = scene.rgb.row(y) + 3 * x;
-            float* o = &out.at(x, y, 0);
+            float* o = &peer_out.at(x, y, 0);
             const float s = scene.range.at(x, y);
-            if (!std::isfinite(s) || s <= 0.0f) {
+            if (!std::isfinite(s) || s <= 0.0f) {  // sky: left unchanged
               o[0] = in[0], o[1] = in[1], o[2] = in[2];
               continue;
             }
-            const std::array<float, 3> g = table.at(s);
-            apply(in, o, g.data(), inf_xyz);
+            double g[3];
+            gamma(static_cast<double>(s), g);
+            render_pixel(in, o, g, inf, xyz);
           }
-      },
-      5);
-  const bench::Spread tt = bench::time_ms([&] { table = attenuation_table(atm, q, r_max); }, 5);
+      };
 
-  // (b) attenuation_direct per pixel.
-  const bench::Spread tb = bench::time_ms(
-      [&] {
-        render(row_step, [&](double s, float* g) {
-          const auto d = attenuation_direct(atm, q, s);
-          for (int c = 0; c < 3; ++c) g[c] = static_cast<float>(d[c]);
-        });
-      },
-      3);
+      // (b) attenuation_direct per pixel.
+      auto t3 = Clock::now();
+      peer([&](double s, double* g) {
+        const auto d = attenuation_direct(p.atmosphere, a.sensitivity, s);
+        for (int c = 0; c < 3; ++c) g[c] = d[c];
+      });
+      const double ms_b = ms_since(t3) * row_step;
+      checksum += peer_out.data[3 * w * 16 * 40];
 
-  // (c) the same sum with beta and the normalised Simpson weights hoisted.
-  std::vector<double> beta(kSensitivitySamples);
-  std::vector<std::array<double, 3>> wq(kSensitivitySamples);
-  std::array<double, 3> norm{};
-  for (int i = 0; i < kSensitivitySamples; ++i) {
-    const double l = kAerialLambdaMinNm + i;
-    beta[i] = rayleigh_beta_per_m(l, atm.altitude_m) + mie_beta_per_m(l, atm.turbidity, atm.altitude_m);
-    const double wt = (i == 0 || i == kSensitivitySamples - 1) ? 1.0 : (i % 2 ? 4.0 : 2.0);
-    for (int c = 0; c < 3; ++c) norm[c] += (wq[i][c] = wt * q.q[i][c]);
-  }
-  for (auto& v : wq)
-    for (int c = 0; c < 3; ++c) v[c] /= norm[c];
-  const bench::Spread tc = bench::time_ms(
-      [&] {
-        render(row_step, [&](double s, float* g) {
-          double a[3] = {0, 0, 0};
-          for (int i = 0; i < kSensitivitySamples; ++i) {
-            const double e = std::exp(-beta[i] * s);
-            for (int c = 0; c < 3; ++c) a[c] += e * wq[i][c];
-          }
-          for (int c = 0; c < 3; ++c) g[c] = static_cast<float>(a[c]);
-        });
-      },
-      3);
+      // (c) the same sum with beta and the normalised Simpson weights hoisted.
+      auto t4 = Clock::now();
+      std::vector<double> beta(kSensitivitySamples);
+      std::vector<std::array<double, 3>> wq(kSensitivitySamples);
+      std::array<double, 3> norm{};
+      for (int i = 0; i < kSensitivitySamples; ++i) {
+        const double l = kAerialLambdaMinNm + i;
+        beta[i] = rayleigh_beta_per_m(l, p.atmosphere.altitude_m) +
+                  mie_beta_per_m(l, p.atmosphere.turbidity, p.atmosphere.altitude_m);
+        const double wt = (i == 0 || i == kSensitivitySamples - 1) ? 1.0 : (i % 2 ? 4.0 : 2.0);
+        for (int c = 0; c < 3; ++c) norm[c] += (wq[i][c] = wt * a.sensitivity.q[i][c]);
+      }
+      for (auto& v : wq)
+        for (int c = 0; c < 3; ++c) v[c] /= norm[c];
+      peer([&](double s, double* g) {
+        g[0] = g[1] = g[2] = 0.0;
+        for (int i = 0; i < kSensitivitySamples; ++i) {
+          const double e = std::exp(-beta[i] * s);
+          for (int c = 0; c < 3; ++c) g[c] += e * wq[i][c];
+        }
+      });
+      const double ms_c = ms_since(t4) * row_step;
+      checksum += peer_out.data[3 * w * 16 * 41];
+
+      if (round == 0) continue;
+      Figures& f = fig[k];
+      f.lib.push_back(ms_lib), f.analyse.push_back(ms_an), f.apply.push_back(ms_ap), f.table.push_back(ms_tab);
+      f.peer_b.push_back(ms_b), f.peer_c.push_back(ms_c);
+    }
 
   const double mpx = static_cast<double>(w) * h / 1e6;
-  const double ms_b = tb.median * row_step, ms_c = tc.median * row_step;  // extrapolated to the full frame
   char date[32];
   const std::time_t now = std::time(nullptr);
-  std::strftime(date, sizeof date, "%Y-%m-%d", std::gmtime(&now));
-  std::printf("brume bench aerial  %s  %s  %d threads  %dx%d demo scene (R_max %.0f m), T %.0f, default (XYZ) "
-              "sensitivity\n",
-              date, bench::cpu_name().c_str(), threads, w, h, r_max, atm.turbidity);
-  std::printf("  table build alone (4096 samples):      %8.2f ms (%.2f..%.2f)\n", tt.median, tt.lo, tt.hi);
-  std::printf("  (a) table + look-up render:            %8.2f ms (%.2f..%.2f)  %8.1f Mpx/s\n", ta.median, ta.lo,
-              ta.hi, mpx / (ta.median * 1e-3));
-  std::printf("  (b) attenuation_direct per pixel:      %8.0f ms (x%d from every %dth row)  %8.3f Mpx/s  ratio %.0fx\n",
-              ms_b, row_step, row_step, mpx / (ms_b * 1e-3), ms_b / ta.median);
-  std::printf("  (c) 1 nm sum per pixel, beta hoisted:  %8.0f ms (x%d from every %dth row)  %8.3f Mpx/s  ratio %.0fx\n",
-              ms_c, row_step, row_step, mpx / (ms_c * 1e-3), ms_c / ta.median);
+  std::strftime(date, sizeof date, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
+  double load[3] = {0, 0, 0};
+  if (std::FILE* la = std::fopen("/proc/loadavg", "r")) {
+    if (std::fscanf(la, "%lf %lf %lf", &load[0], &load[1], &load[2]) != 3) load[0] = load[1] = load[2] = -1;
+    std::fclose(la);
+  }
+  std::printf("brume bench aerial  %s  %s  %d threads  load average %.2f %.2f %.2f (at the end)\n", date,
+              bench::cpu_name().c_str(), threads, load[0], load[1], load[2]);
+  std::printf("  %dx%d demo scene, render, lambda 0, horizon auto; median (min..max) of %d interleaved rounds;\n"
+              "  peers on every %dth row, x%d\n",
+              w, h, rounds, row_step, row_step);
+  for (std::size_t k = 0; k < cases.size(); ++k) {
+    const Figures& f = fig[k];
+    const bench::Spread L = spread(f.lib), An = spread(f.analyse), Ap = spread(f.apply), T = spread(f.table),
+                        B = spread(f.peer_b), C = spread(f.peer_c);
+    const std::string name = cases[k].sensitivity == "default" ? "default (XYZ)" : "camera CSV (RGB)";
+    std::printf("  %-16s T %2.0f\n", name.c_str(), cases[k].turbidity);
+    std::printf("    (a) library analyse+apply:   %8.2f ms (%.2f..%.2f)  %7.1f Mpx/s"
+                "   [analyse %.2f, of which table %.2f; apply %.2f]\n",
+                L.median, L.lo, L.hi, mpx / (L.median * 1e-3), An.median, T.median, Ap.median);
+    std::printf("    (b) attenuation_direct/px:   %8.0f ms (%.0f..%.0f)  %7.3f Mpx/s   (b)/(a) %.0fx\n", B.median, B.lo,
+                B.hi, mpx / (B.median * 1e-3), B.median / L.median);
+    std::printf("    (c) 1 nm sum/px, hoisted:    %8.0f ms (%.0f..%.0f)  %7.3f Mpx/s   (c)/(a) %.0fx\n", C.median, C.lo,
+                C.hi, mpx / (C.median * 1e-3), C.median / L.median);
+  }
+  std::printf("  (checksum %.6g)\n", checksum);
   return 0;
 }

@@ -49,8 +49,9 @@ Scene scene(int w, int h, int sky_rows, unsigned seed = 7) {
 // The analysis with the closed-form tables in place of the spectral ones.
 AerialAnalysis analysis(const Scene& s, const AerialParams& p, const double* beta, const double* beta_from = nullptr) {
   AerialAnalysis a = analyse_aerial(s.rgb, s.range, p);
-  // The closed-form tables are per image channel (a camera-RGB sensitivity);
-  // the default's XYZ path is tested on its own below.
+  // The closed forms are per channel of the image itself (camera-RGB space);
+  // the default sensitivity is XYZ since the spectral branch landed, and the
+  // XYZ path is tested on its own (XyzSpaceIsMDiagGammaMInverse).
   a.sensitivity.space = SensitivitySpace::camera_rgb;
   a.gamma = exp_table(beta, a.range_max_m * p.distance_scale);
   if (beta_from) a.gamma_from = exp_table(beta_from, a.range_max_m * p.distance_scale);
@@ -96,6 +97,28 @@ TEST(Aerial, RenderIsTheTableLookUpOfEachPixel) {
     }
   EXPECT_LT(worst, 2e-6);
   EXPECT_LT(worst_g, 2e-6);
+}
+
+TEST(Aerial, ApplyLooksUpGammaExactlyAsAt) {
+  // apply_aerial splits AttenuationTable::at (log_at per pixel, exp_f over a
+  // row) for speed: the attenuation map must be at(R) bit for bit, in render
+  // (Gamma) and in re-render (Gamma2 / max(Gamma1, floor), f32 division).
+  const Scene s = scene(40, 30, 4);
+  AerialParams p = given_airlight({0.7f, 0.75f, 0.8f});
+  const AerialAnalysis a = analysis(s, p, kBeta1);
+  const AerialResult r = apply_aerial(s.rgb, s.range, p, a);
+  p.from_turbidity = 3.0;
+  const AerialAnalysis b = analysis(s, p, kBeta2, kBeta1);
+  const AerialResult re = apply_aerial(s.rgb, s.range, p, b);
+  for (std::size_t i = 0; i < s.range.pixels(); ++i) {
+    if (!std::isfinite(s.range.data[i])) continue;
+    const auto g = a.gamma.at(s.range.data[i]);
+    const auto g2 = b.gamma.at(s.range.data[i]), g1 = b.gamma_from.at(s.range.data[i]);
+    for (int c = 0; c < 3; ++c) {
+      ASSERT_EQ(r.attenuation.data[i * 3 + c], g[c]) << "pixel " << i << " channel " << c;
+      ASSERT_EQ(re.attenuation.data[i * 3 + c], g2[c] / std::max(g1[c], 1e-3f)) << "pixel " << i << " channel " << c;
+    }
+  }
 }
 
 TEST(Aerial, DistanceScaleMultipliesTheRange) {

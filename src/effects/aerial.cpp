@@ -7,7 +7,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <sstream>
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
 
 #include "brume/aerial.hpp"
 #include "brume/error.hpp"
@@ -31,6 +35,27 @@ const ParamTable<Atmosphere>& atmosphere_param_table() {
 }
 
 bool known_range(float r) { return std::isfinite(r) && r != 0.0f; }
+
+// A zero-filled image whose pages Linux may back with 2 MB huge pages. A
+// render allocates ~50 MB of fresh output per call; with 4 kB pages each first
+// touch is a page fault (on a virtual machine ~10 us each: 150 ms for the
+// outputs of a 1600x1120 frame, more than the render itself). The hint
+// changes nothing else: same vector, same zeros. Hosts with transparent huge
+// pages "never" (or non-Linux) simply ignore it.
+Image fresh_image(int w, int h, int c) {
+  Image im;
+  im.width = w, im.height = h, im.channels = c;
+  const std::size_t n = static_cast<std::size_t>(w) * h * c;
+  im.data.reserve(n);  // allocated, not yet touched
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+  constexpr std::uintptr_t huge = std::uintptr_t{2} << 20;
+  const auto b = reinterpret_cast<std::uintptr_t>(im.data.data());
+  const std::uintptr_t lo = (b + huge - 1) & ~(huge - 1), hi = (b + n * sizeof(float)) & ~(huge - 1);
+  if (hi > lo) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);  // a hint: failure is harmless
+#endif
+  im.data.resize(n);
+  return im;
+}
 
 float luminance(const float* c) { return 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2]; }
 
@@ -122,29 +147,35 @@ AerialAnalysis analyse_aerial(const Image& rgb, const Image& range, const Aerial
 
   AerialAnalysis a;
   a.mode = p.remove ? AerialMode::remove : (p.from_turbidity ? AerialMode::rerender : AerialMode::render);
-  a.sky = Image(range.width, range.height, 1, 0.0f);
-  double rmax = 0.0, rmin = INFINITY;
-  std::vector<std::size_t> known;
-  known.reserve(range.pixels());
-  for (std::size_t i = 0; i < range.pixels(); ++i) {
+  a.sky = fresh_image(range.width, range.height, 1);
+  const std::ptrdiff_t npx = static_cast<std::ptrdiff_t>(range.pixels());
+  float rmax = 0.0f, rmin = INFINITY;
+  std::size_t unknown = 0;
+  std::ptrdiff_t first_negative = npx;  // the first (in scan order) negative range, for the error
+#pragma omp parallel for schedule(static) reduction(max : rmax) reduction(min : rmin, first_negative) \
+    reduction(+ : unknown)
+  for (std::ptrdiff_t i = 0; i < npx; ++i) {
     const float r = range.data[i];
     if (!known_range(r)) {
-      ++a.unknown_pixels;
+      ++unknown;
       a.sky.data[i] = 1.0f;
-      continue;
+    } else if (r < 0.0f) {
+      first_negative = std::min(first_negative, i);
+    } else {
+      rmax = std::max(rmax, r);
+      rmin = std::min(rmin, r);
     }
-    if (r < 0.0f) {
-      std::ostringstream m;
-      m << "range map pixel (" << i % range.width << ", " << i / range.width << ") is " << r
-        << " m; ranges must be >= 0 (0, NaN and inf mark unknown pixels)";
-      throw Error(m.str());
-    }
-    known.push_back(i);
-    rmax = std::max(rmax, static_cast<double>(r));
-    rmin = std::min(rmin, static_cast<double>(r));
   }
-  if (known.empty()) throw Error("the range map has no known value (every pixel is NaN, inf or 0)");
-  if (!(rmax > 0.0)) throw Error("every known range is 0 m; aerial perspective needs distances in metres");
+  if (first_negative < npx) {
+    const std::size_t i = static_cast<std::size_t>(first_negative);
+    std::ostringstream m;
+    m << "range map pixel (" << i % range.width << ", " << i / range.width << ") is " << range.data[i]
+      << " m; ranges must be >= 0 (0, NaN and inf mark unknown pixels)";
+    throw Error(m.str());
+  }
+  a.unknown_pixels = unknown;
+  if (unknown == range.pixels()) throw Error("the range map has no known value (every pixel is NaN, inf or 0)");
+  if (!(rmax > 0.0f)) throw Error("every known range is 0 m; aerial perspective needs distances in metres");
   a.range_max_m = rmax;
   a.range_min_m = rmin;
 
@@ -169,14 +200,29 @@ AerialAnalysis analyse_aerial(const Image& rgb, const Image& range, const Aerial
   std::string estimated_source;
   if (!p.airlight || (a.mode == AerialMode::rerender && !p.from_airlight)) {
     if (a.unknown_pixels >= std::max<std::size_t>(1, rgb.pixels() / 200)) {
-      std::vector<std::size_t> sky;
+      // The k-th smallest value is the same whatever the selection: the
+      // channels are gathered directly (one pass) instead of an index list.
+      std::array<std::vector<float>, 3> v;
+      for (auto& ch : v) ch.resize(a.unknown_pixels);
+      std::size_t n = 0;
       for (std::size_t i = 0; i < range.pixels(); ++i)
-        if (a.sky.data[i] > 0.0f) sky.push_back(i);
-      estimated = channel_median(rgb, sky);
+        if (a.sky.data[i] > 0.0f) {
+          for (int c = 0; c < 3; ++c) v[c][n] = rgb.data[i * 3 + c];
+          ++n;
+        }
+      for (int c = 0; c < 3; ++c) {
+        auto mid = v[c].begin() + static_cast<std::ptrdiff_t>(n / 2);
+        std::nth_element(v[c].begin(), mid, v[c].end());
+        estimated[c] = *mid;
+      }
       estimated_source = "per-channel median of the unknown-range (sky) pixels";
     } else {
       // The thesis' "brightest pixels near the horizon": the 1 % most distant
       // known pixels, then the brightest 10 % of those by luminance.
+      std::vector<std::size_t> known;
+      known.reserve(range.pixels() - a.unknown_pixels);
+      for (std::size_t i = 0; i < range.pixels(); ++i)
+        if (a.sky.data[i] == 0.0f) known.push_back(i);
       const std::size_t nfar = std::max<std::size_t>(1, known.size() / 100);
       std::nth_element(known.begin(), known.begin() + static_cast<std::ptrdiff_t>(nfar - 1), known.end(),
                        [&](std::size_t i, std::size_t j) { return range.data[i] > range.data[j]; });
@@ -221,6 +267,111 @@ AerialAnalysis analyse_aerial(const Image& rgb, const Image& range, const Aerial
   return a;
 }
 
+namespace {
+
+// What the per-pixel pass needs, fixed for the frame.
+struct Frame {
+  const Image* rgb;
+  const Image* range;
+  const float* sky;  // the analysis' mask, or null
+  const AttenuationTable* gamma;
+  const AttenuationTable* gamma_from;
+  double distance_scale, far_m, inv_step, inv_step_from;
+  float s0, smax, inv_rmax, floor_g;
+  std::array<float, 3> A, A1;  // Iinf (Iinf2), Iinf1 in the sensitivity's space
+  int W;
+};
+
+// One row of the per-pixel pass, the mode and space fixed at compile time so
+// that the inner loops carry no branch on them. Gamma is AttenuationTable::at
+// split in two: log_at per pixel (the table's gather), then exp_f over the
+// row's 3 W values as one vector loop (the same operations, bit for bit).
+// Fused (no blur): out.rgb and out.attenuation are written directly, with the
+// same operations the composite pass applies to F, so the result is the one
+// the six-channel route gives without diffusion. Else F = (rho E', rho) for
+// the diffusion.
+template <AerialMode M, bool Xyz>
+std::size_t aerial_row(const Frame& fr, int y, float* lg, float* lg1, unsigned char* skyrow, bool fused,
+                       AerialResult& out, Image& f) {
+  const int W = fr.W;
+  const std::size_t row0 = static_cast<std::size_t>(y) * W;
+  const float* range = fr.range->data.data() + row0;
+  for (int x = 0; x < W; ++x) {
+    const float r = range[x];
+    const bool known = known_range(r);
+    skyrow[x] = (fr.sky && fr.sky[row0 + x] > 0.0f) || !known;
+    // Unknown here (preparation off) is sky at the far end, as haze does.
+    const double s = known ? static_cast<double>(r) * fr.distance_scale : fr.far_m;
+    out.scale.data[row0 + x] = sh::brume_target_scale(known ? r * fr.inv_rmax : 1.0f, fr.s0, fr.smax);
+    const std::array<float, 3> l = fr.gamma->log_at(AttenuationTable::cell(s, fr.inv_step));
+    lg[3 * x] = l[0], lg[3 * x + 1] = l[1], lg[3 * x + 2] = l[2];
+    if constexpr (M == AerialMode::rerender) {
+      const std::array<float, 3> l1 = fr.gamma_from->log_at(AttenuationTable::cell(s, fr.inv_step_from));
+      lg1[3 * x] = l1[0], lg1[3 * x + 1] = l1[1], lg1[3 * x + 2] = l1[2];
+    }
+  }
+  for (int k = 0; k < 3 * W; ++k) lg[k] = AttenuationTable::exp_f(lg[k]);
+  if constexpr (M == AerialMode::rerender)
+    for (int k = 0; k < 3 * W; ++k) lg1[k] = AttenuationTable::exp_f(lg1[k]);
+
+  std::size_t floored = 0;
+  const float* in = fr.rgb->data.data() + 3 * row0;
+  for (int x = 0; x < W; ++x) {
+    const std::size_t i = row0 + x;
+    const bool sky = skyrow[x] != 0;
+    const float* px = in + 3 * x;
+    std::array<float, 3> e = {px[0], px[1], px[2]};
+    if constexpr (Xyz)
+      e = {sh::brume_srgb_to_x(px[0], px[1], px[2]), sh::brume_srgb_to_y(px[0], px[1], px[2]),
+           sh::brume_srgb_to_z(px[0], px[1], px[2])};
+    const float* g = lg + 3 * x;
+    std::array<float, 3> fc{}, rho{};
+    if constexpr (M == AerialMode::render) {
+      for (int c = 0; c < 3; ++c) rho[c] = g[c], fc[c] = g[c] * e[c];
+    } else if constexpr (M == AerialMode::rerender) {
+      const float* g1 = lg1 + 3 * x;
+      floored += !sky && (g1[0] < fr.floor_g || g1[1] < fr.floor_g || g1[2] < fr.floor_g) ? 1 : 0;
+      for (int c = 0; c < 3; ++c) {
+        rho[c] = sh::brume_aerial_rerender_rho(g[c], g1[c], fr.floor_g);
+        fc[c] = rho[c] * sh::brume_aerial_rerender_radiance(e[c], fr.A[c], fr.A1[c]);
+      }
+    } else {
+      floored += !sky && (g[0] < fr.floor_g || g[1] < fr.floor_g || g[2] < fr.floor_g) ? 1 : 0;
+      for (int c = 0; c < 3; ++c)
+        rho[c] = g[c], fc[c] = sh::brume_aerial_remove(e[c], g[c], fr.A[c], fr.floor_g);  // the result itself
+    }
+    if (!fused) {
+      for (int c = 0; c < 3; ++c) f.data[i * 6 + c] = fc[c], f.data[i * 6 + 3 + c] = rho[c];
+      continue;
+    }
+    float* o = out.rgb.data.data() + 3 * i;
+    float* at = out.attenuation.data.data() + 3 * i;
+    if (sky) {  // the sky already is the horizon: unchanged, bit for bit
+      for (int c = 0; c < 3; ++c) o[c] = px[c], at[c] = 1.0f;
+      continue;
+    }
+    std::array<float, 3> v{};
+    for (int c = 0; c < 3; ++c) {
+      v[c] = M == AerialMode::remove ? fc[c] : sh::brume_composite_premultiplied(fc[c], rho[c], fr.A[c]);
+      at[c] = rho[c];
+    }
+    if constexpr (Xyz)
+      v = {sh::brume_xyz_to_r(v[0], v[1], v[2]), sh::brume_xyz_to_g(v[0], v[1], v[2]),
+           sh::brume_xyz_to_b(v[0], v[1], v[2])};
+    for (int c = 0; c < 3; ++c) o[c] = v[c];
+  }
+  return floored;
+}
+
+template <AerialMode M>
+std::size_t aerial_row_space(bool xyz, const Frame& fr, int y, float* lg, float* lg1, unsigned char* skyrow,
+                             bool fused, AerialResult& out, Image& f) {
+  return xyz ? aerial_row<M, true>(fr, y, lg, lg1, skyrow, fused, out, f)
+             : aerial_row<M, false>(fr, y, lg, lg1, skyrow, fused, out, f);
+}
+
+}  // namespace
+
 AerialResult apply_aerial(const Image& rgb, const Image& range, const AerialParams& p, const AerialAnalysis& a,
                           const Exec& exec) {
   const int W = rgb.width, H = rgb.height;
@@ -230,63 +381,54 @@ AerialResult apply_aerial(const Image& rgb, const Image& range, const AerialPara
     throw Error("aerial: the analysis was made for another image size (" + a.sky.size_string() + ")");
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const bool xyz = a.sensitivity.space == SensitivitySpace::xyz;
-  const float s0 = static_cast<float>(p.diffusion.sigma0), smax = static_cast<float>(a.sigma_max);
-  const float inv_rmax = static_cast<float>(1.0 / a.range_max_m);
-  const double far_m = a.range_max_m * p.distance_scale;
-  const float floor_g = static_cast<float>(p.gamma_floor);
   auto to_space = [xyz](const std::array<float, 3>& c) {
     if (!xyz) return c;
     return std::array<float, 3>{sh::brume_srgb_to_x(c[0], c[1], c[2]), sh::brume_srgb_to_y(c[0], c[1], c[2]),
                                 sh::brume_srgb_to_z(c[0], c[1], c[2])};
   };
-  const std::array<float, 3> A = to_space(a.airlight), A1 = to_space(a.from_airlight);
+  Frame fr{};
+  fr.rgb = &rgb, fr.range = &range, fr.sky = a.sky.data.empty() ? nullptr : a.sky.data.data();
+  fr.gamma = &a.gamma, fr.gamma_from = &a.gamma_from;
+  fr.distance_scale = p.distance_scale, fr.far_m = a.range_max_m * p.distance_scale;
+  fr.inv_step = 1.0 / a.gamma.step_m;
+  fr.inv_step_from = a.mode == AerialMode::rerender ? 1.0 / a.gamma_from.step_m : 0.0;
+  fr.s0 = static_cast<float>(p.diffusion.sigma0), fr.smax = static_cast<float>(a.sigma_max);
+  fr.inv_rmax = static_cast<float>(1.0 / a.range_max_m), fr.floor_g = static_cast<float>(p.gamma_floor);
+  fr.A = to_space(a.airlight), fr.A1 = to_space(a.from_airlight), fr.W = W;
   const bool blur = a.plan.iterations > 0 && a.mode != AerialMode::remove;
 
   AerialResult out;
-  out.rgb = Image(W, H, 3);
-  out.attenuation = Image(W, H, 3);
-  out.scale = Image(W, H, 1);
-  Image f(W, H, 6);  // (rho E', rho): the premultiplied colour and the per-channel transfer
+  out.rgb = fresh_image(W, H, 3);
+  out.attenuation = fresh_image(W, H, 3);
+  out.scale = fresh_image(W, H, 1);
+  // (rho E', rho): the premultiplied colour and the per-channel transfer, only
+  // for the diffusion; without it the pass composites directly.
+  Image f = blur ? fresh_image(W, H, 6) : Image();
   std::size_t floored = 0;
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : floored)
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      const float r = range.data[i];
-      const bool known = known_range(r);
-      const bool sky = (!a.sky.data.empty() && a.sky.data[i] > 0.0f) || !known;
-      // Unknown here (preparation off) is sky at the far end, as haze does.
-      const double s = known ? static_cast<double>(r) * p.distance_scale : far_m;
-      out.scale.data[i] = sh::brume_target_scale(known ? r * inv_rmax : 1.0f, s0, smax);
-      const std::array<float, 3> e = to_space({rgb.data[i * 3], rgb.data[i * 3 + 1], rgb.data[i * 3 + 2]});
-      const std::array<float, 3> g = a.gamma.at(s);
-      std::array<float, 3> rho{}, ep{};
-      if (a.mode == AerialMode::render) {
-        rho = g;
-        ep = e;
-      } else if (a.mode == AerialMode::rerender) {
-        const std::array<float, 3> g1 = a.gamma_from.at(s);
-        floored += !sky && (g1[0] < floor_g || g1[1] < floor_g || g1[2] < floor_g) ? 1 : 0;
-        for (int c = 0; c < 3; ++c) {
-          rho[c] = sh::brume_aerial_rerender_rho(g[c], g1[c], floor_g);
-          ep[c] = sh::brume_aerial_rerender_radiance(e[c], A[c], A1[c]);
-        }
-      } else {
-        floored += !sky && (g[0] < floor_g || g[1] < floor_g || g[2] < floor_g) ? 1 : 0;
-        for (int c = 0; c < 3; ++c) {
-          rho[c] = g[c];
-          ep[c] = sh::brume_aerial_remove(e[c], g[c], A[c], floor_g);  // the result itself
-        }
-      }
-      for (int c = 0; c < 3; ++c) {
-        f.data[i * 6 + c] = a.mode == AerialMode::remove ? ep[c] : rho[c] * ep[c];
-        f.data[i * 6 + 3 + c] = rho[c];
+#pragma omp parallel num_threads(nt) reduction(+ : floored)
+  {
+    std::vector<float> lg(3 * static_cast<std::size_t>(W)), lg1(a.mode == AerialMode::rerender ? lg.size() : 0);
+    std::vector<unsigned char> skyrow(static_cast<std::size_t>(W));
+#pragma omp for schedule(static)
+    for (int y = 0; y < H; ++y) {
+      switch (a.mode) {
+        case AerialMode::render:
+          floored += aerial_row_space<AerialMode::render>(xyz, fr, y, lg.data(), lg1.data(), skyrow.data(), !blur, out, f);
+          break;
+        case AerialMode::rerender:
+          floored += aerial_row_space<AerialMode::rerender>(xyz, fr, y, lg.data(), lg1.data(), skyrow.data(), !blur, out, f);
+          break;
+        case AerialMode::remove:
+          floored += aerial_row_space<AerialMode::remove>(xyz, fr, y, lg.data(), lg1.data(), skyrow.data(), !blur, out, f);
+          break;
       }
     }
+  }
   out.floored_pixels = floored;
+  if (!blur) return out;
 
-  if (blur) diffuse(f, out.scale, a.sigma_max, p.diffusion, exec);
-
+  diffuse(f, out.scale, a.sigma_max, p.diffusion, exec);
+  const std::array<float, 3> A = fr.A;
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
@@ -299,7 +441,7 @@ AerialResult apply_aerial(const Image& rgb, const Image& range, const AerialPara
       std::array<float, 3> o{};
       for (int c = 0; c < 3; ++c) {
         const float fc = f.data[i * 6 + c], alpha = f.data[i * 6 + 3 + c];
-        o[c] = a.mode == AerialMode::remove ? fc : sh::brume_composite_premultiplied(fc, alpha, A[c]);
+        o[c] = sh::brume_composite_premultiplied(fc, alpha, A[c]);  // remove never blurs
         out.attenuation.data[i * 3 + c] = alpha;
       }
       if (xyz)
