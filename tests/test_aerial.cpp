@@ -370,27 +370,10 @@ TEST(Aerial, DeclarationHasEveryFlag) {
 }
 
 // ---- GPU = CPU --------------------------------------------------------------------------
-namespace {
-GpuContext* aerial_gpu(std::string* why) {
-  static std::unique_ptr<GpuContext> ctx;
-  static std::string reason;
-  static bool tried = false;
-  if (!tried) {
-    tried = true;
-    try {
-      ctx = std::make_unique<GpuContext>();
-    } catch (const Error& e) {
-      reason = e.what();
-    }
-  }
-  *why = reason;
-  return ctx.get();
-}
-}  // namespace
 
 TEST(AerialGpu, MatchesTheCpuInEveryMode) {
   std::string why;
-  GpuContext* ctx = aerial_gpu(&why);
+  GpuContext* ctx = shared_gpu_context(&why);
   if (!ctx) {
     const char* req = std::getenv("BRUME_REQUIRE_GPU");
     if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;

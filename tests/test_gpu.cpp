@@ -26,25 +26,10 @@ using namespace brume::test;
 
 namespace {
 
-GpuContext* context(std::string* why) {
-  static std::unique_ptr<GpuContext> ctx;
-  static std::string reason;
-  static bool tried = false;
-  if (!tried) {
-    tried = true;
-    try {
-      ctx = std::make_unique<GpuContext>();
-    } catch (const Error& e) {
-      reason = e.what();
-    }
-  }
-  *why = reason;
-  return ctx.get();
-}
 
 #define BRUME_REQUIRE_GPU(ctx)                                                                  \
   std::string why_;                                                                             \
-  GpuContext* ctx = context(&why_);                                                             \
+  GpuContext* ctx = shared_gpu_context(&why_);                                                             \
   if (!ctx) {                                                                                   \
     const char* req = std::getenv("BRUME_REQUIRE_GPU");                                         \
     if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why_;           \

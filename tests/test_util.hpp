@@ -11,11 +11,14 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "brume/depth_source.hpp"
 #include "brume/diffusion.hpp"
+#include "brume/error.hpp"
+#include "brume/gpu.hpp"
 #include "brume/image.hpp"
 #include "brume/io.hpp"
 #include "brume_reference.hpp"
@@ -129,6 +132,25 @@ inline CliRun run(const std::string& args) {
   const int st = pclose(p);
   r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
   return r;
+}
+
+// One GPU context for the whole test binary (contexts belong to the thread
+// that made them; gtest runs tests on the main thread), or null with the
+// reason when none can be made.
+inline GpuContext* shared_gpu_context(std::string* why) {
+  static std::unique_ptr<GpuContext> ctx;
+  static std::string reason;
+  static bool tried = false;
+  if (!tried) {
+    tried = true;
+    try {
+      ctx = std::make_unique<GpuContext>();
+    } catch (const Error& e) {
+      reason = e.what();
+    }
+  }
+  *why = reason;
+  return ctx.get();
 }
 
 }  // namespace brume::test

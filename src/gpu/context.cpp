@@ -2,6 +2,7 @@
 // cache and the texture/target plumbing every pass shares (src/gpu/context.hpp).
 #include "gpu/context.hpp"
 
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -277,6 +278,24 @@ Target make_target(std::initializer_list<GpuTexture> colour) {
     throw Error("GPU backend: this GPU cannot render to the float texture (framebuffer status 0x" + hex(status) +
                 "); use --backend cpu");
   return t;
+}
+
+ColorAndRange upload_color_and_range(const Image& rgb, const Image& range, const char* what) {
+  const int w = rgb.width, h = rgb.height;
+  if (rgb.channels != 3 || range.channels != 1 || range.width != w || range.height != h)
+    throw Error(std::string("GPU ") + what + ": range map " + range.size_string() + " does not match image " +
+                rgb.size_string());
+  std::vector<float> px(static_cast<std::size_t>(w) * h * 4, 1.0f);
+  ColorAndRange c;
+  c.range_host.resize(range.pixels());
+  for (std::size_t i = 0; i < rgb.pixels(); ++i) {
+    for (int k = 0; k < 3; ++k) px[i * 4 + k] = rgb.data[i * 3 + k];
+    const float v = range.data[i];
+    c.range_host[i] = std::isfinite(v) && v != 0.0f ? v : -1.0f;
+  }
+  c.image = make_texture(GL_RGBA32F, w, h, GL_RGBA, GL_FLOAT, px.data());
+  c.range = make_texture(GL_R32F, w, h, GL_RED, GL_FLOAT, c.range_host.data());
+  return c;
 }
 
 std::vector<float> read_rgba(GpuTexture tex) {

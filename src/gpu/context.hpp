@@ -72,6 +72,15 @@ Target make_target(std::initializer_list<GpuTexture> colour);
 gl::Texture make_texture(GLenum internal, int w, int h, GLenum format = GL_RGBA, GLenum type = GL_FLOAT,
                          const void* data = nullptr);
 
+// An effect's inputs on the GPU: linear RGB as RGBA32F (alpha 1) and the
+// range as R32F with unknown (NaN, inf, 0) mapped to -1, because GLSL
+// compilers may fold isnan() away. Checks the sizes; `what` names the effect.
+struct ColorAndRange {
+  gl::Texture image, range;
+  std::vector<float> range_host;  // the uploaded range values (-1 = unknown)
+};
+ColorAndRange upload_color_and_range(const Image& rgb, const Image& range, const char* what);
+
 // Reads `tex` (any float colour format) back as RGBA floats, w * h * 4.
 std::vector<float> read_rgba(GpuTexture tex);
 

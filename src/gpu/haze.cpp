@@ -33,18 +33,10 @@ struct GpuHaze::State {
 
 GpuHaze::GpuHaze(GpuContext& ctx, const Image& rgb, const Image& range)
     : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
-  if (rgb.channels != 3 || range.channels != 1 || range.width != w_ || range.height != h_)
-    throw Error("GPU haze: range map " + range.size_string() + " does not match image " + rgb.size_string());
   const auto t0 = gpu::Clock::now();
-  std::vector<float> px(static_cast<std::size_t>(w_) * h_ * 4, 1.0f);
-  std::vector<float> r(range.pixels());
-  for (std::size_t i = 0; i < rgb.pixels(); ++i) {
-    for (int c = 0; c < 3; ++c) px[i * 4 + c] = rgb.data[i * 3 + c];
-    const float v = range.data[i];
-    r[i] = std::isfinite(v) && v != 0.0f ? v : -1.0f;  // unknown sentinel (see premultiply.frag)
-  }
-  s_->image = gpu::make_texture(GL_RGBA32F, w_, h_, GL_RGBA, GL_FLOAT, px.data());
-  s_->range = gpu::make_texture(GL_R32F, w_, h_, GL_RED, GL_FLOAT, r.data());
+  gpu::ColorAndRange in = gpu::upload_color_and_range(rgb, range, "haze");
+  s_->image = std::move(in.image);
+  s_->range = std::move(in.range);
   glFinish();
   timing_.upload_ms = gpu::ms_since(t0);
 }
