@@ -29,22 +29,6 @@ AttenuationTable exp_table(const double* beta, double s_max) {
       s_max);
 }
 
-struct Scene {
-  Image rgb, range;
-};
-// Random colours in [0.05, 1] over ranges 10 .. 1000 m; the top `sky_rows` rows unknown.
-Scene scene(int w, int h, int sky_rows, unsigned seed = 7) {
-  Scene s{Image(w, h, 3), Image(w, h, 1)};
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> col(0.05f, 1.0f), rr(10.0f, 1000.0f);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      for (int c = 0; c < 3; ++c) s.rgb.at(x, y, c) = col(rng);
-      s.range.at(x, y) = y < sky_rows ? NAN : rr(rng);
-    }
-  s.range.at(0, h - 1) = 1000.0f;  // R_max known exactly
-  return s;
-}
 
 // The analysis with the closed-form tables in place of the spectral ones.
 AerialAnalysis analysis(const Scene& s, const AerialParams& p, const double* beta, const double* beta_from = nullptr) {

@@ -52,11 +52,6 @@ class CliAerial : public ::testing::Test {
   }
 };
 
-nlohmann::json read_json(const std::string& path) {
-  std::ifstream f(path);
-  return nlohmann::json::parse(f);
-}
-
 }  // namespace
 
 TEST_F(CliAerial, WritesEveryOutputAndARecord) {

@@ -62,11 +62,6 @@ class CliInsert : public ::testing::Test {
   }
 };
 
-nlohmann::json read_json(const std::string& path) {
-  std::ifstream f(path);
-  return nlohmann::json::parse(f);
-}
-
 }  // namespace
 
 TEST_F(CliInsert, WritesTheCompositeCoverageAndARecord) {

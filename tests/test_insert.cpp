@@ -26,22 +26,6 @@ AttenuationTable exp_table(double s_max) {
       s_max);
 }
 
-// Random colours in [0.05, 1] over ranges 10 .. 1000 m; the top `sky_rows` rows unknown.
-struct Scene {
-  Image rgb, range;
-};
-Scene scene(int w, int h, int sky_rows, unsigned seed) {
-  Scene s{Image(w, h, 3), Image(w, h, 1)};
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> col(0.05f, 1.0f), rr(10.0f, 1000.0f);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      for (int c = 0; c < 3; ++c) s.rgb.at(x, y, c) = col(rng);
-      s.range.at(x, y) = y < sky_rows ? NAN : rr(rng);
-    }
-  s.range.at(0, h - 1) = 1000.0f;
-  return s;
-}
 
 // An opaque object covering the whole frame: (E, 1).
 Image opaque(const Image& rgb) {

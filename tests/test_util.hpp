@@ -3,6 +3,7 @@
 #pragma once
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 #include <sys/wait.h>
 
 #include <array>
@@ -12,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -151,6 +153,29 @@ inline GpuContext* shared_gpu_context(std::string* why) {
   }
   *why = reason;
   return ctx.get();
+}
+
+// A random RGB-D scene for the aerial and insert tests.
+struct Scene {
+  Image rgb, range;
+};
+// Random colours in [0.05, 1] over ranges 10 .. 1000 m; the top `sky_rows` rows unknown.
+inline Scene scene(int w, int h, int sky_rows, unsigned seed = 7) {
+  Scene s{Image(w, h, 3), Image(w, h, 1)};
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> col(0.05f, 1.0f), rr(10.0f, 1000.0f);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c) s.rgb.at(x, y, c) = col(rng);
+      s.range.at(x, y) = y < sky_rows ? NAN : rr(rng);
+    }
+  s.range.at(0, h - 1) = 1000.0f;  // R_max known exactly
+  return s;
+}
+
+inline nlohmann::json read_json(const std::string& path) {
+  std::ifstream f(path);
+  return nlohmann::json::parse(f);
 }
 
 }  // namespace brume::test
