@@ -28,14 +28,6 @@ const char* kCie = "spectral/CIE_xyz_1931_2deg.csv";
 const char* kCanonCsv = "spectral/Canon_5DMarkII_camspec.csv";
 const char* kDatabase = "spectral/camspec_database.txt";
 
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
 
 SpectralSensitivity flat_sensitivity() {
   SpectralSensitivity s;

@@ -15,8 +15,10 @@
 #include "brume/camera.hpp"
 #include "brume/depth_source.hpp"
 #include "brume/error.hpp"
+#include "test_util.hpp"
 
 using namespace brume;
+using namespace brume::test;
 namespace fs = std::filesystem;
 
 namespace {
@@ -50,14 +52,6 @@ Vec3 unit(Vec3 v) {
   return {v.x / n, v.y / n, v.z / n};
 }
 
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
 
 struct TempDir {
   fs::path dir = fs::temp_directory_path() / ("brume_camera_" + std::to_string(::getpid()));

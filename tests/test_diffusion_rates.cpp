@@ -80,14 +80,6 @@ double channel_sum(const Image& f, int c) {
   return s;
 }
 
-std::string error_of(const std::function<void()>& fn) {
-  try {
-    fn();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "(no brume::Error thrown)";
-}
 
 }  // namespace
 

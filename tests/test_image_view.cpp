@@ -7,8 +7,10 @@
 
 #include "brume/error.hpp"
 #include "brume/image.hpp"
+#include "test_util.hpp"
 
 using namespace brume;
+using namespace brume::test;
 
 namespace {
 
@@ -27,17 +29,6 @@ struct Pitched {
   ImageView view() { return ImageView(buf.data(), W, H, C, PITCH_PX * C, C); }
 };
 
-// The error message must name the problem; returns it for inspection.
-template <class F>
-std::string error_of(F f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "no brume::Error thrown";
-  return "";
-}
 
 }  // namespace
 

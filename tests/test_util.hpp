@@ -11,7 +11,9 @@
 
 #include <cmath>
 #include <filesystem>
+#include <cstring>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <random>
 #include <string>
@@ -176,6 +178,25 @@ inline Scene scene(int w, int h, int sky_rows, unsigned seed = 7) {
 inline nlohmann::json read_json(const std::string& path) {
   std::ifstream f(path);
   return nlohmann::json::parse(f);
+}
+
+// The message of the brume::Error f must throw (for checking that it names
+// the problem); a test failure, and "", when it throws none.
+inline std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "no brume::Error thrown";
+  return "";
+}
+
+// Two image files hold the same pixels to the last bit (read as linear colour).
+inline void expect_same_pixels(const std::string& a, const std::string& b) {
+  const Image x = read_color(a), y = read_color(b);
+  ASSERT_EQ(x.data.size(), y.data.size()) << a << " vs " << b;
+  EXPECT_EQ(std::memcmp(x.data.data(), y.data.data(), x.data.size() * sizeof(float)), 0) << a << " vs " << b;
 }
 
 }  // namespace brume::test

@@ -13,6 +13,7 @@
 // so `brume run record.json` repeats the run.
 #pragma once
 
+#include <chrono>
 #include <map>
 #include <memory>
 #include <set>
@@ -151,6 +152,12 @@ void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, con
 // tool, version, schema_version, command, argv, time
 nlohmann::json run_record_header(const std::string& command, const std::vector<std::string>& argv);
 
+// The "execution.timing" of a record: the GPU's stages (timer queries, else
+// glFinish wall time; only the stages that ran), or the CPU's wall time since t0.
+struct GpuTiming;
+nlohmann::json gpu_timing_record(const GpuTiming& t);
+nlohmann::json cpu_timing_record(std::chrono::steady_clock::time_point t0, int iterations);
+
 // `brume run`: repeat the run a record describes (schema_version 2). Inputs
 // must still have the SHA-256 the record names; with a non-empty out_dir,
 // every output goes into out_dir under its recorded file name. Returns the
@@ -163,5 +170,11 @@ struct RunContext {
   std::vector<std::string> argv;  // for the record
   std::set<std::string> given;    // parameter names set explicitly (CLI flags, record keys)
 };
+
+// A job's record: header, the whole job, its inputs, then what the run
+// derived (run_record's keys); with print_timing, the execution timing goes
+// to stderr. Every effect's run_*_job ends with it.
+nlohmann::json job_record(const std::string& command, const RunContext& ctx, nlohmann::json job, nlohmann::json inputs,
+                          const nlohmann::json& run_record, bool print_timing);
 
 }  // namespace brume

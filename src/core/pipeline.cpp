@@ -413,6 +413,34 @@ void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, con
   outs.commit();
 }
 
+nlohmann::json gpu_timing_record(const GpuTiming& t) {
+  nlohmann::json j = {{"clock", t.gpu_timer ? "timer queries" : "glFinish wall time"}, {"upload_ms", t.upload_ms}};
+  if (t.premultiply_ms > 0.0) j["premultiply_ms"] = t.premultiply_ms;
+  j["diffusion_ms"] = t.diffuse_ms;
+  j["passes"] = t.iterations;
+  if (t.composite_ms > 0.0) j["composite_ms"] = t.composite_ms;
+  j["read_back_ms"] = t.readback_ms;
+  return j;
+}
+
+nlohmann::json cpu_timing_record(std::chrono::steady_clock::time_point t0, int iterations) {
+  return {{"clock", "wall"},
+          {"total_ms", std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count()},
+          {"iterations", iterations}};
+}
+
+nlohmann::json job_record(const std::string& command, const RunContext& ctx, nlohmann::json job, nlohmann::json inputs,
+                          const nlohmann::json& run_record, bool print_timing) {
+  nlohmann::json rec = run_record_header(command, ctx.argv);
+  rec["job"] = std::move(job);
+  rec["inputs"] = std::move(inputs);
+  rec.update(run_record);
+  if (print_timing && rec.contains("execution"))
+    std::fprintf(stderr, "brume %s: %s: %s\n", command.c_str(), rec["execution"].value("backend", "cpu").c_str(),
+                 rec["execution"].value("timing", nlohmann::json::object()).dump().c_str());
+  return rec;
+}
+
 nlohmann::json run_record_header(const std::string& command, const std::vector<std::string>& argv) {
   nlohmann::json j = record_header(command, argv);
   j["schema_version"] = kRecordSchemaVersion;

@@ -3,7 +3,6 @@
 // measured range (R_max, Iinf from the sky, the Gamma tables), prepare it,
 // dispatch once on Exec, record.
 #include <chrono>
-#include <cstdio>
 
 #include "brume/aerial.hpp"
 #include "brume/error.hpp"
@@ -100,16 +99,10 @@ AerialRun run_aerial(const Image& rgb, const Image& measured_range, const Aerial
   if (backend.gpu) {
     GpuAerial ga(*backend.gpu, rgb, prep.range);
     run.result = ga.render(p, run.analysis, exec.gpu_filter);
-    const GpuTiming& t = ga.timing();
-    timing = {{"clock", t.gpu_timer ? "timer queries" : "glFinish wall time"}, {"upload_ms", t.upload_ms},
-              {"premultiply_ms", t.premultiply_ms}, {"diffusion_ms", t.diffuse_ms}, {"passes", t.iterations},
-              {"composite_ms", t.composite_ms}, {"read_back_ms", t.readback_ms}};
+    timing = gpu_timing_record(ga.timing());
   } else {
     run.result = apply_aerial(rgb, prep.range, p, run.analysis, exec);
-    timing = {{"clock", "wall"},
-              {"total_ms",
-               std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count()},
-              {"iterations", run.analysis.plan.iterations}};
+    timing = cpu_timing_record(t0, run.analysis.plan.iterations);
   }
   run.record["aerial"] = aerial_record(p, run.analysis, run.result.floored_pixels);
   run.record["prepare"] = prep.record;
@@ -129,15 +122,8 @@ nlohmann::json run_aerial_job(const AerialJob& job, const ExecOptions& eo, const
   LoadedInputs in = load_inputs(job.input, true);
   AerialRun run = run_aerial(in.rgb, in.depth.range, job.aerial, job.prepare, exec, ctx.given);
 
-  nlohmann::json rec = run_record_header("aerial", ctx.argv);
-  rec["job"] = aerial_job_table().to_json(job);
-  rec["inputs"] = in.record;
-  rec.update(run.record);
-  if (eo.timing) {
-    const auto& t = run.record["execution"]["timing"];
-    std::fprintf(stderr, "brume aerial: %s: %s\n", rec["execution"]["backend"].get<std::string>().c_str(),
-                 t.dump().c_str());
-  }
+  const nlohmann::json rec =
+      job_record("aerial", ctx, aerial_job_table().to_json(job), in.record, run.record, eo.timing);
   write_outputs(job.output, aerial_map_outputs(), run.result.rgb,
                 {{"attenuation", run.result.attenuation}, {"scale-map", run.result.scale}}, &in.image_info, rec);
   return rec;

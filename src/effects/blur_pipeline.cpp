@@ -3,7 +3,6 @@
 
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <sstream>
 
 #include "brume/error.hpp"
@@ -69,29 +68,24 @@ nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& eo, const Run
   if (backend.gpu) {
     GpuTiming t;
     plan = diffuse_gpu(*backend.gpu, f, smap, smax, dp, exec.gpu_filter, &t);
-    timing = {{"clock", t.gpu_timer ? "timer queries" : "glFinish wall time"}, {"upload_ms", t.upload_ms},
-              {"diffusion_ms", t.diffuse_ms}, {"passes", t.iterations}, {"read_back_ms", t.readback_ms}};
+    timing = gpu_timing_record(t);
   } else {
     plan = diffuse(f, smap, smax, dp, exec);
-    timing = {{"clock", "wall"},
-              {"total_ms", std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count()},
-              {"iterations", plan.iterations}};
+    timing = cpu_timing_record(t0, plan.iterations);
   }
   Image out(rgb.width, rgb.height, 3);
   for (std::size_t i = 0; i < rgb.pixels(); ++i)
     for (int k = 0; k < 3; ++k) out.data[i * 3 + k] = f.data[i * 4 + k];
 
-  nlohmann::json rec = run_record_header("blur", ctx.argv);
-  rec["job"] = blur_job_table().to_json(job);
-  rec["inputs"] = in.record;
-  if (!job.scale_map.empty()) rec["inputs"]["scale_map"] = file_record(job.scale_map, map_info, smap);
-  else rec["sigma_px"] = *job.sigma;
-  rec["diffusion"] = diffusion_record(dp, plan);
-  rec["execution"] = backend.record;
-  rec["execution"]["timing"] = timing;
-  rec["effective_gaussian_px"] = job.sigma ? std::sqrt(*job.sigma * *job.sigma - dp.sigma0 * dp.sigma0) : -1.0;
-  if (eo.timing) std::fprintf(stderr, "brume blur: %s: %s\n", rec["execution"]["backend"].get<std::string>().c_str(),
-                              timing.dump().c_str());
+  nlohmann::json inputs = in.record, run;
+  if (!job.scale_map.empty()) inputs["scale_map"] = file_record(job.scale_map, map_info, smap);
+  else run["sigma_px"] = *job.sigma;
+  run["diffusion"] = diffusion_record(dp, plan);
+  run["execution"] = backend.record;
+  run["execution"]["timing"] = timing;
+  run["effective_gaussian_px"] = job.sigma ? std::sqrt(*job.sigma * *job.sigma - dp.sigma0 * dp.sigma0) : -1.0;
+  const nlohmann::json rec =
+      job_record("blur", ctx, blur_job_table().to_json(job), std::move(inputs), run, eo.timing);
   write_outputs(job.output, {}, out, {}, &in.image_info, rec);
   return rec;
 }

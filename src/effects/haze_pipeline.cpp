@@ -2,7 +2,6 @@
 // the shape every effect follows (brume/pipeline.hpp): analyse the measured
 // range, prepare it, dispatch once on Exec, record.
 #include <chrono>
-#include <cstdio>
 
 #include "brume/error.hpp"
 #include "brume/gpu.hpp"
@@ -46,15 +45,10 @@ HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams
   if (backend.gpu) {
     GpuHaze gh(*backend.gpu, rgb, prep.range);
     run.result = gh.render(p, run.analysis, exec.gpu_filter);
-    const GpuTiming& t = gh.timing();
-    timing = {{"clock", t.gpu_timer ? "timer queries" : "glFinish wall time"}, {"upload_ms", t.upload_ms},
-              {"premultiply_ms", t.premultiply_ms}, {"diffusion_ms", t.diffuse_ms}, {"passes", t.iterations},
-              {"composite_ms", t.composite_ms}, {"read_back_ms", t.readback_ms}};
+    timing = gpu_timing_record(gh.timing());
   } else {
     run.result = apply_haze(rgb, prep.range, p, run.analysis, exec);
-    timing = {{"clock", "wall"}, {"total_ms", std::chrono::duration<double, std::milli>(
-                                                  std::chrono::steady_clock::now() - t0).count()},
-              {"iterations", run.analysis.plan.iterations}};
+    timing = cpu_timing_record(t0, run.analysis.plan.iterations);
   }
   run.record["haze"] = haze_record(p, run.analysis);
   if (prep.applied)
@@ -77,15 +71,7 @@ nlohmann::json run_haze_job(const HazeJob& job, const ExecOptions& eo, const Run
   LoadedInputs in = load_inputs(job.input, true);
   HazeRun run = run_haze(in.rgb, in.depth.range, job.haze, job.prepare, exec, ctx.given);
 
-  nlohmann::json rec = run_record_header("haze", ctx.argv);
-  rec["job"] = haze_job_table().to_json(job);
-  rec["inputs"] = in.record;
-  rec.update(run.record);
-  if (eo.timing) {
-    const auto& t = run.record["execution"]["timing"];
-    std::fprintf(stderr, "brume haze: %s: %s\n", rec["execution"]["backend"].get<std::string>().c_str(),
-                 t.dump().c_str());
-  }
+  const nlohmann::json rec = job_record("haze", ctx, haze_job_table().to_json(job), in.record, run.record, eo.timing);
   write_outputs(job.output, haze_map_outputs(), run.result.rgb,
                 {{"transmission", run.result.transmission}, {"scale-map", run.result.scale}}, &in.image_info, rec);
   return rec;

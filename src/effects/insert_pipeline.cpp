@@ -4,7 +4,6 @@
 // analysis on the photo's measured range, the depth test, prepare, apply,
 // record, write.
 #include <chrono>
-#include <cstdio>
 
 #include "brume/error.hpp"
 #include "brume/insert.hpp"
@@ -101,10 +100,7 @@ InsertRun insert_object(const Image& photo, const Image& scene_range, const Imag
   run.record["prepare"] = prep.record;
   run.record["execution"] = backend.record;
   run.record["execution"]["backend_requested"] = enum_name(backend_names(), exec.backend);
-  run.record["execution"]["timing"] = {
-      {"clock", "wall"},
-      {"total_ms", std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count()},
-      {"iterations", run.analysis.aerial.plan.iterations}};
+  run.record["execution"]["timing"] = cpu_timing_record(t0, run.analysis.aerial.plan.iterations);
   return run;
 }
 
@@ -141,17 +137,14 @@ nlohmann::json run_insert_job(const InsertJob& job, const ExecOptions& eo, const
 
   InsertRun run = insert_object(in.rgb, in.depth.range, obj, orange.range, job.aerial, job.prepare, exec, ctx.given);
 
-  nlohmann::json rec = run_record_header("insert", ctx.argv);
-  rec["job"] = insert_job_table().to_json(job);
-  rec["inputs"] = in.record;
-  rec["inputs"]["object"] = file_record(job.object.object, oinfo, obj);
-  rec["inputs"]["object"]["convention"] =
-      oinfo.integer ? "sRGB-encoded colour, straight alpha: decoded to linear, then premultiplied"
-                    : "linear, premultiplied (as stored)";
-  rec["inputs"]["object_range"] = orange.record;
-  rec.update(run.record);
-  if (eo.timing)
-    std::fprintf(stderr, "brume insert: cpu: %s\n", run.record["execution"]["timing"].dump().c_str());
+  nlohmann::json inputs = in.record;
+  inputs["object"] = file_record(job.object.object, oinfo, obj);
+  inputs["object"]["convention"] = oinfo.integer
+                                       ? "sRGB-encoded colour, straight alpha: decoded to linear, then premultiplied"
+                                       : "linear, premultiplied (as stored)";
+  inputs["object_range"] = orange.record;
+  const nlohmann::json rec =
+      job_record("insert", ctx, insert_job_table().to_json(job), std::move(inputs), run.record, eo.timing);
   write_outputs(job.output, insert_map_outputs(), run.result.rgb,
                 {{"coverage", run.result.coverage}, {"scale-map", run.result.scale}}, &in.image_info, rec);
   return rec;
