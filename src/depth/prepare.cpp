@@ -305,7 +305,8 @@ PrepareResult prepare_range(const Image& range, const PrepareParams& p) {
     throw Error("prepare: the range map has " + std::to_string(negatives) + " negative value(s), the first " +
                 fmt(in[first_neg]) + " m at pixel (" + std::to_string(fx) + ", " + std::to_string(fy) +
                 "); range must be > 0 where known, with NaN, inf or 0 marking unknown pixels. Fix the conversion "
-                "that produced the map (e.g. a disparity offset or sign) or set invalid pixels to NaN.");
+                "that produced the map (e.g. a disparity offset or sign), set invalid pixels to NaN, or, if the file "
+                "marks unknown pixels with a negative value such as -1, give it as --unknown-value -1.");
   }
   PrepareResult res;
   res.known_fraction = static_cast<double>(known) / static_cast<double>(N);

@@ -87,7 +87,8 @@ HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const HazeParams
       std::ostringstream m;
       m << "range map pixel (" << i % range.width << ", " << i / range.width << ") is " << r
         << " m; ranges must be >= 0 (0, NaN and inf mark unknown pixels). Is this a signed depth "
-           "(OpenGL eye-space z is negative in front of the camera)?";
+           "(OpenGL eye-space z is negative in front of the camera)? If the file marks unknown pixels with a "
+           "negative value such as -1, give it as --unknown-value -1.";
       throw Error(m.str());
     }
     rmax = std::max(rmax, static_cast<double>(r));
