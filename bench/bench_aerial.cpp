@@ -6,16 +6,23 @@
 // mode, lambda 0, --horizon auto (the sky's median), for T = 2 and 8 and two
 // sensitivities (the default CIE fit, worked in XYZ, and a camera CSV, worked
 // in camera RGB), the threads OpenMP gives (all cores):
-//   (a) library: analyse_aerial (range scan, sensitivity, Gamma table, horizon
-//       estimate) + apply_aerial (every output map it returns) -- the CLI's work
-//       minus file I/O;
+//   (a) library, first call: analyse_aerial (range scan, sensitivity, Gamma
+//       table, horizon estimate) + apply_aerial returning an AerialResult
+//       (every output map, freshly allocated: allocation, zero-fill and the
+//       first-touch page faults of ~57 MB of outputs and mask) -- the CLI's
+//       work minus file I/O;
+//   (s) library, steady state: the same analysis and render into buffers
+//       kept from the previous round (analyse_aerial(..., AerialAnalysis&),
+//       apply_aerial(..., Image& out), no maps) -- a video or batch caller;
+//       its breakdown also times the analysis with the horizon given, so the
+//       difference is the sky median's cost;
 //   (b) peer:    attenuation_direct per pixel (the 1 nm Simpson sum; it also
 //       re-evaluates beta(lambda) and the weights per call) + the same formula,
 //       I = I0 Gamma + Iinf (1 - Gamma) in the sensitivity's space;
 //   (c) peer':   the same 1 nm sum per pixel with beta and the weights hoisted
 //       out of the pixel loop (the fairest per-pixel integral).
 // The peers run on every 16th row and are scaled to the full frame (x16).
-// Rounds interleave (a), (b), (c) (one warm-up round first), so a busy host
+// Rounds interleave (a), (s), (b), (c) (one warm-up round first), so a busy host
 // slows all three alike; each figure is the median (min..max) of its rounds.
 //
 // Usage: brume_bench_aerial [CAMERA.csv] [ROUNDS] [library-only]; the CSV defaults to
@@ -74,7 +81,7 @@ struct Case {
 };
 
 struct Figures {
-  std::vector<double> lib, analyse, apply, table, peer_b, peer_c;
+  std::vector<double> lib, analyse, apply, table, peer_b, peer_c, steady, st_analyse, st_apply, st_given;
 };
 
 }  // namespace
@@ -95,6 +102,9 @@ int main(int argc, char** argv) {
                 camera.c_str());
 
   std::vector<Figures> fig(cases.size());
+  // (s)'s buffers, one set per case as a caller rendering one stream keeps them.
+  std::vector<AerialAnalysis> keep_a(cases.size()), keep_given(cases.size());
+  std::vector<Image> keep_out(cases.size());
   Image peer_out(w, h, 3);
   double checksum = 0.0;  // keeps every result alive
   for (int round = 0; round <= rounds; ++round)  // round 0: warm-up, not recorded
@@ -111,6 +121,20 @@ int main(int argc, char** argv) {
       const AerialResult r = apply_aerial(scene.rgb, scene.range, p, a);
       const double ms_ap = ms_since(t1), ms_lib = ms_since(t0);
       checksum += r.rgb.data[r.rgb.data.size() / 2] + r.attenuation.data[7] + r.scale.data[11];
+      // (s) the steady state: buffers from the previous round (round 0 makes them).
+      auto ts = Clock::now();
+      analyse_aerial(scene.rgb, scene.range, p, keep_a[k]);
+      const double ms_st_an = ms_since(ts);
+      auto ts1 = Clock::now();
+      apply_aerial(scene.rgb, scene.range, p, keep_a[k], keep_out[k]);
+      const double ms_st_ap = ms_since(ts1), ms_st = ms_since(ts);
+      checksum += keep_out[k].data[keep_out[k].data.size() / 3];
+      // The steady analysis with the horizon given (no sky median), for the breakdown.
+      AerialParams given = p;
+      given.airlight = a.airlight;
+      auto tg = Clock::now();
+      analyse_aerial(scene.rgb, scene.range, given, keep_given[k]);
+      const double ms_given = ms_since(tg);
       // The table alone (inside (a) already), for the breakdown.
       auto t2 = Clock::now();
       const AttenuationTable tab = attenuation_table(p.atmosphere, a.sensitivity, a.range_max_m);
@@ -177,6 +201,8 @@ int main(int argc, char** argv) {
       Figures& f = fig[k];
       f.lib.push_back(ms_lib), f.analyse.push_back(ms_an), f.apply.push_back(ms_ap), f.table.push_back(ms_tab);
       f.peer_b.push_back(ms_b), f.peer_c.push_back(ms_c);
+      f.steady.push_back(ms_st), f.st_analyse.push_back(ms_st_an), f.st_apply.push_back(ms_st_ap);
+      f.st_given.push_back(ms_given);
     }
 
   const double mpx = static_cast<double>(w) * h / 1e6;
@@ -196,16 +222,20 @@ int main(int argc, char** argv) {
   for (std::size_t k = 0; k < cases.size(); ++k) {
     const Figures& f = fig[k];
     const bench::Spread L = spread(f.lib), An = spread(f.analyse), Ap = spread(f.apply), T = spread(f.table),
-                        B = spread(f.peer_b), C = spread(f.peer_c);
+                        B = spread(f.peer_b), C = spread(f.peer_c), S = spread(f.steady),
+                        SAn = spread(f.st_analyse), SAp = spread(f.st_apply), G = spread(f.st_given);
     const std::string name = cases[k].sensitivity == "default" ? "default (XYZ)" : "camera CSV (RGB)";
     std::printf("  %-16s T %2.0f\n", name.c_str(), cases[k].turbidity);
     std::printf("    (a) library analyse+apply:   %8.2f ms (%.2f..%.2f)  %7.1f Mpx/s"
                 "   [analyse %.2f, of which table %.2f; apply %.2f]\n",
                 L.median, L.lo, L.hi, mpx / (L.median * 1e-3), An.median, T.median, Ap.median);
-    std::printf("    (b) attenuation_direct/px:   %8.0f ms (%.0f..%.0f)  %7.3f Mpx/s   (b)/(a) %.0fx\n", B.median, B.lo,
-                B.hi, mpx / (B.median * 1e-3), B.median / L.median);
-    std::printf("    (c) 1 nm sum/px, hoisted:    %8.0f ms (%.0f..%.0f)  %7.3f Mpx/s   (c)/(a) %.0fx\n", C.median, C.lo,
-                C.hi, mpx / (C.median * 1e-3), C.median / L.median);
+    std::printf("    (s) library steady state:    %8.2f ms (%.2f..%.2f)  %7.1f Mpx/s"
+                "   [analyse %.2f (horizon given: %.2f); apply, image only %.2f]\n",
+                S.median, S.lo, S.hi, mpx / (S.median * 1e-3), SAn.median, G.median, SAp.median);
+    std::printf("    (b) attenuation_direct/px:   %8.0f ms (%.0f..%.0f)  %7.3f Mpx/s   (b)/(a) %.0fx  (b)/(s) %.0fx\n",
+                B.median, B.lo, B.hi, mpx / (B.median * 1e-3), B.median / L.median, B.median / S.median);
+    std::printf("    (c) 1 nm sum/px, hoisted:    %8.0f ms (%.0f..%.0f)  %7.3f Mpx/s   (c)/(a) %.0fx  (c)/(s) %.0fx\n",
+                C.median, C.lo, C.hi, mpx / (C.median * 1e-3), C.median / L.median, C.median / S.median);
   }
   std::printf("  (checksum %.6g)\n", checksum);
   return 0;
