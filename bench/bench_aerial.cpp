@@ -35,6 +35,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
+#include <time.h>
 #include <fstream>
 #include <string>
 #include <vector>
@@ -49,6 +50,14 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+// Process CPU time (every thread) in ms. On a shared host a preempted thread
+// stretches wall time but not CPU time, so CPU-time ratios between brume and
+// the peers are the load-robust figure; it includes OpenMP's spin-waits.
+double cpu_ms() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
+}
 
 bench::Spread spread(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -82,6 +91,7 @@ struct Case {
 
 struct Figures {
   std::vector<double> lib, analyse, apply, table, peer_b, peer_c, steady, st_analyse, st_apply, st_given;
+  std::vector<double> cpu_lib, cpu_steady, cpu_b, cpu_c;  // process CPU ms
 };
 
 }  // namespace
@@ -114,20 +124,22 @@ int main(int argc, char** argv) {
       p.atmosphere.turbidity = cases[k].turbidity;
 
       // (a) the library.
+      double c0 = cpu_ms();
       auto t0 = Clock::now();
       const AerialAnalysis a = analyse_aerial(scene.rgb, scene.range, p);
       const double ms_an = ms_since(t0);
       auto t1 = Clock::now();
       const AerialResult r = apply_aerial(scene.rgb, scene.range, p, a);
-      const double ms_ap = ms_since(t1), ms_lib = ms_since(t0);
+      const double ms_ap = ms_since(t1), ms_lib = ms_since(t0), cpu_lib = cpu_ms() - c0;
       checksum += r.rgb.data[r.rgb.data.size() / 2] + r.attenuation.data[7] + r.scale.data[11];
       // (s) the steady state: buffers from the previous round (round 0 makes them).
+      c0 = cpu_ms();
       auto ts = Clock::now();
       analyse_aerial(scene.rgb, scene.range, p, keep_a[k]);
       const double ms_st_an = ms_since(ts);
       auto ts1 = Clock::now();
       apply_aerial(scene.rgb, scene.range, p, keep_a[k], keep_out[k]);
-      const double ms_st_ap = ms_since(ts1), ms_st = ms_since(ts);
+      const double ms_st_ap = ms_since(ts1), ms_st = ms_since(ts), cpu_st = cpu_ms() - c0;
       checksum += keep_out[k].data[keep_out[k].data.size() / 3];
       // The steady analysis with the horizon given (no sky median), for the breakdown.
       AerialParams given = p;
@@ -165,15 +177,17 @@ int main(int argc, char** argv) {
       };
 
       // (b) attenuation_direct per pixel.
+      c0 = cpu_ms();
       auto t3 = Clock::now();
       peer([&](double s, double* g) {
         const auto d = attenuation_direct(p.atmosphere, a.sensitivity, s);
         for (int c = 0; c < 3; ++c) g[c] = d[c];
       });
-      const double ms_b = ms_since(t3) * row_step;
+      const double ms_b = ms_since(t3) * row_step, cpu_b = (cpu_ms() - c0) * row_step;
       checksum += peer_out.data[3 * w * 16 * 40];
 
       // (c) the same sum with beta and the normalised Simpson weights hoisted.
+      c0 = cpu_ms();
       auto t4 = Clock::now();
       std::vector<double> beta(kSensitivitySamples);
       std::vector<std::array<double, 3>> wq(kSensitivitySamples);
@@ -194,7 +208,7 @@ int main(int argc, char** argv) {
           for (int c = 0; c < 3; ++c) g[c] += e * wq[i][c];
         }
       });
-      const double ms_c = ms_since(t4) * row_step;
+      const double ms_c = ms_since(t4) * row_step, cpu_c = (cpu_ms() - c0) * row_step;
       checksum += peer_out.data[3 * w * 16 * 41];
 
       if (round == 0) continue;
@@ -203,6 +217,7 @@ int main(int argc, char** argv) {
       f.peer_b.push_back(ms_b), f.peer_c.push_back(ms_c);
       f.steady.push_back(ms_st), f.st_analyse.push_back(ms_st_an), f.st_apply.push_back(ms_st_ap);
       f.st_given.push_back(ms_given);
+      f.cpu_lib.push_back(cpu_lib), f.cpu_steady.push_back(cpu_st), f.cpu_b.push_back(cpu_b), f.cpu_c.push_back(cpu_c);
     }
 
   const double mpx = static_cast<double>(w) * h / 1e6;
@@ -223,7 +238,8 @@ int main(int argc, char** argv) {
     const Figures& f = fig[k];
     const bench::Spread L = spread(f.lib), An = spread(f.analyse), Ap = spread(f.apply), T = spread(f.table),
                         B = spread(f.peer_b), C = spread(f.peer_c), S = spread(f.steady),
-                        SAn = spread(f.st_analyse), SAp = spread(f.st_apply), G = spread(f.st_given);
+                        SAn = spread(f.st_analyse), SAp = spread(f.st_apply), G = spread(f.st_given),
+                        cL = spread(f.cpu_lib), cS = spread(f.cpu_steady), cB = spread(f.cpu_b), cC = spread(f.cpu_c);
     const std::string name = cases[k].sensitivity == "default" ? "default (XYZ)" : "camera CSV (RGB)";
     std::printf("  %-16s T %2.0f\n", name.c_str(), cases[k].turbidity);
     std::printf("    (a) library analyse+apply:   %8.2f ms (%.2f..%.2f)  %7.1f Mpx/s"
@@ -236,6 +252,10 @@ int main(int argc, char** argv) {
                 B.median, B.lo, B.hi, mpx / (B.median * 1e-3), B.median / L.median, B.median / S.median);
     std::printf("    (c) 1 nm sum/px, hoisted:    %8.0f ms (%.0f..%.0f)  %7.3f Mpx/s   (c)/(a) %.0fx  (c)/(s) %.0fx\n",
                 C.median, C.lo, C.hi, mpx / (C.median * 1e-3), C.median / L.median, C.median / S.median);
+    std::printf("    CPU time (all threads): (a) %.1f ms, (s) %.1f ms, (b) %.0f ms, (c) %.0f ms;"
+                "  (b)/(s) %.0fx, (c)/(s) %.0fx, (c)/(a) %.0fx\n",
+                cL.median, cS.median, cB.median, cC.median, cB.median / cS.median, cC.median / cS.median,
+                cC.median / cL.median);
   }
   std::printf("  (checksum %.6g)\n", checksum);
   return 0;

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <cstring>
 #include <sstream>
+#include <type_traits>
 #include <vector>
 #if defined(__linux__)
 #include <sys/mman.h>
@@ -398,52 +399,61 @@ std::size_t aerial_row(const Frame& fr, int y, float* lg, float* lg1, unsigned c
   if constexpr (M == AerialMode::rerender)
     for (int k = 0; k < 3 * W; ++k) lg1[k] = AttenuationTable::exp_f(lg1[k]);
 
-  std::size_t floored = 0;
   const float* in = fr.rgb->data.data() + 3 * row0;
-  for (int x = 0; x < W; ++x) {
-    const std::size_t i = row0 + x;
-    const bool sky = skyrow[x] != 0;
-    const float* px = in + 3 * x;
-    std::array<float, 3> e = {px[0], px[1], px[2]};
-    if constexpr (Xyz)
-      e = {sh::brume_srgb_to_x(px[0], px[1], px[2]), sh::brume_srgb_to_y(px[0], px[1], px[2]),
-           sh::brume_srgb_to_z(px[0], px[1], px[2])};
-    const float* g = lg + 3 * x;
-    std::array<float, 3> fc{}, rho{};
-    if constexpr (M == AerialMode::render) {
-      for (int c = 0; c < 3; ++c) rho[c] = g[c], fc[c] = g[c] * e[c];
-    } else if constexpr (M == AerialMode::rerender) {
-      const float* g1 = lg1 + 3 * x;
-      floored += !sky && (g1[0] < fr.floor_g || g1[1] < fr.floor_g || g1[2] < fr.floor_g) ? 1 : 0;
-      for (int c = 0; c < 3; ++c) {
-        rho[c] = sh::brume_aerial_rerender_rho(g[c], g1[c], fr.floor_g);
-        fc[c] = rho[c] * sh::brume_aerial_rerender_radiance(e[c], fr.A[c], fr.A1[c]);
+  // The pixel loop with the output layout fixed at compile time and the sky
+  // as a select instead of a branch (the sky's output is computed and thrown
+  // away), so that the compiler may vectorise it; the arithmetic per output
+  // value is unchanged, so are the bits.
+  auto pass = [&](auto fused_c, auto att_c) {
+    constexpr bool kFused = decltype(fused_c)::value, kAtt = decltype(att_c)::value;
+    std::size_t floored = 0;
+    for (int x = 0; x < W; ++x) {
+      const std::size_t i = row0 + x;
+      const bool sky = skyrow[x] != 0;
+      const float* px = in + 3 * x;
+      std::array<float, 3> e = {px[0], px[1], px[2]};
+      if constexpr (Xyz)
+        e = {sh::brume_srgb_to_x(px[0], px[1], px[2]), sh::brume_srgb_to_y(px[0], px[1], px[2]),
+             sh::brume_srgb_to_z(px[0], px[1], px[2])};
+      const float* g = lg + 3 * x;
+      std::array<float, 3> fc{}, rho{};
+      if constexpr (M == AerialMode::render) {
+        for (int c = 0; c < 3; ++c) rho[c] = g[c], fc[c] = g[c] * e[c];
+      } else if constexpr (M == AerialMode::rerender) {
+        const float* g1 = lg1 + 3 * x;
+        floored += !sky && (g1[0] < fr.floor_g || g1[1] < fr.floor_g || g1[2] < fr.floor_g) ? 1 : 0;
+        for (int c = 0; c < 3; ++c) {
+          rho[c] = sh::brume_aerial_rerender_rho(g[c], g1[c], fr.floor_g);
+          fc[c] = rho[c] * sh::brume_aerial_rerender_radiance(e[c], fr.A[c], fr.A1[c]);
+        }
+      } else {
+        floored += !sky && (g[0] < fr.floor_g || g[1] < fr.floor_g || g[2] < fr.floor_g) ? 1 : 0;
+        for (int c = 0; c < 3; ++c)
+          rho[c] = g[c], fc[c] = sh::brume_aerial_remove(e[c], g[c], fr.A[c], fr.floor_g);  // the result itself
       }
-    } else {
-      floored += !sky && (g[0] < fr.floor_g || g[1] < fr.floor_g || g[2] < fr.floor_g) ? 1 : 0;
-      for (int c = 0; c < 3; ++c)
-        rho[c] = g[c], fc[c] = sh::brume_aerial_remove(e[c], g[c], fr.A[c], fr.floor_g);  // the result itself
+      if constexpr (!kFused) {
+        for (int c = 0; c < 3; ++c) out.f[i * 6 + c] = fc[c], out.f[i * 6 + 3 + c] = rho[c];
+      } else {
+        std::array<float, 3> v{};
+        for (int c = 0; c < 3; ++c)
+          v[c] = M == AerialMode::remove ? fc[c] : sh::brume_composite_premultiplied(fc[c], rho[c], fr.A[c]);
+        if constexpr (Xyz)
+          v = {sh::brume_xyz_to_r(v[0], v[1], v[2]), sh::brume_xyz_to_g(v[0], v[1], v[2]),
+               sh::brume_xyz_to_b(v[0], v[1], v[2])};
+        if constexpr (kAtt)
+          for (int c = 0; c < 3; ++c) out.att[3 * i + c] = sky ? 1.0f : rho[c];
+        // The sky already is the horizon: unchanged, bit for bit (px may be
+        // the output itself, in place: each value is read before its store).
+        float* o = out.rgb + 3 * i;
+        for (int c = 0; c < 3; ++c) o[c] = sky ? px[c] : v[c];
+      }
     }
-    if (!fused) {
-      for (int c = 0; c < 3; ++c) out.f[i * 6 + c] = fc[c], out.f[i * 6 + 3 + c] = rho[c];
-      continue;
-    }
-    float* o = out.rgb + 3 * i;
-    if (out.att)
-      for (int c = 0; c < 3; ++c) out.att[3 * i + c] = sky ? 1.0f : rho[c];
-    if (sky) {  // the sky already is the horizon: unchanged, bit for bit (px may be o itself: in place)
-      for (int c = 0; c < 3; ++c) o[c] = px[c];
-      continue;
-    }
-    std::array<float, 3> v{};
-    for (int c = 0; c < 3; ++c)
-      v[c] = M == AerialMode::remove ? fc[c] : sh::brume_composite_premultiplied(fc[c], rho[c], fr.A[c]);
-    if constexpr (Xyz)
-      v = {sh::brume_xyz_to_r(v[0], v[1], v[2]), sh::brume_xyz_to_g(v[0], v[1], v[2]),
-           sh::brume_xyz_to_b(v[0], v[1], v[2])};
-    for (int c = 0; c < 3; ++c) o[c] = v[c];
-  }
-  return floored;
+    return floored;
+  };
+  using T = std::true_type;
+  using F = std::false_type;
+  if (!fused) return pass(F{}, F{});
+  return out.att ? pass(T{}, T{}) : pass(T{}, F{});
 }
 
 template <AerialMode M>
