@@ -92,6 +92,7 @@ struct Case {
 struct Figures {
   std::vector<double> lib, analyse, apply, table, peer_b, peer_c, steady, st_analyse, st_apply, st_given;
   std::vector<double> cpu_lib, cpu_steady, cpu_b, cpu_c;  // process CPU ms
+  std::vector<double> cpu_st_analyse, cpu_st_apply, cpu_st_given;
 };
 
 }  // namespace
@@ -136,17 +137,19 @@ int main(int argc, char** argv) {
       c0 = cpu_ms();
       auto ts = Clock::now();
       analyse_aerial(scene.rgb, scene.range, p, keep_a[k]);
-      const double ms_st_an = ms_since(ts);
+      const double ms_st_an = ms_since(ts), cpu_st_an = cpu_ms() - c0;
+      const double c1 = cpu_ms();
       auto ts1 = Clock::now();
       apply_aerial(scene.rgb, scene.range, p, keep_a[k], keep_out[k]);
-      const double ms_st_ap = ms_since(ts1), ms_st = ms_since(ts), cpu_st = cpu_ms() - c0;
+      const double ms_st_ap = ms_since(ts1), ms_st = ms_since(ts), cpu_st = cpu_ms() - c0, cpu_st_ap = cpu_ms() - c1;
       checksum += keep_out[k].data[keep_out[k].data.size() / 3];
       // The steady analysis with the horizon given (no sky median), for the breakdown.
       AerialParams given = p;
       given.airlight = a.airlight;
+      const double c2 = cpu_ms();
       auto tg = Clock::now();
       analyse_aerial(scene.rgb, scene.range, given, keep_given[k]);
-      const double ms_given = ms_since(tg);
+      const double ms_given = ms_since(tg), cpu_given = cpu_ms() - c2;
       // The table alone (inside (a) already), for the breakdown.
       auto t2 = Clock::now();
       const AttenuationTable tab = attenuation_table(p.atmosphere, a.sensitivity, a.range_max_m);
@@ -217,6 +220,7 @@ int main(int argc, char** argv) {
       f.peer_b.push_back(ms_b), f.peer_c.push_back(ms_c);
       f.steady.push_back(ms_st), f.st_analyse.push_back(ms_st_an), f.st_apply.push_back(ms_st_ap);
       f.st_given.push_back(ms_given);
+      f.cpu_st_analyse.push_back(cpu_st_an), f.cpu_st_apply.push_back(cpu_st_ap), f.cpu_st_given.push_back(cpu_given);
       f.cpu_lib.push_back(cpu_lib), f.cpu_steady.push_back(cpu_st), f.cpu_b.push_back(cpu_b), f.cpu_c.push_back(cpu_c);
     }
 
@@ -239,7 +243,8 @@ int main(int argc, char** argv) {
     const bench::Spread L = spread(f.lib), An = spread(f.analyse), Ap = spread(f.apply), T = spread(f.table),
                         B = spread(f.peer_b), C = spread(f.peer_c), S = spread(f.steady),
                         SAn = spread(f.st_analyse), SAp = spread(f.st_apply), G = spread(f.st_given),
-                        cL = spread(f.cpu_lib), cS = spread(f.cpu_steady), cB = spread(f.cpu_b), cC = spread(f.cpu_c);
+                        cL = spread(f.cpu_lib), cS = spread(f.cpu_steady), cB = spread(f.cpu_b), cC = spread(f.cpu_c),
+                        cSAn = spread(f.cpu_st_analyse), cSAp = spread(f.cpu_st_apply), cG = spread(f.cpu_st_given);
     const std::string name = cases[k].sensitivity == "default" ? "default (XYZ)" : "camera CSV (RGB)";
     std::printf("  %-16s T %2.0f\n", name.c_str(), cases[k].turbidity);
     std::printf("    (a) library analyse+apply:   %8.2f ms (%.2f..%.2f)  %7.1f Mpx/s"
@@ -256,6 +261,8 @@ int main(int argc, char** argv) {
                 "  (b)/(s) %.0fx, (c)/(s) %.0fx, (c)/(a) %.0fx\n",
                 cL.median, cS.median, cB.median, cC.median, cB.median / cS.median, cC.median / cS.median,
                 cC.median / cL.median);
+    std::printf("    CPU time of (s): analyse %.1f ms (horizon given: %.1f), apply %.1f ms\n", cSAn.median, cG.median,
+                cSAp.median);
   }
   std::printf("  (checksum %.6g)\n", checksum);
   return 0;
