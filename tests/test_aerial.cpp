@@ -475,5 +475,6 @@ TEST(Aerial, ReusedBuffersMustNotAliasTheInputs) {
   EXPECT_NE(error_of([&] { apply_aerial(rgb, range, p, a, out, AerialMaps{&rgb, nullptr}); }).find("own Image"),
             std::string::npos);
   EXPECT_NE(error_of([&] { apply_aerial(rgb, range, p, a, range); }).find("own Image"), std::string::npos);
-  EXPECT_EQ(std::memcmp(range.data.data(), s.range.data.data(), range.data.size() * sizeof(float)), 0);  // untouched (NaN sky: bits)
+  // Untouched (compared as bits: the sky is NaN).
+  EXPECT_EQ(std::memcmp(range.data.data(), s.range.data.data(), range.data.size() * sizeof(float)), 0);
 }

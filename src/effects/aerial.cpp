@@ -81,7 +81,7 @@ std::uint32_t order_key(float v) {
 
 // Per-channel k-th smallest (k = n/2: the median nth_element gave) of the
 // sky pixels, exact, without gathering and partially sorting every sky
-// value (on the demo frame ~0.5 M per channel): a histogram of the keys' top
+// value per channel: a histogram of the keys' top
 // 16 bits (thread-local, any order, so the pass runs in parallel), then only
 // the values in the one bin holding rank k -- a smooth sky spreads over many
 // bins, so that is a small fraction; a flat sky falls back to the full
@@ -98,7 +98,8 @@ std::array<float, 3> sky_median(const Image& rgb, const float* sky, std::size_t 
 #pragma omp for schedule(dynamic, 16384) nowait
     for (std::ptrdiff_t i = lo; i < hi; ++i)
       if (sky[i] > 0.0f)
-        for (int c = 0; c < 3; ++c) ++h[static_cast<std::size_t>(c) * kSkyBins + (order_key(rgb.data[3 * i + c]) >> 16)];
+        for (int c = 0; c < 3; ++c)
+          ++h[static_cast<std::size_t>(c) * kSkyBins + (order_key(rgb.data[3 * i + c]) >> 16)];
 #pragma omp critical(brume_aerial_sky_hist)
     for (std::size_t b = 0; b < h.size(); ++b) hist[b] += h[b];
   }
@@ -108,7 +109,8 @@ std::array<float, 3> sky_median(const Image& rgb, const float* sky, std::size_t 
   for (int c = 0; c < 3; ++c) {
     std::size_t below = 0;
     std::uint32_t b = 0;
-    while (below + hist[static_cast<std::size_t>(c) * kSkyBins + b] <= k) below += hist[static_cast<std::size_t>(c) * kSkyBins + b++];
+    const std::uint32_t* hc = hist.data() + static_cast<std::size_t>(c) * kSkyBins;
+    while (below + hc[b] <= k) below += hc[b++];  // ends: the counts sum to n_sky > k
     bin[c] = b, rank[c] = k - below;
   }
   std::array<std::vector<float>, 3> v;
@@ -379,8 +381,8 @@ struct RowOut {
 // pixel returning its array through registers: 4.5 % of the single-thread
 // steady-state profile by itself, plus the spills around it).
 template <AerialMode M, bool Xyz>
-[[gnu::flatten]] std::size_t aerial_row(const Frame& fr, int y, float* lg, float* lg1, unsigned char* skyrow, bool fused,
-                       const RowOut& out) {
+[[gnu::flatten]] std::size_t aerial_row(const Frame& fr, int y, float* lg, float* lg1, unsigned char* skyrow,
+                                        bool fused, const RowOut& out) {
   const int W = fr.W;
   const std::size_t row0 = static_cast<std::size_t>(y) * W;
   const float* range = fr.range->data.data() + row0;
