@@ -21,6 +21,10 @@
 //       I = I0 Gamma + Iinf (1 - Gamma) in the sensitivity's space;
 //   (c) peer':   the same 1 nm sum per pixel with beta and the weights hoisted
 //       out of the pixel loop (the fairest per-pixel integral).
+// The peers write the image only, as (s) does, so (c)/(s) is the like-for-like
+// ratio; (a) also makes both maps. CPU time (all threads) is printed beside
+// the wall time: on a loaded host it is the steadier figure. For ratios at
+// equal thread counts run it once as is and once with OMP_NUM_THREADS=1.
 // The peers run on every 16th row and are scaled to the full frame (x16).
 // Rounds interleave (a), (s), (b), (c) (one warm-up round first), so a busy host
 // slows all three alike; each figure is the median (min..max) of its rounds.
