@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <memory>
 #include <random>
 
@@ -385,4 +386,95 @@ TEST(AerialGpu, MatchesTheCpuInEveryMode) {
     EXPECT_EQ(gpu.floored_pixels, cpu.floored_pixels) << "mode " << mode;
     for (int x = 0; x < 64; ++x) ASSERT_EQ(gpu.rgb.at(x, 0, 1), s.rgb.at(x, 0, 1));  // sky kept exactly
   }
+}
+
+// ---- speed paths (issue #10): the fast forms must give the plain forms' numbers ----
+
+TEST(Aerial, SkyMedianIsExactlyNthElement) {
+  // The horizon estimate counts keys in a 16-bit histogram, then selects in
+  // one bin. Reference: nth_element over every sky value (the code it
+  // replaced), k = n/2. Cases that stress the bins: negatives (key order
+  // reversed), many ties, a flat channel (every value in one bin), values
+  // differing only below the top 16 bits, and an odd sky count.
+  std::mt19937 rng(11);
+  const int W = 97, H = 60, sky_rows = 31;  // 3007 sky pixels: odd
+  Scene s = scene(W, H, sky_rows);
+  std::uniform_real_distribution<float> wide(-1.0f, 2.0f);
+  std::uniform_int_distribution<int> level(0, 4), fine(0, 4000);
+  for (int y = 0; y < sky_rows; ++y)
+    for (int x = 0; x < W; ++x) {
+      s.rgb.at(x, y, 0) = wide(rng);                         // negatives and positives
+      s.rgb.at(x, y, 1) = 0.25f * static_cast<float>(level(rng));  // five values, heavy ties
+      s.rgb.at(x, y, 2) = 0.5f + 1e-6f * static_cast<float>(fine(rng));  // one 16-bit bin, distinct low bits
+    }
+  s.rgb.at(5, 3, 2) = 0.5f;  // and a few outside that bin
+  s.rgb.at(6, 3, 2) = 0.9f;
+  s.rgb.at(7, 3, 0) = -0.0f;
+  const AerialAnalysis a = analyse_aerial(s.rgb, s.range, AerialParams{});
+  ASSERT_NE(a.airlight_source.find("sky"), std::string::npos);
+  for (int c = 0; c < 3; ++c) {
+    std::vector<float> v;
+    for (int y = 0; y < sky_rows; ++y)
+      for (int x = 0; x < W; ++x) v.push_back(s.rgb.at(x, y, c));
+    auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    EXPECT_EQ(a.airlight[c], *mid) << "channel " << c;
+  }
+}
+
+TEST(Aerial, ReusedBuffersGiveTheSamePixels) {
+  // apply_aerial into caller buffers (fresh, stale from another frame, wrong
+  // size, in place) and analyse_aerial into a reused analysis must equal the
+  // returning forms bit for bit, in every mode, with and without the blur.
+  const Scene s = scene(64, 48, 6), other = scene(64, 48, 20, 3), small = scene(20, 10, 2, 5);
+  auto same = [](const Image& x, const Image& y) {
+    return x.width == y.width && x.height == y.height && x.channels == y.channels &&
+           std::memcmp(x.data.data(), y.data.data(), x.data.size() * sizeof(float)) == 0;
+  };
+  std::vector<AerialParams> modes(5);
+  modes[0].atmosphere.turbidity = 8.0;                               // render, XYZ
+  modes[1].atmosphere.turbidity = 8.0, modes[1].from_turbidity = 2.0;  // re-render
+  modes[2].atmosphere.turbidity = 4.0, modes[2].remove = true;        // remove
+  modes[3].atmosphere.turbidity = 8.0, modes[3].lambda = 4.0;         // render with the blur
+  modes[4].atmosphere.turbidity = 8.0, modes[4].airlight = Rgb{0.7f, 0.8f, 0.9f};
+  for (std::size_t m = 0; m < modes.size(); ++m) {
+    SCOPED_TRACE("mode " + std::to_string(m));
+    const AerialParams& p = modes[m];
+    const AerialAnalysis a = analyse_aerial(s.rgb, s.range, p);
+    const AerialResult want = apply_aerial(s.rgb, s.range, p, a);
+
+    AerialAnalysis reused = analyse_aerial(other.rgb, other.range, p);  // another frame's mask and horizon
+    analyse_aerial(s.rgb, s.range, p, reused);
+    EXPECT_TRUE(same(reused.sky, a.sky));
+    EXPECT_EQ(reused.airlight, a.airlight);
+    EXPECT_EQ(reused.airlight_source, a.airlight_source);
+    EXPECT_EQ(reused.range_max_m, a.range_max_m);
+
+    Image out = small.rgb, att(64, 48, 3, NAN), scale;  // wrong size; stale NaNs; empty
+    const std::size_t floored = apply_aerial(s.rgb, s.range, p, reused, out, AerialMaps{&att, &scale});
+    EXPECT_TRUE(same(out, want.rgb));
+    EXPECT_TRUE(same(att, want.attenuation));
+    EXPECT_TRUE(same(scale, want.scale));
+    EXPECT_EQ(floored, want.floored_pixels);
+
+    Image stale(64, 48, 3, NAN);  // image only, into a buffer holding garbage
+    apply_aerial(s.rgb, s.range, p, a, stale);
+    EXPECT_TRUE(same(stale, want.rgb));
+
+    Image in_place = s.rgb;
+    apply_aerial(in_place, s.range, p, a, in_place);
+    EXPECT_TRUE(same(in_place, want.rgb));
+  }
+}
+
+TEST(Aerial, ReusedBuffersMustNotAliasTheInputs) {
+  const Scene s = scene(16, 12, 2);
+  const AerialParams p;
+  const AerialAnalysis a = analyse_aerial(s.rgb, s.range, p);
+  Image rgb = s.rgb, range = s.range, out;
+  EXPECT_NE(error_of([&] { apply_aerial(rgb, range, p, a, out, AerialMaps{&rgb, nullptr}); }).find("own Image"),
+            std::string::npos);
+  EXPECT_NE(error_of([&] { apply_aerial(rgb, range, p, a, range); }).find("own Image"), std::string::npos);
+  // Untouched (compared as bits: the sky is NaN).
+  EXPECT_EQ(std::memcmp(range.data.data(), s.range.data.data(), range.data.size() * sizeof(float)), 0);
 }

@@ -239,6 +239,12 @@ struct AerialAnalysis {
 // the per-channel median of the brightest 10 % (by luminance) of the 1 %
 // most distant known pixels -- the thesis' "brightest pixels near the horizon".
 AerialAnalysis analyse_aerial(const Image& rgb, const Image& range, const AerialParams& p);
+// The same analysis into `a`, reusing a.sky's buffer when it already has the
+// frame's size (a video or batch caller keeps `a` between frames and so pays
+// no 7 MB allocation, zero-fill and page faults per 1600x1120 frame for the
+// mask). Every field of `a` is overwritten; the result equals the returning
+// form's, bit for bit. If it throws, `a` is left valid but unspecified.
+void analyse_aerial(const Image& rgb, const Image& range, const AerialParams& p, AerialAnalysis& a);
 
 struct AerialResult {
   Image rgb;          // linear RGB
@@ -251,6 +257,21 @@ struct AerialResult {
 // (the prepared one in the pipeline); unknown pixels in it are sky too.
 AerialResult apply_aerial(const Image& rgb, const Image& range, const AerialParams& p, const AerialAnalysis& a,
                           const Exec& exec = {});
+// The optional maps of the buffer-reusing apply below: null = not computed,
+// not written (a caller that writes neither saves ~28 MB of stores per
+// 1600x1120 frame; the blur computes its sigma map internally either way).
+struct AerialMaps {
+  Image* attenuation = nullptr;  // 3 channels, as AerialResult::attenuation
+  Image* scale = nullptr;        // 1 channel, as AerialResult::scale
+};
+// The same apply into caller-provided buffers: `out` (3 channels) and the
+// maps asked for are (re)allocated only when their size differs from the
+// frame's, so a caller that keeps them between frames pays no allocation,
+// zero-fill or first-touch page faults. `out` may be `rgb` itself (in place);
+// the maps must be distinct images other than rgb and range. Pixels equal the
+// returning form's bit for bit. Returns AerialResult::floored_pixels.
+std::size_t apply_aerial(const Image& rgb, const Image& range, const AerialParams& p, const AerialAnalysis& a,
+                         Image& out, const AerialMaps& maps = {}, const Exec& exec = {});
 
 // ---- the pipeline ---------------------------------------------------------------------
 struct AerialRun {

@@ -394,11 +394,15 @@ AttenuationTable attenuation_table(const Atmosphere& a, const SpectralSensitivit
   t.log_gamma.resize(samples);
   std::array<double, kSensitivitySamples> ratio{};
   for (int l = 0; l < kSensitivitySamples; ++l) ratio[l] = std::exp(-in.beta[l] * t.step_m);
+  // Chunks of kReseed nodes, each starting on a re-seed node: every node is
+  // then the same product whatever the thread count or which thread ran it
+  // (the table, and so the render, no longer depends on the team size), and a
+  // preempted thread on a shared host holds up one chunk, not half the table.
 #pragma omp parallel
   {
     std::array<double, kSensitivitySamples> e{};
     int seeded = -2;  // the node e holds, if this thread's previous node
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, kReseed)
     for (int i = 0; i < samples; ++i) {
       if (i == 0) {
         t.log_gamma[0] = {0.0f, 0.0f, 0.0f};  // Gamma(0) = 1 exactly
