@@ -203,7 +203,7 @@ void check_options(const SkyFitOptions& o) {
 }
 
 // Combine the repeats: the median turbidity, its repeat's samples, the spread.
-SkyFitResult aggregate(std::vector<RepeatResult> reps, std::size_t candidates, const SkyFitOptions& o) {
+SkyFitResult aggregate(std::vector<RepeatResult> reps, std::size_t candidates) {
   SkyFitResult f;
   f.candidates = candidates;
   std::vector<double> ts;
@@ -232,8 +232,6 @@ SkyFitResult aggregate(std::vector<RepeatResult> reps, std::size_t candidates, c
     f.reasons.push_back("the fit ran into the model's bound [1.7, 20]: the sky is outside what the model describes");
   if (f.turbidity_spread > std::max(0.25, 0.05 * f.turbidity))
     f.reasons.push_back("the turbidity changes between samplings by more than max(0.25, 5 %)");
-  if (f.residual > 0.5 * o.inlier_threshold && f.inlier_fraction < 0.8)
-    f.reasons.push_back("large residuals on the inliers");
   f.reliable = f.reasons.empty();
   return f;
 }
@@ -289,7 +287,7 @@ SkyFitResult fit_turbidity(const std::vector<SkySample>& candidates, const SkyDi
     }
     reps.push_back(fit_once(std::move(drawn), ts, o, rng));
   }
-  return aggregate(std::move(reps), usable.size(), o);
+  return aggregate(std::move(reps), usable.size());
 }
 
 SkyFitResult fit_sky_image(const Image& rgb, bool integer_image, const SkyGeometry& g, const SkyDirection& sun,
@@ -366,7 +364,7 @@ SkyFitResult fit_sky_image(const Image& rgb, bool integer_image, const SkyGeomet
   const std::size_t candidates =
       did_scan ? scanned.size()
                : static_cast<std::size_t>(static_cast<double>(accepted) / static_cast<double>(tried) * total);
-  return aggregate(std::move(reps), candidates, o);
+  return aggregate(std::move(reps), candidates);
 }
 
 nlohmann::json sky_fit_json(const SkyFitResult& r, const SunFound& sun) {
