@@ -250,34 +250,42 @@ Image render_sky(const SkyRenderParams& p, const SkyDirection& sun, const SkyGeo
   for (int x = 0; x < static_cast<int>(cos_dphi.size()); ++x)
     cos_dphi[x] = static_cast<float>(std::cos(direction_of_pixel(g, x, 0)->azimuth_deg * kDeg - ps));
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 4)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 4)  // sky rows cost, ground rows do not
   for (int y = 0; y < g.height; ++y) {
     float* row = out.row(y);
     float th_row[3] = {0, 0, 0};
-    float row_theta = 0;
+    float row_theta = 0, row_sin = 0, row_cos = 0;
     if (equirect) {
+      // Everything that depends on theta once per row; rows below the horizon cost nothing.
       row_theta = static_cast<float>(direction_of_pixel(g, 0, y)->zenith_deg * kDeg);
-      for (int c = 0; c < 3; ++c) th_row[c] = sh::brume_perez_theta(cf[c][0], cf[c][1], std::cos(row_theta));
+      row_sin = std::sin(row_theta), row_cos = std::cos(row_theta);
+      for (int c = 0; c < 3; ++c) th_row[c] = sh::brume_perez_theta(cf[c][0], cf[c][1], row_cos);
+      if (row_theta > 0.5f * 3.14159265f) {  // below the horizon: the whole row
+        for (int x = 0; x < g.width; ++x)
+          if (p.ground) row[3 * x] = (*p.ground)[0], row[3 * x + 1] = (*p.ground)[1], row[3 * x + 2] = (*p.ground)[2];
+        continue;
+      }
     }
     for (int x = 0; x < g.width; ++x) {
       float* px = row + 3 * x;
-      float theta, cdp;
+      float theta, cdp, st, ct;
       float th[3];
       if (equirect) {
-        theta = row_theta, cdp = cos_dphi[x];
+        theta = row_theta, cdp = cos_dphi[x], st = row_sin, ct = row_cos;
         th[0] = th_row[0], th[1] = th_row[1], th[2] = th_row[2];
       } else {
         const std::optional<SkyDirection> d = direction_of_pixel(g, x, y);
         if (!d) continue;  // no direction: NaN
         theta = static_cast<float>(d->zenith_deg * kDeg);
         cdp = static_cast<float>(std::cos(d->azimuth_deg * kDeg - ps));
-        for (int c = 0; c < 3; ++c) th[c] = sh::brume_perez_theta(cf[c][0], cf[c][1], std::cos(theta));
+        st = std::sin(theta), ct = std::cos(theta);
+        for (int c = 0; c < 3; ++c) th[c] = sh::brume_perez_theta(cf[c][0], cf[c][1], ct);
       }
       if (theta > 0.5f * 3.14159265f) {
         if (p.ground) px[0] = (*p.ground)[0], px[1] = (*p.ground)[1], px[2] = (*p.ground)[2];
         continue;
       }
-      const float cg = sh::brume_sky_cos_gamma(std::sin(theta), std::cos(theta), sin_ts, cos_ts, cdp);
+      const float cg = sh::brume_sky_cos_gamma(st, ct, sin_ts, cos_ts, cdp);
       const float gamma = sh::acos(cg);
       float v[3];
       for (int c = 0; c < 3; ++c) v[c] = scale[c] * th[c] * sh::brume_perez_gamma(cf[c][2], cf[c][3], cf[c][4], gamma, cg);
