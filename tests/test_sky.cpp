@@ -235,7 +235,21 @@ TEST(SkyFit, RecoversTurbidityOfRenderedSkies) {
         EXPECT_TRUE(r.reliable) << proj << " T " << t;
       }
   }
-  std::printf("[ fit ] rendered skies T = 2..9, 3 suns, 2 projections: max |T^ - T| = %.2e\n", worst);
+  // Pinhole: an ordinary photo looking up south-east with sky filling the frame.
+  SkyViewParams v;
+  v.projection = "pinhole";
+  v.fov_x_deg = 80.0;
+  v.pose.yaw_deg = 140.0, v.pose.pitch_deg = 50.0;
+  const SkyGeometry g = sky_geometry(v, 400, 300);
+  for (int t = 2; t <= 9; ++t) {
+    SkyRenderParams p;
+    p.turbidity = t;
+    const SkyDirection sun{45.0, 200.0};
+    const SkyFitResult r = fit_sky_image(render_sky(p, sun, g), false, g, sun, nullptr, fast_options());
+    worst = std::max(worst, std::fabs(r.turbidity - t));
+    EXPECT_NEAR(r.turbidity, t, 0.02) << "pinhole";
+  }
+  std::printf("[ fit ] rendered skies T = 2..9, 3 suns, 3 projections: max |T^ - T| = %.2e\n", worst);
 }
 
 // Bright cloud blobs covering 20 % of the sky, brighter than the sky by 1.5-3x.
