@@ -14,6 +14,7 @@
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
 #include "brume/insert.hpp"
+#include "brume/sky.hpp"
 #include "brume/pipeline.hpp"
 
 using namespace brume;
@@ -88,6 +89,8 @@ TEST(Params, EveryCommandIsDeclaredCompletely) {
   expect_complete(coefficients_job_table(), "aerial coefficients");
   expect_complete(compare_job_table(), "compare");
   expect_complete(insert_job_table(), "insert");
+  expect_complete(sky_render_job_table(), "sky render");
+  expect_complete(sky_fit_job_table(), "sky fit");
 }
 
 TEST(Params, RangeErrorsNameTheFlag) {
@@ -98,6 +101,8 @@ TEST(Params, RangeErrorsNameTheFlag) {
   expect_range_errors_name_the_flag(camera_pose_param_table());
   expect_range_errors_name_the_flag(aerial_job_table());
   expect_range_errors_name_the_flag(coefficients_job_table());
+  expect_range_errors_name_the_flag(sky_render_job_table());
+  expect_range_errors_name_the_flag(sky_fit_job_table());
   expect_range_errors_name_the_flag(insert_job_table());
 }
 

@@ -287,6 +287,7 @@ struct AerialJob {
   RangeStep prepare;
   AerialParams aerial;
   OutputFiles output;  // maps: attenuation, scale-map
+  std::string turbidity_from;  // --turbidity-from: T from a `brume sky fit` JSON (brume/sky.hpp); must be reliable
 };
 const std::vector<MapOutput>& aerial_map_outputs();
 const ParamTable<AerialJob>& aerial_job_table();

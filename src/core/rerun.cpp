@@ -10,6 +10,7 @@
 #include "brume/depth_pipeline.hpp"
 #include "brume/error.hpp"
 #include "brume/aerial.hpp"
+#include "brume/sky.hpp"
 #include "brume/haze.hpp"
 #include "brume/insert.hpp"
 #include "brume/io.hpp"
@@ -88,12 +89,13 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
   if (cmd == "aerial") return run_aerial_job(job_from(record, aerial_job_table(), out_dir), exec, ctx);
   if (cmd == "insert") return run_insert_job(job_from(record, insert_job_table(), out_dir), exec, ctx);
   if (cmd == "blur") return run_blur_job(job_from(record, blur_job_table(), out_dir), exec, ctx);
+  if (cmd == "sky render") return run_sky_render_job(job_from(record, sky_render_job_table(), out_dir), exec, ctx);
   if (cmd == "depth convert")
     return run_depth_convert_job(job_from(record, depth_convert_job_table(), out_dir), ctx);
   if (cmd == "depth prepare")
     return run_depth_prepare_job(job_from(record, depth_prepare_job_table(), out_dir), ctx);
   throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, aerial, insert, blur, depth convert, "
-              "depth prepare can)");
+              "depth prepare, sky render can)");
 }
 
 }  // namespace brume

@@ -5,6 +5,7 @@
 #include <chrono>
 
 #include "brume/aerial.hpp"
+#include "brume/sky.hpp"
 #include "brume/error.hpp"
 #include "brume/gpu.hpp"
 #include "brume/record.hpp"
@@ -78,7 +79,9 @@ const ParamTable<AerialJob>& aerial_job_table() {
     d.nest(&AerialJob::input, input_param_table(true))
         .nest(&AerialJob::prepare, range_step_param_table())
         .nest(&AerialJob::aerial, aerial_param_table())
-        .nest(&AerialJob::output, output_param_table(aerial_map_outputs()));
+        .nest(&AerialJob::output, output_param_table(aerial_map_outputs()))
+        .text("turbidity-from", &AerialJob::turbidity_from,
+              "take --turbidity from a `brume sky fit` JSON (refused when the fit is flagged unreliable)");
     return d;
   }();
   return t;
@@ -111,7 +114,17 @@ AerialRun run_aerial(const Image& rgb, const Image& measured_range, const Aerial
   return run;
 }
 
-nlohmann::json run_aerial_job(const AerialJob& job, const ExecOptions& eo, const RunContext& ctx) {
+nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo, const RunContext& ctx) {
+  // --turbidity-from: the sky fit's T replaces --turbidity, and the record
+  // holds the resolved value (so `brume run` finds the two consistent).
+  AerialJob job = given_job;
+  if (!job.turbidity_from.empty()) {
+    const double t = turbidity_from_fit_json(job.turbidity_from);
+    if (ctx.given.count("turbidity") && job.aerial.atmosphere.turbidity != t)
+      throw Error("--turbidity " + std::to_string(job.aerial.atmosphere.turbidity) + " and --turbidity-from '" +
+                  job.turbidity_from + "' (T = " + std::to_string(t) + ") disagree; give one of them");
+    job.aerial.atmosphere.turbidity = t;
+  }
   // Every parameter is checked before any file is touched, whatever the input.
   aerial_job_table().validate(job);
   validate_aerial(job.aerial, ctx.given);

@@ -26,6 +26,7 @@ constexpr Topic kTopics[] = {
     {"diffusion_math", shaders::diffusion_math_glsl},
     {"haze_math", shaders::haze_math_glsl},
     {"aerial_math", shaders::aerial_math_glsl},
+    {"sky_math", shaders::sky_math_glsl},
 };
 
 std::string hex(unsigned v) {

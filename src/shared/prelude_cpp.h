@@ -13,10 +13,14 @@ namespace brume::shared {
 #define BRUME_FN inline
 // The stencil update takes any vector and weight type on the CPU (see diffusion_math.glsl).
 #define BRUME_STENCIL_FN template <class brume_vec, class brume_weight> inline
+using std::acos;
+using std::cos;
 using std::exp;
 using std::floor;
 using std::log;
+using std::sin;
 using std::sqrt;
+using std::tan;
 inline float clamp(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
 inline float min(float a, float b) { return b < a ? b : a; }
 inline float max(float a, float b) { return a < b ? b : a; }
@@ -24,6 +28,7 @@ inline float mix(float a, float b, float t) { return a + t * (b - a); }
 #include "shared/diffusion_math.glsl"
 #include "shared/haze_math.glsl"
 #include "shared/aerial_math.glsl"
+#include "shared/sky_math.glsl"
 #undef BRUME_FN
 #undef BRUME_STENCIL_FN
 }  // namespace brume::shared

@@ -124,5 +124,7 @@ Command add_demo(CLI::App& app);
 Command add_study(CLI::App& app);
 // `brume aerial coefficients`, under the `aerial` parent subcommand.
 Command add_aerial_coefficients(CLI::App* aerial);
+// `brume sky render` and `brume sky fit`.
+std::vector<Command> add_sky(CLI::App& app);
 
 }  // namespace brume::cli

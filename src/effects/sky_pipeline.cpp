@@ -1,0 +1,204 @@
+// brume — the sky commands' pipelines: `brume sky render` (files out) and
+// `brume sky fit` (image in, JSON and an optional scatter plot out), with
+// their declared parameters (include/brume/sky.hpp).
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <unistd.h>
+
+#include "brume/error.hpp"
+#include "brume/record.hpp"
+#include "brume/sky.hpp"
+
+namespace brume {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+void check_dir_writable(const std::string& path, const std::string& flag) {
+  fs::path dir = fs::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec))
+    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
+  if (::access(dir.c_str(), W_OK) != 0)
+    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' is not writable");
+}
+
+nlohmann::json sun_json(const SunFound& s) {
+  nlohmann::json j = {{"zenith_deg", s.direction.zenith_deg}, {"azimuth_deg", s.direction.azimuth_deg}, {"source", s.source}};
+  if (!s.record.is_null())
+    for (auto it = s.record.begin(); it != s.record.end(); ++it) j[it.key()] = it.value();
+  return j;
+}
+
+}  // namespace
+
+// ---- render -----------------------------------------------------------------------------
+const ParamTable<SkyRenderParams>& sky_render_param_table() {
+  static const ParamTable<SkyRenderParams> t = [] {
+    ParamTable<SkyRenderParams> d("sky");
+    d.real("turbidity", &SkyRenderParams::turbidity, "1", Range::closed(kSkyTurbidityMin, kSkyTurbidityMax),
+           "atmospheric turbidity T (Preetham's model is valid on [1.7, 20])")
+        .nest(&SkyRenderParams::sun, sun_param_table())
+        .nest(&SkyRenderParams::view, sky_view_param_table())
+        .integer("width", &SkyRenderParams::width, "px", Range::closed(1, 65536), "image width")
+        .integer("height", &SkyRenderParams::height, "px", Range::closed(1, 65536), "image height")
+        .rgb("ground", &SkyRenderParams::ground, "1", Range::at_least(0.0),
+             "linear RGB below the horizon; none: NaN there", "none")
+        .boolean("sun-disc", &SkyRenderParams::sun_disc, "draw the sun's disc (the Preetham model has none)")
+        .real("sun-disc-radius", &SkyRenderParams::sun_disc_radius_deg, "deg", Range::left_open(0.0, 10.0),
+              "angular radius of the drawn disc (point-sampled at pixel centres)")
+        .real("sun-luminance", &SkyRenderParams::sun_luminance_kcd, "kcd/m^2", Range::above(0.0),
+              "luminance of the drawn disc (the sun: about 1.6e6 kcd/m^2)")
+        .real("exposure", &SkyRenderParams::exposure, "1", Range::above(0.0),
+              "multiplies every value (1: linear sRGB in kcd/m^2)");
+    return d;
+  }();
+  return t;
+}
+
+const ParamTable<SkyRenderJob>& sky_render_job_table() {
+  static const ParamTable<SkyRenderJob> t = [] {
+    ParamTable<SkyRenderJob> d("sky render");
+    d.nest(&SkyRenderJob::sky, sky_render_param_table()).nest(&SkyRenderJob::output, output_param_table({}));
+    return d;
+  }();
+  return t;
+}
+
+nlohmann::json run_sky_render_job(const SkyRenderJob& job, const ExecOptions& eo, const RunContext& ctx) {
+  sky_render_job_table().validate(job);
+  const SkyRenderParams& p = job.sky;
+  check_sky_turbidity(p.turbidity);
+  if (p.sun.sun == "auto") throw Error("--sun auto finds the sun in a photo (brume sky fit); to render, give --sun-zenith/--sun-azimuth or --date --latitude --longitude");
+  const SkyGeometry g = sky_geometry(p.view, p.width, p.height);
+  const SunFound sun = resolve_sun(p.sun, nullptr, false, &g);
+  const Exec exec = eo.exec();
+  if (exec.backend == Backend::gpu)
+    throw Error("--backend gpu: the sky render has no GPU pass yet (its per-pixel maths is shared, "
+                "src/shared/sky_math.glsl); use --backend cpu");
+  check_outputs(job.output, {});
+  const auto t0 = std::chrono::steady_clock::now();
+  const Image img = render_sky(p, sun.direction, g, exec);
+  nlohmann::json run;
+  run["sky"] = {{"model", "Preetham, Shirley, Smits 1999 (Perez 1993 distribution)"},
+                {"units", "linear sRGB (D65), kcd/m^2 times --exposure"},
+                {"sun", sun_json(sun)},
+                {"zenith", {{"Y_kcd_m2", sky_zenith(p.turbidity, sun.direction.zenith_deg * 3.14159265358979323846 / 180).Y_kcd}}}};
+  run["execution"] = {{"backend", "cpu"}, {"timing", cpu_timing_record(t0, 0)}};
+  const nlohmann::json rec =
+      job_record("sky render", ctx, sky_render_job_table().to_json(job), nlohmann::json::object(), run, eo.timing);
+  write_outputs(job.output, {}, img, {}, nullptr, rec);
+  return rec;
+}
+
+// ---- fit --------------------------------------------------------------------------------
+const ParamTable<SkyFitJob>& sky_fit_job_table() {
+  static const ParamTable<SkyFitJob> t = [] {
+    ParamTable<SkyFitOptions> f("fit");
+    f.integer("samples", &SkyFitOptions::samples, "1", Range::closed(10, 100000), "sky samples per sampling")
+        .count("seed", &SkyFitOptions::seed, "1", Range::at_least(0.0), "random seed (same seed, same result)")
+        .integer("repeats", &SkyFitOptions::repeats, "1", Range::closed(1, 100),
+                 "independent samplings; the median is reported, their spread as turbidity_spread")
+        .integer("ransac-iterations", &SkyFitOptions::ransac_iterations, "1", Range::closed(1, 10000),
+                 "RANSAC hypotheses per sampling")
+        .real("inlier-threshold", &SkyFitOptions::inlier_threshold, "1", Range::left_open(0.0, 2.0),
+              "|log(measured/model)| of an inlier (0.1: 10 %)")
+        .real("sun-exclusion", &SkyFitOptions::sun_exclusion_deg, "deg", Range::closed(0.0, 89.0),
+              "samples at least this far from the sun (its disc, glare and lens flare)")
+        .real("max-zenith", &SkyFitOptions::max_zenith_deg, "deg", Range::left_open(0.0, 90.0),
+              "samples at most this far from the zenith (the horizon: ground, trees, haze layers)");
+    ParamTable<SkyFitJob> d("sky fit");
+    d.text("image", &SkyFitJob::image, "the sky photo (HDR/EXR linear; PNG/JPEG/TIFF sRGB unless --image-transfer)")
+        .choice("image-transfer", &SkyFitJob::image_transfer, transfer_names(),
+                "transfer function of an integer image (auto: sRGB for integer files, linear for float)")
+        .text("mask", &SkyFitJob::mask, "grey image of the same size: > half scale marks usable sky (default: all)")
+        .nest(&SkyFitJob::view, sky_view_param_table())
+        .nest(&SkyFitJob::sun, sun_param_table())
+        .nest(&SkyFitJob::fit, f)
+        .text("out", &SkyFitJob::out, "the fit as JSON (turbidity, spread, sun, inliers, residual, reliable, samples)")
+        .text("plot", &SkyFitJob::plot, "PNG scatter of measured against model luminance (Morales Fig. 2.5)");
+    return d;
+  }();
+  return t;
+}
+
+nlohmann::json run_sky_fit_job(const SkyFitJob& job, const RunContext& ctx, SkyPlotter plotter) {
+  sky_fit_job_table().validate(job);
+  if (job.image.empty()) throw Error("sky fit needs a sky photo: give --image FILE");
+  if (job.out.empty()) throw Error("sky fit writes its result as JSON: give --out fit.json");
+  check_dir_writable(job.out, "--out");
+  if (!job.plot.empty()) {
+    if (!plotter) throw Error("--plot: this caller has no plotter (the brume command line draws it)");
+    check_writable(job.plot, WriteOptions{}, "--plot");
+  }
+  FileInfo info;
+  const Image rgb = read_color(job.image, job.image_transfer, &info);
+  const bool integer_image = info.integer;
+  const SkyGeometry g = sky_geometry(job.view, rgb.width, rgb.height);
+  Image mask;
+  FileInfo minfo;
+  if (!job.mask.empty()) {
+    mask = read_scalar(job.mask, "", &minfo);
+    if (mask.width != rgb.width || mask.height != rgb.height)
+      throw Error("--mask '" + job.mask + "' is " + mask.size_string() + " but --image '" + job.image + "' is " +
+                  rgb.size_string() + "; give a mask of the image's size");
+    const float half = minfo.integer ? (minfo.bits > 8 ? 32767.5f : 127.5f) : 0.5f;
+    for (float& v : mask.data) v = v > half ? 1.0f : 0.0f;
+  }
+  const SunFound sun = resolve_sun(job.sun, &rgb, integer_image, &g);
+  const auto t0 = std::chrono::steady_clock::now();
+  SkyFitResult r;
+  try {
+    r = fit_sky_image(rgb, integer_image, g, sun.direction, job.mask.empty() ? nullptr : &mask, job.fit);
+  } catch (const Error& e) {
+    throw Error("--image '" + job.image + "': " + e.what());
+  }
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  nlohmann::json j = sky_fit_json(r, sun);
+  nlohmann::json rec = run_record_header("sky fit", ctx.argv);
+  rec["job"] = sky_fit_job_table().to_json(job);
+  rec["inputs"]["image"] = file_record(job.image, info, rgb);
+  if (!job.mask.empty()) rec["inputs"]["mask"] = file_record(job.mask, minfo, mask);
+  rec["method"] = "log-luminance fit with a closed-form scale, T by Eigen Levenberg-Marquardt over "
+                  "T = 1.7 + 18.3/(1+e^-p) from a 48-point grid, RANSAC against clouds (include/brume/sky.hpp)";
+  rec["fit_ms"] = ms;
+  j["record"] = rec;
+  OutputSet outs;
+  outs.write_text(job.out, j.dump(2) + "\n", "--out");
+  if (!job.plot.empty()) {
+    WriteOptions wo;
+    wo.bits = "8";
+    outs.write(job.plot, plotter(j), wo, "--plot");
+  }
+  outs.commit();
+  return j;
+}
+
+double turbidity_from_fit_json(const std::string& path, const std::string& flag) {
+  std::ifstream f(path);
+  if (!f) throw Error(flag + " '" + path + "' cannot be read; give the JSON written by brume sky fit --out");
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(f);
+  } catch (const std::exception& e) {
+    throw Error(flag + " '" + path + "' is not JSON (" + e.what() + "); give the JSON written by brume sky fit --out");
+  }
+  if (!j.is_object() || !j.contains("turbidity") || !j["turbidity"].is_number())
+    throw Error(flag + " '" + path + "' has no number 'turbidity'; give the JSON written by brume sky fit --out");
+  if (!j.value("reliable", false)) {
+    std::string why;
+    if (j.contains("unreliable_because") && j["unreliable_because"].is_array())
+      for (const auto& w : j["unreliable_because"]) why += (why.empty() ? "" : "; ") + w.get<std::string>();
+    throw Error(flag + " '" + path + "': the fit is flagged unreliable (" + (why.empty() ? "no reason given" : why) +
+                "); give --turbidity T yourself, or fit a clearer part of the sky (--mask)");
+  }
+  const double t = j["turbidity"].get<double>();
+  if (!(t >= 1.0 && t <= 20.0)) throw Error(flag + " '" + path + "': turbidity " + std::to_string(t) + " is outside [1, 20]");
+  return t;
+}
+
+}  // namespace brume
