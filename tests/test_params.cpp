@@ -12,6 +12,7 @@
 #include "brume/compare.hpp"
 #include "brume/depth_pipeline.hpp"
 #include "brume/error.hpp"
+#include "brume/fog.hpp"
 #include "brume/haze.hpp"
 #include "brume/insert.hpp"
 #include "brume/pipeline.hpp"
@@ -88,6 +89,7 @@ TEST(Params, EveryCommandIsDeclaredCompletely) {
   expect_complete(coefficients_job_table(), "aerial coefficients");
   expect_complete(compare_job_table(), "compare");
   expect_complete(insert_job_table(), "insert");
+  expect_complete(fog_job_table(), "fog");
 }
 
 TEST(Params, RangeErrorsNameTheFlag) {
@@ -99,6 +101,7 @@ TEST(Params, RangeErrorsNameTheFlag) {
   expect_range_errors_name_the_flag(aerial_job_table());
   expect_range_errors_name_the_flag(coefficients_job_table());
   expect_range_errors_name_the_flag(insert_job_table());
+  expect_range_errors_name_the_flag(fog_job_table());
 }
 
 TEST(Params, CameraPoseBlockDrivesTheCamera) {

@@ -299,6 +299,7 @@ PreparedRange prepare_step(const Image& measured, const RangeStep& step, const s
     PrepareResult pr = prepare_range(measured, step.params);
     out.record = prepare_record(step.params, pr);
     out.range = std::move(pr.range);
+    out.sky_mask = std::move(pr.sky_mask);
     out.applied = true;
     out.record["mode"] = "auto";
     out.record["applied"] = true;
