@@ -162,6 +162,11 @@ struct FogResult {
 // The per-pixel apply on the CPU. `range` in metres; unknown (NaN, inf, 0) is sky.
 FogResult apply_fog(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a,
                     const Exec& exec = {});
+// The same into `out`, reusing its images when they already have the
+// frame's size (a renderer's per-frame loop then allocates nothing: fresh
+// output images cost more in page faults and zero-filling than the fog itself).
+void apply_fog(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a, FogResult& out,
+               const Exec& exec = {});
 
 // ---- the pipeline -----------------------------------------------------------------
 struct FogRun {

@@ -219,7 +219,7 @@ const ParamTable<RangeStep>& range_step_param_table() {
     ParamTable<RangeStep> d("prepare");
     d.choice("prepare", &RangeStep::mode, prepare_mode_names(),
              "auto: fill holes, identify and matte the sky (Hansard 4.1) when the range has unknown pixels; "
-             "off: treat unknown range as R_max")
+             "off: the effect sees unknown range as it is (haze: R_max; fog: sky, integrated along the ray)")
         .nest(&RangeStep::params, prepare_param_table());
     return d;
   }();

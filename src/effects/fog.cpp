@@ -398,6 +398,13 @@ FogAnalysis analyse_fog(const Image& rgb, const Image& measured, const Image& ra
 }
 
 FogResult apply_fog(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a, const Exec& exec) {
+  FogResult out;
+  apply_fog(rgb, range, p, a, out, exec);
+  return out;
+}
+
+void apply_fog(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a, FogResult& out,
+               const Exec& exec) {
   const int W = rgb.width, H = rgb.height;
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const RayY ray(a.camera);
@@ -407,11 +414,13 @@ FogResult apply_fog(const Image& rgb, const Image& range, const FogParams& p, co
               sky_l = static_cast<float>(a.sky_distance_m);
   const sh::BrumeFog fog = to_shared(a.density);
 
-  FogResult out;
-  out.optical_depth = Image(W, H, 1);
-  out.transmission = Image(W, H, 1);
+  auto sized = [&](Image& m, int c) {
+    if (m.width != W || m.height != H || m.channels != c) m = Image(W, H, c);
+  };
+  sized(out.optical_depth, 1);
+  sized(out.transmission, 1);
   Image sigma = blur ? Image(W, H, 1) : Image();
-  if (!blur) out.rgb = Image(W, H, 3);
+  if (!blur) sized(out.rgb, 3);
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int v = 0; v < H; ++v)
     for (int u = 0; u < W; ++u) {
@@ -439,7 +448,6 @@ FogResult apply_fog(const Image& rgb, const Image& range, const FogParams& p, co
     out.rgb = std::move(b.rgb);
     out.transmission = std::move(b.transmission);
   }
-  return out;
 }
 
 }  // namespace brume
