@@ -314,6 +314,34 @@ TEST(Fog, BlurredTransmissionReachesOneWhereNoFogIsCrossed) {
   EXPECT_GT(o.r.optical_depth.at(32, 2), 0.1f);
 }
 
+TEST(Fog, PreparationFillsHolesAndKeepsTheSkySky) {
+  // --prepare auto: a small hole is filled from its boundary (50 m) and
+  // fogged as scene; the top rows, identified as sky, integrate along their
+  // climbing rays (exponential: delta(y_c) / (B d_y), closed form). With
+  // --prepare off the hole is sky too.
+  FogParams p = exp_params(10.0, 10.0);
+  DepthSource ds;
+  ds.k = test_k(40.0);
+  const Camera c = make_camera(test_k(40.0), 48, 32, p.camera);
+  Image range(48, 32, 1, 50.0f);
+  for (int v = 0; v < 6; ++v)
+    for (int u = 0; u < 48; ++u) range.at(u, v) = NAN;
+  range.at(30, 20) = range.at(31, 20) = range.at(30, 21) = range.at(31, 21) = NAN;
+  const FogRun on = run_fog(flat_rgb(48, 32), range, ds, p, RangeStep{});
+  const Image& F = on.result.optical_depth;
+  EXPECT_NEAR(F.at(30, 20) / exp_reference(p, 10.0, 50.0, c.world_ray(30, 20).y), 1.0, 1e-5);
+  const double dc = 0.02 * std::exp(-0.05 * 7.0), up = c.world_ray(10, 2).y;
+  ASSERT_GT(up, 0.0);
+  EXPECT_NEAR(F.at(10, 2) / (dc / (0.05 * up)), 1.0, 1e-5);
+  RangeStep off;
+  off.mode = PrepareMode::off;
+  const FogRun no = run_fog(flat_rgb(48, 32), range, ds, p, off);
+  const double hole_up = c.world_ray(30, 20).y;  // the hole's rays climb (pitch 10): a finite sky integral
+  ASSERT_GT(hole_up, 0.0);
+  EXPECT_NEAR(no.result.optical_depth.at(30, 20) / (dc / (0.05 * hole_up)), 1.0, 1e-5);
+  EXPECT_GT(no.result.optical_depth.at(30, 20), 2.0f * F.at(30, 20));
+}
+
 // ---- bad inputs ---------------------------------------------------------------------------
 
 TEST(Fog, BadInputsGiveClearErrors) {
