@@ -12,6 +12,7 @@
 #include "brume/compare.hpp"
 #include "brume/depth_pipeline.hpp"
 #include "brume/error.hpp"
+#include "brume/fog.hpp"
 #include "brume/haze.hpp"
 #include "brume/insert.hpp"
 #include "brume/sky.hpp"
@@ -91,6 +92,7 @@ TEST(Params, EveryCommandIsDeclaredCompletely) {
   expect_complete(insert_job_table(), "insert");
   expect_complete(sky_render_job_table(), "sky render");
   expect_complete(sky_fit_job_table(), "sky fit");
+  expect_complete(fog_job_table(), "fog");
 }
 
 TEST(Params, RangeErrorsNameTheFlag) {
@@ -104,6 +106,7 @@ TEST(Params, RangeErrorsNameTheFlag) {
   expect_range_errors_name_the_flag(sky_render_job_table());
   expect_range_errors_name_the_flag(sky_fit_job_table());
   expect_range_errors_name_the_flag(insert_job_table());
+  expect_range_errors_name_the_flag(fog_job_table());
 }
 
 TEST(Params, CameraPoseBlockDrivesTheCamera) {

@@ -22,6 +22,7 @@
 #include "brume/aerial.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/exec.hpp"
+#include "brume/fog.hpp"
 #include "brume/haze.hpp"
 #include "brume/image.hpp"
 
@@ -161,6 +162,30 @@ class GpuAerial {
   GpuAerial& operator=(const GpuAerial&) = delete;
   // `a` must come from analyse_aerial for these inputs and `p`.
   AerialResult render(const AerialParams& p, const AerialAnalysis& a, GpuFilter filter = GpuFilter::automatic);
+  const GpuTiming& timing() const { return timing_; }
+  struct State;
+
+ private:
+  GpuContext& ctx_;
+  int w_, h_;
+  std::unique_ptr<State> s_;
+  GpuTiming timing_;
+};
+
+// The layered-fog passes (brume/fog.hpp) over a colour image and a range
+// map (unknown = sky) uploaded once: one fragment pass (shaders/fog.frag:
+// ray, optical depth, transmission, and the composite or, with lambda > 0,
+// the premultiplied F0 and sigma), then for the blur the rate pass, the
+// diffusion passes and haze's composite pass. Density tables hold at most
+// 32 rows here (uniform arrays); longer ones are refused (use the CPU).
+class GpuFog {
+ public:
+  GpuFog(GpuContext& ctx, const Image& rgb, const Image& range);
+  ~GpuFog();
+  GpuFog(const GpuFog&) = delete;
+  GpuFog& operator=(const GpuFog&) = delete;
+  // `a` must come from analyse_fog for these inputs and `p`.
+  FogResult render(const FogParams& p, const FogAnalysis& a, GpuFilter filter = GpuFilter::automatic);
   const GpuTiming& timing() const { return timing_; }
   struct State;
 

@@ -86,6 +86,28 @@ struct HazeResult {
 HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p,
                       const HazeAnalysis& a, const Exec& exec = {});
 
+// The airlight B when none is given (shared by the effects that take
+// --airlight): the per-channel median colour of the unknown-range (sky)
+// pixels of the measured range when they are >= 0.5 % of the frame, else an
+// achromatic grey at the 99th percentile of luminance (bright overcast haze).
+struct AirlightEstimate {
+  std::array<float, 3> rgb{};  // linear RGB
+  std::string source;
+};
+AirlightEstimate estimate_airlight(const Image& rgb, const Image& measured_range, std::size_t unknown_pixels);
+
+// Hansard's scattering blur on given maps (eq. 2-4), shared by haze and
+// layered fog: F0 = tau0 (E, 1) premultiplied (naive: (E, tau0)), diffused to
+// sigma(x) (brume/diffusion.hpp), out = F.rgb + (1 - F.a) B (naive: tau0 F.rgb
+// + (1 - tau0) B). Returns the composite and the blurred transmission F.a.
+struct ScatterBlur {
+  Image rgb;           // linear RGB
+  Image transmission;  // 1 channel
+};
+ScatterBlur scatter_blur(const Image& rgb, const Image& tau0, const Image& sigma, double sigma_max,
+                         const DiffusionParams& p, Composite composite, const std::array<float, 3>& airlight,
+                         const Exec& exec = {});
+
 // ---- the pipeline -----------------------------------------------------------------
 // Everything `brume haze` does, as a library call: analysis on the measured
 // range (R_max, airlight from the sky), preparation, the effect on the

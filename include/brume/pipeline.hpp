@@ -113,6 +113,7 @@ std::size_t unknown_range_pixels(const Image& range);
 
 struct PreparedRange {
   Image range;            // the range the effect runs on (a copy of the measured one when not prepared)
+  Image sky_mask;         // when applied: 1 where the preparation identified sky (margin included), else 0
   bool applied = false;
   nlohmann::json record;  // {"mode", "applied", and the preparation's record when applied}
 };

@@ -219,7 +219,7 @@ const ParamTable<RangeStep>& range_step_param_table() {
     ParamTable<RangeStep> d("prepare");
     d.choice("prepare", &RangeStep::mode, prepare_mode_names(),
              "auto: fill holes, identify and matte the sky (Hansard 4.1) when the range has unknown pixels; "
-             "off: treat unknown range as R_max")
+             "off: the effect sees unknown range as it is (haze: R_max; fog: sky, integrated along the ray)")
         .nest(&RangeStep::params, prepare_param_table());
     return d;
   }();
@@ -299,6 +299,7 @@ PreparedRange prepare_step(const Image& measured, const RangeStep& step, const s
     PrepareResult pr = prepare_range(measured, step.params);
     out.record = prepare_record(step.params, pr);
     out.range = std::move(pr.range);
+    out.sky_mask = std::move(pr.sky_mask);
     out.applied = true;
     out.record["mode"] = "auto";
     out.record["applied"] = true;

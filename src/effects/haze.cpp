@@ -67,6 +67,33 @@ float luminance(const float* c) { return 0.2126f * c[0] + 0.7152f * c[1] + 0.072
 
 }  // namespace
 
+AirlightEstimate estimate_airlight(const Image& rgb, const Image& range, std::size_t unknown_pixels) {
+  AirlightEstimate a;
+  if (unknown_pixels >= std::max<std::size_t>(1, rgb.pixels() / 200)) {
+    // Sky (unknown range, >= 0.5 % of the frame): per-channel median colour.
+    std::array<std::vector<float>, 3> ch;
+    for (std::size_t i = 0; i < range.pixels(); ++i)
+      if (!known_range(range.data[i]))
+        for (int c = 0; c < 3; ++c) ch[c].push_back(rgb.data[i * 3 + c]);
+    for (int c = 0; c < 3; ++c) {
+      auto mid = ch[c].begin() + ch[c].size() / 2;
+      std::nth_element(ch[c].begin(), mid, ch[c].end());
+      a.rgb[c] = *mid;
+    }
+    a.source = "median colour of the unknown-range (sky) pixels";
+  } else {
+    // No sky in view: an achromatic airlight as bright as the 99th percentile
+    // of the image's luminance, the usual look of a bright overcast haze.
+    std::vector<float> y(rgb.pixels());
+    for (std::size_t i = 0; i < y.size(); ++i) y[i] = luminance(&rgb.data[i * 3]);
+    auto q = y.begin() + static_cast<std::ptrdiff_t>(0.99 * (y.size() - 1));
+    std::nth_element(y.begin(), q, y.end());
+    a.rgb = {*q, *q, *q};
+    a.source = "achromatic, 99th percentile of image luminance (no sky in view)";
+  }
+  return a;
+}
+
 HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const HazeParams& p) {
   validate_haze(p);
   if (rgb.channels != 3) throw Error("haze needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
@@ -117,60 +144,34 @@ HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const HazeParams
   if (p.airlight) {
     a.airlight = *p.airlight;
     a.airlight_source = "given";
-  } else if (a.unknown_pixels >= std::max<std::size_t>(1, rgb.pixels() / 200)) {
-    // Sky (unknown range, >= 0.5 % of the frame): per-channel median colour.
-    std::array<std::vector<float>, 3> ch;
-    for (std::size_t i = 0; i < range.pixels(); ++i)
-      if (!known_range(range.data[i]))
-        for (int c = 0; c < 3; ++c) ch[c].push_back(rgb.data[i * 3 + c]);
-    for (int c = 0; c < 3; ++c) {
-      auto mid = ch[c].begin() + ch[c].size() / 2;
-      std::nth_element(ch[c].begin(), mid, ch[c].end());
-      a.airlight[c] = *mid;
-    }
-    a.airlight_source = "median colour of the unknown-range (sky) pixels";
   } else {
-    // No sky in view: an achromatic airlight as bright as the 99th percentile
-    // of the image's luminance, the usual look of a bright overcast haze.
-    std::vector<float> y(rgb.pixels());
-    for (std::size_t i = 0; i < y.size(); ++i) y[i] = luminance(&rgb.data[i * 3]);
-    auto q = y.begin() + static_cast<std::ptrdiff_t>(0.99 * (y.size() - 1));
-    std::nth_element(y.begin(), q, y.end());
-    a.airlight = {*q, *q, *q};
-    a.airlight_source = "achromatic, 99th percentile of image luminance (no sky in view)";
+    AirlightEstimate e = estimate_airlight(rgb, range, a.unknown_pixels);
+    a.airlight = e.rgb;
+    a.airlight_source = std::move(e.source);
   }
   return a;
 }
 
-HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p,
-                      const HazeAnalysis& a, const Exec& exec) {
+ScatterBlur scatter_blur(const Image& rgb, const Image& tau0, const Image& sigma, double sigma_max,
+                         const DiffusionParams& p, Composite composite, const std::array<float, 3>& airlight,
+                         const Exec& exec) {
   const int W = rgb.width, H = rgb.height;
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
-  const float kappa = static_cast<float>(a.kappa_a + a.kappa_s);
-  const float s0 = static_cast<float>(p.diffusion.sigma0), smax = static_cast<float>(a.sigma_max);
-  const float inv_rmax = static_cast<float>(1.0 / a.range_max_m);
-  const bool naive = p.composite == Composite::naive;
-
-  HazeResult out;
+  const bool naive = composite == Composite::naive;
   Image f(W, H, 4);
-  Image tau0(W, H, 1);
-  out.scale = Image(W, H, 1);
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      const float r = range.data[i];
-      const float rn = known_range(r) ? r * inv_rmax : 1.0f;  // unknown -> R_max
-      const float t = sh::brume_transmission(kappa, rn);
-      tau0.data[i] = t;
-      out.scale.data[i] = sh::brume_target_scale(rn, s0, smax);
+      const float t = tau0.data[i];
       const float w = naive ? 1.0f : t;  // eq. 2 premultiplies; naive blurs E itself
       for (int c = 0; c < 3; ++c) f.data[i * 4 + c] = w * rgb.data[i * 3 + c];
       f.data[i * 4 + 3] = t;
     }
 
-  diffuse(f, out.scale, a.sigma_max, p.diffusion, exec);
+  diffuse(f, sigma, sigma_max, p, exec);
 
+  ScatterBlur out;
   out.rgb = Image(W, H, 3);
   out.transmission = Image(W, H, 1);
 #pragma omp parallel for num_threads(nt) schedule(static)
@@ -181,10 +182,36 @@ HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p,
       out.transmission.data[i] = alpha;
       for (int c = 0; c < 3; ++c) {
         const float v = f.data[i * 4 + c];
-        out.rgb.data[i * 3 + c] = naive ? sh::brume_composite_naive(v, tau0.data[i], a.airlight[c])
-                                        : sh::brume_composite_premultiplied(v, alpha, a.airlight[c]);
+        out.rgb.data[i * 3 + c] = naive ? sh::brume_composite_naive(v, tau0.data[i], airlight[c])
+                                        : sh::brume_composite_premultiplied(v, alpha, airlight[c]);
       }
     }
+  return out;
+}
+
+HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p,
+                      const HazeAnalysis& a, const Exec& exec) {
+  const int W = rgb.width, H = rgb.height;
+  const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
+  const float kappa = static_cast<float>(a.kappa_a + a.kappa_s);
+  const float s0 = static_cast<float>(p.diffusion.sigma0), smax = static_cast<float>(a.sigma_max);
+  const float inv_rmax = static_cast<float>(1.0 / a.range_max_m);
+
+  HazeResult out;
+  Image tau0(W, H, 1);
+  out.scale = Image(W, H, 1);
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * W + x;
+      const float r = range.data[i];
+      const float rn = known_range(r) ? r * inv_rmax : 1.0f;  // unknown -> R_max
+      tau0.data[i] = sh::brume_transmission(kappa, rn);
+      out.scale.data[i] = sh::brume_target_scale(rn, s0, smax);
+    }
+  ScatterBlur b = scatter_blur(rgb, tau0, out.scale, a.sigma_max, p.diffusion, p.composite, a.airlight, exec);
+  out.rgb = std::move(b.rgb);
+  out.transmission = std::move(b.transmission);
   return out;
 }
 

@@ -27,6 +27,7 @@ constexpr Topic kTopics[] = {
     {"haze_math", shaders::haze_math_glsl},
     {"aerial_math", shaders::aerial_math_glsl},
     {"sky_math", shaders::sky_math_glsl},
+    {"fog_math", shaders::fog_math_glsl},
 };
 
 std::string hex(unsigned v) {
@@ -172,7 +173,7 @@ void GpuContext::Impl::create() {
 const gpu::Program& GpuContext::Impl::program(const gpu::PassSpec& spec) {
   if (auto it = programs.find(spec.name); it != programs.end()) return *it->second;
   std::string fs = "#version 320 es\nprecision highp float;\nprecision highp int;\nprecision highp sampler2D;\n"
-                   "#define BRUME_FN\n#define BRUME_STENCIL_FN\n#define brume_vec vec4\n#define brume_weight float\n";
+                   "#define BRUME_FN\n#define BRUME_STENCIL_FN\n#define BRUME_IN(T) in T\n#define brume_vec vec4\n#define brume_weight float\n";
   for (const char* topic : spec.topics) {
     const Topic* found = nullptr;
     for (const Topic& t : kTopics)

@@ -15,6 +15,7 @@ namespace {
 struct GpuContext::Impl {};
 struct GpuHaze::State {};
 struct GpuAerial::State {};
+struct GpuFog::State {};
 GpuContext::GpuContext() { unavailable(); }
 GpuContext::~GpuContext() = default;
 const GpuInfo& GpuContext::info() const { unavailable(); }
@@ -38,6 +39,9 @@ HazeResult GpuHaze::render(const HazeParams&, const HazeAnalysis&, GpuFilter) { 
 GpuAerial::GpuAerial(GpuContext& ctx, const Image&, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
 GpuAerial::~GpuAerial() = default;
 AerialResult GpuAerial::render(const AerialParams&, const AerialAnalysis&, GpuFilter) { unavailable(); }
+GpuFog::GpuFog(GpuContext& ctx, const Image&, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
+GpuFog::~GpuFog() = default;
+FogResult GpuFog::render(const FogParams&, const FogAnalysis&, GpuFilter) { unavailable(); }
 DiffusionPlan diffuse_gpu(GpuContext&, Image&, const Image&, double, const DiffusionParams&, GpuFilter, GpuTiming*) {
   unavailable();
 }

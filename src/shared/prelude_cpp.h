@@ -14,6 +14,9 @@ namespace brume::shared {
 // The stencil update takes any vector and weight type on the CPU (see diffusion_math.glsl).
 #define BRUME_STENCIL_FN template <class brume_vec, class brume_weight> inline
 using std::acos;
+// A struct argument: by const reference in C++, by value (`in`) in GLSL.
+#define BRUME_IN(T) const T&
+using std::abs;
 using std::cos;
 using std::exp;
 using std::floor;
@@ -29,6 +32,10 @@ inline float mix(float a, float b, float t) { return a + t * (b - a); }
 #include "shared/haze_math.glsl"
 #include "shared/aerial_math.glsl"
 #include "shared/sky_math.glsl"
+// The CPU holds density tables of up to 1024 rows (the GPU 32).
+#define BRUME_FOG_MAX_KNOTS 1024
+#include "shared/fog_math.glsl"
 #undef BRUME_FN
 #undef BRUME_STENCIL_FN
+#undef BRUME_IN
 }  // namespace brume::shared

@@ -114,6 +114,7 @@ Command job_command(CLI::App* app, const std::string& name, const ParamTable<Job
 
 // One file per subcommand registers it.
 Command add_haze(CLI::App& app);
+Command add_fog(CLI::App& app);
 Command add_aerial(CLI::App& app);
 Command add_insert(CLI::App& app);
 Command add_blur(CLI::App& app);

@@ -1,0 +1,192 @@
+// brume — layered fog from a depth buffer (Zhou, Chen, Smith, "Scene depth
+// reconstruction on the GPU: a post processing technique for layered fog";
+// maths and the sign and limit corrections in DESIGN.md), with the scattering
+// blur of haze driven by the fog actually crossed.
+//
+// A pixel (u, v) with range l [m] along its ray, seen from a camera at height
+// y_c, lies at height y_f = y_c + l d_y (d_y: the world-up component of the
+// pixel's unit ray; camera conventions in brume/camera.hpp). With a height
+// density delta(y) [1/m] and its antiderivative D(y), the optical depth along
+// the ray is
+//
+//   F = l (D(y_f) - D(y_c)) / (y_f - y_c) = l * mean_{[y_c, y_f]} delta      (Zhou eq. 5, corrected)
+//
+// -- the paper's l/|dy| integral is negative when looking down; the mean
+// density has the right sign either way, and its limit as |y_f - y_c| -> 0 is
+// delta(y_c), so a level ray needs no special case. Every profile evaluates
+// the mean in camera-relative heights without forming D(y_f) - D(y_c)
+// (src/shared/fog_math.glsl), stable down to height differences of 1e-6 m.
+//
+//   exponential  delta = D0 exp(-B (y - Y0))
+//   band         delta = D0 (1 + cos(pi (y - Yc) / Wb)) / 2 for |y - Yc| <= Wb, else 0
+//   ramp         delta = D0 below y_b, linear to 0 at y_t, 0 above
+//   constant     delta = D0 (Beer-Lambert on range; classic OpenGL GL_EXP fog)
+//   table        piecewise linear through (height, density) rows of a CSV,
+//                integrated exactly, the end values held outside its heights
+//
+//   f = exp(-F),   C = f C_scene + (1 - f) C_fog                           (Zhou eq. 1)
+//
+// Classic OpenGL fog on the Euclidean range, for comparison (--classic):
+//   linear  f = clamp((end - l) / (end - start), 0, 1)   (F = -ln f)
+//   exp2    f = exp(-(D0 l)^2)                            (F = (D0 l)^2)
+//
+// Sky (unknown range: NaN, inf, 0, a depth buffer's clear value; with
+// --prepare auto the sky the preparation identifies, holes being filled) is
+// integrated to infinity along its ray: finite where the density vanishes
+// upwards along it (exponential with B > 0 looking up: F = delta(y_c) / (B d_y);
+// band, ramp, table ending at density 0: the integral to the top of the fog
+// divided by d_y), and over --sky-distance (default S_max = s-max-factor R_max,
+// the preparation's sky distance) where it diverges.
+//
+// Scattering blur (--lambda > 0, default 0: Zhou's fog has none): haze's
+// premultiplied diffusion (brume/haze.hpp, Hansard eq. 2-4) with the target scale
+//
+//   sigma = sigma0 + lambda sqrt(omega F) l / R_max                          [px]
+//
+// which is haze's sigma0 + lambda sqrt(kappa_s') R'^{3/2} when the density is
+// constant (omega F = kappa_s' R'), but grows with the fog crossed rather than
+// with range. Sky pixels blur as at --sky-distance (F over that distance), so
+// sigma_max is known before the diffusion is planned.
+#pragma once
+
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "brume/camera.hpp"
+#include "brume/diffusion.hpp"
+#include "brume/exec.hpp"
+#include "brume/haze.hpp"
+#include "brume/image.hpp"
+#include "brume/params.hpp"
+#include "brume/pipeline.hpp"
+
+namespace brume {
+
+enum class FogProfile { exponential, band, ramp, constant, table };
+const EnumNames<FogProfile>& fog_profile_names();
+enum class ClassicFog { none, linear, exp2 };
+const EnumNames<ClassicFog>& classic_fog_names();
+
+struct FogParams {
+  FogProfile profile = FogProfile::exponential;
+  double density_per_m = 0.02;      // [1/m] D0, >= 0 (exponential: at the base height)
+  double falloff_per_m = 0.05;      // [1/m] B, exponential height falloff, >= 0 (0 = constant)
+  double base_height_m = 0.0;       // [m]   Y0, exponential: height where delta = D0; finite
+  double band_center_m = 0.0;       // [m]   Yc, band centre; finite
+  double band_half_width_m = 20.0;  // [m]   Wb, band half-width, > 0
+  double ramp_bottom_m = 0.0;       // [m]   y_b: delta = D0 below; finite
+  double ramp_top_m = 50.0;         // [m]   y_t: delta = 0 above, > ramp_bottom_m
+  std::string table_file;           // CSV rows "height_m,density_per_m" (profile table)
+  ClassicFog classic = ClassicFog::none;  // classic OpenGL fog on range instead of a height profile
+  double fog_start_m = 0.0;         // [m]   classic linear: f = 1 nearer than this, >= 0
+  double fog_end_m = 1000.0;        // [m]   classic linear: f = 0 beyond this, > fog_start_m
+  std::optional<double> sky_distance_m;  // [m] > 0; unset: S_max = s-max-factor R_max
+  std::optional<Rgb> airlight;      // linear RGB fog colour, >= 0; unset: estimated (estimate_airlight)
+  double lambda = 0.0;              // [px] blur gain, >= 0 (0: no blur, Zhou's fog)
+  double albedo = 1.0;              // [1] single-scattering albedo omega in sigma, [0, 1]
+  DiffusionParams diffusion;        // scheme, precision, sigma0, rho_max, edge rate (with lambda > 0)
+  CameraPose camera;                // --camera-height, --pitch, --roll, --yaw, --view-matrix, ...
+};
+
+// The declaration of FogParams (diffusion and camera-pose blocks nested).
+const ParamTable<FogParams>& fog_param_table();
+
+// Range checks, and combinations a run would silently ignore (a density
+// parameter the profile does not use, --profile with --classic, blur
+// parameters with --lambda 0, a pose where no height is used, ...).
+// `given`: names set explicitly.
+void validate_fog(const FogParams& p, const std::set<std::string>& given = {});
+
+// A density table (--profile table): heights strictly increasing, densities
+// finite and >= 0. Errors name the file, the line and the fix.
+struct FogTable {
+  std::vector<double> height_m, density_per_m;
+  std::string path, sha256;
+};
+FogTable read_fog_table(const std::string& path);
+
+// The density as the per-pixel code sees it, relative to the camera height
+// (heights u = y - y_c), so that no pixel forms a difference of large heights.
+struct FogDensity {
+  FogProfile profile = FogProfile::constant;
+  ClassicFog classic = ClassicFog::none;
+  double d0 = 0.0;             // [1/m]
+  double falloff = 0.0;        // [1/m] exponential B
+  double exponent_c = 0.0;     // exponential: -B (y_c - Y0), delta(y_c) = D0 exp(exponent_c)
+  double band_offset = 0.0;    // band: y_c - Yc
+  double band_half_width = 1.0;
+  std::vector<double> knot_u, knot_density;  // ramp, constant, table: piecewise linear in u = y - y_c
+  double fog_start = 0.0, fog_end = 1.0;     // classic linear
+  // delta at height u above the camera (for tests and the record).
+  double at(double u) const;
+  // The per-pixel code's kind (BrumeFog.kind, src/shared/fog_math.glsl):
+  // 0 exponential, 1 band, 2 piecewise linear, 3 classic linear, 4 classic exp2.
+  int kind() const;
+};
+// Needs cam.height_known() for the height profiles.
+FogDensity fog_density(const FogParams& p, const FogTable& table, double camera_height_m);
+
+// Optical depth along one ray (CPU, float, the per-pixel path): range_m > 0
+// with ray_y the unit ray's world-up component, or a sky ray (sky = true)
+// integrated to infinity or over sky_distance_m as stated above.
+float fog_optical_depth(const FogDensity& d, float range_m, float ray_y, bool sky, float sky_distance_m);
+
+struct FogAnalysis {
+  double range_max_m = 0.0, range_min_m = 0.0;
+  std::size_t unknown_pixels = 0;
+  double sky_distance_m = 0.0;       // used for diverging sky rays and the sky's blur
+  std::string sky_distance_source;
+  Camera camera;                     // intrinsics and pose (height unknown for constant/classic)
+  bool camera_used = false;
+  FogTable table;                    // profile table only
+  FogDensity density;
+  double sigma_max = 0.0;            // [px] largest target scale over the frame (lambda > 0)
+  std::array<float, 3> airlight{};
+  std::string airlight_source;
+  DiffusionPlan plan;                // iterations 0 without blur
+};
+
+// Image-wide statistics from the measured range (R_max, the sky's colour)
+// and the effect's range (sky as unknown: sigma_max). Throws brume::Error.
+FogAnalysis analyse_fog(const Image& rgb, const Image& measured_range, const Image& range, const Camera& camera,
+                        const FogParams& p, double s_max_factor = PrepareParams{}.s_max_factor);
+
+struct FogResult {
+  Image rgb;            // linear RGB with fog
+  Image optical_depth;  // F along each pixel's ray (sky: as composited), 1 channel
+  Image transmission;   // f = exp(-F), after the blur when lambda > 0, 1 channel
+};
+
+// The per-pixel apply on the CPU. `range` in metres; unknown (NaN, inf, 0) is sky.
+FogResult apply_fog(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a,
+                    const Exec& exec = {});
+// The same into `out`, reusing its images when they already have the
+// frame's size (a renderer's per-frame loop then allocates nothing: fresh
+// output images cost more in page faults and zero-filling than the fog itself).
+void apply_fog(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a, FogResult& out,
+               const Exec& exec = {});
+
+// ---- the pipeline -----------------------------------------------------------------
+struct FogRun {
+  FogResult result;
+  FogAnalysis analysis;
+  nlohmann::json record;  // {"fog": ..., "prepare": ..., "execution": ...}
+};
+// `depth` gives the intrinsics of the camera (and its KITTI camera 2);
+// measured_range is what load_depth produced.
+FogRun run_fog(const Image& rgb, const Image& measured_range, const DepthSource& depth, const FogParams& p,
+               const RangeStep& prepare, const Exec& exec = {}, const std::set<std::string>& given = {});
+
+struct FogJob {
+  InputFiles input;
+  RangeStep prepare;
+  FogParams fog;
+  OutputFiles output;  // maps: optical-depth, transmission
+};
+const std::vector<MapOutput>& fog_map_outputs();
+const ParamTable<FogJob>& fog_job_table();
+nlohmann::json run_fog_job(const FogJob& job, const ExecOptions& exec, const RunContext& ctx = {});
+
+}  // namespace brume

@@ -1,0 +1,128 @@
+// brume — the layered-fog pipeline: what `brume fog` does, as a library call,
+// in the shape every effect follows (brume/pipeline.hpp): analyse the
+// measured range (R_max, the sky's colour), prepare it, dispatch once on
+// Exec, record.
+#include <chrono>
+
+#include "brume/error.hpp"
+#include "brume/fog.hpp"
+#include "brume/gpu.hpp"
+#include "brume/record.hpp"
+
+namespace brume {
+
+namespace {
+
+nlohmann::json fog_record(const FogParams& p, const FogAnalysis& a) {
+  nlohmann::json j;
+  j["parameters"] = fog_param_table().to_json(p);
+  j["units"] = fog_param_table().units();
+  if (p.lambda > 0.0) j["diffusion"] = diffusion_record(p.diffusion, a.plan);
+  j["derived"] = {
+      {"range_max_m", a.range_max_m},
+      {"range_min_m", a.range_min_m},
+      {"unknown_range_pixels", a.unknown_pixels},
+      {"sky_distance_m", a.sky_distance_m},
+      {"sky_distance_source", a.sky_distance_source},
+      {"sky_rule",
+       "sky pixels integrate to infinity along their ray where the density vanishes along it, else over "
+       "sky_distance_m; they blur as at sky_distance_m"},
+      {"optical_depth_rule", "F = l (D(y_f) - D(y_c)) / (y_f - y_c), the mean density over the height interval"},
+      {"sigma_max_px", a.sigma_max},
+      {"airlight_linear_rgb", a.airlight},
+      {"airlight_source", a.airlight_source},
+  };
+  if (a.camera_used) {
+    j["derived"]["camera"] = camera_record(a.camera);
+    j["derived"]["density_at_camera_per_m"] = a.density.at(0.0);
+  }
+  if (!a.table.path.empty())
+    j["derived"]["table"] = {{"path", a.table.path}, {"sha256", a.table.sha256}, {"rows", a.table.height_m.size()},
+                             {"rule", "piecewise linear, integrated exactly, end values held"}};
+  return j;
+}
+
+// The range the effect runs on: the prepared one with the identified sky
+// (margin included) unknown again, so that it integrates along its ray; or,
+// unprepared, the measured one, where every unknown pixel is sky.
+Image effect_range(const PreparedRange& prep) {
+  Image r = prep.range;
+  if (prep.applied)
+    for (std::size_t i = 0; i < r.pixels(); ++i)
+      if (prep.sky_mask.data[i] != 0.0f) r.data[i] = 0.0f;
+  return r;
+}
+
+}  // namespace
+
+const std::vector<MapOutput>& fog_map_outputs() {
+  static const std::vector<MapOutput> m = {
+      {"optical-depth", "write the optical depth F along each pixel's ray (float file)",
+       "the optical depth is unbounded (and +inf behind classic linear fog's end)"},
+      {"transmission", "write the transmission f = exp(-F) (after the blur when --lambda > 0), 1 channel", ""},
+  };
+  return m;
+}
+
+const ParamTable<FogJob>& fog_job_table() {
+  static const ParamTable<FogJob> t = [] {
+    ParamTable<FogJob> d("fog");
+    d.nest(&FogJob::input, input_param_table(true))
+        .nest(&FogJob::prepare, range_step_param_table())
+        .nest(&FogJob::fog, fog_param_table())
+        .nest(&FogJob::output, output_param_table(fog_map_outputs()));
+    return d;
+  }();
+  return t;
+}
+
+FogRun run_fog(const Image& rgb, const Image& measured_range, const DepthSource& depth, const FogParams& p,
+               const RangeStep& prepare, const Exec& exec, const std::set<std::string>& given) {
+  validate_fog(p, given);
+  check_range_step(prepare, given);
+  // The pose matters only for the height profiles; classic and constant fog
+  // need no intrinsics (a range map alone is enough).
+  const bool heights = p.classic == ClassicFog::none && p.profile != FogProfile::constant;
+  const Camera camera = heights ? depth_camera(depth, rgb.width, rgb.height, p.camera)
+                                : make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, rgb.width, rgb.height);
+  FogRun run;
+  PreparedRange prep = prepare_step(measured_range, prepare, given);
+  const Image range = effect_range(prep);
+  run.analysis = analyse_fog(rgb, measured_range, range, camera, p, prepare.params.s_max_factor);
+  BackendChoice backend = choose_backend(exec);
+  const auto t0 = std::chrono::steady_clock::now();
+  nlohmann::json timing;
+  if (backend.gpu) {
+    GpuFog gf(*backend.gpu, rgb, range);
+    run.result = gf.render(p, run.analysis, exec.gpu_filter);
+    timing = gpu_timing_record(gf.timing());
+  } else {
+    run.result = apply_fog(rgb, range, p, run.analysis, exec);
+    timing = cpu_timing_record(t0, run.analysis.plan.iterations);
+  }
+  run.record["fog"] = fog_record(p, run.analysis);
+  run.record["prepare"] = prep.record;
+  run.record["execution"] = backend.record;
+  run.record["execution"]["timing"] = timing;
+  return run;
+}
+
+nlohmann::json run_fog_job(const FogJob& job, const ExecOptions& eo, const RunContext& ctx) {
+  // Every parameter is checked before any file is touched, whatever the input.
+  fog_job_table().validate(job);
+  validate_fog(job.fog, ctx.given);
+  check_range_step(job.prepare, ctx.given);
+  const Exec exec = eo.exec();
+  check_outputs(job.output, fog_map_outputs());
+
+  LoadedInputs in = load_inputs(job.input, true);
+  FogRun run = run_fog(in.rgb, in.depth.range, job.input.depth, job.fog, job.prepare, exec, ctx.given);
+
+  const nlohmann::json rec = job_record("fog", ctx, fog_job_table().to_json(job), in.record, run.record, eo.timing);
+  write_outputs(job.output, fog_map_outputs(), run.result.rgb,
+                {{"optical-depth", run.result.optical_depth}, {"transmission", run.result.transmission}},
+                &in.image_info, rec);
+  return rec;
+}
+
+}  // namespace brume

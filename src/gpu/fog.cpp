@@ -1,0 +1,148 @@
+// brume — layered fog on the GPU: one fragment pass (shaders/fog.frag) over a
+// colour image and a range map uploaded once; with the scattering blur
+// (lambda > 0) it writes the premultiplied F0 = f (C, 1) and sigma, and
+// haze's passes finish: rates (sigma -> rho), N diffusion passes, composite
+// out = F.rgb + (1 - F.a) B. The per-pixel maths is src/shared/fog_math.glsl,
+// the text the CPU compiles.
+#include <cmath>
+#include <vector>
+
+#include "brume/error.hpp"
+#include "gpu/context.hpp"
+#include "gpu/shaders_embedded.hpp"
+
+namespace brume {
+namespace {
+
+constexpr int kMaxKnots = 32;  // BRUME_FOG_MAX_KNOTS in GLSL
+const gpu::PassSpec kFogPass{"fog.apply", {"fog_math"}, gpu::shaders::fog_frag};
+// Haze's composite (Hansard eq. 4), reused as it is.
+const gpu::PassSpec kCompositePass{"haze.composite", {"haze_math"}, gpu::shaders::composite_frag};
+
+GpuTexture tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
+
+}  // namespace
+
+struct GpuFog::State {
+  gl::Texture image, range;
+  Precision precision = Precision::f32;
+  gl::Texture f[2], aux, rates, out;
+  gpu::Target fog, composite;
+};
+
+GpuFog::GpuFog(GpuContext& ctx, const Image& rgb, const Image& range)
+    : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
+  const auto t0 = gpu::Clock::now();
+  gpu::ColorAndRange in = gpu::upload_color_and_range(rgb, range, "fog");
+  s_->image = std::move(in.image);
+  s_->range = std::move(in.range);
+  glFinish();
+  timing_.upload_ms = gpu::ms_since(t0);
+}
+
+GpuFog::~GpuFog() = default;
+
+FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter filter) {
+  const FogDensity& d = a.density;
+  if (d.knot_u.size() > static_cast<std::size_t>(kMaxKnots))
+    throw Error("--table '" + a.table.path + "' has " + std::to_string(d.knot_u.size()) +
+                " rows; the GPU pass holds at most " + std::to_string(kMaxKnots) +
+                " (uniform arrays): resample the table or use --backend cpu");
+  GpuContext::Impl& g = ctx_.impl();
+  State& s = *s_;
+  const bool blur = p.lambda > 0.0;
+  if (!s.composite.fbo || s.precision != p.diffusion.precision) {
+    s.fog = {};
+    s.composite = {};
+    const GLenum fmt = p.diffusion.precision == Precision::f16 ? GL_RGBA16F : GL_RGBA32F;
+    for (gl::Texture& t : s.f) t = gpu::make_texture(fmt, w_, h_);
+    s.aux = gpu::make_texture(GL_RGBA32F, w_, h_);
+    s.rates = gpu::make_texture(GL_R32F, w_, h_);
+    s.out = gpu::make_texture(GL_RGBA32F, w_, h_);
+    s.fog = gpu::make_target({tex(s.f[0], w_, h_), tex(s.aux, w_, h_)});
+    s.composite = gpu::make_target({tex(s.out, w_, h_)});
+    s.precision = p.diffusion.precision;
+  }
+  const double upload_ms = timing_.upload_ms;
+  timing_ = {};
+  timing_.upload_ms = upload_ms;
+  timing_.iterations = blur ? a.plan.iterations : 0;
+  timing_.gpu_timer = g.info.timer_query;
+
+  gpu::StageTimer t1(g, &timing_.gpu_timer);
+  const gpu::Program& pr = g.program(kFogPass);
+  g.begin(s.fog);
+  glUseProgram(pr.id());
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_2D, s.image.id());
+  glActiveTexture(GL_TEXTURE1);
+  glBindTexture(GL_TEXTURE_2D, s.range.id());
+  const Mat3 R = a.camera.world_from_camera().rotation;
+  glUniform3f(pr.loc("uRayRow"), static_cast<float>(R.m[1][0]), static_cast<float>(R.m[1][1]),
+              static_cast<float>(R.m[1][2]));
+  glUniform4f(pr.loc("uK"), static_cast<float>(a.camera.k.cx), static_cast<float>(a.camera.k.cy),
+              static_cast<float>(1.0 / a.camera.k.fx), static_cast<float>(1.0 / a.camera.k.fy));
+  glUniform1i(pr.loc("uKind"), d.kind());
+  glUniform3f(pr.loc("uExp"), static_cast<float>(d.d0), static_cast<float>(d.falloff), static_cast<float>(d.exponent_c));
+  glUniform2f(pr.loc("uBand"), static_cast<float>(d.band_offset), static_cast<float>(d.band_half_width));
+  glUniform2f(pr.loc("uClassic"), static_cast<float>(d.fog_start), static_cast<float>(d.fog_end));
+  std::vector<float> ku(kMaxKnots, 0.0f), kd(kMaxKnots, 0.0f);
+  for (std::size_t i = 0; i < d.knot_u.size(); ++i) {
+    ku[i] = static_cast<float>(d.knot_u[i]);
+    kd[i] = static_cast<float>(d.knot_density[i]);
+  }
+  glUniform1i(pr.loc("uKnots"), static_cast<int>(d.knot_u.size()));
+  glUniform1fv(pr.loc("uKnotU"), kMaxKnots, ku.data());
+  glUniform1fv(pr.loc("uKnotD"), kMaxKnots, kd.data());
+  glUniform1f(pr.loc("uSkyDistance"), static_cast<float>(a.sky_distance_m));
+  glUniform3f(pr.loc("uAirlight"), a.airlight[0], a.airlight[1], a.airlight[2]);
+  glUniform1i(pr.loc("uBlur"), blur ? 1 : 0);
+  glUniform4f(pr.loc("uScale"), static_cast<float>(p.diffusion.sigma0), static_cast<float>(p.lambda),
+              static_cast<float>(p.albedo), static_cast<float>(1.0 / a.range_max_m));
+  glUniform1f(pr.loc("uSigmaMax"), static_cast<float>(a.sigma_max));
+  GpuContext::Impl::draw();
+  gpu::check_gl("fog");
+  if (blur) gpu_diffusion_rates(ctx_, tex(s.aux, w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan);
+  timing_.premultiply_ms = t1.stop();
+
+  int last = 0;
+  const gl::Texture* result = &s.f[0];
+  if (blur) {
+    gpu::StageTimer t2(g, &timing_.gpu_timer);
+    gpu_diffuse_textures(ctx_, tex(s.f[0], w_, h_), tex(s.f[1], w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan,
+                         filter, &last);
+    timing_.diffuse_ms = t2.stop();
+
+    gpu::StageTimer t3(g, &timing_.gpu_timer);
+    const gpu::Program& pc = g.program(kCompositePass);
+    g.begin(s.composite);
+    glUseProgram(pc.id());
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, s.f[last].id());
+    glActiveTexture(GL_TEXTURE1);
+    glBindTexture(GL_TEXTURE_2D, s.aux.id());
+    glUniform3f(pc.loc("uAirlight"), a.airlight[0], a.airlight[1], a.airlight[2]);
+    glUniform1i(pc.loc("uNaive"), 0);
+    GpuContext::Impl::draw();
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    gpu::check_gl("fog composite");
+    timing_.composite_ms = t3.stop();
+    result = &s.out;
+  }
+
+  const auto t4 = gpu::Clock::now();
+  const std::vector<float> o = gpu::read_rgba(tex(*result, w_, h_)), x = gpu::read_rgba(tex(s.aux, w_, h_));
+  timing_.readback_ms = gpu::ms_since(t4);
+  FogResult res;
+  res.rgb = Image(w_, h_, 3);
+  res.transmission = Image(w_, h_, 1);
+  res.optical_depth = Image(w_, h_, 1);
+  for (std::size_t i = 0; i < res.rgb.pixels(); ++i) {
+    for (int c = 0; c < 3; ++c) res.rgb.data[i * 3 + c] = o[i * 4 + c];
+    res.transmission.data[i] = o[i * 4 + 3];
+    res.optical_depth.data[i] = x[i * 4 + 2];
+  }
+  return res;
+}
+
+}  // namespace brume

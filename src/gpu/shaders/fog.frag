@@ -1,0 +1,61 @@
+// The layered-fog pass (Zhou, Chen, Smith; brume/fog.hpp): each pixel's
+// world-up ray component from the camera, its optical depth F along the
+// ray (sky: to infinity or over the sky distance), f = exp(-F), and either
+// the composite C = f C_scene + (1 - f) C_fog (no blur) or the premultiplied
+// F0 = f (C, 1) for haze's diffusion passes, with the blur scale sigma.
+// Inputs: uImage (linear RGB), uRange (metres along the ray; -1 = unknown =
+// sky, set on upload because GLSL compilers may fold isnan() away).
+// Topics: fog_math.
+layout(binding = 0) uniform highp sampler2D uImage;
+layout(binding = 1) uniform highp sampler2D uRange;
+uniform vec3 uRayRow;          // second row of world_from_cv
+uniform vec4 uK;               // cx, cy, 1/fx, 1/fy
+uniform int uKind;             // BrumeFog.kind
+uniform vec3 uExp;             // d0, falloff, exponent_c
+uniform vec2 uBand;            // offset, half-width
+uniform vec2 uClassic;         // fog start, end
+uniform int uKnots;
+uniform float uKnotU[BRUME_FOG_MAX_KNOTS];
+uniform float uKnotD[BRUME_FOG_MAX_KNOTS];
+uniform float uSkyDistance;    // m
+uniform vec3 uAirlight;        // linear RGB
+uniform int uBlur;             // 1: premultiplied output for the diffusion passes
+uniform vec4 uScale;           // sigma0, lambda, albedo, 1 / R_max
+uniform float uSigmaMax;       // px, the analysis' bound (the rate pass needs sigma <= it)
+layout(location = 0) out vec4 oColor;  // no blur: (C, f); blur: f (C, 1)
+layout(location = 1) out vec4 oAux;    // r: sigma, g: f, b: F
+
+void main() {
+  ivec2 p = ivec2(gl_FragCoord.xy);
+  vec3 c = texelFetch(uImage, p, 0).rgb;
+  float r = texelFetch(uRange, p, 0).r;
+  bool sky = !(r > 0.0);
+  BrumeFog fog;
+  fog.kind = uKind;
+  fog.d0 = uExp.x;
+  fog.falloff = uExp.y;
+  fog.exponent_c = uExp.z;
+  fog.band_offset = uBand.x;
+  fog.band_half_width = uBand.y;
+  fog.fog_start = uClassic.x;
+  fog.fog_end = uClassic.y;
+  fog.n = uKnots;
+  for (int i = 0; i < BRUME_FOG_MAX_KNOTS; ++i) {
+    fog.ku[i] = uKnotU[i];
+    fog.kd[i] = uKnotD[i];
+  }
+  float ry = brume_fog_ray_y(uRayRow.x, uRayRow.y, uRayRow.z, uK.x, uK.y, uK.z, uK.w, float(p.x), float(p.y));
+  float F = sky ? brume_fog_sky(fog, ry, uSkyDistance) : brume_fog_along(fog, r, ry);
+  float f = exp(-F);
+  float sigma = 0.0;
+  if (uBlur == 1) {
+    float l = sky ? uSkyDistance : r;
+    float Fb = sky ? brume_fog_along(fog, l, ry) : F;
+    sigma = min(brume_fog_scale(uScale.x, uScale.y, uScale.z, Fb, l * uScale.w), uSigmaMax);
+    oColor = vec4(f * c, f);
+  } else {
+    oColor = vec4(brume_fog_composite(c.r, f, uAirlight.r), brume_fog_composite(c.g, f, uAirlight.g),
+                  brume_fog_composite(c.b, f, uAirlight.b), f);
+  }
+  oAux = vec4(sigma, f, F, 1.0);
+}
