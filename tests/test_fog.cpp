@@ -119,8 +119,8 @@ TEST(Fog, ExponentialMatchesClosedFormOnAGroundPlane) {
       }
     EXPECT_LT(worst, 2e-5);
     EXPECT_GT(down, 81 * 2);  // every pose sees the ground
-    if (pitch < 0) EXPECT_GT(down, 81 * 45);
-    if (pitch > 0) EXPECT_GT(up, 81 * 30);
+    if (pitch < 0) { EXPECT_GT(down, 81 * 45); }
+    if (pitch > 0) { EXPECT_GT(up, 81 * 30); }
   }
 }
 

@@ -383,7 +383,7 @@ TEST(SkyCli, RenderFitRoundTripAndErrorsLeaveNothing) {
           "--width 64 --height 32 --out " + d / "e.exr");
   ASSERT_EQ(r.status, 0) << r.output;
   // Errors name the flag and write nothing.
-  for (const std::string bad :
+  for (const std::string& bad :
        {"sky render --turbidity 1.5 --sun-zenith 30 --sun-azimuth 0 --out " + d / "x.exr",
         "sky render --turbidity 3 --sun-zenith 100 --sun-azimuth 0 --out " + d / "x.exr",
         "sky render --turbidity 3 --sun-zenith 30 --sun-azimuth 0 --projection mercator --out " + d / "x.exr",
