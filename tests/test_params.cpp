@@ -11,6 +11,7 @@
 #include "brume/blur.hpp"
 #include "brume/compare.hpp"
 #include "brume/depth_pipeline.hpp"
+#include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
 #include "brume/insert.hpp"
@@ -88,6 +89,7 @@ TEST(Params, EveryCommandIsDeclaredCompletely) {
   expect_complete(coefficients_job_table(), "aerial coefficients");
   expect_complete(compare_job_table(), "compare");
   expect_complete(insert_job_table(), "insert");
+  expect_complete(dof_job_table(), "dof");
 }
 
 TEST(Params, RangeErrorsNameTheFlag) {
@@ -99,6 +101,7 @@ TEST(Params, RangeErrorsNameTheFlag) {
   expect_range_errors_name_the_flag(aerial_job_table());
   expect_range_errors_name_the_flag(coefficients_job_table());
   expect_range_errors_name_the_flag(insert_job_table());
+  expect_range_errors_name_the_flag(dof_job_table());
 }
 
 TEST(Params, CameraPoseBlockDrivesTheCamera) {

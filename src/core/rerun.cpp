@@ -8,6 +8,7 @@
 
 #include "brume/blur.hpp"
 #include "brume/depth_pipeline.hpp"
+#include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/aerial.hpp"
 #include "brume/haze.hpp"
@@ -87,12 +88,13 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
   if (cmd == "haze") return run_haze_job(job_from(record, haze_job_table(), out_dir), exec, ctx);
   if (cmd == "aerial") return run_aerial_job(job_from(record, aerial_job_table(), out_dir), exec, ctx);
   if (cmd == "insert") return run_insert_job(job_from(record, insert_job_table(), out_dir), exec, ctx);
+  if (cmd == "dof") return run_dof_job(job_from(record, dof_job_table(), out_dir), exec, ctx);
   if (cmd == "blur") return run_blur_job(job_from(record, blur_job_table(), out_dir), exec, ctx);
   if (cmd == "depth convert")
     return run_depth_convert_job(job_from(record, depth_convert_job_table(), out_dir), ctx);
   if (cmd == "depth prepare")
     return run_depth_prepare_job(job_from(record, depth_prepare_job_table(), out_dir), ctx);
-  throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, aerial, insert, blur, depth convert, "
+  throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, aerial, insert, dof, blur, depth convert, "
               "depth prepare can)");
 }
 

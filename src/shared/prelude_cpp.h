@@ -24,6 +24,7 @@ inline float mix(float a, float b, float t) { return a + t * (b - a); }
 #include "shared/diffusion_math.glsl"
 #include "shared/haze_math.glsl"
 #include "shared/aerial_math.glsl"
+#include "shared/dof_math.glsl"
 #undef BRUME_FN
 #undef BRUME_STENCIL_FN
 }  // namespace brume::shared

@@ -117,6 +117,7 @@ Command add_haze(CLI::App& app);
 Command add_aerial(CLI::App& app);
 Command add_insert(CLI::App& app);
 Command add_blur(CLI::App& app);
+Command add_dof(CLI::App& app);
 Command add_compare(CLI::App& app);
 std::vector<Command> add_depth(CLI::App& app);
 Command add_run(CLI::App& app);

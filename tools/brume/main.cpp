@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
   std::vector<Command> commands = {add_haze(app), add_aerial_coefficients(aerial.app), aerial, add_blur(app)};
   for (Command& c : add_depth(app)) commands.push_back(std::move(c));
   commands.push_back(add_insert(app));
+  commands.push_back(add_dof(app));
   commands.push_back(add_compare(app));
   commands.push_back(add_run(app));
   commands.push_back(add_demo(app));
