@@ -263,6 +263,15 @@ TEST(DofForeground, BlurredForegroundHasSoftEdges) {
   std::printf("  green 2 px outside a blurred near square: soft %.3f, sharp %.3g\n", green_out[0], green_out[1]);
   EXPECT_GT(green_out[0], 0.05);   // the near object's blur reaches over the background
   EXPECT_LE(green_out[1], 1e-6);   // without the rule its silhouette stays cut
+  // A large near blur (sigma 16 px) goes through the rule's coarse map (k = 4).
+  p.coc_infinity_px = 64.0;
+  p.foreground = Foreground::soft;
+  DofAnalysis a;
+  const DofResult big = apply_dof(s.rgb, s.z, p, a);
+  std::printf("  sigma 16: green 2 px outside %.3f, sigma there %.2f px\n", big.rgb.at(s.x0 - 2, 60, 1),
+              big.scale.at(s.x0 - 2, 60));
+  EXPECT_GT(big.rgb.at(s.x0 - 2, 60, 1), 0.05);
+  EXPECT_GT(big.scale.at(s.x0 - 2, 60), 4.0);  // the rim's scale is raised towards the near object's
 }
 
 TEST(DofGpu, MatchesCpu) {

@@ -174,13 +174,42 @@ Image dof_scale_map(const Image& z, const DofParams& p, DofAnalysis& a, const Ex
         s_near = std::max(s_near, sigma.data[i]);
       }
     if (s_near > s0) {
+      // The blurred map is smooth, so it is formed at 1/k resolution, k =
+      // floor(s_near / 4): box-averaged down, blurred by s_near / k (>= 4
+      // coarse pixels) and read back bilinearly. It shapes a soft rim, it is
+      // not an image: the full-resolution blur cost as much as the effect's
+      // own diffusion (1024x768, s_near 20 px), this costs 1/k^2 of it.
+      const int k = std::max(1, static_cast<int>(s_near / 4.0f));
+      const int w = (W + k - 1) / k, h = (H + k - 1) / k;
+      Image small(w, h, 1, 0.0f);
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          double acc = 0.0;
+          int n = 0;
+          for (int yy = y * k; yy < std::min(H, (y + 1) * k); ++yy)
+            for (int xx = x * k; xx < std::min(W, (x + 1) * k); ++xx) acc += nearf.at(xx, yy), ++n;
+          small.at(x, y) = static_cast<float>(acc / n);
+        }
       DiffusionParams dp;  // invariant-exact, harmonic: at a constant scale a plain Gaussian
-      dp.sigma0 = p.diffusion.sigma0;
+      dp.sigma0 = 0.5;     // a box-averaged coarse pixel (its own sigma is 0.29 coarse px)
       Exec e = exec;
       e.path = Path::fast;  // a smoothing of the map, not the effect: the float path is enough
-      diffuse(nearf, Image(W, H, 1, s_near), s_near, dp, e);
-      for (std::size_t i = 0; i < sigma.data.size(); ++i)
-        sigma.data[i] = std::min(limit, std::max(sigma.data[i], nearf.data[i]));
+      const float s_small = std::max(1.0f, s_near / static_cast<float>(k));
+      diffuse(small, Image(w, h, 1, s_small), s_small, dp, e);
+      for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+          // Bilinear read of the coarse map at this pixel's centre, clamped at the borders.
+          const float fx = std::clamp((x + 0.5f) / k - 0.5f, 0.0f, static_cast<float>(w - 1));
+          const float fy = std::clamp((y + 0.5f) / k - 0.5f, 0.0f, static_cast<float>(h - 1));
+          const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
+          const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
+          const float ax = fx - x0, ay = fy - y0;
+          const float top = small.at(x0, y0) + ax * (small.at(x1, y0) - small.at(x0, y0));
+          const float bot = small.at(x0, y1) + ax * (small.at(x1, y1) - small.at(x0, y1));
+          const float nb = top + ay * (bot - top);
+          float& s = sigma.at(x, y);
+          s = std::min(limit, std::max(s, nb));
+        }
     }
   }
   float smax = s0;
