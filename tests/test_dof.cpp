@@ -373,6 +373,9 @@ TEST(DofErrors, BadParametersAreRefused) {
   p = lens_50mm();
   p.scheme = DofScheme::bertalmio;
   EXPECT_NE(error_of([&] { validate_dof(p, {"edge-rate"}); }).find("--edge-rate"), std::string::npos);
+  p.scheme = DofScheme::leaky;
+  p.diffusion.precision = Precision::f16;
+  EXPECT_NE(error_of([&] { validate_dof(p); }).find("--precision f16"), std::string::npos);
   // Intrinsics from the depth flags disagreeing with the lens by more than 1 %.
   DepthSource src;
   src.k.fx = 1400.0;  // the lens gives 50 x 1000 / 36 = 1388.9 px: 0.8 % apart, allowed

@@ -42,8 +42,9 @@
 // nothing with the in-focus pixels, whose rate is 0). Rule (--foreground
 // soft, default): the near-field scale map n(x) = sigma(x) where Z < Zf,
 // sigma0 elsewhere, is blurred isotropically by a Gaussian of the largest
-// near-field sigma (by the same engine), and every pixel takes
-// max(sigma(x), n_blurred(x)). Pixels behind the focal plane never raise a
+// near-field sigma (by the same engine, at 1/k resolution with k =
+// floor(sigma_near / 4): it shapes a rim, not an image), and every pixel
+// takes max(sigma(x), n_blurred(x)), still capped at --coc-limit. Pixels behind the focal plane never raise a
 // neighbour's scale, so edges at the focal plane stay sharp and a near
 // object's blur spreads over the background around it. `sharp` keeps the
 // unprocessed map (the paper without §3.4's pre-processing).
