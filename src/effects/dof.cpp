@@ -143,22 +143,30 @@ Image dof_scale_map(const Image& z, const DofParams& p, DofAnalysis& a, const Ex
   const float alpha = static_cast<float>(a.alpha_px), zf = static_cast<float>(*p.focus_distance_m);
   const float s0 = static_cast<float>(p.diffusion.sigma0), limit = static_cast<float>(p.coc_limit_px);
   Image sigma(W, H, 1);
-  a.capped_pixels = a.unknown_pixels = a.near_pixels = 0;
+  const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
+  const long np = static_cast<long>(z.pixels());
+  long unknown = 0, near = 0, capped = 0;
   double zmin = INFINITY, zmax = 0.0;
-  for (std::size_t i = 0; i < z.pixels(); ++i) {
-    const float zi = z.data[i];
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : unknown, near, capped) \
+    reduction(min : zmin) reduction(max : zmax)
+  for (long i = 0; i < np; ++i) {
+    const float zi = z.data[static_cast<std::size_t>(i)];
     const bool known = std::isfinite(zi) && zi > 0.0f;
     // Unknown depth is infinitely far (sky): c = alpha.
     const float c = known ? sh::brume_coc(alpha, zi, zf) : alpha;
-    if (!known) ++a.unknown_pixels;
-    else {
+    if (!known) {
+      ++unknown;
+    } else {
       zmin = std::min(zmin, static_cast<double>(zi));
       zmax = std::max(zmax, static_cast<double>(zi));
-      if (zi < zf) ++a.near_pixels;
+      if (zi < zf) ++near;
     }
-    if (sh::brume_dof_scale(c, s0, INFINITY) > limit) ++a.capped_pixels;
-    sigma.data[i] = sh::brume_dof_scale(c, s0, limit);
+    if (sh::brume_dof_scale(c, s0, INFINITY) > limit) ++capped;
+    sigma.data[static_cast<std::size_t>(i)] = sh::brume_dof_scale(c, s0, limit);
   }
+  a.unknown_pixels = static_cast<std::size_t>(unknown);
+  a.near_pixels = static_cast<std::size_t>(near);
+  a.capped_pixels = static_cast<std::size_t>(capped);
   a.z_min_m = std::isfinite(zmin) ? zmin : 0.0;
   a.z_max_m = zmax;
 
@@ -196,6 +204,7 @@ Image dof_scale_map(const Image& z, const DofParams& p, DofAnalysis& a, const Ex
       e.path = Path::fast;  // a smoothing of the map, not the effect: the float path is enough
       const float s_small = std::max(1.0f, s_near / static_cast<float>(k));
       diffuse(small, Image(w, h, 1, s_small), s_small, dp, e);
+#pragma omp parallel for num_threads(nt) schedule(static)
       for (int y = 0; y < H; ++y)
         for (int x = 0; x < W; ++x) {
           // Bilinear read of the coarse map at this pixel's centre, clamped at the borders.
