@@ -271,7 +271,7 @@ TEST(DofForeground, BlurredForegroundHasSoftEdges) {
   std::printf("  sigma 16: green 2 px outside %.3f, sigma there %.2f px\n", big.rgb.at(s.x0 - 2, 60, 1),
               big.scale.at(s.x0 - 2, 60));
   EXPECT_GT(big.rgb.at(s.x0 - 2, 60, 1), 0.05);
-  EXPECT_GT(big.scale.at(s.x0 - 2, 60), 4.0);  // the rim's scale is raised towards the near object's
+  EXPECT_GT(big.scale.at(s.x0 - 2, 60), 3.0);  // raised well above sigma0 = 1 towards the near object's 16
 }
 
 TEST(DofGpu, MatchesCpu) {

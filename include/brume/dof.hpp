@@ -40,11 +40,13 @@
 // Foreground (§3.4): with g from the CoC alone a blurred object in front of
 // an in-focus background keeps a sharp silhouette (its edge pixels exchange
 // nothing with the in-focus pixels, whose rate is 0). Rule (--foreground
-// soft, default): the near-field scale map n(x) = sigma(x) where Z < Zf,
-// sigma0 elsewhere, is blurred isotropically by a Gaussian of the largest
-// near-field sigma (by the same engine, at 1/k resolution with k =
-// floor(sigma_near / 4): it shapes a rim, not an image), and every pixel
-// takes max(sigma(x), n_blurred(x)), still capped at --coc-limit. Pixels behind the focal plane never raise a
+// soft, default): every near pixel (Z < Zf) spreads its scale over its
+// neighbours by about that scale, as its blur disc covers them: the
+// near-field scale map is split into octave bands of sigma, [2^j, 2^{j+1})
+// px; band j (sigma0 outside it) is blurred isotropically by a Gaussian of
+// 2^j px (by the same engine, at 1/k resolution with k = floor(2^j / 4): it
+// shapes a rim, not an image); every pixel takes the largest of its own
+// sigma and the blurred bands, still capped at --coc-limit. Pixels behind the focal plane never raise a
 // neighbour's scale, so edges at the focal plane stay sharp and a near
 // object's blur spreads over the background around it. `sharp` keeps the
 // unprocessed map (the paper without §3.4's pre-processing).
