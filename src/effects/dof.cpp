@@ -179,8 +179,8 @@ Image dof_scale_map(const Image& z, const DofParams& p, DofAnalysis& a, const Ex
     // Gaussian of 2^j px, the raise is the largest over the bands. (One blur by the largest near sigma let a
     // strongly blurred near ground raise an in-focus house 60 px above it,
     // measured against the thin-lens render.) Each blurred map is smooth, so
-    // it is formed at 1/k resolution, k = floor(s_band / 4): box-averaged
-    // down, blurred by s_band / k (>= 4 coarse pixels) and read back
+    // it is formed at 1/k resolution, k = floor(s_band / 2): box-averaged
+    // down, blurred by s_band / k (>= 2 coarse pixels) and read back
     // bilinearly; it shapes a soft rim, it is not an image (the
     // full-resolution blur cost as much as the effect's own diffusion).
     std::vector<int> band(z.pixels(), -1);
@@ -198,7 +198,7 @@ Image dof_scale_map(const Image& z, const DofParams& p, DofAnalysis& a, const Ex
         if (band[i] == j) nearf.data[i] = sigma.data[i], any = true;
       if (!any) continue;
       const float s_band = std::ldexp(1.0f, j);  // the band's lower edge: every member's sigma is >= it
-      const int k = std::max(1, static_cast<int>(s_band / 4.0f));
+      const int k = std::max(1, static_cast<int>(s_band / 2.0f));
       const int w = (W + k - 1) / k, h = (H + k - 1) / k;
       Image small(w, h, 1, 0.0f);
       for (int y = 0; y < h; ++y)
