@@ -11,6 +11,7 @@
 #include "brume/blur.hpp"
 #include "brume/compare.hpp"
 #include "brume/depth_pipeline.hpp"
+#include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/fog.hpp"
 #include "brume/haze.hpp"
@@ -93,6 +94,7 @@ TEST(Params, EveryCommandIsDeclaredCompletely) {
   expect_complete(sky_render_job_table(), "sky render");
   expect_complete(sky_fit_job_table(), "sky fit");
   expect_complete(fog_job_table(), "fog");
+  expect_complete(dof_job_table(), "dof");
 }
 
 TEST(Params, RangeErrorsNameTheFlag) {
@@ -107,6 +109,7 @@ TEST(Params, RangeErrorsNameTheFlag) {
   expect_range_errors_name_the_flag(sky_fit_job_table());
   expect_range_errors_name_the_flag(insert_job_table());
   expect_range_errors_name_the_flag(fog_job_table());
+  expect_range_errors_name_the_flag(dof_job_table());
 }
 
 TEST(Params, CameraPoseBlockDrivesTheCamera) {

@@ -215,6 +215,20 @@ class ParamTable {
     return *this;
   }
 
+  // A nested block without some of its parameters, where the effect declares
+  // its own parameter of that name (depth of field's --scheme, whose choices
+  // go beyond the diffusion engine's and set the engine's scheme).
+  template <class Q>
+  ParamTable& nest_except(Q P::*m, const ParamTable<Q>& sub, const std::set<std::string>& skip) {
+    for (const Param<Q>& q : sub.params()) {
+      if (skip.count(q.spec.name)) continue;
+      if (find(q.spec.name)) throw Error("internal: parameter '" + q.spec.name + "' declared twice in " + block_);
+      params_.push_back({q.spec, [m, g = q.get](const P& p) { return g(p.*m); },
+                         [m, s = q.set](P& p, const nlohmann::json& v) { s(p.*m, v); }});
+    }
+    return *this;
+  }
+
   const Param<P>* find(const std::string& name) const {
     for (const auto& p : params_)
       if (p.spec.name == name) return &p;

@@ -85,10 +85,10 @@ __attribute__((always_inline)) inline void run_weights(const float* __restrict r
                                                        int n) {
   for (int x = xa; x < xb; ++x) {
     const float rc = rrow[x], f = fr[x];
-    wl[x] = sh::brume_edge_rate(rc, sh::mix(rrow[x - n], rrow[x - n - 1], f), kMode);
-    wr[x] = sh::brume_edge_rate(rc, sh::mix(rrow[x + n], rrow[x + n + 1], f), kMode);
-    wu[x] = sh::brume_edge_rate(rc, sh::mix(ru0[x], ru1[x], f), kMode);
-    wd[x] = sh::brume_edge_rate(rc, sh::mix(rd0[x], rd1[x], f), kMode);
+    wl[x] = sh::brume_edge_rate(rc, sh::brume_tap_rate(rrow[x - n], rrow[x - n - 1], f, kMode), kMode);
+    wr[x] = sh::brume_edge_rate(rc, sh::brume_tap_rate(rrow[x + n], rrow[x + n + 1], f, kMode), kMode);
+    wu[x] = sh::brume_edge_rate(rc, sh::brume_tap_rate(ru0[x], ru1[x], f, kMode), kMode);
+    wd[x] = sh::brume_edge_rate(rc, sh::brume_tap_rate(rd0[x], rd1[x], f, kMode), kMode);
   }
 }
 

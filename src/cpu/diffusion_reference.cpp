@@ -27,6 +27,18 @@ struct Grid {
   double at(int x, int y, int ch) const {
     return (*v)[(static_cast<std::size_t>(mirror(y, h)) * w + mirror(x, w)) * c + ch];
   }
+  // The rate of the tap at (x + dx, y + dy) (brume_tap_rate in double): the
+  // interpolated rate for the mean, the smaller rate of the texels the tap
+  // reads for min and harmonic.
+  double tap_rate(int x, int y, double dx, double dy, EdgeRate mode) const {
+    const double d = dx != 0.0 ? dx : dy;
+    const double fl = std::floor(d), fr = d - fl;
+    const int i0 = static_cast<int>(fl);
+    const double a = dx != 0.0 ? at(x + i0, y, 0) : at(x, y + i0, 0);
+    const double b = dx != 0.0 ? at(x + i0 + 1, y, 0) : at(x, y + i0 + 1, 0);
+    if (mode == EdgeRate::mean) return a + fr * (b - a);
+    return fr > 0.0 ? std::min(a, b) : a;
+  }
   // Sample at (x + dx, y + dy) where exactly one of dx, dy is non-zero.
   double sample(int x, int y, double dx, double dy, int ch) const {
     double d = dx != 0.0 ? dx : dy;
@@ -124,8 +136,8 @@ void diffuse_reference(Image& f, const std::vector<double>& rho, int iterations,
           h = (m + n * (n + 1.0)) / (2.0 * n + 1.0);
         }
         double w[4];
-        for (int u = 0; u < 4; ++u)  // eq. 12, neighbour rate sampled like F
-          w[u] = edge_rate(r, rgrid.sample(x, y, ux[u] * h, uy[u] * h, 0), p.edge_rate);
+        for (int u = 0; u < 4; ++u)  // eq. 12 with the tap's rate (brume_tap_rate)
+          w[u] = edge_rate(r, rgrid.tap_rate(x, y, ux[u] * h, uy[u] * h, p.edge_rate), p.edge_rate);
         for (int c = 0; c < C; ++c) {
           double s[4];
           for (int u = 0; u < 4; ++u) s[u] = fgrid.sample(x, y, ux[u] * h, uy[u] * h, c);

@@ -60,10 +60,10 @@ inline void update_pixel(const typename S::T* src, typename S::T* dst, const flo
   if constexpr (!kUniform) {
     const float* rrow = rho + y * Ws;
     const float rc = rrow[x];
-    wl = sh::brume_edge_rate(rc, sh::mix(rrow[xl0], rrow[xl1], fr), edge_mode);
-    wr = sh::brume_edge_rate(rc, sh::mix(rrow[xr0], rrow[xr1], fr), edge_mode);
-    wu = sh::brume_edge_rate(rc, sh::mix(rho[yu0 * Ws + x], rho[yu1 * Ws + x], fr), edge_mode);
-    wd = sh::brume_edge_rate(rc, sh::mix(rho[yd0 * Ws + x], rho[yd1 * Ws + x], fr), edge_mode);
+    wl = sh::brume_edge_rate(rc, sh::brume_tap_rate(rrow[xl0], rrow[xl1], fr, edge_mode), edge_mode);
+    wr = sh::brume_edge_rate(rc, sh::brume_tap_rate(rrow[xr0], rrow[xr1], fr, edge_mode), edge_mode);
+    wu = sh::brume_edge_rate(rc, sh::brume_tap_rate(rho[yu0 * Ws + x], rho[yu1 * Ws + x], fr, edge_mode), edge_mode);
+    wd = sh::brume_edge_rate(rc, sh::brume_tap_rate(rho[yd0 * Ws + x], rho[yd1 * Ws + x], fr, edge_mode), edge_mode);
   }
   const typename S::T* srow = src + y * Ws * 4;
   S::store(dst + (y * Ws + x) * 4,
@@ -83,7 +83,7 @@ inline UniformStep uniform_step(float sigma_k, float rho, bool exact, int edge_m
   st.h = sh::brume_invariant_offset(sigma_k, rho, exact);
   st.n = static_cast<int>(st.h);
   st.fr = st.h - static_cast<float>(st.n);
-  st.w = sh::brume_edge_rate(rho, sh::mix(rho, rho, st.fr), edge_mode);  // eq. 12, as update_pixel<false> computes it
+  st.w = sh::brume_edge_rate(rho, sh::brume_tap_rate(rho, rho, st.fr, edge_mode), edge_mode);  // as update_pixel<false>
   return st;
 }
 

@@ -35,6 +35,7 @@ inline float mix(float a, float b, float t) { return a + t * (b - a); }
 // The CPU holds density tables of up to 1024 rows (the GPU 32).
 #define BRUME_FOG_MAX_KNOTS 1024
 #include "shared/fog_math.glsl"
+#include "shared/dof_math.glsl"
 #undef BRUME_FN
 #undef BRUME_STENCIL_FN
 #undef BRUME_IN

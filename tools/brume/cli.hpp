@@ -118,6 +118,7 @@ Command add_fog(CLI::App& app);
 Command add_aerial(CLI::App& app);
 Command add_insert(CLI::App& app);
 Command add_blur(CLI::App& app);
+Command add_dof(CLI::App& app);
 Command add_compare(CLI::App& app);
 std::vector<Command> add_depth(CLI::App& app);
 Command add_run(CLI::App& app);

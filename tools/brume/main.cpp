@@ -27,6 +27,7 @@ int main(int argc, char** argv) {
   for (Command& c : add_depth(app)) commands.push_back(std::move(c));
   commands.push_back(add_insert(app));
   commands.push_back(add_fog(app));
+  commands.push_back(add_dof(app));
   commands.push_back(add_compare(app));
   for (Command& c : add_sky(app)) commands.push_back(std::move(c));
   commands.push_back(add_run(app));

@@ -1354,4 +1354,70 @@ DemoScene render_demo_scene(int width, int height) {
   return out;
 }
 
+
+DemoScene render_demo_scene_thin_lens(int width, int height, double focus_distance_m, double coc_infinity_px,
+                                      int samples) {
+  DemoScene out;
+  out.fov_y_deg = kFovYDeg;
+  if (width <= 0 || height <= 0 || samples <= 0) return out;
+  out.rgb = Image(width, height, 3, 0.0f);
+  const Scene sc = make_scene();
+  Camera cam;
+  cam.origin = {0.0, kCamHeight, 0.0};
+  cam.fwd = {0.0, -kSinPitch, kCosPitch};
+  cam.up = {0.0, kCosPitch, kSinPitch};
+  cam.right = {1.0, 0.0, 0.0};
+  cam.th = kTanHalfFovY;
+  cam.aspect = static_cast<double>(width) / height;
+  cam.width = width;
+  cam.height = height;
+  // A lens ray leaves the pinhole's screen-space bounds: every object is a candidate.
+  const std::uint32_t all = 0xFFFFFFFFu;
+  // Focal length in pixels, and the aperture diameter (m) whose image of a
+  // point at infinity is coc_infinity_px wide: a point at planar depth Z
+  // images to a disc of A f |Z - Zf| / (Z Zf) px, which tends to A f / Zf.
+  const double f_px = 0.5 * height / cam.th;
+  const double aperture = coc_infinity_px * focus_distance_m / f_px;
+  const double pix = 2.0 * cam.th / cam.height;  // one pixel, radians
+  const double golden = 0.6180339887498949, plastic1 = 0.7548776662466927, plastic2 = 0.5698402909980532;
+#pragma omp parallel for schedule(dynamic, 2)
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      V3 acc{0.0, 0.0, 0.0};
+      const double jitter = unit(hash2(x, y, 91u));
+      for (int s = 0; s < samples; ++s) {
+        // Pixel position: a rank-1 lattice (Fibonacci-like); lens point: the
+        // R2 sequence, Cartesian-scrambled per pixel, mapped to the disc by
+        // equal-area polar mapping.
+        const double u = (s + 0.5) / samples, v = std::fmod(s * golden + jitter, 1.0);
+        const double a = std::fmod(s * plastic1 + jitter, 1.0), b = std::fmod(s * plastic2 + 0.5 * jitter, 1.0);
+        const double px = x + u, py = y + v;
+        const double sx = (2.0 * px / cam.width - 1.0) * cam.th * cam.aspect;
+        const double sy = (1.0 - 2.0 * py / cam.height) * cam.th;
+        const V3 dir = cam.fwd + cam.right * sx + cam.up * sy;  // forward component 1: planar depth
+        const V3 focus = cam.origin + dir * focus_distance_m;
+        const double r = 0.5 * aperture * std::sqrt(a), phi = 2.0 * 3.141592653589793 * b;
+        const V3 o = cam.origin + cam.right * (r * std::cos(phi)) + cam.up * (r * std::sin(phi));
+        const V3 d = normalize(focus - o);
+        const Ray ray = make_ray(o, d);
+        const Hit h = trace(sc, ray, 0.1 / (2.0 * pix), all);
+        if (h.mat == kNone) {
+          acc = acc + sky_colour(d, pix);
+          continue;
+        }
+        const double inv_len = 1.0 / std::sqrt(dot(dir, dir));
+        const V3 du = cam.right * (2.0 * cam.th * cam.aspect / cam.width * inv_len);
+        const V3 dv = cam.up * (-2.0 * cam.th / cam.height * inv_len);
+        acc = acc + shade(sc, ray, h, pix, du, dv).colour;
+      }
+      acc = acc * (1.0 / samples);
+      float* c = out.rgb.row(y) + 3 * x;
+      c[0] = static_cast<float>(clamp01(acc.x));
+      c[1] = static_cast<float>(clamp01(acc.y));
+      c[2] = static_cast<float>(clamp01(acc.z));
+    }
+  }
+  return out;
+}
+
 }  // namespace brume

@@ -40,6 +40,20 @@ vec4 sample_axis(highp sampler2D tex, ivec2 p, float d, ivec2 axis, ivec2 size) 
   return va + fr * (vb - va);
 }
 
+// The rate of the tap at p + d * axis (brume_tap_rate): hardware or shader
+// interpolation for the mean (as F), the texels' smaller rate for min and
+// harmonic, read with texelFetch so that no filter blends them.
+float rate_axis(ivec2 p, float d, ivec2 axis, ivec2 size) {
+  if (uEdgeRate == 0) return sample_axis(uRates, p, d, axis, size).r;
+  float fl = floor(d);
+  float fr = d - fl;
+  int i0 = int(fl);
+  ivec2 a = p + i0 * axis, b = p + (i0 + 1) * axis;
+  a = ivec2(mirror_index(a.x, size.x), mirror_index(a.y, size.y));
+  b = ivec2(mirror_index(b.x, size.x), mirror_index(b.y, size.y));
+  return brume_tap_rate(texelFetch(uRates, a, 0).r, texelFetch(uRates, b, 0).r, fr, uEdgeRate);
+}
+
 void main() {
   ivec2 p = ivec2(gl_FragCoord.xy);
   ivec2 size = textureSize(uF, 0);
@@ -50,9 +64,9 @@ void main() {
   const ivec2 X = ivec2(1, 0), Y = ivec2(0, 1);
   vec4 l = sample_axis(uF, p, -h, X, size), r = sample_axis(uF, p, h, X, size);
   vec4 u = sample_axis(uF, p, -h, Y, size), d = sample_axis(uF, p, h, Y, size);
-  float wl = brume_edge_rate(rho, sample_axis(uRates, p, -h, X, size).r, uEdgeRate);
-  float wr = brume_edge_rate(rho, sample_axis(uRates, p, h, X, size).r, uEdgeRate);
-  float wu = brume_edge_rate(rho, sample_axis(uRates, p, -h, Y, size).r, uEdgeRate);
-  float wd = brume_edge_rate(rho, sample_axis(uRates, p, h, Y, size).r, uEdgeRate);
+  float wl = brume_edge_rate(rho, rate_axis(p, -h, X, size), uEdgeRate);
+  float wr = brume_edge_rate(rho, rate_axis(p, h, X, size), uEdgeRate);
+  float wu = brume_edge_rate(rho, rate_axis(p, -h, Y, size), uEdgeRate);
+  float wd = brume_edge_rate(rho, rate_axis(p, h, Y, size), uEdgeRate);
   oF = brume_diffusion_update(fc, l, r, u, d, wl, wr, wu, wd);
 }

@@ -26,4 +26,16 @@ struct DemoScene {
 // the same arguments give the same output on any machine and thread count.
 DemoScene render_demo_scene(int width, int height);
 
+// Ground truth for depth of field: the same scene through a thin lens (the
+// pinhole's centre of projection spread over an aperture disc, every ray
+// through its pixel's point on the plane at planar depth focus_distance_m),
+// `samples` rays per pixel (pixel and aperture positions from low-discrepancy
+// sequences). The aperture is chosen so that a point at infinity images to a
+// disc of coc_infinity_px pixels (brume dof's --coc-infinity); a point at
+// planar depth Z to alpha |Z - Zf| / Z, the thin-lens CoC of brume/dof.hpp.
+// rgb only (range is left empty). Partial occlusion is included, which no
+// post-process on the pinhole image can reproduce.
+DemoScene render_demo_scene_thin_lens(int width, int height, double focus_distance_m, double coc_infinity_px,
+                                      int samples);
+
 }  // namespace brume

@@ -1,0 +1,84 @@
+// brume benchmark — `brume dof` as the library runs it (apply_dof: scale map
+// from the CoC, foreground rule, diffusion) on the demo scene at 1024x768,
+// CoC up to sigma = 20 px, the default invariant-exact scheme against the
+// paper's eq. 16 (`bertalmio`, N = 2 sigma^2 = 798 iterations) and its
+// symmetric form (`standard`), same image, same run, interleaved rounds (one
+// warm-up round first) so that a busy host slows all alike; each figure is
+// the median (min..max) of its rounds. Issue #13's target: default >= 15x
+// faster than bertalmio.
+//
+// Usage: brume_bench_dof [ROUNDS]
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <vector>
+
+#include "bench_util.hpp"
+#include "brume/demo_scene.hpp"
+#include "brume/dof.hpp"
+
+using namespace brume;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+bench::Spread spread(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return {v[v.size() / 2], v.front(), v.back()};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int rounds = argc > 1 ? std::max(1, std::atoi(argv[1])) : 3;
+  const int W = 1024, H = 768;
+  const DemoScene s = render_demo_scene(W, H);
+  // Planar depth from the demo's range: fy from its vertical field of view.
+  Intrinsics k;
+  k.fy = k.fx = 0.5 * H / std::tan(0.5 * s.fov_y_deg * M_PI / 180.0);
+  k = resolve(k, W, H);
+  const Image z = planar_depth(s.range, k);
+
+  DofParams p;
+  p.focus_distance_m = 6.0;  // the ball; the far field tends to alpha
+  // sigma_max = 20 px at infinity: c = alpha, (alpha/4)^2 = 20^2 - 1.
+  p.coc_infinity_px = 4.0 * std::sqrt(399.0);
+  p.coc_limit_px = 20.0;  // near pixels (Z < Zf/2) would exceed it: capped at 20 px
+
+  const DofScheme schemes[] = {DofScheme::invariant_exact, DofScheme::bertalmio, DofScheme::standard};
+  std::vector<double> t[3], tmap;
+  int iters[3] = {0, 0, 0};
+  for (int r = 0; r <= rounds; ++r)
+    for (int i = 0; i < 3; ++i) {
+      p.scheme = schemes[i];
+      DofAnalysis a;
+      const auto t0 = Clock::now();
+      const DofResult out = apply_dof(s.rgb, z, p, a);
+      const double ms = ms_since(t0);
+      iters[i] = a.plan.iterations;
+      if (r > 0) t[i].push_back(ms);  // round 0 is the warm-up
+      if (out.rgb.data.empty()) return 1;
+      if (i == 0 && r > 0) {  // the scale map alone (CoC, cap, foreground rule), shared by every scheme
+        const auto t1 = Clock::now();
+        dof_scale_map(z, p, a);
+        tmap.push_back(ms_since(t1));
+      }
+    }
+  std::printf("brume_bench_dof: %dx%d demo scene, sigma_max 20 px, %s, %d threads, %d rounds (median, min..max)\n", W,
+              H, bench::cpu_name().c_str(), omp_get_max_threads(), rounds);
+  const bench::Spread d = spread(t[0]), m = spread(tmap);
+  std::printf("  scale map (CoC, cap, foreground rule): %.1f ms (%.1f..%.1f), in every scheme's time\n", m.median, m.lo,
+              m.hi);
+  for (int i = 0; i < 3; ++i) {
+    const bench::Spread x = spread(t[i]);
+    std::printf("  %-16s %5d iterations  %9.1f ms (%.1f..%.1f)  %6.1fx the default's time\n",
+                to_string(schemes[i]).c_str(), iters[i], x.median, x.lo, x.hi, x.median / d.median);
+  }
+  return 0;
+}

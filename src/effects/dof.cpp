@@ -1,0 +1,306 @@
+// brume — depth of field by leak-free diffusion (Bertalmio et al. eq. 1-2,
+// 14, 16, §3.4); the equations, units and rules are stated in
+// include/brume/dof.hpp. This file holds the declaration of the parameters,
+// the scale map (CoC, cap, foreground rule) and the CPU apply of each
+// scheme, every one of them on the engine's one stencil (brume/diffusion.hpp).
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "brume/dof.hpp"
+#include "brume/error.hpp"
+#include "shared/prelude_cpp.h"
+
+namespace brume {
+namespace sh = brume::shared;
+
+const EnumNames<DofScheme>& dof_scheme_names() {
+  static const EnumNames<DofScheme> n = {{DofScheme::invariant_exact, "invariant-exact"},
+                                         {DofScheme::standard, "standard"},
+                                         {DofScheme::bertalmio, "bertalmio"},
+                                         {DofScheme::leaky, "leaky"}};
+  return n;
+}
+std::string to_string(DofScheme s) { return enum_name(dof_scheme_names(), s); }
+
+const EnumNames<Foreground>& foreground_names() {
+  static const EnumNames<Foreground> n = {{Foreground::soft, "soft"}, {Foreground::sharp, "sharp"}};
+  return n;
+}
+
+const ParamTable<DofParams>& dof_param_table() {
+  static const ParamTable<DofParams> t = [] {
+    ParamTable<DofParams> d("dof");
+    d.real("focus-distance", &DofParams::focus_distance_m, "m", Range::above(0.0),
+           "focus distance Zf, planar depth of the plane in focus (required)", "none")
+        .real("f-number", &DofParams::f_number, "1", Range::above(0.0),
+              "f-number n of the lens (with --focal-length and --sensor-width)", "none")
+        .real("focal-length", &DofParams::focal_length_mm, "mm", Range::above(0.0),
+              "focal length F of the lens (with --f-number and --sensor-width)", "none")
+        .real("sensor-width", &DofParams::sensor_width_mm, "mm", Range::above(0.0),
+              "sensor width; the image width spans it (px per mm = width / sensor width)", "none")
+        .real("coc-infinity", &DofParams::coc_infinity_px, "px", Range::at_least(0.0),
+              "CoC diameter at infinity, alpha in pixels, instead of the lens (for artists)", "none")
+        .real("coc-limit", &DofParams::coc_limit_px, "px", Range::above(0.0),
+              "cap on the target scale sigma = sqrt(sigma0^2 + (c/4)^2), so that a near pixel cannot set the "
+              "iteration count")
+        .choice("scheme", &DofParams::scheme, dof_scheme_names(),
+                "invariant-exact (default: the engine's geometric steps, leak-free, tens of iterations), standard "
+                "(eq. 16 with a symmetric edge weight, leak-free, 2 sigma^2 iterations), bertalmio (eq. 16 as "
+                "published: leaks across the left/top edges of in-focus objects; CPU), leaky (eq. 14, g Laplacian; "
+                "CPU)")
+        .choice("foreground", &DofParams::foreground, foreground_names(),
+                "soft (default, the paper's §3.4: near-field blur spreads over the background) or sharp (the "
+                "unprocessed CoC map: blurred near objects keep a sharp silhouette)")
+        .nest_except(&DofParams::diffusion, diffusion_param_table(), {"scheme"});
+    return d;
+  }();
+  return t;
+}
+
+namespace {
+
+bool lens_given(const DofParams& p) { return p.f_number || p.focal_length_mm || p.sensor_width_mm; }
+
+}  // namespace
+
+void validate_dof(const DofParams& p, const std::set<std::string>& given) {
+  const auto& t = dof_param_table();
+  t.validate(p);
+  if (!p.focus_distance_m)
+    throw Error("--focus-distance is required: the planar depth in metres of the plane in focus");
+  if (p.coc_infinity_px && lens_given(p))
+    throw Error("--coc-infinity gives the CoC at infinity directly; do not also give the lens (--f-number, "
+                "--focal-length, --sensor-width), which would set it too");
+  if (!p.coc_infinity_px) {
+    if (!(p.f_number && p.focal_length_mm && p.sensor_width_mm)) {
+      std::string missing;
+      if (!p.f_number) missing += " --f-number";
+      if (!p.focal_length_mm) missing += " --focal-length";
+      if (!p.sensor_width_mm) missing += " --sensor-width";
+      throw Error("the circle of confusion needs the lens (--f-number N --focal-length MM --sensor-width MM; missing:" +
+                  missing + ") or --coc-infinity PX");
+    }
+    const double zf_mm = *p.focus_distance_m * 1000.0;
+    if (!(zf_mm > *p.focal_length_mm)) {
+      std::ostringstream m;
+      m << "--focus-distance " << *p.focus_distance_m << " m is not beyond the focal length --focal-length "
+        << *p.focal_length_mm << " mm; a thin lens focuses only on planes farther than F (alpha = F^2/(n (Zf - F))): "
+        << "give a focus distance > " << *p.focal_length_mm / 1000.0 << " m";
+      throw Error(m.str());
+    }
+  }
+  if (p.coc_limit_px < p.diffusion.sigma0) {
+    std::ostringstream m;
+    m << "--coc-limit " << p.coc_limit_px << " px is below the inner scale --sigma0 " << p.diffusion.sigma0
+      << " px; the cap is on the target scale sigma, which is at least sigma0: give --coc-limit >= --sigma0";
+    throw Error(m.str());
+  }
+  if (p.scheme == DofScheme::leaky && p.diffusion.precision == Precision::f16)
+    throw Error("--scheme leaky (eq. 14, a comparison mode) runs in f32 only; drop --precision f16");
+  const bool edge_schemes = p.scheme == DofScheme::invariant_exact || p.scheme == DofScheme::standard;
+  if (!edge_schemes && t.is_set(p, "edge-rate", given))
+    throw Error("--edge-rate is not used by --scheme " + to_string(p.scheme) +
+                " (its edge weight is fixed by the paper's equation); drop it, or use --scheme invariant-exact or "
+                "standard");
+}
+
+DiffusionParams dof_diffusion_params(const DofParams& p) {
+  DiffusionParams d = p.diffusion;
+  // bertalmio and leaky plan and form their rates as the standard scheme:
+  // rho = g/4 = (sigma^2 - sigma0^2)/(2N), N = ceil((smax^2 - s0^2)/(2 rho_max)),
+  // which at rho_max = 1/4 is eq. 16's g <= 1 with the corrected N = 2 sigma^2.
+  d.scheme = p.scheme == DofScheme::invariant_exact ? Scheme::invariant_exact : Scheme::standard;
+  return d;
+}
+
+std::optional<double> lens_fx_px(const DofParams& p, int width) {
+  if (!(p.focal_length_mm && p.sensor_width_mm)) return std::nullopt;
+  return *p.focal_length_mm * width / *p.sensor_width_mm;
+}
+
+double coc_infinity_px(const DofParams& p, int width) {
+  if (p.coc_infinity_px) return *p.coc_infinity_px;
+  const double F = *p.focal_length_mm, n = *p.f_number, zf_mm = *p.focus_distance_m * 1000.0;
+  const double alpha_mm = F * F / (n * (zf_mm - F));  // eq. 2, on the sensor
+  return alpha_mm * width / *p.sensor_width_mm;
+}
+
+Image planar_depth(const Image& range, const Intrinsics& k) {
+  Image z = range_to_z(range, k);
+  for (float& v : z.data)
+    if (!std::isfinite(v) || v <= 0.0f) v = NAN;
+  return z;
+}
+
+Image dof_scale_map(const Image& z, const DofParams& p, DofAnalysis& a, const Exec& exec) {
+  validate_dof(p);
+  if (z.channels != 1) throw Error("the depth map must have one channel");
+  const int W = z.width, H = z.height;
+  a.alpha_px = coc_infinity_px(p, W);
+  const float alpha = static_cast<float>(a.alpha_px), zf = static_cast<float>(*p.focus_distance_m);
+  const float s0 = static_cast<float>(p.diffusion.sigma0), limit = static_cast<float>(p.coc_limit_px);
+  Image sigma(W, H, 1);
+  const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
+  const long np = static_cast<long>(z.pixels());
+  long unknown = 0, near = 0, capped = 0;
+  double zmin = INFINITY, zmax = 0.0;
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : unknown, near, capped) \
+    reduction(min : zmin) reduction(max : zmax)
+  for (long i = 0; i < np; ++i) {
+    const float zi = z.data[static_cast<std::size_t>(i)];
+    const bool known = std::isfinite(zi) && zi > 0.0f;
+    // Unknown depth is infinitely far (sky): c = alpha.
+    const float c = known ? sh::brume_coc(alpha, zi, zf) : alpha;
+    if (!known) {
+      ++unknown;
+    } else {
+      zmin = std::min(zmin, static_cast<double>(zi));
+      zmax = std::max(zmax, static_cast<double>(zi));
+      if (zi < zf) ++near;
+    }
+    if (sh::brume_dof_scale(c, s0, INFINITY) > limit) ++capped;
+    sigma.data[static_cast<std::size_t>(i)] = sh::brume_dof_scale(c, s0, limit);
+  }
+  a.unknown_pixels = static_cast<std::size_t>(unknown);
+  a.near_pixels = static_cast<std::size_t>(near);
+  a.capped_pixels = static_cast<std::size_t>(capped);
+  a.z_min_m = std::isfinite(zmin) ? zmin : 0.0;
+  a.z_max_m = zmax;
+
+  if (p.foreground == Foreground::soft && a.near_pixels > 0) {
+    // §3.4: blur the near field's scale map isotropically and let it raise
+    // the scale around near objects (the rule is stated in dof.hpp). Each
+    // near pixel spreads by about its own scale, as its blur disc (radius
+    // c/2 = 2 sigma) overlaps its neighbours: the near field is split into
+    // octave bands of sigma, [2^j, 2^{j+1}) px, and band j is blurred by a
+    // Gaussian of 2^j px, the raise is the largest over the bands. (One blur by the largest near sigma let a
+    // strongly blurred near ground raise an in-focus house 60 px above it,
+    // measured against the thin-lens render.) Each blurred map is smooth, so
+    // it is formed at 1/k resolution, k = floor(s_band / 2): box-averaged
+    // down, blurred by s_band / k (>= 2 coarse pixels) and read back
+    // bilinearly; it shapes a soft rim, it is not an image (the
+    // full-resolution blur cost as much as the effect's own diffusion).
+    std::vector<int> band(z.pixels(), -1);
+    int top_band = -1;
+    for (std::size_t i = 0; i < z.pixels(); ++i)
+      if (std::isfinite(z.data[i]) && z.data[i] < zf && sigma.data[i] > s0) {
+        band[i] = std::max(0, static_cast<int>(std::floor(std::log2(sigma.data[i]))));
+        top_band = std::max(top_band, band[i]);
+      }
+    Image raise(W, H, 1, s0);
+    for (int j = 0; j <= top_band; ++j) {
+      Image nearf(W, H, 1, s0);
+      bool any = false;
+      for (std::size_t i = 0; i < z.pixels(); ++i)
+        if (band[i] == j) nearf.data[i] = sigma.data[i], any = true;
+      if (!any) continue;
+      const float s_band = std::ldexp(1.0f, j);  // the band's lower edge: every member's sigma is >= it
+      const int k = std::max(1, static_cast<int>(s_band / 2.0f));
+      const int w = (W + k - 1) / k, h = (H + k - 1) / k;
+      Image small(w, h, 1, 0.0f);
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          double acc = 0.0;
+          int n = 0;
+          for (int yy = y * k; yy < std::min(H, (y + 1) * k); ++yy)
+            for (int xx = x * k; xx < std::min(W, (x + 1) * k); ++xx) acc += nearf.at(xx, yy), ++n;
+          small.at(x, y) = static_cast<float>(acc / n);
+        }
+      DiffusionParams dp;  // invariant-exact, harmonic: at a constant scale a plain Gaussian
+      dp.sigma0 = 0.5;     // a box-averaged coarse pixel (its own sigma is 0.29 coarse px)
+      Exec e = exec;
+      e.path = Path::fast;  // a smoothing of the map, not the effect: the float path is enough
+      const float s_small = std::max(1.0f, s_band / static_cast<float>(k));
+      diffuse(small, Image(w, h, 1, s_small), s_small, dp, e);
+#pragma omp parallel for num_threads(nt) schedule(static)
+      for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+          // Bilinear read of the coarse map at this pixel's centre, clamped at the borders.
+          const float fx = std::clamp((x + 0.5f) / k - 0.5f, 0.0f, static_cast<float>(w - 1));
+          const float fy = std::clamp((y + 0.5f) / k - 0.5f, 0.0f, static_cast<float>(h - 1));
+          const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
+          const int x1 = std::min(x0 + 1, w - 1), y1 = std::min(y0 + 1, h - 1);
+          const float ax = fx - x0, ay = fy - y0;
+          const float t = small.at(x0, y0) + ax * (small.at(x1, y0) - small.at(x0, y0));
+          const float b = small.at(x0, y1) + ax * (small.at(x1, y1) - small.at(x0, y1));
+          float& r = raise.at(x, y);
+          r = std::max(r, t + ay * (b - t));
+        }
+    }
+    for (std::size_t i = 0; i < sigma.data.size(); ++i)
+      sigma.data[i] = std::min(limit, std::max(sigma.data[i], raise.data[i]));
+  }
+  float smax = s0;
+  for (float v : sigma.data) smax = std::max(smax, v);
+  a.sigma_max = smax;
+  a.plan = plan_diffusion(dof_diffusion_params(p), a.sigma_max);
+  return sigma;
+}
+
+namespace {
+
+// The rates eq. 16 uses, rho = g/4 = (sigma^2 - sigma0^2)/(2N), per pixel.
+Image standard_rates(const Image& sigma, double sigma0, int N) {
+  Image rho(sigma.width, sigma.height, 1, 0.0f);
+  if (N > 0)
+    for (std::size_t i = 0; i < rho.data.size(); ++i)
+    rho.data[i] = sh::brume_standard_rate(sigma.data[i], static_cast<float>(sigma0), static_cast<float>(N));
+  return rho;
+}
+
+}  // namespace
+
+DofResult apply_dof(const Image& rgb, const Image& z, const DofParams& p, DofAnalysis& a, const Exec& exec) {
+  if (rgb.channels != 3) throw Error("depth of field needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
+  if (rgb.width != z.width || rgb.height != z.height)
+    throw Error("depth map " + z.size_string() + " does not match image " + rgb.size_string() +
+                "; they must be the same size (resample the depth map, or crop both)");
+  DofResult out;
+  out.scale = dof_scale_map(z, p, a, exec);
+  const DiffusionParams dp = dof_diffusion_params(p);
+  const int W = rgb.width, H = rgb.height, N = a.plan.iterations;
+  // RGB and a constant fourth channel (the engine's vector width; mass
+  // conservation keeps it 1 except with eq. 14, which does not conserve).
+  Image f(W, H, 4);
+  for (std::size_t i = 0; i < rgb.pixels(); ++i) {
+    for (int c = 0; c < 3; ++c) f.data[i * 4 + c] = rgb.data[i * 3 + c];
+    f.data[i * 4 + 3] = 1.0f;
+  }
+  switch (p.scheme) {
+    case DofScheme::invariant_exact:
+    case DofScheme::standard:
+      diffuse(f, out.scale, a.sigma_max, dp, exec);
+      break;
+    case DofScheme::bertalmio: {
+      // Eq. 16: the edge (x, x+1) and (y, y+1) weighted by g/4 of the pixel
+      // holding the forward difference, i.e. wx = wy = rho(x, y).
+      const Image w = standard_rates(out.scale, dp.sigma0, N);
+      diffuse_conductance(f, w, w, N, dp.precision, exec);
+      break;
+    }
+    case DofScheme::leaky: {
+      // Eq. 14: I <- I + g/4 Delta I = I + g (J - I) with J one isotropic
+      // step of weight 1/4 on every edge (the engine's conductance step).
+      const Image rho = standard_rates(out.scale, dp.sigma0, N);
+      const Image quarter(W, H, 1, 0.25f);
+      for (int k = 0; k < N; ++k) {
+        Image j = f;
+        diffuse_conductance(j, quarter, quarter, 1, dp.precision, exec);
+        for (std::size_t i = 0; i < f.pixels(); ++i) {
+          const float g = 4.0f * rho.data[i];
+          for (int c = 0; c < 4; ++c) f.data[i * 4 + c] += g * (j.data[i * 4 + c] - f.data[i * 4 + c]);
+        }
+      }
+      break;
+    }
+  }
+  out.rgb = Image(W, H, 3);
+  for (std::size_t i = 0; i < rgb.pixels(); ++i)
+    for (int c = 0; c < 3; ++c) out.rgb.data[i * 3 + c] = f.data[i * 4 + c];
+  return out;
+}
+
+}  // namespace brume

@@ -1,0 +1,170 @@
+// brume — the depth-of-field pipeline: what `brume dof` does, as a library
+// call, in the shape every effect follows (brume/pipeline.hpp): prepare the
+// range, turn it into planar depth, form the scale map from the CoC, dispatch
+// once on Exec (the GPU runs the engine's own passes on that map), record.
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include "brume/dof.hpp"
+#include "brume/error.hpp"
+#include "brume/gpu.hpp"
+#include "brume/record.hpp"
+
+namespace brume {
+
+namespace {
+
+nlohmann::json dof_record(const DofParams& p, const DofAnalysis& a, const Intrinsics& k, const std::string& k_source) {
+  nlohmann::json j;
+  j["parameters"] = dof_param_table().to_json(p);
+  j["units"] = dof_param_table().units();
+  j["diffusion"] = diffusion_record(dof_diffusion_params(p), a.plan);
+  j["diffusion"]["dof_scheme"] = to_string(p.scheme);
+  j["derived"] = {
+      {"coc_infinity_px", a.alpha_px},
+      {"sigma_max_px", a.sigma_max},
+      {"coc_limit_px", p.coc_limit_px},
+      {"capped_pixels", a.capped_pixels},
+      {"unknown_depth_pixels", a.unknown_pixels},
+      {"unknown_depth_rule", "unknown depth is infinitely far: c = alpha"},
+      {"near_field_pixels", a.near_pixels},
+      {"foreground_rule", p.foreground == Foreground::soft
+                              ? "near-field sigma blurred by a Gaussian of its largest value, max with sigma (§3.4)"
+                              : "none (the CoC map as is)"},
+      {"z_min_m", a.z_min_m},
+      {"z_max_m", a.z_max_m},
+      {"sigma_law", "sigma = min(sqrt(sigma0^2 + (c/4)^2), coc_limit), c = alpha |Z - Zf| / Z"},
+      {"intrinsics", {{"fx", k.fx}, {"fy", k.fy}, {"cx", k.cx}, {"cy", k.cy}, {"source", k_source}}},
+  };
+  return j;
+}
+
+bool depth_flags_give_intrinsics(const DepthSource& s) {
+  return s.k.fx > 0.0 || s.k.fy > 0.0 || !std::isnan(s.fov_x_deg) || !std::isnan(s.fov_y_deg) || !s.calib.empty() ||
+         (!s.velodyne.empty() && !s.kitti_calib.empty());
+}
+
+bool cpu_only(const DofParams& p) { return p.scheme == DofScheme::bertalmio || p.scheme == DofScheme::leaky; }
+
+// The GPU runs the engine's passes (rates from sigma, diffusion): the schemes
+// whose edge weights they form. --backend gpu with another is an error
+// (checked before any work); --backend auto runs those on the CPU.
+void check_gpu_scheme(const DofParams& p, Backend b) {
+  if (b != Backend::gpu) return;
+  if (cpu_only(p))
+    throw Error("--scheme " + to_string(p.scheme) +
+                " runs on the CPU only (a comparison with the paper; the GPU passes form symmetric edge weights): "
+                "use --backend cpu, or --scheme invariant-exact or standard on the GPU");
+}
+
+}  // namespace
+
+const std::vector<MapOutput>& dof_map_outputs() {
+  static const std::vector<MapOutput> m = {
+      {"scale-map", "write the target scale sigma(x) in pixels (float file)", "sigma is in pixels and exceeds 1"},
+  };
+  return m;
+}
+
+const ParamTable<DofJob>& dof_job_table() {
+  static const ParamTable<DofJob> t = [] {
+    ParamTable<DofJob> d("dof");
+    d.nest(&DofJob::input, input_param_table(true))
+        .nest(&DofJob::prepare, range_step_param_table())
+        .nest(&DofJob::dof, dof_param_table())
+        .nest(&DofJob::output, output_param_table(dof_map_outputs()));
+    return d;
+  }();
+  return t;
+}
+
+Intrinsics dof_intrinsics(const DepthSource& src, const DofParams& p, int width, int height) {
+  const std::optional<double> lens_fx = lens_fx_px(p, width);
+  if (depth_flags_give_intrinsics(src)) {
+    const Intrinsics k = depth_camera(src, width, height).k;
+    if (lens_fx && std::abs(*lens_fx / k.fx - 1.0) > 0.01) {
+      std::ostringstream m;
+      m << "the lens gives fx = focal length x width / sensor width = " << *p.focal_length_mm << " mm x " << width
+        << " px / " << *p.sensor_width_mm << " mm = " << *lens_fx << " px, but the depth's intrinsics give fx = "
+        << k.fx << " px (" << 100.0 * std::abs(*lens_fx / k.fx - 1.0)
+        << " % apart; at most 1 % is allowed): correct --focal-length or --sensor-width, or the intrinsics";
+      throw Error(m.str());
+    }
+    return k;
+  }
+  if (lens_fx) {
+    Intrinsics k;
+    k.fx = k.fy = *lens_fx;  // square pixels, principal point at the centre
+    return resolve(k, width, height);
+  }
+  throw Error("depth of field needs planar depth, so the camera's intrinsics: give --fx (or --fov-x, --calib), or "
+              "the lens (--focal-length and --sensor-width)");
+}
+
+DofRun run_dof(const Image& rgb, const Image& measured_range, const Intrinsics& k, const DofParams& p,
+               const RangeStep& prepare, const Exec& exec, const std::set<std::string>& given) {
+  validate_dof(p, given);
+  check_gpu_scheme(p, exec.gpu ? Backend::gpu : exec.backend);
+  Exec ex = exec;
+  if (cpu_only(p) && ex.backend == Backend::automatic) ex.backend = Backend::cpu;
+  if (rgb.channels != 3) throw Error("depth of field needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
+  if (rgb.width != measured_range.width || rgb.height != measured_range.height)
+    throw Error("range map " + measured_range.size_string() + " does not match image " + rgb.size_string() +
+                "; they must be the same size (resample the range map, or crop both)");
+  DofRun run;
+  PreparedRange prep = prepare_step(measured_range, prepare, given);
+  const Image z = planar_depth(prep.range, k);
+  BackendChoice backend = choose_backend(ex);
+  if (ex.backend != exec.backend)
+    backend.record["note"] = "--scheme " + to_string(p.scheme) + " runs on the CPU only; --backend auto chose the CPU";
+  const auto t0 = std::chrono::steady_clock::now();
+  nlohmann::json timing;
+  if (backend.gpu) {
+    // The engine's GPU passes on the scale map from the CoC (formed on the
+    // host: one pass over W x H, nothing to gain from a GPU pass).
+    run.result.scale = dof_scale_map(z, p, run.analysis, exec);
+    Image f(rgb.width, rgb.height, 4);
+    for (std::size_t i = 0; i < rgb.pixels(); ++i) {
+      for (int c = 0; c < 3; ++c) f.data[i * 4 + c] = rgb.data[i * 3 + c];
+      f.data[i * 4 + 3] = 1.0f;
+    }
+    GpuTiming t;
+    diffuse_gpu(*backend.gpu, f, run.result.scale, run.analysis.sigma_max, dof_diffusion_params(p), exec.gpu_filter,
+                &t);
+    run.result.rgb = Image(rgb.width, rgb.height, 3);
+    for (std::size_t i = 0; i < rgb.pixels(); ++i)
+      for (int c = 0; c < 3; ++c) run.result.rgb.data[i * 3 + c] = f.data[i * 4 + c];
+    timing = gpu_timing_record(t);
+  } else {
+    run.result = apply_dof(rgb, z, p, run.analysis, exec);
+    timing = cpu_timing_record(t0, run.analysis.plan.iterations);
+  }
+  run.record["dof"] = dof_record(p, run.analysis, k, "given by the caller");
+  run.record["prepare"] = prep.record;
+  run.record["execution"] = backend.record;
+  run.record["execution"]["timing"] = timing;
+  return run;
+}
+
+nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& eo, const RunContext& ctx) {
+  // Every parameter is checked before any file is touched, whatever the input.
+  dof_job_table().validate(job);
+  validate_dof(job.dof, ctx.given);
+  check_range_step(job.prepare, ctx.given);
+  check_gpu_scheme(job.dof, eo.backend);
+  const Exec exec = eo.exec();
+  check_outputs(job.output, dof_map_outputs());
+
+  LoadedInputs in = load_inputs(job.input, true);
+  const Intrinsics k = dof_intrinsics(job.input.depth, job.dof, in.rgb.width, in.rgb.height);
+  DofRun run = run_dof(in.rgb, in.depth.range, k, job.dof, job.prepare, exec, ctx.given);
+  run.record["dof"]["derived"]["intrinsics"]["source"] =
+      depth_flags_give_intrinsics(job.input.depth) ? "depth flags" : "lens (focal length x width / sensor width)";
+
+  const nlohmann::json rec = job_record("dof", ctx, dof_job_table().to_json(job), in.record, run.record, eo.timing);
+  write_outputs(job.output, dof_map_outputs(), run.result.rgb, {{"scale-map", run.result.scale}}, &in.image_info, rec);
+  return rec;
+}
+
+}  // namespace brume
