@@ -38,6 +38,9 @@ HazeResult GpuHaze::render(const HazeParams&, const HazeAnalysis&, GpuFilter) { 
 GpuAerial::GpuAerial(GpuContext& ctx, const Image&, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
 GpuAerial::~GpuAerial() = default;
 AerialResult GpuAerial::render(const AerialParams&, const AerialAnalysis&, GpuFilter) { unavailable(); }
+Image render_sky_gpu(GpuContext&, const SkyRenderParams&, const SkyDirection&, const SkyGeometry&, GpuTiming*) {
+  unavailable();
+}
 DiffusionPlan diffuse_gpu(GpuContext&, Image&, const Image&, double, const DiffusionParams&, GpuFilter, GpuTiming*) {
   unavailable();
 }
