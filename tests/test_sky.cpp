@@ -250,8 +250,10 @@ TEST(SkyGpu, MatchesTheCpuInEveryProjection) {
     int mism = 0;
     // 1e-3: the CPU interpolates its gamma table (~1e-6) and the GPU's
     // exp/acos are within a few ulp; a wrong coefficient or angle is >= 1e-2.
-    EXPECT_LT(relative_rms(gpu, cpu, &mism), 1e-3) << c.proj;
+    const double rms = relative_rms(gpu, cpu, &mism);
+    EXPECT_LT(rms, 1e-3) << c.proj;
     EXPECT_EQ(mism, 0) << c.proj;
+    std::printf("sky GPU vs CPU, %s %dx%d: relative RMS %.2e (%s)\n", c.proj, c.w, c.h, rms, ctx->info().renderer.c_str());
     std::size_t nan_px = 0;
     for (float v : cpu.data) nan_px += std::isnan(v);
     if (std::string(c.proj) != "pinhole") EXPECT_GT(nan_px, 0u) << c.proj;  // the test sees the mask
