@@ -272,9 +272,10 @@ TEST(Camera, PoseErrorsNameTheFlag) {
   p = {};
   p.yaw_deg = -450;
   EXPECT_NEAR(make_camera(test_k(), 640, 480, p).ypr().yaw_deg, 270.0, 1e-11);
-  // Reserved projections are refused.
+  // The sky projections are not cameras: refused, pointing to SkyGeometry.
   const std::string fe = error_of([] { make_camera(test_k(), 640, 480, {}, Projection::fisheye); });
-  EXPECT_NE(fe.find("--projection fisheye is not implemented"), std::string::npos) << fe;
+  EXPECT_NE(fe.find("--projection fisheye is a sky projection"), std::string::npos) << fe;
+  EXPECT_NE(fe.find("SkyGeometry"), std::string::npos) << fe;
   EXPECT_EQ(parse_projection("equirectangular"), Projection::equirectangular);
   EXPECT_NE(error_of([] { parse_projection("orthographic"); }).find("--projection 'orthographic'"), std::string::npos);
   EXPECT_NE(error_of([] { make_camera(test_k(), 0, 480); }).find("0x480"), std::string::npos);

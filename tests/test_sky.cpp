@@ -13,6 +13,7 @@
 #include <random>
 #include <sstream>
 
+#include "brume/gpu.hpp"
 #include "brume/io.hpp"
 #include "brume/sky.hpp"
 #include "shared/prelude_cpp.h"
@@ -135,6 +136,55 @@ TEST(SkyProjection, PixelToDirectionRoundTrips) {
   }
 }
 
+TEST(SkyProjection, SharedFloatMathsAgreeWithDirectionOfPixel) {
+  // The GPU pass's pixel -> direction (src/shared/sky_math.glsl, float) against
+  // the double direction_of_pixel: unit vectors within 2e-6 rad (float
+  // trigonometry on angles of a few radians; a wrong sign or convention is 1e-1).
+  namespace sh = brume::shared;
+  auto unit = [](double th, double ph) {
+    return std::array<double, 3>{std::sin(th) * std::sin(ph), std::cos(th), -std::sin(th) * std::cos(ph)};
+  };
+  auto angle = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
+    const double c = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    return std::acos(std::clamp(c, -1.0, 1.0));
+  };
+  std::mt19937 rng(7);
+  for (const char* proj : {"fisheye", "equirectangular", "pinhole"}) {
+    const SkyGeometry g = geometry(proj, 301, 200, 17.0);
+    std::uniform_int_distribution<int> u(0, 300), v(0, 199);
+    double worst = 0.0;
+    int tested = 0;
+    for (int i = 0; i < 3000; ++i) {
+      const int x = u(rng), y = v(rng);
+      const std::optional<SkyDirection> d = direction_of_pixel(g, x, y);
+      float th = 0, ph = 0;
+      const float off = static_cast<float>(g.azimuth_offset_deg * kDeg);
+      if (g.projection == Projection::fisheye) {
+        const float du = x - static_cast<float>(g.cx), dv = y - static_cast<float>(g.cy);
+        const float r = sh::brume_sky_fisheye_r(du, dv);
+        ASSERT_EQ(r > static_cast<float>(g.radius_px), !d.has_value()) << x << "," << y;
+        if (!d) continue;
+        th = sh::brume_sky_fisheye_theta(r, static_cast<float>(g.radius_px));
+        ph = sh::brume_sky_fisheye_phi(du, dv, off);
+      } else if (g.projection == Projection::equirectangular) {
+        th = sh::brume_sky_equirect_theta(static_cast<float>(y), static_cast<float>(g.height));
+        ph = sh::brume_sky_equirect_phi(static_cast<float>(x), static_cast<float>(g.width), off);
+      } else {
+        const Vec3 w = g.camera.world_ray(x, y);
+        const float dx = static_cast<float>(w.x) * 3.0f, dy = static_cast<float>(w.y) * 3.0f,
+                    dz = static_cast<float>(w.z) * 3.0f;  // any length
+        th = std::atan2(sh::brume_sky_ray_sin_theta(dx, dy, dz), sh::brume_sky_ray_cos_theta(dx, dy, dz));
+        ph = sh::brume_sky_ray_phi(dx, dz);
+      }
+      ASSERT_TRUE(d);
+      worst = std::max(worst, angle(unit(th, ph), unit(d->zenith_deg * kDeg, d->azimuth_deg * kDeg)));
+      ++tested;
+    }
+    EXPECT_GT(tested, 1000) << proj;
+    EXPECT_LT(worst, 2e-6) << proj;
+  }
+}
+
 TEST(SkyProjection, ConventionsAsStated) {
   // Fisheye 201x201: centre (100, 100), radius 100.5; north up, EAST ON THE LEFT.
   const SkyGeometry f = geometry("fisheye", 201, 201);
@@ -156,6 +206,87 @@ TEST(SkyProjection, ConventionsAsStated) {
   const SkyDirection c = *direction_of_pixel(p, p.camera.k.cx, p.camera.k.cy);
   EXPECT_NEAR(c.zenith_deg, 65.0, 1e-9);
   EXPECT_NEAR(c.azimuth_deg, 30.0, 1e-9);
+}
+
+// ---- GPU = CPU ------------------------------------------------------------------------------
+GpuContext* sky_gpu_or_skip(std::string* why) {
+  GpuContext* ctx = test::shared_gpu_context(why);
+  const char* req = std::getenv("BRUME_REQUIRE_GPU");
+  if (!ctx && req && std::string(req) == "1") ADD_FAILURE() << "BRUME_REQUIRE_GPU=1 but " << *why;
+  return ctx;
+}
+
+// RMS of (a - b) over pixels finite in both, relative to the RMS of b; the
+// NaN masks must agree exactly (no direction, or below the horizon).
+double relative_rms(const Image& a, const Image& b, int* mask_mismatch) {
+  double num = 0.0, den = 0.0;
+  *mask_mismatch = 0;
+  for (std::size_t i = 0; i < a.data.size(); ++i) {
+    const bool fa = std::isfinite(a.data[i]), fb = std::isfinite(b.data[i]);
+    if (fa != fb) ++*mask_mismatch;
+    if (!fa || !fb) continue;
+    num += (double(a.data[i]) - b.data[i]) * (double(a.data[i]) - b.data[i]);
+    den += double(b.data[i]) * b.data[i];
+  }
+  return std::sqrt(num / den);
+}
+
+TEST(SkyGpu, MatchesTheCpuInEveryProjection) {
+  std::string why;
+  GpuContext* ctx = sky_gpu_or_skip(&why);
+  if (!ctx) GTEST_SKIP() << why;
+  // Sun at zenith 60, azimuth 40: inside the pinhole's view (axis at zenith 65,
+  // azimuth 30, 70 deg wide), so its disc and the circumsolar peak are tested there too.
+  const SkyDirection sun{60.0, 40.0};
+  struct Case { const char* proj; int w, h; double offset; };
+  for (const Case& c : {Case{"fisheye", 96, 80, 17.0}, Case{"equirectangular", 128, 64, -40.0},
+                        Case{"pinhole", 120, 80, 0.0}}) {
+    const SkyGeometry g = geometry(c.proj, c.w, c.h, c.offset);
+    SkyRenderParams p;
+    p.turbidity = 4.5;
+    p.exposure = 0.25;
+    GpuTiming tm;
+    const Image cpu = render_sky(p, sun, g), gpu = render_sky_gpu(*ctx, p, sun, g, &tm);
+    int mism = 0;
+    // 1e-3: the CPU interpolates its gamma table (~1e-6) and the GPU's
+    // exp/acos are within a few ulp; a wrong coefficient or angle is >= 1e-2.
+    const double rms = relative_rms(gpu, cpu, &mism);
+    EXPECT_LT(rms, 1e-3) << c.proj;
+    EXPECT_EQ(mism, 0) << c.proj;
+    std::printf("sky GPU vs CPU, %s %dx%d: relative RMS %.2e (%s)\n", c.proj, c.w, c.h, rms, ctx->info().renderer.c_str());
+    std::size_t nan_px = 0;
+    for (float v : cpu.data) nan_px += std::isnan(v);
+    if (std::string(c.proj) != "pinhole") EXPECT_GT(nan_px, 0u) << c.proj;  // the test sees the mask
+    // --ground: exactly the given colour below the horizon (fisheye: none, NaN outside its circle).
+    p.ground = Rgb{0.1f, 0.2f, 0.3f};
+    const Image cg = render_sky(p, sun, g), gg = render_sky_gpu(*ctx, p, sun, g);
+    EXPECT_LT(relative_rms(gg, cg, &mism), 1e-3) << c.proj;
+    EXPECT_EQ(mism, 0) << c.proj;
+    // --sun-disc (3 deg, so it covers pixels): disc pixels may differ only on the
+    // rim, where float cos gamma decides; elsewhere the same 1e-3.
+    p.sun_disc = true;
+    p.sun_disc_radius_deg = 3.0;
+    const Image cd = render_sky(p, sun, g), gd = render_sky_gpu(*ctx, p, sun, g);
+    const float sunY = static_cast<float>(p.sun_luminance_kcd * p.exposure);
+    int disc_cpu = 0, disc_gpu = 0;
+    Image cd2 = cd, gd2 = gd;
+    for (std::size_t i = 0; i < cd.data.size(); i += 3) {
+      const bool a = cd.data[i] == sunY && cd.data[i + 1] == sunY, b = gd.data[i] == sunY && gd.data[i + 1] == sunY;
+      disc_cpu += a, disc_gpu += b;
+      if (a || b)
+        for (int k = 0; k < 3; ++k) cd2.data[i + k] = gd2.data[i + k] = NAN;
+    }
+    EXPECT_GT(disc_cpu, 3) << c.proj;
+    EXPECT_LE(std::abs(disc_cpu - disc_gpu), 2) << c.proj;
+    EXPECT_LT(relative_rms(gd2, cd2, &mism), 1e-3) << c.proj;
+    EXPECT_EQ(mism, 0) << c.proj;
+  }
+  // The model's domain is checked on the GPU path too.
+  SkyRenderParams p;
+  const SkyGeometry g = geometry("equirectangular", 16, 8);
+  EXPECT_NE(error_of([&] { render_sky_gpu(*ctx, p, {91, 0}, g); }).find("horizon"), std::string::npos);
+  p.turbidity = 1.5;
+  EXPECT_NE(error_of([&] { render_sky_gpu(*ctx, p, {30, 0}, g); }).find("[1.7, 20]"), std::string::npos);
 }
 
 // ---- the sun -------------------------------------------------------------------------------
@@ -364,6 +495,28 @@ struct TempDir {
   std::string operator/(const std::string& f) const { return (p / f).string(); }
 };
 
+TEST(SkyGpu, CliBackendGpuWritesTheCpuImage) {
+  std::string why;
+  GpuContext* ctx = sky_gpu_or_skip(&why);
+  if (!ctx) GTEST_SKIP() << why;
+  TempDir d;
+  const std::string base = "sky render --turbidity 5 --sun-zenith 40 --sun-azimuth 200 --projection fisheye "
+                           "--width 90 --height 90 --sun-disc --ground 0.1,0.1,0.1 --record ";
+  auto r = run(base + d / "g.json --backend gpu --out " + d / "g.exr");
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = run(base + d / "c.json --backend cpu --out " + d / "c.exr");
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(test::read_json(d / "g.json")["execution"]["backend"], "gpu");
+  EXPECT_EQ(test::read_json(d / "c.json")["execution"]["backend"], "cpu");
+  int mism = 0;
+  Image g = read_color(d / "g.exr"), c = read_color(d / "c.exr");
+  // Blank the disc (its rim may differ by a pixel): the sky itself to 1e-3.
+  for (std::size_t i = 0; i < c.data.size(); ++i)
+    if (c.data[i] > 1e5f || g.data[i] > 1e5f) c.data[i] = g.data[i] = NAN;
+  EXPECT_LT(relative_rms(g, c, &mism), 1e-3);
+  EXPECT_EQ(mism, 0);
+}
+
 TEST(SkyCli, RenderFitRoundTripAndErrorsLeaveNothing) {
   TempDir d;
   auto r = run("sky render --turbidity 6 --sun-zenith 35 --sun-azimuth 210 --projection fisheye --width 300 --height 300 --out " +
@@ -439,6 +592,99 @@ TEST(SkyCli, AerialTakesTurbidityFromTheFitAndRunRepeatsTheRender) {
   EXPECT_EQ(r.status, 2) << r.output;
   EXPECT_NE(r.output.find("unreliable"), std::string::npos) << r.output;
   EXPECT_FALSE(std::filesystem::exists(d / "x.exr"));
+}
+
+TEST(SkyCli, AerialTurbidityAutoFitsTheSkyImage) {
+  TempDir d;
+  // The sky shot: a fisheye at T = 6, its own projection and sun under --sky- flags.
+  auto r = run("sky render --turbidity 6 --sun-zenith 35 --sun-azimuth 210 --projection fisheye --width 300 --height 300 "
+               "--out " + d / "s.exr");
+  ASSERT_EQ(r.status, 0) << r.output;
+  Image rgb(24, 16, 3, 0.5f), range(24, 16, 1, 500.0f);
+  write_image(d / "img.exr", rgb, WriteOptions{});
+  WriteOptions data;
+  data.is_color = false;
+  write_image(d / "range.exr", range, data);
+  const std::string base = "aerial --image " + d / "img.exr" + " --range " + d / "range.exr" + " --airlight 1,1,1";
+  const std::string sky = " --sky-image " + d / "s.exr" +
+                          " --sky-projection fisheye --sky-sun-zenith 35 --sky-sun-azimuth 210";
+  r = run(base + " --turbidity auto" + sky + " --out " + d / "a.exr" + " --record " + d / "a.json");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const nlohmann::json rec = test::read_json(d / "a.json");
+  ASSERT_TRUE(rec.contains("turbidity_fit")) << rec.dump(1);
+  const nlohmann::json& fit = rec["turbidity_fit"];
+  // The same 0.02 as `sky fit` on this sky (SkyCli.RenderFitRoundTripAndErrorsLeaveNothing): the same fit.
+  const double t = fit["turbidity"].get<double>();
+  EXPECT_NEAR(t, 6.0, 0.02);
+  EXPECT_TRUE(fit["reliable"].get<bool>());
+  EXPECT_EQ(fit["sun"]["source"], "given");
+  EXPECT_NEAR(fit["sun"]["zenith_deg"].get<double>(), 35.0, 1e-12);
+  for (const char* k : {"turbidity_spread", "inlier_fraction", "residual"}) EXPECT_TRUE(fit.contains(k)) << k;
+  EXPECT_TRUE(rec["inputs"]["sky_image"].contains("sha256"));
+  EXPECT_TRUE(rec["job"]["aerial"]["turbidity"].is_null());  // recorded as auto: brume run refits
+  EXPECT_EQ(rec["job"]["sky"]["sky-projection"], "fisheye") << rec["job"].dump(1);
+  EXPECT_EQ(rec["job"]["sky"]["sky-sun-azimuth"], 210.0) << rec["job"].dump(1);
+  // The fitted T drives the effect: the same image as --turbidity T^ given by hand.
+  r = run(base + " --turbidity " + nlohmann::json(t).dump() + " --out " + d / "b.exr");
+  ASSERT_EQ(r.status, 0) << r.output;
+  test::expect_same_pixels(d / "a.exr", d / "b.exr");
+  // brume run refits the recorded sky image and repeats the render.
+  std::filesystem::create_directories(d / "again");
+  r = run("run " + d / "a.json" + " --out-dir " + d / "again");
+  ASSERT_EQ(r.status, 0) << r.output;
+  test::expect_same_pixels(d / "a.exr", (std::filesystem::path(d / "again") / "a.exr").string());
+  // An overcast sky (textured grey): the fit is unreliable and aerial refuses it with the reasons.
+  Image cloud(128, 64, 3);
+  std::mt19937 rng(2);
+  std::lognormal_distribution<float> n(0.0f, 0.4f);
+  for (std::size_t i = 0; i < cloud.pixels(); ++i)
+    cloud.data[3 * i] = cloud.data[3 * i + 1] = cloud.data[3 * i + 2] = n(rng);
+  write_image(d / "cloud.exr", cloud, WriteOptions{});
+  r = run(base + " --turbidity auto --sky-image " + d / "cloud.exr" +
+          " --sky-projection equirectangular --sky-sun-zenith 40 --sky-sun-azimuth 0 --out " + d / "x.exr");
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("unreliable ("), std::string::npos) << r.output;
+  // Error paths: each names the flag, nothing is written.
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {base + " --turbidity auto", "--sky-image FILE"},
+      {base + " --turbidity 3 --sky-projection fisheye", "--sky-projection describes the sky photo"},
+      {base + sky, "give --turbidity auto"},
+      {base + " --turbidity auto" + sky + " --turbidity-from " + d / "f.json", "both give the turbidity"},
+      {base + " --turbidity 3" + sky, "--turbidity is 3"},
+      {base + " --turbidity auto --sky-image " + d / "s.exr" + " --sky-projection fisheye", "--sky-sun-zenith"},
+      {base + " --turbidity auto --sky-image " + d / "nope.exr" + " --sky-projection fisheye --sky-sun-zenith 35 "
+              "--sky-sun-azimuth 210", "nope.exr"},
+  };
+  for (const auto& [cmd, want] : bad) {
+    r = run(cmd + " --out " + d / "x.exr");
+    EXPECT_EQ(r.status, 2) << cmd << "\n" << r.output;
+    EXPECT_NE(r.output.find(want), std::string::npos) << cmd << "\n" << r.output;
+  }
+  EXPECT_FALSE(std::filesystem::exists(d / "x.exr"));
+}
+
+TEST(SkyCli, RunRepeatsASkyFit) {
+  TempDir d;
+  auto r = run("sky render --turbidity 4 --sun-zenith 40 --sun-azimuth 100 --width 128 --height 64 --out " + d / "s.exr");
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = run("sky fit --image " + d / "s.exr" + " --sun-zenith 40 --sun-azimuth 100 --out " + d / "f.json" + " --plot " +
+          d / "f.png");
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = run("run " + d / "f.json" + " --out-dir " + d / "again");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const nlohmann::json a = test::read_json(d / "f.json"), b = test::read_json(d / "again/f.json");
+  // Same seed, same samples, same result: bit for bit.
+  EXPECT_EQ(a["turbidity"].get<double>(), b["turbidity"].get<double>());
+  EXPECT_EQ(a["samples"], b["samples"]);
+  EXPECT_TRUE(std::filesystem::exists(d / "again/f.png"));
+  // A changed image is refused (the record names its SHA-256).
+  Image img = read_color(d / "s.exr");
+  img.data[0] *= 2.0f;
+  write_image(d / "s.exr", img, WriteOptions{});
+  r = run("run " + d / "f.json" + " --out-dir " + d / "third");
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("has changed"), std::string::npos) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(d / "third/f.json"));
 }
 
 // ---- real skies ----------------------------------------------------------------------------

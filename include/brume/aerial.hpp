@@ -31,6 +31,7 @@
 #include "brume/image.hpp"
 #include "brume/params.hpp"
 #include "brume/pipeline.hpp"
+#include "brume/sky.hpp"
 
 namespace brume {
 
@@ -288,6 +289,16 @@ struct AerialJob {
   AerialParams aerial;
   OutputFiles output;  // maps: attenuation, scale-map
   std::string turbidity_from;  // --turbidity-from: T from a `brume sky fit` JSON (brume/sky.hpp); must be reliable
+  // --turbidity auto --sky-image FILE: T fitted on a photo of the sky as `brume
+  // sky fit` does (fit_sky_image_file), refused when unreliable. The sky's own
+  // flags carry the prefix --sky- so they do not collide with the photo's
+  // (--sky-projection, --sky-yaw, --sky-sun-zenith, --sky-date, --sky-samples, ...).
+  std::string sky_image;                           // --sky-image
+  Transfer sky_image_transfer = Transfer::automatic;  // --sky-image-transfer
+  std::string sky_mask;                            // --sky-mask
+  SkyViewParams sky_view;                          // --sky-projection ...
+  SunParams sky_sun;                               // --sky-sun ...
+  SkyFitOptions sky_fit;                           // --sky-samples ...
 };
 const std::vector<MapOutput>& aerial_map_outputs();
 const ParamTable<AerialJob>& aerial_job_table();

@@ -35,8 +35,12 @@
 // View matrix (OpenGL): x_eye = M x_world for column vectors, M = [R^T | -R^T C;
 // 0 0 0 1], translation in the fourth column, the eye looking down -z.
 //
-// Pinhole is the only projection implemented; fisheye and equirectangular
-// are reserved for the sky work and refused with an error until then.
+// A Camera is a pinhole camera: its rays, projections and poses are the
+// pinhole's. Fisheye (looking up, equidistant) and equirectangular images are
+// sky images: their pixel <-> direction maps are SkyGeometry's
+// (brume/sky.hpp: sky_geometry, direction_of_pixel, pixel_of_direction), which
+// uses a Camera only for --projection pinhole. A Camera built with another
+// projection is refused (make_camera) and names SkyGeometry.
 #pragma once
 
 #include <array>
@@ -82,6 +86,7 @@ inline Vec3 cv_from_eye(const Vec3& e) { return {e.x, -e.y, -e.z}; }
 enum class Projection { pinhole, fisheye, equirectangular };
 std::string to_string(Projection p);
 // "pinhole" | "fisheye" | "equirectangular"; anything else throws naming --projection.
+// (Only pinhole makes a Camera; the other two are the sky projections of SkyGeometry.)
 Projection parse_projection(const std::string& s);
 
 // Angles of the convention above, in degrees.
@@ -161,7 +166,8 @@ struct CameraPose {
 // Validate the pose (brume::Error naming --yaw, --pitch, --roll,
 // --camera-height, --view-matrix) and build the camera for a width x height
 // image. Intrinsics are resolved (NaN cx/cy = the image centre). fisheye and
-// equirectangular are refused until they are implemented.
+// equirectangular are refused: they map sky images, through SkyGeometry
+// (brume/sky.hpp), not through a Camera.
 Camera make_camera(const Intrinsics& k, int width, int height, const CameraPose& pose = {},
                    Projection projection = Projection::pinhole);
 

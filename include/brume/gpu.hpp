@@ -25,6 +25,7 @@
 #include "brume/fog.hpp"
 #include "brume/haze.hpp"
 #include "brume/image.hpp"
+#include "brume/sky.hpp"
 
 namespace brume {
 
@@ -195,6 +196,14 @@ class GpuFog {
   std::unique_ptr<State> s_;
   GpuTiming timing_;
 };
+// The Preetham sky (brume/sky.hpp) in one fragment pass: the same image as
+// render_sky (same conventions, NaN or --ground below the horizon, the disc
+// when p.sun_disc) to float rounding -- the pass evaluates the gamma term
+// directly where the CPU interpolates a per-image table (RMS difference
+// <= 1e-3 relative, tests/test_sky.cpp). Times land in timing->composite_ms
+// (the pass) and readback_ms.
+Image render_sky_gpu(GpuContext& ctx, const SkyRenderParams& p, const SkyDirection& sun, const SkyGeometry& g,
+                     GpuTiming* timing = nullptr);
 
 // The diffusion engine alone on the GPU (same contract as brume::diffuse).
 DiffusionPlan diffuse_gpu(GpuContext& ctx, Image& f, const Image& sigma, double sigma_max, const DiffusionParams& p,

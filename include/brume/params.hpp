@@ -229,6 +229,23 @@ class ParamTable {
     return *this;
   }
 
+  // The same with every flag name prefixed ("sky-": --sky-projection), for a
+  // block that appears twice in one command (the photo's and the sky's).
+  template <class Q>
+  ParamTable& nest(Q P::*m, const ParamTable<Q>& sub, const std::string& prefix) {
+    for (const Param<Q>& q : sub.params()) {
+      ParamSpec sp = q.spec;
+      sp.name = prefix + sp.name;
+      for (std::string& a : sp.aliases) a = prefix + a;
+      // One block for the prefixed flags in records and --help ("sky-" -> "sky").
+      sp.block = prefix.size() > 1 && prefix.back() == '-' ? prefix.substr(0, prefix.size() - 1) : prefix;
+      if (find(sp.name)) throw Error("internal: parameter '" + sp.name + "' declared twice in " + block_);
+      params_.push_back({std::move(sp), [m, g = q.get](const P& p) { return g(p.*m); },
+                         [m, s = q.set](P& p, const nlohmann::json& v) { s(p.*m, v); }});
+    }
+    return *this;
+  }
+
   const Param<P>* find(const std::string& name) const {
     for (const auto& p : params_)
       if (p.spec.name == name) return &p;

@@ -162,9 +162,11 @@ nlohmann::json cpu_timing_record(std::chrono::steady_clock::time_point t0, int i
 // `brume run`: repeat the run a record describes (schema_version 2). Inputs
 // must still have the SHA-256 the record names; with a non-empty out_dir,
 // every output goes into out_dir under its recorded file name. Returns the
-// new record.
+// new record. A `brume sky fit` JSON is repeated too (its record is under
+// "record"); its --plot is drawn by `sky_plot` (the command line's plotter;
+// a library caller without one gets an error naming --plot).
 nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, const std::string& out_dir,
-                     const std::vector<std::string>& argv);
+                     const std::vector<std::string>& argv, Image (*sky_plot)(const nlohmann::json& fit) = nullptr);
 
 // What a pipeline needs to know about the run beyond its job.
 struct RunContext {

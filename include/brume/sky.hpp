@@ -244,6 +244,24 @@ SkyFitResult fit_sky_image(const Image& rgb, bool integer_image, const SkyGeomet
                            const Image* mask, const SkyFitOptions& o);
 nlohmann::json sky_fit_json(const SkyFitResult& r, const SunFound& sun);
 
+// The fit options' flags (--samples, --seed, --repeats, --ransac-iterations,
+// --inlier-threshold, --sun-exclusion, --max-zenith).
+const ParamTable<SkyFitOptions>& sky_fit_param_table();
+
+// `brume sky fit` on an image file without writing anything: read (integer
+// images linearised by `transfer`), the optional mask (> half scale = usable
+// sky), the view, the sun, the fit. `flags` is the prefix of the caller's flag
+// names in messages ("--" for sky fit, "--sky-" for aerial --turbidity auto).
+struct SkyImageFit {
+  nlohmann::json fit;            // sky_fit_json(...)
+  nlohmann::json image_record;   // file_record of the image
+  nlohmann::json mask_record;    // of the mask; null when none
+  double fit_ms = 0.0;
+};
+SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, const std::string& mask,
+                               const SkyViewParams& view, const SunParams& sun, const SkyFitOptions& fit,
+                               const std::string& flags = "--");
+
 struct SkyFitJob {
   std::string image;                      // --image (hdr, exr, png, jpg, tiff)
   Transfer image_transfer = Transfer::automatic;  // --image-transfer

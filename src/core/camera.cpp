@@ -147,7 +147,8 @@ Projection parse_projection(const std::string& s) {
   if (s == "pinhole") return Projection::pinhole;
   if (s == "fisheye") return Projection::fisheye;
   if (s == "equirectangular") return Projection::equirectangular;
-  throw Error("--projection '" + s + "' is not a projection; use pinhole (fisheye and equirectangular are reserved)");
+  throw Error("--projection '" + s + "' is not a projection; use pinhole, fisheye or equirectangular (the last two "
+              "are sky projections: brume sky)");
 }
 
 // ---- yaw, pitch, roll ---------------------------------------------------------------
@@ -183,7 +184,7 @@ YawPitchRoll ypr_from_rotation(const Mat3& r) {
 
 Vec3 Camera::pixel_ray_cv(double u, double v) const {
   if (projection != Projection::pinhole)
-    throw Error("the " + to_string(projection) + " projection is not implemented yet; only pinhole cameras have rays");
+    throw Error("the " + to_string(projection) + " projection is not a Camera's (sky images map through SkyGeometry, brume/sky.hpp); only pinhole cameras have rays");
   return {(u - k.cx) / k.fx, (v - k.cy) / k.fy, 1.0};
 }
 
@@ -202,7 +203,7 @@ double Camera::height_of(double u, double v, double range_m) const { return worl
 
 std::optional<std::array<double, 2>> Camera::pixel_of(const Vec3& world) const {
   if (projection != Projection::pinhole)
-    throw Error("the " + to_string(projection) + " projection is not implemented yet; only pinhole cameras project");
+    throw Error("the " + to_string(projection) + " projection is not a Camera's (sky images map through SkyGeometry, brume/sky.hpp); only pinhole cameras project");
   const Vec3 c = cv_rotation(orientation).transposed() * sub(world, position_m);
   if (!(c.z > 0.0)) return std::nullopt;
   return std::array<double, 2>{k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy};
@@ -328,8 +329,8 @@ Camera make_camera(const Intrinsics& k, int width, int height, const CameraPose&
     throw Error("the camera's image size " + std::to_string(width) + "x" + std::to_string(height) +
                 " is not allowed: both must be > 0 pixels");
   if (projection != Projection::pinhole)
-    throw Error("--projection " + to_string(projection) + " is not implemented yet (reserved for the sky model); "
-                "use pinhole");
+    throw Error("--projection " + to_string(projection) + " is a sky projection (brume sky: SkyGeometry in "
+                "brume/sky.hpp), not a camera for RGB-D images; use pinhole");
   Camera c;
   c.k = resolve(k, width, height);
   c.width = width, c.height = height;

@@ -74,7 +74,11 @@ J job_from(const nlohmann::json& record, const ParamTable<J>& t, const std::stri
 }  // namespace
 
 nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, const std::string& out_dir,
-                     const std::vector<std::string>& argv) {
+                     const std::vector<std::string>& argv, Image (*sky_plot)(const nlohmann::json& fit)) {
+  // `brume sky fit` writes its result with the record inside, under "record".
+  if (record.is_object() && !record.contains("tool") && record.contains("record") && record["record"].is_object() &&
+      record["record"].value("command", "") == "sky fit")
+    return rerun(record["record"], exec, out_dir, argv, sky_plot);
   if (!record.is_object() || record.value("tool", "") != "brume")
     throw Error("not a brume parameter record (no \"tool\": \"brume\")");
   const int version = record.value("schema_version", 1);
@@ -94,12 +98,23 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
   if (cmd == "dof") return run_dof_job(job_from(record, dof_job_table(), out_dir), exec, ctx);
   if (cmd == "blur") return run_blur_job(job_from(record, blur_job_table(), out_dir), exec, ctx);
   if (cmd == "sky render") return run_sky_render_job(job_from(record, sky_render_job_table(), out_dir), exec, ctx);
+  if (cmd == "sky fit") {
+    // --out and --plot are the fit's own flags (not the output block's): moved here.
+    SkyFitJob job = job_from(record, sky_fit_job_table(), out_dir);
+    if (!out_dir.empty()) {
+      job.out = (fs::path(out_dir) / fs::path(job.out).filename()).string();
+      if (!job.plot.empty()) job.plot = (fs::path(out_dir) / fs::path(job.plot).filename()).string();
+    }
+    return run_sky_fit_job(job, ctx, sky_plot).at("record");
+  }
   if (cmd == "depth convert")
     return run_depth_convert_job(job_from(record, depth_convert_job_table(), out_dir), ctx);
   if (cmd == "depth prepare")
     return run_depth_prepare_job(job_from(record, depth_prepare_job_table(), out_dir), ctx);
   throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, aerial, insert, fog, dof, blur, "
               "sky render, depth convert, depth prepare can)");
+  throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, aerial, insert, blur, depth convert, "
+              "depth prepare, sky render, sky fit can)");
 }
 
 }  // namespace brume

@@ -28,8 +28,11 @@ namespace {
 const ParamTable<Atmosphere>& atmosphere_param_table() {
   static const ParamTable<Atmosphere> t = [] {
     ParamTable<Atmosphere> d("aerial");  // the aerial block's own fields, not a block of their own
-    d.real("turbidity", &Atmosphere::turbidity, "1", Range::closed(1.0, 20.0),
-           "atmospheric turbidity T (1: pure air; by Table 3.1 corrected: clear from about 2.7, light haze 4.5, haze 9.8, fog 19.3)")
+    // auto (NaN in the struct): fitted on --sky-image by `brume aerial` (run_aerial_job) before anything runs.
+    d.real_or_unset("turbidity", &Atmosphere::turbidity, "1", Range::closed(1.0, 20.0),
+                    "atmospheric turbidity T (1: pure air; by Table 3.1 corrected: clear from about 2.7, light haze "
+                    "4.5, haze 9.8, fog 19.3); auto: fitted on --sky-image",
+                    NAN)
         .real("altitude", &Atmosphere::altitude_m, "m", Range::closed(-500.0, 9000.0),
               "observer altitude h0 above sea level (scales beta_R by e^{-h0/7994 m}, beta_M by e^{-h0/1200 m})");
     return d;
@@ -201,6 +204,9 @@ const ParamTable<AerialParams>& aerial_param_table() {
 void validate_aerial(const AerialParams& p, const std::set<std::string>& given) {
   const auto& t = aerial_param_table();
   t.validate(p);
+  if (std::isnan(p.atmosphere.turbidity))
+    throw Error("--turbidity auto fits T on a photo of the sky: give --sky-image FILE (and its --sky- flags), or "
+                "--turbidity T");
   validate_atmosphere(p.atmosphere);
   if (p.sensitivity.empty())
     throw Error("--sensitivity is empty; give default, a CSV file or DATABASE.txt#CAMERA NAME");

@@ -81,7 +81,16 @@ const ParamTable<AerialJob>& aerial_job_table() {
         .nest(&AerialJob::aerial, aerial_param_table())
         .nest(&AerialJob::output, output_param_table(aerial_map_outputs()))
         .text("turbidity-from", &AerialJob::turbidity_from,
-              "take --turbidity from a `brume sky fit` JSON (refused when the fit is flagged unreliable)");
+              "take --turbidity from a `brume sky fit` JSON (refused when the fit is flagged unreliable)")
+        .text("sky-image", &AerialJob::sky_image,
+              "--turbidity auto: the sky photo to fit T on, as brume sky fit (refused when unreliable); its flags "
+              "carry --sky-")
+        .choice("sky-image-transfer", &AerialJob::sky_image_transfer, transfer_names(),
+                "transfer function of an integer --sky-image (auto: sRGB for integer files, linear for float)")
+        .text("sky-mask", &AerialJob::sky_mask, "grey image of --sky-image's size: > half scale marks usable sky")
+        .nest(&AerialJob::sky_view, sky_view_param_table(), "sky-")
+        .nest(&AerialJob::sky_sun, sun_param_table(), "sky-")
+        .nest(&AerialJob::sky_fit, sky_fit_param_table(), "sky-");
     return d;
   }();
   return t;
@@ -118,9 +127,55 @@ nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo,
   // --turbidity-from: the sky fit's T replaces --turbidity, and the record
   // holds the resolved value (so `brume run` finds the two consistent).
   AerialJob job = given_job;
+  double& turbidity = job.aerial.atmosphere.turbidity;
+  // --turbidity auto --sky-image: the same fit as `brume sky fit`, before the
+  // photo is read; an unreliable fit is refused with its reasons. The record
+  // keeps the job as given (--turbidity auto: `brume run` refits the recorded,
+  // hash-checked sky image with the same seed, so finds the same T) and the
+  // fit's result under "turbidity_fit"; the aerial block records the T used.
+  nlohmann::json sky_fit_record;
+  nlohmann::json sky_image_record;
+  if (job.sky_image.empty()) {
+    for (const std::string& g : ctx.given)
+      if (g.rfind("sky-", 0) == 0)
+        throw Error("--" + g + " describes the sky photo of --turbidity auto, but --sky-image was not given; give "
+                    "--turbidity auto --sky-image FILE, or drop --" + g);
+  } else {
+    if (!job.turbidity_from.empty())
+      throw Error("--sky-image '" + job.sky_image + "' and --turbidity-from '" + job.turbidity_from +
+                  "' both give the turbidity; use one of them");
+    if (!std::isnan(turbidity))
+      throw Error("--sky-image '" + job.sky_image + "' is for --turbidity auto (T fitted on the sky photo), but "
+                  "--turbidity is " + std::to_string(turbidity) + "; give --turbidity auto, or drop --sky-image");
+    aerial_job_table().validate(job);  // the --sky- flags' ranges, before the fit reads anything
+    SkyImageFit f = fit_sky_image_file(job.sky_image, job.sky_image_transfer, job.sky_mask, job.sky_view, job.sky_sun,
+                                       job.sky_fit, "--sky-");
+    const nlohmann::json& j = f.fit;
+    if (!j.value("reliable", false)) {
+      std::string why;
+      for (const auto& w : j.value("unreliable_because", nlohmann::json::array()))
+        why += (why.empty() ? "" : "; ") + w.get<std::string>();
+      throw Error("--sky-image '" + job.sky_image + "': the turbidity fit (T = " +
+                  std::to_string(j["turbidity"].get<double>()) + ") is unreliable (" +
+                  (why.empty() ? "no reason given" : why) +
+                  "); give --turbidity T yourself, or fit a clearer part of the sky (--sky-mask)");
+    }
+    const double t = j["turbidity"].get<double>();
+    turbidity = t;
+    sky_fit_record = {{"turbidity", t},
+                      {"turbidity_spread", j["turbidity_spread"]},
+                      {"sun", j["sun"]},
+                      {"inlier_fraction", j["inlier_fraction"]},
+                      {"residual", j["residual"]},
+                      {"reliable", true},
+                      {"fit_ms", f.fit_ms}};
+    sky_image_record = f.image_record;
+    if (!f.mask_record.is_null()) sky_fit_record["mask"] = f.mask_record;
+  }
   if (!job.turbidity_from.empty()) {
     const double t = turbidity_from_fit_json(job.turbidity_from);
-    if (ctx.given.count("turbidity") && job.aerial.atmosphere.turbidity != t)
+    // (--turbidity auto with --turbidity-from: the fit in the file is the auto.)
+    if (ctx.given.count("turbidity") && !std::isnan(turbidity) && turbidity != t)
       throw Error("--turbidity " + std::to_string(job.aerial.atmosphere.turbidity) + " and --turbidity-from '" +
                   job.turbidity_from + "' (T = " + std::to_string(t) + ") disagree; give one of them");
     job.aerial.atmosphere.turbidity = t;
@@ -134,9 +189,15 @@ nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo,
 
   LoadedInputs in = load_inputs(job.input, true);
   AerialRun run = run_aerial(in.rgb, in.depth.range, job.aerial, job.prepare, exec, ctx.given);
+  if (!sky_fit_record.is_null()) {
+    run.record["turbidity_fit"] = sky_fit_record;
+    in.record["sky_image"] = sky_image_record;
+  }
 
+  AerialJob recorded = job;
+  if (!sky_fit_record.is_null()) recorded.aerial.atmosphere.turbidity = NAN;  // auto: refitted by brume run
   const nlohmann::json rec =
-      job_record("aerial", ctx, aerial_job_table().to_json(job), in.record, run.record, eo.timing);
+      job_record("aerial", ctx, aerial_job_table().to_json(recorded), in.record, run.record, eo.timing);
   write_outputs(job.output, aerial_map_outputs(), run.result.rgb,
                 {{"attenuation", run.result.attenuation}, {"scale-map", run.result.scale}}, &in.image_info, rec);
   return rec;

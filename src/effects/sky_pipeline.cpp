@@ -4,10 +4,13 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <cctype>
 #include <fstream>
+#include <set>
 #include <unistd.h>
 
 #include "brume/error.hpp"
+#include "brume/gpu.hpp"
 #include "brume/record.hpp"
 #include "brume/sky.hpp"
 
@@ -77,18 +80,28 @@ nlohmann::json run_sky_render_job(const SkyRenderJob& job, const ExecOptions& eo
   const SkyGeometry g = sky_geometry(p.view, p.width, p.height);
   const SunFound sun = resolve_sun(p.sun, nullptr, false, &g);
   const Exec exec = eo.exec();
-  if (exec.backend == Backend::gpu)
-    throw Error("--backend gpu: the sky render has no GPU pass yet (its per-pixel maths is shared, "
-                "src/shared/sky_math.glsl); use --backend cpu");
   check_outputs(job.output, {});
+  // The backend rules of every effect (choose_backend): --backend auto takes a
+  // hardware GPU, never a software rasteriser.
+  BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();
-  const Image img = render_sky(p, sun.direction, g, exec);
+  Image img;
+  nlohmann::json timing;
+  if (backend.gpu) {
+    GpuTiming gt;
+    img = render_sky_gpu(*backend.gpu, p, sun.direction, g, &gt);
+    timing = gpu_timing_record(gt);
+  } else {
+    img = render_sky(p, sun.direction, g, exec);
+    timing = cpu_timing_record(t0, 0);
+  }
   nlohmann::json run;
   run["sky"] = {{"model", "Preetham, Shirley, Smits 1999 (Perez 1993 distribution)"},
                 {"units", "linear sRGB (D65), kcd/m^2 times --exposure"},
                 {"sun", sun_json(sun)},
                 {"zenith", {{"Y_kcd_m2", sky_zenith(p.turbidity, sun.direction.zenith_deg * 3.14159265358979323846 / 180).Y_kcd}}}};
-  run["execution"] = {{"backend", "cpu"}, {"timing", cpu_timing_record(t0, 0)}};
+  run["execution"] = backend.record;
+  run["execution"]["timing"] = timing;
   const nlohmann::json rec =
       job_record("sky render", ctx, sky_render_job_table().to_json(job), nlohmann::json::object(), run, eo.timing);
   write_outputs(job.output, {}, img, {}, nullptr, rec);
@@ -96,8 +109,8 @@ nlohmann::json run_sky_render_job(const SkyRenderJob& job, const ExecOptions& eo
 }
 
 // ---- fit --------------------------------------------------------------------------------
-const ParamTable<SkyFitJob>& sky_fit_job_table() {
-  static const ParamTable<SkyFitJob> t = [] {
+const ParamTable<SkyFitOptions>& sky_fit_param_table() {
+  static const ParamTable<SkyFitOptions> t = [] {
     ParamTable<SkyFitOptions> f("fit");
     f.integer("samples", &SkyFitOptions::samples, "1", Range::closed(10, 100000), "sky samples per sampling")
         .count("seed", &SkyFitOptions::seed, "1", Range::at_least(0.0), "random seed (same seed, same result)")
@@ -111,6 +124,13 @@ const ParamTable<SkyFitJob>& sky_fit_job_table() {
               "samples at least this far from the sun (its disc, glare and lens flare)")
         .real("max-zenith", &SkyFitOptions::max_zenith_deg, "deg", Range::left_open(0.0, 90.0),
               "samples at most this far from the zenith (the horizon: ground, trees, haze layers)");
+    return f;
+  }();
+  return t;
+}
+
+const ParamTable<SkyFitJob>& sky_fit_job_table() {
+  static const ParamTable<SkyFitJob> t = [] {
     ParamTable<SkyFitJob> d("sky fit");
     d.text("image", &SkyFitJob::image, "the sky photo (HDR/EXR linear; PNG/JPEG/TIFF sRGB unless --image-transfer)")
         .choice("image-transfer", &SkyFitJob::image_transfer, transfer_names(),
@@ -118,12 +138,82 @@ const ParamTable<SkyFitJob>& sky_fit_job_table() {
         .text("mask", &SkyFitJob::mask, "grey image of the same size: > half scale marks usable sky (default: all)")
         .nest(&SkyFitJob::view, sky_view_param_table())
         .nest(&SkyFitJob::sun, sun_param_table())
-        .nest(&SkyFitJob::fit, f)
+        .nest(&SkyFitJob::fit, sky_fit_param_table())
         .text("out", &SkyFitJob::out, "the fit as JSON (turbidity, spread, sun, inliers, residual, reliable, samples)")
         .text("plot", &SkyFitJob::plot, "PNG scatter of measured against model luminance (Morales Fig. 2.5)");
     return d;
   }();
   return t;
+}
+
+namespace {
+
+// The sky's flags as another command spells them: every "--name" of the sky
+// view, sun and fit blocks (and --image, --mask) in `msg` becomes "--sky-name"
+// (one pass over the text, so --sun-zenith is not prefixed twice).
+std::string prefix_sky_flags(const std::string& msg, const std::string& flags) {
+  std::set<std::string> names = {"image", "mask", "image-transfer"};
+  for (const auto& p : sky_view_param_table().params()) names.insert(p.spec.name);
+  for (const auto& p : sun_param_table().params()) names.insert(p.spec.name);
+  for (const auto& p : sky_fit_param_table().params()) names.insert(p.spec.name);
+  std::string out;
+  for (std::size_t i = 0; i < msg.size();) {
+    if (msg.compare(i, 2, "--") == 0) {
+      std::size_t j = i + 2;
+      while (j < msg.size() && (std::isalnum(static_cast<unsigned char>(msg[j])) || msg[j] == '-')) ++j;
+      const std::string name = msg.substr(i + 2, j - i - 2);
+      if (names.count(name)) {
+        out += flags + name;
+        i = j;
+        continue;
+      }
+    }
+    out += msg[i++];
+  }
+  return out;
+}
+
+}  // namespace
+
+SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, const std::string& mask_path,
+                               const SkyViewParams& view, const SunParams& sun_params, const SkyFitOptions& fit,
+                               const std::string& flags) {
+  if (flags != "--") {
+    try {
+      return fit_sky_image_file(image, transfer, mask_path, view, sun_params, fit, "--");
+    } catch (const Error& e) {
+      throw Error(prefix_sky_flags(e.what(), flags));
+    }
+  }
+  const std::string image_flag = flags + "image", mask_flag = flags + "mask";
+  FileInfo info;
+  const Image rgb = read_color(image, transfer, &info);
+  const bool integer_image = info.integer;
+  const SkyGeometry g = sky_geometry(view, rgb.width, rgb.height);
+  Image mask;
+  FileInfo minfo;
+  if (!mask_path.empty()) {
+    mask = read_scalar(mask_path, "", &minfo);
+    if (mask.width != rgb.width || mask.height != rgb.height)
+      throw Error(mask_flag + " '" + mask_path + "' is " + mask.size_string() + " but " + image_flag + " '" + image +
+                  "' is " + rgb.size_string() + "; give a mask of the image's size");
+    const float half = minfo.integer ? (minfo.bits > 8 ? 32767.5f : 127.5f) : 0.5f;
+    for (float& v : mask.data) v = v > half ? 1.0f : 0.0f;
+  }
+  const SunFound sun = resolve_sun(sun_params, &rgb, integer_image, &g);
+  const auto t0 = std::chrono::steady_clock::now();
+  SkyFitResult r;
+  try {
+    r = fit_sky_image(rgb, integer_image, g, sun.direction, mask_path.empty() ? nullptr : &mask, fit);
+  } catch (const Error& e) {
+    throw Error(image_flag + " '" + image + "': " + e.what());
+  }
+  SkyImageFit out;
+  out.fit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  out.fit = sky_fit_json(r, sun);
+  out.image_record = file_record(image, info, rgb);
+  if (!mask_path.empty()) out.mask_record = file_record(mask_path, minfo, mask);
+  return out;
 }
 
 nlohmann::json run_sky_fit_job(const SkyFitJob& job, const RunContext& ctx, SkyPlotter plotter) {
@@ -135,37 +225,15 @@ nlohmann::json run_sky_fit_job(const SkyFitJob& job, const RunContext& ctx, SkyP
     if (!plotter) throw Error("--plot: this caller has no plotter (the brume command line draws it)");
     check_writable(job.plot, WriteOptions{}, "--plot");
   }
-  FileInfo info;
-  const Image rgb = read_color(job.image, job.image_transfer, &info);
-  const bool integer_image = info.integer;
-  const SkyGeometry g = sky_geometry(job.view, rgb.width, rgb.height);
-  Image mask;
-  FileInfo minfo;
-  if (!job.mask.empty()) {
-    mask = read_scalar(job.mask, "", &minfo);
-    if (mask.width != rgb.width || mask.height != rgb.height)
-      throw Error("--mask '" + job.mask + "' is " + mask.size_string() + " but --image '" + job.image + "' is " +
-                  rgb.size_string() + "; give a mask of the image's size");
-    const float half = minfo.integer ? (minfo.bits > 8 ? 32767.5f : 127.5f) : 0.5f;
-    for (float& v : mask.data) v = v > half ? 1.0f : 0.0f;
-  }
-  const SunFound sun = resolve_sun(job.sun, &rgb, integer_image, &g);
-  const auto t0 = std::chrono::steady_clock::now();
-  SkyFitResult r;
-  try {
-    r = fit_sky_image(rgb, integer_image, g, sun.direction, job.mask.empty() ? nullptr : &mask, job.fit);
-  } catch (const Error& e) {
-    throw Error("--image '" + job.image + "': " + e.what());
-  }
-  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  nlohmann::json j = sky_fit_json(r, sun);
+  const SkyImageFit f = fit_sky_image_file(job.image, job.image_transfer, job.mask, job.view, job.sun, job.fit);
+  nlohmann::json j = f.fit;
   nlohmann::json rec = run_record_header("sky fit", ctx.argv);
   rec["job"] = sky_fit_job_table().to_json(job);
-  rec["inputs"]["image"] = file_record(job.image, info, rgb);
-  if (!job.mask.empty()) rec["inputs"]["mask"] = file_record(job.mask, minfo, mask);
+  rec["inputs"]["image"] = f.image_record;
+  if (!job.mask.empty()) rec["inputs"]["mask"] = f.mask_record;
   rec["method"] = "log-luminance fit with a closed-form scale, T by Eigen Levenberg-Marquardt over "
                   "T = 1.7 + 18.3/(1+e^-p) from a 48-point grid, RANSAC against clouds (include/brume/sky.hpp)";
-  rec["fit_ms"] = ms;
+  rec["fit_ms"] = f.fit_ms;
   j["record"] = rec;
   OutputSet outs;
   outs.write_text(job.out, j.dump(2) + "\n", "--out");

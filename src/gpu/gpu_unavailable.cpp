@@ -42,6 +42,9 @@ AerialResult GpuAerial::render(const AerialParams&, const AerialAnalysis&, GpuFi
 GpuFog::GpuFog(GpuContext& ctx, const Image&, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
 GpuFog::~GpuFog() = default;
 FogResult GpuFog::render(const FogParams&, const FogAnalysis&, GpuFilter) { unavailable(); }
+Image render_sky_gpu(GpuContext&, const SkyRenderParams&, const SkyDirection&, const SkyGeometry&, GpuTiming*) {
+  unavailable();
+}
 DiffusionPlan diffuse_gpu(GpuContext&, Image&, const Image&, double, const DiffusionParams&, GpuFilter, GpuTiming*) {
   unavailable();
 }

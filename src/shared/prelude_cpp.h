@@ -28,6 +28,8 @@ inline float clamp(float x, float lo, float hi) { return x < lo ? lo : (x > hi ?
 inline float min(float a, float b) { return b < a ? b : a; }
 inline float max(float a, float b) { return a < b ? b : a; }
 inline float mix(float a, float b, float t) { return a + t * (b - a); }
+// GLSL's two-argument atan(y, x) is C's atan2.
+inline float atan(float y, float x) { return std::atan2(y, x); }
 #include "shared/diffusion_math.glsl"
 #include "shared/haze_math.glsl"
 #include "shared/aerial_math.glsl"

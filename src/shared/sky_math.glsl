@@ -79,3 +79,49 @@ BRUME_FN float brume_sky_cos_gamma(float sin_theta, float cos_theta, float sin_t
                                    float cos_dphi) {
   return clamp(sin_theta * sin_theta_s * cos_dphi + cos_theta * cos_theta_s, -1.0f, 1.0f);
 }
+
+// ---- pixel -> direction, the projections of brume/sky.hpp in float ----------------------
+// The GPU pass maps each fragment to its view direction with these (the CPU
+// renderer keeps its double-precision direction_of_pixel, so its output is
+// unchanged; tests/test_sky.cpp holds the two to each other). Angles are
+// radians here; azimuths are not wrapped: only cos(phi - phi_s) is used.
+//
+// Fisheye (looking up, equidistant): offset (du, dv) = (u - cx, v - cy) from
+// the zenith pixel; beyond r > radius there is no direction (the caller tests
+// brume_sky_fisheye_r against the radius). theta = (pi/2) r / radius.
+BRUME_FN float brume_sky_fisheye_r(float du, float dv) { return sqrt(du * du + dv * dv); }
+BRUME_FN float brume_sky_fisheye_theta(float r, float radius) { return 1.57079633f * r / radius; }
+// Compass azimuth: north at the image's up direction, east on the LEFT (seen
+// from below), so phi = atan2(-du, -dv) + offset; at the centre itself the
+// azimuth is undefined and irrelevant (sin theta = 0), taken as the offset.
+BRUME_FN float brume_sky_fisheye_phi(float du, float dv, float offset) {
+  return (du == 0.0f && dv == 0.0f) ? offset : atan(-du, -dv) + offset;
+}
+// Equirectangular: row 0 at the zenith, theta = pi (v + 0.5) / H; column u
+// at phi = 2 pi (u + 0.5) / W - pi + offset (increasing to the right seen from inside).
+// ((v + 0.5) / H first: the middle row of an odd height is then exactly pi/2, the horizon, as on the CPU.)
+BRUME_FN float brume_sky_equirect_theta(float v, float height) { return 3.14159265f * ((v + 0.5f) / height); }
+BRUME_FN float brume_sky_equirect_phi(float u, float width, float offset) {
+  return 6.28318531f * (u + 0.5f) / width - 3.14159265f + offset;
+}
+// Pinhole: the ray d = (east, up, south) of a pixel (any length; the host
+// folds intrinsics and orientation into one world_from_pixel matrix): its
+// cos and sin of the zenith angle and its compass azimuth atan2(east, north).
+BRUME_FN float brume_sky_ray_cos_theta(float dx, float dy, float dz) {
+  return dy / sqrt(dx * dx + dy * dy + dz * dz);
+}
+BRUME_FN float brume_sky_ray_sin_theta(float dx, float dy, float dz) {
+  return sqrt(dx * dx + dz * dz) / sqrt(dx * dx + dy * dy + dz * dz);
+}
+BRUME_FN float brume_sky_ray_phi(float dx, float dz) { return (dx == 0.0f && dz == 0.0f) ? 0.0f : atan(dx, -dz); }
+
+// Below the horizon: the CPU renderer's test on the float zenith angle (the
+// horizon itself, theta = pi/2 exactly, is sky).
+BRUME_FN bool brume_sky_below_horizon(float theta) { return theta > 0.5f * 3.14159265f; }
+
+// One channel of the sky in one direction: the per-image normalisation
+// `scale` = value_zenith / F(0, theta_s) times the Perez F of the view, with
+// gamma from its cosine (acos of a cosine clamped to [-1, 1]).
+BRUME_FN float brume_sky_channel(float scale, float theta_term, float c, float d, float e, float cos_gamma) {
+  return scale * theta_term * brume_perez_gamma(c, d, e, acos(cos_gamma), cos_gamma);
+}

@@ -4,12 +4,13 @@
 
 #include "brume/error.hpp"
 #include "cli.hpp"
+#include "brume_study/sky_plot.hpp"
 
 namespace brume::cli {
 
 Command add_run(CLI::App& app) {
   CLI::App* sub = app.add_subcommand(
-      "run", "repeat the run a parameter record describes (--record FILE.json of haze, aerial, insert, blur, depth convert/prepare)");
+      "run", "repeat the run a parameter record describes (--record FILE.json of haze, aerial, insert, blur, depth convert/prepare, sky render; a sky fit's JSON)");
   auto path = std::make_shared<std::string>();
   auto out_dir = std::make_shared<std::string>();
   sub->add_option("record", *path, "the JSON record (or a record embedded in nothing else: the file itself)")->required();
@@ -27,7 +28,7 @@ Command add_run(CLI::App& app) {
             } catch (const nlohmann::json::exception& e) {
               throw Error("record '" + *path + "' is not JSON: " + e.what());
             }
-            const nlohmann::json out = rerun(rec, *exec, *out_dir, argv);
+            const nlohmann::json out = rerun(rec, *exec, *out_dir, argv, &brume::study::sky_fit_scatter);
             std::fprintf(stderr, "brume run: repeated '%s' from %s\n", out.value("command", "?").c_str(), path->c_str());
             return 0;
           }};
