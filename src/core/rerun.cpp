@@ -112,9 +112,7 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
   if (cmd == "depth prepare")
     return run_depth_prepare_job(job_from(record, depth_prepare_job_table(), out_dir), ctx);
   throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, aerial, insert, fog, dof, blur, "
-              "sky render, depth convert, depth prepare can)");
-  throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, aerial, insert, blur, depth convert, "
-              "depth prepare, sky render, sky fit can)");
+              "sky render, sky fit, depth convert, depth prepare can)");
 }
 
 }  // namespace brume
