@@ -256,7 +256,7 @@ TEST(SkyGpu, MatchesTheCpuInEveryProjection) {
     std::printf("sky GPU vs CPU, %s %dx%d: relative RMS %.2e (%s)\n", c.proj, c.w, c.h, rms, ctx->info().renderer.c_str());
     std::size_t nan_px = 0;
     for (float v : cpu.data) nan_px += std::isnan(v);
-    if (std::string(c.proj) != "pinhole") EXPECT_GT(nan_px, 0u) << c.proj;  // the test sees the mask
+    if (std::string(c.proj) != "pinhole") { EXPECT_GT(nan_px, 0u) << c.proj; }  // the test sees the mask
     // --ground: exactly the given colour below the horizon (fisheye: none, NaN outside its circle).
     p.ground = Rgb{0.1f, 0.2f, 0.3f};
     const Image cg = render_sky(p, sun, g), gg = render_sky_gpu(*ctx, p, sun, g);
