@@ -119,7 +119,11 @@ const ParamTable<SkyViewParams>& sky_view_param_table() {
                        "pinhole horizontal field of view, edge to edge", NAN)
         .real_or_unset("fov-y", &SkyViewParams::fov_y_deg, "deg", Range::left_open(0.0, 180.0),
                        "pinhole vertical field of view, edge to edge", NAN)
-        .nest(&SkyViewParams::pose, camera_pose_param_table());
+        // Only the orientation: a sky is at infinity, so the camera's position
+        // (height, x, z, a view matrix's translation) would be ignored, and a
+        // flag a command would ignore is not offered.
+        .nest_except(&SkyViewParams::pose, camera_pose_param_table(),
+                     {"camera-height", "camera-x", "camera-z", "view-matrix"});
     return d;
   }();
   return t;
