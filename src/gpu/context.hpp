@@ -19,6 +19,7 @@
 // gl2ext.h after gl32.h: it needs GL_APIENTRYP (EXT_disjoint_timer_query).
 #include <GLES2/gl2ext.h>
 
+#include <array>
 #include <chrono>
 #include <initializer_list>
 #include <map>
@@ -138,6 +139,26 @@ class StageTimer {
   bool* used_query_;
   bool running_ = false;
 };
+
+// The textures of a premultiplied scattering blur (Hansard), shared by every
+// effect that blurs by scattering (haze, fog): the effect's own first pass
+// draws into `first` -- the premultiplied colour F0 into f[0] and its
+// per-pixel terms into aux, sigma in aux.x for the rate pass -- and
+// scatter_rates / scatter_diffuse_composite finish: sigma -> rates, the N
+// diffusion passes, and haze's composite out = F.rgb + (1 - F.a) B (eq. 4).
+// Made on the first render and remade when the precision changes.
+struct ScatterTargets {
+  Precision precision = Precision::f32;
+  int w = 0, h = 0;
+  gl::Texture f[2], aux, rates, out;
+  Target first, composite;
+  int last = 0;  // which of f[] holds the diffused colour
+  void ensure(int width, int height, Precision p, GLenum aux_format);
+};
+void scatter_rates(GpuContext& ctx, ScatterTargets& s, const DiffusionParams& d, const DiffusionPlan& plan);
+// The diffusion and the composite, timed into timing.diffuse_ms and composite_ms.
+void scatter_diffuse_composite(GpuContext& ctx, ScatterTargets& s, const DiffusionParams& d, const DiffusionPlan& plan,
+                               GpuFilter filter, const std::array<float, 3>& airlight, bool naive, GpuTiming& timing);
 
 double ms_since(Clock::time_point t0);
 

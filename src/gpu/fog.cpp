@@ -16,18 +16,14 @@ namespace {
 
 constexpr int kMaxKnots = 32;  // BRUME_FOG_MAX_KNOTS in GLSL
 const gpu::PassSpec kFogPass{"fog.apply", {"fog_math"}, gpu::shaders::fog_frag};
-// Haze's composite (Hansard eq. 4), reused as it is.
-const gpu::PassSpec kCompositePass{"haze.composite", {"haze_math"}, gpu::shaders::composite_frag};
 
 GpuTexture tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
 
 }  // namespace
 
 struct GpuFog::State {
-  gl::Texture image, range;
-  Precision precision = Precision::f32;
-  gl::Texture f[2], aux, rates, out;
-  gpu::Target fog, composite;
+  gl::Texture image, range;  // inputs, uploaded once
+  gpu::ScatterTargets t;     // haze's blur textures; aux holds sigma, F0 alpha, F
 };
 
 GpuFog::GpuFog(GpuContext& ctx, const Image& rgb, const Image& range)
@@ -51,18 +47,7 @@ FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter fil
   GpuContext::Impl& g = ctx_.impl();
   State& s = *s_;
   const bool blur = p.lambda > 0.0;
-  if (!s.composite.fbo || s.precision != p.diffusion.precision) {
-    s.fog = {};
-    s.composite = {};
-    const GLenum fmt = p.diffusion.precision == Precision::f16 ? GL_RGBA16F : GL_RGBA32F;
-    for (gl::Texture& t : s.f) t = gpu::make_texture(fmt, w_, h_);
-    s.aux = gpu::make_texture(GL_RGBA32F, w_, h_);
-    s.rates = gpu::make_texture(GL_R32F, w_, h_);
-    s.out = gpu::make_texture(GL_RGBA32F, w_, h_);
-    s.fog = gpu::make_target({tex(s.f[0], w_, h_), tex(s.aux, w_, h_)});
-    s.composite = gpu::make_target({tex(s.out, w_, h_)});
-    s.precision = p.diffusion.precision;
-  }
+  s.t.ensure(w_, h_, p.diffusion.precision, GL_RGBA32F);
   const double upload_ms = timing_.upload_ms;
   timing_ = {};
   timing_.upload_ms = upload_ms;
@@ -71,7 +56,7 @@ FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter fil
 
   gpu::StageTimer t1(g, &timing_.gpu_timer);
   const gpu::Program& pr = g.program(kFogPass);
-  g.begin(s.fog);
+  g.begin(s.t.first);
   glUseProgram(pr.id());
   glActiveTexture(GL_TEXTURE0);
   glBindTexture(GL_TEXTURE_2D, s.image.id());
@@ -102,36 +87,17 @@ FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter fil
   glUniform1f(pr.loc("uSigmaMax"), static_cast<float>(a.sigma_max));
   GpuContext::Impl::draw();
   gpu::check_gl("fog");
-  if (blur) gpu_diffusion_rates(ctx_, tex(s.aux, w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan);
+  if (blur) gpu::scatter_rates(ctx_, s.t, p.diffusion, a.plan);
   timing_.premultiply_ms = t1.stop();
 
-  int last = 0;
-  const gl::Texture* result = &s.f[0];
+  const gl::Texture* result = &s.t.f[0];
   if (blur) {
-    gpu::StageTimer t2(g, &timing_.gpu_timer);
-    gpu_diffuse_textures(ctx_, tex(s.f[0], w_, h_), tex(s.f[1], w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan,
-                         filter, &last);
-    timing_.diffuse_ms = t2.stop();
-
-    gpu::StageTimer t3(g, &timing_.gpu_timer);
-    const gpu::Program& pc = g.program(kCompositePass);
-    g.begin(s.composite);
-    glUseProgram(pc.id());
-    glActiveTexture(GL_TEXTURE0);
-    glBindTexture(GL_TEXTURE_2D, s.f[last].id());
-    glActiveTexture(GL_TEXTURE1);
-    glBindTexture(GL_TEXTURE_2D, s.aux.id());
-    glUniform3f(pc.loc("uAirlight"), a.airlight[0], a.airlight[1], a.airlight[2]);
-    glUniform1i(pc.loc("uNaive"), 0);
-    GpuContext::Impl::draw();
-    glBindFramebuffer(GL_FRAMEBUFFER, 0);
-    gpu::check_gl("fog composite");
-    timing_.composite_ms = t3.stop();
-    result = &s.out;
+    gpu::scatter_diffuse_composite(ctx_, s.t, p.diffusion, a.plan, filter, a.airlight, false, timing_);
+    result = &s.t.out;
   }
 
   const auto t4 = gpu::Clock::now();
-  const std::vector<float> o = gpu::read_rgba(tex(*result, w_, h_)), x = gpu::read_rgba(tex(s.aux, w_, h_));
+  const std::vector<float> o = gpu::read_rgba(tex(*result, w_, h_)), x = gpu::read_rgba(tex(s.t.aux, w_, h_));
   timing_.readback_ms = gpu::ms_since(t4);
   FogResult res;
   res.rgb = Image(w_, h_, 3);

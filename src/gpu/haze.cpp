@@ -23,12 +23,57 @@ GpuTexture tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
 
 }  // namespace
 
+namespace gpu {
+
+void ScatterTargets::ensure(int width, int height, Precision p, GLenum aux_format) {
+  if (composite.fbo && precision == p && w == width && h == height) return;
+  first = {};
+  composite = {};
+  w = width, h = height;
+  const GLenum fmt = p == Precision::f16 ? GL_RGBA16F : GL_RGBA32F;
+  for (gl::Texture& t : f) t = make_texture(fmt, w, h);
+  aux = make_texture(aux_format, w, h);
+  rates = make_texture(GL_R32F, w, h);
+  out = make_texture(GL_RGBA32F, w, h);
+  first = make_target({tex(f[0], w, h), tex(aux, w, h)});
+  composite = make_target({tex(out, w, h)});
+  precision = p;
+}
+
+void scatter_rates(GpuContext& ctx, ScatterTargets& s, const DiffusionParams& d, const DiffusionPlan& plan) {
+  gpu_diffusion_rates(ctx, tex(s.aux, s.w, s.h), tex(s.rates, s.w, s.h), d, plan);
+}
+
+void scatter_diffuse_composite(GpuContext& ctx, ScatterTargets& s, const DiffusionParams& d, const DiffusionPlan& plan,
+                               GpuFilter filter, const std::array<float, 3>& airlight, bool naive, GpuTiming& timing) {
+  GpuContext::Impl& g = ctx.impl();
+  StageTimer t2(g, &timing.gpu_timer);
+  s.last = 0;
+  gpu_diffuse_textures(ctx, tex(s.f[0], s.w, s.h), tex(s.f[1], s.w, s.h), tex(s.rates, s.w, s.h), d, plan, filter,
+                       &s.last);
+  timing.diffuse_ms = t2.stop();
+
+  StageTimer t3(g, &timing.gpu_timer);
+  const Program& pc = g.program(kCompositePass);
+  g.begin(s.composite);
+  glUseProgram(pc.id());
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_2D, s.f[s.last].id());
+  glActiveTexture(GL_TEXTURE1);
+  glBindTexture(GL_TEXTURE_2D, s.aux.id());
+  glUniform3f(pc.loc("uAirlight"), airlight[0], airlight[1], airlight[2]);
+  glUniform1i(pc.loc("uNaive"), naive ? 1 : 0);
+  GpuContext::Impl::draw();
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  check_gl("composite");
+  timing.composite_ms = t3.stop();
+}
+
+}  // namespace gpu
+
 struct GpuHaze::State {
   gl::Texture image, range;  // inputs, uploaded once
-  // Targets, made on the first render and remade when the precision changes.
-  Precision precision = Precision::f32;
-  gl::Texture f[2], aux, rates, out;
-  gpu::Target premultiply, composite;
+  gpu::ScatterTargets t;
 };
 
 GpuHaze::GpuHaze(GpuContext& ctx, const Image& rgb, const Image& range)
@@ -46,25 +91,14 @@ GpuHaze::~GpuHaze() = default;
 HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter filter) {
   GpuContext::Impl& g = ctx_.impl();
   State& s = *s_;
-  if (!s.composite.fbo || s.precision != p.diffusion.precision) {
-    s.premultiply = {};
-    s.composite = {};
-    const GLenum fmt = p.diffusion.precision == Precision::f16 ? GL_RGBA16F : GL_RGBA32F;
-    for (gl::Texture& t : s.f) t = gpu::make_texture(fmt, w_, h_);
-    s.aux = gpu::make_texture(GL_RG32F, w_, h_);
-    s.rates = gpu::make_texture(GL_R32F, w_, h_);
-    s.out = gpu::make_texture(GL_RGBA32F, w_, h_);
-    s.premultiply = gpu::make_target({tex(s.f[0], w_, h_), tex(s.aux, w_, h_)});
-    s.composite = gpu::make_target({tex(s.out, w_, h_)});
-    s.precision = p.diffusion.precision;
-  }
+  s.t.ensure(w_, h_, p.diffusion.precision, GL_RG32F);
   const bool naive = p.composite == Composite::naive;
   timing_.iterations = a.plan.iterations;
   timing_.gpu_timer = g.info.timer_query;
 
   gpu::StageTimer t1(g, &timing_.gpu_timer);
   const gpu::Program& pr = g.program(kPremultiplyPass);
-  g.begin(s.premultiply);
+  g.begin(s.t.first);
   glUseProgram(pr.id());
   glActiveTexture(GL_TEXTURE0);
   glBindTexture(GL_TEXTURE_2D, s.image.id());
@@ -77,32 +111,12 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
   glUniform1i(pr.loc("uNaive"), naive ? 1 : 0);
   GpuContext::Impl::draw();
   gpu::check_gl("premultiply");
-  gpu_diffusion_rates(ctx_, tex(s.aux, w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan);
+  gpu::scatter_rates(ctx_, s.t, p.diffusion, a.plan);
   timing_.premultiply_ms = t1.stop();
-
-  gpu::StageTimer t2(g, &timing_.gpu_timer);
-  int last = 0;
-  gpu_diffuse_textures(ctx_, tex(s.f[0], w_, h_), tex(s.f[1], w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan, filter,
-                       &last);
-  timing_.diffuse_ms = t2.stop();
-
-  gpu::StageTimer t3(g, &timing_.gpu_timer);
-  const gpu::Program& pc = g.program(kCompositePass);
-  g.begin(s.composite);
-  glUseProgram(pc.id());
-  glActiveTexture(GL_TEXTURE0);
-  glBindTexture(GL_TEXTURE_2D, s.f[last].id());
-  glActiveTexture(GL_TEXTURE1);
-  glBindTexture(GL_TEXTURE_2D, s.aux.id());
-  glUniform3f(pc.loc("uAirlight"), a.airlight[0], a.airlight[1], a.airlight[2]);
-  glUniform1i(pc.loc("uNaive"), naive ? 1 : 0);
-  GpuContext::Impl::draw();
-  glBindFramebuffer(GL_FRAMEBUFFER, 0);
-  gpu::check_gl("composite");
-  timing_.composite_ms = t3.stop();
+  gpu::scatter_diffuse_composite(ctx_, s.t, p.diffusion, a.plan, filter, a.airlight, naive, timing_);
 
   const auto t4 = gpu::Clock::now();
-  const std::vector<float> o = gpu::read_rgba(tex(s.out, w_, h_)), x = gpu::read_rgba(tex(s.aux, w_, h_));
+  const std::vector<float> o = gpu::read_rgba(tex(s.t.out, w_, h_)), x = gpu::read_rgba(tex(s.t.aux, w_, h_));
   timing_.readback_ms = gpu::ms_since(t4);
   HazeResult res;
   res.rgb = Image(w_, h_, 3);
