@@ -45,6 +45,10 @@ Image read_color(const std::string& path, Transfer transfer = Transfer::automati
 Image read_scalar(const std::string& path, const std::string& channel = "",
                   FileInfo* info = nullptr);
 
+// Before any work: the directory an output `path` goes to exists and is
+// writable, or a brume::Error naming `flag` and the path says how to fix it.
+void check_output_dir(const std::string& path, const std::string& flag);
+
 // sRGB transfer (IEC 61966-2-1), exact piecewise form.
 float srgb_to_linear(float v);
 float linear_to_srgb(float v);

@@ -67,15 +67,7 @@ double psnr_db(double mse, double peak) {
 
 nlohmann::json db_json(double v) { return std::isinf(v) ? nlohmann::json("inf") : nlohmann::json(v); }
 
-void check_json_path(const std::string& path) {
-  fs::path dir = fs::path(path).parent_path();
-  if (dir.empty()) dir = ".";
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec))
-    throw Error("--json '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
-  if (::access(dir.c_str(), W_OK) != 0)
-    throw Error("--json '" + path + "': directory '" + dir.string() + "' is not writable");
-}
+void check_json_path(const std::string& path) { check_output_dir(path, "--json"); }
 
 }  // namespace
 

@@ -352,15 +352,7 @@ BackendChoice choose_backend(const Exec& exec) {
   return c;
 }
 
-void check_record_path(const std::string& path) {
-  fs::path dir = fs::path(path).parent_path();
-  if (dir.empty()) dir = ".";
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec))
-    throw Error("--record '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
-  if (::access(dir.c_str(), W_OK) != 0)
-    throw Error("--record '" + path + "': directory '" + dir.string() + "' is not writable");
-}
+void check_record_path(const std::string& path) { check_output_dir(path, "--record"); }
 
 namespace {
 

@@ -20,15 +20,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-void check_dir_writable(const std::string& path, const std::string& flag) {
-  fs::path dir = fs::path(path).parent_path();
-  if (dir.empty()) dir = ".";
-  std::error_code ec;
-  if (!fs::is_directory(dir, ec))
-    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
-  if (::access(dir.c_str(), W_OK) != 0)
-    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' is not writable");
-}
 
 nlohmann::json sun_json(const SunFound& s) {
   nlohmann::json j = {{"zenith_deg", s.direction.zenith_deg}, {"azimuth_deg", s.direction.azimuth_deg}, {"source", s.source}};
@@ -220,7 +211,7 @@ nlohmann::json run_sky_fit_job(const SkyFitJob& job, const RunContext& ctx, SkyP
   sky_fit_job_table().validate(job);
   if (job.image.empty()) throw Error("sky fit needs a sky photo: give --image FILE");
   if (job.out.empty()) throw Error("sky fit writes its result as JSON: give --out fit.json");
-  check_dir_writable(job.out, "--out");
+  check_output_dir(job.out, "--out");
   if (!job.plot.empty()) {
     if (!plotter) throw Error("--plot: this caller has no plotter (the brume command line draws it)");
     check_writable(job.plot, WriteOptions{}, "--plot");

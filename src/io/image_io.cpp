@@ -20,6 +20,16 @@ namespace fs = std::filesystem;
 Transfer parse_transfer(const std::string& s, const std::string& flag) { return parse_enum(transfer_names(), s, flag); }
 std::string to_string(Transfer t) { return enum_name(transfer_names(), t); }
 
+void check_output_dir(const std::string& path, const std::string& flag) {
+  fs::path dir = fs::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec))
+    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
+  if (::access(dir.c_str(), W_OK) != 0)
+    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' is not writable");
+}
+
 float srgb_to_linear(float v) {
   return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
 }
@@ -207,13 +217,8 @@ void check_writable(const std::string& path, const WriteOptions& opts, const std
   if (!opts.float_reason.empty() &&
       (type == OIIO::TypeDesc::UINT8 || type == OIIO::TypeDesc::UINT16 || e == ".hdr"))
     throw Error(flag + " '" + path + "': " + opts.float_reason + "; write it to .exr, .pfm or .tif (float)");
-  fs::path dir = fs::path(path).parent_path();
-  if (dir.empty()) dir = ".";
+  check_output_dir(path, flag);
   std::error_code ec;
-  if (!fs::is_directory(dir, ec))
-    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
-  if (::access(dir.c_str(), W_OK) != 0)
-    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' is not writable");
   if (fs::is_directory(path, ec)) throw Error(flag + " '" + path + "' is a directory");
 }
 
