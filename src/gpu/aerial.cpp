@@ -37,8 +37,7 @@ gl::Texture table_texture(const AttenuationTable& t) {
 }  // namespace
 
 struct GpuAerial::State {
-  gl::Texture image, range;  // inputs, uploaded once
-  std::vector<float> range_host;  // the uploaded range (-1 = unknown), for the floored count
+  gpu::ColorAndRange in;  // colour and range, uploaded once
   Precision precision = Precision::f32;
   gl::Texture f0[2], f1[2], aux, rates, out, att;
   gpu::Target premultiply, composite;
@@ -46,13 +45,7 @@ struct GpuAerial::State {
 
 GpuAerial::GpuAerial(GpuContext& ctx, const Image& rgb, const Image& range)
     : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
-  const auto t0 = gpu::Clock::now();
-  gpu::ColorAndRange in = gpu::upload_color_and_range(rgb, range, "aerial");
-  s_->image = std::move(in.image);
-  s_->range = std::move(in.range);
-  s_->range_host = std::move(in.range_host);
-  glFinish();
-  timing_.upload_ms = gpu::ms_since(t0);
+  s_->in = gpu::upload_color_and_range(rgb, range, "aerial", &timing_.upload_ms);
 }
 
 GpuAerial::~GpuAerial() = default;
@@ -102,7 +95,7 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
   const gpu::Program& pr = g.program(kPremultiplyPass);
   g.begin(s.premultiply);
   glUseProgram(pr.id());
-  const GLuint inputs[] = {s.image.id(), s.range.id(), table.id(), table_from.id()};
+  const GLuint inputs[] = {s.in.image.id(), s.in.range.id(), table.id(), table_from.id()};
   for (int k = 0; k < 4; ++k) {
     glActiveTexture(GL_TEXTURE0 + k);
     glBindTexture(GL_TEXTURE_2D, inputs[k]);
@@ -143,7 +136,7 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
   const gpu::Program& pc = g.program(kCompositePass);
   g.begin(s.composite);
   glUseProgram(pc.id());
-  const GLuint cin[] = {s.f0[last0].id(), s.f1[last1].id(), s.image.id(), s.range.id(), sky_tex.id()};
+  const GLuint cin[] = {s.f0[last0].id(), s.f1[last1].id(), s.in.image.id(), s.in.range.id(), sky_tex.id()};
   for (int k = 0; k < 5; ++k) {
     glActiveTexture(GL_TEXTURE0 + k);
     glBindTexture(GL_TEXTURE_2D, cin[k]);
@@ -175,8 +168,8 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
   // The floored count is a statistic of the record: the host's table gives
   // it (the same look-up the pass made), without a GPU reduction.
   if (a.mode != AerialMode::render)
-    for (std::size_t i = 0; i < s.range_host.size(); ++i) {
-      const float r = s.range_host[i];
+    for (std::size_t i = 0; i < s.in.range_host.size(); ++i) {
+      const float r = s.in.range_host[i];
       if (!(r > 0.0f) || (!a.sky.data.empty() && a.sky.data[i] > 0.0f)) continue;
       const std::array<float, 3> gl = (a.mode == AerialMode::rerender ? a.gamma_from : a.gamma)
                                           .at(static_cast<double>(r) * p.distance_scale);

@@ -282,7 +282,8 @@ Target make_target(std::initializer_list<GpuTexture> colour) {
   return t;
 }
 
-ColorAndRange upload_color_and_range(const Image& rgb, const Image& range, const char* what) {
+ColorAndRange upload_color_and_range(const Image& rgb, const Image& range, const char* what, double* upload_ms) {
+  const auto t0 = Clock::now();
   const int w = rgb.width, h = rgb.height;
   if (rgb.channels != 3 || range.channels != 1 || range.width != w || range.height != h)
     throw Error(std::string("GPU ") + what + ": range map " + range.size_string() + " does not match image " +
@@ -297,6 +298,8 @@ ColorAndRange upload_color_and_range(const Image& rgb, const Image& range, const
   }
   c.image = make_texture(GL_RGBA32F, w, h, GL_RGBA, GL_FLOAT, px.data());
   c.range = make_texture(GL_R32F, w, h, GL_RED, GL_FLOAT, c.range_host.data());
+  glFinish();
+  *upload_ms = ms_since(t0);
   return c;
 }
 

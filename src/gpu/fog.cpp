@@ -22,18 +22,13 @@ GpuTexture tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
 }  // namespace
 
 struct GpuFog::State {
-  gl::Texture image, range;  // inputs, uploaded once
+  gpu::ColorAndRange in;  // colour and range, uploaded once
   gpu::ScatterTargets t;     // haze's blur textures; aux holds sigma, F0 alpha, F
 };
 
 GpuFog::GpuFog(GpuContext& ctx, const Image& rgb, const Image& range)
     : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
-  const auto t0 = gpu::Clock::now();
-  gpu::ColorAndRange in = gpu::upload_color_and_range(rgb, range, "fog");
-  s_->image = std::move(in.image);
-  s_->range = std::move(in.range);
-  glFinish();
-  timing_.upload_ms = gpu::ms_since(t0);
+  s_->in = gpu::upload_color_and_range(rgb, range, "fog", &timing_.upload_ms);
 }
 
 GpuFog::~GpuFog() = default;
@@ -59,9 +54,9 @@ FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter fil
   g.begin(s.t.first);
   glUseProgram(pr.id());
   glActiveTexture(GL_TEXTURE0);
-  glBindTexture(GL_TEXTURE_2D, s.image.id());
+  glBindTexture(GL_TEXTURE_2D, s.in.image.id());
   glActiveTexture(GL_TEXTURE1);
-  glBindTexture(GL_TEXTURE_2D, s.range.id());
+  glBindTexture(GL_TEXTURE_2D, s.in.range.id());
   const Mat3 R = a.camera.world_from_camera().rotation;
   glUniform3f(pr.loc("uRayRow"), static_cast<float>(R.m[1][0]), static_cast<float>(R.m[1][1]),
               static_cast<float>(R.m[1][2]));

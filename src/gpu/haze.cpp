@@ -72,18 +72,13 @@ void scatter_diffuse_composite(GpuContext& ctx, ScatterTargets& s, const Diffusi
 }  // namespace gpu
 
 struct GpuHaze::State {
-  gl::Texture image, range;  // inputs, uploaded once
+  gpu::ColorAndRange in;  // colour and range, uploaded once
   gpu::ScatterTargets t;
 };
 
 GpuHaze::GpuHaze(GpuContext& ctx, const Image& rgb, const Image& range)
     : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
-  const auto t0 = gpu::Clock::now();
-  gpu::ColorAndRange in = gpu::upload_color_and_range(rgb, range, "haze");
-  s_->image = std::move(in.image);
-  s_->range = std::move(in.range);
-  glFinish();
-  timing_.upload_ms = gpu::ms_since(t0);
+  s_->in = gpu::upload_color_and_range(rgb, range, "haze", &timing_.upload_ms);
 }
 
 GpuHaze::~GpuHaze() = default;
@@ -101,9 +96,9 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
   g.begin(s.t.first);
   glUseProgram(pr.id());
   glActiveTexture(GL_TEXTURE0);
-  glBindTexture(GL_TEXTURE_2D, s.image.id());
+  glBindTexture(GL_TEXTURE_2D, s.in.image.id());
   glActiveTexture(GL_TEXTURE1);
-  glBindTexture(GL_TEXTURE_2D, s.range.id());
+  glBindTexture(GL_TEXTURE_2D, s.in.range.id());
   glUniform1f(pr.loc("uInvRangeMax"), static_cast<float>(1.0 / a.range_max_m));
   glUniform1f(pr.loc("uKappa"), static_cast<float>(a.kappa_a + a.kappa_s));
   glUniform1f(pr.loc("uSigma0"), static_cast<float>(p.diffusion.sigma0));
