@@ -124,6 +124,7 @@ std::vector<Command> add_depth(CLI::App& app);
 Command add_run(CLI::App& app);
 Command add_demo(CLI::App& app);
 Command add_study(CLI::App& app);
+Command add_sample(CLI::App& app);
 // `brume aerial coefficients`, under the `aerial` parent subcommand.
 Command add_aerial_coefficients(CLI::App* aerial);
 // `brume sky render` and `brume sky fit`.

@@ -33,6 +33,7 @@ int main(int argc, char** argv) {
   commands.push_back(add_run(app));
   commands.push_back(add_demo(app));
   commands.push_back(add_study(app));
+  commands.push_back(add_sample(app));
 
   try {
     app.parse(argc, argv);

@@ -1,0 +1,419 @@
+// brume — sampled effect parameters keyed by (seed, frame key, parameter
+// name); the scheme, its Python twin and the checks are in brume/sample.hpp.
+#include "brume/sample.hpp"
+
+#include <openssl/evp.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdlib>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "brume/aerial.hpp"
+#include "brume/dof.hpp"
+#include "brume/fog.hpp"
+#include "brume/haze.hpp"
+
+namespace brume {
+
+namespace {
+
+// Shortest text that reads back as the same double ("50", "0.8", "1e-05").
+std::string shortest(double v) {
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
+}
+
+std::string trim(std::string_view s) {
+  const auto b = s.find_first_not_of(" \t\r\n");
+  if (b == std::string_view::npos) return "";
+  const auto e = s.find_last_not_of(" \t\r\n");
+  return std::string(s.substr(b, e - b + 1));
+}
+
+std::string lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+bool parse_number(const std::string& t, double& v) {
+  if (t.empty()) return false;
+  char* end = nullptr;
+  v = std::strtod(t.c_str(), &end);
+  return end == t.c_str() + t.size();
+}
+
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> prev(b.size() + 1), cur(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) prev[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    cur[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j)
+      cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (a[i - 1] == b[j - 1] ? 0 : 1)});
+    std::swap(prev, cur);
+  }
+  return prev[b.size()];
+}
+
+const char* kAllowed =
+    "a fixed value as the flag takes it (0.9, auto, a name), uniform(a, b), loguniform(a, b) with 0 < a, or "
+    "choice(x, y, ...)";
+
+// A default distribution of an effect, dropped when the user gives one of
+// `dropped_by` (a parameter that takes over its role, so that the pair would
+// be refused by validate_<effect>).
+struct DefaultSpec {
+  const char* name;
+  const char* spec;
+  std::vector<std::string> dropped_by;
+};
+
+struct EffectSampling {
+  std::string effect;
+  std::vector<ParamSpec> specs;  // the effect's declarations (its table, nested blocks included)
+  std::vector<DefaultSpec> defaults;
+  // Applies {name: value} to a default-constructed parameter struct and runs validate_<effect>.
+  std::function<void(const nlohmann::json&)> validate;
+};
+
+template <class P>
+EffectSampling make_sampling(const char* effect, const ParamTable<P>& table, std::vector<DefaultSpec> defaults,
+                             void (*validate)(const P&, const std::set<std::string>&)) {
+  EffectSampling s;
+  s.effect = effect;
+  for (const Param<P>& d : table.params()) s.specs.push_back(d.spec);
+  s.defaults = std::move(defaults);
+  s.validate = [&table, validate](const nlohmann::json& values) {
+    P p{};
+    const std::set<std::string> given = apply_params(table, p, values);
+    validate(p, given);
+  };
+  return s;
+}
+
+// The default plausible ranges. Each is a physical range a dataset of
+// outdoor photographs can meet, wide enough to augment and narrow enough that
+// every draw is a picture a camera could take; users narrow or widen them per
+// parameter.
+const std::vector<EffectSampling>& samplings() {
+  static const std::vector<EffectSampling> all = [] {
+    std::vector<EffectSampling> v;
+    // Haze: visibility from dense fog (50 m, the fog threshold is 1 km) to light
+    // haze (5 km), log-uniform because perceived haze follows optical depth
+    // ~ 1/V over orders of magnitude; albedo 0.8-1 (water droplets and most
+    // aerosols scatter far more than they absorb; soot-laden smog reaches
+    // 0.8); lambda 0-8 px of blur gain (0: Koschmieder's clean haze; 8 keeps
+    // the scattering blur at sigma ~ 8 px at kappa_s' = 1, the soft look of
+    // real fog without erasing detail at Middlebury/KITTI sizes). kappa-a and
+    // kappa-s take over visibility's role (validate_haze refuses both).
+    v.push_back(make_sampling<HazeParams>("haze", haze_param_table(),
+                                          {{"visibility", "loguniform(50, 5000)", {"kappa-a", "kappa-s"}},
+                                           {"albedo", "uniform(0.8, 1)", {"kappa-a", "kappa-s"}},
+                                           {"lambda", "uniform(0, 8)", {}}},
+                                          &validate_haze));
+    // Layered (exponential) fog: ground density D0 0.002-0.08 /m, i.e. a
+    // Koschmieder visibility 3.912/D0 of 2 km (mist) down to 50 m (thick
+    // fog), log-uniform as for haze; falloff B 0.005-0.2 /m, a scale height
+    // 1/B of 200 m (a deep hazy boundary layer) down to 5 m (valley fog lying
+    // on the ground); blur gain and albedo as haze. --profile or --classic
+    // make the exponential's parameters meaningless, so they drop them.
+    v.push_back(make_sampling<FogParams>("fog", fog_param_table(),
+                                         {{"density", "loguniform(0.002, 0.08)", {"classic", "profile"}},
+                                          {"falloff", "loguniform(0.005, 0.2)", {"classic", "profile"}},
+                                          {"lambda", "uniform(0, 8)", {"classic"}},
+                                          {"albedo", "uniform(0.8, 1)", {"classic"}}},
+                                         &validate_fog));
+    // Spectral aerial perspective: turbidity 2-10 (Morales Table 3.1,
+    // corrected: clear air from about 2.7, light haze 4.5, haze 9.8; fog at 19
+    // is haze's and fog's job), uniform since the Mie coefficient is affine
+    // in T; observer altitude 0-1500 m (sea level to high plateaus, where most
+    // outdoor datasets are shot); blur gain as haze.
+    v.push_back(make_sampling<AerialParams>("aerial", aerial_param_table(),
+                                            {{"turbidity", "uniform(2, 10)", {}},
+                                             {"altitude", "uniform(0, 1500)", {}},
+                                             {"lambda", "uniform(0, 8)", {}}},
+                                            &validate_aerial));
+    // Depth of field through a lens: a 50 mm lens on a 36 mm (full-frame)
+    // sensor, the "normal" lens whose field of view is close to most datasets'
+    // cameras (fix --focal-length and --sensor-width to your camera), at the
+    // full stops f/1.4-f/8 (where depth of field is visible at all), focused
+    // log-uniformly from 1 m (close-up) to 50 m (street scenes; beyond, the
+    // scene is all in focus). --coc-infinity replaces the lens.
+    v.push_back(make_sampling<DofParams>("dof", dof_param_table(),
+                                         {{"focus-distance", "loguniform(1, 50)", {}},
+                                          {"f-number", "choice(1.4, 2, 2.8, 4, 5.6, 8)", {"coc-infinity"}},
+                                          {"focal-length", "50", {"coc-infinity"}},
+                                          {"sensor-width", "36", {"coc-infinity"}}},
+                                         &validate_dof));
+    return v;
+  }();
+  return all;
+}
+
+const EffectSampling& sampling_of(std::string_view effect) {
+  for (const EffectSampling& s : samplings())
+    if (s.effect == effect) return s;
+  std::string all;
+  for (const EffectSampling& s : samplings()) all += (all.empty() ? "" : ", ") + s.effect;
+  throw Error("sampling: effect '" + std::string(effect) + "' has no sampled parameters; use one of: " + all);
+}
+
+const ParamSpec& spec_of(const EffectSampling& s, const std::string& canon) {
+  for (const ParamSpec& p : s.specs)
+    if (p.name == canon) return p;
+  throw Error("internal: sampling: no declaration of '" + canon + "' in " + s.effect);
+}
+
+// Splits "a, b, c" at commas; items trimmed.
+std::vector<std::string> split_args(const std::string& s) {
+  std::vector<std::string> out;
+  std::size_t start = 0;
+  for (std::size_t i = 0; i <= s.size(); ++i)
+    if (i == s.size() || s[i] == ',') {
+      out.push_back(trim(std::string_view(s).substr(start, i - start)));
+      start = i + 1;
+    }
+  return out;
+}
+
+std::map<std::string, Distribution> resolve(const EffectSampling& es, const std::map<std::string, std::string>& specs) {
+  std::map<std::string, std::string> user;  // canonical name -> text
+  std::map<std::string, std::string> spelled;
+  for (const auto& [name, text] : specs) {
+    const std::string canon = detail::canonical_param_name(es.specs, name, es.effect);
+    if (user.count(canon))
+      throw Error("sampling " + es.effect + ": '" + spelled[canon] + "' and '" + name + "' are the same parameter ('" +
+                  canon + "'); give it once");
+    user[canon] = text;
+    spelled[canon] = name;
+  }
+  std::map<std::string, Distribution> out;
+  for (const DefaultSpec& d : es.defaults) {
+    if (user.count(d.name)) continue;
+    const bool dropped = std::any_of(d.dropped_by.begin(), d.dropped_by.end(),
+                                     [&](const std::string& n) { return user.count(n) > 0; });
+    if (!dropped) out[d.name] = parse_distribution(spec_of(es, d.name), d.spec);
+  }
+  for (const auto& [canon, text] : user) out[canon] = parse_distribution(spec_of(es, canon), text);
+  return out;
+}
+
+}  // namespace
+
+double sample_unit(std::uint64_t seed, std::string_view key, std::string_view name) {
+  std::string msg = kSamplerName;
+  msg.push_back('\0');
+  msg += std::to_string(seed);
+  msg.push_back('\0');
+  msg.append(key.data(), key.size());
+  msg.push_back('\0');
+  msg.append(name.data(), name.size());
+  unsigned char md[EVP_MAX_MD_SIZE];
+  unsigned int len = 0;
+  EVP_MD_CTX* ctx = EVP_MD_CTX_new();
+  if (!ctx || EVP_DigestInit_ex(ctx, EVP_sha256(), nullptr) != 1 ||
+      EVP_DigestUpdate(ctx, msg.data(), msg.size()) != 1 || EVP_DigestFinal_ex(ctx, md, &len) != 1 || len < 8) {
+    EVP_MD_CTX_free(ctx);
+    throw Error("internal: SHA-256 (OpenSSL) failed while drawing a sampled parameter");
+  }
+  EVP_MD_CTX_free(ctx);
+  std::uint64_t n = 0;
+  for (int i = 0; i < 8; ++i) n = (n << 8) | md[i];
+  // The top 53 bits: every double of the form k 2^-53, so u < 1 exactly.
+  return static_cast<double>(n >> 11) * 0x1p-53;
+}
+
+std::string Distribution::text() const {
+  switch (kind) {
+    case Kind::uniform: return "uniform(" + shortest(a) + ", " + shortest(b) + ")";
+    case Kind::loguniform: return "loguniform(" + shortest(a) + ", " + shortest(b) + ")";
+    case Kind::choice:
+    case Kind::fixed: {
+      std::string s;
+      for (const nlohmann::json& v : values) {
+        std::string t;
+        if (v.is_null()) t = "auto";
+        else if (v.is_string()) t = v.get<std::string>();
+        else if (v.is_number_float()) t = shortest(v.get<double>());
+        else if (v.is_array()) {
+          for (const auto& c : v) t += (t.empty() ? "" : ",") + shortest(c.get<double>());
+        } else t = v.dump();
+        s += (s.empty() ? "" : ", ") + t;
+      }
+      return kind == Kind::choice ? "choice(" + s + ")" : s;
+    }
+  }
+  return "";
+}
+
+Distribution parse_distribution(const ParamSpec& spec, std::string_view text_in) {
+  const std::string text = trim(text_in);
+  const std::string flag = "--" + spec.name;
+  const std::string where = "sampling " + flag + " '" + std::string(text_in) + "'";
+  auto fail = [&](const std::string& why) -> Distribution { throw Error(where + ": " + why); };
+  // Every value the distribution can give goes through the declaration's own check.
+  auto checked = [&](const nlohmann::json& v, const std::string& role) {
+    try {
+      spec.check(v);
+    } catch (const Error& e) {
+      throw Error(where + ": " + role + " is not allowed: " + e.what());
+    }
+    return v;
+  };
+  auto parsed = [&](const std::string& item, const std::string& role) {
+    nlohmann::json v;
+    try {
+      v = spec.parse(item);
+    } catch (const Error& e) {
+      throw Error(where + ": " + e.what());
+    }
+    return checked(v, role + " '" + item + "'");
+  };
+
+  Distribution d;
+  if (text.empty()) return fail(std::string("empty; give ") + kAllowed);
+  const auto open = text.find('(');
+  std::string fn = open == std::string::npos ? "" : lower(trim(std::string_view(text).substr(0, open)));
+  // A call is one of the three distributions; any other word( is refused as a misspelt one, except for a text
+  // parameter (a file name may hold parentheses).
+  const bool known = fn == "uniform" || fn == "loguniform" || fn == "choice";
+  const bool wordy = !fn.empty() && spec.kind != ParamKind::text &&
+                     std::all_of(fn.begin(), fn.end(), [](char c) { return std::isalpha(static_cast<unsigned char>(c)); });
+  if (open == std::string::npos || !(known || wordy)) {
+    d.kind = Distribution::Kind::fixed;
+    d.values.push_back(parsed(text, "the value"));
+    return d;
+  }
+  if (text.back() != ')') return fail("missing the closing ')'; " + std::string(kAllowed));
+  if (fn != "uniform" && fn != "loguniform" && fn != "choice")
+    return fail("'" + fn + "' is not a distribution; use " + kAllowed);
+  const std::string inner = text.substr(open + 1, text.size() - open - 2);
+  if (inner.find_first_of("()") != std::string::npos) return fail("nested parentheses are not allowed");
+  const std::vector<std::string> args = split_args(inner);
+
+  if (fn == "choice") {
+    if (spec.kind == ParamKind::rgb)
+      return fail("choice(...) of colours is not supported (their commas would be ambiguous); give one R,G,B");
+    if (args.size() == 1 && args[0].empty()) return fail("choice() needs at least one item: choice(x, y, ...)");
+    d.kind = Distribution::Kind::choice;
+    for (const std::string& a : args) {
+      if (a.empty()) return fail("an item of choice(...) is empty; write choice(x, y, ...)");
+      d.values.push_back(parsed(a, "the item"));
+    }
+    return d;
+  }
+
+  // uniform / loguniform: real parameters only.
+  if (spec.kind != ParamKind::real)
+    return fail(fn + "(a, b) draws real numbers, and " + flag + " is " +
+                (spec.kind == ParamKind::integer ? "a whole number" : spec.kind == ParamKind::choice ? "a name" : "not a number") +
+                "; use choice(...) or a fixed value");
+  if (args.size() != 2) return fail(fn + " takes two bounds, " + fn + "(a, b); got " + std::to_string(args.size()));
+  double a = 0, b = 0;
+  if (!parse_number(args[0], a) || !std::isfinite(a)) return fail("the lower bound '" + args[0] + "' is not a finite number");
+  if (!parse_number(args[1], b) || !std::isfinite(b)) return fail("the upper bound '" + args[1] + "' is not a finite number");
+  if (!(a < b))
+    return fail("the bounds need a < b (got " + shortest(a) + " and " + shortest(b) + "); for a constant give the value alone");
+  if (fn == "loguniform" && !(a > 0))
+    return fail("loguniform needs 0 < a (log-uniform over positive values); got a = " + shortest(a) + "; use uniform(a, b)");
+  // The draws lie in [a, b): both ends must be admissible values.
+  checked(a, "its lower bound " + shortest(a));
+  checked(b, "its upper bound " + shortest(b));
+  d.kind = fn == "uniform" ? Distribution::Kind::uniform : Distribution::Kind::loguniform;
+  d.a = a, d.b = b;
+  return d;
+}
+
+nlohmann::json draw(const Distribution& d, double u) {
+  switch (d.kind) {
+    case Distribution::Kind::fixed: return d.values.at(0);
+    case Distribution::Kind::uniform:
+      // Held to [a, b] against the last ulp of rounding (a + u (b - a) may round up to b, never past it by more).
+      return std::clamp(d.a + u * (d.b - d.a), d.a, d.b);
+    case Distribution::Kind::loguniform: {
+      const double la = std::log(d.a), lb = std::log(d.b);
+      return std::clamp(std::exp(la + u * (lb - la)), d.a, d.b);
+    }
+    case Distribution::Kind::choice: {
+      const std::size_t n = d.values.size();
+      const std::size_t i = std::min(n - 1, static_cast<std::size_t>(u * static_cast<double>(n)));
+      return d.values[i];
+    }
+  }
+  return nullptr;
+}
+
+const std::vector<std::string>& sample_effects() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> n;
+    for (const EffectSampling& s : samplings()) n.push_back(s.effect);
+    return n;
+  }();
+  return names;
+}
+
+std::map<std::string, std::string> default_sample_specs(std::string_view effect) {
+  std::map<std::string, std::string> out;
+  for (const DefaultSpec& d : sampling_of(effect).defaults) out[d.name] = d.spec;
+  return out;
+}
+
+std::map<std::string, std::string> resolve_sample_specs(std::string_view effect,
+                                                        const std::map<std::string, std::string>& specs) {
+  std::map<std::string, std::string> out;
+  for (const auto& [name, d] : resolve(sampling_of(effect), specs)) out[name] = d.text();
+  return out;
+}
+
+nlohmann::json random_params(std::string_view effect, std::uint64_t seed, std::string_view key,
+                             const std::map<std::string, std::string>& specs) {
+  const EffectSampling& es = sampling_of(effect);
+  nlohmann::json values = nlohmann::json::object();
+  for (const auto& [name, d] : resolve(es, specs))
+    values[name] = d.kind == Distribution::Kind::fixed ? d.values.at(0) : draw(d, sample_unit(seed, key, name));
+  try {
+    es.validate(values);
+  } catch (const Error& e) {
+    throw Error("sampled " + es.effect + " parameters " + values.dump() + " for key '" + std::string(key) + "' (seed " +
+                std::to_string(seed) + ") cannot be used together: " + e.what());
+  }
+  return values;
+}
+
+nlohmann::json sample_provenance(std::string_view effect, std::uint64_t seed, std::string_view key,
+                                 const std::map<std::string, std::string>& specs) {
+  return {{"sampler", kSamplerName},
+          {"seed", seed},
+          {"key", std::string(key)},
+          {"specs", resolve_sample_specs(effect, specs)}};
+}
+
+namespace detail {
+
+std::string canonical_param_name(const std::vector<ParamSpec>& specs, std::string_view name_in, std::string_view where) {
+  std::string name = trim(name_in);
+  std::replace(name.begin(), name.end(), '_', '-');
+  for (const ParamSpec& s : specs) {
+    if (s.name == name) return s.name;
+    for (const std::string& a : s.aliases)
+      if (a == name) return s.name;
+  }
+  std::string nearest;
+  std::size_t best = std::string::npos;
+  for (const ParamSpec& s : specs) {
+    const std::size_t dist = edit_distance(name, s.name);
+    if (dist < best) best = dist, nearest = s.name;
+  }
+  std::string all;
+  for (const ParamSpec& s : specs) all += (all.empty() ? "" : ", ") + s.name;
+  throw Error("'" + std::string(name_in) + "' is not a parameter of " + std::string(where) +
+              (nearest.empty() ? "" : "; did you mean '" + nearest + "'?") + " (its parameters: " + all + ")");
+}
+
+}  // namespace detail
+
+}  // namespace brume
