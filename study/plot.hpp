@@ -1,4 +1,6 @@
-// brume study — a minimal line-plot renderer for the study's figures.
+// brume study — a minimal line-plot renderer, left for the sky fit's scatter
+// (sky_plot.cpp, drawn by `brume sky fit`); the diffusion study's figures are
+// matplotlib's (python/brume/plots.py).
 //
 // Draws log- or linear-axis line plots (a few series per panel, panels stacked
 // vertically, in the manner of Hansard's Figs. 6-7) with OpenCV imgproc only,

@@ -27,8 +27,10 @@
 //   and the square's colour found in the background within sigma_far of it.
 // summary.md: the key figures as Markdown tables (RMS at 5, 10, 25; time and
 //   iterations at 25; ratios against each peer; leakage).
-// accuracy.png, speed.png (Figs. 6-7 layout, log scales), leakage.png
-//   (crops of the square's corner for each method).
+// leakage_crops/<method>_<edge rate>.png: the square's corner for each
+//   method (8-bit sRGB). The figures (accuracy.png, speed.png, leakage.png)
+//   are drawn from these files by matplotlib: python3 -m brume.plots DIR
+//   (python/brume/plots.py), whose command the study prints.
 //
 // Images: the accuracy part uses a real 1600x1120 image in [0, 1], a 4x4
 // mosaic of 400x280 crops of the photographs in ../shared/data (Middlebury
@@ -59,7 +61,6 @@
 #include "brume_reference.hpp"
 #include "brume_study/study.hpp"
 #include "brume_opencv.hpp"
-#include "plot.hpp"
 
 namespace fs = std::filesystem;
 using namespace brume;
@@ -216,34 +217,7 @@ struct LeakRow {
   double into_near_mean, into_near_max, into_far_mean;
 };
 
-// Copy of a float image as an 8-bit sRGB cv::Mat (BGR) for the crop figure.
-cv::Mat to_bgr8(const Image& f, int x0, int y0, int w, int h, int scale) {
-  cv::Mat m(h * scale, w * scale, CV_8UC3);
-  for (int y = 0; y < h * scale; ++y)
-    for (int x = 0; x < w * scale; ++x) {
-      cv::Vec3b& px = m.at<cv::Vec3b>(y, x);
-      for (int c = 0; c < 3; ++c) {
-        const float v = std::clamp(f.at(x0 + x / scale, y0 + y / scale, c), 0.0f, 1.0f);
-        px[2 - c] = static_cast<unsigned char>(std::lround(255.0f * linear_to_srgb(v)));
-      }
-    }
-  return m;
-}
-
-struct Style {
-  unsigned char r, g, b;
-};
-Style style_of(const std::string& method, const std::string& prec) {
-  const bool f16 = prec == "f16";
-  if (method == "standard" || method == "brume-standard") return f16 ? Style{235, 120, 110} : Style{150, 0, 0};
-  if (method == "invariant" || method == "brume-invariant") return f16 ? Style{110, 160, 240} : Style{0, 40, 170};
-  if (method == "invariant-exact" || method == "brume-invariant-exact") return f16 ? Style{110, 200, 110} : Style{0, 115, 0};
-  if (method == "mipmap") return {230, 140, 0};
-  if (method == "gather") return {140, 0, 170};
-  if (method == "opencv-gaussianblur") return {0, 0, 0};
-  return {128, 128, 128};  // memory floor
-}
-
+// A method's name in the summary's tables.
 std::string label_of(const std::string& method, const std::string& prec, const std::string& backend) {
   std::string m = method.rfind("brume-", 0) == 0 ? method.substr(6) : method;
   if (m == "opencv-gaussianblur") return "OpenCV GaussianBlur";
@@ -253,94 +227,28 @@ std::string label_of(const std::string& method, const std::string& prec, const s
   return m + " " + prec + (backend == "gpu" ? " GPU" : "");
 }
 
-void write_figures(OutputSet& outs, const fs::path& dir, const std::vector<AccRow>& acc, const std::vector<SpeedRow>& spd,
-                   const std::vector<std::pair<std::string, Image>>& crops, const std::vector<StudyBackend>& backends,
-                   int n, int q0) {
-  // Fig. 6: RMS against sigma; the standard scheme on top, the invariant
-  // schemes and the peers below, on the same (log) axis so they compare.
-  double lo = INFINITY, hi = 0;
-  for (const AccRow& r : acc)
-    if (r.rms > 0) lo = std::min(lo, r.rms), hi = std::max(hi, r.rms);
-  auto acc_series = [&](const std::string& scheme, const std::string& prec, const std::string& backend) {
-    plot::Series s;
-    const Style st = style_of(scheme, prec);
-    s.label = label_of(scheme, prec, backend), s.r = st.r, s.g = st.g, s.b = st.b, s.dashed = backend == "gpu";
-    for (const AccRow& r : acc)
-      if (r.scheme == scheme && r.precision == prec && r.backend == backend) s.x.push_back(r.sigma), s.y.push_back(r.rms);
-    return s;
-  };
-  plot::Panel top, bottom;
-  top.title = "Standard scheme (eq. 13): RMS error against a true Gaussian";
-  bottom.title = "Invariant schemes (eq. 18) and the peers";
-  for (plot::Panel* p : {&top, &bottom}) {
-    p->xlabel = "sigma_ref [px]";
-    p->ylabel = "RMS error";
-    if (hi > 0) p->ymin = std::pow(10.0, std::floor(std::log10(lo))), p->ymax = std::pow(10.0, std::ceil(std::log10(hi)));
-    p->xmin = 0;
+// The leakage crops: the near square's top-left corner (2c x 2c pixels
+// around (q0, q0)) of each method's result, unscaled, as 8-bit sRGB PNG in
+// leakage_crops/<method>_<edge rate>.png (<method>.png for the peers), for
+// the figure python/brume/plots.py draws beside the CSVs.
+void write_crops(OutputSet& outs, const fs::path& dir, const std::vector<std::pair<std::string, Image>>& crops, int n,
+                 int q0) {
+  const fs::path cdir = dir / "leakage_crops";
+  std::error_code ec;
+  fs::create_directories(cdir, ec);
+  if (!fs::is_directory(cdir)) throw Error("--out-dir: '" + cdir.string() + "' cannot be created");
+  WriteOptions png;
+  png.bits = "8";
+  png.transfer = Transfer::srgb;  // the bytes a viewer shows; plots.py reads them as they are
+  png.is_color = true;
+  const int c = n / 8;
+  for (const auto& [file, g] : crops) {
+    Image crop(2 * c, 2 * c, 3);
+    for (int y = 0; y < 2 * c; ++y)
+      for (int x = 0; x < 2 * c; ++x)
+        for (int ch = 0; ch < 3; ++ch) crop.at(x, y, ch) = std::clamp(g.at(q0 - c + x, q0 - c + y, ch), 0.0f, 1.0f);
+    outs.write((cdir / (file + ".png")).string(), crop, png, "--out-dir");
   }
-  for (const StudyBackend& b : backends)
-    for (const char* pr : {"f32", "f16"}) {
-      top.series.push_back(acc_series("standard", pr, b.name));
-      bottom.series.push_back(acc_series("invariant", pr, b.name));
-      bottom.series.push_back(acc_series("invariant-exact", pr, b.name));
-    }
-  bottom.series.push_back(acc_series("mipmap", "f32", "cpu"));
-  bottom.series.push_back(acc_series("gather", "f32", "cpu"));
-  plot::write_png(outs, (dir / "accuracy.png").string(), {top, bottom});
-
-  // Fig. 7: time against sigma.
-  auto spd_series = [&](const std::string& method, const std::string& prec, const std::string& backend,
-                        const std::string& map) {
-    plot::Series s;
-    const Style st = style_of(method, prec);
-    s.label = label_of(method, prec, backend), s.r = st.r, s.g = st.g, s.b = st.b, s.dashed = backend == "gpu";
-    for (const SpeedRow& r : spd)
-      if (r.method == method && r.precision == prec && r.backend == backend && r.map == map)
-        s.x.push_back(r.sigma), s.y.push_back(r.seconds);
-    return s;
-  };
-  plot::Panel st, inv, var;
-  st.title = "Standard scheme (eq. 13), constant sigma";
-  inv.title = "Invariant schemes (eq. 18) and the peers, constant sigma";
-  var.title = "Space-variant haze map (sigma0 + R'^1.5 (sigma - sigma0))";
-  double tlo = INFINITY, thi = 0;
-  for (const SpeedRow& r : spd)
-    if (r.seconds > 0) tlo = std::min(tlo, r.seconds), thi = std::max(thi, r.seconds);
-  for (plot::Panel* p : {&st, &inv, &var}) {
-    p->xlabel = "sigma_ref [px]";
-    p->ylabel = "time [s]";
-    if (thi > 0) p->ymin = std::pow(10.0, std::floor(std::log10(tlo))), p->ymax = std::pow(10.0, std::ceil(std::log10(thi)));
-    p->xmin = 0;
-  }
-  for (const StudyBackend& b : backends)
-    for (const char* pr : {"f32", "f16"}) {
-      st.series.push_back(spd_series("brume-standard", pr, b.name, "constant"));
-      inv.series.push_back(spd_series("brume-invariant", pr, b.name, "constant"));
-      inv.series.push_back(spd_series("brume-invariant-exact", pr, b.name, "constant"));
-      var.series.push_back(spd_series("brume-invariant-exact", pr, b.name, "varying"));
-    }
-  for (const char* m : {"opencv-gaussianblur", "mipmap", "gather", "memory-floor"})
-    inv.series.push_back(spd_series(m, "f32", "cpu", "constant"));
-  for (const char* m : {"mipmap", "gather"}) var.series.push_back(spd_series(m, "f32", "cpu", "varying"));
-  for (plot::Panel* p : {&st, &inv, &var})
-    p->series.erase(std::remove_if(p->series.begin(), p->series.end(), [](const plot::Series& s) { return s.x.empty(); }),
-                    p->series.end());
-  plot::write_png(outs, (dir / "speed.png").string(), {st, inv, var});
-
-  // Leakage: the near square's top-left corner, 2x, one tile per method.
-  const int c = n / 8, scale = std::max(2, 240 / (2 * c)), tile = 2 * c * scale, label_h = 26, cols = 4;
-  const int rows = static_cast<int>((crops.size() + cols - 1) / cols);
-  cv::Mat fig(rows * (tile + label_h) + 8, cols * (tile + 8) + 8, CV_8UC3, cv::Scalar(255, 255, 255));
-  for (std::size_t i = 0; i < crops.size(); ++i) {
-    const int cx = 8 + static_cast<int>(i % cols) * (tile + 8), cy = 8 + static_cast<int>(i / cols) * (tile + label_h);
-    to_bgr8(crops[i].second, q0 - c, q0 - c, 2 * c, 2 * c, scale).copyTo(fig(cv::Rect(cx, cy, tile, tile)));
-    double font = 0.5;  // shrink the label to the tile's width
-    int base = 0;
-    while (font > 0.3 && cv::getTextSize(crops[i].first, cv::FONT_HERSHEY_SIMPLEX, font, 1, &base).width > tile) font -= 0.02;
-    cv::putText(fig, crops[i].first, cv::Point(cx, cy + tile + 18), cv::FONT_HERSHEY_SIMPLEX, font, cv::Scalar(0, 0, 0), 1,
-                cv::LINE_AA);
-  }
-  outs.write((dir / "leakage.png").string(), plot::from_canvas(fig), plot::png_options(), "--out-dir");
 }
 
 // The key figures as Markdown tables.
@@ -647,24 +555,27 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
           Image g = scene_f;
           run_brume(b, g, smap, sfar, params(s, Precision::f32, e));
           measure(to_string(s), to_string(e), b.name, g);
-          if (!b.gpu && s != Scheme::invariant) crops.emplace_back(to_string(s) + ", " + to_string(e), g);
+          if (!b.gpu && s != Scheme::invariant) crops.emplace_back(to_string(s) + "_" + to_string(e), g);
         }
     Image g = scene_f;
     peers::mipmap_blur(g, smap, 1.0);
     measure("mipmap", "-", "cpu", g);
-    crops.emplace_back("mip-map", g);
+    crops.emplace_back("mipmap", g);
     g = scene_f;
     peers::gather_blur(g, smap, 1.0);
     measure("gather", "-", "cpu", g);
-    crops.emplace_back("direct gather", g);
+    crops.emplace_back("gather", g);
     outs.write_text((dir / "leakage.csv").string(), lk.str(), "--out-dir");
   }
 
   // ---- Figures ---------------------------------------------------------------
-  write_figures(outs, dir, acc_rows, speed_rows, crops, backends, n, q0);
+  write_crops(outs, dir, crops, n, q0);
   write_summary(outs, dir, acc_rows, speed_rows, leak_rows, acc_name, acc_img, W, H, sfar);
   outs.commit();
-  std::fprintf(stderr, "brume study: wrote accuracy.csv, speed.csv, leakage.csv, summary.md and the plots in %s\n",
-               out_dir.c_str());
+  // The figures are matplotlib's (python/brume/plots.py), drawn from these files.
+  std::fprintf(stderr,
+               "brume study: wrote accuracy.csv, speed.csv, leakage.csv, leakage_crops/ and summary.md in %s\n"
+               "brume study: draw the figures with: PYTHONPATH=%s python3 -m brume.plots %s\n",
+               out_dir.c_str(), BRUME_PYTHON_DIR, out_dir.c_str());
   return 0;
 }
