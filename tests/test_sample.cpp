@@ -240,6 +240,9 @@ TEST(Sample, BadSpecsGiveClearErrors) {
   // Names: unknown (with the nearest), duplicated by spelling, unknown effect.
   m = error_of([] { random_params("haze", 1, "k", {{"visiblity", "800"}}); });
   EXPECT_NE(m.find("'visiblity' is not a parameter of haze; did you mean 'visibility'?"), std::string::npos) << m;
+  m = error_of([] { random_params("fog", 1, "k", {{"visibility", "800"}}); });
+  EXPECT_NE(m.find("'visibility' is not a parameter of fog"), std::string::npos) << m;
+  EXPECT_NE(m.find("'visibility' is a parameter of haze"), std::string::npos) << m;
   m = error_of([] { random_params("haze", 1, "k", {{"kappa-s", "0.5"}, {"kappa_s", "0.6"}}); });
   EXPECT_NE(m.find("same parameter"), std::string::npos) << m;
   m = error_of([] { random_params("smoke", 1, "k", {}); });

@@ -184,7 +184,23 @@ std::map<std::string, Distribution> resolve(const EffectSampling& es, const std:
   std::map<std::string, std::string> user;  // canonical name -> text
   std::map<std::string, std::string> spelled;
   for (const auto& [name, text] : specs) {
-    const std::string canon = detail::canonical_param_name(es.specs, name, es.effect);
+    std::string canon;
+    try {
+      canon = detail::canonical_param_name(es.specs, name, es.effect);
+    } catch (const Error& e) {
+      // A parameter of another effect (visibility given for fog) says so: the fix is the effect, not the spelling.
+      std::string others;
+      for (const EffectSampling& o : samplings()) {
+        if (o.effect == es.effect) continue;
+        try {
+          detail::canonical_param_name(o.specs, name, o.effect);
+          others += (others.empty() ? "" : ", ") + o.effect;
+        } catch (const Error&) {
+        }
+      }
+      if (others.empty()) throw;
+      throw Error(std::string(e.what()) + "; '" + name + "' is a parameter of " + others);
+    }
     if (user.count(canon))
       throw Error("sampling " + es.effect + ": '" + spelled[canon] + "' and '" + name + "' are the same parameter ('" +
                   canon + "'); give it once");
