@@ -88,6 +88,9 @@ TEST(Sample, KeyedByNameNotByOrderOrSet) {
   const nlohmann::json dash = random_params("haze", 3, "k", {{"kappa-s", "uniform(0.1, 1)"}});
   const nlohmann::json under = random_params("haze", 3, "k", {{"kappa_s", "uniform(0.1, 1)"}});
   EXPECT_EQ(dash, under);
+  // Python's escape of the keyword: lambda_ is lambda.
+  EXPECT_EQ(random_params("haze", 3, "k", {{"lambda_", "uniform(1, 2)"}}),
+            random_params("haze", 3, "k", {{"lambda", "uniform(1, 2)"}}));
 }
 
 TEST(Sample, DifferentKeysAndSeedsDiffer) {

@@ -83,8 +83,9 @@ const std::vector<std::string>& sample_effects();
 std::map<std::string, std::string> default_sample_specs(std::string_view effect);
 
 // The specs a draw uses: the effect's defaults, overridden and extended by
-// `specs` (names may use '_' for '-' and the flag's aliases; they are
-// resolved to canonical names), each parsed and range-checked. A default
+// `specs` (names may use '_' for '-', a trailing '_' as in Python's lambda_,
+// and the flag's aliases; they are resolved to canonical names), each
+// parsed and range-checked. A default
 // that another given parameter excludes (haze: --visibility when --kappa-s is
 // given) is dropped. Returns {canonical name: canonical spec text}.
 std::map<std::string, std::string> resolve_sample_specs(std::string_view effect,

@@ -412,6 +412,8 @@ namespace detail {
 
 std::string canonical_param_name(const std::vector<ParamSpec>& specs, std::string_view name_in, std::string_view where) {
   std::string name = trim(name_in);
+  // Python keywords: lambda_ (PEP 8's escape of a reserved word) and kappa_s for kappa-s.
+  if (name.size() > 1 && name.back() == '_') name.pop_back();
   std::replace(name.begin(), name.end(), '_', '-');
   for (const ParamSpec& s : specs) {
     if (s.name == name) return s.name;
