@@ -139,6 +139,10 @@ struct DofRun {
 // invariant-exact and standard schemes through the engine's GPU passes.
 DofRun run_dof(const Image& rgb, const Image& measured_range, const Intrinsics& k, const DofParams& p,
                const RangeStep& prepare, const Exec& exec = {}, const std::set<std::string>& given = {});
+// The same on a range the caller prepared (prepare_step), e.g. once for a
+// chain of effects (brume/chain.hpp).
+DofRun run_dof_prepared(const Image& rgb, const PreparedRange& prepared, const Intrinsics& k, const DofParams& p,
+                        const Exec& exec = {}, const std::set<std::string>& given = {});
 
 struct DofJob {
   InputFiles input;
@@ -151,6 +155,8 @@ const ParamTable<DofJob>& dof_job_table();
 // The intrinsics a job's planar depth uses: the depth flags' (--fx.., --fov-x..,
 // --calib), else the lens's (fx = F W / sensor width, centred); when both are
 // given they must agree within 1 %. Throws when neither is.
+// Whether the depth flags give the camera's intrinsics (else the lens must).
+bool depth_flags_give_intrinsics(const DepthSource& src);
 Intrinsics dof_intrinsics(const DepthSource& src, const DofParams& p, int width, int height);
 nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
