@@ -44,8 +44,9 @@
 // neighbours by about that scale, as its blur disc covers them: the
 // near-field scale map is split into octave bands of sigma, [2^j, 2^{j+1})
 // px; band j (sigma0 outside it) is blurred isotropically by a Gaussian of
-// 2^j px (by the same engine, at 1/k resolution with k = floor(2^j / 2): it
-// shapes a rim, not an image); every pixel takes the largest of its own
+// 2^j px (a separable sampled Gaussian at 1/k resolution, k = floor(2^j / 2),
+// read back bilinearly: it shapes a rim, not an image; within 0.2 px of the
+// full-resolution definition, tests/test_dof.cpp); every pixel takes the largest of its own
 // sigma and the blurred bands, still capped at --coc-limit. Pixels behind the focal plane never raise a
 // neighbour's scale, so edges at the focal plane stay sharp and a near
 // object's blur spreads over the background around it. `sharp` keeps the

@@ -30,7 +30,8 @@ nlohmann::json dof_record(const DofParams& p, const DofAnalysis& a, const Intrin
       {"unknown_depth_rule", "unknown depth is infinitely far: c = alpha"},
       {"near_field_pixels", a.near_pixels},
       {"foreground_rule", p.foreground == Foreground::soft
-                              ? "near-field sigma blurred by a Gaussian of its largest value, max with sigma (§3.4)"
+                              ? "near-field sigma in octave bands [2^j, 2^(j+1)) px, each blurred by a Gaussian of 2^j px, max with "
+                                "sigma (§3.4)"
                               : "none (the CoC map as is)"},
       {"z_min_m", a.z_min_m},
       {"z_max_m", a.z_max_m},
