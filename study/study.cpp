@@ -255,77 +255,79 @@ std::string label_of(const std::string& method, const std::string& prec, const s
 
 void write_figures(OutputSet& outs, const fs::path& dir, const std::vector<AccRow>& acc, const std::vector<SpeedRow>& spd,
                    const std::vector<std::pair<std::string, Image>>& crops, const std::vector<StudyBackend>& backends,
-                   int n, int q0) {
-  // Fig. 6: RMS against sigma; the standard scheme on top, the invariant
-  // schemes and the peers below, on the same (log) axis so they compare.
-  double lo = INFINITY, hi = 0;
-  for (const AccRow& r : acc)
-    if (r.rms > 0) lo = std::min(lo, r.rms), hi = std::max(hi, r.rms);
-  auto acc_series = [&](const std::string& scheme, const std::string& prec, const std::string& backend) {
-    plot::Series s;
-    const Style st = style_of(scheme, prec);
-    s.label = label_of(scheme, prec, backend), s.r = st.r, s.g = st.g, s.b = st.b, s.dashed = backend == "gpu";
+                   int n, int q0, bool all) {
+  if (all) {  // accuracy.png and speed.png
+    // Fig. 6: RMS against sigma; the standard scheme on top, the invariant
+    // schemes and the peers below, on the same (log) axis so they compare.
+    double lo = INFINITY, hi = 0;
     for (const AccRow& r : acc)
-      if (r.scheme == scheme && r.precision == prec && r.backend == backend) s.x.push_back(r.sigma), s.y.push_back(r.rms);
-    return s;
-  };
-  plot::Panel top, bottom;
-  top.title = "Standard scheme (eq. 13): RMS error against a true Gaussian";
-  bottom.title = "Invariant schemes (eq. 18) and the peers";
-  for (plot::Panel* p : {&top, &bottom}) {
-    p->xlabel = "sigma_ref [px]";
-    p->ylabel = "RMS error";
-    if (hi > 0) p->ymin = std::pow(10.0, std::floor(std::log10(lo))), p->ymax = std::pow(10.0, std::ceil(std::log10(hi)));
-    p->xmin = 0;
-  }
-  for (const StudyBackend& b : backends)
-    for (const char* pr : {"f32", "f16"}) {
-      top.series.push_back(acc_series("standard", pr, b.name));
-      bottom.series.push_back(acc_series("invariant", pr, b.name));
-      bottom.series.push_back(acc_series("invariant-exact", pr, b.name));
+      if (r.rms > 0) lo = std::min(lo, r.rms), hi = std::max(hi, r.rms);
+    auto acc_series = [&](const std::string& scheme, const std::string& prec, const std::string& backend) {
+      plot::Series s;
+      const Style st = style_of(scheme, prec);
+      s.label = label_of(scheme, prec, backend), s.r = st.r, s.g = st.g, s.b = st.b, s.dashed = backend == "gpu";
+      for (const AccRow& r : acc)
+        if (r.scheme == scheme && r.precision == prec && r.backend == backend) s.x.push_back(r.sigma), s.y.push_back(r.rms);
+      return s;
+    };
+    plot::Panel top, bottom;
+    top.title = "Standard scheme (eq. 13): RMS error against a true Gaussian";
+    bottom.title = "Invariant schemes (eq. 18) and the peers";
+    for (plot::Panel* p : {&top, &bottom}) {
+      p->xlabel = "sigma_ref [px]";
+      p->ylabel = "RMS error";
+      if (hi > 0) p->ymin = std::pow(10.0, std::floor(std::log10(lo))), p->ymax = std::pow(10.0, std::ceil(std::log10(hi)));
+      p->xmin = 0;
     }
-  bottom.series.push_back(acc_series("mipmap", "f32", "cpu"));
-  bottom.series.push_back(acc_series("gather", "f32", "cpu"));
-  plot::write_png(outs, (dir / "accuracy.png").string(), {top, bottom});
+    for (const StudyBackend& b : backends)
+      for (const char* pr : {"f32", "f16"}) {
+        top.series.push_back(acc_series("standard", pr, b.name));
+        bottom.series.push_back(acc_series("invariant", pr, b.name));
+        bottom.series.push_back(acc_series("invariant-exact", pr, b.name));
+      }
+    bottom.series.push_back(acc_series("mipmap", "f32", "cpu"));
+    bottom.series.push_back(acc_series("gather", "f32", "cpu"));
+    plot::write_png(outs, (dir / "accuracy.png").string(), {top, bottom});
 
-  // Fig. 7: time against sigma.
-  auto spd_series = [&](const std::string& method, const std::string& prec, const std::string& backend,
-                        const std::string& map) {
-    plot::Series s;
-    const Style st = style_of(method, prec);
-    s.label = label_of(method, prec, backend), s.r = st.r, s.g = st.g, s.b = st.b, s.dashed = backend == "gpu";
+    // Fig. 7: time against sigma.
+    auto spd_series = [&](const std::string& method, const std::string& prec, const std::string& backend,
+                          const std::string& map) {
+      plot::Series s;
+      const Style st = style_of(method, prec);
+      s.label = label_of(method, prec, backend), s.r = st.r, s.g = st.g, s.b = st.b, s.dashed = backend == "gpu";
+      for (const SpeedRow& r : spd)
+        if (r.method == method && r.precision == prec && r.backend == backend && r.map == map)
+          s.x.push_back(r.sigma), s.y.push_back(r.seconds);
+      return s;
+    };
+    plot::Panel st, inv, var;
+    st.title = "Standard scheme (eq. 13), constant sigma";
+    inv.title = "Invariant schemes (eq. 18) and the peers, constant sigma";
+    var.title = "Space-variant haze map (sigma0 + R'^1.5 (sigma - sigma0))";
+    double tlo = INFINITY, thi = 0;
     for (const SpeedRow& r : spd)
-      if (r.method == method && r.precision == prec && r.backend == backend && r.map == map)
-        s.x.push_back(r.sigma), s.y.push_back(r.seconds);
-    return s;
-  };
-  plot::Panel st, inv, var;
-  st.title = "Standard scheme (eq. 13), constant sigma";
-  inv.title = "Invariant schemes (eq. 18) and the peers, constant sigma";
-  var.title = "Space-variant haze map (sigma0 + R'^1.5 (sigma - sigma0))";
-  double tlo = INFINITY, thi = 0;
-  for (const SpeedRow& r : spd)
-    if (r.seconds > 0) tlo = std::min(tlo, r.seconds), thi = std::max(thi, r.seconds);
-  for (plot::Panel* p : {&st, &inv, &var}) {
-    p->xlabel = "sigma_ref [px]";
-    p->ylabel = "time [s]";
-    if (thi > 0) p->ymin = std::pow(10.0, std::floor(std::log10(tlo))), p->ymax = std::pow(10.0, std::ceil(std::log10(thi)));
-    p->xmin = 0;
-  }
-  for (const StudyBackend& b : backends)
-    for (const char* pr : {"f32", "f16"}) {
-      st.series.push_back(spd_series("brume-standard", pr, b.name, "constant"));
-      inv.series.push_back(spd_series("brume-invariant", pr, b.name, "constant"));
-      inv.series.push_back(spd_series("brume-invariant-exact", pr, b.name, "constant"));
-      var.series.push_back(spd_series("brume-invariant-exact", pr, b.name, "varying"));
+      if (r.seconds > 0) tlo = std::min(tlo, r.seconds), thi = std::max(thi, r.seconds);
+    for (plot::Panel* p : {&st, &inv, &var}) {
+      p->xlabel = "sigma_ref [px]";
+      p->ylabel = "time [s]";
+      if (thi > 0) p->ymin = std::pow(10.0, std::floor(std::log10(tlo))), p->ymax = std::pow(10.0, std::ceil(std::log10(thi)));
+      p->xmin = 0;
     }
-  for (const char* m : {"opencv-gaussianblur", "mipmap", "gather", "memory-floor"})
-    inv.series.push_back(spd_series(m, "f32", "cpu", "constant"));
-  for (const char* m : {"mipmap", "gather"}) var.series.push_back(spd_series(m, "f32", "cpu", "varying"));
-  for (plot::Panel* p : {&st, &inv, &var})
-    p->series.erase(std::remove_if(p->series.begin(), p->series.end(), [](const plot::Series& s) { return s.x.empty(); }),
-                    p->series.end());
-  plot::write_png(outs, (dir / "speed.png").string(), {st, inv, var});
+    for (const StudyBackend& b : backends)
+      for (const char* pr : {"f32", "f16"}) {
+        st.series.push_back(spd_series("brume-standard", pr, b.name, "constant"));
+        inv.series.push_back(spd_series("brume-invariant", pr, b.name, "constant"));
+        inv.series.push_back(spd_series("brume-invariant-exact", pr, b.name, "constant"));
+        var.series.push_back(spd_series("brume-invariant-exact", pr, b.name, "varying"));
+      }
+    for (const char* m : {"opencv-gaussianblur", "mipmap", "gather", "memory-floor"})
+      inv.series.push_back(spd_series(m, "f32", "cpu", "constant"));
+    for (const char* m : {"mipmap", "gather"}) var.series.push_back(spd_series(m, "f32", "cpu", "varying"));
+    for (plot::Panel* p : {&st, &inv, &var})
+      p->series.erase(std::remove_if(p->series.begin(), p->series.end(), [](const plot::Series& s) { return s.x.empty(); }),
+                      p->series.end());
+    plot::write_png(outs, (dir / "speed.png").string(), {st, inv, var});
+  }
 
   // Leakage: the near square's top-left corner, 2x, one tile per method.
   const int c = n / 8, scale = std::max(2, 240 / (2 * c)), tile = 2 * c * scale, label_h = 26, cols = 4;
@@ -421,8 +423,13 @@ void write_summary(OutputSet& outs, const fs::path& dir, const std::vector<AccRo
 }  // namespace
 
 int run_study(const std::string& what, const std::string& out_dir, bool quick, const std::string& backend,
-              const std::string& image_path) {
+              const std::string& image_path, const std::string& part) {
   if (what != "diffusion") throw Error("brume study '" + what + "': the only study is 'diffusion'");
+  if (part != "all" && part != "leakage")
+    throw Error("--only '" + part + "' is not a part of the study; use all or leakage");
+  // --only leakage: the leakage experiment alone (leakage.csv, leakage.png),
+  // e.g. after a change to the edge rates, without re-timing the speed part.
+  const bool all = part == "all";
   if (backend != "cpu" && backend != "gpu" && backend != "all")
     throw Error("--backend '" + backend + "' is not allowed for the study; use cpu, gpu or all");
   std::error_code ec;
@@ -435,7 +442,9 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
   OutputSet outs;
   Image acc_rgb;
   std::string acc_name;
-  if (!image_path.empty()) {
+  if (!all) {
+    // the leakage experiment builds its own scene
+  } else if (!image_path.empty()) {
     acc_rgb = read_color(image_path);
     acc_name = image_path;
   } else {
@@ -480,7 +489,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
   const std::vector<double> acc_sigmas =
       quick ? std::vector<double>{2, 5, 10} : std::vector<double>{1.5, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 25};
   std::vector<AccRow> acc_rows;
-  {
+  if (all) {
     std::ostringstream acc;
     acc << "scheme,precision,backend,sigma,rms,iterations,spread\n";
     std::fprintf(stderr, "brume study: accuracy on %s (%dx%d)\n", acc_name.c_str(), acc_img.width, acc_img.height);
@@ -523,13 +532,13 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
 
   // ---- Speed (Fig. 7) -------------------------------------------------------
   const int W = quick ? 463 : 1600, H = quick ? 370 : 1120;
-  const DemoScene scene = render_demo_scene(W, H);
+  const DemoScene scene = all ? render_demo_scene(W, H) : DemoScene{};  // the speed part only
   const Image big = rgba(scene.rgb);
   double rmax = 0;
   for (float r : scene.range.data)
     if (std::isfinite(r)) rmax = std::max(rmax, static_cast<double>(r));
   std::vector<SpeedRow> speed_rows;
-  {
+  if (all) {
     std::ostringstream spd;
     spd << "method,precision,backend,sigma,seconds,iterations,map,runs\n";
     auto emit = [&](const std::string& method, const std::string& prec, const std::string& bname, double sigma,
@@ -661,9 +670,13 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
   }
 
   // ---- Figures ---------------------------------------------------------------
-  write_figures(outs, dir, acc_rows, speed_rows, crops, backends, n, q0);
-  write_summary(outs, dir, acc_rows, speed_rows, leak_rows, acc_name, acc_img, W, H, sfar);
+  write_figures(outs, dir, acc_rows, speed_rows, crops, backends, n, q0, all);
+  if (all) write_summary(outs, dir, acc_rows, speed_rows, leak_rows, acc_name, acc_img, W, H, sfar);
   outs.commit();
+  if (!all) {
+    std::fprintf(stderr, "brume study: wrote leakage.csv and leakage.png in %s\n", out_dir.c_str());
+    return 0;
+  }
   std::fprintf(stderr, "brume study: wrote accuracy.csv, speed.csv, leakage.csv, summary.md and the plots in %s\n",
                out_dir.c_str());
   return 0;
