@@ -7,7 +7,7 @@
 // the median (min..max) of its rounds. Issue #13's target: default >= 15x
 // faster than bertalmio.
 //
-// Usage: brume_bench_dof [ROUNDS]
+// Usage: brume_bench_dof [ROUNDS] [map|invariant-exact|bertalmio|standard|leaky]   (one part alone, below)
 #include <omp.h>
 
 #include <algorithm>
@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <string>
 #include <vector>
 
 #include "bench_util.hpp"
@@ -51,6 +52,26 @@ int main(int argc, char** argv) {
   p.coc_infinity_px = 4.0 * std::sqrt(399.0);
   p.coc_limit_px = 20.0;  // near pixels (Z < Zf/2) would exceed it: capped at 20 px
 
+  // One part alone, for a profiler or for CPU-time differencing on a busy
+  // host (`time` of ROUNDS = 1 and 11: the difference / 10 is one call's CPU
+  // time, start-up and the scene render cancel): the scale map, or a
+  // scheme's whole apply.
+  const std::string only = argc > 2 ? argv[2] : "";
+  if (!only.empty()) {
+    const bool map = only == "map";
+    if (!map) p.scheme = parse_enum(dof_scheme_names(), only, "brume_bench_dof PART");
+    std::vector<double> tm;
+    for (int r = 0; r <= rounds; ++r) {
+      DofAnalysis a;
+      const auto t0 = Clock::now();
+      if (map) dof_scale_map(z, p, a);
+      else apply_dof(s.rgb, z, p, a);
+      if (r > 0) tm.push_back(ms_since(t0));
+    }
+    const bench::Spread m = spread(tm);
+    std::printf("%s: %.1f ms (%.1f..%.1f)\n", only.c_str(), m.median, m.lo, m.hi);
+    return 0;
+  }
   const DofScheme schemes[] = {DofScheme::invariant_exact, DofScheme::bertalmio, DofScheme::standard};
   std::vector<double> t[3], tmap;
   int iters[3] = {0, 0, 0};

@@ -329,8 +329,13 @@ void write_summary(OutputSet& outs, const fs::path& dir, const std::vector<AccRo
 }  // namespace
 
 int run_study(const std::string& what, const std::string& out_dir, bool quick, const std::string& backend,
-              const std::string& image_path) {
+              const std::string& image_path, const std::string& part) {
   if (what != "diffusion") throw Error("brume study '" + what + "': the only study is 'diffusion'");
+  if (part != "all" && part != "leakage")
+    throw Error("--only '" + part + "' is not a part of the study; use all or leakage");
+  // --only leakage: the leakage experiment alone (leakage.csv, leakage.png),
+  // e.g. after a change to the edge rates, without re-timing the speed part.
+  const bool all = part == "all";
   if (backend != "cpu" && backend != "gpu" && backend != "all")
     throw Error("--backend '" + backend + "' is not allowed for the study; use cpu, gpu or all");
   std::error_code ec;
@@ -343,7 +348,9 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
   OutputSet outs;
   Image acc_rgb;
   std::string acc_name;
-  if (!image_path.empty()) {
+  if (!all) {
+    // the leakage experiment builds its own scene
+  } else if (!image_path.empty()) {
     acc_rgb = read_color(image_path);
     acc_name = image_path;
   } else {
@@ -388,7 +395,7 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
   const std::vector<double> acc_sigmas =
       quick ? std::vector<double>{2, 5, 10} : std::vector<double>{1.5, 2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 25};
   std::vector<AccRow> acc_rows;
-  {
+  if (all) {
     std::ostringstream acc;
     acc << "scheme,precision,backend,sigma,rms,iterations,spread\n";
     std::fprintf(stderr, "brume study: accuracy on %s (%dx%d)\n", acc_name.c_str(), acc_img.width, acc_img.height);
@@ -431,13 +438,13 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
 
   // ---- Speed (Fig. 7) -------------------------------------------------------
   const int W = quick ? 463 : 1600, H = quick ? 370 : 1120;
-  const DemoScene scene = render_demo_scene(W, H);
+  const DemoScene scene = all ? render_demo_scene(W, H) : DemoScene{};  // the speed part only
   const Image big = rgba(scene.rgb);
   double rmax = 0;
   for (float r : scene.range.data)
     if (std::isfinite(r)) rmax = std::max(rmax, static_cast<double>(r));
   std::vector<SpeedRow> speed_rows;
-  {
+  if (all) {
     std::ostringstream spd;
     spd << "method,precision,backend,sigma,seconds,iterations,map,runs\n";
     auto emit = [&](const std::string& method, const std::string& prec, const std::string& bname, double sigma,
@@ -570,12 +577,13 @@ int run_study(const std::string& what, const std::string& out_dir, bool quick, c
 
   // ---- Figures ---------------------------------------------------------------
   write_crops(outs, dir, crops, n, q0);
-  write_summary(outs, dir, acc_rows, speed_rows, leak_rows, acc_name, acc_img, W, H, sfar);
+  if (all) write_summary(outs, dir, acc_rows, speed_rows, leak_rows, acc_name, acc_img, W, H, sfar);
   outs.commit();
   // The figures are matplotlib's (python/brume/plots.py), drawn from these files.
-  std::fprintf(stderr,
-               "brume study: wrote accuracy.csv, speed.csv, leakage.csv, leakage_crops/ and summary.md in %s\n"
-               "brume study: draw the figures with: PYTHONPATH=%s python3 -m brume.plots %s\n",
-               out_dir.c_str(), BRUME_PYTHON_DIR, out_dir.c_str());
+  std::fprintf(stderr, "brume study: wrote %s in %s\n",
+               all ? "accuracy.csv, speed.csv, leakage.csv, leakage_crops/ and summary.md" : "leakage.csv and leakage_crops/",
+               out_dir.c_str());
+  std::fprintf(stderr, "brume study: draw the figures with: PYTHONPATH=%s python3 -m brume.plots %s\n", BRUME_PYTHON_DIR,
+               out_dir.c_str());
   return 0;
 }

@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
 #include <sstream>
 #include <nlohmann/json.hpp>
 
@@ -418,6 +419,34 @@ TEST_F(Cli, StudyDiffusionQuickWritesItsTables) {
     EXPECT_FALSE(std::filesystem::exists(p(std::string("study/") + png))) << png;
   EXPECT_NE(r.output.find("python3 -m brume.plots " + p("study")), std::string::npos) << r.output;
   EXPECT_TRUE(std::filesystem::exists(p("study/summary.md")));
+}
+
+TEST_F(Cli, StudyLeakageAloneWritesItsCsvAndCrops) {
+  // `--only leakage` (regenerates docs/study/leakage.* without re-timing the
+  // speed part): leakage.csv and leakage_crops/ and nothing else; no image
+  // needed. The leak-free edge rates put no near colour into the far ring
+  // since the streak fix (the bound 1e-3; the paper's mean does).
+  CliRun r = run("study diffusion --quick --backend cpu --only leakage --out-dir " + p("lk"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  std::set<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(p("lk"))) names.insert(e.path().filename().string());
+  EXPECT_EQ(names, (std::set<std::string>{"leakage.csv", "leakage_crops"}));
+  std::ifstream lk(p("lk/leakage.csv"));
+  std::string line;
+  std::getline(lk, line);
+  std::map<std::string, double> far;
+  while (std::getline(lk, line)) {
+    std::stringstream ss(line);
+    std::string f[7];
+    for (auto& x : f) std::getline(ss, x, ',');
+    far[f[0] + "/" + f[1]] = std::stod(f[6]);
+  }
+  for (const char* k : {"invariant/min", "invariant/harmonic", "invariant-exact/min", "invariant-exact/harmonic"}) {
+    ASSERT_EQ(far.count(k), 1u) << k;
+    EXPECT_LE(far.at(k), 1e-3) << k;
+  }
+  EXPECT_GT(far.at("invariant-exact/mean"), 0.1);
+  EXPECT_NE(run("study diffusion --only speed --out-dir " + p("lk2")).status, 0);
 }
 
 TEST_F(Cli, UnknownValueTurnsASkySentinelIntoSky) {

@@ -9,6 +9,7 @@
 #include "brume/aerial.hpp"
 #include "brume/aerial_coefficients.hpp"
 #include "brume/blur.hpp"
+#include "brume/chain.hpp"
 #include "brume/compare.hpp"
 #include "brume/depth_pipeline.hpp"
 #include "brume/dof.hpp"
@@ -95,6 +96,7 @@ TEST(Params, EveryCommandIsDeclaredCompletely) {
   expect_complete(sky_fit_job_table(), "sky fit");
   expect_complete(fog_job_table(), "fog");
   expect_complete(dof_job_table(), "dof");
+  expect_complete(haze_dof_job_table(), "haze+dof");
 }
 
 TEST(Params, RangeErrorsNameTheFlag) {
@@ -110,6 +112,7 @@ TEST(Params, RangeErrorsNameTheFlag) {
   expect_range_errors_name_the_flag(insert_job_table());
   expect_range_errors_name_the_flag(fog_job_table());
   expect_range_errors_name_the_flag(dof_job_table());
+  expect_range_errors_name_the_flag(haze_dof_job_table());
 }
 
 TEST(Params, CameraPoseBlockDrivesTheCamera) {

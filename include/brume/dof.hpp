@@ -44,8 +44,9 @@
 // neighbours by about that scale, as its blur disc covers them: the
 // near-field scale map is split into octave bands of sigma, [2^j, 2^{j+1})
 // px; band j (sigma0 outside it) is blurred isotropically by a Gaussian of
-// 2^j px (by the same engine, at 1/k resolution with k = floor(2^j / 2): it
-// shapes a rim, not an image); every pixel takes the largest of its own
+// 2^j px (a separable sampled Gaussian at 1/k resolution, k = floor(2^j / 2),
+// read back bilinearly: it shapes a rim, not an image; within 0.2 px of the
+// full-resolution definition, tests/test_dof.cpp); every pixel takes the largest of its own
 // sigma and the blurred bands, still capped at --coc-limit. Pixels behind the focal plane never raise a
 // neighbour's scale, so edges at the focal plane stay sharp and a near
 // object's blur spreads over the background around it. `sharp` keeps the
@@ -139,6 +140,10 @@ struct DofRun {
 // invariant-exact and standard schemes through the engine's GPU passes.
 DofRun run_dof(const Image& rgb, const Image& measured_range, const Intrinsics& k, const DofParams& p,
                const RangeStep& prepare, const Exec& exec = {}, const std::set<std::string>& given = {});
+// The same on a range the caller prepared (prepare_step), e.g. once for a
+// chain of effects (brume/chain.hpp).
+DofRun run_dof_prepared(const Image& rgb, const PreparedRange& prepared, const Intrinsics& k, const DofParams& p,
+                        const Exec& exec = {}, const std::set<std::string>& given = {});
 
 struct DofJob {
   InputFiles input;
@@ -151,6 +156,8 @@ const ParamTable<DofJob>& dof_job_table();
 // The intrinsics a job's planar depth uses: the depth flags' (--fx.., --fov-x..,
 // --calib), else the lens's (fx = F W / sensor width, centred); when both are
 // given they must agree within 1 %. Throws when neither is.
+// Whether the depth flags give the camera's intrinsics (else the lens must).
+bool depth_flags_give_intrinsics(const DepthSource& src);
 Intrinsics dof_intrinsics(const DepthSource& src, const DofParams& p, int width, int height);
 nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 

@@ -119,6 +119,11 @@ struct HazeRun {
 };
 HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams& p, const RangeStep& prepare,
                  const Exec& exec = {}, const std::set<std::string>& given = {});
+// The same on a range the caller prepared (prepare_step of measured_range),
+// e.g. once for a chain of effects (brume/chain.hpp); R_max and the airlight
+// still come from the measured range.
+HazeRun run_haze_prepared(const Image& rgb, const Image& measured_range, const PreparedRange& prepared,
+                          const HazeParams& p, const Exec& exec = {}, const std::set<std::string>& given = {});
 
 // From files to files (the CLI's `brume haze` and `brume run`):
 struct HazeJob {

@@ -7,6 +7,7 @@
 #include <map>
 
 #include "brume/blur.hpp"
+#include "brume/chain.hpp"
 #include "brume/depth_pipeline.hpp"
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
@@ -96,6 +97,7 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
   if (cmd == "insert") return run_insert_job(job_from(record, insert_job_table(), out_dir), exec, ctx);
   if (cmd == "fog") return run_fog_job(job_from(record, fog_job_table(), out_dir), exec, ctx);
   if (cmd == "dof") return run_dof_job(job_from(record, dof_job_table(), out_dir), exec, ctx);
+  if (cmd == "haze+dof") return run_haze_dof_job(job_from(record, haze_dof_job_table(), out_dir), exec, ctx);
   if (cmd == "blur") return run_blur_job(job_from(record, blur_job_table(), out_dir), exec, ctx);
   if (cmd == "sky render") return run_sky_render_job(job_from(record, sky_render_job_table(), out_dir), exec, ctx);
   if (cmd == "sky fit") {
@@ -111,7 +113,7 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
     return run_depth_convert_job(job_from(record, depth_convert_job_table(), out_dir), ctx);
   if (cmd == "depth prepare")
     return run_depth_prepare_job(job_from(record, depth_prepare_job_table(), out_dir), ctx);
-  throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, aerial, insert, fog, dof, blur, "
+  throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, haze+dof, aerial, insert, fog, dof, blur, "
               "sky render, sky fit, depth convert, depth prepare can)");
 }
 

@@ -30,7 +30,8 @@ nlohmann::json dof_record(const DofParams& p, const DofAnalysis& a, const Intrin
       {"unknown_depth_rule", "unknown depth is infinitely far: c = alpha"},
       {"near_field_pixels", a.near_pixels},
       {"foreground_rule", p.foreground == Foreground::soft
-                              ? "near-field sigma blurred by a Gaussian of its largest value, max with sigma (§3.4)"
+                              ? "near-field sigma in octave bands [2^j, 2^(j+1)) px, each blurred by a Gaussian of 2^j px, max with "
+                                "sigma (§3.4)"
                               : "none (the CoC map as is)"},
       {"z_min_m", a.z_min_m},
       {"z_max_m", a.z_max_m},
@@ -38,11 +39,6 @@ nlohmann::json dof_record(const DofParams& p, const DofAnalysis& a, const Intrin
       {"intrinsics", {{"fx", k.fx}, {"fy", k.fy}, {"cx", k.cx}, {"cy", k.cy}, {"source", k_source}}},
   };
   return j;
-}
-
-bool depth_flags_give_intrinsics(const DepthSource& s) {
-  return s.k.fx > 0.0 || s.k.fy > 0.0 || !std::isnan(s.fov_x_deg) || !std::isnan(s.fov_y_deg) || !s.calib.empty() ||
-         (!s.velodyne.empty() && !s.kitti_calib.empty());
 }
 
 bool cpu_only(const DofParams& p) { return p.scheme == DofScheme::bertalmio || p.scheme == DofScheme::leaky; }
@@ -59,6 +55,11 @@ void check_gpu_scheme(const DofParams& p, Backend b) {
 }
 
 }  // namespace
+
+bool depth_flags_give_intrinsics(const DepthSource& s) {
+  return s.k.fx > 0.0 || s.k.fy > 0.0 || !std::isnan(s.fov_x_deg) || !std::isnan(s.fov_y_deg) || !s.calib.empty() ||
+         (!s.velodyne.empty() && !s.kitti_calib.empty());
+}
 
 const std::vector<MapOutput>& dof_map_outputs() {
   static const std::vector<MapOutput> m = {
@@ -106,14 +107,24 @@ DofRun run_dof(const Image& rgb, const Image& measured_range, const Intrinsics& 
                const RangeStep& prepare, const Exec& exec, const std::set<std::string>& given) {
   validate_dof(p, given);
   check_gpu_scheme(p, exec.gpu ? Backend::gpu : exec.backend);
-  Exec ex = exec;
-  if (cpu_only(p) && ex.backend == Backend::automatic) ex.backend = Backend::cpu;
   if (rgb.channels != 3) throw Error("depth of field needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
   if (rgb.width != measured_range.width || rgb.height != measured_range.height)
     throw Error("range map " + measured_range.size_string() + " does not match image " + rgb.size_string() +
                 "; they must be the same size (resample the range map, or crop both)");
+  return run_dof_prepared(rgb, prepare_step(measured_range, prepare, given), k, p, exec, given);
+}
+
+DofRun run_dof_prepared(const Image& rgb, const PreparedRange& prep, const Intrinsics& k, const DofParams& p,
+                        const Exec& exec, const std::set<std::string>& given) {
+  validate_dof(p, given);
+  check_gpu_scheme(p, exec.gpu ? Backend::gpu : exec.backend);
+  Exec ex = exec;
+  if (cpu_only(p) && ex.backend == Backend::automatic) ex.backend = Backend::cpu;
+  if (rgb.channels != 3) throw Error("depth of field needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
+  if (rgb.width != prep.range.width || rgb.height != prep.range.height)
+    throw Error("range map " + prep.range.size_string() + " does not match image " + rgb.size_string() +
+                "; they must be the same size (resample the range map, or crop both)");
   DofRun run;
-  PreparedRange prep = prepare_step(measured_range, prepare, given);
   const Image z = planar_depth(prep.range, k);
   BackendChoice backend = choose_backend(ex);
   if (ex.backend != exec.backend)

@@ -2,6 +2,7 @@
 // the shape every effect follows (brume/pipeline.hpp): analyse the measured
 // range, prepare it, dispatch once on Exec, record.
 #include <chrono>
+#include <utility>
 
 #include "brume/error.hpp"
 #include "brume/gpu.hpp"
@@ -30,15 +31,13 @@ const ParamTable<HazeJob>& haze_job_table() {
   return t;
 }
 
-HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams& p, const RangeStep& prepare,
-                 const Exec& exec, const std::set<std::string>& given) {
-  validate_haze(p, given);
+namespace {
+
+// The effect on the prepared range, with the analysis of the measured one.
+HazeRun haze_on_prepared(const Image& rgb, HazeAnalysis analysis, const PreparedRange& prep, const HazeParams& p,
+                         const Exec& exec) {
   HazeRun run;
-  // Image-wide statistics (R_max, the airlight from the sky) come from the
-  // measured range; the effect then runs on the prepared one, whose sky lies
-  // at S_max > R_max (so it gets the far transmission and sigma_max).
-  run.analysis = analyse_haze(rgb, measured_range, p);
-  PreparedRange prep = prepare_step(measured_range, prepare, given);
+  run.analysis = std::move(analysis);
   BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;
@@ -58,6 +57,28 @@ HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams
   run.record["execution"] = backend.record;
   run.record["execution"]["timing"] = timing;
   return run;
+}
+
+}  // namespace
+
+HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams& p, const RangeStep& prepare,
+                 const Exec& exec, const std::set<std::string>& given) {
+  validate_haze(p, given);
+  // Image-wide statistics (R_max, the airlight from the sky) come from the
+  // measured range; the effect then runs on the prepared one, whose sky lies
+  // at S_max > R_max (so it gets the far transmission and sigma_max).
+  HazeAnalysis analysis = analyse_haze(rgb, measured_range, p);
+  const PreparedRange prep = prepare_step(measured_range, prepare, given);
+  return haze_on_prepared(rgb, std::move(analysis), prep, p, exec);
+}
+
+HazeRun run_haze_prepared(const Image& rgb, const Image& measured_range, const PreparedRange& prepared,
+                          const HazeParams& p, const Exec& exec, const std::set<std::string>& given) {
+  validate_haze(p, given);
+  HazeAnalysis analysis = analyse_haze(rgb, measured_range, p);
+  if (prepared.range.width != measured_range.width || prepared.range.height != measured_range.height)
+    throw Error("internal: the prepared range is not the measured range's size");
+  return haze_on_prepared(rgb, std::move(analysis), prepared, p, exec);
 }
 
 nlohmann::json run_haze_job(const HazeJob& job, const ExecOptions& eo, const RunContext& ctx) {

@@ -26,7 +26,7 @@ Command add_demo(CLI::App& app) {
 Command add_study(CLI::App& app) {
   CLI::App* study = app.add_subcommand("study", "accuracy and speed studies (Hansard 5.2-5.3)");
   struct Args {
-    std::string what, dir, backend = "cpu", image;
+    std::string what, dir, backend = "cpu", image, only = "all";
     bool quick = false;
   };
   auto a = std::make_shared<Args>();
@@ -35,8 +35,10 @@ Command add_study(CLI::App& app) {
   study->add_flag("--quick", a->quick, "small image and a few sigma (a smoke test)");
   study->add_option("--backend", a->backend, "cpu, gpu or all")->capture_default_str();
   study->add_option("--image", a->image, "real image in [0,1] for the accuracy part (default Middlebury Art)");
+  study->add_option("--only", a->only, "all, or leakage: the leakage experiment alone (leakage.csv, leakage.png)")
+      ->capture_default_str();
   return {study, "study", [a](const std::vector<std::string>&) {
-            return run_study(a->what, a->dir, a->quick, a->backend, a->image);
+            return run_study(a->what, a->dir, a->quick, a->backend, a->image, a->only);
           }};
 }
 

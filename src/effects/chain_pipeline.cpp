@@ -1,0 +1,189 @@
+// brume — haze then depth of field in one run (brume/chain.hpp): the range
+// prepared once, the haze stage, its linear RGB handed to the DOF stage in
+// memory, one record holding both parameter blocks.
+#include <cctype>
+#include <chrono>
+#include <utility>
+
+#include "brume/chain.hpp"
+#include "brume/error.hpp"
+#include "brume/record.hpp"
+
+namespace brume {
+
+namespace {
+
+bool has_dof_prefix(const std::string& n) { return n.rfind(kDofPrefix, 0) == 0; }
+
+// The chain's names split into each stage's own: the DOF's without the prefix.
+std::set<std::string> haze_given(const std::set<std::string>& given) {
+  std::set<std::string> g;
+  for (const auto& n : given)
+    if (!has_dof_prefix(n)) g.insert(n);
+  return g;
+}
+std::set<std::string> dof_given(const std::set<std::string>& given) {
+  std::set<std::string> g;
+  const std::string prefix = kDofPrefix;
+  for (const auto& n : given)
+    if (has_dof_prefix(n)) g.insert(n.substr(prefix.size()));
+  return g;
+}
+
+// The DOF stage's checks name its flags as `brume dof` spells them
+// (--focus-distance); in the chain the user typed --dof-focus-distance.
+// Every "--NAME" of a DOF parameter in the message gets the prefix.
+[[noreturn]] void rethrow_prefixed(const Error& e) {
+  const std::string m = e.what();
+  std::string out;
+  std::size_t i = 0;
+  while (i < m.size()) {
+    if (m.compare(i, 2, "--") == 0 && (i == 0 || !std::isalnum(static_cast<unsigned char>(m[i - 1])))) {
+      std::size_t j = i + 2;
+      while (j < m.size() && (std::isalnum(static_cast<unsigned char>(m[j])) || m[j] == '-')) ++j;
+      std::string name = m.substr(i + 2, j - i - 2);
+      while (!name.empty() && name.back() == '-') name.pop_back(), --j;
+      bool dof = dof_param_table().find(name) != nullptr;
+      for (const auto& d : dof_param_table().params())
+        for (const auto& a : d.spec.aliases) dof = dof || a == name;
+      out += "--" + std::string(dof ? kDofPrefix : "") + name;
+      i = j;
+    } else {
+      out += m[i++];
+    }
+  }
+  throw Error(out);
+}
+
+template <class F>
+auto dof_stage(F&& f) -> decltype(f()) {
+  try {
+    return f();
+  } catch (const Error& e) {
+    rethrow_prefixed(e);
+  }
+}
+
+bool cpu_only(DofScheme s) { return s == DofScheme::bertalmio || s == DofScheme::leaky; }
+
+}  // namespace
+
+HazeDofRun run_haze_dof(const Image& rgb, const Image& measured_range, const Intrinsics& k, const HazeParams& haze,
+                        const DofParams& dof, const RangeStep& prepare, const Exec& exec,
+                        const std::set<std::string>& given) {
+  const std::set<std::string> gh = haze_given(given), gd = dof_given(given);
+  // Both stages' parameters are checked before either runs.
+  validate_haze(haze, gh);
+  dof_stage([&] { validate_dof(dof, gd); });
+  if (exec.backend == Backend::gpu && cpu_only(dof.scheme))
+    throw Error("--dof-scheme " + to_string(dof.scheme) +
+                " runs on the CPU only (a comparison with the paper): use --backend cpu or auto, or --dof-scheme "
+                "invariant-exact or standard on the GPU");
+
+  // One context for both stages (a second EGL context would cost its start-up again).
+  BackendChoice backend = choose_backend(exec);
+  Exec ex = exec;
+  ex.gpu = backend.gpu;
+  if (!backend.gpu) ex.backend = Backend::cpu;  // auto that chose the CPU: the stages must not try again
+  Exec ex_dof = ex;
+  nlohmann::json dof_note;
+  if (cpu_only(dof.scheme) && backend.gpu) {
+    ex_dof.gpu = nullptr;
+    ex_dof.backend = Backend::cpu;
+    dof_note = "--dof-scheme " + to_string(dof.scheme) + " runs on the CPU only; --backend auto ran that stage on the CPU";
+  }
+
+  HazeDofRun run;
+  const PreparedRange prep = prepare_step(measured_range, prepare, gh);
+  run.haze = run_haze_prepared(rgb, measured_range, prep, haze, ex, gh);
+  run.dof = dof_stage([&] { return run_dof_prepared(run.haze.result.rgb, prep, k, dof, ex_dof, gd); });
+
+  run.record["haze"] = run.haze.record["haze"];
+  run.record["dof"] = run.dof.record["dof"];
+  run.record["prepare"] = prep.record;
+  run.record["execution"] = backend.record;
+  if (!dof_note.is_null()) run.record["execution"]["dof_backend"] = {{"backend", "cpu"}, {"note", dof_note}};
+  if (backend.gpu)
+    run.record["execution"]["handoff"] =
+        "the hazy image is read back (haze's readback_ms) and uploaded as the DOF diffusion's input (dof's upload_ms)";
+  run.record["execution"]["timing"] = {{"haze", run.haze.record["execution"]["timing"]},
+                                       {"dof", run.dof.record["execution"]["timing"]}};
+  return run;
+}
+
+const std::vector<MapOutput>& haze_dof_map_outputs() {
+  static const std::vector<MapOutput> m = [] {
+    std::vector<MapOutput> v = haze_map_outputs();
+    v.push_back({"dof-scale-map", "write the depth-of-field stage's target scale sigma(x) in pixels (float file)",
+                 "sigma is in pixels and exceeds 1"});
+    return v;
+  }();
+  return m;
+}
+
+const ParamTable<HazeDofJob>& haze_dof_job_table() {
+  static const ParamTable<HazeDofJob> t = [] {
+    ParamTable<HazeDofJob> d("haze");
+    d.nest(&HazeDofJob::input, input_param_table(true))
+        .nest(&HazeDofJob::prepare, range_step_param_table())
+        .nest(&HazeDofJob::haze, haze_param_table())
+        .nest(&HazeDofJob::dof, dof_param_table(), kDofPrefix)
+        .nest(&HazeDofJob::output, output_param_table(haze_dof_map_outputs()));
+    return d;
+  }();
+  return t;
+}
+
+bool dof_stage_requested(const std::set<std::string>& given) {
+  for (const auto& n : given)
+    if (has_dof_prefix(n)) return true;
+  return false;
+}
+
+HazeJob haze_part(const HazeDofJob& job, const std::set<std::string>& given) {
+  const auto& t = haze_dof_job_table();
+  for (const auto& d : t.params())
+    if (has_dof_prefix(d.spec.name) && t.is_set(job, d.spec.name, given))
+      throw Error("--" + d.spec.name + " is a setting of the depth-of-field stage; plain haze would ignore it: run the "
+                  "chain (run_haze_dof_job), or drop it");
+  HazeJob h;
+  h.input = job.input;
+  h.prepare = job.prepare;
+  h.haze = job.haze;
+  h.output = job.output;
+  h.output.maps.erase("dof-scale-map");
+  return h;
+}
+
+nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, const RunContext& ctx) {
+  // Every parameter of both stages is checked before any file is touched.
+  haze_dof_job_table().validate(job);
+  const std::set<std::string> gh = haze_given(ctx.given), gd = dof_given(ctx.given);
+  validate_haze(job.haze, gh);
+  dof_stage([&] { validate_dof(job.dof, gd); });
+  check_range_step(job.prepare, gh);
+  if (eo.backend == Backend::gpu && cpu_only(job.dof.scheme))
+    throw Error("--dof-scheme " + to_string(job.dof.scheme) +
+                " runs on the CPU only (a comparison with the paper): use --backend cpu or auto, or --dof-scheme "
+                "invariant-exact or standard on the GPU");
+  const Exec exec = eo.exec();
+  check_outputs(job.output, haze_dof_map_outputs());
+
+  LoadedInputs in = load_inputs(job.input, true);
+  const Intrinsics k =
+      dof_stage([&] { return dof_intrinsics(job.input.depth, job.dof, in.rgb.width, in.rgb.height); });
+  HazeDofRun run = run_haze_dof(in.rgb, in.depth.range, k, job.haze, job.dof, job.prepare, exec, ctx.given);
+  run.record["dof"]["derived"]["intrinsics"]["source"] =
+      depth_flags_give_intrinsics(job.input.depth) ? "depth flags" : "lens (focal length x width / sensor width)";
+
+  const nlohmann::json rec =
+      job_record("haze+dof", ctx, haze_dof_job_table().to_json(job), in.record, run.record, eo.timing);
+  write_outputs(job.output, haze_dof_map_outputs(), run.dof.result.rgb,
+                {{"transmission", run.haze.result.transmission},
+                 {"scale-map", run.haze.result.scale},
+                 {"dof-scale-map", run.dof.result.scale}},
+                &in.image_info, rec);
+  return rec;
+}
+
+}  // namespace brume
