@@ -14,6 +14,7 @@
 // of a run's outputs only after every one of them has been written.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -44,6 +45,35 @@ Image read_color(const std::string& path, Transfer transfer = Transfer::automati
 // channel (or several identical ones, like a grey PNG saved as RGB).
 Image read_scalar(const std::string& path, const std::string& channel = "",
                   FileInfo* info = nullptr);
+
+// The largest image or depth map a read accepts, in pixels (width × height).
+// A header that declares more is refused before any allocation — a hostile or
+// corrupt file must not exhaust memory. Process-wide, like OpenImageIO's own
+// "limits:" attributes; `--max-pixels` on the command line sets it.
+constexpr std::uint64_t default_max_pixels = 500'000'000;
+std::uint64_t max_pixels();
+void set_max_pixels(std::uint64_t n);  // n ≥ 1
+
+// The header of an image file (no pixels are read): size and channel count.
+struct ImageHeader {
+  int width = 0, height = 0, channels = 0;
+  std::string format;
+};
+ImageHeader read_header(const std::string& path);
+
+// The memory this process may still allocate, in bytes: the least of the
+// kernel's MemAvailable, the cgroup's limit less its usage (v2 memory.max or v1
+// memory.limit_in_bytes) and RLIMIT_AS less the current virtual size.
+std::uint64_t memory_available();
+// Refuse, before it starts, work that needs `bytes` more than memory_available();
+// the error names `what`, both amounts and the fix.
+void check_memory(std::uint64_t bytes, const std::string& what);
+
+// Signals and interrupted writes: SIGXFSZ (a file-size limit, `ulimit -f`) is
+// ignored so that a too-large write fails with EFBIG and is reported, and
+// SIGINT, SIGTERM and SIGHUP first remove the temporaries of outputs being
+// written, then end the process as the signal would. Call once, from main().
+void install_output_signal_handlers();
 
 // Before any work: the directory an output `path` goes to exists and is
 // writable, or a brume::Error naming `flag` and the path says how to fix it.
@@ -80,7 +110,12 @@ class OutputSet {
   void commit();
 
  private:
-  std::vector<std::pair<std::string, std::string>> pending_;  // (temp, final)
+  struct Pending {
+    std::string tmp, final_path;
+    int slot;  // in the signal handler's list of temporaries (-1: not listed)
+  };
+  void add_pending(const std::string& tmp, const std::string& final_path);
+  std::vector<Pending> pending_;
 };
 
 // Convenience: write one file atomically.

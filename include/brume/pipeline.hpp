@@ -67,9 +67,17 @@ struct ExecOptions {
 const ParamTable<ExecOptions>& exec_param_table();
 
 // The colour image and the depth of an effect's input.
+// NaN or ±inf in a colour input: a diffusion would smear one over its whole
+// neighbourhood, so by default they are an error naming their count and the
+// first one; `zero` replaces them by 0 (the count is recorded). Negative values
+// are legitimate in linear float images and pass untouched.
+enum class NonFinite { error, zero };
+const EnumNames<NonFinite>& nonfinite_names();
+
 struct InputFiles {
   std::string image;                       // colour image
   Transfer image_transfer = Transfer::automatic;
+  NonFinite nonfinite = NonFinite::error;
   DepthSource depth;                       // needs_depth effects only
 };
 const ParamTable<InputFiles>& input_param_table(bool with_depth);
@@ -107,6 +115,10 @@ struct LoadedInputs {
   nlohmann::json record;  // {"image": file record, "depth": ...}
 };
 LoadedInputs load_inputs(const InputFiles& in, bool with_depth);
+// Before an effect starts on a frame: its working memory (`bytes_per_pixel`,
+// the effect's measured peak less what is already held) must fit in what the
+// process may still use (check_memory), or a brume::Error says so.
+void check_working_memory(const std::string& effect, const Image& frame, double bytes_per_pixel);
 
 // Unknown pixels (NaN, +-inf, 0) of a range map.
 std::size_t unknown_range_pixels(const Image& range);

@@ -2,6 +2,7 @@
 #include "brume/pipeline.hpp"
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
@@ -44,6 +45,11 @@ const EnumNames<GpuFilter>& gpu_filter_names() {
 }
 const EnumNames<PrepareMode>& prepare_mode_names() {
   static const EnumNames<PrepareMode> n = {{PrepareMode::automatic, "auto"}, {PrepareMode::off, "off"}};
+  return n;
+}
+
+const EnumNames<NonFinite>& nonfinite_names() {
+  static const EnumNames<NonFinite> n = {{NonFinite::error, "error"}, {NonFinite::zero, "zero"}};
   return n;
 }
 
@@ -206,7 +212,10 @@ const ParamTable<InputFiles>& input_param_table(bool with_depth) {
     ParamTable<InputFiles> d("input");
     d.text("image", &InputFiles::image, "input colour image (PNG, JPEG, TIFF, EXR, PFM, HDR)")
         .choice("image-transfer", &InputFiles::image_transfer, transfer_names(),
-                "transfer function of the input: auto (integer files sRGB, float files linear), srgb, linear");
+                "transfer function of the input: auto (integer files sRGB, float files linear), srgb, linear")
+        .choice("nonfinite", &InputFiles::nonfinite, nonfinite_names(),
+                "NaN or inf in the colour image: error (default; names the count and the first pixel) or zero "
+                "(replaced by 0, the count recorded)");
     if (depth) d.nest(&InputFiles::depth, depth_param_table());
     return d;
   };
@@ -266,6 +275,29 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
   LoadedInputs L;
   L.rgb = read_color(in.image, in.image_transfer, &L.image_info);
   L.record["image"] = file_record(in.image, L.image_info, L.rgb);
+  std::size_t bad = 0, first = 0;
+  for (std::size_t i = 0; i < L.rgb.data.size(); ++i)
+    if (!std::isfinite(L.rgb.data[i])) {
+      if (bad == 0) first = i;
+      ++bad;
+    }
+  if (bad > 0) {
+    const int c = L.rgb.channels;
+    const std::size_t px = first / static_cast<std::size_t>(c);
+    const int x = static_cast<int>(px % static_cast<std::size_t>(L.rgb.width));
+    const int y = static_cast<int>(px / static_cast<std::size_t>(L.rgb.width));
+    const float v = L.rgb.data[first];
+    if (in.nonfinite == NonFinite::error)
+      throw Error("--image '" + in.image + "' has " + std::to_string(bad) + " non-finite value" +
+                  (bad == 1 ? "" : "s") + " (NaN or inf); the first is " + (std::isnan(v) ? "NaN" : v > 0 ? "+inf" : "-inf") +
+                  " at x " + std::to_string(x) + ", y " + std::to_string(y) + " (row 0 at the top), channel " +
+                  std::to_string(first % static_cast<std::size_t>(c)) +
+                  "; a blur would smear it over its neighbourhood. Fix the file, or pass --nonfinite zero to "
+                  "replace them by 0");
+    for (float& f : L.rgb.data)
+      if (!std::isfinite(f)) f = 0.0f;
+    L.record["image"]["nonfinite_replaced"] = bad;
+  }
   if (with_depth) {
     L.depth = load_depth(in.depth, L.rgb.width, L.rgb.height);
     if (L.depth.range.width != L.rgb.width || L.depth.range.height != L.rgb.height)
@@ -274,6 +306,11 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
     L.record["depth"] = L.depth.record;
   }
   return L;
+}
+
+void check_working_memory(const std::string& effect, const Image& frame, double bytes_per_pixel) {
+  const double bytes = bytes_per_pixel * static_cast<double>(frame.pixels());
+  check_memory(static_cast<std::uint64_t>(bytes), effect + " on a " + frame.size_string() + " frame");
 }
 
 std::size_t unknown_range_pixels(const Image& range) {

@@ -247,6 +247,13 @@ LidarImage project_velodyne(const std::string& bin_path, const KittiCalib& c, in
   if (bytes % 16 != 0 || bytes == 0)
     throw Error("--velodyne '" + bin_path + "' is " + std::to_string(bytes) +
                 " bytes; a KITTI scan is float32 (x, y, z, reflectance) per point, a multiple of 16 bytes");
+  // A Velodyne HDL-64E sweep holds ~120 000 points; 10 M is a hundred sweeps,
+  // so more is not one scan (and would cost 160 MB and more before projection).
+  constexpr std::size_t kMaxPoints = 10'000'000;
+  if (bytes / 16 > kMaxPoints)
+    throw Error("--velodyne '" + bin_path + "' holds " + std::to_string(bytes / 16) +
+                " points; one KITTI scan has ~120 000 and brume refuses more than 10 000 000 (is this a "
+                "concatenation of scans, or not a Velodyne .bin?)");
   std::vector<float> buf(bytes / 4);
   in.seekg(0);
   in.read(reinterpret_cast<char*>(buf.data()), static_cast<std::streamsize>(bytes));

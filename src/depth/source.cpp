@@ -100,8 +100,8 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
                   "': a lidar scan stores points, not a grid with a no-data value (pixels no point hits are "
                   "unknown already); drop --unknown-value");
     if (width <= 0 && !s.like.empty()) {
-      Image im = read_color(s.like);
-      width = im.width, height = im.height;
+      const ImageHeader h = read_header(s.like);  // its size only: no pixels are decoded
+      width = h.width, height = h.height;
     } else if (width <= 0) {
       width = s.width, height = s.height;
     }

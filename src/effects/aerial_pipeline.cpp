@@ -188,6 +188,8 @@ nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo,
   check_outputs(job.output, aerial_map_outputs());
 
   LoadedInputs in = load_inputs(job.input, true);
+
+  check_working_memory("aerial", in.rgb, 190);  // measured peak bytes per pixel (README "Reliability")
   AerialRun run = run_aerial(in.rgb, in.depth.range, job.aerial, job.prepare, exec, ctx.given);
   if (!sky_fit_record.is_null()) {
     run.record["turbidity_fit"] = sky_fit_record;

@@ -15,7 +15,9 @@ const ParamTable<BlurJob>& blur_job_table() {
   static const ParamTable<BlurJob> t = [] {
     ParamTable<BlurJob> d("blur");
     d.nest(&BlurJob::input, input_param_table(false))
-        .real("sigma", &BlurJob::sigma, "px", Range::above(0.0),
+        // At most 10 000 px: wider than any image the pixel limit admits is a
+        // mistake (1e9 px would ask the standard scheme for 2e18 iterations).
+        .real("sigma", &BlurJob::sigma, "px", Range::left_open(0.0, 1e4),
               "constant target scale (the result is a Gaussian of sqrt(sigma^2 - sigma0^2))", "none")
         .text("scale-map", &BlurJob::scale_map, "per-pixel target scale in px (1-channel float file)")
         .nest(&BlurJob::diffusion, diffusion_param_table())
@@ -42,6 +44,8 @@ nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& eo, const Run
   check_outputs(job.output, {});
 
   LoadedInputs in = load_inputs(job.input, false);
+
+  check_working_memory("blur", in.rgb, 110);  // measured peak bytes per pixel (README "Reliability")
   const Image& rgb = in.rgb;
   Image smap;
   FileInfo map_info;

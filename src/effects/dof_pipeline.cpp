@@ -168,6 +168,8 @@ nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& eo, const RunCo
   check_outputs(job.output, dof_map_outputs());
 
   LoadedInputs in = load_inputs(job.input, true);
+
+  check_working_memory("dof", in.rgb, 90);  // measured peak bytes per pixel (README "Reliability")
   const Intrinsics k = dof_intrinsics(job.input.depth, job.dof, in.rgb.width, in.rgb.height);
   DofRun run = run_dof(in.rgb, in.depth.range, k, job.dof, job.prepare, exec, ctx.given);
   run.record["dof"]["derived"]["intrinsics"]["source"] =

@@ -116,6 +116,8 @@ nlohmann::json run_fog_job(const FogJob& job, const ExecOptions& eo, const RunCo
   check_outputs(job.output, fog_map_outputs());
 
   LoadedInputs in = load_inputs(job.input, true);
+
+  check_working_memory("fog", in.rgb, 150);  // measured peak bytes per pixel (README "Reliability")
   FogRun run = run_fog(in.rgb, in.depth.range, job.input.depth, job.fog, job.prepare, exec, ctx.given);
 
   const nlohmann::json rec = job_record("fog", ctx, fog_job_table().to_json(job), in.record, run.record, eo.timing);

@@ -90,6 +90,8 @@ nlohmann::json run_haze_job(const HazeJob& job, const ExecOptions& eo, const Run
   check_outputs(job.output, haze_map_outputs());
 
   LoadedInputs in = load_inputs(job.input, true);
+
+  check_working_memory("haze", in.rgb, 140);  // measured peak bytes per pixel (README "Reliability")
   HazeRun run = run_haze(in.rgb, in.depth.range, job.haze, job.prepare, exec, ctx.given);
 
   const nlohmann::json rec = job_record("haze", ctx, haze_job_table().to_json(job), in.record, run.record, eo.timing);

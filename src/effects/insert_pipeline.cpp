@@ -119,6 +119,8 @@ nlohmann::json run_insert_job(const InsertJob& job, const ExecOptions& eo, const
   check_outputs(job.output, insert_map_outputs());
 
   LoadedInputs in = load_inputs(job.input, true);
+
+  check_working_memory("insert", in.rgb, 190);  // measured peak bytes per pixel (README "Reliability")
   FileInfo oinfo;
   const Image obj = read_object_rgba(job.object.object, &oinfo);
   if (obj.width != in.rgb.width || obj.height != in.rgb.height)

@@ -1,11 +1,18 @@
 // brume — image and range-map files through OpenImageIO (see brume/io.hpp).
 #include <OpenImageIO/imageio.h>
 #include <openssl/evp.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
+#include <atomic>
+#include <cerrno>
+#include <climits>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -39,6 +46,126 @@ float linear_to_srgb(float v) {
 }
 
 namespace {
+std::atomic<std::uint64_t> g_max_pixels{default_max_pixels};
+
+std::string mpx(std::uint64_t px) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.1f Mpx", static_cast<double>(px) / 1e6);
+  return b;
+}
+std::string mib(std::uint64_t bytes) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.0f MiB", static_cast<double>(bytes) / (1024.0 * 1024.0));
+  return b;
+}
+
+// A number from a one-line kernel file ("max" = no limit).
+bool read_u64_file(const std::string& path, std::uint64_t& v) {
+  std::ifstream f(path);
+  std::string s;
+  if (!(f >> s) || s == "max") return false;
+  try {
+    v = std::stoull(s);
+  } catch (...) {
+    return false;
+  }
+  return true;
+}
+
+// A "Key:   N kB" line of /proc/meminfo or /proc/self/status, in bytes.
+bool read_kb_field(const std::string& path, const std::string& key, std::uint64_t& v) {
+  std::ifstream f(path);
+  std::string line;
+  while (std::getline(f, line))
+    if (line.compare(0, key.size(), key) == 0 && line.size() > key.size() && line[key.size()] == ':') {
+      try {
+        v = std::stoull(line.substr(key.size() + 1)) * 1024;
+      } catch (...) {
+        return false;
+      }
+      return true;
+    }
+  return false;
+}
+
+void check_declared_size(const std::string& path, std::int64_t w, std::int64_t h, std::int64_t channels) {
+  const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
+  if (px > max_pixels())
+    throw Error("'" + path + "' declares " + std::to_string(w) + " x " + std::to_string(h) + " pixels (" + mpx(px) +
+                "), over the limit of " + mpx(max_pixels()) +
+                "; a corrupt or hostile header is the usual cause. If the file is genuine, raise the limit with "
+                "--max-pixels " + std::to_string(px));
+  if (channels > 1024)
+    throw Error("'" + path + "' declares " + std::to_string(channels) +
+                " channels; brume reads at most 1024 (a corrupt header?)");
+}
+}  // namespace
+
+std::uint64_t max_pixels() { return g_max_pixels.load(std::memory_order_relaxed); }
+void set_max_pixels(std::uint64_t n) {
+  if (n < 1) throw Error("--max-pixels must be at least 1");
+  g_max_pixels.store(n, std::memory_order_relaxed);
+}
+
+std::uint64_t memory_available() {
+  std::uint64_t avail = UINT64_MAX, v = 0;
+  if (read_kb_field("/proc/meminfo", "MemAvailable", v)) avail = v;
+  // cgroup v2: the process's group from /proc/self/cgroup ("0::/path").
+  {
+    std::ifstream f("/proc/self/cgroup");
+    std::string line;
+    while (std::getline(f, line)) {
+      if (line.rfind("0::", 0) == 0) {
+        const std::string dir = "/sys/fs/cgroup" + line.substr(3);
+        std::uint64_t limit = 0, used = 0;
+        if (read_u64_file(dir + "/memory.max", limit)) {
+          read_u64_file(dir + "/memory.current", used);
+          avail = std::min(avail, limit > used ? limit - used : 0);
+        }
+      }
+    }
+  }
+  // cgroup v1 (an unlimited group reports a huge number, harmless here).
+  {
+    std::uint64_t limit = 0, used = 0;
+    if (read_u64_file("/sys/fs/cgroup/memory/memory.limit_in_bytes", limit)) {
+      read_u64_file("/sys/fs/cgroup/memory/memory.usage_in_bytes", used);
+      avail = std::min(avail, limit > used ? limit - used : 0);
+    }
+  }
+  struct rlimit rl {};
+  if (::getrlimit(RLIMIT_AS, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY) {
+    std::uint64_t vm = 0;
+    read_kb_field("/proc/self/status", "VmSize", vm);
+    const std::uint64_t lim = rl.rlim_cur;
+    avail = std::min(avail, lim > vm ? lim - vm : 0);
+  }
+  return avail;
+}
+
+void check_memory(std::uint64_t bytes, const std::string& what) {
+  const std::uint64_t avail = memory_available();
+  if (bytes > avail)
+    throw Error(what + " needs about " + mib(bytes) + " of memory but this process may use only " + mib(avail) +
+                " more (the least of MemAvailable, the cgroup limit and ulimit -v); free memory, raise the limit "
+                "or work on a smaller image");
+}
+
+ImageHeader read_header(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw Error("cannot read '" + path + "': no such file");
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) {
+    std::string e = OIIO::geterror();
+    throw Error("cannot read '" + path + "': " + (e.empty() ? "unknown or unsupported image format" : e));
+  }
+  const OIIO::ImageSpec& spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) throw Error("cannot read '" + path + "': empty image");
+  check_declared_size(path, spec.width, spec.height, spec.nchannels);
+  return {spec.width, spec.height, spec.nchannels, in->format_name()};
+}
+
+namespace {
 
 struct Raw {
   Image img;
@@ -69,6 +196,11 @@ Raw read_raw(const std::string& path, bool counts) {
   r.info.channel_names.assign(spec.channelnames.begin(), spec.channelnames.end());
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
     throw Error("cannot read '" + path + "': empty image");
+  // Refused before any allocation: the header alone decides.
+  check_declared_size(path, spec.width, spec.height, spec.nchannels);
+  const std::uint64_t px = static_cast<std::uint64_t>(spec.width) * static_cast<std::uint64_t>(spec.height);
+  // The decoded file (all channels) and the caller's converted copy (≤ 3 channels).
+  check_memory(px * 4 * static_cast<std::uint64_t>(spec.nchannels + 3), "reading '" + path + "'");
   r.img = Image(spec.width, spec.height, spec.nchannels);
   bool ok = in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, r.img.data.data());
   if (!ok) {
@@ -76,8 +208,24 @@ Raw read_raw(const std::string& path, bool counts) {
     throw Error("cannot read '" + path + "': " + (e.empty() ? "read failed (truncated or corrupt file?)" : e));
   }
   in->close();
+  const int container = static_cast<int>(spec.format.size() * 8);
+  const int stored = std::min(r.info.bits, container);
+  if (r.info.integer && stored < container && container <= 16) {
+    // Fewer bits than the container (a 12-bit TIFF in 16 bits): OpenImageIO
+    // widens a count k by bit replication ((k << 4) | (k >> 8)), so the float
+    // it returns is not k/4095 (2048 reads as 0.500114, not 0.500122). The top
+    // `stored` bits of the widened count are k — also for readers that scale
+    // by 65535/4095 instead — and k/(2^stored − 1) is the true value.
+    const double wide = std::ldexp(1.0, container) - 1.0, narrow = std::ldexp(1.0, stored) - 1.0;
+    const int shift = container - stored;
+    for (float& v : r.img.data) {
+      const auto k = static_cast<std::uint32_t>(std::nearbyint(v * wide)) >> shift;
+      v = static_cast<float>(k / narrow);
+    }
+  }
   if (counts && r.info.integer) {
-    const double maxval = std::ldexp(1.0, static_cast<int>(spec.format.size() * 8)) - 1.0;
+    // Counts of the stored bit depth: a 12-bit depth map's 4095 is 4095.
+    const double maxval = std::ldexp(1.0, stored) - 1.0;
     for (float& v : r.img.data) v = static_cast<float>(std::nearbyint(v * maxval));
   }
   return r;
@@ -204,7 +352,60 @@ std::string temp_path_for(const std::string& path) {
   return (p.parent_path() / name).string();
 }
 
+// Temporaries being written, for the signal handler: fixed slots, since a
+// handler may only call async-signal-safe functions (unlink, raise) and read
+// what was published before the signal.
+constexpr int kTempSlots = 64;
+struct TempSlot {
+  std::atomic<bool> used{false};
+  char path[PATH_MAX];
+};
+std::array<TempSlot, kTempSlots> g_temps;
+
+int register_temp(const std::string& path) {
+  if (path.size() >= PATH_MAX) return -1;
+  for (int i = 0; i < kTempSlots; ++i) {
+    bool expected = false;
+    TempSlot& t = g_temps[static_cast<std::size_t>(i)];
+    if (t.used.load(std::memory_order_acquire)) continue;
+    std::memcpy(t.path, path.c_str(), path.size() + 1);
+    if (t.used.compare_exchange_strong(expected, true, std::memory_order_acq_rel)) return i;
+  }
+  return -1;  // more than 64 outputs in flight: still removed by ~OutputSet, only not on a signal
+}
+
+void unregister_temp(int slot) {
+  if (slot >= 0) g_temps[static_cast<std::size_t>(slot)].used.store(false, std::memory_order_release);
+}
+
+extern "C" void remove_temps_and_reraise(int sig) {
+  for (TempSlot& t : g_temps)
+    if (t.used.load(std::memory_order_acquire)) ::unlink(t.path);
+  std::signal(sig, SIG_DFL);
+  std::raise(sig);
+}
+
+// A failed write's reason from errno (EFBIG: a file-size limit; ENOSPC: a full disk).
+std::string write_failure(int err) {
+  if (err == EFBIG) return "the file-size limit was reached (ulimit -f); raise it or write a smaller format";
+  if (err == ENOSPC) return "the disk is full; free space or write elsewhere";
+  if (err == EDQUOT) return "the disk quota is exhausted";
+  if (err != 0) return std::strerror(err);
+  return "disk full or directory removed?";
+}
+
 }  // namespace
+
+void install_output_signal_handlers() {
+  std::signal(SIGXFSZ, SIG_IGN);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) {
+    struct sigaction sa {};
+    sa.sa_handler = remove_temps_and_reraise;
+    sigemptyset(&sa.sa_mask);
+    sa.sa_flags = SA_RESETHAND;
+    ::sigaction(sig, &sa, nullptr);
+  }
+}
 
 void check_writable(const std::string& path, const WriteOptions& opts, const std::string& flag) {
   if (path.empty()) throw Error(flag + " needs a file name");
@@ -223,10 +424,15 @@ void check_writable(const std::string& path, const WriteOptions& opts, const std
 }
 
 OutputSet::~OutputSet() {
-  for (auto& [tmp, final_path] : pending_) {
+  for (auto& p : pending_) {
     std::error_code ec;
-    fs::remove(tmp, ec);
+    fs::remove(p.tmp, ec);
+    unregister_temp(p.slot);
   }
+}
+
+void OutputSet::add_pending(const std::string& tmp, const std::string& final_path) {
+  pending_.push_back({tmp, final_path, register_temp(tmp)});
 }
 
 void OutputSet::write(const std::string& path, const Image& img, const WriteOptions& opts,
@@ -254,11 +460,12 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
 
   const std::string tmp = temp_path_for(path);
   if (e == ".pfm") {
-    pending_.emplace_back(tmp, path);
+    add_pending(tmp, path);
     try {
+      errno = 0;
       write_pfm(tmp, *src);
     } catch (const Error&) {
-      throw Error(flag + " '" + path + "': write failed (disk full?)");
+      throw Error(flag + " '" + path + "': write failed: " + write_failure(errno));
     }
     return;
   }
@@ -268,12 +475,22 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   if (img.channels == 1) spec.channelnames = {"Y"};
   spec.attribute("oiio:ColorSpace", t == Transfer::srgb ? "sRGB" : "linear");
   if (!opts.description.empty()) spec.attribute("ImageDescription", opts.description);
-  pending_.emplace_back(tmp, path);
+  add_pending(tmp, path);
+  errno = 0;
   if (!out->open(tmp, spec))
     throw Error(flag + " '" + path + "': cannot open for writing: " + out->geterror());
-  if (!out->write_image(OIIO::TypeDesc::FLOAT, src->data.data()))
-    throw Error(flag + " '" + path + "': write failed: " + out->geterror());
-  if (!out->close()) throw Error(flag + " '" + path + "': close failed: " + out->geterror());
+  if (!out->write_image(OIIO::TypeDesc::FLOAT, src->data.data())) {
+    const int err = errno;
+    throw Error(flag + " '" + path + "': write failed: " + write_failure(err) + " (" + out->geterror() + ")");
+  }
+  if (!out->close()) {
+    const int err = errno;
+    throw Error(flag + " '" + path + "': close failed: " + write_failure(err) + " (" + out->geterror() + ")");
+  }
+  // Some writers report a short write only through the file's size: verify it exists whole.
+  std::error_code ec;
+  if (!fs::exists(tmp, ec) || fs::file_size(tmp, ec) == 0 || ec)
+    throw Error(flag + " '" + path + "': write failed: " + write_failure(errno));
 }
 
 void OutputSet::write_text(const std::string& path, const std::string& text, const std::string& flag) {
@@ -283,20 +500,23 @@ void OutputSet::write_text(const std::string& path, const std::string& text, con
   if (!fs::is_directory(dir, ec))
     throw Error(flag + " '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
   const std::string tmp = temp_path_for(path);
-  pending_.emplace_back(tmp, path);
+  add_pending(tmp, path);
+  errno = 0;
   std::ofstream f(tmp, std::ios::binary);
   f << text;
   f.close();
-  if (!f) throw Error(flag + " '" + path + "': write failed (directory not writable or disk full?)");
+  if (!f) throw Error(flag + " '" + path + "': write failed: " + write_failure(errno));
 }
 
 void OutputSet::commit() {
-  for (auto& [tmp, final_path] : pending_) {
+  while (!pending_.empty()) {
+    const Pending& p = pending_.front();
     std::error_code ec;
-    fs::rename(tmp, final_path, ec);
-    if (ec) throw Error("cannot move the finished output into place at '" + final_path + "': " + ec.message());
+    fs::rename(p.tmp, p.final_path, ec);
+    if (ec) throw Error("cannot move the finished output into place at '" + p.final_path + "': " + ec.message());
+    unregister_temp(p.slot);
+    pending_.erase(pending_.begin());
   }
-  pending_.clear();
 }
 
 void write_image(const std::string& path, const Image& img, const WriteOptions& opts,

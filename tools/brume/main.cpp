@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "brume/error.hpp"
+#include "brume/io.hpp"
 #include "cli.hpp"
 
 int main(int argc, char** argv) {
@@ -19,6 +20,16 @@ int main(int argc, char** argv) {
   CLI::App app{"brume: physically based, depth-aware haze, fog and lens effects for RGB-D images"};
   app.set_version_flag("--version", std::string("brume ") + BRUME_VERSION);
   app.require_subcommand(1);
+  // Process limits, not effect parameters (they change no output, so no record
+  // holds them): accepted before or after the subcommand.
+  app.fallthrough();
+  double max_pixels = static_cast<double>(brume::default_max_pixels);
+  app.add_option("--max-pixels", max_pixels,
+                 "largest image or depth map read, in pixels (width x height); a header declaring more is refused "
+                 "before any allocation")
+      ->default_str("500000000")
+      ->check(CLI::Range(1.0, 1e12));
+  brume::install_output_signal_handlers();
 
   // A parsed subcommand marks its parent parsed too: `aerial coefficients`
   // comes before `aerial` so that the first parsed command is the one asked for.
@@ -40,6 +51,7 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
+  brume::set_max_pixels(static_cast<std::uint64_t>(max_pixels));
   for (const Command& c : commands) {
     if (!c.app->parsed()) continue;
     try {
