@@ -17,6 +17,7 @@
 #include "brume/gpu.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
+#include "effects/fog_fast.hpp"
 #include "test_util.hpp"
 
 using namespace brume;
@@ -121,6 +122,97 @@ TEST(Fog, ExponentialMatchesClosedFormOnAGroundPlane) {
     EXPECT_GT(down, 81 * 2);  // every pose sees the ground
     if (pitch < 0) { EXPECT_GT(down, 81 * 45); }
     if (pitch > 0) { EXPECT_GT(up, 81 * 30); }
+  }
+}
+
+TEST(Fog, VectorRowsMatchThePerPixelLoopAndTheClosedForm) {
+  // The exponential profile without blur runs as vector rows (fog_fast.cpp:
+  // one polynomial e^x for the mean instead of two libm expf). An odd width
+  // (vector tails), looking down, level and up, sky of every kind (NaN, inf,
+  // 0; climbing: closed form, else over the sky distance), and a camera
+  // 1.8 km above the base height (delta(y_c) ~ 1e-41 /m: denormal in f32).
+  //  - F against the per-pixel loop: 1e-6 relative + 1e-30 absolute (exp_f's
+  //    1e-7 amplified <= 4.5x by the difference d_low - dc at |x| >= 0.25;
+  //    6e-7 measured);
+  //  - F against the double closed form: 2e-5 relative + 1e-30 absolute (the
+  //    float ray and range, as the per-pixel loop's own test); from 1.8 km,
+  //    1e-4: exponents of ~90 e-folds carry 90 x 6e-8 each in f32 (the
+  //    per-pixel loop's too: the formulation's conditioning, not the rows');
+  //  - transmission and colour against the double composite: 2e-6 absolute
+  //    (from 1.8 km: 5e-5, f F times the relative error of F).
+  const int W = 203, H = 57;
+  for (double height : {10.0, 1800.0})
+    for (double pitch : {-20.0, 0.0, 25.0}) {
+      SCOPED_TRACE("height " + std::to_string(height) + ", pitch " + std::to_string(pitch));
+      FogParams p = exp_params(height, pitch);
+      p.sky_distance_m = 900.0;
+      const Camera c = make_camera(test_k(), W, H, p.camera);
+      Image range(W, H, 1);
+      for (int v = 0; v < H; ++v)
+        for (int u = 0; u < W; ++u) {
+          const Vec3 d = c.world_ray(u, v);
+          // the ground (from 10 m: or a wall at 700 m), and sky in a few columns and rows
+          const double l = d.y < 0.0 ? std::min(height / -d.y, height > 100.0 ? 1e5 : 700.0) : 30.0 + 3.0 * u + v;
+          float r = static_cast<float>(l);
+          if (u % 17 == 3) r = NAN;
+          if (u % 29 == 5) r = INFINITY;
+          if (v % 13 == 7) r = 0.0f;
+          range.at(u, v) = r;
+        }
+      Image rgb(W, H, 3);
+      for (std::size_t i = 0; i < rgb.data.size(); ++i) rgb.data[i] = 0.05f + 0.9f * static_cast<float>(i % 97) / 97.0f;
+      const FogAnalysis a = analyse_fog(rgb, range, range, c, p);
+      FogResult vec, loop;
+      apply_fog(rgb, range, p, a, vec);
+      detail::apply_fog_rows(rgb, range, p, a, loop, Exec{}, false);
+      const double B = p.falloff_per_m, dc = p.density_per_m * std::exp(-B * (height - p.base_height_m));
+      double worst_loop = 0.0, worst_ref = 0.0, worst_f = 0.0, worst_c = 0.0, loop_ref = 0.0;
+      for (int v = 0; v < H; ++v)
+        for (int u = 0; u < W; ++u) {
+          const float r = range.at(u, v);
+          const bool sky = !(std::isfinite(r) && r != 0.0f);
+          const double dy = c.world_ray(u, v).y;
+          const double ref = !sky ? exp_reference(p, height, r, dy)
+                             : dy > 0.0 ? dc / (B * dy)
+                                        : exp_reference(p, height, 900.0, dy);
+          const double F = vec.optical_depth.at(u, v);
+          ASSERT_TRUE(std::isfinite(F) && F >= 0.0) << u << "," << v << ": " << F;
+          worst_loop = std::max(worst_loop, std::abs(F - loop.optical_depth.at(u, v)) / (1e-6 * F + 1e-30));
+          worst_ref = std::max(worst_ref, std::abs(F - ref) / (2e-5 * ref + 1e-30));
+          loop_ref = std::max(loop_ref, std::abs(loop.optical_depth.at(u, v) - ref) / (2e-5 * ref + 1e-30));
+          const double f = std::exp(-ref);
+          worst_f = std::max(worst_f, std::abs(vec.transmission.at(u, v) - f));
+          for (int k = 0; k < 3; ++k) {
+            const double want = f * rgb.at(u, v, k) + (1.0 - f) * (*p.airlight)[k];
+            worst_c = std::max(worst_c, std::abs(vec.rgb.at(u, v, k) - want));
+          }
+        }
+      const double high = height > 100.0 ? 1.0 : 0.0;
+      std::printf("  vector rows / loop: F %.2g x 1e-6; F vs double %.2g x 2e-5 (loop %.2g); f %.2g; colour %.2g\n",
+                  worst_loop, worst_ref, loop_ref, worst_f, worst_c);
+      EXPECT_LE(worst_loop, 1.0);
+      EXPECT_LE(worst_ref, high ? 5.0 : 1.0);
+      EXPECT_LT(worst_f, high ? 5e-5 : 2e-6);
+      EXPECT_LT(worst_c, high ? 5e-5 : 2e-6);
+    }
+}
+
+TEST(Fog, VectorRowsKeepTheLevelRayLimit) {
+  // One pixel at the principal point, whose unit ray climbs exactly ray_y =
+  // r2: height differences of 1e-6 m, 0 and -1e-6 m over l = 1 km give
+  // F = l delta(y_c) to float precision (1e-6), as the per-pixel loop does.
+  const float l = 1000.0f, rgb[3] = {0.2f, 0.4f, 0.6f};
+  for (float dy : {1e-6f, 0.0f, -1e-6f, 1e-3f, -1e-3f}) {
+    detail::FogExpFrame fr;
+    float F = -1.0f, f = -1.0f, out[3] = {};
+    fr.rgb = rgb, fr.range = &l, fr.out_rgb = out, fr.optical_depth = &F, fr.transmission = &f;
+    fr.width = 1, fr.r2 = dy / l, fr.ifx = fr.ify = 0.01f;
+    fr.d0 = 0.02f, fr.falloff = 0.05f, fr.exponent_c = -0.35f, fr.sky_distance = 500.0f;
+    detail::fog_exponential_row(fr, 0);
+    const double dc = 0.02 * std::exp(-0.35), B = 0.05;
+    const double want = dy == 0.0f ? l * dc : l * dc * -std::expm1(-B * dy) / (B * dy);
+    EXPECT_NEAR(F / want, 1.0, 1e-6) << "dy " << dy;
+    EXPECT_NEAR(f, std::exp(-want), 1e-6);
   }
 }
 
