@@ -530,6 +530,65 @@ TEST(Fog, GpuMatchesCpu) {
   }
 }
 
+TEST(Fog, GpuReadsTheDepthBufferAsTheCpuReadsTheRange) {
+  // The fog pass sampling a renderer's window depth and linearising it itself
+  // (depth_math.glsl) against the CPU's range path on the range the CPU
+  // converts from the same buffer (load_depth: depth_buffer_to_z, z_to_range):
+  // OpenGL, D3D and reversed-Z, finite and infinite far planes, the cleared
+  // value and NaN as sky, with and without the blur. RMS <= 1e-3 (f32, as
+  // GpuMatchesCpu); the optical depth to 1e-4 relative RMS (the linearisation
+  // in highp, a few ulp, times dF/dl l / F <= a few).
+  std::string why;
+  GpuContext* ctx = shared_gpu_context(&why);
+  if (!ctx) {
+    const char* req = std::getenv("BRUME_REQUIRE_GPU");
+    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
+    GTEST_SKIP() << why;
+  }
+  const int W = 96, H = 64;
+  const Scene s = scene(W, H, 0);
+  FogParams p = exp_params(10.0, -5.0);
+  const Camera c = make_camera(test_k(80.0), W, H, p.camera);
+  const Image ground = ground_plane(c, 300.0);
+  const double n = 0.5;
+  int case_no = 0;
+  for (auto conv : {DepthBufferConvention::opengl, DepthBufferConvention::d3d, DepthBufferConvention::reversed})
+    for (double far : {2000.0, static_cast<double>(INFINITY)})
+      for (double lambda : {0.0, 4.0}) {
+        if (lambda > 0.0 && (++case_no % 2)) continue;  // the blur on half the cases: it only follows the pass
+        SCOPED_TRACE("convention " + std::to_string(static_cast<int>(conv)) + ", far " + std::to_string(far) +
+                     ", lambda " + std::to_string(lambda));
+        p.lambda = lambda;
+        const float clear = conv == DepthBufferConvention::reversed ? 0.0f : 1.0f;
+        Image d(W, H, 1);
+        for (int v = 0; v < H; ++v)
+          for (int u = 0; u < W; ++u) {
+            const Vec3 ray = c.pixel_ray_cv(u, v);
+            const double z = ground.at(u, v) / std::sqrt(ray.x * ray.x + ray.y * ray.y + 1.0);
+            d.at(u, v) = v < 8 ? clear : static_cast<float>(z_to_depth_buffer(z, conv, n, far));
+          }
+        d.at(5, 20) = NAN;  // an unknown stored value: sky too
+        const Image range = z_to_range(depth_buffer_to_z(d, conv, n, far), c.k);
+        const FogAnalysis a = analyse_fog(s.rgb, range, range, c, p);
+        ASSERT_EQ(a.unknown_pixels, static_cast<std::size_t>(8 * W + 1));
+        const FogResult cpu = apply_fog(s.rgb, range, p, a);
+        GpuFog g(*ctx, s.rgb, d, conv, n, far);
+        const FogResult gpu = g.render(p, a);
+        EXPECT_LT(compare(cpu.rgb, gpu.rgb).rms, 1e-3) << compare(cpu.rgb, gpu.rgb);
+        EXPECT_LT(compare(cpu.transmission, gpu.transmission).rms, 1e-3);
+        double se = 0.0;
+        for (std::size_t i = 0; i < cpu.optical_depth.pixels(); ++i) {
+          const double e = gpu.optical_depth.data[i] / cpu.optical_depth.data[i] - 1.0;
+          se += e * e;
+        }
+        EXPECT_LT(std::sqrt(se / cpu.optical_depth.pixels()), 1e-4);
+      }
+  // Out-of-range window depth is refused as by `depth convert`.
+  Image bad(W, H, 1, 0.5f);
+  bad.at(3, 4) = 1.5f;
+  EXPECT_THROW(GpuFog(*ctx, s.rgb, bad, DepthBufferConvention::d3d, n, 100.0), Error);
+}
+
 TEST(Fog, DepthBuffersGiveTheFogOfTheRange) {
   // The same ground plane as a range map and as OpenGL, D3D and reversed-Z
   // depth buffers (window depth written here by the textbook formulas):
@@ -644,4 +703,73 @@ TEST_F(CliFog, RunRepeatsTheRecord) {
   const Image f1 = read_scalar(p("first/F.exr")), f2 = read_scalar(p("again/F.exr"));
   ASSERT_EQ(f1.data.size(), f2.data.size());
   EXPECT_EQ(std::memcmp(f1.data.data(), f2.data.data(), f1.data.size() * sizeof(float)), 0);
+}
+
+TEST_F(CliFog, RunRefusesAChangedTableAndTheRecordShowsPlusZero) {
+  {
+    std::ofstream t(p("table.csv"));
+    t << "height_m,density_per_m\n0,0.02\n40,0.005\n120,0\n";
+  }
+  const CliRun a = run(base() + " --profile table --table " + p("table.csv") + " --out " + p("o.exr") + " --record " +
+                       p("a.json"));
+  ASSERT_EQ(a.status, 0) << a.output;
+  const nlohmann::json rec = read_json(p("a.json"));
+  // A level-yaw pose records yaw +0 (atan2 gives -0), and the pitch as given.
+  const double yaw = rec["fog"]["derived"]["camera"]["yaw_deg"].get<double>();
+  EXPECT_EQ(yaw, 0.0);
+  EXPECT_FALSE(std::signbit(yaw));
+  EXPECT_NEAR(rec["fog"]["derived"]["camera"]["pitch_deg"].get<double>(), 3.0, 1e-9);
+  EXPECT_EQ(rec["fog"]["derived"]["table"]["sha256"].get<std::string>().size(), 64u);
+  ASSERT_EQ(run("run " + p("a.json") + " --out-dir " + p("again")).status, 0);
+  {
+    std::ofstream t(p("table.csv"), std::ios::app);
+    t << "200,0\n";
+  }
+  const CliRun b = run("run " + p("a.json") + " --out-dir " + p("third"));
+  EXPECT_NE(b.status, 0);
+  EXPECT_NE(b.output.find("table.csv"), std::string::npos) << b.output;
+  EXPECT_NE(b.output.find("SHA-256 differs"), std::string::npos) << b.output;
+  EXPECT_FALSE(fs::exists(p("third/o.exr")));
+}
+
+TEST_F(CliFog, GpuDepthBufferRunsTheDepthPassWhenUnprepared) {
+  // `brume fog --backend gpu --depth-buffer ... --prepare off` hands the
+  // window depth to the fog pass (the record says so, and names the pass's
+  // time fog_pass_ms); the result equals the CPU's on the same flags (RMS
+  // 1e-3, f32). With --prepare auto and sky present, the CPU prepares the range.
+  std::string why;
+  if (!shared_gpu_context(&why)) {
+    const char* req = std::getenv("BRUME_REQUIRE_GPU");
+    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
+    GTEST_SKIP() << why;
+  }
+  const Image range = read_scalar(p("range.exr"));
+  const Intrinsics k = intrinsics_from_fov(range.width, range.height, NAN, 50.0);
+  const Image z = range_to_z(range, k);
+  Image d(range.width, range.height, 1);
+  for (std::size_t i = 0; i < d.pixels(); ++i)
+    d.data[i] = std::isfinite(z.data[i]) && z.data[i] > 0.0f
+                    ? static_cast<float>(z_to_depth_buffer(z.data[i], DepthBufferConvention::reversed, 0.5, 3000.0))
+                    : 0.0f;
+  WriteOptions data;
+  data.is_color = false;
+  write_image(p("depth.exr"), d, data);
+  const std::string flags = "fog --image " + p("img.exr") + " --depth-buffer " + p("depth.exr") +
+                            " --near 0.5 --far 3000 --convention reversed-z --fov-y 50 --camera-height 20 --pitch 3 "
+                            "--airlight 0.7,0.72,0.75 --prepare off";
+  const CliRun g = run(flags + " --backend gpu --timing --out " + p("g.exr") + " --record " + p("g.json"));
+  ASSERT_EQ(g.status, 0) << g.output;
+  const CliRun c = run(flags + " --backend cpu --out " + p("c.exr"));
+  ASSERT_EQ(c.status, 0) << c.output;
+  const nlohmann::json rec = read_json(p("g.json"));
+  EXPECT_EQ(rec["execution"]["gpu_depth_input"].get<std::string>().rfind("window depth", 0), 0u) << rec["execution"];
+  EXPECT_TRUE(rec["execution"]["timing"].contains("fog_pass_ms")) << rec["execution"]["timing"];
+  EXPECT_FALSE(rec["execution"]["timing"].contains("premultiply_ms"));
+  EXPECT_NE(g.output.find("fog_pass_ms"), std::string::npos) << g.output;
+  EXPECT_LT(compare(read_color(p("c.exr")), read_color(p("g.exr"))).rms, 1e-3);
+  const CliRun h = run("fog --image " + p("img.exr") + " --depth-buffer " + p("depth.exr") +
+                       " --near 0.5 --far 3000 --convention reversed-z --fov-y 50 --camera-height 20 --pitch 3 "
+                       "--backend gpu --out " + p("h.exr") + " --record " + p("h.json"));
+  ASSERT_EQ(h.status, 0) << h.output;
+  EXPECT_EQ(read_json(p("h.json"))["execution"]["gpu_depth_input"], "range from the CPU");
 }
