@@ -8,12 +8,14 @@
 //   (a) apply:   apply_fog into reused output images (ray, optical depth,
 //                transmission, composite; the optical-depth and transmission
 //                maps written too), a renderer's per-frame loop;
+//   (e) per-pixel: the same through the per-pixel loop (libm expf, the
+//                schedule before the vector rows; every other profile's path);
 //   (b) fresh:   apply_fog returning new images (allocation, zero fill and
 //                first-touch page faults included);
 //   (d) full:    analyse_fog (range scan, airlight from the sky) + apply_fog;
 //   (c) floor:   read depth and colour, write colour once (out = c * (r > 0)):
 //                what any per-pixel pass over these images must at least move.
-// Rounds interleave (a), (b), (c) (one warm-up round first), so a busy host
+// Rounds interleave (a), (e), (b), (d), (c) (one warm-up round first), so a busy host
 // slows all alike; each figure is the median (min..max) of its rounds.
 //
 // Usage: brume_bench_fog [ROUNDS]
@@ -28,6 +30,7 @@
 #include "bench_util.hpp"
 #include "brume/demo_scene.hpp"
 #include "brume/fog.hpp"
+#include "effects/fog_fast.hpp"
 
 using namespace brume;
 
@@ -67,14 +70,18 @@ int main(int argc, char** argv) {
         for (int c = 0; c < 3; ++c) floor_out.data[i * 3 + c] = m * s.rgb.data[i * 3 + c];
       }
   };
-  std::vector<double> ta, tb, tc, td;
+  std::vector<double> ta, tb, tc, td, te, floor_ratio, loop_ratio;
   volatile float sink = 0.0f;
-  FogResult reused;
+  FogResult reused, reused_pp;
   for (int r = 0; r <= rounds; ++r) {
     auto t = Clock::now();
     apply_fog(s.rgb, s.range, p, a, reused);
     const double da = ms_since(t);
     sink = sink + reused.rgb.data[12345];
+    t = Clock::now();
+    detail::apply_fog_rows(s.rgb, s.range, p, a, reused_pp, Exec{}, false);
+    const double de = ms_since(t);
+    sink = sink + reused_pp.rgb.data[12345];
     t = Clock::now();
     FogResult o = apply_fog(s.rgb, s.range, p, a);
     const double dd = ms_since(t);
@@ -89,16 +96,20 @@ int main(int argc, char** argv) {
     const double dc = ms_since(t);
     sink = sink + floor_out.data[12345];
     if (r == 0) continue;  // warm-up round
-    ta.push_back(da), tb.push_back(db), tc.push_back(dc), td.push_back(dd);
+    ta.push_back(da), tb.push_back(db), tc.push_back(dc), td.push_back(dd), te.push_back(de);
+    floor_ratio.push_back(da / dc), loop_ratio.push_back(de / da);  // per round: both under the same load
   }
   const double mpx = W * static_cast<double>(H) / 1e6;
-  const bench::Spread A = spread(ta), B = spread(tb), C = spread(tc), D = spread(td);
+  const bench::Spread A = spread(ta), B = spread(tb), C = spread(tc), D = spread(td), E = spread(te);
   std::printf("brume_bench_fog: %dx%d exponential, no blur, %d threads, %s, %d rounds (median, min..max)\n", W, H,
               threads, bench::cpu_name().c_str(), rounds);
   std::printf("  (a) apply_fog, reused    %7.2f ms (%.2f..%.2f)  %6.1f Mpx/s\n", A.median, A.lo, A.hi, mpx / A.median * 1e3);
+  std::printf("  (e) per-pixel loop, reused %7.2f ms (%.2f..%.2f)  %6.1f Mpx/s\n", E.median, E.lo, E.hi, mpx / E.median * 1e3);
   std::printf("  (b) apply_fog, new images %7.2f ms (%.2f..%.2f)  %6.1f Mpx/s\n", D.median, D.lo, D.hi, mpx / D.median * 1e3);
   std::printf("  (d) analyse + apply      %7.2f ms (%.2f..%.2f)  %6.1f Mpx/s\n", B.median, B.lo, B.hi, mpx / B.median * 1e3);
   std::printf("  (c) memory floor         %7.2f ms (%.2f..%.2f)  %6.1f Mpx/s\n", C.median, C.lo, C.hi, mpx / C.median * 1e3);
-  std::printf("  apply / floor = %.2fx\n", A.median / C.median);
+  const bench::Spread FR = spread(floor_ratio), LR = spread(loop_ratio);
+  std::printf("  apply / floor     = %.2fx (%.2f..%.2f), ratio per round\n", FR.median, FR.lo, FR.hi);
+  std::printf("  per-pixel / apply = %.2fx (%.2f..%.2f), ratio per round\n", LR.median, LR.lo, LR.hi);
   return 0;
 }

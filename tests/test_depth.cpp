@@ -78,6 +78,34 @@ TEST(Depth, DepthBufferRoundTripsEveryConvention) {
   EXPECT_THROW(depth_buffer_to_z(buf, DepthBufferConvention::opengl, -1.0, 5.0), Error);  // near <= 0
 }
 
+TEST(Depth, DepthBufferImageFormIsTheDoubleFormulaToAFewUlp) {
+  // The image conversion (and the GPU fog pass) evaluate 1/z = (1 - d) a + d b
+  // in f32 (src/shared/depth_math.glsl); the double textbook formula for the
+  // same stored d is the reference. Bound 4e-7 relative (~3 ulp: a and b
+  // rounded to f32, two products, a sum and the reciprocal, no cancellation:
+  // both terms >= 0), over d in (0, 1) densely and near both planes.
+  for (auto c : {DepthBufferConvention::opengl, DepthBufferConvention::d3d, DepthBufferConvention::reversed})
+    for (double far : {2000.0, 60.0, static_cast<double>(INFINITY)}) {
+      const double n = 0.3;
+      const DepthBufferLinear lin = depth_buffer_linear(c, n, far);
+      Image buf(4001, 1, 1);
+      for (int i = 0; i < buf.width; ++i) {
+        const double t = (i + 0.5) / buf.width;  // also within 1e-6 of each plane
+        buf.data[i] = static_cast<float>(i < 3 ? 1e-6 * (i + 1) : i > buf.width - 4 ? 1.0 - 1e-6 * (buf.width - i) : t);
+      }
+      const Image z = depth_buffer_to_z(buf, c, n, far);
+      double worst = 0.0;
+      for (int i = 0; i < buf.width; ++i) {
+        const float d = buf.data[i];
+        if (d == lin.clear) continue;
+        const double want = depth_buffer_to_z(static_cast<double>(d), c, n, far);
+        worst = std::max(worst, std::abs(z.data[i] / want - 1.0));
+      }
+      EXPECT_LT(worst, 4e-7) << int(c) << " far " << far;
+    }
+  EXPECT_THROW(depth_buffer_linear(DepthBufferConvention::d3d, 1.0, 0.5), Error);  // far < near
+}
+
 TEST(Depth, DisparityFormulaAndUnknowns) {
   // Z = f B / (d + doffs); inf, NaN and d + doffs <= 0 are unknown.
   Image d(5, 1, 1);

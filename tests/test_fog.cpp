@@ -17,6 +17,7 @@
 #include "brume/gpu.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
+#include "effects/fog_fast.hpp"
 #include "test_util.hpp"
 
 using namespace brume;
@@ -121,6 +122,97 @@ TEST(Fog, ExponentialMatchesClosedFormOnAGroundPlane) {
     EXPECT_GT(down, 81 * 2);  // every pose sees the ground
     if (pitch < 0) { EXPECT_GT(down, 81 * 45); }
     if (pitch > 0) { EXPECT_GT(up, 81 * 30); }
+  }
+}
+
+TEST(Fog, VectorRowsMatchThePerPixelLoopAndTheClosedForm) {
+  // The exponential profile without blur runs as vector rows (fog_fast.cpp:
+  // one polynomial e^x for the mean instead of two libm expf). An odd width
+  // (vector tails), looking down, level and up, sky of every kind (NaN, inf,
+  // 0; climbing: closed form, else over the sky distance), and a camera
+  // 1.8 km above the base height (delta(y_c) ~ 1e-41 /m: denormal in f32).
+  //  - F against the per-pixel loop: 1e-6 relative + 1e-30 absolute (exp_f's
+  //    1e-7 amplified <= 4.5x by the difference d_low - dc at |x| >= 0.25;
+  //    6e-7 measured);
+  //  - F against the double closed form: 2e-5 relative + 1e-30 absolute (the
+  //    float ray and range, as the per-pixel loop's own test); from 1.8 km,
+  //    1e-4: exponents of ~90 e-folds carry 90 x 6e-8 each in f32 (the
+  //    per-pixel loop's too: the formulation's conditioning, not the rows');
+  //  - transmission and colour against the double composite: 2e-6 absolute
+  //    (from 1.8 km: 5e-5, f F times the relative error of F).
+  const int W = 203, H = 57;
+  for (double height : {10.0, 1800.0})
+    for (double pitch : {-20.0, 0.0, 25.0}) {
+      SCOPED_TRACE("height " + std::to_string(height) + ", pitch " + std::to_string(pitch));
+      FogParams p = exp_params(height, pitch);
+      p.sky_distance_m = 900.0;
+      const Camera c = make_camera(test_k(), W, H, p.camera);
+      Image range(W, H, 1);
+      for (int v = 0; v < H; ++v)
+        for (int u = 0; u < W; ++u) {
+          const Vec3 d = c.world_ray(u, v);
+          // the ground (from 10 m: or a wall at 700 m), and sky in a few columns and rows
+          const double l = d.y < 0.0 ? std::min(height / -d.y, height > 100.0 ? 1e5 : 700.0) : 30.0 + 3.0 * u + v;
+          float r = static_cast<float>(l);
+          if (u % 17 == 3) r = NAN;
+          if (u % 29 == 5) r = INFINITY;
+          if (v % 13 == 7) r = 0.0f;
+          range.at(u, v) = r;
+        }
+      Image rgb(W, H, 3);
+      for (std::size_t i = 0; i < rgb.data.size(); ++i) rgb.data[i] = 0.05f + 0.9f * static_cast<float>(i % 97) / 97.0f;
+      const FogAnalysis a = analyse_fog(rgb, range, range, c, p);
+      FogResult vec, loop;
+      apply_fog(rgb, range, p, a, vec);
+      detail::apply_fog_rows(rgb, range, p, a, loop, Exec{}, false);
+      const double B = p.falloff_per_m, dc = p.density_per_m * std::exp(-B * (height - p.base_height_m));
+      double worst_loop = 0.0, worst_ref = 0.0, worst_f = 0.0, worst_c = 0.0, loop_ref = 0.0;
+      for (int v = 0; v < H; ++v)
+        for (int u = 0; u < W; ++u) {
+          const float r = range.at(u, v);
+          const bool sky = !(std::isfinite(r) && r != 0.0f);
+          const double dy = c.world_ray(u, v).y;
+          const double ref = !sky ? exp_reference(p, height, r, dy)
+                             : dy > 0.0 ? dc / (B * dy)
+                                        : exp_reference(p, height, 900.0, dy);
+          const double F = vec.optical_depth.at(u, v);
+          ASSERT_TRUE(std::isfinite(F) && F >= 0.0) << u << "," << v << ": " << F;
+          worst_loop = std::max(worst_loop, std::abs(F - loop.optical_depth.at(u, v)) / (1e-6 * F + 1e-30));
+          worst_ref = std::max(worst_ref, std::abs(F - ref) / (2e-5 * ref + 1e-30));
+          loop_ref = std::max(loop_ref, std::abs(loop.optical_depth.at(u, v) - ref) / (2e-5 * ref + 1e-30));
+          const double f = std::exp(-ref);
+          worst_f = std::max(worst_f, std::abs(vec.transmission.at(u, v) - f));
+          for (int k = 0; k < 3; ++k) {
+            const double want = f * rgb.at(u, v, k) + (1.0 - f) * (*p.airlight)[k];
+            worst_c = std::max(worst_c, std::abs(vec.rgb.at(u, v, k) - want));
+          }
+        }
+      const double high = height > 100.0 ? 1.0 : 0.0;
+      std::printf("  vector rows / loop: F %.2g x 1e-6; F vs double %.2g x 2e-5 (loop %.2g); f %.2g; colour %.2g\n",
+                  worst_loop, worst_ref, loop_ref, worst_f, worst_c);
+      EXPECT_LE(worst_loop, 1.0);
+      EXPECT_LE(worst_ref, high ? 5.0 : 1.0);
+      EXPECT_LT(worst_f, high ? 5e-5 : 2e-6);
+      EXPECT_LT(worst_c, high ? 5e-5 : 2e-6);
+    }
+}
+
+TEST(Fog, VectorRowsKeepTheLevelRayLimit) {
+  // One pixel at the principal point, whose unit ray climbs exactly ray_y =
+  // r2: height differences of 1e-6 m, 0 and -1e-6 m over l = 1 km give
+  // F = l delta(y_c) to float precision (1e-6), as the per-pixel loop does.
+  const float l = 1000.0f, rgb[3] = {0.2f, 0.4f, 0.6f};
+  for (float dy : {1e-6f, 0.0f, -1e-6f, 1e-3f, -1e-3f}) {
+    detail::FogExpFrame fr;
+    float F = -1.0f, f = -1.0f, out[3] = {};
+    fr.rgb = rgb, fr.range = &l, fr.out_rgb = out, fr.optical_depth = &F, fr.transmission = &f;
+    fr.width = 1, fr.r2 = dy / l, fr.ifx = fr.ify = 0.01f;
+    fr.d0 = 0.02f, fr.falloff = 0.05f, fr.exponent_c = -0.35f, fr.sky_distance = 500.0f;
+    detail::fog_exponential_row(fr, 0);
+    const double dc = 0.02 * std::exp(-0.35), B = 0.05;
+    const double want = dy == 0.0f ? l * dc : l * dc * -std::expm1(-B * dy) / (B * dy);
+    EXPECT_NEAR(F / want, 1.0, 1e-6) << "dy " << dy;
+    EXPECT_NEAR(f, std::exp(-want), 1e-6);
   }
 }
 
@@ -438,6 +530,65 @@ TEST(Fog, GpuMatchesCpu) {
   }
 }
 
+TEST(Fog, GpuReadsTheDepthBufferAsTheCpuReadsTheRange) {
+  // The fog pass sampling a renderer's window depth and linearising it itself
+  // (depth_math.glsl) against the CPU's range path on the range the CPU
+  // converts from the same buffer (load_depth: depth_buffer_to_z, z_to_range):
+  // OpenGL, D3D and reversed-Z, finite and infinite far planes, the cleared
+  // value and NaN as sky, with and without the blur. RMS <= 1e-3 (f32, as
+  // GpuMatchesCpu); the optical depth to 1e-4 relative RMS (the linearisation
+  // in highp, a few ulp, times dF/dl l / F <= a few).
+  std::string why;
+  GpuContext* ctx = shared_gpu_context(&why);
+  if (!ctx) {
+    const char* req = std::getenv("BRUME_REQUIRE_GPU");
+    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
+    GTEST_SKIP() << why;
+  }
+  const int W = 96, H = 64;
+  const Scene s = scene(W, H, 0);
+  FogParams p = exp_params(10.0, -5.0);
+  const Camera c = make_camera(test_k(80.0), W, H, p.camera);
+  const Image ground = ground_plane(c, 300.0);
+  const double n = 0.5;
+  int case_no = 0;
+  for (auto conv : {DepthBufferConvention::opengl, DepthBufferConvention::d3d, DepthBufferConvention::reversed})
+    for (double far : {2000.0, static_cast<double>(INFINITY)})
+      for (double lambda : {0.0, 4.0}) {
+        if (lambda > 0.0 && (++case_no % 2)) continue;  // the blur on half the cases: it only follows the pass
+        SCOPED_TRACE("convention " + std::to_string(static_cast<int>(conv)) + ", far " + std::to_string(far) +
+                     ", lambda " + std::to_string(lambda));
+        p.lambda = lambda;
+        const float clear = conv == DepthBufferConvention::reversed ? 0.0f : 1.0f;
+        Image d(W, H, 1);
+        for (int v = 0; v < H; ++v)
+          for (int u = 0; u < W; ++u) {
+            const Vec3 ray = c.pixel_ray_cv(u, v);
+            const double z = ground.at(u, v) / std::sqrt(ray.x * ray.x + ray.y * ray.y + 1.0);
+            d.at(u, v) = v < 8 ? clear : static_cast<float>(z_to_depth_buffer(z, conv, n, far));
+          }
+        d.at(5, 20) = NAN;  // an unknown stored value: sky too
+        const Image range = z_to_range(depth_buffer_to_z(d, conv, n, far), c.k);
+        const FogAnalysis a = analyse_fog(s.rgb, range, range, c, p);
+        ASSERT_EQ(a.unknown_pixels, static_cast<std::size_t>(8 * W + 1));
+        const FogResult cpu = apply_fog(s.rgb, range, p, a);
+        GpuFog g(*ctx, s.rgb, d, conv, n, far);
+        const FogResult gpu = g.render(p, a);
+        EXPECT_LT(compare(cpu.rgb, gpu.rgb).rms, 1e-3) << compare(cpu.rgb, gpu.rgb);
+        EXPECT_LT(compare(cpu.transmission, gpu.transmission).rms, 1e-3);
+        double se = 0.0;
+        for (std::size_t i = 0; i < cpu.optical_depth.pixels(); ++i) {
+          const double e = gpu.optical_depth.data[i] / cpu.optical_depth.data[i] - 1.0;
+          se += e * e;
+        }
+        EXPECT_LT(std::sqrt(se / cpu.optical_depth.pixels()), 1e-4);
+      }
+  // Out-of-range window depth is refused as by `depth convert`.
+  Image bad(W, H, 1, 0.5f);
+  bad.at(3, 4) = 1.5f;
+  EXPECT_THROW(GpuFog(*ctx, s.rgb, bad, DepthBufferConvention::d3d, n, 100.0), Error);
+}
+
 TEST(Fog, DepthBuffersGiveTheFogOfTheRange) {
   // The same ground plane as a range map and as OpenGL, D3D and reversed-Z
   // depth buffers (window depth written here by the textbook formulas):
@@ -552,4 +703,73 @@ TEST_F(CliFog, RunRepeatsTheRecord) {
   const Image f1 = read_scalar(p("first/F.exr")), f2 = read_scalar(p("again/F.exr"));
   ASSERT_EQ(f1.data.size(), f2.data.size());
   EXPECT_EQ(std::memcmp(f1.data.data(), f2.data.data(), f1.data.size() * sizeof(float)), 0);
+}
+
+TEST_F(CliFog, RunRefusesAChangedTableAndTheRecordShowsPlusZero) {
+  {
+    std::ofstream t(p("table.csv"));
+    t << "height_m,density_per_m\n0,0.02\n40,0.005\n120,0\n";
+  }
+  const CliRun a = run(base() + " --profile table --table " + p("table.csv") + " --out " + p("o.exr") + " --record " +
+                       p("a.json"));
+  ASSERT_EQ(a.status, 0) << a.output;
+  const nlohmann::json rec = read_json(p("a.json"));
+  // A level-yaw pose records yaw +0 (atan2 gives -0), and the pitch as given.
+  const double yaw = rec["fog"]["derived"]["camera"]["yaw_deg"].get<double>();
+  EXPECT_EQ(yaw, 0.0);
+  EXPECT_FALSE(std::signbit(yaw));
+  EXPECT_NEAR(rec["fog"]["derived"]["camera"]["pitch_deg"].get<double>(), 3.0, 1e-9);
+  EXPECT_EQ(rec["fog"]["derived"]["table"]["sha256"].get<std::string>().size(), 64u);
+  ASSERT_EQ(run("run " + p("a.json") + " --out-dir " + p("again")).status, 0);
+  {
+    std::ofstream t(p("table.csv"), std::ios::app);
+    t << "200,0\n";
+  }
+  const CliRun b = run("run " + p("a.json") + " --out-dir " + p("third"));
+  EXPECT_NE(b.status, 0);
+  EXPECT_NE(b.output.find("table.csv"), std::string::npos) << b.output;
+  EXPECT_NE(b.output.find("SHA-256 differs"), std::string::npos) << b.output;
+  EXPECT_FALSE(fs::exists(p("third/o.exr")));
+}
+
+TEST_F(CliFog, GpuDepthBufferRunsTheDepthPassWhenUnprepared) {
+  // `brume fog --backend gpu --depth-buffer ... --prepare off` hands the
+  // window depth to the fog pass (the record says so, and names the pass's
+  // time fog_pass_ms); the result equals the CPU's on the same flags (RMS
+  // 1e-3, f32). With --prepare auto and sky present, the CPU prepares the range.
+  std::string why;
+  if (!shared_gpu_context(&why)) {
+    const char* req = std::getenv("BRUME_REQUIRE_GPU");
+    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
+    GTEST_SKIP() << why;
+  }
+  const Image range = read_scalar(p("range.exr"));
+  const Intrinsics k = intrinsics_from_fov(range.width, range.height, NAN, 50.0);
+  const Image z = range_to_z(range, k);
+  Image d(range.width, range.height, 1);
+  for (std::size_t i = 0; i < d.pixels(); ++i)
+    d.data[i] = std::isfinite(z.data[i]) && z.data[i] > 0.0f
+                    ? static_cast<float>(z_to_depth_buffer(z.data[i], DepthBufferConvention::reversed, 0.5, 3000.0))
+                    : 0.0f;
+  WriteOptions data;
+  data.is_color = false;
+  write_image(p("depth.exr"), d, data);
+  const std::string flags = "fog --image " + p("img.exr") + " --depth-buffer " + p("depth.exr") +
+                            " --near 0.5 --far 3000 --convention reversed-z --fov-y 50 --camera-height 20 --pitch 3 "
+                            "--airlight 0.7,0.72,0.75 --prepare off";
+  const CliRun g = run(flags + " --backend gpu --timing --out " + p("g.exr") + " --record " + p("g.json"));
+  ASSERT_EQ(g.status, 0) << g.output;
+  const CliRun c = run(flags + " --backend cpu --out " + p("c.exr"));
+  ASSERT_EQ(c.status, 0) << c.output;
+  const nlohmann::json rec = read_json(p("g.json"));
+  EXPECT_EQ(rec["execution"]["gpu_depth_input"].get<std::string>().rfind("window depth", 0), 0u) << rec["execution"];
+  EXPECT_TRUE(rec["execution"]["timing"].contains("fog_pass_ms")) << rec["execution"]["timing"];
+  EXPECT_FALSE(rec["execution"]["timing"].contains("premultiply_ms"));
+  EXPECT_NE(g.output.find("fog_pass_ms"), std::string::npos) << g.output;
+  EXPECT_LT(compare(read_color(p("c.exr")), read_color(p("g.exr"))).rms, 1e-3);
+  const CliRun h = run("fog --image " + p("img.exr") + " --depth-buffer " + p("depth.exr") +
+                       " --near 0.5 --far 3000 --convention reversed-z --fov-y 50 --camera-height 20 --pitch 3 "
+                       "--backend gpu --out " + p("h.exr") + " --record " + p("h.json"));
+  ASSERT_EQ(h.status, 0) << h.output;
+  EXPECT_EQ(read_json(p("h.json"))["execution"]["gpu_depth_input"], "range from the CPU");
 }

@@ -61,7 +61,17 @@ enum class DepthBufferConvention { opengl, d3d, reversed };
 DepthBufferConvention parse_depth_buffer_convention(const std::string& s);
 double depth_buffer_to_z(double d, DepthBufferConvention c, double near_m, double far_m);
 double z_to_depth_buffer(double z, DepthBufferConvention c, double near_m, double far_m);
+// The image conversion evaluates, per pixel in f32, the form the GPU fog
+// pass also evaluates (src/shared/depth_math.glsl): 1/z = (1 - d) a + d b,
+// without the textbook forms' cancellation (a few ulp from the double
+// depth_buffer_to_z above for the same stored d).
 Image depth_buffer_to_z(const Image& d, DepthBufferConvention c, double near_m, double far_m);
+// That form's constants, validated (near > 0, far > near or inf).
+struct DepthBufferLinear {
+  double a = 0.0, b = 0.0;  // [1/m] (1/near, 1/far), or (1/far, 1/near) for reversed-z; 1/inf = 0
+  float clear = 1.0f;       // the cleared window depth, background = unknown: 1, or 0 for reversed-z
+};
+DepthBufferLinear depth_buffer_linear(DepthBufferConvention c, double near_m, double far_m);
 
 // ---- monocular estimates ------------------------------------------------------
 // Inverse depth (MiDaS-style, affine-invariant): z = 1 / (scale v + shift).

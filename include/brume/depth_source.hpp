@@ -54,6 +54,8 @@ struct LoadedDepth {
   Image range;           // metres along the ray, NaN unknown
   nlohmann::json record; // what was read and how it was converted
   std::string path;      // the source file
+  Image window_depth;    // --depth-buffer: the window depth d in [0, 1] as read (NaN unknown), for a GPU pass
+                         // that linearises it itself; empty for other sources
 };
 
 // Convert the source to a range map. width/height: the image the depth

@@ -175,9 +175,13 @@ struct FogRun {
   nlohmann::json record;  // {"fog": ..., "prepare": ..., "execution": ...}
 };
 // `depth` gives the intrinsics of the camera (and its KITTI camera 2);
-// measured_range is what load_depth produced.
+// measured_range is what load_depth produced. window_depth (LoadedDepth's,
+// for --depth-buffer): on the GPU backend with the range unprepared, the
+// fog pass reads it and linearises it itself instead of the CPU's range
+// (the analysis still takes R_max and the sky's colour from measured_range).
 FogRun run_fog(const Image& rgb, const Image& measured_range, const DepthSource& depth, const FogParams& p,
-               const RangeStep& prepare, const Exec& exec = {}, const std::set<std::string>& given = {});
+               const RangeStep& prepare, const Exec& exec = {}, const std::set<std::string>& given = {},
+               const Image* window_depth = nullptr);
 
 struct FogJob {
   InputFiles input;

@@ -20,6 +20,7 @@
 #include <string>
 
 #include "brume/aerial.hpp"
+#include "brume/depth.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/exec.hpp"
 #include "brume/fog.hpp"
@@ -179,9 +180,18 @@ class GpuAerial {
 // the premultiplied F0 and sigma), then for the blur the rate pass, the
 // diffusion passes and haze's composite pass. Density tables hold at most
 // 32 rows here (uniform arrays); longer ones are refused (use the CPU).
+//
+// Or over a renderer's depth buffer: the pass reads the window depth d in
+// [0, 1] and linearises it itself (src/shared/depth_math.glsl, the CPU
+// conversion's expression: 1/z = (1 - d) a + d b, range = z |ray|), the
+// cleared value (and NaN) being sky. Values outside [0, 1] are refused as by
+// `brume depth convert`. `analyse_fog` still needs the range for its
+// image-wide statistics (R_max, the sky's colour).
 class GpuFog {
  public:
   GpuFog(GpuContext& ctx, const Image& rgb, const Image& range);
+  GpuFog(GpuContext& ctx, const Image& rgb, const Image& window_depth, DepthBufferConvention c, double near_m,
+         double far_m);
   ~GpuFog();
   GpuFog(const GpuFog&) = delete;
   GpuFog& operator=(const GpuFog&) = delete;

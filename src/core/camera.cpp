@@ -372,7 +372,10 @@ Camera make_camera(const Intrinsics& k, int width, int height, const CameraPose&
 }
 
 nlohmann::json camera_record(const Camera& c) {
-  const YawPitchRoll a = c.ypr();
+  YawPitchRoll a = c.ypr();
+  // -0.0 + 0.0 is +0.0: a level pose's angles come out of atan2 as -0, which
+  // a record should not show.
+  a.yaw_deg += 0.0, a.pitch_deg += 0.0, a.roll_deg += 0.0;
   auto finite_or_null = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
   return {{"projection", to_string(c.projection)},
           {"width_px", c.width},

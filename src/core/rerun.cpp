@@ -90,6 +90,7 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
   const std::string cmd = record.value("command", "");
   if (record.contains("inputs")) verify_inputs(record["inputs"]);
   if (record.contains("depth")) verify_inputs(record["depth"]);
+  if (record.contains("fog")) verify_inputs(record["fog"]);  // the density table (fog.derived.table)
   RunContext ctx;
   ctx.argv = argv;
   if (cmd == "haze") return run_haze_job(job_from(record, haze_job_table(), out_dir), exec, ctx);

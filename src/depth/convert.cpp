@@ -11,6 +11,7 @@
 
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
+#include "shared/prelude_cpp.h"
 
 namespace brume {
 
@@ -171,14 +172,25 @@ double z_to_depth_buffer(double z, DepthBufferConvention c, double n, double f) 
   return NAN;
 }
 
-Image depth_buffer_to_z(const Image& d, DepthBufferConvention c, double n, double f) {
+DepthBufferLinear depth_buffer_linear(DepthBufferConvention c, double n, double f) {
   require_positive(n, "--near (metres)");
   if (!(f > n)) throw Error("--far " + num(f) + " must be greater than --near " + num(n) + " (use inf for an infinite far plane)");
-  const float background = c == DepthBufferConvention::reversed ? 0.0f : 1.0f;
+  const double inv_n = 1.0 / n, inv_f = std::isinf(f) ? 0.0 : 1.0 / f;
+  DepthBufferLinear l;
+  const bool reversed = c == DepthBufferConvention::reversed;
+  l.a = reversed ? inv_f : inv_n;
+  l.b = reversed ? inv_n : inv_f;
+  l.clear = reversed ? 0.0f : 1.0f;
+  return l;
+}
+
+Image depth_buffer_to_z(const Image& d, DepthBufferConvention c, double n, double f) {
+  const DepthBufferLinear lin = depth_buffer_linear(c, n, f);
+  const float a = static_cast<float>(lin.a), b = static_cast<float>(lin.b);
   Image z(d.width, d.height, 1);
   for (std::size_t i = 0; i < d.data.size(); ++i) {
     const float v = d.data[i];
-    if (!std::isfinite(v) || v == background) {
+    if (!std::isfinite(v) || v == lin.clear) {
       z.data[i] = kUnknown;
       continue;
     }
@@ -186,7 +198,7 @@ Image depth_buffer_to_z(const Image& d, DepthBufferConvention c, double n, doubl
       throw Error("depth-buffer pixel (" + std::to_string(i % d.width) + ", " + std::to_string(i / d.width) +
                   ") is " + num(v) + "; window depth must be in [0, 1] (for a 16/24-bit integer buffer give --scale 1/65535 or 1/16777215)");
     }
-    z.data[i] = static_cast<float>(depth_buffer_to_z(v, c, n, f));
+    z.data[i] = 1.0f / brume::shared::brume_depth_inverse_z(v, a, b);
   }
   return z;
 }

@@ -207,6 +207,7 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
     rec["far_m"] = std::isinf(s.far_m) ? nlohmann::json("inf") : nlohmann::json(s.far_m);
     rec["intrinsics"] = intrinsics_record(k);
     out.range = z_to_range(depth_buffer_to_z(v, c, s.near_m, s.far_m), k);
+    out.window_depth = std::move(v);
   } else if (!s.inverse_depth.empty()) {
     rec["source"] = "inverse depth";
     unorm(v, info);

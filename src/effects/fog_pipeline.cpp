@@ -3,6 +3,7 @@
 // measured range (R_max, the sky's colour), prepare it, dispatch once on
 // Exec, record.
 #include <chrono>
+#include <memory>
 
 #include "brume/error.hpp"
 #include "brume/fog.hpp"
@@ -77,7 +78,8 @@ const ParamTable<FogJob>& fog_job_table() {
 }
 
 FogRun run_fog(const Image& rgb, const Image& measured_range, const DepthSource& depth, const FogParams& p,
-               const RangeStep& prepare, const Exec& exec, const std::set<std::string>& given) {
+               const RangeStep& prepare, const Exec& exec, const std::set<std::string>& given,
+               const Image* window_depth) {
   validate_fog(p, given);
   check_range_step(prepare, given);
   // The pose matters only for the height profiles; classic and constant fog
@@ -92,10 +94,24 @@ FogRun run_fog(const Image& rgb, const Image& measured_range, const DepthSource&
   BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;
+  // A depth buffer goes to the GPU as it is (the pass linearises it) when
+  // nothing was prepared; a prepared range (holes filled: --prepare auto
+  // found some) is the CPU's and goes as range. Unprepared, both carry the
+  // same unknown pixels (the clear value, NaN), so the sky is the same.
+  const bool gpu_depth = backend.gpu && window_depth && !window_depth->data.empty() && !prep.applied;
   if (backend.gpu) {
-    GpuFog gf(*backend.gpu, rgb, range);
-    run.result = gf.render(p, run.analysis, exec.gpu_filter);
-    timing = gpu_timing_record(gf.timing());
+    std::unique_ptr<GpuFog> gf =
+        gpu_depth ? std::make_unique<GpuFog>(*backend.gpu, rgb, *window_depth,
+                                             parse_depth_buffer_convention(depth.convention), depth.near_m, depth.far_m)
+                  : std::make_unique<GpuFog>(*backend.gpu, rgb, range);
+    run.result = gf->render(p, run.analysis, exec.gpu_filter);
+    timing = gpu_timing_record(gf->timing());
+    // GpuTiming's first-pass slot is haze's premultiply; here it times the
+    // fog pass (ray, optical depth, composite, or F0, sigma and the rates).
+    if (timing.contains("premultiply_ms")) {
+      timing["fog_pass_ms"] = timing["premultiply_ms"];
+      timing.erase("premultiply_ms");
+    }
   } else {
     run.result = apply_fog(rgb, range, p, run.analysis, exec);
     timing = cpu_timing_record(t0, run.analysis.plan.iterations);
@@ -104,6 +120,9 @@ FogRun run_fog(const Image& rgb, const Image& measured_range, const DepthSource&
   run.record["prepare"] = prep.record;
   run.record["execution"] = backend.record;
   run.record["execution"]["timing"] = timing;
+  if (backend.gpu)
+    run.record["execution"]["gpu_depth_input"] =
+        gpu_depth ? "window depth, linearised in the fog pass (src/shared/depth_math.glsl)" : "range from the CPU";
   return run;
 }
 
@@ -116,9 +135,9 @@ nlohmann::json run_fog_job(const FogJob& job, const ExecOptions& eo, const RunCo
   check_outputs(job.output, fog_map_outputs());
 
   LoadedInputs in = load_inputs(job.input, true);
-
   check_working_memory("fog", in.rgb, 150);  // measured peak bytes per pixel (README "Reliability")
-  FogRun run = run_fog(in.rgb, in.depth.range, job.input.depth, job.fog, job.prepare, exec, ctx.given);
+  FogRun run =
+      run_fog(in.rgb, in.depth.range, job.input.depth, job.fog, job.prepare, exec, ctx.given, &in.depth.window_depth);
 
   const nlohmann::json rec = job_record("fog", ctx, fog_job_table().to_json(job), in.record, run.record, eo.timing);
   write_outputs(job.output, fog_map_outputs(), run.result.rgb,

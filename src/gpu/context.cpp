@@ -28,6 +28,7 @@ constexpr Topic kTopics[] = {
     {"aerial_math", shaders::aerial_math_glsl},
     {"sky_math", shaders::sky_math_glsl},
     {"fog_math", shaders::fog_math_glsl},
+    {"depth_math", shaders::depth_math_glsl},
 };
 
 std::string hex(unsigned v) {

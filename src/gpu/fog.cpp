@@ -15,20 +15,52 @@ namespace brume {
 namespace {
 
 constexpr int kMaxKnots = 32;  // BRUME_FOG_MAX_KNOTS in GLSL
-const gpu::PassSpec kFogPass{"fog.apply", {"fog_math"}, gpu::shaders::fog_frag};
+const gpu::PassSpec kFogPass{"fog.apply", {"fog_math", "depth_math"}, gpu::shaders::fog_frag};
 
 GpuTexture tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
 
 }  // namespace
 
 struct GpuFog::State {
-  gpu::ColorAndRange in;  // colour and range, uploaded once
+  gpu::ColorAndRange in;  // colour and range (or window depth), uploaded once
   gpu::ScatterTargets t;     // haze's blur textures; aux holds sigma, F0 alpha, F
+  bool depth_buffer = false;  // in.range holds window depth (NaN set to the clear value)
+  DepthBufferLinear lin;
 };
 
 GpuFog::GpuFog(GpuContext& ctx, const Image& rgb, const Image& range)
     : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
   s_->in = gpu::upload_color_and_range(rgb, range, "fog", &timing_.upload_ms);
+}
+
+GpuFog::GpuFog(GpuContext& ctx, const Image& rgb, const Image& window_depth, DepthBufferConvention c, double near_m,
+               double far_m)
+    : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
+  s_->depth_buffer = true;
+  s_->lin = depth_buffer_linear(c, near_m, far_m);
+  // Window depth as stored: the pass linearises it. NaN (an unknown stored
+  // value) becomes the clear value, because GLSL compilers may fold isnan() away.
+  if (rgb.channels != 3 || window_depth.channels != 1 || window_depth.width != w_ || window_depth.height != h_)
+    throw Error("GPU fog: depth buffer " + window_depth.size_string() + " does not match image " +
+                rgb.size_string() + " (one channel of window depth, the image's size)");
+  Image d = window_depth;
+  for (std::size_t i = 0; i < d.data.size(); ++i) {
+    float& v = d.data[i];
+    if (!std::isfinite(v)) v = s_->lin.clear;
+    if (v < 0.0f || v > 1.0f)
+      throw Error("depth-buffer pixel (" + std::to_string(i % d.width) + ", " + std::to_string(i / d.width) + ") is " +
+                  std::to_string(v) + "; window depth must be in [0, 1] (for a 16/24-bit integer buffer give --scale "
+                  "1/65535 or 1/16777215)");
+  }
+  const auto t0 = gpu::Clock::now();
+  std::vector<float> px(rgb.pixels() * 4, 1.0f);
+  for (std::size_t i = 0; i < rgb.pixels(); ++i)
+    for (int k = 0; k < 3; ++k) px[i * 4 + k] = rgb.data[i * 3 + k];
+  s_->in.image = gpu::make_texture(GL_RGBA32F, w_, h_, GL_RGBA, GL_FLOAT, px.data());
+  s_->in.range = gpu::make_texture(GL_R32F, w_, h_, GL_RED, GL_FLOAT, d.data.data());
+  s_->in.range_host = std::move(d.data);
+  glFinish();
+  timing_.upload_ms = gpu::ms_since(t0);
 }
 
 GpuFog::~GpuFog() = default;
@@ -80,6 +112,8 @@ FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter fil
   glUniform4f(pr.loc("uScale"), static_cast<float>(p.diffusion.sigma0), static_cast<float>(p.lambda),
               static_cast<float>(p.albedo), static_cast<float>(1.0 / a.range_max_m));
   glUniform1f(pr.loc("uSigmaMax"), static_cast<float>(a.sigma_max));
+  glUniform1i(pr.loc("uDepthBuffer"), s.depth_buffer ? 1 : 0);
+  glUniform3f(pr.loc("uDepthLinear"), static_cast<float>(s.lin.a), static_cast<float>(s.lin.b), s.lin.clear);
   GpuContext::Impl::draw();
   gpu::check_gl("fog");
   if (blur) gpu::scatter_rates(ctx_, s.t, p.diffusion, a.plan);

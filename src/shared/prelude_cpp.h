@@ -37,6 +37,7 @@ inline float atan(float y, float x) { return std::atan2(y, x); }
 // The CPU holds density tables of up to 1024 rows (the GPU 32).
 #define BRUME_FOG_MAX_KNOTS 1024
 #include "shared/fog_math.glsl"
+#include "shared/depth_math.glsl"
 #include "shared/dof_math.glsl"
 #undef BRUME_FN
 #undef BRUME_STENCIL_FN

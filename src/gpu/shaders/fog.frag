@@ -3,9 +3,12 @@
 // ray (sky: to infinity or over the sky distance), f = exp(-F), and either
 // the composite C = f C_scene + (1 - f) C_fog (no blur) or the premultiplied
 // F0 = f (C, 1) for haze's diffusion passes, with the blur scale sigma.
-// Inputs: uImage (linear RGB), uRange (metres along the ray; -1 = unknown =
-// sky, set on upload because GLSL compilers may fold isnan() away).
-// Topics: fog_math.
+// Inputs: uImage (linear RGB), uRange: with uDepthBuffer == 0, metres along
+// the ray (-1 = unknown = sky, set on upload because GLSL compilers may fold
+// isnan() away); with uDepthBuffer == 1, a renderer's window depth in [0, 1]
+// (the depth texture itself), linearised here by the CPU conversion's
+// expression (depth_math.glsl), the cleared value uDepthLinear.z being sky.
+// Topics: fog_math, depth_math.
 layout(binding = 0) uniform highp sampler2D uImage;
 layout(binding = 1) uniform highp sampler2D uRange;
 uniform vec3 uRayRow;          // second row of world_from_cv
@@ -22,6 +25,8 @@ uniform vec3 uAirlight;        // linear RGB
 uniform int uBlur;             // 1: premultiplied output for the diffusion passes
 uniform vec4 uScale;           // sigma0, lambda, albedo, 1 / R_max
 uniform float uSigmaMax;       // px, the analysis' bound (the rate pass needs sigma <= it)
+uniform int uDepthBuffer;      // 0: uRange is range; 1: uRange is window depth
+uniform vec3 uDepthLinear;     // a, b [1/m] (1/z = (1 - d) a + d b: (1/n, 1/f), reversed-z (1/f, 1/n)), clear value
 layout(location = 0) out vec4 oColor;  // no blur: (C, f); blur: f (C, 1)
 layout(location = 1) out vec4 oAux;    // r: sigma, g: f, b: F
 
@@ -29,6 +34,11 @@ void main() {
   ivec2 p = ivec2(gl_FragCoord.xy);
   vec3 c = texelFetch(uImage, p, 0).rgb;
   float r = texelFetch(uRange, p, 0).r;
+  if (uDepthBuffer == 1) {
+    float x = (float(p.x) - uK.x) * uK.z;
+    float y = (float(p.y) - uK.y) * uK.w;
+    r = r == uDepthLinear.z ? -1.0 : brume_depth_buffer_range(r, uDepthLinear.x, uDepthLinear.y, x, y);
+  }
   bool sky = !(r > 0.0);
   BrumeFog fog;
   fog.kind = uKind;
