@@ -30,7 +30,7 @@ const ParamTable<HazeJob>& haze_job_table() {
   return t;
 }
 
-HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams& p, const RangeStep& prepare,
+HazeRun run_haze(ConstImageView rgb, ConstImageView measured_range, const HazeParams& p, const RangeStep& prepare,
                  const Exec& exec, const std::set<std::string>& given) {
   validate_haze(p, given);
   HazeRun run;
@@ -43,7 +43,7 @@ HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;
   if (backend.gpu) {
-    GpuHaze gh(*backend.gpu, rgb, prep.range);
+    GpuHaze gh(*backend.gpu, copy_of(rgb), prep.range);  // the upload's dense staging copy
     run.result = gh.render(p, run.analysis, exec.gpu_filter);
     timing = gpu_timing_record(gh.timing());
   } else {

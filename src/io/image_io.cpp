@@ -50,7 +50,7 @@ struct Raw {
 Raw read_raw(const std::string& path, bool counts) {
   std::error_code ec;
   if (!fs::exists(path, ec))
-    throw Error("cannot read '" + path + "': no such file");
+    throw FileNotFound("cannot read '" + path + "': no such file");
   if (fs::is_directory(path, ec))
     throw Error("cannot read '" + path + "': it is a directory, not an image file");
   auto in = OIIO::ImageInput::open(path);
@@ -67,6 +67,7 @@ Raw read_raw(const std::string& path, bool counts) {
   if (spec.get_int_attribute("oiio:BitsPerSample", 0) > 0)
     r.info.bits = spec.get_int_attribute("oiio:BitsPerSample");
   r.info.channel_names.assign(spec.channelnames.begin(), spec.channelnames.end());
+  r.info.description = spec.get_string_attribute("ImageDescription");
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
     throw Error("cannot read '" + path + "': empty image");
   r.img = Image(spec.width, spec.height, spec.nchannels);
