@@ -43,12 +43,12 @@ def draw_params(seed, key):
     # TODO(lead): brume.random_params("haze", seed, key) -- the C++ sampler keyed by
     # (seed, frame key, parameter name) -- replaces this stand-in.
     g = np.random.default_rng([seed, zlib.crc32(key.encode())])
-    # The scenes span 1.4-2.9 m, so visibilities of a few metres (a smoky
-    # room) give visible haze; log-uniform, as visibility spans decades.
+    # The scenes span 1.4-2.9 m: visibilities of 8-80 m give optical depths of
+    # about 0.1-1 at the back wall (a smoky room); log-uniform, as visibility spans decades.
     return {
-        "visibility": float(np.exp(g.uniform(np.log(3.0), np.log(30.0)))),
+        "visibility": float(np.exp(g.uniform(np.log(8.0), np.log(80.0)))),
         "albedo": float(g.uniform(0.8, 1.0)),
-        "lambda_": float(g.uniform(2.0, 12.0)),
+        "lambda_": float(g.uniform(1.0, 8.0)),
     }
 
 
