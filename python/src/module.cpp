@@ -893,6 +893,16 @@ PYBIND11_MODULE(_brume, m) {
         py::arg("rgb"), py::arg("mask") = py::none(), docstring(doc).c_str());
   }
 
+  // ---- brume.random_params (issue #14 item 3): the lead binds the C++ sampler here ----
+  // It returns the dict an effect takes and a record stores, so it is one m.def:
+  //   m.def("random_params", [](std::string effect, std::uint64_t seed, std::string key, py::kwargs ranges) {
+  //     const json r = from_py(ranges, "brume.random_params(): ranges");
+  //     json drawn;
+  //     { py::gil_scoped_release nogil; drawn = brume::random_params(effect, seed, key, r); }
+  //     return to_py(drawn);  // keys are flag names ("lambda"): brume.haze(rgb, rng, **drawn) takes them
+  //   }, py::arg("effect"), py::arg("seed"), py::arg("key"));
+  // (set_keywords accepts the flag spellings "lambda", "kappa_s" as well as lambda_.)
+
   // ---- files ----------------------------------------------------------------------------
   m.def(
       "read_image",
