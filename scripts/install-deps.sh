@@ -12,6 +12,10 @@ PKGS=(
   libgtest-dev libbenchmark-dev          # tests, benchmarks
   libegl-dev libgles-dev                 # GPU backend: headless EGL + OpenGL ES 3.2 headers and loaders
   libegl-mesa0 libgl1-mesa-dri           # Mesa's EGL and llvmpipe, the GPU the tests run on without one
+  python3-dev pybind11-dev                # the Python module: CPython headers, the C++ binding layer
+  python3-numpy                          # the Python module's arrays (numpy in, numpy out)
+  python3-pytest                         # the Python tests (ctest `python`)
+  python3-matplotlib                     # the diffusion study's plots (brume.plots)
 )
 missing=()
 for p in "${PKGS[@]}"; do

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "brume/diffusion.hpp"
+#include "brume/image.hpp"
 #include "brume/pipeline.hpp"
 
 namespace brume {
@@ -22,6 +23,19 @@ struct BlurJob {
   OutputFiles output;
 };
 const ParamTable<BlurJob>& blur_job_table();
+
+// In memory (the Python module's brume.blur): `rgb` is any view of linear RGB
+// pixels (a numpy array, an RGBA buffer's RGB) read in place -- the only copy
+// is the engine's own RGBA working buffer; either a constant `sigma` or a
+// per-pixel `scale_map` (1 channel, rgb's size, px), not both. Checks as
+// `brume blur` (sigma >= sigma0). Pixels equal `brume blur`'s bit for bit.
+struct BlurRun {
+  Image rgb;              // linear RGB, 3 channels
+  DiffusionPlan plan;
+  nlohmann::json record;  // {"diffusion", "execution", "effective_gaussian_px" | "sigma_px"}
+};
+BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* scale_map, const DiffusionParams& dp,
+                 const Exec& exec = {});
 nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

@@ -16,4 +16,17 @@ class Error : public std::runtime_error {
   explicit Error(const std::string& what) : std::runtime_error(what) {}
 };
 
+// Two kinds a caller may want to tell apart (the Python module maps them to
+// FileNotFoundError and RuntimeError; every other Error is a ValueError):
+// an input file that does not exist, and no GPU context to run on. Both are
+// still brume::Error, so `catch (const Error&)` sees them as before.
+class FileNotFound : public Error {
+ public:
+  using Error::Error;
+};
+class GpuUnavailable : public Error {
+ public:
+  using Error::Error;
+};
+
 }  // namespace brume

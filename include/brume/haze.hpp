@@ -74,7 +74,7 @@ struct HazeAnalysis {
 
 // Validates parameters and inputs (throws brume::Error) and gathers the
 // image-wide statistics. `range` is in metres, 1 channel, same size as rgb.
-HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const HazeParams& p);
+HazeAnalysis analyse_haze(ConstImageView rgb, ConstImageView range, const HazeParams& p);
 
 struct HazeResult {
   Image rgb;           // linear RGB with haze
@@ -83,7 +83,7 @@ struct HazeResult {
 };
 
 // The per-pixel apply on the CPU (exec.path: fast or reference).
-HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p,
+HazeResult apply_haze(ConstImageView rgb, ConstImageView range, const HazeParams& p,
                       const HazeAnalysis& a, const Exec& exec = {});
 
 // The airlight B when none is given (shared by the effects that take
@@ -94,7 +94,7 @@ struct AirlightEstimate {
   std::array<float, 3> rgb{};  // linear RGB
   std::string source;
 };
-AirlightEstimate estimate_airlight(const Image& rgb, const Image& measured_range, std::size_t unknown_pixels);
+AirlightEstimate estimate_airlight(ConstImageView rgb, ConstImageView measured_range, std::size_t unknown_pixels);
 
 // Hansard's scattering blur on given maps (eq. 2-4), shared by haze and
 // layered fog: F0 = tau0 (E, 1) premultiplied (naive: (E, tau0)), diffused to
@@ -104,26 +104,51 @@ struct ScatterBlur {
   Image rgb;           // linear RGB
   Image transmission;  // 1 channel
 };
-ScatterBlur scatter_blur(const Image& rgb, const Image& tau0, const Image& sigma, double sigma_max,
+ScatterBlur scatter_blur(ConstImageView rgb, const Image& tau0, const Image& sigma, double sigma_max,
                          const DiffusionParams& p, Composite composite, const std::array<float, 3>& airlight,
                          const Exec& exec = {});
 
 // ---- the pipeline -----------------------------------------------------------------
 // Everything `brume haze` does, as a library call: analysis on the measured
 // range (R_max, airlight from the sky), preparation, the effect on the
-// backend Exec chooses, the record. In memory:
+// backend Exec chooses, the record. In memory; rgb and the range are views,
+// read in place (an Image converts to one; a numpy array is wrapped without a
+// copy): the CPU path's only copies are the engine's own working buffers
+// (premultiplied RGBA, the prepared range); the GPU path uploads a dense copy.
 struct HazeRun {
   HazeResult result;
   HazeAnalysis analysis;
   nlohmann::json record;  // {"haze": ..., "prepare": ..., "execution": ...}
 };
-HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams& p, const RangeStep& prepare,
+HazeRun run_haze(ConstImageView rgb, ConstImageView measured_range, const HazeParams& p, const RangeStep& prepare,
                  const Exec& exec = {}, const std::set<std::string>& given = {});
 // The same on a range the caller prepared (prepare_step of measured_range),
 // e.g. once for a chain of effects (brume/chain.hpp); R_max and the airlight
 // still come from the measured range.
 HazeRun run_haze_prepared(const Image& rgb, const Image& measured_range, const PreparedRange& prepared,
                           const HazeParams& p, const Exec& exec = {}, const std::set<std::string>& given = {});
+
+// The Image forms of the view functions above (source compatibility: an
+// Image temporary cannot become a view, which would dangle once stored).
+inline AirlightEstimate estimate_airlight(const Image& rgb, const Image& measured_range, std::size_t unknown_pixels) {
+  return estimate_airlight(ConstImageView(rgb), ConstImageView(measured_range), unknown_pixels);
+}
+inline HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const HazeParams& p) {
+  return analyse_haze(ConstImageView(rgb), ConstImageView(range), p);
+}
+inline HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p, const HazeAnalysis& a,
+                             const Exec& exec = {}) {
+  return apply_haze(ConstImageView(rgb), ConstImageView(range), p, a, exec);
+}
+inline ScatterBlur scatter_blur(const Image& rgb, const Image& tau0, const Image& sigma, double sigma_max,
+                                const DiffusionParams& p, Composite composite, const std::array<float, 3>& airlight,
+                                const Exec& exec = {}) {
+  return scatter_blur(ConstImageView(rgb), tau0, sigma, sigma_max, p, composite, airlight, exec);
+}
+inline HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams& p, const RangeStep& prepare,
+                        const Exec& exec = {}, const std::set<std::string>& given = {}) {
+  return run_haze(ConstImageView(rgb), ConstImageView(measured_range), p, prepare, exec, given);
+}
 
 // From files to files (the CLI's `brume haze` and `brume run`):
 struct HazeJob {

@@ -33,6 +33,7 @@ struct FileInfo {
   int bits = 32;
   std::vector<std::string> channel_names;
   Transfer transfer = Transfer::linear;  // transfer function actually applied on read
+  std::string description;  // the file's ImageDescription (brume embeds its JSON record there); empty if none
 };
 
 // Colour image -> linear float RGB (grey is expanded to RGB, alpha dropped).

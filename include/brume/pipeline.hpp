@@ -135,6 +135,9 @@ struct PreparedRange {
 // pixels.
 void check_range_step(const RangeStep& step, const std::set<std::string>& given = {});
 PreparedRange prepare_step(const Image& measured, const RangeStep& step, const std::set<std::string>& given = {});
+// The same on pixels owned elsewhere (a numpy array): read in place; the
+// effect's range is the preparation's result or, when not prepared, a copy.
+PreparedRange prepare_step(ConstImageView measured, const RangeStep& step, const std::set<std::string>& given = {});
 
 // The GPU context a run uses: Exec::gpu if the caller passed one; for
 // Backend::gpu a new context or an error saying why; for Backend::automatic

@@ -196,6 +196,14 @@ const ParamTable<SkyRenderParams>& sky_render_param_table();
 // no sky. The sun direction is resolved (given or ephemeris).
 Image render_sky(const SkyRenderParams& p, const SkyDirection& sun, const SkyGeometry& g, const Exec& exec = {});
 
+// In memory (the Python module's brume.sky.render): checks, the sun, the
+// backend (Exec), the image and the record's "sky" and "execution".
+struct SkyRenderRun {
+  Image rgb;
+  nlohmann::json record;
+};
+SkyRenderRun run_sky_render(const SkyRenderParams& p, const Exec& exec = {});
+
 struct SkyRenderJob {
   SkyRenderParams sky;
   OutputFiles output;
@@ -261,6 +269,17 @@ struct SkyImageFit {
 SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, const std::string& mask,
                                const SkyViewParams& view, const SunParams& sun, const SkyFitOptions& fit,
                                const std::string& flags = "--");
+
+// The same fit on pixels in memory (linear RGB; `integer_image`: they came
+// from 8/16-bit values, so saturation is detectable; `mask`: 1 = usable sky,
+// binarised, or null). Fills fit and fit_ms. Errors of the fit itself are a
+// SkyFitError (the file form prefixes them with the image's flag and name).
+class SkyFitError : public Error {
+ public:
+  using Error::Error;
+};
+SkyImageFit fit_sky_data(const Image& rgb, bool integer_image, const Image* mask, const SkyViewParams& view,
+                         const SunParams& sun, const SkyFitOptions& fit);
 
 struct SkyFitJob {
   std::string image;                      // --image (hdr, exr, png, jpg, tiff)

@@ -346,6 +346,21 @@ PreparedRange prepare_step(const Image& measured, const RangeStep& step, const s
   return out;
 }
 
+PreparedRange prepare_step(ConstImageView measured, const RangeStep& step, const std::set<std::string>& given) {
+  check_range_step(step, given);
+  std::size_t unknown = 0;
+  for (int y = 0; y < measured.height(); ++y)
+    for (int x = 0; x < measured.width(); ++x) {
+      const float r = measured.at(x, y);
+      unknown += (std::isfinite(r) && r != 0.0f) ? 0 : 1;
+    }
+  if (step.mode == PrepareMode::automatic && unknown > 0) return prepare_step(copy_of(measured), step, given);
+  PreparedRange out;
+  out.record = {{"mode", enum_name(prepare_mode_names(), step.mode)}, {"applied", false}};
+  out.range = copy_of(measured);
+  return out;
+}
+
 BackendChoice::BackendChoice() = default;
 BackendChoice::~BackendChoice() = default;
 BackendChoice::BackendChoice(BackendChoice&&) noexcept = default;

@@ -27,19 +27,77 @@ const ParamTable<BlurJob>& blur_job_table() {
   return t;
 }
 
-nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& eo, const RunContext& ctx) {
-  blur_job_table().validate(job);
-  const DiffusionParams& dp = job.diffusion;
-  if (job.sigma && !job.scale_map.empty())
+namespace {
+void check_blur_scale(std::optional<double> sigma, bool has_map, const DiffusionParams& dp) {
+  if (sigma && has_map)
     throw Error("give either --sigma (a constant scale) or --scale-map (a per-pixel scale), not both");
-  if (!job.sigma && job.scale_map.empty())
-    throw Error("blur needs a target scale: give --sigma S (px) or --scale-map FILE");
-  if (job.sigma && *job.sigma < dp.sigma0) {
+  if (!sigma && !has_map) throw Error("blur needs a target scale: give --sigma S (px) or --scale-map FILE");
+  if (sigma && *sigma < dp.sigma0) {
     std::ostringstream m;
-    m << "--sigma " << *job.sigma << " px is below the inner scale --sigma0 " << dp.sigma0
+    m << "--sigma " << *sigma << " px is below the inner scale --sigma0 " << dp.sigma0
       << " px; diffusion can only add blur. The Gaussian applied is sqrt(sigma^2 - sigma0^2): give --sigma >= --sigma0";
     throw Error(m.str());
   }
+}
+}  // namespace
+
+BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* scale_map, const DiffusionParams& dp,
+                 const Exec& exec) {
+  diffusion_param_table().validate(dp);
+  check_blur_scale(sigma, scale_map != nullptr, dp);
+  if (sigma && !std::isfinite(*sigma)) throw Error("--sigma must be a finite number of pixels");
+  if (rgb.channels() != 3)
+    throw Error("blur: the image has " + std::to_string(rgb.channels()) + " channels; give linear RGB (3 channels)");
+  Image smap;
+  double smax = sigma.value_or(dp.sigma0);
+  if (scale_map) {
+    if (scale_map->width != rgb.width() || scale_map->height != rgb.height() || scale_map->channels != 1)
+      throw Error("--scale-map is " + scale_map->size_string() + "x" + std::to_string(scale_map->channels) +
+                  " but the image is " + rgb.size_string() + "; give one channel of the image's size");
+    for (float v : scale_map->data)
+      if (std::isfinite(v)) smax = std::max(smax, static_cast<double>(v));
+  } else {
+    smap = Image(rgb.width(), rgb.height(), 1, static_cast<float>(*sigma));
+  }
+  const Image& sm = scale_map ? *scale_map : smap;
+  // The engine's working buffer (premultiplied RGBA with alpha 1), filled
+  // straight from the caller's pixels: the view is read in place.
+  Image f(rgb.width(), rgb.height(), 4);
+  for (int y = 0; y < rgb.height(); ++y) {
+    const float* src = rgb.row(y);
+    float* dst = f.row(y);
+    for (int x = 0; x < rgb.width(); ++x) {
+      for (int k = 0; k < 3; ++k) dst[x * 4 + k] = src[x * rgb.pixel_stride() + k];
+      dst[x * 4 + 3] = 1.0f;
+    }
+  }
+  BackendChoice backend = choose_backend(exec);
+  BlurRun run;
+  nlohmann::json timing;
+  const auto t0 = std::chrono::steady_clock::now();
+  if (backend.gpu) {
+    GpuTiming t;
+    run.plan = diffuse_gpu(*backend.gpu, f, sm, smax, dp, exec.gpu_filter, &t);
+    timing = gpu_timing_record(t);
+  } else {
+    run.plan = diffuse(f, sm, smax, dp, exec);
+    timing = cpu_timing_record(t0, run.plan.iterations);
+  }
+  run.rgb = Image(rgb.width(), rgb.height(), 3);
+  for (std::size_t i = 0; i < rgb.pixels(); ++i)
+    for (int k = 0; k < 3; ++k) run.rgb.data[i * 3 + k] = f.data[i * 4 + k];
+  if (sigma) run.record["sigma_px"] = *sigma;
+  run.record["diffusion"] = diffusion_record(dp, run.plan);
+  run.record["execution"] = backend.record;
+  run.record["execution"]["timing"] = timing;
+  run.record["effective_gaussian_px"] = sigma ? std::sqrt(*sigma * *sigma - dp.sigma0 * dp.sigma0) : -1.0;
+  return run;
+}
+
+nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& eo, const RunContext& ctx) {
+  blur_job_table().validate(job);
+  const DiffusionParams& dp = job.diffusion;
+  check_blur_scale(job.sigma, !job.scale_map.empty(), dp);
   const Exec exec = eo.exec();
   check_outputs(job.output, {});
 
@@ -49,48 +107,19 @@ nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& eo, const Run
   const Image& rgb = in.rgb;
   Image smap;
   FileInfo map_info;
-  double smax = job.sigma.value_or(dp.sigma0);
   if (!job.scale_map.empty()) {
     smap = read_scalar(job.scale_map, "", &map_info);
     if (smap.width != rgb.width || smap.height != rgb.height)
       throw Error("--scale-map '" + job.scale_map + "' is " + smap.size_string() + " but --image '" + job.input.image +
                   "' is " + rgb.size_string() + "; they must be the same size");
-    for (float v : smap.data)
-      if (std::isfinite(v)) smax = std::max(smax, static_cast<double>(v));
-  } else {
-    smap = Image(rgb.width, rgb.height, 1, static_cast<float>(*job.sigma));
   }
-  Image f(rgb.width, rgb.height, 4);
-  for (std::size_t i = 0; i < rgb.pixels(); ++i) {
-    for (int k = 0; k < 3; ++k) f.data[i * 4 + k] = rgb.data[i * 3 + k];
-    f.data[i * 4 + 3] = 1.0f;
-  }
-  BackendChoice backend = choose_backend(exec);
-  DiffusionPlan plan;
-  nlohmann::json timing;
-  const auto t0 = std::chrono::steady_clock::now();
-  if (backend.gpu) {
-    GpuTiming t;
-    plan = diffuse_gpu(*backend.gpu, f, smap, smax, dp, exec.gpu_filter, &t);
-    timing = gpu_timing_record(t);
-  } else {
-    plan = diffuse(f, smap, smax, dp, exec);
-    timing = cpu_timing_record(t0, plan.iterations);
-  }
-  Image out(rgb.width, rgb.height, 3);
-  for (std::size_t i = 0; i < rgb.pixels(); ++i)
-    for (int k = 0; k < 3; ++k) out.data[i * 3 + k] = f.data[i * 4 + k];
+  BlurRun run = run_blur(rgb, job.sigma, job.scale_map.empty() ? nullptr : &smap, dp, exec);
 
-  nlohmann::json inputs = in.record, run;
+  nlohmann::json inputs = in.record;
   if (!job.scale_map.empty()) inputs["scale_map"] = file_record(job.scale_map, map_info, smap);
-  else run["sigma_px"] = *job.sigma;
-  run["diffusion"] = diffusion_record(dp, plan);
-  run["execution"] = backend.record;
-  run["execution"]["timing"] = timing;
-  run["effective_gaussian_px"] = job.sigma ? std::sqrt(*job.sigma * *job.sigma - dp.sigma0 * dp.sigma0) : -1.0;
   const nlohmann::json rec =
-      job_record("blur", ctx, blur_job_table().to_json(job), std::move(inputs), run, eo.timing);
-  write_outputs(job.output, {}, out, {}, &in.image_info, rec);
+      job_record("blur", ctx, blur_job_table().to_json(job), std::move(inputs), run.record, eo.timing);
+  write_outputs(job.output, {}, run.rgb, {}, &in.image_info, rec);
   return rec;
 }
 

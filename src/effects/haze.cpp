@@ -67,14 +67,15 @@ float luminance(const float* c) { return 0.2126f * c[0] + 0.7152f * c[1] + 0.072
 
 }  // namespace
 
-AirlightEstimate estimate_airlight(const Image& rgb, const Image& range, std::size_t unknown_pixels) {
+AirlightEstimate estimate_airlight(ConstImageView rgb, ConstImageView range, std::size_t unknown_pixels) {
   AirlightEstimate a;
   if (unknown_pixels >= std::max<std::size_t>(1, rgb.pixels() / 200)) {
     // Sky (unknown range, >= 0.5 % of the frame): per-channel median colour.
     std::array<std::vector<float>, 3> ch;
-    for (std::size_t i = 0; i < range.pixels(); ++i)
-      if (!known_range(range.data[i]))
-        for (int c = 0; c < 3; ++c) ch[c].push_back(rgb.data[i * 3 + c]);
+    for (int y = 0; y < range.height(); ++y)
+      for (int x = 0; x < range.width(); ++x)
+        if (!known_range(range.at(x, y)))
+          for (int c = 0; c < 3; ++c) ch[c].push_back(rgb.at(x, y, c));
     for (int c = 0; c < 3; ++c) {
       auto mid = ch[c].begin() + ch[c].size() / 2;
       std::nth_element(ch[c].begin(), mid, ch[c].end());
@@ -85,7 +86,9 @@ AirlightEstimate estimate_airlight(const Image& rgb, const Image& range, std::si
     // No sky in view: an achromatic airlight as bright as the 99th percentile
     // of the image's luminance, the usual look of a bright overcast haze.
     std::vector<float> y(rgb.pixels());
-    for (std::size_t i = 0; i < y.size(); ++i) y[i] = luminance(&rgb.data[i * 3]);
+    for (int v = 0; v < rgb.height(); ++v)
+      for (int u = 0; u < rgb.width(); ++u)
+        y[static_cast<std::size_t>(v) * rgb.width() + u] = luminance(&rgb.at(u, v, 0));
     auto q = y.begin() + static_cast<std::ptrdiff_t>(0.99 * (y.size() - 1));
     std::nth_element(y.begin(), q, y.end());
     a.rgb = {*q, *q, *q};
@@ -94,25 +97,25 @@ AirlightEstimate estimate_airlight(const Image& rgb, const Image& range, std::si
   return a;
 }
 
-HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const HazeParams& p) {
+HazeAnalysis analyse_haze(ConstImageView rgb, ConstImageView range, const HazeParams& p) {
   validate_haze(p);
-  if (rgb.channels != 3) throw Error("haze needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
-  if (range.channels != 1) throw Error("the range map must have one channel");
-  if (rgb.width != range.width || rgb.height != range.height)
+  if (rgb.channels() != 3) throw Error("haze needs an RGB image, got " + std::to_string(rgb.channels()) + " channels");
+  if (range.channels() != 1) throw Error("the range map must have one channel");
+  if (rgb.width() != range.width() || rgb.height() != range.height())
     throw Error("range map " + range.size_string() + " does not match image " + rgb.size_string() +
                 "; they must be the same size (resample the range map, or crop both)");
 
   HazeAnalysis a;
   double rmax = 0.0, rmin = INFINITY;
   for (std::size_t i = 0; i < range.pixels(); ++i) {
-    const float r = range.data[i];
+    const float r = range.at(static_cast<int>(i % range.width()), static_cast<int>(i / range.width()));
     if (!known_range(r)) {
       ++a.unknown_pixels;
       continue;
     }
     if (r < 0.0f) {
       std::ostringstream m;
-      m << "range map pixel (" << i % range.width << ", " << i / range.width << ") is " << r
+      m << "range map pixel (" << i % range.width() << ", " << i / range.width() << ") is " << r
         << " m; ranges must be >= 0 (0, NaN and inf mark unknown pixels). Is this a signed depth "
            "(OpenGL eye-space z is negative in front of the camera)? If the file marks unknown pixels with a "
            "negative value such as -1, give it as --unknown-value -1.";
@@ -152,10 +155,11 @@ HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const HazeParams
   return a;
 }
 
-ScatterBlur scatter_blur(const Image& rgb, const Image& tau0, const Image& sigma, double sigma_max,
+ScatterBlur scatter_blur(ConstImageView rgb, const Image& tau0, const Image& sigma, double sigma_max,
                          const DiffusionParams& p, Composite composite, const std::array<float, 3>& airlight,
                          const Exec& exec) {
-  const int W = rgb.width, H = rgb.height;
+  const int W = rgb.width(), H = rgb.height();
+  const std::ptrdiff_t ps = rgb.pixel_stride();
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const bool naive = composite == Composite::naive;
   Image f(W, H, 4);
@@ -165,7 +169,8 @@ ScatterBlur scatter_blur(const Image& rgb, const Image& tau0, const Image& sigma
       const std::size_t i = static_cast<std::size_t>(y) * W + x;
       const float t = tau0.data[i];
       const float w = naive ? 1.0f : t;  // eq. 2 premultiplies; naive blurs E itself
-      for (int c = 0; c < 3; ++c) f.data[i * 4 + c] = w * rgb.data[i * 3 + c];
+      const float* e = rgb.row(y) + x * ps;
+      for (int c = 0; c < 3; ++c) f.data[i * 4 + c] = w * e[c];
       f.data[i * 4 + 3] = t;
     }
 
@@ -189,9 +194,9 @@ ScatterBlur scatter_blur(const Image& rgb, const Image& tau0, const Image& sigma
   return out;
 }
 
-HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p,
+HazeResult apply_haze(ConstImageView rgb, ConstImageView range, const HazeParams& p,
                       const HazeAnalysis& a, const Exec& exec) {
-  const int W = rgb.width, H = rgb.height;
+  const int W = rgb.width(), H = rgb.height();
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const float kappa = static_cast<float>(a.kappa_a + a.kappa_s);
   const float s0 = static_cast<float>(p.diffusion.sigma0), smax = static_cast<float>(a.sigma_max);
@@ -204,7 +209,7 @@ HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p,
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      const float r = range.data[i];
+      const float r = range.at(x, y);
       const float rn = known_range(r) ? r * inv_rmax : 1.0f;  // unknown -> R_max
       tau0.data[i] = sh::brume_transmission(kappa, rn);
       out.scale.data[i] = sh::brume_target_scale(rn, s0, smax);

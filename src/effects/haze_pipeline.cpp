@@ -34,7 +34,7 @@ const ParamTable<HazeJob>& haze_job_table() {
 namespace {
 
 // The effect on the prepared range, with the analysis of the measured one.
-HazeRun haze_on_prepared(const Image& rgb, HazeAnalysis analysis, const PreparedRange& prep, const HazeParams& p,
+HazeRun haze_on_prepared(ConstImageView rgb, HazeAnalysis analysis, const PreparedRange& prep, const HazeParams& p,
                          const Exec& exec) {
   HazeRun run;
   run.analysis = std::move(analysis);
@@ -42,7 +42,7 @@ HazeRun haze_on_prepared(const Image& rgb, HazeAnalysis analysis, const Prepared
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;
   if (backend.gpu) {
-    GpuHaze gh(*backend.gpu, rgb, prep.range);
+    GpuHaze gh(*backend.gpu, copy_of(rgb), prep.range);  // the upload's dense staging copy
     run.result = gh.render(p, run.analysis, exec.gpu_filter);
     timing = gpu_timing_record(gh.timing());
   } else {
@@ -61,7 +61,7 @@ HazeRun haze_on_prepared(const Image& rgb, HazeAnalysis analysis, const Prepared
 
 }  // namespace
 
-HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams& p, const RangeStep& prepare,
+HazeRun run_haze(ConstImageView rgb, ConstImageView measured_range, const HazeParams& p, const RangeStep& prepare,
                  const Exec& exec, const std::set<std::string>& given) {
   validate_haze(p, given);
   // Image-wide statistics (R_max, the airlight from the sky) come from the

@@ -63,39 +63,48 @@ const ParamTable<SkyRenderJob>& sky_render_job_table() {
   return t;
 }
 
+SkyRenderRun run_sky_render(const SkyRenderParams& p, const Exec& exec) {
+  sky_render_param_table().validate(p);
+  check_sky_turbidity(p.turbidity);
+  if (p.sun.sun == "auto") throw Error("--sun auto finds the sun in a photo (brume sky fit); to render, give --sun-zenith/--sun-azimuth or --date --latitude --longitude");
+  const SkyGeometry g = sky_geometry(p.view, p.width, p.height);
+  const SunFound sun = resolve_sun(p.sun, nullptr, false, &g);
+  // The backend rules of every effect (choose_backend): --backend auto takes a
+  // hardware GPU, never a software rasteriser.
+  BackendChoice backend = choose_backend(exec);
+  const auto t0 = std::chrono::steady_clock::now();
+  SkyRenderRun run;
+  nlohmann::json timing;
+  if (backend.gpu) {
+    GpuTiming gt;
+    run.rgb = render_sky_gpu(*backend.gpu, p, sun.direction, g, &gt);
+    timing = gpu_timing_record(gt);
+  } else {
+    run.rgb = render_sky(p, sun.direction, g, exec);
+    timing = cpu_timing_record(t0, 0);
+  }
+  run.record["sky"] = {{"model", "Preetham, Shirley, Smits 1999 (Perez 1993 distribution)"},
+                       {"units", "linear sRGB (D65), kcd/m^2 times --exposure"},
+                       {"sun", sun_json(sun)},
+                       {"zenith", {{"Y_kcd_m2", sky_zenith(p.turbidity, sun.direction.zenith_deg * 3.14159265358979323846 / 180).Y_kcd}}}};
+  run.record["execution"] = backend.record;
+  run.record["execution"]["timing"] = timing;
+  return run;
+}
+
 nlohmann::json run_sky_render_job(const SkyRenderJob& job, const ExecOptions& eo, const RunContext& ctx) {
   sky_render_job_table().validate(job);
   const SkyRenderParams& p = job.sky;
   check_sky_turbidity(p.turbidity);
   if (p.sun.sun == "auto") throw Error("--sun auto finds the sun in a photo (brume sky fit); to render, give --sun-zenith/--sun-azimuth or --date --latitude --longitude");
   const SkyGeometry g = sky_geometry(p.view, p.width, p.height);
-  const SunFound sun = resolve_sun(p.sun, nullptr, false, &g);
+  resolve_sun(p.sun, nullptr, false, &g);  // every sun error before any output check, as before
   const Exec exec = eo.exec();
   check_outputs(job.output, {});
-  // The backend rules of every effect (choose_backend): --backend auto takes a
-  // hardware GPU, never a software rasteriser.
-  BackendChoice backend = choose_backend(exec);
-  const auto t0 = std::chrono::steady_clock::now();
-  Image img;
-  nlohmann::json timing;
-  if (backend.gpu) {
-    GpuTiming gt;
-    img = render_sky_gpu(*backend.gpu, p, sun.direction, g, &gt);
-    timing = gpu_timing_record(gt);
-  } else {
-    img = render_sky(p, sun.direction, g, exec);
-    timing = cpu_timing_record(t0, 0);
-  }
-  nlohmann::json run;
-  run["sky"] = {{"model", "Preetham, Shirley, Smits 1999 (Perez 1993 distribution)"},
-                {"units", "linear sRGB (D65), kcd/m^2 times --exposure"},
-                {"sun", sun_json(sun)},
-                {"zenith", {{"Y_kcd_m2", sky_zenith(p.turbidity, sun.direction.zenith_deg * 3.14159265358979323846 / 180).Y_kcd}}}};
-  run["execution"] = backend.record;
-  run["execution"]["timing"] = timing;
+  SkyRenderRun run = run_sky_render(p, exec);
   const nlohmann::json rec =
-      job_record("sky render", ctx, sky_render_job_table().to_json(job), nlohmann::json::object(), run, eo.timing);
-  write_outputs(job.output, {}, img, {}, nullptr, rec);
+      job_record("sky render", ctx, sky_render_job_table().to_json(job), nlohmann::json::object(), run.record, eo.timing);
+  write_outputs(job.output, {}, run.rgb, {}, nullptr, rec);
   return rec;
 }
 
@@ -166,6 +175,23 @@ std::string prefix_sky_flags(const std::string& msg, const std::string& flags) {
 
 }  // namespace
 
+SkyImageFit fit_sky_data(const Image& rgb, bool integer_image, const Image* mask, const SkyViewParams& view,
+                         const SunParams& sun_params, const SkyFitOptions& fit) {
+  const SkyGeometry g = sky_geometry(view, rgb.width, rgb.height);
+  const SunFound sun = resolve_sun(sun_params, &rgb, integer_image, &g);
+  const auto t0 = std::chrono::steady_clock::now();
+  SkyFitResult r;
+  try {
+    r = fit_sky_image(rgb, integer_image, g, sun.direction, mask, fit);
+  } catch (const Error& e) {
+    throw SkyFitError(e.what());
+  }
+  SkyImageFit out;
+  out.fit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  out.fit = sky_fit_json(r, sun);
+  return out;
+}
+
 SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, const std::string& mask_path,
                                const SkyViewParams& view, const SunParams& sun_params, const SkyFitOptions& fit,
                                const std::string& flags) {
@@ -180,7 +206,7 @@ SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, cons
   FileInfo info;
   const Image rgb = read_color(image, transfer, &info);
   const bool integer_image = info.integer;
-  const SkyGeometry g = sky_geometry(view, rgb.width, rgb.height);
+  (void)sky_geometry(view, rgb.width, rgb.height);  // view errors before mask errors, as before
   Image mask;
   FileInfo minfo;
   if (!mask_path.empty()) {
@@ -191,17 +217,13 @@ SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, cons
     const float half = minfo.integer ? (minfo.bits > 8 ? 32767.5f : 127.5f) : 0.5f;
     for (float& v : mask.data) v = v > half ? 1.0f : 0.0f;
   }
-  const SunFound sun = resolve_sun(sun_params, &rgb, integer_image, &g);
-  const auto t0 = std::chrono::steady_clock::now();
-  SkyFitResult r;
-  try {
-    r = fit_sky_image(rgb, integer_image, g, sun.direction, mask_path.empty() ? nullptr : &mask, fit);
-  } catch (const Error& e) {
-    throw Error(image_flag + " '" + image + "': " + e.what());
-  }
   SkyImageFit out;
-  out.fit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  out.fit = sky_fit_json(r, sun);
+  try {
+    out = fit_sky_data(rgb, integer_image, mask_path.empty() ? nullptr : &mask, view, sun_params, fit);
+  } catch (const Error& e) {
+    if (dynamic_cast<const SkyFitError*>(&e)) throw Error(image_flag + " '" + image + "': " + e.what());
+    throw;
+  }
   out.image_record = file_record(image, info, rgb);
   if (!mask_path.empty()) out.mask_record = file_record(mask_path, minfo, mask);
   return out;

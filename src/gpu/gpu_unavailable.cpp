@@ -7,7 +7,7 @@ namespace brume {
 
 namespace {
 [[noreturn]] void unavailable() {
-  throw Error("no OpenGL ES 3.2 context: this brume was built without the GPU backend (EGL/GLES 3.2 headers were "
+  throw GpuUnavailable("no OpenGL ES 3.2 context: this brume was built without the GPU backend (EGL/GLES 3.2 headers were "
               "missing at build time: apt libegl-dev libgles-dev); use --backend cpu");
 }
 }  // namespace

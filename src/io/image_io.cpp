@@ -177,7 +177,7 @@ struct Raw {
 Raw read_raw(const std::string& path, bool counts) {
   std::error_code ec;
   if (!fs::exists(path, ec))
-    throw Error("cannot read '" + path + "': no such file");
+    throw FileNotFound("cannot read '" + path + "': no such file");
   if (fs::is_directory(path, ec))
     throw Error("cannot read '" + path + "': it is a directory, not an image file");
   auto in = OIIO::ImageInput::open(path);
@@ -194,6 +194,7 @@ Raw read_raw(const std::string& path, bool counts) {
   if (spec.get_int_attribute("oiio:BitsPerSample", 0) > 0)
     r.info.bits = spec.get_int_attribute("oiio:BitsPerSample");
   r.info.channel_names.assign(spec.channelnames.begin(), spec.channelnames.end());
+  r.info.description = spec.get_string_attribute("ImageDescription");
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
     throw Error("cannot read '" + path + "': empty image");
   // Refused before any allocation: the header alone decides.

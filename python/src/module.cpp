@@ -1,0 +1,994 @@
+// brume._brume — the Python binding (pybind11). Every keyword of every
+// function comes from the parameter tables that make the CLI's flags and the
+// JSON records (brume/params.hpp): a function's table is the effect's own
+// table nested with the shared blocks it takes (range preparation, execution,
+// intrinsics), and ONE generic routine (set_keywords) turns **kwargs into the
+// parameter structs -- names (flag `--f-number` -> keyword `f_number`,
+// `lambda` -> `lambda_`, aliases too), Python types, ranges. Docstrings and
+// the type stubs (_brume.pyi, written at build time by python/gen_stubs.py)
+// are generated from the same tables, so help(brume.haze) shows the CLI's help.
+//
+// Adding a function: a table (usually `call_table<P>(its table, blocks)`) and
+// one def_effect / def_function line with a lambda calling the library.
+//
+// Conventions (the README's Python section):
+//  - images are numpy arrays H x W x 3 (or x 4, alpha ignored) of linear RGB;
+//    ranges H x W (or H x W x 1) float metres. float32 is read in place
+//    whenever its channels are contiguous (any row/pixel strides: a crop is
+//    still no copy); float64 is converted once; uint8/uint16 need
+//    transfer="srgb"|"linear" (the CLI's rule for integer files); anything
+//    else is a ValueError naming the argument, its shape and dtype.
+//  - the GIL is released while the library runs (after every Python object
+//    has been read), so Python threads run effects concurrently; results do
+//    not depend on threads= or on concurrency.
+//  - GPU: backend="gpu"|"auto" makes an OpenGL ES context for the call, on
+//    the calling thread, and destroys it before returning, so a context never
+//    crosses threads (cost: one context creation per call).
+//  - errors: brume::FileNotFound -> FileNotFoundError, GpuUnavailable ->
+//    RuntimeError, every other brume::Error -> ValueError with the library's
+//    message; wrong Python types -> TypeError; unknown keywords -> TypeError
+//    naming the nearest valid ones.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "brume/aerial.hpp"
+#include "brume/blur.hpp"
+#include "brume/depth.hpp"
+#include "brume/depth_pipeline.hpp"
+#include "brume/dof.hpp"
+#include "brume/error.hpp"
+#include "brume/fog.hpp"
+#include "brume/haze.hpp"
+#include "brume/io.hpp"
+#include "brume/params.hpp"
+#include "brume/pipeline.hpp"
+#include "brume/prepare.hpp"
+#include "brume/record.hpp"
+#include "brume/sky.hpp"
+
+namespace py = pybind11;
+using json = nlohmann::json;
+
+namespace brume::python {
+
+// ==== JSON <-> Python (records, parameter values; random_params reuses it) ====
+py::object to_py(const json& j) {
+  switch (j.type()) {
+    case json::value_t::null: return py::none();
+    case json::value_t::boolean: return py::bool_(j.get<bool>());
+    case json::value_t::number_integer: return py::int_(j.get<long long>());
+    case json::value_t::number_unsigned: return py::int_(j.get<unsigned long long>());
+    case json::value_t::number_float: return py::float_(j.get<double>());
+    case json::value_t::string: return py::str(j.get<std::string>());
+    case json::value_t::array: {
+      py::list l;
+      for (const auto& e : j) l.append(to_py(e));
+      return l;
+    }
+    case json::value_t::object: {
+      py::dict d;
+      for (const auto& [k, v] : j.items()) d[py::str(k)] = to_py(v);
+      return d;
+    }
+    default: return py::none();
+  }
+}
+
+std::string type_name(py::handle o) { return py::str(py::type::handle_of(o).attr("__name__")); }
+
+// dict / list / tuple / str / int / float / bool / None / numpy scalars and
+// arrays / os.PathLike. Anything else: TypeError naming `where`.
+json from_py(py::handle o, const std::string& where) {
+  if (o.is_none()) return nullptr;
+  if (py::isinstance<py::bool_>(o) || py::isinstance(o, py::module_::import("numpy").attr("bool_")))
+    return py::cast<bool>(o);
+  if (PyLong_Check(o.ptr())) return py::cast<long long>(o);
+  if (PyFloat_Check(o.ptr())) return py::cast<double>(o);
+  if (py::isinstance<py::str>(o)) return py::cast<std::string>(o);
+  if (py::isinstance<py::dict>(o)) {
+    json j = json::object();
+    for (auto [k, v] : py::reinterpret_borrow<py::dict>(o)) {
+      if (!py::isinstance<py::str>(k)) throw py::type_error(where + ": dict keys must be str, got " + type_name(k));
+      const std::string key = py::cast<std::string>(k);
+      j[key] = from_py(v, where + "['" + key + "']");
+    }
+    return j;
+  }
+  if (py::isinstance<py::array>(o)) return from_py(o.attr("tolist")(), where);
+  py::module_ np = py::module_::import("numpy");
+  if (py::isinstance(o, np.attr("integer"))) return py::cast<long long>(o.attr("item")());
+  if (py::isinstance(o, np.attr("floating"))) return py::cast<double>(o.attr("item")());
+  if (py::isinstance<py::list>(o) || py::isinstance<py::tuple>(o)) {
+    json j = json::array();
+    std::size_t i = 0;
+    for (auto e : o) j.push_back(from_py(e, where + "[" + std::to_string(i++) + "]"));
+    return j;
+  }
+  if (py::hasattr(o, "__fspath__")) return py::cast<std::string>(py::module_::import("os").attr("fspath")(o));
+  throw py::type_error(where + ": cannot be stored as JSON (got " + type_name(o) + ")");
+}
+
+// ==== keyword names from flag names ===========================================
+bool is_py_keyword(const std::string& s) {
+  static const std::set<std::string> kw = {"False", "None", "True", "and", "as", "assert", "async", "await",
+                                           "break", "class", "continue", "def", "del", "elif", "else", "except",
+                                           "finally", "for", "from", "global", "if", "import", "in", "is",
+                                           "lambda", "nonlocal", "not", "or", "pass", "raise", "return", "try",
+                                           "while", "with", "yield"};
+  return kw.count(s) > 0;
+}
+// `--f-number` -> f_number; a Python keyword gets a trailing underscore
+// (lambda -> lambda_), and the bare name is accepted too via **{"lambda": ...}.
+std::string py_name(const std::string& flag) {
+  std::string n = flag;
+  for (char& c : n)
+    if (c == '-') c = '_';
+  return is_py_keyword(n) ? n + "_" : n;
+}
+
+// ==== the generic keyword -> parameter routine =================================
+// The value a keyword holds, as the JSON the table's setter takes. Python
+// types are checked here (TypeError); ranges by the declaration (ValueError).
+json keyword_value(const ParamSpec& s, py::handle v, const std::string& where) {
+  const std::string kwd = py_name(s.name);
+  auto wrong = [&](const char* expected) -> py::type_error {
+    return py::type_error(where + ": keyword " + kwd + " takes " + expected + ", got " + type_name(v) + " " +
+                          py::cast<std::string>(py::repr(v)) + " (" + s.describe() + ")");
+  };
+  if (v.is_none()) {
+    if (s.optional) return nullptr;
+    throw wrong("a value (None only for parameters that can be unset)");
+  }
+  // The word that means "unset" (auto, none), as on the command line.
+  if (s.optional && py::isinstance<py::str>(v) && py::cast<std::string>(v) == s.unset_word) return nullptr;
+  const bool is_bool = py::isinstance<py::bool_>(v) || py::isinstance(v, py::module_::import("numpy").attr("bool_"));
+  switch (s.kind) {
+    case ParamKind::real: {
+      if (is_bool || !(PyLong_Check(v.ptr()) || PyFloat_Check(v.ptr()) ||
+                       py::isinstance(v, py::module_::import("numpy").attr("number"))))
+        throw wrong(s.optional ? ("a number or None/'" + s.unset_word + "'").c_str() : "a number");
+      return py::cast<double>(py::float_(py::reinterpret_borrow<py::object>(v)));
+    }
+    case ParamKind::integer: {
+      if (is_bool || !(PyLong_Check(v.ptr()) || py::isinstance(v, py::module_::import("numpy").attr("integer"))))
+        throw wrong("an int");
+      return py::cast<long long>(py::int_(py::reinterpret_borrow<py::object>(v)));
+    }
+    case ParamKind::boolean:
+      if (!is_bool) throw wrong("a bool");
+      return py::cast<bool>(v);
+    case ParamKind::choice:
+      if (!py::isinstance<py::str>(v)) throw wrong("a str");
+      return py::cast<std::string>(v);
+    case ParamKind::rgb: {
+      if (py::isinstance<py::str>(v)) throw wrong("a sequence of 3 numbers (linear R, G, B)");
+      json j;
+      try {
+        j = from_py(v, where);
+      } catch (const py::type_error&) {
+        throw wrong("a sequence of 3 numbers (linear R, G, B)");
+      }
+      if (!j.is_array() || j.size() != 3) throw wrong("a sequence of 3 numbers (linear R, G, B)");
+      for (auto& e : j)
+        if (!e.is_number() || e.is_boolean()) throw wrong("a sequence of 3 numbers (linear R, G, B)");
+      for (auto& e : j) e = e.get<double>();
+      return j;
+    }
+    case ParamKind::text:
+      if (py::isinstance<py::str>(v)) return py::cast<std::string>(v);
+      if (py::hasattr(v, "__fspath__")) return py::cast<std::string>(py::module_::import("os").attr("fspath")(v));
+      throw wrong("a str (or os.PathLike)");
+  }
+  throw wrong("a value");
+}
+
+ParamSpec path_spec() {
+  ParamSpec s;
+  s.name = "path";
+  s.kind = ParamKind::text;
+  s.help = "a file name";
+  return s;
+}
+
+template <class P>
+const Param<P>* find_keyword(const ParamTable<P>& t, const std::string& k) {
+  for (const Param<P>& d : t.params()) {
+    if (k == py_name(d.spec.name) || k == d.spec.name) return &d;
+    std::string bare = d.spec.name;
+    for (char& c : bare)
+      if (c == '-') c = '_';
+    if (k == bare) return &d;  // lambda via **{"lambda": ...}
+    for (const std::string& a : d.spec.aliases)
+      if (k == py_name(a) || k == a) return &d;
+  }
+  return nullptr;
+}
+
+template <class P>
+std::vector<std::string> keyword_names(const ParamTable<P>& t) {
+  std::vector<std::string> n;
+  for (const Param<P>& d : t.params()) n.push_back(py_name(d.spec.name));
+  return n;
+}
+
+// kwargs -> p, every value type- and range-checked by its declaration.
+// Returns the parameter names given (the CLI's "given": a value the run
+// would ignore is refused even when it equals the default).
+template <class P>
+std::set<std::string> set_keywords(const ParamTable<P>& t, P& p, const py::dict& kw, const std::string& fn) {
+  std::set<std::string> given;
+  for (auto [key, value] : kw) {
+    const std::string k = py::cast<std::string>(key);
+    const Param<P>* d = find_keyword(t, k);
+    if (!d) {
+      py::list names;
+      for (const std::string& n : keyword_names(t)) names.append(n);
+      py::list close = py::module_::import("difflib").attr("get_close_matches")(k, names, 3, 0.5);
+      std::string hint;
+      for (auto c : close) hint += (hint.empty() ? "" : ", ") + py::cast<std::string>(c);
+      throw py::type_error(fn + "() got an unexpected keyword argument '" + k + "'" +
+                           (hint.empty() ? "" : "; did you mean: " + hint + "?") + " (help(" + fn +
+                           ") lists the keywords)");
+    }
+    if (given.count(d->spec.name))
+      throw py::type_error(fn + "(): keyword " + py_name(d->spec.name) + " given twice (as '" + k +
+                           "' and another of its names)");
+    const json v = keyword_value(d->spec, value, fn + "()");
+    try {
+      d->spec.check(v);
+    } catch (const Error& e) {
+      throw py::value_error(fn + "(): keyword " + py_name(d->spec.name) + ": " + e.what());
+    }
+    d->set(p, v);
+    given.insert(d->spec.name);
+  }
+  return given;
+}
+
+// ==== the call tables: an effect's table nested with shared blocks ===========
+// Every Python function sets one Call<P>: the effect's parameters and the
+// blocks it takes. Which members a function exposes is its table's choice.
+template <class P>
+struct Call {
+  P p;
+  RangeStep prepare;
+  DepthSource depth;  // intrinsics only (fog, dof): fx, fy, cx, cy, fov-x, fov-y, calib
+  ExecOptions exec;
+};
+
+// The intrinsics flags of the depth block (the camera of fog and dof): the
+// rest of that block names files, which a numpy range does not have.
+std::set<std::string> depth_file_keywords() {
+  static const std::set<std::string> keep = {"fx", "fy", "cx", "cy", "fov-x", "fov-y", "calib"};
+  std::set<std::string> skip;
+  for (const auto& d : depth_param_table().params())
+    if (!keep.count(d.spec.name)) skip.insert(d.spec.name);
+  return skip;
+}
+
+enum Blocks : unsigned { kNone = 0, kPrepare = 1, kIntrinsics = 2, kExec = 4 };
+
+template <class P>
+ParamTable<Call<P>> call_table(const ParamTable<P>& own, unsigned blocks, const std::set<std::string>& skip = {}) {
+  ParamTable<Call<P>> t(own.block());
+  t.nest_except(&Call<P>::p, own, skip);
+  if (blocks & kPrepare) t.nest(&Call<P>::prepare, range_step_param_table());
+  if (blocks & kIntrinsics) t.nest_except(&Call<P>::depth, depth_param_table(), depth_file_keywords());
+  if (blocks & kExec) t.nest(&Call<P>::exec, exec_param_table());
+  return t;
+}
+
+template <class T>
+std::set<std::string> names_of(const ParamTable<T>& t) {
+  std::set<std::string> n;
+  for (const auto& d : t.params()) n.insert(d.spec.name);
+  return n;
+}
+
+// The job's parameters for the record, as the CLI's "job" (without the
+// execution block, which the record holds under "execution").
+template <class P>
+json job_json(const ParamTable<Call<P>>& t, const Call<P>& c) {
+  json j = t.to_json(c);
+  j.erase("execution");
+  return j;
+}
+
+// ==== documentation from the tables ===============================================
+struct Extra {  // a keyword of the binding itself (not a parameter of the run)
+  std::string name, stub_type, help;
+};
+struct FunctionDoc {
+  std::string name;        // as bound in _brume: haze, depth_convert, ...
+  std::string public_name; // brume.haze, brume.depth.convert, ...
+  std::string positional;  // stub text of the positional parameters
+  std::string summary;
+  std::vector<std::pair<ParamSpec, json>> params;  // spec and default
+  std::vector<Extra> extras;
+  std::vector<std::string> fields;  // result fields
+  std::string returns = "Result";
+};
+std::vector<FunctionDoc>& registry() {
+  static std::vector<FunctionDoc> r;
+  return r;
+}
+
+std::string stub_type(const ParamSpec& s) {
+  std::string t;
+  switch (s.kind) {
+    case ParamKind::real: t = "float"; break;
+    case ParamKind::integer: t = "int"; break;
+    case ParamKind::boolean: t = "bool"; break;
+    case ParamKind::rgb: t = "tuple[float, float, float] | Sequence[float]"; break;
+    case ParamKind::text: t = "str | os.PathLike[str]"; break;
+    case ParamKind::choice: {
+      t = "Literal[";
+      for (std::size_t i = 0; i < s.choices.size(); ++i) t += (i ? ", \"" : "\"") + s.choices[i] + "\"";
+      t += "]";
+      break;
+    }
+  }
+  if (s.optional) t += " | Literal[\"" + s.unset_word + "\"] | None";
+  return t;
+}
+
+std::string docstring(const FunctionDoc& f) {
+  std::ostringstream o;
+  o << f.public_name << "(" << f.positional << ", **keywords) -> " << f.returns << "\n\n" << f.summary << "\n";
+  std::string block;
+  for (const auto& [s, def] : f.params) {
+    if (s.block != block) {
+      block = s.block;
+      o << "\n" << block << ":\n";
+    }
+    o << "  " << py_name(s.name) << " = " << s.format(def);
+    if (s.kind == ParamKind::choice || s.kind == ParamKind::boolean || s.kind == ParamKind::text) o << "";
+    o << "\n      " << s.describe();
+    if (s.optional) o << " (or None)";
+    if (!s.aliases.empty()) {
+      o << " [also:";
+      for (const auto& a : s.aliases) o << " " << py_name(a);
+      o << "]";
+    }
+    o << "\n";
+  }
+  if (!f.extras.empty()) {
+    o << "\nbinding:\n";
+    for (const Extra& e : f.extras) o << "  " << e.name << "\n      " << e.help << "\n";
+  }
+  if (!f.fields.empty()) {
+    o << "\nReturns a brume.Result with:";
+    for (const auto& x : f.fields) o << " " << x;
+    o << "\n";
+  }
+  return o.str();
+}
+
+std::string stub_text() {
+  std::ostringstream o;
+  o << "# Generated at build time from brume's parameter tables (python/src/module.cpp). Do not edit.\n"
+       "import os\nfrom typing import Any, Literal, Sequence\n\nimport numpy as np\nimport numpy.typing as npt\n\n"
+       "from ._result import Result\n\n";
+  for (const FunctionDoc& f : registry()) {
+    o << "def " << f.name << "(" << f.positional;
+    if (!f.params.empty() || !f.extras.empty()) o << (f.positional.empty() ? "*" : ", *");
+    for (const Extra& e : f.extras) o << ", " << e.name << ": " << e.stub_type << " = ...";
+    for (const auto& [s, def] : f.params) o << ", " << py_name(s.name) << ": " << stub_type(s) << " = ...";
+    o << ") -> " << f.returns << ":\n    \"\"\"" << f.summary;
+    if (!f.fields.empty()) {
+      o << " Result fields:";
+      for (const auto& x : f.fields) o << " " << x;
+      o << ".";
+    }
+    o << "\"\"\"\n\n";
+  }
+  o << "def _stub_text() -> str: ...\n"
+       "def _debug_last_inputs() -> dict[str, dict[str, Any]]: ...\n"
+       "def _bench_blur_cpp(rgb: npt.NDArray[np.float32], sigma: float, repeats: int, threads: int) -> list[float]: ...\n";
+  return o.str();
+}
+
+template <class C>
+FunctionDoc make_doc(const char* name, const char* public_name, const char* positional, const char* summary,
+                     const ParamTable<C>& t, std::vector<Extra> extras, std::vector<std::string> fields) {
+  FunctionDoc f{name, public_name, positional, summary, {}, std::move(extras), std::move(fields)};
+  const C defaults{};
+  for (const auto& d : t.params()) f.params.emplace_back(d.spec, d.get(defaults));
+  return f;
+}
+
+// ==== arrays in =========================================================================
+// What each input of the last call on this thread became (the zero-copy test
+// reads it): the address the library read and whether that was a copy.
+struct InputTrace {
+  std::uintptr_t address = 0;
+  bool copied = false;
+  std::string how;
+};
+thread_local std::map<std::string, InputTrace> g_last_inputs;
+
+// One input image as the library sees it: a view of the caller's pixels
+// (float32 with contiguous channels), or of `owned` (a conversion).
+struct Input {
+  ConstImageView view;
+  Image owned;
+  py::object keep;  // the array the view points into
+  json record;
+};
+
+Transfer parse_transfer_kw(py::handle t, const std::string& where) {
+  if (t.is_none()) return Transfer::automatic;
+  if (!py::isinstance<py::str>(t)) throw py::type_error(where + ": transfer takes 'srgb' or 'linear' (or None)");
+  const std::string s = py::cast<std::string>(t);
+  if (s == "srgb") return Transfer::srgb;
+  if (s == "linear") return Transfer::linear;
+  if (s == "auto") return Transfer::automatic;
+  throw py::value_error(where + ": transfer '" + s + "' is not allowed; use 'srgb' or 'linear' (integer arrays), or None");
+}
+
+std::string shape_text(const py::array& a) {
+  std::string s = "(";
+  for (py::ssize_t i = 0; i < a.ndim(); ++i) s += (i ? ", " : "") + std::to_string(a.shape(i));
+  return s + (a.ndim() == 1 ? ",)" : ")");
+}
+
+// `channels`: 3 for colour (4 accepted, alpha ignored), 1 for a scalar map
+// (H x W or H x W x 1). Integer colour needs `transfer`; integer scalars are refused.
+Input read_input(py::handle obj, const std::string& arg, int channels, Transfer transfer, const std::string& fn) {
+  const bool color = channels == 3;
+  const std::string expected =
+      color ? "an H x W x 3 (or x 4) array of linear RGB, float32 (read in place) or float64 (converted once), or "
+              "uint8/uint16 with transfer='srgb'|'linear'"
+            : "an H x W (or H x W x 1) float32 or float64 array in metres (NaN: unknown)";
+  if (!py::isinstance<py::array>(obj))
+    throw py::type_error(fn + "(): " + arg + " must be a numpy.ndarray, " + expected + "; got " + type_name(obj));
+  py::array a = py::reinterpret_borrow<py::array>(obj);
+  py::module_ np = py::module_::import("numpy");
+  const std::string dtype = py::cast<std::string>(py::str(a.dtype()));
+  auto bad = [&](const std::string& why) {
+    return py::value_error(fn + "(): " + arg + " has shape " + shape_text(a) + " and dtype " + dtype + ": " + why +
+                           "; expected " + expected);
+  };
+  const bool shape_ok = color ? (a.ndim() == 3 && (a.shape(2) == 3 || a.shape(2) == 4))
+                              : (a.ndim() == 2 || (a.ndim() == 3 && a.shape(2) == 1));
+  if (!shape_ok) throw bad(color ? "not H x W x 3 or H x W x 4" : "not H x W");
+  if (a.shape(0) < 1 || a.shape(1) < 1) throw bad("it is empty");
+  if (a.shape(0) > (1 << 20) || a.shape(1) > (1 << 20)) throw bad("it is too large");
+  const int h = static_cast<int>(a.shape(0)), w = static_cast<int>(a.shape(1));
+  const int nc = a.ndim() == 3 ? static_cast<int>(a.shape(2)) : 1;
+  Input in;
+  in.keep = py::reinterpret_borrow<py::object>(obj);
+  in.record = {{"source", "numpy"}, {"shape", json::array()}, {"dtype", dtype}};
+  for (py::ssize_t i = 0; i < a.ndim(); ++i) in.record["shape"].push_back(a.shape(i));
+  const char kind = a.dtype().kind();
+  const bool integer = kind == 'u' || kind == 'i';
+  if (integer && !color)
+    throw bad("a range needs metres; convert it (range.astype(np.float32) * metres_per_count) or use "
+              "brume.depth.convert with depth_scale");
+  if (integer) {
+    if (!(a.dtype().is(py::dtype::of<std::uint8_t>()) || a.dtype().is(py::dtype::of<std::uint16_t>())))
+      throw bad("integer pixels must be uint8 or uint16");
+    if (transfer == Transfer::automatic)
+      throw bad("integer pixels need an explicit transfer='srgb' (sRGB-encoded, as PNG/JPEG files) or "
+                "transfer='linear'");
+  } else if (transfer != Transfer::automatic) {
+    throw py::value_error(fn + "(): transfer='" + to_string(transfer) + "' applies to uint8/uint16 " + arg +
+                          " only; " + arg + " is " + dtype + " (float arrays are linear)");
+  }
+  if (!integer && kind != 'f') throw bad("dtype not supported");
+  in.record["transfer"] = integer ? to_string(transfer) : "linear";
+  // float32 with contiguous channels: a view, no copy.
+  if (a.dtype().is(py::dtype::of<float>())) {
+    const py::ssize_t rs = a.strides(0), ps = a.strides(1), cs = a.ndim() == 3 ? a.strides(2) : 4;
+    if (cs == 4 && rs > 0 && ps > 0 && rs % 4 == 0 && ps % 4 == 0 && (nc == 1 || ps >= 4 * nc)) {
+      try {
+        in.view = ConstImageView::from_byte_strides(static_cast<const float*>(a.data()), w, h, nc, rs, ps);
+        if (color && nc == 4) in.view = in.view.channel_range(0, 3);
+        in.record["copied"] = false;
+        g_last_inputs[arg] = {reinterpret_cast<std::uintptr_t>(in.view.data()), false, "view"};
+        return in;
+      } catch (const Error&) {
+        // overlapping rows (a broadcast array): fall through to a copy
+      }
+    }
+  }
+  // Everything else: one conversion into a dense float image.
+  py::array_t<double, py::array::c_style | py::array::forcecast> dense(a);
+  const int oc = color ? 3 : 1;
+  in.owned = Image(w, h, oc);
+  const double* src = dense.data();
+  const double maxval = a.dtype().is(py::dtype::of<std::uint8_t>()) ? 255.0 : 65535.0;
+  for (std::size_t i = 0; i < in.owned.pixels(); ++i)
+    for (int c = 0; c < oc; ++c) {
+      const double v = src[i * nc + c];
+      float f;
+      if (integer) {
+        // As OpenImageIO reads an integer file: count / max in float, then the transfer.
+        f = static_cast<float>(v) * (1.0f / static_cast<float>(maxval));
+        if (transfer == Transfer::srgb) f = srgb_to_linear(f);
+      } else {
+        f = static_cast<float>(v);
+      }
+      in.owned.data[i * oc + c] = f;
+    }
+  in.view = ConstImageView(in.owned);
+  in.record["copied"] = true;
+  g_last_inputs[arg] = {reinterpret_cast<std::uintptr_t>(in.view.data()), true, "converted"};
+  return in;
+}
+
+// Library functions that take an Image (aerial, fog, dof, depth.prepare,
+// sky.fit, not yet views like haze and blur): a view of the caller's float32
+// becomes one -- a copy, recorded in the trace and in the record's inputs.
+const Image& as_image(Input& in, const std::string& arg) {
+  if (in.owned.empty()) {
+    in.owned = copy_of(in.view);
+    in.record["copied"] = true;
+    g_last_inputs[arg] = {reinterpret_cast<std::uintptr_t>(in.owned.data.data()), true, "copied for an Image API"};
+  }
+  return in.owned;
+}
+
+// ==== arrays out: the Image's buffer becomes the array's (no copy) ==============
+py::array to_numpy(Image&& img) {
+  auto* owner = new Image(std::move(img));
+  py::capsule cap(owner, [](void* p) { delete static_cast<Image*>(p); });
+  const py::ssize_t h = owner->height, w = owner->width, c = owner->channels, f = sizeof(float);
+  if (c == 1) return py::array_t<float>({h, w}, {w * f, f}, owner->data.data(), cap);
+  return py::array_t<float>({h, w, c}, {w * c * f, c * f, f}, owner->data.data(), cap);
+}
+
+py::object make_result(std::map<std::string, Image>&& images, const json& record,
+                       const std::map<std::string, py::object>& more = {}) {
+  py::dict kw;
+  for (auto& [k, v] : images) kw[py::str(k)] = v.empty() ? py::none() : py::object(to_numpy(std::move(v)));
+  for (const auto& [k, v] : more) kw[py::str(k)] = v;
+  kw["record"] = to_py(record);
+  return py::module_::import("brume._result").attr("Result")(**kw);
+}
+
+json python_header(const std::string& command, const std::string& fn) {
+  return run_record_header(command, {"python", fn});
+}
+
+// ==== effects: (rgb, range, **keywords) -> Result =========================================
+struct EffectOut {
+  std::map<std::string, Image> images;
+  json record;
+};
+// The body runs without the GIL. It reads `.view` (pixels in place) when the
+// library function takes views, else `.owned` (def_effect made the Image).
+template <class P>
+using EffectBody = std::function<EffectOut(const Input& rgb, const Input& range, Call<P>& c, const Exec& exec,
+                                           const std::set<std::string>& given)>;
+enum class Takes { views, images };
+
+template <class P>
+void def_effect(py::module_& m, const char* name, const char* command, const ParamTable<Call<P>>* table,
+                Takes takes, const char* summary, std::vector<std::string> fields, EffectBody<P> body) {
+  const std::string fn = std::string("brume.") + name;
+  FunctionDoc doc = make_doc(name, fn.c_str(), "rgb: npt.NDArray[Any], range: npt.NDArray[Any]", summary, *table,
+                             {{"transfer", "Literal[\"srgb\", \"linear\"] | None",
+                               "uint8/uint16 rgb only: 'srgb' (PNG/JPEG-like) or 'linear'; float arrays are linear"}},
+                             fields);
+  registry().push_back(doc);
+  m.def(
+      name,
+      [=](py::object rgb_obj, py::object range_obj, py::kwargs kw) {
+        py::dict k = py::dict(kw);
+        const Transfer tr = parse_transfer_kw(k.contains("transfer") ? py::object(k["transfer"]) : py::object(py::none()), fn + "()");
+        if (k.contains("transfer")) PyDict_DelItemString(k.ptr(), "transfer");
+        Call<P> c;
+        const std::set<std::string> given = set_keywords(*table, c, k, fn);
+        g_last_inputs.clear();
+        Input rgb = read_input(rgb_obj, "rgb", 3, tr, fn);
+        Input range = read_input(range_obj, "range", 1, Transfer::automatic, fn);
+        if (takes == Takes::images) {
+          as_image(rgb, "rgb");
+          as_image(range, "range");
+        }
+        const Exec exec = c.exec.exec();
+        EffectOut out;
+        {
+          py::gil_scoped_release nogil;
+          out = body(rgb, range, c, exec, given);
+        }
+        json rec = python_header(command, fn);
+        rec["job"] = job_json(*table, c);
+        rec["inputs"] = {{"rgb", rgb.record}, {"range", range.record}};
+        rec.update(out.record);
+        return make_result(std::move(out.images), rec);
+      },
+      py::arg("rgb"), py::arg("range"), docstring(doc).c_str());
+}
+
+// A table that lives as long as the module (functions keep a pointer).
+template <class T>
+const T* keep(T t) {
+  return new T(std::move(t));
+}
+
+// ==== GPU context per call (see the top) and thread-safe errors ===========================
+void register_errors() {
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const FileNotFound& e) {
+      PyErr_SetString(PyExc_FileNotFoundError, e.what());
+    } catch (const GpuUnavailable& e) {
+      PyErr_SetString(PyExc_RuntimeError, e.what());
+    } catch (const Error& e) {
+      PyErr_SetString(PyExc_ValueError, e.what());
+    } catch (const nlohmann::json::exception& e) {
+      PyErr_SetString(PyExc_ValueError, e.what());
+    }
+  });
+}
+
+}  // namespace brume::python
+
+using namespace brume;
+using namespace brume::python;
+
+PYBIND11_MODULE(_brume, m) {
+  m.doc() = "brume: physically based, depth-aware atmospheric and lens effects on numpy RGB-D images";
+  m.attr("__version__") = BRUME_VERSION;
+  register_errors();
+
+  // ---- the effects -----------------------------------------------------------------
+  def_effect<HazeParams>(
+      m, "haze", "haze", keep(call_table(haze_param_table(), kPrepare | kExec)), Takes::views,
+      "Haze and fog with scattering blur (Hansard): Beer-Lambert transmission from the range, premultiplied "
+      "compositing with the airlight, depth-dependent blur by inhomogeneous diffusion. As `brume haze`.",
+      {"rgb", "transmission", "scale", "record"},
+      [](const Input& rgb, const Input& range, Call<HazeParams>& c, const Exec& e, const std::set<std::string>& g) {
+        HazeRun r = run_haze(rgb.view, range.view, c.p, c.prepare, e, g);
+        return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"transmission", std::move(r.result.transmission)},
+                          {"scale", std::move(r.result.scale)}}, r.record};
+      });
+  def_effect<AerialParams>(
+      m, "aerial", "aerial", keep(call_table(aerial_param_table(), kPrepare | kExec)), Takes::images,
+      "Spectral aerial perspective from turbidity (Morales): render, re-render (from_turbidity) or remove, with "
+      "optional scattering blur (lambda_). As `brume aerial` (turbidity from a sky fit: brume.sky.fit first).",
+      {"rgb", "attenuation", "scale", "record"},
+      [](const Input& rgb, const Input& range, Call<AerialParams>& c, const Exec& e, const std::set<std::string>& g) {
+        AerialRun r = run_aerial(rgb.owned, range.owned, c.p, c.prepare, e, g);
+        return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"attenuation", std::move(r.result.attenuation)},
+                          {"scale", std::move(r.result.scale)}}, r.record};
+      });
+  def_effect<FogParams>(
+      m, "fog", "fog", keep(call_table(fog_param_table(), kPrepare | kIntrinsics | kExec)), Takes::images,
+      "Layered fog from the range and the camera (Zhou, Chen, Smith), with scattering blur for lambda_ > 0. "
+      "The intrinsics (fx.. or fov_x/fov_y) and the pose are keywords. As `brume fog`.",
+      {"rgb", "optical_depth", "transmission", "record"},
+      [](const Input& rgb, const Input& range, Call<FogParams>& c, const Exec& e, const std::set<std::string>& g) {
+        FogRun r = run_fog(rgb.owned, range.owned, c.depth, c.p, c.prepare, e, g);
+        return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"optical_depth", std::move(r.result.optical_depth)},
+                          {"transmission", std::move(r.result.transmission)}}, r.record};
+      });
+  def_effect<DofParams>(
+      m, "dof", "dof", keep(call_table(dof_param_table(), kPrepare | kIntrinsics | kExec)), Takes::images,
+      "Depth of field by leak-free diffusion (thin-lens circle of confusion). `range` is metres along the ray; "
+      "planar depth comes from the intrinsics or the lens. As `brume dof`.",
+      {"rgb", "scale", "record"},
+      [](const Input& rgb, const Input& range, Call<DofParams>& c, const Exec& e, const std::set<std::string>& g) {
+        const Intrinsics k = dof_intrinsics(c.depth, c.p, rgb.owned.width, rgb.owned.height);
+        DofRun r = run_dof(rgb.owned, range.owned, k, c.p, c.prepare, e, g);
+        return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"scale", std::move(r.result.scale)}}, r.record};
+      });
+
+  // ---- blur: the engine alone, the image read in place ---------------------------------
+  {
+    std::set<std::string> skip = names_of(input_param_table(false));
+    for (const auto& n : names_of(output_param_table({}))) skip.insert(n);
+    skip.insert("scale-map");  // a numpy argument here, not a file
+    const auto* table = keep(call_table(blur_job_table(), kExec, skip));
+    FunctionDoc doc = make_doc("blur", "brume.blur", "rgb: npt.NDArray[Any], scale_map: npt.NDArray[Any] | None = None",
+                               "The diffusion engine alone: a Gaussian of sqrt(sigma^2 - sigma0^2) (sigma=) or a "
+                               "space-variant blur to a per-pixel scale map in px (scale_map=). As `brume blur`. "
+                               "A float32 rgb is read in place (no copy).",
+                               *table,
+                               {{"transfer", "Literal[\"srgb\", \"linear\"] | None", "uint8/uint16 rgb only"}},
+                               {"rgb", "record"});
+    registry().push_back(doc);
+    m.def(
+        "blur",
+        [table](py::object rgb_obj, py::object map_obj, py::kwargs kw) {
+          const std::string fn = "brume.blur";
+          py::dict k = py::dict(kw);
+          const Transfer tr = parse_transfer_kw(k.contains("transfer") ? py::object(k["transfer"]) : py::object(py::none()), fn + "()");
+          if (k.contains("transfer")) PyDict_DelItemString(k.ptr(), "transfer");
+          Call<BlurJob> c;
+          set_keywords(*table, c, k, fn);
+          g_last_inputs.clear();
+          Input rgb = read_input(rgb_obj, "rgb", 3, tr, fn);
+          std::optional<Input> smap;
+          if (!map_obj.is_none()) {
+            smap = read_input(map_obj, "scale_map", 1, Transfer::automatic, fn);
+            as_image(*smap, "scale_map");
+          }
+          const Exec exec = c.exec.exec();
+          BlurRun r;
+          {
+            py::gil_scoped_release nogil;
+            r = run_blur(rgb.view, c.p.sigma, smap ? &smap->owned : nullptr, c.p.diffusion, exec);
+          }
+          json rec = python_header("blur", fn);
+          rec["job"] = job_json(*table, c);
+          rec["inputs"] = {{"rgb", rgb.record}};
+          if (smap) rec["inputs"]["scale_map"] = smap->record;
+          rec.update(r.record);
+          return make_result({{"rgb", std::move(r.rgb)}}, rec);
+        },
+        py::arg("rgb"), py::arg("scale_map") = py::none(), docstring(doc).c_str());
+  }
+
+  // ---- depth ----------------------------------------------------------------------------
+  {
+    std::set<std::string> skip = {"out", "record"};
+    const auto* table = keep(call_table(depth_convert_job_table(), kNone, skip));
+    FunctionDoc doc = make_doc("depth_convert", "brume.depth.convert", "",
+                               "Every depth source to a range map (metres along the ray; kind='z': planar depth), "
+                               "read from its file with its conventions. Exactly one source keyword (range=, z=, "
+                               "disparity=, depth_buffer=, inverse_depth=, normalized_depth=, velodyne=). As "
+                               "`brume depth convert`.",
+                               *table, {}, {"range", "record"});
+    registry().push_back(doc);
+    m.def(
+        "depth_convert",
+        [table](py::kwargs kw) {
+          const std::string fn = "brume.depth.convert";
+          Call<DepthConvertJob> c;
+          set_keywords(*table, c, py::dict(kw), fn);
+          Image result;
+          json rec = python_header("depth convert", fn);
+          {
+            py::gil_scoped_release nogil;
+            depth_convert_job_table().validate(c.p);
+            LoadedDepth ld = load_depth(c.p.depth);
+            result = std::move(ld.range);
+            rec["depth"] = ld.record;
+            if (c.p.kind == "z") {
+              const Intrinsics k = depth_camera(c.p.depth, result.width, result.height).k;
+              result = range_to_z(result, k);
+              rec["z_intrinsics"] = {{"fx_px", k.fx}, {"fy_px", k.fy}, {"cx_px", k.cx}, {"cy_px", k.cy}};
+            }
+          }
+          rec["job"] = table->to_json(c);
+          rec["kind"] = c.p.kind;
+          rec["result"] = {{"width", result.width}, {"height", result.height},
+                           {"unknown_pixels", unknown_range_pixels(result)}};
+          return make_result({{c.p.kind == "z" ? "z" : "range", std::move(result)}}, rec);
+        },
+        docstring(doc).c_str());
+  }
+  {
+    const auto* table = keep(call_table(prepare_param_table(), kNone));
+    FunctionDoc doc = make_doc("depth_prepare", "brume.depth.prepare", "range: npt.NDArray[Any]",
+                               "Range preparation (Hansard 4.1): fill holes, identify the sky (set to S_max) and "
+                               "matte the horizon. As `brume depth prepare`, on an array.",
+                               *table, {}, {"range", "sky_mask", "hole_mask", "margin_mask", "record"});
+    registry().push_back(doc);
+    m.def(
+        "depth_prepare",
+        [table](py::object range_obj, py::kwargs kw) {
+          const std::string fn = "brume.depth.prepare";
+          Call<PrepareParams> c;
+          set_keywords(*table, c, py::dict(kw), fn);
+          g_last_inputs.clear();
+          Input range = read_input(range_obj, "range", 1, Transfer::automatic, fn);
+          const Image& r_img = as_image(range, "range");
+          PrepareResult pr;
+          {
+            py::gil_scoped_release nogil;
+            prepare_param_table().validate(c.p);
+            pr = prepare_range(r_img, c.p);
+          }
+          json rec = python_header("depth prepare", fn);
+          rec["job"] = table->to_json(c);
+          rec["inputs"] = {{"range", range.record}};
+          rec["prepare"] = prepare_record(c.p, pr);
+          return make_result({{"range", std::move(pr.range)},
+                              {"sky_mask", std::move(pr.sky_mask)},
+                              {"hole_mask", std::move(pr.hole_mask)},
+                              {"margin_mask", std::move(pr.margin_mask)}},
+                             rec);
+        },
+        py::arg("range"), docstring(doc).c_str());
+  }
+
+  // ---- sky ------------------------------------------------------------------------------
+  {
+    const auto* table = keep(call_table(sky_render_param_table(), kExec));
+    FunctionDoc doc = make_doc("sky_render", "brume.sky.render", "",
+                               "A Preetham sky in linear sRGB (kcd/m^2 x exposure), NaN (or ground) below the "
+                               "horizon. As `brume sky render`.",
+                               *table, {}, {"rgb", "record"});
+    registry().push_back(doc);
+    m.def(
+        "sky_render",
+        [table](py::kwargs kw) {
+          const std::string fn = "brume.sky.render";
+          Call<SkyRenderParams> c;
+          set_keywords(*table, c, py::dict(kw), fn);
+          const Exec exec = c.exec.exec();
+          SkyRenderRun r;
+          {
+            py::gil_scoped_release nogil;
+            r = run_sky_render(c.p, exec);
+          }
+          json rec = python_header("sky render", fn);
+          rec["job"] = job_json(*table, c);
+          rec["inputs"] = json::object();
+          rec.update(r.record);
+          return make_result({{"rgb", std::move(r.rgb)}}, rec);
+        },
+        docstring(doc).c_str());
+  }
+  {
+    std::set<std::string> skip = {"image", "image-transfer", "mask", "out", "plot"};
+    const auto* table = keep(call_table(sky_fit_job_table(), kNone, skip));
+    FunctionDoc doc = make_doc("sky_fit", "brume.sky.fit", "rgb: npt.NDArray[Any], mask: npt.NDArray[Any] | None = None",
+                               "Turbidity of a sky photo (Preetham model, RANSAC against clouds). mask: > 0.5 marks "
+                               "usable sky. Integer rgb (transfer=) enables saturation detection, as an 8/16-bit "
+                               "file does. As `brume sky fit`; the result's `fit` is its JSON.",
+                               *table,
+                               {{"transfer", "Literal[\"srgb\", \"linear\"] | None", "uint8/uint16 rgb only"}},
+                               {"turbidity", "reliable", "fit", "record"});
+    registry().push_back(doc);
+    m.def(
+        "sky_fit",
+        [table](py::object rgb_obj, py::object mask_obj, py::kwargs kw) {
+          const std::string fn = "brume.sky.fit";
+          py::dict k = py::dict(kw);
+          const Transfer tr = parse_transfer_kw(k.contains("transfer") ? py::object(k["transfer"]) : py::object(py::none()), fn + "()");
+          if (k.contains("transfer")) PyDict_DelItemString(k.ptr(), "transfer");
+          Call<SkyFitJob> c;
+          set_keywords(*table, c, k, fn);
+          g_last_inputs.clear();
+          Input rgb = read_input(rgb_obj, "rgb", 3, tr, fn);
+          const bool integer = py::reinterpret_borrow<py::array>(rgb_obj).dtype().kind() == 'u';
+          const Image& img = as_image(rgb, "rgb");
+          std::optional<Input> mask;
+          if (!mask_obj.is_none()) {
+            mask = read_input(mask_obj, "mask", 1, Transfer::automatic, fn);
+            Image& mk = const_cast<Image&>(as_image(*mask, "mask"));
+            if (mk.width != img.width || mk.height != img.height)
+              throw py::value_error(fn + "(): mask is " + mk.size_string() + " but rgb is " + img.size_string() +
+                                    "; give a mask of the image's size");
+            for (float& v : mk.data) v = v > 0.5f ? 1.0f : 0.0f;
+          }
+          SkyImageFit f;
+          {
+            py::gil_scoped_release nogil;
+            sky_fit_job_table().validate(c.p);
+            f = fit_sky_data(img, integer, mask ? &mask->owned : nullptr, c.p.view, c.p.sun, c.p.fit);
+          }
+          json rec = python_header("sky fit", fn);
+          rec["job"] = table->to_json(c);
+          rec["inputs"] = {{"rgb", rgb.record}};
+          if (mask) rec["inputs"]["mask"] = mask->record;
+          rec["fit_ms"] = f.fit_ms;
+          return make_result({}, rec,
+                             {{"turbidity", to_py(f.fit.value("turbidity", json()))},
+                              {"reliable", to_py(f.fit.value("reliable", json(false)))},
+                              {"fit", to_py(f.fit)}});
+        },
+        py::arg("rgb"), py::arg("mask") = py::none(), docstring(doc).c_str());
+  }
+
+  // ---- brume.random_params (issue #14 item 3): the lead binds the C++ sampler here ----
+  // It returns the dict an effect takes and a record stores, so it is one m.def:
+  //   m.def("random_params", [](std::string effect, std::uint64_t seed, std::string key, py::kwargs ranges) {
+  //     const json r = from_py(ranges, "brume.random_params(): ranges");
+  //     json drawn;
+  //     { py::gil_scoped_release nogil; drawn = brume::random_params(effect, seed, key, r); }
+  //     return to_py(drawn);  // keys are flag names ("lambda"): brume.haze(rgb, rng, **drawn) takes them
+  //   }, py::arg("effect"), py::arg("seed"), py::arg("key"));
+  // (set_keywords accepts the flag spellings "lambda", "kappa_s" as well as lambda_.)
+
+  // ---- files ----------------------------------------------------------------------------
+  m.def(
+      "read_image",
+      [](py::object path_obj, py::object transfer) {
+        const std::string path = keyword_value(path_spec(), path_obj, "brume.read_image()");
+        Transfer t = Transfer::automatic;
+        if (!transfer.is_none()) t = parse_transfer(py::cast<std::string>(transfer), "transfer");
+        FileInfo info;
+        Image img;
+        {
+          py::gil_scoped_release nogil;
+          img = read_color(path, t, &info);
+        }
+        json rec;
+        if (!info.description.empty()) {
+          rec = json::parse(info.description, nullptr, false);
+          if (rec.is_discarded()) rec = nullptr;  // a description that is not brume's JSON
+        }
+        json file = {{"path", info.path}, {"format", info.format}, {"integer", info.integer}, {"bits", info.bits},
+                     {"transfer", to_string(info.transfer)}, {"channels", info.channel_names}};
+        return make_result({{"rgb", std::move(img)}}, rec, {{"file", to_py(file)}});
+      },
+      py::arg("path"), py::arg("transfer") = py::none(),
+      "read_image(path, transfer=None) -> Result\n\nA colour image as linear float32 RGB (H x W x 3) by the CLI's "
+      "rules: integer files (PNG, JPEG, 8/16-bit TIFF) are sRGB and float files (EXR, PFM, HDR) linear unless "
+      "transfer='srgb'|'linear' says otherwise; grey is expanded, alpha dropped. Result: rgb, record (the brume "
+      "record embedded in the file's ImageDescription, or None), file (format, bits, transfer).");
+  m.def(
+      "write_image",
+      [](py::object path_obj, py::object img_obj, std::string bits, py::object transfer, py::object record,
+         bool data) {
+        const std::string fn = "brume.write_image";
+        const std::string path = keyword_value(path_spec(), path_obj, fn + "()");
+        if (!py::isinstance<py::array>(img_obj))
+          throw py::type_error(fn + "(): image must be a numpy.ndarray (H x W x 3 colour, or H x W data)");
+        py::array a = py::reinterpret_borrow<py::array>(img_obj);
+        g_last_inputs.clear();
+        Input in = read_input(img_obj, "image", a.ndim() == 2 ? 1 : 3, Transfer::automatic, fn);
+        WriteOptions o;
+        o.bits = bits;
+        if (!transfer.is_none()) o.transfer = parse_transfer(py::cast<std::string>(transfer), "transfer");
+        o.is_color = in.view.channels() == 3 && !data;
+        if (!record.is_none()) o.description = from_py(record, fn + "(): record").dump();
+        const Image& img = as_image(in, "image");
+        {
+          py::gil_scoped_release nogil;
+          check_writable(path, o, "path");
+          write_image(path, img, o, "path");
+        }
+      },
+      py::arg("path"), py::arg("image"), py::arg("bits") = "auto", py::arg("transfer") = py::none(),
+      py::arg("record") = py::none(), py::arg("data") = false,
+      "write_image(path, image, bits='auto', transfer=None, record=None, data=False)\n\nWrite linear float pixels "
+      "(H x W x 3 colour, or H x W data) atomically, by the CLI's encoding rules: integer outputs (bits 8/16, PNG, "
+      "JPEG) of colour are sRGB-encoded unless transfer='linear'; data=True (or a 2-D array) is never "
+      "sRGB-encoded; bits auto: PNG/TIFF 16, JPEG 8, EXR/PFM/HDR float. record (a dict, e.g. a Result's) is "
+      "embedded as ImageDescription where the format allows (PNG, TIFF, JPEG, EXR); read_image returns it.");
+
+  // ---- introspection, tests and benchmarks -----------------------------------------------
+  m.def("_stub_text", &stub_text, "The type stubs of this module, generated from the parameter tables.");
+  m.def(
+      "_debug_last_inputs",
+      []() {
+        py::dict d;
+        for (const auto& [k, t] : g_last_inputs)
+          d[py::str(k)] = py::dict(py::arg("address") = t.address, py::arg("copied") = t.copied,
+                                   py::arg("how") = t.how);
+        return d;
+      },
+      "For the zero-copy test: per input of this thread's last call, the address of the pixels the library "
+      "read and whether they were a copy.");
+  m.def(
+      "_bench_blur_cpp",
+      [](py::object rgb_obj, double sigma, int repeats, int threads) {
+        Input rgb = read_input(rgb_obj, "rgb", 3, Transfer::automatic, "_bench_blur_cpp");
+        DiffusionParams dp;
+        Exec e;
+        e.threads = threads;
+        std::vector<double> s;
+        py::gil_scoped_release nogil;
+        for (int i = 0; i < repeats; ++i) {
+          const auto t0 = std::chrono::steady_clock::now();
+          BlurRun r = run_blur(rgb.view, sigma, nullptr, dp, e);
+          s.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        }
+        return s;
+      },
+      "The C++ side of bench/bench_python.py: run_blur on the same pixels, timed in C++ (seconds per call).");
+}

@@ -1,0 +1,58 @@
+"""Shared fixtures of the Python tests: the CLI built beside the module, a
+small demo scene, the real data folder, and the GPU gate."""
+import os
+import pathlib
+import subprocess
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+def cli_path():
+    p = os.environ.get("BRUME_CLI") or str(ROOT / "build" / "brume")
+    if not os.path.exists(p):
+        pytest.skip(f"the brume CLI is not built ({p}); build target brume_cli or set BRUME_CLI")
+    return p
+
+
+def run_cli(*args, cwd=None):
+    """Runs `brume ARGS` and fails the test with its stderr when it fails."""
+    r = subprocess.run([cli_path(), *map(str, args)], capture_output=True, text=True, cwd=cwd)
+    assert r.returncode == 0, f"brume {' '.join(map(str, args))} failed ({r.returncode}):\n{r.stderr}"
+    return r
+
+
+@pytest.fixture(scope="session")
+def demo(tmp_path_factory):
+    """The procedural demo scene at 160 x 112: clean.png (8-bit sRGB) and
+    range.exr (metres, NaN sky), plus the arrays brume reads from them."""
+    import brume
+    d = tmp_path_factory.mktemp("demo")
+    run_cli("demo", "--out-dir", d, "--width", 160, "--height", 112)
+    rgb = brume.read_image(d / "clean.png").rgb
+    rng = brume.depth.convert(range=d / "range.exr").range
+    return {"dir": d, "rgb": rgb, "range": rng}
+
+
+@pytest.fixture(scope="session")
+def data_dir():
+    d = pathlib.Path(os.environ.get("BRUME_DATA_DIR") or (ROOT.parent / "shared" / "data"))
+    if not d.is_dir():
+        pytest.skip(f"real data folder {d} is absent")
+    return d
+
+
+@pytest.fixture(scope="session")
+def gpu():
+    """Skips GPU tests when no EGL/GLES 3.2 context can be made, unless
+    BRUME_REQUIRE_GPU=1, which turns that into a failure."""
+    import numpy as np
+    import brume
+    try:
+        brume.blur(np.zeros((4, 4, 3), np.float32), sigma=1.5, backend="gpu")
+    except RuntimeError as e:
+        if os.environ.get("BRUME_REQUIRE_GPU") == "1":
+            pytest.fail(f"BRUME_REQUIRE_GPU=1 but no GPU context: {e}")
+        pytest.skip(f"no GPU context: {e}")
+    return True

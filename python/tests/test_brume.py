@@ -1,0 +1,379 @@
+"""brume's Python module against the CLI (bit for bit on the CPU backend),
+its zero-copy inputs, its errors, the GIL and threads, files, the GPU."""
+import math
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import brume
+from brume import _brume
+from conftest import run_cli
+
+
+def read_map(path, **kw):
+    """A 1-channel file as brume reads it (raw values; integer files: counts with depth_scale=1)."""
+    return brume.depth.convert(range=path, **kw).range
+
+
+def same(a, b):
+    """Bit-identical, NaN where NaN (the CPU backend's promise)."""
+    assert a.shape == b.shape and a.dtype == b.dtype
+    assert np.array_equal(a, b, equal_nan=True), f"max |diff| {np.nanmax(np.abs(a - b))}"
+
+
+# ---- every function against the CLI on the same inputs (CPU: bit-identical) ----------------
+def test_haze_equals_cli(demo, tmp_path):
+    d = demo["dir"]
+    run_cli("haze", "--image", d / "clean.png", "--range", d / "range.exr", "--visibility", 3000, "--albedo", 0.9,
+            "--lambda", 6, "--out", tmp_path / "o.exr", "--bits", "float", "--transmission", tmp_path / "t.exr",
+            "--scale-map", tmp_path / "s.exr", "--threads", 2)
+    r = brume.haze(demo["rgb"], demo["range"], visibility=3000, albedo=0.9, lambda_=6, threads=2)
+    same(r.rgb, brume.read_image(tmp_path / "o.exr").rgb)
+    same(r.transmission, read_map(tmp_path / "t.exr"))
+    same(r.scale, read_map(tmp_path / "s.exr"))
+    # the record keeps the flag's name and the values actually used
+    assert r.record["job"]["haze"]["lambda"] == 6
+    assert r.record["job"]["haze"]["visibility"] == 3000
+    assert r.record["haze"] == brume.read_image(tmp_path / "o.exr").record["haze"]
+
+
+def test_aerial_equals_cli(demo, tmp_path):
+    d = demo["dir"]
+    run_cli("aerial", "--image", d / "clean.png", "--range", d / "range.exr", "--turbidity", 8, "--lambda", 4,
+            "--out", tmp_path / "o.exr", "--bits", "float", "--attenuation", tmp_path / "a.exr")
+    r = brume.aerial(demo["rgb"], demo["range"], turbidity=8, **{"lambda": 4})
+    same(r.rgb, brume.read_image(tmp_path / "o.exr").rgb)
+    same(r.attenuation, brume.read_image(tmp_path / "a.exr").rgb)
+
+
+def test_fog_equals_cli(demo, tmp_path):
+    d = demo["dir"]
+    args = dict(fov_y=55, camera_height=1.6, pitch=-5, profile="band", density=0.03, band_center=25,
+                band_half_width=12, lambda_=3, airlight=(0.78, 0.79, 0.81))
+    run_cli("fog", "--image", d / "clean.png", "--range", d / "range.exr", "--fov-y", 55, "--camera-height", 1.6,
+            "--pitch", -5, "--profile", "band", "--density", 0.03, "--band-center", 25, "--band-half-width", 12,
+            "--lambda", 3, "--airlight", "0.78,0.79,0.81", "--out", tmp_path / "o.exr", "--bits", "float",
+            "--optical-depth", tmp_path / "f.exr")
+    r = brume.fog(demo["rgb"], demo["range"], **args)
+    same(r.rgb, brume.read_image(tmp_path / "o.exr").rgb)
+    same(r.optical_depth, read_map(tmp_path / "f.exr"))
+
+
+def test_dof_equals_cli(demo, tmp_path):
+    d = demo["dir"]
+    run_cli("dof", "--image", d / "clean.png", "--range", d / "range.exr", "--focus-distance", 3.9,
+            "--coc-infinity", 14.4, "--fov-y", 55, "--out", tmp_path / "o.exr", "--bits", "float",
+            "--scale-map", tmp_path / "s.exr")
+    r = brume.dof(demo["rgb"], demo["range"], focus_distance=3.9, coc_infinity=14.4, fov_y=55)
+    same(r.rgb, brume.read_image(tmp_path / "o.exr").rgb)
+    same(r.scale, read_map(tmp_path / "s.exr"))
+
+
+def test_blur_equals_cli(demo, tmp_path):
+    d = demo["dir"]
+    run_cli("blur", "--image", d / "clean.png", "--sigma", 4, "--out", tmp_path / "o.exr", "--bits", "float")
+    same(brume.blur(demo["rgb"], sigma=4).rgb, brume.read_image(tmp_path / "o.exr").rgb)
+    # a per-pixel scale map, from an array and from the file
+    smap = np.linspace(1, 6, demo["rgb"].shape[1], dtype=np.float32)[None, :].repeat(demo["rgb"].shape[0], 0)
+    brume.write_image(tmp_path / "map.exr", smap)
+    run_cli("blur", "--image", d / "clean.png", "--scale-map", tmp_path / "map.exr", "--out", tmp_path / "m.exr",
+            "--bits", "float")
+    same(brume.blur(demo["rgb"], smap).rgb, brume.read_image(tmp_path / "m.exr").rgb)
+
+
+def test_depth_convert_equals_cli(data_dir, tmp_path):
+    art = data_dir / "middlebury2005_thirdsize" / "Art"
+    flags = dict(fx=1246.667, baseline=0.16, disparity_scale=0.3333333, disparity_offset=66.667)
+    for kind in ("range", "z"):
+        run_cli("depth", "convert", "--disparity", art / "disp1.png", "--fx", 1246.667, "--baseline", 0.16,
+                "--disparity-scale", 0.3333333, "--disparity-offset", 66.667, "--kind", kind,
+                "--out", tmp_path / f"{kind}.exr")
+        r = brume.depth.convert(disparity=art / "disp1.png", kind=kind, **flags)
+        same(r[kind], read_map(tmp_path / f"{kind}.exr"))
+    assert 1.3 < np.nanmin(r.z) and np.nanmax(r.z) < 2.3  # Art: 1.41-2.19 m (data/SOURCES.md)
+
+
+def test_depth_prepare_equals_cli(demo, tmp_path):
+    d = demo["dir"]
+    run_cli("depth", "prepare", "--range", d / "range.exr", "--sky-margin", 4, "--out", tmp_path / "p.exr",
+            "--masks", tmp_path / "m")
+    r = brume.depth.prepare(demo["range"], sky_margin=4)
+    same(r.range, read_map(tmp_path / "p.exr"))
+    assert np.array_equal(r.sky_mask > 0.5, read_map(tmp_path / "m" / "sky.png", depth_scale=1) > 127)
+    assert np.isfinite(r.range).all() and np.isnan(demo["range"]).any()
+
+
+def test_sky_render_and_fit_equal_cli(tmp_path):
+    run_cli("sky", "render", "--turbidity", 4, "--sun-zenith", 40, "--sun-azimuth", 120, "--width", 96,
+            "--height", 48, "--out", tmp_path / "sky.exr")
+    r = brume.sky.render(turbidity=4, sun_zenith=40, sun_azimuth=120, width=96, height=48)
+    same(r.rgb, brume.read_image(tmp_path / "sky.exr").rgb)
+    run_cli("sky", "fit", "--image", tmp_path / "sky.exr", "--sun-zenith", 40, "--sun-azimuth", 120,
+            "--out", tmp_path / "fit.json")
+    import json
+    cli = json.loads((tmp_path / "fit.json").read_text())
+    f = brume.sky.fit(np.nan_to_num(r.rgb), sun_zenith=40, sun_azimuth=120)
+    assert f.turbidity == cli["turbidity"]
+    assert abs(f.turbidity - 4) < 0.05  # the fit recovers the rendered turbidity (noise-free sky)
+
+
+# ---- inputs: zero copy, conversions -------------------------------------------------------------
+def test_float32_is_read_in_place():
+    rgb = np.random.default_rng(1).random((64, 80, 3), dtype=np.float32)
+    brume.blur(rgb, sigma=2)
+    seen = _brume._debug_last_inputs()["rgb"]
+    assert seen == {"address": rgb.ctypes.data, "copied": False, "how": "view"}
+    # a crop and the RGB of an RGBA buffer are strided views: still no copy, same pixels
+    crop = rgb[5:50, 7:70]
+    r_crop = brume.blur(crop, sigma=2).rgb
+    assert _brume._debug_last_inputs()["rgb"]["address"] == crop.ctypes.data
+    assert not _brume._debug_last_inputs()["rgb"]["copied"]
+    same(r_crop, brume.blur(np.ascontiguousarray(crop), sigma=2).rgb)
+    rgba = np.concatenate([rgb, np.full((64, 80, 1), 7, np.float32)], axis=2)
+    r_rgba = brume.blur(rgba, sigma=2).rgb
+    assert _brume._debug_last_inputs()["rgb"] == {"address": rgba.ctypes.data, "copied": False, "how": "view"}
+    same(r_rgba, brume.blur(rgb, sigma=2).rgb)
+
+
+def test_haze_reads_rgb_and_range_in_place(demo):
+    rgb, rng = demo["rgb"], demo["range"]
+    ref = brume.haze(rgb, rng, visibility=900)
+    seen = _brume._debug_last_inputs()
+    assert seen["rgb"] == {"address": rgb.ctypes.data, "copied": False, "how": "view"}
+    assert seen["range"] == {"address": rng.ctypes.data, "copied": False, "how": "view"}
+    assert ref.record["inputs"]["rgb"]["copied"] is False
+    # strided views (RGBA buffer, a range inside a wider array) give the same bits
+    rgba = np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,), np.float32)], axis=2)
+    wide = np.zeros((rng.shape[0], rng.shape[1] + 9), np.float32)
+    wide[:, 4:-5] = rng
+    r = brume.haze(rgba, wide[:, 4:-5], visibility=900)
+    assert not any(v["copied"] for v in _brume._debug_last_inputs().values())
+    same(r.rgb, ref.rgb)
+    same(r.transmission, ref.transmission)
+    # aerial still takes Images: the copy is reported, not hidden
+    brume.aerial(rgb, rng, turbidity=3)
+    assert _brume._debug_last_inputs()["rgb"]["copied"]
+
+
+def test_other_layouts_are_converted_once():
+    rgb = np.random.default_rng(2).random((40, 30, 3), dtype=np.float32)
+    ref = brume.blur(rgb, sigma=2).rgb
+    for arr in (rgb.astype(np.float64), np.asfortranarray(rgb), rgb[::-1][::-1]):
+        same(brume.blur(arr, sigma=2).rgb, ref)
+    brume.blur(rgb.astype(np.float64), sigma=2)
+    assert _brume._debug_last_inputs()["rgb"]["copied"]
+
+
+def test_uint8_with_transfer_equals_reading_the_png(demo, tmp_path):
+    rgb8 = (np.arange(48 * 64 * 3) % 256).astype(np.uint8).reshape(48, 64, 3)
+    brume.write_image(tmp_path / "x.png", rgb8.astype(np.float32) / 255, transfer="linear", bits="8")
+    from_file = brume.read_image(tmp_path / "x.png").rgb  # integer file: sRGB, as the CLI reads it
+    same(brume.blur(rgb8, sigma=1.0, transfer="srgb").rgb, brume.blur(from_file, sigma=1.0).rgb)
+    lin = brume.blur(rgb8, sigma=1.0, transfer="linear").rgb
+    same(lin, brume.blur(rgb8.astype(np.float32) * np.float32(1 / 255), sigma=1.0).rgb)
+
+
+# ---- errors -----------------------------------------------------------------------------------------
+def test_unknown_keyword_names_the_nearest(demo):
+    with pytest.raises(TypeError, match=r"visibilty.*did you mean: visibility"):
+        brume.haze(demo["rgb"], demo["range"], visibilty=300)
+    with pytest.raises(TypeError, match="f_number"):
+        brume.dof(demo["rgb"], demo["range"], f_numbr=2)
+
+
+def test_bad_types_and_ranges(demo):
+    rgb, rng = demo["rgb"], demo["range"]
+    with pytest.raises(ValueError, match=r"keyword visibility.*--visibility -5.*\(0, inf\)"):
+        brume.haze(rgb, rng, visibility=-5)
+    with pytest.raises(TypeError, match="keyword visibility takes a number"):
+        brume.haze(rgb, rng, visibility="far")
+    with pytest.raises(TypeError, match="keyword threads takes an int"):
+        brume.haze(rgb, rng, threads=1.5)
+    with pytest.raises(TypeError, match="keyword threads takes an int"):
+        brume.haze(rgb, rng, threads=True)
+    with pytest.raises(ValueError, match="scheme.*use one of"):
+        brume.haze(rgb, rng, scheme="fast")
+    with pytest.raises(TypeError, match="airlight takes a sequence of 3"):
+        brume.haze(rgb, rng, airlight=(1, 2))
+    with pytest.raises(ValueError, match="airlight"):
+        brume.haze(rgb, rng, airlight=(1, -2, 0.5))
+    with pytest.raises(TypeError, match="lambda_ given twice"):
+        brume.haze(rgb, rng, lambda_=1, **{"lambda": 2})
+    # a combination the run would ignore: the library's own message
+    with pytest.raises(ValueError, match="albedo"):
+        brume.haze(rgb, rng, albedo=0.5)
+    with pytest.raises(ValueError, match="--reference"):
+        brume.haze(rgb, rng, reference=True, backend="gpu")
+
+
+def test_bad_arrays_name_argument_shape_dtype(demo):
+    rgb, rng = demo["rgb"], demo["range"]
+    with pytest.raises(ValueError, match=r"rgb has shape \(112, 160\) and dtype float32.*H x W x 3"):
+        brume.haze(rgb[..., 0], rng)
+    with pytest.raises(ValueError, match=r"rgb has shape \(112, 160, 3\) and dtype int32"):
+        brume.haze(rgb.astype(np.int32), rng)
+    with pytest.raises(ValueError, match=r"uint8.*transfer='srgb'"):
+        brume.haze((rgb * 255).astype(np.uint8), rng)
+    with pytest.raises(ValueError, match=r"transfer='srgb' applies to uint8/uint16 rgb only"):
+        brume.haze(rgb, rng, transfer="srgb")
+    with pytest.raises(ValueError, match=r"range has shape \(112, 160, 3\)"):
+        brume.haze(rgb, rgb)
+    with pytest.raises(ValueError, match=r"range has shape .* uint16.*metres"):
+        brume.haze(rgb, np.nan_to_num(rng).astype(np.uint16))
+    with pytest.raises(TypeError, match="rgb must be a numpy.ndarray"):
+        brume.haze(rgb.tolist(), rng)
+    with pytest.raises(ValueError, match="the same size|does not match|size"):
+        brume.haze(rgb, rng[:50])
+    with pytest.raises(ValueError, match="sigma0"):
+        brume.blur(rgb, sigma=0.5)
+    with pytest.raises(ValueError, match="not both"):
+        brume.blur(rgb, rng, sigma=2)
+
+
+def test_file_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        brume.read_image(tmp_path / "missing.png")
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        brume.depth.convert(range=tmp_path / "missing.exr")
+    with pytest.raises(ValueError, match="does not exist"):
+        brume.write_image(tmp_path / "no" / "dir.png", np.zeros((4, 4, 3), np.float32))
+
+
+def test_missing_gpu_is_a_runtime_error():
+    # No EGL platform may be tried: the context cannot be made, whatever the machine.
+    code = ("import numpy as np, brume\n"
+            "try:\n    brume.blur(np.zeros((4,4,3),np.float32), sigma=2, backend='gpu')\n"
+            "except RuntimeError as e:\n    print('RuntimeError', e)\n")
+    env = dict(os.environ, BRUME_EGL_PLATFORM="none-such")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("RuntimeError no OpenGL ES 3.2 context"), out.stdout + out.stderr
+
+
+# ---- the GIL, threads -------------------------------------------------------------------------------
+def test_gil_is_released_during_a_long_blur():
+    rgb = np.random.default_rng(3).random((600, 800, 3), dtype=np.float32)
+    ticks, running = [0], [True]
+
+    def count():
+        while running[0]:
+            ticks[0] += 1
+
+    t = threading.Thread(target=count)
+    t.start()
+    time.sleep(0.05)
+    before = ticks[0]
+    t0 = time.perf_counter()
+    brume.blur(rgb, sigma=20, threads=1)
+    elapsed = time.perf_counter() - t0
+    during = ticks[0] - before
+    running[0] = False
+    t.join()
+    # Held GIL: the counter thread gets nothing until the call returns (a few
+    # ticks at most around the switch). Released: it counts the whole time
+    # (millions per second in CPython 3.11; 10^4 per second is a safe floor).
+    assert elapsed > 0.05, "the blur was too short to tell"
+    assert during > 1e4 * elapsed, f"{during} ticks in {elapsed:.3f} s: the GIL was held"
+
+
+def test_threads_give_identical_results(demo):
+    rgb, rng = demo["rgb"], demo["range"]
+    ref = brume.haze(rgb, rng, visibility=800, lambda_=10, threads=1)
+    same(brume.haze(rgb, rng, visibility=800, lambda_=10, threads=2).rgb, ref.rgb)
+    results = [None] * 4
+
+    def work(i):
+        results[i] = brume.haze(rgb, rng, visibility=800, lambda_=10, threads=1)
+
+    ts = [threading.Thread(target=work, args=(i,)) for i in range(4)]
+    for t in ts:
+        t.start()
+    for t in ts:
+        t.join()
+    for r in results:
+        same(r.rgb, ref.rgb)
+        same(r.transmission, ref.transmission)
+
+
+# ---- files --------------------------------------------------------------------------------------------
+def test_read_write_round_trip(tmp_path):
+    rgb = np.random.default_rng(4).random((30, 40, 3), dtype=np.float32) * 4
+    brume.write_image(tmp_path / "x.exr", rgb, record={"note": "hello", "lambda": 3})
+    back = brume.read_image(tmp_path / "x.exr")
+    same(back.rgb, rgb)  # float EXR: exact
+    assert back.record == {"note": "hello", "lambda": 3}
+    assert back.file["format"] == "openexr"
+    # 16-bit PNG: sRGB-encoded, within half a count of the encoded value
+    small = np.clip(rgb / 4, 0, 1)
+    brume.write_image(tmp_path / "x.png", small, bits="16")
+    png = brume.read_image(tmp_path / "x.png")
+    enc = lambda v: np.where(v <= 0.0031308, 12.92 * v, 1.055 * v ** (1 / 2.4) - 0.055)
+    assert np.max(np.abs(enc(png.rgb.astype(np.float64)) - enc(small.astype(np.float64)))) <= 0.5 / 65535 + 1e-6
+    assert png.file["bits"] == 16 and png.record is None
+    # a 2-D array is data: never sRGB-encoded
+    m = np.linspace(0, 1, 30 * 40, dtype=np.float32).reshape(30, 40)
+    brume.write_image(tmp_path / "m.png", m, bits="16")
+    assert np.max(np.abs(brume.read_image(tmp_path / "m.png", "linear").rgb[..., 0] - m)) <= 0.5 / 65535 + 1e-7
+
+
+def test_result_record_embeds_and_reads_back(demo, tmp_path):
+    r = brume.haze(demo["rgb"], demo["range"], visibility=2000)
+    brume.write_image(tmp_path / "h.png", r.rgb, record=r.record)
+    back = brume.read_image(tmp_path / "h.png").record
+    assert back["job"]["haze"]["visibility"] == 2000 and back["command"] == "haze"
+
+
+# ---- documentation from the tables --------------------------------------------------------------
+def test_help_and_stubs_come_from_the_tables():
+    doc = brume.haze.__doc__
+    assert "visibility = auto" in doc and "meteorological visibility" in doc
+    assert "lambda_ = 15" in doc and "sigma0" in doc and "threads" in doc and "prepare" in doc
+    assert "f_number" in brume.dof.__doc__ and "focus_distance" in brume.dof.__doc__
+    stub = os.path.join(os.path.dirname(brume.__file__), "_brume.pyi")
+    with open(stub, encoding="utf-8") as f:
+        text = f.read()
+    assert "def haze(rgb: npt.NDArray[Any], range: npt.NDArray[Any], *, transfer:" in text
+    assert "lambda_: float = ..." in text
+    assert 'scheme: Literal["standard", "invariant", "invariant-exact"]' in text or "scheme: Literal[" in text
+    assert text == _brume._stub_text()
+    import ast
+    tree = ast.parse(text)  # the stubs are valid Python
+    defs = {n.name: n for n in tree.body if isinstance(n, ast.FunctionDef)}
+    assert {"haze", "aerial", "fog", "dof", "blur", "depth_convert", "depth_prepare", "sky_render", "sky_fit"} <= set(defs)
+    # every keyword the function accepts is in its stub, and no other
+    hz = {a.arg for a in defs["haze"].args.kwonlyargs}
+    assert "lambda_" in hz and "visibility" in hz and "threads" in hz and "transfer" in hz
+    with pytest.raises(TypeError):
+        brume.haze(np.zeros((2, 2, 3), np.float32), np.ones((2, 2), np.float32), not_a_stub_keyword=1)
+
+
+# ---- GPU (llvmpipe where there is no hardware) ------------------------------------------------------
+def test_gpu_haze_and_blur_match_cpu(demo, gpu):
+    rgb, rng = demo["rgb"], demo["range"]
+    cpu = brume.haze(rgb, rng, visibility=1500, lambda_=8)
+    g = brume.haze(rgb, rng, visibility=1500, lambda_=8, backend="gpu")
+    assert g.record["execution"]["backend"] == "gpu"
+    assert math.sqrt(np.mean((g.rgb - cpu.rgb) ** 2)) < 1e-3  # f32 GPU arithmetic vs CPU (README: RMS <= 1e-3)
+    gb = brume.blur(rgb, sigma=3, backend="gpu").rgb
+    assert math.sqrt(np.mean((gb - brume.blur(rgb, sigma=3).rgb) ** 2)) < 1e-3
+
+
+def test_gpu_from_threads(demo, gpu):
+    # Each call makes and ends its context on its own thread: concurrent GPU calls work.
+    rgb = demo["rgb"]
+    out = [None, None]
+
+    def work(i):
+        out[i] = brume.blur(rgb, sigma=3, backend="gpu").rgb
+
+    ts = [threading.Thread(target=work, args=(i,)) for i in range(2)]
+    for t in ts:
+        t.start()
+    for t in ts:
+        t.join()
+    assert out[0] is not None and np.array_equal(out[0], out[1])
