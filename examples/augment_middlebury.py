@@ -19,10 +19,7 @@ import json
 import pathlib
 import sys
 import time
-import zlib
 from concurrent.futures import ThreadPoolExecutor, as_completed
-
-import numpy as np
 
 import brume
 
@@ -38,18 +35,16 @@ def load_scene(folder):
     return rgb, rng
 
 
+SPECS = {"visibility": "loguniform(8, 80)", "albedo": "uniform(0.8, 1)", "lambda": "uniform(1, 8)"}
+
+
 def draw_params(seed, key):
     """Haze parameters for one output, from (seed, key) alone."""
-    # TODO(lead): brume.random_params("haze", seed, key) -- the C++ sampler keyed by
-    # (seed, frame key, parameter name) -- replaces this stand-in.
-    g = np.random.default_rng([seed, zlib.crc32(key.encode())])
+    # The library's sampler, keyed by (seed, frame key, parameter name): the
+    # same values as `brume sample` and the batch mode, whatever the order.
     # The scenes span 1.4-2.9 m: visibilities of 8-80 m give optical depths of
     # about 0.1-1 at the back wall (a smoky room); log-uniform, as visibility spans decades.
-    return {
-        "visibility": float(np.exp(g.uniform(np.log(8.0), np.log(80.0)))),
-        "albedo": float(g.uniform(0.8, 1.0)),
-        "lambda_": float(g.uniform(1.0, 8.0)),
-    }
+    return brume.random_params("haze", seed, key, **SPECS)
 
 
 def main():
@@ -73,7 +68,8 @@ def main():
         params = draw_params(a.seed, key)
         rgb, rng = frames[name]
         r = brume.haze(rgb, rng, threads=1, **params)
-        r.record["augment"] = {"seed": a.seed, "key": key}
+        # How the values were drawn, so the record reproduces them (brume sample prints the same).
+        r.record["sampling"] = {"sampler": "brume-sample-v1", "seed": a.seed, "key": key, "specs": SPECS}
         out = a.out_dir / f"{name}_{k:03d}.png"
         brume.write_image(out, r.rgb, bits="8", record=r.record)
         out.with_suffix(".json").write_text(json.dumps(r.record, indent=2) + "\n")

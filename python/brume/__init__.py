@@ -14,9 +14,9 @@ metres along each pixel's ray (NaN: unknown). float32 is read in place,
 float64 converted once, uint8/uint16 need ``transfer="srgb"|"linear"``. The
 GIL is released while an effect runs. See the README's Python section.
 """
-from ._brume import __version__, aerial, blur, dof, fog, haze, read_image, write_image
+from ._brume import __version__, aerial, blur, dof, fog, haze, random_params, read_image, write_image
 from ._result import Result
 from . import depth, sky
 
-__all__ = ["Result", "__version__", "aerial", "blur", "depth", "dof", "fog", "haze", "read_image", "sky",
-           "write_image"]
+__all__ = ["Result", "__version__", "aerial", "blur", "depth", "dof", "fog", "haze", "random_params", "read_image",
+           "sky", "write_image"]

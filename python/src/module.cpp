@@ -60,6 +60,7 @@
 #include "brume/pipeline.hpp"
 #include "brume/prepare.hpp"
 #include "brume/record.hpp"
+#include "brume/sample.hpp"
 #include "brume/sky.hpp"
 
 namespace py = pybind11;
@@ -398,6 +399,9 @@ std::string stub_text() {
     }
     o << "\"\"\"\n\n";
   }
+  o << "def random_params(effect: Literal['haze', 'fog', 'aerial', 'dof'], seed: int, key: str,\n"
+       "                  **ranges: str | float | int | bool | Sequence[str | float]) -> dict[str, Any]:\n"
+       "    \"\"\"Plausible parameters of an effect for the frame `key`, keyed by (seed, key, name).\"\"\"\n\n";
   o << "def _stub_text() -> str: ...\n"
        "def _debug_last_inputs() -> dict[str, dict[str, Any]]: ...\n"
        "def _bench_blur_cpp(rgb: npt.NDArray[np.float32], sigma: float, repeats: int, threads: int) -> list[float]: ...\n";
@@ -893,15 +897,56 @@ PYBIND11_MODULE(_brume, m) {
         py::arg("rgb"), py::arg("mask") = py::none(), docstring(doc).c_str());
   }
 
-  // ---- brume.random_params (issue #14 item 3): the lead binds the C++ sampler here ----
-  // It returns the dict an effect takes and a record stores, so it is one m.def:
-  //   m.def("random_params", [](std::string effect, std::uint64_t seed, std::string key, py::kwargs ranges) {
-  //     const json r = from_py(ranges, "brume.random_params(): ranges");
-  //     json drawn;
-  //     { py::gil_scoped_release nogil; drawn = brume::random_params(effect, seed, key, r); }
-  //     return to_py(drawn);  // keys are flag names ("lambda"): brume.haze(rgb, rng, **drawn) takes them
-  //   }, py::arg("effect"), py::arg("seed"), py::arg("key"));
-  // (set_keywords accepts the flag spellings "lambda", "kappa_s" as well as lambda_.)
+  // ---- brume.random_params (issue #14 item 3): the library's sampler ------------------
+  // Keyed by (seed, frame key, parameter name), never by call order, so the
+  // batch mode, `brume sample` and any Python runner draw the same values for
+  // the same frame. A range is a spec string ("loguniform(50, 5000)"), a fixed
+  // number or name, or a list/tuple (a choice).
+  m.def(
+      "random_params",
+      [](const std::string& effect, std::uint64_t seed, const std::string& key, py::kwargs ranges) {
+        std::map<std::string, std::string> specs;
+        for (auto item : ranges) {
+          const std::string name = py::str(item.first);
+          py::handle v = item.second;
+          std::string spec;
+          if (py::isinstance<py::str>(v)) {
+            spec = v.cast<std::string>();
+          } else if (py::isinstance<py::bool_>(v)) {
+            spec = v.cast<bool>() ? "true" : "false";
+          } else if (py::isinstance<py::int_>(v) || py::isinstance<py::float_>(v)) {
+            spec = py::str(py::repr(v));
+          } else if (py::isinstance<py::list>(v) || py::isinstance<py::tuple>(v)) {
+            spec = "choice(";
+            bool first = true;
+            for (py::handle e : v) {
+              spec += (first ? "" : ", ") + std::string(py::str(e));
+              first = false;
+            }
+            spec += ")";
+          } else {
+            throw py::type_error("brume.random_params(): " + name + "=" + std::string(py::repr(v)) +
+                                 " is neither a spec string ('uniform(a, b)', 'loguniform(a, b)', "
+                                 "'choice(x, y)'), a fixed value nor a list of choices");
+          }
+          specs[name] = spec;
+        }
+        json drawn;
+        {
+          py::gil_scoped_release nogil;
+          drawn = brume::random_params(effect, seed, key, specs);
+        }
+        return to_py(drawn);  // keys are flag names ("lambda"): brume.haze(rgb, rng, **drawn) takes them
+      },
+      py::arg("effect"), py::arg("seed"), py::arg("key"),
+      "random_params(effect, seed, key, **ranges) -> dict\n\n"
+      "Physically plausible parameters of `effect` (haze, fog, aerial, dof) for the frame `key`, drawn by\n"
+      "the library's sampler (brume-sample-v1: SHA-256 of seed, key and parameter name, so the values do\n"
+      "not depend on call order, shard or runner; `brume sample` prints the same). `ranges` override or\n"
+      "extend the effect's defaults: a spec string 'uniform(a, b)', 'loguniform(a, b)', 'choice(x, y)',\n"
+      "a fixed value, or a list of choices. Names are checked against the effect's parameters and every\n"
+      "value a spec can produce against their ranges (ValueError). The dict's keys are the parameter\n"
+      "names (e.g. 'lambda'), so brume.haze(rgb, range, **params) takes it as it is.");
 
   // ---- files ----------------------------------------------------------------------------
   m.def(

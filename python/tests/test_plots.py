@@ -4,6 +4,7 @@ malformed study files (nothing written then)."""
 
 import shutil
 import subprocess
+import os
 import sys
 from pathlib import Path
 
@@ -83,7 +84,8 @@ def test_quick_study_without_gpu_rows_or_crops(tmp_path):
 
 
 def test_command_line(tmp_path):
-    env = {"PYTHONPATH": str(ROOT / "python"), "MPLBACKEND": "Agg", "PATH": "/usr/bin:/bin",
+    # The build-tree package (ctest sets PYTHONPATH), else the source tree's.
+    env = {"PYTHONPATH": os.environ.get("PYTHONPATH", str(ROOT / "python")), "MPLBACKEND": "Agg", "PATH": "/usr/bin:/bin",
            "PYTHONDONTWRITEBYTECODE": "1", "HOME": str(tmp_path)}
     r = subprocess.run([sys.executable, "-m", "brume.plots", str(STUDY), "--out", str(tmp_path / "o")],
                        capture_output=True, text=True, env=env, cwd=tmp_path)
