@@ -239,7 +239,7 @@ TEST_F(Reliability, FileSizeLimitFailsCleanly) {
 // SIGINT/SIGTERM at random moments while a run writes: the output is either
 // absent or complete (renamed whole), and no temporary is left behind.
 // SIGKILL cannot be caught: there the destination is still absent or whole
-// (rename is atomic); only a temporary may remain, named .NAME.brume-tmp-PID.
+// (rename is atomic); only a temporary may remain, named .NAME.brume-tmp-PID-N.
 TEST_F(Reliability, InterruptedRunsLeaveWholeFilesOnly) {
   Image img(512, 384, 3);
   for (std::size_t i = 0; i < img.data.size(); ++i) img.data[i] = static_cast<float>(i % 89) / 89.0f;

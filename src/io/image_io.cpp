@@ -349,6 +349,11 @@ std::string temp_path_for(const std::string& path) {
   name += p.filename().string();
   name += ".brume-tmp-";
   name += std::to_string(::getpid());
+  // A per-process counter as well: threads of one process (Python, a batch
+  // run) writing the same destination must not share a temporary.
+  static std::atomic<unsigned> counter{0};
+  name += "-";
+  name += std::to_string(counter.fetch_add(1, std::memory_order_relaxed));
   name += p.extension().string();
   return (p.parent_path() / name).string();
 }
