@@ -250,7 +250,6 @@ TEST_F(Reliability, InterruptedRunsLeaveWholeFilesOnly) {
   ASSERT_EQ(run("blur --image " + p("i.exr") + " --sigma 3 --out " + p("ref.exr")).status, 0);
   const double full_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   const Image ref = read_color(p("ref.exr"));
-  int whole = 0, absent = 0;
   for (int round = 0; round < 12; ++round) {
     const int sig = round % 3 == 0 ? SIGKILL : round % 3 == 1 ? SIGTERM : SIGINT;
     // Appended piecewise: GCC 12's -Wrestrict misfires on "o" + to_string(...) (GCC bug 105329).
@@ -271,12 +270,9 @@ TEST_F(Reliability, InterruptedRunsLeaveWholeFilesOnly) {
     int st = 0;
     waitpid(pid, &st, 0);
     if (fs::exists(out)) {
-      ++whole;
       Image o = read_color(out);  // complete: decodes, and equals the uninterrupted run
       ASSERT_EQ(o.data.size(), ref.data.size());
       EXPECT_EQ(o.data, ref.data) << "round " << round;
-    } else {
-      ++absent;
     }
     if (sig != SIGKILL) {
       EXPECT_EQ(temporaries(), 0) << "round " << round << " signal " << sig;
@@ -284,5 +280,4 @@ TEST_F(Reliability, InterruptedRunsLeaveWholeFilesOnly) {
     for (auto& e : fs::directory_iterator(dir))
       if (e.path().filename().string().find(".brume-tmp-") != std::string::npos) fs::remove(e.path());
   }
-  EXPECT_EQ(whole + absent, 12);
 }

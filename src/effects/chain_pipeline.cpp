@@ -170,7 +170,7 @@ nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, co
   check_outputs(job.output, haze_dof_map_outputs());
 
   LoadedInputs in = load_inputs(job.input, true);
-  check_working_memory("haze+dof", in.rgb, 140);  // the larger stage's measured peak bytes per pixel (haze)
+  check_working_memory("haze+dof", in.rgb, 140);  // haze's measured peak (the larger stage); the chain's own is not measured
   const Intrinsics k =
       dof_stage([&] { return dof_intrinsics(job.input.depth, job.dof, in.rgb.width, in.rgb.height); });
   HazeDofRun run = run_haze_dof(in.rgb, in.depth.range, k, job.haze, job.dof, job.prepare, exec, ctx.given);

@@ -120,7 +120,7 @@ nlohmann::json run_insert_job(const InsertJob& job, const ExecOptions& eo, const
 
   LoadedInputs in = load_inputs(job.input, true);
 
-  check_working_memory("insert", in.rgb, 190);  // measured peak bytes per pixel (README "Reliability")
+  check_working_memory("insert", in.rgb, 190);  // aerial's measured peak (insert runs aerial; its own is not measured)
   FileInfo oinfo;
   const Image obj = read_object_rgba(job.object.object, &oinfo);
   if (obj.width != in.rgb.width || obj.height != in.rgb.height)

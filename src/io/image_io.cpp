@@ -99,6 +99,19 @@ void check_declared_size(const std::string& path, std::int64_t w, std::int64_t h
     throw Error("'" + path + "' declares " + std::to_string(channels) +
                 " channels; brume reads at most 1024 (a corrupt header?)");
 }
+// The file opened for reading (its header parsed), or an error naming it.
+std::unique_ptr<OIIO::ImageInput> open_image(const std::string& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw FileNotFound("cannot read '" + path + "': no such file");
+  if (fs::is_directory(path, ec))
+    throw Error("cannot read '" + path + "': it is a directory, not an image file");
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) {
+    std::string e = OIIO::geterror();
+    throw Error("cannot read '" + path + "': " + (e.empty() ? "unknown or unsupported image format" : e));
+  }
+  return in;
+}
 }  // namespace
 
 std::uint64_t max_pixels() { return g_max_pixels.load(std::memory_order_relaxed); }
@@ -152,13 +165,7 @@ void check_memory(std::uint64_t bytes, const std::string& what) {
 }
 
 ImageHeader read_header(const std::string& path) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw Error("cannot read '" + path + "': no such file");
-  auto in = OIIO::ImageInput::open(path);
-  if (!in) {
-    std::string e = OIIO::geterror();
-    throw Error("cannot read '" + path + "': " + (e.empty() ? "unknown or unsupported image format" : e));
-  }
+  auto in = open_image(path);
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) throw Error("cannot read '" + path + "': empty image");
   check_declared_size(path, spec.width, spec.height, spec.nchannels);
@@ -175,16 +182,7 @@ struct Raw {
 // Read every channel of the first subimage as float. Integer files are read
 // as their raw counts (not normalised) when `counts` is set.
 Raw read_raw(const std::string& path, bool counts) {
-  std::error_code ec;
-  if (!fs::exists(path, ec))
-    throw FileNotFound("cannot read '" + path + "': no such file");
-  if (fs::is_directory(path, ec))
-    throw Error("cannot read '" + path + "': it is a directory, not an image file");
-  auto in = OIIO::ImageInput::open(path);
-  if (!in) {
-    std::string e = OIIO::geterror();
-    throw Error("cannot read '" + path + "': " + (e.empty() ? "unknown or unsupported image format" : e));
-  }
+  auto in = open_image(path);
   const OIIO::ImageSpec& spec = in->spec();
   Raw r;
   r.info.path = path;
