@@ -66,6 +66,18 @@ TEST(Params, ChainIsDeclaredCompletelyWithPrefixedDofFlags) {
   HazeDofJob j;
   const std::string m = error_of([&] { t.set_text(j, "dof-f-number", "0"); });
   EXPECT_NE(m.find("--dof-f-number"), std::string::npos) << m;
+  // Help texts name the flags as this command spells them: the DOF's own
+  // mentions gain the prefix, haze's (and unknown words) keep theirs.
+  const std::string h = t.at("dof-f-number").spec.help;
+  EXPECT_NE(h.find("--dof-focal-length"), std::string::npos) << h;
+  EXPECT_EQ(h.find(" --focal-length"), std::string::npos) << h;
+  for (const auto& q : t.params())
+    if (q.spec.block == "dof")
+      for (std::size_t i = q.spec.help.find("--"); i != std::string::npos; i = q.spec.help.find("--", i + 2))
+        EXPECT_EQ(q.spec.help.compare(i, 6, "--dof-"), 0) << q.spec.name << ": " << q.spec.help;
+  EXPECT_EQ(prefix_flag_mentions("use --scheme, not --visibility-", "dof-",
+                                 [](const std::string& n) { return n == "scheme" || n == "visibility"; }),
+            "use --dof-scheme, not --dof-visibility-");
   EXPECT_TRUE(dof_stage_requested({"visibility", "dof-focus-distance"}));
   EXPECT_FALSE(dof_stage_requested({"visibility", "scale-map", "scheme"}));
 }

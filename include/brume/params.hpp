@@ -104,6 +104,12 @@ struct Param {
   std::function<void(P&, const nlohmann::json&)> set;  // the value has passed spec.check
 };
 
+// `text` with every mention "--NAME" of a flag for which is_flag(NAME) holds
+// rewritten "--PREFIXNAME": a nested block's help and error messages name the
+// flags as the user of the enclosing command types them (--dof-focal-length).
+std::string prefix_flag_mentions(const std::string& text, const std::string& prefix,
+                                 const std::function<bool(const std::string&)>& is_flag);
+
 template <class P>
 class ParamTable {
  public:
@@ -239,11 +245,22 @@ class ParamTable {
       for (std::string& a : sp.aliases) a = prefix + a;
       // One block for the prefixed flags in records and --help ("sky-" -> "sky").
       sp.block = prefix.size() > 1 && prefix.back() == '-' ? prefix.substr(0, prefix.size() - 1) : prefix;
+      sp.help = prefix_flag_mentions(sp.help, prefix, [&sub](const std::string& n) { return sub.declares(n); });
       if (find(sp.name)) throw Error("internal: parameter '" + sp.name + "' declared twice in " + block_);
       params_.push_back({std::move(sp), [m, g = q.get](const P& p) { return g(p.*m); },
                          [m, s = q.set](P& p, const nlohmann::json& v) { s(p.*m, v); }});
     }
     return *this;
+  }
+
+  // Whether NAME is one of this table's flags or their aliases.
+  bool declares(const std::string& name) const {
+    for (const auto& p : params_) {
+      if (p.spec.name == name) return true;
+      for (const auto& a : p.spec.aliases)
+        if (a == name) return true;
+    }
+    return false;
   }
 
   const Param<P>* find(const std::string& name) const {

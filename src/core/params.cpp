@@ -2,6 +2,7 @@
 // user typed, checking a value, and describing a parameter.
 #include "brume/params.hpp"
 
+#include <cctype>
 #include <cstdlib>
 #include <sstream>
 
@@ -179,6 +180,26 @@ void ParamSpec::check(const nlohmann::json& v) const {
       if (!v.is_string()) bad_type("text");
       return;
   }
+}
+
+std::string prefix_flag_mentions(const std::string& text, const std::string& prefix,
+                                 const std::function<bool(const std::string&)>& is_flag) {
+  const auto word = [](char c) { return std::isalnum(static_cast<unsigned char>(c)) != 0; };
+  std::string out;
+  std::size_t i = 0;
+  while (i < text.size()) {
+    if (text.compare(i, 2, "--") == 0 && (i == 0 || !word(text[i - 1]))) {
+      std::size_t j = i + 2;
+      while (j < text.size() && (word(text[j]) || text[j] == '-')) ++j;
+      std::string name = text.substr(i + 2, j - i - 2);
+      while (!name.empty() && name.back() == '-') name.pop_back(), --j;  // "--foo-" at a line end
+      out += "--" + (is_flag(name) ? prefix : std::string()) + name;
+      i = j;
+    } else {
+      out += text[i++];
+    }
+  }
+  return out;
 }
 
 }  // namespace brume

@@ -1,7 +1,6 @@
 // brume — haze then depth of field in one run (brume/chain.hpp): the range
 // prepared once, the haze stage, its linear RGB handed to the DOF stage in
 // memory, one record holding both parameter blocks.
-#include <cctype>
 #include <chrono>
 #include <utility>
 
@@ -34,25 +33,8 @@ std::set<std::string> dof_given(const std::set<std::string>& given) {
 // (--focus-distance); in the chain the user typed --dof-focus-distance.
 // Every "--NAME" of a DOF parameter in the message gets the prefix.
 [[noreturn]] void rethrow_prefixed(const Error& e) {
-  const std::string m = e.what();
-  std::string out;
-  std::size_t i = 0;
-  while (i < m.size()) {
-    if (m.compare(i, 2, "--") == 0 && (i == 0 || !std::isalnum(static_cast<unsigned char>(m[i - 1])))) {
-      std::size_t j = i + 2;
-      while (j < m.size() && (std::isalnum(static_cast<unsigned char>(m[j])) || m[j] == '-')) ++j;
-      std::string name = m.substr(i + 2, j - i - 2);
-      while (!name.empty() && name.back() == '-') name.pop_back(), --j;
-      bool dof = dof_param_table().find(name) != nullptr;
-      for (const auto& d : dof_param_table().params())
-        for (const auto& a : d.spec.aliases) dof = dof || a == name;
-      out += "--" + std::string(dof ? kDofPrefix : "") + name;
-      i = j;
-    } else {
-      out += m[i++];
-    }
-  }
-  throw Error(out);
+  throw Error(prefix_flag_mentions(e.what(), kDofPrefix,
+                                   [](const std::string& n) { return dof_param_table().declares(n); }));
 }
 
 template <class F>
