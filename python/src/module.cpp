@@ -434,6 +434,7 @@ struct Input {
   Image owned;
   py::object keep;  // the array the view points into
   json record;
+  DenseImageRef dense;  // as_dense: the same pixels for the dense-image APIs
 };
 
 Transfer parse_transfer_kw(py::handle t, const std::string& where) {
@@ -537,9 +538,25 @@ Input read_input(py::handle obj, const std::string& arg, int channels, Transfer 
   return in;
 }
 
-// Library functions that take an Image (aerial, fog, dof, depth.prepare,
-// sky.fit, not yet views like haze and blur): a view of the caller's float32
-// becomes one -- a copy, recorded in the trace and in the record's inputs.
+// Library functions that take a dense image (DenseImageRef: aerial, fog,
+// dof, depth.prepare, sky.fit): a C-contiguous float32 array is read in
+// place, like haze's and blur's views. A strided float32 array (a crop, the
+// RGB of an RGBA buffer) has no dense form, so it is copied once -- recorded
+// in the trace and in the record's inputs ("copied": true).
+DenseImageRef as_dense(Input& in, const std::string& arg) {
+  if (in.owned.empty() && !in.view.contiguous()) {
+    in.owned = copy_of(in.view);
+    in.view = ConstImageView(in.owned);
+    in.record["copied"] = true;
+    g_last_inputs[arg] = {reinterpret_cast<std::uintptr_t>(in.owned.data.data()), true,
+                          "copied: strided, the function needs a dense image"};
+  }
+  in.dense = DenseImageRef(in.view);
+  return in.dense;
+}
+
+// The few APIs that still take an Image (blur's scale map, sky.fit's mask,
+// which the binding binarises): a view becomes one -- a copy, recorded.
 const Image& as_image(Input& in, const std::string& arg) {
   if (in.owned.empty()) {
     in.owned = copy_of(in.view);
@@ -577,11 +594,12 @@ struct EffectOut {
   json record;
 };
 // The body runs without the GIL. It reads `.view` (pixels in place) when the
-// library function takes views, else `.owned` (def_effect made the Image).
+// library function takes views, else `.dense` (def_effect made it: the
+// caller's pixels in place when C-contiguous).
 template <class P>
 using EffectBody = std::function<EffectOut(const Input& rgb, const Input& range, Call<P>& c, const Exec& exec,
                                            const std::set<std::string>& given)>;
-enum class Takes { views, images };
+enum class Takes { views, dense };
 
 template <class P>
 void def_effect(py::module_& m, const char* name, const char* command, const ParamTable<Call<P>>* table,
@@ -603,9 +621,9 @@ void def_effect(py::module_& m, const char* name, const char* command, const Par
         g_last_inputs.clear();
         Input rgb = read_input(rgb_obj, "rgb", 3, tr, fn);
         Input range = read_input(range_obj, "range", 1, Transfer::automatic, fn);
-        if (takes == Takes::images) {
-          as_image(rgb, "rgb");
-          as_image(range, "range");
+        if (takes == Takes::dense) {
+          as_dense(rgb, "rgb");
+          as_dense(range, "range");
         }
         const Exec exec = c.exec.exec();
         EffectOut out;
@@ -667,33 +685,33 @@ PYBIND11_MODULE(_brume, m) {
                           {"scale", std::move(r.result.scale)}}, r.record};
       });
   def_effect<AerialParams>(
-      m, "aerial", "aerial", keep(call_table(aerial_param_table(), kPrepare | kExec)), Takes::images,
+      m, "aerial", "aerial", keep(call_table(aerial_param_table(), kPrepare | kExec)), Takes::dense,
       "Spectral aerial perspective from turbidity (Morales): render, re-render (from_turbidity) or remove, with "
       "optional scattering blur (lambda_). As `brume aerial` (turbidity from a sky fit: brume.sky.fit first).",
       {"rgb", "attenuation", "scale", "record"},
       [](const Input& rgb, const Input& range, Call<AerialParams>& c, const Exec& e, const std::set<std::string>& g) {
-        AerialRun r = run_aerial(rgb.owned, range.owned, c.p, c.prepare, e, g);
+        AerialRun r = run_aerial(rgb.dense, range.dense, c.p, c.prepare, e, g);
         return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"attenuation", std::move(r.result.attenuation)},
                           {"scale", std::move(r.result.scale)}}, r.record};
       });
   def_effect<FogParams>(
-      m, "fog", "fog", keep(call_table(fog_param_table(), kPrepare | kIntrinsics | kExec)), Takes::images,
+      m, "fog", "fog", keep(call_table(fog_param_table(), kPrepare | kIntrinsics | kExec)), Takes::dense,
       "Layered fog from the range and the camera (Zhou, Chen, Smith), with scattering blur for lambda_ > 0. "
       "The intrinsics (fx.. or fov_x/fov_y) and the pose are keywords. As `brume fog`.",
       {"rgb", "optical_depth", "transmission", "record"},
       [](const Input& rgb, const Input& range, Call<FogParams>& c, const Exec& e, const std::set<std::string>& g) {
-        FogRun r = run_fog(rgb.owned, range.owned, c.depth, c.p, c.prepare, e, g);
+        FogRun r = run_fog(rgb.dense, range.dense, c.depth, c.p, c.prepare, e, g);
         return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"optical_depth", std::move(r.result.optical_depth)},
                           {"transmission", std::move(r.result.transmission)}}, r.record};
       });
   def_effect<DofParams>(
-      m, "dof", "dof", keep(call_table(dof_param_table(), kPrepare | kIntrinsics | kExec)), Takes::images,
+      m, "dof", "dof", keep(call_table(dof_param_table(), kPrepare | kIntrinsics | kExec)), Takes::dense,
       "Depth of field by leak-free diffusion (thin-lens circle of confusion). `range` is metres along the ray; "
       "planar depth comes from the intrinsics or the lens. As `brume dof`.",
       {"rgb", "scale", "record"},
       [](const Input& rgb, const Input& range, Call<DofParams>& c, const Exec& e, const std::set<std::string>& g) {
-        const Intrinsics k = dof_intrinsics(c.depth, c.p, rgb.owned.width, rgb.owned.height);
-        DofRun r = run_dof(rgb.owned, range.owned, k, c.p, c.prepare, e, g);
+        const Intrinsics k = dof_intrinsics(c.depth, c.p, rgb.dense.width, rgb.dense.height);
+        DofRun r = run_dof(rgb.dense, range.dense, k, c.p, c.prepare, e, g);
         return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"scale", std::move(r.result.scale)}}, r.record};
       });
 
@@ -797,7 +815,7 @@ PYBIND11_MODULE(_brume, m) {
           set_keywords(*table, c, py::dict(kw), fn);
           g_last_inputs.clear();
           Input range = read_input(range_obj, "range", 1, Transfer::automatic, fn);
-          const Image& r_img = as_image(range, "range");
+          const DenseImageRef r_img = as_dense(range, "range");
           PrepareResult pr;
           {
             py::gil_scoped_release nogil;
@@ -868,7 +886,7 @@ PYBIND11_MODULE(_brume, m) {
           g_last_inputs.clear();
           Input rgb = read_input(rgb_obj, "rgb", 3, tr, fn);
           const bool integer = py::reinterpret_borrow<py::array>(rgb_obj).dtype().kind() == 'u';
-          const Image& img = as_image(rgb, "rgb");
+          const DenseImageRef img = as_dense(rgb, "rgb");
           std::optional<Input> mask;
           if (!mask_obj.is_none()) {
             mask = read_input(mask_obj, "mask", 1, Transfer::automatic, fn);

@@ -155,9 +155,52 @@ def test_haze_reads_rgb_and_range_in_place(demo):
     assert not any(v["copied"] for v in _brume._debug_last_inputs().values())
     same(r.rgb, ref.rgb)
     same(r.transmission, ref.transmission)
-    # aerial still takes Images: the copy is reported, not hidden
-    brume.aerial(rgb, rng, turbidity=3)
-    assert _brume._debug_last_inputs()["rgb"]["copied"]
+
+
+# Every effect and tool that takes arrays, with the keywords of a quick run.
+DENSE_CALLS = {
+    "aerial": lambda rgb, rng: brume.aerial(rgb, rng, turbidity=3, lambda_=2),
+    "fog": lambda rgb, rng: brume.fog(rgb, rng, fov_y=55, camera_height=1.6, density=0.03, lambda_=2),
+    "dof": lambda rgb, rng: brume.dof(rgb, rng, focus_distance=3.9, coc_infinity=6, fov_y=55),
+    "depth.prepare": lambda rgb, rng: brume.depth.prepare(rng),
+    "sky.fit": lambda rgb, rng: brume.sky.fit(np.nan_to_num(rgb), sun_zenith=40, sun_azimuth=120),
+}
+
+
+@pytest.mark.parametrize("name", list(DENSE_CALLS))
+def test_every_function_reads_c_contiguous_float32_in_place(demo, name):
+    """aerial, fog, dof, depth.prepare and sky.fit read a C-contiguous float32
+    array where numpy keeps it (the address the library read is the array's,
+    nothing copied), as haze and blur do; a strided one (the RGB of an RGBA
+    buffer, a range inside a wider array) is copied once, says so, and gives
+    the same bits (the copy holds the same floats)."""
+    call = DENSE_CALLS[name]
+    rgb = np.ascontiguousarray(demo["rgb"])
+    rng = np.ascontiguousarray(demo["range"])
+    if name == "sky.fit":  # its rgb is the array given to it
+        rgb = np.nan_to_num(demo["rgb"])
+        call = lambda _rgb, _rng: brume.sky.fit(_rgb, sun_zenith=40, sun_azimuth=120)  # noqa: E731
+    ref = call(rgb, rng)
+    seen = _brume._debug_last_inputs()
+    inputs = {"depth.prepare": {"range": rng}, "sky.fit": {"rgb": rgb}}.get(name, {"rgb": rgb, "range": rng})
+    assert set(seen) == set(inputs)
+    for arg, arr in inputs.items():
+        assert seen[arg] == {"address": arr.ctypes.data, "copied": False, "how": "view"}, arg
+        assert ref.record["inputs"][arg]["copied"] is False
+    # strided: one copy each, reported, same bits
+    rgba = np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,), np.float32)], axis=2)
+    wide = np.zeros((rng.shape[0], rng.shape[1] + 9), np.float32)
+    wide[:, 4:-5] = rng
+    r = call(rgba[..., :3], wide[:, 4:-5])
+    seen = _brume._debug_last_inputs()
+    for arg in inputs:
+        assert seen[arg]["copied"] and seen[arg]["how"].startswith("copied: strided"), arg
+        assert r.record["inputs"][arg]["copied"] is True
+    for k, v in ref.__dict__.items():
+        if isinstance(v, np.ndarray):
+            same(r[k], v)
+    if name == "sky.fit":
+        assert r.fit == ref.fit
 
 
 def test_other_layouts_are_converted_once():

@@ -96,7 +96,7 @@ const ParamTable<AerialJob>& aerial_job_table() {
   return t;
 }
 
-AerialRun run_aerial(const Image& rgb, const Image& measured_range, const AerialParams& p, const RangeStep& prepare,
+AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const AerialParams& p, const RangeStep& prepare,
                      const Exec& exec, const std::set<std::string>& given) {
   validate_aerial(p, given);
   AerialRun run;
@@ -104,7 +104,7 @@ AerialRun run_aerial(const Image& rgb, const Image& measured_range, const Aerial
   // effect runs on the prepared one, whose smooth sky margin only shapes the
   // blur near the horizon (sky pixels themselves stay unchanged).
   run.analysis = analyse_aerial(rgb, measured_range, p);
-  PreparedRange prep = prepare_step(measured_range, prepare, given);
+  PreparedRange prep = prepare_step(measured_range.view(), prepare, given);
   BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;

@@ -175,7 +175,7 @@ std::string prefix_sky_flags(const std::string& msg, const std::string& flags) {
 
 }  // namespace
 
-SkyImageFit fit_sky_data(const Image& rgb, bool integer_image, const Image* mask, const SkyViewParams& view,
+SkyImageFit fit_sky_data(DenseImageRef rgb, bool integer_image, const Image* mask, const SkyViewParams& view,
                          const SunParams& sun_params, const SkyFitOptions& fit) {
   const SkyGeometry g = sky_geometry(view, rgb.width, rgb.height);
   const SunFound sun = resolve_sun(sun_params, &rgb, integer_image, &g);
