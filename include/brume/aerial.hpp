@@ -302,6 +302,19 @@ struct AerialJob {
 };
 const std::vector<MapOutput>& aerial_map_outputs();
 const ParamTable<AerialJob>& aerial_job_table();
+// The turbidity of a job whose T comes from elsewhere, resolved into
+// job.aerial.atmosphere.turbidity as `brume aerial` does before it reads the
+// photo: --turbidity-from (a `brume sky fit` JSON) or --turbidity auto
+// --sky-image (the same fit as `brume sky fit` on that file, seeded, so the
+// same T every run). Refuses an unreliable fit, both sources at once, a
+// disagreeing --turbidity and --sky-* flags without --sky-image (`given`:
+// the parameter names set). fit_record is the record's "turbidity_fit" and
+// image_record its inputs' "sky_image" (both null unless --sky-image).
+struct AerialTurbidity {
+  nlohmann::json fit_record;
+  nlohmann::json image_record;
+};
+AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::string>& given);
 nlohmann::json run_aerial_job(const AerialJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

@@ -262,6 +262,47 @@ std::set<std::string> set_keywords(const ParamTable<P>& t, P& p, const py::dict&
   return given;
 }
 
+// A record's "job" ({block: {flag name: value}}) read back into p, as `brume
+// run` reads one: every value checked by its declaration and none counted as
+// "given" -- a record holds every parameter, so the CLI's rule against
+// flags the run would ignore (visibility with kappa-a, say) judges them
+// against the defaults, as for a library caller. A CLI record's "input",
+// "depth" and "output" blocks describe files and how to read them (the depth
+// source, its scale and unknown value), which the arrays and the Result
+// stand for: their camera keywords (fx, fov-y ...) are read where this table
+// has them, the rest skipped. Anything else unknown is refused.
+template <class P>
+void apply_job(const ParamTable<P>& t, P& p, py::handle job, const std::string& fn) {
+  if (!py::isinstance<py::dict>(job))
+    throw py::type_error(fn + "(): job takes a record's \"job\" dict ({block: {name: value}}), got " +
+                         type_name(job));
+  const json j = from_py(job, fn + "(): job");
+  for (const auto& [block, vals] : j.items()) {
+    if (!vals.is_object())
+      throw py::value_error(fn + "(): job: block '" + block + "' is not a dict; give a record's \"job\" as it is");
+    const bool files = block == "input" || block == "output" || block == "depth";
+    for (const auto& [name, v] : vals.items()) {
+      const Param<P>* d = nullptr;
+      for (const Param<P>& q : t.params())
+        if (q.spec.name == name && (q.spec.block == block || files)) {
+          d = &q;
+          break;
+        }
+      if (!d) {
+        if (files) continue;
+        throw py::value_error(fn + "(): job: '" + block + "." + name + "' is not a parameter of " + fn +
+                              "; give the \"job\" of a record of the same command");
+      }
+      try {
+        d->spec.check(v);
+      } catch (const Error& e) {
+        throw py::value_error(fn + "(): job: " + block + "." + name + ": " + e.what());
+      }
+      d->set(p, v);
+    }
+  }
+}
+
 // ==== the call tables: an effect's table nested with shared blocks ===========
 // Every Python function sets one Call<P>: the effect's parameters and the
 // blocks it takes. Which members a function exposes is its table's choice.
@@ -402,6 +443,9 @@ std::string stub_text() {
   o << "def random_params(effect: Literal['haze', 'fog', 'aerial', 'dof'], seed: int, key: str,\n"
        "                  **ranges: str | float | int | bool | Sequence[str | float]) -> dict[str, Any]:\n"
        "    \"\"\"Plausible parameters of an effect for the frame `key`, keyed by (seed, key, name).\"\"\"\n\n";
+  o << "def set_max_pixels(pixels: int) -> None:\n"
+       "    \"\"\"The largest image or depth map read from a file, in pixels (process-wide, as brume --max-pixels).\"\"\"\n\n"
+       "def max_pixels() -> int: ...\n\n";
   o << "def _stub_text() -> str: ...\n"
        "def _debug_last_inputs() -> dict[str, dict[str, Any]]: ...\n"
        "def _bench_blur_cpp(rgb: npt.NDArray[np.float32], sigma: float, repeats: int, threads: int) -> list[float]: ...\n";
@@ -607,7 +651,10 @@ void def_effect(py::module_& m, const char* name, const char* command, const Par
   const std::string fn = std::string("brume.") + name;
   FunctionDoc doc = make_doc(name, fn.c_str(), "rgb: npt.NDArray[Any], range: npt.NDArray[Any]", summary, *table,
                              {{"transfer", "Literal[\"srgb\", \"linear\"] | None",
-                               "uint8/uint16 rgb only: 'srgb' (PNG/JPEG-like) or 'linear'; float arrays are linear"}},
+                               "uint8/uint16 rgb only: 'srgb' (PNG/JPEG-like) or 'linear'; float arrays are linear"},
+                              {"job", "dict[str, Any] | None",
+                               "a record's \"job\" (Result.record['job'], or a CLI record's): replays that run, "
+                               "bit for bit on the CPU, as `brume run` does; other keywords override its values"}},
                              fields);
   registry().push_back(doc);
   m.def(
@@ -617,6 +664,11 @@ void def_effect(py::module_& m, const char* name, const char* command, const Par
         const Transfer tr = parse_transfer_kw(k.contains("transfer") ? py::object(k["transfer"]) : py::object(py::none()), fn + "()");
         if (k.contains("transfer")) PyDict_DelItemString(k.ptr(), "transfer");
         Call<P> c;
+        if (k.contains("job")) {
+          py::object job = k["job"];
+          PyDict_DelItemString(k.ptr(), "job");
+          if (!job.is_none()) apply_job(*table, c, job, fn);
+        }
         const std::set<std::string> given = set_keywords(*table, c, k, fn);
         g_last_inputs.clear();
         Input rgb = read_input(rgb_obj, "rgb", 3, tr, fn);
@@ -634,6 +686,10 @@ void def_effect(py::module_& m, const char* name, const char* command, const Par
         json rec = python_header(command, fn);
         rec["job"] = job_json(*table, c);
         rec["inputs"] = {{"rgb", rgb.record}, {"range", range.record}};
+        if (out.record.contains("sky_image")) {  // aerial's sky photo is an input, as in the CLI's record
+          rec["inputs"]["sky_image"] = out.record["sky_image"];
+          out.record.erase("sky_image");
+        }
         rec.update(out.record);
         return make_result(std::move(out.images), rec);
       },
@@ -656,7 +712,10 @@ void register_errors() {
     } catch (const GpuUnavailable& e) {
       PyErr_SetString(PyExc_RuntimeError, e.what());
     } catch (const Error& e) {
-      PyErr_SetString(PyExc_ValueError, e.what());
+      std::string m = e.what();
+      if (m.find("raise the limit with --max-pixels") != std::string::npos)
+        m += " (in Python: brume.set_max_pixels(N))";
+      PyErr_SetString(PyExc_ValueError, m.c_str());
     } catch (const nlohmann::json::exception& e) {
       PyErr_SetString(PyExc_ValueError, e.what());
     }
@@ -684,16 +743,35 @@ PYBIND11_MODULE(_brume, m) {
         return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"transmission", std::move(r.result.transmission)},
                           {"scale", std::move(r.result.scale)}}, r.record};
       });
-  def_effect<AerialParams>(
-      m, "aerial", "aerial", keep(call_table(aerial_param_table(), kPrepare | kExec)), Takes::dense,
-      "Spectral aerial perspective from turbidity (Morales): render, re-render (from_turbidity) or remove, with "
-      "optional scattering blur (lambda_). As `brume aerial` (turbidity from a sky fit: brume.sky.fit first).",
-      {"rgb", "attenuation", "scale", "record"},
-      [](const Input& rgb, const Input& range, Call<AerialParams>& c, const Exec& e, const std::set<std::string>& g) {
-        AerialRun r = run_aerial(rgb.dense, range.dense, c.p, c.prepare, e, g);
-        return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"attenuation", std::move(r.result.attenuation)},
-                          {"scale", std::move(r.result.scale)}}, r.record};
-      });
+  {
+    // aerial takes the whole `brume aerial` job but its files: the turbidity
+    // from a sky fit's JSON (turbidity_from=) or fitted on a sky photo
+    // (turbidity="auto", sky_image=, the sky_* keywords) resolve as the CLI
+    // resolves them (resolve_aerial_turbidity), and the record holds the same
+    // "turbidity_fit" and inputs' "sky_image". sky_image is a file, as on the
+    // command line (its record hashes it, so `brume run` can refit it); for a
+    // sky already in memory call brume.sky.fit and pass turbidity=.
+    std::set<std::string> skip = names_of(input_param_table(true));
+    for (const auto& n : names_of(output_param_table(aerial_map_outputs()))) skip.insert(n);
+    def_effect<AerialJob>(
+        m, "aerial", "aerial", keep(call_table(aerial_job_table(), kExec, skip)), Takes::dense,
+        "Spectral aerial perspective from turbidity (Morales): render, re-render (from_turbidity) or remove, with "
+        "optional scattering blur (lambda_). The turbidity is given, read from a `brume sky fit` JSON "
+        "(turbidity_from=) or fitted on a sky photo (turbidity='auto', sky_image=FILE, sky_* keywords), refused "
+        "when the fit is unreliable. As `brume aerial`.",
+        {"rgb", "attenuation", "scale", "record"},
+        [](const Input& rgb, const Input& range, Call<AerialJob>& c, const Exec& e, const std::set<std::string>& g) {
+          const AerialTurbidity tf = resolve_aerial_turbidity(c.p, g);
+          AerialRun r = run_aerial(rgb.dense, range.dense, c.p.aerial, c.p.prepare, e, g);
+          if (!tf.fit_record.is_null()) {
+            r.record["turbidity_fit"] = tf.fit_record;
+            r.record["sky_image"] = tf.image_record;  // moved under "inputs" by def_effect
+            c.p.aerial.atmosphere.turbidity = NAN;     // recorded as given (auto), as the CLI does
+          }
+          return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"attenuation", std::move(r.result.attenuation)},
+                            {"scale", std::move(r.result.scale)}}, r.record};
+        });
+  }
   def_effect<FogParams>(
       m, "fog", "fog", keep(call_table(fog_param_table(), kPrepare | kIntrinsics | kExec)), Takes::dense,
       "Layered fog from the range and the camera (Zhou, Chen, Smith), with scattering blur for lambda_ > 0. "
@@ -965,6 +1043,32 @@ PYBIND11_MODULE(_brume, m) {
       "a fixed value, or a list of choices. Names are checked against the effect's parameters and every\n"
       "value a spec can produce against their ranges (ValueError). The dict's keys are the parameter\n"
       "names (e.g. 'lambda'), so brume.haze(rgb, range, **params) takes it as it is.");
+
+  // ---- the process limit of `brume --max-pixels` ---------------------------------------
+  // A module-level setting, not a keyword: like the CLI's root option (and
+  // OpenImageIO's "limits:" attributes) it is a process limit against
+  // hostile or corrupt file headers, not a parameter of a run (no record
+  // holds it). It guards every file any function reads (read_image,
+  // depth.convert, aerial's sky_image ...); arrays are already in memory. A
+  // per-call keyword could not be honest: the library's limit is one
+  // process-wide value, and a call on another thread would see it changed.
+  m.def(
+      "set_max_pixels",
+      [](py::object n) {
+        if (py::isinstance<py::bool_>(n) ||
+            !(PyLong_Check(n.ptr()) || py::isinstance(n, py::module_::import("numpy").attr("integer"))))
+          throw py::type_error("brume.set_max_pixels(): takes an int (pixels, width x height), got " + type_name(n));
+        const py::int_ v(n);
+        if (v < py::int_(1) || v > py::int_(1000000000000LL))
+          throw py::value_error("brume.set_max_pixels(): " + py::cast<std::string>(py::repr(v)) +
+                                " pixels is outside 1 .. 1e12 (the CLI's --max-pixels range); give a limit in it");
+        set_max_pixels(py::cast<std::uint64_t>(v));
+      },
+      py::arg("pixels"),
+      "set_max_pixels(pixels: int) -> None\n\nThe largest image or depth map any brume function reads from a file, "
+      "in pixels (width x height); a header declaring more is refused (ValueError) before any allocation. "
+      "Process-wide, as `brume --max-pixels`; default 500000000. Arrays passed in are not limited.");
+  m.def("max_pixels", []() { return max_pixels(); }, "max_pixels() -> int\n\nThe limit set_max_pixels sets.");
 
   // ---- files ----------------------------------------------------------------------------
   m.def(

@@ -261,7 +261,13 @@ nlohmann::json run_sky_fit_job(const SkyFitJob& job, const RunContext& ctx, SkyP
 
 double turbidity_from_fit_json(const std::string& path, const std::string& flag) {
   std::ifstream f(path);
-  if (!f) throw Error(flag + " '" + path + "' cannot be read; give the JSON written by brume sky fit --out");
+  if (!f) {
+    std::error_code ec;
+    // A missing file is FileNotFound (Python: FileNotFoundError); one that exists but cannot be read is not.
+    if (!std::filesystem::exists(path, ec))
+      throw FileNotFound(flag + " '" + path + "' does not exist; give the JSON written by brume sky fit --out");
+    throw Error(flag + " '" + path + "' cannot be read; give the JSON written by brume sky fit --out");
+  }
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(f);
