@@ -21,9 +21,10 @@
 //  - the GIL is released while the library runs (after every Python object
 //    has been read), so Python threads run effects concurrently; results do
 //    not depend on threads= or on concurrency.
-//  - GPU: backend="gpu"|"auto" makes an OpenGL ES context for the call, on
-//    the calling thread, and destroys it before returning, so a context never
-//    crosses threads (cost: one context creation per call).
+//  - GPU: backend="gpu"|"auto" runs on an OpenGL ES context of the calling
+//    thread, made by that thread's first GPU call and reused by its later
+//    ones (making one costs tens of ms), destroyed when the thread exits; a
+//    context never crosses threads (thread_gpu).
 //  - errors: brume::FileNotFound -> FileNotFoundError, GpuUnavailable ->
 //    RuntimeError, every other brume::Error -> ValueError with the library's
 //    message; wrong Python types -> TypeError; unknown keywords -> TypeError
@@ -54,6 +55,7 @@
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/fog.hpp"
+#include "brume/gpu.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
 #include "brume/params.hpp"
@@ -448,6 +450,7 @@ std::string stub_text() {
        "def max_pixels() -> int: ...\n\n";
   o << "def _stub_text() -> str: ...\n"
        "def _debug_last_inputs() -> dict[str, dict[str, Any]]: ...\n"
+       "def _debug_thread_gpu() -> int | None: ...\n"
        "def _bench_blur_cpp(rgb: npt.NDArray[np.float32], sigma: float, repeats: int, threads: int) -> list[float]: ...\n";
   return o.str();
 }
@@ -459,6 +462,36 @@ FunctionDoc make_doc(const char* name, const char* public_name, const char* posi
   const C defaults{};
   for (const auto& d : t.params()) f.params.emplace_back(d.spec, d.get(defaults));
   return f;
+}
+
+// ==== one GPU context per thread ==========================================================
+// A context belongs to the thread that made it (EGL makes it current there),
+// so each Python thread gets its own: made lazily, without the GIL, by its
+// first call with backend gpu/auto, and reused by its later calls --
+// per-call creation cost tens of ms (llvmpipe: ~30-60 ms). The thread_local
+// is destroyed at the thread's exit, on that thread (the main thread's at
+// process exit, before the atexit handlers of the GL driver). A thread on
+// which creation failed does not retry here: choose_backend then makes its
+// own attempt per call and reports it exactly as before (auto: CPU with the
+// reason in the record; gpu: RuntimeError).
+thread_local std::unique_ptr<GpuContext> t_gpu;
+GpuContext* thread_gpu(const Exec& exec) {
+  std::unique_ptr<GpuContext>& ctx = t_gpu;
+  thread_local bool failed = false;
+  if (exec.backend == Backend::cpu || exec.path == Path::reference || exec.gpu) return exec.gpu;
+  if (!ctx && !failed) {
+    try {
+      ctx = std::make_unique<GpuContext>();
+    } catch (const Error&) {
+      failed = true;
+    }
+  }
+  return ctx.get();
+}
+// The execution options of a call with this thread's context (call without the GIL).
+Exec with_thread_gpu(Exec e) {
+  e.gpu = thread_gpu(e);
+  return e;
 }
 
 // ==== arrays in =========================================================================
@@ -681,7 +714,7 @@ void def_effect(py::module_& m, const char* name, const char* command, const Par
         EffectOut out;
         {
           py::gil_scoped_release nogil;
-          out = body(rgb, range, c, exec, given);
+          out = body(rgb, range, c, with_thread_gpu(exec), given);
         }
         json rec = python_header(command, fn);
         rec["job"] = job_json(*table, c);
@@ -702,7 +735,7 @@ const T* keep(T t) {
   return new T(std::move(t));
 }
 
-// ==== GPU context per call (see the top) and thread-safe errors ===========================
+// ==== errors as Python exceptions ===========================
 void register_errors() {
   py::register_exception_translator([](std::exception_ptr p) {
     try {
@@ -789,7 +822,11 @@ PYBIND11_MODULE(_brume, m) {
       {"rgb", "scale", "record"},
       [](const Input& rgb, const Input& range, Call<DofParams>& c, const Exec& e, const std::set<std::string>& g) {
         const Intrinsics k = dof_intrinsics(c.depth, c.p, rgb.dense.width, rgb.dense.height);
-        DofRun r = run_dof(rgb.dense, range.dense, k, c.p, c.prepare, e, g);
+        // run_dof reads a given context as backend gpu (its CPU-only schemes
+        // would be refused), so with auto it makes its own, as before.
+        Exec ex = e;
+        if (ex.backend != Backend::gpu) ex.gpu = nullptr;
+        DofRun r = run_dof(rgb.dense, range.dense, k, c.p, c.prepare, ex, g);
         return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"scale", std::move(r.result.scale)}}, r.record};
       });
 
@@ -827,7 +864,7 @@ PYBIND11_MODULE(_brume, m) {
           BlurRun r;
           {
             py::gil_scoped_release nogil;
-            r = run_blur(rgb.view, c.p.sigma, smap ? &smap->owned : nullptr, c.p.diffusion, exec);
+            r = run_blur(rgb.view, c.p.sigma, smap ? &smap->owned : nullptr, c.p.diffusion, with_thread_gpu(exec));
           }
           json rec = python_header("blur", fn);
           rec["job"] = job_json(*table, c);
@@ -931,7 +968,7 @@ PYBIND11_MODULE(_brume, m) {
           SkyRenderRun r;
           {
             py::gil_scoped_release nogil;
-            r = run_sky_render(c.p, exec);
+            r = run_sky_render(c.p, with_thread_gpu(exec));
           }
           json rec = python_header("sky render", fn);
           rec["job"] = job_json(*table, c);
@@ -1141,6 +1178,13 @@ PYBIND11_MODULE(_brume, m) {
       },
       "For the zero-copy test: per input of this thread's last call, the address of the pixels the library "
       "read and whether they were a copy.");
+  m.def(
+      "_debug_thread_gpu",
+      []() -> py::object {
+        if (!t_gpu) return py::none();
+        return py::int_(reinterpret_cast<std::uintptr_t>(t_gpu.get()));
+      },
+      "For the GPU-context test: the address of this thread's GPU context, or None before its first GPU call.");
   m.def(
       "_bench_blur_cpp",
       [](py::object rgb_obj, double sigma, int repeats, int threads) {

@@ -407,19 +407,34 @@ def test_gpu_haze_and_blur_match_cpu(demo, gpu):
 
 
 def test_gpu_from_threads(demo, gpu):
-    # Each call makes and ends its context on its own thread: concurrent GPU calls work.
+    """Each thread makes its own context on its first GPU call and reuses it
+    for its later ones (the same context, the same bits); two threads hold two
+    contexts, run concurrently and agree bit for bit; a CPU call makes none."""
     rgb = demo["rgb"]
-    out = [None, None]
+    out = [None, None, None]
+    ctx = [None, None]
+    both_alive = threading.Barrier(2, timeout=120)  # both contexts exist at once: distinct addresses mean distinct
 
     def work(i):
+        assert _brume._debug_thread_gpu() is None  # a fresh thread has no context yet
+        brume.blur(rgb, sigma=2)  # the CPU backend makes none
+        assert _brume._debug_thread_gpu() is None
         out[i] = brume.blur(rgb, sigma=3, backend="gpu").rgb
+        ctx[i] = _brume._debug_thread_gpu()
+        again = brume.haze(rgb, demo["range"], visibility=1500, backend="gpu")
+        assert _brume._debug_thread_gpu() == ctx[i]  # reused, not remade
+        assert again.record["execution"]["backend"] == "gpu"
+        if i == 0:
+            out[2] = brume.blur(rgb, sigma=3, backend="gpu").rgb
+        both_alive.wait()
 
     ts = [threading.Thread(target=work, args=(i,)) for i in range(2)]
     for t in ts:
         t.start()
     for t in ts:
         t.join()
-    assert out[0] is not None and np.array_equal(out[0], out[1])
+    assert ctx[0] is not None and ctx[1] is not None and ctx[0] != ctx[1]
+    assert out[0] is not None and np.array_equal(out[0], out[1]) and np.array_equal(out[0], out[2])
 
 
 # ---- aerial's turbidity from a sky fit (issue #14 item: as `brume aerial` has it) -------------
