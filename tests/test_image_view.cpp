@@ -150,3 +150,42 @@ TEST(ImageView, ImageWithInconsistentBufferIsRefused) {
   const std::string m = error_of([&] { ConstImageView v(bad); });
   EXPECT_NE(m.find("buffer holds 10 floats"), std::string::npos) << m;
 }
+
+// DenseImageRef: an Image's members over someone else's dense pixels (the
+// Python module wraps a C-contiguous numpy array with it). Same addresses, same
+// indexing as the Image it stands for; a strided view is refused, not copied.
+TEST(DenseImageRef, ReadsTheCallersPixelsInPlaceAsAnImageWould) {
+  Image im(7, 5, 3);
+  for (int y = 0; y < 5; ++y)
+    for (int x = 0; x < 7; ++x)
+      for (int c = 0; c < 3; ++c) im.at(x, y, c) = tag(x, y, c);
+  std::vector<float> caller = im.data;  // a foreign buffer with the same layout
+  const DenseImageRef from_image(im);
+  const DenseImageRef from_view(ConstImageView(caller.data(), 7, 5, 3, 21, 3));
+  EXPECT_EQ(from_image.data.data(), im.data.data());
+  EXPECT_EQ(from_view.data.data(), caller.data());  // no copy
+  for (const DenseImageRef* r : {&from_image, &from_view}) {
+    EXPECT_EQ(r->width, 7);
+    EXPECT_EQ(r->height, 5);
+    EXPECT_EQ(r->channels, 3);
+    EXPECT_EQ(r->pixels(), 35u);
+    for (int y = 0; y < 5; ++y)
+      for (int x = 0; x < 7; ++x)
+        for (int c = 0; c < 3; ++c) {
+          EXPECT_EQ(r->at(x, y, c), tag(x, y, c));
+          EXPECT_EQ(r->data[(static_cast<std::size_t>(y) * 7 + x) * 3 + c], tag(x, y, c));
+          EXPECT_EQ(r->row(y)[x * 3 + c], tag(x, y, c));
+        }
+    EXPECT_EQ(r->to_image().data, im.data);
+    EXPECT_EQ(r->view().data(), r->data.data());
+    EXPECT_TRUE(r->view().contiguous());
+  }
+}
+
+TEST(DenseImageRef, StridedViewIsRefusedWithTheFix) {
+  Pitched p;
+  const std::string m = error_of([&] { DenseImageRef r(ConstImageView(p.view()).channel_range(0, 3)); });
+  EXPECT_NE(m.find("not one dense block"), std::string::npos) << m;
+  EXPECT_NE(m.find("copy_of"), std::string::npos) << m;
+  EXPECT_TRUE(DenseImageRef(ConstImageView()).empty());
+}

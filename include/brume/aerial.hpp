@@ -239,13 +239,13 @@ struct AerialAnalysis {
 // of the sky pixels (unknown range) when they are >= 0.5 % of the frame, else
 // the per-channel median of the brightest 10 % (by luminance) of the 1 %
 // most distant known pixels -- the thesis' "brightest pixels near the horizon".
-AerialAnalysis analyse_aerial(const Image& rgb, const Image& range, const AerialParams& p);
+AerialAnalysis analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p);
 // The same analysis into `a`, reusing a.sky's buffer when it already has the
 // frame's size (a video or batch caller keeps `a` between frames and so pays
 // no 7 MB allocation, zero-fill and page faults per 1600x1120 frame for the
 // mask). Every field of `a` is overwritten; the result equals the returning
 // form's, bit for bit. If it throws, `a` is left valid but unspecified.
-void analyse_aerial(const Image& rgb, const Image& range, const AerialParams& p, AerialAnalysis& a);
+void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, AerialAnalysis& a);
 
 struct AerialResult {
   Image rgb;          // linear RGB
@@ -256,7 +256,7 @@ struct AerialResult {
 };
 // The per-pixel apply on the CPU. `range` is the range the effect runs on
 // (the prepared one in the pipeline); unknown pixels in it are sky too.
-AerialResult apply_aerial(const Image& rgb, const Image& range, const AerialParams& p, const AerialAnalysis& a,
+AerialResult apply_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, const AerialAnalysis& a,
                           const Exec& exec = {});
 // The optional maps of the buffer-reusing apply below: null = not computed,
 // not written (a caller that writes neither saves ~28 MB of stores per
@@ -271,7 +271,7 @@ struct AerialMaps {
 // zero-fill or first-touch page faults. `out` may be `rgb` itself (in place);
 // the maps must be distinct images other than rgb and range. Pixels equal the
 // returning form's bit for bit. Returns AerialResult::floored_pixels.
-std::size_t apply_aerial(const Image& rgb, const Image& range, const AerialParams& p, const AerialAnalysis& a,
+std::size_t apply_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, const AerialAnalysis& a,
                          Image& out, const AerialMaps& maps = {}, const Exec& exec = {});
 
 // ---- the pipeline ---------------------------------------------------------------------
@@ -280,7 +280,7 @@ struct AerialRun {
   AerialAnalysis analysis;
   nlohmann::json record;  // {"aerial": ..., "prepare": ..., "execution": ...}
 };
-AerialRun run_aerial(const Image& rgb, const Image& measured_range, const AerialParams& p, const RangeStep& prepare,
+AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const AerialParams& p, const RangeStep& prepare,
                      const Exec& exec = {}, const std::set<std::string>& given = {});
 
 struct AerialJob {
@@ -302,6 +302,19 @@ struct AerialJob {
 };
 const std::vector<MapOutput>& aerial_map_outputs();
 const ParamTable<AerialJob>& aerial_job_table();
+// The turbidity of a job whose T comes from elsewhere, resolved into
+// job.aerial.atmosphere.turbidity as `brume aerial` does before it reads the
+// photo: --turbidity-from (a `brume sky fit` JSON) or --turbidity auto
+// --sky-image (the same fit as `brume sky fit` on that file, seeded, so the
+// same T every run). Refuses an unreliable fit, both sources at once, a
+// disagreeing --turbidity and --sky-* flags without --sky-image (`given`:
+// the parameter names set). fit_record is the record's "turbidity_fit" and
+// image_record its inputs' "sky_image" (both null unless --sky-image).
+struct AerialTurbidity {
+  nlohmann::json fit_record;
+  nlohmann::json image_record;
+};
+AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::string>& given);
 nlohmann::json run_aerial_job(const AerialJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

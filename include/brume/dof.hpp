@@ -127,7 +127,7 @@ struct DofResult {
 Image dof_scale_map(const Image& z, const DofParams& p, DofAnalysis& a, const Exec& exec = {});
 
 // The CPU apply: every scheme (exec.path: fast or reference).
-DofResult apply_dof(const Image& rgb, const Image& z, const DofParams& p, DofAnalysis& a, const Exec& exec = {});
+DofResult apply_dof(DenseImageRef rgb, const Image& z, const DofParams& p, DofAnalysis& a, const Exec& exec = {});
 
 // ---- the pipeline -----------------------------------------------------------------
 struct DofRun {
@@ -138,11 +138,11 @@ struct DofRun {
 // In memory: `measured_range` in metres along the ray; `k` the intrinsics
 // (resolved), needed to turn range into planar depth. Backend gpu: the
 // invariant-exact and standard schemes through the engine's GPU passes.
-DofRun run_dof(const Image& rgb, const Image& measured_range, const Intrinsics& k, const DofParams& p,
+DofRun run_dof(DenseImageRef rgb, DenseImageRef measured_range, const Intrinsics& k, const DofParams& p,
                const RangeStep& prepare, const Exec& exec = {}, const std::set<std::string>& given = {});
 // The same on a range the caller prepared (prepare_step), e.g. once for a
 // chain of effects (brume/chain.hpp).
-DofRun run_dof_prepared(const Image& rgb, const PreparedRange& prepared, const Intrinsics& k, const DofParams& p,
+DofRun run_dof_prepared(DenseImageRef rgb, const PreparedRange& prepared, const Intrinsics& k, const DofParams& p,
                         const Exec& exec = {}, const std::set<std::string>& given = {});
 
 struct DofJob {

@@ -150,7 +150,7 @@ struct FogAnalysis {
 
 // Image-wide statistics from the measured range (R_max, the sky's colour)
 // and the effect's range (sky as unknown: sigma_max). Throws brume::Error.
-FogAnalysis analyse_fog(const Image& rgb, const Image& measured_range, const Image& range, const Camera& camera,
+FogAnalysis analyse_fog(DenseImageRef rgb, DenseImageRef measured_range, DenseImageRef range, const Camera& camera,
                         const FogParams& p, double s_max_factor = PrepareParams{}.s_max_factor);
 
 struct FogResult {
@@ -160,12 +160,12 @@ struct FogResult {
 };
 
 // The per-pixel apply on the CPU. `range` in metres; unknown (NaN, inf, 0) is sky.
-FogResult apply_fog(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a,
+FogResult apply_fog(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a,
                     const Exec& exec = {});
 // The same into `out`, reusing its images when they already have the
 // frame's size (a renderer's per-frame loop then allocates nothing: fresh
 // output images cost more in page faults and zero-filling than the fog itself).
-void apply_fog(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a, FogResult& out,
+void apply_fog(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a, FogResult& out,
                const Exec& exec = {});
 
 // ---- the pipeline -----------------------------------------------------------------
@@ -179,7 +179,7 @@ struct FogRun {
 // for --depth-buffer): on the GPU backend with the range unprepared, the
 // fog pass reads it and linearises it itself instead of the CPU's range
 // (the analysis still takes R_max and the sky's colour from measured_range).
-FogRun run_fog(const Image& rgb, const Image& measured_range, const DepthSource& depth, const FogParams& p,
+FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSource& depth, const FogParams& p,
                const RangeStep& prepare, const Exec& exec = {}, const std::set<std::string>& given = {},
                const Image* window_depth = nullptr);
 

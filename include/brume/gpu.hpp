@@ -158,7 +158,7 @@ class GpuHaze {
 // with the same rates, and a composite pass. Render, re-render and remove.
 class GpuAerial {
  public:
-  GpuAerial(GpuContext& ctx, const Image& rgb, const Image& range);
+  GpuAerial(GpuContext& ctx, DenseImageRef rgb, const Image& range);
   ~GpuAerial();
   GpuAerial(const GpuAerial&) = delete;
   GpuAerial& operator=(const GpuAerial&) = delete;
@@ -189,8 +189,8 @@ class GpuAerial {
 // image-wide statistics (R_max, the sky's colour).
 class GpuFog {
  public:
-  GpuFog(GpuContext& ctx, const Image& rgb, const Image& range);
-  GpuFog(GpuContext& ctx, const Image& rgb, const Image& window_depth, DepthBufferConvention c, double near_m,
+  GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& range);
+  GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& window_depth, DepthBufferConvention c, double near_m,
          double far_m);
   ~GpuFog();
   GpuFog(const GpuFog&) = delete;

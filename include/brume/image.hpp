@@ -15,8 +15,10 @@
 // pixel_stride = 4. The view never outlives the pixels: it holds no ownership.
 #pragma once
 
+#include <algorithm>
 #include <cassert>
 #include <cstddef>
+#include <span>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -205,5 +207,51 @@ inline void copy(ConstImageView src, ImageView dst) {
     for (int x = 0; x < src.width(); ++x)
       for (int c = 0; c < src.channels(); ++c) dst.at(x, y, c) = src.at(x, y, c);
 }
+
+// A read-only DENSE image whose pixels someone else owns: an Image, or a
+// caller's buffer laid out exactly as an Image's (a C-contiguous float32
+// numpy array, wrapped by the Python module without a copy). It offers the
+// Image members an effect's loops read (width, height, channels, data[i],
+// data.data(), pixels(), at(), row()), so an effect written on `const Image&`
+// takes a caller's buffer in place by changing only its signature, and its
+// arithmetic -- hence its output bits -- is unchanged. An Image converts
+// implicitly. Like a view, it owns nothing: never keep one past the pixels'
+// life (binding it to a temporary Image outside a call dangles).
+struct DenseImageRef {
+  int width = 0;
+  int height = 0;
+  int channels = 0;
+  std::span<const float> data;  // width*height*channels floats
+
+  DenseImageRef() = default;
+  DenseImageRef(const Image& im)  // NOLINT: implicit, so an Image is passed where a ref is taken
+      : width(im.width), height(im.height), channels(im.channels), data(im.data) {}
+  // A view laid out as an Image (contiguous()); a strided view has no dense
+  // form without a copy, so it is refused (copy_of it first).
+  explicit DenseImageRef(ConstImageView v)
+      : width(v.width()), height(v.height()), channels(v.channels()),
+        data(v.data(), v.empty() ? 0 : v.pixels() * static_cast<std::size_t>(v.channels())) {
+    if (!v.contiguous())
+      throw Error("dense image of a " + v.size_string() + "x" + std::to_string(v.channels()) +
+                  " view with pixel stride " + std::to_string(v.pixel_stride()) + " and row stride " +
+                  std::to_string(v.row_stride()) + " floats: the pixels are not one dense block; pass copy_of(view)");
+  }
+
+  std::size_t pixels() const { return static_cast<std::size_t>(width) * height; }
+  bool empty() const { return data.empty(); }
+  const float* row(int y) const { return data.data() + static_cast<std::size_t>(y) * width * channels; }
+  float at(int x, int y, int c = 0) const { return data[(static_cast<std::size_t>(y) * width + x) * channels + c]; }
+  std::string size_string() const { return std::to_string(width) + "x" + std::to_string(height); }
+  // The same pixels as a (dense) view, and as an owning copy.
+  ConstImageView view() const {
+    return empty() ? ConstImageView() : ConstImageView(data.data(), width, height, channels,
+                                                      static_cast<std::ptrdiff_t>(width) * channels, channels);
+  }
+  Image to_image() const {
+    Image out(width, height, channels);
+    std::copy(data.begin(), data.end(), out.data.begin());
+    return out;
+  }
+};
 
 }  // namespace brume

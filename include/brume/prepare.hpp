@@ -52,6 +52,6 @@ struct PrepareResult {
 };
 
 // Throws brume::Error for sparse or empty inputs (message says what to do).
-PrepareResult prepare_range(const Image& range, const PrepareParams& p = {});
+PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p = {});
 
 }  // namespace brume

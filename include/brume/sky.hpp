@@ -175,9 +175,9 @@ struct SunFound {
 // summed luminance; its centre from cv::fitEllipse on its outer contour, or
 // its luminance-weighted centroid when the contour has < 6 points (a sun one
 // or two pixels wide); then through the projection.
-SunFound find_sun_in_image(const Image& rgb, bool integer_image, const SkyGeometry& g);
+SunFound find_sun_in_image(DenseImageRef rgb, bool integer_image, const SkyGeometry& g);
 // Resolve the sun from the flags (image may be null for render: auto refused).
-SunFound resolve_sun(const SunParams& p, const Image* rgb, bool integer_image, const SkyGeometry* g);
+SunFound resolve_sun(const SunParams& p, const DenseImageRef* rgb, bool integer_image, const SkyGeometry* g);
 
 // ---- brume sky render ---------------------------------------------------------------
 struct SkyRenderParams {
@@ -248,7 +248,7 @@ SkyFitResult fit_turbidity(const std::vector<SkySample>& candidates, const SkyDi
 // Fit on an image (linear RGB): candidates are pixels with a direction above
 // the horizon within max_zenith, >= sun_exclusion from the sun, mask > 0.5
 // (when given), finite positive luminance and not saturated (integer images).
-SkyFitResult fit_sky_image(const Image& rgb, bool integer_image, const SkyGeometry& g, const SkyDirection& sun,
+SkyFitResult fit_sky_image(DenseImageRef rgb, bool integer_image, const SkyGeometry& g, const SkyDirection& sun,
                            const Image* mask, const SkyFitOptions& o);
 nlohmann::json sky_fit_json(const SkyFitResult& r, const SunFound& sun);
 
@@ -278,7 +278,7 @@ class SkyFitError : public Error {
  public:
   using Error::Error;
 };
-SkyImageFit fit_sky_data(const Image& rgb, bool integer_image, const Image* mask, const SkyViewParams& view,
+SkyImageFit fit_sky_data(DenseImageRef rgb, bool integer_image, const Image* mask, const SkyViewParams& view,
                          const SunParams& sun, const SkyFitOptions& fit);
 
 struct SkyFitJob {

@@ -14,9 +14,11 @@ metres along each pixel's ray (NaN: unknown). float32 is read in place,
 float64 converted once, uint8/uint16 need ``transfer="srgb"|"linear"``. The
 GIL is released while an effect runs. See the README's Python section.
 """
-from ._brume import __version__, aerial, blur, dof, fog, haze, random_params, read_image, write_image
+from ._brume import (__version__, aerial, blur, dof, fog, haze, max_pixels, random_params, read_image,
+                     set_max_pixels, write_image)
 from ._result import Result
 from . import depth, sky
+from ._rerun import rerun
 
-__all__ = ["Result", "__version__", "aerial", "blur", "depth", "dof", "fog", "haze", "random_params", "read_image",
-           "sky", "write_image"]
+__all__ = ["Result", "__version__", "aerial", "blur", "depth", "dof", "fog", "haze", "max_pixels", "random_params",
+           "read_image", "rerun", "set_max_pixels", "sky", "write_image"]

@@ -21,9 +21,10 @@
 //  - the GIL is released while the library runs (after every Python object
 //    has been read), so Python threads run effects concurrently; results do
 //    not depend on threads= or on concurrency.
-//  - GPU: backend="gpu"|"auto" makes an OpenGL ES context for the call, on
-//    the calling thread, and destroys it before returning, so a context never
-//    crosses threads (cost: one context creation per call).
+//  - GPU: backend="gpu"|"auto" runs on an OpenGL ES context of the calling
+//    thread, made by that thread's first GPU call and reused by its later
+//    ones (making one costs tens of ms), destroyed when the thread exits; a
+//    context never crosses threads (thread_gpu).
 //  - errors: brume::FileNotFound -> FileNotFoundError, GpuUnavailable ->
 //    RuntimeError, every other brume::Error -> ValueError with the library's
 //    message; wrong Python types -> TypeError; unknown keywords -> TypeError
@@ -54,6 +55,7 @@
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/fog.hpp"
+#include "brume/gpu.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
 #include "brume/params.hpp"
@@ -262,6 +264,47 @@ std::set<std::string> set_keywords(const ParamTable<P>& t, P& p, const py::dict&
   return given;
 }
 
+// A record's "job" ({block: {flag name: value}}) read back into p, as `brume
+// run` reads one: every value checked by its declaration and none counted as
+// "given" -- a record holds every parameter, so the CLI's rule against
+// flags the run would ignore (visibility with kappa-a, say) judges them
+// against the defaults, as for a library caller. A CLI record's "input",
+// "depth" and "output" blocks describe files and how to read them (the depth
+// source, its scale and unknown value), which the arrays and the Result
+// stand for: their camera keywords (fx, fov-y ...) are read where this table
+// has them, the rest skipped. Anything else unknown is refused.
+template <class P>
+void apply_job(const ParamTable<P>& t, P& p, py::handle job, const std::string& fn) {
+  if (!py::isinstance<py::dict>(job))
+    throw py::type_error(fn + "(): job takes a record's \"job\" dict ({block: {name: value}}), got " +
+                         type_name(job));
+  const json j = from_py(job, fn + "(): job");
+  for (const auto& [block, vals] : j.items()) {
+    if (!vals.is_object())
+      throw py::value_error(fn + "(): job: block '" + block + "' is not a dict; give a record's \"job\" as it is");
+    const bool files = block == "input" || block == "output" || block == "depth";
+    for (const auto& [name, v] : vals.items()) {
+      const Param<P>* d = nullptr;
+      for (const Param<P>& q : t.params())
+        if (q.spec.name == name && (q.spec.block == block || files)) {
+          d = &q;
+          break;
+        }
+      if (!d) {
+        if (files) continue;
+        throw py::value_error(fn + "(): job: '" + block + "." + name + "' is not a parameter of " + fn +
+                              "; give the \"job\" of a record of the same command");
+      }
+      try {
+        d->spec.check(v);
+      } catch (const Error& e) {
+        throw py::value_error(fn + "(): job: " + block + "." + name + ": " + e.what());
+      }
+      d->set(p, v);
+    }
+  }
+}
+
 // ==== the call tables: an effect's table nested with shared blocks ===========
 // Every Python function sets one Call<P>: the effect's parameters and the
 // blocks it takes. Which members a function exposes is its table's choice.
@@ -402,8 +445,12 @@ std::string stub_text() {
   o << "def random_params(effect: Literal['haze', 'fog', 'aerial', 'dof'], seed: int, key: str,\n"
        "                  **ranges: str | float | int | bool | Sequence[str | float]) -> dict[str, Any]:\n"
        "    \"\"\"Plausible parameters of an effect for the frame `key`, keyed by (seed, key, name).\"\"\"\n\n";
+  o << "def set_max_pixels(pixels: int) -> None:\n"
+       "    \"\"\"The largest image or depth map read from a file, in pixels (process-wide, as brume --max-pixels).\"\"\"\n\n"
+       "def max_pixels() -> int: ...\n\n";
   o << "def _stub_text() -> str: ...\n"
        "def _debug_last_inputs() -> dict[str, dict[str, Any]]: ...\n"
+       "def _debug_thread_gpu() -> int | None: ...\n"
        "def _bench_blur_cpp(rgb: npt.NDArray[np.float32], sigma: float, repeats: int, threads: int) -> list[float]: ...\n";
   return o.str();
 }
@@ -415,6 +462,36 @@ FunctionDoc make_doc(const char* name, const char* public_name, const char* posi
   const C defaults{};
   for (const auto& d : t.params()) f.params.emplace_back(d.spec, d.get(defaults));
   return f;
+}
+
+// ==== one GPU context per thread ==========================================================
+// A context belongs to the thread that made it (EGL makes it current there),
+// so each Python thread gets its own: made lazily, without the GIL, by its
+// first call with backend gpu/auto, and reused by its later calls --
+// per-call creation cost tens of ms (llvmpipe: ~30-60 ms). The thread_local
+// is destroyed at the thread's exit, on that thread (the main thread's at
+// process exit, before the atexit handlers of the GL driver). A thread on
+// which creation failed does not retry here: choose_backend then makes its
+// own attempt per call and reports it exactly as before (auto: CPU with the
+// reason in the record; gpu: RuntimeError).
+thread_local std::unique_ptr<GpuContext> t_gpu;
+GpuContext* thread_gpu(const Exec& exec) {
+  std::unique_ptr<GpuContext>& ctx = t_gpu;
+  thread_local bool failed = false;
+  if (exec.backend == Backend::cpu || exec.path == Path::reference || exec.gpu) return exec.gpu;
+  if (!ctx && !failed) {
+    try {
+      ctx = std::make_unique<GpuContext>();
+    } catch (const Error&) {
+      failed = true;
+    }
+  }
+  return ctx.get();
+}
+// The execution options of a call with this thread's context (call without the GIL).
+Exec with_thread_gpu(Exec e) {
+  e.gpu = thread_gpu(e);
+  return e;
 }
 
 // ==== arrays in =========================================================================
@@ -434,6 +511,7 @@ struct Input {
   Image owned;
   py::object keep;  // the array the view points into
   json record;
+  DenseImageRef dense;  // as_dense: the same pixels for the dense-image APIs
 };
 
 Transfer parse_transfer_kw(py::handle t, const std::string& where) {
@@ -537,9 +615,25 @@ Input read_input(py::handle obj, const std::string& arg, int channels, Transfer 
   return in;
 }
 
-// Library functions that take an Image (aerial, fog, dof, depth.prepare,
-// sky.fit, not yet views like haze and blur): a view of the caller's float32
-// becomes one -- a copy, recorded in the trace and in the record's inputs.
+// Library functions that take a dense image (DenseImageRef: aerial, fog,
+// dof, depth.prepare, sky.fit): a C-contiguous float32 array is read in
+// place, like haze's and blur's views. A strided float32 array (a crop, the
+// RGB of an RGBA buffer) has no dense form, so it is copied once -- recorded
+// in the trace and in the record's inputs ("copied": true).
+DenseImageRef as_dense(Input& in, const std::string& arg) {
+  if (in.owned.empty() && !in.view.contiguous()) {
+    in.owned = copy_of(in.view);
+    in.view = ConstImageView(in.owned);
+    in.record["copied"] = true;
+    g_last_inputs[arg] = {reinterpret_cast<std::uintptr_t>(in.owned.data.data()), true,
+                          "copied: strided, the function needs a dense image"};
+  }
+  in.dense = DenseImageRef(in.view);
+  return in.dense;
+}
+
+// The few APIs that still take an Image (blur's scale map, sky.fit's mask,
+// which the binding binarises): a view becomes one -- a copy, recorded.
 const Image& as_image(Input& in, const std::string& arg) {
   if (in.owned.empty()) {
     in.owned = copy_of(in.view);
@@ -577,11 +671,12 @@ struct EffectOut {
   json record;
 };
 // The body runs without the GIL. It reads `.view` (pixels in place) when the
-// library function takes views, else `.owned` (def_effect made the Image).
+// library function takes views, else `.dense` (def_effect made it: the
+// caller's pixels in place when C-contiguous).
 template <class P>
 using EffectBody = std::function<EffectOut(const Input& rgb, const Input& range, Call<P>& c, const Exec& exec,
                                            const std::set<std::string>& given)>;
-enum class Takes { views, images };
+enum class Takes { views, dense };
 
 template <class P>
 void def_effect(py::module_& m, const char* name, const char* command, const ParamTable<Call<P>>* table,
@@ -589,7 +684,10 @@ void def_effect(py::module_& m, const char* name, const char* command, const Par
   const std::string fn = std::string("brume.") + name;
   FunctionDoc doc = make_doc(name, fn.c_str(), "rgb: npt.NDArray[Any], range: npt.NDArray[Any]", summary, *table,
                              {{"transfer", "Literal[\"srgb\", \"linear\"] | None",
-                               "uint8/uint16 rgb only: 'srgb' (PNG/JPEG-like) or 'linear'; float arrays are linear"}},
+                               "uint8/uint16 rgb only: 'srgb' (PNG/JPEG-like) or 'linear'; float arrays are linear"},
+                              {"job", "dict[str, Any] | None",
+                               "a record's \"job\" (Result.record['job'], or a CLI record's): replays that run, "
+                               "bit for bit on the CPU, as `brume run` does; other keywords override its values"}},
                              fields);
   registry().push_back(doc);
   m.def(
@@ -599,23 +697,32 @@ void def_effect(py::module_& m, const char* name, const char* command, const Par
         const Transfer tr = parse_transfer_kw(k.contains("transfer") ? py::object(k["transfer"]) : py::object(py::none()), fn + "()");
         if (k.contains("transfer")) PyDict_DelItemString(k.ptr(), "transfer");
         Call<P> c;
+        if (k.contains("job")) {
+          py::object job = k["job"];
+          PyDict_DelItemString(k.ptr(), "job");
+          if (!job.is_none()) apply_job(*table, c, job, fn);
+        }
         const std::set<std::string> given = set_keywords(*table, c, k, fn);
         g_last_inputs.clear();
         Input rgb = read_input(rgb_obj, "rgb", 3, tr, fn);
         Input range = read_input(range_obj, "range", 1, Transfer::automatic, fn);
-        if (takes == Takes::images) {
-          as_image(rgb, "rgb");
-          as_image(range, "range");
+        if (takes == Takes::dense) {
+          as_dense(rgb, "rgb");
+          as_dense(range, "range");
         }
         const Exec exec = c.exec.exec();
         EffectOut out;
         {
           py::gil_scoped_release nogil;
-          out = body(rgb, range, c, exec, given);
+          out = body(rgb, range, c, with_thread_gpu(exec), given);
         }
         json rec = python_header(command, fn);
         rec["job"] = job_json(*table, c);
         rec["inputs"] = {{"rgb", rgb.record}, {"range", range.record}};
+        if (out.record.contains("sky_image")) {  // aerial's sky photo is an input, as in the CLI's record
+          rec["inputs"]["sky_image"] = out.record["sky_image"];
+          out.record.erase("sky_image");
+        }
         rec.update(out.record);
         return make_result(std::move(out.images), rec);
       },
@@ -628,7 +735,7 @@ const T* keep(T t) {
   return new T(std::move(t));
 }
 
-// ==== GPU context per call (see the top) and thread-safe errors ===========================
+// ==== errors as Python exceptions ===========================
 void register_errors() {
   py::register_exception_translator([](std::exception_ptr p) {
     try {
@@ -638,7 +745,10 @@ void register_errors() {
     } catch (const GpuUnavailable& e) {
       PyErr_SetString(PyExc_RuntimeError, e.what());
     } catch (const Error& e) {
-      PyErr_SetString(PyExc_ValueError, e.what());
+      std::string m = e.what();
+      if (m.find("raise the limit with --max-pixels") != std::string::npos)
+        m += " (in Python: brume.set_max_pixels(N))";
+      PyErr_SetString(PyExc_ValueError, m.c_str());
     } catch (const nlohmann::json::exception& e) {
       PyErr_SetString(PyExc_ValueError, e.what());
     }
@@ -666,34 +776,57 @@ PYBIND11_MODULE(_brume, m) {
         return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"transmission", std::move(r.result.transmission)},
                           {"scale", std::move(r.result.scale)}}, r.record};
       });
-  def_effect<AerialParams>(
-      m, "aerial", "aerial", keep(call_table(aerial_param_table(), kPrepare | kExec)), Takes::images,
-      "Spectral aerial perspective from turbidity (Morales): render, re-render (from_turbidity) or remove, with "
-      "optional scattering blur (lambda_). As `brume aerial` (turbidity from a sky fit: brume.sky.fit first).",
-      {"rgb", "attenuation", "scale", "record"},
-      [](const Input& rgb, const Input& range, Call<AerialParams>& c, const Exec& e, const std::set<std::string>& g) {
-        AerialRun r = run_aerial(rgb.owned, range.owned, c.p, c.prepare, e, g);
-        return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"attenuation", std::move(r.result.attenuation)},
-                          {"scale", std::move(r.result.scale)}}, r.record};
-      });
+  {
+    // aerial takes the whole `brume aerial` job but its files: the turbidity
+    // from a sky fit's JSON (turbidity_from=) or fitted on a sky photo
+    // (turbidity="auto", sky_image=, the sky_* keywords) resolve as the CLI
+    // resolves them (resolve_aerial_turbidity), and the record holds the same
+    // "turbidity_fit" and inputs' "sky_image". sky_image is a file, as on the
+    // command line (its record hashes it, so `brume run` can refit it); for a
+    // sky already in memory call brume.sky.fit and pass turbidity=.
+    std::set<std::string> skip = names_of(input_param_table(true));
+    for (const auto& n : names_of(output_param_table(aerial_map_outputs()))) skip.insert(n);
+    def_effect<AerialJob>(
+        m, "aerial", "aerial", keep(call_table(aerial_job_table(), kExec, skip)), Takes::dense,
+        "Spectral aerial perspective from turbidity (Morales): render, re-render (from_turbidity) or remove, with "
+        "optional scattering blur (lambda_). The turbidity is given, read from a `brume sky fit` JSON "
+        "(turbidity_from=) or fitted on a sky photo (turbidity='auto', sky_image=FILE, sky_* keywords), refused "
+        "when the fit is unreliable. As `brume aerial`.",
+        {"rgb", "attenuation", "scale", "record"},
+        [](const Input& rgb, const Input& range, Call<AerialJob>& c, const Exec& e, const std::set<std::string>& g) {
+          const AerialTurbidity tf = resolve_aerial_turbidity(c.p, g);
+          AerialRun r = run_aerial(rgb.dense, range.dense, c.p.aerial, c.p.prepare, e, g);
+          if (!tf.fit_record.is_null()) {
+            r.record["turbidity_fit"] = tf.fit_record;
+            r.record["sky_image"] = tf.image_record;  // moved under "inputs" by def_effect
+            c.p.aerial.atmosphere.turbidity = NAN;     // recorded as given (auto), as the CLI does
+          }
+          return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"attenuation", std::move(r.result.attenuation)},
+                            {"scale", std::move(r.result.scale)}}, r.record};
+        });
+  }
   def_effect<FogParams>(
-      m, "fog", "fog", keep(call_table(fog_param_table(), kPrepare | kIntrinsics | kExec)), Takes::images,
+      m, "fog", "fog", keep(call_table(fog_param_table(), kPrepare | kIntrinsics | kExec)), Takes::dense,
       "Layered fog from the range and the camera (Zhou, Chen, Smith), with scattering blur for lambda_ > 0. "
       "The intrinsics (fx.. or fov_x/fov_y) and the pose are keywords. As `brume fog`.",
       {"rgb", "optical_depth", "transmission", "record"},
       [](const Input& rgb, const Input& range, Call<FogParams>& c, const Exec& e, const std::set<std::string>& g) {
-        FogRun r = run_fog(rgb.owned, range.owned, c.depth, c.p, c.prepare, e, g);
+        FogRun r = run_fog(rgb.dense, range.dense, c.depth, c.p, c.prepare, e, g);
         return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"optical_depth", std::move(r.result.optical_depth)},
                           {"transmission", std::move(r.result.transmission)}}, r.record};
       });
   def_effect<DofParams>(
-      m, "dof", "dof", keep(call_table(dof_param_table(), kPrepare | kIntrinsics | kExec)), Takes::images,
+      m, "dof", "dof", keep(call_table(dof_param_table(), kPrepare | kIntrinsics | kExec)), Takes::dense,
       "Depth of field by leak-free diffusion (thin-lens circle of confusion). `range` is metres along the ray; "
       "planar depth comes from the intrinsics or the lens. As `brume dof`.",
       {"rgb", "scale", "record"},
       [](const Input& rgb, const Input& range, Call<DofParams>& c, const Exec& e, const std::set<std::string>& g) {
-        const Intrinsics k = dof_intrinsics(c.depth, c.p, rgb.owned.width, rgb.owned.height);
-        DofRun r = run_dof(rgb.owned, range.owned, k, c.p, c.prepare, e, g);
+        const Intrinsics k = dof_intrinsics(c.depth, c.p, rgb.dense.width, rgb.dense.height);
+        // run_dof reads a given context as backend gpu (its CPU-only schemes
+        // would be refused), so with auto it makes its own, as before.
+        Exec ex = e;
+        if (ex.backend != Backend::gpu) ex.gpu = nullptr;
+        DofRun r = run_dof(rgb.dense, range.dense, k, c.p, c.prepare, ex, g);
         return EffectOut{{{"rgb", std::move(r.result.rgb)}, {"scale", std::move(r.result.scale)}}, r.record};
       });
 
@@ -731,7 +864,7 @@ PYBIND11_MODULE(_brume, m) {
           BlurRun r;
           {
             py::gil_scoped_release nogil;
-            r = run_blur(rgb.view, c.p.sigma, smap ? &smap->owned : nullptr, c.p.diffusion, exec);
+            r = run_blur(rgb.view, c.p.sigma, smap ? &smap->owned : nullptr, c.p.diffusion, with_thread_gpu(exec));
           }
           json rec = python_header("blur", fn);
           rec["job"] = job_json(*table, c);
@@ -797,7 +930,7 @@ PYBIND11_MODULE(_brume, m) {
           set_keywords(*table, c, py::dict(kw), fn);
           g_last_inputs.clear();
           Input range = read_input(range_obj, "range", 1, Transfer::automatic, fn);
-          const Image& r_img = as_image(range, "range");
+          const DenseImageRef r_img = as_dense(range, "range");
           PrepareResult pr;
           {
             py::gil_scoped_release nogil;
@@ -835,7 +968,7 @@ PYBIND11_MODULE(_brume, m) {
           SkyRenderRun r;
           {
             py::gil_scoped_release nogil;
-            r = run_sky_render(c.p, exec);
+            r = run_sky_render(c.p, with_thread_gpu(exec));
           }
           json rec = python_header("sky render", fn);
           rec["job"] = job_json(*table, c);
@@ -868,7 +1001,7 @@ PYBIND11_MODULE(_brume, m) {
           g_last_inputs.clear();
           Input rgb = read_input(rgb_obj, "rgb", 3, tr, fn);
           const bool integer = py::reinterpret_borrow<py::array>(rgb_obj).dtype().kind() == 'u';
-          const Image& img = as_image(rgb, "rgb");
+          const DenseImageRef img = as_dense(rgb, "rgb");
           std::optional<Input> mask;
           if (!mask_obj.is_none()) {
             mask = read_input(mask_obj, "mask", 1, Transfer::automatic, fn);
@@ -948,6 +1081,32 @@ PYBIND11_MODULE(_brume, m) {
       "value a spec can produce against their ranges (ValueError). The dict's keys are the parameter\n"
       "names (e.g. 'lambda'), so brume.haze(rgb, range, **params) takes it as it is.");
 
+  // ---- the process limit of `brume --max-pixels` ---------------------------------------
+  // A module-level setting, not a keyword: like the CLI's root option (and
+  // OpenImageIO's "limits:" attributes) it is a process limit against
+  // hostile or corrupt file headers, not a parameter of a run (no record
+  // holds it). It guards every file any function reads (read_image,
+  // depth.convert, aerial's sky_image ...); arrays are already in memory. A
+  // per-call keyword could not be honest: the library's limit is one
+  // process-wide value, and a call on another thread would see it changed.
+  m.def(
+      "set_max_pixels",
+      [](py::object n) {
+        if (py::isinstance<py::bool_>(n) ||
+            !(PyLong_Check(n.ptr()) || py::isinstance(n, py::module_::import("numpy").attr("integer"))))
+          throw py::type_error("brume.set_max_pixels(): takes an int (pixels, width x height), got " + type_name(n));
+        const py::int_ v(n);
+        if (v < py::int_(1) || v > py::int_(1000000000000LL))
+          throw py::value_error("brume.set_max_pixels(): " + py::cast<std::string>(py::repr(v)) +
+                                " pixels is outside 1 .. 1e12 (the CLI's --max-pixels range); give a limit in it");
+        set_max_pixels(py::cast<std::uint64_t>(v));
+      },
+      py::arg("pixels"),
+      "set_max_pixels(pixels: int) -> None\n\nThe largest image or depth map any brume function reads from a file, "
+      "in pixels (width x height); a header declaring more is refused (ValueError) before any allocation. "
+      "Process-wide, as `brume --max-pixels`; default 500000000. Arrays passed in are not limited.");
+  m.def("max_pixels", []() { return max_pixels(); }, "max_pixels() -> int\n\nThe limit set_max_pixels sets.");
+
   // ---- files ----------------------------------------------------------------------------
   m.def(
       "read_image",
@@ -1019,6 +1178,13 @@ PYBIND11_MODULE(_brume, m) {
       },
       "For the zero-copy test: per input of this thread's last call, the address of the pixels the library "
       "read and whether they were a copy.");
+  m.def(
+      "_debug_thread_gpu",
+      []() -> py::object {
+        if (!t_gpu) return py::none();
+        return py::int_(reinterpret_cast<std::uintptr_t>(t_gpu.get()));
+      },
+      "For the GPU-context test: the address of this thread's GPU context, or None before its first GPU call.");
   m.def(
       "_bench_blur_cpp",
       [](py::object rgb_obj, double sigma, int repeats, int threads) {

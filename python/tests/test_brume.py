@@ -12,7 +12,7 @@ import pytest
 
 import brume
 from brume import _brume
-from conftest import run_cli
+from conftest import cli_path, run_cli
 
 
 def read_map(path, **kw):
@@ -155,9 +155,52 @@ def test_haze_reads_rgb_and_range_in_place(demo):
     assert not any(v["copied"] for v in _brume._debug_last_inputs().values())
     same(r.rgb, ref.rgb)
     same(r.transmission, ref.transmission)
-    # aerial still takes Images: the copy is reported, not hidden
-    brume.aerial(rgb, rng, turbidity=3)
-    assert _brume._debug_last_inputs()["rgb"]["copied"]
+
+
+# Every effect and tool that takes arrays, with the keywords of a quick run.
+DENSE_CALLS = {
+    "aerial": lambda rgb, rng: brume.aerial(rgb, rng, turbidity=3, lambda_=2),
+    "fog": lambda rgb, rng: brume.fog(rgb, rng, fov_y=55, camera_height=1.6, density=0.03, lambda_=2),
+    "dof": lambda rgb, rng: brume.dof(rgb, rng, focus_distance=3.9, coc_infinity=6, fov_y=55),
+    "depth.prepare": lambda rgb, rng: brume.depth.prepare(rng),
+    "sky.fit": lambda rgb, rng: brume.sky.fit(np.nan_to_num(rgb), sun_zenith=40, sun_azimuth=120),
+}
+
+
+@pytest.mark.parametrize("name", list(DENSE_CALLS))
+def test_every_function_reads_c_contiguous_float32_in_place(demo, name):
+    """aerial, fog, dof, depth.prepare and sky.fit read a C-contiguous float32
+    array where numpy keeps it (the address the library read is the array's,
+    nothing copied), as haze and blur do; a strided one (the RGB of an RGBA
+    buffer, a range inside a wider array) is copied once, says so, and gives
+    the same bits (the copy holds the same floats)."""
+    call = DENSE_CALLS[name]
+    rgb = np.ascontiguousarray(demo["rgb"])
+    rng = np.ascontiguousarray(demo["range"])
+    if name == "sky.fit":  # its rgb is the array given to it
+        rgb = np.nan_to_num(demo["rgb"])
+        call = lambda _rgb, _rng: brume.sky.fit(_rgb, sun_zenith=40, sun_azimuth=120)  # noqa: E731
+    ref = call(rgb, rng)
+    seen = _brume._debug_last_inputs()
+    inputs = {"depth.prepare": {"range": rng}, "sky.fit": {"rgb": rgb}}.get(name, {"rgb": rgb, "range": rng})
+    assert set(seen) == set(inputs)
+    for arg, arr in inputs.items():
+        assert seen[arg] == {"address": arr.ctypes.data, "copied": False, "how": "view"}, arg
+        assert ref.record["inputs"][arg]["copied"] is False
+    # strided: one copy each, reported, same bits
+    rgba = np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,), np.float32)], axis=2)
+    wide = np.zeros((rng.shape[0], rng.shape[1] + 9), np.float32)
+    wide[:, 4:-5] = rng
+    r = call(rgba[..., :3], wide[:, 4:-5])
+    seen = _brume._debug_last_inputs()
+    for arg in inputs:
+        assert seen[arg]["copied"] and seen[arg]["how"].startswith("copied: strided"), arg
+        assert r.record["inputs"][arg]["copied"] is True
+    for k, v in ref.__dict__.items():
+        if isinstance(v, np.ndarray):
+            same(r[k], v)
+    if name == "sky.fit":
+        assert r.fit == ref.fit
 
 
 def test_other_layouts_are_converted_once():
@@ -364,16 +407,159 @@ def test_gpu_haze_and_blur_match_cpu(demo, gpu):
 
 
 def test_gpu_from_threads(demo, gpu):
-    # Each call makes and ends its context on its own thread: concurrent GPU calls work.
+    """Each thread makes its own context on its first GPU call and reuses it
+    for its later ones (the same context, the same bits); two threads hold two
+    contexts, run concurrently and agree bit for bit; a CPU call makes none."""
     rgb = demo["rgb"]
-    out = [None, None]
+    out = [None, None, None]
+    ctx = [None, None]
+    both_alive = threading.Barrier(2, timeout=120)  # both contexts exist at once: distinct addresses mean distinct
 
     def work(i):
+        assert _brume._debug_thread_gpu() is None  # a fresh thread has no context yet
+        brume.blur(rgb, sigma=2)  # the CPU backend makes none
+        assert _brume._debug_thread_gpu() is None
         out[i] = brume.blur(rgb, sigma=3, backend="gpu").rgb
+        ctx[i] = _brume._debug_thread_gpu()
+        again = brume.haze(rgb, demo["range"], visibility=1500, backend="gpu")
+        assert _brume._debug_thread_gpu() == ctx[i]  # reused, not remade
+        assert again.record["execution"]["backend"] == "gpu"
+        if i == 0:
+            out[2] = brume.blur(rgb, sigma=3, backend="gpu").rgb
+        both_alive.wait()
 
     ts = [threading.Thread(target=work, args=(i,)) for i in range(2)]
     for t in ts:
         t.start()
     for t in ts:
         t.join()
-    assert out[0] is not None and np.array_equal(out[0], out[1])
+    assert ctx[0] is not None and ctx[1] is not None and ctx[0] != ctx[1]
+    assert out[0] is not None and np.array_equal(out[0], out[1]) and np.array_equal(out[0], out[2])
+
+
+# ---- aerial's turbidity from a sky fit (issue #14 item: as `brume aerial` has it) -------------
+def _without_timing(fit):
+    return {k: v for k, v in fit.items() if k != "fit_ms"}
+
+
+def test_aerial_turbidity_from_sky_fit_equals_cli(demo, tmp_path):
+    """turbidity_from= (a `brume sky fit` JSON) and turbidity='auto' with
+    sky_image= (the fit run on the photo) give the CLI's pixels bit for bit,
+    the same turbidity and the same record blocks; the fit recovers the
+    rendered T = 5 (a noise-free Preetham sky: within 0.05, as the sky.fit test)."""
+    d = demo["dir"]
+    sky, fit = tmp_path / "sky.exr", tmp_path / "fit.json"
+    run_cli("sky", "render", "--turbidity", 5, "--sun-zenith", 40, "--sun-azimuth", 120, "--width", 96,
+            "--height", 48, "--out", sky)
+    run_cli("sky", "fit", "--image", sky, "--sun-zenith", 40, "--sun-azimuth", 120, "--out", fit)
+    common = ["--image", d / "clean.png", "--range", d / "range.exr", "--lambda", 3, "--bits", "float"]
+
+    run_cli("aerial", *common, "--turbidity-from", fit, "--out", tmp_path / "a.exr")
+    cli = brume.read_image(tmp_path / "a.exr")
+    r = brume.aerial(demo["rgb"], demo["range"], turbidity_from=fit, lambda_=3)
+    same(r.rgb, cli.rgb)
+    assert r.record["aerial"] == cli.record["aerial"]
+    for block in r.record["job"]:
+        assert r.record["job"][block] == cli.record["job"][block], block
+    assert abs(r.record["job"]["aerial"]["turbidity"] - 5) < 0.05
+
+    run_cli("aerial", *common, "--turbidity", "auto", "--sky-image", sky, "--sky-sun-zenith", 40,
+            "--sky-sun-azimuth", 120, "--out", tmp_path / "b.exr")
+    cli = brume.read_image(tmp_path / "b.exr")
+    r = brume.aerial(demo["rgb"], demo["range"], turbidity="auto", sky_image=sky, sky_sun_zenith=40,
+                     sky_sun_azimuth=120, lambda_=3)
+    same(r.rgb, cli.rgb)
+    assert _without_timing(r.record["turbidity_fit"]) == _without_timing(cli.record["turbidity_fit"])
+    assert r.record["inputs"]["sky_image"] == cli.record["inputs"]["sky_image"]
+    assert r.record["aerial"] == cli.record["aerial"]
+    for block in r.record["job"]:
+        assert r.record["job"][block] == cli.record["job"][block], block
+    assert r.record["job"]["aerial"]["turbidity"] == "auto" or r.record["job"]["aerial"]["turbidity"] is None
+    assert abs(r.record["turbidity_fit"]["turbidity"] - 5) < 0.05
+
+
+def test_aerial_sky_arguments_are_checked_as_the_cli(demo, tmp_path):
+    rgb, rng = demo["rgb"], demo["range"]
+    with pytest.raises(ValueError, match="sky-image"):  # a sky flag without the photo
+        brume.aerial(rgb, rng, turbidity=3, sky_sun_zenith=40)
+    with pytest.raises(ValueError, match="turbidity auto"):  # a photo with a given T
+        brume.aerial(rgb, rng, turbidity=3, sky_image=tmp_path / "none.exr")
+    with pytest.raises(FileNotFoundError):
+        brume.aerial(rgb, rng, turbidity_from=tmp_path / "missing.json")
+
+
+# ---- the --max-pixels limit (process-wide, as the CLI's root option) ---------------------------
+def test_max_pixels_limits_every_file_read(demo, tmp_path):
+    """brume.set_max_pixels is the CLI's --max-pixels: a file declaring more
+    pixels is refused before its pixels are read, by read_image and by the
+    other readers (depth.convert); arrays are not limited; the message names
+    the Python fix. 160 x 112 = 17920 pixels: a limit one below refuses it."""
+    d = demo["dir"]
+    assert brume.max_pixels() == 500_000_000  # the CLI's default
+    try:
+        brume.set_max_pixels(160 * 112)
+        assert brume.read_image(d / "clean.png").rgb.shape == (112, 160, 3)  # exactly at the limit: read
+        brume.set_max_pixels(160 * 112 - 1)
+        assert brume.max_pixels() == 17919
+        with pytest.raises(ValueError, match=r"over the limit.*brume\.set_max_pixels"):
+            brume.read_image(d / "clean.png")
+        with pytest.raises(ValueError, match="over the limit"):
+            brume.depth.convert(range=d / "range.exr")
+        brume.blur(demo["rgb"], sigma=2)  # an array is not a file: no limit
+        # the same limit as the CLI's flag
+        r = subprocess.run([str(x) for x in [cli_path(), "--max-pixels", 17919, "blur", "--image", d / "clean.png",
+                                             "--sigma", 2, "--out", tmp_path / "o.exr"]], capture_output=True, text=True)
+        assert r.returncode != 0 and "over the limit" in r.stderr
+    finally:
+        brume.set_max_pixels(500_000_000)
+    with pytest.raises(ValueError, match="1 .. 1e12"):
+        brume.set_max_pixels(0)
+    with pytest.raises(TypeError, match="int"):
+        brume.set_max_pixels(1e6)
+    with pytest.raises(TypeError, match="int"):
+        brume.set_max_pixels(True)
+    assert brume.max_pixels() == 500_000_000
+
+
+# ---- replaying a record: job= and brume.rerun ---------------------------------------------------
+def test_haze_record_replays_bit_for_bit(demo, tmp_path):
+    """A haze record holds both visibility and the default kappa-a; spreading
+    it as keywords is refused by the given rule (as on the command line), but
+    job= (and brume.rerun) read it as `brume run` does and reproduce the run
+    bit for bit -- from the Python record and from the CLI's."""
+    rgb, rng = demo["rgb"], demo["range"]
+    r = brume.haze(rgb, rng, visibility=3000, albedo=0.9, lambda_=6, threads=2)
+    assert "kappa-a" in r.record["job"]["haze"] and r.record["job"]["haze"]["visibility"] == 3000
+    with pytest.raises(ValueError, match="visibility"):  # the trap, still a clear error
+        brume.haze(rgb, rng, **r.record["job"]["haze"])
+    for again in (brume.haze(rgb, rng, job=r.record["job"]), brume.rerun(r.record, rgb, rng, threads=1)):
+        same(again.rgb, r.rgb)
+        same(again.transmission, r.transmission)
+        assert again.record["job"] == r.record["job"]
+    # a CLI record: its input/output blocks name files (the arrays replace them)
+    d = demo["dir"]
+    run_cli("haze", "--image", d / "clean.png", "--range", d / "range.exr", "--visibility", 700, "--lambda", 3,
+            "--sky-margin", 5, "--out", tmp_path / "o.exr", "--bits", "float")
+    cli = brume.read_image(tmp_path / "o.exr")
+    same(brume.rerun(cli.record, rgb, rng).rgb, cli.rgb)
+    # keywords override the job's values (and count as given)
+    same(brume.haze(rgb, rng, job=r.record["job"], lambda_=3).rgb,
+         brume.haze(rgb, rng, visibility=3000, albedo=0.9, lambda_=3).rgb)
+
+
+def test_rerun_other_effects_and_bad_records(demo):
+    rgb, rng = demo["rgb"], demo["range"]
+    for r in (brume.fog(rgb, rng, fov_y=55, camera_height=1.6, density=0.03, lambda_=2),
+              brume.dof(rgb, rng, focus_distance=3.9, coc_infinity=6, fov_y=55),
+              brume.aerial(rgb, rng, turbidity=4, lambda_=2)):
+        same(brume.rerun(r.record, rgb, rng).rgb, r.rgb)
+    with pytest.raises(ValueError, match="not a brume parameter record"):
+        brume.rerun({"job": {}}, rgb, rng)
+    with pytest.raises(ValueError, match="not one of"):
+        brume.rerun(brume.blur(rgb, sigma=2).record, rgb, rng)
+    with pytest.raises(ValueError, match="'haze.bogus' is not a parameter"):
+        brume.haze(rgb, rng, job={"haze": {"bogus": 1}})
+    with pytest.raises(ValueError, match="visibility"):
+        brume.haze(rgb, rng, job={"haze": {"visibility": -5}})
+    with pytest.raises(TypeError, match="job"):
+        brume.haze(rgb, rng, job="haze")

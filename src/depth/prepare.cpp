@@ -259,7 +259,7 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target) {
 
 }  // namespace
 
-PrepareResult prepare_range(const Image& range, const PrepareParams& p) {
+PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p) {
   validate(p);
   if (range.empty() || range.width <= 0 || range.height <= 0)
     throw Error("prepare: the range map is empty (" + range.size_string() +
@@ -330,7 +330,7 @@ PrepareResult prepare_range(const Image& range, const PrepareParams& p) {
                 "too large (lower it).");
   res.s_max_m = smax;
 
-  res.range = range;
+  res.range = range.to_image();  // the output starts as the measured range (its own buffer)
   res.sky_mask = Image(W, H, 1, 0.0f);
   res.hole_mask = Image(W, H, 1, 0.0f);
   res.margin_mask = Image(W, H, 1, 0.0f);

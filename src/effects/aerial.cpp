@@ -92,7 +92,7 @@ std::uint32_t order_key(float v) {
 constexpr int kSkyBins = 1 << 16;
 // [lo, hi) bounds the sky pixels (from the range scan): a sky above the land
 // spares both passes the rest of the frame.
-std::array<float, 3> sky_median(const Image& rgb, const float* sky, std::size_t n_sky, std::ptrdiff_t lo,
+std::array<float, 3> sky_median(DenseImageRef rgb, const float* sky, std::size_t n_sky, std::ptrdiff_t lo,
                                 std::ptrdiff_t hi) {
   std::vector<std::uint32_t> hist(3 * static_cast<std::size_t>(kSkyBins), 0u);
 #pragma omp parallel
@@ -141,7 +141,7 @@ std::array<float, 3> sky_median(const Image& rgb, const float* sky, std::size_t 
 float luminance(const float* c) { return 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2]; }
 
 // Per-channel median of the listed pixels.
-std::array<float, 3> channel_median(const Image& rgb, const std::vector<std::size_t>& px) {
+std::array<float, 3> channel_median(DenseImageRef rgb, const std::vector<std::size_t>& px) {
   std::array<float, 3> m{};
   std::vector<float> v(px.size());
   for (int c = 0; c < 3; ++c) {
@@ -220,13 +220,13 @@ void validate_aerial(const AerialParams& p, const std::set<std::string>& given) 
                 " with --remove: the scattering blur cannot be undone; drop --lambda (remove uses Gamma only)");
 }
 
-AerialAnalysis analyse_aerial(const Image& rgb, const Image& range, const AerialParams& p) {
+AerialAnalysis analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p) {
   AerialAnalysis a;
   analyse_aerial(rgb, range, p, a);
   return a;
 }
 
-void analyse_aerial(const Image& rgb, const Image& range, const AerialParams& p, AerialAnalysis& a) {
+void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, AerialAnalysis& a) {
   validate_aerial(p);
   if (rgb.channels != 3)
     throw Error("aerial needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
@@ -355,8 +355,8 @@ namespace {
 
 // What the per-pixel pass needs, fixed for the frame.
 struct Frame {
-  const Image* rgb;
-  const Image* range;
+  const DenseImageRef* rgb;
+  const DenseImageRef* range;
   const float* sky;  // the analysis' mask, or null
   const AttenuationTable* gamma;
   const AttenuationTable* gamma_from;
@@ -480,26 +480,29 @@ std::size_t aerial_row_space(bool xyz, const Frame& fr, int y, float* lg, float*
 
 }  // namespace
 
-AerialResult apply_aerial(const Image& rgb, const Image& range, const AerialParams& p, const AerialAnalysis& a,
+AerialResult apply_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, const AerialAnalysis& a,
                           const Exec& exec) {
   AerialResult out;
   out.floored_pixels = apply_aerial(rgb, range, p, a, out.rgb, AerialMaps{&out.attenuation, &out.scale}, exec);
   return out;
 }
 
-std::size_t apply_aerial(const Image& rgb, const Image& range, const AerialParams& p, const AerialAnalysis& a,
+std::size_t apply_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, const AerialAnalysis& a,
                          Image& out, const AerialMaps& maps, const Exec& exec) {
   const int W = rgb.width, H = rgb.height;
   if (range.width != W || range.height != H || range.channels != 1 || rgb.channels != 3)
     throw Error("aerial: range map " + range.size_string() + " does not match image " + rgb.size_string());
   if (!a.sky.data.empty() && (a.sky.width != W || a.sky.height != H))
     throw Error("aerial: the analysis was made for another image size (" + a.sky.size_string() + ")");
-  // Resizing a map that is an input would destroy the input mid-pass.
+  // Resizing a map that is an input would destroy the input mid-pass. The
+  // inputs are references to pixels (an Image's or a caller's buffer), so
+  // "is the same image" means "holds the same pixels".
+  auto holds = [](const Image* m, DenseImageRef r) { return !r.empty() && m->data.data() == r.data.data(); };
   for (const Image* m : {maps.attenuation, maps.scale})
-    if (m && (m == &rgb || m == &range || m == &out || m == &a.sky))
+    if (m && (holds(m, rgb) || holds(m, range) || m == &out || m == &a.sky))
       throw Error("aerial: an output map is also the image, the range, the output or the sky mask; give each "
                   "map its own Image");
-  if (&out == &range || &out == &a.sky || (maps.attenuation && maps.attenuation == maps.scale))
+  if (holds(&out, range) || &out == &a.sky || (maps.attenuation && maps.attenuation == maps.scale))
     throw Error("aerial: the output image is also the range or the sky mask, or both maps are one Image; give "
                 "each output its own Image (only out = rgb, in place, is allowed)");
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();

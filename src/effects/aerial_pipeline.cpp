@@ -96,7 +96,7 @@ const ParamTable<AerialJob>& aerial_job_table() {
   return t;
 }
 
-AerialRun run_aerial(const Image& rgb, const Image& measured_range, const AerialParams& p, const RangeStep& prepare,
+AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const AerialParams& p, const RangeStep& prepare,
                      const Exec& exec, const std::set<std::string>& given) {
   validate_aerial(p, given);
   AerialRun run;
@@ -104,7 +104,7 @@ AerialRun run_aerial(const Image& rgb, const Image& measured_range, const Aerial
   // effect runs on the prepared one, whose smooth sky margin only shapes the
   // blur near the horizon (sky pixels themselves stay unchanged).
   run.analysis = analyse_aerial(rgb, measured_range, p);
-  PreparedRange prep = prepare_step(measured_range, prepare, given);
+  PreparedRange prep = prepare_step(measured_range.view(), prepare, given);
   BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;
@@ -123,20 +123,20 @@ AerialRun run_aerial(const Image& rgb, const Image& measured_range, const Aerial
   return run;
 }
 
-nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo, const RunContext& ctx) {
+AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::string>& given) {
   // --turbidity-from: the sky fit's T replaces --turbidity, and the record
   // holds the resolved value (so `brume run` finds the two consistent).
-  AerialJob job = given_job;
   double& turbidity = job.aerial.atmosphere.turbidity;
   // --turbidity auto --sky-image: the same fit as `brume sky fit`, before the
   // photo is read; an unreliable fit is refused with its reasons. The record
   // keeps the job as given (--turbidity auto: `brume run` refits the recorded,
   // hash-checked sky image with the same seed, so finds the same T) and the
   // fit's result under "turbidity_fit"; the aerial block records the T used.
-  nlohmann::json sky_fit_record;
-  nlohmann::json sky_image_record;
+  AerialTurbidity out;
+  nlohmann::json& sky_fit_record = out.fit_record;
+  nlohmann::json& sky_image_record = out.image_record;
   if (job.sky_image.empty()) {
-    for (const std::string& g : ctx.given)
+    for (const std::string& g : given)
       if (g.rfind("sky-", 0) == 0)
         throw Error("--" + g + " describes the sky photo of --turbidity auto, but --sky-image was not given; give "
                     "--turbidity auto --sky-image FILE, or drop --" + g);
@@ -175,11 +175,19 @@ nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo,
   if (!job.turbidity_from.empty()) {
     const double t = turbidity_from_fit_json(job.turbidity_from);
     // (--turbidity auto with --turbidity-from: the fit in the file is the auto.)
-    if (ctx.given.count("turbidity") && !std::isnan(turbidity) && turbidity != t)
+    if (given.count("turbidity") && !std::isnan(turbidity) && turbidity != t)
       throw Error("--turbidity " + std::to_string(job.aerial.atmosphere.turbidity) + " and --turbidity-from '" +
                   job.turbidity_from + "' (T = " + std::to_string(t) + ") disagree; give one of them");
     job.aerial.atmosphere.turbidity = t;
   }
+  return out;
+}
+
+nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo, const RunContext& ctx) {
+  AerialJob job = given_job;
+  const AerialTurbidity tf = resolve_aerial_turbidity(job, ctx.given);
+  const nlohmann::json& sky_fit_record = tf.fit_record;
+  const nlohmann::json& sky_image_record = tf.image_record;
   // Every parameter is checked before any file is touched, whatever the input.
   aerial_job_table().validate(job);
   validate_aerial(job.aerial, ctx.given);

@@ -336,7 +336,7 @@ Image standard_rates(const Image& sigma, double sigma0, int N) {
 
 }  // namespace
 
-DofResult apply_dof(const Image& rgb, const Image& z, const DofParams& p, DofAnalysis& a, const Exec& exec) {
+DofResult apply_dof(DenseImageRef rgb, const Image& z, const DofParams& p, DofAnalysis& a, const Exec& exec) {
   if (rgb.channels != 3) throw Error("depth of field needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
   if (rgb.width != z.width || rgb.height != z.height)
     throw Error("depth map " + z.size_string() + " does not match image " + rgb.size_string() +

@@ -103,7 +103,7 @@ Intrinsics dof_intrinsics(const DepthSource& src, const DofParams& p, int width,
               "the lens (--focal-length and --sensor-width)");
 }
 
-DofRun run_dof(const Image& rgb, const Image& measured_range, const Intrinsics& k, const DofParams& p,
+DofRun run_dof(DenseImageRef rgb, DenseImageRef measured_range, const Intrinsics& k, const DofParams& p,
                const RangeStep& prepare, const Exec& exec, const std::set<std::string>& given) {
   validate_dof(p, given);
   check_gpu_scheme(p, exec.gpu ? Backend::gpu : exec.backend);
@@ -111,10 +111,10 @@ DofRun run_dof(const Image& rgb, const Image& measured_range, const Intrinsics& 
   if (rgb.width != measured_range.width || rgb.height != measured_range.height)
     throw Error("range map " + measured_range.size_string() + " does not match image " + rgb.size_string() +
                 "; they must be the same size (resample the range map, or crop both)");
-  return run_dof_prepared(rgb, prepare_step(measured_range, prepare, given), k, p, exec, given);
+  return run_dof_prepared(rgb, prepare_step(measured_range.view(), prepare, given), k, p, exec, given);
 }
 
-DofRun run_dof_prepared(const Image& rgb, const PreparedRange& prep, const Intrinsics& k, const DofParams& p,
+DofRun run_dof_prepared(DenseImageRef rgb, const PreparedRange& prep, const Intrinsics& k, const DofParams& p,
                         const Exec& exec, const std::set<std::string>& given) {
   validate_dof(p, given);
   check_gpu_scheme(p, exec.gpu ? Backend::gpu : exec.backend);

@@ -305,11 +305,11 @@ struct RayY {
 
 }  // namespace
 
-FogAnalysis analyse_fog(const Image& rgb, const Image& measured, const Image& range, const Camera& camera,
+FogAnalysis analyse_fog(DenseImageRef rgb, DenseImageRef measured, DenseImageRef range, const Camera& camera,
                         const FogParams& p, double s_max_factor) {
   validate_fog(p);
   if (rgb.channels != 3) throw Error("fog needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
-  for (const Image* r : {&measured, &range}) {
+  for (const DenseImageRef* r : {&measured, &range}) {
     if (r->channels != 1) throw Error("the range map must have one channel");
     if (rgb.width != r->width || rgb.height != r->height)
       throw Error("range map " + r->size_string() + " does not match image " + rgb.size_string() +
@@ -365,7 +365,7 @@ FogAnalysis analyse_fog(const Image& rgb, const Image& measured, const Image& ra
     a.airlight = *p.airlight;
     a.airlight_source = "given";
   } else {
-    AirlightEstimate e = estimate_airlight(rgb, measured, a.unknown_pixels);
+    AirlightEstimate e = estimate_airlight(rgb.view(), measured.view(), a.unknown_pixels);
     a.airlight = e.rgb;
     a.airlight_source = std::move(e.source);
   }
@@ -398,20 +398,20 @@ FogAnalysis analyse_fog(const Image& rgb, const Image& measured, const Image& ra
   return a;
 }
 
-FogResult apply_fog(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a, const Exec& exec) {
+FogResult apply_fog(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a, const Exec& exec) {
   FogResult out;
   apply_fog(rgb, range, p, a, out, exec);
   return out;
 }
 
-void apply_fog(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a, FogResult& out,
+void apply_fog(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a, FogResult& out,
                const Exec& exec) {
   detail::apply_fog_rows(rgb, range, p, a, out, exec, true);
 }
 
 namespace detail {
 
-void apply_fog_rows(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a, FogResult& out,
+void apply_fog_rows(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a, FogResult& out,
                     const Exec& exec, bool vector_rows) {
   const int W = rgb.width, H = rgb.height;
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
@@ -467,7 +467,7 @@ void apply_fog_rows(const Image& rgb, const Image& range, const FogParams& p, co
       }
     }
   if (blur) {
-    ScatterBlur b = scatter_blur(rgb, out.transmission, sigma, a.sigma_max, p.diffusion, Composite::premultiplied,
+    ScatterBlur b = scatter_blur(rgb.view(), out.transmission, sigma, a.sigma_max, p.diffusion, Composite::premultiplied,
                                  a.airlight, exec);
     out.rgb = std::move(b.rgb);
     out.transmission = std::move(b.transmission);

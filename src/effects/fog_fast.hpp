@@ -33,7 +33,7 @@ void fog_exponential_row(const FogExpFrame& fr, int v);
 
 // apply_fog itself; vector_rows = false forces the per-pixel loop (every
 // profile; the vector rows' peer in tests/test_fog.cpp and bench/bench_fog.cpp).
-void apply_fog_rows(const Image& rgb, const Image& range, const FogParams& p, const FogAnalysis& a, FogResult& out,
+void apply_fog_rows(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a, FogResult& out,
                     const Exec& exec, bool vector_rows);
 
 }  // namespace brume::detail

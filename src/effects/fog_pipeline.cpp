@@ -77,7 +77,7 @@ const ParamTable<FogJob>& fog_job_table() {
   return t;
 }
 
-FogRun run_fog(const Image& rgb, const Image& measured_range, const DepthSource& depth, const FogParams& p,
+FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSource& depth, const FogParams& p,
                const RangeStep& prepare, const Exec& exec, const std::set<std::string>& given,
                const Image* window_depth) {
   validate_fog(p, given);
@@ -88,7 +88,7 @@ FogRun run_fog(const Image& rgb, const Image& measured_range, const DepthSource&
   const Camera camera = heights ? depth_camera(depth, rgb.width, rgb.height, p.camera)
                                 : make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, rgb.width, rgb.height);
   FogRun run;
-  PreparedRange prep = prepare_step(measured_range, prepare, given);
+  PreparedRange prep = prepare_step(measured_range.view(), prepare, given);
   const Image range = effect_range(prep);
   run.analysis = analyse_fog(rgb, measured_range, range, camera, p, prepare.params.s_max_factor);
   BackendChoice backend = choose_backend(exec);

@@ -332,7 +332,7 @@ Image render_sky(const SkyRenderParams& p, const SkyDirection& sun, const SkyGeo
 }
 
 // ---- the sun in an image ------------------------------------------------------------------
-SunFound find_sun_in_image(const Image& rgb, bool integer_image, const SkyGeometry& g) {
+SunFound find_sun_in_image(DenseImageRef rgb, bool integer_image, const SkyGeometry& g) {
   const int w = rgb.width, h = rgb.height;
   cv::Mat lum(h, w, CV_32F, cv::Scalar(0));
   cv::Mat usable(h, w, CV_8U, cv::Scalar(0));
@@ -436,7 +436,7 @@ const ParamTable<SunParams>& sun_param_table() {
   return t;
 }
 
-SunFound resolve_sun(const SunParams& p, const Image* rgb, bool integer_image, const SkyGeometry* g) {
+SunFound resolve_sun(const SunParams& p, const DenseImageRef* rgb, bool integer_image, const SkyGeometry* g) {
   const bool given = !std::isnan(p.zenith_deg) || !std::isnan(p.azimuth_deg);
   const bool eph = !p.date.empty() || !std::isnan(p.latitude_deg) || !std::isnan(p.longitude_deg);
   SunFound f;

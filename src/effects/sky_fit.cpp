@@ -290,7 +290,7 @@ SkyFitResult fit_turbidity(const std::vector<SkySample>& candidates, const SkyDi
   return aggregate(std::move(reps), usable.size());
 }
 
-SkyFitResult fit_sky_image(const Image& rgb, bool integer_image, const SkyGeometry& g, const SkyDirection& sun,
+SkyFitResult fit_sky_image(DenseImageRef rgb, bool integer_image, const SkyGeometry& g, const SkyDirection& sun,
                            const Image* mask, const SkyFitOptions& o) {
   check_options(o);
   check_sun(sun);

@@ -175,7 +175,7 @@ std::string prefix_sky_flags(const std::string& msg, const std::string& flags) {
 
 }  // namespace
 
-SkyImageFit fit_sky_data(const Image& rgb, bool integer_image, const Image* mask, const SkyViewParams& view,
+SkyImageFit fit_sky_data(DenseImageRef rgb, bool integer_image, const Image* mask, const SkyViewParams& view,
                          const SunParams& sun_params, const SkyFitOptions& fit) {
   const SkyGeometry g = sky_geometry(view, rgb.width, rgb.height);
   const SunFound sun = resolve_sun(sun_params, &rgb, integer_image, &g);
@@ -261,7 +261,13 @@ nlohmann::json run_sky_fit_job(const SkyFitJob& job, const RunContext& ctx, SkyP
 
 double turbidity_from_fit_json(const std::string& path, const std::string& flag) {
   std::ifstream f(path);
-  if (!f) throw Error(flag + " '" + path + "' cannot be read; give the JSON written by brume sky fit --out");
+  if (!f) {
+    std::error_code ec;
+    // A missing file is FileNotFound (Python: FileNotFoundError); one that exists but cannot be read is not.
+    if (!std::filesystem::exists(path, ec))
+      throw FileNotFound(flag + " '" + path + "' does not exist; give the JSON written by brume sky fit --out");
+    throw Error(flag + " '" + path + "' cannot be read; give the JSON written by brume sky fit --out");
+  }
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(f);

@@ -43,7 +43,7 @@ struct GpuAerial::State {
   gpu::Target premultiply, composite;
 };
 
-GpuAerial::GpuAerial(GpuContext& ctx, const Image& rgb, const Image& range)
+GpuAerial::GpuAerial(GpuContext& ctx, DenseImageRef rgb, const Image& range)
     : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
   s_->in = gpu::upload_color_and_range(rgb, range, "aerial", &timing_.upload_ms);
 }

@@ -283,7 +283,7 @@ Target make_target(std::initializer_list<GpuTexture> colour) {
   return t;
 }
 
-ColorAndRange upload_color_and_range(const Image& rgb, const Image& range, const char* what, double* upload_ms) {
+ColorAndRange upload_color_and_range(DenseImageRef rgb, const Image& range, const char* what, double* upload_ms) {
   const auto t0 = Clock::now();
   const int w = rgb.width, h = rgb.height;
   if (rgb.channels != 3 || range.channels != 1 || range.width != w || range.height != h)

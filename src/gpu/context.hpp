@@ -81,7 +81,7 @@ struct ColorAndRange {
   std::vector<float> range_host;  // the uploaded range values (-1 = unknown)
 };
 // Finishes the upload (glFinish) and stores its wall time in *upload_ms.
-ColorAndRange upload_color_and_range(const Image& rgb, const Image& range, const char* what, double* upload_ms);
+ColorAndRange upload_color_and_range(DenseImageRef rgb, const Image& range, const char* what, double* upload_ms);
 
 // Reads `tex` (any float colour format) back as RGBA floats, w * h * 4.
 std::vector<float> read_rgba(GpuTexture tex);

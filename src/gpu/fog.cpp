@@ -28,12 +28,12 @@ struct GpuFog::State {
   DepthBufferLinear lin;
 };
 
-GpuFog::GpuFog(GpuContext& ctx, const Image& rgb, const Image& range)
+GpuFog::GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& range)
     : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
   s_->in = gpu::upload_color_and_range(rgb, range, "fog", &timing_.upload_ms);
 }
 
-GpuFog::GpuFog(GpuContext& ctx, const Image& rgb, const Image& window_depth, DepthBufferConvention c, double near_m,
+GpuFog::GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& window_depth, DepthBufferConvention c, double near_m,
                double far_m)
     : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
   s_->depth_buffer = true;

@@ -36,10 +36,10 @@ DiffusionPlan gpu_diffuse_textures(GpuContext&, GpuTexture, GpuTexture, GpuTextu
 GpuHaze::GpuHaze(GpuContext& ctx, const Image&, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
 GpuHaze::~GpuHaze() = default;
 HazeResult GpuHaze::render(const HazeParams&, const HazeAnalysis&, GpuFilter) { unavailable(); }
-GpuAerial::GpuAerial(GpuContext& ctx, const Image&, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
+GpuAerial::GpuAerial(GpuContext& ctx, DenseImageRef, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
 GpuAerial::~GpuAerial() = default;
 AerialResult GpuAerial::render(const AerialParams&, const AerialAnalysis&, GpuFilter) { unavailable(); }
-GpuFog::GpuFog(GpuContext& ctx, const Image&, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
+GpuFog::GpuFog(GpuContext& ctx, DenseImageRef, const Image&) : ctx_(ctx), w_(0), h_(0) { unavailable(); }
 GpuFog::~GpuFog() = default;
 FogResult GpuFog::render(const FogParams&, const FogAnalysis&, GpuFilter) { unavailable(); }
 Image render_sky_gpu(GpuContext&, const SkyRenderParams&, const SkyDirection&, const SkyGeometry&, GpuTiming*) {

@@ -1,0 +1,29 @@
+"""brume.rerun: repeat the run a parameter record describes, on arrays."""
+from . import _brume
+
+_EFFECTS = {"haze": _brume.haze, "aerial": _brume.aerial, "fog": _brume.fog, "dof": _brume.dof}
+
+
+def rerun(record, rgb, range, **keywords):
+    """Repeat the effect run that ``record`` describes on ``rgb`` and ``range``
+    (a Result's ``record``, or the JSON a ``brume`` command wrote with
+    ``--record`` or embedded in its output), bit for bit on the CPU backend.
+
+    The same as ``brume.<command>(rgb, range, job=record["job"], **keywords)``:
+    the record's job is read as ``brume run`` reads it -- every parameter is
+    recorded, so none counts as given, and a haze record holding both
+    ``visibility`` and the default ``kappa-a`` replays (spreading the job's
+    blocks as keywords, ``**record["job"]["haze"]``, would give both and be
+    refused). ``keywords`` override single values (``threads=``,
+    ``backend=`` ...). The inputs are the arrays given, not the record's files:
+    pass the same pixels for the same bits (a CLI record's ``inputs`` name
+    and hash its files). Commands: haze, aerial, fog, dof.
+    """
+    if not isinstance(record, dict) or record.get("tool") != "brume" or "job" not in record:
+        raise ValueError("brume.rerun(): record is not a brume parameter record (a dict with \"tool\": \"brume\" "
+                         "and \"job\"); pass a Result's .record or a record JSON loaded with json.load")
+    command = record.get("command")
+    if command not in _EFFECTS:
+        raise ValueError(f"brume.rerun(): the record's command {command!r} is not one of "
+                         f"{', '.join(sorted(_EFFECTS))}; rerun other records with `brume run`")
+    return _EFFECTS[command](rgb, range, job=record["job"], **keywords)
