@@ -100,6 +100,11 @@ struct BatchFrame {
   std::vector<std::string> outputs;  // every file the frame writes (main image first, record last)
 };
 
+// A frame as JSON and back (the Dask runner ships frames to its workers):
+// {"key", "effect", "line", "job", "given": [...], "batch", "image", "outputs": [...]}.
+nlohmann::json batch_frame_to_json(const BatchFrame& f);
+BatchFrame batch_frame_from_json(const nlohmann::json& j);
+
 // Every row of the manifest, planned and checked (all shards). Throws
 // brume::Error listing the rows that are wrong (line, column, value, fix).
 std::vector<BatchFrame> plan_batch(const BatchOptions& o);

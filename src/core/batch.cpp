@@ -369,6 +369,30 @@ const std::vector<std::string>& batch_effects() {
   return v;
 }
 
+nlohmann::json batch_frame_to_json(const BatchFrame& f) {
+  return {{"key", f.key},     {"effect", f.effect}, {"line", f.line},   {"job", f.job},
+          {"given", f.given}, {"batch", f.batch},   {"image", f.image}, {"outputs", f.outputs}};
+}
+
+BatchFrame batch_frame_from_json(const nlohmann::json& j) {
+  BatchFrame f;
+  try {
+    f.key = j.at("key").get<std::string>();
+    f.effect = j.at("effect").get<std::string>();
+    f.line = j.at("line").get<int>();
+    f.job = j.at("job");
+    f.given = j.at("given").get<std::set<std::string>>();
+    f.batch = j.at("batch");
+    f.image = j.at("image").get<std::string>();
+    f.outputs = j.at("outputs").get<std::vector<std::string>>();
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(std::string("not a batch frame: ") + e.what());
+  }
+  effect_named(f.effect, "batch frame '" + f.key + "'");
+  if (f.outputs.size() < 2) throw Error("batch frame '" + f.key + "' names fewer than two outputs (image, record)");
+  return f;
+}
+
 int shard_of(std::string_view key, int count) {
   if (count < 1) throw Error("internal: shard count < 1");
   std::uint64_t n = 0;
