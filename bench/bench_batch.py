@@ -10,9 +10,19 @@ frames, the same values, in the same rounds, interleaved:
   batch: one `brume batch --workers W` process for the 30 frames.
 
 Reports frames/s of each and their ratio (median of the rounds), and the
-batch's per-frame overhead beyond the effect's own time: (wall x W / frames)
-/ (mean of the records' execution.timing.total_ms) - 1, i.e. the core-time a
-frame costs beyond its effect's apply.
+batch's per-frame overhead beyond the effect's own time:
+
+  overhead = (batch --workers 1 --threads 1 wall / frames) / (effect's own time per frame) - 1,
+
+both one frame after the other on one thread (on a shared machine, W
+workers do not get W cores, so the parallel run's core time would charge the
+neighbours' load to the batch), the effect's own time being brume.haze (run_haze: analysis, preparation of
+the range, apply) on the frame's arrays already in memory, threads=1, one
+frame after the other, in the same round (the Python module from
+build/python). What the overhead holds: decoding the PNG and the disparity,
+the disparity-to-range conversion, SHA-256 of the inputs, encoding, the
+record, the rename. With python3-distributed installed, the same frames also
+run through `python3 -m brume.dask --scheduler local --workers W`.
 
   python3 bench/bench_batch.py [--cli build/brume] [--rounds 3] [--workers 2]
 
@@ -88,7 +98,32 @@ def main():
             loop_cmds.append((cmd, r["key"][:-4].replace("/", "_") + ".png"))
         shutil.rmtree(tmp / "plan")
 
-        loop_fps, batch_fps, overheads, effect_ms = [], [], [], []
+        sys.path.insert(0, str(ROOT / "build" / "python"))
+        try:
+            import brume
+        except ImportError as e:
+            sys.exit(f"the brume Python module is not built in build/python ({e}); build target brume_python")
+        try:
+            import distributed  # noqa: F401
+            have_dask = True
+        except ImportError:
+            have_dask = False
+        # The frames' arrays, decoded once (outside every timing), for the effect's own time.
+        arrays = {}
+        for r in rows:
+            if r["image"] in arrays:
+                continue
+            rgb = brume.read_image(str(tmp / r["image"])).rgb
+            rng = brume.depth.convert(disparity=str(tmp / r["disparity"]), fx=r["fx"], baseline=r["baseline"],
+                                      disparity_scale=r["disparity-scale"],
+                                      disparity_offset=r["disparity-offset"]).range
+            arrays[r["image"]] = (rgb, rng)
+        values = []
+        for cmd, _ in loop_cmds:
+            v = {cmd[i][2:]: float(cmd[i + 1]) for i in range(len(cmd)) if cmd[i] in ("--visibility", "--albedo", "--lambda")}
+            values.append(v)
+
+        loop_fps, batch_fps, dask_fps, overheads, effect_ms = [], [], [], [], []
         for rnd in range(a.rounds):
             out = tmp / "loop"
             out.mkdir()
@@ -104,21 +139,45 @@ def main():
                             "--workers", str(a.workers), "--quiet"], check=True, capture_output=True)
             wall = time.perf_counter() - t0
             batch_fps.append(len(rows) / wall)
-            eff = [json.loads((out / (r["key"][:-4] + ".json")).read_text())["execution"]["timing"]["total_ms"]
-                   for r in rows]
-            mean_eff = statistics.mean(eff) / 1000.0
-            effect_ms.append(mean_eff * 1000)
-            overheads.append(wall * a.workers / len(rows) / mean_eff - 1.0)
             shutil.rmtree(out)
+
+            t0 = time.perf_counter()
+            for r, v in zip(rows, values):
+                rgb, rng = arrays[r["image"]]
+                brume.haze(rgb, rng, threads=1, **v)
+            mean_eff = (time.perf_counter() - t0) / len(rows)
+            effect_ms.append(mean_eff * 1000)
+            out = tmp / "seq"
+            t0 = time.perf_counter()
+            subprocess.run([str(cli), "batch", "--manifest", str(manifest), "--out-dir", str(out), "--seed", "1",
+                            "--workers", "1", "--threads", "1", "--quiet"], check=True, capture_output=True)
+            seq = (time.perf_counter() - t0) / len(rows)
+            shutil.rmtree(out)
+            overheads.append(seq / mean_eff - 1.0)
+
+            dask_txt = ""
+            if have_dask:
+                out = tmp / "dask"
+                env = dict(os.environ, PYTHONPATH=str(ROOT / "build" / "python"))
+                t0 = time.perf_counter()
+                subprocess.run([sys.executable, "-m", "brume.dask", "--manifest", str(manifest), "--out-dir", str(out),
+                                "--scheduler", "local", "--workers", str(a.workers), "--seed", "1", "--quiet"],
+                               check=True, capture_output=True, env=env)
+                dask_fps.append(len(rows) / (time.perf_counter() - t0))
+                shutil.rmtree(out)
+                dask_txt = f", dask {dask_fps[-1]:.2f} frames/s (cluster start-up included)"
             print(f"round {rnd + 1}: loop {loop_fps[-1]:.2f} frames/s, batch {batch_fps[-1]:.2f} frames/s "
-                  f"({batch_fps[-1] / loop_fps[-1]:.2f}x), effect {mean_eff * 1000:.1f} ms/frame, "
-                  f"overhead {overheads[-1] * 100:.0f} %", flush=True)
+                  f"({batch_fps[-1] / loop_fps[-1]:.2f}x){dask_txt}, effect {mean_eff * 1000:.1f} ms/frame, "
+                  f"batch --workers 1 overhead {overheads[-1] * 100:.0f} %", flush=True)
 
         lf, bf = statistics.median(loop_fps), statistics.median(batch_fps)
         print(f"\n{cpu_model()}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}; "
               f"{len(rows)} Middlebury third-size frames, haze, batch --workers {a.workers}")
         print(f"loop of brume haze: {lf:.2f} frames/s   brume batch: {bf:.2f} frames/s   ratio {bf / lf:.2f}x "
               f"(target >= 3x)")
+        if dask_fps:
+            print(f"python3 -m brume.dask --scheduler local --workers {a.workers}: "
+                  f"{statistics.median(dask_fps):.2f} frames/s")
         print(f"batch per-frame overhead beyond the effect's own time: {statistics.median(overheads) * 100:.0f} % "
               f"(effect {statistics.median(effect_ms):.1f} ms/frame; target <= 25 %)")
     finally:

@@ -187,12 +187,15 @@ TEST_F(Batch, SampledParametersInRangeAndIndependentOfRowOrder) {
 TEST_F(Batch, FrameEqualsSingleRunAndRecordRepeats) {
   const std::vector<std::string> keys = make_frames(2);
   const std::string m = csv(keys, "effect,visibility,albedo,lambda", "haze,300,0.9,4");
-  CliRun r = run("batch --manifest " + m + " --out-dir " + p("out") + " --quiet");
+  CliRun r = run("batch --manifest " + m + " --out-dir " + p("out") + " --quiet --map transmission");
   ASSERT_EQ(r.status, 0) << r.output;
   r = run("haze --image " + p("data/a/f0.png") + " --range " + p("data/a/f0.exr") +
-          " --visibility 300 --albedo 0.9 --lambda 4 --out " + p("single.png"));
+          " --visibility 300 --albedo 0.9 --lambda 4 --out " + p("single.png") + " --transmission " + p("single_t.exr"));
   ASSERT_EQ(r.status, 0) << r.output;
   expect_same_pixels(p("out/a/f0.png"), p("single.png"));
+  const Image t1 = read_scalar(p("out/a/f0.transmission.exr")), t2 = read_scalar(p("single_t.exr"));
+  ASSERT_EQ(t1.data.size(), t2.data.size());
+  EXPECT_EQ(std::memcmp(t1.data.data(), t2.data.data(), t1.data.size() * sizeof(float)), 0);
   r = run("run " + p("out/a/f0.json") + " --out-dir " + p("again"));
   ASSERT_EQ(r.status, 0) << r.output;
   expect_same_pixels(p("out/a/f0.png"), p("again/f0.png"));
@@ -459,4 +462,26 @@ TEST_F(Batch, ScanSharedData) {
     const std::string msg = single.output.substr(single.output.find("error: ") + 7);
     EXPECT_NE(r.output.find(msg.substr(0, msg.find('\n'))), std::string::npos) << r.output << "\nvs\n" << msg;
   }
+}
+
+// --layout pairs: images and depth files paired by what '*' matched, paths
+// relative to the manifest's folder, keys relative to the scanned folder.
+TEST_F(Batch, ScanPairs) {
+  make_frames(3);
+  ScanOptions s;
+  s.dir = p("data");
+  s.layout = "pairs";
+  s.image_glob = "*/*.png";
+  s.depth_glob = "*/*.exr";
+  s.manifest_dir = dir.string();
+  const std::vector<nlohmann::json> rows = scan_dataset(s);
+  ASSERT_EQ(rows.size(), 3u);
+  EXPECT_EQ(rows[0], (nlohmann::json{{"key", "a/f0.png"}, {"image", "data/a/f0.png"}, {"range", "data/a/f0.exr"}}));
+  EXPECT_EQ(rows[1]["key"], "a/f2.png");
+  EXPECT_EQ(rows[2]["range"], "data/b/f1.exr");
+  s.depth_glob = "*/f*.exr";  // two '*': both captures must agree
+  s.image_glob = "*/f*.png";
+  EXPECT_EQ(scan_dataset(s).size(), 3u);
+  s.depth_kind = "depth";
+  EXPECT_NE(error_of([&] { scan_dataset(s); }).find("--depth-kind 'depth' is not allowed"), std::string::npos);
 }
