@@ -524,7 +524,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
             std::error_code fec;
             value = is_file || (!t.empty() && fs::exists(base / t, fec)) ? resolve_path(t) : t;
             sp->check(value);
-          } else if (!v.is_string() && !v.is_null() && !v.is_array()) {
+          } else if (!v.is_string() && !v.is_null() && !v.is_array() && sp->kind != ParamKind::choice) {
             value = v;  // a JSON number or boolean: checked as it is
             if (sp->kind == ParamKind::integer && v.is_number_float() && std::floor(v.get<double>()) == v.get<double>())
               value = static_cast<long long>(v.get<double>());
