@@ -485,3 +485,50 @@ TEST_F(Batch, ScanPairs) {
   s.depth_kind = "depth";
   EXPECT_NE(error_of([&] { scan_dataset(s); }).find("--depth-kind 'depth' is not allowed"), std::string::npos);
 }
+
+// --layout cityscapes on a folder of Cityscapes' shape (no Cityscapes data in
+// ../shared/data): the row carries the camera JSON's values, and the range
+// the batch's depth flags give at the principal point is f B / ((p - 1)/256)
+// (closed form; float32 storage, so 1e-6 relative).
+TEST_F(Batch, ScanCityscapes) {
+  const fs::path city = dir / "cs";
+  for (const char* d : {"leftImg8bit/train/aachen", "disparity/train/aachen", "camera/train/aachen"})
+    fs::create_directories(city / d);
+  const std::string n = "aachen_000000_000019";
+  write_image((city / "leftImg8bit/train/aachen" / (n + "_leftImg8bit.png")).string(), scene(8, 6, 0).rgb, WriteOptions{});
+  Image disp(8, 6, 1);
+  for (std::size_t i = 0; i < disp.data.size(); ++i) disp.data[i] = (1 + 256 * 20 + 37 * static_cast<float>(i)) / 65535.0f;
+  disp.at(0, 0) = 0.0f;  // invalid
+  WriteOptions w;
+  w.bits = "16";
+  w.is_color = false;
+  write_image((city / "disparity/train/aachen" / (n + "_disparity.png")).string(), disp, w);
+  std::ofstream((city / "camera/train/aachen" / (n + "_camera.json")).string())
+      << R"({"extrinsic": {"baseline": 0.209313, "pitch": 0.038}, "intrinsic": {"fx": 2262.52, "fy": 2265.3017905988554, "u0": 3.0, "v0": 2.0}})";
+  ScanOptions s;
+  s.dir = city.string();
+  s.layout = "cityscapes";
+  s.manifest_dir = dir.string();
+  const std::vector<nlohmann::json> rows = scan_dataset(s);
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0]["key"], "leftImg8bit/train/aachen/" + n + "_leftImg8bit.png");
+  EXPECT_EQ(rows[0]["fx"].get<double>(), 2262.52);
+  EXPECT_EQ(rows[0]["cx"].get<double>(), 3.0);
+  EXPECT_EQ(rows[0]["baseline"].get<double>(), 0.209313);
+  EXPECT_EQ(rows[0]["disparity-offset"].get<double>(), -1.0 / 256.0);
+  // The row's depth flags through `brume depth convert`.
+  std::string flags;
+  for (const auto& [k, v] : rows[0].items()) {
+    if (k == "key" || k == "image") continue;
+    char b[64];
+    if (v.is_number()) std::snprintf(b, sizeof b, "%.17g", v.get<double>());
+    flags += " --" + k + " " + (v.is_string() ? p(v.get<std::string>()) : std::string(b));
+  }
+  const CliRun r = run("depth convert" + flags + " --out " + p("cs_range.exr"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const Image range = read_scalar(p("cs_range.exr"));
+  const double pv = 1 + 256 * 20 + 37 * (2 * 8 + 3);  // the count at (3, 2), the principal point
+  const double z = 2262.52 * 0.209313 / ((pv - 1) / 256.0);
+  EXPECT_NEAR(range.at(3, 2), z, 1e-6 * z);
+  EXPECT_TRUE(std::isnan(range.at(0, 0)));
+}

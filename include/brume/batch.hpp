@@ -145,7 +145,9 @@ std::vector<std::string> batch_record_argv(const BatchOptions& o);
 // `brume batch --scan DIR --layout L`: a manifest of the dataset in DIR.
 // Layouts: middlebury (2005/2006 folders Scene/view1.png, disp1.png,
 // dmin.txt at third size), eth3d (Scene/im0.png, disp0.pfm, calib.txt),
-// kitti (image_2/N.png, velodyne/N.bin, calib/N.txt), pairs (image_glob and
+// kitti (image_2/N.png, velodyne/N.bin, calib/N.txt), cityscapes
+// (leftImg8bit/S/C/N_leftImg8bit.png, disparity/S/C/N_disparity.png with
+// d = (p - 1)/256, camera/S/C/N_camera.json for fx, fy, u0, v0, baseline), pairs (image_glob and
 // depth_glob relative to DIR, '*' within one path component, paired by what
 // '*' matched; depth_kind the depth flag: range, z, disparity, ...).
 // Paths are written relative to the manifest's folder; keys are the image

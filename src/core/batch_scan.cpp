@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <fstream>
 #include <regex>
+#include <set>
+#include <map>
 
 #include "brume/batch.hpp"
 #include "brume/error.hpp"
@@ -113,6 +115,48 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
                       {"velodyne", rel(velo, o.manifest_dir)},
                       {"kitti-calib", rel(calib, o.manifest_dir)}});
     }
+  } else if (L == "cityscapes") {
+    // Cityscapes: leftImg8bit/<split>/<city>/<name>_leftImg8bit.png with
+    // disparity/.../<name>_disparity.png (16-bit; p > 0: d = (p - 1)/256 px,
+    // p = 0 invalid) and camera/.../<name>_camera.json (intrinsic fx, fy, u0,
+    // v0 in px; extrinsic baseline in m). So --disparity-scale 1/256
+    // --disparity-offset -1/256: p = 0 is unknown as every integer 0 is, and
+    // p = 1 (d = 0, infinitely far) is unknown as d <= 0 is.
+    const fs::path img = dir / "leftImg8bit";
+    if (!fs::is_directory(img)) throw Error("--scan '" + o.dir + "' --layout cityscapes: no leftImg8bit/ folder");
+    const std::string suffix = "_leftImg8bit.png";
+    std::vector<fs::path> files;
+    for (const auto& e : fs::recursive_directory_iterator(img)) {
+      const std::string n = e.path().filename().string();
+      if (e.is_regular_file() && n.size() > suffix.size() && n.compare(n.size() - suffix.size(), suffix.size(), suffix) == 0)
+        files.push_back(e.path());
+    }
+    std::sort(files.begin(), files.end());
+    for (const fs::path& p : files) {
+      const fs::path sub = p.parent_path().lexically_relative(img);
+      const std::string name = p.filename().string().substr(0, p.filename().string().size() - suffix.size());
+      const fs::path disp = dir / "disparity" / sub / (name + "_disparity.png");
+      const fs::path cam = dir / "camera" / sub / (name + "_camera.json");
+      if (!fs::exists(disp) || !fs::exists(cam)) continue;
+      nlohmann::json c;
+      try {
+        std::ifstream f(cam);
+        c = nlohmann::json::parse(f);
+        rows.push_back({{"key", key_of(p, dir)},
+                        {"image", rel(p, o.manifest_dir)},
+                        {"disparity", rel(disp, o.manifest_dir)},
+                        {"disparity-scale", 1.0 / 256.0},
+                        {"disparity-offset", -1.0 / 256.0},
+                        {"fx", c.at("intrinsic").at("fx").get<double>()},
+                        {"fy", c.at("intrinsic").at("fy").get<double>()},
+                        {"cx", c.at("intrinsic").at("u0").get<double>()},
+                        {"cy", c.at("intrinsic").at("v0").get<double>()},
+                        {"baseline", c.at("extrinsic").at("baseline").get<double>()}});
+      } catch (const nlohmann::json::exception& e) {
+        throw Error("--scan: camera file '" + cam.string() +
+                    "' is not a Cityscapes camera JSON (intrinsic.fx, fy, u0, v0; extrinsic.baseline): " + e.what());
+      }
+    }
   } else if (L == "pairs") {
     if (o.image_glob.empty() || o.depth_glob.empty())
       throw Error("--layout pairs needs --image-glob and --depth-glob (relative to --scan, '*' within one folder "
@@ -138,7 +182,7 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
       rows.push_back({{"key", r}, {"image", rel(dir / r, o.manifest_dir)}, {o.depth_kind, rel(dir / it->second, o.manifest_dir)}});
     }
   } else {
-    throw Error("--layout '" + L + "' is not allowed; use middlebury, eth3d, kitti or pairs");
+    throw Error("--layout '" + L + "' is not allowed; use middlebury, eth3d, kitti, cityscapes or pairs");
   }
   if (rows.empty()) throw Error("--scan '" + o.dir + "' --layout " + L + ": no frames found");
   return rows;

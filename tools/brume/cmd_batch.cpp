@@ -50,7 +50,7 @@ Command add_batch(CLI::App& app) {
                                       "<key>.<map>.exr; repeatable");
   sub->add_flag("--quiet", a->quiet, "no progress lines (failures and the summary are still printed)");
   sub->add_option("--scan", a->scan.dir, "write --manifest from this dataset folder instead (with --out-dir: then run it)");
-  sub->add_option("--layout", a->scan.layout, "the --scan folder's layout: middlebury, eth3d, kitti, pairs");
+  sub->add_option("--layout", a->scan.layout, "the --scan folder's layout: middlebury, eth3d, kitti, cityscapes, pairs");
   sub->add_option("--image-glob", a->scan.image_glob, "pairs: images relative to --scan, e.g. 'rgb/*.png'");
   sub->add_option("--depth-glob", a->scan.depth_glob,
                   "pairs: depth files relative to --scan, paired by what '*' matched, e.g. 'depth/*.exr'");
@@ -79,7 +79,7 @@ Command add_batch(CLI::App& app) {
             }
             if (!a->scan.dir.empty()) {
               ScanOptions s = a->scan;
-              if (s.layout.empty()) throw Error("--scan needs --layout middlebury|eth3d|kitti|pairs");
+              if (s.layout.empty()) throw Error("--scan needs --layout middlebury|eth3d|kitti|cityscapes|pairs");
               s.manifest_dir = std::filesystem::path(o.manifest).parent_path().string();
               const auto rows = scan_dataset(s);
               write_manifest(o.manifest, rows);
