@@ -16,6 +16,7 @@ PKGS=(
   python3-numpy                          # the Python module's arrays (numpy in, numpy out)
   python3-pytest                         # the Python tests (ctest `python`)
   python3-matplotlib                     # the diffusion study's plots (brume.plots)
+  python3-distributed                    # brume.dask: a batch's frames as Dask tasks (and its LocalCluster test)
 )
 missing=()
 for p in "${PKGS[@]}"; do

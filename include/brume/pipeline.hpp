@@ -187,6 +187,9 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
 struct RunContext {
   std::vector<std::string> argv;  // for the record
   std::set<std::string> given;    // parameter names set explicitly (CLI flags, record keys)
+  // Top-level blocks added to the record (an object, or null for none), e.g.
+  // `brume batch`'s {"batch": {key, seed, sampling, values}}.
+  nlohmann::json extra;
 };
 
 // A job's record: header, the whole job, its inputs, then what the run

@@ -55,6 +55,7 @@
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/fog.hpp"
+#include "brume/batch.hpp"
 #include "brume/gpu.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
@@ -1166,6 +1167,46 @@ PYBIND11_MODULE(_brume, m) {
       "embedded as ImageDescription where the format allows (PNG, TIFF, JPEG, EXR); read_image returns it.");
 
   // ---- introspection, tests and benchmarks -----------------------------------------------
+  // ---- brume batch's frames, for brume.dask (the same planning and pipelines as the CLI) ----
+  m.def(
+      "_batch_plan",
+      [](const std::string& manifest, const std::string& out_dir, std::uint64_t seed, const std::string& format,
+         const std::string& effect, const std::vector<std::pair<std::string, std::string>>& params,
+         const std::vector<std::string>& maps) {
+        BatchOptions o;
+        o.manifest = manifest;
+        o.out_dir = out_dir;
+        o.seed = seed;
+        o.format = format;
+        o.effect = effect;
+        o.params = params;
+        o.maps = maps;
+        nlohmann::json j = {{"argv", batch_record_argv(o)}, {"frames", nlohmann::json::array()}};
+        for (const BatchFrame& f : plan_batch(o)) j["frames"].push_back(batch_frame_to_json(f));
+        return j.dump();
+      },
+      py::arg("manifest"), py::arg("out_dir"), py::arg("seed") = 0, py::arg("format") = "", py::arg("effect") = "",
+      py::arg("params") = std::vector<std::pair<std::string, std::string>>{},
+      py::arg("maps") = std::vector<std::string>{},
+      "brume batch's plan of a manifest as JSON: {argv, frames} (private; brume.dask uses it).");
+  m.def(
+      "_batch_frame_done", [](const std::string& frame) { return batch_frame_done(batch_frame_from_json(nlohmann::json::parse(frame))); },
+      py::arg("frame"), "Whether a planned frame is done (private; brume.dask --resume).");
+  m.def(
+      "_batch_run_frame",
+      [](const std::string& frame, const std::vector<std::string>& argv, int threads) {
+        const BatchFrame f = batch_frame_from_json(nlohmann::json::parse(frame));
+        ExecOptions eo;
+        eo.threads = threads;
+        BatchFrameResult r;
+        {
+          py::gil_scoped_release release;
+          r = run_batch_frame(f, eo, argv);
+        }
+        return r.line.dump();
+      },
+      py::arg("frame"), py::arg("argv"), py::arg("threads") = 1,
+      "Run one planned frame through its pipeline, the GIL released; returns its results line as JSON (private).");
   m.def("_stub_text", &stub_text, "The type stubs of this module, generated from the parameter tables.");
   m.def(
       "_debug_last_inputs",

@@ -480,6 +480,7 @@ nlohmann::json job_record(const std::string& command, const RunContext& ctx, nlo
   rec["job"] = std::move(job);
   rec["inputs"] = std::move(inputs);
   rec.update(run_record);
+  if (ctx.extra.is_object()) rec.update(ctx.extra);
   if (print_timing && rec.contains("execution"))
     std::fprintf(stderr, "brume %s: %s: %s\n", command.c_str(), rec["execution"].value("backend", "cpu").c_str(),
                  rec["execution"].value("timing", nlohmann::json::object()).dump().c_str());

@@ -125,6 +125,7 @@ Command add_run(CLI::App& app);
 Command add_demo(CLI::App& app);
 Command add_study(CLI::App& app);
 Command add_sample(CLI::App& app);
+Command add_batch(CLI::App& app);
 // `brume aerial coefficients`, under the `aerial` parent subcommand.
 Command add_aerial_coefficients(CLI::App* aerial);
 // `brume sky render` and `brume sky fit`.

@@ -45,6 +45,7 @@ int main(int argc, char** argv) {
   commands.push_back(add_demo(app));
   commands.push_back(add_study(app));
   commands.push_back(add_sample(app));
+  commands.push_back(add_batch(app));
 
   try {
     app.parse(argc, argv);

@@ -1,0 +1,861 @@
+// brume — `brume batch`: manifests, sampled parameters, shards, resume and
+// workers over the effects' own pipelines (brume/batch.hpp says what and why).
+#include "brume/batch.hpp"
+
+#include <openssl/evp.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cctype>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include "brume/aerial.hpp"
+#include "brume/chain.hpp"
+#include "brume/dof.hpp"
+#include "brume/error.hpp"
+#include "brume/fog.hpp"
+#include "brume/haze.hpp"
+#include "brume/io.hpp"
+#include "brume/sample.hpp"
+
+namespace fs = std::filesystem;
+
+namespace brume {
+
+namespace {
+
+std::string trim(std::string_view s) {
+  std::size_t a = 0, b = s.size();
+  while (a < b && std::isspace(static_cast<unsigned char>(s[a]))) ++a;
+  while (b > a && std::isspace(static_cast<unsigned char>(s[b - 1]))) --b;
+  return std::string(s.substr(a, b - a));
+}
+
+std::string lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+// ---- manifests ---------------------------------------------------------------------
+
+// RFC 4180 records: fields separated by ',', quoted with '"' ('""' inside
+// quotes is a quote); a quoted field may span lines. Returns the records with
+// the line each starts on.
+std::vector<std::pair<int, std::vector<std::string>>> parse_csv(const std::string& text, const std::string& path) {
+  std::vector<std::pair<int, std::vector<std::string>>> out;
+  std::vector<std::string> rec;
+  std::string field;
+  bool quoted = false, any = false, was_quoted = false;
+  int line = 1, start = 1;
+  auto end_field = [&] {
+    rec.push_back(was_quoted ? field : trim(field));
+    field.clear();
+    was_quoted = false;
+  };
+  auto end_record = [&] {
+    end_field();
+    // Blank lines and '#' comment lines are not records.
+    const bool blank = rec.size() == 1 && rec[0].empty() && !any;
+    const bool comment = !rec.empty() && !rec[0].empty() && rec[0][0] == '#';
+    if (!blank && !comment) out.emplace_back(start, rec);
+    rec.clear();
+    any = false;
+  };
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (quoted) {
+      if (c == '"') {
+        if (i + 1 < text.size() && text[i + 1] == '"') {
+          field += '"';
+          ++i;
+        } else {
+          quoted = false;
+        }
+      } else {
+        if (c == '\n') ++line;
+        field += c;
+      }
+      continue;
+    }
+    if (c == '"' && trim(field).empty()) {
+      quoted = was_quoted = any = true;
+      field.clear();
+    } else if (c == ',') {
+      end_field();
+      any = true;
+    } else if (c == '\n' || c == '\r') {
+      if (c == '\r' && i + 1 < text.size() && text[i + 1] == '\n') ++i;
+      end_record();
+      ++line;
+      start = line;
+    } else {
+      field += c;
+      if (!std::isspace(static_cast<unsigned char>(c))) any = true;
+    }
+  }
+  if (quoted) throw Error("manifest '" + path + "' line " + std::to_string(start) + ": a quoted field is not closed");
+  if (!field.empty() || !rec.empty() || any) end_record();
+  return out;
+}
+
+}  // namespace
+
+Manifest read_manifest(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error("--manifest '" + path + "' cannot be read; check the path");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string text = ss.str();
+  Manifest m;
+  m.path = path;
+  const std::string ext = lower(fs::path(path).extension().string());
+  if (ext == ".csv") {
+    m.format = "csv";
+  } else if (ext == ".jsonl" || ext == ".ndjson" || ext == ".json") {
+    m.format = "jsonl";
+  } else {
+    const std::string t = trim(text);
+    m.format = !t.empty() && t[0] == '{' ? "jsonl" : "csv";
+  }
+  if (m.format == "jsonl") {
+    std::istringstream ls(text);
+    std::string l;
+    int line = 0;
+    while (std::getline(ls, l)) {
+      ++line;
+      const std::string t = trim(l);
+      if (t.empty() || t[0] == '#') continue;
+      nlohmann::json j;
+      try {
+        j = nlohmann::json::parse(t);
+      } catch (const nlohmann::json::exception& e) {
+        throw Error("manifest '" + path + "' line " + std::to_string(line) + " is not JSON: " + e.what());
+      }
+      if (!j.is_object())
+        throw Error("manifest '" + path + "' line " + std::to_string(line) +
+                    ": a JSON Lines manifest holds one object per line ({\"image\": ..., ...}), got " + j.dump());
+      ManifestRow r;
+      r.line = line;
+      for (const auto& [k, v] : j.items()) r.cells.emplace_back(k, v);
+      m.rows.push_back(std::move(r));
+    }
+    return m;
+  }
+  const auto recs = parse_csv(text, path);
+  if (recs.empty()) throw Error("manifest '" + path + "' is empty; a CSV manifest needs a header row (key,image,...)");
+  const std::vector<std::string>& header = recs[0].second;
+  std::set<std::string> seen;
+  for (const std::string& h : header) {
+    if (h.empty()) throw Error("manifest '" + path + "': the header has an empty column name");
+    if (!seen.insert(h).second) throw Error("manifest '" + path + "': the header names column '" + h + "' twice");
+  }
+  for (std::size_t i = 1; i < recs.size(); ++i) {
+    const auto& [line, fields] = recs[i];
+    if (fields.size() != header.size())
+      throw Error("manifest '" + path + "' line " + std::to_string(line) + " has " + std::to_string(fields.size()) +
+                  " fields, the header " + std::to_string(header.size()) +
+                  "; quote a value that holds a comma (\"loguniform(50, 5000)\")");
+    ManifestRow r;
+    r.line = line;
+    for (std::size_t c = 0; c < header.size(); ++c)
+      if (!fields[c].empty()) r.cells.emplace_back(header[c], fields[c]);
+    m.rows.push_back(std::move(r));
+  }
+  return m;
+}
+
+// ---- the effects a row can name --------------------------------------------------------
+
+namespace {
+
+// One effect, type-erased over its job: its table's declarations, and how to
+// build, check and run a job given as its table's JSON.
+struct EffectDef {
+  std::string name;
+  std::string stage_prefix;           // chain: the later stage's flag prefix ("dof-"), else ""
+  std::vector<ParamSpec> specs;
+  std::function<nlohmann::json(const std::vector<std::pair<std::string, nlohmann::json>>&)> build;
+  std::function<void(const nlohmann::json&, const std::set<std::string>&)> check;
+  std::function<nlohmann::json(const nlohmann::json&, const ExecOptions&, const RunContext&)> run;
+};
+
+template <class Job>
+EffectDef effect_def(const char* name, const char* prefix, const ParamTable<Job>& t,
+                     std::function<void(const Job&, const std::set<std::string>&)> check,
+                     nlohmann::json (*run)(const Job&, const ExecOptions&, const RunContext&)) {
+  EffectDef e;
+  e.name = name;
+  e.stage_prefix = prefix;
+  for (const Param<Job>& d : t.params()) e.specs.push_back(d.spec);
+  e.build = [&t](const std::vector<std::pair<std::string, nlohmann::json>>& values) {
+    Job j;
+    for (const auto& [n, v] : values) {
+      const Param<Job>& d = t.at(n);
+      d.spec.check(v);
+      d.set(j, v);
+    }
+    return t.to_json(j);
+  };
+  e.check = [&t, check](const nlohmann::json& job, const std::set<std::string>& given) {
+    Job j;
+    t.from_json(j, job, "job");
+    t.validate(j);
+    check(j, given);
+  };
+  e.run = [&t, run](const nlohmann::json& job, const ExecOptions& eo, const RunContext& ctx) {
+    Job j;
+    t.from_json(j, job, "job");
+    return run(j, eo, ctx);
+  };
+  return e;
+}
+
+std::set<std::string> strip_prefixed(const std::set<std::string>& given, const std::string& prefix, bool keep) {
+  std::set<std::string> out;
+  for (const std::string& n : given) {
+    const bool p = n.rfind(prefix, 0) == 0;
+    if (p && keep) out.insert(n.substr(prefix.size()));
+    if (!p && !keep) out.insert(n);
+  }
+  return out;
+}
+
+const std::vector<EffectDef>& effect_defs() {
+  static const std::vector<EffectDef> v = [] {
+    std::vector<EffectDef> d;
+    d.push_back(effect_def<HazeJob>(
+        "haze", "", haze_job_table(),
+        [](const HazeJob& j, const std::set<std::string>& g) {
+          validate_haze(j.haze, g);
+          check_range_step(j.prepare, g);
+        },
+        &run_haze_job));
+    d.push_back(effect_def<FogJob>(
+        "fog", "", fog_job_table(),
+        [](const FogJob& j, const std::set<std::string>& g) {
+          validate_fog(j.fog, g);
+          check_range_step(j.prepare, g);
+        },
+        &run_fog_job));
+    d.push_back(effect_def<AerialJob>(
+        "aerial", "", aerial_job_table(),
+        [](const AerialJob& j, const std::set<std::string>& g) {
+          validate_aerial(j.aerial, g);
+          check_range_step(j.prepare, g);
+        },
+        &run_aerial_job));
+    d.push_back(effect_def<DofJob>(
+        "dof", "", dof_job_table(),
+        [](const DofJob& j, const std::set<std::string>& g) {
+          validate_dof(j.dof, g);
+          check_range_step(j.prepare, g);
+        },
+        &run_dof_job));
+    d.push_back(effect_def<HazeDofJob>(
+        "haze+dof", kDofPrefix, haze_dof_job_table(),
+        [](const HazeDofJob& j, const std::set<std::string>& g) {
+          const std::set<std::string> gh = strip_prefixed(g, kDofPrefix, false);
+          validate_haze(j.haze, gh);
+          check_range_step(j.prepare, gh);
+          try {
+            validate_dof(j.dof, strip_prefixed(g, kDofPrefix, true));
+          } catch (const Error& e) {
+            throw Error(std::string("depth-of-field stage (dof.*): ") + e.what());
+          }
+        },
+        &run_haze_dof_job));
+    return d;
+  }();
+  return v;
+}
+
+const EffectDef& effect_named(const std::string& name, const std::string& where) {
+  std::string n = lower(trim(name));
+  n.erase(std::remove_if(n.begin(), n.end(), [](char c) { return std::isspace(static_cast<unsigned char>(c)); }),
+          n.end());
+  for (const EffectDef& e : effect_defs())
+    if (e.name == n) return e;
+  throw Error(where + ": effect '" + name + "' is not available in brume batch; use one of: " + [] {
+    std::string all;
+    for (const EffectDef& e : effect_defs()) all += (all.empty() ? "" : ", ") + e.name;
+    return all;
+  }() + " (chains: '+'-joined stages, the later stages' parameters prefixed with their name: dof.focus-distance)");
+}
+
+// ---- names -----------------------------------------------------------------------------
+
+const std::set<std::string>& image_extensions() {
+  static const std::set<std::string> s = {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr", ".pfm", ".hdr"};
+  return s;
+}
+
+// The key as a relative path under --out-dir (decisions in batch.hpp).
+std::string output_stem(const std::string& key) {
+  if (key.empty()) throw Error("the key is empty");
+  if (key[0] == '/') throw Error("key '" + key + "' is absolute; keys name files under --out-dir");
+  std::string out, comp;
+  auto flush = [&] {
+    if (comp.empty() || comp == "." || comp == "..")
+      throw Error("key '" + key + "' has an empty, '.' or '..' path component; keys name files under --out-dir");
+    if (comp[0] == '.') comp[0] = '_';
+    out += (out.empty() ? "" : "/") + comp;
+    comp.clear();
+  };
+  for (char c : key) {
+    if (c == '/') {
+      flush();
+      continue;
+    }
+    const unsigned char u = static_cast<unsigned char>(c);
+    const bool bad = u < 0x20 || u == 0x7f || std::string_view("\\:*?\"<>|").find(c) != std::string_view::npos;
+    comp += bad ? '_' : c;
+  }
+  flush();
+  const fs::path p(out);
+  if (image_extensions().count(lower(p.extension().string()))) out = (p.parent_path() / p.stem()).generic_string();
+  return out;
+}
+
+std::string sha256_hex_prefix8(const std::string& msg, std::uint64_t* n) {
+  unsigned char md[EVP_MAX_MD_SIZE];
+  unsigned int len = 0;
+  EVP_MD_CTX* ctx = EVP_MD_CTX_new();
+  if (!ctx || EVP_DigestInit_ex(ctx, EVP_sha256(), nullptr) != 1 ||
+      EVP_DigestUpdate(ctx, msg.data(), msg.size()) != 1 || EVP_DigestFinal_ex(ctx, md, &len) != 1 || len < 8) {
+    EVP_MD_CTX_free(ctx);
+    throw Error("internal: SHA-256 failed");
+  }
+  EVP_MD_CTX_free(ctx);
+  std::uint64_t v = 0;
+  for (int i = 0; i < 8; ++i) v = (v << 8) | md[i];
+  *n = v;
+  return {};
+}
+
+// A cell as the text a flag takes (CSV cells are text already).
+std::string cell_text(const nlohmann::json& v) {
+  if (v.is_string()) return v.get<std::string>();
+  if (v.is_array()) {
+    std::string s;
+    for (const auto& x : v) s += (s.empty() ? "" : ",") + (x.is_string() ? x.get<std::string>() : x.dump());
+    return s;
+  }
+  if (v.is_null()) return "auto";
+  return v.dump();
+}
+
+std::string cell_where(const Manifest& m, const ManifestRow& r, const std::string& col) {
+  return "manifest '" + m.path + "' line " + std::to_string(r.line) + (col.empty() ? "" : ", column '" + col + "'");
+}
+
+}  // namespace
+
+const std::vector<std::string>& batch_effects() {
+  static const std::vector<std::string> v = [] {
+    std::vector<std::string> n;
+    for (const EffectDef& e : effect_defs()) n.push_back(e.name);
+    return n;
+  }();
+  return v;
+}
+
+nlohmann::json batch_frame_to_json(const BatchFrame& f) {
+  return {{"key", f.key},     {"effect", f.effect}, {"line", f.line},   {"job", f.job},
+          {"given", f.given}, {"batch", f.batch},   {"image", f.image}, {"outputs", f.outputs}};
+}
+
+BatchFrame batch_frame_from_json(const nlohmann::json& j) {
+  BatchFrame f;
+  try {
+    f.key = j.at("key").get<std::string>();
+    f.effect = j.at("effect").get<std::string>();
+    f.line = j.at("line").get<int>();
+    f.job = j.at("job");
+    f.given = j.at("given").get<std::set<std::string>>();
+    f.batch = j.at("batch");
+    f.image = j.at("image").get<std::string>();
+    f.outputs = j.at("outputs").get<std::vector<std::string>>();
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(std::string("not a batch frame: ") + e.what());
+  }
+  effect_named(f.effect, "batch frame '" + f.key + "'");
+  if (f.outputs.size() < 2) throw Error("batch frame '" + f.key + "' names fewer than two outputs (image, record)");
+  return f;
+}
+
+int shard_of(std::string_view key, int count) {
+  if (count < 1) throw Error("internal: shard count < 1");
+  std::uint64_t n = 0;
+  sha256_hex_prefix8(std::string(kShardHashName) + '\0' + std::string(key), &n);
+  return static_cast<int>(n % static_cast<std::uint64_t>(count)) + 1;
+}
+
+std::vector<std::string> batch_record_argv(const BatchOptions& o) {
+  std::vector<std::string> a = {"brume", "batch", "--manifest", o.manifest, "--out-dir", o.out_dir,
+                                "--seed", std::to_string(o.seed)};
+  if (!o.format.empty()) a.insert(a.end(), {"--format", o.format});
+  if (!o.effect.empty()) a.insert(a.end(), {"--effect", o.effect});
+  for (const auto& [n, s] : o.params) a.insert(a.end(), {"--param", n + "=" + s});
+  for (const std::string& m : o.maps) a.insert(a.end(), {"--map", m});
+  return a;
+}
+
+std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
+  if (o.out_dir.empty()) throw Error("--out-dir is required: the folder the outputs and records go to");
+  std::string fmt = lower(trim(o.format));
+  if (!fmt.empty() && fmt[0] == '.') fmt.erase(0, 1);
+  if (!fmt.empty() && !image_extensions().count("." + fmt))
+    throw Error("--format '" + o.format + "' is not an image format brume writes; use png, jpg, tif, exr, pfm or hdr");
+  const Manifest m = read_manifest(o.manifest);
+  const fs::path base = fs::path(o.manifest).parent_path();
+  auto resolve_path = [&](const std::string& p) {
+    if (p.empty() || fs::path(p).is_absolute()) return p;
+    return (base / p).lexically_normal().generic_string();
+  };
+
+  std::vector<BatchFrame> frames;
+  std::vector<std::string> errors;
+  std::map<std::string, int> key_line;
+  std::map<std::string, std::string> name_key;
+  std::map<std::string, std::vector<int>> dup;
+  for (const ManifestRow& r : m.rows) {
+    try {
+      // Reserved columns first: key, effect; the rest are the effect's parameters.
+      std::string key, effect = o.effect;
+      std::vector<std::pair<std::string, nlohmann::json>> cells;
+      for (const auto& [col, v] : r.cells) {
+        const std::string c = lower(trim(col));
+        if (c == "key") {
+          key = cell_text(v);
+        } else if (c == "effect") {
+          effect = cell_text(v);
+        } else {
+          cells.emplace_back(col, v);
+        }
+      }
+      if (trim(effect).empty())
+        throw Error(cell_where(m, r, "") + ": no effect; add an 'effect' column or give --effect (" + [] {
+          std::string all;
+          for (const EffectDef& e : effect_defs()) all += (all.empty() ? "" : ", ") + e.name;
+          return all;
+        }() + ")");
+      const EffectDef& e = effect_named(effect, cell_where(m, r, "effect"));
+      // --param NAME=SPEC fills the columns a row does not have.
+      std::vector<std::pair<std::string, nlohmann::json>> all = cells;
+      // Resolve a column name to (job parameter, name hashed by the sampler).
+      auto resolve = [&](const std::string& col) -> std::pair<std::string, std::string> {
+        std::string n = trim(col);
+        std::string prefix;  // the later stage's flag prefix when the column is prefixed with its name
+        const std::string first = e.name.substr(0, e.name.find('+'));
+        if (!e.stage_prefix.empty()) {
+          const std::string stage = e.stage_prefix.substr(0, e.stage_prefix.size() - 1);  // "dof"
+          for (const std::string sep : {".", "-", "_"})
+            if (n.rfind(stage + sep, 0) == 0) {
+              prefix = e.stage_prefix;
+              n = n.substr(stage.size() + 1);
+              break;
+            }
+        }
+        if (prefix.empty() && n.rfind(first + ".", 0) == 0) n = n.substr(first.size() + 1);
+        std::string canon;
+        if (prefix.empty()) {
+          canon = detail::canonical_param_name(e.specs, n, e.name);
+          if (!e.stage_prefix.empty() && canon.rfind(e.stage_prefix, 0) == 0) prefix = e.stage_prefix;
+        } else {
+          canon = detail::canonical_param_name(e.specs, prefix + n, e.name);
+        }
+        const ParamSpec* sp = nullptr;
+        for (const ParamSpec& s : e.specs)
+          if (s.name == canon) sp = &s;
+        if (sp->block == "output" && (canon == "out" || canon == "record" || sp->kind == ParamKind::text))
+          throw Error("'" + col + "' is an output, named by brume batch from the key under --out-dir (maps: --map NAME)");
+        const std::string hashed =
+            prefix.empty() ? canon : prefix.substr(0, prefix.size() - 1) + "." + canon.substr(prefix.size());
+        return {canon, hashed};
+      };
+      std::set<std::string> have;
+      for (const auto& [col, v] : cells) have.insert(resolve(col).first);
+      for (const auto& [n, s] : o.params) {
+        std::pair<std::string, std::string> rn;
+        try {
+          rn = resolve(n);
+        } catch (const Error& ex) {
+          throw Error("--param " + n + "=" + s + " for effect " + e.name + ": " + ex.what());
+        }
+        if (!have.count(rn.first)) all.emplace_back(n, s), have.insert(rn.first);
+      }
+
+      std::vector<std::pair<std::string, nlohmann::json>> values;
+      std::set<std::string> given;
+      nlohmann::json specs = nlohmann::json::object(), drawn = nlohmann::json::object();
+      std::string image_text;
+      // The key must be known before any draw: the default key is the image as written.
+      for (const auto& [col, v] : all)
+        if (resolve(col).first == "image") image_text = cell_text(v);
+      if (key.empty()) key = fs::path(image_text).lexically_normal().generic_string();
+      if (key.empty()) throw Error(cell_where(m, r, "") + ": no 'image' column (and no key)");
+      for (const auto& [col, v] : all) {
+        const auto [canon, hashed] = resolve(col);
+        if (!given.insert(canon).second)
+          throw Error(cell_where(m, r, col) + ": the parameter '" + canon + "' is given twice");
+        const ParamSpec* sp = nullptr;
+        for (const ParamSpec& s : e.specs)
+          if (s.name == canon) sp = &s;
+        nlohmann::json value;
+        try {
+          if (sp->kind == ParamKind::text) {
+            // Files: relative to the manifest's folder.
+            std::string t = cell_text(v);
+            // Files are relative to the manifest's folder: the input and depth
+            // files always (a missing one is then reported where it was looked
+            // for); other text (aerial's --sensitivity 'default' or a CSV, fog's
+            // --table) when such a file exists there, else as written.
+            const bool is_file = (sp->block == "input" || sp->block == "depth") && canon != "depth-channel";
+            std::error_code fec;
+            value = is_file || (!t.empty() && fs::exists(base / t, fec)) ? resolve_path(t) : t;
+            sp->check(value);
+          } else if (!v.is_string() && !v.is_null() && !v.is_array() && sp->kind != ParamKind::choice) {
+            value = v;  // a JSON number or boolean: checked as it is
+            if (sp->kind == ParamKind::integer && v.is_number_float() && std::floor(v.get<double>()) == v.get<double>())
+              value = static_cast<long long>(v.get<double>());
+            sp->check(value);
+          } else {
+            const Distribution d = parse_distribution(*sp, cell_text(v));
+            if (d.kind == Distribution::Kind::fixed) {
+              value = d.values.at(0);
+            } else {
+              value = draw(d, sample_unit(o.seed, key, hashed));
+              specs[hashed] = d.text();
+              drawn[hashed] = value;
+            }
+          }
+        } catch (const Error& ex) {
+          throw Error(cell_where(m, r, col) + ": " + ex.what());
+        }
+        values.emplace_back(canon, value);
+      }
+
+      BatchFrame f;
+      f.key = key;
+      f.effect = e.name;
+      f.line = r.line;
+      f.image = image_text.empty() ? "" : resolve_path(image_text);
+      std::string stem;
+      try {
+        stem = output_stem(key);
+      } catch (const Error& ex) {
+        throw Error(cell_where(m, r, "key") + ": " + ex.what());
+      }
+      std::string ext = fmt.empty() ? lower(fs::path(image_text).extension().string()) : "." + fmt;
+      if (!image_extensions().count(ext))
+        throw Error(cell_where(m, r, "image") + ": the output would take the input's extension '" + ext +
+                    "', which brume does not write; give --format");
+      const fs::path od(o.out_dir);
+      const std::string out = (od / (stem + ext)).generic_string();
+      const std::string rec = (od / (stem + ".json")).generic_string();
+      values.emplace_back("out", out);
+      f.outputs.push_back(out);
+      for (const std::string& map : o.maps) {
+        bool declared = false;
+        for (const ParamSpec& s : e.specs)
+          if (s.name == map && s.block == "output" && s.kind == ParamKind::text && map != "out" && map != "record")
+            declared = true;
+        if (!declared) {
+          std::string all_maps;
+          for (const ParamSpec& s : e.specs)
+            if (s.block == "output" && s.kind == ParamKind::text && s.name != "out" && s.name != "record")
+              all_maps += (all_maps.empty() ? "" : ", ") + s.name;
+          throw Error("--map " + map + ": effect " + e.name + " has no such map; its maps: " + all_maps);
+        }
+        const std::string p = (od / (stem + "." + map + ".exr")).generic_string();
+        values.emplace_back(map, p);
+        f.outputs.push_back(p);
+      }
+      values.emplace_back("record", rec);
+      f.outputs.push_back(rec);
+      f.job = e.build(values);
+      f.given = given;
+      try {
+        e.check(f.job, f.given);
+      } catch (const Error& ex) {
+        throw Error(cell_where(m, r, "") + ": " + ex.what());
+      }
+      f.batch = {{"key", key},
+                 {"effect", e.name},
+                 {"seed", o.seed},
+                 {"sampling", {{"sampler", kSamplerName}, {"seed", o.seed}, {"key", key}, {"specs", specs}}},
+                 {"values", drawn}};
+      if (key_line.count(key)) {
+        dup[key].push_back(r.line);
+        continue;
+      }
+      key_line[key] = r.line;
+      const std::string name_lc = lower(stem);  // case-insensitive file systems
+      if (name_key.count(name_lc))
+        throw Error(cell_where(m, r, "key") + ": keys '" + name_key[name_lc] + "' and '" + key +
+                    "' give the same output name '" + stem + "'; make the keys differ by more than the extension, "
+                    "case or the characters mapped to '_'");
+      name_key[name_lc] = key;
+      frames.push_back(std::move(f));
+    } catch (const Error& ex) {
+      errors.push_back(ex.what());
+    }
+  }
+  for (const auto& [key, lines] : dup) {
+    std::string l = std::to_string(key_line[key]);
+    for (int x : lines) l += ", " + std::to_string(x);
+    errors.push_back("manifest '" + m.path + "': key '" + key + "' is on lines " + l +
+                     "; keys name the outputs and must be unique (add a 'key' column)");
+  }
+  if (!errors.empty()) {
+    std::string msg = std::to_string(errors.size()) + " manifest error" + (errors.size() > 1 ? "s" : "") +
+                      " (nothing was run):";
+    for (std::size_t i = 0; i < errors.size() && i < 20; ++i) msg += "\n  " + errors[i];
+    if (errors.size() > 20) msg += "\n  ... and " + std::to_string(errors.size() - 20) + " more";
+    throw Error(msg);
+  }
+  if (frames.empty()) throw Error("manifest '" + m.path + "' has no rows");
+  return frames;
+}
+
+// ---- one frame ---------------------------------------------------------------------------
+
+namespace {
+
+void collect_inputs(const nlohmann::json& j, std::vector<std::pair<std::string, std::string>>& out) {
+  if (j.is_object()) {
+    if (j.contains("path") && j.contains("sha256") && j["path"].is_string() && j["sha256"].is_string())
+      out.emplace_back(j["path"].get<std::string>(), j["sha256"].get<std::string>());
+    for (const auto& [k, v] : j.items()) collect_inputs(v, out);
+  } else if (j.is_array()) {
+    for (const auto& v : j) collect_inputs(v, out);
+  }
+}
+
+// Temporaries an earlier process left beside a frame's outputs (SIGKILL
+// cannot be caught): .NAME.brume-tmp-PID-N. A frame belongs to one shard, so
+// no other live process writes them.
+void remove_stale_temporaries(const BatchFrame& f) {
+  for (const std::string& o : f.outputs) {
+    const fs::path p(o);
+    const fs::path dir = p.parent_path().empty() ? fs::path(".") : p.parent_path();
+    std::error_code ec;
+    if (!fs::is_directory(dir, ec)) continue;
+    const std::string prefix = "." + p.filename().string() + ".brume-tmp-";
+    for (const auto& ent : fs::directory_iterator(dir, ec))
+      if (ent.path().filename().string().rfind(prefix, 0) == 0) fs::remove(ent.path(), ec);
+  }
+}
+
+const EffectDef& def_of(const std::string& name) {
+  for (const EffectDef& e : effect_defs())
+    if (e.name == name) return e;
+  throw Error("internal: batch effect '" + name + "'");
+}
+
+}  // namespace
+
+bool batch_frame_done(const BatchFrame& f) {
+  std::error_code ec;
+  for (const std::string& o : f.outputs)
+    if (!fs::is_regular_file(o, ec)) return false;
+  nlohmann::json rec;
+  try {
+    std::ifstream in(f.outputs.back());
+    rec = nlohmann::json::parse(in);
+  } catch (const std::exception&) {
+    return false;
+  }
+  if (!rec.is_object() || rec.value("job", nlohmann::json()) != f.job || rec.value("batch", nlohmann::json()) != f.batch)
+    return false;
+  std::vector<std::pair<std::string, std::string>> inputs;
+  collect_inputs(rec.value("inputs", nlohmann::json()), inputs);
+  if (inputs.empty()) return false;
+  for (const auto& [path, sha] : inputs) {
+    try {
+      if (sha256_file(path) != sha) return false;
+    } catch (const std::exception&) {
+      return false;
+    }
+  }
+  return true;
+}
+
+namespace {
+
+// The results manifest's line for a frame.
+nlohmann::json result_line(const BatchFrame& f, const BatchFrameResult& r) {
+  nlohmann::json outputs = nlohmann::json::object();
+  outputs["image"] = f.outputs.front();
+  outputs["record"] = f.outputs.back();
+  for (std::size_t i = 1; i + 1 < f.outputs.size(); ++i) outputs["maps"].push_back(f.outputs[i]);
+  // The input files: the text parameters of the input and depth blocks that are set.
+  nlohmann::json inputs = nlohmann::json::object();
+  for (const ParamSpec& s : def_of(f.effect).specs) {
+    if ((s.block != "input" && s.block != "depth") || s.kind != ParamKind::text || s.name == "depth-channel") continue;
+    const nlohmann::json& v = f.job[s.block][s.name];
+    if (v.is_string() && !v.get<std::string>().empty()) inputs[s.name] = v;
+  }
+  nlohmann::json params = nlohmann::json::object();
+  // The parameters the row set (fixed and drawn), as the job holds them.
+  for (const std::string& n : f.given)
+    for (const auto& [block, vals] : f.job.items())
+      if (block != "input" && block != "depth" && block != "output" && vals.is_object() && vals.contains(n))
+        params[f.effect == "haze+dof" && n.rfind(kDofPrefix, 0) == 0 ? "dof." + n.substr(4) : n] = vals[n];
+  nlohmann::json l = {{"key", f.key},        {"status", r.status},  {"effect", f.effect}, {"inputs", inputs},
+                      {"outputs", outputs},  {"parameters", params}, {"sampling", f.batch["sampling"]},
+                      {"seconds", r.seconds}};
+  if (!r.error.empty()) l["error"] = r.error;
+  return l;
+}
+
+}  // namespace
+
+BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, const std::vector<std::string>& argv) {
+  BatchFrameResult r;
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    remove_stale_temporaries(f);
+    std::error_code ec;
+    for (const std::string& o : f.outputs) fs::create_directories(fs::path(o).parent_path(), ec);
+    RunContext ctx;
+    ctx.argv = argv;
+    ctx.given = f.given;
+    ctx.extra = {{"batch", f.batch}};
+    def_of(f.effect).run(f.job, exec, ctx);
+    r.status = "ok";
+  } catch (const std::exception& e) {
+    r.status = "failed";
+    r.error = e.what();
+    // A failed frame leaves no output of its key behind (not even one from an
+    // earlier run with other parameters): the folder never holds an output the
+    // manifest no longer describes.
+    std::error_code ec;
+    for (const std::string& o : f.outputs) fs::remove(o, ec);
+  }
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  r.line = result_line(f, r);
+  return r;
+}
+
+// ---- the whole run --------------------------------------------------------------------------
+
+BatchSummary run_batch(const BatchOptions& o) {
+  if (o.shard_count < 1 || o.shard_index < 1 || o.shard_index > o.shard_count)
+    throw Error("--shard " + std::to_string(o.shard_index) + "/" + std::to_string(o.shard_count) +
+                " is not allowed: I/N with 1 <= I <= N (I counts from 1, as Slurm's array index can)");
+  if (o.workers < 0 || o.workers > 4096)
+    throw Error("--workers " + std::to_string(o.workers) + " is not allowed: 0 (one per core) to 4096");
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::vector<BatchFrame> all = plan_batch(o);
+  std::vector<const BatchFrame*> frames;
+  for (const BatchFrame& f : all)
+    if (o.shard_count == 1 || shard_of(f.key, o.shard_count) == o.shard_index) frames.push_back(&f);
+  std::error_code ec;
+  fs::create_directories(o.out_dir, ec);
+  if (!fs::is_directory(o.out_dir)) throw Error("--out-dir '" + o.out_dir + "' cannot be created: " + ec.message());
+  check_output_dir((fs::path(o.out_dir) / "results.jsonl").string(), "--out-dir");
+
+  const int hw = std::max(1u, std::thread::hardware_concurrency());
+  const int asked = o.workers > 0 ? o.workers : hw;
+  const int workers = std::max(1, std::min<int>(asked, static_cast<int>(frames.size())));
+  ExecOptions exec = o.exec;
+  // Results do not depend on threads; frames in flight share the cores. From
+  // the workers asked for, not those a small shard uses, so that the records'
+  // execution.threads is the same in every shard.
+  if (exec.threads == 0) exec.threads = std::max(1, hw / asked);
+  const std::vector<std::string> argv = batch_record_argv(o);
+
+  BatchSummary s;
+  s.frames = frames.size();
+  std::vector<nlohmann::json> lines(frames.size());
+  std::atomic<std::size_t> next{0};
+  std::mutex mu;
+  std::size_t finished = 0, worked = 0;
+  const bool tty = o.progress && isatty(STDERR_FILENO);
+  auto last_print = std::chrono::steady_clock::now() - std::chrono::seconds(10);
+  auto progress = [&](bool final) {
+    // Rate and ETA over the frames that ran (skipped ones cost nothing).
+    const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double rate = worked > 0 ? static_cast<double>(worked) / el : 0.0;
+    const std::size_t left = s.frames - finished;
+    char eta[32] = "?";
+    if (rate > 0) std::snprintf(eta, sizeof eta, "%.0f s", static_cast<double>(left) / rate);
+    char buf[256];
+    std::snprintf(buf, sizeof buf, "brume batch: %zu/%zu frames (%zu ok, %zu skipped, %zu failed)  %.2f frames/s  ETA %s",
+                  finished, s.frames, s.ok, s.skipped, s.failed, rate, final ? "0 s" : eta);
+    if (tty) {
+      const int width = 24;
+      const int fill = s.frames ? static_cast<int>(width * finished / s.frames) : width;
+      std::fprintf(stderr, "\r[%s%s] %s\033[K%s", std::string(fill, '#').c_str(), std::string(width - fill, '.').c_str(),
+                   buf, final ? "\n" : "");
+    } else {
+      std::fprintf(stderr, "%s\n", buf);
+    }
+    std::fflush(stderr);
+  };
+
+  auto worker = [&] {
+    for (;;) {
+      const std::size_t i = next.fetch_add(1);
+      if (i >= frames.size()) return;
+      const BatchFrame& f = *frames[i];
+      BatchFrameResult r;
+      if (o.resume && batch_frame_done(f)) {
+        r.status = "skipped";
+        r.line = result_line(f, r);
+      } else {
+        r = run_batch_frame(f, exec, argv);
+      }
+      std::lock_guard<std::mutex> lock(mu);
+      lines[i] = r.line;
+      ++finished;
+      if (r.status == "ok") ++s.ok, ++worked;
+      if (r.status == "skipped") ++s.skipped;
+      if (r.status == "failed") {
+        ++s.failed, ++worked;
+        // Frame, file, message: enough to find the bad input without the results file.
+        std::fprintf(stderr, "%sbrume batch: frame '%s' (%s) failed: %s\n", tty ? "\r\033[K" : "", f.key.c_str(),
+                     f.image.c_str(), r.error.c_str());
+      }
+      const auto now = std::chrono::steady_clock::now();
+      // A terminal's bar is redrawn at most 10 times a second; plain lines (a log) once a second.
+      if (o.progress && (now - last_print > std::chrono::milliseconds(tty ? 100 : 1000) || finished == s.frames)) {
+        last_print = now;
+        if (finished < s.frames) progress(false);
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int w = 1; w < workers; ++w) pool.emplace_back(worker);
+  worker();
+  for (std::thread& t : pool) t.join();
+  s.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (o.progress) progress(true);
+
+  // The results manifest: one line per frame of this shard, in manifest
+  // order, written whole at the end (a killed run leaves none; --resume
+  // writes it, with the frames done before as "skipped").
+  const std::string name = o.shard_count == 1 ? "results.jsonl"
+                                              : "results.shard-" + std::to_string(o.shard_index) + "-of-" +
+                                                    std::to_string(o.shard_count) + ".jsonl";
+  s.results = (fs::path(o.out_dir) / name).generic_string();
+  std::string text;
+  for (const nlohmann::json& l : lines) text += l.dump() + "\n";
+  OutputSet outs;
+  outs.write_text(s.results, text, "--out-dir");
+  outs.commit();
+  return s;
+}
+
+}  // namespace brume
