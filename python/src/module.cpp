@@ -49,13 +49,13 @@
 #include <nlohmann/json.hpp>
 
 #include "brume/aerial.hpp"
+#include "brume/batch.hpp"
 #include "brume/blur.hpp"
 #include "brume/depth.hpp"
 #include "brume/depth_pipeline.hpp"
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/fog.hpp"
-#include "brume/batch.hpp"
 #include "brume/gpu.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
