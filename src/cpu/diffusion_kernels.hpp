@@ -45,6 +45,14 @@ void diffuse_conductance_reference(Image& f, const std::vector<double>& wx, cons
                                    int iterations, bool f16);
 void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16, int threads);
 
+// Vector width of the fast path's row kernels: 0 = 128-bit vectors (any
+// CPU), 1 = AVX2, 2 = AVX-512F. Every width evaluates the same elementwise
+// operations in the same order, so all give the same bits; the default is
+// the widest the CPU has. set_diffusion_simd_limit caps it (-1: no cap), so
+// that tests can compare the widths on one host.
+int diffusion_simd_level();
+void set_diffusion_simd_limit(int level);
+
 // Round n floats to the nearest IEEE binary16 value (ties to even), in place.
 void round_to_half(float* v, std::size_t n);
 
