@@ -32,6 +32,7 @@
 #include <cmath>
 #include <cstring>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "cpu/diffusion_rows.hpp"
@@ -372,29 +373,67 @@ void round_to_half(float* v, std::size_t n) {
   for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<float>(static_cast<_Float16>(v[i]));
 }
 
-Image rates_from_scale(const Image& sigma, const DiffusionParams& p, int iterations, int threads) {
+float* Workspace::get(Slot s, std::size_t n) {
+  if (n_[s] < n) {
+    p_[s].reset();  // before the new allocation: never hold both
+    p_[s].reset(new float[n]);
+    n_[s] = n;
+  }
+  return p_[s].get();
+}
+std::size_t Workspace::bytes() const {
+  std::size_t b = 0;
+  for (std::size_t n : n_) b += n * sizeof(float);
+  return b;
+}
+
+namespace {
+std::mutex g_pool_mutex;
+std::unique_ptr<Workspace> g_pool;  // the one workspace kept between calls
+}  // namespace
+
+WorkspaceLease::WorkspaceLease() {
+  {
+    std::lock_guard<std::mutex> lock(g_pool_mutex);
+    ws_ = std::move(g_pool);
+  }
+  if (!ws_) ws_ = std::make_unique<Workspace>();
+}
+WorkspaceLease::~WorkspaceLease() {
+  std::lock_guard<std::mutex> lock(g_pool_mutex);
+  // Keep the larger of the two (the other is freed here).
+  if (!g_pool || g_pool->bytes() < ws_->bytes()) g_pool = std::move(ws_);
+}
+
+void release_workspace() {
+  std::unique_ptr<Workspace> drop;
+  std::lock_guard<std::mutex> lock(g_pool_mutex);
+  drop = std::move(g_pool);
+}
+
+const float* rates_from_scale(const Image& sigma, const DiffusionParams& p, int iterations, int threads,
+                              Workspace& ws) {
   const float s0 = static_cast<float>(p.sigma0), Nf = static_cast<float>(iterations);
   const bool standard = p.scheme == Scheme::standard;
-  Image rho(sigma.width, sigma.height, 1);
   const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(sigma.data.size());
+  float* rho = ws.get(Workspace::rates, sigma.data.size());
 #pragma omp parallel for num_threads(thread_count(threads)) schedule(static)
   for (std::ptrdiff_t i = 0; i < n; ++i) {
     const float s = sigma.data[i];
-    rho.data[i] = standard ? sh::brume_standard_rate(s, s0, Nf) : sh::brume_invariant_rate(s, s0, Nf);
+    rho[i] = standard ? sh::brume_standard_rate(s, s0, Nf) : sh::brume_invariant_rate(s, s0, Nf);
   }
   return rho;
 }
 
-void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16,
-                              int threads) {
+void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16, int threads,
+                              Workspace& ws) {
   const int W = f.width, H = f.height;
   const std::size_t Ws = static_cast<std::size_t>(W);
   const int nt = thread_count(threads);
-  // Ping-pong partner, deliberately not zero-filled (every value is written
-  // before it is read).
-  std::unique_ptr<float[]> buf(new float[f.data.size()]);
+  // Ping-pong partner, not zero-filled (every value is written before it is
+  // read; a new one is first touched by the threads that use it).
   float* src = f.data.data();
-  float* dst = buf.get();
+  float* dst = ws.get(Workspace::partner, f.data.size());
   if (f16) round_to_half(src, f.data.size());
   const std::vector<float> zero(Ws, 0.0f);
   const RowKernels kern = row_kernels();
@@ -414,7 +453,8 @@ void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int it
   if (src != f.data.data()) std::memcpy(f.data.data(), src, f.data.size() * sizeof(float));
 }
 
-void diffuse_fast(Image& f, const Image& rho_map, int iterations, const DiffusionParams& p, int threads) {
+void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionParams& p, int threads,
+                  Workspace& ws) {
   const int W = f.width, H = f.height, N = iterations;
   const std::size_t np = f.pixels();
   const std::size_t Ws = static_cast<std::size_t>(W);
@@ -423,12 +463,12 @@ void diffuse_fast(Image& f, const Image& rho_map, int iterations, const Diffusio
   const bool exact = p.scheme == Scheme::invariant_exact;
   const int nt = thread_count(threads);
   const int edge_mode = static_cast<int>(p.edge_rate);
-  const std::vector<float>& rates = rho_map.data;
   const RowKernels kern = row_kernels();
 
   if (p.scheme == Scheme::standard) {
     // Edge weights of eq. 12, fixed for all iterations: the conductance path.
-    std::vector<float> wr(np), wd(np);
+    float* wr = ws.get(Workspace::edge_x, np);
+    float* wd = ws.get(Workspace::edge_y, np);
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x) {
@@ -437,18 +477,16 @@ void diffuse_fast(Image& f, const Image& rho_map, int iterations, const Diffusio
         wr[i] = x < W - 1 ? sh::brume_edge_rate(rc, rates[i + 1], edge_mode) : 0.0f;
         wd[i] = y < H - 1 ? sh::brume_edge_rate(rc, rates[i + Ws], edge_mode) : 0.0f;
       }
-    diffuse_conductance_fast(f, wr.data(), wd.data(), N, f16, threads);
+    diffuse_conductance_fast(f, wr, wd, N, f16, threads, ws);
     return;
   }
 
   // A constant rate needs no per-pixel rate, offset or scale arrays.
-  const bool uniform = std::all_of(rates.begin(), rates.end(), [&](float v) { return v == rates[0]; });
+  const bool uniform = std::all_of(rates, rates + np, [&](float v) { return v == rates[0]; });
 
-  // Ping-pong partner, deliberately not zero-filled (every value is written
-  // before it is read).
-  std::unique_ptr<float[]> buf(new float[f.data.size()]);
+  // Ping-pong partner, as in diffuse_conductance_fast.
   float* src = f.data.data();
-  float* dst = buf.get();
+  float* dst = ws.get(Workspace::partner, f.data.size());
   if (f16) round_to_half(src, f.data.size());
 
   if (uniform && f16 && uniform_iterations_f16(src, W, H, N, s0, rates[0], exact, edge_mode, nt)) {
@@ -481,11 +519,14 @@ void diffuse_fast(Image& f, const Image& rho_map, int iterations, const Diffusio
   } else {
     // Per-pixel rate, sigma_k as a running product, and the exact scheme's
     // variance ratio (e^{2 rho} - 1)/(2 rho).
-    const float* rho = rates.data();
-    std::vector<float> sig(np, s0), growth(np), vratio(np);
+    const float* rho = rates;
+    float* sig = ws.get(Workspace::sigma, np);
+    float* growth = ws.get(Workspace::growth, np);
+    float* vratio = ws.get(Workspace::vratio, np);
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y)
       for (std::size_t i = y * Ws; i < (y + 1) * Ws; ++i) {
+        sig[i] = s0;
         growth[i] = std::exp(rho[i]);
         vratio[i] = sh::brume_step_variance_ratio(rho[i]);
       }
@@ -494,7 +535,7 @@ void diffuse_fast(Image& f, const Image& rho_map, int iterations, const Diffusio
 #pragma omp parallel for num_threads(nt) schedule(static)
       for (int y = 0; y < H; ++y) {
         // (advances sigma_k of the row to sigma_{k+1})
-        kern.general(src, dst, rho, sig.data() + y * Ws, growth.data() + y * Ws, vratio.data() + y * Ws, exact,
+        kern.general(src, dst, rho, sig + y * Ws, growth + y * Ws, vratio + y * Ws, exact,
                      edge_mode, W, H, y, scratch[static_cast<std::size_t>(omp_get_thread_num())]);
         if (f16) round_to_half(dst + y * Ws * 4, Ws * 4);
       }
