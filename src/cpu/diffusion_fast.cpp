@@ -49,8 +49,8 @@ int thread_count(int requested) { return requested > 0 ? requested : omp_get_max
 
 // Interior of a row when every pixel has the same offset h = n + fr and the
 // same rate w (so every eq. 12 weight is w): a contiguous loop over floats,
-// compiled for three vector widths (the same elementwise operations in the
-// same order in each, hence the same bits).
+// compiled for 128-bit vectors and for AVX2 (the same elementwise operations
+// in the same order in each, hence the same bits; why not AVX-512: row_kernels).
 #define BRUME_UNIFORM_ROW_ARGS                                                                      \
   const float *__restrict s, const float *__restrict u0, const float *__restrict u1,               \
       const float *__restrict d0, const float *__restrict d1, float *__restrict o, std::size_t begin, \
@@ -70,7 +70,6 @@ using UniformRow = void (*)(BRUME_UNIFORM_ROW_ARGS);
 void uniform_row_generic(BRUME_UNIFORM_ROW_ARGS) { BRUME_UNIFORM_ROW_CALL; }
 #if defined(__x86_64__)
 __attribute__((target("avx2"))) void uniform_row_avx2(BRUME_UNIFORM_ROW_ARGS) { BRUME_UNIFORM_ROW_CALL; }
-__attribute__((target("avx512f"))) void uniform_row_avx512(BRUME_UNIFORM_ROW_ARGS) { BRUME_UNIFORM_ROW_CALL; }
 #endif
 #undef BRUME_UNIFORM_ROW_CALL
 #undef BRUME_UNIFORM_ROW_ARGS
@@ -335,7 +334,14 @@ int simd_available() {
 RowKernels row_kernels() {
   switch (diffusion_simd_level()) {
 #if defined(__x86_64__)
-    case 2: return {uniform_row_avx512, general_row_avx512, standard_row_avx512};
+    // The constant-scale rows stay at AVX2 on AVX-512 hosts: measured on an
+    // AMD EPYC (Zen, 2 cores, 1600x1120, sigma 25) they take 1.3x longer with
+    // 512-bit vectors (73-78 ms against 100-108 ms of CPU time per blur),
+    // presumably because taps at offsets of n RGBA pixels (16n bytes) make
+    // three in four 64-byte loads straddle two cache lines (one in four at 32
+    // bytes). The space-variant rows gain from 512 bits (160 against 175 ms):
+    // their per-pixel offsets and weights are arithmetic-bound.
+    case 2: return {uniform_row_avx2, general_row_avx512, standard_row_avx512};
     case 1: return {uniform_row_avx2, general_row_avx2, standard_row_avx2};
 #endif
     default: return {uniform_row_generic, general_row_generic, standard_row_generic};
