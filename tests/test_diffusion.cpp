@@ -413,7 +413,9 @@ TEST(DiffusionSimd, EveryVectorWidthGivesTheSameBits) {
   // operations in the same order (no contraction), so they must agree bit for
   // bit: every scheme, edge rate and precision, constant and space-variant
   // maps, a width that is no multiple of the vector (tails), and the
-  // conductance path.
+  // conductance path. Width 0 also runs f16 on a constant map in float
+  // storage rounded to binary16 each iteration, which the binary16 (F16C)
+  // storage of the wider levels must match bit for bit.
   const int widest = cpu::diffusion_simd_level();
   if (widest < 2) std::printf("[ INFO ] this CPU has no AVX-512F: comparing widths 0..%d only\n", widest);
   if (widest < 1) GTEST_SKIP() << "this CPU has neither AVX2 nor AVX-512F: one vector width only";

@@ -387,9 +387,18 @@ float* Workspace::get(Slot s, std::size_t n) {
   }
   return p_[s].get();
 }
+std::uint16_t* Workspace::get_half(int which, std::size_t n) {
+  if (hn_[which] < n) {
+    h_[which].reset();
+    h_[which].reset(new std::uint16_t[n]);
+    hn_[which] = n;
+  }
+  return h_[which].get();
+}
 std::size_t Workspace::bytes() const {
   std::size_t b = 0;
   for (std::size_t n : n_) b += n * sizeof(float);
+  for (std::size_t n : hn_) b += n * sizeof(std::uint16_t);
   return b;
 }
 
@@ -490,14 +499,19 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
   // A constant rate needs no per-pixel rate, offset or scale arrays.
   const bool uniform = std::all_of(rates, rates + np, [&](float v) { return v == rates[0]; });
 
-  // Ping-pong partner, as in diffuse_conductance_fast.
   float* src = f.data.data();
-  float* dst = ws.get(Workspace::partner, f.data.size());
   if (f16) round_to_half(src, f.data.size());
+  // (Level 0 keeps binary16 values in float storage, rounded by
+  // round_to_half: the tests' peer of the F16C storage.)
+  if (uniform && f16 && diffusion_simd_level() >= 1 &&
+      uniform_iterations_f16(src, W, H, N, s0, rates[0], exact, edge_mode, nt,
+                             ws.get_half(0, f.data.size()), ws.get_half(1, f.data.size()))) {
+    return;  // done in binary16 storage (result in f)
+  }
+  // Ping-pong partner, as in diffuse_conductance_fast.
+  float* dst = ws.get(Workspace::partner, f.data.size());
 
-  if (uniform && f16 && uniform_iterations_f16(src, W, H, N, s0, rates[0], exact, edge_mode, nt)) {
-    // done in binary16 storage (result in f)
-  } else if (uniform) {
+  if (uniform) {
     const float rho = rates[0];
     const float growth = std::exp(rho);
     float sig = s0;  // sigma_k, the same running product as the general path

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <vector>
 
@@ -34,11 +35,15 @@ class Workspace {
   enum Slot { partner, rates, sigma, growth, vratio, edge_x, edge_y, kSlots };
   // At least n floats, uninitialised; valid until the next get of that slot.
   float* get(Slot s, std::size_t n);
+  // The two binary16 ping-pong buffers of the f16 constant-scale path.
+  std::uint16_t* get_half(int which, std::size_t n);
   std::size_t bytes() const;
 
  private:
   std::unique_ptr<float[]> p_[kSlots];
   std::size_t n_[kSlots] = {};
+  std::unique_ptr<std::uint16_t[]> h_[2];
+  std::size_t hn_[2] = {};
 };
 
 // One diffusion call's hold on a workspace: the process keeps at most one
@@ -91,7 +96,9 @@ void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int it
 // CPU), 1 = AVX2, 2 = AVX-512F. Every width evaluates the same elementwise
 // operations in the same order, so all give the same bits; the default is
 // the widest the CPU has. set_diffusion_simd_limit caps it (-1: no cap), so
-// that tests can compare the widths on one host.
+// that tests can compare the widths on one host; level 0 also keeps the f16
+// constant-scale path in float storage (round_to_half after every
+// iteration) instead of binary16 storage, the bits the latter must match.
 int diffusion_simd_level();
 void set_diffusion_simd_limit(int level);
 
