@@ -1,12 +1,18 @@
 // Diffusion engine: accuracy against a true Gaussian, the impulse variance of
 // every scheme against its closed form, invariants (constant images, mass,
 // mirror symmetry), the fast path against the double-precision reference,
-// thread-count independence, and the f16 finding of Hansard §5.2.
+// thread-count independence, the vector widths of the fast path (same
+// bits), and the f16 finding of Hansard §5.2.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <iterator>
+#include <thread>
+#include <vector>
 
 #include "brume/diffusion.hpp"
 #include "brume/error.hpp"
+#include "cpu/diffusion_kernels.hpp"
 #include "test_util.hpp"
 
 using namespace brume;
@@ -377,4 +383,147 @@ TEST(DiffusionErrors, TargetBelowInnerScaleIsAnError) {
   EXPECT_THROW(diffuse(f, bad, 2.0, params(Scheme::standard)), Error);
   Image nan_map(8, 8, 1, NAN);
   EXPECT_THROW(diffuse(f, nan_map, 2.0, params(Scheme::standard)), Error);
+}
+
+namespace {
+
+// A scale map that varies along both axes, smoothly (a dome) and with a sharp
+// step (a "near object" at the inner scale), like a haze map of a scene.
+Image dome_map(int w, int h, double s0, double smax) {
+  Image m(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const double u = (x - 0.4 * w) / w, v = (y - 0.6 * h) / h;
+      double t = std::max(0.0, 1.0 - 2.5 * (u * u + v * v));
+      if (x > w / 5 && x < w / 3 && y > h / 4) t = 0.0;
+      m.at(x, y) = static_cast<float>(s0 + t * (smax - s0));
+    }
+  return m;
+}
+
+// Caps the fast path's vector width for the scope (cpu::set_diffusion_simd_limit).
+struct SimdLimit {
+  explicit SimdLimit(int level) { cpu::set_diffusion_simd_limit(level); }
+  ~SimdLimit() { cpu::set_diffusion_simd_limit(-1); }
+};
+
+}  // namespace
+
+TEST(DiffusionSimd, EveryVectorWidthGivesTheSameBits) {
+  // The 128-bit, AVX2 and AVX-512 row kernels evaluate the same elementwise
+  // operations in the same order (no contraction), so they must agree bit for
+  // bit: every scheme, edge rate and precision, constant and space-variant
+  // maps, a width that is no multiple of the vector (tails), and the
+  // conductance path. Width 0 also runs f16 on a constant map in float
+  // storage rounded to binary16 each iteration, which the binary16 (F16C)
+  // storage of the wider levels must match bit for bit.
+  const int widest = cpu::diffusion_simd_level();
+  if (widest < 2) std::printf("[ INFO ] this CPU has no AVX-512F: comparing widths 0..%d only\n", widest);
+  if (widest < 1) GTEST_SKIP() << "this CPU has neither AVX2 nor AVX-512F: one vector width only";
+  const int W = 103, H = 67;
+  const Image f = texture(W, H);
+  const Image maps[] = {constant_map(f, 9.0), ramp_map(W, H, 1.0, 9.0), dome_map(W, H, 1.0, 9.0)};
+  for (Scheme s : {Scheme::standard, Scheme::invariant, Scheme::invariant_exact})
+    for (EdgeRate e : {EdgeRate::mean, EdgeRate::min, EdgeRate::harmonic})
+      for (Precision p : {Precision::f32, Precision::f16})
+        for (std::size_t m = 0; m < std::size(maps); ++m) {
+          DiffusionParams dp = params(s, p);
+          dp.edge_rate = e;
+          std::vector<Image> out;
+          for (int level = 0; level <= widest; ++level) {
+            SimdLimit cap(level);
+            Image g = f;
+            diffuse(g, maps[m], 9.0, dp);
+            out.push_back(std::move(g));
+          }
+          for (int level = 1; level <= widest; ++level)
+            EXPECT_EQ(out[0].data, out[static_cast<std::size_t>(level)].data)
+                << to_string(s) << " " << to_string(e) << " " << to_string(p) << " map " << m << " width level " << level;
+        }
+  // Conductance (depth of field) with weights that vary per edge.
+  Image wx(W, H, 1), wy(W, H, 1);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      wx.at(x, y) = 0.25f * static_cast<float>((x * 31 + y * 17) % 23) / 22.0f;
+      wy.at(x, y) = 0.25f * static_cast<float>((x * 13 + y * 29) % 19) / 18.0f;
+    }
+  std::vector<Image> out;
+  for (int level = 0; level <= widest; ++level) {
+    SimdLimit cap(level);
+    Image g = f;
+    diffuse_conductance(g, wx, wy, 40);
+    out.push_back(std::move(g));
+  }
+  for (int level = 1; level <= widest; ++level)
+    EXPECT_EQ(out[0].data, out[static_cast<std::size_t>(level)].data) << "conductance, width level " << level;
+}
+
+TEST(DiffusionSimd, TwoAxisMapIsIndependentOfThreadCount) {
+  // Rows are shared out among threads; every output pixel depends only on the
+  // previous iteration, so the partition must not change a bit.
+  const Image f = texture(103, 67), map = dome_map(103, 67, 1.0, 9.0);
+  Image a = f, b = f, c = f;
+  Exec e1, e2, e3;
+  e1.threads = 1, e2.threads = 2, e3.threads = 7;
+  diffuse(a, map, 9.0, params(Scheme::invariant_exact), e1);
+  diffuse(b, map, 9.0, params(Scheme::invariant_exact), e2);
+  diffuse(c, map, 9.0, params(Scheme::invariant_exact), e3);
+  EXPECT_EQ(a.data, b.data);
+  EXPECT_EQ(a.data, c.data);
+}
+
+TEST(DiffusionSimd, SpaceVariantRunsMatchTheReferenceOnATwoAxisMap) {
+  // The widest kernels on a map varying along x and y (runs of every length,
+  // steps), against the double reference at the tolerances of
+  // MatchesScalarReference (float rounding over ~11-50 iterations plus the
+  // running product for sigma_k).
+  const int W = 103, H = 67;
+  const Image f = texture(W, H), map = dome_map(W, H, 1.0, 9.0);
+  for (Scheme s : {Scheme::standard, Scheme::invariant, Scheme::invariant_exact})
+    for (EdgeRate e : {EdgeRate::mean, EdgeRate::min, EdgeRate::harmonic}) {
+      DiffusionParams dp = params(s);
+      dp.edge_rate = e;
+      Image fast = f, ref = f;
+      diffuse(fast, map, 9.0, dp);
+      Exec ex;
+      ex.path = Path::reference;
+      diffuse(ref, map, 9.0, dp, ex);
+      const Diff d = compare(fast, ref);
+      EXPECT_LE(d.max_abs, 2e-5) << to_string(s) << " " << to_string(e) << ": " << d;
+      EXPECT_LE(d.rms, 2e-6) << to_string(s) << " " << to_string(e) << ": " << d;
+    }
+}
+
+TEST(DiffusionWorkspace, ReusedAndReleasedBuffersGiveTheSameBits) {
+  // The fast path's buffers are kept between calls and handed, uninitialised,
+  // to the next one; every value is written before it is read, so a call
+  // after a larger one (stale data beyond the new image), after a smaller one
+  // (buffers grow), after a different scheme, or after release must give
+  // what a first call gives.
+  const Image big = texture(131, 97), small = texture(57, 41);
+  const Image map_big = dome_map(131, 97, 1.0, 7.0), map_small = ramp_map(57, 41, 1.0, 7.0);
+  auto run = [](const Image& f, const Image& m, Scheme s, Precision p) {
+    Image g = f;
+    diffuse(g, m, 7.0, params(s, p));
+    return g;
+  };
+  release_diffusion_buffers();
+  const Image first_small = run(small, map_small, Scheme::invariant_exact, Precision::f32);
+  const Image first_big = run(big, map_big, Scheme::invariant_exact, Precision::f32);
+  const Image first_f16 = run(big, constant_map(big, 7.0), Scheme::invariant_exact, Precision::f16);
+  const Image first_std = run(small, map_small, Scheme::standard, Precision::f32);
+  EXPECT_EQ(run(small, map_small, Scheme::invariant_exact, Precision::f32).data, first_small.data);
+  EXPECT_EQ(run(big, map_big, Scheme::invariant_exact, Precision::f32).data, first_big.data);
+  EXPECT_EQ(run(small, map_small, Scheme::standard, Precision::f32).data, first_std.data);
+  EXPECT_EQ(run(big, constant_map(big, 7.0), Scheme::invariant_exact, Precision::f16).data, first_f16.data);
+  release_diffusion_buffers();
+  EXPECT_EQ(run(big, map_big, Scheme::invariant_exact, Precision::f32).data, first_big.data);
+  // Concurrent calls each hold their own workspace.
+  Image a, b;
+  std::thread ta([&] { for (int i = 0; i < 3; ++i) a = run(big, map_big, Scheme::invariant_exact, Precision::f32); });
+  std::thread tb([&] { for (int i = 0; i < 3; ++i) b = run(small, map_small, Scheme::invariant_exact, Precision::f32); });
+  ta.join();
+  tb.join();
+  EXPECT_EQ(a.data, first_big.data);
+  EXPECT_EQ(b.data, first_small.data);
 }

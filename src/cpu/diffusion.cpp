@@ -147,15 +147,11 @@ void by_groups_of_four(Image& f, Run&& run) {
   }
 }
 
-// The rate path once its inputs are checked: `rho` is the float map the fast
-// path runs on, `rho_ref` the double rates of the reference.
-void run_rates(Image& f, const Image& rho, const std::vector<double>& rho_ref, int iterations,
-               const DiffusionParams& p, const Exec& exec) {
-  if (exec.path == Path::reference) {
-    cpu::diffuse_reference(f, rho_ref, iterations, p);
-    return;
-  }
-  by_groups_of_four(f, [&](Image& g) { cpu::diffuse_fast(g, rho, iterations, p, exec.threads); });
+// The fast rate path once its inputs are checked: `rho` is the float map
+// (one value per pixel of f).
+void run_rates_fast(Image& f, const float* rho, int iterations, const DiffusionParams& p, const Exec& exec,
+                    cpu::Workspace& ws) {
+  by_groups_of_four(f, [&](Image& g) { cpu::diffuse_fast(g, rho, iterations, p, exec.threads, ws); });
 }
 
 }  // namespace
@@ -188,9 +184,10 @@ DiffusionPlan diffuse(Image& f, const Image& sigma, double sigma_max,
       rho[i] = p.scheme == Scheme::standard ? (s * s - s0 * s0) / (2.0 * N)  // eq. 13
                                             : std::log(s / s0) / N;          // eq. 18
     }
-    run_rates(f, Image(), rho, N, p, exec);
+    cpu::diffuse_reference(f, rho, N, p);
   } else {
-    run_rates(f, cpu::rates_from_scale(sigma, p, N, exec.threads), {}, N, p, exec);
+    cpu::WorkspaceLease ws;
+    run_rates_fast(f, cpu::rates_from_scale(sigma, p, N, exec.threads, *ws), N, p, exec, *ws);
   }
   return plan;
 }
@@ -223,11 +220,16 @@ DiffusionPlan diffuse_rates(Image& f, const Image& rho, int iterations, const Di
     if (p.precision == Precision::f16) cpu::round_to_half(f.data.data(), f.data.size());
     return plan;
   }
-  std::vector<double> rho_ref;
-  if (exec.path == Path::reference) rho_ref.assign(rho.data.begin(), rho.data.end());
-  run_rates(f, rho, rho_ref, iterations, p, exec);
+  if (exec.path == Path::reference) {
+    cpu::diffuse_reference(f, std::vector<double>(rho.data.begin(), rho.data.end()), iterations, p);
+  } else {
+    cpu::WorkspaceLease ws;
+    run_rates_fast(f, rho.data.data(), iterations, p, exec, *ws);
+  }
   return plan;
 }
+
+void release_diffusion_buffers() { cpu::release_workspace(); }
 
 void diffuse_conductance(Image& f, const Image& wx, const Image& wy, int iterations, Precision precision,
                          const Exec& exec) {
@@ -259,8 +261,9 @@ void diffuse_conductance(Image& f, const Image& wx, const Image& wy, int iterati
   }
   std::vector<float> ex, ey;
   edges(ex, ey);
+  cpu::WorkspaceLease ws;
   by_groups_of_four(f, [&](Image& g) {
-    cpu::diffuse_conductance_fast(g, ex.data(), ey.data(), iterations, f16, exec.threads);
+    cpu::diffuse_conductance_fast(g, ex.data(), ey.data(), iterations, f16, exec.threads, *ws);
   });
 }
 

@@ -28,18 +28,17 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "cpu/diffusion_rows.hpp"
 
 #if defined(__x86_64__)
 #include <immintrin.h>
-#define BRUME_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#define BRUME_CLONES
 #endif
 
 namespace brume::cpu {
@@ -49,12 +48,14 @@ namespace {
 int thread_count(int requested) { return requested > 0 ? requested : omp_get_max_threads(); }
 
 // Interior of a row when every pixel has the same offset h = n + fr and the
-// same rate w (so every eq. 12 weight is w): a contiguous loop over floats.
-BRUME_CLONES
-void uniform_row_interior(const float* __restrict s, const float* __restrict u0,
-                          const float* __restrict u1, const float* __restrict d0,
-                          const float* __restrict d1, float* __restrict o, std::size_t begin,
-                          std::size_t end, std::ptrdiff_t n4, float fr, float w) {
+// same rate w (so every eq. 12 weight is w): a contiguous loop over floats,
+// compiled for 128-bit vectors and for AVX2 (the same elementwise operations
+// in the same order in each, hence the same bits; why not AVX-512: row_kernels).
+#define BRUME_UNIFORM_ROW_ARGS                                                                      \
+  const float *__restrict s, const float *__restrict u0, const float *__restrict u1,               \
+      const float *__restrict d0, const float *__restrict d1, float *__restrict o, std::size_t begin, \
+      std::size_t end, std::ptrdiff_t n4, float fr, float w
+__attribute__((always_inline)) inline void uniform_row_body(BRUME_UNIFORM_ROW_ARGS) {
   for (std::size_t i = begin; i < end; ++i) {
     const float fc = s[i];
     const float l = s[i - n4] + fr * (s[i - n4 - 4] - s[i - n4]);
@@ -64,6 +65,14 @@ void uniform_row_interior(const float* __restrict s, const float* __restrict u0,
     o[i] = brume_diffusion_update(fc, l, r, u, d, w, w, w, w);
   }
 }
+#define BRUME_UNIFORM_ROW_CALL uniform_row_body(s, u0, u1, d0, d1, o, begin, end, n4, fr, w)
+using UniformRow = void (*)(BRUME_UNIFORM_ROW_ARGS);
+void uniform_row_generic(BRUME_UNIFORM_ROW_ARGS) { BRUME_UNIFORM_ROW_CALL; }
+#if defined(__x86_64__)
+__attribute__((target("avx2"))) void uniform_row_avx2(BRUME_UNIFORM_ROW_ARGS) { BRUME_UNIFORM_ROW_CALL; }
+#endif
+#undef BRUME_UNIFORM_ROW_CALL
+#undef BRUME_UNIFORM_ROW_ARGS
 
 // Per-thread scratch of the general (space-variant) row: offsets, their
 // integer and fractional parts, and the four eq. 12 weights of each pixel.
@@ -93,32 +102,119 @@ __attribute__((always_inline)) inline void run_weights(const float* __restrict r
 }
 
 // Eq. 11 for the pixels [xa, xb) of such a run: the taps x -+ n, x -+ (n+1)
-// and the rows y -+ n, y -+ (n+1) are contiguous across the run.
-__attribute__((always_inline)) inline void run_update(const float* s, const float* u0, const float* u1,
-                                                      const float* d0, const float* d1, float* o,
-                                                      const RowScratch& t, int xa, int xb, int n) {
+// and the rows y -+ n, y -+ (n+1) are contiguous across the run. Three
+// widths of the same arithmetic: one pixel per 128-bit vector (any CPU), two
+// per AVX2 vector, four per AVX-512 vector. The wide ones broadcast each
+// pixel's fraction and weights over its four lanes and then evaluate, lane
+// by lane, exactly eq11's operations in eq11's order (sub, mul, add for the
+// interpolation; brume_diffusion_update for the stencil; no contraction in
+// ISO mode), so the three give the same bits (test: DiffusionSimd).
+struct RunArgs {
+  const float *s, *u0, *u1, *d0, *d1;  // rows y, y -+ n, y -+ (n+1) of F
+  float* o;                            // row y of the output
+  const float *fr, *wl, *wr, *wu, *wd;  // per pixel of the row
+};
+using RunUpdate = void (*)(const RunArgs&, int xa, int xb, int n);
+
+inline void run_update_v4(const RunArgs& a, int xa, int xb, int n) {
   const std::ptrdiff_t n4 = static_cast<std::ptrdiff_t>(n) * 4;
-  const float *fr = t.fr.data(), *wl = t.wl.data(), *wr = t.wr.data(), *wu = t.wu.data(), *wd = t.wd.data();
+  auto ld = [](const float* p) { return StoreF32::load(p); };
   for (int x = xa; x < xb; ++x) {
     const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(x) * 4;
-    auto ld = [](const float* p) { return StoreF32::load(p); };
-    StoreF32::store(o + i, eq11(ld(s + i), ld(s + i - n4), ld(s + i - n4 - 4), ld(s + i + n4), ld(s + i + n4 + 4),
-                                ld(u0 + i), ld(u1 + i), ld(d0 + i), ld(d1 + i), fr[x], wl[x], wr[x], wu[x], wd[x]));
+    StoreF32::store(a.o + i, eq11(ld(a.s + i), ld(a.s + i - n4), ld(a.s + i - n4 - 4), ld(a.s + i + n4),
+                                  ld(a.s + i + n4 + 4), ld(a.u0 + i), ld(a.u1 + i), ld(a.d0 + i), ld(a.d1 + i),
+                                  a.fr[x], a.wl[x], a.wr[x], a.wu[x], a.wd[x]));
   }
 }
 
-// Offsets of the exact scheme for a row, and their integer and fractional
-// parts (separate restrict-qualified loops, so that both vectorise).
-__attribute__((always_inline)) inline void row_offsets(float* __restrict h, const float* __restrict sg,
-                                                       const float* __restrict vr, int W) {
-  for (int x = 0; x < W; ++x) h[x] = sh::brume_offset_for_moment(sg[x] * sg[x] * vr[x]);
+void run_update_generic(const RunArgs& a, int xa, int xb, int n) { run_update_v4(a, xa, xb, n); }
+
+#if defined(__x86_64__)
+// (Lambdas would not inherit the target attribute: helpers instead.)
+#define BRUME_AVX2 __attribute__((target("avx2"), always_inline)) inline
+#define BRUME_AVX512 __attribute__((target("avx512f"), always_inline)) inline
+// Two consecutive per-pixel values, each over its pixel's four lanes.
+BRUME_AVX2 __m256 bc2(const float* p) {
+  const __m256i idx = _mm256_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1);
+  return _mm256_permutevar8x32_ps(_mm256_castps128_ps256(_mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(p)))),
+                                  idx);
 }
-__attribute__((always_inline)) inline void row_split(int* __restrict n, float* __restrict fr,
-                                                     const float* __restrict h, int W) {
-  for (int x = 0; x < W; ++x) {
-    n[x] = static_cast<int>(h[x]);
-    fr[x] = h[x] - static_cast<float>(n[x]);
+BRUME_AVX2 __m256 lerp2(__m256 p0, __m256 p1, __m256 f) { return p0 + f * (p1 - p0); }
+// Four consecutive per-pixel values, each over its pixel's four lanes.
+BRUME_AVX512 __m512 bc4(const float* p) {
+  const __m512i idx = _mm512_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
+  return _mm512_permutexvar_ps(idx, _mm512_broadcast_f32x4(_mm_loadu_ps(p)));
+}
+BRUME_AVX512 __m512 lerp4(__m512 p0, __m512 p1, __m512 f) { return p0 + f * (p1 - p0); }
+
+__attribute__((target("avx2"))) void run_update_avx2(const RunArgs& a, int xa, int xb, int n) {
+  const std::ptrdiff_t n4 = static_cast<std::ptrdiff_t>(n) * 4;
+  int x = xa;
+  for (; x + 2 <= xb; x += 2) {
+    const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(x) * 4;
+    const __m256 f = bc2(a.fr + x);
+    const __m256 fc = _mm256_loadu_ps(a.s + i);
+    const __m256 l = lerp2(_mm256_loadu_ps(a.s + i - n4), _mm256_loadu_ps(a.s + i - n4 - 4), f);
+    const __m256 r = lerp2(_mm256_loadu_ps(a.s + i + n4), _mm256_loadu_ps(a.s + i + n4 + 4), f);
+    const __m256 u = lerp2(_mm256_loadu_ps(a.u0 + i), _mm256_loadu_ps(a.u1 + i), f);
+    const __m256 d = lerp2(_mm256_loadu_ps(a.d0 + i), _mm256_loadu_ps(a.d1 + i), f);
+    const __m256 wl = bc2(a.wl + x), wr = bc2(a.wr + x), wu = bc2(a.wu + x), wd = bc2(a.wd + x);
+    _mm256_storeu_ps(a.o + i, fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc));
   }
+  run_update_v4(a, x, xb, n);
+}
+
+__attribute__((target("avx512f"))) void run_update_avx512(const RunArgs& a, int xa, int xb, int n) {
+  const std::ptrdiff_t n4 = static_cast<std::ptrdiff_t>(n) * 4;
+  int x = xa;
+  for (; x + 4 <= xb; x += 4) {
+    const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(x) * 4;
+    const __m512 f = bc4(a.fr + x);
+    const __m512 fc = _mm512_loadu_ps(a.s + i);
+    const __m512 l = lerp4(_mm512_loadu_ps(a.s + i - n4), _mm512_loadu_ps(a.s + i - n4 - 4), f);
+    const __m512 r = lerp4(_mm512_loadu_ps(a.s + i + n4), _mm512_loadu_ps(a.s + i + n4 + 4), f);
+    const __m512 u = lerp4(_mm512_loadu_ps(a.u0 + i), _mm512_loadu_ps(a.u1 + i), f);
+    const __m512 d = lerp4(_mm512_loadu_ps(a.d0 + i), _mm512_loadu_ps(a.d1 + i), f);
+    const __m512 wl = bc4(a.wl + x), wr = bc4(a.wr + x), wu = bc4(a.wu + x), wd = bc4(a.wd + x);
+    _mm512_storeu_ps(a.o + i, fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc));
+  }
+  run_update_v4(a, x, xb, n);
+}
+#undef BRUME_AVX2
+#undef BRUME_AVX512
+#endif
+
+// Offsets of a row at iteration k, their integer and fractional parts, and
+// sigma_k advanced in place to sigma_{k+1} (one pass; sigma_k is read by its
+// own pixel's offset only). The exact scheme's offset needs the variance
+// ratio vr; the published one is sigma_k itself.
+template <bool kExact>
+__attribute__((always_inline)) inline void row_offsets(float* __restrict h, int* __restrict n, float* __restrict fr,
+                                                       float* __restrict sg, const float* __restrict growth,
+                                                       const float* __restrict vr, int W) {
+  for (int x = 0; x < W; ++x) {
+    const float s = sg[x];
+    const float hx = kExact ? sh::brume_offset_for_moment(s * s * vr[x]) : s;
+    h[x] = hx;
+    n[x] = static_cast<int>(hx);
+    fr[x] = hx - static_cast<float>(n[x]);
+    sg[x] = s * growth[x];
+  }
+}
+
+// First index e > x with n[e] != n[x] (or W): blocks of 16 compared without
+// an early exit, so that the compare vectorises, then one at a time.
+__attribute__((always_inline)) inline int run_end(const int* __restrict n, int x, int W) {
+  const int v = n[x];
+  int e = x + 1;
+  while (e + 16 <= W) {
+    int differ = 0;
+    for (int j = 0; j < 16; ++j) differ |= n[e + j] != v;
+    if (differ) break;
+    e += 16;
+  }
+  while (e < W && n[e] == v) ++e;
+  return e;
 }
 
 // One row of the general invariant scheme: offsets from sigma_k (and, for the
@@ -129,21 +225,21 @@ __attribute__((always_inline)) inline void row_split(int* __restrict n, float* _
 // mirror (near the borders) go through the general per-pixel update_pixel.
 // Both evaluate the same formulas in the same order (ISO C++, no
 // reassociation or contraction), so the split does not change results.
-BRUME_CLONES
-void general_row(const float* src, float* dst, const float* rho, const float* sg, const float* vr, bool exact,
-                 int edge_mode, int W, int H, int y, RowScratch& t) {
+// Written once (always inlined) and compiled three times below, for the
+// three widths of run_update; the offset and weight loops widen with them.
+__attribute__((always_inline)) inline void general_row_body(const float* src, float* dst, const float* rho,
+                                                            float* sg, const float* growth, const float* vr, bool exact,
+                                                            int edge_mode, int W, int H, int y, RowScratch& t,
+                                                            RunUpdate run_update) {
   float* h = t.h.data();
-  if (exact) {
-    row_offsets(h, sg, vr, W);
-  } else {
-    for (int x = 0; x < W; ++x) h[x] = sg[x];
-  }
-  row_split(t.n.data(), t.fr.data(), h, W);
+  if (exact)
+    row_offsets<true>(h, t.n.data(), t.fr.data(), sg, growth, vr, W);
+  else
+    row_offsets<false>(h, t.n.data(), t.fr.data(), sg, growth, vr, W);
   const std::size_t Ws = static_cast<std::size_t>(W);
   for (int x = 0; x < W;) {
     const int n = t.n[x];
-    int e = x + 1;
-    while (e < W && t.n[e] == n) ++e;
+    const int e = run_end(t.n.data(), x, W);
     // Columns of the run whose horizontal taps stay inside the row, if the
     // vertical taps stay inside the image.
     int a = std::max(x, n + 1), b = std::min(e, W - n - 1);
@@ -159,22 +255,48 @@ void general_row(const float* src, float* dst, const float* rho, const float* sg
         case 2: run_weights<2>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
         default: run_weights<0>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
       }
-      run_update(src + y * Ws * 4, src + (y - n) * Ws * 4, src + (y - n - 1) * Ws * 4, src + (y + n) * Ws * 4,
-                 src + (y + n + 1) * Ws * 4, dst + y * Ws * 4, t, a, b, n);
+      const RunArgs args{src + y * Ws * 4,
+                         src + (y - n) * Ws * 4,
+                         src + (y - n - 1) * Ws * 4,
+                         src + (y + n) * Ws * 4,
+                         src + (y + n + 1) * Ws * 4,
+                         dst + y * Ws * 4,
+                         t.fr.data(),
+                         wl,
+                         wr,
+                         wu,
+                         wd};
+      run_update(args, a, b, n);
     }
     for (int i = std::max(b, a); i < e; ++i) update_pixel<false>(src, dst, rho, 0.0f, W, H, i, y, h[i], edge_mode);
     x = e;
   }
 }
 
+#define BRUME_GENERAL_ROW_ARGS                                                                              \
+  const float *src, float *dst, const float *rho, float *sg, const float *growth, const float *vr, bool exact, \
+      int edge_mode,                                                                                        \
+      int W, int H, int y, RowScratch &t
+#define BRUME_GENERAL_ROW_CALL(upd) general_row_body(src, dst, rho, sg, growth, vr, exact, edge_mode, W, H, y, t, upd)
+using GeneralRow = void (*)(BRUME_GENERAL_ROW_ARGS);
+void general_row_generic(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(run_update_generic); }
+#if defined(__x86_64__)
+__attribute__((target("avx2"))) void general_row_avx2(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(run_update_avx2); }
+__attribute__((target("avx512f"))) void general_row_avx512(BRUME_GENERAL_ROW_ARGS) {
+  BRUME_GENERAL_ROW_CALL(run_update_avx512);
+}
+#endif
+#undef BRUME_GENERAL_ROW_CALL
+#undef BRUME_GENERAL_ROW_ARGS
+
 // One row of the conductance stencil (the standard scheme once its edge
 // rates are formed): wr[x] couples x and x+1 (0 at the last column: zero
-// flux), wd couples rows.
-BRUME_CLONES
-void standard_row(const float* __restrict s, const float* __restrict up,
-                  const float* __restrict dn, const float* __restrict wr,
-                  const float* __restrict wd_up, const float* __restrict wd, float* __restrict o,
-                  int W) {
+// flux), wd couples rows. Three widths, as uniform_row.
+#define BRUME_STANDARD_ROW_ARGS                                                                        \
+  const float *__restrict s, const float *__restrict up, const float *__restrict dn,                  \
+      const float *__restrict wr, const float *__restrict wd_up, const float *__restrict wd, float *__restrict o, \
+      int W
+__attribute__((always_inline)) inline void standard_row_body(BRUME_STANDARD_ROW_ARGS) {
   for (int x = 0; x < W; ++x) {
     const float wl = x > 0 ? wr[x - 1] : 0.0f;
     const int xl = x > 0 ? x - 1 : 0, xr = x < W - 1 ? x + 1 : x;
@@ -184,8 +306,55 @@ void standard_row(const float* __restrict s, const float* __restrict up,
                                              dn[x * 4 + ch], a, b, c, e);
   }
 }
+#define BRUME_STANDARD_ROW_CALL standard_row_body(s, up, dn, wr, wd_up, wd, o, W)
+using StandardRow = void (*)(BRUME_STANDARD_ROW_ARGS);
+void standard_row_generic(BRUME_STANDARD_ROW_ARGS) { BRUME_STANDARD_ROW_CALL; }
+#if defined(__x86_64__)
+__attribute__((target("avx2"))) void standard_row_avx2(BRUME_STANDARD_ROW_ARGS) { BRUME_STANDARD_ROW_CALL; }
+__attribute__((target("avx512f"))) void standard_row_avx512(BRUME_STANDARD_ROW_ARGS) { BRUME_STANDARD_ROW_CALL; }
+#endif
+#undef BRUME_STANDARD_ROW_CALL
+#undef BRUME_STANDARD_ROW_ARGS
+
+// The three widths of every row kernel, picked once per call.
+struct RowKernels {
+  UniformRow uniform;
+  GeneralRow general;
+  StandardRow standard;
+};
+std::atomic<int> g_simd_limit{-1};
+int simd_available() {
+#if defined(__x86_64__)
+  static const int level = __builtin_cpu_supports("avx512f") ? 2 : __builtin_cpu_supports("avx2") ? 1 : 0;
+  return level;
+#else
+  return 0;
+#endif
+}
+RowKernels row_kernels() {
+  switch (diffusion_simd_level()) {
+#if defined(__x86_64__)
+    // The constant-scale rows stay at AVX2 on AVX-512 hosts: measured on an
+    // AMD EPYC (Zen, 2 cores, 1600x1120, sigma 25) they take 1.3x longer with
+    // 512-bit vectors (73-78 ms against 100-108 ms of CPU time per blur),
+    // presumably because taps at offsets of n RGBA pixels (16n bytes) make
+    // three in four 64-byte loads straddle two cache lines (one in four at 32
+    // bytes). The space-variant rows gain from 512 bits (160 against 175 ms):
+    // their per-pixel offsets and weights are arithmetic-bound.
+    case 2: return {uniform_row_avx2, general_row_avx512, standard_row_avx512};
+    case 1: return {uniform_row_avx2, general_row_avx2, standard_row_avx2};
+#endif
+    default: return {uniform_row_generic, general_row_generic, standard_row_generic};
+  }
+}
 
 }  // namespace
+
+int diffusion_simd_level() {
+  const int limit = g_simd_limit.load(std::memory_order_relaxed);
+  return limit < 0 ? simd_available() : std::min(limit, simd_available());
+}
+void set_diffusion_simd_limit(int level) { g_simd_limit.store(level, std::memory_order_relaxed); }
 
 #if defined(__x86_64__)
 __attribute__((target("f16c,avx"))) static void round_to_half_f16c(float* v, std::size_t n) {
@@ -210,31 +379,79 @@ void round_to_half(float* v, std::size_t n) {
   for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<float>(static_cast<_Float16>(v[i]));
 }
 
-Image rates_from_scale(const Image& sigma, const DiffusionParams& p, int iterations, int threads) {
+float* Workspace::get(Slot s, std::size_t n) {
+  if (n_[s] < n) {
+    p_[s].reset();  // before the new allocation: never hold both
+    p_[s].reset(new float[n]);
+    n_[s] = n;
+  }
+  return p_[s].get();
+}
+std::uint16_t* Workspace::get_half(int which, std::size_t n) {
+  if (hn_[which] < n) {
+    h_[which].reset();
+    h_[which].reset(new std::uint16_t[n]);
+    hn_[which] = n;
+  }
+  return h_[which].get();
+}
+std::size_t Workspace::bytes() const {
+  std::size_t b = 0;
+  for (std::size_t n : n_) b += n * sizeof(float);
+  for (std::size_t n : hn_) b += n * sizeof(std::uint16_t);
+  return b;
+}
+
+namespace {
+std::mutex g_pool_mutex;
+std::unique_ptr<Workspace> g_pool;  // the one workspace kept between calls
+}  // namespace
+
+WorkspaceLease::WorkspaceLease() {
+  {
+    std::lock_guard<std::mutex> lock(g_pool_mutex);
+    ws_ = std::move(g_pool);
+  }
+  if (!ws_) ws_ = std::make_unique<Workspace>();
+}
+WorkspaceLease::~WorkspaceLease() {
+  std::lock_guard<std::mutex> lock(g_pool_mutex);
+  // Keep the larger of the two (the other is freed here).
+  if (!g_pool || g_pool->bytes() < ws_->bytes()) g_pool = std::move(ws_);
+}
+
+void release_workspace() {
+  std::unique_ptr<Workspace> drop;
+  std::lock_guard<std::mutex> lock(g_pool_mutex);
+  drop = std::move(g_pool);
+}
+
+const float* rates_from_scale(const Image& sigma, const DiffusionParams& p, int iterations, int threads,
+                              Workspace& ws) {
   const float s0 = static_cast<float>(p.sigma0), Nf = static_cast<float>(iterations);
   const bool standard = p.scheme == Scheme::standard;
-  Image rho(sigma.width, sigma.height, 1);
   const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(sigma.data.size());
+  float* rho = ws.get(Workspace::rates, sigma.data.size());
 #pragma omp parallel for num_threads(thread_count(threads)) schedule(static)
   for (std::ptrdiff_t i = 0; i < n; ++i) {
     const float s = sigma.data[i];
-    rho.data[i] = standard ? sh::brume_standard_rate(s, s0, Nf) : sh::brume_invariant_rate(s, s0, Nf);
+    rho[i] = standard ? sh::brume_standard_rate(s, s0, Nf) : sh::brume_invariant_rate(s, s0, Nf);
   }
   return rho;
 }
 
-void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16,
-                              int threads) {
+void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16, int threads,
+                              Workspace& ws) {
   const int W = f.width, H = f.height;
   const std::size_t Ws = static_cast<std::size_t>(W);
   const int nt = thread_count(threads);
-  // Ping-pong partner, deliberately not zero-filled (every value is written
-  // before it is read).
-  std::unique_ptr<float[]> buf(new float[f.data.size()]);
+  // Ping-pong partner, not zero-filled (every value is written before it is
+  // read; a new one is first touched by the threads that use it).
   float* src = f.data.data();
-  float* dst = buf.get();
+  float* dst = ws.get(Workspace::partner, f.data.size());
   if (f16) round_to_half(src, f.data.size());
   const std::vector<float> zero(Ws, 0.0f);
+  const RowKernels kern = row_kernels();
   for (int k = 0; k < iterations; ++k) {
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y) {
@@ -243,7 +460,7 @@ void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int it
       const float* dn = src + (y < H - 1 ? y + 1 : y) * Ws * 4;
       const float* wdu = y > 0 ? wy + (y - 1) * Ws : zero.data();
       float* o = dst + y * Ws * 4;
-      standard_row(s, up, dn, wx + y * Ws, wdu, wy + y * Ws, o, W);
+      kern.standard(s, up, dn, wx + y * Ws, wdu, wy + y * Ws, o, W);
       if (f16) round_to_half(o, Ws * 4);
     }
     std::swap(src, dst);
@@ -251,7 +468,8 @@ void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int it
   if (src != f.data.data()) std::memcpy(f.data.data(), src, f.data.size() * sizeof(float));
 }
 
-void diffuse_fast(Image& f, const Image& rho_map, int iterations, const DiffusionParams& p, int threads) {
+void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionParams& p, int threads,
+                  Workspace& ws) {
   const int W = f.width, H = f.height, N = iterations;
   const std::size_t np = f.pixels();
   const std::size_t Ws = static_cast<std::size_t>(W);
@@ -260,11 +478,12 @@ void diffuse_fast(Image& f, const Image& rho_map, int iterations, const Diffusio
   const bool exact = p.scheme == Scheme::invariant_exact;
   const int nt = thread_count(threads);
   const int edge_mode = static_cast<int>(p.edge_rate);
-  const std::vector<float>& rates = rho_map.data;
+  const RowKernels kern = row_kernels();
 
   if (p.scheme == Scheme::standard) {
     // Edge weights of eq. 12, fixed for all iterations: the conductance path.
-    std::vector<float> wr(np), wd(np);
+    float* wr = ws.get(Workspace::edge_x, np);
+    float* wd = ws.get(Workspace::edge_y, np);
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x) {
@@ -273,23 +492,26 @@ void diffuse_fast(Image& f, const Image& rho_map, int iterations, const Diffusio
         wr[i] = x < W - 1 ? sh::brume_edge_rate(rc, rates[i + 1], edge_mode) : 0.0f;
         wd[i] = y < H - 1 ? sh::brume_edge_rate(rc, rates[i + Ws], edge_mode) : 0.0f;
       }
-    diffuse_conductance_fast(f, wr.data(), wd.data(), N, f16, threads);
+    diffuse_conductance_fast(f, wr, wd, N, f16, threads, ws);
     return;
   }
 
   // A constant rate needs no per-pixel rate, offset or scale arrays.
-  const bool uniform = std::all_of(rates.begin(), rates.end(), [&](float v) { return v == rates[0]; });
+  const bool uniform = std::all_of(rates, rates + np, [&](float v) { return v == rates[0]; });
 
-  // Ping-pong partner, deliberately not zero-filled (every value is written
-  // before it is read).
-  std::unique_ptr<float[]> buf(new float[f.data.size()]);
   float* src = f.data.data();
-  float* dst = buf.get();
   if (f16) round_to_half(src, f.data.size());
+  // (Level 0 keeps binary16 values in float storage, rounded by
+  // round_to_half: the tests' peer of the F16C storage.)
+  if (uniform && f16 && diffusion_simd_level() >= 1 &&
+      uniform_iterations_f16(src, W, H, N, s0, rates[0], exact, edge_mode, nt,
+                             ws.get_half(0, f.data.size()), ws.get_half(1, f.data.size()))) {
+    return;  // done in binary16 storage (result in f)
+  }
+  // Ping-pong partner, as in diffuse_conductance_fast.
+  float* dst = ws.get(Workspace::partner, f.data.size());
 
-  if (uniform && f16 && uniform_iterations_f16(src, W, H, N, s0, rates[0], exact, edge_mode, nt)) {
-    // done in binary16 storage (result in f)
-  } else if (uniform) {
+  if (uniform) {
     const float rho = rates[0];
     const float growth = std::exp(rho);
     float sig = s0;  // sigma_k, the same running product as the general path
@@ -305,7 +527,7 @@ void diffuse_fast(Image& f, const Image& rho_map, int iterations, const Diffusio
         const float* d0 = src + mirror(y + n, H) * Ws * 4;
         const float* d1 = src + mirror(y + n + 1, H) * Ws * 4;
         float* o = dst + y * Ws * 4;
-        uniform_row_interior(s, u0, u1, d0, d1, o, static_cast<std::size_t>(xa) * 4,
+        kern.uniform(s, u0, u1, d0, d1, o, static_cast<std::size_t>(xa) * 4,
                              static_cast<std::size_t>(xb) * 4, static_cast<std::ptrdiff_t>(n) * 4, fr, w);
         for (int x = 0; x < xa; ++x) update_pixel<true>(src, dst, nullptr, w, W, H, x, y, h);
         for (int x = xb; x < W; ++x) update_pixel<true>(src, dst, nullptr, w, W, H, x, y, h);
@@ -317,11 +539,14 @@ void diffuse_fast(Image& f, const Image& rho_map, int iterations, const Diffusio
   } else {
     // Per-pixel rate, sigma_k as a running product, and the exact scheme's
     // variance ratio (e^{2 rho} - 1)/(2 rho).
-    const float* rho = rates.data();
-    std::vector<float> sig(np, s0), growth(np), vratio(np);
+    const float* rho = rates;
+    float* sig = ws.get(Workspace::sigma, np);
+    float* growth = ws.get(Workspace::growth, np);
+    float* vratio = ws.get(Workspace::vratio, np);
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y)
       for (std::size_t i = y * Ws; i < (y + 1) * Ws; ++i) {
+        sig[i] = s0;
         growth[i] = std::exp(rho[i]);
         vratio[i] = sh::brume_step_variance_ratio(rho[i]);
       }
@@ -329,11 +554,10 @@ void diffuse_fast(Image& f, const Image& rho_map, int iterations, const Diffusio
     for (int k = 0; k < N; ++k) {
 #pragma omp parallel for num_threads(nt) schedule(static)
       for (int y = 0; y < H; ++y) {
-        general_row(src, dst, rho, sig.data() + y * Ws, vratio.data() + y * Ws, exact, edge_mode, W, H, y,
-                    scratch[static_cast<std::size_t>(omp_get_thread_num())]);
+        // (advances sigma_k of the row to sigma_{k+1})
+        kern.general(src, dst, rho, sig + y * Ws, growth + y * Ws, vratio + y * Ws, exact,
+                     edge_mode, W, H, y, scratch[static_cast<std::size_t>(omp_get_thread_num())]);
         if (f16) round_to_half(dst + y * Ws * 4, Ws * 4);
-        // sigma_k is read only by its own pixel's offset: advance it here.
-        for (std::size_t i = y * Ws; i < (y + 1) * Ws; ++i) sig[i] *= growth[i];
       }
       std::swap(src, dst);
     }

@@ -75,13 +75,12 @@ void row_interior_f16(const std::uint16_t* s, const std::uint16_t* u0, const std
 }  // namespace
 
 bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, bool exact, int edge_mode,
-                            int threads) {
+                            int threads, std::uint16_t* a, std::uint16_t* b) {
   static const bool supported = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("f16c");
   if (!supported) return false;
-  const std::size_t Ws = static_cast<std::size_t>(W), n = Ws * H * 4;
-  std::unique_ptr<std::uint16_t[]> a(new std::uint16_t[n]), b(new std::uint16_t[n]);
-  std::uint16_t* src = a.get();
-  std::uint16_t* dst = b.get();
+  const std::size_t Ws = static_cast<std::size_t>(W);
+  std::uint16_t* src = a;
+  std::uint16_t* dst = b;
   // F arrives rounded to binary16 already, so this conversion is exact.
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y)
@@ -115,7 +114,9 @@ bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, 
 #else  // no F16C build: the float-storage path rounds to binary16 instead
 
 namespace brume::cpu {
-bool uniform_iterations_f16(float*, int, int, int, float, float, bool, int, int) { return false; }
+bool uniform_iterations_f16(float*, int, int, int, float, float, bool, int, int, std::uint16_t*, std::uint16_t*) {
+  return false;
+}
 }  // namespace brume::cpu
 
 #endif

@@ -6,6 +6,9 @@
 // reference and the fast float path.
 #pragma once
 
+#include <cstddef>
+#include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "brume/diffusion.hpp"
@@ -21,6 +24,47 @@ inline int mirror(int i, int n) {
   return i < n ? i : period - 1 - i;
 }
 
+// Buffers of the fast path (the ping-pong partner of F, the rate map, sigma_k
+// and the per-pixel constants of the invariant schemes, edge weights),
+// uninitialised and reused across iterations and calls. A fresh 28 MB
+// partner per call costs ~7000 first-touch page faults, which on the hosts
+// measured (VMs) cost as much as several iterations; a reused one costs none.
+// Every value is written before it is read, so reuse cannot change a result.
+class Workspace {
+ public:
+  enum Slot { partner, rates, sigma, growth, vratio, edge_x, edge_y, kSlots };
+  // At least n floats, uninitialised; valid until the next get of that slot.
+  float* get(Slot s, std::size_t n);
+  // The two binary16 ping-pong buffers of the f16 constant-scale path.
+  std::uint16_t* get_half(int which, std::size_t n);
+  std::size_t bytes() const;
+
+ private:
+  std::unique_ptr<float[]> p_[kSlots];
+  std::size_t n_[kSlots] = {};
+  std::unique_ptr<std::uint16_t[]> h_[2];
+  std::size_t hn_[2] = {};
+};
+
+// One diffusion call's hold on a workspace: the process keeps at most one
+// (the last returned), so a run of calls reuses it while concurrent calls
+// each get their own and at most one set of buffers outlives its call
+// (brume::release_diffusion_buffers frees it).
+class WorkspaceLease {
+ public:
+  WorkspaceLease();
+  ~WorkspaceLease();
+  WorkspaceLease(const WorkspaceLease&) = delete;
+  WorkspaceLease& operator=(const WorkspaceLease&) = delete;
+  Workspace& operator*() { return *ws_; }
+
+ private:
+  std::unique_ptr<Workspace> ws_;
+};
+
+// Frees the workspace kept between calls (brume::release_diffusion_buffers).
+void release_workspace();
+
 // The CPU schedules take validated inputs (the checks are in diffusion.cpp).
 //
 // Rate path: F with any channel count for the reference, four channels for
@@ -30,12 +74,14 @@ inline int mirror(int i, int n) {
 // edge weights formed from the two ends' rates (eq. 12 or its min/harmonic
 // variants); the invariant schemes take offsets from sigma_k = s0 e^{k rho}.
 void diffuse_reference(Image& f, const std::vector<double>& rho, int iterations, const DiffusionParams& p);
-void diffuse_fast(Image& f, const Image& rho, int iterations, const DiffusionParams& p, int threads);
+// rho: one float per pixel of f (W x H).
+void diffuse_fast(Image& f, const float* rho, int iterations, const DiffusionParams& p, int threads, Workspace& ws);
 
 // The float rate map of a target-scale map, per pixel: brume_standard_rate
 // or brume_invariant_rate with N as a float (the sigma front end of the fast
-// path; threaded).
-Image rates_from_scale(const Image& sigma, const DiffusionParams& p, int iterations, int threads);
+// path; threaded), in the workspace's rate slot.
+const float* rates_from_scale(const Image& sigma, const DiffusionParams& p, int iterations, int threads,
+                              Workspace& ws);
 
 // Conductance path: wx[y W + x] is the weight of the edge between (x, y) and
 // (x+1, y), wy[y W + x] that of the edge between (x, y) and (x, y+1); the
@@ -43,7 +89,18 @@ Image rates_from_scale(const Image& sigma, const DiffusionParams& p, int iterati
 // boundary carries no flux). Same channel rules as the rate path.
 void diffuse_conductance_reference(Image& f, const std::vector<double>& wx, const std::vector<double>& wy,
                                    int iterations, bool f16);
-void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16, int threads);
+void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16, int threads,
+                              Workspace& ws);
+
+// Vector width of the fast path's row kernels: 0 = 128-bit vectors (any
+// CPU), 1 = AVX2, 2 = AVX-512F. Every width evaluates the same elementwise
+// operations in the same order, so all give the same bits; the default is
+// the widest the CPU has. set_diffusion_simd_limit caps it (-1: no cap), so
+// that tests can compare the widths on one host; level 0 also keeps the f16
+// constant-scale path in float storage (round_to_half after every
+// iteration) instead of binary16 storage, the bits the latter must match.
+int diffusion_simd_level();
+void set_diffusion_simd_limit(int level);
 
 // Round n floats to the nearest IEEE binary16 value (ties to even), in place.
 void round_to_half(float* v, std::size_t n);

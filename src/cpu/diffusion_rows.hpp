@@ -3,6 +3,7 @@
 // stored between iterations (float, or binary16 bits).
 #pragma once
 
+#include <cstdint>
 #include <cstring>
 
 #include "cpu/diffusion_kernels.hpp"
@@ -90,8 +91,9 @@ inline UniformStep uniform_step(float sigma_k, float rho, bool exact, int edge_m
 // f16 storage of the constant-scale path on CPUs with F16C (x86-64): F is
 // kept as binary16 bits between iterations, halving the memory traffic, with
 // the same arithmetic and rounding as the float path + round_to_half. Returns
-// false (and does nothing) where F16C is missing.
+// false (and does nothing) where F16C is missing. a and b: two buffers of
+// W x H x 4 binary16 values (the workspace's), contents ignored.
 bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, bool exact, int edge_mode,
-                            int threads);
+                            int threads, std::uint16_t* a, std::uint16_t* b);
 
 }  // namespace brume::cpu
