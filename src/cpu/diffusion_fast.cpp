@@ -36,8 +36,22 @@
 #include "cpu/half.hpp"
 #include "cpu/diffusion_rows.hpp"
 
+// ThreadSanitizer instruments the ifunc resolver target_clones generates, and
+// the dynamic loader runs it before TSan's runtime is up (a crash at start):
+// the TSan build (scripts/test-sanitize.sh) keeps the default clone only.
+#if defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define BRUME_TSAN 1
+#endif
+#endif
+#if defined(__SANITIZE_THREAD__)
+#define BRUME_TSAN 1
+#endif
+
 #if defined(__x86_64__)
 #include <immintrin.h>
+#endif
+#if defined(__x86_64__) && !defined(BRUME_TSAN)
 #define BRUME_CLONES __attribute__((target_clones("avx2", "default")))
 #else
 #define BRUME_CLONES
