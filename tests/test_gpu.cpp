@@ -3,6 +3,9 @@
 // reference on real data, and re-rendering without re-upload. When no
 // context can be made the tests skip with the reason, unless
 // BRUME_REQUIRE_GPU=1 (set by .ci/run), which turns the skip into a failure.
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -13,6 +16,10 @@
 #include "brume/error.hpp"
 #include "brume/gpu.hpp"
 #include "brume/haze.hpp"
+#include "brume/io.hpp"
+#ifdef BRUME_HAVE_GPU
+#include "gpu/gl.hpp"  // the failure-injection hook
+#endif
 #include "test_util.hpp"
 
 namespace brume {
@@ -23,6 +30,7 @@ inline void PrintTo(GpuFilter f, std::ostream* os) {
 
 using namespace brume;
 using namespace brume::test;
+namespace fs = std::filesystem;
 
 namespace {
 
@@ -248,6 +256,97 @@ TEST(Gpu, ThrowMidRenderLeaksNoGlObject) {
     EXPECT_EQ(gpu_live_objects().textures, before.textures + 3);
   }
   EXPECT_EQ(gpu_live_objects(), before);
+}
+
+#ifdef BRUME_HAVE_GPU
+TEST(Gpu, InjectedFailureAtEveryObjectLeaksNothing) {
+  // A driver can refuse any GL object of a render (GL_OUT_OF_MEMORY). With
+  // gl::fail_after(n) the (n+1)-th object made throws; for n = 0, 1, 2, ...
+  // a haze render on a new GpuHaze either throws brume::Error (n below the
+  // render's object count) or completes to the bits of an uninjected render,
+  // and every time the live objects return to their count before it:
+  // textures, framebuffers, queries, samplers and vertex arrays exactly;
+  // programs may only grow by the passes the context has since compiled and
+  // caches (each test runs in its own process under ctest, so the first
+  // iterations fail inside program creation too). Then repeated
+  // uninjected renders (many renders, one process) leave nothing either.
+  BRUME_REQUIRE_GPU(ctx);
+  Image rgb, range;
+  small_scene(24, 18, rgb, range);
+  HazeParams p;
+  p.kappa_s = 1.0;
+  p.lambda = 6.0;
+  const HazeAnalysis a = analyse_haze(rgb, range, p);
+  const GpuObjectCounts start = gpu_live_objects();
+  struct Reset {
+    ~Reset() { gl::fail_after() = -1; }
+  } reset;
+  int failures = 0, n = 0;
+  HazeResult injected_ok;
+  for (;; ++n) {
+    ASSERT_LT(n, 500) << "a haze render makes fewer than 500 GL objects";
+    const GpuObjectCounts before = gpu_live_objects();
+    gl::fail_after() = n;
+    bool threw = false;
+    try {
+      GpuHaze gh(*ctx, rgb, range);
+      injected_ok = gh.render(p, a);
+    } catch (const Error& e) {
+      threw = true;
+      ++failures;
+      EXPECT_NE(std::string(e.what()).find("injected failure"), std::string::npos) << "n=" << n << ": " << e.what();
+    }
+    gl::fail_after() = -1;
+    GpuObjectCounts after = gpu_live_objects();
+    EXPECT_GE(after.programs, before.programs) << "n=" << n;
+    after.programs = before.programs;
+    ASSERT_EQ(after, before) << "n=" << n << (threw ? " (threw)" : " (completed)");
+    if (!threw) break;
+  }
+  EXPECT_EQ(failures, n);
+  EXPECT_GE(n, 5) << "a haze render makes its inputs, targets and framebuffers: at least 5 objects";
+  GpuObjectCounts warm = gpu_live_objects();
+  for (int i = 0; i < 20; ++i) {
+    GpuHaze gh(*ctx, rgb, range);
+    const HazeResult r = gh.render(p, a);
+    if (i == 0) {
+      EXPECT_EQ(r.rgb.data, injected_ok.rgb.data);  // the surviving context renders the same bits
+    }
+  }
+  EXPECT_EQ(gpu_live_objects(), warm);
+  warm.programs = start.programs;
+  EXPECT_EQ(warm, start);
+}
+#endif
+
+TEST(Gpu, MissingContextIsAClearError) {
+  // No EGL vendor library (libglvnd finds none): the GPU backend is refused
+  // with what is missing and the fix, exit 2, and no output; auto falls back
+  // to the CPU. Independent of the machine's GPU: the vendor list is emptied.
+  const fs::path dir = fs::temp_directory_path() / ("brume-nogpu-" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  Image rgb, range;
+  small_scene(24, 18, rgb, range);
+  write_image((dir / "i.exr").string(), rgb, WriteOptions{});
+  write_image((dir / "r.exr").string(), range, WriteOptions{});
+  const std::string env = "__EGL_VENDOR_LIBRARY_FILENAMES=/nonexistent/brume.json ";
+  const std::string args = " haze --image " + (dir / "i.exr").string() + " --range " + (dir / "r.exr").string() +
+                           " --kappa-s 1 --out " + (dir / "o.exr").string();
+  const auto run = [](const std::string& cmd, std::string& out) {
+    std::FILE* f = ::popen((cmd + " 2>&1").c_str(), "r");
+    char buf[4096];
+    for (std::size_t k; (k = std::fread(buf, 1, sizeof buf, f)) > 0;) out.append(buf, k);
+    return WEXITSTATUS(::pclose(f));
+  };
+  std::string out;
+  EXPECT_EQ(run(env + BRUME_CLI + args + " --backend gpu", out), 2) << out;
+  EXPECT_NE(out.find("no OpenGL ES 3.2 context"), std::string::npos) << out;
+  EXPECT_NE(out.find("--backend cpu"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(dir / "o.exr"));
+  std::string out_auto;
+  EXPECT_EQ(run(env + BRUME_CLI + args + " --backend auto", out_auto), 0) << out_auto;
+  EXPECT_TRUE(fs::exists(dir / "o.exr"));
+  fs::remove_all(dir);
 }
 
 TEST(Gpu, TexturePassesMatchCpuReference) {

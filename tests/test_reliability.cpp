@@ -281,3 +281,59 @@ TEST_F(Reliability, InterruptedRunsLeaveWholeFilesOnly) {
       if (e.path().filename().string().find(".brume-tmp-") != std::string::npos) fs::remove(e.path());
   }
 }
+
+// The output's directory is removed while the effect runs (a cleanup job, a
+// user's rm -r): the write fails with the directory named, exit 2, and
+// nothing is left behind, not even the record bound for a directory that
+// still exists (outputs are all or nothing).
+TEST_F(Reliability, OutputDirectoryRemovedMidRun) {
+  Image img(384, 288, 3);
+  for (std::size_t i = 0; i < img.data.size(); ++i) img.data[i] = static_cast<float>(i % 97) / 97.0f;
+  write_image(p("i.exr"), img, WriteOptions{});
+  const fs::path out_dir = dir / "out";
+  const std::string out = (out_dir / "o.exr").string();
+  // Learn how long a run takes; the removal then lands in its middle, long
+  // after the outputs were checked (before any work) and before the write.
+  fs::create_directories(out_dir);
+  const auto t0 = std::chrono::steady_clock::now();
+  ASSERT_EQ(run("blur --image " + p("i.exr") + " --sigma 24 --out " + out).status, 0);
+  const double full_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  fs::remove(out);
+  int removed_mid_run = 0;
+  for (int attempt = 0; attempt < 4 && removed_mid_run == 0; ++attempt) {
+    fs::create_directories(out_dir);
+    int pipefd[2];
+    ASSERT_EQ(pipe(pipefd), 0);
+    const pid_t pid = fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+      dup2(pipefd[1], 2);
+      close(pipefd[0]);
+      execl(BRUME_CLI, BRUME_CLI, "blur", "--image", p("i.exr").c_str(), "--sigma", "24", "--out", out.c_str(),
+            "--record", p("rec.json").c_str(), static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    close(pipefd[1]);
+    std::this_thread::sleep_for(std::chrono::microseconds(static_cast<long>(full_ms * 500)));
+    int st = 0;
+    const bool still_running = waitpid(pid, &st, WNOHANG) == 0;
+    fs::remove_all(out_dir);
+    if (still_running) waitpid(pid, &st, 0);
+    std::string err;
+    char buf[4096];
+    for (ssize_t k; (k = read(pipefd[0], buf, sizeof buf)) > 0;) err.append(buf, static_cast<std::size_t>(k));
+    close(pipefd[0]);
+    if (!still_running) {  // the run beat the removal (a fast or idle machine): try again, later on
+      fs::remove(p("rec.json"));
+      continue;
+    }
+    ++removed_mid_run;
+    ASSERT_TRUE(WIFEXITED(st)) << err;
+    EXPECT_EQ(WEXITSTATUS(st), 2) << err;
+    EXPECT_NE(err.find("directory '" + out_dir.string() + "' does not exist"), std::string::npos) << err;
+    EXPECT_FALSE(fs::exists(out_dir)) << "the output directory was recreated";
+    EXPECT_FALSE(fs::exists(p("rec.json"))) << "the record was written without its image";
+    EXPECT_EQ(temporaries(), 0);
+  }
+  ASSERT_EQ(removed_mid_run, 1) << "every run (" << full_ms << " ms) ended before the directory was removed";
+}

@@ -174,6 +174,13 @@ struct GpuTiming;
 nlohmann::json gpu_timing_record(const GpuTiming& t);
 nlohmann::json cpu_timing_record(std::chrono::steady_clock::time_point t0, int iterations);
 
+// The checks rerun makes before it runs anything, without running or reading
+// a file: the record is brume's, of the schema brume run reads, its command
+// can be repeated and its job reads back through that command's parameter
+// table (every key declared, every value type- and range-checked). Returns
+// the command ("haze", "sky fit", ...); throws brume::Error as rerun does.
+std::string check_record(const nlohmann::json& record);
+
 // `brume run`: repeat the run a record describes (schema_version 2). Inputs
 // must still have the SHA-256 the record names; with a non-empty out_dir,
 // every output goes into out_dir under its recorded file name. Returns the

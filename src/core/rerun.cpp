@@ -72,22 +72,63 @@ J job_from(const nlohmann::json& record, const ParamTable<J>& t, const std::stri
   return job;
 }
 
+Error unknown_command(const std::string& cmd) {
+  return Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, haze+dof, aerial, insert, "
+               "fog, dof, blur, sky render, sky fit, depth convert, depth prepare can)");
+}
+
+// A record's text field, or "" when absent or not a string: a hand-edited or
+// corrupt record must end in brume's message, not in a JSON type error
+// ("internal error"; found by fuzz/fuzz_record.cpp: {"tool": 1}).
+std::string text_field(const nlohmann::json& j, const char* key) {
+  if (!j.is_object()) return "";
+  const auto it = j.find(key);
+  return it != j.end() && it->is_string() ? it->get<std::string>() : std::string();
+}
+
+// A `brume sky fit` JSON holds its record under "record".
+bool is_sky_fit_json(const nlohmann::json& record) {
+  return record.is_object() && !record.contains("tool") && record.contains("record") &&
+         record["record"].is_object() && text_field(record["record"], "command") == "sky fit";
+}
+
+// The record's command, after the checks every record must pass.
+std::string record_command(const nlohmann::json& record) {
+  if (text_field(record, "tool") != "brume") throw Error("not a brume parameter record (no \"tool\": \"brume\")");
+  const auto v = record.find("schema_version");
+  const bool integral = v == record.end() || v->is_number_integer();
+  const long long version = v == record.end() ? 1 : integral ? v->get<long long>() : -1;
+  if (version != kRecordSchemaVersion || !record.contains("job"))
+    throw Error("this record has schema_version " + (integral ? std::to_string(version) : v->dump()) +
+                "; brume run reads version " + std::to_string(kRecordSchemaVersion) +
+                " (records written by brume " BRUME_VERSION " and later, which hold the whole job)");
+  return text_field(record, "command");
+}
+
 }  // namespace
+
+std::string check_record(const nlohmann::json& record) {
+  if (is_sky_fit_json(record)) return check_record(record["record"]);
+  const std::string cmd = record_command(record);
+  if (cmd == "haze") job_from(record, haze_job_table(), "");
+  else if (cmd == "aerial") job_from(record, aerial_job_table(), "");
+  else if (cmd == "insert") job_from(record, insert_job_table(), "");
+  else if (cmd == "fog") job_from(record, fog_job_table(), "");
+  else if (cmd == "dof") job_from(record, dof_job_table(), "");
+  else if (cmd == "haze+dof") job_from(record, haze_dof_job_table(), "");
+  else if (cmd == "blur") job_from(record, blur_job_table(), "");
+  else if (cmd == "sky render") job_from(record, sky_render_job_table(), "");
+  else if (cmd == "sky fit") job_from(record, sky_fit_job_table(), "");
+  else if (cmd == "depth convert") job_from(record, depth_convert_job_table(), "");
+  else if (cmd == "depth prepare") job_from(record, depth_prepare_job_table(), "");
+  else throw unknown_command(cmd);
+  return cmd;
+}
 
 nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, const std::string& out_dir,
                      const std::vector<std::string>& argv, Image (*sky_plot)(const nlohmann::json& fit)) {
-  // `brume sky fit` writes its result with the record inside, under "record".
-  if (record.is_object() && !record.contains("tool") && record.contains("record") && record["record"].is_object() &&
-      record["record"].value("command", "") == "sky fit")
-    return rerun(record["record"], exec, out_dir, argv, sky_plot);
-  if (!record.is_object() || record.value("tool", "") != "brume")
-    throw Error("not a brume parameter record (no \"tool\": \"brume\")");
-  const int version = record.value("schema_version", 1);
-  if (version != kRecordSchemaVersion || !record.contains("job"))
-    throw Error("this record has schema_version " + std::to_string(version) + "; brume run reads version " +
-                std::to_string(kRecordSchemaVersion) + " (records written by brume " BRUME_VERSION
-                " and later, which hold the whole job)");
-  const std::string cmd = record.value("command", "");
+  if (is_sky_fit_json(record)) return rerun(record["record"], exec, out_dir, argv, sky_plot);
+  const std::string cmd = record_command(record);
   if (record.contains("inputs")) verify_inputs(record["inputs"]);
   if (record.contains("depth")) verify_inputs(record["depth"]);
   if (record.contains("fog")) verify_inputs(record["fog"]);  // the density table (fog.derived.table)
@@ -114,8 +155,7 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
     return run_depth_convert_job(job_from(record, depth_convert_job_table(), out_dir), ctx);
   if (cmd == "depth prepare")
     return run_depth_prepare_job(job_from(record, depth_prepare_job_table(), out_dir), ctx);
-  throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (haze, haze+dof, aerial, insert, fog, dof, blur, "
-              "sky render, sky fit, depth convert, depth prepare can)");
+  throw unknown_command(cmd);
 }
 
 }  // namespace brume

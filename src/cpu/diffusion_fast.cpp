@@ -36,6 +36,7 @@
 #include <vector>
 
 #include "cpu/diffusion_rows.hpp"
+#include "cpu/half.hpp"
 
 #if defined(__x86_64__)
 #include <immintrin.h>
@@ -364,19 +365,19 @@ __attribute__((target("f16c,avx"))) static void round_to_half_f16c(float* v, std
     __m128i h = _mm256_cvtps_ph(x, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
     _mm256_storeu_ps(v + i, _mm256_cvtph_ps(h));
   }
-  for (; i < n; ++i) v[i] = static_cast<float>(static_cast<_Float16>(v[i]));
+  for (; i < n; ++i) v[i] = static_cast<float>(static_cast<half_t>(v[i]));
 }
 #endif
 
 void round_to_half(float* v, std::size_t n) {
 #if defined(__x86_64__)
-  static const bool has_f16c = __builtin_cpu_supports("f16c") && __builtin_cpu_supports("avx");
+  static const bool has_f16c = cpu_has_f16c() && __builtin_cpu_supports("avx");
   if (has_f16c) {
     round_to_half_f16c(v, n);
     return;
   }
 #endif
-  for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<float>(static_cast<_Float16>(v[i]));
+  for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<float>(static_cast<half_t>(v[i]));
 }
 
 float* Workspace::get(Slot s, std::size_t n) {
@@ -516,7 +517,10 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
     const float growth = std::exp(rho);
     float sig = s0;  // sigma_k, the same running product as the general path
     for (int k = 0; k < N; ++k) {
-      const auto [h, fr, w, n] = uniform_step(sig, rho, exact, edge_mode);
+      // Named copies, not a structured binding: clang-14 cannot capture a binding in an OpenMP region.
+      const UniformStep st = uniform_step(sig, rho, exact, edge_mode);
+      const float h = st.h, fr = st.fr, w = st.w;
+      const int n = st.n;
       // Columns whose taps x-n-1 .. x+n+1 all lie inside the row.
       const int xa = std::min(n + 1, W), xb = std::max(W - n - 1, xa);
 #pragma omp parallel for num_threads(nt) schedule(static)

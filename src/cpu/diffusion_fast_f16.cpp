@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <memory>
 
+#include "cpu/half.hpp"
 #include "cpu/diffusion_rows.hpp"
 
 #if defined(__x86_64__) && defined(__F16C__) && defined(__AVX2__)
@@ -76,7 +77,7 @@ void row_interior_f16(const std::uint16_t* s, const std::uint16_t* u0, const std
 
 bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, bool exact, int edge_mode,
                             int threads, std::uint16_t* a, std::uint16_t* b) {
-  static const bool supported = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("f16c");
+  static const bool supported = __builtin_cpu_supports("avx2") && cpu_has_f16c();
   if (!supported) return false;
   const std::size_t Ws = static_cast<std::size_t>(W);
   std::uint16_t* src = a;
@@ -88,7 +89,10 @@ bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, 
   const float growth = std::exp(rho);
   float sig = s0;
   for (int k = 0; k < N; ++k) {
-    const auto [h, fr, w, nn] = uniform_step(sig, rho, exact, edge_mode);
+    // Named copies, not a structured binding: clang-14 cannot capture a binding in an OpenMP region.
+    const UniformStep st = uniform_step(sig, rho, exact, edge_mode);
+    const float h = st.h, fr = st.fr, w = st.w;
+    const int nn = st.n;
     const int xa = std::min(nn + 1, W), xb = std::max(W - nn - 1, xa);
 #pragma omp parallel for num_threads(threads) schedule(static)
     for (int y = 0; y < H; ++y) {

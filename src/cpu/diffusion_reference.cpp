@@ -11,13 +11,14 @@
 #include <cmath>
 #include <vector>
 
+#include "cpu/half.hpp"
 #include "cpu/diffusion_kernels.hpp"
 #include "cpu/diffusion_stencil.hpp"
 
 namespace brume::cpu {
 namespace {
 
-double to_half(double v) { return static_cast<double>(static_cast<_Float16>(static_cast<float>(v))); }
+double to_half(double v) { return static_cast<double>(static_cast<half_t>(static_cast<float>(v))); }
 
 // Linear interpolation of channel c of a W x H x C double image at the
 // fractional column position x + d (d may be negative), row y, mirrored.

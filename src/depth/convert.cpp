@@ -114,8 +114,18 @@ StereoCalib read_stereo_calib(const std::string& path) {
   };
   c.baseline_m = number("baseline", 0.0) / 1000.0;
   c.doffs_px = number("doffs", 0.0);
-  c.width = static_cast<int>(number("width", 0));
-  c.height = static_cast<int>(number("height", 0));
+  // Sizes are whole pixel counts; anything else (1e12, 3.5, nan) is refused
+  // before the conversion to int, which would be undefined out of range
+  // (UBSan; fuzz/corpus/stereo_calib/crlf_bigwidth.txt holds such a file).
+  auto size = [&](const std::string& key) {
+    const double v = number(key, 0);
+    if (!(v >= 0.0 && v <= 1e9) || v != std::floor(v))
+      throw Error("--calib '" + path + "': '" + key + "=" + kv[key] +
+                  "' is not a pixel count; it must be a whole number from 0 to 1e9");
+    return static_cast<int>(v);
+  };
+  c.width = size("width");
+  c.height = size("height");
   require_positive(c.f_px, "--calib '" + path + "': focal length f in cam0");
   require_positive(c.baseline_m, "--calib '" + path + "': baseline");
   return c;

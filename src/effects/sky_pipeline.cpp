@@ -276,10 +276,18 @@ double turbidity_from_fit_json(const std::string& path, const std::string& flag)
   }
   if (!j.is_object() || !j.contains("turbidity") || !j["turbidity"].is_number())
     throw Error(flag + " '" + path + "' has no number 'turbidity'; give the JSON written by brume sky fit --out");
-  if (!j.value("reliable", false)) {
+  // Read by type, never get<>() on what a hand-edited file may hold instead
+  // (a JSON type error would end in "internal error"; issue #15, reproduced
+  // by fuzz/corpus/sky_fit_json/reliable_not_bool.json).
+  const auto rel = j.find("reliable");
+  if (rel != j.end() && !rel->is_boolean())
+    throw Error(flag + " '" + path + "': 'reliable' is " + rel->dump() + ", not true or false; give the JSON "
+                "written by brume sky fit --out");
+  if (rel == j.end() || !rel->get<bool>()) {
     std::string why;
     if (j.contains("unreliable_because") && j["unreliable_because"].is_array())
-      for (const auto& w : j["unreliable_because"]) why += (why.empty() ? "" : "; ") + w.get<std::string>();
+      for (const auto& w : j["unreliable_because"])
+        why += (why.empty() ? "" : "; ") + (w.is_string() ? w.get<std::string>() : w.dump());
     throw Error(flag + " '" + path + "': the fit is flagged unreliable (" + (why.empty() ? "no reason given" : why) +
                 "); give --turbidity T yourself, or fit a clearer part of the sky (--mask)");
   }

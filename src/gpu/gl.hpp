@@ -16,6 +16,8 @@
 #include <atomic>
 #include <utility>
 
+#include "brume/error.hpp"
+
 namespace brume::gl {
 
 enum Kind { kTexture, kFramebuffer, kProgram, kQuery, kSampler, kVertexArray, kKinds };
@@ -23,6 +25,15 @@ enum Kind { kTexture, kFramebuffer, kProgram, kQuery, kSampler, kVertexArray, kK
 inline std::atomic<int>& live(Kind k) {
   static std::atomic<int> counts[kKinds];
   return counts[k];
+}
+
+// Failure injection for the leak tests (tests/test_gpu.cpp): when >= 0, the
+// number of further GL objects make() may create before it throws
+// brume::Error, as a driver that runs out of memory mid-render would
+// (GL_OUT_OF_MEMORY). Every kind counts. -1 (the default) turns it off.
+inline std::atomic<int>& fail_after() {
+  static std::atomic<int> n{-1};
+  return n;
 }
 
 template <Kind K>
@@ -43,6 +54,10 @@ class Object {
 
   // A new GL object of this kind (programs: glCreateProgram).
   static Object make() {
+    for (int n = fail_after().load(); n >= 0; n = fail_after().load()) {
+      if (n == 0) throw Error("GPU backend: injected failure (gl::fail_after, a test hook): no GL object created");
+      if (fail_after().compare_exchange_weak(n, n - 1)) break;
+    }
     Object o;
     switch (K) {
       case kTexture: glGenTextures(1, &o.id_); break;

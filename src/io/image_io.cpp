@@ -32,7 +32,10 @@ void check_output_dir(const std::string& path, const std::string& flag) {
   if (dir.empty()) dir = ".";
   std::error_code ec;
   if (!fs::is_directory(dir, ec))
-    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
+    // Checked before any work and again at each write: the second time, the
+    // directory was there when the run started and has since been removed.
+    throw Error(flag + " '" + path + "': directory '" + dir.string() +
+                "' does not exist (or was removed while brume ran); create it and run again");
   if (::access(dir.c_str(), W_OK) != 0)
     throw Error(flag + " '" + path + "': directory '" + dir.string() + "' is not writable");
 }
@@ -100,11 +103,58 @@ void check_declared_size(const std::string& path, std::int64_t w, std::int64_t h
                 " channels; brume reads at most 1024 (a corrupt header?)");
 }
 // The file opened for reading (its header parsed), or an error naming it.
+// OpenEXR 3.1 (Debian 12) allocates each header attribute at the size the
+// file declares before it reads the bytes, so a 1 kB file declaring a 1.7 GB
+// attribute costs 1.7 GB and seconds per open (found by fuzz/fuzz_image.cpp;
+// reproducer fuzz/corpus/image/openexr_huge_attribute.bin). Refused here
+// first: an attribute (name, type, int32 size, bytes; every header of a
+// multi-part file) cannot be larger than what is left of the file. Headers
+// this scan cannot follow are left to OpenEXR, which reports them.
+void check_exr_attributes(const std::string& path) {
+  // Only the first MB is read (it holds any real header's attributes but a
+  // large preview); the scan stops at its end and leaves the rest to OpenEXR.
+  std::error_code ec;
+  const std::uintmax_t total = fs::file_size(path, ec);
+  if (ec) return;
+  std::vector<char> b(static_cast<std::size_t>(std::min<std::uintmax_t>(total, 1u << 20)));
+  std::ifstream f(path, std::ios::binary);
+  if (!f.read(b.data(), static_cast<std::streamsize>(b.size()))) return;
+  const std::size_t n = b.size();
+  if (n < 8 || static_cast<unsigned char>(b[0]) != 0x76 || b[1] != 0x2f || b[2] != 0x31 || b[3] != 0x01) return;
+  const bool multipart = (static_cast<unsigned char>(b[5]) & 0x10) != 0;  // version bit 12
+  std::size_t i = 8;
+  auto cstring = [&](std::string& out) {
+    const std::size_t start = i;
+    while (i < n && b[i] != '\0' && i - start < 256) ++i;
+    if (i >= n || b[i] != '\0') return false;
+    out.assign(&b[start], i - start);
+    ++i;
+    return true;
+  };
+  for (;;) {  // headers
+    std::string name, type;
+    if (!cstring(name)) return;
+    if (name.empty()) {  // end of this header; a multi-part file ends its list with an empty header
+      if (!multipart || i >= n || b[i] == '\0') return;
+      continue;
+    }
+    if (!cstring(type) || i + 4 > n) return;
+    std::int32_t size = 0;
+    std::memcpy(&size, &b[i], 4);  // little-endian, as x86-64
+    i += 4;
+    if (size < 0 || static_cast<std::uintmax_t>(size) > total - i)
+      throw Error("cannot read '" + path + "': a corrupt OpenEXR header (attribute '" + name + "' declares " +
+                  std::to_string(size) + " bytes, but " + std::to_string(total - i) + " remain in the file)");
+    i += static_cast<std::size_t>(size);
+  }
+}
+
 std::unique_ptr<OIIO::ImageInput> open_image(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw FileNotFound("cannot read '" + path + "': no such file");
   if (fs::is_directory(path, ec))
     throw Error("cannot read '" + path + "': it is a directory, not an image file");
+  check_exr_attributes(path);
   auto in = OIIO::ImageInput::open(path);
   if (!in) {
     std::string e = OIIO::geterror();

@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# The test suite under sanitizers (issue #15): the README's second test
+# command, run by .ci/run after scripts/test.sh.
+#  1. AddressSanitizer + UndefinedBehaviorSanitizer (clang-14, -O1): the
+#     library, the CLI the tests run, the test suite (GPU tests included, on
+#     Mesa llvmpipe) and the fuzz targets, which replay their committed
+#     corpora (fuzz/corpus). Any report fails the run.
+#  2. ThreadSanitizer on the multithreaded CPU paths (OpenMP): clang-14 with
+#     LLVM's libomp and its Archer tool, which tells TSan about OpenMP's own
+#     barriers and tasks (with GCC's libgomp, TSan sees none and reports
+#     false races). A gtest filter picks the tests that run threaded code.
+# Cost (measured 2026-12-01, 2 cores shared with other builds): see README
+# "Reliability". Options: --asan-only, --tsan-only.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/install-deps.sh
+jobs=$(nproc)
+run_asan=1 run_tsan=1
+case "${1:-}" in
+  --asan-only) run_tsan=0 ;;
+  --tsan-only) run_asan=0 ;;
+  "") ;;
+  *) echo "usage: $0 [--asan-only|--tsan-only]" >&2; exit 2 ;;
+esac
+# -O1 keeps the instrumented build and run fast with readable stacks; no
+# benchmarks, no Python module (its interpreter is not instrumented).
+common=(-DCMAKE_CXX_COMPILER=clang++-14 -DCMAKE_BUILD_TYPE=RelWithDebInfo
+        "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -gline-tables-only"
+        -DBRUME_BUILD_BENCH=OFF -DBRUME_PYTHON=OFF)
+if command -v ccache >/dev/null; then common+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
+supp="$PWD/scripts/sanitize/lsan.supp"
+
+if [ "$run_asan" = 1 ]; then
+  t0=$(date +%s)
+  cmake -S . -B build-asan "${common[@]}" -DBRUME_SANITIZE=address,undefined -DBRUME_FUZZ=ON -DBRUME_FUZZ_COVERAGE=OFF
+  # detect_leaks: on, with Debian's libraries' leaks suppressed (see the
+  # file); set before the build, whose test discovery runs the test binary.
+  export ASAN_OPTIONS="detect_leaks=1"
+  export LSAN_OPTIONS="suppressions=$supp:print_suppressions=0"
+  export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
+  cmake --build build-asan -j"$jobs"
+  t1=$(date +%s)
+  # install_consumer builds an uninstrumented project against the
+  # instrumented static library: not meaningful here (scripts/test.sh runs it).
+  ctest --test-dir build-asan --output-on-failure -j"$jobs" -E '^install_consumer$'
+  t2=$(date +%s)
+  echo "test-sanitize: ASan+UBSan build $((t1 - t0)) s, tests and fuzz regression $((t2 - t1)) s"
+  unset ASAN_OPTIONS LSAN_OPTIONS UBSAN_OPTIONS
+fi
+
+if [ "$run_tsan" = 1 ]; then
+  t0=$(date +%s)
+  cmake -S . -B build-tsan "${common[@]}" -DBRUME_SANITIZE=thread
+  cmake --build build-tsan -j"$jobs" --target brume_tests
+  t1=$(date +%s)
+  archer=$(ls /usr/lib/llvm-14/lib/libarcher.so)
+  # The threaded CPU paths (every OpenMP loop of src/: the fast diffusion in
+  # f32 and f16, haze, fog, aerial, dof, insert, sky, the range preparation)
+  # through their own suites, at four threads; the GPU, CLI and real-data
+  # tests add no threads of brume's own and are left to the ASan run.
+  filter='Diffusion*:GaussianAccuracy*:Haze*:Fog*:Aerial*:Dof*:ChainHazeDof*:Insert*:Sky*:Prepare*'
+  filter+='-*Gpu*:*GPU*:Cli*:*Real*'
+  OMP_TOOL_LIBRARIES="$archer" ARCHER_OPTIONS="verbose=0" \
+    TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:ignore_noninstrumented_modules=1" \
+    OMP_NUM_THREADS=4 build-tsan/tests/brume_tests --gtest_filter="$filter" --gtest_brief=1
+  t2=$(date +%s)
+  echo "test-sanitize: TSan build $((t1 - t0)) s, tests $((t2 - t1)) s"
+fi
