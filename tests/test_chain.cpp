@@ -71,10 +71,12 @@ TEST(Params, ChainIsDeclaredCompletelyWithPrefixedDofFlags) {
   const std::string h = t.at("dof-f-number").spec.help;
   EXPECT_NE(h.find("--dof-focal-length"), std::string::npos) << h;
   EXPECT_EQ(h.find(" --focal-length"), std::string::npos) << h;
-  for (const auto& q : t.params())
-    if (q.spec.block == "dof")
-      for (std::size_t i = q.spec.help.find("--"); i != std::string::npos; i = q.spec.help.find("--", i + 2))
-        EXPECT_EQ(q.spec.help.compare(i, 6, "--dof-"), 0) << q.spec.name << ": " << q.spec.help;
+  for (const auto& q : t.params()) {
+    if (q.spec.block != "dof") continue;
+    for (std::size_t i = q.spec.help.find("--"); i != std::string::npos; i = q.spec.help.find("--", i + 2)) {
+      EXPECT_EQ(q.spec.help.compare(i, 6, "--dof-"), 0) << q.spec.name << ": " << q.spec.help;
+    }
+  }
   EXPECT_EQ(prefix_flag_mentions("use --scheme, not --visibility-", "dof-",
                                  [](const std::string& n) { return n == "scheme" || n == "visibility"; }),
             "use --dof-scheme, not --dof-visibility-");

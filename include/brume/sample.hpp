@@ -57,6 +57,10 @@ inline constexpr const char* kSamplerName = "brume-sample-v1";
 // u in [0, 1) for (seed, key, name) by the scheme above.
 double sample_unit(std::uint64_t seed, std::string_view key, std::string_view name);
 
+// The first 8 bytes of SHA-256(msg), big-endian: the one hash the sampler
+// and the batch's shards (brume/batch.hpp) are keyed by.
+std::uint64_t sha256_prefix64(std::string_view msg);
+
 // One parameter's distribution, parsed from what a user wrote.
 struct Distribution {
   enum class Kind { fixed, uniform, loguniform, choice };

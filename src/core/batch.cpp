@@ -2,7 +2,6 @@
 // workers over the effects' own pipelines (brume/batch.hpp says what and why).
 #include "brume/batch.hpp"
 
-#include <openssl/evp.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -326,22 +325,6 @@ std::string output_stem(const std::string& key) {
   return out;
 }
 
-std::string sha256_hex_prefix8(const std::string& msg, std::uint64_t* n) {
-  unsigned char md[EVP_MAX_MD_SIZE];
-  unsigned int len = 0;
-  EVP_MD_CTX* ctx = EVP_MD_CTX_new();
-  if (!ctx || EVP_DigestInit_ex(ctx, EVP_sha256(), nullptr) != 1 ||
-      EVP_DigestUpdate(ctx, msg.data(), msg.size()) != 1 || EVP_DigestFinal_ex(ctx, md, &len) != 1 || len < 8) {
-    EVP_MD_CTX_free(ctx);
-    throw Error("internal: SHA-256 failed");
-  }
-  EVP_MD_CTX_free(ctx);
-  std::uint64_t v = 0;
-  for (int i = 0; i < 8; ++i) v = (v << 8) | md[i];
-  *n = v;
-  return {};
-}
-
 // A cell as the text a flag takes (CSV cells are text already).
 std::string cell_text(const nlohmann::json& v) {
   if (v.is_string()) return v.get<std::string>();
@@ -395,8 +378,7 @@ BatchFrame batch_frame_from_json(const nlohmann::json& j) {
 
 int shard_of(std::string_view key, int count) {
   if (count < 1) throw Error("internal: shard count < 1");
-  std::uint64_t n = 0;
-  sha256_hex_prefix8(std::string(kShardHashName) + '\0' + std::string(key), &n);
+  const std::uint64_t n = sha256_prefix64(std::string(kShardHashName) + '\0' + std::string(key));
   return static_cast<int>(n % static_cast<std::uint64_t>(count)) + 1;
 }
 

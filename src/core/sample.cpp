@@ -220,6 +220,21 @@ std::map<std::string, Distribution> resolve(const EffectSampling& es, const std:
 
 }  // namespace
 
+std::uint64_t sha256_prefix64(std::string_view msg) {
+  unsigned char md[EVP_MAX_MD_SIZE];
+  unsigned int len = 0;
+  EVP_MD_CTX* ctx = EVP_MD_CTX_new();
+  if (!ctx || EVP_DigestInit_ex(ctx, EVP_sha256(), nullptr) != 1 ||
+      EVP_DigestUpdate(ctx, msg.data(), msg.size()) != 1 || EVP_DigestFinal_ex(ctx, md, &len) != 1 || len < 8) {
+    EVP_MD_CTX_free(ctx);
+    throw Error("internal: SHA-256 (OpenSSL) failed");
+  }
+  EVP_MD_CTX_free(ctx);
+  std::uint64_t n = 0;
+  for (int i = 0; i < 8; ++i) n = (n << 8) | md[i];
+  return n;
+}
+
 double sample_unit(std::uint64_t seed, std::string_view key, std::string_view name) {
   std::string msg = kSamplerName;
   msg.push_back('\0');
@@ -228,17 +243,7 @@ double sample_unit(std::uint64_t seed, std::string_view key, std::string_view na
   msg.append(key.data(), key.size());
   msg.push_back('\0');
   msg.append(name.data(), name.size());
-  unsigned char md[EVP_MAX_MD_SIZE];
-  unsigned int len = 0;
-  EVP_MD_CTX* ctx = EVP_MD_CTX_new();
-  if (!ctx || EVP_DigestInit_ex(ctx, EVP_sha256(), nullptr) != 1 ||
-      EVP_DigestUpdate(ctx, msg.data(), msg.size()) != 1 || EVP_DigestFinal_ex(ctx, md, &len) != 1 || len < 8) {
-    EVP_MD_CTX_free(ctx);
-    throw Error("internal: SHA-256 (OpenSSL) failed while drawing a sampled parameter");
-  }
-  EVP_MD_CTX_free(ctx);
-  std::uint64_t n = 0;
-  for (int i = 0; i < 8; ++i) n = (n << 8) | md[i];
+  const std::uint64_t n = sha256_prefix64(msg);
   // The top 53 bits: every double of the form k 2^-53, so u < 1 exactly.
   return static_cast<double>(n >> 11) * 0x1p-53;
 }
