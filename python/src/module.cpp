@@ -1166,7 +1166,6 @@ PYBIND11_MODULE(_brume, m) {
       "sRGB-encoded; bits auto: PNG/TIFF 16, JPEG 8, EXR/PFM/HDR float. record (a dict, e.g. a Result's) is "
       "embedded as ImageDescription where the format allows (PNG, TIFF, JPEG, EXR); read_image returns it.");
 
-  // ---- introspection, tests and benchmarks -----------------------------------------------
   // ---- brume batch's frames, for brume.dask (the same planning and pipelines as the CLI) ----
   m.def(
       "_batch_plan",
@@ -1207,6 +1206,7 @@ PYBIND11_MODULE(_brume, m) {
       },
       py::arg("frame"), py::arg("argv"), py::arg("threads") = 1,
       "Run one planned frame through its pipeline, the GIL released; returns its results line as JSON (private).");
+  // ---- introspection, tests and benchmarks -----------------------------------------------
   m.def("_stub_text", &stub_text, "The type stubs of this module, generated from the parameter tables.");
   m.def(
       "_debug_last_inputs",
