@@ -24,7 +24,12 @@ the disparity-to-range conversion, SHA-256 of the inputs, encoding, the
 record, the rename. With python3-distributed installed, the same frames also
 run through `python3 -m brume.dask --scheduler local --workers W`.
 
-  python3 bench/bench_batch.py [--cli build/brume] [--rounds 3] [--workers 2]
+The overhead is measured at the writer's default PNG compression and, in the
+same rounds, at each --compression given (default zip:1, deflate level 1:
+the encoder is most of a frame's write), so that the price of the default
+and of the fast setting are read side by side.
+
+  python3 bench/bench_batch.py [--cli build/brume] [--rounds 3] [--workers 2] [--compression zip:1 ...]
 
 Not run by ctest. Prints the machine (lscpu model name, cores) and the load.
 """
@@ -59,6 +64,8 @@ def main():
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 2)
     ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--compression", nargs="*", default=["zip:1"],
+                    help="also measure the overhead with --param compression=SPEC (each, same rounds)")
     a = ap.parse_args()
     cli = pathlib.Path(a.cli)
     if not cli.exists():
@@ -124,6 +131,7 @@ def main():
             values.append(v)
 
         loop_fps, batch_fps, dask_fps, overheads, effect_ms = [], [], [], [], []
+        comp_overheads = {c: [] for c in a.compression}
         for rnd in range(a.rounds):
             out = tmp / "loop"
             out.mkdir()
@@ -154,6 +162,16 @@ def main():
             seq = (time.perf_counter() - t0) / len(rows)
             shutil.rmtree(out)
             overheads.append(seq / mean_eff - 1.0)
+            comp_txt = ""
+            for c in a.compression:
+                t0 = time.perf_counter()
+                subprocess.run([str(cli), "batch", "--manifest", str(manifest), "--out-dir", str(out), "--seed", "1",
+                                "--workers", "1", "--threads", "1", "--quiet", "--param", "compression=" + c],
+                               check=True, capture_output=True)
+                seq_c = (time.perf_counter() - t0) / len(rows)
+                shutil.rmtree(out)
+                comp_overheads[c].append(seq_c / mean_eff - 1.0)
+                comp_txt += f", with compression {c} {comp_overheads[c][-1] * 100:.0f} %"
 
             dask_txt = ""
             if have_dask:
@@ -168,7 +186,7 @@ def main():
                 dask_txt = f", dask {dask_fps[-1]:.2f} frames/s (cluster start-up included)"
             print(f"round {rnd + 1}: loop {loop_fps[-1]:.2f} frames/s, batch {batch_fps[-1]:.2f} frames/s "
                   f"({batch_fps[-1] / loop_fps[-1]:.2f}x){dask_txt}, effect {mean_eff * 1000:.1f} ms/frame, "
-                  f"batch --workers 1 overhead {overheads[-1] * 100:.0f} %", flush=True)
+                  f"batch --workers 1 overhead {overheads[-1] * 100:.0f} %{comp_txt}", flush=True)
 
         lf, bf = statistics.median(loop_fps), statistics.median(batch_fps)
         print(f"\n{cpu_model()}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}; "
@@ -180,6 +198,9 @@ def main():
                   f"{statistics.median(dask_fps):.2f} frames/s")
         print(f"batch per-frame overhead beyond the effect's own time: {statistics.median(overheads) * 100:.0f} % "
               f"(effect {statistics.median(effect_ms):.1f} ms/frame; target <= 25 %)")
+        for c, o in comp_overheads.items():
+            print(f"  the same with --param compression={c}: {statistics.median(o) * 100:.0f} % "
+                  f"(rounds {', '.join(f'{x * 100:.0f}' for x in o)} %)")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

@@ -201,6 +201,42 @@ TEST_F(Batch, FrameEqualsSingleRunAndRecordRepeats) {
   expect_same_pixels(p("out/a/f0.png"), p("again/f0.png"));
 }
 
+// --compression is an output setting, not a file: a manifest column or
+// --param sets it, the pixels are those of the default, the record holds it
+// and `brume run` repeats it (the output block's other text parameters are
+// files, which brume batch names and brume run moves).
+TEST_F(Batch, CompressionIsASettingNotAFile) {
+  const std::vector<std::string> keys = make_frames(2, 96, 64);
+  const std::string m = csv(keys, "effect,visibility,compression", "haze,300,none");
+  CliRun r = run("batch --manifest " + m + " --out-dir " + p("none") + " --quiet");
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = run("batch --manifest " + csv(keys, "effect,visibility", "haze,300", "d.csv") + " --out-dir " + p("dflt") +
+          " --quiet --param compression=zip:9");
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const std::string stem : {"a/f0", "b/f1"}) {
+    expect_same_pixels(p("none/" + stem + ".png"), p("dflt/" + stem + ".png"));
+    // Stored deflate blocks hold at least the raw 8-bit samples; level 9 compresses.
+    EXPECT_GE(fs::file_size(p("none/" + stem + ".png")), 96u * 64 * 3);
+    EXPECT_LT(fs::file_size(p("dflt/" + stem + ".png")), fs::file_size(p("none/" + stem + ".png")));
+    const nlohmann::json rec = nlohmann::json::parse(slurp(p("dflt/" + stem + ".json")));
+    EXPECT_EQ(rec["job"]["output"]["compression"], "zip:9");
+  }
+  r = run("run " + p("none/a/f0.json") + " --out-dir " + p("again"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_GE(fs::file_size(p("again/f0.png")), 96u * 64 * 3);  // stored again, not the default's deflate
+  expect_same_pixels(p("none/a/f0.png"), p("again/f0.png"));
+  // A compression the output format does not take is a manifest error, before any work.
+  r = run("batch --manifest " + p("data/d.csv") + " --out-dir " + p("pfm") + " --quiet --format pfm --param compression=zip");
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("auto, none"), std::string::npos) << r.output;
+  r = run("batch --manifest " + csv(keys, "effect,compression", "haze,lzw", "bad.csv") + " --out-dir " + p("bad") +
+          " --quiet");
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("'lzw'"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("line 2"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p("bad"))) << r.output;
+}
+
 // Shards 1/3, 2/3, 3/3 together are the unsharded run: every frame in exactly
 // one shard, by the documented hash, with the same files and bits.
 TEST_F(Batch, ShardsTogetherEqualTheWhole) {

@@ -132,6 +132,8 @@ TEST_F(Cli, ErrorPathsAreClearAndLeaveNothing) {
       {"haze --image " + img + " --range " + range + " --out " + p("o.xyz"), "o.xyz"},
       {"haze --image " + img + " --range " + range + " --out " + p("o.jpg") + " --bits 16", "--bits"},
       {"haze --image " + img + " --range " + range + io + " --record " + p("no/r.json"), "--record"},
+      {"haze --image " + img + " --range " + range + io + " --compression lzw", "none, zip, zip:0..9"},
+      {"haze --image " + img + " --range " + range + " --out " + p("o.exr") + " --compression zip:12", "1..9"},
       {"blur --image " + img + " --sigma 0.5" + io, "below the inner scale"},
       {"blur --image " + img + io, "--sigma"},
   };

@@ -230,3 +230,87 @@ TEST(IO, ErrorsNameTheFile) {
   }
   fs::remove_all(d);
 }
+
+// --compression reaches OpenImageIO's writer: the file says so when read back
+// (EXR and TIFF name their compression; PNG's deflate level shows only in the
+// size), lossless forms give exactly the pixels of the default, and each
+// format refuses a name or level it does not take, naming what it takes.
+TEST(IO, CompressionReachesTheWriterAndKeepsLosslessPixels) {
+  fs::path d = tmpdir();
+  // Smooth plus a little structure: compressible, but not trivially.
+  Image rgb = gradient(96, 64, 3);
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 96; ++x) rgb.at(x, y, 1) += ((x * 7 + y * 3) % 11) * 0.01f;
+  auto write_as = [&](const std::string& name, const std::string& bits, const std::string& comp) {
+    WriteOptions o;
+    o.bits = bits;
+    o.compression = comp;
+    const std::string p = (d / name).string();
+    write_image(p, rgb, o);
+    return p;
+  };
+  auto stored_compression = [](const std::string& p) {
+    auto in = OIIO::ImageInput::open(p);
+    EXPECT_TRUE(in) << p;
+    return in ? std::string(in->spec().get_string_attribute("compression")) : std::string();
+  };
+  // PNG, 16 bits: the same samples at every level; stored blocks (none) are
+  // at least the raw 96 x 64 x 3 x 2 bytes, level 9 well under them.
+  const Image png_auto = read_color(write_as("auto.png", "16", "auto"));
+  std::uintmax_t none_size = 0, z9_size = 0;
+  for (const char* c : {"none", "zip", "zip:0", "zip:1", "zip:9"}) {
+    const std::string p = write_as(std::string("c_") + (c[3] == ':' ? std::string("zip") + c[4] : c) + ".png", "16", c);
+    EXPECT_EQ(read_color(p).data, png_auto.data) << c;
+    if (std::string(c) == "none") none_size = fs::file_size(p);
+    if (std::string(c) == "zip:9") z9_size = fs::file_size(p);
+  }
+  EXPECT_GE(none_size, 96u * 64 * 3 * 2);
+  EXPECT_LT(z9_size, none_size * 3 / 4);
+  // EXR float: lossless forms are exact and named in the file.
+  for (const char* c : {"none", "rle", "zip", "zip:1", "zips", "piz"}) {
+    const std::string p = write_as(std::string("e_") + (std::string(c) == "zip:1" ? "zip1" : c) + ".exr", "float", c);
+    EXPECT_EQ(read_color(p).data, rgb.data) << c;
+    const std::string name = std::string(c).substr(0, std::string(c).find(':'));
+    EXPECT_EQ(stored_compression(p).substr(0, name.size()), name) << c;
+  }
+  // A lossy EXR form on colour is allowed and named.
+  EXPECT_EQ(stored_compression(write_as("dwaa.exr", "half", "dwaa:45")).substr(0, 4), "dwaa");
+  // TIFF, 16 bits.
+  const Image tif_auto = read_color(write_as("auto.tif", "16", "auto"));
+  for (const char* c : {"none", "lzw", "zip:1", "packbits"}) {
+    const std::string n = std::string(c) == "zip:1" ? "zip" : c;
+    const std::string p = write_as("t_" + n + ".tif", "16", c);
+    EXPECT_EQ(read_color(p).data, tif_auto.data) << c;
+    EXPECT_EQ(stored_compression(p), n) << c;
+  }
+  // JPEG: the quality is the compression.
+  EXPECT_LT(fs::file_size(write_as("q20.jpg", "8", "jpeg:20")), fs::file_size(write_as("q100.jpg", "8", "jpeg:100")));
+
+  struct Bad {
+    const char* file;
+    const char* comp;
+    bool data;
+    const char* must_contain;
+  };
+  for (Bad b : {Bad{"x.png", "lzw", false, "none, zip, zip:0..9"}, Bad{"x.png", "zip:10", false, "0..9"},
+                Bad{"x.png", "zip:", false, "not a whole number"}, Bad{"x.png", "none:3", false, "takes no level"},
+                Bad{"x.exr", "dwaa", true, "lossy"}, Bad{"x.exr", "zip:0", false, "1..9"},
+                Bad{"x.exr", "ZIP", false, "not a compression"}, Bad{"x.jpg", "jpeg", false, "jpeg:1..100"},
+                Bad{"x.pfm", "zip", false, "auto, none"}, Bad{"x.hdr", "none", false, "auto, rle"}}) {
+    WriteOptions o;
+    o.compression = b.comp;
+    o.is_color = !b.data;
+    const std::string p = (d / b.file).string();
+    try {
+      check_writable(p, o, "--out");
+      ADD_FAILURE() << b.file << " " << b.comp << " was accepted";
+    } catch (const Error& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find(b.must_contain), std::string::npos) << m;
+      EXPECT_NE(m.find(std::string("'") + b.comp + "'"), std::string::npos) << m;
+      EXPECT_NE(m.find(b.file), std::string::npos) << m;
+    }
+    EXPECT_FALSE(fs::exists(p));
+  }
+  fs::remove_all(d);
+}

@@ -92,11 +92,23 @@ struct WriteOptions {
   // storage and Radiance HDR are refused with this reason, never clipped.
   std::string float_reason;
   std::string description;     // embedded as ImageDescription where the format allows
+  // The file's compression, NAME[:LEVEL] as OpenImageIO spells it: "auto" is
+  // the writer's default (PNG deflate level 6, TIFF zip, EXR zip, JPEG
+  // quality 95). Which names a format takes: see compression_names().
+  std::string compression = "auto";
 };
+
+// The --compression values a file of this extension takes (".png" -> "auto,
+// none, zip, zip:0..9"), for help texts and messages.
+std::string compression_names(const std::string& ext);
 
 // Check, before any work is done, that `path` can be written with `opts`
 // (known extension, existing writable directory, bit depth supported).
 void check_writable(const std::string& path, const WriteOptions& opts, const std::string& flag);
+// The part of check_writable that needs no directory: the extension is known
+// and takes opts' bits and compression (brume batch checks every frame's
+// outputs this way before the first frame runs).
+void check_encoding(const std::string& path, const WriteOptions& opts, const std::string& flag);
 
 class OutputSet {
  public:

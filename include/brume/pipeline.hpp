@@ -102,10 +102,15 @@ struct OutputFiles {
   std::string out;                       // main image
   std::string bits = "auto";             // auto | 8 | 16 | half | float
   Transfer transfer = Transfer::automatic;
+  std::string compression = "auto";      // main image's NAME[:LEVEL] (WriteOptions::compression)
   std::string record;                    // JSON record (optional)
   std::map<std::string, std::string> maps;  // declared map outputs that were asked for
 };
 const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& maps, bool main_required = true);
+// The output block's text parameters name files (--out, --record, the maps)
+// except --compression: brume batch names the files from the frame's key and
+// brume run moves them under --out-dir; the compression is a setting like --bits.
+bool is_output_file(const ParamSpec& s);
 
 // ---- the shared steps -------------------------------------------------------------
 struct LoadedInputs {

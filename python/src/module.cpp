@@ -1138,7 +1138,7 @@ PYBIND11_MODULE(_brume, m) {
   m.def(
       "write_image",
       [](py::object path_obj, py::object img_obj, std::string bits, py::object transfer, py::object record,
-         bool data) {
+         bool data, std::string compression) {
         const std::string fn = "brume.write_image";
         const std::string path = keyword_value(path_spec(), path_obj, fn + "()");
         if (!py::isinstance<py::array>(img_obj))
@@ -1148,6 +1148,7 @@ PYBIND11_MODULE(_brume, m) {
         Input in = read_input(img_obj, "image", a.ndim() == 2 ? 1 : 3, Transfer::automatic, fn);
         WriteOptions o;
         o.bits = bits;
+        o.compression = compression;
         if (!transfer.is_none()) o.transfer = parse_transfer(py::cast<std::string>(transfer), "transfer");
         o.is_color = in.view.channels() == 3 && !data;
         if (!record.is_none()) o.description = from_py(record, fn + "(): record").dump();
@@ -1159,12 +1160,14 @@ PYBIND11_MODULE(_brume, m) {
         }
       },
       py::arg("path"), py::arg("image"), py::arg("bits") = "auto", py::arg("transfer") = py::none(),
-      py::arg("record") = py::none(), py::arg("data") = false,
-      "write_image(path, image, bits='auto', transfer=None, record=None, data=False)\n\nWrite linear float pixels "
+      py::arg("record") = py::none(), py::arg("data") = false, py::arg("compression") = "auto",
+      "write_image(path, image, bits='auto', transfer=None, record=None, data=False, compression='auto')\n\nWrite "
+      "linear float pixels "
       "(H x W x 3 colour, or H x W data) atomically, by the CLI's encoding rules: integer outputs (bits 8/16, PNG, "
       "JPEG) of colour are sRGB-encoded unless transfer='linear'; data=True (or a 2-D array) is never "
       "sRGB-encoded; bits auto: PNG/TIFF 16, JPEG 8, EXR/PFM/HDR float. record (a dict, e.g. a Result's) is "
-      "embedded as ImageDescription where the format allows (PNG, TIFF, JPEG, EXR); read_image returns it.");
+      "embedded as ImageDescription where the format allows (PNG, TIFF, JPEG, EXR); read_image returns it. "
+      "compression: the CLI's --compression (NAME[:LEVEL], e.g. 'zip:1' for a fast PNG).");
 
   // ---- brume batch's frames, for brume.dask (the same planning and pipelines as the CLI) ----
   m.def(

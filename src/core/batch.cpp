@@ -459,7 +459,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
         const ParamSpec* sp = nullptr;
         for (const ParamSpec& s : e.specs)
           if (s.name == canon) sp = &s;
-        if (sp->block == "output" && (canon == "out" || canon == "record" || sp->kind == ParamKind::text))
+        if (is_output_file(*sp))
           throw Error("'" + col + "' is an output, named by brume batch from the key under --out-dir (maps: --map NAME)");
         const std::string hashed =
             prefix.empty() ? canon : prefix.substr(0, prefix.size() - 1) + "." + canon.substr(prefix.size());
@@ -550,12 +550,12 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       for (const std::string& map : o.maps) {
         bool declared = false;
         for (const ParamSpec& s : e.specs)
-          if (s.name == map && s.block == "output" && s.kind == ParamKind::text && map != "out" && map != "record")
+          if (s.name == map && is_output_file(s) && map != "out" && map != "record")
             declared = true;
         if (!declared) {
           std::string all_maps;
           for (const ParamSpec& s : e.specs)
-            if (s.block == "output" && s.kind == ParamKind::text && s.name != "out" && s.name != "record")
+            if (is_output_file(s) && s.name != "out" && s.name != "record")
               all_maps += (all_maps.empty() ? "" : ", ") + s.name;
           throw Error("--map " + map + ": effect " + e.name + " has no such map; its maps: " + all_maps);
         }
@@ -569,6 +569,12 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       f.given = given;
       try {
         e.check(f.job, f.given);
+        // The output's encoding (bits, compression) against its format, now
+        // rather than when the frame's turn comes.
+        WriteOptions wo;
+        wo.bits = f.job["output"].value("bits", "auto");
+        wo.compression = f.job["output"].value("compression", "auto");
+        check_encoding(out, wo, "--out");
       } catch (const Error& ex) {
         throw Error(cell_where(m, r, "") + ": " + ex.what());
       }

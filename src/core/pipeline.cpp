@@ -248,6 +248,12 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
               "output storage: auto (PNG/TIFF: the input's 8 or 16 bits, else 16; JPEG 8; EXR/PFM/HDR float)")
       .choice("out-transfer", &OutputFiles::transfer, transfer_names(),
               "transfer function of the output: auto (sRGB for 8/16-bit, linear for float), srgb, linear")
+      .text("compression", &OutputFiles::compression,
+            "compression of the output image, NAME[:LEVEL]: auto (the writer's default: PNG zip:6, TIFF and EXR "
+            "zip); PNG none, zip, zip:0..9 (deflate level: 1 is fastest, 9 smallest); TIFF none, lzw, zip, "
+            "zip:1..9, packbits; EXR none, rle, zip, zip:1..9, zips, piz, and the lossy pxr24, b44, b44a, "
+            "dwaa[:L], dwab[:L]; JPEG jpeg:1..100 (quality); PFM none; HDR rle. Lossless forms give the same "
+            "pixels. Maps keep their format's default lossless compression")
       .text("record", &OutputFiles::record, "write a JSON record of every parameter, derived value and input hash");
   for (const MapOutput& m : maps) {
     ParamSpec s;
@@ -267,6 +273,10 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
         });
   }
   return cache.emplace(key, std::move(d)).first->second;
+}
+
+bool is_output_file(const ParamSpec& s) {
+  return s.block == "output" && s.kind == ParamKind::text && s.name != "compression";
 }
 
 // ---- steps ---------------------------------------------------------------------------
@@ -426,6 +436,7 @@ WriteOptions main_options(const OutputFiles& o) {
   WriteOptions w;
   w.bits = o.bits;
   w.transfer = o.transfer;
+  w.compression = o.compression;
   return w;
 }
 

@@ -54,7 +54,7 @@ void redirect_outputs(J& job, const ParamTable<J>& t, const std::string& out_dir
   fs::create_directories(out_dir, ec);
   if (!fs::is_directory(out_dir)) throw Error("--out-dir '" + out_dir + "' cannot be created: " + ec.message());
   for (const auto& d : t.params()) {
-    if (d.spec.block != "output" || d.spec.kind != ParamKind::text) continue;
+    if (!is_output_file(d.spec)) continue;
     const std::string v = d.get(job).template get<std::string>();
     if (v.empty()) continue;
     fs::path p(v);
