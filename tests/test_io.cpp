@@ -6,6 +6,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
@@ -312,5 +313,101 @@ TEST(IO, CompressionReachesTheWriterAndKeepsLosslessPixels) {
     }
     EXPECT_FALSE(fs::exists(p));
   }
+  fs::remove_all(d);
+}
+
+// The sRGB tables of read_color and of 8-bit writes give exactly the bits of
+// the per-value curve: decoding every 8- and 16-bit code, and encoding a sweep
+// of every 97th float in [0, 1.01] plus +-200 floats around each step of the
+// curve, NaN, infinities, negatives and denormals, through whole PNG files,
+// against OpenImageIO writing the per-value floats linear_to_srgb(max(v, 0)).
+TEST(IO, SrgbTablesGiveThePerValueBits) {
+  fs::path d = tmpdir();
+  auto write_raw = [](const std::string& p, int w, int h, OIIO::TypeDesc file_type, OIIO::TypeDesc mem_type,
+                      const void* data) {
+    auto out = OIIO::ImageOutput::create(p);
+    ASSERT_TRUE(out);
+    ASSERT_TRUE(out->open(p, OIIO::ImageSpec(w, h, 3, file_type)));
+    ASSERT_TRUE(out->write_image(mem_type, data));
+    ASSERT_TRUE(out->close());
+  };
+  auto read_as = [](const std::string& p, OIIO::TypeDesc t, std::size_t bytes) {
+    std::vector<unsigned char> v(bytes);
+    auto in = OIIO::ImageInput::open(p);
+    EXPECT_TRUE(in && in->read_image(0, 0, 0, 3, t, v.data())) << p;
+    return v;
+  };
+  // Decoding: every code of an 8-bit and of a 16-bit PNG.
+  for (int bits : {8, 16}) {
+    const int n = 1 << bits, w = 256, h = n / 256;
+    std::vector<std::uint16_t> c16(static_cast<std::size_t>(n) * 3);
+    std::vector<std::uint8_t> c8(c16.size());
+    for (std::size_t i = 0; i < c16.size(); ++i) c16[i] = static_cast<std::uint16_t>((i / 3 + 7 * (i % 3)) % n), c8[i] = static_cast<std::uint8_t>(c16[i]);
+    const std::string p = (d / ("codes" + std::to_string(bits) + ".png")).string();
+    if (bits == 8) write_raw(p, w, h, OIIO::TypeDesc::UINT8, OIIO::TypeDesc::UINT8, c8.data());
+    else write_raw(p, w, h, OIIO::TypeDesc::UINT16, OIIO::TypeDesc::UINT16, c16.data());
+    std::vector<unsigned char> f = read_as(p, OIIO::TypeDesc::FLOAT, c16.size() * 4);
+    const Image got = read_color(p);
+    ASSERT_EQ(got.data.size(), c16.size());
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < c16.size(); ++i) {
+      float v;
+      std::memcpy(&v, &f[i * 4], 4);
+      const float want = srgb_to_linear(v);
+      differ += std::memcmp(&want, &got.data[i], 4) != 0;
+    }
+    EXPECT_EQ(differ, 0u) << bits << "-bit";
+  }
+  // Encoding: the sweep, then the neighbours of every step it crossed.
+  std::vector<float> v;
+  std::uint32_t top;
+  const float lim = 1.01f;
+  std::memcpy(&top, &lim, 4);
+  for (std::uint32_t b = 0; b <= top; b += 97) {
+    float f;
+    std::memcpy(&f, &b, 4);
+    v.push_back(f);
+  }
+  {
+    std::vector<float> e(v.size());
+    for (std::size_t i = 0; i < v.size(); ++i) e[i] = linear_to_srgb(std::max(v[i], 0.0f));
+    std::vector<std::uint8_t> c(v.size());
+    ASSERT_TRUE(OIIO::convert_pixel_values(OIIO::TypeDesc::FLOAT, e.data(), OIIO::TypeDesc::UINT8, c.data(),
+                                           static_cast<int>(c.size())));
+    const std::size_t sweep = v.size();
+    int steps = 0;
+    for (std::size_t i = 1; i < sweep; ++i)
+      if (c[i] != c[i - 1]) {
+        ++steps;
+        std::uint32_t b;
+        std::memcpy(&b, &v[i], 4);
+        for (std::uint32_t q = b - 200; q <= b + 200; ++q) {
+          float f;
+          std::memcpy(&f, &q, 4);
+          v.push_back(f);
+        }
+      }
+    EXPECT_EQ(steps, 255);
+  }
+  for (float f : {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity(),
+                  -std::numeric_limits<float>::infinity(), -1.0f, -0.0f, 1e-42f, 2.0f, 1e30f})
+    v.push_back(f);
+  while (v.size() % 3) v.push_back(0.5f);
+  const int w = 1024, h = static_cast<int>((v.size() / 3 + w - 1) / w);
+  v.resize(static_cast<std::size_t>(w) * h * 3, 0.25f);
+  Image img(w, h, 3);
+  img.data = v;
+  std::vector<float> per_value(v.size());
+  for (std::size_t i = 0; i < v.size(); ++i) per_value[i] = linear_to_srgb(std::max(v[i], 0.0f));
+  const std::string old_path = (d / "per_value.png").string(), new_path = (d / "table.png").string();
+  write_raw(old_path, w, h, OIIO::TypeDesc::UINT8, OIIO::TypeDesc::FLOAT, per_value.data());
+  WriteOptions o;
+  o.bits = "8";
+  write_image(new_path, img, o);
+  const auto a = read_as(old_path, OIIO::TypeDesc::UINT8, v.size()), b = read_as(new_path, OIIO::TypeDesc::UINT8, v.size());
+  std::size_t differ = 0, first = 0;
+  for (std::size_t i = 0; i < v.size(); ++i)
+    if (a[i] != b[i] && differ++ == 0) first = i;
+  EXPECT_EQ(differ, 0u) << "first at value " << v[first] << ": per-value " << int(a[first]) << ", table " << int(b[first]);
   fs::remove_all(d);
 }

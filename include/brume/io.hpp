@@ -83,6 +83,10 @@ void check_output_dir(const std::string& path, const std::string& flag);
 // sRGB transfer (IEC 61966-2-1), exact piecewise form.
 float srgb_to_linear(float v);
 float linear_to_srgb(float v);
+// n values encoded to 8-bit sRGB codes exactly as writing the floats
+// linear_to_srgb(max(v, 0)) to an 8-bit file would store them (by a table of
+// the curve's 255 steps, built once; no pow per value).
+void srgb_encode_8(const float* v, std::uint8_t* out, std::size_t n);
 
 struct WriteOptions {
   std::string bits = "auto";   // auto | 8 | 16 | half | float

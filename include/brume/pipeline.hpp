@@ -120,6 +120,17 @@ struct LoadedInputs {
   nlohmann::json record;  // {"image": file record, "depth": ...}
 };
 LoadedInputs load_inputs(const InputFiles& in, bool with_depth);
+
+// Wall time of a run's file work, for --timing's whole-run line: reading and
+// decoding the inputs, depth conversion included (load_inputs), encoding and
+// writing the outputs' temporaries, and renaming them into place
+// (write_outputs); `read_end`/`write_begin` bound the effect between them.
+// Per thread (brume batch's workers run frames side by side).
+struct RunPhases {
+  double read_ms = 0.0, write_ms = 0.0, rename_ms = 0.0;
+  std::chrono::steady_clock::time_point read_end{}, write_begin{};
+};
+RunPhases& run_phases();
 // Before an effect starts on a frame: its working memory (`bytes_per_pixel`,
 // the effect's measured peak less what is already held) must fit in what the
 // process may still use (check_memory), or a brume::Error says so.

@@ -280,8 +280,27 @@ bool is_output_file(const ParamSpec& s) {
 }
 
 // ---- steps ---------------------------------------------------------------------------
+RunPhases& run_phases() {
+  thread_local RunPhases p;
+  return p;
+}
+
+namespace {
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+}  // namespace
+
 LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
   if (in.image.empty()) throw Error("no colour image given: use --image FILE");
+  const auto t0 = std::chrono::steady_clock::now();
+  struct Phase {
+    std::chrono::steady_clock::time_point t0;
+    ~Phase() {
+      run_phases().read_ms += ms_since(t0);
+      run_phases().read_end = std::chrono::steady_clock::now();
+    }
+  } phase{t0};
   LoadedInputs L;
   L.rgb = read_color(in.image, in.image_transfer, &L.image_info);
   L.record["image"] = file_record(in.image, L.image_info, L.rgb);
@@ -458,6 +477,8 @@ void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, con
     if (e == ".png" || e == ".tif" || e == ".tiff") wo.bits = std::to_string(input_info->bits);
   }
   wo.description = record.dump();
+  const auto t0 = std::chrono::steady_clock::now();
+  if (run_phases().write_begin == std::chrono::steady_clock::time_point{}) run_phases().write_begin = t0;
   OutputSet outs;
   outs.write(o.out, main, wo, "--out");
   for (const auto& [name, path] : o.maps) {
@@ -466,7 +487,10 @@ void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, con
     outs.write(path, it->second, map_options(declared(decl, name)), "--" + name);
   }
   if (!o.record.empty()) outs.write_text(o.record, record.dump(2) + "\n", "--record");
+  const auto t1 = std::chrono::steady_clock::now();
+  run_phases().write_ms += std::chrono::duration<double, std::milli>(t1 - t0).count();
   outs.commit();
+  run_phases().rename_ms += ms_since(t1);
 }
 
 nlohmann::json gpu_timing_record(const GpuTiming& t) {

@@ -93,6 +93,13 @@ struct Command {
   std::function<int(const std::vector<std::string>& argv)> run;
 };
 
+// --timing's whole-run line on stderr, after the job: the process's start-up
+// before main() (from /proc/self/stat: exec to main, at the kernel's 10 ms
+// clock-tick resolution), reading the inputs, the effect, writing the
+// outputs' temporaries, renaming them, and the rest (argument parsing, the
+// checks, the record), from brume::run_phases().
+void print_whole_run(const std::string& command);
+
 // A subcommand running a job: its table's flags (plus the execution flags
 // when with_exec), then `run(job, exec, ctx)`.
 template <class Job>
@@ -108,7 +115,9 @@ Command job_command(CLI::App* app, const std::string& name, const ParamTable<Job
             ctx.argv = argv;
             ctx.given = flags->apply(*job);
             if (eflags) eflags->apply(*exec);
-            return run(*job, *exec, ctx);
+            const int status = run(*job, *exec, ctx);
+            if (exec->timing) print_whole_run(name);
+            return status;
           }};
 }
 

@@ -6,16 +6,77 @@
 // Errors name the file or flag, the value, what is allowed and the fix; the
 // exit status is 2 (3 for an internal error) and no output file is left behind.
 #include <CLI/CLI.hpp>
+#include <time.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <iterator>
+#include <sstream>
 #include <cstdio>
 #include <string>
 #include <vector>
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
+#include "brume/pipeline.hpp"
 #include "cli.hpp"
+
+namespace {
+const auto g_main_entry = std::chrono::steady_clock::now();  // set before main() by static initialisation
+
+// Seconds from the process's exec to now, or -1: /proc/self/stat's field 22
+// (start time in clock ticks since boot) against CLOCK_BOOTTIME.
+double seconds_since_exec() {
+  std::ifstream f("/proc/self/stat");
+  std::string stat((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  const auto close = stat.rfind(')');  // the command name may hold spaces
+  if (close == std::string::npos) return -1.0;
+  std::istringstream rest(stat.substr(close + 2));
+  std::string field;
+  unsigned long long start = 0;
+  for (int i = 3; i <= 22 && rest >> field; ++i)
+    if (i == 22) start = std::stoull(field);
+  timespec now{};
+  if (start == 0 || clock_gettime(CLOCK_BOOTTIME, &now) != 0) return -1.0;
+  const double s = static_cast<double>(now.tv_sec) + 1e-9 * static_cast<double>(now.tv_nsec) -
+                   static_cast<double>(start) / static_cast<double>(sysconf(_SC_CLK_TCK));
+  return s >= 0.0 && s < 3600.0 ? s : -1.0;
+}
+}  // namespace
+
+namespace brume::cli {
+void print_whole_run(const std::string& command) {
+  using clock = std::chrono::steady_clock;
+  const clock::time_point now = clock::now();
+  const double since_main = std::chrono::duration<double, std::milli>(now - g_main_entry).count();
+  const double since_exec = seconds_since_exec() * 1000.0;
+  const double startup = since_exec > since_main ? since_exec - since_main : -1.0;
+  const RunPhases& p = run_phases();
+  const double effect = p.write_begin > p.read_end && p.read_end != clock::time_point{}
+                            ? std::chrono::duration<double, std::milli>(p.write_begin - p.read_end).count()
+                            : 0.0;
+  const double rest = since_main - p.read_ms - effect - p.write_ms - p.rename_ms;
+  std::string s = "brume " + command + ": whole run ";
+  char b[256];
+  std::snprintf(b, sizeof b, "%.0f ms: ", (startup >= 0.0 ? startup : 0.0) + since_main);
+  s += b;
+  if (startup >= 0.0) {
+    std::snprintf(b, sizeof b, "start-up %.0f ms (exec to main, 10 ms ticks), ", startup);
+    s += b;
+  }
+  std::snprintf(b, sizeof b,
+                "read %.1f ms (decode, depth conversion), effect %.1f ms, write %.1f ms (encode to temporaries), "
+                "rename %.2f ms, other %.1f ms (parsing, checks, record)",
+                p.read_ms, effect, p.write_ms, p.rename_ms, rest);
+  s += b;
+  std::fprintf(stderr, "%s\n", s.c_str());
+}
+}  // namespace brume::cli
 
 int main(int argc, char** argv) {
   using namespace brume::cli;
+  (void)g_main_entry;
   const std::vector<std::string> args(argv, argv + argc);
   CLI::App app{"brume: physically based, depth-aware haze, fog and lens effects for RGB-D images"};
   app.set_version_flag("--version", std::string("brume ") + BRUME_VERSION);
