@@ -89,9 +89,14 @@ class SrgbDecodeTable {
 // bisection over the floats' ordered bit patterns with OpenImageIO's own
 // float -> uint8 conversion -- turn encoding into a few comparisons: a
 // bucket on v's top 16 bits gives the code at the bucket's start, and at most
-// a step or two more are compared. Tested against the per-value path for
-// every float in [0, 1] at a stride, each threshold's neighbours, and
-// through whole PNG files (tests/test_io.cpp).
+// a step or two more are compared. The conversion is OpenImageIO's vector
+// loop (calls of whole multiples of 16 values), the one a scanline goes
+// through; its scalar tail, which converted the last (width x channels mod 4)
+// values of each row before, can round an exact tie (v x 255 = k + 1/2)
+// the other way (seen: 0.00015176348 encodes to code 1 there, 0 in the
+// vector loop), so such a value could differ by one code between columns;
+// now every value is rounded as the vector loop does. Tested against OpenImageIO writing the per-value floats for every
+// 97th float in [0, 1.01] and each step's neighbours (tests/test_io.cpp).
 class SrgbEncoder8 {
  public:
   static const SrgbEncoder8& get() {
@@ -111,11 +116,16 @@ class SrgbEncoder8 {
   }
 
  private:
-  // The per-value path's code, through OpenImageIO's conversion.
-  static std::uint8_t slow(float v) {
-    const float e = linear_to_srgb(std::max(v, 0.0f));
-    std::uint8_t c = 0;
-    OIIO::convert_pixel_values(OIIO::TypeDesc::FLOAT, &e, OIIO::TypeDesc::UINT8, &c, 1);
+  // The per-value path's codes of v (any count), through OpenImageIO's
+  // vector conversion: the call is padded to a multiple of 16 values.
+  static std::vector<std::uint8_t> slow(std::vector<float> v) {
+    const std::size_t n = v.size();
+    v.resize((n + 15) / 16 * 16, 0.0f);
+    for (float& x : v) x = linear_to_srgb(std::max(x, 0.0f));
+    std::vector<std::uint8_t> c(v.size());
+    OIIO::convert_pixel_values(OIIO::TypeDesc::FLOAT, v.data(), OIIO::TypeDesc::UINT8, c.data(),
+                               static_cast<int>(v.size()));
+    c.resize(n);
     return c;
   }
   static float from_bits(std::uint32_t b) {
@@ -124,21 +134,27 @@ class SrgbEncoder8 {
     return f;
   }
   SrgbEncoder8() {
-    nan_code_ = slow(std::numeric_limits<float>::quiet_NaN());
-    zero_code_ = slow(0.0f);
-    const std::uint32_t top = 0x40000000u;  // 2.0f: slow(2) == 255
-    threshold_.assign(256, 0.0f);
-    for (unsigned k = 1; k <= 255; ++k) {
-      if (k <= zero_code_) continue;
-      std::uint32_t lo = 0, hi = top;  // slow(lo) < k <= slow(hi)
-      while (hi - lo > 1) {
-        const std::uint32_t mid = lo + (hi - lo) / 2;
-        (slow(from_bits(mid)) >= k ? hi : lo) = mid;
+    const std::vector<std::uint8_t> ends = slow({std::numeric_limits<float>::quiet_NaN(), 0.0f});
+    nan_code_ = ends[0];
+    zero_code_ = ends[1];
+    const std::uint32_t top = 0x40000000u;  // 2.0f, whose code is 255
+    // All 255 bisections in step: lo[k] < threshold <= hi[k] (slow(lo) < k <= slow(hi)).
+    std::vector<std::uint32_t> lo(256, 0), hi(256, top);
+    for (int step = 0; step < 32; ++step) {
+      std::vector<float> mid(256);
+      for (unsigned k = 0; k < 256; ++k) mid[k] = from_bits(lo[k] + (hi[k] - lo[k]) / 2);
+      const std::vector<std::uint8_t> c = slow(mid);
+      for (unsigned k = zero_code_ + 1u; k < 256; ++k) {
+        if (hi[k] - lo[k] <= 1) continue;
+        const std::uint32_t m = lo[k] + (hi[k] - lo[k]) / 2;
+        (c[k] >= k ? hi[k] : lo[k]) = m;
       }
-      threshold_[k] = from_bits(hi);
     }
-    start_.resize((top >> 16) + 1);
-    for (std::size_t i = 0; i < start_.size(); ++i) start_[i] = slow(from_bits(static_cast<std::uint32_t>(i << 16)));
+    threshold_.assign(256, 0.0f);
+    for (unsigned k = zero_code_ + 1u; k < 256; ++k) threshold_[k] = from_bits(hi[k]);
+    std::vector<float> starts((top >> 16) + 1);
+    for (std::size_t i = 0; i < starts.size(); ++i) starts[i] = from_bits(static_cast<std::uint32_t>(i << 16));
+    start_ = slow(starts);
   }
   std::uint8_t nan_code_ = 0, zero_code_ = 0;
   std::vector<float> threshold_;      // [k]: the least float whose code is >= k
