@@ -72,6 +72,10 @@ Manifest read_manifest(const std::string& path);
 // The effects a manifest row can name: haze, fog, aerial, dof, haze+dof.
 const std::vector<std::string>& batch_effects();
 
+// The compression of a batch's PNG frames when neither the row nor --param
+// sets one (single runs keep the writer's default, zip:6).
+inline constexpr const char* kBatchPngCompression = "zip:1";
+
 struct BatchOptions {
   std::string manifest;
   std::string out_dir;

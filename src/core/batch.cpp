@@ -4,6 +4,8 @@
 
 #include <unistd.h>
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cctype>
@@ -546,6 +548,11 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       const std::string out = (od / (stem + ext)).generic_string();
       const std::string rec = (od / (stem + ".json")).generic_string();
       values.emplace_back("out", out);
+      // PNG frames deflate at level 1 unless the row or --param says
+      // otherwise: at the writer's default 6 the encoder was the largest
+      // cost of a dataset frame after the effect, for files ~6 % smaller
+      // (OpenCV's imwrite makes the same choice). Recorded like any value.
+      if (ext == ".png" && !given.count("compression")) values.emplace_back("compression", std::string(kBatchPngCompression));
       f.outputs.push_back(out);
       for (const std::string& map : o.maps) {
         bool declared = false;
@@ -709,7 +716,27 @@ nlohmann::json result_line(const BatchFrame& f, const BatchFrameResult& r) {
 
 }  // namespace
 
+// Frames of one size, one after another: glibc hands each frame's large
+// buffers (128 kB up to its dynamic 32 MB threshold) back to the kernel when
+// they are freed, and the next frame faults them in again, zero-filled by
+// the kernel -- on a Middlebury third-size haze frame that was a third of the
+// frame's time (30 frames, one thread: 2.6 s, 2.0 s with the heap kept;
+// README "Datasets"). So a batch keeps its heap: blocks up to 32 MB come from
+// the heap, and its free top is not trimmed. The process's resident memory
+// stays at the peak of its frames in flight, which check_memory already
+// admits; set once per process, by the first frame (brume batch, brume.dask
+// workers), never for a single run.
+static void keep_heap_for_frames() {
+  static const bool once = [] {
+    mallopt(M_MMAP_THRESHOLD, 32 << 20);
+    mallopt(M_TRIM_THRESHOLD, 1 << 30);
+    return true;
+  }();
+  (void)once;
+}
+
 BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, const std::vector<std::string>& argv) {
+  keep_heap_for_frames();
   BatchFrameResult r;
   const auto t0 = std::chrono::steady_clock::now();
   try {
