@@ -364,6 +364,18 @@ def test_read_write_round_trip(tmp_path):
     assert np.max(np.abs(brume.read_image(tmp_path / "m.png", "linear").rgb[..., 0] - m)) <= 0.5 / 65535 + 1e-7
 
 
+def test_write_image_compression(tmp_path):
+    # the CLI's --compression: stored deflate blocks hold the raw 8-bit samples, the pixels are the default's
+    rgb = np.random.default_rng(5).random((32, 48, 3), dtype=np.float32)
+    brume.write_image(tmp_path / "d.png", rgb, bits="8")
+    brume.write_image(tmp_path / "n.png", rgb, bits="8", compression="none")
+    assert (tmp_path / "n.png").stat().st_size >= 32 * 48 * 3
+    same(brume.read_image(tmp_path / "n.png").rgb, brume.read_image(tmp_path / "d.png").rgb)
+    with pytest.raises(ValueError, match=r"'lzw'.*\.png files take auto, none, zip"):
+        brume.write_image(tmp_path / "x.png", rgb, compression="lzw")
+    assert not (tmp_path / "x.png").exists()
+
+
 def test_result_record_embeds_and_reads_back(demo, tmp_path):
     r = brume.haze(demo["rgb"], demo["range"], visibility=2000)
     brume.write_image(tmp_path / "h.png", r.rgb, record=r.record)
