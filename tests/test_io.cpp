@@ -411,3 +411,53 @@ TEST(IO, SrgbTablesGiveThePerValueBits) {
   EXPECT_EQ(differ, 0u) << "first at value " << v[first] << ": per-value " << int(a[first]) << ", table " << int(b[first]);
   fs::remove_all(d);
 }
+
+// brume's PFM pixel reader against OpenImageIO's on the same files, bit for
+// bit: RGB and grey, little- and big-endian, a header spaced unusually,
+// non-finite values, and ETH3D's disparity maps.
+TEST(IO, PfmPixelsReadStraightEqualOpenImageIO) {
+  fs::path d = tmpdir();
+  auto oiio_floats = [](const std::string& p) {
+    auto in = OIIO::ImageInput::open(p);
+    EXPECT_TRUE(in) << p;
+    const OIIO::ImageSpec& s = in->spec();
+    std::vector<float> v(static_cast<std::size_t>(s.width) * s.height * s.nchannels);
+    EXPECT_TRUE(in->read_image(0, 0, 0, s.nchannels, OIIO::TypeDesc::FLOAT, v.data())) << p;
+    return v;
+  };
+  auto write_by_hand = [](const std::string& p, const std::string& header, int w, int h, int c, bool big) {
+    std::ofstream f(p, std::ios::binary);
+    f << header;
+    for (int i = 0; i < w * h * c; ++i) {
+      float v = i % 17 == 0 ? NAN : i % 23 == 0 ? INFINITY : 0.25f * i - 3.0f;
+      std::uint32_t b;
+      std::memcpy(&b, &v, 4);
+      if (big) b = __builtin_bswap32(b);
+      f.write(reinterpret_cast<const char*>(&b), 4);
+    }
+  };
+  std::vector<std::string> files;
+  write_by_hand((d / "le.pfm").string(), "PF\n7 5\n-1.0\n", 7, 5, 3, false);
+  write_by_hand((d / "be.pfm").string(), "PF\n7 5\n1.0\n", 7, 5, 3, true);
+  write_by_hand((d / "grey.pfm").string(), "Pf\n9 4\n-2.5\n", 9, 4, 1, false);
+  write_by_hand((d / "spaced.pfm").string(), "PF  6\t3 \n -1\n", 6, 3, 3, false);
+  for (const char* n : {"le.pfm", "be.pfm", "grey.pfm", "spaced.pfm"}) files.push_back((d / n).string());
+  Image rgb = gradient(31, 17, 3);
+  write_image((d / "brume.pfm").string(), rgb, WriteOptions{});
+  files.push_back((d / "brume.pfm").string());
+  for (const char* rel : {"eth3d_two_view/playground_1l/disp0.pfm", "eth3d_two_view/playground_1l/disp0GT.pfm"})
+    if (have_data(rel)) files.push_back(data_path(rel));
+  for (const std::string& p : files) {
+    const std::vector<float> want = oiio_floats(p);
+    FileInfo info;
+    auto in = OIIO::ImageInput::open(p);
+    ASSERT_TRUE(in) << p;
+    const int c = in->spec().nchannels;
+    in.reset();
+    const Image got = c == 1 ? read_scalar(p, "", &info) : read_color(p, Transfer::linear, &info);
+    EXPECT_EQ(info.format, "pnm") << p;  // the condition of the straight read
+    ASSERT_EQ(got.data.size(), want.size()) << p;
+    EXPECT_EQ(std::memcmp(got.data.data(), want.data(), want.size() * 4), 0) << p;
+  }
+  fs::remove_all(d);
+}

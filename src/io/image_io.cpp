@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cctype>
 #include <cerrno>
 #include <climits>
 #include <cmath>
@@ -349,6 +350,67 @@ struct Raw {
   FileInfo info;
 };
 
+// PFM's pixels read straight into the image: one read per row, rows flipped
+// (PFM stores the picture's bottom row first), bytes swapped for a
+// big-endian file (positive scale); the values are the stored floats, not
+// multiplied by the scale, as OpenImageIO reads them. OpenImageIO's PNM
+// reader converted scanline by scanline (86 ms for a 960x672 RGB file, the
+// whole of brume blur's read before the hash); this is one copy from the
+// page cache. OpenImageIO has opened the file and parsed its header first
+// (its errors and checks stand); this parser re-reads the header only to find
+// where the pixels start, and returns false -- OpenImageIO then reads the
+// file -- for anything unexpected: a header it parses differently, a short
+// file. Tested against OpenImageIO on grey and RGB, little- and big-endian
+// files and ETH3D's PFMs, bit for bit (tests/test_io.cpp).
+bool read_pfm_pixels(const std::string& path, const OIIO::ImageSpec& spec, Image& img) {
+  if (spec.format != OIIO::TypeDesc::FLOAT || (spec.nchannels != 1 && spec.nchannels != 3)) return false;
+  std::ifstream f(path, std::ios::binary);
+  char head[256];
+  f.read(head, sizeof head);
+  const std::size_t got = static_cast<std::size_t>(f.gcount());
+  if (got < 3 || head[0] != 'P' || (head[1] != 'F' && head[1] != 'f')) return false;
+  const int channels = head[1] == 'F' ? 3 : 1;
+  // Three whitespace-separated tokens after the magic, then one whitespace byte.
+  std::size_t i = 2;
+  std::string tok[3];
+  for (std::string& t : tok) {
+    while (i < got && std::isspace(static_cast<unsigned char>(head[i]))) ++i;
+    while (i < got && !std::isspace(static_cast<unsigned char>(head[i]))) t += head[i++];
+    if (t.empty() || i >= got) return false;
+  }
+  ++i;  // the single whitespace byte that ends the header
+  char* end = nullptr;
+  const long w = std::strtol(tok[0].c_str(), &end, 10);
+  if (*end) return false;
+  const long h = std::strtol(tok[1].c_str(), &end, 10);
+  if (*end) return false;
+  const double scale = std::strtod(tok[2].c_str(), &end);
+  if (*end || scale == 0.0 || !std::isfinite(scale)) return false;
+  if (w != spec.width || h != spec.height || channels != spec.nchannels) return false;
+  const std::size_t row = static_cast<std::size_t>(w) * static_cast<std::size_t>(channels);
+  std::error_code ec;
+  const std::uintmax_t size = fs::file_size(path, ec);
+  if (ec || size < i + row * static_cast<std::size_t>(h) * 4) return false;
+  f.clear();
+  f.seekg(static_cast<std::streamoff>(i));
+  for (long y = h - 1; y >= 0; --y) {
+    f.read(reinterpret_cast<char*>(img.data.data() + static_cast<std::size_t>(y) * row),
+           static_cast<std::streamsize>(row * 4));
+    if (!f) return false;
+  }
+  static_assert(sizeof(float) == 4);
+  const std::uint32_t probe = 1;
+  const bool host_little = *reinterpret_cast<const unsigned char*>(&probe) == 1;
+  if ((scale < 0.0) != host_little)
+    for (float& v : img.data) {
+      std::uint32_t b;
+      std::memcpy(&b, &v, 4);
+      b = __builtin_bswap32(b);
+      std::memcpy(&v, &b, 4);
+    }
+  return true;
+}
+
 // Read every channel of the first subimage as float. Integer files are read
 // as their raw counts (not normalised) when `counts` is set.
 Raw read_raw(const std::string& path, bool counts) {
@@ -371,7 +433,8 @@ Raw read_raw(const std::string& path, bool counts) {
   // The decoded file (all channels) and the caller's converted copy (≤ 3 channels).
   check_memory(px * 4 * static_cast<std::uint64_t>(spec.nchannels + 3), "reading '" + path + "'");
   r.img = Image(spec.width, spec.height, spec.nchannels);
-  bool ok = in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, r.img.data.data());
+  const bool pfm = r.info.format == "pnm" && read_pfm_pixels(path, spec, r.img);
+  bool ok = pfm || in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, r.img.data.data());
   if (!ok) {
     std::string e = in->geterror();
     throw Error("cannot read '" + path + "': " + (e.empty() ? "read failed (truncated or corrupt file?)" : e));
