@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <regex>
 #include <set>
 #include <sstream>
 #include <nlohmann/json.hpp>
@@ -147,6 +148,30 @@ TEST_F(Cli, ErrorPathsAreClearAndLeaveNothing) {
           << c.args << " left " << n;
     }
   }
+}
+
+// --timing ends with the whole run's breakdown: its parts are non-negative
+// and add up to the whole (each printed rounded: within 1.5 ms).
+TEST_F(Cli, TimingPrintsTheWholeRunBreakdown) {
+  const CliRun r = run("blur --image " + img + " --sigma 3 --out " + p("b.pfm") + " --timing");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const std::regex line(
+      "brume blur: whole run ([0-9.]+) ms: start-up ([0-9.]+) ms \\(exec to main, 10 ms ticks\\), read ([0-9.]+) ms "
+      "\\(decode, depth conversion\\), effect ([0-9.]+) ms, write ([0-9.]+) ms \\(encode to temporaries\\), rename "
+      "([0-9.]+) ms, other (-?[0-9.]+) ms");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(r.output, m, line)) << r.output;
+  double parts = 0.0;
+  for (int i = 2; i <= 7; ++i) {
+    const double v = std::stod(m[i].str());
+    if (i < 7) {
+      EXPECT_GE(v, 0.0) << m[0];
+    }
+    parts += v;
+  }
+  EXPECT_NEAR(parts, std::stod(m[1].str()), 1.5) << m[0];  // six parts and the whole, each rounded
+  EXPECT_GT(std::stod(m[3].str()), 0.0) << "the image was read: " << m[0];
+  EXPECT_GT(std::stod(m[5].str()), 0.0) << "the output was written: " << m[0];
 }
 
 TEST_F(Cli, BlurConstantScaleIsAGaussian) {

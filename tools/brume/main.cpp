@@ -10,10 +10,10 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
 #include <fstream>
 #include <iterator>
 #include <sstream>
-#include <cstdio>
 #include <string>
 #include <vector>
 
