@@ -399,7 +399,12 @@ nlohmann::json random_params(std::string_view effect, std::uint64_t seed, std::s
   try {
     es.validate(values);
   } catch (const Error& e) {
-    throw Error("sampled " + es.effect + " parameters " + values.dump() + " for key '" + std::string(key) + "' (seed " +
+    // A value may hold bytes that are not UTF-8 (a text parameter as typed):
+    // the message shows them as U+FFFD rather than failing to be written
+    // (found by fuzz/fuzz_sample_specs.cpp; reproducer in its corpus).
+    throw Error("sampled " + es.effect + " parameters " +
+                values.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + " for key '" +
+                std::string(key) + "' (seed " +
                 std::to_string(seed) + ") cannot be used together: " + e.what());
   }
   return values;
