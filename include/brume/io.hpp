@@ -98,7 +98,7 @@ struct WriteOptions {
   std::string description;     // embedded as ImageDescription where the format allows
   // The file's compression, NAME[:LEVEL] as OpenImageIO spells it: "auto" is
   // the writer's default (PNG deflate level 6, TIFF zip, EXR zip, JPEG
-  // quality 95). Which names a format takes: see compression_names().
+  // quality 98, measured: a file at auto equals one at jpeg:98). Which names a format takes: see compression_names().
   std::string compression = "auto";
 };
 

@@ -719,7 +719,7 @@ nlohmann::json result_line(const BatchFrame& f, const BatchFrameResult& r) {
 // Frames of one size, one after another: glibc hands each frame's large
 // buffers (128 kB up to its dynamic 32 MB threshold) back to the kernel when
 // they are freed, and the next frame faults them in again, zero-filled by
-// the kernel -- on a Middlebury third-size haze frame that was a third of the
+// the kernel -- on a Middlebury third-size haze frame that was a quarter of the
 // frame's time (30 frames, one thread: 2.6 s, 2.0 s with the heap kept;
 // README "Datasets"). So a batch keeps its heap: blocks up to 32 MB come from
 // the heap, and its free top is not trimmed. The process's resident memory

@@ -740,7 +740,7 @@ Compression parse_compression(const std::string& path, const std::string& text, 
                 std::to_string(rule->max_level));
     c.level = l;
   } else if (name == "jpeg") {
-    throw bad("JPEG's compression is its quality: give it as jpeg:1..100 (OpenImageIO's default is 95)");
+    throw bad("JPEG's compression is its quality: give it as jpeg:1..100 (OpenImageIO's default is 98)");
   }
   return c;
 }
