@@ -53,7 +53,7 @@ Image weight_map(int w, int h, int seed) {
 }
 
 
-DiffusionParams params(Scheme s, Precision p = Precision::f32) {
+DiffusionParams rate_params(Scheme s, Precision p = Precision::f32) {
   DiffusionParams d;
   d.scheme = s;
   d.precision = p;
@@ -255,7 +255,7 @@ TEST(DiffusionConductance, StandardSchemeIsTheConductanceOfItsEdgeRates) {
         if (y + 1 < H) wy.at(x, y) = shared::brume_edge_rate(rho.at(x, y), rho.at(x, y + 1), static_cast<int>(e));
       }
     Image a = texture(W, H, 4), b = a;
-    DiffusionParams dp = params(Scheme::standard);
+    DiffusionParams dp = rate_params(Scheme::standard);
     dp.edge_rate = e;
     diffuse_rates(a, rho, N, dp);
     diffuse_conductance(b, wx, wy, N);
@@ -277,7 +277,7 @@ TEST(DiffusionRates, RatesFromSigmaGiveTheSigmaPathBitForBit) {
       for (bool uniform : {false, true}) {
         const double smax = 6.0;
         const Image sigma = uniform ? Image(W, H, 1, 6.0f) : ramp_map(W, H, 1.0, smax);
-        const DiffusionParams dp = params(s, p);
+        const DiffusionParams dp = rate_params(s, p);
         const int N = plan_diffusion(dp, smax).iterations;
         Image rho(W, H, 1);
         for (std::size_t i = 0; i < rho.data.size(); ++i)
@@ -306,7 +306,7 @@ TEST(DiffusionRates, FastMatchesReferenceOnAnArbitraryRateMap) {
   const Image rho = weight_map(67, 53, 9);
   for (Scheme s : {Scheme::standard, Scheme::invariant, Scheme::invariant_exact})
     for (EdgeRate e : {EdgeRate::mean, EdgeRate::min, EdgeRate::harmonic}) {
-      DiffusionParams dp = params(s);
+      DiffusionParams dp = rate_params(s);
       dp.edge_rate = e;
       const int N = s == Scheme::standard ? 30 : 12;
       Image fast = texture(67, 53, 4), ref = fast;
@@ -322,11 +322,11 @@ TEST(DiffusionRates, PlanReportsTheScaleReached) {
   // Standard: sigma^2 = s0^2 + 2 N rho; invariant: sigma = s0 e^{N rho}.
   Image f(8, 8, 4, 0.5f), rho(8, 8, 1, 0.1f);
   rho.at(3, 3) = 0.2f;
-  const DiffusionPlan a = diffuse_rates(f, rho, 50, params(Scheme::standard));
+  const DiffusionPlan a = diffuse_rates(f, rho, 50, rate_params(Scheme::standard));
   EXPECT_EQ(a.iterations, 50);
   EXPECT_NEAR(a.rho_max, 0.2, 1e-7);
   EXPECT_NEAR(a.sigma_max, std::sqrt(1.0 + 2.0 * 50 * 0.2), 1e-5);
-  const DiffusionPlan b = diffuse_rates(f, rho, 10, params(Scheme::invariant_exact));
+  const DiffusionPlan b = diffuse_rates(f, rho, 10, rate_params(Scheme::invariant_exact));
   EXPECT_NEAR(b.sigma_max, std::exp(10 * 0.2), 1e-4);
 }
 
@@ -346,9 +346,9 @@ TEST(DiffusionChannels, SixChannelsEqualIndependentFourAndTwoChannelRuns) {
       std::function<void(Image&)> fn;
     };
     const Run runs[] = {
-        {"sigma invariant-exact", [&](Image& g) { diffuse(g, sigma, 7.0, params(Scheme::invariant_exact, p)); }},
-        {"sigma standard", [&](Image& g) { diffuse(g, sigma, 7.0, params(Scheme::standard, p)); }},
-        {"rates invariant", [&](Image& g) { diffuse_rates(g, rho, 9, params(Scheme::invariant, p)); }},
+        {"sigma invariant-exact", [&](Image& g) { diffuse(g, sigma, 7.0, rate_params(Scheme::invariant_exact, p)); }},
+        {"sigma standard", [&](Image& g) { diffuse(g, sigma, 7.0, rate_params(Scheme::standard, p)); }},
+        {"rates invariant", [&](Image& g) { diffuse_rates(g, rho, 9, rate_params(Scheme::invariant, p)); }},
         {"conductance", [&](Image& g) { diffuse_conductance(g, wx, wy, 25, p); }},
     };
     for (const Run& r : runs) {
@@ -367,8 +367,8 @@ TEST(DiffusionChannels, OneChannelIsChannelZeroOfAFourChannelRun) {
   const Image sigma = ramp_map(W, H, 1.0, 6.0), f = texture(W, H, 4);
   for (Scheme s : {Scheme::standard, Scheme::invariant_exact}) {
     Image four = f, one = channels(f, 0, 1);
-    diffuse(four, sigma, 6.0, params(s));
-    diffuse(one, sigma, 6.0, params(s));
+    diffuse(four, sigma, 6.0, rate_params(s));
+    diffuse(one, sigma, 6.0, rate_params(s));
     EXPECT_EQ(one.data, channels(four, 0, 1).data) << to_string(s);
     EXPECT_NE(one.data, channels(f, 0, 1).data) << to_string(s);  // it did blur
   }
@@ -380,8 +380,8 @@ TEST(DiffusionChannels, SixChannelFastMatchesReference) {
   const Image sigma = ramp_map(61, 45, 1.0, 6.0);
   for (Scheme s : {Scheme::standard, Scheme::invariant_exact}) {
     Image fast = texture(61, 45, 6), ref = fast;
-    diffuse(fast, sigma, 6.0, params(s));
-    diffuse(ref, sigma, 6.0, params(s), reference_exec());
+    diffuse(fast, sigma, 6.0, rate_params(s));
+    diffuse(ref, sigma, 6.0, rate_params(s), reference_exec());
     const Diff d = compare(fast, ref);
     EXPECT_LE(d.max_abs, 2e-5) << to_string(s) << ": " << d;
     EXPECT_LE(d.rms, 2e-6) << to_string(s) << ": " << d;
@@ -396,7 +396,7 @@ TEST(DiffusionRatesErrors, BadInputsNameTheMapThePixelAndTheValue) {
   };
   Image f(8, 6, 3, 0.5f);
   const Image ok(8, 6, 1, 0.1f);
-  const DiffusionParams dp = params(Scheme::standard);
+  const DiffusionParams dp = rate_params(Scheme::standard);
 
   // Size mismatch, for each map.
   std::string m = error_of([&] { diffuse_rates(f, Image(7, 6, 1, 0.1f), 5, dp); });
@@ -413,7 +413,7 @@ TEST(DiffusionRatesErrors, BadInputsNameTheMapThePixelAndTheValue) {
   EXPECT_TRUE(has(m, "rate map pixel (5, 2)") && has(m, "-0.01") && has(m, "[0, 0.25]")) << m;
   Image nan = ok;
   nan.at(0, 4) = NAN;
-  m = error_of([&] { diffuse_rates(f, nan, 5, params(Scheme::invariant_exact)); });
+  m = error_of([&] { diffuse_rates(f, nan, 5, rate_params(Scheme::invariant_exact)); });
   EXPECT_TRUE(has(m, "rate map pixel (0, 4)") && has(m, "nan")) << m;
   Image big = ok;
   big.at(7, 5) = 0.3f;  // the unused last column/row is still checked
@@ -434,7 +434,7 @@ TEST(DiffusionRatesErrors, BadInputsNameTheMapThePixelAndTheValue) {
   EXPECT_TRUE(has(m, "iteration count -1")) << m;
 
   // Invariant offsets that would run off any image.
-  m = error_of([&] { diffuse_rates(f, Image(8, 6, 1, 0.25f), 100, params(Scheme::invariant)); });
+  m = error_of([&] { diffuse_rates(f, Image(8, 6, 1, 0.25f), 100, rate_params(Scheme::invariant)); });
   EXPECT_TRUE(has(m, "1e6 px")) << m;
 
   // The GPU's check keeps its 4-channel contract.

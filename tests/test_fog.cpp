@@ -26,7 +26,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-Intrinsics test_k(double f = 60.0) {
+Intrinsics fog_k(double f = 60.0) {
   Intrinsics k;
   k.fx = k.fy = f;
   return k;
@@ -105,7 +105,7 @@ TEST(Fog, ExponentialMatchesClosedFormOnAGroundPlane) {
   for (double pitch : {-20.0, 0.0, 25.0}) {
     SCOPED_TRACE("pitch " + std::to_string(pitch));
     const FogParams p = exp_params(10.0, pitch);
-    const Camera c = make_camera(test_k(), 81, 61, p.camera);
+    const Camera c = make_camera(fog_k(), 81, 61, p.camera);
     const Image range = ground_plane(c);
     const Applied o = apply(flat_rgb(81, 61), range, p, c);
     double worst = 0.0;
@@ -146,7 +146,7 @@ TEST(Fog, VectorRowsMatchThePerPixelLoopAndTheClosedForm) {
       SCOPED_TRACE("height " + std::to_string(height) + ", pitch " + std::to_string(pitch));
       FogParams p = exp_params(height, pitch);
       p.sky_distance_m = 900.0;
-      const Camera c = make_camera(test_k(), W, H, p.camera);
+      const Camera c = make_camera(fog_k(), W, H, p.camera);
       Image range(W, H, 1);
       for (int v = 0; v < H; ++v)
         for (int u = 0; u < W; ++u) {
@@ -299,7 +299,7 @@ TEST(Fog, ConstantDensityEqualsHazeWithTheSameExtinction) {
   f.profile = FogProfile::constant;
   f.density_per_m = 0.0015;
   f.airlight = Rgb{0.6f, 0.65f, 0.7f};
-  const Camera c = make_camera(test_k(), 64, 48);
+  const Camera c = make_camera(fog_k(), 64, 48);
   const Applied o = apply(s.rgb, s.range, f, c);
   HazeParams h;
   h.kappa_a = 0.0015 * 1000.0, h.kappa_s = 0.0, h.lambda = 0.0;
@@ -315,7 +315,7 @@ TEST(Fog, TableSamplingTheExponentialConverges) {
   // samples divides the worst F error by about 4 (3..5), and 800 samples
   // are within 1e-4 relative of the exponential.
   const FogParams e = exp_params(10.0, -10.0);
-  const Camera c = make_camera(test_k(), 41, 31, e.camera);
+  const Camera c = make_camera(fog_k(), 41, 31, e.camera);
   const Image range = ground_plane(c, 100.0);  // heights 0 .. 70 m
   const Applied ref = apply(flat_rgb(41, 31), range, e, c);
   auto err = [&](int n) {
@@ -352,14 +352,14 @@ TEST(Fog, TurningAboutTheVerticalLeavesTheFogUnchanged) {
   // Euclidean distance). A pitch change does change them (the test can fail).
   FogParams p = exp_params(10.0, -5.0);
   p.camera.roll_deg = 7.0;
-  const Camera c0 = make_camera(test_k(), 41, 31, p.camera);
+  const Camera c0 = make_camera(fog_k(), 41, 31, p.camera);
   const Image range = ground_plane(c0);
   const Applied a0 = apply(flat_rgb(41, 31), range, p, c0);
   p.camera.yaw_deg = 73.0;
-  const Applied a1 = apply(flat_rgb(41, 31), range, p, make_camera(test_k(), 41, 31, p.camera));
+  const Applied a1 = apply(flat_rgb(41, 31), range, p, make_camera(fog_k(), 41, 31, p.camera));
   EXPECT_LT(compare(a0.r.optical_depth, a1.r.optical_depth).max_abs, 1e-6);
   p.camera.pitch_deg = -8.0;
-  const Applied a2 = apply(flat_rgb(41, 31), range, p, make_camera(test_k(), 41, 31, p.camera));
+  const Applied a2 = apply(flat_rgb(41, 31), range, p, make_camera(fog_k(), 41, 31, p.camera));
   EXPECT_GT(compare(a0.r.optical_depth, a2.r.optical_depth).max_abs, 1e-3);
 }
 
@@ -370,14 +370,14 @@ TEST(Fog, CameraInsideABandOrBelowARampIsANormalCase) {
   b.profile = FogProfile::band, b.band_center_m = 5.0, b.band_half_width_m = 20.0, b.density_per_m = 0.01;
   b.camera.height_m = 2.0;
   const double db = 0.005 * (1.0 + std::cos(M_PI * -3.0 / 20.0));
-  const Camera c = make_camera(test_k(), 41, 31, b.camera);
+  const Camera c = make_camera(fog_k(), 41, 31, b.camera);
   const Image range(41, 31, 1, 250.0f);
   const Applied o = apply(flat_rgb(41, 31), range, b, c);
   EXPECT_NEAR(o.r.optical_depth.at(20, 15), 250.0 * db, 1e-5);
   FogParams r;
   r.profile = FogProfile::ramp, r.ramp_bottom_m = 30.0, r.ramp_top_m = 60.0, r.density_per_m = 0.004;
   r.camera.height_m = 2.0;
-  const Applied q = apply(flat_rgb(41, 31), range, r, make_camera(test_k(), 41, 31, r.camera));
+  const Applied q = apply(flat_rgb(41, 31), range, r, make_camera(fog_k(), 41, 31, r.camera));
   EXPECT_NEAR(q.r.optical_depth.at(20, 15), 1.0, 1e-5);
 }
 
@@ -392,7 +392,7 @@ TEST(Fog, BlurredTransmissionReachesOneWhereNoFogIsCrossed) {
   p.camera.height_m = 2.0;
   p.lambda = 4.0;
   p.airlight = Rgb{0.8f, 0.8f, 0.8f};
-  const Camera c = make_camera(test_k(), 64, 48, p.camera);
+  const Camera c = make_camera(fog_k(), 64, 48, p.camera);
   Image range(64, 48, 1, 80.0f);
   for (int v = 0; v < 12; ++v)
     for (int u = 0; u < 64; ++u) range.at(u, v) = 300.0f;
@@ -413,8 +413,8 @@ TEST(Fog, PreparationFillsHolesAndKeepsTheSkySky) {
   // --prepare off the hole is sky too.
   FogParams p = exp_params(10.0, 10.0);
   DepthSource ds;
-  ds.k = test_k(40.0);
-  const Camera c = make_camera(test_k(40.0), 48, 32, p.camera);
+  ds.k = fog_k(40.0);
+  const Camera c = make_camera(fog_k(40.0), 48, 32, p.camera);
   Image range(48, 32, 1, 50.0f);
   for (int v = 0; v < 6; ++v)
     for (int u = 0; u < 48; ++u) range.at(u, v) = NAN;
@@ -478,7 +478,7 @@ TEST(Fog, BadInputsGiveClearErrors) {
   p.camera.height_m = NAN;
   p.camera.view_matrix_file = vm;
   DepthSource ds;
-  ds.k = test_k();
+  ds.k = fog_k();
   const std::string m = error_of([&] {
     run_fog(flat_rgb(8, 6), Image(8, 6, 1, 10.0f), ds, p, RangeStep{});
   });
@@ -516,7 +516,7 @@ TEST(Fog, GpuMatchesCpu) {
     FogParams& p = ps[i];
     if (p.classic == ClassicFog::none) p.camera.height_m = 10.0, p.camera.pitch_deg = -5.0;
     p.airlight = Rgb{0.7f, 0.72f, 0.75f};
-    const Camera c = make_camera(test_k(80.0), 96, 64, p.camera);
+    const Camera c = make_camera(fog_k(80.0), 96, 64, p.camera);
     Image range = ground_plane(c, 300.0);
     for (int v = 0; v < 10; ++v)
       for (int u = 0; u < 96; ++u) range.at(u, v) = NAN;  // sky
@@ -548,7 +548,7 @@ TEST(Fog, GpuReadsTheDepthBufferAsTheCpuReadsTheRange) {
   const int W = 96, H = 64;
   const Scene s = scene(W, H, 0);
   FogParams p = exp_params(10.0, -5.0);
-  const Camera c = make_camera(test_k(80.0), W, H, p.camera);
+  const Camera c = make_camera(fog_k(80.0), W, H, p.camera);
   const Image ground = ground_plane(c, 300.0);
   const double n = 0.5;
   int case_no = 0;
@@ -597,7 +597,7 @@ TEST(Fog, DepthBuffersGiveTheFogOfTheRange) {
   const fs::path dir = fs::temp_directory_path() / ("brume_fog_db_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const FogParams p = exp_params(10.0, -12.0);
-  const Camera c = make_camera(test_k(), 64, 48, p.camera);
+  const Camera c = make_camera(fog_k(), 64, 48, p.camera);
   const Image range = ground_plane(c, 300.0);
   const double n = 0.5, f = 2000.0;
   WriteOptions data;

@@ -47,7 +47,7 @@ RangeStep prepare_off() {
   return r;
 }
 
-double max_diff_known(const Image& a, const Image& b, const Image& range) {
+double insert_max_diff(const Image& a, const Image& b, const Image& range) {
   double m = 0.0;
   for (std::size_t i = 0; i < range.pixels(); ++i) {
     if (!std::isfinite(range.data[i])) continue;
@@ -71,7 +71,7 @@ TEST(Insert, SceneAsItsOwnObjectReproducesAerial) {
   const InsertRun ins = insert_object(other.rgb, clean.range, opaque(clean.rgb), clean.range, p, prepare_off());
   EXPECT_EQ(ins.analysis.visible_pixels, 40u * 25u);
   EXPECT_EQ(ins.analysis.hidden_pixels, 0u);
-  EXPECT_LT(max_diff_known(ins.result.rgb, ref.result.rgb, clean.range), 1e-6);
+  EXPECT_LT(insert_max_diff(ins.result.rgb, ref.result.rgb, clean.range), 1e-6);
   // Sky (object absent): the photo itself.
   for (int y = 0; y < 5; ++y)
     for (int x = 0; x < 40; ++x)

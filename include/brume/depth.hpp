@@ -21,6 +21,11 @@
 
 namespace brume {
 
+// The convention of every range map brume reads or makes: a pixel's range is
+// known when it is finite and not zero; NaN, +-inf and 0 mark it unknown
+// (a lidar hole, sky, no return).
+inline bool known_range(float r) { return std::isfinite(r) && r != 0.0f; }
+
 struct Intrinsics {
   double fx = 0.0, fy = 0.0;  // [px] focal lengths, > 0
   double cx = NAN, cy = NAN;  // [px] principal point; NaN = the image centre

@@ -104,6 +104,17 @@ struct Param {
   std::function<void(P&, const nlohmann::json&)> set;  // the value has passed spec.check
 };
 
+// Text that brume keeps in a record or a manifest (a path, a frame key, an
+// argument) must be UTF-8: JSON holds Unicode text only, and a record that
+// replaced the bytes of a file name with U+FFFD could not be run again.
+// first_invalid_utf8 is the offset of the first byte that does not begin a
+// well-formed sequence (RFC 3629: no overlong forms, no surrogates, nothing
+// above U+10FFFF), npos when there is none; check_utf8 throws an Error that
+// names `what`, shows the value with its bad bytes as \xHH, and says how to
+// fix it.
+std::size_t first_invalid_utf8(const std::string& text);
+void check_utf8(const std::string& text, const std::string& what);
+
 // `text` with every mention "--NAME" of a flag for which is_flag(NAME) holds
 // rewritten "--PREFIXNAME": a nested block's help and error messages name the
 // flags as the user of the enclosing command types them (--dof-focal-length).

@@ -35,14 +35,14 @@ namespace brume {
 
 namespace {
 
-std::string trim(std::string_view s) {
+std::string batch_trim(std::string_view s) {
   std::size_t a = 0, b = s.size();
   while (a < b && std::isspace(static_cast<unsigned char>(s[a]))) ++a;
   while (b > a && std::isspace(static_cast<unsigned char>(s[b - 1]))) --b;
   return std::string(s.substr(a, b - a));
 }
 
-std::string lower(std::string s) {
+std::string batch_lower(std::string s) {
   for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return s;
 }
@@ -59,7 +59,7 @@ std::vector<std::pair<int, std::vector<std::string>>> parse_csv(const std::strin
   bool quoted = false, any = false, was_quoted = false;
   int line = 1, start = 1;
   auto end_field = [&] {
-    rec.push_back(was_quoted ? field : trim(field));
+    rec.push_back(was_quoted ? field : batch_trim(field));
     field.clear();
     was_quoted = false;
   };
@@ -88,7 +88,7 @@ std::vector<std::pair<int, std::vector<std::string>>> parse_csv(const std::strin
       }
       continue;
     }
-    if (c == '"' && trim(field).empty()) {
+    if (c == '"' && batch_trim(field).empty()) {
       quoted = was_quoted = any = true;
       field.clear();
     } else if (c == ',') {
@@ -119,13 +119,13 @@ Manifest read_manifest(const std::string& path) {
   const std::string text = ss.str();
   Manifest m;
   m.path = path;
-  const std::string ext = lower(fs::path(path).extension().string());
+  const std::string ext = batch_lower(fs::path(path).extension().string());
   if (ext == ".csv") {
     m.format = "csv";
   } else if (ext == ".jsonl" || ext == ".ndjson" || ext == ".json") {
     m.format = "jsonl";
   } else {
-    const std::string t = trim(text);
+    const std::string t = batch_trim(text);
     m.format = !t.empty() && t[0] == '{' ? "jsonl" : "csv";
   }
   if (m.format == "jsonl") {
@@ -134,7 +134,7 @@ Manifest read_manifest(const std::string& path) {
     int line = 0;
     while (std::getline(ls, l)) {
       ++line;
-      const std::string t = trim(l);
+      const std::string t = batch_trim(l);
       if (t.empty() || t[0] == '#') continue;
       nlohmann::json j;
       try {
@@ -281,7 +281,7 @@ const std::vector<EffectDef>& effect_defs() {
 }
 
 const EffectDef& effect_named(const std::string& name, const std::string& where) {
-  std::string n = lower(trim(name));
+  std::string n = batch_lower(batch_trim(name));
   n.erase(std::remove_if(n.begin(), n.end(), [](char c) { return std::isspace(static_cast<unsigned char>(c)); }),
           n.end());
   for (const EffectDef& e : effect_defs())
@@ -323,7 +323,7 @@ std::string output_stem(const std::string& key) {
   }
   flush();
   const fs::path p(out);
-  if (image_extensions().count(lower(p.extension().string()))) out = (p.parent_path() / p.stem()).generic_string();
+  if (image_extensions().count(batch_lower(p.extension().string()))) out = (p.parent_path() / p.stem()).generic_string();
   return out;
 }
 
@@ -396,7 +396,7 @@ std::vector<std::string> batch_record_argv(const BatchOptions& o) {
 
 std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
   if (o.out_dir.empty()) throw Error("--out-dir is required: the folder the outputs and records go to");
-  std::string fmt = lower(trim(o.format));
+  std::string fmt = batch_lower(batch_trim(o.format));
   if (!fmt.empty() && fmt[0] == '.') fmt.erase(0, 1);
   if (!fmt.empty() && !image_extensions().count("." + fmt))
     throw Error("--format '" + o.format + "' is not an image format brume writes; use png, jpg, tif, exr, pfm or hdr");
@@ -418,7 +418,10 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       std::string key, effect = o.effect;
       std::vector<std::pair<std::string, nlohmann::json>> cells;
       for (const auto& [col, v] : r.cells) {
-        const std::string c = lower(trim(col));
+        // Every cell ends in the frame's record and the results manifest (JSON).
+        check_utf8(col, cell_where(m, r, "") + ": the column name");
+        if (v.is_string()) check_utf8(v.get_ref<const std::string&>(), cell_where(m, r, col));
+        const std::string c = batch_lower(batch_trim(col));
         if (c == "key") {
           key = cell_text(v);
         } else if (c == "effect") {
@@ -427,7 +430,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
           cells.emplace_back(col, v);
         }
       }
-      if (trim(effect).empty())
+      if (batch_trim(effect).empty())
         throw Error(cell_where(m, r, "") + ": no effect; add an 'effect' column or give --effect (" + [] {
           std::string all;
           for (const EffectDef& e : effect_defs()) all += (all.empty() ? "" : ", ") + e.name;
@@ -438,7 +441,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       std::vector<std::pair<std::string, nlohmann::json>> all = cells;
       // Resolve a column name to (job parameter, name hashed by the sampler).
       auto resolve = [&](const std::string& col) -> std::pair<std::string, std::string> {
-        std::string n = trim(col);
+        std::string n = batch_trim(col);
         std::string prefix;  // the later stage's flag prefix when the column is prefixed with its name
         const std::string first = e.name.substr(0, e.name.find('+'));
         if (!e.stage_prefix.empty()) {
@@ -540,7 +543,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       } catch (const Error& ex) {
         throw Error(cell_where(m, r, "key") + ": " + ex.what());
       }
-      std::string ext = fmt.empty() ? lower(fs::path(image_text).extension().string()) : "." + fmt;
+      std::string ext = fmt.empty() ? batch_lower(fs::path(image_text).extension().string()) : "." + fmt;
       if (!image_extensions().count(ext))
         throw Error(cell_where(m, r, "image") + ": the output would take the input's extension '" + ext +
                     "', which brume does not write; give --format");
@@ -595,7 +598,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
         continue;
       }
       key_line[key] = r.line;
-      const std::string name_lc = lower(stem);  // case-insensitive file systems
+      const std::string name_lc = batch_lower(stem);  // case-insensitive file systems
       if (name_key.count(name_lc))
         throw Error(cell_where(m, r, "key") + ": keys '" + name_key[name_lc] + "' and '" + key +
                     "' give the same output name '" + stem + "'; make the keys differ by more than the extension, "

@@ -191,6 +191,11 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
 void write_manifest(const std::string& path, const std::vector<nlohmann::json>& rows) {
   std::string ext = fs::path(path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  // A file name that is not UTF-8 (Linux allows any bytes) cannot go into a
+  // manifest or, later, a record: refuse it by name rather than replace it.
+  for (const auto& r : rows)
+    for (const auto& [k, v] : r.items())
+      if (v.is_string()) check_utf8(v.get_ref<const std::string&>(), "--scan: the '" + k + "' file");
   std::string text;
   if (ext == ".jsonl" || ext == ".ndjson" || ext == ".json") {
     for (const auto& r : rows) text += r.dump() + "\n";

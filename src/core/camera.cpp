@@ -8,12 +8,11 @@
 #include <sstream>
 
 #include "brume/error.hpp"
+#include "core/math_constants.hpp"
 
 namespace brume {
 
 namespace {
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 // A view matrix's last row must be (0, 0, 0, 1) this closely: it is exact in
 // any rigid matrix, so more than rounding means a projection or a typo.
 constexpr double kLastRowTol = 1e-6;
@@ -22,7 +21,7 @@ constexpr double kLastRowTol = 1e-6;
 // scale or shear that would distort heights (1e-4 of 100 m is 1 cm).
 constexpr double kOrthoTol = 1e-4;
 
-std::string num(double v) {
+std::string pose_num(double v) {
   std::ostringstream s;
   s.precision(10);
   s << v;
@@ -247,7 +246,7 @@ void validate_view_matrix(const Mat4& m, const std::string& what) {
     for (int c = 0; c < 4; ++c)
       if (!std::isfinite(m.m[r][c]))
         throw Error(what + ": row " + std::to_string(r + 1) + ", column " + std::to_string(c + 1) + " is " +
-                    num(m.m[r][c]) + "; every entry of a view matrix must be a finite number");
+                    pose_num(m.m[r][c]) + "; every entry of a view matrix must be a finite number");
   for (int c = 0; c < 4; ++c)
     if (std::abs(m.m[3][c] - (c == 3 ? 1.0 : 0.0)) > kLastRowTol)
       throw Error(what + ": row 4 is " + row_string(m.m[3], 4) + "; it must be (0 0 0 1) within 1e-6. A view matrix "
@@ -266,14 +265,14 @@ void validate_view_matrix(const Mat4& m, const std::string& what) {
   if (worst > kOrthoTol) {
     const std::string why =
         wi == wj ? "row " + std::to_string(wi + 1) + " " + row_string(m.m[wi], 3) + " of the upper 3x3 has length " +
-                       num(std::sqrt(g.m[wi][wi]))
+                       pose_num(std::sqrt(g.m[wi][wi]))
                  : "rows " + std::to_string(wi + 1) + " " + row_string(m.m[wi], 3) + " and " + std::to_string(wj + 1) +
-                       " " + row_string(m.m[wj], 3) + " of the upper 3x3 have dot product " + num(g.m[wi][wj]);
+                       " " + row_string(m.m[wj], 3) + " of the upper 3x3 have dot product " + pose_num(g.m[wi][wj]);
     throw Error(what + ": " + why + "; the upper 3x3 must be a rotation, orthonormal within 1e-4 (unit rows, "
                 "perpendicular): no scale or shear. Remove any model scale from the matrix");
   }
   if (det(r) < 0.0)
-    throw Error(what + ": the upper 3x3 has determinant " + num(det(r)) + ", a mirror; a view matrix's rotation "
+    throw Error(what + ": the upper 3x3 has determinant " + pose_num(det(r)) + ", a mirror; a view matrix's rotation "
                 "has determinant +1 (right-handed, OpenGL). Check for a flipped axis (left-handed / D3D convention)");
 }
 
@@ -338,10 +337,10 @@ Camera make_camera(const Intrinsics& k, int width, int height, const CameraPose&
 
   if (!p.view_matrix_file.empty()) {
     std::string clash;
-    if (p.yaw_deg != 0.0) clash = "--yaw " + num(p.yaw_deg);
-    else if (p.pitch_deg != 0.0) clash = "--pitch " + num(p.pitch_deg);
-    else if (p.roll_deg != 0.0) clash = "--roll " + num(p.roll_deg);
-    else if (!std::isnan(p.height_m)) clash = "--camera-height " + num(p.height_m);
+    if (p.yaw_deg != 0.0) clash = "--yaw " + pose_num(p.yaw_deg);
+    else if (p.pitch_deg != 0.0) clash = "--pitch " + pose_num(p.pitch_deg);
+    else if (p.roll_deg != 0.0) clash = "--roll " + pose_num(p.roll_deg);
+    else if (!std::isnan(p.height_m)) clash = "--camera-height " + pose_num(p.height_m);
     else if (p.x_m != 0.0 || p.z_m != 0.0) clash = "a camera x/z position";
     if (!clash.empty())
       throw Error("--view-matrix '" + p.view_matrix_file + "' gives the whole pose, but " + clash +
@@ -353,19 +352,19 @@ Camera make_camera(const Intrinsics& k, int width, int height, const CameraPose&
   }
 
   if (!std::isfinite(p.yaw_deg))
-    throw Error("--yaw " + num(p.yaw_deg) + " is not allowed: it must be a finite number of degrees (compass azimuth "
+    throw Error("--yaw " + pose_num(p.yaw_deg) + " is not allowed: it must be a finite number of degrees (compass azimuth "
                 "of the optical axis, clockwise from north; taken modulo 360)");
   if (!(p.pitch_deg >= -90.0 && p.pitch_deg <= 90.0))
-    throw Error("--pitch " + num(p.pitch_deg) + " is not allowed: it must be in [-90, 90] degrees (elevation of the "
+    throw Error("--pitch " + pose_num(p.pitch_deg) + " is not allowed: it must be in [-90, 90] degrees (elevation of the "
                 "optical axis, > 0 up); to look back over the top, turn --yaw by 180 and --roll by 180 instead");
   if (!(p.roll_deg > -180.0 && p.roll_deg <= 180.0))
-    throw Error("--roll " + num(p.roll_deg) + " is not allowed: it must be in (-180, 180] degrees (> 0 turns the "
+    throw Error("--roll " + pose_num(p.roll_deg) + " is not allowed: it must be in (-180, 180] degrees (> 0 turns the "
                 "image content clockwise); -180 is written 180");
   if (std::isinf(p.height_m))
-    throw Error("--camera-height " + num(p.height_m) + " is not allowed: it must be a finite number of metres above "
+    throw Error("--camera-height " + pose_num(p.height_m) + " is not allowed: it must be a finite number of metres above "
                 "the ground plane");
   if (!std::isfinite(p.x_m) || !std::isfinite(p.z_m))
-    throw Error("the camera position x " + num(p.x_m) + ", z " + num(p.z_m) + " m is not allowed: both must be finite");
+    throw Error("the camera position x " + pose_num(p.x_m) + ", z " + pose_num(p.z_m) + " m is not allowed: both must be finite");
   c.orientation = rotation_from_ypr(p.yaw_deg, p.pitch_deg, p.roll_deg);
   c.position_m = {p.x_m, p.height_m, p.z_m};
   return c;

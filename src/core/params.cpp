@@ -3,6 +3,7 @@
 #include "brume/params.hpp"
 
 #include <cctype>
+#include <cstdio>
 #include <cstdlib>
 #include <sstream>
 
@@ -26,6 +27,66 @@ bool parse_double(const std::string& t, double& v) {
 }
 
 }  // namespace
+
+std::size_t first_invalid_utf8(const std::string& s) {
+  const std::size_t n = s.size();
+  std::size_t i = 0;
+  while (i < n) {
+    const unsigned c = static_cast<unsigned char>(s[i]);
+    if (c < 0x80) {
+      ++i;
+      continue;
+    }
+    // The lead byte fixes the length and the range of the second byte
+    // (RFC 3629 table 3-7): E0 and F0 exclude overlong forms, ED the UTF-16
+    // surrogates, F4 anything above U+10FFFF.
+    std::size_t len = 0;
+    unsigned lo = 0x80, hi = 0xBF;
+    if (c >= 0xC2 && c <= 0xDF) len = 2;
+    else if (c == 0xE0) len = 3, lo = 0xA0;
+    else if ((c >= 0xE1 && c <= 0xEC) || c == 0xEE || c == 0xEF) len = 3;
+    else if (c == 0xED) len = 3, hi = 0x9F;
+    else if (c == 0xF0) len = 4, lo = 0x90;
+    else if (c >= 0xF1 && c <= 0xF3) len = 4;
+    else if (c == 0xF4) len = 4, hi = 0x8F;
+    else return i;
+    if (n - i < len) return i;
+    const unsigned c1 = static_cast<unsigned char>(s[i + 1]);
+    if (c1 < lo || c1 > hi) return i;
+    for (std::size_t k = 2; k < len; ++k) {
+      const unsigned ck = static_cast<unsigned char>(s[i + k]);
+      if (ck < 0x80 || ck > 0xBF) return i;
+    }
+    i += len;
+  }
+  return std::string::npos;
+}
+
+void check_utf8(const std::string& text, const std::string& what) {
+  std::size_t bad = first_invalid_utf8(text);
+  if (bad == std::string::npos) return;
+  const unsigned first = static_cast<unsigned char>(text[bad]);
+  // The value as typed, with every byte that breaks the encoding as \xHH.
+  std::string shown;
+  std::size_t i = 0;
+  char hex[8];
+  while (i < text.size()) {
+    const std::size_t j = first_invalid_utf8(text.substr(i));
+    if (j == std::string::npos) {
+      shown += text.substr(i);
+      break;
+    }
+    shown += text.substr(i, j);
+    std::snprintf(hex, sizeof hex, "\\x%02X", static_cast<unsigned char>(text[i + j]));
+    shown += hex;
+    i += j + 1;
+  }
+  std::snprintf(hex, sizeof hex, "0x%02X", first);
+  throw Error(what + " '" + shown + "' is not valid UTF-8 (byte " + hex + " at offset " + std::to_string(bad) +
+              "): brume writes every path, key and argument into its JSON records and manifests, which hold "
+              "UTF-8 text only; rename the file to a UTF-8 name (e.g. convmv -f latin1 -t utf8 --notest FILE) "
+              "or pass a symbolic link that has one");
+}
 
 bool Range::contains(double v) const {
   if (std::isnan(v)) return false;
@@ -178,6 +239,7 @@ void ParamSpec::check(const nlohmann::json& v) const {
     }
     case ParamKind::text:
       if (!v.is_string()) bad_type("text");
+      check_utf8(v.get_ref<const std::string&>(), flag);
       return;
   }
 }

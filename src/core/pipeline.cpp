@@ -344,7 +344,7 @@ void check_working_memory(const std::string& effect, const Image& frame, double 
 
 std::size_t unknown_range_pixels(const Image& range) {
   std::size_t n = 0;
-  for (float r : range.data) n += (std::isfinite(r) && r != 0.0f) ? 0 : 1;
+  for (float r : range.data) n += known_range(r) ? 0 : 1;
   return n;
 }
 

@@ -11,15 +11,15 @@
 
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
+#include "core/math_constants.hpp"
 #include "shared/prelude_cpp.h"
 
 namespace brume {
 
 namespace {
-constexpr double kPi = 3.14159265358979323846;
 const float kUnknown = std::numeric_limits<float>::quiet_NaN();
 
-std::string num(double v) {
+std::string depth_num(double v) {
   std::ostringstream s;
   s << v;
   return s.str();
@@ -27,14 +27,14 @@ std::string num(double v) {
 
 void require_positive(double v, const std::string& what) {
   if (!(v > 0.0) || !std::isfinite(v))
-    throw Error(what + " " + num(v) + " is not allowed: it must be a finite number > 0");
+    throw Error(what + " " + depth_num(v) + " is not allowed: it must be a finite number > 0");
 }
 }  // namespace
 
 Intrinsics intrinsics_from_fov(int width, int height, double fov_x_deg, double fov_y_deg) {
   auto check = [](double f, const char* flag) {
     if (!std::isnan(f) && !(f > 0.0 && f < 180.0))
-      throw Error(std::string(flag) + " " + num(f) + " degrees is not a field of view; use (0, 180)");
+      throw Error(std::string(flag) + " " + depth_num(f) + " degrees is not a field of view; use (0, 180)");
   };
   check(fov_x_deg, "--fov-x");
   check(fov_y_deg, "--fov-y");
@@ -184,7 +184,7 @@ double z_to_depth_buffer(double z, DepthBufferConvention c, double n, double f) 
 
 DepthBufferLinear depth_buffer_linear(DepthBufferConvention c, double n, double f) {
   require_positive(n, "--near (metres)");
-  if (!(f > n)) throw Error("--far " + num(f) + " must be greater than --near " + num(n) + " (use inf for an infinite far plane)");
+  if (!(f > n)) throw Error("--far " + depth_num(f) + " must be greater than --near " + depth_num(n) + " (use inf for an infinite far plane)");
   const double inv_n = 1.0 / n, inv_f = std::isinf(f) ? 0.0 : 1.0 / f;
   DepthBufferLinear l;
   const bool reversed = c == DepthBufferConvention::reversed;
@@ -206,7 +206,7 @@ Image depth_buffer_to_z(const Image& d, DepthBufferConvention c, double n, doubl
     }
     if (v < 0.0f || v > 1.0f) {
       throw Error("depth-buffer pixel (" + std::to_string(i % d.width) + ", " + std::to_string(i / d.width) +
-                  ") is " + num(v) + "; window depth must be in [0, 1] (for a 16/24-bit integer buffer give --scale 1/65535 or 1/16777215)");
+                  ") is " + depth_num(v) + "; window depth must be in [0, 1] (for a 16/24-bit integer buffer give --scale 1/65535 or 1/16777215)");
     }
     z.data[i] = 1.0f / brume::shared::brume_depth_inverse_z(v, a, b);
   }
@@ -226,7 +226,7 @@ Image inverse_depth_to_z(const Image& v, double scale, double shift) {
 
 Image normalized_depth_to_z(const Image& v, double n, double f) {
   if (!(n >= 0.0) || !(f > n) || !std::isfinite(f))
-    throw Error("--near " + num(n) + " and --far " + num(f) + ": need 0 <= near < far, finite (z = near + v (far - near))");
+    throw Error("--near " + depth_num(n) + " and --far " + depth_num(f) + ": need 0 <= near < far, finite (z = near + v (far - near))");
   Image z(v.width, v.height, 1);
   for (std::size_t i = 0; i < v.data.size(); ++i) {
     const float x = v.data[i];

@@ -17,6 +17,7 @@
 #endif
 
 #include "brume/aerial.hpp"
+#include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "shared/prelude_cpp.h"
 
@@ -25,7 +26,7 @@ namespace sh = brume::shared;
 
 namespace {
 
-const ParamTable<Atmosphere>& atmosphere_param_table() {
+const ParamTable<Atmosphere>& aerial_atmosphere_table() {
   static const ParamTable<Atmosphere> t = [] {
     ParamTable<Atmosphere> d("aerial");  // the aerial block's own fields, not a block of their own
     // auto (NaN in the struct): fitted on --sky-image by `brume aerial` (run_aerial_job) before anything runs.
@@ -39,8 +40,6 @@ const ParamTable<Atmosphere>& atmosphere_param_table() {
   }();
   return t;
 }
-
-bool known_range(float r) { return std::isfinite(r) && r != 0.0f; }
 
 // A zero-filled image whose pages Linux may back with 2 MB huge pages. A
 // render allocates ~50 MB of fresh output per call; with 4 kB pages each first
@@ -138,7 +137,7 @@ std::array<float, 3> sky_median(DenseImageRef rgb, const float* sky, std::size_t
   return m;
 }
 
-float luminance(const float* c) { return 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2]; }
+float aerial_luminance(const float* c) { return 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2]; }
 
 // Per-channel median of the listed pixels.
 std::array<float, 3> channel_median(DenseImageRef rgb, const std::vector<std::size_t>& px) {
@@ -173,7 +172,7 @@ std::string to_string(AerialMode m) {
 const ParamTable<AerialParams>& aerial_param_table() {
   static const ParamTable<AerialParams> t = [] {
     ParamTable<AerialParams> d("aerial");
-    d.nest(&AerialParams::atmosphere, atmosphere_param_table())
+    d.nest(&AerialParams::atmosphere, aerial_atmosphere_table())
         .text("sensitivity", &AerialParams::sensitivity,
               "camera spectral sensitivities q_c(lambda): default, a CSV of wavelength_nm,r,g,b, or "
               "DATABASE.txt#CAMERA NAME")
@@ -303,7 +302,7 @@ void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& 
       estimated_source = "per-channel median of the unknown-range (sky) pixels";
     } else {
       // The thesis' "brightest pixels near the horizon": the 1 % most distant
-      // known pixels, then the brightest 10 % of those by luminance.
+      // known pixels, then the brightest 10 % of those by aerial_luminance.
       std::vector<std::size_t> known;
       known.reserve(range.pixels() - a.unknown_pixels);
       for (std::size_t i = 0; i < range.pixels(); ++i)
@@ -315,7 +314,7 @@ void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& 
       const std::size_t nb = std::max<std::size_t>(1, far.size() / 10);
       std::nth_element(far.begin(), far.begin() + static_cast<std::ptrdiff_t>(nb - 1), far.end(),
                        [&](std::size_t i, std::size_t j) {
-                         return luminance(&rgb.data[i * 3]) > luminance(&rgb.data[j * 3]);
+                         return aerial_luminance(&rgb.data[i * 3]) > aerial_luminance(&rgb.data[j * 3]);
                        });
       far.resize(nb);
       estimated = channel_median(rgb, far);

@@ -30,7 +30,7 @@ namespace brume {
 
 namespace {
 
-std::string num(double v) {
+std::string spectral_num(double v) {
   std::ostringstream o;
   o.precision(10);
   o << v;
@@ -39,7 +39,7 @@ std::string num(double v) {
 
 void check_lambda(double lambda_nm) {
   if (!(lambda_nm >= kAerialLambdaMinNm && lambda_nm <= kAerialLambdaMaxNm))
-    throw Error("wavelength " + num(lambda_nm) + " nm is outside the model's range [380, 780] nm");
+    throw Error("wavelength " + spectral_num(lambda_nm) + " nm is outside the model's range [380, 780] nm");
 }
 
 }  // namespace
@@ -48,11 +48,11 @@ void check_lambda(double lambda_nm) {
 
 void validate_atmosphere(const Atmosphere& a) {
   if (!(a.turbidity >= 1.0 && a.turbidity <= 20.0))
-    throw Error("--turbidity " + num(a.turbidity) +
+    throw Error("--turbidity " + spectral_num(a.turbidity) +
                 " is outside [1, 20]: T = 1 is a pure Rayleigh sky, T = 20 thick haze near fog (the range of the "
                 "Preetham/Morales model); give a value in [1, 20]");
   if (!(a.altitude_m >= -500.0 && a.altitude_m <= 9000.0))
-    throw Error("--altitude " + num(a.altitude_m) +
+    throw Error("--altitude " + spectral_num(a.altitude_m) +
                 " m is outside [-500, 9000] m (observer altitude above sea level, from the Dead Sea shore to "
                 "above Everest); give the observer's altitude in metres");
 }
@@ -104,15 +104,15 @@ std::array<double, 3> cie1931_wyman(double l) {
           1.217 * lobe(l, 437.0, 11.8, 36.0) + 0.681 * lobe(l, 459.0, 26.0, 13.8)};
 }
 
-std::string trim(const std::string& s) {
+std::string spectral_trim(const std::string& s) {
   const auto b = s.find_first_not_of(" \t\r\n");
   if (b == std::string::npos) return "";
   return s.substr(b, s.find_last_not_of(" \t\r\n") - b + 1);
 }
 
 // A number that is the whole field; nullopt for text, NaN or infinity.
-bool parse_number(const std::string& field, double& v) {
-  const std::string t = trim(field);
+bool spectral_parse_number(const std::string& field, double& v) {
+  const std::string t = spectral_trim(field);
   if (t.empty()) return false;
   errno = 0;
   char* end = nullptr;
@@ -177,7 +177,7 @@ SpectralSensitivity load_csv(const std::string& path) {
   bool header_allowed = true;
   for (std::size_t n = 0; n < lines.size(); ++n) {
     const int ln = static_cast<int>(n) + 1;
-    const std::string t = trim(lines[n]);
+    const std::string t = spectral_trim(lines[n]);
     if (t.empty() || t[0] == '#') continue;
     std::vector<std::string> f;
     std::stringstream ss(t);
@@ -185,7 +185,7 @@ SpectralSensitivity load_csv(const std::string& path) {
     while (std::getline(ss, field, ',')) f.push_back(field);
     double w = 0.0;
     // One header line (a first field that is not a number) may precede the data.
-    if (header_allowed && !f.empty() && !parse_number(f[0], w)) {
+    if (header_allowed && !f.empty() && !spectral_parse_number(f[0], w)) {
       header_allowed = false;
       continue;
     }
@@ -193,17 +193,17 @@ SpectralSensitivity load_csv(const std::string& path) {
     if (f.size() != 4)
       throw Error(where(path, ln) + ": '" + t + "' has " + std::to_string(f.size()) +
                   " fields; each data row is wavelength_nm,r,g,b");
-    if (!parse_number(f[0], w)) throw Error(where(path, ln) + ": wavelength '" + trim(f[0]) + "' is not a number");
-    if (w < 0.0) throw Error(where(path, ln) + ": wavelength " + num(w) + " nm is negative");
+    if (!spectral_parse_number(f[0], w)) throw Error(where(path, ln) + ": wavelength '" + spectral_trim(f[0]) + "' is not a number");
+    if (w < 0.0) throw Error(where(path, ln) + ": wavelength " + spectral_num(w) + " nm is negative");
     if (!wl.empty() && !(w > wl.back()))
-      throw Error(where(path, ln) + ": wavelength " + num(w) + " nm does not increase (previous row " +
-                  num(wl.back()) + " nm); sort the rows by wavelength, one row per wavelength");
+      throw Error(where(path, ln) + ": wavelength " + spectral_num(w) + " nm does not increase (previous row " +
+                  spectral_num(wl.back()) + " nm); sort the rows by wavelength, one row per wavelength");
     std::array<double, 3> q{};
     for (int c = 0; c < 3; ++c) {
-      if (!parse_number(f[1 + c], q[c]))
-        throw Error(where(path, ln) + ": value '" + trim(f[1 + c]) + "' is not a number");
+      if (!spectral_parse_number(f[1 + c], q[c]))
+        throw Error(where(path, ln) + ": value '" + spectral_trim(f[1 + c]) + "' is not a number");
       if (q[c] < 0.0)
-        throw Error(where(path, ln) + ": value " + num(q[c]) +
+        throw Error(where(path, ln) + ": value " + spectral_num(q[c]) +
                     " is negative; a sensitivity is a response, >= 0 (clip a measurement's noise floor to 0 "
                     "yourself if that is what it is)");
     }
@@ -229,7 +229,7 @@ SpectralSensitivity load_csv(const std::string& path) {
 SpectralSensitivity load_database(const std::string& path, const std::string& camera) {
   const std::vector<std::string> lines = read_lines(path);
   std::size_t n = 0;
-  while (n < lines.size() && trim(lines[n]).rfind("---", 0) != 0) ++n;
+  while (n < lines.size() && spectral_trim(lines[n]).rfind("---", 0) != 0) ++n;
   if (n == lines.size())
     throw Error("--sensitivity '" + path +
                 "' is not a camspec database (no '---------' line ending its header); give the "
@@ -237,11 +237,11 @@ SpectralSensitivity load_database(const std::string& path, const std::string& ca
   ++n;
   std::vector<std::string> names;
   auto next = [&](std::size_t& i) {
-    while (i < lines.size() && trim(lines[i]).empty()) ++i;
+    while (i < lines.size() && spectral_trim(lines[i]).empty()) ++i;
     return i < lines.size();
   };
   while (next(n)) {
-    const std::string name = trim(lines[n]);
+    const std::string name = spectral_trim(lines[n]);
     const int name_line = static_cast<int>(n) + 1;
     ++n;
     names.push_back(name);
@@ -255,8 +255,8 @@ SpectralSensitivity load_database(const std::string& path, const std::string& ca
       std::string field;
       while (ss >> field) {
         double v = 0.0;
-        if (!parse_number(field, v)) throw Error(where(path, ln) + ": value '" + field + "' is not a number");
-        if (v < 0.0) throw Error(where(path, ln) + ": value " + num(v) + " is negative");
+        if (!spectral_parse_number(field, v)) throw Error(where(path, ln) + ": value '" + field + "' is not a number");
+        if (v < 0.0) throw Error(where(path, ln) + ": value " + spectral_num(v) + " is negative");
         rows[c].push_back(v);
       }
       if (rows[c].size() != 33)
@@ -303,7 +303,7 @@ SpectralSensitivity load_sensitivity(const std::string& spec) {
     const std::string file = spec.substr(0, hash);
     std::error_code ec;
     if (std::filesystem::is_regular_file(file, ec)) {
-      const std::string camera = trim(spec.substr(hash + 1));
+      const std::string camera = spectral_trim(spec.substr(hash + 1));
       if (camera.empty())
         throw Error("--sensitivity '" + spec + "': no camera name after '#'; write DATABASE.txt#CAMERA NAME");
       return load_database(file, camera);
@@ -343,7 +343,7 @@ Integrand make_integrand(const Atmosphere& a, const SpectralSensitivity& q) {
     const double w = (i == 0 || i == kSensitivitySamples - 1) ? 1.0 : (i % 2 ? 4.0 : 2.0);
     for (int c = 0; c < 3; ++c) {
       if (!(q.q[i][c] >= 0.0) || !std::isfinite(q.q[i][c]))
-        throw Error("sensitivity '" + q.source + "' has value " + num(q.q[i][c]) + " at " + num(l) +
+        throw Error("sensitivity '" + q.source + "' has value " + spectral_num(q.q[i][c]) + " at " + spectral_num(l) +
                     " nm; sensitivities are finite and >= 0");
       in.wq[i][c] = w * q.q[i][c];
       norm[c] += in.wq[i][c];
@@ -371,13 +371,13 @@ std::array<double, 3> gamma_at(const Integrand& in, double s_m) {
 
 std::array<double, 3> attenuation_direct(const Atmosphere& a, const SpectralSensitivity& q, double s_m) {
   if (!(s_m >= 0.0))
-    throw Error("distance " + num(s_m) + " m is not >= 0; attenuation is defined for distances from the camera");
+    throw Error("distance " + spectral_num(s_m) + " m is not >= 0; attenuation is defined for distances from the camera");
   return gamma_at(make_integrand(a, q), s_m);
 }
 
 AttenuationTable attenuation_table(const Atmosphere& a, const SpectralSensitivity& q, double s_max_m, int samples) {
   if (!(s_max_m > 0.0) || !std::isfinite(s_max_m))
-    throw Error("attenuation table: the largest distance " + num(s_max_m) + " m must be finite and > 0");
+    throw Error("attenuation table: the largest distance " + spectral_num(s_max_m) + " m must be finite and > 0");
   if (samples < 2) throw Error("attenuation table: " + std::to_string(samples) + " samples; at least 2 are needed");
   // The same integrand and sum as attenuation_direct (same order over lambda,
   // so Gamma <= 1 still holds in floating point), but e^{-beta(l) i step} by a

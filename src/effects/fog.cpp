@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "brume/fog.hpp"
 #include "brume/io.hpp"
@@ -80,7 +81,7 @@ const ParamTable<FogParams>& fog_param_table() {
 
 namespace {
 
-std::string num(double v) {
+std::string fog_num(double v) {
   std::ostringstream s;
   s << v;
   return s.str();
@@ -110,9 +111,9 @@ void validate_fog(const FogParams& p, const std::set<std::string>& given) {
     if (p.classic == ClassicFog::linear) {
       refuse({"density"}, "is not used by --classic linear (it uses --fog-start and --fog-end); use --classic exp2");
       if (!(p.fog_end_m > p.fog_start_m))
-        throw Error("--fog-end " + num(p.fog_end_m) + " must exceed --fog-start " + num(p.fog_start_m) + " m");
+        throw Error("--fog-end " + fog_num(p.fog_end_m) + " must exceed --fog-start " + fog_num(p.fog_start_m) + " m");
       if (p.lambda > 0.0)
-        throw Error("--lambda " + num(p.lambda) + " needs an optical depth, which --classic linear does not have "
+        throw Error("--lambda " + fog_num(p.lambda) + " needs an optical depth, which --classic linear does not have "
                     "beyond --fog-end (it is infinite there); use --classic exp2 or a height profile");
     } else {
       refuse({"fog-start", "fog-end"}, "is only used by --classic linear");
@@ -130,7 +131,7 @@ void validate_fog(const FogParams& p, const std::set<std::string>& given) {
       if (p.table_file.empty()) throw Error("--profile table needs --table FILE.csv (rows height_m,density_per_m)");
     }
     if (p.profile == FogProfile::ramp && !(p.ramp_top_m > p.ramp_bottom_m))
-      throw Error("--ramp-top " + num(p.ramp_top_m) + " must exceed --ramp-bottom " + num(p.ramp_bottom_m) +
+      throw Error("--ramp-top " + fog_num(p.ramp_top_m) + " must exceed --ramp-bottom " + fog_num(p.ramp_bottom_m) +
                   " m (the density falls from --density at the bottom to 0 at the top)");
   }
   if (p.lambda == 0.0)
@@ -179,10 +180,10 @@ FogTable read_fog_table(const std::string& path) {
       throw Error(at + ": '" + line + "' is not two numbers; each row is height_m,density_per_m");
     header_allowed = false;
     if (!std::isfinite(v[0]) || !std::isfinite(v[1]))
-      throw Error(at + ": height " + num(v[0]) + " m, density " + num(v[1]) + " /m: both must be finite numbers");
-    if (v[1] < 0.0) throw Error(at + ": density " + num(v[1]) + " /m is negative; densities must be >= 0");
+      throw Error(at + ": height " + fog_num(v[0]) + " m, density " + fog_num(v[1]) + " /m: both must be finite numbers");
+    if (v[1] < 0.0) throw Error(at + ": density " + fog_num(v[1]) + " /m is negative; densities must be >= 0");
     if (!t.height_m.empty() && !(v[0] > t.height_m.back()))
-      throw Error(at + ": height " + num(v[0]) + " m does not exceed the previous row's " + num(t.height_m.back()) +
+      throw Error(at + ": height " + fog_num(v[0]) + " m does not exceed the previous row's " + fog_num(t.height_m.back()) +
                   " m; heights must be strictly increasing (sort the table, remove repeated heights)");
     t.height_m.push_back(v[0]);
     t.density_per_m.push_back(v[1]);
@@ -286,8 +287,6 @@ float fog_optical_depth(const FogDensity& d, float l, float ray_y, bool sky, flo
 // ---- analysis and apply ------------------------------------------------------------------
 
 namespace {
-
-bool known_range(float r) { return std::isfinite(r) && r != 0.0f; }
 
 // The constants of each pixel's world-up ray component (brume_fog_ray_y).
 struct RayY {

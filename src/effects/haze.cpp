@@ -7,6 +7,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
 #include "shared/prelude_cpp.h"
@@ -60,8 +61,6 @@ void validate_haze(const HazeParams& p, const std::set<std::string>& given) {
 }
 
 namespace {
-
-bool known_range(float r) { return std::isfinite(r) && r != 0.0f; }
 
 float luminance(const float* c) { return 0.2126f * c[0] + 0.7152f * c[1] + 0.0722f * c[2]; }
 

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <sstream>
 
+#include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "brume/insert.hpp"
 #include "shared/prelude_cpp.h"
@@ -19,8 +20,6 @@ namespace brume {
 namespace sh = brume::shared;
 
 namespace {
-
-bool known_range(float r) { return std::isfinite(r) && r != 0.0f; }
 
 std::string pixel_text(std::size_t i, int w) {
   return "(" + std::to_string(i % static_cast<std::size_t>(w)) + ", " + std::to_string(i / static_cast<std::size_t>(w)) +

@@ -13,7 +13,7 @@ namespace brume {
 
 namespace {
 
-nlohmann::json gamma_json(const std::array<double, 3>& g) { return {g[0], g[1], g[2]}; }
+nlohmann::json insert_gamma_json(const std::array<double, 3>& g) { return {g[0], g[1], g[2]}; }
 
 nlohmann::json insert_record(const AerialParams& p, const InsertAnalysis& a) {
   const AerialAnalysis& aa = a.aerial;
@@ -23,7 +23,7 @@ nlohmann::json insert_record(const AerialParams& p, const InsertAnalysis& a) {
   j["diffusion"] = diffusion_record(p.diffusion, aa.plan);
   nlohmann::json g = nlohmann::json::object();
   for (double s : {100.0, 1000.0, 10000.0})
-    g[std::to_string(static_cast<int>(s)) + "_m"] = gamma_json(attenuation_direct(p.atmosphere, aa.sensitivity, s));
+    g[std::to_string(static_cast<int>(s)) + "_m"] = insert_gamma_json(attenuation_direct(p.atmosphere, aa.sensitivity, s));
   j["derived"] = {
       {"depth_test", "the object is visible where alpha > 0, its range is known and <= the scene's measured range "
                      "(ties: the object; unknown scene range = sky = the object)"},

@@ -8,6 +8,7 @@
 #include <omp.h>
 
 #include "brume/error.hpp"
+#include "core/math_constants.hpp"
 #include "brume_opencv.hpp"
 #include "shared/prelude_cpp.h"
 
@@ -17,16 +18,14 @@ namespace sh = brume::shared;
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 
-std::string num(double v) {
+std::string sky_num(double v) {
   char b[32];
   std::snprintf(b, sizeof b, "%.6g", v);
   return b;
 }
 
-double wrap360(double a) {
+double sky_wrap360(double a) {
   double r = std::fmod(a, 360.0);
   if (r < 0) r += 360.0;
   return r >= 360.0 ? 0.0 : r;
@@ -36,7 +35,7 @@ double wrap360(double a) {
 
 void check_sky_turbidity(double t, const std::string& flag) {
   if (!(t >= kSkyTurbidityMin && t <= kSkyTurbidityMax))
-    throw Error(flag + " " + num(t) +
+    throw Error(flag + " " + sky_num(t) +
                 " is outside the sky model's [1.7, 20]: Preetham's fit turns negative below T = 1.65 "
                 "(the gradation term 1 + A e^B of the luminance changes sign) and 20 is the top of the "
                 "thesis' range; use a turbidity in [1.7, 20]");
@@ -140,17 +139,17 @@ SkyGeometry sky_geometry(const SkyViewParams& v, int width, int height) {
   else
     throw Error("--projection '" + v.projection + "' is not a sky projection; use fisheye, equirectangular or pinhole");
   if (!std::isfinite(v.azimuth_offset_deg))
-    throw Error("--azimuth-offset " + num(v.azimuth_offset_deg) + " is not finite; give degrees");
+    throw Error("--azimuth-offset " + sky_num(v.azimuth_offset_deg) + " is not finite; give degrees");
   g.azimuth_offset_deg = v.azimuth_offset_deg;
   g.cx = (width - 1) / 2.0, g.cy = (height - 1) / 2.0;
   g.radius_px = std::isnan(v.fisheye_radius_px) ? std::min(width, height) / 2.0 : v.fisheye_radius_px;
   if (!(g.radius_px > 0.0))
-    throw Error("--fisheye-radius " + num(g.radius_px) + " is not allowed; use a radius > 0 px");
+    throw Error("--fisheye-radius " + sky_num(g.radius_px) + " is not allowed; use a radius > 0 px");
   if (g.projection != Projection::fisheye && !std::isnan(v.fisheye_radius_px))
     throw Error("--fisheye-radius is for --projection fisheye, not " + v.projection + "; drop it");
   if (g.projection == Projection::pinhole) {
     if (v.azimuth_offset_deg != 0.0)
-      throw Error("--azimuth-offset " + num(v.azimuth_offset_deg) +
+      throw Error("--azimuth-offset " + sky_num(v.azimuth_offset_deg) +
                   " is not used by --projection pinhole (--yaw gives the compass azimuth of the optical axis); "
                   "use --yaw instead");
     Intrinsics k = v.k;
@@ -180,18 +179,18 @@ std::optional<SkyDirection> direction_of_pixel(const SkyGeometry& g, double u, d
       if (r > g.radius_px) return std::nullopt;
       // Seen from below with north up, east is on the left: azimuth grows counter-clockwise.
       const double phi = r > 0.0 ? std::atan2(-du, -dv) / kDeg : 0.0;
-      return SkyDirection{90.0 * r / g.radius_px, wrap360(phi + g.azimuth_offset_deg)};
+      return SkyDirection{90.0 * r / g.radius_px, sky_wrap360(phi + g.azimuth_offset_deg)};
     }
     case Projection::equirectangular: {
       if (v < -0.5 || v > g.height - 0.5) return std::nullopt;
       const double phi = 360.0 * (u + 0.5) / g.width - 180.0 + g.azimuth_offset_deg;
-      return SkyDirection{180.0 * (v + 0.5) / g.height, wrap360(phi)};
+      return SkyDirection{180.0 * (v + 0.5) / g.height, sky_wrap360(phi)};
     }
     case Projection::pinhole:
     default: {
       const Vec3 d = g.camera.world_ray(u, v);  // x east, y up, z south
       const double theta = std::acos(std::clamp(d.y, -1.0, 1.0)) / kDeg;
-      return SkyDirection{theta, wrap360(std::atan2(d.x, -d.z) / kDeg)};
+      return SkyDirection{theta, sky_wrap360(std::atan2(d.x, -d.z) / kDeg)};
     }
   }
 }
@@ -207,7 +206,7 @@ std::optional<std::array<double, 2>> pixel_of_direction(const SkyGeometry& g, co
     case Projection::equirectangular: {
       if (d.zenith_deg > 180.0 || d.zenith_deg < 0.0) return std::nullopt;
       // Column: the azimuth relative to the image's centre column, in [-180, 180).
-      double a = wrap360(d.azimuth_deg - g.azimuth_offset_deg + 180.0) - 180.0;
+      double a = sky_wrap360(d.azimuth_deg - g.azimuth_offset_deg + 180.0) - 180.0;
       return std::array<double, 2>{(a + 180.0) / 360.0 * g.width - 0.5, d.zenith_deg / 180.0 * g.height - 0.5};
     }
     case Projection::pinhole:
@@ -226,7 +225,7 @@ std::optional<std::array<double, 2>> pixel_of_direction(const SkyGeometry& g, co
 Image render_sky(const SkyRenderParams& p, const SkyDirection& sun, const SkyGeometry& g, const Exec& exec) {
   check_sky_turbidity(p.turbidity);
   if (!(sun.zenith_deg >= 0.0 && sun.zenith_deg < 90.0))
-    throw Error("the sun's zenith angle " + num(sun.zenith_deg) +
+    throw Error("the sun's zenith angle " + sky_num(sun.zenith_deg) +
                 " deg is not above the horizon; the Preetham model has no twilight: use a sun zenith in [0, 90)");
   Image out(g.width, g.height, 3, NAN);
   const float t = static_cast<float>(p.turbidity);
@@ -466,14 +465,14 @@ SunFound resolve_sun(const SunParams& p, const DenseImageRef* rgb, bool integer_
   } else if (given) {
     if (std::isnan(p.zenith_deg) || std::isnan(p.azimuth_deg))
       throw Error("the sun needs both --sun-zenith and --sun-azimuth (degrees)");
-    f.direction = {p.zenith_deg, wrap360(p.azimuth_deg)};
+    f.direction = {p.zenith_deg, sky_wrap360(p.azimuth_deg)};
     f.source = "given";
   } else {
     throw Error("where is the sun? give --sun-zenith DEG --sun-azimuth DEG, or --date --latitude --longitude"
                 ", or --sun auto (brume sky fit)");
   }
   if (!(f.direction.zenith_deg < 90.0))
-    throw Error("the sun (" + f.source + ") is at zenith angle " + num(f.direction.zenith_deg) +
+    throw Error("the sun (" + f.source + ") is at zenith angle " + sky_num(f.direction.zenith_deg) +
                 " deg, not above the horizon; the Preetham model has no twilight: use a daytime sky (sun zenith < 90)");
   return f;
 }

@@ -12,6 +12,7 @@
 #include <unsupported/Eigen/NumericalDiff>
 
 #include "brume/error.hpp"
+#include "core/math_constants.hpp"
 #include "brume/sky.hpp"
 #include "shared/prelude_cpp.h"
 
@@ -19,8 +20,6 @@ namespace brume {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 constexpr double kTLo = kSkyTurbidityMin, kTHi = kSkyTurbidityMax;
 
 // A sample ready for the fit: log of the measured luminance and its angles.

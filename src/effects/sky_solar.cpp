@@ -15,14 +15,13 @@
 #include <string>
 
 #include "brume/error.hpp"
+#include "core/math_constants.hpp"
 #include "brume/sky.hpp"
 
 namespace brume {
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 
 double wrap360(double a) {
   double r = std::fmod(a, 360.0);

@@ -18,12 +18,12 @@
 namespace brume {
 namespace {
 
-const gpu::PassSpec kPremultiplyPass{"aerial.premultiply", {"haze_math", "aerial_math"},
+const gpu::PassSpec kAerialPremultiplyPass{"aerial.premultiply", {"haze_math", "aerial_math"},
                                      gpu::shaders::aerial_premultiply_frag};
-const gpu::PassSpec kCompositePass{"aerial.composite", {"haze_math", "aerial_math"},
+const gpu::PassSpec kAerialCompositePass{"aerial.composite", {"haze_math", "aerial_math"},
                                    gpu::shaders::aerial_composite_frag};
 
-GpuTexture tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
+GpuTexture aerial_tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
 
 // ln Gamma as an N x 1 RGBA32F texture, read with texelFetch only.
 gl::Texture table_texture(const AttenuationTable& t) {
@@ -68,8 +68,8 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
     s.rates = gpu::make_texture(GL_R32F, w_, h_);
     s.out = gpu::make_texture(GL_RGBA32F, w_, h_);
     s.att = gpu::make_texture(GL_RGBA32F, w_, h_);
-    s.premultiply = gpu::make_target({tex(s.f0[0], w_, h_), tex(s.f1[0], w_, h_), tex(s.aux, w_, h_)});
-    s.composite = gpu::make_target({tex(s.out, w_, h_), tex(s.att, w_, h_)});
+    s.premultiply = gpu::make_target({aerial_tex(s.f0[0], w_, h_), aerial_tex(s.f1[0], w_, h_), aerial_tex(s.aux, w_, h_)});
+    s.composite = gpu::make_target({aerial_tex(s.out, w_, h_), aerial_tex(s.att, w_, h_)});
     s.precision = p.diffusion.precision;
   }
   // Per render: the tables and the sky mask belong to the analysis.
@@ -92,7 +92,7 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
   timing_.gpu_timer = g.info.timer_query;
 
   gpu::StageTimer t1(g, &timing_.gpu_timer);
-  const gpu::Program& pr = g.program(kPremultiplyPass);
+  const gpu::Program& pr = g.program(kAerialPremultiplyPass);
   g.begin(s.premultiply);
   glUseProgram(pr.id());
   const GLuint inputs[] = {s.in.image.id(), s.in.range.id(), table.id(), table_from.id()};
@@ -119,21 +119,21 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
   glUniform1f(pr.loc("uFloor"), static_cast<float>(p.gamma_floor));
   GpuContext::Impl::draw();
   gpu::check_gl("aerial premultiply");
-  if (blur) gpu_diffusion_rates(ctx_, tex(s.aux, w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan);
+  if (blur) gpu_diffusion_rates(ctx_, aerial_tex(s.aux, w_, h_), aerial_tex(s.rates, w_, h_), p.diffusion, a.plan);
   timing_.premultiply_ms = t1.stop();
 
   gpu::StageTimer t2(g, &timing_.gpu_timer);
   int last0 = 0, last1 = 0;
   if (blur) {
-    gpu_diffuse_textures(ctx_, tex(s.f0[0], w_, h_), tex(s.f0[1], w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan,
+    gpu_diffuse_textures(ctx_, aerial_tex(s.f0[0], w_, h_), aerial_tex(s.f0[1], w_, h_), aerial_tex(s.rates, w_, h_), p.diffusion, a.plan,
                          filter, &last0);
-    gpu_diffuse_textures(ctx_, tex(s.f1[0], w_, h_), tex(s.f1[1], w_, h_), tex(s.rates, w_, h_), p.diffusion, a.plan,
+    gpu_diffuse_textures(ctx_, aerial_tex(s.f1[0], w_, h_), aerial_tex(s.f1[1], w_, h_), aerial_tex(s.rates, w_, h_), p.diffusion, a.plan,
                          filter, &last1);
   }
   timing_.diffuse_ms = t2.stop();
 
   gpu::StageTimer t3(g, &timing_.gpu_timer);
-  const gpu::Program& pc = g.program(kCompositePass);
+  const gpu::Program& pc = g.program(kAerialCompositePass);
   g.begin(s.composite);
   glUseProgram(pc.id());
   const GLuint cin[] = {s.f0[last0].id(), s.f1[last1].id(), s.in.image.id(), s.in.range.id(), sky_tex.id()};
@@ -150,8 +150,8 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
   timing_.composite_ms = t3.stop();
 
   const auto t4 = gpu::Clock::now();
-  const std::vector<float> o = gpu::read_rgba(tex(s.out, w_, h_)), at = gpu::read_rgba(tex(s.att, w_, h_)),
-                           x = gpu::read_rgba(tex(s.aux, w_, h_));
+  const std::vector<float> o = gpu::read_rgba(aerial_tex(s.out, w_, h_)), at = gpu::read_rgba(aerial_tex(s.att, w_, h_)),
+                           x = gpu::read_rgba(aerial_tex(s.aux, w_, h_));
   timing_.readback_ms = gpu::ms_since(t4);
   AerialResult res;
   res.rgb = Image(w_, h_, 3);

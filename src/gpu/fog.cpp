@@ -17,7 +17,7 @@ namespace {
 constexpr int kMaxKnots = 32;  // BRUME_FOG_MAX_KNOTS in GLSL
 const gpu::PassSpec kFogPass{"fog.apply", {"fog_math", "depth_math"}, gpu::shaders::fog_frag};
 
-GpuTexture tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
+GpuTexture fog_tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
 
 }  // namespace
 
@@ -126,7 +126,7 @@ FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter fil
   }
 
   const auto t4 = gpu::Clock::now();
-  const std::vector<float> o = gpu::read_rgba(tex(*result, w_, h_)), x = gpu::read_rgba(tex(s.t.aux, w_, h_));
+  const std::vector<float> o = gpu::read_rgba(fog_tex(*result, w_, h_)), x = gpu::read_rgba(fog_tex(s.t.aux, w_, h_));
   timing_.readback_ms = gpu::ms_since(t4);
   FogResult res;
   res.rgb = Image(w_, h_, 3);

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "brume/error.hpp"
+#include "core/math_constants.hpp"
 #include "brume/sky.hpp"
 #include "gpu/context.hpp"
 #include "gpu/shaders_embedded.hpp"
@@ -16,8 +17,6 @@ namespace brume {
 namespace {
 
 const gpu::PassSpec kSkyPass{"sky.render", {"aerial_math", "sky_math"}, gpu::shaders::sky_render_frag};
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kDeg = kPi / 180.0;
 
 }  // namespace
 

@@ -108,6 +108,19 @@ int main(int argc, char** argv) {
   commands.push_back(add_sample(app));
   commands.push_back(add_batch(app));
 
+  // Every argument goes into the run's record (JSON, UTF-8 only): refuse one
+  // that is not UTF-8 before any work, naming it, instead of failing at the
+  // record after the effect has run.
+  for (int i = 1; i < argc; ++i) {
+    try {
+      const bool after_flag = i > 1 && argv[i - 1][0] == '-';
+      brume::check_utf8(argv[i], "argument " + std::to_string(i) +
+                                     (after_flag ? std::string(" (after ") + argv[i - 1] + ")" : std::string()));
+    } catch (const brume::Error& e) {
+      std::fprintf(stderr, "brume: error: %s\n", e.what());
+      return 2;
+    }
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
