@@ -19,6 +19,8 @@
 #include <gtest/gtest.h>
 
 #include "brume/batch.hpp"
+#include "brume/error.hpp"
+#include "brume/gpu.hpp"
 #include "brume/io.hpp"
 #include "brume/sample.hpp"
 #include "test_util.hpp"
@@ -201,6 +203,32 @@ TEST_F(Batch, FrameEqualsSingleRunAndRecordRepeats) {
   r = run("run " + p("out/a/f0.json") + " --out-dir " + p("again"));
   ASSERT_EQ(r.status, 0) << r.output;
   expect_same_pixels(p("out/a/f0.png"), p("again/f0.png"));
+}
+
+// On --backend gpu each worker runs its frames on one context of its own
+// (made once, on its thread): the frames equal single `brume haze --backend
+// gpu` runs bit for bit (one driver, the same passes), and their records say
+// they ran on the GPU. Needs an OpenGL ES 3.2 context (llvmpipe in CI).
+TEST_F(Batch, GpuFramesShareAWorkerContextAndEqualSingleRuns) {
+  try {
+    GpuContext probe;
+  } catch (const Error& e) {
+    const char* req = std::getenv("BRUME_REQUIRE_GPU");
+    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << e.what();
+    GTEST_SKIP() << e.what();
+  }
+  const std::vector<std::string> keys = make_frames(4);
+  const std::string m = csv(keys, "effect,visibility,albedo", "haze,300,0.9");
+  CliRun r = run("batch --manifest " + m + " --out-dir " + p("out") + " --quiet --workers 2 --backend gpu");
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (int i : {0, 3}) {
+    const std::string stem = std::string(i % 2 ? "b" : "a") + "/f" + std::to_string(i);
+    r = run("haze --image " + p("data/" + stem + ".png") + " --range " + p("data/" + stem + ".exr") +
+            " --visibility 300 --albedo 0.9 --backend gpu --out " + p("single.png"));
+    ASSERT_EQ(r.status, 0) << r.output;
+    expect_same_pixels(p("out/" + stem + ".png"), p("single.png"));
+    EXPECT_EQ(nlohmann::json::parse(slurp(p("out/" + stem + ".json")))["execution"]["backend"], "gpu") << stem;
+  }
 }
 
 // --compression is an output setting, not a file: a manifest column or

@@ -62,6 +62,11 @@ struct ExecOptions {
   Backend backend = Backend::cpu;
   GpuFilter gpu_filter = GpuFilter::automatic;
   bool timing = false;    // print per-pass times
+  // Not a parameter (no flag, never recorded: it changes no output): a GPU
+  // context to run on, made by the caller on the thread that runs the job
+  // (brume batch keeps one per worker, so that its frames share the
+  // context and its compiled passes); null: the job makes its own.
+  GpuContext* gpu = nullptr;
   Exec exec() const;      // checked: --reference only on the CPU
 };
 const ParamTable<ExecOptions>& exec_param_table();

@@ -16,6 +16,7 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <sstream>
 #include <thread>
@@ -25,6 +26,7 @@
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/fog.hpp"
+#include "brume/gpu.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
 #include "brume/sample.hpp"
@@ -824,6 +826,15 @@ BatchSummary run_batch(const BatchOptions& o) {
   };
 
   auto worker = [&] {
+    // On a GPU backend each worker makes one context on its own thread (a
+    // context belongs to the thread that made it) and runs all its frames on
+    // it: a context per frame cost its creation and the compilation of every
+    // pass again, per frame (README "Datasets"). Made before the first frame
+    // that needs it; when it cannot be made, each frame decides as a single
+    // run would (gpu: the frame fails, naming why; auto: the CPU, recorded).
+    std::unique_ptr<GpuContext> gpu;
+    bool gpu_tried = false;
+    ExecOptions wexec = exec;
     for (;;) {
       const std::size_t i = next.fetch_add(1);
       if (i >= frames.size()) return;
@@ -833,7 +844,15 @@ BatchSummary run_batch(const BatchOptions& o) {
         r.status = "skipped";
         r.line = result_line(f, r);
       } else {
-        r = run_batch_frame(f, exec, argv);
+        if (exec.backend != Backend::cpu && !exec.reference && !gpu_tried) {
+          gpu_tried = true;
+          try {
+            gpu = std::make_unique<GpuContext>();
+            wexec.gpu = gpu.get();
+          } catch (const Error&) {
+          }
+        }
+        r = run_batch_frame(f, wexec, argv);
       }
       std::lock_guard<std::mutex> lock(mu);
       lines[i] = r.line;

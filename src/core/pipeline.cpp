@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
+#include <mutex>
+#include <set>
 #include <unistd.h>
 
 #include "brume/error.hpp"
@@ -184,6 +186,7 @@ Exec ExecOptions::exec() const {
   e.path = reference ? Path::reference : Path::fast;
   e.backend = backend;
   e.gpu_filter = gpu_filter;
+  e.gpu = gpu;
   if (reference && backend != Backend::cpu)
     throw Error("--reference is the CPU's double-precision path; it cannot be combined with --backend " +
                 enum_name(backend_names(), backend));
@@ -395,6 +398,17 @@ BackendChoice::~BackendChoice() = default;
 BackendChoice::BackendChoice(BackendChoice&&) noexcept = default;
 BackendChoice& BackendChoice::operator=(BackendChoice&&) noexcept = default;
 
+namespace {
+// A note about the backend, printed once per process: a batch's frames would
+// otherwise repeat it for every frame.
+void note_once(const std::string& text) {
+  static std::mutex mu;
+  static std::set<std::string> said;
+  std::lock_guard<std::mutex> lock(mu);
+  if (said.insert(text).second) std::fprintf(stderr, "%s\n", text.c_str());
+}
+}  // namespace
+
 BackendChoice choose_backend(const Exec& exec) {
   BackendChoice c;
   c.record = {{"backend_requested", enum_name(backend_names(), exec.backend)},
@@ -412,15 +426,15 @@ BackendChoice choose_backend(const Exec& exec) {
       g = c.owned.get();
     } catch (const Error& e) {
       if (exec.backend == Backend::gpu) throw;
-      std::fprintf(stderr, "brume: --backend auto: %s; running on the CPU\n", e.what());
+      note_once(std::string("brume: --backend auto: ") + e.what() + "; running on the CPU");
       c.record["gpu_unavailable"] = e.what();
       return c;
     }
   }
   if (exec.backend == Backend::automatic && g->info().software) {
     // Measured here: llvmpipe ran haze 1.7-6x (blur up to 30x) slower than the CPU backend.
-    std::fprintf(stderr, "brume: --backend auto: the GPU '%s' is a software rasteriser, slower than the CPU backend; "
-                 "running on the CPU (--backend gpu forces it)\n", g->info().renderer.c_str());
+    note_once("brume: --backend auto: the GPU '" + g->info().renderer +
+              "' is a software rasteriser, slower than the CPU backend; running on the CPU (--backend gpu forces it)");
     c.record["gpu_skipped"] = "software renderer: " + g->info().renderer;
     c.owned.reset();
     return c;
