@@ -43,18 +43,12 @@ import subprocess
 import sys
 import tempfile
 import time
+from benchlib import cpu_model
+
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 
-def cpu_model():
-    try:
-        for line in subprocess.run(["lscpu"], capture_output=True, text=True).stdout.splitlines():
-            if line.startswith("Model name:"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown CPU"
 
 
 def main():

@@ -19,7 +19,6 @@ host makes absolute times noisy -- compare the ratios.
 import argparse
 import os
 import statistics
-import subprocess
 import threading
 import time
 
@@ -27,17 +26,7 @@ import numpy as np
 
 import brume
 from brume import _brume
-
-
-def cpu_model():
-    try:
-        out = subprocess.run(["lscpu"], capture_output=True, text=True).stdout
-        for line in out.splitlines():
-            if line.startswith("Model name:"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown CPU"
+from benchlib import cpu_model
 
 
 def spread(xs):

@@ -9,13 +9,12 @@
 #     LLVM's libomp and its Archer tool, which tells TSan about OpenMP's own
 #     barriers and tasks (with GCC's libgomp, TSan sees none and reports
 #     false races). A gtest filter picks the tests that run threaded code.
-# Cost on 2 cores (AMD EPYC, 2026-12-01), unity builds: ASan+UBSan build
-# 280 s, TSan build 139 s (490 s and 255 s file by file), TSan suites 33 s;
-# all 336 tests under ASan 466 s (README "Reliability"). Options:
-# --asan-only, --tsan-only, and --ci, what .ci/run runs within CI's budget:
-# the ASan+UBSan build, then every test except those that mostly re-run the
-# CLI or the GPU passes already run by the full suite (their ~430 s of CPU
-# under ASan; CI_SKIP below), the fuzz corpora included (294 s), then TSan.
+# Cost on 2 cores (AMD EPYC, 2026-12-01, a clean clone; .ci/run runs the
+# whole script), unity builds: ASan+UBSan build 277 s (490 s file by file),
+# its 341 tests 528 s; TSan build 146 s (255 s file by file), its suites 35 s
+# (README "Reliability"). Options: --asan-only, --tsan-only, and --ci, a
+# shorter form: every test under ASan except those that mostly re-run the CLI
+# or the GPU passes (CI_SKIP below; 267 tests, 294 s), then TSan.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh

@@ -149,6 +149,20 @@ std::string py_name(const std::string& flag) {
 // ==== the generic keyword -> parameter routine =================================
 // The value a keyword holds, as the JSON the table's setter takes. Python
 // types are checked here (TypeError); ranges by the declaration (ValueError).
+// A str as UTF-8 text. A str holding lone surrogates (os.fsdecode of a file
+// name that is not UTF-8) has no UTF-8 form: its original bytes get brume's
+// message (check_utf8: the name, its bad bytes as \xHH, the fix) instead of
+// pybind11's "Unable to cast Python instance to C++ type".
+std::string utf8_of(py::handle v, const std::string& what) {
+  Py_ssize_t n = 0;
+  if (const char* p = PyUnicode_AsUTF8AndSize(v.ptr(), &n)) return std::string(p, static_cast<std::size_t>(n));
+  PyErr_Clear();
+  const std::string raw =
+      py::cast<std::string>(py::reinterpret_borrow<py::object>(v).attr("encode")("utf-8", "surrogateescape"));
+  check_utf8(raw, what);
+  return raw;
+}
+
 json keyword_value(const ParamSpec& s, py::handle v, const std::string& where) {
   const std::string kwd = py_name(s.name);
   auto wrong = [&](const char* expected) -> py::type_error {
@@ -160,7 +174,7 @@ json keyword_value(const ParamSpec& s, py::handle v, const std::string& where) {
     throw wrong("a value (None only for parameters that can be unset)");
   }
   // The word that means "unset" (auto, none), as on the command line.
-  if (s.optional && py::isinstance<py::str>(v) && py::cast<std::string>(v) == s.unset_word) return nullptr;
+  if (s.optional && py::isinstance<py::str>(v) && utf8_of(v, where + ": " + kwd) == s.unset_word) return nullptr;
   const bool is_bool = py::isinstance<py::bool_>(v) || py::isinstance(v, py::module_::import("numpy").attr("bool_"));
   switch (s.kind) {
     case ParamKind::real: {
@@ -195,8 +209,14 @@ json keyword_value(const ParamSpec& s, py::handle v, const std::string& where) {
       return j;
     }
     case ParamKind::text:
-      if (py::isinstance<py::str>(v)) return py::cast<std::string>(v);
-      if (py::hasattr(v, "__fspath__")) return py::cast<std::string>(py::module_::import("os").attr("fspath")(v));
+      if (py::isinstance<py::str>(v)) return utf8_of(v, where + ": " + kwd);
+      if (py::hasattr(v, "__fspath__")) {
+        const py::object p = py::module_::import("os").attr("fspath")(v);
+        if (py::isinstance<py::str>(p)) return utf8_of(p, where + ": " + kwd);
+        const std::string raw = py::cast<std::string>(p);  // a bytes path
+        check_utf8(raw, where + ": " + kwd);
+        return raw;
+      }
       throw wrong("a str (or os.PathLike)");
   }
   throw wrong("a value");

@@ -287,6 +287,17 @@ def test_file_errors(tmp_path):
         brume.write_image(tmp_path / "no" / "dir.png", np.zeros((4, 4, 3), np.float32))
 
 
+def test_path_that_is_not_utf8_is_refused_by_name(tmp_path):
+    # os.fsdecode of a file name that is not UTF-8 gives a str with lone
+    # surrogates: brume's message, the bytes as \xHH, not pybind11's cast error.
+    name = os.fsdecode(b"im\xff.png")
+    with pytest.raises(ValueError, match=r"path '.*im\\xFF\.png' is not valid UTF-8"):
+        brume.read_image(str(tmp_path / name))
+    with pytest.raises(ValueError, match="is not valid UTF-8"):
+        brume.write_image(tmp_path / name, np.zeros((4, 4, 3), np.float32))
+    assert not any(tmp_path.iterdir())
+
+
 def test_missing_gpu_is_a_runtime_error():
     # No EGL platform may be tried: the context cannot be made, whatever the machine.
     code = ("import numpy as np, brume\n"
