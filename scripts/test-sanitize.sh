@@ -10,8 +10,9 @@
 #     barriers and tasks (with GCC's libgomp, TSan sees none and reports
 #     false races). A gtest filter picks the tests that run threaded code.
 # Cost on 2 cores (AMD EPYC, 2026-12-01, a clean clone; .ci/run runs the
-# whole script), unity builds: ASan+UBSan build 277 s (490 s file by file),
-# its 341 tests 528 s; TSan build 146 s (255 s file by file), its suites 35 s
+# whole script), unity builds: ASan+UBSan build 277-295 s (490 s file by
+# file), its 342 tests 528-565 s; TSan build 143-146 s (255 s file by file),
+# its suites 35-37 s
 # (README "Reliability"). Options: --asan-only, --tsan-only, and --ci, a
 # shorter form: every test under ASan except those that mostly re-run the CLI
 # or the GPU passes (CI_SKIP below; 267 tests, 294 s), then TSan.
