@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 
 #include <array>
+#include <cstdlib>
 #include <cstring>
 #include <cstdio>
 #include <filesystem>
@@ -172,6 +173,47 @@ TEST_F(Cli, TimingPrintsTheWholeRunBreakdown) {
   EXPECT_NEAR(parts, std::stod(m[1].str()), 1.5) << m[0];  // six parts and the whole, each rounded
   EXPECT_GT(std::stod(m[3].str()), 0.0) << "the image was read: " << m[0];
   EXPECT_GT(std::stod(m[5].str()), 0.0) << "the output was written: " << m[0];
+}
+
+// OpenImageIO lives in brume_codec.so, loaded only when a file needs it
+// (src/io/codec.hpp): a PFM-only run works with no module at all, a PNG run
+// names the module's load in --timing, and a module that cannot be loaded is
+// an error naming every path tried, with nothing written.
+TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
+  Image rgb(24, 16, 3, 0.5f);
+  rgb.at(3, 4, 1) = 2.0f;
+  write_image(p("in.pfm"), rgb, WriteOptions{});  // brume's own PFM writer
+  struct EnvGuard {
+    explicit EnvGuard(const char* v) { ::setenv("BRUME_CODEC_MODULE", v, 1); }
+    ~EnvGuard() { ::unsetenv("BRUME_CODEC_MODULE"); }
+  };
+  {
+    EnvGuard none("/nonexistent/brume_codec.so");
+    const CliRun r = run("blur --image " + p("in.pfm") + " --sigma 3 --out " + p("o.pfm") + " --timing");
+    ASSERT_EQ(r.status, 0) << r.output;
+    EXPECT_EQ(r.output.find("codec module"), std::string::npos) << r.output;
+    EXPECT_EQ(read_color(p("o.pfm")).width, 24);
+
+    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o.png"));
+    EXPECT_EQ(bad.status, 2) << bad.output;
+    for (const char* want : {"reading '", "img.png", "brume_codec.so", "/nonexistent/brume_codec.so: no such file",
+                             "BRUME_CODEC_MODULE"})
+      EXPECT_NE(bad.output.find(want), std::string::npos) << want << "\n" << bad.output;
+    EXPECT_FALSE(fs::exists(p("o.png")));
+  }
+  for (const char* lib : {"/lib/x86_64-linux-gnu/libz.so.1", "/usr/lib/x86_64-linux-gnu/libz.so.1"}) {
+    if (!fs::exists(lib)) continue;
+    EnvGuard other(lib);  // a shared object, but not brume's module
+    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o.png"));
+    EXPECT_EQ(bad.status, 2) << bad.output;
+    EXPECT_NE(bad.output.find("no brume_codec_api in it"), std::string::npos) << bad.output;
+    break;
+  }
+  const CliRun png = run("blur --image " + img + " --sigma 3 --out " + p("o.png") + " --timing");
+  ASSERT_EQ(png.status, 0) << png.output;
+  EXPECT_NE(png.output.find("of which loading the OpenImageIO codec module"), std::string::npos) << png.output;
+  for (auto& e : fs::directory_iterator(dir))
+    EXPECT_EQ(e.path().filename().string().find(".brume-tmp-"), std::string::npos) << e.path();
 }
 
 TEST_F(Cli, BlurConstantScaleIsAGaussian) {

@@ -443,7 +443,13 @@ TEST(IO, PfmPixelsReadStraightEqualOpenImageIO) {
   write_by_hand((d / "be.pfm").string(), "PF\n7 5\n1.0\n", 7, 5, 3, true);
   write_by_hand((d / "grey.pfm").string(), "Pf\n9 4\n-2.5\n", 9, 4, 1, false);
   write_by_hand((d / "spaced.pfm").string(), "PF  6\t3 \n -1\n", 6, 3, 3, false);
-  for (const char* n : {"le.pfm", "be.pfm", "grey.pfm", "spaced.pfm"}) files.push_back((d / n).string());
+  // Outside the strict subset brume reads itself: OpenImageIO reads these
+  // (a comment, a signed width, a hex scale), and must give the same.
+  write_by_hand((d / "comment.pfm").string(), "PF\n# by hand\n7 5\n-1.0\n", 7, 5, 3, false);
+  write_by_hand((d / "signed.pfm").string(), "PF\n+7 5\n-1.0\n", 7, 5, 3, false);
+  write_by_hand((d / "hex.pfm").string(), "Pf\n7 5\n-0x1p1\n", 7, 5, 1, false);
+  for (const char* n : {"le.pfm", "be.pfm", "grey.pfm", "spaced.pfm", "comment.pfm", "signed.pfm", "hex.pfm"})
+    files.push_back((d / n).string());
   Image rgb = gradient(31, 17, 3);
   write_image((d / "brume.pfm").string(), rgb, WriteOptions{});
   files.push_back((d / "brume.pfm").string());
@@ -454,12 +460,33 @@ TEST(IO, PfmPixelsReadStraightEqualOpenImageIO) {
     FileInfo info;
     auto in = OIIO::ImageInput::open(p);
     ASSERT_TRUE(in) << p;
-    const int c = in->spec().nchannels;
+    const OIIO::ImageSpec spec = in->spec();
+    const int c = spec.nchannels;
+    const std::string format = in->format_name();
     in.reset();
     const Image got = c == 1 ? read_scalar(p, "", &info) : read_color(p, Transfer::linear, &info);
-    EXPECT_EQ(info.format, "pnm") << p;  // the condition of the straight read
+    // The FileInfo the straight read makes up is the one OpenImageIO gives.
+    EXPECT_EQ(info.format, format) << p;
+    EXPECT_EQ(info.integer, false) << p;
+    EXPECT_EQ(info.bits, 32) << p;
+    EXPECT_EQ(info.channel_names, std::vector<std::string>(spec.channelnames.begin(), spec.channelnames.end())) << p;
+    EXPECT_EQ(info.description, spec.get_string_attribute("ImageDescription")) << p;
+    EXPECT_EQ(got.width, spec.width) << p;
+    EXPECT_EQ(got.height, spec.height) << p;
     ASSERT_EQ(got.data.size(), want.size()) << p;
     EXPECT_EQ(std::memcmp(got.data.data(), want.data(), want.size() * 4), 0) << p;
+  }
+  // A file shorter than its header says is left to OpenImageIO, whose
+  // refusal names the file.
+  {
+    std::ofstream f(d / "short.pfm", std::ios::binary);
+    f << "PF\n7 5\n-1.0\n" << std::string(7 * 4 * 3 * 4, '\0');  // four of the five rows
+  }
+  try {
+    (void)read_color((d / "short.pfm").string(), Transfer::linear);
+    ADD_FAILURE() << "a short PFM was read";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("short.pfm"), std::string::npos) << e.what();
   }
   fs::remove_all(d);
 }

@@ -133,6 +133,7 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth);
 // Per thread (brume batch's workers run frames side by side).
 struct RunPhases {
   double read_ms = 0.0, write_ms = 0.0, rename_ms = 0.0;
+  double codec_load_ms = 0.0;  // loading brume_codec.so (OpenImageIO), inside the read or write that needed it
   std::chrono::steady_clock::time_point read_end{}, write_begin{};
 };
 RunPhases& run_phases();

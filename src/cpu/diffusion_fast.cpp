@@ -35,6 +35,7 @@
 #include <mutex>
 #include <vector>
 
+#include "core/huge_pages.hpp"
 #include "cpu/diffusion_rows.hpp"
 #include "cpu/half.hpp"
 
@@ -384,6 +385,7 @@ float* Workspace::get(Slot s, std::size_t n) {
   if (n_[s] < n) {
     p_[s].reset();  // before the new allocation: never hold both
     p_[s].reset(new float[n]);
+    detail::advise_huge_pages(p_[s].get(), n * sizeof(float));  // before the first touch
     n_[s] = n;
   }
   return p_[s].get();
@@ -392,6 +394,7 @@ std::uint16_t* Workspace::get_half(int which, std::size_t n) {
   if (hn_[which] < n) {
     h_[which].reset();
     h_[which].reset(new std::uint16_t[n]);
+    detail::advise_huge_pages(h_[which].get(), n * sizeof(std::uint16_t));
     hn_[which] = n;
   }
   return h_[which].get();

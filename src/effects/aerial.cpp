@@ -12,9 +12,6 @@
 #include <sstream>
 #include <type_traits>
 #include <vector>
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
 
 #include "brume/aerial.hpp"
 #include "brume/depth.hpp"
@@ -41,34 +38,13 @@ const ParamTable<Atmosphere>& aerial_atmosphere_table() {
   return t;
 }
 
-// A zero-filled image whose pages Linux may back with 2 MB huge pages. A
-// render allocates ~50 MB of fresh output per call; with 4 kB pages each first
-// touch is a page fault (on a virtual machine ~10 us each: 150 ms for the
-// outputs of a 1600x1120 frame, more than the render itself). The hint
-// changes nothing else: same vector, same zeros. Hosts with transparent huge
-// pages "never" (or non-Linux) simply ignore it.
-Image fresh_image(int w, int h, int c) {
-  Image im;
-  im.width = w, im.height = h, im.channels = c;
-  const std::size_t n = static_cast<std::size_t>(w) * h * c;
-  im.data.reserve(n);  // allocated, not yet touched
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-  constexpr std::uintptr_t huge = std::uintptr_t{2} << 20;
-  const auto b = reinterpret_cast<std::uintptr_t>(im.data.data());
-  const std::uintptr_t lo = (b + huge - 1) & ~(huge - 1), hi = (b + n * sizeof(float)) & ~(huge - 1);
-  if (hi > lo) madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);  // a hint: failure is harmless
-#endif
-  im.data.resize(n);
-  return im;
-}
-
 // `im` as a w x h x c image, keeping its buffer (and so its already-touched
 // pages) when the size is already right; only then are its old values left
 // in place, to be overwritten by the caller.
 void ensure_image(Image& im, int w, int h, int c) {
   if (im.width == w && im.height == h && im.channels == c && im.data.size() == static_cast<std::size_t>(w) * h * c)
     return;
-  im = fresh_image(w, h, c);
+  im = Image(w, h, c);  // fresh, with the huge-page hint (brume/image.hpp)
 }
 
 // An order-preserving map of a float's bits to an unsigned integer (negative
@@ -531,7 +507,7 @@ std::size_t apply_aerial(DenseImageRef rgb, DenseImageRef range, const AerialPar
   if (scale) ensure_image(*scale, W, H, 1);
   if (maps.attenuation) ensure_image(*maps.attenuation, W, H, 3);
   ensure_image(out, W, H, 3);
-  Image f = blur ? fresh_image(W, H, 6) : Image();
+  Image f = blur ? Image(W, H, 6) : Image();
   const RowOut ro{out.data.data(), maps.attenuation ? maps.attenuation->data.data() : nullptr,
                   scale ? scale->data.data() : nullptr, blur ? f.data.data() : nullptr};
   std::size_t floored = 0;

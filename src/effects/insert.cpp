@@ -4,7 +4,6 @@
 // equations and conventions are stated in include/brume/insert.hpp.
 #include <omp.h>
 
-#include <OpenImageIO/imageio.h>
 
 #include <algorithm>
 #include <cmath>
@@ -14,6 +13,7 @@
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "brume/insert.hpp"
+#include "io/codec.hpp"
 #include "shared/prelude_cpp.h"
 
 namespace brume {
@@ -22,8 +22,13 @@ namespace sh = brume::shared;
 namespace {
 
 std::string pixel_text(std::size_t i, int w) {
-  return "(" + std::to_string(i % static_cast<std::size_t>(w)) + ", " + std::to_string(i / static_cast<std::size_t>(w)) +
-         ")";
+  // Appended piece by piece: GCC 12's -Wrestrict misfires on "(" + to_string(...) (its bug 105329).
+  std::string s = "(";
+  s += std::to_string(i % static_cast<std::size_t>(w));
+  s += ", ";
+  s += std::to_string(i / static_cast<std::size_t>(w));
+  s += ")";
+  return s;
 }
 
 }  // namespace
@@ -81,29 +86,27 @@ Image read_object_rgba(const std::string& path, FileInfo* info) {
   if (!std::filesystem::exists(path, ec)) throw Error("cannot read --object '" + path + "': no such file");
   // Keep PNG/TIFF alpha unassociated: OpenImageIO would otherwise premultiply
   // the sRGB-ENCODED values, which is not linear-light coverage.
-  OIIO::ImageSpec config;
-  config.attribute("oiio:UnassociatedAlpha", 1);
-  auto in = OIIO::ImageInput::open(path, &config);
-  if (!in) {
-    const std::string e = OIIO::geterror();
-    throw Error("cannot read --object '" + path + "': " + (e.empty() ? "unknown or unsupported image format" : e));
-  }
-  const OIIO::ImageSpec& spec = in->spec();
-  const int nc = spec.nchannels, W = spec.width, H = spec.height;
+  std::string open_error;
+  auto in = codec::api("reading --object '" + path + "'").open_input(path, true, &open_error);
+  if (!in)
+    throw Error("cannot read --object '" + path + "': " +
+                (open_error.empty() ? "unknown or unsupported image format" : open_error));
+  const codec::InputSpec& spec = in->spec();
+  const int nc = spec.channels, W = spec.width, H = spec.height;
   if (W <= 0 || H <= 0 || nc <= 0) throw Error("cannot read --object '" + path + "': empty image");
   Image raw(W, H, nc);
-  if (!in->read_image(0, 0, 0, nc, OIIO::TypeDesc::FLOAT, raw.data.data())) {
-    const std::string e = in->geterror();
+  if (!in->read_float(raw.data.data())) {
+    const std::string e = in->error();
     throw Error("cannot read --object '" + path + "': " + (e.empty() ? "read failed" : e));
   }
-  const bool integer = !spec.format.is_floating_point();
+  const bool integer = !spec.floating;
   FileInfo fi;
   fi.path = path;
-  fi.format = in->format_name();
+  fi.format = spec.format;
   fi.integer = integer;
-  fi.bits = static_cast<int>(spec.format.size() * 8);
-  if (spec.get_int_attribute("oiio:BitsPerSample", 0) > 0) fi.bits = spec.get_int_attribute("oiio:BitsPerSample");
-  fi.channel_names.assign(spec.channelnames.begin(), spec.channelnames.end());
+  fi.bits = spec.container_bits;
+  if (spec.bits_per_sample > 0) fi.bits = spec.bits_per_sample;
+  fi.channel_names = spec.channel_names;
   fi.transfer = integer ? Transfer::srgb : Transfer::linear;
   in->close();
 
@@ -116,7 +119,7 @@ Image read_object_rgba(const std::string& path, FileInfo* info) {
   // Integer files are sRGB-encoded with straight alpha (PNG's definition, and
   // what a TIFF without associated alpha holds); float files are linear and
   // premultiplied (EXR's definition) unless the file says its alpha is unassociated.
-  const bool straight = integer || spec.get_int_attribute("oiio:UnassociatedAlpha", 0) != 0;
+  const bool straight = integer || spec.unassociated_alpha;
   Image out(W, H, 4);
   for (std::size_t i = 0; i < raw.pixels(); ++i) {
     const float a = alpha >= 0 ? raw.data[i * nc + alpha] : 1.0f;

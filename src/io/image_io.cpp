@@ -1,5 +1,5 @@
-// brume — image and range-map files through OpenImageIO (see brume/io.hpp).
-#include <OpenImageIO/imageio.h>
+// brume — image and range-map files: PFM directly, the other formats through
+// OpenImageIO, in the module loaded on first use (src/io/codec.hpp; see brume/io.hpp).
 #include <openssl/evp.h>
 #include <sys/resource.h>
 #include <unistd.h>
@@ -17,11 +17,13 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <sstream>
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
+#include "io/codec.hpp"
 
 namespace brume {
 namespace fs = std::filesystem;
@@ -126,8 +128,7 @@ class SrgbEncoder8 {
     v.resize((n + 15) / 16 * 16, 0.0f);
     for (float& x : v) x = linear_to_srgb(std::max(x, 0.0f));
     std::vector<std::uint8_t> c(v.size());
-    OIIO::convert_pixel_values(OIIO::TypeDesc::FLOAT, v.data(), OIIO::TypeDesc::UINT8, c.data(),
-                               static_cast<int>(v.size()));
+    codec::api("writing an 8-bit file").float_to_u8(v.data(), c.data(), static_cast<int>(v.size()));
     c.resize(n);
     return c;
   }
@@ -272,17 +273,19 @@ void check_exr_attributes(const std::string& path) {
   }
 }
 
-std::unique_ptr<OIIO::ImageInput> open_image(const std::string& path) {
+void check_readable(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw FileNotFound("cannot read '" + path + "': no such file");
   if (fs::is_directory(path, ec))
     throw Error("cannot read '" + path + "': it is a directory, not an image file");
+}
+
+std::unique_ptr<codec::Input> open_image(const std::string& path) {
+  check_readable(path);
   check_exr_attributes(path);
-  auto in = OIIO::ImageInput::open(path);
-  if (!in) {
-    std::string e = OIIO::geterror();
-    throw Error("cannot read '" + path + "': " + (e.empty() ? "unknown or unsupported image format" : e));
-  }
+  std::string e;
+  auto in = codec::api("reading '" + path + "'").open_input(path, false, &e);
+  if (!in) throw Error("cannot read '" + path + "': " + (e.empty() ? "unknown or unsupported image format" : e));
   return in;
 }
 }  // namespace
@@ -339,10 +342,10 @@ void check_memory(std::uint64_t bytes, const std::string& what) {
 
 ImageHeader read_header(const std::string& path) {
   auto in = open_image(path);
-  const OIIO::ImageSpec& spec = in->spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) throw Error("cannot read '" + path + "': empty image");
-  check_declared_size(path, spec.width, spec.height, spec.nchannels);
-  return {spec.width, spec.height, spec.nchannels, in->format_name()};
+  const codec::InputSpec& spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.channels <= 0) throw Error("cannot read '" + path + "': empty image");
+  check_declared_size(path, spec.width, spec.height, spec.channels);
+  return {spec.width, spec.height, spec.channels, spec.format};
 }
 
 namespace {
@@ -352,50 +355,82 @@ struct Raw {
   FileInfo info;
 };
 
-// PFM's pixels read straight into the image: one read per row, rows flipped
-// (PFM stores the picture's bottom row first), bytes swapped for a
-// big-endian file (positive scale); the values are the stored floats times
-// |scale| (in float), as OpenImageIO reads them. OpenImageIO's PNM
-// reader converts scanline by scanline; this is one copy from the page cache
-// (brume blur's whole read of a 960x672 RGB PFM, its SHA-256 included: 150-165
-// ms through OpenImageIO's reader, 124-129 ms with this one). OpenImageIO has opened the file and parsed its header first
-// (its errors and checks stand); this parser re-reads the header only to find
-// where the pixels start, and returns false -- OpenImageIO then reads the
-// file -- for anything unexpected: a header it parses differently, a short
-// file. Tested against OpenImageIO on grey and RGB, little- and big-endian
-// files and ETH3D's PFMs, bit for bit (tests/test_io.cpp).
-bool read_pfm_pixels(const std::string& path, const OIIO::ImageSpec& spec, Image& img) {
-  if (spec.format != OIIO::TypeDesc::FLOAT || (spec.nchannels != 1 && spec.nchannels != 3)) return false;
-  std::ifstream f(path, std::ios::binary);
+// PFM read without OpenImageIO. Its PNM reader, on open, copies the whole
+// file into a zero-filled buffer of its own before the pixels are asked for:
+// for a 1600x1120 RGB PFM (21.5 MB) that is ~11 000 page faults and two
+// passes over the data, ~100 ms of brume blur's 300 ms read on the AMD EPYC
+// VM (README "Speed"). A PFM is a three-token text header and raw floats, so
+// brume reads the common form itself, straight into the image (rows flipped:
+// PFM stores the picture's bottom row first; bytes swapped for a big-endian
+// file, positive scale; values times |scale|, in float, as OpenImageIO
+// does). Only a strict subset is taken this way: magic "PF" (RGB) or "Pf"
+// (grey), then width, height (decimal digits) and scale (a plain decimal
+// number), separated by spaces, tabs or line ends, no comments, then exactly
+// one whitespace byte and at least width x height x channels floats. Any
+// other file -- a comment, an odd number, a short file, not a PFM at all --
+// goes to OpenImageIO, whose reading and messages stand. The FileInfo is the
+// one OpenImageIO gives a PFM (format "pnm", 32-bit float, channels R, G, B
+// or Y). Tested against OpenImageIO on grey and RGB, little- and big-endian
+// files, unusual spacing and ETH3D's PFMs, bit for bit, and on the files it
+// must leave to OpenImageIO (tests/test_io.cpp).
+struct PfmHeader {
+  int width = 0, height = 0, channels = 0;
+  double scale = 0.0;
+  std::size_t offset = 0;  // where the pixels start
+};
+
+bool pfm_space(char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; }
+
+std::optional<PfmHeader> parse_pfm_header(std::ifstream& f) {
   char head[256];
   f.read(head, sizeof head);
   const std::size_t got = static_cast<std::size_t>(f.gcount());
-  if (got < 3 || head[0] != 'P' || (head[1] != 'F' && head[1] != 'f')) return false;
-  const int channels = head[1] == 'F' ? 3 : 1;
-  // Three whitespace-separated tokens after the magic, then one whitespace byte.
+  if (got < 3 || head[0] != 'P' || (head[1] != 'F' && head[1] != 'f') || !pfm_space(head[2])) return std::nullopt;
+  PfmHeader h;
+  h.channels = head[1] == 'F' ? 3 : 1;
   std::size_t i = 2;
   std::string tok[3];
   for (std::string& t : tok) {
-    while (i < got && std::isspace(static_cast<unsigned char>(head[i]))) ++i;
-    while (i < got && !std::isspace(static_cast<unsigned char>(head[i]))) t += head[i++];
-    if (t.empty() || i >= got) return false;
+    while (i < got && pfm_space(head[i])) ++i;
+    while (i < got && !pfm_space(head[i])) t += head[i++];
+    if (t.empty() || i >= got) return std::nullopt;
   }
-  ++i;  // the single whitespace byte that ends the header
-  char* end = nullptr;
-  const long w = std::strtol(tok[0].c_str(), &end, 10);
-  if (*end) return false;
-  const long h = std::strtol(tok[1].c_str(), &end, 10);
-  if (*end) return false;
-  const double scale = std::strtod(tok[2].c_str(), &end);
-  if (*end || scale == 0.0 || !std::isfinite(scale)) return false;
-  if (w != spec.width || h != spec.height || channels != spec.nchannels) return false;
-  const std::size_t row = static_cast<std::size_t>(w) * static_cast<std::size_t>(channels);
-  std::error_code ec;
-  const std::uintmax_t size = fs::file_size(path, ec);
-  if (ec || size < i + row * static_cast<std::size_t>(h) * 4) return false;
+  h.offset = i + 1;  // the single whitespace byte that ends the header
+  for (int k = 0; k < 2; ++k) {
+    const std::string& t = tok[k];
+    if (t.size() > 9 || t.find_first_not_of("0123456789") != std::string::npos) return std::nullopt;
+    const long v = std::strtol(t.c_str(), nullptr, 10);
+    if (v < 1) return std::nullopt;
+    (k == 0 ? h.width : h.height) = static_cast<int>(v);
+  }
+  // [-]digits[.digits][(e|E)[+|-]digits]: no inf, nan, hex or leading '+'.
+  const std::string& t = tok[2];
+  std::size_t j = t[0] == '-' ? 1 : 0;
+  const std::size_t int_start = j;
+  while (j < t.size() && std::isdigit(static_cast<unsigned char>(t[j]))) ++j;
+  if (j == int_start) return std::nullopt;
+  if (j < t.size() && t[j] == '.') {
+    ++j;
+    while (j < t.size() && std::isdigit(static_cast<unsigned char>(t[j]))) ++j;
+  }
+  if (j < t.size() && (t[j] == 'e' || t[j] == 'E')) {
+    ++j;
+    if (j < t.size() && (t[j] == '+' || t[j] == '-')) ++j;
+    const std::size_t e0 = j;
+    while (j < t.size() && std::isdigit(static_cast<unsigned char>(t[j]))) ++j;
+    if (j == e0) return std::nullopt;
+  }
+  if (j != t.size()) return std::nullopt;
+  h.scale = std::strtod(t.c_str(), nullptr);
+  if (h.scale == 0.0 || !std::isfinite(h.scale)) return std::nullopt;
+  return h;
+}
+
+bool read_pfm_pixels(std::ifstream& f, const PfmHeader& ph, Image& img) {
+  const std::size_t row = static_cast<std::size_t>(ph.width) * static_cast<std::size_t>(ph.channels);
   f.clear();
-  f.seekg(static_cast<std::streamoff>(i));
-  for (long y = h - 1; y >= 0; --y) {
+  f.seekg(static_cast<std::streamoff>(ph.offset));
+  for (long y = ph.height - 1; y >= 0; --y) {
     f.read(reinterpret_cast<char*>(img.data.data() + static_cast<std::size_t>(y) * row),
            static_cast<std::streamsize>(row * 4));
     if (!f) return false;
@@ -403,14 +438,14 @@ bool read_pfm_pixels(const std::string& path, const OIIO::ImageSpec& spec, Image
   static_assert(sizeof(float) == 4);
   const std::uint32_t probe = 1;
   const bool host_little = *reinterpret_cast<const unsigned char*>(&probe) == 1;
-  if ((scale < 0.0) != host_little)
+  if ((ph.scale < 0.0) != host_little)
     for (float& v : img.data) {
       std::uint32_t b;
       std::memcpy(&b, &v, 4);
       b = __builtin_bswap32(b);
       std::memcpy(&v, &b, 4);
     }
-  const float k = static_cast<float>(std::fabs(scale));
+  const float k = static_cast<float>(std::fabs(ph.scale));
   if (k != 1.0f)
     for (float& v : img.data) v *= k;
   return true;
@@ -419,33 +454,51 @@ bool read_pfm_pixels(const std::string& path, const OIIO::ImageSpec& spec, Image
 // Read every channel of the first subimage as float. Integer files are read
 // as their raw counts (not normalised) when `counts` is set.
 Raw read_raw(const std::string& path, bool counts) {
+  check_readable(path);
+  {
+    std::ifstream f(path, std::ios::binary);
+    if (const std::optional<PfmHeader> ph = f ? parse_pfm_header(f) : std::nullopt) {
+      std::error_code ec;
+      const std::uintmax_t size = fs::file_size(path, ec);
+      const std::uint64_t px = static_cast<std::uint64_t>(ph->width) * static_cast<std::uint64_t>(ph->height);
+      if (!ec && size >= ph->offset && (size - ph->offset) / 4 / static_cast<std::uint64_t>(ph->channels) >= px) {
+        check_declared_size(path, ph->width, ph->height, ph->channels);
+        check_memory(px * 4 * static_cast<std::uint64_t>(ph->channels + 3), "reading '" + path + "'");
+        Raw r;
+        r.info.path = path;
+        r.info.format = "pnm";  // OpenImageIO's name for the format
+        r.info.integer = false;
+        r.info.bits = 32;
+        r.info.channel_names = ph->channels == 3 ? std::vector<std::string>{"R", "G", "B"} : std::vector<std::string>{"Y"};
+        r.img = Image(ph->width, ph->height, ph->channels);
+        if (read_pfm_pixels(f, *ph, r.img)) return r;
+      }
+    }
+  }
   auto in = open_image(path);
-  const OIIO::ImageSpec& spec = in->spec();
+  const codec::InputSpec& spec = in->spec();
   Raw r;
   r.info.path = path;
-  r.info.format = in->format_name();
-  r.info.integer = !spec.format.is_floating_point();
-  r.info.bits = static_cast<int>(spec.format.size() * 8);
-  if (spec.get_int_attribute("oiio:BitsPerSample", 0) > 0)
-    r.info.bits = spec.get_int_attribute("oiio:BitsPerSample");
-  r.info.channel_names.assign(spec.channelnames.begin(), spec.channelnames.end());
-  r.info.description = spec.get_string_attribute("ImageDescription");
-  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
+  r.info.format = spec.format;
+  r.info.integer = !spec.floating;
+  r.info.bits = spec.container_bits;
+  if (spec.bits_per_sample > 0) r.info.bits = spec.bits_per_sample;
+  r.info.channel_names = spec.channel_names;
+  r.info.description = spec.description;
+  if (spec.width <= 0 || spec.height <= 0 || spec.channels <= 0)
     throw Error("cannot read '" + path + "': empty image");
   // Refused before any allocation: the header alone decides.
-  check_declared_size(path, spec.width, spec.height, spec.nchannels);
+  check_declared_size(path, spec.width, spec.height, spec.channels);
   const std::uint64_t px = static_cast<std::uint64_t>(spec.width) * static_cast<std::uint64_t>(spec.height);
   // The decoded file (all channels) and the caller's converted copy (≤ 3 channels).
-  check_memory(px * 4 * static_cast<std::uint64_t>(spec.nchannels + 3), "reading '" + path + "'");
-  r.img = Image(spec.width, spec.height, spec.nchannels);
-  const bool pfm = r.info.format == "pnm" && read_pfm_pixels(path, spec, r.img);
-  bool ok = pfm || in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, r.img.data.data());
-  if (!ok) {
-    std::string e = in->geterror();
+  check_memory(px * 4 * static_cast<std::uint64_t>(spec.channels + 3), "reading '" + path + "'");
+  r.img = Image(spec.width, spec.height, spec.channels);
+  if (!in->read_float(r.img.data.data())) {
+    std::string e = in->error();
     throw Error("cannot read '" + path + "': " + (e.empty() ? "read failed (truncated or corrupt file?)" : e));
   }
   in->close();
-  const int container = static_cast<int>(spec.format.size() * 8);
+  const int container = spec.container_bits;
   const int stored = std::min(r.info.bits, container);
   if (r.info.integer && stored < container && container <= 16) {
     // Fewer bits than the container (a 12-bit TIFF in 16 bits): OpenImageIO
@@ -551,8 +604,7 @@ std::string lower_ext(const std::string& path) {
 
 // The storage type for a file: explicit --bits, or the format's natural one.
 // Data maps (is_color false) default to float where the format has it.
-OIIO::TypeDesc storage_type(const std::string& path, const std::string& bits, const std::string& flag,
-                            bool is_color) {
+codec::Type storage_type(const std::string& path, const std::string& bits, const std::string& flag, bool is_color) {
   const std::string e = lower_ext(path);
   const bool is_png = e == ".png", is_jpg = e == ".jpg" || e == ".jpeg", is_tif = e == ".tif" || e == ".tiff";
   const bool is_exr = e == ".exr", is_pfm = e == ".pfm", is_hdr = e == ".hdr";
@@ -566,10 +618,10 @@ OIIO::TypeDesc storage_type(const std::string& path, const std::string& bits, co
   if (is_png && b != "8" && b != "16") throw bad("8 or 16");
   if (is_exr && b != "half" && b != "float") throw bad("half or float");
   if ((is_pfm || is_hdr) && b != "float") throw bad("float");
-  if (b == "8") return OIIO::TypeDesc::UINT8;
-  if (b == "16") return OIIO::TypeDesc::UINT16;
-  if (b == "half") return OIIO::TypeDesc::HALF;
-  if (b == "float") return OIIO::TypeDesc::FLOAT;
+  if (b == "8") return codec::Type::u8;
+  if (b == "16") return codec::Type::u16;
+  if (b == "half") return codec::Type::f16;
+  if (b == "float") return codec::Type::f32;
   throw Error("--bits '" + bits + "' is not a bit depth; use auto, 8, 16, half or float");
 }
 
@@ -746,16 +798,20 @@ Compression parse_compression(const std::string& path, const std::string& text, 
 }
 
 // The attributes that carry `c` to OpenImageIO's writer for extension `e`.
-void apply_compression(OIIO::ImageSpec& spec, const std::string& e, const Compression& c) {
+codec::Attribute int_attribute(const std::string& name, int v) { return {name, true, v, {}}; }
+codec::Attribute text_attribute(const std::string& name, const std::string& v) { return {name, false, 0, v}; }
+
+void apply_compression(codec::OutputSpec& spec, const std::string& e, const Compression& c) {
   if (c.name == "auto") return;
   if (e == ".png") {
     // "none" is deflate's stored blocks (level 0): PNG always deflates.
-    spec.attribute("png:compressionLevel", c.name == "none" ? 0 : (c.level >= 0 ? c.level : 6));
+    spec.attributes.push_back(int_attribute("png:compressionLevel", c.name == "none" ? 0 : (c.level >= 0 ? c.level : 6)));
     return;
   }
   if (e == ".hdr") return;  // Radiance HDR's run-length encoding is the writer's only form
-  spec.attribute("compression", c.level >= 0 ? c.name + ":" + std::to_string(c.level) : c.name);
-  if ((e == ".tif" || e == ".tiff") && c.name == "zip" && c.level >= 0) spec.attribute("tiff:zipquality", c.level);
+  spec.attributes.push_back(text_attribute("compression", c.level >= 0 ? c.name + ":" + std::to_string(c.level) : c.name));
+  if ((e == ".tif" || e == ".tiff") && c.name == "zip" && c.level >= 0)
+    spec.attributes.push_back(int_attribute("tiff:zipquality", c.level));
 }
 
 }  // namespace
@@ -781,9 +837,8 @@ void check_encoding(const std::string& path, const WriteOptions& opts, const std
   if (std::find(std::begin(known), std::end(known), e) == std::end(known))
     throw Error(flag + " '" + path + "': unknown output type '" + e +
                 "'; use .png, .jpg, .tif, .exr, .pfm or .hdr");
-  const OIIO::TypeDesc type = storage_type(path, opts.bits, flag, opts.is_color);
-  if (!opts.float_reason.empty() &&
-      (type == OIIO::TypeDesc::UINT8 || type == OIIO::TypeDesc::UINT16 || e == ".hdr"))
+  const codec::Type type = storage_type(path, opts.bits, flag, opts.is_color);
+  if (!opts.float_reason.empty() && (type == codec::Type::u8 || type == codec::Type::u16 || e == ".hdr"))
     throw Error(flag + " '" + path + "': " + opts.float_reason + "; write it to .exr, .pfm or .tif (float)");
   const Compression c = parse_compression(path, opts.compression, flag);
   if (c.lossy && (!opts.is_color || !opts.float_reason.empty()) && e != ".jpg" && e != ".jpeg")
@@ -814,13 +869,13 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
                       const std::string& flag) {
   check_writable(path, opts, flag);
   const std::string e = lower_ext(path);
-  OIIO::TypeDesc type = storage_type(path, opts.bits, flag, opts.is_color);
+  const codec::Type type = storage_type(path, opts.bits, flag, opts.is_color);
   if ((e == ".hdr") && img.channels != 3)
     throw Error(flag + " '" + path + "': Radiance HDR holds RGB only; write this " +
                 std::to_string(img.channels) + "-channel map as .exr, .pfm or .tif");
   if (e == ".pfm" && img.channels != 1 && img.channels != 3)
     throw Error(flag + " '" + path + "': PFM holds 1 or 3 channels");
-  const bool integer = type == OIIO::TypeDesc::UINT8 || type == OIIO::TypeDesc::UINT16;
+  const bool integer = type == codec::Type::u8 || type == codec::Type::u16;
   Transfer t = opts.transfer;
   if (t == Transfer::automatic) t = (integer && opts.is_color) ? Transfer::srgb : Transfer::linear;
 
@@ -830,7 +885,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   Image encoded;
   std::vector<std::uint8_t> codes;
   const Image* src = &img;
-  if (t == Transfer::srgb && type == OIIO::TypeDesc::UINT8 && e != ".pfm") {
+  if (t == Transfer::srgb && type == codec::Type::u8 && e != ".pfm") {
     codes.resize(img.data.size());
     srgb_encode_8(img.data.data(), codes.data(), codes.size());
   } else if (t == Transfer::srgb) {
@@ -850,26 +905,26 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
     }
     return;
   }
-  auto out = OIIO::ImageOutput::create(path);
-  if (!out) throw Error(flag + " '" + path + "': cannot create a writer: " + OIIO::geterror());
-  OIIO::ImageSpec spec(img.width, img.height, img.channels, type);
-  if (img.channels == 1) spec.channelnames = {"Y"};
-  spec.attribute("oiio:ColorSpace", t == Transfer::srgb ? "sRGB" : "linear");
-  if (!opts.description.empty()) spec.attribute("ImageDescription", opts.description);
+  std::string create_error;
+  auto out = codec::api("writing '" + path + "'").create_output(path, &create_error);
+  if (!out) throw Error(flag + " '" + path + "': cannot create a writer: " + create_error);
+  codec::OutputSpec spec;
+  spec.width = img.width, spec.height = img.height, spec.channels = img.channels, spec.type = type;
+  if (img.channels == 1) spec.channel_names = {"Y"};
+  spec.attributes.push_back(text_attribute("oiio:ColorSpace", t == Transfer::srgb ? "sRGB" : "linear"));
+  if (!opts.description.empty()) spec.attributes.push_back(text_attribute("ImageDescription", opts.description));
   apply_compression(spec, e, parse_compression(path, opts.compression, flag));
   add_pending(tmp, path);
   errno = 0;
-  if (!out->open(tmp, spec))
-    throw Error(flag + " '" + path + "': cannot open for writing: " + out->geterror());
-  const bool ok = codes.empty() ? out->write_image(OIIO::TypeDesc::FLOAT, src->data.data())
-                                : out->write_image(OIIO::TypeDesc::UINT8, codes.data());
+  if (!out->open(tmp, spec)) throw Error(flag + " '" + path + "': cannot open for writing: " + out->error());
+  const bool ok = codes.empty() ? out->write_float(src->data.data()) : out->write_u8(codes.data());
   if (!ok) {
     const int err = errno;
-    throw Error(flag + " '" + path + "': write failed: " + write_failure(err) + " (" + out->geterror() + ")");
+    throw Error(flag + " '" + path + "': write failed: " + write_failure(err) + " (" + out->error() + ")");
   }
   if (!out->close()) {
     const int err = errno;
-    throw Error(flag + " '" + path + "': close failed: " + write_failure(err) + " (" + out->geterror() + ")");
+    throw Error(flag + " '" + path + "': close failed: " + write_failure(err) + " (" + out->error() + ")");
   }
   // Some writers report a short write only through the file's size: verify it exists whole.
   std::error_code ec;

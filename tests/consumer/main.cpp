@@ -19,7 +19,7 @@
 #include <brume/prepare.hpp>
 #include <brume/record.hpp>
 
-int main() {
+int main(int argc, char** argv) {
   // A caller-owned RGBA buffer (as a renderer would hold it), seen through a
   // view and copied into the Image the engine takes.
   const int W = 64, H = 48;
@@ -43,7 +43,27 @@ int main() {
   const double centre = f.at(W / 2, H / 2, 0);
   std::printf("brume consumer: %d iterations, red mass %.6f (expected %.6f), green error %.2e, centre %.4f\n",
               plan.iterations, red, mass, worst_green, centre);
-  const bool ok = plan.iterations > 0 && std::abs(red - mass) <= 1e-5 * mass && worst_green <= 1e-5 &&
-                  centre < 0.5 && centre > 0.25;
+  bool ok = plan.iterations > 0 && std::abs(red - mass) <= 1e-5 * mass && worst_green <= 1e-5 &&
+             centre < 0.5 && centre > 0.25;
+
+  // A 16-bit PNG round trip through the installed codec module
+  // (lib/brume/brume_codec.so; run.cmake points BRUME_CODEC_MODULE at it):
+  // 16-bit linear storage of k/65535 reads back exactly.
+  if (argc > 1) {
+    brume::Image g(5, 3, 3);
+    for (std::size_t i = 0; i < g.data.size(); ++i) g.data[i] = static_cast<float>(i * 1000) / 65535.0f;
+    brume::WriteOptions o;
+    o.bits = "16";
+    o.transfer = brume::Transfer::linear;
+    {
+      brume::OutputSet outs;
+      outs.write(argv[1], g, o, "--out");
+      outs.commit();
+    }
+    const brume::Image back = brume::read_color(argv[1], brume::Transfer::linear);
+    const bool same = back.data == g.data;
+    std::printf("brume consumer: PNG round trip through the codec module %s\n", same ? "exact" : "DIFFERS");
+    ok = ok && same;
+  }
   return ok ? 0 : 1;
 }

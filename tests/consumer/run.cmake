@@ -29,5 +29,12 @@ endforeach()
 step("configure consumer" ${CMAKE_COMMAND} -S "${SOURCE_DIR}" -B "${WORK_DIR}/build" -G "${GENERATOR}"
      "-DCMAKE_PREFIX_PATH=${prefix}" "-DCMAKE_CXX_COMPILER=${CXX}" "-DCMAKE_BUILD_TYPE=${BUILD_TYPE}")
 step("build consumer" ${CMAKE_COMMAND} --build "${WORK_DIR}/build" -j2)
-step("run consumer" "${WORK_DIR}/build/brume_consumer")
+file(GLOB_RECURSE codec "${prefix}/lib*/brume/brume_codec.so")
+if(NOT codec)
+  message(FATAL_ERROR "install_consumer: <libdir>/brume/brume_codec.so was not installed")
+endif()
+# The prefix is not the one brume was configured for, so the installed
+# module is named by BRUME_CODEC_MODULE, as a relocated install's user would.
+step("run consumer" ${CMAKE_COMMAND} -E env "BRUME_CODEC_MODULE=${codec}"
+     "${WORK_DIR}/build/brume_consumer" "${WORK_DIR}/roundtrip.png")
 message(STATUS "${last_out}")

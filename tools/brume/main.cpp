@@ -70,6 +70,11 @@ void print_whole_run(const std::string& command) {
                 "rename %.2f ms, other %.1f ms (parsing, checks, record)",
                 p.read_ms, effect, p.write_ms, p.rename_ms, rest);
   s += b;
+  if (p.codec_load_ms > 0.0) {
+    // Inside the read or write that first needed a codec (src/io/codec.hpp).
+    std::snprintf(b, sizeof b, "; of which loading the OpenImageIO codec module %.0f ms", p.codec_load_ms);
+    s += b;
+  }
   std::fprintf(stderr, "%s\n", s.c_str());
 }
 }  // namespace brume::cli

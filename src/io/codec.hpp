@@ -1,0 +1,115 @@
+// The image codecs (OpenImageIO), loaded on first use.
+//
+// Debian's OpenImageIO links 260 shared libraries (ffmpeg, GDAL, DCMTK,
+// libheif, OpenVDB, ...). Loading and relocating them is ~0.4 s of every
+// process that links it -- 20x the rest of brume's start-up (README "Speed":
+// `brume --version` 0.42 s linked, 0.02 s without) and more than a whole
+// diffusion. So libbrume does not link OpenImageIO: the few calls it makes
+// live in a module, brume_codec.so (src/io/codec_oiio.cpp), that brume
+// dlopens the first time a file needs it. A run that reads and writes only
+// PFM (brume's own reader and writer, src/io/image_io.cpp), and every run
+// that fails its checks, `--help` and `--version` never load it.
+//
+// Where the module is looked for: $BRUME_CODEC_MODULE (a path) when set,
+// and only there -- for a relocated install. Otherwise, first found wins
+// (each must be the module of this very build, checked by its tag, else the
+// next is tried):
+//   2. next to the executable or shared object that holds libbrume
+//      (the Python package installs it beside _brume.so);
+//   3. ../lib/brume/ from there (an installed bin/brume);
+//   4. the install path and the build path this libbrume was configured with.
+// When none loads, the error names every path tried and why.
+//
+// The interface is C++ (same compiler, same build) but throws nothing across
+// the boundary: failures come back as false/null plus a message.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace brume::codec {
+
+// The storage type of a file's values.
+enum class Type { u8, u16, f16, f32, other };
+
+struct InputSpec {
+  int width = 0, height = 0, channels = 0;
+  bool floating = false;     // the stored values are floating point
+  int container_bits = 0;    // bits of the stored type (8, 16, 32, ...)
+  int bits_per_sample = 0;   // oiio:BitsPerSample (0: not given)
+  std::vector<std::string> channel_names;
+  std::string description;   // ImageDescription
+  std::string format;        // OpenImageIO's format name ("png", "openexr", ...)
+  int alpha_channel = -1;
+  bool unassociated_alpha = false;  // oiio:UnassociatedAlpha
+};
+
+class Input {
+ public:
+  virtual ~Input() = default;
+  virtual const InputSpec& spec() const = 0;
+  // Every channel of the first subimage as float, in `out` (w * h * c values).
+  virtual bool read_float(float* out) = 0;
+  virtual std::string error() = 0;
+  virtual void close() = 0;
+};
+
+// An attribute for the writer: an int or a string value.
+struct Attribute {
+  std::string name;
+  bool is_int = false;
+  int i = 0;
+  std::string s;
+};
+
+struct OutputSpec {
+  int width = 0, height = 0, channels = 0;
+  Type type = Type::f32;
+  std::vector<std::string> channel_names;  // empty: the writer's default
+  std::vector<Attribute> attributes;
+};
+
+class Output {
+ public:
+  virtual ~Output() = default;
+  virtual bool open(const std::string& path, const OutputSpec& spec) = 0;
+  // All pixels, as floats or (u8 files) as the codes themselves.
+  virtual bool write_float(const float* px) = 0;
+  virtual bool write_u8(const std::uint8_t* px) = 0;
+  virtual bool close() = 0;
+  virtual std::string error() = 0;
+};
+
+// The module's entry points. `tag` identifies the build (kCodecTag).
+struct Api {
+  const char* tag;
+  // null and *err set when the file cannot be opened (err may be empty).
+  std::unique_ptr<Input> (*open_input)(const std::string& path, bool unassociated_alpha, std::string* err);
+  // A writer chosen by `path`'s extension; null and *err set when none.
+  std::unique_ptr<Output> (*create_output)(const std::string& path, std::string* err);
+  // OpenImageIO's float -> uint8 conversion of n values (its vector loop).
+  void (*float_to_u8)(const float* in, std::uint8_t* out, int n);
+};
+
+// The tag both sides are built with: the module is used only if it matches.
+#define BRUME_CODEC_STR2(x) #x
+#define BRUME_CODEC_STR(x) BRUME_CODEC_STR2(x)
+inline constexpr const char* kCodecTag = "brume-codec-1 " BRUME_VERSION " " BRUME_CODEC_STR(__GNUC__) "." BRUME_CODEC_STR(
+    __GNUC_MINOR__);
+
+// The module's entry symbol: extern "C" const Api* brume_codec_api();
+inline constexpr const char* kEntrySymbol = "brume_codec_api";
+
+// The loaded module (loaded on the first call; thread-safe). Throws
+// brume::Error naming every path tried when it cannot be loaded; `why` says
+// what needed it ("reading 'x.png'").
+const Api& api(const std::string& why);
+
+// Whether the module has been loaded in this process (for tests and --timing).
+bool loaded();
+
+}  // namespace brume::codec
