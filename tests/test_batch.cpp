@@ -12,6 +12,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <set>
 #include <thread>
@@ -221,6 +222,22 @@ TEST_F(Batch, GpuFramesShareAWorkerContextAndEqualSingleRuns) {
   const std::string m = csv(keys, "effect,visibility,albedo", "haze,300,0.9");
   CliRun r = run("batch --manifest " + m + " --out-dir " + p("out") + " --quiet --workers 2 --backend gpu");
   ASSERT_EQ(r.status, 0) << r.output;
+  // In process, the contexts made: at most one per worker (one per frame
+  // would be 4), at least one (the frames did run on the GPU).
+  {
+    BatchOptions o;
+    o.manifest = m;
+    o.out_dir = p("in_process");
+    o.workers = 2;
+    o.exec.backend = Backend::gpu;
+    o.progress = false;
+    const std::uint64_t before = gpu_contexts_made();
+    const BatchSummary s = run_batch(o);
+    const std::uint64_t made = gpu_contexts_made() - before;
+    EXPECT_EQ(s.ok, 4u);
+    EXPECT_GE(made, 1u);
+    EXPECT_LE(made, 2u) << "contexts made for 4 frames on 2 workers";
+  }
   for (int i : {0, 3}) {
     const std::string stem = std::string(i % 2 ? "b" : "a") + "/f" + std::to_string(i);
     r = run("haze --image " + p("data/" + stem + ".png") + " --range " + p("data/" + stem + ".exr") +
@@ -344,8 +361,23 @@ TEST_F(Batch, ResumeAfterSigkillEqualsUninterruptedRun) {
     waitpid(pid, &st, 0);
     const std::size_t records = count_records(out);
     if (records > 0 && records < keys.size()) interrupted_midway = true;
+    // The killed run's journal: whole JSON lines, one per finished frame,
+    // each naming a record that exists (a frame's line follows its outputs).
+    {
+      std::ifstream jf(out + "/results.jsonl.partial", std::ios::binary);
+      const std::string all((std::istreambuf_iterator<char>(jf)), std::istreambuf_iterator<char>());
+      std::size_t lines = 0, start = 0;
+      for (std::size_t nl; (nl = all.find('\n', start)) != std::string::npos; start = nl + 1, ++lines) {
+        const nlohmann::json j = nlohmann::json::parse(all.substr(start, nl - start));
+        EXPECT_EQ(j["status"], "ok") << j.dump();
+        EXPECT_TRUE(fs::exists(j["outputs"]["record"].get<std::string>())) << j.dump();
+      }
+      EXPECT_LE(lines, records) << "round " << round;
+      EXPECT_FALSE(fs::exists(out + "/results.jsonl")) << "a killed run writes no results manifest";
+    }
     r = run("batch --manifest " + m + " --out-dir " + out + common + " --resume");
     ASSERT_EQ(r.status, 0) << r.output;
+    EXPECT_FALSE(fs::exists(out + "/results.jsonl.partial")) << "the journal outlived a finished run";
     expect_same_outputs(p("whole"), out);
     // Frames done before the kill were skipped, the others run.
     std::size_t skipped = 0;

@@ -16,6 +16,7 @@
 // from the thread that created the GpuContext.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -73,6 +74,10 @@ struct GpuObjectCounts {
   bool operator==(const GpuObjectCounts&) const = default;
 };
 GpuObjectCounts gpu_live_objects();
+// GpuContexts this process has made so far (constructions that succeeded,
+// the ones a call makes for itself when given none included): how a test
+// sees that a batch worker's frames share one context.
+std::uint64_t gpu_contexts_made();
 
 // A texture as the pass layer sees it: a GL texture name on the context's
 // thread and its size in texels. The caller owns it (or a GpuImage does).

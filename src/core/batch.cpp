@@ -11,7 +11,9 @@
 #include <cctype>
 #include <chrono>
 #include <cmath>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -30,6 +32,7 @@
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
 #include "brume/sample.hpp"
+#include "core/text.hpp"
 
 namespace fs = std::filesystem;
 
@@ -37,17 +40,8 @@ namespace brume {
 
 namespace {
 
-std::string batch_trim(std::string_view s) {
-  std::size_t a = 0, b = s.size();
-  while (a < b && std::isspace(static_cast<unsigned char>(s[a]))) ++a;
-  while (b > a && std::isspace(static_cast<unsigned char>(s[b - 1]))) --b;
-  return std::string(s.substr(a, b - a));
-}
-
-std::string batch_lower(std::string s) {
-  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
+using text::lower;
+using text::trim;
 
 // ---- manifests ---------------------------------------------------------------------
 
@@ -61,7 +55,7 @@ std::vector<std::pair<int, std::vector<std::string>>> parse_csv(const std::strin
   bool quoted = false, any = false, was_quoted = false;
   int line = 1, start = 1;
   auto end_field = [&] {
-    rec.push_back(was_quoted ? field : batch_trim(field));
+    rec.push_back(was_quoted ? field : trim(field));
     field.clear();
     was_quoted = false;
   };
@@ -90,7 +84,7 @@ std::vector<std::pair<int, std::vector<std::string>>> parse_csv(const std::strin
       }
       continue;
     }
-    if (c == '"' && batch_trim(field).empty()) {
+    if (c == '"' && trim(field).empty()) {
       quoted = was_quoted = any = true;
       field.clear();
     } else if (c == ',') {
@@ -121,13 +115,13 @@ Manifest read_manifest(const std::string& path) {
   const std::string text = ss.str();
   Manifest m;
   m.path = path;
-  const std::string ext = batch_lower(fs::path(path).extension().string());
+  const std::string ext = lower(fs::path(path).extension().string());
   if (ext == ".csv") {
     m.format = "csv";
   } else if (ext == ".jsonl" || ext == ".ndjson" || ext == ".json") {
     m.format = "jsonl";
   } else {
-    const std::string t = batch_trim(text);
+    const std::string t = trim(text);
     m.format = !t.empty() && t[0] == '{' ? "jsonl" : "csv";
   }
   if (m.format == "jsonl") {
@@ -136,7 +130,7 @@ Manifest read_manifest(const std::string& path) {
     int line = 0;
     while (std::getline(ls, l)) {
       ++line;
-      const std::string t = batch_trim(l);
+      const std::string t = trim(l);
       if (t.empty() || t[0] == '#') continue;
       nlohmann::json j;
       try {
@@ -283,7 +277,7 @@ const std::vector<EffectDef>& effect_defs() {
 }
 
 const EffectDef& effect_named(const std::string& name, const std::string& where) {
-  std::string n = batch_lower(batch_trim(name));
+  std::string n = lower(trim(name));
   n.erase(std::remove_if(n.begin(), n.end(), [](char c) { return std::isspace(static_cast<unsigned char>(c)); }),
           n.end());
   for (const EffectDef& e : effect_defs())
@@ -325,7 +319,7 @@ std::string output_stem(const std::string& key) {
   }
   flush();
   const fs::path p(out);
-  if (image_extensions().count(batch_lower(p.extension().string()))) out = (p.parent_path() / p.stem()).generic_string();
+  if (image_extensions().count(lower(p.extension().string()))) out = (p.parent_path() / p.stem()).generic_string();
   return out;
 }
 
@@ -398,7 +392,7 @@ std::vector<std::string> batch_record_argv(const BatchOptions& o) {
 
 std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
   if (o.out_dir.empty()) throw Error("--out-dir is required: the folder the outputs and records go to");
-  std::string fmt = batch_lower(batch_trim(o.format));
+  std::string fmt = lower(trim(o.format));
   if (!fmt.empty() && fmt[0] == '.') fmt.erase(0, 1);
   if (!fmt.empty() && !image_extensions().count("." + fmt))
     throw Error("--format '" + o.format + "' is not an image format brume writes; use png, jpg, tif, exr, pfm or hdr");
@@ -423,7 +417,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
         // Every cell ends in the frame's record and the results manifest (JSON).
         check_utf8(col, cell_where(m, r, "") + ": the column name");
         if (v.is_string()) check_utf8(v.get_ref<const std::string&>(), cell_where(m, r, col));
-        const std::string c = batch_lower(batch_trim(col));
+        const std::string c = lower(trim(col));
         if (c == "key") {
           key = cell_text(v);
         } else if (c == "effect") {
@@ -432,7 +426,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
           cells.emplace_back(col, v);
         }
       }
-      if (batch_trim(effect).empty())
+      if (trim(effect).empty())
         throw Error(cell_where(m, r, "") + ": no effect; add an 'effect' column or give --effect (" + [] {
           std::string all;
           for (const EffectDef& e : effect_defs()) all += (all.empty() ? "" : ", ") + e.name;
@@ -443,7 +437,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       std::vector<std::pair<std::string, nlohmann::json>> all = cells;
       // Resolve a column name to (job parameter, name hashed by the sampler).
       auto resolve = [&](const std::string& col) -> std::pair<std::string, std::string> {
-        std::string n = batch_trim(col);
+        std::string n = trim(col);
         std::string prefix;  // the later stage's flag prefix when the column is prefixed with its name
         const std::string first = e.name.substr(0, e.name.find('+'));
         if (!e.stage_prefix.empty()) {
@@ -545,7 +539,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       } catch (const Error& ex) {
         throw Error(cell_where(m, r, "key") + ": " + ex.what());
       }
-      std::string ext = fmt.empty() ? batch_lower(fs::path(image_text).extension().string()) : "." + fmt;
+      std::string ext = fmt.empty() ? lower(fs::path(image_text).extension().string()) : "." + fmt;
       if (!image_extensions().count(ext))
         throw Error(cell_where(m, r, "image") + ": the output would take the input's extension '" + ext +
                     "', which brume does not write; give --format");
@@ -600,7 +594,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
         continue;
       }
       key_line[key] = r.line;
-      const std::string name_lc = batch_lower(stem);  // case-insensitive file systems
+      const std::string name_lc = lower(stem);  // case-insensitive file systems
       if (name_key.count(name_lc))
         throw Error(cell_where(m, r, "key") + ": keys '" + name_key[name_lc] + "' and '" + key +
                     "' give the same output name '" + stem + "'; make the keys differ by more than the extension, "
@@ -799,6 +793,20 @@ BatchSummary run_batch(const BatchOptions& o) {
   BatchSummary s;
   s.frames = frames.size();
   std::vector<nlohmann::json> lines(frames.size());
+  // The results manifest's name, and its journal: the same lines, appended
+  // as frames finish (in the order they finish) and flushed one by one, so
+  // that a running or killed batch shows what is done (`tail -f`). Each line
+  // is one write of a whole line. The journal is removed once the manifest
+  // (manifest order, written whole) is in place; a new run starts it afresh.
+  const std::string name = o.shard_count == 1 ? "results.jsonl"
+                                              : "results.shard-" + std::to_string(o.shard_index) + "-of-" +
+                                                    std::to_string(o.shard_count) + ".jsonl";
+  s.results = (fs::path(o.out_dir) / name).generic_string();
+  const std::string journal_path = s.results + ".partial";
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> journal(std::fopen(journal_path.c_str(), "w"), &std::fclose);
+  if (!journal)
+    throw Error("--out-dir '" + o.out_dir + "': cannot create the results journal '" + journal_path +
+                "': " + std::strerror(errno));
   std::atomic<std::size_t> next{0};
   std::mutex mu;
   std::size_t finished = 0, worked = 0;
@@ -856,6 +864,9 @@ BatchSummary run_batch(const BatchOptions& o) {
       }
       std::lock_guard<std::mutex> lock(mu);
       lines[i] = r.line;
+      const std::string jl = r.line.dump() + "\n";
+      std::fwrite(jl.data(), 1, jl.size(), journal.get());  // a full disk shows at the manifest's write
+      std::fflush(journal.get());
       ++finished;
       if (r.status == "ok") ++s.ok, ++worked;
       if (r.status == "skipped") ++s.skipped;
@@ -881,17 +892,15 @@ BatchSummary run_batch(const BatchOptions& o) {
   if (o.progress) progress(true);
 
   // The results manifest: one line per frame of this shard, in manifest
-  // order, written whole at the end (a killed run leaves none; --resume
-  // writes it, with the frames done before as "skipped").
-  const std::string name = o.shard_count == 1 ? "results.jsonl"
-                                              : "results.shard-" + std::to_string(o.shard_index) + "-of-" +
-                                                    std::to_string(o.shard_count) + ".jsonl";
-  s.results = (fs::path(o.out_dir) / name).generic_string();
+  // order, written whole at the end (a killed run leaves only the journal;
+  // --resume writes it, with the frames done before as "skipped").
   std::string text;
   for (const nlohmann::json& l : lines) text += l.dump() + "\n";
   OutputSet outs;
   outs.write_text(s.results, text, "--out-dir");
   outs.commit();
+  journal.reset();
+  fs::remove(journal_path, ec);
   return s;
 }
 

@@ -1,6 +1,7 @@
 // brume — typed parameter declarations (see brume/params.hpp): parsing what a
 // user typed, checking a value, and describing a parameter.
 #include "brume/params.hpp"
+#include "core/text.hpp"
 
 #include <cctype>
 #include <cstdio>
@@ -19,12 +20,7 @@ std::string num(double v) {
 }
 
 // strtod over the whole text ("1e-3", "inf", "nan"), nothing left over.
-bool parse_double(const std::string& t, double& v) {
-  if (t.empty()) return false;
-  char* end = nullptr;
-  v = std::strtod(t.c_str(), &end);
-  return end == t.c_str() + t.size();
-}
+using text::parse_number;
 
 }  // namespace
 
@@ -145,7 +141,7 @@ nlohmann::json ParamSpec::parse(const std::string& t) const {
   switch (kind) {
     case ParamKind::real: {
       double v = 0;
-      if (!parse_double(t, v))
+      if (!parse_number(t, v))
         throw Error(flag + " '" + t + "' is not a number" + (optional ? " (or " + unset_word + ")" : "") + "; " +
                     describe());
       return v;
@@ -169,7 +165,7 @@ nlohmann::json ParamSpec::parse(const std::string& t) const {
       int n = 0;
       while (std::getline(ss, item, ',')) {
         double v = 0;
-        if (n < 3 && !parse_double(item, v))
+        if (n < 3 && !parse_number(item, v))
           throw Error(flag + " '" + t + "': '" + item + "' is not a number; give R,G,B in linear light, e.g. "
                       "0.8,0.82,0.85" + (optional ? ", or " + unset_word : std::string()));
         if (n < 3) c[n] = static_cast<float>(v);

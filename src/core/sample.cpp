@@ -16,6 +16,7 @@
 #include "brume/dof.hpp"
 #include "brume/fog.hpp"
 #include "brume/haze.hpp"
+#include "core/text.hpp"
 
 namespace brume {
 
@@ -28,24 +29,9 @@ std::string shortest(double v) {
   return std::string(buf, r.ptr);
 }
 
-std::string trim(std::string_view s) {
-  const auto b = s.find_first_not_of(" \t\r\n");
-  if (b == std::string_view::npos) return "";
-  const auto e = s.find_last_not_of(" \t\r\n");
-  return std::string(s.substr(b, e - b + 1));
-}
-
-std::string lower(std::string s) {
-  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
-
-bool parse_number(const std::string& t, double& v) {
-  if (t.empty()) return false;
-  char* end = nullptr;
-  v = std::strtod(t.c_str(), &end);
-  return end == t.c_str() + t.size();
-}
+using text::lower;
+using text::parse_number;
+using text::trim;
 
 std::size_t edit_distance(const std::string& a, const std::string& b) {
   std::vector<std::size_t> prev(b.size() + 1), cur(b.size() + 1);

@@ -242,15 +242,21 @@ __attribute__((always_inline)) inline void general_row_body(const float* src, fl
   for (int x = 0; x < W;) {
     const int n = t.n[x];
     const int e = run_end(t.n.data(), x, W);
-    // Columns of the run whose horizontal taps stay inside the row, if the
-    // vertical taps stay inside the image.
+    // Columns of the run whose horizontal taps stay inside the row. The
+    // vertical taps are whole rows for the whole run (one n), mirrored when
+    // they fall outside the image -- as update_pixel mirrors them (mirror is
+    // the identity inside), so rows near the top and bottom take the vector
+    // loops too, with the same bits (on a haze map those rows have the
+    // largest offsets: up to 2 x 24 of 1120 rows went pixel by pixel).
     int a = std::max(x, n + 1), b = std::min(e, W - n - 1);
-    if (y - n - 1 < 0 || y + n + 1 >= H || a >= b) a = b = e;
+    if (a >= b) a = b = e;
     for (int i = x; i < a; ++i) update_pixel<false>(src, dst, rho, 0.0f, W, H, i, y, h[i], edge_mode);
     if (a < b) {
+      const std::size_t yu0 = static_cast<std::size_t>(mirror(y - n, H)), yu1 = static_cast<std::size_t>(mirror(y - n - 1, H));
+      const std::size_t yd0 = static_cast<std::size_t>(mirror(y + n, H)), yd1 = static_cast<std::size_t>(mirror(y + n + 1, H));
       const float* rrow = rho + y * Ws;
-      const float *ru0 = rho + (y - n) * Ws, *ru1 = rho + (y - n - 1) * Ws;
-      const float *rd0 = rho + (y + n) * Ws, *rd1 = rho + (y + n + 1) * Ws;
+      const float *ru0 = rho + yu0 * Ws, *ru1 = rho + yu1 * Ws;
+      const float *rd0 = rho + yd0 * Ws, *rd1 = rho + yd1 * Ws;
       float *wl = t.wl.data(), *wr = t.wr.data(), *wu = t.wu.data(), *wd = t.wd.data();
       switch (edge_mode) {
         case 1: run_weights<1>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
@@ -258,10 +264,10 @@ __attribute__((always_inline)) inline void general_row_body(const float* src, fl
         default: run_weights<0>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
       }
       const RunArgs args{src + y * Ws * 4,
-                         src + (y - n) * Ws * 4,
-                         src + (y - n - 1) * Ws * 4,
-                         src + (y + n) * Ws * 4,
-                         src + (y + n + 1) * Ws * 4,
+                         src + yu0 * Ws * 4,
+                         src + yu1 * Ws * 4,
+                         src + yd0 * Ws * 4,
+                         src + yd1 * Ws * 4,
                          dst + y * Ws * 4,
                          t.fr.data(),
                          wl,

@@ -25,6 +25,7 @@
 #include "brume/aerial.hpp"
 #include "brume/error.hpp"
 #include "brume/io.hpp"
+#include "core/text.hpp"
 
 namespace brume {
 
@@ -104,20 +105,11 @@ std::array<double, 3> cie1931_wyman(double l) {
           1.217 * lobe(l, 437.0, 11.8, 36.0) + 0.681 * lobe(l, 459.0, 26.0, 13.8)};
 }
 
-std::string spectral_trim(const std::string& s) {
-  const auto b = s.find_first_not_of(" \t\r\n");
-  if (b == std::string::npos) return "";
-  return s.substr(b, s.find_last_not_of(" \t\r\n") - b + 1);
-}
-
-// A number that is the whole field; nullopt for text, NaN or infinity.
+// A number that is the whole field (white space around it allowed); false
+// for text, NaN, infinity or overflow.
 bool spectral_parse_number(const std::string& field, double& v) {
-  const std::string t = spectral_trim(field);
-  if (t.empty()) return false;
   errno = 0;
-  char* end = nullptr;
-  v = std::strtod(t.c_str(), &end);
-  return end == t.c_str() + t.size() && errno != ERANGE && std::isfinite(v);
+  return text::parse_number(text::trim(field), v) && errno != ERANGE && std::isfinite(v);
 }
 
 std::string where(const std::string& path, int line) { return "--sensitivity '" + path + "' line " + std::to_string(line); }
@@ -177,7 +169,7 @@ SpectralSensitivity load_csv(const std::string& path) {
   bool header_allowed = true;
   for (std::size_t n = 0; n < lines.size(); ++n) {
     const int ln = static_cast<int>(n) + 1;
-    const std::string t = spectral_trim(lines[n]);
+    const std::string t = text::trim(lines[n]);
     if (t.empty() || t[0] == '#') continue;
     std::vector<std::string> f;
     std::stringstream ss(t);
@@ -193,7 +185,7 @@ SpectralSensitivity load_csv(const std::string& path) {
     if (f.size() != 4)
       throw Error(where(path, ln) + ": '" + t + "' has " + std::to_string(f.size()) +
                   " fields; each data row is wavelength_nm,r,g,b");
-    if (!spectral_parse_number(f[0], w)) throw Error(where(path, ln) + ": wavelength '" + spectral_trim(f[0]) + "' is not a number");
+    if (!spectral_parse_number(f[0], w)) throw Error(where(path, ln) + ": wavelength '" + text::trim(f[0]) + "' is not a number");
     if (w < 0.0) throw Error(where(path, ln) + ": wavelength " + spectral_num(w) + " nm is negative");
     if (!wl.empty() && !(w > wl.back()))
       throw Error(where(path, ln) + ": wavelength " + spectral_num(w) + " nm does not increase (previous row " +
@@ -201,7 +193,7 @@ SpectralSensitivity load_csv(const std::string& path) {
     std::array<double, 3> q{};
     for (int c = 0; c < 3; ++c) {
       if (!spectral_parse_number(f[1 + c], q[c]))
-        throw Error(where(path, ln) + ": value '" + spectral_trim(f[1 + c]) + "' is not a number");
+        throw Error(where(path, ln) + ": value '" + text::trim(f[1 + c]) + "' is not a number");
       if (q[c] < 0.0)
         throw Error(where(path, ln) + ": value " + spectral_num(q[c]) +
                     " is negative; a sensitivity is a response, >= 0 (clip a measurement's noise floor to 0 "
@@ -229,7 +221,7 @@ SpectralSensitivity load_csv(const std::string& path) {
 SpectralSensitivity load_database(const std::string& path, const std::string& camera) {
   const std::vector<std::string> lines = read_lines(path);
   std::size_t n = 0;
-  while (n < lines.size() && spectral_trim(lines[n]).rfind("---", 0) != 0) ++n;
+  while (n < lines.size() && text::trim(lines[n]).rfind("---", 0) != 0) ++n;
   if (n == lines.size())
     throw Error("--sensitivity '" + path +
                 "' is not a camspec database (no '---------' line ending its header); give the "
@@ -237,11 +229,11 @@ SpectralSensitivity load_database(const std::string& path, const std::string& ca
   ++n;
   std::vector<std::string> names;
   auto next = [&](std::size_t& i) {
-    while (i < lines.size() && spectral_trim(lines[i]).empty()) ++i;
+    while (i < lines.size() && text::trim(lines[i]).empty()) ++i;
     return i < lines.size();
   };
   while (next(n)) {
-    const std::string name = spectral_trim(lines[n]);
+    const std::string name = text::trim(lines[n]);
     const int name_line = static_cast<int>(n) + 1;
     ++n;
     names.push_back(name);
@@ -303,7 +295,7 @@ SpectralSensitivity load_sensitivity(const std::string& spec) {
     const std::string file = spec.substr(0, hash);
     std::error_code ec;
     if (std::filesystem::is_regular_file(file, ec)) {
-      const std::string camera = spectral_trim(spec.substr(hash + 1));
+      const std::string camera = text::trim(spec.substr(hash + 1));
       if (camera.empty())
         throw Error("--sensitivity '" + spec + "': no camera name after '#'; write DATABASE.txt#CAMERA NAME");
       return load_database(file, camera);

@@ -2,6 +2,7 @@
 // cache and the texture/target plumbing every pass shares (src/gpu/context.hpp).
 #include "gpu/context.hpp"
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -210,7 +211,15 @@ void GpuContext::Impl::begin(const gpu::Target& t) const {
   glViewport(0, 0, t.width, t.height);
 }
 
-GpuContext::GpuContext() : impl_(std::make_unique<Impl>()) { impl_->create(); }
+namespace {
+std::atomic<std::uint64_t> g_contexts_made{0};
+}  // namespace
+std::uint64_t gpu_contexts_made() { return g_contexts_made.load(std::memory_order_relaxed); }
+
+GpuContext::GpuContext() : impl_(std::make_unique<Impl>()) {
+  impl_->create();
+  g_contexts_made.fetch_add(1, std::memory_order_relaxed);
+}
 GpuContext::~GpuContext() = default;
 const GpuInfo& GpuContext::info() const { return impl_->info; }
 

@@ -20,6 +20,7 @@ GpuContext::GpuContext() { unavailable(); }
 GpuContext::~GpuContext() = default;
 const GpuInfo& GpuContext::info() const { unavailable(); }
 GpuObjectCounts gpu_live_objects() { return {}; }  // nothing can have been made
+std::uint64_t gpu_contexts_made() { return 0; }
 GpuImage::GpuImage(GpuContext&, const Image&, Precision) { unavailable(); }
 GpuImage::GpuImage(GpuContext&, int, int, int, Precision) { unavailable(); }
 GpuImage::GpuImage(GpuImage&&) noexcept {}
