@@ -213,3 +213,24 @@ TEST(Params, OptionalsTakeTheirUnsetWord) {
   EXPECT_THROW(t.set_text(p, "range-max", "0"), Error);
   EXPECT_THROW(t.set_text(p, "rho-max", "0"), Error);
 }
+
+// The output block marks the parameters that name files it writes (brume
+// batch renames them after the key, brume run moves them): --out, --record
+// and every declared map, never a setting such as --compression or --bits.
+TEST(Params, OutputFilesAreMarkedBySpecNotByName) {
+  const std::vector<MapOutput> maps = {MapOutput{"transmission", "T map", ""},
+                                       MapOutput{"sigma", "blur scale map", "values in px"}};
+  std::set<std::string> files, settings;
+  for (const auto& d : output_param_table(maps).params()) (is_output_file(d.spec) ? files : settings).insert(d.spec.name);
+  EXPECT_EQ(files, (std::set<std::string>{"out", "record", "transmission", "sigma"}));
+  EXPECT_EQ(settings, (std::set<std::string>{"bits", "out-transfer", "compression"}));
+  // The depth commands' own output blocks: exactly what the name rule gave
+  // before the flag (their text parameters of the output block).
+  std::set<std::string> conv, prep;
+  for (const auto& d : depth_convert_job_table().params())
+    if (is_output_file(d.spec)) conv.insert(d.spec.name);
+  for (const auto& d : depth_prepare_job_table().params())
+    if (is_output_file(d.spec)) prep.insert(d.spec.name);
+  EXPECT_EQ(conv, (std::set<std::string>{"out", "record"}));
+  EXPECT_EQ(prep, (std::set<std::string>{"out", "masks", "record"}));
+}

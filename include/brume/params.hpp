@@ -66,6 +66,9 @@ struct ParamSpec {
   std::string unset_word = "auto";   // what the user writes for "unset"
   std::string block;                 // the declaring block: "haze", "diffusion", "prepare", ...
   bool allow_inf = false;            // real: +inf is a meaningful value (an infinite far plane)
+  bool output_file = false;          // text: names a file (depth prepare's --masks: a directory) the run
+                                     // writes; brume run moves it under --out-dir, brume batch names its
+                                     // own outputs after the frame's key
 
   // Help with unit, range or choices, for --help and docs.
   std::string describe() const;
@@ -214,6 +217,11 @@ class ParamTable {
   // +inf is allowed for the last declared parameter.
   ParamTable& infinite() {
     params_.back().spec.allow_inf = true;
+    return *this;
+  }
+  // The last declared (text) parameter names a file the run writes.
+  ParamTable& writes_file() {
+    params_.back().spec.output_file = true;
     return *this;
   }
   // Other accepted flag names for the last declared parameter.

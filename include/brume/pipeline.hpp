@@ -112,9 +112,11 @@ struct OutputFiles {
   std::map<std::string, std::string> maps;  // declared map outputs that were asked for
 };
 const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& maps, bool main_required = true);
-// The output block's text parameters name files (--out, --record, the maps)
-// except --compression: brume batch names the files from the frame's key and
-// brume run moves them under --out-dir; the compression is a setting like --bits.
+// Whether a parameter names a file the run writes: its spec's output_file
+// flag, set (ParamTable::writes_file) on the output block's --out, --record
+// and maps, and on depth convert's and depth prepare's --out, --record and
+// --masks -- not on --compression, a setting like --bits. brume batch names
+// these files from the frame's key and brume run moves them under --out-dir.
 bool is_output_file(const ParamSpec& s);
 
 // ---- the shared steps -------------------------------------------------------------

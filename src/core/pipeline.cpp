@@ -247,6 +247,7 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
   if (it != cache.end()) return it->second;
   ParamTable<OutputFiles> d("output");
   d.text("out", &OutputFiles::out, "output image (.png .jpg .tif .exr .pfm .hdr)")
+      .writes_file()
       .choice("bits", &OutputFiles::bits, {"auto", "8", "16", "half", "float"},
               "output storage: auto (PNG/TIFF: the input's 8 or 16 bits, else 16; JPEG 8; EXR/PFM/HDR float)")
       .choice("out-transfer", &OutputFiles::transfer, transfer_names(),
@@ -257,11 +258,13 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
             "zip:1..9, packbits; EXR none, rle, zip, zip:1..9, zips, piz, and the lossy pxr24, b44, b44a, "
             "dwaa[:L], dwab[:L]; JPEG jpeg:1..100 (quality); PFM none; HDR rle. Lossless forms give the same "
             "pixels. Maps keep their format's default lossless compression")
-      .text("record", &OutputFiles::record, "write a JSON record of every parameter, derived value and input hash");
+      .text("record", &OutputFiles::record, "write a JSON record of every parameter, derived value and input hash")
+      .writes_file();
   for (const MapOutput& m : maps) {
     ParamSpec s;
     s.name = m.name;
     s.kind = ParamKind::text;
+    s.output_file = true;
     s.help = m.help;
     const std::string name = m.name;
     d.custom(
@@ -278,9 +281,7 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
   return cache.emplace(key, std::move(d)).first->second;
 }
 
-bool is_output_file(const ParamSpec& s) {
-  return s.block == "output" && s.kind == ParamKind::text && s.name != "compression";
-}
+bool is_output_file(const ParamSpec& s) { return s.output_file; }
 
 // ---- steps ---------------------------------------------------------------------------
 RunPhases& run_phases() {

@@ -30,7 +30,9 @@ const ParamTable<DepthConvertJob>& depth_convert_job_table() {
     d.nest(&DepthConvertJob::depth, depth_param_table())
         .choice("kind", &DepthConvertJob::kind, {"range", "z"}, "range (metres along the ray) or z (planar depth)")
         .text("out", &DepthConvertJob::out, "output float file (.exr, .pfm, .tif)")
-        .text("record", &DepthConvertJob::record, "write a JSON record of the conversion");
+        .writes_file()
+        .text("record", &DepthConvertJob::record, "write a JSON record of the conversion")
+        .writes_file();
     return d;
   }();
   return t;
@@ -70,8 +72,11 @@ const ParamTable<DepthPrepareJob>& depth_prepare_job_table() {
     d.nest(&DepthPrepareJob::depth, depth_param_table())
         .nest(&DepthPrepareJob::prepare, prepare_param_table())
         .text("out", &DepthPrepareJob::out, "prepared range, float file (.exr, .pfm, .tif)")
+        .writes_file()
         .text("masks", &DepthPrepareJob::masks, "directory for sky.png, holes.png, margin.png and prepared-preview.png")
-        .text("record", &DepthPrepareJob::record, "write a JSON record of what was done");
+        .writes_file()  // a directory the run writes into
+        .text("record", &DepthPrepareJob::record, "write a JSON record of what was done")
+        .writes_file();
     return d;
   }();
   return t;
