@@ -1,9 +1,13 @@
 // brume — image and range-map files.
 //
-// Reading and writing go through OpenImageIO: PNG (8/16-bit), JPEG, TIFF
-// (integer and float), OpenEXR (any channel by name), PFM (Middlebury's: rows
-// stored bottom to top, the sign of the scale gives the byte order, 1 or 3
-// channels) and Radiance HDR.
+// Formats: PNG (8/16-bit), JPEG, TIFF (integer and float), OpenEXR (any
+// channel by name), PFM (Middlebury's: rows stored bottom to top, the sign of
+// the scale gives the byte order, 1 or 3 channels) and Radiance HDR. brume
+// reads and writes PFM itself; the others go through OpenImageIO, which
+// libbrume loads on first use from its module brume_codec.so (looked for
+// beside the executable or Python extension, in ../lib/brume/, at the
+// configured install and build paths, or only at $BRUME_CODEC_MODULE when
+// that is set; src/io/codec.hpp).
 //
 // Colour convention: integer files (8/16-bit) are sRGB-encoded and float files
 // (EXR, PFM, float TIFF, HDR) are linear, unless a Transfer says otherwise.
