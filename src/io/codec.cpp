@@ -111,6 +111,4 @@ const Api& api(const std::string& why_needed) {
               "module's path");
 }
 
-bool loaded() { return g_api.load(std::memory_order_acquire) != nullptr; }
-
 }  // namespace brume::codec

@@ -14,10 +14,10 @@
 // and only there -- for a relocated install. Otherwise, first found wins
 // (each must be the module of this very build, checked by its tag, else the
 // next is tried):
-//   2. next to the executable or shared object that holds libbrume
+//   1. next to the executable or shared object that holds libbrume
 //      (the Python package installs it beside _brume.so);
-//   3. ../lib/brume/ from there (an installed bin/brume);
-//   4. the install path and the build path this libbrume was configured with.
+//   2. ../lib/brume/ from there (an installed bin/brume);
+//   3. the install path and the build path this libbrume was configured with.
 // When none loads, the error names every path tried and why.
 //
 // The interface is C++ (same compiler, same build) but throws nothing across
@@ -34,7 +34,7 @@
 namespace brume::codec {
 
 // The storage type of a file's values.
-enum class Type { u8, u16, f16, f32, other };
+enum class Type { u8, u16, f16, f32 };
 
 struct InputSpec {
   int width = 0, height = 0, channels = 0;
@@ -95,11 +95,9 @@ struct Api {
   void (*float_to_u8)(const float* in, std::uint8_t* out, int n);
 };
 
-// The tag both sides are built with: the module is used only if it matches.
-#define BRUME_CODEC_STR2(x) #x
-#define BRUME_CODEC_STR(x) BRUME_CODEC_STR2(x)
-inline constexpr const char* kCodecTag = "brume-codec-1 " BRUME_VERSION " " BRUME_CODEC_STR(__GNUC__) "." BRUME_CODEC_STR(
-    __GNUC_MINOR__);
+// The tag both sides are built with (interface revision, brume's version,
+// the compiler's): the module is used only if it matches.
+inline constexpr const char* kCodecTag = "brume-codec-1 " BRUME_VERSION " " __VERSION__;
 
 // The module's entry symbol: extern "C" const Api* brume_codec_api();
 inline constexpr const char* kEntrySymbol = "brume_codec_api";
@@ -108,8 +106,5 @@ inline constexpr const char* kEntrySymbol = "brume_codec_api";
 // brume::Error naming every path tried when it cannot be loaded; `why` says
 // what needed it ("reading 'x.png'").
 const Api& api(const std::string& why);
-
-// Whether the module has been loaded in this process (for tests and --timing).
-bool loaded();
 
 }  // namespace brume::codec
