@@ -13,6 +13,19 @@
 // (min..max) of --runs timed runs; machine, threads and size are printed.
 //
 //   brume_bench_blur [--image FILE] [--runs N] [--threads N] [--quick]
+//   brume_bench_blur --ab [--rounds R] [--size WxH] [--image FILE] [--threads N]
+//                    [--fusion HALO_ROWS,RING_BYTES,BAND_HALOS]
+//
+// --ab (issue #16): the interleaved A/B harness. In one process, each round
+// runs every contender once, in its own shuffled order, after a pause: OpenCV at sigma 25, brume at sigma 25
+// with the fused schedule and with one pass per iteration, brume in f16, the
+// space-variant map, OpenCV and brume at sigma 10. After a warm-up round,
+// R rounds; per contender the median and spread of its times, and the median
+// (and spread) of its per-round ratio to OpenCV at the same sigma, so that a
+// host's drift during the run moves both sides of a ratio alike. --size
+// renders the demo scene at another size (e.g. 4000x2800, an image that
+// outgrows a smaller last-level cache); --fusion sets the fused schedule's
+// limits (src/cpu/diffusion_kernels.hpp) for tuning them on a host.
 //
 // Without --image the built-in demo scene is rendered at 1600x1120 and used
 // (written to a temporary EXR and read back, so both contenders see the same
@@ -22,6 +35,9 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <random>
+#include <thread>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -37,6 +53,7 @@
 #include "brume/io.hpp"
 #include "bench_util.hpp"
 #include "brume_opencv.hpp"
+#include "cpu/diffusion_kernels.hpp"  // the fusion limits, for the A/B of the two schedules
 
 using namespace brume;
 
@@ -54,29 +71,161 @@ Timing measure(const std::function<void()>& fn, int runs) {
   return Timing{t.median * 1e-3, t.lo * 1e-3, t.hi * 1e-3, ru.ru_maxrss};
 }
 
+// A space-variant map like haze makes: sigma0 at the bottom row growing as
+// R'^{3/2} to sigma_max at the top.
+Image haze_like_map(int W, int H, double sigma) {
+  Image map(W, H, 1);
+  for (int y = 0; y < H; ++y) {
+    const double r = 1.0 - static_cast<double>(y) / (H - 1);
+    for (int x = 0; x < W; ++x) map.at(x, y) = static_cast<float>(1.0 + std::pow(r, 1.5) * (sigma - 1.0));
+  }
+  return map;
+}
+
+// `brume blur`'s whole work on an RGB image: RGB -> RGBA, diffuse, RGBA -> RGB.
+int blur_rgb(const Image& rgb, const Image& map, double sigma, const DiffusionParams& dp, const Exec& ex) {
+  const int W = rgb.width, H = rgb.height;
+  Image f(W, H, 4);
+  for (std::size_t i = 0; i < rgb.pixels(); ++i) {
+    std::memcpy(&f.data[i * 4], &rgb.data[i * 3], 3 * sizeof(float));
+    f.data[i * 4 + 3] = 1.0f;
+  }
+  const int iters = diffuse(f, map, sigma, dp, ex).iterations;
+  Image out(W, H, 3);
+  for (std::size_t i = 0; i < rgb.pixels(); ++i) std::memcpy(&out.data[i * 3], &f.data[i * 4], 3 * sizeof(float));
+  return iters;
+}
+
+// The interleaved A/B harness (--ab; see the header comment).
+int run_ab(const std::string& image, const std::string& label, int threads, int rounds,
+           const cpu::FusionLimits& fusion) {
+  cpu::set_diffusion_fusion(&fusion);  // the fused contenders' limits (--fusion; default: the library's)
+  const Image rgb = read_color(image);
+  const int W = rgb.width, H = rgb.height;
+  cv::setNumThreads(threads);
+  const cv::Mat src(H, W, CV_32FC3, const_cast<float*>(rgb.data.data()));
+  cv::Mat dst;
+  const Image c25(W, H, 1, 25.0f), c10(W, H, 1, 10.0f), v25 = haze_like_map(W, H, 25.0);
+  Exec ex;
+  ex.threads = threads;
+  DiffusionParams f32, f16;
+  f16.precision = Precision::f16;
+  const cpu::FusionLimits unfused{0, 0, 0};
+  struct Contender {
+    std::string name;
+    double sigma;  // the OpenCV peer of its ratio
+    std::function<void()> run;
+    std::vector<double> ms, ratio;
+  };
+  std::vector<Contender> cs = {
+      {"OpenCV GaussianBlur sigma 25", 25,
+       [&] { cv::GaussianBlur(src, dst, cv::Size(0, 0), 25, 25, cv::BORDER_REFLECT); }, {}, {}},
+      {"brume constant sigma 25, f32, fused passes", 25, [&] { blur_rgb(rgb, c25, 25, f32, ex); }, {}, {}},
+      {"brume constant sigma 25, f32, one pass per iteration", 25,
+       [&] {
+         cpu::set_diffusion_fusion(&unfused);
+         blur_rgb(rgb, c25, 25, f32, ex);
+         cpu::set_diffusion_fusion(&fusion);
+       },
+       {}, {}},
+      {"brume constant sigma 25, f16", 25, [&] { blur_rgb(rgb, c25, 25, f16, ex); }, {}, {}},
+      {"brume space-variant sigma <= 25, f32", 25, [&] { blur_rgb(rgb, v25, 25, f32, ex); }, {}, {}},
+      {"OpenCV GaussianBlur sigma 10", 10,
+       [&] { cv::GaussianBlur(src, dst, cv::Size(0, 0), 10, 10, cv::BORDER_REFLECT); }, {}, {}},
+      {"brume constant sigma 10, f32", 10, [&] { blur_rgb(rgb, c10, 10, f32, ex); }, {}, {}},
+  };
+  for (Contender& c : cs) c.run();  // warm-up round: workspaces, page faults, OpenCV's pools
+  std::mt19937 rng(20261202);
+  const int pause_ms = std::getenv("BRUME_BENCH_PAUSE_MS") ? std::atoi(std::getenv("BRUME_BENCH_PAUSE_MS")) : 200;
+  for (int r = 0; r < rounds; ++r) {
+    std::vector<double> t(cs.size());
+    // Each round runs the contenders in its own order (a fixed-seed shuffle),
+    // so that none always follows the same one, with a pause before each:
+    // the contender run right after OpenCV was measured 1.8x slower at
+    // 4000x2800 on 2 cores, even with fusion off (the same work as the next
+    // contender's), and the pause removed that (OpenCV's worker threads still
+    // spinning when the next contender's threads start is the likely cause).
+    std::vector<std::size_t> order(cs.size());
+    for (std::size_t q = 0; q < order.size(); ++q) order[q] = q;
+    std::shuffle(order.begin(), order.end(), rng);
+    for (const std::size_t i : order) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(pause_ms));
+      const auto a = std::chrono::steady_clock::now();
+      cs[i].run();
+      t[i] = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a).count();
+      cs[i].ms.push_back(t[i]);
+      if (std::getenv("BRUME_BENCH_VERBOSE")) std::fprintf(stderr, "  %-55s %8.1f ms\n", cs[i].name.c_str(), t[i]);
+    }
+    for (std::size_t i = 0; i < cs.size(); ++i)
+      for (std::size_t j = 0; j < cs.size(); ++j)
+        if (cs[j].name.rfind("OpenCV", 0) == 0 && cs[j].sigma == cs[i].sigma) cs[i].ratio.push_back(t[i] / t[j]);
+    std::fprintf(stderr, "round %d/%d done\n", r + 1, rounds);
+  }
+  auto med = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return std::array<double, 3>{v[v.size() / 2], v.front(), v.back()};
+  };
+  std::printf("# brume_bench_blur --ab\n\n- machine: %s, %d threads\n- image: %dx%d RGB float (%s)\n"
+              "- %d interleaved rounds after a warm-up round; median (min..max); ratio: median (min..max) of the "
+              "per-round ratios to OpenCV at the same sigma\n\n",
+              bench::cpu_name().c_str(), threads, W, H, label.c_str(), rounds);
+  std::printf("- fusion limits: halo %d rows, rings %lld bytes per thread, bands >= %d halos\n\n", fusion.halo_rows,
+              fusion.ring_bytes, fusion.band_halos);
+  std::printf("| contender | time ms | vs OpenCV same sigma |\n|---|---:|---:|\n");
+  for (const Contender& c : cs) {
+    const auto t = med(c.ms), q = med(c.ratio);
+    std::printf("| %s | %.1f (%.1f..%.1f) | %.3fx (%.3f..%.3f) |\n", c.name.c_str(), t[0], t[1], t[2], q[0], q[1], q[2]);
+  }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string image;
   int runs = 5, threads = static_cast<int>(sysconf(_SC_NPROCESSORS_ONLN)), only = -1;
-  bool quick = false;
+  bool quick = false, ab = false;
+  int rounds = 9, size_w = 1600, size_h = 1120;
+  cpu::FusionLimits fusion = cpu::diffusion_fusion_limits();
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     if (a == "--image" && i + 1 < argc) image = argv[++i];
+    else if (a == "--ab") ab = true;
+    else if (a == "--fusion" && i + 1 < argc) {
+      if (std::sscanf(argv[++i], "%d,%lld,%d", &fusion.halo_rows, &fusion.ring_bytes, &fusion.band_halos) != 3) {
+        std::fprintf(stderr, "--fusion: expected HALO_ROWS,RING_BYTES,BAND_HALOS, got '%s'\n", argv[i]);
+        return 2;
+      }
+    }
+    else if (a == "--rounds" && i + 1 < argc) rounds = std::max(1, std::atoi(argv[++i]));
+    else if (a == "--size" && i + 1 < argc) {
+      if (std::sscanf(argv[++i], "%dx%d", &size_w, &size_h) != 2 || size_w < 64 || size_h < 64) {
+        std::fprintf(stderr, "--size: expected WxH, each at least 64, got '%s'\n", argv[i]);
+        return 2;
+      }
+    }
     else if (a == "--case" && i + 1 < argc) only = std::atoi(argv[++i]);
     else if (a == "--runs" && i + 1 < argc) runs = std::atoi(argv[++i]);
     else if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
     else if (a == "--quick") quick = true;
     else {
-      std::fprintf(stderr, "usage: %s [--image FILE] [--runs N] [--threads N] [--quick]\n", argv[0]);
+      std::fprintf(stderr,
+                   "usage: %s [--image FILE] [--runs N] [--threads N] [--quick]\n"
+                   "       %s --ab [--rounds R] [--size WxH] [--image FILE] [--threads N]\n",
+                   argv[0], argv[0]);
       return 2;
     }
   }
   std::string tmp;
   if (image.empty()) {
     tmp = (std::filesystem::temp_directory_path() / ("brume_bench_" + std::to_string(getpid()) + ".exr")).string();
-    write_image(tmp, render_demo_scene(1600, 1120).rgb, WriteOptions{});
+    write_image(tmp, render_demo_scene(size_w, size_h).rgb, WriteOptions{});
     image = tmp;
+  }
+  if (ab) {
+    const int rc = run_ab(image, image == tmp ? "built-in demo scene" : image, threads, rounds, fusion);
+    if (!tmp.empty()) std::filesystem::remove(tmp);
+    return rc;
   }
 
   struct Case {

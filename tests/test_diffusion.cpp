@@ -3,15 +3,19 @@
 // mirror symmetry), the fast path against the double-precision reference,
 // thread-count independence, the vector widths of the fast path (same
 // bits), and the f16 finding of Hansard §5.2.
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iterator>
+#include <string>
 #include <thread>
 #include <vector>
 
 #include "brume/diffusion.hpp"
 #include "brume/error.hpp"
+#include "cpu/diffusion_fusion.hpp"
 #include "cpu/diffusion_kernels.hpp"
 #include "test_util.hpp"
 
@@ -401,6 +405,21 @@ Image dome_map(int w, int h, double s0, double smax) {
   return m;
 }
 
+// The fast path against the double-precision reference at the tolerances of
+// MatchesScalarReference (float rounding over ~11-50 iterations plus the
+// running product for sigma_k).
+void expect_fast_near_reference(const Image& f, const Image& map, double sigma, const DiffusionParams& dp,
+                                const std::string& what) {
+  Image fast = f, ref = f;
+  diffuse(fast, map, sigma, dp);
+  Exec ex;
+  ex.path = Path::reference;
+  diffuse(ref, map, sigma, dp, ex);
+  const Diff d = compare(fast, ref);
+  EXPECT_LE(d.max_abs, 2e-5) << what << ": " << d;
+  EXPECT_LE(d.rms, 2e-6) << what << ": " << d;
+}
+
 // Caps the fast path's vector width for the scope (cpu::set_diffusion_simd_limit).
 struct SimdLimit {
   explicit SimdLimit(int level) { cpu::set_diffusion_simd_limit(level); }
@@ -483,14 +502,7 @@ TEST(DiffusionSimd, SpaceVariantRunsMatchTheReferenceOnATwoAxisMap) {
     for (EdgeRate e : {EdgeRate::mean, EdgeRate::min, EdgeRate::harmonic}) {
       DiffusionParams dp = params(s);
       dp.edge_rate = e;
-      Image fast = f, ref = f;
-      diffuse(fast, map, 9.0, dp);
-      Exec ex;
-      ex.path = Path::reference;
-      diffuse(ref, map, 9.0, dp, ex);
-      const Diff d = compare(fast, ref);
-      EXPECT_LE(d.max_abs, 2e-5) << to_string(s) << " " << to_string(e) << ": " << d;
-      EXPECT_LE(d.rms, 2e-6) << to_string(s) << " " << to_string(e) << ": " << d;
+      expect_fast_near_reference(f, map, 9.0, dp, to_string(s) + " " + to_string(e));
     }
 }
 
@@ -526,4 +538,100 @@ TEST(DiffusionWorkspace, ReusedAndReleasedBuffersGiveTheSameBits) {
   tb.join();
   EXPECT_EQ(a.data, first_big.data);
   EXPECT_EQ(b.data, first_small.data);
+}
+
+namespace {
+
+// Sets the fusion limits of the fast path for the scope (nullptr: defaults).
+struct FusionScope {
+  explicit FusionScope(const cpu::FusionLimits* l) { cpu::set_diffusion_fusion(l); }
+  ~FusionScope() { cpu::set_diffusion_fusion(nullptr); }
+};
+
+}  // namespace
+
+TEST(DiffusionFusion, PlanFusesTheSmallOffsetsAndLeavesTheLargeAlone) {
+  // The default plan of the README benchmark (sigma 25, 17 iterations of the
+  // exact scheme, 1600x1120, 2 threads): the early iterations, whose offsets
+  // are 1-3 px, share passes; the last ones (offsets 12-22 px) run alone.
+  DiffusionParams dp = params(Scheme::invariant_exact);
+  const int N = 17;
+  const float rho = static_cast<float>(std::log(25.0 / dp.sigma0) / N);
+  const auto st = cpu::uniform_steps(N, 1.0f, rho, true, static_cast<int>(dp.edge_rate));
+  const auto groups = cpu::plan_fusion(st, 1600, 1120, 2, sizeof(float));
+  int k = 0;
+  for (const auto& g : groups) {
+    EXPECT_EQ(g.k0, k);
+    k += g.m;
+  }
+  EXPECT_EQ(k, N);
+  ASSERT_GE(groups.front().m, 4) << "the first iterations (offsets 1-2 px) are fused";
+  EXPECT_LT(groups.size(), static_cast<std::size_t>(N) - 6) << "fewer passes than iterations";
+  EXPECT_EQ(groups.back().m, 1) << "the last iteration's offset (" << st.back().n << " px) runs alone";
+  // No fusion at all when the limits say so.
+  const cpu::FusionLimits off{0, 0, 0};
+  FusionScope scope(&off);
+  EXPECT_EQ(cpu::plan_fusion(st, 1600, 1120, 2, sizeof(float)).size(), static_cast<std::size_t>(N));
+}
+
+TEST(DiffusionFusion, FusedPassesGiveTheBitsOfOnePassPerIteration) {
+  // Every row of every level of a fused group is computed by the same row
+  // function from the same input rows as one pass per iteration, so the
+  // result must be bit for bit the same: both invariant schemes, the three
+  // edge rates, f32 and f16 (float storage rounded each iteration, and the
+  // binary16 storage where F16C exists), at every vector width, for thread
+  // counts that cut the image into bands of different heights, and for
+  // groups from two iterations to all of them. The images are tall enough
+  // for the fusion to happen and narrow enough for mirrored column taps; the
+  // 7-row image has offsets larger than itself (taps reflected twice).
+  struct Size {
+    int w, h;
+    double sigma;
+  };
+  const Size sizes[] = {{61, 300, 9.0}, {37, 181, 14.0}, {23, 7, 9.0}};
+  const cpu::FusionLimits none{0, 0, 0}, small{6, 1LL << 30, 0}, all{1 << 20, 1LL << 30, 0};
+  const int widest = cpu::diffusion_simd_level();
+  for (const Size& z : sizes) {
+    const Image f = texture(z.w, z.h);
+    const Image map = constant_map(f, z.sigma);
+    for (Scheme s : {Scheme::invariant, Scheme::invariant_exact})
+      for (EdgeRate e : {EdgeRate::mean, EdgeRate::harmonic})
+        for (Precision p : {Precision::f32, Precision::f16})
+          for (int level : {0, widest}) {
+            SimdLimit cap(level);
+            DiffusionParams dp = params(s, p);
+            dp.edge_rate = e;
+            Image want = f;
+            {
+              FusionScope scope(&none);
+              diffuse(want, map, z.sigma, dp);
+            }
+            for (const cpu::FusionLimits* lim : {&small, &all})
+              for (int threads : {1, 2, 3, 7}) {
+                FusionScope scope(lim);
+                Exec ex;
+                ex.threads = threads;
+                Image got = f;
+                diffuse(got, map, z.sigma, dp, ex);
+                EXPECT_EQ(got.data, want.data)
+                    << z.w << "x" << z.h << " " << to_string(s) << " " << to_string(e) << " " << to_string(p)
+                    << " width level " << level << " halo limit " << lim->halo_rows << " threads " << threads;
+              }
+          }
+  }
+}
+
+TEST(DiffusionFusion, DefaultScheduleMatchesTheReference) {
+  // The default (fused) schedule on an image large enough for the default
+  // limits to fuse, against the double-precision reference at the tolerance
+  // of MatchesScalarReference: fusion changes which pass computes a row, not
+  // its arithmetic.
+  const Image f = texture(120, 400);
+  const DiffusionParams dp = params(Scheme::invariant_exact);
+  const int N = plan_diffusion(dp, 12.0).iterations;
+  const float rho = static_cast<float>(std::log(12.0 / dp.sigma0) / N);
+  const auto st = cpu::uniform_steps(N, 1.0f, rho, true, static_cast<int>(dp.edge_rate));
+  ASSERT_LT(cpu::plan_fusion(st, 120, 400, omp_get_max_threads(), sizeof(float)).size(), st.size())
+      << "this image is fused by the default limits";
+  expect_fast_near_reference(f, constant_map(f, 12.0), 12.0, dp, "fused, default limits");
 }

@@ -19,7 +19,10 @@
 //    makes every offset and weight equal, and the interior of each row is
 //    then a contiguous 5-tap loop over floats that the compiler vectorises
 //    (AVX2 clone selected at run time). It performs the same arithmetic in
-//    the same order as the general path, so it gives the same bits;
+//    the same order as the general path, so it gives the same bits. Its
+//    iterations with small offsets share passes over the image (temporal
+//    blocking, diffusion_fusion.hpp): 17 iterations at sigma 25 take 6
+//    passes, with the same bits;
 //  - a space-variant scale splits each row into runs of pixels whose offsets
 //    share their integer part; inside the image a run's rate samples, edge
 //    weights and taps are contiguous, so they are computed by vector loops
@@ -36,6 +39,7 @@
 #include <vector>
 
 #include "core/huge_pages.hpp"
+#include "cpu/diffusion_fusion.hpp"
 #include "cpu/diffusion_rows.hpp"
 #include "cpu/half.hpp"
 
@@ -358,6 +362,23 @@ RowKernels row_kernels() {
 
 }  // namespace
 
+namespace {
+// Defaults of the fusion limits (what they bound: diffusion_fusion.hpp),
+// measured in README "Speed".
+constexpr FusionLimits kFusionDefaults{32, 1536 * 1024, 4};
+std::mutex g_fusion_mutex;
+FusionLimits g_fusion = kFusionDefaults;
+}  // namespace
+
+FusionLimits diffusion_fusion_limits() {
+  std::lock_guard<std::mutex> lock(g_fusion_mutex);
+  return g_fusion;
+}
+void set_diffusion_fusion(const FusionLimits* limits) {
+  std::lock_guard<std::mutex> lock(g_fusion_mutex);
+  g_fusion = limits ? *limits : kFusionDefaults;
+}
+
 int diffusion_simd_level() {
   const int limit = g_simd_limit.load(std::memory_order_relaxed);
   return limit < 0 ? simd_available() : std::min(limit, simd_available());
@@ -513,42 +534,43 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
   if (f16) round_to_half(src, f.data.size());
   // (Level 0 keeps binary16 values in float storage, rounded by
   // round_to_half: the tests' peer of the F16C storage.)
-  if (uniform && f16 && diffusion_simd_level() >= 1 &&
-      uniform_iterations_f16(src, W, H, N, s0, rates[0], exact, edge_mode, nt,
-                             ws.get_half(0, f.data.size()), ws.get_half(1, f.data.size()))) {
-    return;  // done in binary16 storage (result in f)
+  // The constant-scale schedule: every iteration's offset and weight, and
+  // which iterations share a pass (diffusion_fusion.hpp).
+  std::vector<UniformStep> steps;
+  std::vector<FusedGroup> groups;
+  if (uniform) {
+    steps = uniform_steps(N, s0, rates[0], exact, edge_mode);
+    if (f16 && diffusion_simd_level() >= 1) {
+      groups = plan_fusion(steps, W, H, nt, sizeof(std::uint16_t));
+      const std::size_t ring_values = std::max<std::size_t>(1, fusion_ring_values(steps, groups, W, nt));
+      if (uniform_iterations_f16(src, W, H, steps, groups, nt, ws.get_half(0, f.data.size()),
+                                 ws.get_half(1, f.data.size()), ws.get_half(2, ring_values)))
+        return;  // done in binary16 storage (result in f)
+    }
+    groups = plan_fusion(steps, W, H, nt, sizeof(float));
   }
   // Ping-pong partner, as in diffuse_conductance_fast.
   float* dst = ws.get(Workspace::partner, f.data.size());
 
   if (uniform) {
-    const float rho = rates[0];
-    const float growth = std::exp(rho);
-    float sig = s0;  // sigma_k, the same running product as the general path
-    for (int k = 0; k < N; ++k) {
-      // Named copies, not a structured binding: clang-14 cannot capture a binding in an OpenMP region.
-      const UniformStep st = uniform_step(sig, rho, exact, edge_mode);
-      const float h = st.h, fr = st.fr, w = st.w;
+    // Every offset and weight is the same for the whole image: one row
+    // function (vectorised interior, mirrored border columns), run over the
+    // iterations either one pass per iteration or, where the offsets are
+    // small, several iterations per pass (temporal blocking:
+    // diffusion_fusion.hpp). Same rows from the same inputs either way.
+    float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(steps, groups, W, nt)));
+    auto row = [&](const float* s, const float* u0, const float* u1, const float* d0, const float* d1, float* o,
+                   const UniformStep& st) {
       const int n = st.n;
       // Columns whose taps x-n-1 .. x+n+1 all lie inside the row.
       const int xa = std::min(n + 1, W), xb = std::max(W - n - 1, xa);
-#pragma omp parallel for num_threads(nt) schedule(static)
-      for (int y = 0; y < H; ++y) {
-        const float* s = src + y * Ws * 4;
-        const float* u0 = src + mirror(y - n, H) * Ws * 4;
-        const float* u1 = src + mirror(y - n - 1, H) * Ws * 4;
-        const float* d0 = src + mirror(y + n, H) * Ws * 4;
-        const float* d1 = src + mirror(y + n + 1, H) * Ws * 4;
-        float* o = dst + y * Ws * 4;
-        kern.uniform(s, u0, u1, d0, d1, o, static_cast<std::size_t>(xa) * 4,
-                             static_cast<std::size_t>(xb) * 4, static_cast<std::ptrdiff_t>(n) * 4, fr, w);
-        for (int x = 0; x < xa; ++x) update_pixel<true>(src, dst, nullptr, w, W, H, x, y, h);
-        for (int x = xb; x < W; ++x) update_pixel<true>(src, dst, nullptr, w, W, H, x, y, h);
-        if (f16) round_to_half(o, Ws * 4);
-      }
-      sig *= growth;
-      std::swap(src, dst);
-    }
+      kern.uniform(s, u0, u1, d0, d1, o, static_cast<std::size_t>(xa) * 4, static_cast<std::size_t>(xb) * 4,
+                   static_cast<std::ptrdiff_t>(n) * 4, st.fr, st.w);
+      for (int x = 0; x < xa; ++x) uniform_border_pixel(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
+      for (int x = xb; x < W; ++x) uniform_border_pixel(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
+      if (f16) round_to_half(o, Ws * 4);
+    };
+    src = uniform_iterations_fused(src, dst, W, H, steps, groups, nt, ring, row);
   } else {
     // Per-pixel rate, sigma_k as a running product, and the exact scheme's
     // variance ratio (e^{2 rho} - 1)/(2 rho).

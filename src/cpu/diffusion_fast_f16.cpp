@@ -7,7 +7,9 @@
 // read and written as 8 bytes per pixel instead of 16. The arithmetic is the
 // float path's, term by term, and every stored value is rounded to nearest
 // binary16 exactly as round_to_half does, so the result is bit-identical to
-// the float-storage f16 path.
+// the float-storage f16 path. The schedule is the float path's too: the
+// groups of iterations that share a pass (diffusion_fusion.hpp), planned by
+// the caller with 2-byte values.
 #include <omp.h>
 
 #include <algorithm>
@@ -16,6 +18,7 @@
 #include <memory>
 
 #include "cpu/half.hpp"
+#include "cpu/diffusion_fusion.hpp"
 #include "cpu/diffusion_rows.hpp"
 
 #if defined(__x86_64__) && defined(__F16C__) && defined(__AVX2__)
@@ -75,41 +78,31 @@ void row_interior_f16(const std::uint16_t* s, const std::uint16_t* u0, const std
 
 }  // namespace
 
-bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, bool exact, int edge_mode,
-                            int threads, std::uint16_t* a, std::uint16_t* b) {
+bool uniform_iterations_f16(float* f, int W, int H, const std::vector<UniformStep>& steps,
+                            const std::vector<FusedGroup>& groups, int threads, std::uint16_t* a, std::uint16_t* b,
+                            std::uint16_t* ring) {
   static const bool supported = __builtin_cpu_supports("avx2") && cpu_has_f16c();
   if (!supported) return false;
   const std::size_t Ws = static_cast<std::size_t>(W);
-  std::uint16_t* src = a;
-  std::uint16_t* dst = b;
   // F arrives rounded to binary16 already, so this conversion is exact.
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y)
-    for (std::size_t i = y * Ws * 4; i < (y + 1) * Ws * 4; i += 4) StoreF16::store(src + i, StoreF32::load(f + i));
-  const float growth = std::exp(rho);
-  float sig = s0;
-  for (int k = 0; k < N; ++k) {
-    // Named copies, not a structured binding: clang-14 cannot capture a binding in an OpenMP region.
-    const UniformStep st = uniform_step(sig, rho, exact, edge_mode);
-    const float h = st.h, fr = st.fr, w = st.w;
-    const int nn = st.n;
-    const int xa = std::min(nn + 1, W), xb = std::max(W - nn - 1, xa);
-#pragma omp parallel for num_threads(threads) schedule(static)
-    for (int y = 0; y < H; ++y) {
-      const std::uint16_t* s = src + y * Ws * 4;
-      row_interior_f16(s, src + mirror(y - nn, H) * Ws * 4, src + mirror(y - nn - 1, H) * Ws * 4,
-                       src + mirror(y + nn, H) * Ws * 4, src + mirror(y + nn + 1, H) * Ws * 4, dst + y * Ws * 4,
-                       static_cast<std::size_t>(xa) * 4, static_cast<std::size_t>(xb) * 4,
-                       static_cast<std::ptrdiff_t>(nn) * 4, fr, w);
-      for (int x = 0; x < xa; ++x) update_pixel<true, StoreF16>(src, dst, nullptr, w, W, H, x, y, h);
-      for (int x = xb; x < W; ++x) update_pixel<true, StoreF16>(src, dst, nullptr, w, W, H, x, y, h);
-    }
-    sig *= growth;
-    std::swap(src, dst);
-  }
+    for (std::size_t i = y * Ws * 4; i < (y + 1) * Ws * 4; i += 4) StoreF16::store(a + i, StoreF32::load(f + i));
+  // One row of one iteration, as diffusion_fast.cpp's float row: the vector
+  // interior, then the mirrored border columns.
+  auto row = [W](const std::uint16_t* s, const std::uint16_t* u0, const std::uint16_t* u1, const std::uint16_t* d0,
+                 const std::uint16_t* d1, std::uint16_t* o, const UniformStep& st) {
+    const int n = st.n;
+    const int xa = std::min(n + 1, W), xb = std::max(W - n - 1, xa);
+    row_interior_f16(s, u0, u1, d0, d1, o, static_cast<std::size_t>(xa) * 4, static_cast<std::size_t>(xb) * 4,
+                     static_cast<std::ptrdiff_t>(n) * 4, st.fr, st.w);
+    for (int x = 0; x < xa; ++x) uniform_border_pixel<StoreF16>(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
+    for (int x = xb; x < W; ++x) uniform_border_pixel<StoreF16>(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
+  };
+  const std::uint16_t* res = uniform_iterations_fused(a, b, W, H, steps, groups, threads, ring, row);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (int y = 0; y < H; ++y)
-    for (std::size_t i = y * Ws * 4; i < (y + 1) * Ws * 4; i += 4) StoreF32::store(f + i, StoreF16::load(src + i));
+    for (std::size_t i = y * Ws * 4; i < (y + 1) * Ws * 4; i += 4) StoreF32::store(f + i, StoreF16::load(res + i));
   return true;
 }
 
@@ -118,7 +111,8 @@ bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, 
 #else  // no F16C build: the float-storage path rounds to binary16 instead
 
 namespace brume::cpu {
-bool uniform_iterations_f16(float*, int, int, int, float, float, bool, int, int, std::uint16_t*, std::uint16_t*) {
+bool uniform_iterations_f16(float*, int, int, const std::vector<UniformStep>&, const std::vector<FusedGroup>&, int,
+                            std::uint16_t*, std::uint16_t*, std::uint16_t*) {
   return false;
 }
 }  // namespace brume::cpu

@@ -32,18 +32,19 @@ inline int mirror(int i, int n) {
 // Every value is written before it is read, so reuse cannot change a result.
 class Workspace {
  public:
-  enum Slot { partner, rates, sigma, growth, vratio, edge_x, edge_y, kSlots };
+  enum Slot { partner, rates, sigma, growth, vratio, edge_x, edge_y, ring, kSlots };
   // At least n floats, uninitialised; valid until the next get of that slot.
   float* get(Slot s, std::size_t n);
-  // The two binary16 ping-pong buffers of the f16 constant-scale path.
+  // The binary16 buffers of the f16 constant-scale path: 0 and 1 the
+  // ping-pong pair, 2 the fused schedule's rings.
   std::uint16_t* get_half(int which, std::size_t n);
   std::size_t bytes() const;
 
  private:
   std::unique_ptr<float[]> p_[kSlots];
   std::size_t n_[kSlots] = {};
-  std::unique_ptr<std::uint16_t[]> h_[2];
-  std::size_t hn_[2] = {};
+  std::unique_ptr<std::uint16_t[]> h_[3];
+  std::size_t hn_[3] = {};
 };
 
 // One diffusion call's hold on a workspace: the process keeps at most one
@@ -101,6 +102,19 @@ void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int it
 // iteration) instead of binary16 storage, the bits the latter must match.
 int diffusion_simd_level();
 void set_diffusion_simd_limit(int level);
+
+// Temporal blocking of the constant-scale iterations (diffusion_fusion.hpp):
+// which consecutive iterations may share one pass over the image.
+struct FusionLimits {
+  int halo_rows;           // a group's total halo r_1 + ... + r_m at most this; 0: no fusion
+  long long ring_bytes;    // its rings at most this many bytes per thread
+  int band_halos;          // a thread's band at least this many halos tall
+};
+// The limits in force: the defaults, or those set_diffusion_fusion set
+// (nullptr: the defaults again), so that tests and benchmarks can compare
+// schedules on one host. Results do not depend on them.
+FusionLimits diffusion_fusion_limits();
+void set_diffusion_fusion(const FusionLimits* limits);
 
 // Round n floats to the nearest IEEE binary16 value (ties to even), in place.
 void round_to_half(float* v, std::size_t n);

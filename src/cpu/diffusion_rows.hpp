@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <cstring>
+#include <vector>
 
 #include "cpu/diffusion_kernels.hpp"
 #include "cpu/diffusion_stencil.hpp"
@@ -73,6 +74,23 @@ inline void update_pixel(const typename S::T* src, typename S::T* dst, const flo
                 S::load(src + (yd0 * Ws + x) * 4), S::load(src + (yd1 * Ws + x) * 4), fr, wl, wr, wu, wd));
 }
 
+// One pixel of a constant-scale iteration (every weight w_all, offset h =
+// n + fr) from row pointers: the centre row s and the rows at -n, -(n+1),
+// +n, +(n+1), already mirrored; the column taps are mirrored here. Row
+// pointers let the fused schedule (diffusion_fusion.hpp) feed rows from its
+// rings. Same taps, same eq11, hence the same bits as update_pixel<true, S>
+// (which mirrors every index once any falls outside; mirror is the identity
+// inside).
+template <class S = StoreF32>
+inline void uniform_border_pixel(const typename S::T* s, const typename S::T* u0, const typename S::T* u1,
+                                 const typename S::T* d0, const typename S::T* d1, typename S::T* o, int W, int x,
+                                 int n, float fr, float w) {
+  const std::ptrdiff_t c = static_cast<std::ptrdiff_t>(x) * 4;
+  S::store(o + c, eq11(S::load(s + c), S::load(s + mirror(x - n, W) * 4), S::load(s + mirror(x - n - 1, W) * 4),
+                       S::load(s + mirror(x + n, W) * 4), S::load(s + mirror(x + n + 1, W) * 4), S::load(u0 + c),
+                       S::load(u1 + c), S::load(d0 + c), S::load(d1 + c), fr, w, w, w, w));
+}
+
 // Offset, interpolation fraction and eq. 12 weight of one iteration when the
 // target scale is the same everywhere (every pixel has the same sigma_k).
 struct UniformStep {
@@ -90,10 +108,18 @@ inline UniformStep uniform_step(float sigma_k, float rho, bool exact, int edge_m
 
 // f16 storage of the constant-scale path on CPUs with F16C (x86-64): F is
 // kept as binary16 bits between iterations, halving the memory traffic, with
-// the same arithmetic and rounding as the float path + round_to_half. Returns
-// false (and does nothing) where F16C is missing. a and b: two buffers of
-// W x H x 4 binary16 values (the workspace's), contents ignored.
-bool uniform_iterations_f16(float* f, int W, int H, int N, float s0, float rho, bool exact, int edge_mode,
-                            int threads, std::uint16_t* a, std::uint16_t* b);
+// the same arithmetic and rounding as the float path + round_to_half, and the
+// same schedule (steps and fused groups: diffusion_fusion.hpp, computed by
+// the caller so that this -mavx2 file compiles none of the planning).
+// Returns false (and does nothing) where F16C is missing. a and b: two
+// buffers of W x H x 4 binary16 values, ring: fusion_ring_values(...)
+// values (the workspace's), contents ignored.
+// A run of consecutive iterations [k0, k0 + m) done in one pass.
+struct FusedGroup {
+  int k0, m;
+};
+bool uniform_iterations_f16(float* f, int W, int H, const std::vector<UniformStep>& steps,
+                            const std::vector<FusedGroup>& groups, int threads, std::uint16_t* a, std::uint16_t* b,
+                            std::uint16_t* ring);
 
 }  // namespace brume::cpu
