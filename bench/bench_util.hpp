@@ -28,15 +28,24 @@ inline Spread time_ms(const std::function<void()>& fn, int runs) {
   return {t[t.size() / 2], t.front(), t.back()};
 }
 
+// The CPU's model name with its family and model numbers: virtual hosts
+// often report a bare "AMD EPYC" for different generations (family 25 is
+// Zen 3/4, 26 Zen 5), whose speed ratios differ.
 inline std::string cpu_name() {
   std::ifstream f("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("model name", 0) == 0) {
-      const auto c = line.find(':');
-      return c == std::string::npos ? line : line.substr(c + 2);
-    }
-  return "unknown CPU";
+  std::string line, name = "unknown CPU", family, model;
+  auto value = [&] {
+    const auto c = line.find(':');
+    return c == std::string::npos ? std::string() : line.substr(c + 2);
+  };
+  while (std::getline(f, line)) {
+    if (line.rfind("model name", 0) == 0) name = value();
+    else if (line.rfind("cpu family", 0) == 0 && family.empty()) family = value();
+    else if (line.rfind("model\t", 0) == 0 && model.empty()) model = value();
+    if (line.empty() && name != "unknown CPU") break;  // the first processor's block
+  }
+  if (!family.empty() && !model.empty()) name += " (family " + family + ", model " + model + ")";
+  return name;
 }
 
 }  // namespace brume::bench
