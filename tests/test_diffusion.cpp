@@ -548,6 +548,40 @@ struct FusionScope {
   ~FusionScope() { cpu::set_diffusion_fusion(nullptr); }
 };
 
+// Diffusing f with `map` under each of `limits` at 1, 2, 3 and 7 threads
+// gives the bits of one pass per iteration: both invariant schemes, the
+// given edge rates, f32 and f16, the narrowest and the widest vectors.
+void expect_fusion_keeps_bits(const Image& f, const Image& map, double smax, const std::vector<EdgeRate>& edges,
+                              const std::vector<cpu::FusionLimits>& limits, const std::string& what) {
+  const cpu::FusionLimits none{0, 0, 0};
+  const int widest = cpu::diffusion_simd_level();
+  for (Scheme s : {Scheme::invariant, Scheme::invariant_exact})
+    for (EdgeRate e : edges)
+      for (Precision p : {Precision::f32, Precision::f16})
+        for (int level : {0, widest}) {
+          SimdLimit cap(level);
+          DiffusionParams dp = params(s, p);
+          dp.edge_rate = e;
+          Image want = f;
+          {
+            FusionScope scope(&none);
+            diffuse(want, map, smax, dp);
+          }
+          for (const cpu::FusionLimits& lim : limits)
+            for (int threads : {1, 2, 3, 7}) {
+              FusionScope scope(&lim);
+              Exec ex;
+              ex.threads = threads;
+              Image got = f;
+              diffuse(got, map, smax, dp, ex);
+              EXPECT_EQ(got.data, want.data)
+                  << what << " " << f.width << "x" << f.height << " " << to_string(s) << " " << to_string(e) << " "
+                  << to_string(p) << " width level " << level << " halo limit " << lim.halo_rows << " threads "
+                  << threads;
+            }
+        }
+}
+
 }  // namespace
 
 TEST(DiffusionFusion, PlanFusesTheSmallOffsetsAndLeavesTheLargeAlone) {
@@ -558,7 +592,7 @@ TEST(DiffusionFusion, PlanFusesTheSmallOffsetsAndLeavesTheLargeAlone) {
   const int N = 17;
   const float rho = static_cast<float>(std::log(25.0 / dp.sigma0) / N);
   const auto st = cpu::uniform_steps(N, 1.0f, rho, true, static_cast<int>(dp.edge_rate));
-  const auto groups = cpu::plan_fusion(st, 1600, 1120, 2, sizeof(float));
+  const auto groups = cpu::plan_fusion(cpu::uniform_radii(st), 1600, 1120, 2, sizeof(float));
   int k = 0;
   for (const auto& g : groups) {
     EXPECT_EQ(g.k0, k);
@@ -571,14 +605,14 @@ TEST(DiffusionFusion, PlanFusesTheSmallOffsetsAndLeavesTheLargeAlone) {
   // No fusion at all when the limits say so.
   const cpu::FusionLimits off{0, 0, 0};
   FusionScope scope(&off);
-  EXPECT_EQ(cpu::plan_fusion(st, 1600, 1120, 2, sizeof(float)).size(), static_cast<std::size_t>(N));
+  EXPECT_EQ(cpu::plan_fusion(cpu::uniform_radii(st), 1600, 1120, 2, sizeof(float)).size(), static_cast<std::size_t>(N));
 }
 
 TEST(DiffusionFusion, FusedPassesGiveTheBitsOfOnePassPerIteration) {
   // Every row of every level of a fused group is computed by the same row
   // function from the same input rows as one pass per iteration, so the
-  // result must be bit for bit the same: both invariant schemes, the three
-  // edge rates, f32 and f16 (float storage rounded each iteration, and the
+  // result must be bit for bit the same: both invariant schemes, two edge
+  // rates (mean, harmonic), f32 and f16 (float storage rounded each iteration, and the
   // binary16 storage where F16C exists), at every vector width, for thread
   // counts that cut the image into bands of different heights, and for
   // groups from two iterations to all of them. The images are tall enough
@@ -589,35 +623,62 @@ TEST(DiffusionFusion, FusedPassesGiveTheBitsOfOnePassPerIteration) {
     double sigma;
   };
   const Size sizes[] = {{61, 300, 9.0}, {37, 181, 14.0}, {23, 7, 9.0}};
-  const cpu::FusionLimits none{0, 0, 0}, small{6, 1LL << 30, 0}, all{1 << 20, 1LL << 30, 0};
-  const int widest = cpu::diffusion_simd_level();
   for (const Size& z : sizes) {
     const Image f = texture(z.w, z.h);
-    const Image map = constant_map(f, z.sigma);
-    for (Scheme s : {Scheme::invariant, Scheme::invariant_exact})
-      for (EdgeRate e : {EdgeRate::mean, EdgeRate::harmonic})
-        for (Precision p : {Precision::f32, Precision::f16})
-          for (int level : {0, widest}) {
-            SimdLimit cap(level);
-            DiffusionParams dp = params(s, p);
-            dp.edge_rate = e;
-            Image want = f;
-            {
-              FusionScope scope(&none);
-              diffuse(want, map, z.sigma, dp);
-            }
-            for (const cpu::FusionLimits* lim : {&small, &all})
-              for (int threads : {1, 2, 3, 7}) {
-                FusionScope scope(lim);
-                Exec ex;
-                ex.threads = threads;
-                Image got = f;
-                diffuse(got, map, z.sigma, dp, ex);
-                EXPECT_EQ(got.data, want.data)
-                    << z.w << "x" << z.h << " " << to_string(s) << " " << to_string(e) << " " << to_string(p)
-                    << " width level " << level << " halo limit " << lim->halo_rows << " threads " << threads;
-              }
-          }
+    expect_fusion_keeps_bits(f, constant_map(f, z.sigma), z.sigma, {EdgeRate::mean, EdgeRate::harmonic},
+                             {{6, 1LL << 30, 0}, {1 << 20, 1LL << 30, 0}}, "constant");
+  }
+}
+
+TEST(DiffusionFusion, SpaceVariantFusedPassesGiveTheBitsOfOnePassPerIteration) {
+  // The space-variant rows blocked the same way: each fused level's rows
+  // read their taps through the rings, sigma_k of a level's row is the
+  // group's sigma times growth j times, and the group's last level writes
+  // sigma back. Maps that vary along both axes with a sharp step (runs of
+  // every length, mirrored pixels), a ramp, and a map on an image shorter
+  // than its offsets; the three edge rates, both invariant schemes, f32 and
+  // f16, every vector width, 1/2/3/7 threads, small and unlimited groups.
+  struct Case {
+    int w, h;
+    double smax;
+    bool dome;
+  };
+  const Case cases[] = {{61, 300, 9.0, true}, {37, 181, 14.0, false}, {23, 7, 9.0, true}};
+  for (const Case& c : cases) {
+    const Image f = texture(c.w, c.h);
+    const Image map = c.dome ? dome_map(c.w, c.h, 1.0, c.smax) : ramp_map(c.w, c.h, 1.0, c.smax);
+    expect_fusion_keeps_bits(f, map, c.smax, {EdgeRate::mean, EdgeRate::min, EdgeRate::harmonic},
+                             {{8, 1LL << 30, 0}, {1 << 20, 1LL << 30, 0}}, c.dome ? "dome" : "ramp");
+  }
+}
+
+TEST(DiffusionFusion, SpaceVariantRadiiBoundEveryPixelsOffset) {
+  // general_radii must bound n + 1 of every pixel at every iteration (a tap
+  // outside a level's ring would read another row's values): checked
+  // against the offsets the fast path computes, pixel by pixel, on a map
+  // whose rates span 0 (sigma = sigma0) to the largest.
+  const int W = 97, H = 61;
+  const Image map = dome_map(W, H, 1.0, 30.0);
+  for (bool exact : {false, true}) {
+    DiffusionParams dp = params(exact ? Scheme::invariant_exact : Scheme::invariant);
+    const int N = plan_diffusion(dp, 30.0).iterations;
+    std::vector<float> rho(map.data.size());
+    for (std::size_t i = 0; i < rho.size(); ++i)
+      rho[i] = shared::brume_invariant_rate(map.data[i], 1.0f, static_cast<float>(N));
+    const cpu::Radii r = cpu::general_radii(rho.data(), rho.size(), N, 1.0f, exact);
+    ASSERT_EQ(r.size(), static_cast<std::size_t>(N));
+    int tight = 0;
+    for (std::size_t i = 0; i < rho.size(); ++i) {
+      const float g = std::exp(rho[i]);
+      float sg = 1.0f;
+      for (int k = 0; k < N; ++k) {
+        const int n = static_cast<int>(shared::brume_invariant_offset(sg, rho[i], exact));
+        ASSERT_LE(n + 1, r[static_cast<std::size_t>(k)]) << "pixel " << i << " iteration " << k;
+        if (n + 2 == r[static_cast<std::size_t>(k)]) ++tight;
+        sg *= g;
+      }
+    }
+    EXPECT_GT(tight, 0) << "the bound is the largest offset plus one row of slack, not more";
   }
 }
 
@@ -631,7 +692,7 @@ TEST(DiffusionFusion, DefaultScheduleMatchesTheReference) {
   const int N = plan_diffusion(dp, 12.0).iterations;
   const float rho = static_cast<float>(std::log(12.0 / dp.sigma0) / N);
   const auto st = cpu::uniform_steps(N, 1.0f, rho, true, static_cast<int>(dp.edge_rate));
-  ASSERT_LT(cpu::plan_fusion(st, 120, 400, omp_get_max_threads(), sizeof(float)).size(), st.size())
+  ASSERT_LT(cpu::plan_fusion(cpu::uniform_radii(st), 120, 400, omp_get_max_threads(), sizeof(float)).size(), st.size())
       << "this image is fused by the default limits";
   expect_fast_near_reference(f, constant_map(f, 12.0), 12.0, dp, "fused, default limits");
 }

@@ -82,10 +82,11 @@ __attribute__((target("avx2"))) void uniform_row_avx2(BRUME_UNIFORM_ROW_ARGS) { 
 
 // Per-thread scratch of the general (space-variant) row: offsets, their
 // integer and fractional parts, and the four eq. 12 weights of each pixel.
+// (sg: a row of sigma_k, for the rows of a fused group's levels.)
 struct RowScratch {
-  std::vector<float> h, fr, wl, wr, wu, wd;
+  std::vector<float> h, fr, wl, wr, wu, wd, sg;
   std::vector<int> n;
-  explicit RowScratch(int W) : h(W), fr(W), wl(W), wr(W), wu(W), wd(W), n(W) {}
+  explicit RowScratch(int W) : h(W), fr(W), wl(W), wr(W), wu(W), wd(W), sg(W), n(W) {}
 };
 
 // Eq. 12 weights of the pixels [xa, xb) of a run that shares the integer
@@ -233,7 +234,9 @@ __attribute__((always_inline)) inline int run_end(const int* __restrict n, int x
 // reassociation or contraction), so the split does not change results.
 // Written once (always inlined) and compiled three times below, for the
 // three widths of run_update; the offset and weight loops widen with them.
-__attribute__((always_inline)) inline void general_row_body(const float* src, float* dst, const float* rho,
+// F's rows come through a RowSource (the whole image, or a fused group's
+// ring) and row y of the result goes to orow.
+__attribute__((always_inline)) inline void general_row_body(const RowSource<float>& in, float* orow, const float* rho,
                                                             float* sg, const float* growth, const float* vr, bool exact,
                                                             int edge_mode, int W, int H, int y, RowScratch& t,
                                                             RunUpdate run_update) {
@@ -254,7 +257,7 @@ __attribute__((always_inline)) inline void general_row_body(const float* src, fl
     // largest offsets: up to 2 x 24 of 1120 rows went pixel by pixel).
     int a = std::max(x, n + 1), b = std::min(e, W - n - 1);
     if (a >= b) a = b = e;
-    for (int i = x; i < a; ++i) update_pixel<false>(src, dst, rho, 0.0f, W, H, i, y, h[i], edge_mode);
+    for (int i = x; i < a; ++i) pixel_from_rows<false>(in, orow, rho, 0.0f, W, H, i, y, h[i], edge_mode);
     if (a < b) {
       const std::size_t yu0 = static_cast<std::size_t>(mirror(y - n, H)), yu1 = static_cast<std::size_t>(mirror(y - n - 1, H));
       const std::size_t yd0 = static_cast<std::size_t>(mirror(y + n, H)), yd1 = static_cast<std::size_t>(mirror(y + n + 1, H));
@@ -267,12 +270,12 @@ __attribute__((always_inline)) inline void general_row_body(const float* src, fl
         case 2: run_weights<2>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
         default: run_weights<0>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
       }
-      const RunArgs args{src + y * Ws * 4,
-                         src + yu0 * Ws * 4,
-                         src + yu1 * Ws * 4,
-                         src + yd0 * Ws * 4,
-                         src + yd1 * Ws * 4,
-                         dst + y * Ws * 4,
+      const RunArgs args{in(y),
+                         in(static_cast<int>(yu0)),
+                         in(static_cast<int>(yu1)),
+                         in(static_cast<int>(yd0)),
+                         in(static_cast<int>(yd1)),
+                         orow,
                          t.fr.data(),
                          wl,
                          wr,
@@ -280,16 +283,15 @@ __attribute__((always_inline)) inline void general_row_body(const float* src, fl
                          wd};
       run_update(args, a, b, n);
     }
-    for (int i = std::max(b, a); i < e; ++i) update_pixel<false>(src, dst, rho, 0.0f, W, H, i, y, h[i], edge_mode);
+    for (int i = std::max(b, a); i < e; ++i) pixel_from_rows<false>(in, orow, rho, 0.0f, W, H, i, y, h[i], edge_mode);
     x = e;
   }
 }
 
 #define BRUME_GENERAL_ROW_ARGS                                                                              \
-  const float *src, float *dst, const float *rho, float *sg, const float *growth, const float *vr, bool exact, \
-      int edge_mode,                                                                                        \
-      int W, int H, int y, RowScratch &t
-#define BRUME_GENERAL_ROW_CALL(upd) general_row_body(src, dst, rho, sg, growth, vr, exact, edge_mode, W, H, y, t, upd)
+  const RowSource<float> &in, float *orow, const float *rho, float *sg, const float *growth, const float *vr, \
+      bool exact, int edge_mode, int W, int H, int y, RowScratch &t
+#define BRUME_GENERAL_ROW_CALL(upd) general_row_body(in, orow, rho, sg, growth, vr, exact, edge_mode, W, H, y, t, upd)
 using GeneralRow = void (*)(BRUME_GENERAL_ROW_ARGS);
 void general_row_generic(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(run_update_generic); }
 #if defined(__x86_64__)
@@ -541,13 +543,13 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
   if (uniform) {
     steps = uniform_steps(N, s0, rates[0], exact, edge_mode);
     if (f16 && diffusion_simd_level() >= 1) {
-      groups = plan_fusion(steps, W, H, nt, sizeof(std::uint16_t));
-      const std::size_t ring_values = std::max<std::size_t>(1, fusion_ring_values(steps, groups, W, nt));
+      groups = plan_fusion(uniform_radii(steps), W, H, nt, sizeof(std::uint16_t));
+      const std::size_t ring_values = std::max<std::size_t>(1, fusion_ring_values(uniform_radii(steps), groups, W, nt));
       if (uniform_iterations_f16(src, W, H, steps, groups, nt, ws.get_half(0, f.data.size()),
                                  ws.get_half(1, f.data.size()), ws.get_half(2, ring_values)))
         return;  // done in binary16 storage (result in f)
     }
-    groups = plan_fusion(steps, W, H, nt, sizeof(float));
+    groups = plan_fusion(uniform_radii(steps), W, H, nt, sizeof(float));
   }
   // Ping-pong partner, as in diffuse_conductance_fast.
   float* dst = ws.get(Workspace::partner, f.data.size());
@@ -558,7 +560,8 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
     // iterations either one pass per iteration or, where the offsets are
     // small, several iterations per pass (temporal blocking:
     // diffusion_fusion.hpp). Same rows from the same inputs either way.
-    float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(steps, groups, W, nt)));
+    float* ring =
+        ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(uniform_radii(steps), groups, W, nt)));
     auto row = [&](const float* s, const float* u0, const float* u1, const float* d0, const float* d1, float* o,
                    const UniformStep& st) {
       const int n = st.n;
@@ -586,16 +589,36 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
         vratio[i] = sh::brume_step_variance_ratio(rho[i]);
       }
     std::vector<RowScratch> scratch(static_cast<std::size_t>(nt), RowScratch(W));
-    for (int k = 0; k < N; ++k) {
-#pragma omp parallel for num_threads(nt) schedule(static)
-      for (int y = 0; y < H; ++y) {
-        // (advances sigma_k of the row to sigma_{k+1})
-        kern.general(src, dst, rho, sig + y * Ws, growth + y * Ws, vratio + y * Ws, exact,
-                     edge_mode, W, H, y, scratch[static_cast<std::size_t>(omp_get_thread_num())]);
-        if (f16) round_to_half(dst + y * Ws * 4, Ws * 4);
+    // Temporal blocking as on the constant path (diffusion_fusion.hpp), with
+    // each iteration's radius bounded over the whole image; sigma_k of a
+    // fused level's row is sigma_{k0} of the group times growth j times,
+    // the same float products as the running product, and the group's last
+    // level writes sigma_{k0+m} into the other sigma buffer (a band's edge
+    // rows are computed by two threads, so sigma cannot advance in place).
+    const Radii radii = general_radii(rates, np, N, s0, exact);
+    const std::vector<FusedGroup> ggroups = plan_fusion(radii, W, H, nt, sizeof(float));
+    const bool any_fused = std::any_of(ggroups.begin(), ggroups.end(), [](const FusedGroup& g) { return g.m > 1; });
+    float* sg_cur = sig;
+    float* sg_next = any_fused ? ws.get(Workspace::sigma_next, np) : nullptr;
+    float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, ggroups, W, nt)));
+    auto row = [&](int, int j, int m, int y, const RowSource<float>& in, float* out) {
+      RowScratch& t = scratch[static_cast<std::size_t>(omp_get_thread_num())];
+      const std::size_t r0 = static_cast<std::size_t>(y) * Ws;
+      float* sgrow = sg_cur + r0;  // alone: advanced in place, as before blocking
+      if (m > 1) {
+        sgrow = t.sg.data();
+        std::memcpy(sgrow, sg_cur + r0, Ws * sizeof(float));
+        for (int i = 0; i < j; ++i)
+          for (std::size_t x = 0; x < Ws; ++x) sgrow[x] = sgrow[x] * growth[r0 + x];
       }
-      std::swap(src, dst);
-    }
+      // (advances sgrow to sigma_{k+1})
+      kern.general(in, out, rho, sgrow, growth + r0, vratio + r0, exact, edge_mode, W, H, y, t);
+      if (m > 1 && j == m - 1) std::memcpy(sg_next + r0, sgrow, Ws * sizeof(float));
+      if (f16) round_to_half(out, Ws * 4);
+    };
+    src = iterations_fused(src, dst, W, H, radii, ggroups, nt, ring, row, [&](const FusedGroup& g) {
+      if (g.m > 1) std::swap(sg_cur, sg_next);
+    });
   }
   if (src != f.data.data()) std::memcpy(f.data.data(), src, f.data.size() * sizeof(float));
 }

@@ -56,28 +56,34 @@ namespace brume::cpu {
 // without them.
 namespace {
 
-// Rows of ring that a group's levels 1 .. m-1 need (level j: 2 r_{j+1} + 1).
-inline std::size_t fused_ring_rows(const UniformStep* st, int m) {
+// Radii of a schedule: iteration k reads rows within y -+ radii[k] of the
+// row it writes (its largest integer offset n, plus 1).
+using Radii = std::vector<int>;
+
+// Rows of ring that a group's levels 1 .. m-1 need (level j, read by
+// iteration j of the group: 2 radius + 1).
+inline std::size_t fused_ring_rows(const int* radii, int m) {
   std::size_t rows = 0;
-  for (int j = 1; j < m; ++j) rows += 2 * static_cast<std::size_t>(st[j].n + 1) + 1;
+  for (int j = 1; j < m; ++j) rows += 2 * static_cast<std::size_t>(radii[j]) + 1;
   return rows;
 }
 
-// The groups of a constant-scale blur of N iterations on a W x H image with
+// The groups of N iterations with these radii on a W x H image with
 // `threads` bands; `elem_bytes` per channel value (4: float, 2: binary16).
-inline std::vector<FusedGroup> plan_fusion(const std::vector<UniformStep>& st, int W, int H, int threads,
-                                           std::size_t elem_bytes) {
+inline std::vector<FusedGroup> plan_fusion(const Radii& radii, int W, int H, int threads, std::size_t elem_bytes) {
   const FusionLimits lim = diffusion_fusion_limits();
-  const int N = static_cast<int>(st.size());
+  const int N = static_cast<int>(radii.size());
   const std::size_t row_bytes = static_cast<std::size_t>(W) * 4 * elem_bytes;
   const int band = H / std::max(1, threads);
   std::vector<FusedGroup> groups;
   for (int k = 0; k < N;) {
-    int m = 1, halo = st[k].n + 1;
+    int m = 1, halo = radii[static_cast<std::size_t>(k)];
     while (k + m < N) {
-      const int h = halo + st[k + m].n + 1;
+      const int h = halo + radii[static_cast<std::size_t>(k + m)];
       if (h > lim.halo_rows || static_cast<long long>(lim.band_halos) * h > band) break;
-      if (static_cast<long long>(fused_ring_rows(&st[k], m + 1) * row_bytes) > lim.ring_bytes) break;
+      if (static_cast<long long>(fused_ring_rows(&radii[static_cast<std::size_t>(k)], m + 1) * row_bytes) >
+          lim.ring_bytes)
+        break;
       halo = h;
       ++m;
     }
@@ -87,19 +93,21 @@ inline std::vector<FusedGroup> plan_fusion(const std::vector<UniformStep>& st, i
   return groups;
 }
 
-// Output rows [Y0, Y1) of a group of m >= 2 iterations (steps st[0 .. m)),
-// from the whole image A (level 0) into the whole image B (level m); ring:
-// fused_ring_rows(st, m) rows of W x 4 values, this thread's own.
-// row(s, u0, u1, d0, d1, o, step): one row of one iteration from its centre
-// row and the rows at -n, -(n+1), +n, +(n+1) (already mirrored).
-template <class T, class RowFn>
-void fused_group_band(const T* A, T* B, int W, int H, const UniformStep* st, int m, int Y0, int Y1, T* ring,
-                      RowFn&& row) {
+// Output rows [Y0, Y1) of a group of m >= 2 iterations with radii
+// radii[0 .. m), from the whole image A (level 0) into the whole image B
+// (level m); ring: fused_ring_rows(radii, m) rows of W x 4 values, this
+// thread's own. row(j, y, in, out): iteration j of the group writes row y of
+// level j + 1 to `out`, reading level j through in(q), which returns row q
+// (any q within y -+ radii[j], already mirrored into the image).
+template <class T, class LevelRow>
+void fused_group_band(const T* A, T* B, int W, int H, const int* radii, int m, int Y0, int Y1, T* ring,
+                      LevelRow&& row) {
   const std::size_t rs = static_cast<std::size_t>(W) * 4;  // values per row
-  // Levels 1..m: radius r, halo E, rows [lo, hi], lag; levels 1..m-1: ring.
+  // Levels 1..m: radius r (of the iteration that writes it), halo E, rows
+  // [lo, hi], lag; levels 1..m-1: ring capacity and base.
   std::vector<int> r(m + 1), E(m + 1), lo(m + 1), hi(m + 1), lag(m + 1), cap(m + 1, 0);
   std::vector<T*> base(m + 1, nullptr);
-  for (int j = 1; j <= m; ++j) r[j] = st[j - 1].n + 1;
+  for (int j = 1; j <= m; ++j) r[j] = radii[j - 1];
   E[m] = 0;
   for (int j = m - 1; j >= 1; --j) E[j] = E[j + 1] + r[j + 1];
   lag[1] = 0;
@@ -114,66 +122,110 @@ void fused_group_band(const T* A, T* B, int W, int H, const UniformStep* st, int
       p += static_cast<std::size_t>(cap[j]) * rs;
     }
   }
-  // Row q of level j (0: A; m: B; between: its ring slot).
-  auto in_row = [&](int j, int q) -> const T* {
-    if (j == 0) return A + static_cast<std::size_t>(q) * rs;
-    return base[j] + static_cast<std::size_t>(q % cap[j]) * rs;
-  };
-  auto out_row = [&](int j, int y) -> T* {
-    if (j == m) return B + static_cast<std::size_t>(y) * rs;
-    return base[j] + static_cast<std::size_t>(y % cap[j]) * rs;
-  };
   int v0 = lo[1], v1 = hi[1];
   for (int j = 2; j <= m; ++j) v0 = std::min(v0, lo[j] + lag[j]), v1 = std::max(v1, hi[j] + lag[j]);
   for (int v = v0; v <= v1; ++v)
     for (int j = 1; j <= m; ++j) {
       const int y = v - lag[j];
       if (y < lo[j] || y > hi[j]) continue;
-      const int n = st[j - 1].n;
-      row(in_row(j - 1, y), in_row(j - 1, mirror(y - n, H)), in_row(j - 1, mirror(y - n - 1, H)),
-          in_row(j - 1, mirror(y + n, H)), in_row(j - 1, mirror(y + n + 1, H)), out_row(j, y), st[j - 1]);
+      // Level j - 1 (0: A; else its ring), row y of level j (m: B).
+      const RowSource<T> in = j == 1 ? RowSource<T>{A, rs, 0} : RowSource<T>{base[j - 1], rs, cap[j - 1]};
+      T* out = j == m ? B + static_cast<std::size_t>(y) * rs : base[j] + static_cast<std::size_t>(y % cap[j]) * rs;
+      row(j - 1, y, in, out);
     }
 }
 
-// N constant-scale iterations of F from `src`, ping-ponging with `dst`
-// (both W x H x 4), grouped by plan_fusion; returns the buffer holding the
-// result. ring: at least threads x max fused_ring_rows x W x 4 values (see
-// fusion_ring_values).
-template <class T, class RowFn>
-T* uniform_iterations_fused(T* src, T* dst, int W, int H, const std::vector<UniformStep>& st,
-                            const std::vector<FusedGroup>& groups, int threads, T* ring, RowFn row) {
+// N iterations of F from `src`, ping-ponging with `dst` (both W x H x 4),
+// grouped by plan_fusion; returns the buffer holding the result. ring: at
+// least fusion_ring_values(...) values. row(k, j, m, y, in, out): iteration
+// k (the j-th of its group of m) writes row y to `out`, reading the previous
+// level through in(q) (see fused_group_band). Called from inside OpenMP
+// parallel regions (omp_get_thread_num() names the calling thread's scratch).
+// group_done(g): after each group, outside the parallel regions.
+template <class T, class LevelRow, class GroupDone = void (*)(const FusedGroup&)>
+T* iterations_fused(T* src, T* dst, int W, int H, const Radii& radii, const std::vector<FusedGroup>& groups,
+                    int threads, T* ring, LevelRow row, GroupDone group_done = [](const FusedGroup&) {}) {
   const std::size_t rs = static_cast<std::size_t>(W) * 4;
   std::size_t ring_rows = 0;
-  for (const FusedGroup& g : groups) ring_rows = std::max(ring_rows, fused_ring_rows(&st[g.k0], g.m));
+  for (const FusedGroup& g : groups)
+    ring_rows = std::max(ring_rows, fused_ring_rows(&radii[static_cast<std::size_t>(g.k0)], g.m));
   for (const FusedGroup& g : groups) {
-    const UniformStep* s = &st[g.k0];
     if (g.m == 1) {
-      const int n = s->n;
+      const RowSource<T> in{src, rs, 0};
 #pragma omp parallel for num_threads(threads) schedule(static)
-      for (int y = 0; y < H; ++y)
-        row(src + y * rs, src + mirror(y - n, H) * rs, src + mirror(y - n - 1, H) * rs, src + mirror(y + n, H) * rs,
-            src + mirror(y + n + 1, H) * rs, dst + y * rs, *s);
+      for (int y = 0; y < H; ++y) row(g.k0, 0, 1, y, in, dst + y * rs);
     } else {
 #pragma omp parallel num_threads(threads)
       {
         const int t = omp_get_thread_num(), nt = omp_get_num_threads();
         const int Y0 = static_cast<int>(static_cast<long long>(H) * t / nt);
         const int Y1 = static_cast<int>(static_cast<long long>(H) * (t + 1) / nt);
-        if (Y0 < Y1) fused_group_band(src, dst, W, H, s, g.m, Y0, Y1, ring + t * ring_rows * rs, row);
+        if (Y0 < Y1)
+          fused_group_band(src, dst, W, H, &radii[static_cast<std::size_t>(g.k0)], g.m, Y0, Y1,
+                           ring + t * ring_rows * rs,
+                           [&](int j, int y, const RowSource<T>& in, T* out) { row(g.k0 + j, j, g.m, y, in, out); });
       }
     }
     std::swap(src, dst);
+    group_done(g);
   }
   return src;
 }
 
-// Values of ring that uniform_iterations_fused needs.
-inline std::size_t fusion_ring_values(const std::vector<UniformStep>& st, const std::vector<FusedGroup>& groups,
-                                      int W, int threads) {
+// Values of ring that iterations_fused needs.
+inline std::size_t fusion_ring_values(const Radii& radii, const std::vector<FusedGroup>& groups, int W,
+                                      int threads) {
   std::size_t ring_rows = 0;
   for (const FusedGroup& g : groups)
-    if (g.m > 1) ring_rows = std::max(ring_rows, fused_ring_rows(&st[g.k0], g.m));
+    if (g.m > 1) ring_rows = std::max(ring_rows, fused_ring_rows(&radii[static_cast<std::size_t>(g.k0)], g.m));
   return ring_rows * static_cast<std::size_t>(W) * 4 * static_cast<std::size_t>(threads);
+}
+
+// The radii of constant-scale steps: n + 1.
+inline Radii uniform_radii(const std::vector<UniformStep>& st) {
+  Radii r(st.size());
+  for (std::size_t k = 0; k < st.size(); ++k) r[k] = st[k].n + 1;
+  return r;
+}
+
+// The radii of the space-variant invariant schemes: per iteration, a bound
+// on the largest integer offset n over the image, plus 1, plus one row of
+// slack. The offset grows with the rate (sigma_k = s0 e^{k rho} and the
+// exact scheme's variance ratio both increase with rho), so the largest rate
+// bounds it; computed in double with a relative margin of 1e-4 (+1e-6 per
+// iteration) for the float running product, e^{rho} and the ratio, which
+// differ from the double values by a few ulps: a bound, never an estimate.
+inline Radii general_radii(const float* rho, std::size_t np, int N, float s0, bool exact) {
+  float rmax = 0.0f;
+  for (std::size_t i = 0; i < np; ++i) rmax = std::max(rmax, rho[i]);
+  const double x = 2.0 * static_cast<double>(rmax);
+  const double vr = exact ? (x < 1e-12 ? 1.0 : std::expm1(x) / x) : 1.0;
+  const double g = std::exp(static_cast<double>(rmax));
+  Radii r(static_cast<std::size_t>(N));
+  double s = s0;
+  for (int k = 0; k < N; ++k) {
+    const double margin = 1.0 + 1e-4 + 1e-6 * k;
+    // exact: n = floor(sqrt(m)), m = sigma_k^2 vr (brume_offset_for_moment);
+    // published: n = floor(sigma_k).
+    const double bound = exact ? std::sqrt(s * s * vr) * margin * margin : s * margin;
+    r[static_cast<std::size_t>(k)] = static_cast<int>(std::floor(bound)) + 2;
+    s *= g;
+  }
+  return r;
+}
+
+// Constant-scale iterations: one row from its centre row and the rows at
+// -n, -(n+1), +n, +(n+1) of the step, mirrored. row5(s, u0, u1, d0, d1, o, step).
+template <class T, class Row5>
+T* uniform_iterations_fused(T* src, T* dst, int W, int H, const std::vector<UniformStep>& st,
+                            const std::vector<FusedGroup>& groups, int threads, T* ring, Row5 row5) {
+  return iterations_fused(src, dst, W, H, uniform_radii(st), groups, threads, ring,
+                          [&](int k, int, int, int y, const RowSource<T>& in, T* out) {
+                            const UniformStep& s = st[static_cast<std::size_t>(k)];
+                            const int n = s.n;
+                            row5(in(y), in(mirror(y - n, H)), in(mirror(y - n - 1, H)), in(mirror(y + n, H)),
+                                 in(mirror(y + n + 1, H)), out, s);
+                          });
 }
 
 // The steps of N constant-scale iterations: sigma_k as the running product

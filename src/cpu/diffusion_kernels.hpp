@@ -32,7 +32,7 @@ inline int mirror(int i, int n) {
 // Every value is written before it is read, so reuse cannot change a result.
 class Workspace {
  public:
-  enum Slot { partner, rates, sigma, growth, vratio, edge_x, edge_y, ring, kSlots };
+  enum Slot { partner, rates, sigma, sigma_next, growth, vratio, edge_x, edge_y, ring, kSlots };
   // At least n floats, uninitialised; valid until the next get of that slot.
   float* get(Slot s, std::size_t n);
   // The binary16 buffers of the f16 constant-scale path: 0 and 1 the

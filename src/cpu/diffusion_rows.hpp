@@ -41,14 +41,29 @@ inline v4 eq11(v4 fc, v4 l0, v4 l1, v4 r0, v4 r1, v4 u0, v4 u1, v4 d0, v4 d1, fl
   return brume_diffusion_update(fc, l, r, u, d, wl, wr, wu, wd);
 }
 
+// Where an iteration reads its rows: the whole image (cap 0: row q at
+// base + q rs), or a fused group's ring of cap rows (row q in slot q % cap;
+// diffusion_fusion.hpp). rs: values per row.
+template <class T>
+struct RowSource {
+  const T* base;
+  std::size_t rs;
+  int cap;
+  const T* operator()(int q) const {
+    return base + static_cast<std::size_t>(cap ? q % cap : q) * rs;
+  }
+};
+
 // One pixel of the general scheme (any offsets, any rates): eq. 11-12.
 // `h` is the pixel's neighbour offset; indices are mirrored only when a tap
 // falls outside the image. kUniform: every rate is `w_all` (a constant target
 // scale), so the eq. 12 weights need no look-up. The arithmetic, channel by
 // channel, is the same as uniform_row_interior's, so both give the same bits.
+// F's rows come through `in` (the image or a fused group's ring) and the
+// pixel goes to row `orow` of the result.
 template <bool kUniform, class S = StoreF32>
-inline void update_pixel(const typename S::T* src, typename S::T* dst, const float* rho, float w_all, int W,
-                         int H, int x, int y, float h, int edge_mode = 0) {
+inline void pixel_from_rows(const RowSource<typename S::T>& in, typename S::T* orow, const float* rho, float w_all,
+                            int W, int H, int x, int y, float h, int edge_mode = 0) {
   const int n = static_cast<int>(h);
   const float fr = h - static_cast<float>(n);
   int xl0 = x - n, xl1 = x - n - 1, xr0 = x + n, xr1 = x + n + 1;
@@ -67,11 +82,20 @@ inline void update_pixel(const typename S::T* src, typename S::T* dst, const flo
     wu = sh::brume_edge_rate(rc, sh::brume_tap_rate(rho[yu0 * Ws + x], rho[yu1 * Ws + x], fr, edge_mode), edge_mode);
     wd = sh::brume_edge_rate(rc, sh::brume_tap_rate(rho[yd0 * Ws + x], rho[yd1 * Ws + x], fr, edge_mode), edge_mode);
   }
-  const typename S::T* srow = src + y * Ws * 4;
-  S::store(dst + (y * Ws + x) * 4,
-           eq11(S::load(srow + x * 4), S::load(srow + xl0 * 4), S::load(srow + xl1 * 4), S::load(srow + xr0 * 4),
-                S::load(srow + xr1 * 4), S::load(src + (yu0 * Ws + x) * 4), S::load(src + (yu1 * Ws + x) * 4),
-                S::load(src + (yd0 * Ws + x) * 4), S::load(src + (yd1 * Ws + x) * 4), fr, wl, wr, wu, wd));
+  const typename S::T* srow = in(y);
+  const std::size_t c = static_cast<std::size_t>(x) * 4;
+  S::store(orow + c, eq11(S::load(srow + c), S::load(srow + xl0 * 4), S::load(srow + xl1 * 4),
+                          S::load(srow + xr0 * 4), S::load(srow + xr1 * 4), S::load(in(yu0) + c),
+                          S::load(in(yu1) + c), S::load(in(yd0) + c), S::load(in(yd1) + c), fr, wl, wr, wu, wd));
+}
+
+// The same pixel of whole images src -> dst.
+template <bool kUniform, class S = StoreF32>
+inline void update_pixel(const typename S::T* src, typename S::T* dst, const float* rho, float w_all, int W,
+                         int H, int x, int y, float h, int edge_mode = 0) {
+  const std::size_t rs = static_cast<std::size_t>(W) * 4;
+  pixel_from_rows<kUniform, S>(RowSource<typename S::T>{src, rs, 0}, dst + static_cast<std::size_t>(y) * rs, rho,
+                               w_all, W, H, x, y, h, edge_mode);
 }
 
 // One pixel of a constant-scale iteration (every weight w_all, offset h =
