@@ -17,9 +17,10 @@
 //                    [--fusion HALO_ROWS,RING_BYTES,BAND_HALOS]
 //
 // --ab (issue #16): the interleaved A/B harness. In one process, each round
-// runs every contender once, in its own shuffled order, after a pause: OpenCV at sigma 25, brume at sigma 25
-// with the fused schedule and with one pass per iteration, brume in f16, the
-// space-variant map, OpenCV and brume at sigma 10. After a warm-up round,
+// runs every contender once, in its own shuffled order, after a pause:
+// OpenCV at sigma 25, brume at sigma 25 with the fused schedule and with one
+// pass per iteration, brume in f16, the space-variant map both ways, OpenCV
+// and brume at sigma 10. After a warm-up round,
 // R rounds; per contender the median and spread of its times, and the median
 // (and spread) of its per-round ratio to OpenCV at the same sigma, so that a
 // host's drift during the run moves both sides of a ratio alike. --size
@@ -129,7 +130,14 @@ int run_ab(const std::string& image, const std::string& label, int threads, int 
        },
        {}, {}},
       {"brume constant sigma 25, f16", 25, [&] { blur_rgb(rgb, c25, 25, f16, ex); }, {}, {}},
-      {"brume space-variant sigma <= 25, f32", 25, [&] { blur_rgb(rgb, v25, 25, f32, ex); }, {}, {}},
+      {"brume space-variant sigma <= 25, f32, fused passes", 25, [&] { blur_rgb(rgb, v25, 25, f32, ex); }, {}, {}},
+      {"brume space-variant sigma <= 25, f32, one pass per iteration", 25,
+       [&] {
+         cpu::set_diffusion_fusion(&unfused);
+         blur_rgb(rgb, v25, 25, f32, ex);
+         cpu::set_diffusion_fusion(&fusion);
+       },
+       {}, {}},
       {"OpenCV GaussianBlur sigma 10", 10,
        [&] { cv::GaussianBlur(src, dst, cv::Size(0, 0), 10, 10, cv::BORDER_REFLECT); }, {}, {}},
       {"brume constant sigma 10, f32", 10, [&] { blur_rgb(rgb, c10, 10, f32, ex); }, {}, {}},

@@ -27,7 +27,8 @@
 //    share their integer part; inside the image a run's rate samples, edge
 //    weights and taps are contiguous, so they are computed by vector loops
 //    (about 1.9x faster than per-pixel gathers on a haze map), and only the pixels
-//    whose taps need the mirror take the per-pixel path.
+//    whose taps need the mirror take the per-pixel path. Its iterations are
+//    blocked too, each with a radius bounded over the whole map.
 #include <omp.h>
 
 #include <algorithm>

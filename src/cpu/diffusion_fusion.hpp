@@ -1,5 +1,5 @@
-// brume — temporal blocking of the constant-scale diffusion iterations
-// (internal; issue #16).
+// brume — temporal blocking of the diffusion iterations of the invariant
+// schemes, constant-scale and space-variant (internal; issue #16).
 //
 // Every iteration of the invariant schemes reads the whole image and writes
 // the whole image: at 1600x1120 RGBA float, 17 iterations move ~1 GB. When
@@ -12,7 +12,9 @@
 //
 // The schedule is a wavefront over rows. Iteration j of a group (level j)
 // computes row y from rows y, y -+ n_j and y -+ (n_j + 1) of level j - 1,
-// mirrored at the image's edges: all within y -+ r_j, r_j = n_j + 1 (a single
+// mirrored at the image's edges (n_j: the constant offset's integer part, or
+// on a space-variant map any pixel's, at most the bound general_radii gives):
+// all within y -+ r_j, r_j = n_j + 1 (a single
 // reflection moves a row by at most n_j; a tap reflected twice means
 // r_j > H, and then every row is within reach). So level j can compute row y
 // as soon as level j - 1 has row min(H - 1, y + r_j), and level j - 1 must
