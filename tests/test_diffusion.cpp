@@ -711,3 +711,28 @@ TEST(DiffusionFusion, DefaultScheduleMatchesTheReference) {
       << "this map is fused by the default limits";
   expect_fast_near_reference(f, map, 12.0, dp, "space-variant, fused, default limits");
 }
+
+TEST(DiffusionWorkspace, ExtraHeapIsTheStatedMultipleOfTheImage) {
+  // README "Speed" states the memory a diffusion call keeps: the partner
+  // image (1x the RGBA image), the rate map (1/4), for a space-variant map
+  // sigma_k, e^{rho} and the variance ratio (3/4), and the fused schedule's
+  // rings (at most ring_bytes per thread, whatever the image size).
+  const int W = 640, H = 448, threads = 2;
+  const Image f0 = texture(W, H);
+  const double image = static_cast<double>(f0.data.size() * sizeof(float));
+  const double rings = static_cast<double>(threads) * static_cast<double>(cpu::diffusion_fusion_limits().ring_bytes);
+  Exec ex;
+  ex.threads = threads;
+  for (bool variant : {false, true}) {
+    release_diffusion_buffers();
+    Image f = f0;
+    diffuse(f, variant ? ramp_map(W, H, 1.0, 25.0) : constant_map(f, 25.0), 25.0, params(Scheme::invariant_exact),
+            ex);
+    const double kept = static_cast<double>(cpu::kept_workspace_bytes());
+    const double base = variant ? 2.0 : 1.25;
+    EXPECT_GE(kept, base * image) << (variant ? "space-variant" : "constant");
+    EXPECT_LE(kept, base * image + rings) << (variant ? "space-variant" : "constant");
+  }
+  release_diffusion_buffers();
+  EXPECT_EQ(cpu::kept_workspace_bytes(), 0u);
+}

@@ -83,10 +83,12 @@ __attribute__((target("avx2"))) void uniform_row_avx2(BRUME_UNIFORM_ROW_ARGS) { 
 
 // Per-thread scratch of the general (space-variant) row: offsets, their
 // integer and fractional parts, and the four eq. 12 weights of each pixel.
-// (sg: a row of sigma_k, for the rows of a fused group's levels.)
+// (sg: a row of sigma_k, for the rows of a fused group's levels; staged:
+// the sigma rows a fused group's last level holds back until the group
+// ends, staged_y their rows.)
 struct RowScratch {
-  std::vector<float> h, fr, wl, wr, wu, wd, sg;
-  std::vector<int> n;
+  std::vector<float> h, fr, wl, wr, wu, wd, sg, staged;
+  std::vector<int> n, staged_y;
   explicit RowScratch(int W) : h(W), fr(W), wl(W), wr(W), wu(W), wd(W), sg(W), n(W) {}
 };
 
@@ -454,6 +456,11 @@ WorkspaceLease::~WorkspaceLease() {
   if (!g_pool || g_pool->bytes() < ws_->bytes()) g_pool = std::move(ws_);
 }
 
+std::size_t kept_workspace_bytes() {
+  std::lock_guard<std::mutex> lock(g_pool_mutex);
+  return g_pool ? g_pool->bytes() : 0;
+}
+
 void release_workspace() {
   std::unique_ptr<Workspace> drop;
   std::lock_guard<std::mutex> lock(g_pool_mutex);
@@ -591,34 +598,45 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
       }
     std::vector<RowScratch> scratch(static_cast<std::size_t>(nt), RowScratch(W));
     // Temporal blocking as on the constant path (diffusion_fusion.hpp), with
-    // each iteration's radius bounded over the whole image; sigma_k of a
-    // fused level's row is sigma_{k0} of the group times growth j times,
-    // the same float products as the running product, and the group's last
-    // level writes sigma_{k0+m} into the other sigma buffer (a band's edge
-    // rows are computed by two threads, so sigma cannot advance in place).
+    // each iteration's radius bounded over the whole map. sigma_k of a fused
+    // level's row is the group's sigma times growth j times (the same float
+    // products as the running product), and the group's last level writes
+    // sigma_{k0+m} back -- in place, except the rows within `edge` of its
+    // band's ends: a neighbouring band still reads their sigma_{k0} for its
+    // own edge rows, so those are staged and written after the group.
     const Radii radii = general_radii(rates, np, N, s0, exact);
     const std::vector<FusedGroup> ggroups = plan_fusion(radii, W, H, nt, sizeof(float));
-    const bool any_fused = std::any_of(ggroups.begin(), ggroups.end(), [](const FusedGroup& g) { return g.m > 1; });
-    float* sg_cur = sig;
-    float* sg_next = any_fused ? ws.get(Workspace::sigma_next, np) : nullptr;
     float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, ggroups, W, nt)));
-    auto row = [&](int, int j, int m, int y, const RowSource<float>& in, float* out) {
+    auto row = [&](int, int j, int m, int y, const RowSource<float>& in, float* out, const Band& band) {
       RowScratch& t = scratch[static_cast<std::size_t>(omp_get_thread_num())];
       const std::size_t r0 = static_cast<std::size_t>(y) * Ws;
-      float* sgrow = sg_cur + r0;  // alone: advanced in place, as before blocking
+      float* sgrow = sig + r0;  // alone: advanced in place, as before blocking
       if (m > 1) {
         sgrow = t.sg.data();
-        std::memcpy(sgrow, sg_cur + r0, Ws * sizeof(float));
+        std::memcpy(sgrow, sig + r0, Ws * sizeof(float));
         for (int i = 0; i < j; ++i)
           for (std::size_t x = 0; x < Ws; ++x) sgrow[x] = sgrow[x] * growth[r0 + x];
       }
       // (advances sgrow to sigma_{k+1})
       kern.general(in, out, rho, sgrow, growth + r0, vratio + r0, exact, edge_mode, W, H, y, t);
-      if (m > 1 && j == m - 1) std::memcpy(sg_next + r0, sgrow, Ws * sizeof(float));
+      if (m > 1 && j == m - 1) {
+        if (y < band.y0 + band.edge || y >= band.y1 - band.edge) {
+          t.staged_y.push_back(y);
+          t.staged.insert(t.staged.end(), sgrow, sgrow + Ws);
+        } else {
+          std::memcpy(sig + r0, sgrow, Ws * sizeof(float));
+        }
+      }
       if (f16) round_to_half(out, Ws * 4);
     };
-    src = iterations_fused(src, dst, W, H, radii, ggroups, nt, ring, row, [&](const FusedGroup& g) {
-      if (g.m > 1) std::swap(sg_cur, sg_next);
+    src = iterations_fused(src, dst, W, H, radii, ggroups, nt, ring, row, [&](const FusedGroup&) {
+      for (RowScratch& t : scratch) {
+        for (std::size_t i = 0; i < t.staged_y.size(); ++i)
+          std::memcpy(sig + static_cast<std::size_t>(t.staged_y[i]) * Ws, t.staged.data() + i * Ws,
+                      Ws * sizeof(float));
+        t.staged_y.clear();
+        t.staged.clear();
+      }
     });
   }
   if (src != f.data.data()) std::memcpy(f.data.data(), src, f.data.size() * sizeof(float));

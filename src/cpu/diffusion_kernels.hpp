@@ -32,7 +32,7 @@ inline int mirror(int i, int n) {
 // Every value is written before it is read, so reuse cannot change a result.
 class Workspace {
  public:
-  enum Slot { partner, rates, sigma, sigma_next, growth, vratio, edge_x, edge_y, ring, kSlots };
+  enum Slot { partner, rates, sigma, growth, vratio, edge_x, edge_y, ring, kSlots };
   // At least n floats, uninitialised; valid until the next get of that slot.
   float* get(Slot s, std::size_t n);
   // The binary16 buffers of the f16 constant-scale path: 0 and 1 the
@@ -65,6 +65,8 @@ class WorkspaceLease {
 
 // Frees the workspace kept between calls (brume::release_diffusion_buffers).
 void release_workspace();
+// Bytes of the workspace kept between calls (0 when none is kept).
+std::size_t kept_workspace_bytes();
 
 // The CPU schedules take validated inputs (the checks are in diffusion.cpp).
 //
