@@ -547,17 +547,19 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
   // The constant-scale schedule: every iteration's offset and weight, and
   // which iterations share a pass (diffusion_fusion.hpp).
   std::vector<UniformStep> steps;
+  Radii radii;
   std::vector<FusedGroup> groups;
   if (uniform) {
     steps = uniform_steps(N, s0, rates[0], exact, edge_mode);
+    radii = uniform_radii(steps);
     if (f16 && diffusion_simd_level() >= 1) {
-      groups = plan_fusion(uniform_radii(steps), W, H, nt, sizeof(std::uint16_t));
-      const std::size_t ring_values = std::max<std::size_t>(1, fusion_ring_values(uniform_radii(steps), groups, W, nt));
+      groups = plan_fusion(radii, W, H, nt, sizeof(std::uint16_t));
+      const std::size_t ring_values = std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt));
       if (uniform_iterations_f16(src, W, H, steps, groups, nt, ws.get_half(0, f.data.size()),
                                  ws.get_half(1, f.data.size()), ws.get_half(2, ring_values)))
         return;  // done in binary16 storage (result in f)
     }
-    groups = plan_fusion(uniform_radii(steps), W, H, nt, sizeof(float));
+    groups = plan_fusion(radii, W, H, nt, sizeof(float));
   }
   // Ping-pong partner, as in diffuse_conductance_fast.
   float* dst = ws.get(Workspace::partner, f.data.size());
@@ -568,8 +570,7 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
     // iterations either one pass per iteration or, where the offsets are
     // small, several iterations per pass (temporal blocking:
     // diffusion_fusion.hpp). Same rows from the same inputs either way.
-    float* ring =
-        ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(uniform_radii(steps), groups, W, nt)));
+    float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt)));
     auto row = [&](const float* s, const float* u0, const float* u1, const float* d0, const float* d1, float* o,
                    const UniformStep& st) {
       const int n = st.n;
@@ -604,9 +605,9 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
     // sigma_{k0+m} back -- in place, except the rows within `edge` of its
     // band's ends: a neighbouring band still reads their sigma_{k0} for its
     // own edge rows, so those are staged and written after the group.
-    const Radii radii = general_radii(rates, np, N, s0, exact);
-    const std::vector<FusedGroup> ggroups = plan_fusion(radii, W, H, nt, sizeof(float));
-    float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, ggroups, W, nt)));
+    radii = general_radii(rates, np, N, s0, exact);
+    groups = plan_fusion(radii, W, H, nt, sizeof(float));
+    float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt)));
     auto row = [&](int, int j, int m, int y, const RowSource<float>& in, float* out, const Band& band) {
       RowScratch& t = scratch[static_cast<std::size_t>(omp_get_thread_num())];
       const std::size_t r0 = static_cast<std::size_t>(y) * Ws;
@@ -629,7 +630,7 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
       }
       if (f16) round_to_half(out, Ws * 4);
     };
-    src = iterations_fused(src, dst, W, H, radii, ggroups, nt, ring, row, [&](const FusedGroup&) {
+    src = iterations_fused(src, dst, W, H, radii, groups, nt, ring, row, [&](const FusedGroup&) {
       for (RowScratch& t : scratch) {
         for (std::size_t i = 0; i < t.staged_y.size(); ++i)
           std::memcpy(sig + static_cast<std::size_t>(t.staged_y[i]) * Ws, t.staged.data() + i * Ws,

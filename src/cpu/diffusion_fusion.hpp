@@ -70,6 +70,14 @@ inline std::size_t fused_ring_rows(const int* radii, int m) {
   return rows;
 }
 
+// Rows of ring per thread that the largest group of a plan needs (a pass
+// alone needs none).
+inline std::size_t max_ring_rows(const Radii& radii, const std::vector<FusedGroup>& groups) {
+  std::size_t rows = 0;
+  for (const FusedGroup& g : groups) rows = std::max(rows, fused_ring_rows(&radii[static_cast<std::size_t>(g.k0)], g.m));
+  return rows;
+}
+
 // The groups of N iterations with these radii on a W x H image with
 // `threads` bands; `elem_bytes` per channel value (4: float, 2: binary16).
 inline std::vector<FusedGroup> plan_fusion(const Radii& radii, int W, int H, int threads, std::size_t elem_bytes) {
@@ -156,9 +164,7 @@ template <class T, class LevelRow, class GroupDone = void (*)(const FusedGroup&)
 T* iterations_fused(T* src, T* dst, int W, int H, const Radii& radii, const std::vector<FusedGroup>& groups,
                     int threads, T* ring, LevelRow row, GroupDone group_done = [](const FusedGroup&) {}) {
   const std::size_t rs = static_cast<std::size_t>(W) * 4;
-  std::size_t ring_rows = 0;
-  for (const FusedGroup& g : groups)
-    ring_rows = std::max(ring_rows, fused_ring_rows(&radii[static_cast<std::size_t>(g.k0)], g.m));
+  const std::size_t ring_rows = max_ring_rows(radii, groups);
   for (const FusedGroup& g : groups) {
     if (g.m == 1) {
       const RowSource<T> in{src, rs, 0};
@@ -189,10 +195,7 @@ T* iterations_fused(T* src, T* dst, int W, int H, const Radii& radii, const std:
 // Values of ring that iterations_fused needs.
 inline std::size_t fusion_ring_values(const Radii& radii, const std::vector<FusedGroup>& groups, int W,
                                       int threads) {
-  std::size_t ring_rows = 0;
-  for (const FusedGroup& g : groups)
-    if (g.m > 1) ring_rows = std::max(ring_rows, fused_ring_rows(&radii[static_cast<std::size_t>(g.k0)], g.m));
-  return ring_rows * static_cast<std::size_t>(W) * 4 * static_cast<std::size_t>(threads);
+  return max_ring_rows(radii, groups) * static_cast<std::size_t>(W) * 4 * static_cast<std::size_t>(threads);
 }
 
 // The radii of constant-scale steps: n + 1.
