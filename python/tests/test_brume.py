@@ -311,7 +311,9 @@ def test_missing_gpu_is_a_runtime_error():
 
 # ---- the GIL, threads -------------------------------------------------------------------------------
 def test_gil_is_released_during_a_long_blur():
-    rgb = np.random.default_rng(3).random((600, 800, 3), dtype=np.float32)
+    # (1000 x 1400: long enough to tell; 600 x 800 took 46 ms on one Zen 5 core
+    # once the engine had got faster, under the 50 ms floor below.)
+    rgb = np.random.default_rng(3).random((1000, 1400, 3), dtype=np.float32)
     ticks, running = [0], [True]
 
     def count():

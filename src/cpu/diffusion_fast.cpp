@@ -11,10 +11,11 @@
 //    count;
 //  - F stays interleaved RGBA float, so a pixel is one 128-bit vector and the
 //    channel loops vectorise;
-//  - the invariant schemes keep sigma_k(x) as a running product
-//    sigma_{k+1} = sigma_k e^{rho} (one multiply instead of an exp per pixel
-//    and iteration; relative drift < 1e-6 after 13 steps, covered by the
-//    fast-vs-reference test);
+//  - the invariant schemes form sigma_k(x) as a running product
+//    sigma_0 e^{rho} ... e^{rho} (multiplies instead of an exp per pixel and
+//    iteration; relative drift < 1e-6 after 13 steps, covered by the
+//    fast-vs-reference test), on the space-variant path per row and chunk
+//    from the growth map rather than kept in a map (row_offsets);
 //  - a constant rate (a constant target scale: the accuracy experiment, `brume blur --sigma`)
 //    makes every offset and weight equal, and the interior of each row is
 //    then a contiguous 5-tap loop over floats that the compiler vectorises
@@ -83,13 +84,10 @@ __attribute__((target("avx2"))) void uniform_row_avx2(BRUME_UNIFORM_ROW_ARGS) { 
 
 // Per-thread scratch of the general (space-variant) row: offsets, their
 // integer and fractional parts, and the four eq. 12 weights of each pixel.
-// (sg: a row of sigma_k, for the rows of a fused group's levels; staged:
-// the sigma rows a fused group's last level holds back until the group
-// ends, staged_y their rows.)
 struct RowScratch {
-  std::vector<float> h, fr, wl, wr, wu, wd, sg, staged;
-  std::vector<int> n, staged_y;
-  explicit RowScratch(int W) : h(W), fr(W), wl(W), wr(W), wu(W), wd(W), sg(W), n(W) {}
+  std::vector<float> h, fr, wl, wr, wu, wd;
+  std::vector<int> n;
+  explicit RowScratch(int W) : h(W), fr(W), wl(W), wr(W), wu(W), wd(W), n(W) {}
 };
 
 // Eq. 12 weights of the pixels [xa, xb) of a run that shares the integer
@@ -122,9 +120,16 @@ __attribute__((always_inline)) inline void run_weights(const float* __restrict r
 struct RunArgs {
   const float *s, *u0, *u1, *d0, *d1;  // rows y, y -+ n, y -+ (n+1) of F
   float* o;                            // row y of the output
-  const float *fr, *wl, *wr, *wu, *wd;  // per pixel of the row
+  const float* fr;                     // per pixel of the row
+  float *wl, *wr, *wu, *wd;            // per pixel of the row (scratch)
 };
 using RunUpdate = void (*)(const RunArgs&, int xa, int xb, int n);
+// The rate map's rows y, y -+ n, y -+ (n+1) of a run (its eq. 12 weights).
+struct RateRows {
+  const float *c, *u0, *u1, *d0, *d1;
+};
+// A run's weights and update (three widths below).
+using RunKernel = void (*)(const RunArgs&, const RateRows&, int edge_mode, int xa, int xb, int n);
 
 inline void run_update_v4(const RunArgs& a, int xa, int xb, int n) {
   const std::ptrdiff_t n4 = static_cast<std::ptrdiff_t>(n) * 4;
@@ -138,6 +143,23 @@ inline void run_update_v4(const RunArgs& a, int xa, int xb, int n) {
 }
 
 void run_update_generic(const RunArgs& a, int xa, int xb, int n) { run_update_v4(a, xa, xb, n); }
+
+// A run's weights (run_weights, into the scratch rows) and then its update:
+// the run kernel of the 128-bit and AVX2 rows (the AVX-512 rows fuse the two,
+// run_fused_avx512).
+template <RunUpdate kUpdate>
+__attribute__((always_inline)) inline void weights_then_update(const RunArgs& a, const RateRows& q, int edge_mode,
+                                                               int xa, int xb, int n) {
+  switch (edge_mode) {
+    case 1: run_weights<1>(q.c, q.u0, q.u1, q.d0, q.d1, a.fr, a.wl, a.wr, a.wu, a.wd, xa, xb, n); break;
+    case 2: run_weights<2>(q.c, q.u0, q.u1, q.d0, q.d1, a.fr, a.wl, a.wr, a.wu, a.wd, xa, xb, n); break;
+    default: run_weights<0>(q.c, q.u0, q.u1, q.d0, q.d1, a.fr, a.wl, a.wr, a.wu, a.wd, xa, xb, n); break;
+  }
+  kUpdate(a, xa, xb, n);
+}
+void run_generic(const RunArgs& a, const RateRows& q, int edge_mode, int xa, int xb, int n) {
+  weights_then_update<run_update_generic>(a, q, edge_mode, xa, xb, n);
+}
 
 #if defined(__x86_64__)
 // (Lambdas would not inherit the target attribute: helpers instead.)
@@ -174,6 +196,11 @@ __attribute__((target("avx2"))) void run_update_avx2(const RunArgs& a, int xa, i
   run_update_v4(a, x, xb, n);
 }
 
+__attribute__((target("avx2"))) void run_avx2(const RunArgs& a, const RateRows& q, int edge_mode, int xa, int xb,
+                                              int n) {
+  weights_then_update<run_update_avx2>(a, q, edge_mode, xa, xb, n);
+}
+
 __attribute__((target("avx512f"))) void run_update_avx512(const RunArgs& a, int xa, int xb, int n) {
   const std::ptrdiff_t n4 = static_cast<std::ptrdiff_t>(n) * 4;
   int x = xa;
@@ -190,25 +217,101 @@ __attribute__((target("avx512f"))) void run_update_avx512(const RunArgs& a, int 
   }
   run_update_v4(a, x, xb, n);
 }
+
+// The AVX-512 run: sixteen pixels' eq. 12 weights in four registers (the
+// rate taps are contiguous loads, as in run_weights), then their update four
+// pixels at a time, each pixel's fraction and weights permuted over its four
+// lanes from those registers -- no round trip of the weights through the
+// scratch rows, whose 4 x W floats, with the offsets and F's rows, outgrew
+// L1 at W = 1600. tap16 and edge16 are brume_tap_rate and brume_edge_rate
+// lane by lane, operation for operation (min(a, b) is b < a ? b : a, which
+// is _mm512_min_ps(b, a); max(a, b) is a < b ? b : a, _mm512_max_ps(a, b) for
+// the finite values here), so the weights, and the pixels, keep their bits
+// (test: DiffusionSimd). The last < 16 pixels take run_weights and
+// run_update_avx512.
+template <int kMode>
+BRUME_AVX512 __m512 tap16(__m512 r0, __m512 r1, __m512 f) {
+  if constexpr (kMode == 0) return r0 + f * (r1 - r0);
+  return _mm512_mask_blend_ps(_mm512_cmp_ps_mask(f, _mm512_setzero_ps(), _CMP_GT_OQ), r0, _mm512_min_ps(r1, r0));
+}
+template <int kMode>
+BRUME_AVX512 __m512 edge16(__m512 rc, __m512 rn) {
+  if constexpr (kMode == 1) return _mm512_min_ps(rn, rc);
+  if constexpr (kMode == 2) return _mm512_set1_ps(2.0f) * rc * rn / _mm512_max_ps(rc + rn, _mm512_set1_ps(1.0e-30f));
+  return _mm512_set1_ps(0.5f) * (rc + rn);
+}
+template <int kMode>
+__attribute__((target("avx512f"))) void run_fused_avx512_mode(const RunArgs& a, const RateRows& q, int xa, int xb,
+                                                              int n) {
+  const std::ptrdiff_t n4 = static_cast<std::ptrdiff_t>(n) * 4;
+  const __m512i lanes[4] = {_mm512_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3),
+                            _mm512_setr_epi32(4, 4, 4, 4, 5, 5, 5, 5, 6, 6, 6, 6, 7, 7, 7, 7),
+                            _mm512_setr_epi32(8, 8, 8, 8, 9, 9, 9, 9, 10, 10, 10, 10, 11, 11, 11, 11),
+                            _mm512_setr_epi32(12, 12, 12, 12, 13, 13, 13, 13, 14, 14, 14, 14, 15, 15, 15, 15)};
+  int x = xa;
+  for (; x + 16 <= xb; x += 16) {
+    const __m512 f16 = _mm512_loadu_ps(a.fr + x), rc = _mm512_loadu_ps(q.c + x);
+    const __m512 wl16 = edge16<kMode>(rc, tap16<kMode>(_mm512_loadu_ps(q.c + x - n), _mm512_loadu_ps(q.c + x - n - 1), f16));
+    const __m512 wr16 = edge16<kMode>(rc, tap16<kMode>(_mm512_loadu_ps(q.c + x + n), _mm512_loadu_ps(q.c + x + n + 1), f16));
+    const __m512 wu16 = edge16<kMode>(rc, tap16<kMode>(_mm512_loadu_ps(q.u0 + x), _mm512_loadu_ps(q.u1 + x), f16));
+    const __m512 wd16 = edge16<kMode>(rc, tap16<kMode>(_mm512_loadu_ps(q.d0 + x), _mm512_loadu_ps(q.d1 + x), f16));
+    for (int j = 0; j < 4; ++j) {
+      const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(x + 4 * j) * 4;
+      const __m512 f = _mm512_permutexvar_ps(lanes[j], f16);
+      const __m512 fc = _mm512_loadu_ps(a.s + i);
+      const __m512 l = lerp4(_mm512_loadu_ps(a.s + i - n4), _mm512_loadu_ps(a.s + i - n4 - 4), f);
+      const __m512 r = lerp4(_mm512_loadu_ps(a.s + i + n4), _mm512_loadu_ps(a.s + i + n4 + 4), f);
+      const __m512 u = lerp4(_mm512_loadu_ps(a.u0 + i), _mm512_loadu_ps(a.u1 + i), f);
+      const __m512 d = lerp4(_mm512_loadu_ps(a.d0 + i), _mm512_loadu_ps(a.d1 + i), f);
+      const __m512 wl = _mm512_permutexvar_ps(lanes[j], wl16), wr = _mm512_permutexvar_ps(lanes[j], wr16);
+      const __m512 wu = _mm512_permutexvar_ps(lanes[j], wu16), wd = _mm512_permutexvar_ps(lanes[j], wd16);
+      _mm512_storeu_ps(a.o + i, fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc));
+    }
+  }
+  if (x < xb) {
+    run_weights<kMode>(q.c, q.u0, q.u1, q.d0, q.d1, a.fr, a.wl, a.wr, a.wu, a.wd, x, xb, n);
+    run_update_avx512(a, x, xb, n);
+  }
+}
+__attribute__((target("avx512f"))) void run_fused_avx512(const RunArgs& a, const RateRows& q, int edge_mode, int xa,
+                                                         int xb, int n) {
+  switch (edge_mode) {
+    case 1: run_fused_avx512_mode<1>(a, q, xa, xb, n); break;
+    case 2: run_fused_avx512_mode<2>(a, q, xa, xb, n); break;
+    default: run_fused_avx512_mode<0>(a, q, xa, xb, n); break;
+  }
+}
 #undef BRUME_AVX2
 #undef BRUME_AVX512
 #endif
 
-// Offsets of a row at iteration k, their integer and fractional parts, and
-// sigma_k advanced in place to sigma_{k+1} (one pass; sigma_k is read by its
-// own pixel's offset only). The exact scheme's offset needs the variance
-// ratio vr; the published one is sigma_k itself.
+// Offsets of a row at iteration k, their integer and fractional parts. The
+// row's sigma_k is the running product sigma_0 e^rho e^rho ... (k factors
+// growth = e^rho, in that order: the same float sequence as every path),
+// formed here in L1-sized chunks rather than kept in a W x H map between
+// iterations: k multiplies a pixel cost less than reading and writing the
+// map (a quarter of the RGBA image, streamed twice per iteration), the map's
+// heap is saved, and a fused group's levels need no sigma of their own. The
+// exact scheme's offset needs the variance ratio vr; the published one is
+// sigma_k itself.
 template <bool kExact>
 __attribute__((always_inline)) inline void row_offsets(float* __restrict h, int* __restrict n, float* __restrict fr,
-                                                       float* __restrict sg, const float* __restrict growth,
+                                                       float s0, int k, const float* __restrict growth,
                                                        const float* __restrict vr, int W) {
-  for (int x = 0; x < W; ++x) {
-    const float s = sg[x];
-    const float hx = kExact ? sh::brume_offset_for_moment(s * s * vr[x]) : s;
-    h[x] = hx;
-    n[x] = static_cast<int>(hx);
-    fr[x] = hx - static_cast<float>(n[x]);
-    sg[x] = s * growth[x];
+  constexpr int kChunk = 256;
+  float s[kChunk];
+  for (int x0 = 0; x0 < W; x0 += kChunk) {
+    const int c = std::min(kChunk, W - x0);
+    const float* __restrict g = growth + x0;
+    for (int x = 0; x < c; ++x) s[x] = s0;
+    for (int i = 0; i < k; ++i)
+      for (int x = 0; x < c; ++x) s[x] = s[x] * g[x];
+    for (int x = 0; x < c; ++x) {
+      const float hx = kExact ? sh::brume_offset_for_moment(s[x] * s[x] * vr[x0 + x]) : s[x];
+      h[x0 + x] = hx;
+      n[x0 + x] = static_cast<int>(hx);
+      fr[x0 + x] = hx - static_cast<float>(n[x0 + x]);
+    }
   }
 }
 
@@ -240,14 +343,14 @@ __attribute__((always_inline)) inline int run_end(const int* __restrict n, int x
 // F's rows come through a RowSource (the whole image, or a fused group's
 // ring) and row y of the result goes to orow.
 __attribute__((always_inline)) inline void general_row_body(const RowSource<float>& in, float* orow, const float* rho,
-                                                            float* sg, const float* growth, const float* vr, bool exact,
-                                                            int edge_mode, int W, int H, int y, RowScratch& t,
-                                                            RunUpdate run_update) {
+                                                            float s0, int k, const float* growth, const float* vr,
+                                                            bool exact, int edge_mode, int W, int H, int y, RowScratch& t,
+                                                            RunKernel run) {
   float* h = t.h.data();
   if (exact)
-    row_offsets<true>(h, t.n.data(), t.fr.data(), sg, growth, vr, W);
+    row_offsets<true>(h, t.n.data(), t.fr.data(), s0, k, growth, vr, W);
   else
-    row_offsets<false>(h, t.n.data(), t.fr.data(), sg, growth, vr, W);
+    row_offsets<false>(h, t.n.data(), t.fr.data(), s0, k, growth, vr, W);
   const std::size_t Ws = static_cast<std::size_t>(W);
   for (int x = 0; x < W;) {
     const int n = t.n[x];
@@ -267,12 +370,7 @@ __attribute__((always_inline)) inline void general_row_body(const RowSource<floa
       const float* rrow = rho + y * Ws;
       const float *ru0 = rho + yu0 * Ws, *ru1 = rho + yu1 * Ws;
       const float *rd0 = rho + yd0 * Ws, *rd1 = rho + yd1 * Ws;
-      float *wl = t.wl.data(), *wr = t.wr.data(), *wu = t.wu.data(), *wd = t.wd.data();
-      switch (edge_mode) {
-        case 1: run_weights<1>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
-        case 2: run_weights<2>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
-        default: run_weights<0>(rrow, ru0, ru1, rd0, rd1, t.fr.data(), wl, wr, wu, wd, a, b, n); break;
-      }
+      const RateRows q{rrow, ru0, ru1, rd0, rd1};
       const RunArgs args{in(y),
                          in(static_cast<int>(yu0)),
                          in(static_cast<int>(yu1)),
@@ -280,11 +378,11 @@ __attribute__((always_inline)) inline void general_row_body(const RowSource<floa
                          in(static_cast<int>(yd1)),
                          orow,
                          t.fr.data(),
-                         wl,
-                         wr,
-                         wu,
-                         wd};
-      run_update(args, a, b, n);
+                         t.wl.data(),
+                         t.wr.data(),
+                         t.wu.data(),
+                         t.wd.data()};
+      run(args, q, edge_mode, a, b, n);
     }
     for (int i = std::max(b, a); i < e; ++i) pixel_from_rows<false>(in, orow, rho, 0.0f, W, H, i, y, h[i], edge_mode);
     x = e;
@@ -292,15 +390,18 @@ __attribute__((always_inline)) inline void general_row_body(const RowSource<floa
 }
 
 #define BRUME_GENERAL_ROW_ARGS                                                                              \
-  const RowSource<float> &in, float *orow, const float *rho, float *sg, const float *growth, const float *vr, \
-      bool exact, int edge_mode, int W, int H, int y, RowScratch &t
-#define BRUME_GENERAL_ROW_CALL(upd) general_row_body(in, orow, rho, sg, growth, vr, exact, edge_mode, W, H, y, t, upd)
+  const RowSource<float> &in, float *orow, const float *rho, float s0, int k, const float *growth,            \
+      const float *vr, bool exact, int edge_mode, int W, int H, int y, RowScratch &t
+#define BRUME_GENERAL_ROW_CALL(upd) \
+  general_row_body(in, orow, rho, s0, k, growth, vr, exact, edge_mode, W, H, y, t, upd)
 using GeneralRow = void (*)(BRUME_GENERAL_ROW_ARGS);
-void general_row_generic(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(run_update_generic); }
+void general_row_generic(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(run_generic); }
 #if defined(__x86_64__)
-__attribute__((target("avx2"))) void general_row_avx2(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(run_update_avx2); }
+__attribute__((target("avx2"))) void general_row_avx2(BRUME_GENERAL_ROW_ARGS) {
+  BRUME_GENERAL_ROW_CALL(run_avx2);
+}
 __attribute__((target("avx512f"))) void general_row_avx512(BRUME_GENERAL_ROW_ARGS) {
-  BRUME_GENERAL_ROW_CALL(run_update_avx512);
+  BRUME_GENERAL_ROW_CALL(run_fused_avx512);
 }
 #endif
 #undef BRUME_GENERAL_ROW_CALL
@@ -357,7 +458,9 @@ RowKernels row_kernels() {
     // presumably because taps at offsets of n RGBA pixels (16n bytes) make
     // three in four 64-byte loads straddle two cache lines (one in four at 32
     // bytes). The space-variant rows gain from 512 bits (160 against 175 ms):
-    // their per-pixel offsets and weights are arithmetic-bound.
+    // their per-pixel offsets and weights are arithmetic-bound. On Zen 5
+    // (AMD EPYC family 26), with the workspace rows cache-line aligned, the
+    // constant rows took the same time at either width (-3..+3 %, 2026-12-02).
     case 2: return {uniform_row_avx2, general_row_avx512, standard_row_avx512};
     case 1: return {uniform_row_avx2, general_row_avx2, standard_row_avx2};
 #endif
@@ -416,7 +519,7 @@ void round_to_half(float* v, std::size_t n) {
 float* Workspace::get(Slot s, std::size_t n) {
   if (n_[s] < n) {
     p_[s].reset();  // before the new allocation: never hold both
-    p_[s].reset(new float[n]);
+    p_[s].reset(static_cast<float*>(::operator new[](n * sizeof(float), std::align_val_t{kAlign})));
     detail::advise_huge_pages(p_[s].get(), n * sizeof(float));  // before the first touch
     n_[s] = n;
   }
@@ -425,7 +528,7 @@ float* Workspace::get(Slot s, std::size_t n) {
 std::uint16_t* Workspace::get_half(int which, std::size_t n) {
   if (hn_[which] < n) {
     h_[which].reset();
-    h_[which].reset(new std::uint16_t[n]);
+    h_[which].reset(static_cast<std::uint16_t*>(::operator new[](n * sizeof(std::uint16_t), std::align_val_t{kAlign})));
     detail::advise_huge_pages(h_[which].get(), n * sizeof(std::uint16_t));
     hn_[which] = n;
   }
@@ -584,61 +687,32 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
     };
     src = uniform_iterations_fused(src, dst, W, H, steps, groups, nt, ring, row);
   } else {
-    // Per-pixel rate, sigma_k as a running product, and the exact scheme's
-    // variance ratio (e^{2 rho} - 1)/(2 rho).
+    // Per-pixel rate, growth e^rho of the running product sigma_k (formed
+    // per row: row_offsets), and the exact scheme's variance ratio
+    // (e^{2 rho} - 1)/(2 rho).
     const float* rho = rates;
-    float* sig = ws.get(Workspace::sigma, np);
     float* growth = ws.get(Workspace::growth, np);
     float* vratio = ws.get(Workspace::vratio, np);
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y)
       for (std::size_t i = y * Ws; i < (y + 1) * Ws; ++i) {
-        sig[i] = s0;
         growth[i] = std::exp(rho[i]);
         vratio[i] = sh::brume_step_variance_ratio(rho[i]);
       }
     std::vector<RowScratch> scratch(static_cast<std::size_t>(nt), RowScratch(W));
     // Temporal blocking as on the constant path (diffusion_fusion.hpp), with
-    // each iteration's radius bounded over the whole map. sigma_k of a fused
-    // level's row is the group's sigma times growth j times (the same float
-    // products as the running product), and the group's last level writes
-    // sigma_{k0+m} back -- in place, except the rows within `edge` of its
-    // band's ends: a neighbouring band still reads their sigma_{k0} for its
-    // own edge rows, so those are staged and written after the group.
+    // each iteration's radius bounded over the whole map.
     radii = general_radii(rates, np, N, s0, exact);
     groups = plan_fusion(radii, W, H, nt, sizeof(float));
     float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt)));
-    auto row = [&](int, int j, int m, int y, const RowSource<float>& in, float* out, const Band& band) {
-      RowScratch& t = scratch[static_cast<std::size_t>(omp_get_thread_num())];
-      const std::size_t r0 = static_cast<std::size_t>(y) * Ws;
-      float* sgrow = sig + r0;  // alone: advanced in place, as before blocking
-      if (m > 1) {
-        sgrow = t.sg.data();
-        std::memcpy(sgrow, sig + r0, Ws * sizeof(float));
-        for (int i = 0; i < j; ++i)
-          for (std::size_t x = 0; x < Ws; ++x) sgrow[x] = sgrow[x] * growth[r0 + x];
-      }
-      // (advances sgrow to sigma_{k+1})
-      kern.general(in, out, rho, sgrow, growth + r0, vratio + r0, exact, edge_mode, W, H, y, t);
-      if (m > 1 && j == m - 1) {
-        if (y < band.y0 + band.edge || y >= band.y1 - band.edge) {
-          t.staged_y.push_back(y);
-          t.staged.insert(t.staged.end(), sgrow, sgrow + Ws);
-        } else {
-          std::memcpy(sig + r0, sgrow, Ws * sizeof(float));
-        }
-      }
-      if (f16) round_to_half(out, Ws * 4);
-    };
-    src = iterations_fused(src, dst, W, H, radii, groups, nt, ring, row, [&](const FusedGroup&) {
-      for (RowScratch& t : scratch) {
-        for (std::size_t i = 0; i < t.staged_y.size(); ++i)
-          std::memcpy(sig + static_cast<std::size_t>(t.staged_y[i]) * Ws, t.staged.data() + i * Ws,
-                      Ws * sizeof(float));
-        t.staged_y.clear();
-        t.staged.clear();
-      }
-    });
+    src = iterations_fused(src, dst, W, H, radii, groups, nt, ring,
+                           [&](int k, int y, const RowSource<float>& in, float* out) {
+                             RowScratch& t = scratch[static_cast<std::size_t>(omp_get_thread_num())];
+                             const std::size_t r0 = static_cast<std::size_t>(y) * Ws;
+                             kern.general(in, out, rho, s0, k, growth + r0, vratio + r0, exact, edge_mode, W, H, y,
+                                          t);
+                             if (f16) round_to_half(out, Ws * 4);
+                           });
   }
   if (src != f.data.data()) std::memcpy(f.data.data(), src, f.data.size() * sizeof(float));
 }

@@ -145,49 +145,38 @@ void fused_group_band(const T* A, T* B, int W, int H, const int* radii, int m, i
     }
 }
 
-// The output rows [y0, y1) of the calling thread in a fused group, and
-// `edge`: how far beyond them its first level reads (E_1), so that rows
-// within `edge` of [y0, y1)'s ends are also read by the neighbouring bands.
-// A pass alone: the whole image, edge 0.
-struct Band {
-  int y0, y1, edge;
-};
-
 // N iterations of F from `src`, ping-ponging with `dst` (both W x H x 4),
 // grouped by plan_fusion; returns the buffer holding the result. ring: at
-// least fusion_ring_values(...) values. row(k, j, m, y, in, out, band):
-// iteration k (the j-th of its group of m) writes row y to `out`, reading
-// the previous level through in(q) (see fused_group_band). Called from
-// inside OpenMP parallel regions (omp_get_thread_num() names the calling
-// thread's scratch). group_done(g): after each group, outside them.
-template <class T, class LevelRow, class GroupDone = void (*)(const FusedGroup&)>
+// least fusion_ring_values(...) values. row(k, y, in, out): iteration k
+// writes row y to `out`, reading the previous level through in(q) (see
+// fused_group_band). Called from inside OpenMP parallel regions
+// (omp_get_thread_num() names the calling thread's scratch). Each thread's
+// band of a fused group overlaps its neighbours' by the group's halo, so
+// rows there are computed twice, from the same inputs, with the same bits.
+template <class T, class LevelRow>
 T* iterations_fused(T* src, T* dst, int W, int H, const Radii& radii, const std::vector<FusedGroup>& groups,
-                    int threads, T* ring, LevelRow row, GroupDone group_done = [](const FusedGroup&) {}) {
+                    int threads, T* ring, LevelRow row) {
   const std::size_t rs = static_cast<std::size_t>(W) * 4;
   const std::size_t ring_rows = max_ring_rows(radii, groups);
   for (const FusedGroup& g : groups) {
     if (g.m == 1) {
       const RowSource<T> in{src, rs, 0};
 #pragma omp parallel for num_threads(threads) schedule(static)
-      for (int y = 0; y < H; ++y) row(g.k0, 0, 1, y, in, dst + y * rs, Band{0, H, 0});
+      for (int y = 0; y < H; ++y) row(g.k0, y, in, dst + y * rs);
     } else {
 #pragma omp parallel num_threads(threads)
       {
         const int t = omp_get_thread_num(), nt = omp_get_num_threads();
         const int Y0 = static_cast<int>(static_cast<long long>(H) * t / nt);
         const int Y1 = static_cast<int>(static_cast<long long>(H) * (t + 1) / nt);
-        int edge = 0;  // E_1 of the group
-        for (int i = 1; i < g.m; ++i) edge += radii[static_cast<std::size_t>(g.k0 + i)];
-        const Band band{Y0, Y1, edge};
         if (Y0 < Y1)
           fused_group_band(src, dst, W, H, &radii[static_cast<std::size_t>(g.k0)], g.m, Y0, Y1,
                            ring + t * ring_rows * rs, [&](int j, int y, const RowSource<T>& in, T* out) {
-                             row(g.k0 + j, j, g.m, y, in, out, band);
+                             row(g.k0 + j, y, in, out);
                            });
       }
     }
     std::swap(src, dst);
-    group_done(g);
   }
   return src;
 }
@@ -237,7 +226,7 @@ template <class T, class Row5>
 T* uniform_iterations_fused(T* src, T* dst, int W, int H, const std::vector<UniformStep>& st,
                             const std::vector<FusedGroup>& groups, int threads, T* ring, Row5 row5) {
   return iterations_fused(src, dst, W, H, uniform_radii(st), groups, threads, ring,
-                          [&](int k, int, int, int y, const RowSource<T>& in, T* out, const Band&) {
+                          [&](int k, int y, const RowSource<T>& in, T* out) {
                             const UniformStep& s = st[static_cast<std::size_t>(k)];
                             const int n = s.n;
                             row5(in(y), in(mirror(y - n, H)), in(mirror(y - n - 1, H)), in(mirror(y + n, H)),

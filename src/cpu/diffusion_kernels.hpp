@@ -9,6 +9,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <new>
 #include <vector>
 
 #include "brume/diffusion.hpp"
@@ -24,15 +25,16 @@ inline int mirror(int i, int n) {
   return i < n ? i : period - 1 - i;
 }
 
-// Buffers of the fast path (the ping-pong partner of F, the rate map, sigma_k
-// and the per-pixel constants of the invariant schemes, edge weights),
+// Buffers of the fast path (the ping-pong partner of F, the rate map, the
+// per-pixel constants of the invariant schemes, edge weights, the fused
+// schedule's rings),
 // uninitialised and reused across iterations and calls. A fresh 28 MB
 // partner per call costs ~7000 first-touch page faults, which on the hosts
 // measured (VMs) cost as much as several iterations; a reused one costs none.
 // Every value is written before it is read, so reuse cannot change a result.
 class Workspace {
  public:
-  enum Slot { partner, rates, sigma, growth, vratio, edge_x, edge_y, ring, kSlots };
+  enum Slot { partner, rates, growth, vratio, edge_x, edge_y, ring, kSlots };
   // At least n floats, uninitialised; valid until the next get of that slot.
   float* get(Slot s, std::size_t n);
   // The binary16 buffers of the f16 constant-scale path: 0 and 1 the
@@ -41,9 +43,16 @@ class Workspace {
   std::size_t bytes() const;
 
  private:
-  std::unique_ptr<float[]> p_[kSlots];
+  // Cache-line aligned: a 64-byte vector load of an aligned row offset then
+  // touches one line, not two (malloc's large blocks start 16 bytes past a
+  // page, which split every 512-bit load of a row across two lines).
+  struct AlignedFree {
+    void operator()(void* p) const { ::operator delete[](p, std::align_val_t{kAlign}); }
+  };
+  static constexpr std::size_t kAlign = 64;
+  std::unique_ptr<float[], AlignedFree> p_[kSlots];
   std::size_t n_[kSlots] = {};
-  std::unique_ptr<std::uint16_t[]> h_[3];
+  std::unique_ptr<std::uint16_t[], AlignedFree> h_[3];
   std::size_t hn_[3] = {};
 };
 
