@@ -49,6 +49,16 @@
 #include <immintrin.h>
 #endif
 
+// GCC 12's AVX-512 intrinsics pass _mm512_undefined_ps() (`__m512 __Y = __Y;`)
+// as the unused pass-through of their unmasked forms (_mm512_permutexvar_ps,
+// _mm512_min_ps, _mm512_broadcast_f32x4), and -Wmaybe-uninitialized reports
+// it once per inlining of the row kernels: a false positive (no lane of it
+// is ever read), silenced for the row kernels only (push ... pop below).
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+
 namespace brume::cpu {
 
 namespace {
@@ -406,6 +416,9 @@ __attribute__((target("avx512f"))) void general_row_avx512(BRUME_GENERAL_ROW_ARG
 #endif
 #undef BRUME_GENERAL_ROW_CALL
 #undef BRUME_GENERAL_ROW_ARGS
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 
 // One row of the conductance stencil (the standard scheme once its edge
 // rates are formed): wr[x] couples x and x+1 (0 at the last column: zero
