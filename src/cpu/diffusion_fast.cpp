@@ -250,6 +250,12 @@ BRUME_AVX512 __m512 edge16(__m512 rc, __m512 rn) {
   if constexpr (kMode == 2) return _mm512_set1_ps(2.0f) * rc * rn / _mm512_max_ps(rc + rn, _mm512_set1_ps(1.0e-30f));
   return _mm512_set1_ps(0.5f) * (rc + rn);
 }
+// One direction's weights of sixteen pixels: centre rates rc, the tap's
+// two texels' rates at r0 and r1, fractions f.
+template <int kMode>
+BRUME_AVX512 __m512 weight16(__m512 rc, const float* r0, const float* r1, __m512 f) {
+  return edge16<kMode>(rc, tap16<kMode>(_mm512_loadu_ps(r0), _mm512_loadu_ps(r1), f));
+}
 template <int kMode>
 __attribute__((target("avx512f"))) void run_fused_avx512_mode(const RunArgs& a, const RateRows& q, int xa, int xb,
                                                               int n) {
@@ -261,10 +267,10 @@ __attribute__((target("avx512f"))) void run_fused_avx512_mode(const RunArgs& a, 
   int x = xa;
   for (; x + 16 <= xb; x += 16) {
     const __m512 f16 = _mm512_loadu_ps(a.fr + x), rc = _mm512_loadu_ps(q.c + x);
-    const __m512 wl16 = edge16<kMode>(rc, tap16<kMode>(_mm512_loadu_ps(q.c + x - n), _mm512_loadu_ps(q.c + x - n - 1), f16));
-    const __m512 wr16 = edge16<kMode>(rc, tap16<kMode>(_mm512_loadu_ps(q.c + x + n), _mm512_loadu_ps(q.c + x + n + 1), f16));
-    const __m512 wu16 = edge16<kMode>(rc, tap16<kMode>(_mm512_loadu_ps(q.u0 + x), _mm512_loadu_ps(q.u1 + x), f16));
-    const __m512 wd16 = edge16<kMode>(rc, tap16<kMode>(_mm512_loadu_ps(q.d0 + x), _mm512_loadu_ps(q.d1 + x), f16));
+    const __m512 wl16 = weight16<kMode>(rc, q.c + x - n, q.c + x - n - 1, f16);
+    const __m512 wr16 = weight16<kMode>(rc, q.c + x + n, q.c + x + n + 1, f16);
+    const __m512 wu16 = weight16<kMode>(rc, q.u0 + x, q.u1 + x, f16);
+    const __m512 wd16 = weight16<kMode>(rc, q.d0 + x, q.d1 + x, f16);
     for (int j = 0; j < 4; ++j) {
       const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(x + 4 * j) * 4;
       const __m512 f = _mm512_permutexvar_ps(lanes[j], f16);
@@ -354,8 +360,8 @@ __attribute__((always_inline)) inline int run_end(const int* __restrict n, int x
 // ring) and row y of the result goes to orow.
 __attribute__((always_inline)) inline void general_row_body(const RowSource<float>& in, float* orow, const float* rho,
                                                             float s0, int k, const float* growth, const float* vr,
-                                                            bool exact, int edge_mode, int W, int H, int y, RowScratch& t,
-                                                            RunKernel run) {
+                                                            bool exact, int edge_mode, int W, int H, int y,
+                                                            RowScratch& t, RunKernel run) {
   float* h = t.h.data();
   if (exact)
     row_offsets<true>(h, t.n.data(), t.fr.data(), s0, k, growth, vr, W);
