@@ -1,6 +1,7 @@
 // File I/O: PFM against an independent parser, round trips through every
 // format, named EXR channels, raw integer counts, sRGB, and error paths.
 #include <OpenImageIO/imageio.h>
+#include <png.h>
 
 #include <cstdio>
 #include <cstring>
@@ -10,6 +11,7 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
+#include "io/png_direct.hpp"
 #include "test_util.hpp"
 
 using namespace brume;
@@ -488,5 +490,204 @@ TEST(IO, PfmPixelsReadStraightEqualOpenImageIO) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("short.pfm"), std::string::npos) << e.what();
   }
+  fs::remove_all(d);
+}
+
+namespace {
+// A PNG written with libpng by hand (the shapes OpenImageIO's writer does
+// not make: interlaced, palette, 1-bit, tRNS), values row-major.
+void write_png_by_hand(const std::string& p, int w, int h, int depth, int color, bool interlace,
+                       const std::vector<unsigned char>& bytes, bool trns = false) {
+  std::FILE* f = std::fopen(p.c_str(), "wb");
+  ASSERT_TRUE(f) << p;
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+  png_infop info = png_create_info_struct(png);
+  ASSERT_EQ(setjmp(png_jmpbuf(png)), 0) << p;
+  png_init_io(png, f);
+  png_set_IHDR(png, info, w, h, depth, color, interlace ? PNG_INTERLACE_ADAM7 : PNG_INTERLACE_NONE,
+               PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+  png_color palette[4] = {{0, 0, 0}, {255, 0, 0}, {0, 255, 0}, {10, 20, 30}};
+  if (color == PNG_COLOR_TYPE_PALETTE) png_set_PLTE(png, info, palette, 4);
+  png_color_16 t{};
+  t.gray = 3;
+  if (trns) png_set_tRNS(png, info, nullptr, 0, &t);
+  png_write_info(png, info);
+  const std::size_t rowbytes = png_get_rowbytes(png, info);
+  std::vector<png_bytep> rows(h);
+  std::vector<unsigned char> copy = bytes;  // libpng takes non-const rows
+  for (int y = 0; y < h; ++y) rows[y] = copy.data() + y * rowbytes;
+  png_write_image(png, rows.data());
+  png_write_end(png, nullptr);
+  png_destroy_write_struct(&png, &info);
+  std::fclose(f);
+}
+}  // namespace
+
+TEST(IO, PngSubsetIsReadAsOpenImageIOReadsIt) {
+  // 8/16-bit grey and RGB PNG are read with libpng itself (no OpenImageIO
+  // module load): the values (every 8- and 16-bit count), FileInfo and the
+  // Description text must be what OpenImageIO gives, bit for bit; every
+  // other PNG must be declined by the subset reader and read by OpenImageIO
+  // as before.
+  fs::path d = tmpdir();
+  auto oiio_write = [](const std::string& p, int w, int h, int c, OIIO::TypeDesc t, const void* px,
+                       const std::string& desc) {
+    OIIO::ImageSpec spec(w, h, c, t);
+    if (!desc.empty()) spec.attribute("ImageDescription", desc);
+    auto out = OIIO::ImageOutput::create(p);
+    ASSERT_TRUE(out && out->open(p, spec)) << p;
+    ASSERT_TRUE(out->write_image(t, px)) << p;
+    ASSERT_TRUE(out->close()) << p;
+  };
+  std::vector<std::string> subset, other;
+  {
+    std::vector<unsigned char> g8(256 * 3);
+    for (std::size_t i = 0; i < g8.size(); ++i) g8[i] = static_cast<unsigned char>(i * 7 % 256);
+    oiio_write((d / "g8.png").string(), 256, 3, 1, OIIO::TypeDesc::UINT8, g8.data(), "{\"a\": \"brume\"}");
+    std::vector<std::uint16_t> g16(256 * 256);
+    for (std::size_t i = 0; i < g16.size(); ++i) g16[i] = static_cast<std::uint16_t>(i);
+    oiio_write((d / "g16.png").string(), 256, 256, 1, OIIO::TypeDesc::UINT16, g16.data(), "");
+    std::vector<unsigned char> c8(97 * 13 * 3);
+    for (std::size_t i = 0; i < c8.size(); ++i) c8[i] = static_cast<unsigned char>((i * 2654435761u) >> 24);
+    oiio_write((d / "rgb8.png").string(), 97, 13, 3, OIIO::TypeDesc::UINT8, c8.data(), "x");
+    std::vector<std::uint16_t> c16(61 * 7 * 3);
+    for (std::size_t i = 0; i < c16.size(); ++i) c16[i] = static_cast<std::uint16_t>((i * 2654435761u) >> 16);
+    oiio_write((d / "rgb16.png").string(), 61, 7, 3, OIIO::TypeDesc::UINT16, c16.data(), "");
+    std::vector<unsigned char> i8(33 * 21 * 3);
+    for (std::size_t i = 0; i < i8.size(); ++i) i8[i] = static_cast<unsigned char>(i * 13 % 251);
+    write_png_by_hand((d / "interlaced.png").string(), 33, 21, 8, PNG_COLOR_TYPE_RGB, true, i8);
+    for (const char* n : {"g8.png", "g16.png", "rgb8.png", "rgb16.png", "interlaced.png"})
+      subset.push_back((d / n).string());
+    // Outside the subset: alpha (OpenImageIO associates it), grey + alpha,
+    // palette, 1-bit grey, a tRNS chunk.
+    std::vector<unsigned char> a8(19 * 5 * 4);
+    for (std::size_t i = 0; i < a8.size(); ++i) a8[i] = static_cast<unsigned char>(i * 31 % 256);
+    oiio_write((d / "rgba.png").string(), 19, 5, 4, OIIO::TypeDesc::UINT8, a8.data(), "");
+    oiio_write((d / "ga.png").string(), 19, 5, 2, OIIO::TypeDesc::UINT8, a8.data(), "");
+    std::vector<unsigned char> pal(8 * 4);
+    for (std::size_t i = 0; i < pal.size(); ++i) pal[i] = static_cast<unsigned char>(i % 4);
+    write_png_by_hand((d / "palette.png").string(), 8, 4, 8, PNG_COLOR_TYPE_PALETTE, false, pal);
+    std::vector<unsigned char> bits(2 * 4, 0xA5);
+    write_png_by_hand((d / "bits1.png").string(), 16, 4, 1, PNG_COLOR_TYPE_GRAY, false, bits);
+    std::vector<unsigned char> tr(8 * 4, 3);
+    write_png_by_hand((d / "trns.png").string(), 8, 4, 8, PNG_COLOR_TYPE_GRAY, false, tr, true);
+    for (const char* n : {"rgba.png", "ga.png", "palette.png", "bits1.png", "trns.png"})
+      other.push_back((d / n).string());
+  }
+  for (const char* rel : {"middlebury2005_thirdsize/Art/view1.png", "middlebury2005_thirdsize/Art/disp1.png"})
+    if (have_data(rel)) subset.push_back(data_path(rel));
+  auto none = [](int, int, int) {};
+  for (const std::string& p : subset) {
+    Image raw;
+    detail::PngInfo pi;
+    EXPECT_TRUE(detail::read_png_subset(p, raw, pi, none)) << p << " was not read by the subset reader";
+  }
+  for (const std::string& p : other) {
+    Image raw;
+    detail::PngInfo pi;
+    EXPECT_FALSE(detail::read_png_subset(p, raw, pi, none)) << p << " is outside the subset";
+  }
+  std::vector<std::string> all = subset;
+  all.insert(all.end(), other.begin(), other.end());
+  for (const std::string& p : all) {
+    auto in = OIIO::ImageInput::open(p);
+    ASSERT_TRUE(in) << p;
+    const OIIO::ImageSpec spec = in->spec();
+    const int c = spec.nchannels;
+    std::vector<float> want(static_cast<std::size_t>(spec.width) * spec.height * c);
+    ASSERT_TRUE(in->read_image(0, 0, 0, c, OIIO::TypeDesc::FLOAT, want.data())) << p;
+    in.reset();
+    FileInfo info;
+    const Image got = read_color(p, Transfer::linear, &info);
+    EXPECT_EQ(info.format, "png") << p;
+    EXPECT_TRUE(info.integer) << p;
+    EXPECT_EQ(info.bits, static_cast<int>(spec.format.size() * 8)) << p;
+    EXPECT_EQ(info.channel_names, std::vector<std::string>(spec.channelnames.begin(), spec.channelnames.end())) << p;
+    EXPECT_EQ(info.description, spec.get_string_attribute("ImageDescription")) << p;
+    ASSERT_EQ(got.width, spec.width) << p;
+    ASSERT_EQ(got.height, spec.height) << p;
+    // read_color: grey to RGB, alpha dropped; the values themselves (linear).
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < got.pixels(); ++i)
+      for (int k = 0; k < 3; ++k) {
+        const float w = want[i * c + (c >= 3 ? k : 0)];
+        if (std::memcmp(&w, &got.data[i * 3 + k], 4) != 0) ++differ;
+      }
+    EXPECT_EQ(differ, 0u) << p;
+    if (c == 1) {  // counts
+      const Image counts = read_scalar(p);
+      const double max = spec.format.size() == 1 ? 255.0 : 65535.0;
+      std::size_t bad = 0;
+      for (std::size_t i = 0; i < want.size(); ++i)
+        if (counts.data[i] != static_cast<float>(std::nearbyint(want[i] * max))) ++bad;
+      EXPECT_EQ(bad, 0u) << p;
+    }
+  }
+  // A truncated subset file is declined and OpenImageIO's refusal names it.
+  {
+    std::ifstream f(d / "rgb16.png", std::ios::binary);
+    std::string b((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    std::ofstream(d / "cut.png", std::ios::binary) << b.substr(0, b.size() * 2 / 3);
+    Image raw;
+    detail::PngInfo pi;
+    EXPECT_FALSE(detail::read_png_subset((d / "cut.png").string(), raw, pi, none));
+    try {
+      (void)read_color((d / "cut.png").string(), Transfer::linear);
+      ADD_FAILURE() << "a truncated PNG was read";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("cut.png"), std::string::npos) << e.what();
+    }
+  }
+  fs::remove_all(d);
+}
+
+TEST(IO, PngSubsetWritesTheFileOpenImageIOWrites) {
+  // brume writes 1- and 3-channel 8/16-bit PNG with libpng itself: the file
+  // must be the one OpenImageIO writes from the same values and attributes,
+  // byte for byte (chunks, their order, the deflate stream), at each
+  // compression setting, sRGB and linear, with and without a description.
+  fs::path d = tmpdir();
+  for (int w : {64, 37})
+    for (int c : {1, 3})
+      for (const char* bits : {"8", "16"})
+        for (Transfer t : {Transfer::srgb, Transfer::linear})
+          for (const char* comp : {"auto", "zip:1", "none"})
+            for (const char* desc : {"", "{\"brume\": 1}"}) {
+              Image img(w, 9, c);
+              for (std::size_t i = 0; i < img.data.size(); ++i)
+                img.data[i] = -0.05f + 1.1f * static_cast<float>((i * 2654435761u) % 10007) / 10006.0f;
+              WriteOptions o;
+              o.bits = bits;
+              o.transfer = t;
+              o.compression = comp;
+              o.description = desc;
+              const std::string mine = (d / "mine.png").string(), theirs = (d / "theirs.png").string();
+              write_image(mine, img, o);
+              OIIO::ImageSpec spec(w, 9, c, std::string(bits) == "8" ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16);
+              if (c == 1) spec.channelnames = {"Y"};
+              spec.attribute("oiio:ColorSpace", t == Transfer::srgb ? "sRGB" : "linear");
+              if (*desc) spec.attribute("ImageDescription", desc);
+              if (std::string(comp) == "zip:1") spec.attribute("png:compressionLevel", 1);
+              if (std::string(comp) == "none") spec.attribute("png:compressionLevel", 0);
+              auto out = OIIO::ImageOutput::create(theirs);
+              ASSERT_TRUE(out && out->open(theirs, spec));
+              if (t == Transfer::srgb && std::string(bits) == "8") {
+                std::vector<std::uint8_t> codes(img.data.size());
+                srgb_encode_8(img.data.data(), codes.data(), codes.size());
+                ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, codes.data()));
+              } else {
+                std::vector<float> v = img.data;
+                if (t == Transfer::srgb)
+                  for (float& x : v) x = linear_to_srgb(std::max(x, 0.0f));
+                ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, v.data()));
+              }
+              ASSERT_TRUE(out->close());
+              std::ifstream a(mine, std::ios::binary), b(theirs, std::ios::binary);
+              const std::string ba((std::istreambuf_iterator<char>(a)), std::istreambuf_iterator<char>());
+              const std::string bb((std::istreambuf_iterator<char>(b)), std::istreambuf_iterator<char>());
+              EXPECT_TRUE(ba == bb) << "width " << w << ", " << c << " channels, " << bits << " bits, "
+                                    << (t == Transfer::srgb ? "sRGB" : "linear") << ", " << comp << ", description '"
+                                    << desc << "': " << ba.size() << " against " << bb.size() << " bytes";
+            }
   fs::remove_all(d);
 }

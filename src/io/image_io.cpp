@@ -24,6 +24,7 @@
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
 #include "io/codec.hpp"
+#include "io/png_direct.hpp"
 
 namespace brume {
 namespace fs = std::filesystem;
@@ -121,15 +122,14 @@ class SrgbEncoder8 {
   }
 
  private:
-  // The per-value path's codes of v (any count), through OpenImageIO's
-  // vector conversion: the call is padded to a multiple of 16 values.
-  static std::vector<std::uint8_t> slow(std::vector<float> v) {
-    const std::size_t n = v.size();
-    v.resize((n + 15) / 16 * 16, 0.0f);
-    for (float& x : v) x = linear_to_srgb(std::max(x, 0.0f));
+  // The per-value path's codes of v (any count): OpenImageIO's vector
+  // conversion of the encoded floats (detail::oiio_count, so that writing
+  // an 8-bit file needs no OpenImageIO; IO.SrgbTablesGiveThePerValueBits
+  // checks it against OpenImageIO's own).
+  static std::vector<std::uint8_t> slow(const std::vector<float>& v) {
     std::vector<std::uint8_t> c(v.size());
-    codec::api("writing an 8-bit file").float_to_u8(v.data(), c.data(), static_cast<int>(v.size()));
-    c.resize(n);
+    for (std::size_t i = 0; i < v.size(); ++i)
+      c[i] = static_cast<std::uint8_t>(detail::oiio_count(linear_to_srgb(std::max(v[i], 0.0f)), 255.0f));
     return c;
   }
   static float from_bits(std::uint32_t b) {
@@ -341,6 +341,24 @@ void check_memory(std::uint64_t bytes, const std::string& what) {
 }
 
 ImageHeader read_header(const std::string& path) {
+  {
+    // The PNG subset's header, without OpenImageIO (io/png_direct.hpp): the
+    // size check throws out of the read before any pixel is decoded.
+    struct HeaderOnly {
+      ImageHeader h;
+    };
+    check_readable(path);
+    Image none;
+    detail::PngInfo pi;
+    try {
+      detail::read_png_subset(path, none, pi, [&](int w, int h, int c) {
+        check_declared_size(path, w, h, c);
+        throw HeaderOnly{{w, h, c, "png"}};
+      });
+    } catch (const HeaderOnly& done) {
+      return done.h;
+    }
+  }
   auto in = open_image(path);
   const codec::InputSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.channels <= 0) throw Error("cannot read '" + path + "': empty image");
@@ -474,6 +492,30 @@ Raw read_raw(const std::string& path, bool counts) {
         r.img = Image(ph->width, ph->height, ph->channels);
         if (read_pfm_pixels(f, *ph, r.img)) return r;
       }
+    }
+  }
+  {
+    // 8/16-bit grey and RGB PNG: libpng itself (io/png_direct.hpp); the
+    // values and FileInfo are OpenImageIO's, and anything outside the subset
+    // (or any libpng complaint) goes on to OpenImageIO below.
+    Raw r;
+    detail::PngInfo pi;
+    if (detail::read_png_subset(path, r.img, pi, [&](int w, int h, int c) {
+          check_declared_size(path, w, h, c);
+          const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
+          check_memory(px * 4 * static_cast<std::uint64_t>(c + 3), "reading '" + path + "'");
+        })) {
+      r.info.path = path;
+      r.info.format = "png";
+      r.info.integer = true;
+      r.info.bits = pi.bits;
+      r.info.channel_names = pi.channels == 3 ? std::vector<std::string>{"R", "G", "B"} : std::vector<std::string>{"Y"};
+      r.info.description = pi.description;
+      if (counts) {
+        const double maxval = std::ldexp(1.0, pi.bits) - 1.0;  // as below
+        for (float& v : r.img.data) v = static_cast<float>(std::nearbyint(v * maxval));
+      }
+      return r;
     }
   }
   auto in = open_image(path);
@@ -903,6 +945,24 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
       write_pfm(tmp, *src);
     } catch (const Error&) {
       throw Error(flag + " '" + path + "': write failed: " + write_failure(errno));
+    }
+    return;
+  }
+  if (e == ".png" && detail::png_subset_writable(img.channels, type == codec::Type::u8    ? 8
+                                                              : type == codec::Type::u16 ? 16
+                                                                                         : 0)) {
+    // libpng itself, the file OpenImageIO would write (io/png_direct.hpp),
+    // at its deflate level: png:compressionLevel below, 6 when not given.
+    const Compression c = parse_compression(path, opts.compression, flag);
+    const int level = c.name == "auto" ? 6 : c.name == "none" ? 0 : (c.level >= 0 ? c.level : 6);
+    add_pending(tmp, path);
+    std::string why;
+    errno = 0;
+    if (!detail::write_png_subset(tmp, img.width, img.height, img.channels, type == codec::Type::u8 ? 8 : 16,
+                                  codes.empty() ? nullptr : codes.data(), src->data.data(),
+                                  t == Transfer::srgb ? "sRGB" : "linear", opts.description, level, &why)) {
+      const int err = errno;
+      throw Error(flag + " '" + path + "': write failed: " + write_failure(err) + " (" + why + ")");
     }
     return;
   }

@@ -1,0 +1,213 @@
+// brume — the PNG subset read and written with libpng itself (png_direct.hpp).
+//
+// libpng reports errors by longjmp to the setjmp of the function that called
+// it. Each function below calls setjmp once, after every C++ object it owns
+// is constructed, and between the setjmp and its returns only libpng calls,
+// plain values and the pre-sized buffers change, so a longjmp skips no
+// destructor; the Guard's destructor frees libpng's structures and the FILE
+// on every return.
+#include "io/png_direct.hpp"
+
+#include <png.h>
+#include <zlib.h>
+
+#include <cerrno>
+#include <cmath>
+#include <csetjmp>
+#include <cstdio>
+#include <cstring>
+#include <vector>
+
+namespace brume::detail {
+
+namespace {
+
+bool iequals(const char* a, const char* b) {
+  for (; *a && *b; ++a, ++b)
+    if ((*a | 0x20) != (*b | 0x20)) return false;
+  return *a == *b;
+}
+
+bool little_endian() {
+  const std::uint16_t probe = 1;
+  unsigned char b;
+  std::memcpy(&b, &probe, 1);
+  return b == 1;
+}
+
+struct ReadGuard {
+  std::FILE* f = nullptr;
+  png_structp png = nullptr;
+  png_infop info = nullptr;
+  bool warned = false;
+  ~ReadGuard() {
+    if (png) png_destroy_read_struct(&png, info ? &info : nullptr, nullptr);
+    if (f) std::fclose(f);
+  }
+};
+
+// Errors end the read (back to its setjmp); warnings are remembered, and a
+// read that had any is handed to OpenImageIO (png_direct.hpp).
+void read_error(png_structp png, png_const_charp) { longjmp(png_jmpbuf(png), 1); }
+void read_warning(png_structp png, png_const_charp) {
+  static_cast<ReadGuard*>(png_get_error_ptr(png))->warned = true;
+}
+
+struct WriteGuard {
+  std::FILE* f = nullptr;
+  png_structp png = nullptr;
+  png_infop info = nullptr;
+  std::string message;
+  ~WriteGuard() {
+    if (png) png_destroy_write_struct(&png, info ? &info : nullptr);
+    if (f) std::fclose(f);
+  }
+};
+
+void write_error(png_structp png, png_const_charp msg) {
+  static_cast<WriteGuard*>(png_get_error_ptr(png))->message = msg ? msg : "libpng error";
+  longjmp(png_jmpbuf(png), 1);
+}
+void write_warning(png_structp, png_const_charp) {}
+
+}  // namespace
+
+bool read_png_subset(const std::string& path, Image& out, PngInfo& info,
+                     const std::function<void(int, int, int)>& check) {
+  ReadGuard g;
+  g.f = std::fopen(path.c_str(), "rb");
+  if (!g.f) return false;
+  unsigned char sig[8];
+  if (std::fread(sig, 1, 8, g.f) != 8 || png_sig_cmp(sig, 0, 8) != 0) return false;
+  g.png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &g, read_error, read_warning);
+  if (!g.png) return false;
+  g.info = png_create_info_struct(g.png);
+  if (!g.info) return false;
+  std::vector<unsigned char> rows;
+  std::vector<png_bytep> row_ptrs;
+  PngInfo got;
+  if (setjmp(png_jmpbuf(g.png))) return false;
+  png_init_io(g.png, g.f);
+  png_set_sig_bytes(g.png, 8);
+  png_read_info(g.png, g.info);
+  png_uint_32 w = 0, h = 0;
+  int depth = 0, color = 0;
+  png_get_IHDR(g.png, g.info, &w, &h, &depth, &color, nullptr, nullptr, nullptr);
+  if (g.warned || (depth != 8 && depth != 16) || (color != PNG_COLOR_TYPE_GRAY && color != PNG_COLOR_TYPE_RGB) ||
+      png_get_valid(g.png, g.info, PNG_INFO_tRNS) || w == 0 || h == 0 || w > 0x7fffffff || h > 0x7fffffff)
+    return false;
+  got.width = static_cast<int>(w);
+  got.height = static_cast<int>(h);
+  got.channels = color == PNG_COLOR_TYPE_RGB ? 3 : 1;
+  got.bits = depth;
+  // The text before the image data, as OpenImageIO reads it (it reads the
+  // chunks after the image data without keeping them); the last
+  // "Description" wins, as its attribute would.
+  png_textp text = nullptr;
+  const int ntext = png_get_text(g.png, g.info, &text, nullptr);
+  for (int i = 0; i < ntext; ++i)
+    if (text[i].key && iequals(text[i].key, "Description")) got.description = text[i].text ? text[i].text : "";
+  check(got.width, got.height, got.channels);  // may throw (no libpng call is in progress)
+  if (depth == 16 && little_endian()) png_set_swap(g.png);
+  png_set_interlace_handling(g.png);
+  png_read_update_info(g.png, g.info);
+  const std::size_t rowbytes = png_get_rowbytes(g.png, g.info);
+  if (rowbytes != static_cast<std::size_t>(w) * got.channels * (depth / 8)) return false;
+  rows.resize(rowbytes * h);
+  row_ptrs.resize(h);
+  for (png_uint_32 y = 0; y < h; ++y) row_ptrs[y] = rows.data() + y * rowbytes;
+  png_read_image(g.png, row_ptrs.data());
+  png_read_end(g.png, nullptr);
+  if (g.warned) return false;
+  Image img(got.width, got.height, got.channels);
+  const std::size_t n = img.data.size();
+  if (depth == 8) {
+    const float k = 1.0f / 255.0f;  // OpenImageIO: the count times the float 1/255
+    for (std::size_t i = 0; i < n; ++i) img.data[i] = static_cast<float>(rows[i]) * k;
+  } else {
+    const float k = 1.0f / 65535.0f;
+    for (std::size_t i = 0; i < n; ++i) {
+      std::uint16_t c;
+      std::memcpy(&c, rows.data() + 2 * i, 2);
+      img.data[i] = static_cast<float>(c) * k;
+    }
+  }
+  out = std::move(img);
+  info = std::move(got);
+  return true;
+}
+
+bool png_subset_writable(int channels, int bits) { return (channels == 1 || channels == 3) && (bits == 8 || bits == 16); }
+
+bool write_png_subset(const std::string& path, int width, int height, int channels, int bits,
+                      const std::uint8_t* codes, const float* values, const std::string& colorspace,
+                      const std::string& description, int level, std::string* error) {
+  WriteGuard g;
+  errno = 0;
+  g.f = std::fopen(path.c_str(), "wb");
+  if (!g.f) {
+    *error = std::strerror(errno);
+    return false;
+  }
+  g.png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &g, write_error, write_warning);
+  if (g.png) g.info = png_create_info_struct(g.png);
+  if (!g.png || !g.info) {
+    *error = "cannot create libpng's write structures";
+    return false;
+  }
+  const std::size_t row_values = static_cast<std::size_t>(width) * channels;
+  std::vector<unsigned char> row(row_values * (bits / 8));
+  std::string cs = colorspace, desc = description;  // (libpng keeps char* to them until png_write_info)
+  png_text text[2];
+  std::memset(text, 0, sizeof text);
+  char key_cs[] = "oiio:ColorSpace", key_desc[] = "Description";
+  text[0].compression = PNG_TEXT_COMPRESSION_NONE;
+  text[0].key = key_cs;
+  text[0].text = cs.data();
+  text[1].compression = PNG_TEXT_COMPRESSION_NONE;
+  text[1].key = key_desc;
+  text[1].text = desc.data();
+  if (setjmp(png_jmpbuf(g.png))) {
+    if (g.message.empty()) g.message = "libpng error";
+    *error = g.message;
+    return false;
+  }
+  png_init_io(g.png, g.f);
+  png_set_compression_level(g.png, level);
+  png_set_compression_strategy(g.png, Z_DEFAULT_STRATEGY);
+  png_set_IHDR(g.png, g.info, static_cast<png_uint_32>(width), static_cast<png_uint_32>(height), bits,
+               channels == 3 ? PNG_COLOR_TYPE_RGB : PNG_COLOR_TYPE_GRAY, PNG_INTERLACE_NONE,
+               PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+  if (colorspace == "sRGB")
+    png_set_sRGB_gAMA_and_cHRM(g.png, g.info, PNG_sRGB_INTENT_ABSOLUTE);
+  else
+    png_set_gAMA(g.png, g.info, 1.0);
+  png_set_oFFs(g.png, g.info, 0, 0, PNG_OFFSET_PIXEL);
+  png_set_text(g.png, g.info, text, description.empty() ? 1 : 2);
+  png_write_info(g.png, g.info);
+  if (bits == 16 && little_endian()) png_set_swap(g.png);
+  for (int y = 0; y < height; ++y) {
+    const std::size_t base = static_cast<std::size_t>(y) * row_values;
+    if (codes) {
+      std::memcpy(row.data(), codes + base, row_values);
+    } else if (bits == 8) {
+      for (std::size_t i = 0; i < row_values; ++i) row[i] = static_cast<unsigned char>(oiio_count(values[base + i], 255.0f));
+    } else {
+      for (std::size_t i = 0; i < row_values; ++i) {
+        const auto c = static_cast<std::uint16_t>(oiio_count(values[base + i], 65535.0f));
+        std::memcpy(row.data() + 2 * i, &c, 2);
+      }
+    }
+    png_write_row(g.png, row.data());
+  }
+  png_write_end(g.png, nullptr);
+  std::FILE* f = g.f;
+  g.f = nullptr;
+  if (std::fclose(f) != 0) {
+    *error = std::strerror(errno);
+    return false;
+  }
+  return true;
+}
+
+}  // namespace brume::detail

@@ -1,0 +1,76 @@
+// brume — 8- and 16-bit grey and RGB PNG read and written with libpng itself
+// (internal).
+//
+// Every other image format goes through OpenImageIO, loaded on first use
+// (src/io/codec.hpp), and that load is ~0.4 s of symbol lookups across
+// Debian's OpenImageIO and its 260 libraries -- more than a whole haze run on
+// a Middlebury frame, paid by every `brume haze in.png ... --out out.png`
+// and once by every batch. The PNGs of the datasets brume's users turn
+// foggy (Middlebury, KITTI, Cityscapes: 8-bit RGB images, 8/16-bit grey
+// disparity and depth) and the PNGs brume writes are a small subset of PNG,
+// so brume reads and writes that subset with libpng directly, exactly as
+// OpenImageIO would:
+//  - read: 8 or 16 bits, grey or RGB, no transparency chunk (tRNS), any
+//    interlacing; values as OpenImageIO returns them (the count times the
+//    float 1/255 or 1/65535), FileInfo as it gives it (format "png", channels
+//    Y or R G B, the "Description" text as the description). Anything else --
+//    palette, alpha, 1/2/4 bits, tRNS, a libpng error or warning of any kind
+//    (a corrupt or truncated file) -- returns false, and the caller reads the
+//    file through OpenImageIO as before, which then gives its own result or
+//    its own error message;
+//  - write: 1 or 3 channels, 8 or 16 bits, the chunks OpenImageIO's writer
+//    puts there for brume's attributes (gAMA 1.0 for linear, sRGB + gAMA +
+//    cHRM for sRGB, oFFs 0 0, tEXt oiio:ColorSpace and Description), its
+//    deflate level (png:compressionLevel, default 6) and strategy, and its
+//    float-to-count rounding (round half away from zero of v x 255 or
+//    v x 65535, clamped; NaN to 0) -- the same file, byte for byte (tested
+//    against OpenImageIO's writer).
+// Tests: IO.PngSubset* (tests/test_io.cpp).
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "brume/image.hpp"
+
+namespace brume::detail {
+
+struct PngInfo {
+  int width = 0, height = 0, channels = 0, bits = 0;
+  std::string description;
+};
+
+// Reads `path` into `out` (channels 1 or 3, values as OpenImageIO gives
+// them) when it is a PNG of the subset above, calling check(width, height,
+// channels) after the header and before any allocation (it may throw).
+// Returns false, having thrown nothing and changed nothing, for any other
+// file or on any libpng error or warning.
+bool read_png_subset(const std::string& path, Image& out, PngInfo& info,
+                     const std::function<void(int, int, int)>& check);
+
+// OpenImageIO's conversion of a float to a count 0..max (255 or 65535) in
+// its vector loop: round half away from zero of v x max, clamped, NaN to 0
+// (measured against convert_pixel_values on every count's rounding
+// boundary; its scalar loop, for the last < 16 values of a call, differs in
+// one 8-bit value, 0.0019607842 = 0.5/255 rounded, which it makes 1).
+inline unsigned oiio_count(float v, float max) {
+  if (v != v) return 0;
+  const float r = std::round(v * max);
+  return static_cast<unsigned>(r < 0.0f ? 0.0f : r > max ? max : r);
+}
+
+// Whether write_png_subset writes this output (else OpenImageIO does).
+bool png_subset_writable(int channels, int bits);
+
+// Writes `channels`-channel pixels (u8 codes when `codes` is not null, else
+// floats converted as OpenImageIO converts them) to `path` at `bits` bits.
+// colorspace: "sRGB" or "linear"; description: empty for none; level: the
+// deflate level 0..9. Returns false with *error (errno left as the failing
+// call set it) when the file cannot be written.
+bool write_png_subset(const std::string& path, int width, int height, int channels, int bits,
+                      const std::uint8_t* codes, const float* values, const std::string& colorspace,
+                      const std::string& description, int level, std::string* error);
+
+}  // namespace brume::detail
