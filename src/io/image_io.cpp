@@ -509,7 +509,8 @@ Raw read_raw(const std::string& path, bool counts) {
       r.info.format = "png";
       r.info.integer = true;
       r.info.bits = pi.bits;
-      r.info.channel_names = pi.channels == 3 ? std::vector<std::string>{"R", "G", "B"} : std::vector<std::string>{"Y"};
+      r.info.channel_names =
+          pi.channels == 3 ? std::vector<std::string>{"R", "G", "B"} : std::vector<std::string>{"Y"};
       r.info.description = pi.description;
       if (counts) {
         const double maxval = std::ldexp(1.0, pi.bits) - 1.0;  // as below
@@ -844,11 +845,15 @@ Compression parse_compression(const std::string& path, const std::string& text, 
 codec::Attribute int_attribute(const std::string& name, int v) { return {name, true, v, {}}; }
 codec::Attribute text_attribute(const std::string& name, const std::string& v) { return {name, false, 0, v}; }
 
+// PNG's deflate level for a compression setting: "none" is deflate's stored
+// blocks (level 0: PNG always deflates), "zip" without a level and "auto"
+// are 6, OpenImageIO's default.
+int png_level(const Compression& c) { return c.name == "none" ? 0 : (c.name == "zip" && c.level >= 0) ? c.level : 6; }
+
 void apply_compression(codec::OutputSpec& spec, const std::string& e, const Compression& c) {
   if (c.name == "auto") return;
   if (e == ".png") {
-    // "none" is deflate's stored blocks (level 0): PNG always deflates.
-    spec.attributes.push_back(int_attribute("png:compressionLevel", c.name == "none" ? 0 : (c.level >= 0 ? c.level : 6)));
+    spec.attributes.push_back(int_attribute("png:compressionLevel", png_level(c)));
     return;
   }
   if (e == ".hdr") return;  // Radiance HDR's run-length encoding is the writer's only form
@@ -953,8 +958,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
                                                                                          : 0)) {
     // libpng itself, the file OpenImageIO would write (io/png_direct.hpp),
     // at its deflate level: png:compressionLevel below, 6 when not given.
-    const Compression c = parse_compression(path, opts.compression, flag);
-    const int level = c.name == "auto" ? 6 : c.name == "none" ? 0 : (c.level >= 0 ? c.level : 6);
+    const int level = png_level(parse_compression(path, opts.compression, flag));
     add_pending(tmp, path);
     std::string why;
     errno = 0;
@@ -962,7 +966,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
                                   codes.empty() ? nullptr : codes.data(), src->data.data(),
                                   t == Transfer::srgb ? "sRGB" : "linear", opts.description, level, &why)) {
       const int err = errno;
-      throw Error(flag + " '" + path + "': write failed: " + write_failure(err) + " (" + why + ")");
+      throw Error(flag + " '" + path + "': write failed: " + write_failure(err) + (why.empty() ? "" : " (" + why + ")"));
     }
     return;
   }

@@ -146,7 +146,7 @@ bool write_png_subset(const std::string& path, int width, int height, int channe
   errno = 0;
   g.f = std::fopen(path.c_str(), "wb");
   if (!g.f) {
-    *error = std::strerror(errno);
+    error->clear();  // errno says why
     return false;
   }
   g.png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &g, write_error, write_warning);
@@ -204,7 +204,7 @@ bool write_png_subset(const std::string& path, int width, int height, int channe
   std::FILE* f = g.f;
   g.f = nullptr;
   if (std::fclose(f) != 0) {
-    *error = std::strerror(errno);
+    error->clear();  // errno says why
     return false;
   }
   return true;

@@ -67,8 +67,9 @@ bool png_subset_writable(int channels, int bits);
 // Writes `channels`-channel pixels (u8 codes when `codes` is not null, else
 // floats converted as OpenImageIO converts them) to `path` at `bits` bits.
 // colorspace: "sRGB" or "linear"; description: empty for none; level: the
-// deflate level 0..9. Returns false with *error (errno left as the failing
-// call set it) when the file cannot be written.
+// deflate level 0..9. Returns false when the file cannot be written, errno
+// as the failing call left it and *error libpng's message (empty when the
+// failure was opening or closing the file, which errno explains).
 bool write_png_subset(const std::string& path, int width, int height, int channels, int bits,
                       const std::uint8_t* codes, const float* values, const std::string& colorspace,
                       const std::string& description, int level, std::string* error);
