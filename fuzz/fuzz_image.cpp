@@ -3,7 +3,9 @@
 // its reader by it, then by content), the rest is the file. OpenImageIO and
 // its codecs are Debian's, uninstrumented: this finds crashes and bad
 // handling in brume's use of them (sizes, channels, bit depths, limits), not
-// coverage inside them.
+// coverage inside them. A .png goes first through brume's own libpng reader
+// (src/io/png_direct.cpp: its setjmp error path, its fall-back to
+// OpenImageIO on anything outside the subset or any libpng complaint).
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "fuzz_util.hpp"
