@@ -91,13 +91,11 @@ struct Api {
   std::unique_ptr<Input> (*open_input)(const std::string& path, bool unassociated_alpha, std::string* err);
   // A writer chosen by `path`'s extension; null and *err set when none.
   std::unique_ptr<Output> (*create_output)(const std::string& path, std::string* err);
-  // OpenImageIO's float -> uint8 conversion of n values (its vector loop).
-  void (*float_to_u8)(const float* in, std::uint8_t* out, int n);
 };
 
 // The tag both sides are built with (interface revision, brume's version,
 // the compiler's): the module is used only if it matches.
-inline constexpr const char* kCodecTag = "brume-codec-1 " BRUME_VERSION " " __VERSION__;
+inline constexpr const char* kCodecTag = "brume-codec-2 " BRUME_VERSION " " __VERSION__;
 
 // The module's entry symbol: extern "C" const Api* brume_codec_api();
 inline constexpr const char* kEntrySymbol = "brume_codec_api";

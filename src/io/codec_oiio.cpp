@@ -139,11 +139,7 @@ std::unique_ptr<brume::codec::Output> create_output(const std::string& path, std
   }
 }
 
-void float_to_u8(const float* in, std::uint8_t* out, int n) {
-  OIIO::convert_pixel_values(OIIO::TypeDesc::FLOAT, in, OIIO::TypeDesc::UINT8, out, n);
-}
-
-const Api kApi{brume::codec::kCodecTag, &open_input, &create_output, &float_to_u8};
+const Api kApi{brume::codec::kCodecTag, &open_input, &create_output};
 }  // namespace
 
 extern "C" __attribute__((visibility("default"))) const Api* brume_codec_api() { return &kApi; }

@@ -9,8 +9,10 @@
 #include "io/png_direct.hpp"
 
 #include <png.h>
+#include <strings.h>
 #include <zlib.h>
 
+#include <bit>
 #include <cerrno>
 #include <cmath>
 #include <csetjmp>
@@ -21,19 +23,6 @@
 namespace brume::detail {
 
 namespace {
-
-bool iequals(const char* a, const char* b) {
-  for (; *a && *b; ++a, ++b)
-    if ((*a | 0x20) != (*b | 0x20)) return false;
-  return *a == *b;
-}
-
-bool little_endian() {
-  const std::uint16_t probe = 1;
-  unsigned char b;
-  std::memcpy(&b, &probe, 1);
-  return b == 1;
-}
 
 struct ReadGuard {
   std::FILE* f = nullptr;
@@ -106,9 +95,9 @@ bool read_png_subset(const std::string& path, Image& out, PngInfo& info,
   png_textp text = nullptr;
   const int ntext = png_get_text(g.png, g.info, &text, nullptr);
   for (int i = 0; i < ntext; ++i)
-    if (text[i].key && iequals(text[i].key, "Description")) got.description = text[i].text ? text[i].text : "";
+    if (text[i].key && ::strcasecmp(text[i].key, "Description") == 0) got.description = text[i].text ? text[i].text : "";
   check(got.width, got.height, got.channels);  // may throw (no libpng call is in progress)
-  if (depth == 16 && little_endian()) png_set_swap(g.png);
+  if (depth == 16 && std::endian::native == std::endian::little) png_set_swap(g.png);
   png_set_interlace_handling(g.png);
   png_read_update_info(g.png, g.info);
   const std::size_t rowbytes = png_get_rowbytes(g.png, g.info);
@@ -185,7 +174,7 @@ bool write_png_subset(const std::string& path, int width, int height, int channe
   png_set_oFFs(g.png, g.info, 0, 0, PNG_OFFSET_PIXEL);
   png_set_text(g.png, g.info, text, description.empty() ? 1 : 2);
   png_write_info(g.png, g.info);
-  if (bits == 16 && little_endian()) png_set_swap(g.png);
+  if (bits == 16 && std::endian::native == std::endian::little) png_set_swap(g.png);
   for (int y = 0; y < height; ++y) {
     const std::size_t base = static_cast<std::size_t>(y) * row_values;
     if (codes) {
