@@ -494,6 +494,11 @@ TEST(IO, PfmPixelsReadStraightEqualOpenImageIO) {
 }
 
 namespace {
+std::string file_bytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
 // A PNG written with libpng by hand (the shapes OpenImageIO's writer does
 // not make: interlaced, palette, 1-bit, tRNS), values row-major.
 void write_png_by_hand(const std::string& p, int w, int h, int depth, int color, bool interlace,
@@ -580,12 +585,12 @@ TEST(IO, PngSubsetIsReadAsOpenImageIOReadsIt) {
   for (const std::string& p : subset) {
     Image raw;
     detail::PngInfo pi;
-    EXPECT_TRUE(detail::read_png_subset(p, raw, pi, none)) << p << " was not read by the subset reader";
+    EXPECT_TRUE(detail::read_png_subset(p, &raw, pi, none)) << p << " was not read by the subset reader";
   }
   for (const std::string& p : other) {
     Image raw;
     detail::PngInfo pi;
-    EXPECT_FALSE(detail::read_png_subset(p, raw, pi, none)) << p << " is outside the subset";
+    EXPECT_FALSE(detail::read_png_subset(p, &raw, pi, none)) << p << " is outside the subset";
   }
   std::vector<std::string> all = subset;
   all.insert(all.end(), other.begin(), other.end());
@@ -597,6 +602,11 @@ TEST(IO, PngSubsetIsReadAsOpenImageIOReadsIt) {
     std::vector<float> want(static_cast<std::size_t>(spec.width) * spec.height * c);
     ASSERT_TRUE(in->read_image(0, 0, 0, c, OIIO::TypeDesc::FLOAT, want.data())) << p;
     in.reset();
+    const ImageHeader hd = read_header(p);  // (the subset's: the header alone)
+    EXPECT_EQ(hd.width, spec.width) << p;
+    EXPECT_EQ(hd.height, spec.height) << p;
+    EXPECT_EQ(hd.channels, c) << p;
+    EXPECT_EQ(hd.format, "png") << p;
     FileInfo info;
     const Image got = read_color(p, Transfer::linear, &info);
     EXPECT_EQ(info.format, "png") << p;
@@ -623,20 +633,14 @@ TEST(IO, PngSubsetIsReadAsOpenImageIOReadsIt) {
       EXPECT_EQ(bad, 0u) << p;
     }
   }
-  // A truncated subset file is declined and OpenImageIO's refusal names it.
+  // A truncated subset file is declined (OpenImageIO's refusal, which names
+  // the file, is IO.ErrorsNameTheFile's).
   {
-    std::ifstream f(d / "rgb16.png", std::ios::binary);
-    std::string b((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    const std::string b = file_bytes(d / "rgb16.png");
     std::ofstream(d / "cut.png", std::ios::binary) << b.substr(0, b.size() * 2 / 3);
     Image raw;
     detail::PngInfo pi;
-    EXPECT_FALSE(detail::read_png_subset((d / "cut.png").string(), raw, pi, none));
-    try {
-      (void)read_color((d / "cut.png").string(), Transfer::linear);
-      ADD_FAILURE() << "a truncated PNG was read";
-    } catch (const Error& e) {
-      EXPECT_NE(std::string(e.what()).find("cut.png"), std::string::npos) << e.what();
-    }
+    EXPECT_FALSE(detail::read_png_subset((d / "cut.png").string(), &raw, pi, none));
   }
   fs::remove_all(d);
 }
@@ -682,9 +686,7 @@ TEST(IO, PngSubsetWritesTheFileOpenImageIOWrites) {
                 ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, v.data()));
               }
               ASSERT_TRUE(out->close());
-              std::ifstream a(mine, std::ios::binary), b(theirs, std::ios::binary);
-              const std::string ba((std::istreambuf_iterator<char>(a)), std::istreambuf_iterator<char>());
-              const std::string bb((std::istreambuf_iterator<char>(b)), std::istreambuf_iterator<char>());
+              const std::string ba = file_bytes(mine), bb = file_bytes(theirs);
               EXPECT_TRUE(ba == bb) << "width " << w << ", " << c << " channels, " << bits << " bits, "
                                     << (t == Transfer::srgb ? "sRGB" : "linear") << ", " << comp << ", description '"
                                     << desc << "': " << ba.size() << " against " << bb.size() << " bytes";

@@ -305,9 +305,10 @@ __attribute__((target("avx512f"))) void run_fused_avx512(const RunArgs& a, const
 // row's sigma_k is the running product sigma_0 e^rho e^rho ... (k factors
 // growth = e^rho, in that order: the same float sequence as every path),
 // formed here in L1-sized chunks rather than kept in a W x H map between
-// iterations: k multiplies a pixel cost less than reading and writing the
-// map (a quarter of the RGBA image, streamed twice per iteration), the map's
-// heap is saved, and a fused group's levels need no sigma of their own. The
+// iterations: k multiplies a pixel (at most N - 1, vectorised, in L1) take
+// the place of reading and writing the map (a quarter of the RGBA image,
+// streamed twice per iteration), the map's heap is saved, and a fused
+// group's levels need no sigma of their own. The
 // exact scheme's offset needs the variance ratio vr; the published one is
 // sigma_k itself.
 template <bool kExact>
@@ -355,7 +356,8 @@ __attribute__((always_inline)) inline int run_end(const int* __restrict n, int x
 // Both evaluate the same formulas in the same order (ISO C++, no
 // reassociation or contraction), so the split does not change results.
 // Written once (always inlined) and compiled three times below, for the
-// three widths of run_update; the offset and weight loops widen with them.
+// three widths of the run kernel (weights and update: run_generic, run_avx2,
+// run_fused_avx512); the offset loops widen with them.
 // F's rows come through a RowSource (the whole image, or a fused group's
 // ring) and row y of the result goes to orow.
 __attribute__((always_inline)) inline void general_row_body(const RowSource<float>& in, float* orow, const float* rho,

@@ -341,24 +341,11 @@ void check_memory(std::uint64_t bytes, const std::string& what) {
 }
 
 ImageHeader read_header(const std::string& path) {
-  {
-    // The PNG subset's header, without OpenImageIO (io/png_direct.hpp): the
-    // size check throws out of the read before any pixel is decoded.
-    struct HeaderOnly {
-      ImageHeader h;
-    };
-    check_readable(path);
-    Image none;
-    detail::PngInfo pi;
-    try {
-      detail::read_png_subset(path, none, pi, [&](int w, int h, int c) {
-        check_declared_size(path, w, h, c);
-        throw HeaderOnly{{w, h, c, "png"}};
-      });
-    } catch (const HeaderOnly& done) {
-      return done.h;
-    }
-  }
+  // The PNG subset's header without OpenImageIO (io/png_direct.hpp).
+  check_readable(path);
+  detail::PngInfo pi;
+  if (detail::read_png_subset(path, nullptr, pi, [&](int w, int h, int c) { check_declared_size(path, w, h, c); }))
+    return {pi.width, pi.height, pi.channels, "png"};
   auto in = open_image(path);
   const codec::InputSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.channels <= 0) throw Error("cannot read '" + path + "': empty image");
@@ -500,7 +487,7 @@ Raw read_raw(const std::string& path, bool counts) {
     // (or any libpng complaint) goes on to OpenImageIO below.
     Raw r;
     detail::PngInfo pi;
-    if (detail::read_png_subset(path, r.img, pi, [&](int w, int h, int c) {
+    if (detail::read_png_subset(path, &r.img, pi, [&](int w, int h, int c) {
           check_declared_size(path, w, h, c);
           const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
           check_memory(px * 4 * static_cast<std::uint64_t>(c + 3), "reading '" + path + "'");

@@ -61,7 +61,7 @@ void write_warning(png_structp, png_const_charp) {}
 
 }  // namespace
 
-bool read_png_subset(const std::string& path, Image& out, PngInfo& info,
+bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
                      const std::function<void(int, int, int)>& check) {
   ReadGuard g;
   g.f = std::fopen(path.c_str(), "rb");
@@ -97,6 +97,10 @@ bool read_png_subset(const std::string& path, Image& out, PngInfo& info,
   for (int i = 0; i < ntext; ++i)
     if (text[i].key && ::strcasecmp(text[i].key, "Description") == 0) got.description = text[i].text ? text[i].text : "";
   check(got.width, got.height, got.channels);  // may throw (no libpng call is in progress)
+  if (!out) {
+    info = std::move(got);
+    return true;
+  }
   if (depth == 16 && std::endian::native == std::endian::little) png_set_swap(g.png);
   png_set_interlace_handling(g.png);
   png_read_update_info(g.png, g.info);
@@ -121,7 +125,7 @@ bool read_png_subset(const std::string& path, Image& out, PngInfo& info,
       img.data[i] = static_cast<float>(c) * k;
     }
   }
-  out = std::move(img);
+  *out = std::move(img);
   info = std::move(got);
   return true;
 }

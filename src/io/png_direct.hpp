@@ -42,12 +42,13 @@ struct PngInfo {
   std::string description;
 };
 
-// Reads `path` into `out` (channels 1 or 3, values as OpenImageIO gives
+// Reads `path` into *out (channels 1 or 3, values as OpenImageIO gives
 // them) when it is a PNG of the subset above, calling check(width, height,
 // channels) after the header and before any allocation (it may throw).
-// Returns false, having thrown nothing and changed nothing, for any other
-// file or on any libpng error or warning.
-bool read_png_subset(const std::string& path, Image& out, PngInfo& info,
+// out == nullptr: the header only (info, the check; no pixel decoded).
+// Returns false, having changed nothing, for any other file or on any
+// libpng error or warning (exceptions only from check).
+bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
                      const std::function<void(int, int, int)>& check);
 
 // OpenImageIO's conversion of a float to a count 0..max (255 or 65535) in
