@@ -261,7 +261,7 @@ TEST(IO, CompressionReachesTheWriterAndKeepsLosslessPixels) {
   // at least the raw 96 x 64 x 3 x 2 bytes, level 9 well under them.
   const Image png_auto = read_color(write_as("auto.png", "16", "auto"));
   std::uintmax_t none_size = 0, z9_size = 0;
-  for (const char* c : {"none", "zip", "zip:0", "zip:1", "zip:9"}) {
+  for (const char* c : {"none", "zip", "zip:0", "zip:1", "zip:9", "rle"}) {
     const std::string p = write_as(std::string("c_") + (c[3] == ':' ? std::string("zip") + c[4] : c) + ".png", "16", c);
     EXPECT_EQ(read_color(p).data, png_auto.data) << c;
     if (std::string(c) == "none") none_size = fs::file_size(p);
@@ -299,6 +299,7 @@ TEST(IO, CompressionReachesTheWriterAndKeepsLosslessPixels) {
   };
   for (Bad b : {Bad{"x.png", "lzw", false, "none, zip, zip:0..9"}, Bad{"x.png", "zip:10", false, "0..9"},
                 Bad{"x.png", "zip:", false, "not a whole number"}, Bad{"x.png", "none:3", false, "takes no level"},
+                Bad{"x.png", "rle:1", false, "'rle' takes no level"},
                 Bad{"x.exr", "dwaa", true, "lossy"}, Bad{"x.exr", "zip:0", false, "1..9"},
                 Bad{"x.exr", "ZIP", false, "not a compression"}, Bad{"x.jpg", "jpeg", false, "jpeg:1..100"},
                 Bad{"x.pfm", "zip", false, "auto, none"}, Bad{"x.hdr", "none", false, "auto, rle"}}) {
@@ -655,7 +656,7 @@ TEST(IO, PngSubsetWritesTheFileOpenImageIOWrites) {
     for (int c : {1, 3})
       for (const char* bits : {"8", "16"})
         for (Transfer t : {Transfer::srgb, Transfer::linear})
-          for (const char* comp : {"auto", "zip:1", "none"})
+          for (const char* comp : {"auto", "zip:1", "none", "rle"})
             for (const char* desc : {"", "{\"brume\": 1}"}) {
               Image img(w, 9, c);
               for (std::size_t i = 0; i < img.data.size(); ++i)
@@ -673,6 +674,7 @@ TEST(IO, PngSubsetWritesTheFileOpenImageIOWrites) {
               if (*desc) spec.attribute("ImageDescription", desc);
               if (std::string(comp) == "zip:1") spec.attribute("png:compressionLevel", 1);
               if (std::string(comp) == "none") spec.attribute("png:compressionLevel", 0);
+              if (std::string(comp) == "rle") spec.attribute("compression", "rle"), spec.attribute("png:filter", 0x20);
               auto out = OIIO::ImageOutput::create(theirs);
               ASSERT_TRUE(out && out->open(theirs, spec));
               if (t == Transfer::srgb && std::string(bits) == "8") {

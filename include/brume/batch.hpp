@@ -73,8 +73,9 @@ Manifest read_manifest(const std::string& path);
 const std::vector<std::string>& batch_effects();
 
 // The compression of a batch's PNG frames when neither the row nor --param
-// sets one (single runs keep the writer's default, zip:6).
-inline constexpr const char* kBatchPngCompression = "zip:1";
+// sets one (single runs keep the writer's default, zip:6): the Up filter and
+// deflate's run-length strategy (io/png_direct.hpp).
+inline constexpr const char* kBatchPngCompression = "rle";
 
 struct BatchOptions {
   std::string manifest;

@@ -1187,7 +1187,7 @@ PYBIND11_MODULE(_brume, m) {
       "JPEG) of colour are sRGB-encoded unless transfer='linear'; data=True (or a 2-D array) is never "
       "sRGB-encoded; bits auto: PNG/TIFF 16, JPEG 8, EXR/PFM/HDR float. record (a dict, e.g. a Result's) is "
       "embedded as ImageDescription where the format allows (PNG, TIFF, JPEG, EXR); read_image returns it. "
-      "compression: the CLI's --compression (NAME[:LEVEL], e.g. 'zip:1' for a fast PNG).");
+      "compression: the CLI's --compression (NAME[:LEVEL], e.g. 'rle' for a fast PNG).");
 
   // ---- brume batch's frames, for brume.dask (the same planning and pipelines as the CLI) ----
   m.def(

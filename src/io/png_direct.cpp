@@ -130,11 +130,13 @@ bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
   return true;
 }
 
+static_assert(kPngFilterUp == PNG_FILTER_UP);
+
 bool png_subset_writable(int channels, int bits) { return (channels == 1 || channels == 3) && (bits == 8 || bits == 16); }
 
 bool write_png_subset(const std::string& path, int width, int height, int channels, int bits,
                       const std::uint8_t* codes, const float* values, const std::string& colorspace,
-                      const std::string& description, int level, std::string* error) {
+                      const std::string& description, PngDeflate deflate, std::string* error) {
   WriteGuard g;
   errno = 0;
   g.f = std::fopen(path.c_str(), "wb");
@@ -166,8 +168,9 @@ bool write_png_subset(const std::string& path, int width, int height, int channe
     return false;
   }
   png_init_io(g.png, g.f);
-  png_set_compression_level(g.png, level);
-  png_set_compression_strategy(g.png, Z_DEFAULT_STRATEGY);
+  png_set_compression_level(g.png, deflate.level);
+  png_set_compression_strategy(g.png, deflate.rle ? Z_RLE : Z_DEFAULT_STRATEGY);
+  if (deflate.rle) png_set_filter(g.png, PNG_FILTER_TYPE_BASE, PNG_FILTER_UP);
   png_set_IHDR(g.png, g.info, static_cast<png_uint_32>(width), static_cast<png_uint_32>(height), bits,
                channels == 3 ? PNG_COLOR_TYPE_RGB : PNG_COLOR_TYPE_GRAY, PNG_INTERLACE_NONE,
                PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
