@@ -379,7 +379,14 @@ namespace {
 struct Raw {
   Image img;
   FileInfo info;
+  bool linear = false;  // already decoded from sRGB (RawValues::srgb_linear and a PNG of the subset)
 };
+
+// What read_raw returns: the values as OpenImageIO reads them, the integer
+// counts (read_scalar), or, for read_color, the values already decoded from
+// sRGB where that can be done during the decode (the PNG subset: per count,
+// srgb_to_linear of the value, bit for bit what decoding them after gives).
+enum class RawValues { values, counts, srgb_linear };
 
 // PFM read without OpenImageIO. Its PNM reader, on open, copies the whole
 // file into a zero-filled buffer of its own before the pixels are asked for:
@@ -480,7 +487,8 @@ bool read_pfm_pixels(std::ifstream& f, const PfmHeader& ph, Image& img) {
 
 // Read every channel of the first subimage as float. Integer files are read
 // as their raw counts (not normalised) when `counts` is set.
-Raw read_raw(const std::string& path, bool counts) {
+Raw read_raw(const std::string& path, RawValues want) {
+  const bool counts = want == RawValues::counts;
   check_readable(path);
   {
     std::ifstream f(path, std::ios::binary);
@@ -508,11 +516,18 @@ Raw read_raw(const std::string& path, bool counts) {
     // (or any libpng complaint) goes on to OpenImageIO below.
     Raw r;
     detail::PngInfo pi;
-    if (detail::read_png_subset(path, &r.img, pi, [&](int w, int h, int c) {
-          check_declared_size(path, w, h, c);
-          const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
-          check_memory(px * 4 * static_cast<std::uint64_t>(c + 3), "reading '" + path + "'");
-        })) {
+    std::function<float(float, int)> map;
+    if (counts)  // as below
+      map = [](float v, int bits) { return static_cast<float>(std::nearbyint(v * (std::ldexp(1.0, bits) - 1.0))); };
+    if (want == RawValues::srgb_linear) map = [](float v, int) { return srgb_to_linear(v); };
+    if (detail::read_png_subset(
+            path, &r.img, pi,
+            [&](int w, int h, int c) {
+              check_declared_size(path, w, h, c);
+              const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
+              check_memory(px * 4 * static_cast<std::uint64_t>(c + 3), "reading '" + path + "'");
+            },
+            map)) {
       r.info.path = path;
       r.info.format = "png";
       r.info.integer = true;
@@ -520,10 +535,7 @@ Raw read_raw(const std::string& path, bool counts) {
       r.info.channel_names =
           pi.channels == 3 ? std::vector<std::string>{"R", "G", "B"} : std::vector<std::string>{"Y"};
       r.info.description = pi.description;
-      if (counts) {
-        const double maxval = std::ldexp(1.0, pi.bits) - 1.0;  // as below
-        for (float& v : r.img.data) v = static_cast<float>(std::nearbyint(v * maxval));
-      }
+      r.linear = want == RawValues::srgb_linear;
       return r;
     }
   }
@@ -576,11 +588,20 @@ Raw read_raw(const std::string& path, bool counts) {
 }  // namespace
 
 Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
-  Raw r = read_raw(path, false);
+  // An integer file's automatic transfer is sRGB; the PNG subset (always
+  // integer) is decoded from it during its read.
+  Raw r = read_raw(path, transfer == Transfer::linear ? RawValues::values : RawValues::srgb_linear);
   Transfer t = transfer;
   if (t == Transfer::automatic) t = r.info.integer ? Transfer::srgb : Transfer::linear;
   r.info.transfer = t;
   if (info) *info = r.info;
+  if (r.linear) {
+    if (r.img.channels == 3) return std::move(r.img);
+    Image out(r.img.width, r.img.height, 3);  // grey: the one channel three times
+    for (std::size_t i = 0; i < r.img.pixels(); ++i)
+      out.data[i * 3] = out.data[i * 3 + 1] = out.data[i * 3 + 2] = r.img.data[i];
+    return out;
+  }
   // Three channels: converted in place and returned, no second image (a
   // fresh 960x672 RGB float buffer costs ~15 ms of page faults on a VM).
   if (r.img.channels == 3) {
@@ -612,7 +633,7 @@ Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
 }
 
 Image read_scalar(const std::string& path, const std::string& channel, FileInfo* info) {
-  Raw r = read_raw(path, true);
+  Raw r = read_raw(path, RawValues::counts);
   const Image& s = r.img;
   int pick = 0;
   if (!channel.empty()) {

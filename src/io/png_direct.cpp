@@ -3,7 +3,8 @@
 // libpng reports errors by longjmp to the setjmp of the function that called
 // it. Each function below calls setjmp once, after every C++ object it owns
 // is constructed, and between the setjmp and its returns only libpng calls,
-// plain values and the pre-sized buffers change, so a longjmp skips no
+// plain values, the buffers declared before it (resized, filled) and the
+// reader's per-value map (which does not throw) run, so a longjmp skips no
 // destructor; the Guard's destructor frees libpng's structures and the FILE
 // on every return.
 #include "io/png_direct.hpp"
@@ -62,7 +63,7 @@ void write_warning(png_structp, png_const_charp) {}
 }  // namespace
 
 bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
-                     const std::function<void(int, int, int)>& check) {
+                     const std::function<void(int, int, int)>& check, const std::function<float(float, int)>& map) {
   ReadGuard g;
   g.f = std::fopen(path.c_str(), "rb");
   if (!g.f) return false;
@@ -74,6 +75,9 @@ bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
   if (!g.info) return false;
   std::vector<unsigned char> rows;
   std::vector<png_bytep> row_ptrs;
+  std::vector<float> table;           // [count]: its value (8 bits: every count; 16 bits with a map: as met)
+  std::vector<unsigned char> known;   // 16 bits with a map: table[count] computed
+  Image img;
   PngInfo got;
   if (setjmp(png_jmpbuf(g.png))) return false;
   png_init_io(g.png, g.f);
@@ -102,29 +106,56 @@ bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
     return true;
   }
   if (depth == 16 && std::endian::native == std::endian::little) png_set_swap(g.png);
-  png_set_interlace_handling(g.png);
+  const int passes = png_set_interlace_handling(g.png);
   png_read_update_info(g.png, g.info);
   const std::size_t rowbytes = png_get_rowbytes(g.png, g.info);
   if (rowbytes != static_cast<std::size_t>(w) * got.channels * (depth / 8)) return false;
-  rows.resize(rowbytes * h);
-  row_ptrs.resize(h);
-  for (png_uint_32 y = 0; y < h; ++y) row_ptrs[y] = rows.data() + y * rowbytes;
-  png_read_image(g.png, row_ptrs.data());
+  // A count's value: the count times the float 1/255 or 1/65535, as
+  // OpenImageIO returns it, then `map` (the caller's per-value function,
+  // evaluated once per distinct count, so the result is map's bit for bit).
+  const float k = depth == 8 ? 1.0f / 255.0f : 1.0f / 65535.0f;
+  if (depth == 8) {
+    table.resize(256);
+    for (unsigned c = 0; c < 256; ++c) table[c] = map ? map(static_cast<float>(c) * k, 8) : static_cast<float>(c) * k;
+  } else if (map) {
+    table.resize(65536);
+    known.assign(65536, 0);
+  }
+  const std::size_t row_values = static_cast<std::size_t>(w) * got.channels;
+  img = Image(got.width, got.height, got.channels);
+  auto convert = [&](const unsigned char* src, float* dst) {
+    if (depth == 8) {
+      for (std::size_t i = 0; i < row_values; ++i) dst[i] = table[src[i]];
+      return;
+    }
+    for (std::size_t i = 0; i < row_values; ++i) {
+      std::uint16_t c;
+      std::memcpy(&c, src + 2 * i, 2);
+      if (!map) {
+        dst[i] = static_cast<float>(c) * k;
+      } else {
+        if (!known[c]) table[c] = map(static_cast<float>(c) * k, 16), known[c] = 1;
+        dst[i] = table[c];
+      }
+    }
+  };
+  if (passes == 1) {
+    // Row by row through one row buffer: no second image-sized buffer.
+    rows.resize(rowbytes);
+    for (png_uint_32 y = 0; y < h; ++y) {
+      png_read_row(g.png, rows.data(), nullptr);
+      convert(rows.data(), img.data.data() + y * row_values);
+    }
+  } else {
+    // Adam7: the passes fill the whole image before any row is complete.
+    rows.resize(rowbytes * h);
+    row_ptrs.resize(h);
+    for (png_uint_32 y = 0; y < h; ++y) row_ptrs[y] = rows.data() + y * rowbytes;
+    png_read_image(g.png, row_ptrs.data());
+    for (png_uint_32 y = 0; y < h; ++y) convert(row_ptrs[y], img.data.data() + y * row_values);
+  }
   png_read_end(g.png, nullptr);
   if (g.warned) return false;
-  Image img(got.width, got.height, got.channels);
-  const std::size_t n = img.data.size();
-  if (depth == 8) {
-    const float k = 1.0f / 255.0f;  // OpenImageIO: the count times the float 1/255
-    for (std::size_t i = 0; i < n; ++i) img.data[i] = static_cast<float>(rows[i]) * k;
-  } else {
-    const float k = 1.0f / 65535.0f;
-    for (std::size_t i = 0; i < n; ++i) {
-      std::uint16_t c;
-      std::memcpy(&c, rows.data() + 2 * i, 2);
-      img.data[i] = static_cast<float>(c) * k;
-    }
-  }
   *out = std::move(img);
   info = std::move(got);
   return true;

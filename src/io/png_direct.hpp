@@ -45,13 +45,17 @@ struct PngInfo {
 };
 
 // Reads `path` into *out (channels 1 or 3, values as OpenImageIO gives
-// them) when it is a PNG of the subset above, calling check(width, height,
-// channels) after the header and before any allocation (it may throw).
-// out == nullptr: the header only (info, the check; no pixel decoded).
-// Returns false, having changed nothing, for any other file or on any
-// libpng error or warning (exceptions only from check).
+// them, or map(value, bits) when map is given) when it is a PNG of the subset
+// above, calling check(width, height, channels) after the header and before
+// any allocation (it may throw). out == nullptr: the header only (info, the
+// check; no pixel decoded). map is called once per distinct count (every
+// count of an 8-bit file, the counts met in a 16-bit one), so its result is
+// map's own, bit for bit, with no pass over the image after the decode; it
+// must not throw. Returns false, having changed nothing, for any other file
+// or on any libpng error or warning (exceptions only from check).
 bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
-                     const std::function<void(int, int, int)>& check);
+                     const std::function<void(int, int, int)>& check,
+                     const std::function<float(float, int)>& map = {});
 
 // OpenImageIO's conversion of a float to a count 0..max (255 or 65535) in
 // its vector loop: round half away from zero of v x max, clamped, NaN to 0
