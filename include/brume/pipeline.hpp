@@ -156,12 +156,14 @@ struct PreparedRange {
 // Validates every preparation parameter whatever the input, refuses
 // parameters that `--prepare off` would ignore (`given` names the ones set
 // explicitly), and prepares when the mode is auto and the range has unknown
-// pixels.
+// pixels, on `threads` OpenMP threads (Exec::threads: 0 = all).
 void check_range_step(const RangeStep& step, const std::set<std::string>& given = {});
-PreparedRange prepare_step(const Image& measured, const RangeStep& step, const std::set<std::string>& given = {});
+PreparedRange prepare_step(const Image& measured, const RangeStep& step, const std::set<std::string>& given = {},
+                           int threads = 0);
 // The same on pixels owned elsewhere (a numpy array): read in place; the
 // effect's range is the preparation's result or, when not prepared, a copy.
-PreparedRange prepare_step(ConstImageView measured, const RangeStep& step, const std::set<std::string>& given = {});
+PreparedRange prepare_step(ConstImageView measured, const RangeStep& step, const std::set<std::string>& given = {},
+                           int threads = 0);
 
 // The GPU context a run uses: Exec::gpu if the caller passed one; for
 // Backend::gpu a new context or an error saying why; for Backend::automatic

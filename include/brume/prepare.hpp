@@ -52,6 +52,9 @@ struct PrepareResult {
 };
 
 // Throws brume::Error for sparse or empty inputs (message says what to do).
-PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p = {});
+// threads: the OpenMP threads of its parallel loops (0 = all hardware
+// threads, as Exec::threads; the result does not depend on it). OpenCV's
+// labelling and distance transform run on OpenCV's own pool.
+PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p = {}, int threads = 0);
 
 }  // namespace brume

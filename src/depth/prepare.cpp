@@ -56,6 +56,7 @@
 #include "brume/pipeline.hpp"
 #include "brume/prepare.hpp"
 
+#include <omp.h>
 
 #include <algorithm>
 #include <cassert>
@@ -160,7 +161,7 @@ constexpr std::size_t kBlock = 4096;
 // Conjugate gradients on A u = b until max |b - A u| <= target; returns the
 // iteration count. No preconditioner: diag(A) is 4 except at the image border,
 // so Jacobi scaling does not change the iteration count (measured).
-int solve_cg(const MarginSystem& s, std::vector<double>& u, double target) {
+int solve_cg(const MarginSystem& s, std::vector<double>& u, double target, int nt) {
   const std::size_t n = s.n;
   const std::size_t nblk = (n + kBlock - 1) / kBlock;
   const int* nb = s.nb.data();
@@ -183,7 +184,7 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target) {
   };
   // r = b - A u, p = r; returns max |r| and r.r.
   auto restart = [&] {
-#pragma omp parallel for schedule(static) if (par)
+#pragma omp parallel for num_threads(nt) schedule(static) if (par)
     for (std::size_t k = 0; k < nblk; ++k) {
       double m = 0.0, rr = 0.0;
       const std::size_t e = std::min(n, (k + 1) * kBlock);
@@ -207,7 +208,7 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target) {
     if (rmax <= target) break;
     while (rmax > target && iters < cap) {
       // q = A p, p.q
-#pragma omp parallel for schedule(static) if (par)
+#pragma omp parallel for num_threads(nt) schedule(static) if (par)
       for (std::size_t k = 0; k < nblk; ++k) {
         double a = 0.0;
         const std::size_t e = std::min(n, (k + 1) * kBlock);
@@ -224,7 +225,7 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target) {
       if (!(pq > 0.0)) break;
       const double alpha = rr / pq;
       // u += alpha p, r -= alpha q, r.r, max |r|
-#pragma omp parallel for schedule(static) if (par)
+#pragma omp parallel for num_threads(nt) schedule(static) if (par)
       for (std::size_t k = 0; k < nblk; ++k) {
         // Two interleaved accumulators (even/odd i) for the sum and the max:
         // shorter dependency chains, fixed order. (No `omp simd` here: clang
@@ -246,7 +247,7 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target) {
       const double beta = rr_new / rr;
       rr = rr_new;
       // p = r + beta p
-#pragma omp parallel for schedule(static) if (par)
+#pragma omp parallel for num_threads(nt) schedule(static) if (par)
       for (std::size_t i = 0; i < n; ++i) p[i] = r[i] + beta * p[i];
       ++iters;
     }
@@ -259,8 +260,9 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target) {
 
 }  // namespace
 
-PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p) {
+PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int threads) {
   validate(p);
+  const int nt = threads > 0 ? threads : omp_get_max_threads();
   if (range.empty() || range.width <= 0 || range.height <= 0)
     throw Error("prepare: the range map is empty (" + range.size_string() +
                 "); pass a range map with at least one pixel.");
@@ -281,7 +283,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p) {
   cv::Mat unknown(H, W, CV_8U);
   std::size_t known = 0, negatives = 0, first_neg = N;
   float rmax = 0.0f;
-#pragma omp parallel for schedule(static) reduction(+ : known, negatives) reduction(min : first_neg) \
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : known, negatives) reduction(min : first_neg) \
     reduction(max : rmax)
   for (int y = 0; y < H; ++y) {
     unsigned char* u = unknown.ptr<unsigned char>(y);
@@ -393,7 +395,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p) {
     };
     std::vector<std::vector<float>> bnd(nholes);
     if (box_area <= dN) {
-#pragma omp parallel for schedule(dynamic, 8)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 8)
       for (int h = 0; h < nholes; ++h) {
         const int l = hole_label[h];
         const int* st = stats.ptr<int>(l);
@@ -422,7 +424,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p) {
           for (int k = 0; k < nc; ++k) bnd[c[k]].push_back(in[static_cast<std::size_t>(y) * W + x]);
         }
       }
-#pragma omp parallel for schedule(dynamic, 8)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 8)
       for (int h = 0; h < nholes; ++h) fill[h] = ransac_fill(bnd[h], p.ransac_iterations, hole_seed[h]);
     }
   }
@@ -432,7 +434,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p) {
     float* out = res.range.data.data();
     float* skym = res.sky_mask.data.data();
     float* holem = res.hole_mask.data.data();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y) {
       const int* L = labels.ptr<int>(y);
       const std::size_t o = static_cast<std::size_t>(y) * W;
@@ -460,7 +462,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p) {
   const int x1 = std::min(W - 1, sky_right + 1), y1 = std::min(H - 1, sky_bottom + 1);
   const int cw = x1 - x0 + 1, ch = y1 - y0 + 1;
   cv::Mat skycrop(ch, cw, CV_8U), dist;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(static)
   for (int y = 0; y < ch; ++y) {
     const float* s = res.sky_mask.row(y + y0) + x0;
     unsigned char* d = skycrop.ptr<unsigned char>(y);
@@ -479,7 +481,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p) {
     return d < mu_lo || static_cast<double>(std::llround(double(d) * d)) <= mu2;
   };
   std::vector<std::size_t> row_count(ch + 1, 0);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(static)
   for (int y = 0; y < ch; ++y) {
     const float* d = dist.ptr<float>(y);
     std::size_t c = 0;
@@ -495,7 +497,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p) {
   sys.n = n;
   sys.pix.resize(n);
   std::vector<float> mdist(n);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(static)
   for (int y = 0; y < ch; ++y) {
     const float* d = dist.ptr<float>(y);
     int* L = labels.ptr<int>(y + y0) + x0;
@@ -523,7 +525,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p) {
     const float* out = res.range.data.data();
     const float* skym = res.sky_mask.data.data();
     float* mm = res.margin_mask.data.data();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(static)
     for (std::size_t i = 0; i < n; ++i) {
       const std::size_t pi = sys.pix[i];
       mm[pi] = 1.0f;
@@ -572,13 +574,13 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p) {
     }
   }
 
-  res.solver_iterations = solve_cg(sys, u, 0.25 * p.residual_tol * smax);
+  res.solver_iterations = solve_cg(sys, u, 0.25 * p.residual_tol * smax, nt);
 
   // Write back in float and measure the residual actually delivered.
   float* out = res.range.data.data();
   for (std::size_t i = 0; i < n; ++i) out[sys.pix[i]] = static_cast<float>(u[i]);
   double worst = 0.0;
-#pragma omp parallel for schedule(static) reduction(max : worst)
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(max : worst)
   for (std::size_t i = 0; i < n; ++i) {
     double a = sys.b[i] - sys.diag[i] * static_cast<double>(out[sys.pix[i]]);
     for (int k = 0; k < 4; ++k) {

@@ -104,7 +104,7 @@ AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const Aeri
   // effect runs on the prepared one, whose smooth sky margin only shapes the
   // blur near the horizon (sky pixels themselves stay unchanged).
   run.analysis = analyse_aerial(rgb, measured_range, p);
-  PreparedRange prep = prepare_step(measured_range.view(), prepare, given);
+  PreparedRange prep = prepare_step(measured_range.view(), prepare, given, exec.threads);
   BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;

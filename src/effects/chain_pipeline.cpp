@@ -76,7 +76,7 @@ HazeDofRun run_haze_dof(const Image& rgb, const Image& measured_range, const Int
   }
 
   HazeDofRun run;
-  const PreparedRange prep = prepare_step(measured_range, prepare, gh);
+  const PreparedRange prep = prepare_step(measured_range, prepare, gh, exec.threads);
   run.haze = run_haze_prepared(rgb, measured_range, prep, haze, ex, gh);
   run.dof = dof_stage([&] { return run_dof_prepared(run.haze.result.rgb, prep, k, dof, ex_dof, gd); });
 

@@ -111,7 +111,7 @@ DofRun run_dof(DenseImageRef rgb, DenseImageRef measured_range, const Intrinsics
   if (rgb.width != measured_range.width || rgb.height != measured_range.height)
     throw Error("range map " + measured_range.size_string() + " does not match image " + rgb.size_string() +
                 "; they must be the same size (resample the range map, or crop both)");
-  return run_dof_prepared(rgb, prepare_step(measured_range.view(), prepare, given), k, p, exec, given);
+  return run_dof_prepared(rgb, prepare_step(measured_range.view(), prepare, given, exec.threads), k, p, exec, given);
 }
 
 DofRun run_dof_prepared(DenseImageRef rgb, const PreparedRange& prep, const Intrinsics& k, const DofParams& p,

@@ -88,7 +88,7 @@ FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSourc
   const Camera camera = heights ? depth_camera(depth, rgb.width, rgb.height, p.camera)
                                 : make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, rgb.width, rgb.height);
   FogRun run;
-  PreparedRange prep = prepare_step(measured_range.view(), prepare, given);
+  PreparedRange prep = prepare_step(measured_range.view(), prepare, given, exec.threads);
   const Image range = effect_range(prep);
   run.analysis = analyse_fog(rgb, measured_range, range, camera, p, prepare.params.s_max_factor);
   BackendChoice backend = choose_backend(exec);

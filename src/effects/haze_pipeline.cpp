@@ -68,7 +68,7 @@ HazeRun run_haze(ConstImageView rgb, ConstImageView measured_range, const HazePa
   // measured range; the effect then runs on the prepared one, whose sky lies
   // at S_max > R_max (so it gets the far transmission and sigma_max).
   HazeAnalysis analysis = analyse_haze(rgb, measured_range, p);
-  const PreparedRange prep = prepare_step(measured_range, prepare, given);
+  const PreparedRange prep = prepare_step(measured_range, prepare, given, exec.threads);
   return haze_on_prepared(rgb, std::move(analysis), prep, p, exec);
 }
 
