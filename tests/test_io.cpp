@@ -634,14 +634,45 @@ TEST(IO, PngSubsetIsReadAsOpenImageIOReadsIt) {
       EXPECT_EQ(bad, 0u) << p;
     }
   }
-  // A truncated subset file is declined (OpenImageIO's refusal, which names
-  // the file, is IO.ErrorsNameTheFile's).
+  // A file cut inside a chunk is refused by name before libpng (or
+  // OpenImageIO after it) allocates the chunk's declared length; a file cut
+  // at a chunk boundary goes to libpng, whose error declines it, and then to
+  // OpenImageIO (which reads a file that lacks only its IEND, as before).
+  auto refusal = [&](const std::string& name) {
+    Image raw;
+    detail::PngInfo pi;
+    try {
+      detail::read_png_subset((d / name).string(), &raw, pi, none);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
   {
     const std::string b = file_bytes(d / "rgb16.png");
     std::ofstream(d / "cut.png", std::ios::binary) << b.substr(0, b.size() * 2 / 3);
+    const std::string e = refusal("cut.png");
+    EXPECT_NE(e.find("cut.png"), std::string::npos) << e;
+    EXPECT_NE(e.find("IDAT chunk"), std::string::npos) << e;
+    EXPECT_NE(e.find("truncated or corrupt"), std::string::npos) << e;
+    std::ofstream(d / "cut_at_chunk.png", std::ios::binary) << b.substr(0, b.size() - 12);  // without IEND
     Image raw;
     detail::PngInfo pi;
-    EXPECT_FALSE(detail::read_png_subset((d / "cut.png").string(), &raw, pi, none));
+    EXPECT_FALSE(detail::read_png_subset((d / "cut_at_chunk.png").string(), &raw, pi, none));
+    EXPECT_EQ(read_color((d / "cut_at_chunk.png").string()).data, read_color((d / "rgb16.png").string()).data);
+  }
+  // A tEXt chunk declaring 2^31 - 1 bytes in a file of ~100 (fuzz_image's
+  // finding): refused with the chunk's name and sizes, also by read_header
+  // and read_color, with no 2 GB allocation (the fuzz regression checks
+  // that under libFuzzer's malloc limit).
+  {
+    std::string b = file_bytes(d / "rgb16.png").substr(0, 33);  // signature and IHDR
+    b += std::string("\x7f\xff\xff\xff", 4) + "tEXt" + "Comment";
+    std::ofstream(d / "huge_text.png", std::ios::binary) << b;
+    const std::string e = refusal("huge_text.png");
+    EXPECT_NE(e.find("tEXt chunk at byte 33 declares 2147483647 bytes"), std::string::npos) << e;
+    EXPECT_THROW(read_header((d / "huge_text.png").string()), Error);
+    EXPECT_THROW(read_color((d / "huge_text.png").string()), Error);
   }
   fs::remove_all(d);
 }

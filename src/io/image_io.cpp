@@ -97,8 +97,9 @@ class SrgbDecodeTable {
 // comparison with the next step's threshold the rest, with no branch on the
 // value (a loop over the steps, whose exit depends on the value, took 5 % of
 // a batch of 8-bit PNG frames). The conversion is OpenImageIO's vector loop
-// (calls of whole multiples of 16 values), the one a scanline goes through; its scalar tail, which converted the last (width x channels mod 4)
-// values of each row before, can round an exact tie (v x 255 = k + 1/2)
+// (calls of whole multiples of 16 values), the one a scanline goes through;
+// its scalar tail, which converted the last (width x channels mod 4) values
+// of each row before, can round an exact tie (v x 255 = k + 1/2)
 // the other way (seen: 0.00015176348 encodes to code 1 there, 0 in the
 // vector loop), so such a value could differ by one code between columns;
 // now every value is rounded as the vector loop does. Tested against
@@ -874,11 +875,10 @@ Compression parse_compression(const std::string& path, const std::string& text, 
 codec::Attribute int_attribute(const std::string& name, int v) { return {name, true, v, {}}; }
 codec::Attribute text_attribute(const std::string& name, const std::string& v) { return {name, false, 0, v}; }
 
-// PNG's deflate level for a compression setting: "none" is deflate's stored
-// blocks (level 0: PNG always deflates), "zip" without a level and "auto"
-// are 6, OpenImageIO's default.
-// PNG's deflate settings (io/png_direct.hpp): `rle` the Up filter and the
-// run-length strategy at OpenImageIO's default level, which that strategy
+// PNG's deflate settings for a compression setting (io/png_direct.hpp):
+// "none" is deflate's stored blocks (level 0: PNG always deflates), "zip"
+// without a level and "auto" are 6, OpenImageIO's default; "rle" the Up
+// filter and the run-length strategy at that level, which the strategy
 // ignores.
 detail::PngDeflate png_deflate(const Compression& c) {
   detail::PngDeflate d;

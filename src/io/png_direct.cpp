@@ -19,7 +19,10 @@
 #include <csetjmp>
 #include <cstdio>
 #include <cstring>
+#include <string>
 #include <vector>
+
+#include "brume/error.hpp"
 
 namespace brume::detail {
 
@@ -60,6 +63,38 @@ void write_error(png_structp png, png_const_charp msg) {
 }
 void write_warning(png_structp, png_const_charp) {}
 
+// Every chunk of a PNG must fit in the file. libpng allocates a chunk's
+// declared length before it reads the data, so a 347-byte file whose tEXt
+// chunk declared 2 GB made brume's reader -- and OpenImageIO's, which would
+// read it next -- allocate 2 GB before failing at the end of the file
+// (found by fuzz_image; OpenImageIO alone peaked at 2.0 GB of RSS on it).
+// The chunk headers are walked first (8 bytes each, up to IEND): a chunk
+// that runs past the end of the file makes the file truncated or corrupt,
+// and it is refused here, by name, without either reader allocating it.
+// A length over 2^31 - 1 is left to libpng, which refuses it before any
+// allocation ("out of range"). f: positioned after the signature.
+void check_chunk_lengths(std::FILE* f, const std::string& path) {
+  const long end = std::fseek(f, 0, SEEK_END) == 0 ? std::ftell(f) : -1;
+  const auto size = static_cast<std::uint64_t>(end < 0 ? 0 : end);  // unknown: no check
+  std::uint64_t at = 8;
+  unsigned char h[8];
+  while (at + 8 <= size) {
+    if (std::fseek(f, static_cast<long>(at), SEEK_SET) != 0 || std::fread(h, 1, 8, f) != 8) break;
+    const std::uint64_t len = (std::uint64_t{h[0]} << 24) | (std::uint64_t{h[1]} << 16) | (std::uint64_t{h[2]} << 8) | h[3];
+    if (len > 0x7fffffffu) break;
+    if (at + 12 + len > size) {
+      std::string type;
+      for (int i = 4; i < 8; ++i) type += (h[i] >= 0x20 && h[i] < 0x7f) ? static_cast<char>(h[i]) : '?';
+      throw Error("cannot read '" + path + "': its " + type + " chunk at byte " + std::to_string(at) + " declares " +
+                  std::to_string(len) + " bytes of data, but the file ends " + std::to_string(size - at - 8) +
+                  " bytes after the chunk's header: the file is truncated or corrupt");
+    }
+    at += 12 + len;
+    if (std::memcmp(h + 4, "IEND", 4) == 0) break;
+  }
+  std::fseek(f, 8, SEEK_SET);
+}
+
 }  // namespace
 
 bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
@@ -69,6 +104,7 @@ bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
   if (!g.f) return false;
   unsigned char sig[8];
   if (std::fread(sig, 1, 8, g.f) != 8 || png_sig_cmp(sig, 0, 8) != 0) return false;
+  check_chunk_lengths(g.f, path);  // may throw (before libpng is involved)
   g.png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &g, read_error, read_warning);
   if (!g.png) return false;
   g.info = png_create_info_struct(g.png);

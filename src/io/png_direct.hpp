@@ -52,7 +52,10 @@ struct PngInfo {
 // count of an 8-bit file, the counts met in a 16-bit one), so its result is
 // map's own, bit for bit, with no pass over the image after the decode; it
 // must not throw. Returns false, having changed nothing, for any other file
-// or on any libpng error or warning (exceptions only from check).
+// or on any libpng error or warning; throws brume::Error (naming the file)
+// for a PNG with a chunk that runs past the end of the file, before libpng
+// or OpenImageIO would allocate its declared length (png_direct.cpp), and
+// whatever check throws.
 bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
                      const std::function<void(int, int, int)>& check,
                      const std::function<float(float, int)>& map = {});
