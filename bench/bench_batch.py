@@ -24,10 +24,11 @@ the disparity-to-range conversion, SHA-256 of the inputs, encoding, the
 record, the rename. With python3-distributed installed, the same frames also
 run through `python3 -m brume.dask --scheduler local --workers W`.
 
-The overhead is measured at brume batch's PNG default (zip:1, deflate level
-1) and, in the same rounds, at each --compression given (default zip:6,
-libpng's default, which single runs keep), so that the price of each is read
-side by side.
+The overhead is measured at brume batch's PNG default (rle: the Up filter and
+deflate's run-length strategy; zip:1 until 2026-12-02) and, in the same
+rounds, at each --compression given (default zip:6, libpng's default, which
+single runs keep; add zip:1 to compare with the old batch default), so that
+the price of each is read side by side.
 
   python3 bench/bench_batch.py [--cli build/brume] [--rounds 3] [--workers 2] [--compression zip:6 ...]
 
