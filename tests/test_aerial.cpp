@@ -449,6 +449,15 @@ TEST(Aerial, ReusedBuffersGiveTheSamePixels) {
     EXPECT_EQ(reused.airlight, a.airlight);
     EXPECT_EQ(reused.airlight_source, a.airlight_source);
     EXPECT_EQ(reused.range_max_m, a.range_max_m);
+    // The thread count given (Exec::threads) changes nothing: 1 and 3 threads
+    // against the default team, the sky median and the Gamma tables included.
+    for (int threads : {1, 3}) {
+      const AerialAnalysis t = analyse_aerial(s.rgb, s.range, p, threads);
+      EXPECT_TRUE(same(t.sky, a.sky)) << threads;
+      EXPECT_EQ(t.airlight, a.airlight) << threads;
+      EXPECT_EQ(t.gamma.log_gamma, a.gamma.log_gamma) << threads;
+      EXPECT_EQ(t.gamma_from.log_gamma, a.gamma_from.log_gamma) << threads;
+    }
 
     Image out = small.rgb, att(64, 48, 3, NAN), scale;  // wrong size; stale NaNs; empty
     const std::size_t floored = apply_aerial(s.rgb, s.range, p, reused, out, AerialMaps{&att, &scale});

@@ -163,8 +163,10 @@ struct AttenuationTable {
 // grows as step^2 and with T: over 0..100 km with 16384 samples <= 1.3e-6
 // (4096 samples: 2.0e-5 at T 20 near s = 0); over a 2 km scene with 4096
 // samples <= 6.3e-8 for T = 1..20 (the float output's own rounding).
+// threads: OpenMP threads of the tabulation (0 = all, as Exec::threads; the
+// table does not depend on it).
 AttenuationTable attenuation_table(const Atmosphere& a, const SpectralSensitivity& q, double s_max_m,
-                                   int samples = 4096);
+                                   int samples = 4096, int threads = 0);
 
 // ==== brume aerial: render, re-render, remove (Morales eq. 3.11-3.13) =================
 // With s = R distance_scale the physical distance of a pixel and Gamma_c(s)
@@ -239,13 +241,16 @@ struct AerialAnalysis {
 // of the sky pixels (unknown range) when they are >= 0.5 % of the frame, else
 // the per-channel median of the brightest 10 % (by luminance) of the 1 %
 // most distant known pixels -- the thesis' "brightest pixels near the horizon".
-AerialAnalysis analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p);
+// threads: OpenMP threads of its passes (0 = all, as Exec::threads; the
+// analysis does not depend on it).
+AerialAnalysis analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, int threads = 0);
 // The same analysis into `a`, reusing a.sky's buffer when it already has the
 // frame's size (a video or batch caller keeps `a` between frames and so pays
 // no 7 MB allocation, zero-fill and page faults per 1600x1120 frame for the
 // mask). Every field of `a` is overwritten; the result equals the returning
 // form's, bit for bit. If it throws, `a` is left valid but unspecified.
-void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, AerialAnalysis& a);
+void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, AerialAnalysis& a,
+                    int threads = 0);
 
 struct AerialResult {
   Image rgb;          // linear RGB

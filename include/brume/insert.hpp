@@ -88,9 +88,10 @@ struct InsertAnalysis {
   double object_range_min_m = 0.0, object_range_max_m = 0.0;  // over visible pixels (0 if none)
 };
 // Validates and checks sizes (messages name the photo and the object), runs
-// analyse_aerial on the photo and its MEASURED range, and depth-tests the object.
+// analyse_aerial on the photo and its MEASURED range (on `threads` OpenMP
+// threads, 0 = all), and depth-tests the object.
 InsertAnalysis analyse_insert(const Image& photo, const Image& scene_range, const Image& object_rgba,
-                              const Image& object_range, const AerialParams& p);
+                              const Image& object_range, const AerialParams& p, int threads = 0);
 
 struct InsertResult {
   Image rgb;       // linear RGB

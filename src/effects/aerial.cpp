@@ -68,9 +68,9 @@ constexpr int kSkyBins = 1 << 16;
 // [lo, hi) bounds the sky pixels (from the range scan): a sky above the land
 // spares both passes the rest of the frame.
 std::array<float, 3> sky_median(DenseImageRef rgb, const float* sky, std::size_t n_sky, std::ptrdiff_t lo,
-                                std::ptrdiff_t hi) {
+                                std::ptrdiff_t hi, int nt) {
   std::vector<std::uint32_t> hist(3 * static_cast<std::size_t>(kSkyBins), 0u);
-#pragma omp parallel
+#pragma omp parallel num_threads(nt)
   {
     std::vector<std::uint32_t> h(3 * static_cast<std::size_t>(kSkyBins), 0u);
 #pragma omp for schedule(dynamic, 16384) nowait
@@ -92,7 +92,7 @@ std::array<float, 3> sky_median(DenseImageRef rgb, const float* sky, std::size_t
     bin[c] = b, rank[c] = k - below;
   }
   std::array<std::vector<float>, 3> v;
-#pragma omp parallel
+#pragma omp parallel num_threads(nt)
   {
     std::array<std::vector<float>, 3> mine;
 #pragma omp for schedule(dynamic, 16384) nowait
@@ -195,13 +195,14 @@ void validate_aerial(const AerialParams& p, const std::set<std::string>& given) 
                 " with --remove: the scattering blur cannot be undone; drop --lambda (remove uses Gamma only)");
 }
 
-AerialAnalysis analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p) {
+AerialAnalysis analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, int threads) {
   AerialAnalysis a;
-  analyse_aerial(rgb, range, p, a);
+  analyse_aerial(rgb, range, p, a, threads);
   return a;
 }
 
-void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, AerialAnalysis& a) {
+void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, AerialAnalysis& a, int threads) {
+  const int nt = threads > 0 ? threads : omp_get_max_threads();
   validate_aerial(p);
   if (rgb.channels != 3)
     throw Error("aerial needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
@@ -224,7 +225,7 @@ void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& 
   std::ptrdiff_t sky_lo = npx, sky_hi = 0;  // [first, last + 1) unknown pixel, for the sky median
   // Dynamic chunks: on a shared host one preempted thread would otherwise
   // hold up the whole pass (the same choice as apply_aerial's rows).
-#pragma omp parallel for schedule(dynamic, 65536) reduction(max : rmax, sky_hi) \
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 65536) reduction(max : rmax, sky_hi) \
     reduction(min : rmin, first_negative, sky_lo) reduction(+ : unknown)
   for (std::ptrdiff_t i = 0; i < npx; ++i) {
     const float r = range.data[i];
@@ -255,11 +256,11 @@ void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& 
 
   a.sensitivity = load_sensitivity(p.sensitivity);
   const double s_max = a.range_max_m * p.distance_scale;
-  a.gamma = attenuation_table(p.atmosphere, a.sensitivity, s_max);
+  a.gamma = attenuation_table(p.atmosphere, a.sensitivity, s_max, 4096, nt);
   if (p.from_turbidity) {
     Atmosphere from = p.atmosphere;
     from.turbidity = *p.from_turbidity;
-    a.gamma_from = attenuation_table(from, a.sensitivity, s_max);
+    a.gamma_from = attenuation_table(from, a.sensitivity, s_max, 4096, nt);
   }
 
   // kappa_s' for haze's sigma law: the optical depth at the far end at 550 nm.
@@ -274,7 +275,7 @@ void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& 
   std::string estimated_source;
   if (!p.airlight || (a.mode == AerialMode::rerender && !p.from_airlight)) {
     if (a.unknown_pixels >= std::max<std::size_t>(1, rgb.pixels() / 200)) {
-      estimated = sky_median(rgb, a.sky.data.data(), a.unknown_pixels, sky_lo, sky_hi);
+      estimated = sky_median(rgb, a.sky.data.data(), a.unknown_pixels, sky_lo, sky_hi, nt);
       estimated_source = "per-channel median of the unknown-range (sky) pixels";
     } else {
       // The thesis' "brightest pixels near the horizon": the 1 % most distant

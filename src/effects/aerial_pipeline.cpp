@@ -103,7 +103,7 @@ AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const Aeri
   // Statistics (R_max, Iinf, the sky mask) from the measured range; the
   // effect runs on the prepared one, whose smooth sky margin only shapes the
   // blur near the horizon (sky pixels themselves stay unchanged).
-  run.analysis = analyse_aerial(rgb, measured_range, p);
+  run.analysis = analyse_aerial(rgb, measured_range, p, exec.threads);
   PreparedRange prep = prepare_step(measured_range.view(), prepare, given, exec.threads);
   BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();

@@ -367,7 +367,8 @@ std::array<double, 3> attenuation_direct(const Atmosphere& a, const SpectralSens
   return gamma_at(make_integrand(a, q), s_m);
 }
 
-AttenuationTable attenuation_table(const Atmosphere& a, const SpectralSensitivity& q, double s_max_m, int samples) {
+AttenuationTable attenuation_table(const Atmosphere& a, const SpectralSensitivity& q, double s_max_m, int samples,
+                                   int threads) {
   if (!(s_max_m > 0.0) || !std::isfinite(s_max_m))
     throw Error("attenuation table: the largest distance " + spectral_num(s_max_m) + " m must be finite and > 0");
   if (samples < 2) throw Error("attenuation table: " + std::to_string(samples) + " samples; at least 2 are needed");
@@ -390,7 +391,7 @@ AttenuationTable attenuation_table(const Atmosphere& a, const SpectralSensitivit
   // then the same product whatever the thread count or which thread ran it
   // (the table, and so the render, no longer depends on the team size), and a
   // preempted thread on a shared host holds up one chunk, not half the table.
-#pragma omp parallel
+#pragma omp parallel num_threads(threads > 0 ? threads : omp_get_max_threads())
   {
     std::array<double, kSensitivitySamples> e{};
     int seeded = -2;  // the node e holds, if this thread's previous node

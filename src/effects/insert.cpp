@@ -147,7 +147,7 @@ Image read_object_rgba(const std::string& path, FileInfo* info) {
 }
 
 InsertAnalysis analyse_insert(const Image& photo, const Image& scene_range, const Image& object_rgba,
-                              const Image& object_range, const AerialParams& p) {
+                              const Image& object_range, const AerialParams& p, int threads) {
   validate_insert(p);
   if (object_rgba.channels != 4)
     throw Error("the object must be RGBA (4 channels, premultiplied), got " + std::to_string(object_rgba.channels));
@@ -161,7 +161,7 @@ InsertAnalysis analyse_insert(const Image& photo, const Image& scene_range, cons
 
   InsertAnalysis a;
   // Iinf, the Gamma table and the sigma law exactly as `brume aerial` on the photo.
-  a.aerial = analyse_aerial(photo, scene_range, p);
+  a.aerial = analyse_aerial(photo, scene_range, p, threads);
   a.visible = Image(photo.width, photo.height, 1, 0.0f);
   double omin = INFINITY, omax = 0.0;
   for (std::size_t i = 0; i < photo.pixels(); ++i) {
@@ -198,7 +198,7 @@ InsertAnalysis analyse_insert(const Image& photo, const Image& scene_range, cons
   // out to it rather than extrapolating; sigma keeps the scene's law (R' is
   // clamped to 1, as the sky's).
   if (omax > a.aerial.range_max_m)
-    a.aerial.gamma = attenuation_table(p.atmosphere, a.aerial.sensitivity, omax * p.distance_scale);
+    a.aerial.gamma = attenuation_table(p.atmosphere, a.aerial.sensitivity, omax * p.distance_scale, 4096, threads);
   return a;
 }
 

@@ -89,7 +89,7 @@ InsertRun insert_object(const Image& photo, const Image& scene_range, const Imag
   InsertRun run;
   // Statistics (R_max, Iinf, the sky) and the depth test on the MEASURED
   // range; the prepared range only shapes sigma where the object is not visible.
-  run.analysis = analyse_insert(photo, scene_range, object_rgba, object_range, p);
+  run.analysis = analyse_insert(photo, scene_range, object_rgba, object_range, p, exec.threads);
   PreparedRange prep = prepare_step(scene_range, prepare, given, exec.threads);
   Exec cpu = exec;
   cpu.backend = Backend::cpu;  // auto: the CPU (the only backend insert has)
