@@ -165,8 +165,9 @@ struct AttenuationTable {
 // samples <= 6.3e-8 for T = 1..20 (the float output's own rounding).
 // threads: OpenMP threads of the tabulation (0 = all, as Exec::threads; the
 // table does not depend on it).
+inline constexpr int kAttenuationSamples = 4096;  // the effects' table size
 AttenuationTable attenuation_table(const Atmosphere& a, const SpectralSensitivity& q, double s_max_m,
-                                   int samples = 4096, int threads = 0);
+                                   int samples = kAttenuationSamples, int threads = 0);
 
 // ==== brume aerial: render, re-render, remove (Morales eq. 3.11-3.13) =================
 // With s = R distance_scale the physical distance of a pixel and Gamma_c(s)

@@ -256,11 +256,11 @@ void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& 
 
   a.sensitivity = load_sensitivity(p.sensitivity);
   const double s_max = a.range_max_m * p.distance_scale;
-  a.gamma = attenuation_table(p.atmosphere, a.sensitivity, s_max, 4096, nt);
+  a.gamma = attenuation_table(p.atmosphere, a.sensitivity, s_max, kAttenuationSamples, nt);
   if (p.from_turbidity) {
     Atmosphere from = p.atmosphere;
     from.turbidity = *p.from_turbidity;
-    a.gamma_from = attenuation_table(from, a.sensitivity, s_max, 4096, nt);
+    a.gamma_from = attenuation_table(from, a.sensitivity, s_max, kAttenuationSamples, nt);
   }
 
   // kappa_s' for haze's sigma law: the optical depth at the far end at 550 nm.

@@ -198,7 +198,8 @@ InsertAnalysis analyse_insert(const Image& photo, const Image& scene_range, cons
   // out to it rather than extrapolating; sigma keeps the scene's law (R' is
   // clamped to 1, as the sky's).
   if (omax > a.aerial.range_max_m)
-    a.aerial.gamma = attenuation_table(p.atmosphere, a.aerial.sensitivity, omax * p.distance_scale, 4096, threads);
+    a.aerial.gamma =
+        attenuation_table(p.atmosphere, a.aerial.sensitivity, omax * p.distance_scale, kAttenuationSamples, threads);
   return a;
 }
 
