@@ -2,6 +2,7 @@
 // format, named EXR channels, raw integer counts, sRGB, and error paths.
 #include <OpenImageIO/imageio.h>
 #include <png.h>
+#include <zlib.h>
 
 #include <cstdio>
 #include <cstring>
@@ -261,7 +262,7 @@ TEST(IO, CompressionReachesTheWriterAndKeepsLosslessPixels) {
   // at least the raw 96 x 64 x 3 x 2 bytes, level 9 well under them.
   const Image png_auto = read_color(write_as("auto.png", "16", "auto"));
   std::uintmax_t none_size = 0, z9_size = 0;
-  for (const char* c : {"none", "zip", "zip:0", "zip:1", "zip:9", "rle"}) {
+  for (const char* c : {"none", "zip", "zip:0", "zip:1", "zip:9", "rle", "fast"}) {
     const std::string p = write_as(std::string("c_") + (c[3] == ':' ? std::string("zip") + c[4] : c) + ".png", "16", c);
     EXPECT_EQ(read_color(p).data, png_auto.data) << c;
     if (std::string(c) == "none") none_size = fs::file_size(p);
@@ -501,15 +502,21 @@ std::string file_bytes(const fs::path& p) {
 }
 
 // A PNG written with libpng by hand (the shapes OpenImageIO's writer does
-// not make: interlaced, palette, 1-bit, tRNS), values row-major.
+// not make: interlaced, palette, 1-bit, tRNS, one row filter forced, small
+// IDAT chunks), values row-major (16 bits: big-endian). filters: libpng's
+// PNG_FILTER_* mask (0: its default); idat_bytes: the zlib output per IDAT
+// chunk (0: its default, 8192).
 void write_png_by_hand(const std::string& p, int w, int h, int depth, int color, bool interlace,
-                       const std::vector<unsigned char>& bytes, bool trns = false) {
+                       const std::vector<unsigned char>& bytes, bool trns = false, int filters = 0,
+                       std::size_t idat_bytes = 0) {
   std::FILE* f = std::fopen(p.c_str(), "wb");
   ASSERT_TRUE(f) << p;
   png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
   png_infop info = png_create_info_struct(png);
   ASSERT_EQ(setjmp(png_jmpbuf(png)), 0) << p;
   png_init_io(png, f);
+  if (filters) png_set_filter(png, PNG_FILTER_TYPE_BASE, filters);
+  if (idat_bytes) png_set_compression_buffer_size(png, idat_bytes);
   png_set_IHDR(png, info, w, h, depth, color, interlace ? PNG_INTERLACE_ADAM7 : PNG_INTERLACE_NONE,
                PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
   png_color palette[4] = {{0, 0, 0}, {255, 0, 0}, {0, 255, 0}, {10, 20, 30}};
@@ -673,6 +680,215 @@ TEST(IO, PngSubsetIsReadAsOpenImageIOReadsIt) {
     EXPECT_NE(e.find("tEXt chunk at byte 33 declares 2147483647 bytes"), std::string::npos) << e;
     EXPECT_THROW(read_header((d / "huge_text.png").string()), Error);
     EXPECT_THROW(read_color((d / "huge_text.png").string()), Error);
+  }
+  fs::remove_all(d);
+}
+
+namespace {
+// PNG assembled chunk by chunk (zlib's compress2 and crc32), so that a test
+// sets every byte: the rows' filter bytes, how the zlib stream is split
+// into IDAT chunks, what follows them.
+std::string be32_bytes(std::uint32_t v) {
+  return {static_cast<char>(v >> 24), static_cast<char>(v >> 16), static_cast<char>(v >> 8), static_cast<char>(v)};
+}
+std::string png_chunk(const std::string& type, const std::string& data) {
+  const std::string body = type + data;
+  const auto crc = crc32(0, reinterpret_cast<const Bytef*>(body.data()), static_cast<uInt>(body.size()));
+  return be32_bytes(static_cast<std::uint32_t>(data.size())) + body + be32_bytes(static_cast<std::uint32_t>(crc));
+}
+std::string zlib_stream(const std::string& raw) {
+  uLongf n = compressBound(static_cast<uLong>(raw.size()));
+  std::string z(n, '\0');
+  compress2(reinterpret_cast<Bytef*>(z.data()), &n, reinterpret_cast<const Bytef*>(raw.data()),
+            static_cast<uLong>(raw.size()), 6);
+  z.resize(n);
+  return z;
+}
+std::string png_head(int w, int h) {  // signature and IHDR: 8-bit grey, not interlaced
+  return std::string("\x89PNG\r\n\x1a\n", 8) +
+         png_chunk("IHDR", be32_bytes(static_cast<std::uint32_t>(w)) + be32_bytes(static_cast<std::uint32_t>(h)) +
+                               std::string("\x08\x00\x00\x00\x00", 5));
+}
+}  // namespace
+
+TEST(IO, PngImageDataIsDecodedExactly) {
+  // The subset reader inflates a non-interlaced file's image data with
+  // libdeflate and undoes the row filters itself (png_direct.cpp). PNG
+  // decoding is exact, so every count must come back as written, for every
+  // filter libpng's writer can force (None, Sub, Up, Average, Paeth, and
+  // its adaptive mix), every byte count per pixel of the subset (grey and
+  // RGB at 8 and 16 bits: 1, 2, 3, 6), widths of 1 pixel up (a row shorter
+  // than the filters' left neighbour), one row (the row above is zeros) and
+  // more, the zlib stream in one IDAT chunk or in many small ones; data
+  // random, smooth (Paeth's ties) and constant. Each read must take that
+  // path (png_fast_reads), and anything unusual must not: it goes to
+  // libpng as before, which declines the broken files below.
+  fs::path d = tmpdir();
+  auto none = [](int, int, int) {};
+  std::uint32_t seed = 12345;
+  auto rnd = [&] { return (seed = seed * 1664525u + 1013904223u) >> 24; };
+  const std::pair<int, const char*> filters[] = {{PNG_FILTER_NONE, "none"}, {PNG_FILTER_SUB, "sub"},
+                                                  {PNG_FILTER_UP, "up"},     {PNG_FILTER_AVG, "avg"},
+                                                  {PNG_FILTER_PAETH, "paeth"}, {PNG_ALL_FILTERS, "all"}};
+  int files = 0;
+  for (int depth : {8, 16})
+    for (int color : {PNG_COLOR_TYPE_GRAY, PNG_COLOR_TYPE_RGB})
+      for (int w : {1, 2, 7, 64})
+        for (int h : {1, 6})
+          for (const auto& [filter, fname] : filters)
+            for (std::size_t idat : {std::size_t{8192}, std::size_t{61}}) {
+              const int c = color == PNG_COLOR_TYPE_RGB ? 3 : 1;
+              const std::size_t values = static_cast<std::size_t>(w) * h * c, vb = depth / 8;
+              std::vector<unsigned char> bytes(values * vb);
+              for (std::size_t i = 0; i < bytes.size(); ++i) {
+                const std::size_t row = i / (bytes.size() / h);
+                bytes[i] = static_cast<unsigned char>(row % 3 == 0 ? rnd() : row % 3 == 1 ? (i * 7 + row * 3) % 256 : 200);
+              }
+              const std::string p =
+                  (d / ("f_" + std::to_string(depth) + "_" + std::to_string(c) + "_" + std::to_string(w) + "x" +
+                        std::to_string(h) + "_" + fname + "_" + std::to_string(idat) + ".png"))
+                      .string();
+              write_png_by_hand(p, w, h, depth, color, false, bytes, false, filter, idat);
+              Image got;
+              detail::PngInfo pi;
+              const std::uint64_t before = detail::png_fast_reads();
+              ASSERT_TRUE(detail::read_png_subset(p, &got, pi, none)) << p;
+              EXPECT_EQ(detail::png_fast_reads(), before + 1) << p << " did not take the fast path";
+              ASSERT_EQ(got.data.size(), values) << p;
+              std::size_t bad = 0;
+              for (std::size_t i = 0; i < values; ++i) {
+                const unsigned count = vb == 1 ? bytes[i] : (bytes[2 * i] << 8) | bytes[2 * i + 1];
+                const float want = static_cast<float>(count) * (depth == 8 ? 1.0f / 255.0f : 1.0f / 65535.0f);
+                if (std::memcmp(&want, &got.data[i], 4) != 0) ++bad;
+              }
+              EXPECT_EQ(bad, 0u) << p;
+              ++files;
+            }
+  EXPECT_EQ(files, 384);
+
+  // Hand-assembled 8-bit grey files, 5 x 4: rows of a filter byte (None) and
+  // the counts 10 y + x.
+  const int w = 5, h = 4;
+  auto rows = [&](int n, int bad_filter_row = -1) {
+    std::string raw;
+    for (int y = 0; y < n; ++y) {
+      raw += static_cast<char>(y == bad_filter_row ? 5 : 0);
+      for (int x = 0; x < w; ++x) raw += static_cast<char>(10 * y + x);
+    }
+    return raw;
+  };
+  const std::string head = png_head(w, h), iend = png_chunk("IEND", "");
+  const std::string z = zlib_stream(rows(h));
+  struct Case {
+    const char* name;
+    std::string bytes;
+    bool fast;  // taken by the fast path
+    bool read;  // read (by either path: the counts checked)
+  };
+  std::string bad_crc = png_chunk("IDAT", z);
+  bad_crc[bad_crc.size() - 1] ^= 1;
+  const Case cases[] = {
+      {"split.png",  // the stream in three IDAT chunks, one empty; text after them
+       head + png_chunk("IDAT", z.substr(0, 7)) + png_chunk("IDAT", "") + png_chunk("IDAT", z.substr(7)) +
+           png_chunk("tEXt", std::string("Comment\0after", 13)) + iend,
+       true, true},
+      {"bad_filter.png", head + png_chunk("IDAT", zlib_stream(rows(h, 2))) + iend, false, false},
+      {"short_stream.png", head + png_chunk("IDAT", zlib_stream(rows(h - 1))) + iend, false, false},
+      {"long_stream.png", head + png_chunk("IDAT", zlib_stream(rows(h + 1))) + iend, false, false},
+      {"bad_crc.png", head + bad_crc + iend, false, false},
+      {"bad_adler.png", head + png_chunk("IDAT", z.substr(0, z.size() - 1) + static_cast<char>(z.back() ^ 1)) + iend,
+       false, false},
+      {"after_stream.png", head + png_chunk("IDAT", z + "xyz") + iend, false, false},
+      {"idat_text_idat.png",
+       head + png_chunk("IDAT", z.substr(0, 7)) + png_chunk("tEXt", std::string("Comment\0x", 9)) +
+           png_chunk("IDAT", z.substr(7)) + iend,
+       false, false},
+      // A critical chunk after the image data: left to libpng, which reads
+      // the file (it does not check chunks after the image data it reads).
+      {"critical_after.png", head + png_chunk("IDAT", z) + png_chunk("ABCD", "x") + iend, false, true},
+      {"no_iend.png", head + png_chunk("IDAT", z), false, false},
+  };
+  for (const Case& k : cases) {
+    const std::string p = (d / k.name).string();
+    std::ofstream(p, std::ios::binary) << k.bytes;
+    Image got;
+    detail::PngInfo pi;
+    const std::uint64_t before = detail::png_fast_reads();
+    const bool read = detail::read_png_subset(p, &got, pi, none);
+    EXPECT_EQ(detail::png_fast_reads(), before + (k.fast ? 1 : 0)) << k.name;
+    if (k.read) {
+      ASSERT_TRUE(read) << k.name;
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          EXPECT_EQ(got.data[y * w + x], static_cast<float>(10 * y + x) * (1.0f / 255.0f)) << k.name;
+    } else {
+      EXPECT_FALSE(read) << k.name << ": libpng read it, or declined it with no complaint";
+    }
+  }
+  fs::remove_all(d);
+}
+
+TEST(IO, PngFastIsAPngOfTheSamePixels) {
+  // `--compression fast` (brume batch's PNG default) writes the image data
+  // itself (Up rows, libdeflate level 1, IDAT chunks of 1 MiB) after the
+  // chunks libpng writes. OpenImageIO (its own libpng read, not brume's
+  // reader) must read the same values from it as from the `rle` file of
+  // the same image, whose bytes before the first IDAT it must share; an
+  // image over 1 MiB deflated spans several IDAT chunks; brume reads the
+  // file back on its fast path.
+  fs::path d = tmpdir();
+  std::uint32_t seed = 7;
+  auto rnd = [&] { return static_cast<float>((seed = seed * 1664525u + 1013904223u) >> 8) / 16777216.0f; };
+  struct Case {
+    int w, h, c;
+    const char* bits;
+    bool noise;
+  };
+  for (const Case& k : {Case{97, 31, 3, "8", false}, Case{64, 17, 1, "16", false}, Case{53, 9, 3, "16", false},
+                        Case{640, 480, 3, "16", true}}) {
+    Image img(k.w, k.h, k.c);
+    for (int y = 0; y < k.h; ++y)
+      for (int x = 0; x < k.w; ++x)
+        for (int ch = 0; ch < k.c; ++ch)
+          img.at(x, y, ch) = k.noise ? rnd() : static_cast<float>((x * 3 + y * 5 + ch * 40) % 97) / 96.0f;
+    const std::string tag = std::to_string(k.w) + "_" + k.bits + "_" + std::to_string(k.c);
+    auto write = [&](const std::string& comp) {
+      WriteOptions o;
+      o.bits = k.bits;
+      o.compression = comp;
+      const std::string p = (d / (tag + "_" + comp + ".png")).string();
+      write_image(p, img, o);
+      return p;
+    };
+    const std::string fast = write("fast"), rle = write("rle");
+    auto oiio_counts = [](const std::string& p) {
+      auto in = OIIO::ImageInput::open(p);
+      EXPECT_TRUE(in) << p;
+      if (!in) return std::vector<std::uint16_t>();
+      const OIIO::ImageSpec spec = in->spec();
+      std::vector<std::uint16_t> v(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
+      EXPECT_TRUE(in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::UINT16, v.data())) << p;
+      return v;
+    };
+    const std::vector<std::uint16_t> want = oiio_counts(rle);
+    ASSERT_EQ(want.size(), img.data.size()) << tag;
+    EXPECT_TRUE(oiio_counts(fast) == want) << tag << ": OpenImageIO reads other values from the fast file";
+    const std::string fb = file_bytes(fast), rb = file_bytes(rle);
+    const std::size_t head = rb.find("IDAT") - 4;  // the first IDAT's length
+    ASSERT_NE(head + 4, std::string::npos);
+    EXPECT_EQ(fb.substr(0, head), rb.substr(0, head)) << tag << ": the chunks before the image data differ";
+    std::size_t idats = 0;
+    for (std::size_t at = fb.find("IDAT"); at != std::string::npos; at = fb.find("IDAT", at + 4)) ++idats;
+    if (k.noise)  // 640 x 480 x 6 bytes of noise: ~1.8 MB deflated
+      EXPECT_GE(idats, 2u) << tag;
+    else
+      EXPECT_EQ(idats, 1u) << tag;
+    EXPECT_EQ(fb.substr(fb.size() - 12), rb.substr(rb.size() - 12)) << tag << ": IEND";
+    Image back;
+    detail::PngInfo pi;
+    const std::uint64_t before = detail::png_fast_reads();
+    ASSERT_TRUE(detail::read_png_subset(fast, &back, pi, [](int, int, int) {})) << tag;
+    EXPECT_EQ(detail::png_fast_reads(), before + 1) << tag;
   }
   fs::remove_all(d);
 }

@@ -74,8 +74,9 @@ const std::vector<std::string>& batch_effects();
 
 // The compression of a batch's PNG frames when neither the row nor --param
 // sets one (single runs keep the writer's default, zip:6): the Up filter and
-// deflate's run-length strategy (io/png_direct.hpp).
-inline constexpr const char* kBatchPngCompression = "rle";
+// libdeflate's level 1 (io/png_direct.hpp; "rle" until 2026-12-02's fourth
+// session).
+inline constexpr const char* kBatchPngCompression = "fast";
 
 struct BatchOptions {
   std::string manifest;

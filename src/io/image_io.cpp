@@ -810,7 +810,8 @@ struct CompressionRule {
 };
 
 const std::vector<CompressionRule>& compression_rules(const std::string& e) {
-  static const std::vector<CompressionRule> png = {{"none", 1, 0, false}, {"zip", 0, 9, false}, {"rle", 1, 0, false}};
+  static const std::vector<CompressionRule> png = {
+      {"none", 1, 0, false}, {"zip", 0, 9, false}, {"rle", 1, 0, false}, {"fast", 1, 0, false}};
   static const std::vector<CompressionRule> tif = {
       {"none", 1, 0, false}, {"lzw", 1, 0, false}, {"zip", 1, 9, false}, {"packbits", 1, 0, false}};
   static const std::vector<CompressionRule> exr = {
@@ -879,11 +880,14 @@ codec::Attribute text_attribute(const std::string& name, const std::string& v) {
 // "none" is deflate's stored blocks (level 0: PNG always deflates), "zip"
 // without a level and "auto" are 6, OpenImageIO's default; "rle" the Up
 // filter and the run-length strategy at that level, which the strategy
-// ignores.
+// ignores; "fast" the Up filter and libdeflate's level 1 (brume's own name:
+// OpenImageIO has no such setting, and a PNG it writes -- 2 or 4 channels
+// -- takes "rle" for it, the nearest it has).
 detail::PngDeflate png_deflate(const Compression& c) {
   detail::PngDeflate d;
   d.level = c.name == "none" ? 0 : (c.name == "zip" && c.level >= 0) ? c.level : 6;
   d.rle = c.name == "rle";
+  d.fast = c.name == "fast";
   return d;
 }
 
@@ -892,7 +896,7 @@ void apply_compression(codec::OutputSpec& spec, const std::string& e, const Comp
   if (e == ".png") {
     const detail::PngDeflate d = png_deflate(c);
     spec.attributes.push_back(int_attribute("png:compressionLevel", d.level));
-    if (d.rle) {  // the same file as write_png_subset's (tested)
+    if (d.rle || d.fast) {  // rle: the same file as write_png_subset's (tested)
       spec.attributes.push_back(text_attribute("compression", "rle"));
       spec.attributes.push_back(int_attribute("png:filter", detail::kPngFilterUp));
     }

@@ -11,7 +11,9 @@
 // so brume reads and writes that subset with libpng directly, exactly as
 // OpenImageIO would:
 //  - read: 8 or 16 bits, grey or RGB, no transparency chunk (tRNS), any
-//    interlacing; values as OpenImageIO returns them (the count times the
+//    interlacing (the image data of a non-interlaced file inflated by
+//    libdeflate and unfiltered by brume, ~2x libpng's speed: png_direct.cpp);
+//    values as OpenImageIO returns them (the count times the
 //    float 1/255 or 1/65535), FileInfo as it gives it (format "png", channels
 //    Y or R G B, the "Description" text as the description). Anything else --
 //    palette, alpha, 1/2/4 bits, tRNS, a libpng error or warning of any kind
@@ -60,6 +62,13 @@ bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
                      const std::function<void(int, int, int)>& check,
                      const std::function<float(float, int)>& map = {});
 
+// How many reads of this process took the image data without libpng's row
+// loop (read_image_data in png_direct.cpp: libdeflate's inflate and
+// brume's own unfiltering), for tests: a well-formed non-interlaced file
+// of the subset does; anything unusual, an interlaced file or a PNG outside
+// the subset does not.
+std::uint64_t png_fast_reads();
+
 // OpenImageIO's conversion of a float to a count 0..max (255 or 65535) in
 // its vector loop: round half away from zero of v x max, clamped, NaN to 0
 // (measured against convert_pixel_values on every count's rounding
@@ -88,10 +97,20 @@ bool png_subset_writable(int channels, int bits);
 //    files from 27 % smaller (a hazy frame: long runs) to 5 % larger. Up
 //    alone, not the adaptive choice: trying five filters per row was half
 //    of zip:1's time, and Paeth, the smallest with rle, reads back about as
-//    slowly as zip:1 (Paeth rows unfilter slowest in libpng 1.6.39).
+//    slowly as zip:1 (Paeth rows unfilter slowest in libpng 1.6.39);
+//  - fast true: every row filtered with Up and the whole image deflated by
+//    libdeflate at its level 1 in one call (libpng writes the chunks before
+//    the image data, the same as for the other settings; brume the IDAT
+//    chunks, 1 MiB each, and IEND): `--compression fast`, brume batch's PNG
+//    default since 2026-12-02 (fourth session). No OpenImageIO setting
+//    writes these bytes: the file is brume's own, a valid PNG that every
+//    decoder reads. On the hazy Middlebury frames of bench_batch, against
+//    rle: ~1.8x faster to deflate (2.7 -> 1.5 ms for Art), files 3-9 %
+//    smaller; read back as fast (Up rows).
 struct PngDeflate {
   int level = 6;
   bool rle = false;
+  bool fast = false;
 };
 // libpng's PNG_FILTER_UP (png.h is not included here): the value of
 // OpenImageIO's png:filter attribute for the same rows.
