@@ -255,7 +255,8 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
       .text("compression", &OutputFiles::compression,
             "compression of the output image, NAME[:LEVEL]: auto (the writer's default: PNG zip:6, TIFF and EXR "
             "zip, JPEG jpeg:98); PNG none, zip, zip:0..9 (deflate level: 1 is fastest, 9 smallest), rle (Up filter and "
-            "run-length deflate: about twice as fast to write and to read as zip:1); TIFF none, lzw, zip, "
+            "run-length deflate: about twice as fast to write and to read as zip:1), fast (Up filter and libdeflate's "
+            "level 1: faster again, about rle's size; brume batch's PNG default); TIFF none, lzw, zip, "
             "zip:1..9, packbits; EXR none, rle, zip, zip:1..9, zips, piz, and the lossy pxr24, b44, b44a, "
             "dwaa[:L], dwab[:L]; JPEG jpeg:1..100 (quality); PFM none; HDR rle. Lossless forms give the same "
             "pixels. Maps keep their format's default lossless compression")

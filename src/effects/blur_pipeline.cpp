@@ -83,9 +83,16 @@ BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* s
     run.plan = diffuse(f, sm, smax, dp, exec);
     timing = cpu_timing_record(t0, run.plan.iterations);
   }
-  run.rgb = Image(rgb.width(), rgb.height(), 3);
-  for (std::size_t i = 0; i < rgb.pixels(); ++i)
-    for (int k = 0; k < 3; ++k) run.rgb.data[i * 3 + k] = f.data[i * 4 + k];
+  // RGBA -> RGB in f's own buffer (pixel i's three values move down to 3i,
+  // never past a pixel not yet moved), which then becomes the result: no
+  // fresh image-sized buffer, whose first-touch page faults cost more than
+  // the copy (~2-10 ms at 1600x1120 on the hosts measured).
+  const std::size_t np = rgb.pixels();
+  for (std::size_t i = 0; i < np; ++i)
+    for (int k = 0; k < 3; ++k) f.data[i * 3 + k] = f.data[i * 4 + k];
+  f.data.resize(np * 3);
+  f.channels = 3;
+  run.rgb = std::move(f);
   if (sigma) run.record["sigma_px"] = *sigma;
   run.record["diffusion"] = diffusion_record(dp, run.plan);
   run.record["execution"] = backend.record;
