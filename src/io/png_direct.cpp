@@ -15,16 +15,16 @@
 #include <strings.h>
 #include <zlib.h>
 
-#include <atomic>
 #include <algorithm>
+#include <atomic>
 #include <bit>
-#include <cstdlib>
-#include <memory>
 #include <cerrno>
 #include <cmath>
 #include <csetjmp>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <vector>
 

@@ -105,8 +105,11 @@ bool png_subset_writable(int channels, int bits);
 //    default since 2026-12-02 (fourth session). No OpenImageIO setting
 //    writes these bytes: the file is brume's own, a valid PNG that every
 //    decoder reads. On the hazy Middlebury frames of bench_batch, against
-//    rle: ~1.8x faster to deflate (2.7 -> 1.5 ms for Art), files 3-9 %
-//    smaller; read back as fast (Up rows).
+//    rle: ~1.8x faster to deflate (2.7 -> 1.5 ms for Art), files from 9 %
+//    smaller to 2 % larger; read back as fast (Up rows). The filtered rows
+//    and their deflated copy are held whole while writing: up to twice the
+//    file's raw bytes (6 bytes a pixel for 16-bit RGB), beside the float
+//    image's 12.
 struct PngDeflate {
   int level = 6;
   bool rle = false;
