@@ -7,8 +7,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <iterator>
+#include <limits>
 #include <string>
 #include <thread>
 #include <vector>
@@ -18,6 +21,7 @@
 #include "cpu/diffusion_fusion.hpp"
 #include "cpu/diffusion_kernels.hpp"
 #include "cpu/diffusion_rows.hpp"
+#include "cpu/diffusion_setup_math.hpp"
 #include "test_util.hpp"
 
 using namespace brume;
@@ -478,6 +482,83 @@ TEST(DiffusionSimd, EveryVectorWidthGivesTheSameBits) {
     EXPECT_EQ(out[0].data, out[static_cast<std::size_t>(level)].data) << "conductance, width level " << level;
 }
 
+// The fast path's e^x and ln x (diffusion_setup_math.hpp) against the
+// correctly rounded float: libm's double function rounded to float, and where
+// that double rounding could itself be off (the two differ), the x87 long
+// double function (64-bit significand) decides. Reason for exact equality:
+// the double evaluation errs by < 1e-15 relative, so a float result can only
+// differ from the correctly rounded one where the exact value lies within
+// 1e-15 of a midpoint; an exhaustive run over every float of [0, 0.5) for
+// e^x (1 056 964 608 values) and of [1, 1e6) for ln x (167 million) found no
+// such case (2026-12-03), and one where (float)std::log(double) itself was
+// the wrong neighbour (x = 0x1.2f1fd6p+3). Here: every float of [1, 2) for
+// ln x, and a stride through [0, 0.5] (e^x), [2, 1e6) (ln x) and the
+// variance ratio's whole rate range.
+namespace {
+bool correctly_rounded(float got, float x, bool exp) {
+  const float d = exp ? static_cast<float>(std::exp(static_cast<double>(x))) : static_cast<float>(std::log(static_cast<double>(x)));
+  if (got == d) return true;
+  const float l = exp ? static_cast<float>(expl(static_cast<long double>(x))) : static_cast<float>(logl(static_cast<long double>(x)));
+  return got == l;
+}
+float float_at(std::uint32_t u) {
+  float f;
+  std::memcpy(&f, &u, sizeof f);
+  return f;
+}
+std::uint32_t bits_of(float f) {
+  std::uint32_t u;
+  std::memcpy(&u, &f, sizeof u);
+  return u;
+}
+}  // namespace
+
+TEST(DiffusionSetupMath, ExpAndLogAreCorrectlyRounded) {
+  namespace sm = cpu::setup_math;
+  long checked = 0;
+  for (std::uint32_t u = bits_of(1.0f); u < bits_of(2.0f); ++u, ++checked)
+    ASSERT_TRUE(correctly_rounded(sm::logf1(float_at(u)), float_at(u), false)) << "ln " << float_at(u);
+  for (std::uint32_t u = bits_of(2.0f); u < bits_of(1e6f); u += 97, ++checked)
+    ASSERT_TRUE(correctly_rounded(sm::logf1(float_at(u)), float_at(u), false)) << "ln " << float_at(u);
+  ASSERT_TRUE(correctly_rounded(sm::logf1(0x1.2f1fd6p+3f), 0x1.2f1fd6p+3f, false));
+  EXPECT_EQ(sm::logf1(1.0f), 0.0f) << "sigma = sigma0 is rate 0 exactly";
+  for (std::uint32_t u = 0; u <= bits_of(0.5f); u += 61, ++checked)
+    ASSERT_TRUE(correctly_rounded(sm::expf1(float_at(u)), float_at(u), true)) << "e^" << float_at(u);
+  // The variance ratio: the shared formula's float operations around
+  // e^{2 rho}, here from the square of e^rho in double; equal to expf1(2 rho)
+  // on every float rho of [0, 0.25] (exhaustive run, 2026-12-03), a stride here.
+  for (std::uint32_t u = 0; u <= bits_of(0.25f); u += 4099, ++checked) {
+    const float r = float_at(u), x = 2.0f * r;
+    const float want = x < 1.0e-3f ? 1.0f + x * (0.5f + x / 6.0f) : (sm::expf1(x) - 1.0f) / x;
+    ASSERT_EQ(bits_of(sm::variance_ratio1(r)), bits_of(want)) << "rho " << r;
+  }
+  EXPECT_GT(checked, 8000000);
+}
+
+TEST(DiffusionSetupMath, LanesOutsideTheRangesTakeLibm) {
+  // Eight lanes at once, mixing in-range values with ones the polynomial
+  // does not cover: those lanes are std::exp / std::log's, the others are
+  // unchanged by their neighbours.
+  namespace sm = cpu::setup_math;
+  const sm::v8f xe = {0.1f, 85.0f, -0.3f, -90.0f, 0.0f, 1e30f, 0.25f, -1e-8f};
+  const sm::v8f ye = sm::expf8(xe);
+  for (int j = 0; j < 8; ++j) {
+    if (std::fabs(xe[j]) > 80.0f)
+      EXPECT_EQ(bits_of(ye[j]), bits_of(std::exp(xe[j]))) << "lane " << j;
+    else
+      EXPECT_EQ(ye[j], sm::expf1(xe[j])) << "lane " << j;
+  }
+  const sm::v8f xl = {2.0f, 0.0f, 9.5f, -1.0f, 1e-40f, std::numeric_limits<float>::infinity(), 1.0f, 3e38f};
+  const sm::v8f yl = sm::logf8(xl);
+  for (int j = 0; j < 8; ++j) {
+    if (!(xl[j] >= 0x1p-126f && std::isfinite(xl[j])))
+      EXPECT_TRUE(bits_of(yl[j]) == bits_of(std::log(xl[j])) || (std::isnan(yl[j]) && std::isnan(std::log(xl[j]))))
+          << "lane " << j;
+    else
+      EXPECT_EQ(yl[j], sm::logf1(xl[j])) << "lane " << j;
+  }
+}
+
 TEST(DiffusionSimd, OneIterationIsThePerPixelFormula) {
   // One space-variant iteration of the fast path -- the run kernels inside
   // the row, pixel_from_rows where a horizontal tap leaves it -- must equal
@@ -501,7 +582,11 @@ TEST(DiffusionSimd, OneIterationIsThePerPixelFormula) {
           Image want(W, H, 4);
           for (int y = 0; y < H; ++y)
             for (int x = 0; x < W; ++x) {
-              const float h = cpu::sh::brume_invariant_offset(static_cast<float>(s0), rho.at(x, y), s == Scheme::invariant_exact);
+              // brume_invariant_offset with the fast path's e^x (diffusion_setup_math.hpp).
+              const float s0f = static_cast<float>(s0);
+              const float h = s == Scheme::invariant_exact
+                                  ? cpu::sh::brume_offset_for_moment(s0f * s0f * cpu::setup_math::variance_ratio1(rho.at(x, y)))
+                                  : s0f;
               cpu::update_pixel<false>(f.data.data(), want.data.data(), rho.data.data(), 0.0f, W, H, x, y, h,
                                        static_cast<int>(e));
             }
@@ -710,10 +795,11 @@ TEST(DiffusionFusion, SpaceVariantRadiiBoundEveryPixelsOffset) {
     ASSERT_EQ(r.size(), static_cast<std::size_t>(N));
     int tight = 0;
     for (std::size_t i = 0; i < rho.size(); ++i) {
-      const float g = std::exp(rho[i]);
+      const float g = cpu::setup_math::expf1(rho[i]);  // the fast path's growth and variance ratio
+      const float vr = cpu::setup_math::variance_ratio1(rho[i]);
       float sg = 1.0f;
       for (int k = 0; k < N; ++k) {
-        const int n = static_cast<int>(shared::brume_invariant_offset(sg, rho[i], exact));
+        const int n = static_cast<int>(exact ? shared::brume_offset_for_moment(sg * sg * vr) : sg);
         ASSERT_LE(n + 1, r[static_cast<std::size_t>(k)]) << "pixel " << i << " iteration " << k;
         if (n + 2 == r[static_cast<std::size_t>(k)]) ++tight;
         sg *= g;

@@ -105,6 +105,12 @@ DiffusionPlan check_scale_problem(const Image& f, const Image& sigma, double sig
   const float lo = static_cast<float>(p.sigma0), hi = static_cast<float>(sigma_max);
   for (int y = 0; y < sigma.height; ++y) {
     const float* s = sigma.row(y);
+    // A branch-free pass over the row first (it vectorises; s - s is 0 only
+    // for finite s, and NaN fails every comparison); only a row with a bad
+    // pixel is searched for the first one, to name it.
+    int bad = 0;
+    for (int x = 0; x < sigma.width; ++x) bad |= !(s[x] >= lo && s[x] <= hi && s[x] - s[x] == 0.0f);
+    if (!bad) continue;
     for (int x = 0; x < sigma.width; ++x) {
       if (!std::isfinite(s[x]) || s[x] < lo || s[x] > hi) {
         std::ostringstream m;

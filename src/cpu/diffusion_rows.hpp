@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "cpu/diffusion_kernels.hpp"
+#include "cpu/diffusion_setup_math.hpp"
 #include "cpu/diffusion_stencil.hpp"
 #include "shared/prelude_cpp.h"
 
@@ -123,7 +124,9 @@ struct UniformStep {
 };
 inline UniformStep uniform_step(float sigma_k, float rho, bool exact, int edge_mode) {
   UniformStep st;
-  st.h = sh::brume_invariant_offset(sigma_k, rho, exact);
+  // brume_invariant_offset with the fast path's e^x (diffusion_setup_math.hpp),
+  // as the space-variant rows form it.
+  st.h = exact ? sh::brume_offset_for_moment(sigma_k * sigma_k * setup_math::variance_ratio1(rho)) : sigma_k;
   st.n = static_cast<int>(st.h);
   st.fr = st.h - static_cast<float>(st.n);
   st.w = sh::brume_edge_rate(rho, sh::brume_tap_rate(rho, rho, st.fr, edge_mode), edge_mode);  // as update_pixel<false>
