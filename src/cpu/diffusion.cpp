@@ -77,6 +77,20 @@ double check_unit_quarter(const Image& m, const std::string& what, const std::st
   float hi = 0.0f;
   for (int y = 0; y < m.height; ++y) {
     const float* r = m.row(y);
+    // As check_scale_problem: a branch-free pass (in [0, 0.25] excludes NaN
+    // and infinities), then the row's largest value, and a search for the
+    // first bad pixel only in a row that has one.
+    int bad = 0;
+    for (int x = 0; x < m.width; ++x) bad |= !((r[x] >= 0.0f) & (r[x] <= 0.25f));
+    if (!bad) {
+      float m8[8] = {};  // eight running maxima (one loop-carried max per value is slower)
+      int x = 0;
+      for (; x + 8 <= m.width; x += 8)
+        for (int j = 0; j < 8; ++j) m8[j] = std::max(m8[j], r[x + j]);
+      for (; x < m.width; ++x) hi = std::max(hi, r[x]);
+      for (float v : m8) hi = std::max(hi, v);
+      continue;
+    }
     for (int x = 0; x < m.width; ++x) {
       if (!std::isfinite(r[x]) || r[x] < 0.0f || r[x] > 0.25f) {
         std::ostringstream msg;
@@ -105,11 +119,13 @@ DiffusionPlan check_scale_problem(const Image& f, const Image& sigma, double sig
   const float lo = static_cast<float>(p.sigma0), hi = static_cast<float>(sigma_max);
   for (int y = 0; y < sigma.height; ++y) {
     const float* s = sigma.row(y);
-    // A branch-free pass over the row first (it vectorises; s - s is 0 only
-    // for finite s, and NaN fails every comparison); only a row with a bad
-    // pixel is searched for the first one, to name it.
+    // A branch-free pass over the row first (it vectorises: & rather than
+    // &&, which GCC 12 leaves as control flow; s - s is 0 only for finite s,
+    // and NaN fails every comparison); only a row with a bad pixel is
+    // searched for the first one, to name it. 1.8-2.7 -> 0.3-0.5 ms for a
+    // 1600 x 1120 map (Zen 4, 2026-12-03).
     int bad = 0;
-    for (int x = 0; x < sigma.width; ++x) bad |= !(s[x] >= lo && s[x] <= hi && s[x] - s[x] == 0.0f);
+    for (int x = 0; x < sigma.width; ++x) bad |= !((s[x] >= lo) & (s[x] <= hi) & (s[x] - s[x] == 0.0f));
     if (!bad) continue;
     for (int x = 0; x < sigma.width; ++x) {
       if (!std::isfinite(s[x]) || s[x] < lo || s[x] > hi) {
