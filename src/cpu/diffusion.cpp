@@ -83,12 +83,7 @@ double check_unit_quarter(const Image& m, const std::string& what, const std::st
     int bad = 0;
     for (int x = 0; x < m.width; ++x) bad |= !((r[x] >= 0.0f) & (r[x] <= 0.25f));
     if (!bad) {
-      float m8[8] = {};  // eight running maxima (one loop-carried max per value is slower)
-      int x = 0;
-      for (; x + 8 <= m.width; x += 8)
-        for (int j = 0; j < 8; ++j) m8[j] = std::max(m8[j], r[x + j]);
-      for (; x < m.width; ++x) hi = std::max(hi, r[x]);
-      for (float v : m8) hi = std::max(hi, v);
+      hi = std::max(hi, cpu::largest_nonnegative(r, static_cast<std::size_t>(m.width)));
       continue;
     }
     for (int x = 0; x < m.width; ++x) {

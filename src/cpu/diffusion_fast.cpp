@@ -731,25 +731,20 @@ __attribute__((target("avx512f"))) void growth_avx512(const float* rho, float* g
   growth_body(rho, g, vr, n);
 }
 #endif
-RatesFn rates_fn() {
+// The width of both, picked as row_kernels picks the rows'.
+struct Kernels {
+  RatesFn rates;
+  GrowthFn growth;
+};
+Kernels kernels() {
 #if defined(__x86_64__)
   switch (diffusion_simd_level()) {
-    case 2: return rates_avx512;
-    case 1: return rates_avx2;
+    case 2: return {rates_avx512, growth_avx512};
+    case 1: return {rates_avx2, growth_avx2};
     default: break;
   }
 #endif
-  return rates_generic;
-}
-GrowthFn growth_fn() {
-#if defined(__x86_64__)
-  switch (diffusion_simd_level()) {
-    case 2: return growth_avx512;
-    case 1: return growth_avx2;
-    default: break;
-  }
-#endif
-  return growth_generic;
+  return {rates_generic, growth_generic};
 }
 }  // namespace setup
 
@@ -764,7 +759,7 @@ const float* rates_from_scale(const Image& sigma, const DiffusionParams& p, int 
     for (std::ptrdiff_t i = 0; i < n; ++i) rho[i] = sh::brume_standard_rate(sigma.data[i], s0, Nf);
     return rho;
   }
-  const setup::RatesFn rates = setup::rates_fn();
+  const setup::RatesFn rates = setup::kernels().rates;
   const int W = sigma.width, H = sigma.height;
   const std::size_t Ws = static_cast<std::size_t>(W);
 #pragma omp parallel for num_threads(thread_count(threads)) schedule(static)
@@ -881,7 +876,7 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
     const float* rho = rates;
     float* growth = ws.get(Workspace::growth, np);
     float* vratio = ws.get(Workspace::vratio, np);
-    const setup::GrowthFn growth_rows = setup::growth_fn();
+    const setup::GrowthFn growth_rows = setup::kernels().growth;
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y) growth_rows(rho + y * Ws, growth + y * Ws, vratio + y * Ws, Ws);
     std::vector<RowScratch> scratch(static_cast<std::size_t>(nt), RowScratch(W));

@@ -202,16 +202,7 @@ inline Radii uniform_radii(const std::vector<UniformStep>& st) {
 // iteration) for the float running product, e^{rho} and the ratio, which
 // differ from the double values by a few ulps: a bound, never an estimate.
 inline Radii general_radii(const float* rho, std::size_t np, int N, float s0, bool exact) {
-  // The largest rate, sixteen running maxima at a time (one loop-carried
-  // maxss per value took 1.2 ms of a 1600 x 1120 map's set-up); the rates
-  // are finite and >= 0, so the order of the comparisons cannot matter.
-  float m16[16] = {};
-  std::size_t i0 = 0;
-  for (; i0 + 16 <= np; i0 += 16)
-    for (int j = 0; j < 16; ++j) m16[j] = m16[j] < rho[i0 + j] ? rho[i0 + j] : m16[j];
-  float rmax = 0.0f;
-  for (int j = 0; j < 16; ++j) rmax = std::max(rmax, m16[j]);
-  for (; i0 < np; ++i0) rmax = std::max(rmax, rho[i0]);
+  const float rmax = largest_nonnegative(rho, np);  // the rates are finite and >= 0
   const double x = 2.0 * static_cast<double>(rmax);
   const double vr = exact ? (x < 1e-12 ? 1.0 : std::expm1(x) / x) : 1.0;
   const double g = std::exp(static_cast<double>(rmax));

@@ -25,6 +25,21 @@ inline int mirror(int i, int n) {
   return i < n ? i : period - 1 - i;
 }
 
+// The largest of n floats that are not NaN (0 for none below 0), with
+// sixteen running maxima so that the loop vectorises (one loop-carried max
+// per value took 1.2 ms for a 1600 x 1120 map); for such values the order
+// of the comparisons cannot change the result.
+inline float largest_nonnegative(const float* v, std::size_t n) {
+  float m16[16] = {};
+  std::size_t i = 0;
+  for (; i + 16 <= n; i += 16)
+    for (int j = 0; j < 16; ++j) m16[j] = m16[j] < v[i + j] ? v[i + j] : m16[j];
+  float m = 0.0f;
+  for (float x : m16) m = m < x ? x : m;
+  for (; i < n; ++i) m = m < v[i] ? v[i] : m;
+  return m;
+}
+
 // Buffers of the fast path (the ping-pong partner of F, the rate map, the
 // per-pixel constants of the invariant schemes, edge weights, the fused
 // schedule's rings),
