@@ -582,11 +582,7 @@ TEST(DiffusionSimd, OneIterationIsThePerPixelFormula) {
           Image want(W, H, 4);
           for (int y = 0; y < H; ++y)
             for (int x = 0; x < W; ++x) {
-              // brume_invariant_offset with the fast path's e^x (diffusion_setup_math.hpp).
-              const float s0f = static_cast<float>(s0);
-              const float h = s == Scheme::invariant_exact
-                                  ? cpu::sh::brume_offset_for_moment(s0f * s0f * cpu::setup_math::variance_ratio1(rho.at(x, y)))
-                                  : s0f;
+              const float h = cpu::invariant_offset_fast(static_cast<float>(s0), rho.at(x, y), s == Scheme::invariant_exact);
               cpu::update_pixel<false>(f.data.data(), want.data.data(), rho.data.data(), 0.0f, W, H, x, y, h,
                                        static_cast<int>(e));
             }
@@ -795,11 +791,10 @@ TEST(DiffusionFusion, SpaceVariantRadiiBoundEveryPixelsOffset) {
     ASSERT_EQ(r.size(), static_cast<std::size_t>(N));
     int tight = 0;
     for (std::size_t i = 0; i < rho.size(); ++i) {
-      const float g = cpu::setup_math::expf1(rho[i]);  // the fast path's growth and variance ratio
-      const float vr = cpu::setup_math::variance_ratio1(rho[i]);
+      const float g = cpu::setup_math::expf1(rho[i]);  // the fast path's growth
       float sg = 1.0f;
       for (int k = 0; k < N; ++k) {
-        const int n = static_cast<int>(exact ? shared::brume_offset_for_moment(sg * sg * vr) : sg);
+        const int n = static_cast<int>(cpu::invariant_offset_fast(sg, rho[i], exact));
         ASSERT_LE(n + 1, r[static_cast<std::size_t>(k)]) << "pixel " << i << " iteration " << k;
         if (n + 2 == r[static_cast<std::size_t>(k)]) ++tight;
         sg *= g;

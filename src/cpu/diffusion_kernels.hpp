@@ -25,7 +25,7 @@ inline int mirror(int i, int n) {
   return i < n ? i : period - 1 - i;
 }
 
-// The largest of n floats that are not NaN (0 for none below 0), with
+// The largest of n floats that are not NaN, or 0 when none is above 0, with
 // sixteen running maxima so that the loop vectorises (one loop-carried max
 // per value took 1.2 ms for a 1600 x 1120 map); for such values the order
 // of the comparisons cannot change the result.

@@ -122,11 +122,14 @@ struct UniformStep {
   float h, fr, w;
   int n;
 };
+// brume_invariant_offset with the fast path's variance ratio
+// (diffusion_setup_math.hpp), as the space-variant rows form it.
+inline float invariant_offset_fast(float sigma_k, float rho, bool exact) {
+  return exact ? sh::brume_offset_for_moment(sigma_k * sigma_k * setup_math::variance_ratio1(rho)) : sigma_k;
+}
 inline UniformStep uniform_step(float sigma_k, float rho, bool exact, int edge_mode) {
   UniformStep st;
-  // brume_invariant_offset with the fast path's e^x (diffusion_setup_math.hpp),
-  // as the space-variant rows form it.
-  st.h = exact ? sh::brume_offset_for_moment(sigma_k * sigma_k * setup_math::variance_ratio1(rho)) : sigma_k;
+  st.h = invariant_offset_fast(sigma_k, rho, exact);
   st.n = static_cast<int>(st.h);
   st.fr = st.h - static_cast<float>(st.n);
   st.w = sh::brume_edge_rate(rho, sh::brume_tap_rate(rho, rho, st.fr, edge_mode), edge_mode);  // as update_pixel<false>
