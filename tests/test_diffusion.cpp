@@ -566,37 +566,43 @@ TEST(DiffusionSimd, OneIterationIsThePerPixelFormula) {
   // any leaves the image) bit for bit at every pixel: every vector width,
   // edge rate and invariant scheme, offsets from ~2 px to more than the
   // whole row (taps beyond both edges, several reflections), rates varying
-  // per pixel (runs of every length). The multi-iteration tests compare
-  // widths and schedules with each other; this one pins them to the
-  // formula.
+  // per pixel (runs of every length) or per row only (each row one run: 80
+  // px rows then have runs longer than the widest kernel's 16-pixel
+  // blocks, with ~20 px at each end taking the mirror). The multi-iteration
+  // tests compare widths and schedules with each other; this one pins them
+  // to the formula.
   const int widest = cpu::diffusion_simd_level();
-  for (const auto& [W, H] : {std::pair{23, 19}, std::pair{9, 7}})
-    for (double s0 : {2.5, 6.0, 13.0}) {
-      const Image f = texture(W, H);
-      Image rho(W, H, 1);
-      for (int y = 0; y < H; ++y)
-        for (int x = 0; x < W; ++x)
-          rho.at(x, y) = 0.02f + 0.16f * static_cast<float>((x * 37 + y * 53 + x * y * 7) % 29) / 28.0f;
-      for (Scheme s : {Scheme::invariant, Scheme::invariant_exact})
-        for (EdgeRate e : {EdgeRate::mean, EdgeRate::min, EdgeRate::harmonic}) {
-          Image want(W, H, 4);
-          for (int y = 0; y < H; ++y)
-            for (int x = 0; x < W; ++x) {
-              const float h = cpu::invariant_offset_fast(static_cast<float>(s0), rho.at(x, y), s == Scheme::invariant_exact);
-              cpu::update_pixel<false>(f.data.data(), want.data.data(), rho.data.data(), 0.0f, W, H, x, y, h,
-                                       static_cast<int>(e));
+  for (const auto& [W, H] : {std::pair{23, 19}, std::pair{9, 7}, std::pair{80, 37}})
+    for (double s0 : {2.5, 6.0, 13.0, 20.0})
+      for (bool per_row : {false, true}) {
+        const Image f = texture(W, H);
+        Image rho(W, H, 1);
+        for (int y = 0; y < H; ++y)
+          for (int x = 0; x < W; ++x)
+            rho.at(x, y) =
+                0.02f + 0.16f * static_cast<float>((per_row ? y * 53 : x * 37 + y * 53 + x * y * 7) % 29) / 28.0f;
+        for (Scheme s : {Scheme::invariant, Scheme::invariant_exact})
+          for (EdgeRate e : {EdgeRate::mean, EdgeRate::min, EdgeRate::harmonic}) {
+            Image want(W, H, 4);
+            for (int y = 0; y < H; ++y)
+              for (int x = 0; x < W; ++x) {
+                const float h =
+                    cpu::invariant_offset_fast(static_cast<float>(s0), rho.at(x, y), s == Scheme::invariant_exact);
+                cpu::update_pixel<false>(f.data.data(), want.data.data(), rho.data.data(), 0.0f, W, H, x, y, h,
+                                         static_cast<int>(e));
+              }
+            for (int level = 0; level <= widest; ++level) {
+              SimdLimit cap(level);
+              DiffusionParams dp = params(s, Precision::f32, s0);
+              dp.edge_rate = e;
+              Image g = f;
+              diffuse_rates(g, rho, 1, dp);
+              EXPECT_EQ(g.data, want.data) << W << "x" << H << " sigma0 " << s0 << " " << to_string(s) << " "
+                                           << to_string(e) << " width level " << level
+                                           << (per_row ? " per-row map" : "");
             }
-          for (int level = 0; level <= widest; ++level) {
-            SimdLimit cap(level);
-            DiffusionParams dp = params(s, Precision::f32, s0);
-            dp.edge_rate = e;
-            Image g = f;
-            diffuse_rates(g, rho, 1, dp);
-            EXPECT_EQ(g.data, want.data) << W << "x" << H << " sigma0 " << s0 << " " << to_string(s) << " "
-                                         << to_string(e) << " width level " << level;
           }
-        }
-    }
+      }
 }
 
 TEST(DiffusionSimd, TwoAxisMapIsIndependentOfThreadCount) {
