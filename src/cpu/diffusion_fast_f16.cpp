@@ -1,6 +1,26 @@
 // brume — binary16 storage for the constant-scale diffusion path (x86-64 with
-// F16C). Compiled with -mavx2 -mf16c and only entered after a run-time check,
-// so the rest of the library keeps running on any x86-64.
+// F16C). Its functions are compiled for AVX2 and F16C (the target pragma
+// below) and only entered after a run-time check, so the rest of the library
+// keeps running on any x86-64.
+//
+// Why a pragma after the includes rather than -mavx2 -mf16c for the file
+// (as until 2026-12-03): the headers' inline functions (mirror, eq11,
+// StoreF32, std::vector's members, ...) are then compiled for the baseline
+// here too. With the flags, a build that does not inline them (GCC 12 at
+// -O0 and -Og: 151 and 20 such functions; clang 14 at -O0) emitted AVX2
+// copies of them as weak symbols (eq11, StoreF32's load and store, the
+// stencil update), and the linker may keep that copy for every caller in the
+// library: an illegal instruction on an x86-64 without AVX2. Functions
+// defined after the pragma get the target (lambdas and OpenMP bodies
+// included); the header templates instantiated here keep the baseline, and
+// could then only call StoreF16's loads and stores, not inline them -- so
+// uniform_border_pixel, the one such template in a loop here, is always
+// inlined (into the AVX2 row), and the row writes the stencil update's
+// expression itself (below). Same bits and time as before (f16 constant
+// sigma 25, 1600x1120, 2 threads, Zen 4, six rounds alternated: 36.5 and
+// 36.7 ms median). The test
+// build_f16_kernels_leave_shared_code_at_baseline
+// (tests/check_target_isolation.sh) checks the weak symbols.
 //
 // Hansard §5.3 measures RGBA16F about twice as fast as RGBA32F on a GPU; the
 // same holds here because the constant-scale iteration is memory-bound: F is
@@ -21,8 +41,15 @@
 #include "cpu/diffusion_fusion.hpp"
 #include "cpu/diffusion_rows.hpp"
 
-#if defined(__x86_64__) && defined(__F16C__) && defined(__AVX2__)
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #include <immintrin.h>
+
+#if defined(__clang__)
+#pragma clang attribute push(__attribute__((target("avx2,f16c"))), apply_to = function)
+#else
+#pragma GCC push_options
+#pragma GCC target("avx2,f16c")
+#endif
 
 namespace brume::cpu {
 namespace {
@@ -60,8 +87,11 @@ void row_interior_f16(const std::uint16_t* s, const std::uint16_t* u0, const std
     const __m256 r = lerp(ld8(s + i + n4), ld8(s + i + n4 + 4));
     const __m256 u = lerp(ld8(u0 + i), ld8(u1 + i));
     const __m256 d = lerp(ld8(d0 + i), ld8(d1 + i));
-    // GCC's __m256 is a vector type, so the shared update applies as is.
-    const __m256 acc = brume_diffusion_update(fc, l, r, u, d, vw, vw, vw, vw);
+    // brume_diffusion_update's expression, term by term (as diffusion_fast.cpp's
+    // AVX2 and AVX-512 rows write it): the shared template, instantiated
+    // outside the target pragma, would take 256-bit vectors across a
+    // baseline call, which clang refuses (it changes the ABI).
+    const __m256 acc = fc + vw * (l - fc) + vw * (r - fc) + vw * (u - fc) + vw * (d - fc);
     _mm_storeu_si128(reinterpret_cast<__m128i*>(o + i), _mm256_cvtps_ph(acc, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC));
   }
   for (; i < end; i += 4) {  // (end - begin) is a multiple of 4: one pixel at a time
@@ -108,7 +138,13 @@ bool uniform_iterations_f16(float* f, int W, int H, const std::vector<UniformSte
 
 }  // namespace brume::cpu
 
-#else  // no F16C build: the float-storage path rounds to binary16 instead
+#if defined(__clang__)
+#pragma clang attribute pop
+#else
+#pragma GCC pop_options
+#endif
+
+#else  // not x86-64: the float-storage path rounds to binary16 instead
 
 namespace brume::cpu {
 bool uniform_iterations_f16(float*, int, int, const std::vector<UniformStep>&, const std::vector<FusedGroup>&, int,

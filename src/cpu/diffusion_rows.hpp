@@ -105,9 +105,11 @@ inline void update_pixel(const typename S::T* src, typename S::T* dst, const flo
 // pointers let the fused schedule (diffusion_fusion.hpp) feed rows from its
 // rings. Same taps, same eq11, hence the same bits as update_pixel<true, S>
 // (which mirrors every index once any falls outside; mirror is the identity
-// inside).
+// inside). Always inlined: the binary16 row (diffusion_fast_f16.cpp) calls
+// it from AVX2 + F16C code, and only once inlined there can its StoreF16
+// loads and stores, compiled for that target, be inlined too.
 template <class S = StoreF32>
-inline void uniform_border_pixel(const typename S::T* s, const typename S::T* u0, const typename S::T* u1,
+__attribute__((always_inline)) inline void uniform_border_pixel(const typename S::T* s, const typename S::T* u0, const typename S::T* u1,
                                  const typename S::T* d0, const typename S::T* d1, typename S::T* o, int W, int x,
                                  int n, float fr, float w) {
   const std::ptrdiff_t c = static_cast<std::ptrdiff_t>(x) * 4;
