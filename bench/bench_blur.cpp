@@ -19,8 +19,9 @@
 // --ab (issue #16): the interleaved A/B harness. In one process, each round
 // runs every contender once, in its own shuffled order, after a pause:
 // OpenCV at sigma 25, brume at sigma 25 with the fused schedule and with one
-// pass per iteration, brume in f16, the space-variant map both ways, OpenCV
-// and brume at sigma 10. After a warm-up round,
+// pass per iteration, brume in f16, the space-variant map both ways, the
+// demo scene's own haze map (demo_haze_map: many runs per row, as real maps
+// have), OpenCV and brume at sigma 10. After a warm-up round,
 // R rounds; per contender the median and spread of its times, and the median
 // (and spread) of its per-round ratio to OpenCV at the same sigma, so that a
 // host's drift during the run moves both sides of a ratio alike. --size
@@ -83,6 +84,26 @@ Image haze_like_map(int W, int H, double sigma) {
   return map;
 }
 
+// The map `brume haze` makes from the demo scene's range at W x H (eq. 7):
+// sigma = sigma0 + R'^{3/2} (sigma_max - sigma0), R' = R / R_max over its
+// finite ranges, the sky (no range) at R_max as apply_haze treats unknown
+// range. Unlike haze_like_map, whose rows are each one rate (one run per
+// row), the range of the ground, the objects and the sky edge varies along
+// the rows too: many runs, as on real data.
+Image demo_haze_map(int W, int H, double sigma) {
+  const Image range = render_demo_scene(W, H).range;
+  float rmax = 0.0f;
+  for (const float r : range.data)
+    if (std::isfinite(r) && r > rmax) rmax = r;
+  Image map(W, H, 1);
+  for (std::size_t i = 0; i < map.data.size(); ++i) {
+    const float r = range.data[i];
+    const double rp = std::isfinite(r) && r > 0.0f ? static_cast<double>(r) / rmax : 1.0;
+    map.data[i] = static_cast<float>(1.0 + std::pow(rp, 1.5) * (sigma - 1.0));
+  }
+  return map;
+}
+
 // `brume blur`'s whole work on an RGB image: RGB -> RGBA, diffuse, RGBA -> RGB.
 int blur_rgb(const Image& rgb, const Image& map, double sigma, const DiffusionParams& dp, const Exec& ex) {
   const int W = rgb.width, H = rgb.height;
@@ -107,6 +128,7 @@ int run_ab(const std::string& image, const std::string& label, int threads, int 
   const cv::Mat src(H, W, CV_32FC3, const_cast<float*>(rgb.data.data()));
   cv::Mat dst;
   const Image c25(W, H, 1, 25.0f), c10(W, H, 1, 10.0f), v25 = haze_like_map(W, H, 25.0);
+  const Image d25 = demo_haze_map(W, H, 25.0);
   Exec ex;
   ex.threads = threads;
   DiffusionParams f32, f16;
@@ -134,6 +156,8 @@ int run_ab(const std::string& image, const std::string& label, int threads, int 
       {"brume constant sigma 25, f16", 25, [&] { blur_rgb(rgb, c25, 25, f16, ex); }, {}, {}},
       {"brume space-variant sigma <= 25, f32, fused passes", 25, [&] { blur_rgb(rgb, v25, 25, f32, ex); }, {}, {}},
       {"brume space-variant sigma <= 25, f32, one pass per iteration", 25, one_pass_each(v25), {}, {}},
+      {"brume space-variant sigma <= 25, demo scene's haze map, f32, fused passes", 25,
+       [&] { blur_rgb(rgb, d25, 25, f32, ex); }, {}, {}},
       {"OpenCV GaussianBlur sigma 10", 10,
        [&] { cv::GaussianBlur(src, dst, cv::Size(0, 0), 10, 10, cv::BORDER_REFLECT); }, {}, {}},
       {"brume constant sigma 10, f32", 10, [&] { blur_rgb(rgb, c10, 10, f32, ex); }, {}, {}},
