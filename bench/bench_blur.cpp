@@ -56,6 +56,7 @@
 #include "bench_util.hpp"
 #include "brume_opencv.hpp"
 #include "cpu/diffusion_kernels.hpp"  // the fusion limits, for the A/B of the two schedules
+#include "shared/prelude_cpp.h"       // brume_target_scale (eq. 7)
 
 using namespace brume;
 
@@ -74,22 +75,22 @@ Timing measure(const std::function<void()>& fn, int runs) {
 }
 
 // A space-variant map like haze makes: sigma0 at the bottom row growing as
-// R'^{3/2} to sigma_max at the top.
+// R'^{3/2} to sigma_max at the top (Hansard eq. 7, brume_target_scale).
 Image haze_like_map(int W, int H, double sigma) {
   Image map(W, H, 1);
   for (int y = 0; y < H; ++y) {
-    const double r = 1.0 - static_cast<double>(y) / (H - 1);
-    for (int x = 0; x < W; ++x) map.at(x, y) = static_cast<float>(1.0 + std::pow(r, 1.5) * (sigma - 1.0));
+    const float r = static_cast<float>(1.0 - static_cast<double>(y) / (H - 1));
+    for (int x = 0; x < W; ++x) map.at(x, y) = shared::brume_target_scale(r, 1.0f, static_cast<float>(sigma));
   }
   return map;
 }
 
-// The map `brume haze` makes from the demo scene's range at W x H (eq. 7):
-// sigma = sigma0 + R'^{3/2} (sigma_max - sigma0), R' = R / R_max over its
-// finite ranges, the sky (no range) at R_max as apply_haze treats unknown
-// range. Unlike haze_like_map, whose rows are each one rate (one run per
-// row), the range of the ground, the objects and the sky edge varies along
-// the rows too: many runs, as on real data.
+// The map `brume haze` makes from the demo scene's range at W x H (eq. 7,
+// brume_target_scale of R' = R / R_max over its finite ranges; the sky, with
+// no range, at R_max, as apply_haze treats unknown range). Unlike
+// haze_like_map, whose rows are each one rate (one run per row), the range
+// of the ground, the objects and the sky edge varies along the rows too:
+// many runs, as on real data.
 Image demo_haze_map(int W, int H, double sigma) {
   const Image range = render_demo_scene(W, H).range;
   float rmax = 0.0f;
@@ -98,8 +99,8 @@ Image demo_haze_map(int W, int H, double sigma) {
   Image map(W, H, 1);
   for (std::size_t i = 0; i < map.data.size(); ++i) {
     const float r = range.data[i];
-    const double rp = std::isfinite(r) && r > 0.0f ? static_cast<double>(r) / rmax : 1.0;
-    map.data[i] = static_cast<float>(1.0 + std::pow(rp, 1.5) * (sigma - 1.0));
+    const float rn = std::isfinite(r) && r > 0.0f ? r / rmax : 1.0f;
+    map.data[i] = shared::brume_target_scale(rn, 1.0f, static_cast<float>(sigma));
   }
   return map;
 }
@@ -295,14 +296,7 @@ int main(int argc, char** argv) {
       dp.precision = c.precision;
       Exec ex;
       ex.threads = threads;
-      // A space-variant map like haze makes: sigma0 at the bottom row growing
-      // as R'^{3/2} to sigma_max at the top.
-      Image map(W, H, 1, static_cast<float>(c.sigma));
-      if (c.variant)
-        for (int y = 0; y < H; ++y) {
-          const double r = 1.0 - static_cast<double>(y) / (H - 1);
-          for (int x = 0; x < W; ++x) map.at(x, y) = static_cast<float>(1.0 + std::pow(r, 1.5) * (c.sigma - 1.0));
-        }
+      const Image map = c.variant ? haze_like_map(W, H, c.sigma) : Image(W, H, 1, static_cast<float>(c.sigma));
       // The whole of `brume blur`'s work: RGB -> RGBA, diffuse, RGBA -> RGB.
       t = measure(
           [&] {
