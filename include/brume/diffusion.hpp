@@ -119,6 +119,12 @@ DiffusionPlan validate_diffusion(const Image& f, const Image& sigma, double sigm
 DiffusionPlan diffuse(Image& f, const Image& sigma, double sigma_max,
                       const DiffusionParams& p, const Exec& exec = {});
 
+// The same for one target scale everywhere (finite, >= sigma0): the result
+// of diffuse(f, a map holding float(sigma) everywhere, sigma, p, exec), bit
+// for bit, without the map (nor, on the fast path of the invariant schemes,
+// the per-pixel rates): `brume blur --sigma`.
+DiffusionPlan diffuse(Image& f, double sigma, const DiffusionParams& p, const Exec& exec = {});
+
 // Diffuse `f` (any channel count >= 1, in place) for `iterations` steps of
 // the per-pixel rate `rho` (1 channel, same size, every value finite and in
 // [0, 1/4], the 2-D stability limit; 0 = this pixel's own rate is zero, so

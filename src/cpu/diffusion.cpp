@@ -209,6 +209,34 @@ DiffusionPlan diffuse(Image& f, const Image& sigma, double sigma_max,
   return plan;
 }
 
+DiffusionPlan diffuse(Image& f, double sigma, const DiffusionParams& p, const Exec& exec) {
+  check_image(f);
+  // The map this stands for holds float(sigma), checked in float against
+  // sigma0 and sigma_max = sigma, as check_scale_problem checks it.
+  const float s = static_cast<float>(sigma);
+  if (!std::isfinite(sigma) || !(s >= static_cast<float>(p.sigma0))) {
+    std::ostringstream m;
+    m << "target scale " << sigma << " px is not allowed; it must be finite and at least the inner scale sigma0 = "
+      << p.sigma0 << " px (diffusion can only add blur)";
+    throw Error(m.str());
+  }
+  // The fast path of the invariant schemes needs only the one rate. Every
+  // other path (the reference, the standard scheme's per-edge weights) takes
+  // the map, whose result this is by definition.
+  if (exec.path == Path::reference || p.scheme == Scheme::standard)
+    return diffuse(f, Image(f.width, f.height, 1, s), sigma, p, exec);
+  const DiffusionPlan plan = plan_diffusion(p, sigma);
+  const int N = plan.iterations;
+  if (N == 0) {
+    if (p.precision == Precision::f16) cpu::round_to_half(f.data.data(), f.data.size());
+    return plan;
+  }
+  const float rho = cpu::rate_from_scale(s, p, N);
+  cpu::WorkspaceLease ws;
+  by_groups_of_four(f, [&](Image& g) { cpu::diffuse_fast_uniform(g, rho, N, p, exec.threads, *ws); });
+  return plan;
+}
+
 DiffusionPlan diffuse_rates(Image& f, const Image& rho, int iterations, const DiffusionParams& p,
                             const Exec& exec) {
   check_image(f);

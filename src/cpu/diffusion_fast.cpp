@@ -795,6 +795,69 @@ void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int it
   if (src != f.data.data()) std::memcpy(f.data.data(), src, f.data.size() * sizeof(float));
 }
 
+namespace {
+// The result is in the partner after an odd number of passes: copied back
+// by the threads, a band of rows each (one thread's memcpy of 28.7 MB took
+// ~3 ms).
+void copy_back(Image& f, const float* src, int nt) {
+  if (src == f.data.data()) return;
+  const int H = f.height;
+  const std::size_t Ws4 = static_cast<std::size_t>(f.width) * 4;
+  float* out = f.data.data();
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (int y = 0; y < H; ++y) std::memcpy(out + y * Ws4, src + y * Ws4, Ws4 * sizeof(float));
+}
+}  // namespace
+
+void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionParams& p, int threads, Workspace& ws) {
+  const int W = f.width, H = f.height, N = iterations;
+  const std::size_t Ws = static_cast<std::size_t>(W);
+  const float s0 = static_cast<float>(p.sigma0);
+  const bool f16 = p.precision == Precision::f16;
+  const bool exact = p.scheme == Scheme::invariant_exact;
+  const int nt = thread_count(threads);
+  const int edge_mode = static_cast<int>(p.edge_rate);
+  const RowKernels kern = row_kernels();
+  float* src = f.data.data();
+  if (f16) round_to_half(src, f.data.size());
+  // (Level 0 keeps binary16 values in float storage, rounded by
+  // round_to_half: the tests' peer of the F16C storage.)
+  // Every iteration's offset and weight, and which iterations share a pass
+  // (diffusion_fusion.hpp).
+  const std::vector<UniformStep> steps = uniform_steps(N, s0, rho, exact, edge_mode);
+  const Radii radii = uniform_radii(steps);
+  std::vector<FusedGroup> groups;
+  if (f16 && diffusion_simd_level() >= 1) {
+    groups = plan_fusion(radii, W, H, nt, sizeof(std::uint16_t));
+    const std::size_t ring_values = std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt));
+    if (uniform_iterations_f16(src, W, H, steps, groups, nt, ws.get_half(0, f.data.size()),
+                               ws.get_half(1, f.data.size()), ws.get_half(2, ring_values)))
+      return;  // done in binary16 storage (result in f)
+  }
+  groups = plan_fusion(radii, W, H, nt, sizeof(float));
+  // Ping-pong partner, not zero-filled (every value is written before it is
+  // read; a new one is first touched by the threads that use it).
+  float* dst = ws.get(Workspace::partner, f.data.size());
+  // Every offset and weight is the same for the whole image: one row
+  // function (vectorised interior, mirrored border columns), run over the
+  // iterations either one pass per iteration or, where the offsets are
+  // small, several iterations per pass (temporal blocking:
+  // diffusion_fusion.hpp). Same rows from the same inputs either way.
+  float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt)));
+  auto row = [&](const float* s, const float* u0, const float* u1, const float* d0, const float* d1, float* o,
+                 const UniformStep& st) {
+    const int n = st.n;
+    // Columns whose taps x-n-1 .. x+n+1 all lie inside the row.
+    const int xa = std::min(n + 1, W), xb = std::max(W - n - 1, xa);
+    kern.uniform(s, u0, u1, d0, d1, o, static_cast<std::size_t>(xa) * 4, static_cast<std::size_t>(xb) * 4,
+                 static_cast<std::ptrdiff_t>(n) * 4, st.fr, st.w);
+    for (int x = 0; x < xa; ++x) uniform_border_pixel(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
+    for (int x = xb; x < W; ++x) uniform_border_pixel(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
+    if (f16) round_to_half(o, Ws * 4);
+  };
+  copy_back(f, uniform_iterations_fused(src, dst, W, H, steps, groups, nt, ring, row), nt);
+}
+
 void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionParams& p, int threads,
                   Workspace& ws) {
   const int W = f.width, H = f.height, N = iterations;
@@ -824,84 +887,48 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
   }
 
   // A constant rate needs no per-pixel rate, offset or scale arrays.
-  const bool uniform = std::all_of(rates, rates + np, [&](float v) { return v == rates[0]; });
+  if (std::all_of(rates, rates + np, [&](float v) { return v == rates[0]; })) {
+    diffuse_fast_uniform(f, rates[0], N, p, threads, ws);
+    return;
+  }
 
   float* src = f.data.data();
   if (f16) round_to_half(src, f.data.size());
-  // (Level 0 keeps binary16 values in float storage, rounded by
-  // round_to_half: the tests' peer of the F16C storage.)
-  // The constant-scale schedule: every iteration's offset and weight, and
-  // which iterations share a pass (diffusion_fusion.hpp).
-  std::vector<UniformStep> steps;
-  Radii radii;
-  std::vector<FusedGroup> groups;
-  if (uniform) {
-    steps = uniform_steps(N, s0, rates[0], exact, edge_mode);
-    radii = uniform_radii(steps);
-    if (f16 && diffusion_simd_level() >= 1) {
-      groups = plan_fusion(radii, W, H, nt, sizeof(std::uint16_t));
-      const std::size_t ring_values = std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt));
-      if (uniform_iterations_f16(src, W, H, steps, groups, nt, ws.get_half(0, f.data.size()),
-                                 ws.get_half(1, f.data.size()), ws.get_half(2, ring_values)))
-        return;  // done in binary16 storage (result in f)
-    }
-    groups = plan_fusion(radii, W, H, nt, sizeof(float));
-  }
-  // Ping-pong partner, as in diffuse_conductance_fast.
+  // Ping-pong partner, as in diffuse_fast_uniform.
   float* dst = ws.get(Workspace::partner, f.data.size());
+  // Per-pixel rate, growth e^rho of the running product sigma_k (formed
+  // per row: row_offsets), and the exact scheme's variance ratio
+  // (e^{2 rho} - 1)/(2 rho).
+  const float* rho = rates;
+  float* growth = ws.get(Workspace::growth, np);
+  float* vratio = ws.get(Workspace::vratio, np);
+  const setup::GrowthFn growth_rows = setup::kernels().growth;
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (int y = 0; y < H; ++y) growth_rows(rho + y * Ws, growth + y * Ws, vratio + y * Ws, Ws);
+  std::vector<RowScratch> scratch(static_cast<std::size_t>(nt), RowScratch(W));
+  // Temporal blocking as on the constant path (diffusion_fusion.hpp), with
+  // each iteration's radius bounded over the whole map.
+  const Radii radii = general_radii(rates, np, N, s0, exact);
+  const std::vector<FusedGroup> groups = plan_fusion(radii, W, H, nt, sizeof(float));
+  float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt)));
+  src = iterations_fused(src, dst, W, H, radii, groups, nt, ring,
+                         [&](int k, int y, const RowSource<float>& in, float* out) {
+                           RowScratch& t = scratch[static_cast<std::size_t>(omp_get_thread_num())];
+                           const std::size_t r0 = static_cast<std::size_t>(y) * Ws;
+                           kern.general(in, out, rho, s0, k, growth + r0, vratio + r0, exact, edge_mode, W, H, y,
+                                        t);
+                           if (f16) round_to_half(out, Ws * 4);
+                         });
+  copy_back(f, src, nt);
+}
 
-  if (uniform) {
-    // Every offset and weight is the same for the whole image: one row
-    // function (vectorised interior, mirrored border columns), run over the
-    // iterations either one pass per iteration or, where the offsets are
-    // small, several iterations per pass (temporal blocking:
-    // diffusion_fusion.hpp). Same rows from the same inputs either way.
-    float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt)));
-    auto row = [&](const float* s, const float* u0, const float* u1, const float* d0, const float* d1, float* o,
-                   const UniformStep& st) {
-      const int n = st.n;
-      // Columns whose taps x-n-1 .. x+n+1 all lie inside the row.
-      const int xa = std::min(n + 1, W), xb = std::max(W - n - 1, xa);
-      kern.uniform(s, u0, u1, d0, d1, o, static_cast<std::size_t>(xa) * 4, static_cast<std::size_t>(xb) * 4,
-                   static_cast<std::ptrdiff_t>(n) * 4, st.fr, st.w);
-      for (int x = 0; x < xa; ++x) uniform_border_pixel(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
-      for (int x = xb; x < W; ++x) uniform_border_pixel(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
-      if (f16) round_to_half(o, Ws * 4);
-    };
-    src = uniform_iterations_fused(src, dst, W, H, steps, groups, nt, ring, row);
-  } else {
-    // Per-pixel rate, growth e^rho of the running product sigma_k (formed
-    // per row: row_offsets), and the exact scheme's variance ratio
-    // (e^{2 rho} - 1)/(2 rho).
-    const float* rho = rates;
-    float* growth = ws.get(Workspace::growth, np);
-    float* vratio = ws.get(Workspace::vratio, np);
-    const setup::GrowthFn growth_rows = setup::kernels().growth;
-#pragma omp parallel for num_threads(nt) schedule(static)
-    for (int y = 0; y < H; ++y) growth_rows(rho + y * Ws, growth + y * Ws, vratio + y * Ws, Ws);
-    std::vector<RowScratch> scratch(static_cast<std::size_t>(nt), RowScratch(W));
-    // Temporal blocking as on the constant path (diffusion_fusion.hpp), with
-    // each iteration's radius bounded over the whole map.
-    radii = general_radii(rates, np, N, s0, exact);
-    groups = plan_fusion(radii, W, H, nt, sizeof(float));
-    float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt)));
-    src = iterations_fused(src, dst, W, H, radii, groups, nt, ring,
-                           [&](int k, int y, const RowSource<float>& in, float* out) {
-                             RowScratch& t = scratch[static_cast<std::size_t>(omp_get_thread_num())];
-                             const std::size_t r0 = static_cast<std::size_t>(y) * Ws;
-                             kern.general(in, out, rho, s0, k, growth + r0, vratio + r0, exact, edge_mode, W, H, y,
-                                          t);
-                             if (f16) round_to_half(out, Ws * 4);
-                           });
-  }
-  if (src != f.data.data()) {
-    // The result is in the partner (an odd number of passes): copied back
-    // by the threads, a band of rows each (one thread's memcpy of 28.7 MB
-    // took ~3 ms).
-    float* out = f.data.data();
-#pragma omp parallel for num_threads(nt) schedule(static)
-    for (int y = 0; y < H; ++y) std::memcpy(out + y * Ws * 4, src + y * Ws * 4, Ws * 4 * sizeof(float));
-  }
+float rate_from_scale(float sigma, const DiffusionParams& p, int iterations) {
+  const float s0 = static_cast<float>(p.sigma0), Nf = static_cast<float>(iterations);
+  if (p.scheme == Scheme::standard) return sh::brume_standard_rate(sigma, s0, Nf);
+  // rates_from_scale's kernel on one value (padded lanes), so the same bits.
+  float rho = 0.0f;
+  setup::kernels().rates(&sigma, &rho, 1, s0, Nf);
+  return rho;
 }
 
 }  // namespace brume::cpu

@@ -113,6 +113,12 @@ std::size_t kept_workspace_bytes();
 void diffuse_reference(Image& f, const std::vector<double>& rho, int iterations, const DiffusionParams& p);
 // rho: one float per pixel of f (W x H).
 void diffuse_fast(Image& f, const float* rho, int iterations, const DiffusionParams& p, int threads, Workspace& ws);
+// The same for one rate everywhere (a constant target scale), invariant
+// schemes (the standard one takes the per-pixel path): what diffuse_fast
+// does for a map of that rate, bit for bit, without the map.
+void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionParams& p, int threads, Workspace& ws);
+// The float rate of one target scale, as rates_from_scale forms it.
+float rate_from_scale(float sigma, const DiffusionParams& p, int iterations);
 
 // The float rate map of a target-scale map, per pixel: brume_standard_rate
 // or brume_invariant_rate with N as a float (the sigma front end of the fast

@@ -48,7 +48,6 @@ BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* s
   if (sigma && !std::isfinite(*sigma)) throw Error("--sigma must be a finite number of pixels");
   if (rgb.channels() != 3)
     throw Error("blur: the image has " + std::to_string(rgb.channels()) + " channels; give linear RGB (3 channels)");
-  Image smap;
   double smax = sigma.value_or(dp.sigma0);
   if (scale_map) {
     if (scale_map->width != rgb.width() || scale_map->height != rgb.height() || scale_map->channels != 1)
@@ -56,10 +55,7 @@ BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* s
                   " but the image is " + rgb.size_string() + "; give one channel of the image's size");
     for (float v : scale_map->data)
       if (std::isfinite(v)) smax = std::max(smax, static_cast<double>(v));
-  } else {
-    smap = Image(rgb.width(), rgb.height(), 1, static_cast<float>(*sigma));
   }
-  const Image& sm = scale_map ? *scale_map : smap;
   // The engine's working buffer (premultiplied RGBA with alpha 1), filled
   // straight from the caller's pixels: the view is read in place.
   Image f(rgb.width(), rgb.height(), 4);
@@ -76,11 +72,15 @@ BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* s
   nlohmann::json timing;
   const auto t0 = std::chrono::steady_clock::now();
   if (backend.gpu) {
+    // The GPU pass samples a scale texture, so a constant scale is one.
     GpuTiming t;
-    run.plan = diffuse_gpu(*backend.gpu, f, sm, smax, dp, exec.gpu_filter, &t);
+    const Image smap = scale_map ? Image() : Image(rgb.width(), rgb.height(), 1, static_cast<float>(*sigma));
+    run.plan = diffuse_gpu(*backend.gpu, f, scale_map ? *scale_map : smap, smax, dp, exec.gpu_filter, &t);
     timing = gpu_timing_record(t);
   } else {
-    run.plan = diffuse(f, sm, smax, dp, exec);
+    // A constant scale needs no map on the CPU (the same bits without its
+    // 4 bytes a pixel, nor the rates' 4 more, first touched in every run).
+    run.plan = scale_map ? diffuse(f, *scale_map, smax, dp, exec) : diffuse(f, *sigma, dp, exec);
     timing = cpu_timing_record(t0, run.plan.iterations);
   }
   // RGBA -> RGB in f's own buffer (pixel i's three values move down to 3i,
