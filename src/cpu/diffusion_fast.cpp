@@ -807,17 +807,30 @@ void copy_back(Image& f, const float* src, int nt) {
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int y = 0; y < H; ++y) std::memcpy(out + y * Ws4, src + y * Ws4, Ws4 * sizeof(float));
 }
+// What both entry points derive from the parameters once per call.
+struct FastCall {
+  float s0;
+  bool f16, exact;
+  int nt, edge_mode;
+  RowKernels kern;
+  FastCall(const DiffusionParams& p, int threads)
+      : s0(static_cast<float>(p.sigma0)),
+        f16(p.precision == Precision::f16),
+        exact(p.scheme == Scheme::invariant_exact),
+        nt(thread_count(threads)),
+        edge_mode(static_cast<int>(p.edge_rate)),
+        kern(row_kernels()) {}
+};
 }  // namespace
 
 void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionParams& p, int threads, Workspace& ws) {
   const int W = f.width, H = f.height, N = iterations;
   const std::size_t Ws = static_cast<std::size_t>(W);
-  const float s0 = static_cast<float>(p.sigma0);
-  const bool f16 = p.precision == Precision::f16;
-  const bool exact = p.scheme == Scheme::invariant_exact;
-  const int nt = thread_count(threads);
-  const int edge_mode = static_cast<int>(p.edge_rate);
-  const RowKernels kern = row_kernels();
+  const FastCall c(p, threads);
+  const float s0 = c.s0;
+  const bool f16 = c.f16, exact = c.exact;
+  const int nt = c.nt, edge_mode = c.edge_mode;
+  const RowKernels kern = c.kern;
   float* src = f.data.data();
   if (f16) round_to_half(src, f.data.size());
   // (Level 0 keeps binary16 values in float storage, rounded by
@@ -863,12 +876,11 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
   const int W = f.width, H = f.height, N = iterations;
   const std::size_t np = f.pixels();
   const std::size_t Ws = static_cast<std::size_t>(W);
-  const float s0 = static_cast<float>(p.sigma0);
-  const bool f16 = p.precision == Precision::f16;
-  const bool exact = p.scheme == Scheme::invariant_exact;
-  const int nt = thread_count(threads);
-  const int edge_mode = static_cast<int>(p.edge_rate);
-  const RowKernels kern = row_kernels();
+  const FastCall c(p, threads);
+  const float s0 = c.s0;
+  const bool f16 = c.f16, exact = c.exact;
+  const int nt = c.nt, edge_mode = c.edge_mode;
+  const RowKernels kern = c.kern;
 
   if (p.scheme == Scheme::standard) {
     // Edge weights of eq. 12, fixed for all iterations: the conductance path.
