@@ -155,9 +155,10 @@ DiffusionPlan diffuse_rates(Image& f, const Image& rho, int iterations, const Di
 void diffuse_conductance(Image& f, const Image& wx, const Image& wy, int iterations,
                          Precision precision = Precision::f32, const Exec& exec = {});
 
-// The CPU fast path reuses its buffers (the ping-pong partner of F, the rate
-// map, the invariant schemes' per-pixel sigma_k and constants: at most about
-// twice the 4-channel float image) from one call to the next, so that a run
+// The CPU fast path reuses its buffers (the rate map, the invariant
+// schemes' per-pixel constants, the rows its passes keep; a partner image
+// for F only where offsets are large against the image: at most about twice
+// the 4-channel float image) from one call to the next, so that a run
 // of calls on same-sized images pays no allocation or first-touch page
 // faults; at most one such set is kept by the process between calls. This
 // frees it (e.g. after the last image of a batch). Thread-safe.

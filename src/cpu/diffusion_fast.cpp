@@ -807,6 +807,15 @@ void copy_back(Image& f, const float* src, int nt) {
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int y = 0; y < H; ++y) std::memcpy(out + y * Ws4, src + y * Ws4, Ws4 * sizeof(float));
 }
+// The partner image of the fused schedule, where some group of it runs
+// ping-pong (plan_scratch), else null: most schedules run in place
+// (diffusion_fusion.hpp) and need no second image-sized buffer, nor its
+// first-touch page faults. Not zero-filled (every value is written before
+// it is read; a new one is first touched by the threads that use it).
+float* partner_if_needed(Workspace& ws, const Radii& radii, const std::vector<FusedGroup>& groups, const Image& f,
+                         int nt) {
+  return fusion_needs_partner(radii, groups, f.height, nt) ? ws.get(Workspace::partner, f.data.size()) : nullptr;
+}
 // What both entry points derive from the parameters once per call.
 struct FastCall {
   float s0;
@@ -842,21 +851,22 @@ void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionPa
   std::vector<FusedGroup> groups;
   if (f16 && diffusion_simd_level() >= 1) {
     groups = plan_fusion(radii, W, H, nt, sizeof(std::uint16_t));
-    const std::size_t ring_values = std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt));
-    if (uniform_iterations_f16(src, W, H, steps, groups, nt, ws.get_half(0, f.data.size()),
-                               ws.get_half(1, f.data.size()), ws.get_half(2, ring_values)))
+    const std::size_t scratch_values = std::max<std::size_t>(1, fusion_scratch_values(radii, groups, W, H, nt));
+    std::uint16_t* partner =
+        fusion_needs_partner(radii, groups, H, nt) ? ws.get_half(1, f.data.size()) : nullptr;
+    if (uniform_iterations_f16(src, W, H, steps, groups, nt, ws.get_half(0, f.data.size()), partner,
+                               ws.get_half(2, scratch_values)))
       return;  // done in binary16 storage (result in f)
   }
   groups = plan_fusion(radii, W, H, nt, sizeof(float));
-  // Ping-pong partner, not zero-filled (every value is written before it is
-  // read; a new one is first touched by the threads that use it).
-  float* dst = ws.get(Workspace::partner, f.data.size());
   // Every offset and weight is the same for the whole image: one row
   // function (vectorised interior, mirrored border columns), run over the
   // iterations either one pass per iteration or, where the offsets are
   // small, several iterations per pass (temporal blocking:
-  // diffusion_fusion.hpp). Same rows from the same inputs either way.
-  float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt)));
+  // diffusion_fusion.hpp), in f's own buffer. Same rows from the same inputs
+  // either way.
+  float* scratch =
+      ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_scratch_values(radii, groups, W, H, nt)));
   auto row = [&](const float* s, const float* u0, const float* u1, const float* d0, const float* d1, float* o,
                  const UniformStep& st) {
     const int n = st.n;
@@ -868,7 +878,9 @@ void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionPa
     for (int x = xb; x < W; ++x) uniform_border_pixel(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
     if (f16) round_to_half(o, Ws * 4);
   };
-  copy_back(f, uniform_iterations_fused(src, dst, W, H, steps, groups, nt, ring, row), nt);
+  copy_back(f, uniform_iterations_fused(src, partner_if_needed(ws, radii, groups, f, nt), W, H, steps, groups, nt,
+                                       scratch, row),
+            nt);
 }
 
 void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionParams& p, int threads,
@@ -906,8 +918,6 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
 
   float* src = f.data.data();
   if (f16) round_to_half(src, f.data.size());
-  // Ping-pong partner, as in diffuse_fast_uniform.
-  float* dst = ws.get(Workspace::partner, f.data.size());
   // Per-pixel rate, growth e^rho of the running product sigma_k (formed
   // per row: row_offsets), and the exact scheme's variance ratio
   // (e^{2 rho} - 1)/(2 rho).
@@ -922,8 +932,9 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
   // each iteration's radius bounded over the whole map.
   const Radii radii = general_radii(rates, np, N, s0, exact);
   const std::vector<FusedGroup> groups = plan_fusion(radii, W, H, nt, sizeof(float));
-  float* ring = ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_ring_values(radii, groups, W, nt)));
-  src = iterations_fused(src, dst, W, H, radii, groups, nt, ring,
+  float* fusion =
+      ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_scratch_values(radii, groups, W, H, nt)));
+  src = iterations_fused(src, partner_if_needed(ws, radii, groups, f, nt), W, H, radii, groups, nt, fusion,
                          [&](int k, int y, const RowSource<float>& in, float* out) {
                            RowScratch& t = scratch[static_cast<std::size_t>(omp_get_thread_num())];
                            const std::size_t r0 = static_cast<std::size_t>(y) * Ws;

@@ -40,11 +40,12 @@ inline float largest_nonnegative(const float* v, std::size_t n) {
   return m;
 }
 
-// Buffers of the fast path (the ping-pong partner of F, the rate map, the
-// per-pixel constants of the invariant schemes, edge weights, the fused
-// schedule's rings),
+// Buffers of the fast path (the rate map, the per-pixel constants of the
+// invariant schemes, edge weights, the fused schedule's rings, copies and
+// delay rows; the ping-pong partner of F for the standard scheme and for
+// invariant schedules that cannot run in place, diffusion_fusion.hpp),
 // uninitialised and reused across iterations and calls. A fresh 28 MB
-// partner per call costs ~7000 first-touch page faults, which on the hosts
+// buffer per call costs ~7000 first-touch page faults, which on the hosts
 // measured (VMs) cost as much as several iterations; a reused one costs none.
 // Every value is written before it is read, so reuse cannot change a result.
 // Frees a Workspace buffer allocated at `align` bytes.
@@ -54,11 +55,11 @@ struct WorkspaceFree {
 };
 class Workspace {
  public:
-  enum Slot { partner, rates, growth, vratio, edge_x, edge_y, ring, kSlots };
+  enum Slot { partner, rates, growth, vratio, edge_x, edge_y, ring, kSlots };  // ring: the fusion scratch
   // At least n floats, uninitialised; valid until the next get of that slot.
   float* get(Slot s, std::size_t n);
-  // The binary16 buffers of the f16 constant-scale path: 0 and 1 the
-  // ping-pong pair, 2 the fused schedule's rings.
+  // The binary16 buffers of the f16 constant-scale path: 0 F, 1 its
+  // partner (where the schedule needs one), 2 the fused schedule's scratch.
   std::uint16_t* get_half(int which, std::size_t n);
   std::size_t bytes() const;
 

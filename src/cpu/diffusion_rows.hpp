@@ -43,14 +43,18 @@ inline v4 eq11(v4 fc, v4 l0, v4 l1, v4 r0, v4 r1, v4 u0, v4 u1, v4 d0, v4 d1, fl
 }
 
 // Where an iteration reads its rows: the whole image (cap 0: row q at
-// base + q rs), or a fused group's ring of cap rows (row q in slot q % cap;
-// diffusion_fusion.hpp). rs: values per row.
+// base + q rs), a fused group's ring of cap rows (row q in slot q % cap), or
+// a table of row pointers (a band of an image updated in place, whose
+// neighbouring bands' rows are read from copies; diffusion_fusion.hpp).
+// rs: values per row.
 template <class T>
 struct RowSource {
   const T* base;
   std::size_t rs;
   int cap;
+  const T* const* table = nullptr;
   const T* operator()(int q) const {
+    if (table) return table[q];
     return base + static_cast<std::size_t>(cap ? q % cap : q) * rs;
   }
 };
@@ -143,9 +147,10 @@ inline UniformStep uniform_step(float sigma_k, float rho, bool exact, int edge_m
 // the same arithmetic and rounding as the float path + round_to_half, and the
 // same schedule (steps and fused groups: diffusion_fusion.hpp, computed by
 // the caller so that this -mavx2 file compiles none of the planning).
-// Returns false (and does nothing) where F16C is missing. a and b: two
-// buffers of W x H x 4 binary16 values, ring: fusion_ring_values(...)
-// values (the workspace's), contents ignored.
+// Returns false (and does nothing) where F16C is missing. a: a buffer of
+// W x H x 4 binary16 values, b: another where fusion_needs_partner(...)
+// (else null), ring: fusion_scratch_values(...) values (the workspace's),
+// contents ignored.
 // A run of consecutive iterations [k0, k0 + m) done in one pass.
 struct FusedGroup {
   int k0, m;
