@@ -934,6 +934,57 @@ TEST(DiffusionFusion, InPlaceScheduleIsThePerPixelFormulaBetweenTwoImages) {
   EXPECT_GT(ping_pong, 0) << "some groups run ping-pong";
 }
 
+TEST(DiffusionFusion, ConductancePassesAreThePerPixelStencilBetweenTwoImages) {
+  // The conductance path (the standard scheme; depth of field's standard
+  // and bertalmio schemes) runs through the same fused, in-place schedule
+  // with a radius of one row per iteration. Its result must be N passes of
+  // the per-pixel stencil -- brume_diffusion_update with the clamped
+  // neighbours and the edge weights, written here -- from one image into
+  // another, binary16-rounded after each pass for f16: for the default
+  // limits, small groups and no fusion, at 1, 2, 3 and 7 threads, on an
+  // image tall enough to fuse (in place) and one of 7 rows (ping-pong at
+  // several threads).
+  const int N = 45;
+  for (const auto& [W, H] : {std::pair{37, 260}, std::pair{23, 7}}) {
+    Image wx(W, H, 1), wy(W, H, 1);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        wx.at(x, y) = x < W - 1 ? 0.25f * static_cast<float>((x * 13 + y * 7) % 11) / 10.0f : 0.0f;
+        wy.at(x, y) = y < H - 1 ? 0.25f * static_cast<float>((x * 5 + y * 17) % 13) / 12.0f : 0.0f;
+      }
+    const Image f = texture(W, H);
+    for (Precision p : {Precision::f32, Precision::f16}) {
+      const bool f16 = p == Precision::f16;
+      Image want = f, next = f;
+      if (f16) cpu::round_to_half(want.data.data(), want.data.size());
+      for (int k = 0; k < N; ++k) {
+        for (int y = 0; y < H; ++y)
+          for (int x = 0; x < W; ++x) {
+            const float wl = x > 0 ? wx.at(x - 1, y) : 0.0f, wr = wx.at(x, y);
+            const float wu = y > 0 ? wy.at(x, y - 1) : 0.0f, wd = wy.at(x, y);
+            for (int c = 0; c < 4; ++c)
+              next.at(x, y, c) = cpu::brume_diffusion_update(
+                  want.at(x, y, c), want.at(std::max(x - 1, 0), y, c), want.at(std::min(x + 1, W - 1), y, c),
+                  want.at(x, std::max(y - 1, 0), c), want.at(x, std::min(y + 1, H - 1), c), wl, wr, wu, wd);
+          }
+        if (f16) cpu::round_to_half(next.data.data(), next.data.size());
+        std::swap(want, next);
+      }
+      const cpu::FusionLimits small{6, 1LL << 30, 0}, none{0, 0, 0};
+      for (const cpu::FusionLimits* lim : {static_cast<const cpu::FusionLimits*>(nullptr), &small, &none})
+        for (int threads : {1, 2, 3, 7}) {
+          FusionScope scope(lim);
+          Exec ex;
+          ex.threads = threads;
+          Image got = f;
+          diffuse_conductance(got, wx, wy, N, p, ex);
+          EXPECT_EQ(got.data, want.data) << W << "x" << H << " " << to_string(p) << " halo limit "
+                                         << (lim ? lim->halo_rows : -1) << " threads " << threads;
+        }
+    }
+  }
+}
+
 TEST(DiffusionWorkspace, ExtraHeapIsTheStatedMultipleOfTheImage) {
   // README "Speed" states the memory a diffusion call keeps: the rate map
   // (1/4 of the RGBA image), for a space-variant map e^{rho} and the

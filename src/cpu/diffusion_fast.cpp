@@ -5,7 +5,8 @@
 // or brume_invariant_rate) on four interleaved channels; the front end feeds
 // other channel counts as groups of four. The standard scheme forms its edge
 // weights once and runs the conductance stencil, which is also the public
-// per-edge (depth-of-field) path.
+// per-edge (depth-of-field) path; its iterations share passes too
+// (diffuse_conductance_fast).
 //  - rows in parallel (OpenMP, static schedule); every output pixel depends
 //    only on the previous iteration, so results do not depend on the thread
 //    count;
@@ -767,34 +768,6 @@ const float* rates_from_scale(const Image& sigma, const DiffusionParams& p, int 
   return rho;
 }
 
-void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16, int threads,
-                              Workspace& ws) {
-  const int W = f.width, H = f.height;
-  const std::size_t Ws = static_cast<std::size_t>(W);
-  const int nt = thread_count(threads);
-  // Ping-pong partner, not zero-filled (every value is written before it is
-  // read; a new one is first touched by the threads that use it).
-  float* src = f.data.data();
-  float* dst = ws.get(Workspace::partner, f.data.size());
-  if (f16) round_to_half(src, f.data.size());
-  const std::vector<float> zero(Ws, 0.0f);
-  const RowKernels kern = row_kernels();
-  for (int k = 0; k < iterations; ++k) {
-#pragma omp parallel for num_threads(nt) schedule(static)
-    for (int y = 0; y < H; ++y) {
-      const float* s = src + y * Ws * 4;
-      const float* up = src + (y > 0 ? y - 1 : 0) * Ws * 4;
-      const float* dn = src + (y < H - 1 ? y + 1 : y) * Ws * 4;
-      const float* wdu = y > 0 ? wy + (y - 1) * Ws : zero.data();
-      float* o = dst + y * Ws * 4;
-      kern.standard(s, up, dn, wx + y * Ws, wdu, wy + y * Ws, o, W);
-      if (f16) round_to_half(o, Ws * 4);
-    }
-    std::swap(src, dst);
-  }
-  if (src != f.data.data()) std::memcpy(f.data.data(), src, f.data.size() * sizeof(float));
-}
-
 namespace {
 // The result is in the partner after an odd number of passes: copied back
 // by the threads, a band of rows each (one thread's memcpy of 28.7 MB took
@@ -831,6 +804,36 @@ struct FastCall {
         kern(row_kernels()) {}
 };
 }  // namespace
+
+void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16, int threads,
+                              Workspace& ws) {
+  const int W = f.width, H = f.height;
+  const std::size_t Ws = static_cast<std::size_t>(W);
+  const int nt = thread_count(threads);
+  float* src = f.data.data();
+  if (f16) round_to_half(src, f.data.size());
+  const std::vector<float> zero(Ws, 0.0f);
+  const RowKernels kern = row_kernels();
+  // Every iteration reads rows y - 1 .. y + 1 (radius 1, clamped at the
+  // top and bottom, where the edge weights are 0), so many iterations share
+  // a pass: the fused schedule of the invariant schemes (diffusion_fusion.hpp,
+  // in place), with this stencil as its row. At 1600 x 1120, 2 threads, 21
+  // iterations a pass (the rings' limit), so a standard-scheme blur of
+  // hundreds of iterations reads and writes the image a few dozen times
+  // instead of hundreds. Same rows from the same inputs, hence the same bits.
+  const Radii radii(static_cast<std::size_t>(std::max(0, iterations)), 1);
+  const std::vector<FusedGroup> groups = plan_fusion(radii, W, H, nt, sizeof(float));
+  float* scratch =
+      ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_scratch_values(radii, groups, W, H, nt)));
+  src = iterations_fused(src, partner_if_needed(ws, radii, groups, f, nt), W, H, radii, groups, nt, scratch,
+                         [&](int, int y, const RowSource<float>& in, float* o) {
+                           const float* wdu = y > 0 ? wy + (y - 1) * Ws : zero.data();
+                           kern.standard(in(y), in(y > 0 ? y - 1 : 0), in(y < H - 1 ? y + 1 : y), wx + y * Ws, wdu,
+                                         wy + y * Ws, o, W);
+                           if (f16) round_to_half(o, Ws * 4);
+                         });
+  copy_back(f, src, nt);
+}
 
 void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionParams& p, int threads, Workspace& ws) {
   const int W = f.width, H = f.height, N = iterations;

@@ -1,5 +1,6 @@
-// brume — temporal blocking of the diffusion iterations of the invariant
-// schemes, constant-scale and space-variant (internal; issue #16).
+// brume — temporal blocking of the diffusion iterations: the invariant
+// schemes, constant-scale and space-variant, and the conductance stencil
+// (standard scheme, radius one row) (internal; issue #16).
 //
 // Every iteration of the invariant schemes reads the whole image and writes
 // the whole image: at 1600x1120 RGBA float, 17 iterations move ~1 GB. When
