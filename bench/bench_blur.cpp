@@ -50,6 +50,7 @@
 #include <string>
 #include <vector>
 
+#include "brume/blur.hpp"
 #include "brume/demo_scene.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/io.hpp"
@@ -105,18 +106,12 @@ Image demo_haze_map(int W, int H, double sigma) {
   return map;
 }
 
-// `brume blur`'s whole work on an RGB image: RGB -> RGBA, diffuse, RGBA -> RGB.
-int blur_rgb(const Image& rgb, const Image& map, double sigma, const DiffusionParams& dp, const Exec& ex) {
-  const int W = rgb.width, H = rgb.height;
-  Image f(W, H, 4);
-  for (std::size_t i = 0; i < rgb.pixels(); ++i) {
-    std::memcpy(&f.data[i * 4], &rgb.data[i * 3], 3 * sizeof(float));
-    f.data[i * 4 + 3] = 1.0f;
-  }
-  const int iters = diffuse(f, map, sigma, dp, ex).iterations;
-  Image out(W, H, 3);
-  for (std::size_t i = 0; i < rgb.pixels(); ++i) std::memcpy(&out.data[i * 3], &f.data[i * 4], 3 * sizeof(float));
-  return iters;
+// `brume blur`'s whole work on an RGB image, as the library does it
+// (run_blur: the engine's working copy of the pixels -- RGB rows for a
+// constant scale in f32, else RGBA -- the diffusion, the RGB result): a
+// constant sigma (map null) or a scale map.
+int blur_rgb(const Image& rgb, const Image* map, double sigma, const DiffusionParams& dp, const Exec& ex) {
+  return run_blur(rgb, map ? std::nullopt : std::optional<double>(sigma), map, dp, ex).plan.iterations;
 }
 
 // The interleaved A/B harness (--ab; see the header comment).
@@ -128,7 +123,7 @@ int run_ab(const std::string& image, const std::string& label, int threads, int 
   cv::setNumThreads(threads);
   const cv::Mat src(H, W, CV_32FC3, const_cast<float*>(rgb.data.data()));
   cv::Mat dst;
-  const Image c25(W, H, 1, 25.0f), c10(W, H, 1, 10.0f), v25 = haze_like_map(W, H, 25.0);
+  const Image v25 = haze_like_map(W, H, 25.0);
   const Image d25 = demo_haze_map(W, H, 25.0);
   Exec ex;
   ex.threads = threads;
@@ -142,26 +137,26 @@ int run_ab(const std::string& image, const std::string& label, int threads, int 
     std::vector<double> ms, ratio;
   };
   // The same sigma-25 blur with blocking off for the call.
-  auto one_pass_each = [&](const Image& map) {
-    return [&, m = &map] {
+  auto one_pass_each = [&](const Image* map) {
+    return [&, m = map] {
       cpu::set_diffusion_fusion(&unfused);
-      blur_rgb(rgb, *m, 25, f32, ex);
+      blur_rgb(rgb, m, 25, f32, ex);
       cpu::set_diffusion_fusion(&fusion);
     };
   };
   std::vector<Contender> cs = {
       {"OpenCV GaussianBlur sigma 25", 25,
        [&] { cv::GaussianBlur(src, dst, cv::Size(0, 0), 25, 25, cv::BORDER_REFLECT); }, {}, {}},
-      {"brume constant sigma 25, f32, fused passes", 25, [&] { blur_rgb(rgb, c25, 25, f32, ex); }, {}, {}},
-      {"brume constant sigma 25, f32, one pass per iteration", 25, one_pass_each(c25), {}, {}},
-      {"brume constant sigma 25, f16", 25, [&] { blur_rgb(rgb, c25, 25, f16, ex); }, {}, {}},
-      {"brume space-variant sigma <= 25, f32, fused passes", 25, [&] { blur_rgb(rgb, v25, 25, f32, ex); }, {}, {}},
-      {"brume space-variant sigma <= 25, f32, one pass per iteration", 25, one_pass_each(v25), {}, {}},
+      {"brume constant sigma 25, f32, fused passes", 25, [&] { blur_rgb(rgb, nullptr, 25, f32, ex); }, {}, {}},
+      {"brume constant sigma 25, f32, one pass per iteration", 25, one_pass_each(nullptr), {}, {}},
+      {"brume constant sigma 25, f16", 25, [&] { blur_rgb(rgb, nullptr, 25, f16, ex); }, {}, {}},
+      {"brume space-variant sigma <= 25, f32, fused passes", 25, [&] { blur_rgb(rgb, &v25, 25, f32, ex); }, {}, {}},
+      {"brume space-variant sigma <= 25, f32, one pass per iteration", 25, one_pass_each(&v25), {}, {}},
       {"brume space-variant sigma <= 25, demo scene's haze map, f32, fused passes", 25,
-       [&] { blur_rgb(rgb, d25, 25, f32, ex); }, {}, {}},
+       [&] { blur_rgb(rgb, &d25, 25, f32, ex); }, {}, {}},
       {"OpenCV GaussianBlur sigma 10", 10,
        [&] { cv::GaussianBlur(src, dst, cv::Size(0, 0), 10, 10, cv::BORDER_REFLECT); }, {}, {}},
-      {"brume constant sigma 10, f32", 10, [&] { blur_rgb(rgb, c10, 10, f32, ex); }, {}, {}},
+      {"brume constant sigma 10, f32", 10, [&] { blur_rgb(rgb, nullptr, 10, f32, ex); }, {}, {}},
   };
   for (Contender& c : cs) c.run();  // warm-up round: workspaces, page faults, OpenCV's pools
   std::mt19937 rng(20261202);
@@ -296,21 +291,9 @@ int main(int argc, char** argv) {
       dp.precision = c.precision;
       Exec ex;
       ex.threads = threads;
-      const Image map = c.variant ? haze_like_map(W, H, c.sigma) : Image(W, H, 1, static_cast<float>(c.sigma));
-      // The whole of `brume blur`'s work: RGB -> RGBA, diffuse, RGBA -> RGB.
-      t = measure(
-          [&] {
-            Image f(W, H, 4);
-            for (std::size_t i = 0; i < rgb.pixels(); ++i) {
-              std::memcpy(&f.data[i * 4], &rgb.data[i * 3], 3 * sizeof(float));
-              f.data[i * 4 + 3] = 1.0f;
-            }
-            iters = diffuse(f, map, c.sigma, dp, ex).iterations;
-            Image out(W, H, 3);
-            for (std::size_t i = 0; i < rgb.pixels(); ++i)
-              std::memcpy(&out.data[i * 3], &f.data[i * 4], 3 * sizeof(float));
-          },
-          c.runs);
+      const Image map = c.variant ? haze_like_map(W, H, c.sigma) : Image();
+      // The whole of `brume blur`'s work (blur_rgb).
+      t = measure([&] { iters = blur_rgb(rgb, c.variant ? &map : nullptr, c.sigma, dp, ex); }, c.runs);
     }
     std::printf("%.9f %.9f %.9f %d %ld %d %d\n", t.median, t.lo, t.hi, iters, t.peak_kb, W, H);
     return 0;

@@ -438,9 +438,10 @@ TEST(DiffusionFastPath, ConstantScaleWithoutAMapGivesTheMapsBits) {
   // sigma, ...) without the map (`brume blur --sigma`): equal bit for bit
   // for every scheme (the standard one and the reference path take the map
   // themselves), both storages, channel counts 1, 3, 4 and 6 (groups of
-  // four), 1 and 3 threads, every vector width, sigma = sigma0 (no
-  // iteration) and scales whose offsets outgrow the image; and the same
-  // plan. Bad scales are refused with the map path's rule.
+  // four; three in f32 are rows of three values, not a group), 1 and 3
+  // threads, every vector width, sigma = sigma0 (no iteration) and scales
+  // whose offsets outgrow the image; and the same plan. Bad scales are
+  // refused with the map path's rule.
   const int widest = cpu::diffusion_simd_level();
   for (const int C : {1, 3, 4, 6}) {
     Image base(37, 29, C);
@@ -465,6 +466,25 @@ TEST(DiffusionFastPath, ConstantScaleWithoutAMapGivesTheMapsBits) {
               EXPECT_EQ(pg.iterations, pw.iterations);
               EXPECT_EQ(pg.sigma_max, pw.sigma_max);
             }
+        }
+  }
+  // Three channels in f32 run as rows of three values a pixel (no fourth
+  // channel): also on an image tall enough for fused, in-place passes, at
+  // 1, 2, 3 and 7 threads.
+  for (const int C : {3, 4}) {
+    Image base(23, 260, C);
+    for (std::size_t i = 0; i < base.data.size(); ++i)
+      base.data[i] = static_cast<float>((i * 7919) % 1009) / 1008.0f;
+    for (Scheme s : {Scheme::invariant, Scheme::invariant_exact})
+      for (double sigma : {6.0, 14.0})
+        for (int threads : {1, 2, 3, 7}) {
+          Exec ex;
+          ex.threads = threads;
+          Image want = base, got = base;
+          diffuse(want, Image(23, 260, 1, static_cast<float>(sigma)), sigma, params(s), ex);
+          diffuse(got, sigma, params(s), ex);
+          EXPECT_EQ(got.data, want.data) << C << " channels, 23x260, " << to_string(s) << ", sigma " << sigma << ", "
+                                         << threads << " threads";
         }
   }
   Image f = texture(9, 7);

@@ -26,7 +26,8 @@ const ParamTable<BlurJob>& blur_job_table();
 
 // In memory (the Python module's brume.blur): `rgb` is any view of linear RGB
 // pixels (a numpy array, an RGBA buffer's RGB) read in place -- the only copy
-// is the engine's own RGBA working buffer; either a constant `sigma` or a
+// is the engine's own working buffer (RGB for a constant scale in f32 on the
+// CPU, else RGBA), which becomes the result; either a constant `sigma` or a
 // per-pixel `scale_map` (1 channel, rgb's size, px), not both. Checks as
 // `brume blur` (sigma >= sigma0). Pixels equal `brume blur`'s bit for bit.
 struct BlurRun {

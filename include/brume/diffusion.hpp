@@ -122,7 +122,8 @@ DiffusionPlan diffuse(Image& f, const Image& sigma, double sigma_max,
 // The same for one target scale everywhere (finite, >= sigma0): the result
 // of diffuse(f, a map holding float(sigma) everywhere, sigma, p, exec), bit
 // for bit, without the map (nor, on the fast path of the invariant schemes,
-// the per-pixel rates): `brume blur --sigma`.
+// the per-pixel rates): `brume blur --sigma`. A 3-channel f32 image is
+// diffused as it is (no fourth channel added and removed).
 DiffusionPlan diffuse(Image& f, double sigma, const DiffusionParams& p, const Exec& exec = {});
 
 // Diffuse `f` (any channel count >= 1, in place) for `iterations` steps of

@@ -71,21 +71,23 @@ int thread_count(int requested) { return requested > 0 ? requested : omp_get_max
 // same rate w (so every eq. 12 weight is w): a contiguous loop over floats,
 // compiled for 128-bit vectors and for AVX2 (the same elementwise operations
 // in the same order in each, hence the same bits; why not AVX-512: row_kernels).
+// px: values per pixel (4, or 3 for RGB without alpha), n4 = n px: the
+// loop is the same for any channel count.
 #define BRUME_UNIFORM_ROW_ARGS                                                                      \
   const float *__restrict s, const float *__restrict u0, const float *__restrict u1,               \
       const float *__restrict d0, const float *__restrict d1, float *__restrict o, std::size_t begin, \
-      std::size_t end, std::ptrdiff_t n4, float fr, float w
+      std::size_t end, std::ptrdiff_t n4, std::ptrdiff_t px, float fr, float w
 __attribute__((always_inline)) inline void uniform_row_body(BRUME_UNIFORM_ROW_ARGS) {
   for (std::size_t i = begin; i < end; ++i) {
     const float fc = s[i];
-    const float l = s[i - n4] + fr * (s[i - n4 - 4] - s[i - n4]);
-    const float r = s[i + n4] + fr * (s[i + n4 + 4] - s[i + n4]);
+    const float l = s[i - n4] + fr * (s[i - n4 - px] - s[i - n4]);
+    const float r = s[i + n4] + fr * (s[i + n4 + px] - s[i + n4]);
     const float u = u0[i] + fr * (u1[i] - u0[i]);
     const float d = d0[i] + fr * (d1[i] - d0[i]);
     o[i] = brume_diffusion_update(fc, l, r, u, d, w, w, w, w);
   }
 }
-#define BRUME_UNIFORM_ROW_CALL uniform_row_body(s, u0, u1, d0, d1, o, begin, end, n4, fr, w)
+#define BRUME_UNIFORM_ROW_CALL uniform_row_body(s, u0, u1, d0, d1, o, begin, end, n4, px, fr, w)
 using UniformRow = void (*)(BRUME_UNIFORM_ROW_ARGS);
 void uniform_row_generic(BRUME_UNIFORM_ROW_ARGS) { BRUME_UNIFORM_ROW_CALL; }
 #if defined(__x86_64__)
@@ -93,6 +95,25 @@ __attribute__((target("avx2"))) void uniform_row_avx2(BRUME_UNIFORM_ROW_ARGS) { 
 #endif
 #undef BRUME_UNIFORM_ROW_CALL
 #undef BRUME_UNIFORM_ROW_ARGS
+
+// A border pixel of a constant-scale row of C values a pixel (the 3-channel
+// rows): uniform_border_pixel's taps and, value by value, eq11's operations
+// in eq11's order (the interpolation, then brume_diffusion_update; no
+// contraction in this file), hence the bits a 4-channel row gives the same
+// values.
+inline void uniform_border_values(const float* s, const float* u0, const float* u1, const float* d0, const float* d1,
+                                  float* o, int W, int x, int n, float fr, float w, int C) {
+  const std::ptrdiff_t c0 = static_cast<std::ptrdiff_t>(x) * C;
+  const std::ptrdiff_t l0 = static_cast<std::ptrdiff_t>(mirror(x - n, W)) * C,
+                       l1 = static_cast<std::ptrdiff_t>(mirror(x - n - 1, W)) * C;
+  const std::ptrdiff_t r0 = static_cast<std::ptrdiff_t>(mirror(x + n, W)) * C,
+                       r1 = static_cast<std::ptrdiff_t>(mirror(x + n + 1, W)) * C;
+  for (int c = 0; c < C; ++c) {
+    const float l = s[l0 + c] + fr * (s[l1 + c] - s[l0 + c]), r = s[r0 + c] + fr * (s[r1 + c] - s[r0 + c]);
+    const float u = u0[c0 + c] + fr * (u1[c0 + c] - u0[c0 + c]), d = d0[c0 + c] + fr * (d1[c0 + c] - d0[c0 + c]);
+    o[c0 + c] = brume_diffusion_update(s[c0 + c], l, r, u, d, w, w, w, w);
+  }
+}
 
 // Per-thread scratch of the general (space-variant) row: offsets, their
 // integer and fractional parts, and the four eq. 12 weights of each pixel.
@@ -775,7 +796,7 @@ namespace {
 void copy_back(Image& f, const float* src, int nt) {
   if (src == f.data.data()) return;
   const int H = f.height;
-  const std::size_t Ws4 = static_cast<std::size_t>(f.width) * 4;
+  const std::size_t Ws4 = static_cast<std::size_t>(f.width) * static_cast<std::size_t>(f.channels);
   float* out = f.data.data();
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int y = 0; y < H; ++y) std::memcpy(out + y * Ws4, src + y * Ws4, Ws4 * sizeof(float));
@@ -837,6 +858,7 @@ void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int it
 
 void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionParams& p, int threads, Workspace& ws) {
   const int W = f.width, H = f.height, N = iterations;
+  const int C = f.channels;  // 4, or 3: RGB rows without an alpha to carry
   const std::size_t Ws = static_cast<std::size_t>(W);
   const FastCall c(p, threads);
   const float s0 = c.s0;
@@ -852,7 +874,7 @@ void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionPa
   const std::vector<UniformStep> steps = uniform_steps(N, s0, rho, exact, edge_mode);
   const Radii radii = uniform_radii(steps);
   std::vector<FusedGroup> groups;
-  if (f16 && diffusion_simd_level() >= 1) {
+  if (f16 && C == 4 && diffusion_simd_level() >= 1) {
     groups = plan_fusion(radii, W, H, nt, sizeof(std::uint16_t));
     const std::size_t scratch_values = std::max<std::size_t>(1, fusion_scratch_values(radii, groups, W, H, nt));
     std::uint16_t* partner =
@@ -861,7 +883,7 @@ void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionPa
                                ws.get_half(2, scratch_values)))
       return;  // done in binary16 storage (result in f)
   }
-  groups = plan_fusion(radii, W, H, nt, sizeof(float));
+  groups = plan_fusion(radii, W, H, nt, sizeof(float), C);
   // Every offset and weight is the same for the whole image: one row
   // function (vectorised interior, mirrored border columns), run over the
   // iterations either one pass per iteration or, where the offsets are
@@ -869,20 +891,26 @@ void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionPa
   // diffusion_fusion.hpp), in f's own buffer. Same rows from the same inputs
   // either way.
   float* scratch =
-      ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_scratch_values(radii, groups, W, H, nt)));
+      ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_scratch_values(radii, groups, W, H, nt, C)));
+  const std::ptrdiff_t px = C;
   auto row = [&](const float* s, const float* u0, const float* u1, const float* d0, const float* d1, float* o,
                  const UniformStep& st) {
     const int n = st.n;
     // Columns whose taps x-n-1 .. x+n+1 all lie inside the row.
     const int xa = std::min(n + 1, W), xb = std::max(W - n - 1, xa);
-    kern.uniform(s, u0, u1, d0, d1, o, static_cast<std::size_t>(xa) * 4, static_cast<std::size_t>(xb) * 4,
-                 static_cast<std::ptrdiff_t>(n) * 4, st.fr, st.w);
-    for (int x = 0; x < xa; ++x) uniform_border_pixel(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
-    for (int x = xb; x < W; ++x) uniform_border_pixel(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
-    if (f16) round_to_half(o, Ws * 4);
+    kern.uniform(s, u0, u1, d0, d1, o, static_cast<std::size_t>(xa) * C, static_cast<std::size_t>(xb) * C, n * px, px,
+                 st.fr, st.w);
+    if (C == 4) {
+      for (int x = 0; x < xa; ++x) uniform_border_pixel(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
+      for (int x = xb; x < W; ++x) uniform_border_pixel(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
+    } else {
+      for (int x = 0; x < xa; ++x) uniform_border_values(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w, C);
+      for (int x = xb; x < W; ++x) uniform_border_values(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w, C);
+    }
+    if (f16) round_to_half(o, Ws * C);
   };
   copy_back(f, uniform_iterations_fused(src, partner_if_needed(ws, radii, groups, f, nt), W, H, steps, groups, nt,
-                                       scratch, row),
+                                       scratch, row, C),
             nt);
 }
 

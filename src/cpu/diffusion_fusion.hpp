@@ -74,10 +74,11 @@ inline std::size_t fused_ring_rows(const int* radii, int m) {
 
 // The groups of N iterations with these radii on a W x H image with
 // `threads` bands; `elem_bytes` per channel value (4: float, 2: binary16).
-inline std::vector<FusedGroup> plan_fusion(const Radii& radii, int W, int H, int threads, std::size_t elem_bytes) {
+inline std::vector<FusedGroup> plan_fusion(const Radii& radii, int W, int H, int threads, std::size_t elem_bytes,
+                                           int channels = 4) {
   const FusionLimits lim = diffusion_fusion_limits();
   const int N = static_cast<int>(radii.size());
-  const std::size_t row_bytes = static_cast<std::size_t>(W) * 4 * elem_bytes;
+  const std::size_t row_bytes = static_cast<std::size_t>(W) * static_cast<std::size_t>(channels) * elem_bytes;
   const int band = H / std::max(1, threads);
   std::vector<FusedGroup> groups;
   for (int k = 0; k < N;) {
@@ -136,16 +137,16 @@ struct GroupShape {
 // Output rows [Y0, Y1) of a group of m >= 1 iterations with radii
 // radii[0 .. m) into the whole image B (level m). Level 0 is read through
 // `level0` (the image A, or, in place, B's own rows and copies of the
-// neighbouring bands'). ring: fused_ring_rows(radii, m) rows of W x 4
-// values, this thread's own. delay: null when B is not level 0 (rows are
-// written directly), else GroupShape::delay() rows (or null when that is 0).
+// neighbouring bands'). rs: values per row (W x the channels). ring:
+// fused_ring_rows(radii, m) rows, this thread's own. delay: null when B is
+// not level 0 (rows are written directly), else GroupShape::delay() rows
+// (or null when that is 0).
 // row(j, y, in, out): iteration j of the group writes row y of level j + 1
 // to `out`, reading level j through in(q), which returns row q (any q within
 // y -+ radii[j], already mirrored into the image).
 template <class T, class LevelRow>
-void fused_group_band(const RowSource<T>& level0, T* B, int W, int H, const int* radii, int m, int Y0, int Y1,
-                      T* ring, T* delay, LevelRow&& row) {
-  const std::size_t rs = static_cast<std::size_t>(W) * 4;  // values per row
+void fused_group_band(const RowSource<T>& level0, T* B, std::size_t rs, int H, const int* radii, int m, int Y0,
+                      int Y1, T* ring, T* delay, LevelRow&& row) {
   const GroupShape g(radii, m);
   // Levels 1..m: rows [lo, hi]; levels 1..m-1: ring capacity and base.
   std::vector<int> lo(m + 1), hi(m + 1), cap(m + 1, 0);
@@ -191,7 +192,7 @@ inline std::size_t band_copy_rows(int halo, int H, int threads) {
   return threads > 1 ? 2 * static_cast<std::size_t>(std::min(H, halo)) : 0;
 }
 
-// Per-thread scratch of a schedule, in rows of W x 4 values: the rings of
+// Per-thread scratch of a schedule, in rows (W x the channels values): the rings of
 // the largest group, the copies of neighbouring bands' rows and the delay
 // of the largest in-place group; and whether some group runs ping-pong.
 struct ScratchPlan {
@@ -231,11 +232,12 @@ inline ScratchPlan plan_scratch(const Radii& radii, const std::vector<FusedGroup
   return s;
 }
 
-// N iterations of F in `img` (W x H x 4), grouped by plan_fusion, each
+// N iterations of F in `img` (W x H x channels, 4 but for the constant
+// scale's 3-channel rows), grouped by plan_fusion, each
 // group in place or, where plan_scratch says so, from img into `partner`
 // (then the two swap); returns the buffer holding the result (img unless a
 // ping-pong group left it in partner). scratch: fusion_scratch_values(...)
-// values; partner: W x H x 4 values where plan_scratch(...).partner, else
+// values; partner: an image's values where plan_scratch(...).partner, else
 // unused (may be null). row(k, y, in, out): iteration k writes row y to
 // `out`, reading the previous level through in(q) (see fused_group_band).
 // Called from inside OpenMP parallel regions (omp_get_thread_num() names
@@ -247,8 +249,8 @@ inline ScratchPlan plan_scratch(const Radii& radii, const std::vector<FusedGroup
 // count, band, group or buffer (tests: DiffusionFusion.*).
 template <class T, class LevelRow>
 T* iterations_fused(T* img, T* partner, int W, int H, const Radii& radii, const std::vector<FusedGroup>& groups,
-                    int threads, T* scratch, LevelRow row) {
-  const std::size_t rs = static_cast<std::size_t>(W) * 4;
+                    int threads, T* scratch, LevelRow row, int channels = 4) {
+  const std::size_t rs = static_cast<std::size_t>(W) * static_cast<std::size_t>(channels);  // values per row
   const ScratchPlan plan = plan_scratch(radii, groups, H, threads);
   const std::size_t per_thread = plan.rows_per_thread() * rs;
   // Level 0's row table of each thread (in-place groups).
@@ -277,7 +279,7 @@ T* iterations_fused(T* img, T* partner, int W, int H, const Radii& radii, const 
       auto level_row = [&](int j, int y, const RowSource<T>& in, T* out) { row(fg.k0 + j, y, in, out); };
       if (!in_place) {
         if (Y0 < Y1)
-          fused_group_band(RowSource<T>{cur, rs, 0}, other, W, H, radii_g, fg.m, Y0, Y1, ring,
+          fused_group_band(RowSource<T>{cur, rs, 0}, other, rs, H, radii_g, fg.m, Y0, Y1, ring,
                            static_cast<T*>(nullptr), level_row);
       } else {
         // Level 1 reads rows [a, b); those of the neighbouring bands are
@@ -298,7 +300,7 @@ T* iterations_fused(T* img, T* partner, int W, int H, const Radii& radii, const 
         }
 #pragma omp barrier
         if (Y0 < Y1)
-          fused_group_band(RowSource<T>{cur, rs, 0, table}, cur, W, H, radii_g, fg.m, Y0, Y1, ring,
+          fused_group_band(RowSource<T>{cur, rs, 0, table}, cur, rs, H, radii_g, fg.m, Y0, Y1, ring,
                            copies + band_copy_rows(halo, H, threads) * rs, level_row);
       }
     }
@@ -309,9 +311,9 @@ T* iterations_fused(T* img, T* partner, int W, int H, const Radii& radii, const 
 
 // Values of scratch that iterations_fused needs.
 inline std::size_t fusion_scratch_values(const Radii& radii, const std::vector<FusedGroup>& groups, int W, int H,
-                                         int threads) {
-  return plan_scratch(radii, groups, H, threads).rows_per_thread() * static_cast<std::size_t>(W) * 4 *
-         static_cast<std::size_t>(threads);
+                                         int threads, int channels = 4) {
+  return plan_scratch(radii, groups, H, threads).rows_per_thread() * static_cast<std::size_t>(W) *
+         static_cast<std::size_t>(channels) * static_cast<std::size_t>(threads);
 }
 // Whether iterations_fused needs its partner image.
 inline bool fusion_needs_partner(const Radii& radii, const std::vector<FusedGroup>& groups, int H, int threads) {
@@ -354,14 +356,16 @@ inline Radii general_radii(const float* rho, std::size_t np, int N, float s0, bo
 // -n, -(n+1), +n, +(n+1) of the step, mirrored. row5(s, u0, u1, d0, d1, o, step).
 template <class T, class Row5>
 T* uniform_iterations_fused(T* img, T* partner, int W, int H, const std::vector<UniformStep>& st,
-                            const std::vector<FusedGroup>& groups, int threads, T* scratch, Row5 row5) {
+                            const std::vector<FusedGroup>& groups, int threads, T* scratch, Row5 row5,
+                            int channels = 4) {
   return iterations_fused(img, partner, W, H, uniform_radii(st), groups, threads, scratch,
                           [&](int k, int y, const RowSource<T>& in, T* out) {
                             const UniformStep& s = st[static_cast<std::size_t>(k)];
                             const int n = s.n;
                             row5(in(y), in(mirror(y - n, H)), in(mirror(y - n - 1, H)), in(mirror(y + n, H)),
                                  in(mirror(y + n + 1, H)), out, s);
-                          });
+                          },
+                          channels);
 }
 
 // The steps of N constant-scale iterations: sigma_k as the running product

@@ -116,7 +116,9 @@ void diffuse_reference(Image& f, const std::vector<double>& rho, int iterations,
 void diffuse_fast(Image& f, const float* rho, int iterations, const DiffusionParams& p, int threads, Workspace& ws);
 // The same for one rate everywhere (a constant target scale), invariant
 // schemes (the standard one takes the per-pixel path): what diffuse_fast
-// does for a map of that rate, bit for bit, without the map.
+// does for a map of that rate, bit for bit, without the map. f has four
+// channels, or three in f32 (RGB rows of three values a pixel: the same
+// bits as those channels of a four-channel run).
 void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionParams& p, int threads, Workspace& ws);
 // The float rate of one target scale, as rates_from_scale forms it.
 float rate_from_scale(float sigma, const DiffusionParams& p, int iterations);
