@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "brume/blur.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/error.hpp"
 #include "cpu/diffusion_fusion.hpp"
@@ -1003,6 +1004,30 @@ TEST(DiffusionFusion, ConductancePassesAreThePerPixelStencilBetweenTwoImages) {
         }
     }
   }
+}
+
+TEST(DiffusionFastPath, BlurOfAnOwnedImageIsTheBlurOfItsView) {
+  // run_blur(Image&&) (what `brume blur` calls with the decoded file) blurs
+  // the image's own buffer where the engine works on RGB rows (a constant
+  // scale in f32) and copies it otherwise; either way the pixels are those
+  // of run_blur on a view of the same image (the Python module's form).
+  Image rgb(61, 47, 3);
+  for (std::size_t i = 0; i < rgb.data.size(); ++i) rgb.data[i] = static_cast<float>((i * 7919) % 1009) / 1008.0f;
+  const Image map = ramp_map(61, 47, 1.0, 9.0);
+  for (Precision p : {Precision::f32, Precision::f16})
+    for (bool use_map : {false, true}) {
+      const DiffusionParams dp = params(Scheme::invariant_exact, p);
+      const std::optional<double> sigma = use_map ? std::nullopt : std::optional<double>(9.0);
+      const BlurRun want = run_blur(rgb, sigma, use_map ? &map : nullptr, dp);
+      Image owned = rgb;
+      const float* buffer = owned.data.data();
+      const BlurRun got = run_blur(std::move(owned), sigma, use_map ? &map : nullptr, dp);
+      EXPECT_EQ(got.rgb.data, want.rgb.data) << to_string(p) << (use_map ? " scale map" : " constant");
+      EXPECT_EQ(got.rgb.channels, 3);
+      // The constant f32 case blurred the given buffer itself.
+      EXPECT_EQ(got.rgb.data.data() == buffer, !use_map && p == Precision::f32)
+          << to_string(p) << (use_map ? " scale map" : " constant");
+    }
 }
 
 TEST(DiffusionWorkspace, ExtraHeapIsTheStatedMultipleOfTheImage) {

@@ -37,6 +37,11 @@ struct BlurRun {
 };
 BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* scale_map, const DiffusionParams& dp,
                  const Exec& exec = {});
+// The same for an image the caller gives up (3 channels): where the engine
+// works on RGB rows it blurs that buffer itself, with no copy (`brume blur`
+// hands over the decoded file). The same pixels as the view form.
+BlurRun run_blur(Image&& rgb, std::optional<double> sigma, const Image* scale_map, const DiffusionParams& dp,
+                 const Exec& exec = {});
 nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

@@ -42,8 +42,11 @@ void check_blur_scale(std::optional<double> sigma, bool has_map, const Diffusion
 }
 }  // namespace
 
-BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* scale_map, const DiffusionParams& dp,
-                 const Exec& exec) {
+namespace {
+// Both entry points: `owned`, when given, holds the pixels of `rgb` and may
+// become the working buffer itself.
+BlurRun blur_impl(ConstImageView rgb, Image* owned, std::optional<double> sigma, const Image* scale_map,
+                  const DiffusionParams& dp, const Exec& exec) {
   diffusion_param_table().validate(dp);
   check_blur_scale(sigma, scale_map != nullptr, dp);
   if (sigma && !std::isfinite(*sigma)) throw Error("--sigma must be a finite number of pixels");
@@ -79,13 +82,18 @@ BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* s
   // take four channels).
   const bool rgb_rows = !backend.gpu && !scale_map && dp.precision == Precision::f32;
   const int fc = rgb_rows ? 3 : 4;
-  Image f(rgb.width(), rgb.height(), fc);
-  for (int y = 0; y < rgb.height(); ++y) {
-    const float* src = rgb.row(y);
-    float* dst = f.row(y);
-    for (int x = 0; x < rgb.width(); ++x) {
-      for (int k = 0; k < 3; ++k) dst[x * fc + k] = src[x * rgb.pixel_stride() + k];
-      if (fc == 4) dst[x * 4 + 3] = 1.0f;
+  Image f;
+  if (rgb_rows && owned) {
+    f = std::move(*owned);  // the decoded image is the working buffer: no copy
+  } else {
+    f = Image(rgb.width(), rgb.height(), fc);
+    for (int y = 0; y < rgb.height(); ++y) {
+      const float* src = rgb.row(y);
+      float* dst = f.row(y);
+      for (int x = 0; x < rgb.width(); ++x) {
+        for (int k = 0; k < 3; ++k) dst[x * fc + k] = src[x * rgb.pixel_stride() + k];
+        if (fc == 4) dst[x * 4 + 3] = 1.0f;
+      }
     }
   }
   BlurRun run;
@@ -122,6 +130,17 @@ BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* s
   run.record["effective_gaussian_px"] = sigma ? std::sqrt(*sigma * *sigma - dp.sigma0 * dp.sigma0) : -1.0;
   return run;
 }
+}  // namespace
+
+BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* scale_map, const DiffusionParams& dp,
+                 const Exec& exec) {
+  return blur_impl(rgb, nullptr, sigma, scale_map, dp, exec);
+}
+
+BlurRun run_blur(Image&& rgb, std::optional<double> sigma, const Image* scale_map, const DiffusionParams& dp,
+                 const Exec& exec) {
+  return blur_impl(rgb, &rgb, sigma, scale_map, dp, exec);
+}
 
 nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& eo, const RunContext& ctx) {
   blur_job_table().validate(job);
@@ -142,7 +161,9 @@ nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& eo, const Run
       throw Error("--scale-map '" + job.scale_map + "' is " + smap.size_string() + " but --image '" + job.input.image +
                   "' is " + rgb.size_string() + "; they must be the same size");
   }
-  BlurRun run = run_blur(rgb, job.sigma, job.scale_map.empty() ? nullptr : &smap, dp, exec);
+  // The decoded image is handed over (blurred in its own buffer where the
+  // engine's rows are RGB); nothing below reads it again.
+  BlurRun run = run_blur(std::move(in.rgb), job.sigma, job.scale_map.empty() ? nullptr : &smap, dp, exec);
 
   nlohmann::json inputs = in.record;
   if (!job.scale_map.empty()) inputs["scale_map"] = file_record(job.scale_map, map_info, smap);
