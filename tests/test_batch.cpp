@@ -404,18 +404,25 @@ TEST_F(Batch, ResumeAfterSigkillEqualsUninterruptedRun) {
 }
 
 // A corrupt frame is reported (key, file, message) and skipped; the others are
-// written; the exit status and the summary say one failed.
+// written; the exit status and the summary say how many failed. A failed
+// frame alone in its folder leaves no folder behind (folders are made when
+// a frame writes its first output).
 TEST_F(Batch, CorruptFrameIsReportedAndOthersWritten) {
-  const std::vector<std::string> keys = make_frames(4);
+  std::vector<std::string> keys = make_frames(4);
   std::ofstream(p("data/b/f1.png"), std::ios::binary) << "not a png at all";
+  fs::create_directories(p("data/c/d"));
+  std::ofstream(p("data/c/d/lone.png"), std::ios::binary) << "not a png either";
+  fs::copy_file(p("data/a/f0.exr"), p("data/c/d/lone.exr"));
+  keys.push_back("c/d/lone.png");
   const std::string m = csv(keys, "effect,visibility", "haze,400");
   const CliRun r = run("batch --manifest " + m + " --out-dir " + p("out") + " --workers 2");
   EXPECT_EQ(r.status, 1) << r.output;
   EXPECT_NE(r.output.find("frame 'b/f1.png'"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find(p("data/b/f1.png")), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("1 failed"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("2 failed"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(p("out/b/f1.png")));
   EXPECT_FALSE(fs::exists(p("out/b/f1.json")));
+  EXPECT_FALSE(fs::exists(p("out/c"))) << "a failed frame's folder was left behind";
   for (const std::string k : {"a/f0", "a/f2", "b/f3"}) {
     EXPECT_TRUE(fs::exists(p("out/" + k + ".png"))) << k;
     EXPECT_TRUE(fs::exists(p("out/" + k + ".json"))) << k;
@@ -427,8 +434,9 @@ TEST_F(Batch, CorruptFrameIsReportedAndOthersWritten) {
     const nlohmann::json j = nlohmann::json::parse(l);
     res[j["key"]] = j;
   }
-  ASSERT_EQ(res.size(), 4u);
+  ASSERT_EQ(res.size(), 5u);
   EXPECT_EQ(res["b/f1.png"]["status"], "failed");
+  EXPECT_EQ(res["c/d/lone.png"]["status"], "failed");
   EXPECT_FALSE(res["b/f1.png"].value("error", "").empty());
   EXPECT_EQ(res["a/f0.png"]["status"], "ok");
   EXPECT_EQ(res["a/f0.png"]["outputs"]["image"], p("out/a/f0.png"));

@@ -82,7 +82,28 @@ void install_output_signal_handlers();
 
 // Before any work: the directory an output `path` goes to exists and is
 // writable, or a brume::Error naming `flag` and the path says how to fix it.
+// Inside a CreateOutputFolders scope, a directory that does not exist yet
+// passes when it can be created (its nearest existing ancestor is a
+// writable directory).
 void check_output_dir(const std::string& path, const std::string& flag);
+
+// While one lives, on its thread, outputs may go to folders that do not
+// exist yet: check_output_dir accepts them and OutputSet creates each
+// folder when it writes a file there. A batch frame (brume batch, brume.dask)
+// runs in one, so that a frame that fails before writing leaves no empty
+// folder behind (folders made up front stayed when the frame failed, and
+// removing them afterwards would race with the other workers' frames that
+// share them).
+class CreateOutputFolders {
+ public:
+  CreateOutputFolders();
+  ~CreateOutputFolders();
+  CreateOutputFolders(const CreateOutputFolders&) = delete;
+  CreateOutputFolders& operator=(const CreateOutputFolders&) = delete;
+
+ private:
+  bool outer_;
+};
 
 // sRGB transfer (IEC 61966-2-1), exact piecewise form.
 float srgb_to_linear(float v);

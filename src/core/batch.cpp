@@ -744,8 +744,9 @@ BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, c
   const auto t0 = std::chrono::steady_clock::now();
   try {
     remove_stale_temporaries(f);
-    std::error_code ec;
-    for (const std::string& o : f.outputs) fs::create_directories(fs::path(o).parent_path(), ec);
+    // The frame's folders are made as its outputs are written, so that a
+    // frame that fails before writing leaves none behind.
+    const CreateOutputFolders lazily;
     RunContext ctx;
     ctx.argv = argv;
     ctx.given = f.given;

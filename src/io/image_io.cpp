@@ -32,10 +32,31 @@ namespace fs = std::filesystem;
 Transfer parse_transfer(const std::string& s, const std::string& flag) { return parse_enum(transfer_names(), s, flag); }
 std::string to_string(Transfer t) { return enum_name(transfer_names(), t); }
 
+namespace {
+thread_local bool t_create_folders = false;  // inside a CreateOutputFolders scope
+}  // namespace
+
+CreateOutputFolders::CreateOutputFolders() : outer_(t_create_folders) { t_create_folders = true; }
+CreateOutputFolders::~CreateOutputFolders() { t_create_folders = outer_; }
+
 void check_output_dir(const std::string& path, const std::string& flag) {
   fs::path dir = fs::path(path).parent_path();
   if (dir.empty()) dir = ".";
   std::error_code ec;
+  if (t_create_folders && !fs::exists(dir, ec)) {
+    // Created when an output is written there (ensure_output_folder): the
+    // nearest existing ancestor must be a writable directory.
+    fs::path up = dir;
+    while (up.has_parent_path() && up.parent_path() != up && !fs::exists(up, ec)) up = up.parent_path();
+    if (!fs::exists(up, ec)) up = ".";
+    if (!fs::is_directory(up, ec))
+      throw Error(flag + " '" + path + "': '" + up.string() + "' is not a directory, so '" + dir.string() +
+                  "' cannot be created in it");
+    if (::access(up.c_str(), W_OK) != 0)
+      throw Error(flag + " '" + path + "': directory '" + up.string() + "' is not writable, so '" + dir.string() +
+                  "' cannot be created in it");
+    return;
+  }
   if (!fs::is_directory(dir, ec))
     // Checked before any work and again at each write: the second time, the
     // directory was there when the run started and has since been removed.
@@ -947,6 +968,20 @@ void check_writable(const std::string& path, const WriteOptions& opts, const std
   if (fs::is_directory(path, ec)) throw Error(flag + " '" + path + "' is a directory");
 }
 
+namespace {
+// The folder of an output, created now inside a CreateOutputFolders scope
+// (check_output_dir accepted it as creatable); elsewhere it exists already.
+void ensure_output_folder(const std::string& path, const std::string& flag) {
+  if (!t_create_folders) return;
+  const fs::path dir = fs::path(path).parent_path();
+  std::error_code ec;
+  if (dir.empty() || fs::is_directory(dir, ec)) return;
+  fs::create_directories(dir, ec);
+  if (!fs::is_directory(dir, ec))
+    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' cannot be created: " + ec.message());
+}
+}  // namespace
+
 OutputSet::~OutputSet() {
   for (auto& p : pending_) {
     std::error_code ec;
@@ -988,6 +1023,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
     src = &encoded;
   }
 
+  ensure_output_folder(path, flag);
   const std::string tmp = temp_path_for(path);
   if (e == ".pfm") {
     add_pending(tmp, path);
@@ -1044,6 +1080,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
 }
 
 void OutputSet::write_text(const std::string& path, const std::string& text, const std::string& flag) {
+  ensure_output_folder(path, flag);
   fs::path dir = fs::path(path).parent_path();
   if (dir.empty()) dir = ".";
   std::error_code ec;
