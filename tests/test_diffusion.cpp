@@ -627,19 +627,23 @@ TEST(DiffusionSetupMath, LanesOutsideTheRangesTakeLibm) {
 
 TEST(DiffusionSimd, OneIterationIsThePerPixelFormula) {
   // One space-variant iteration of the fast path -- the run kernels inside
-  // the row, pixel_from_rows where a horizontal tap leaves it -- must equal
+  // the row and, on mirrored copies of the border columns, where a
+  // horizontal tap leaves it -- must equal
   // the per-pixel formula update_pixel<false> (which mirrors every tap once
   // any leaves the image) bit for bit at every pixel: every vector width,
   // edge rate and invariant scheme, offsets from ~2 px to more than the
   // whole row (taps beyond both edges, several reflections), rates varying
   // per pixel (runs of every length) or per row only (each row one run: 80
   // px rows then have runs longer than the widest kernel's 16-pixel
-  // blocks, with ~20 px at each end taking the mirror). The multi-iteration
+  // blocks, with ~20 px at each end taking the mirror; at sigma0 60 the
+  // border segments of the two narrow images exceed the copy's bound and
+  // take pixel_from_rows, the 80 px one's are still copied and take the
+  // run kernels). The multi-iteration
   // tests compare widths and schedules with each other; this one pins them
   // to the formula.
   const int widest = cpu::diffusion_simd_level();
   for (const auto& [W, H] : {std::pair{23, 19}, std::pair{9, 7}, std::pair{80, 37}})
-    for (double s0 : {2.5, 6.0, 13.0, 20.0})
+    for (double s0 : {2.5, 6.0, 13.0, 20.0, 60.0})
       for (bool per_row : {false, true}) {
         const Image f = texture(W, H);
         Image rho(W, H, 1);

@@ -120,6 +120,9 @@ inline void uniform_border_values(const float* s, const float* u0, const float* 
 struct RowScratch {
   std::vector<float> h, fr, wl, wr, wu, wd;
   std::vector<int> n;
+  // The mirrored columns of a border segment (general_row_body): F's
+  // values and the rates, grown on demand.
+  std::vector<float> fpad, rpad;
   explicit RowScratch(int W) : h(W), fr(W), wl(W), wr(W), wu(W), wd(W), n(W) {}
 };
 
@@ -463,28 +466,50 @@ __attribute__((always_inline)) inline void general_row_body(const RowSource<floa
     // largest offsets: up to 2 x 24 of 1120 rows went pixel by pixel).
     int a = std::max(x, n + 1), b = std::min(e, W - n - 1);
     if (a >= b) a = b = e;
-    for (int i = x; i < a; ++i) pixel_from_rows<false>(in, orow, rho, 0.0f, W, H, i, y, h[i], edge_mode);
-    if (a < b) {
-      const std::size_t yu0 = static_cast<std::size_t>(mirror(y - n, H)), yu1 = static_cast<std::size_t>(mirror(y - n - 1, H));
-      const std::size_t yd0 = static_cast<std::size_t>(mirror(y + n, H)), yd1 = static_cast<std::size_t>(mirror(y + n + 1, H));
-      const float* rrow = rho + y * Ws;
-      const float *ru0 = rho + yu0 * Ws, *ru1 = rho + yu1 * Ws;
-      const float *rd0 = rho + yd0 * Ws, *rd1 = rho + yd1 * Ws;
-      const RateRows q{rrow, ru0, ru1, rd0, rd1};
-      const RunArgs args{in(y),
-                         in(static_cast<int>(yu0)),
-                         in(static_cast<int>(yu1)),
-                         in(static_cast<int>(yd0)),
-                         in(static_cast<int>(yd1)),
-                         orow,
-                         t.fr.data(),
-                         t.wl.data(),
-                         t.wr.data(),
-                         t.wu.data(),
-                         t.wd.data()};
-      run(args, q, edge_mode, a, b, n);
-    }
-    for (int i = std::max(b, a); i < e; ++i) pixel_from_rows<false>(in, orow, rho, 0.0f, W, H, i, y, h[i], edge_mode);
+    const std::size_t yu0 = static_cast<std::size_t>(mirror(y - n, H)), yu1 = static_cast<std::size_t>(mirror(y - n - 1, H));
+    const std::size_t yd0 = static_cast<std::size_t>(mirror(y + n, H)), yd1 = static_cast<std::size_t>(mirror(y + n + 1, H));
+    const float* rrow = rho + y * Ws;
+    const RateRows q{rrow, rho + yu0 * Ws, rho + yu1 * Ws, rho + yd0 * Ws, rho + yd1 * Ws};
+    const RunArgs args{in(y),        in(static_cast<int>(yu0)), in(static_cast<int>(yu1)), in(static_cast<int>(yd0)),
+                       in(static_cast<int>(yd1)), orow,         t.fr.data(),              t.wl.data(),
+                       t.wr.data(),  t.wu.data(),               t.wd.data()};
+    // The columns [p, q) whose horizontal taps (x -+ n, x -+ (n+1)) leave
+    // the row: F's row and the rate row at the taps' columns p - n - 1 ..
+    // q + n, mirrored, are copied side by side, and the same run kernel
+    // reads them through pointers shifted so that column c is copy entry
+    // c - (p - n - 1). Every tap and rate sample is then the value
+    // pixel_from_rows reads at the mirrored index, and the kernel evaluates
+    // its formulas in its order: the same bits (test: DiffusionFastPath's
+    // border cases), four to sixteen pixels a vector instead of one with
+    // per-tap mirroring (the border columns, up to 2 (n + 1) a row, took 5 %
+    // of a space-variant blur at sigma 25 one pixel at a time, and more in
+    // the top band, whose offsets are the largest). A segment whose copy
+    // would exceed the row by far (an offset of several row widths) keeps
+    // the per-pixel path.
+    auto border = [&](int p, int qe) {
+      if (p >= qe) return;
+      const std::size_t len = static_cast<std::size_t>(qe - p) + 2 * static_cast<std::size_t>(n) + 2;
+      if (len > 2 * Ws + 64) {
+        for (int i = p; i < qe; ++i) pixel_from_rows<false>(in, orow, rho, 0.0f, W, H, i, y, h[i], edge_mode);
+        return;
+      }
+      if (t.rpad.size() < len) t.fpad.resize(4 * len), t.rpad.resize(len);
+      const float* s = args.s;
+      for (std::size_t j = 0; j < len; ++j) {
+        const int col = mirror(p - n - 1 + static_cast<int>(j), W);
+        std::memcpy(t.fpad.data() + 4 * j, s + static_cast<std::size_t>(col) * 4, 4 * sizeof(float));
+        t.rpad[j] = rrow[col];
+      }
+      const std::ptrdiff_t shift = static_cast<std::ptrdiff_t>(n) + 1 - p;  // column c -> entry c + shift
+      RunArgs pa = args;
+      pa.s = t.fpad.data() + shift * 4;
+      RateRows pq = q;
+      pq.c = t.rpad.data() + shift;
+      run(pa, pq, edge_mode, p, qe, n);
+    };
+    border(x, a);
+    if (a < b) run(args, q, edge_mode, a, b, n);
+    border(std::max(b, a), e);
     x = e;
   }
 }
