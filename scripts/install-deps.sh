@@ -11,6 +11,7 @@ PKGS=(
   libssl-dev                             # SHA-256 of input files in the records
   libpng-dev                             # 8/16-bit grey and RGB PNG without loading OpenImageIO
   libdeflate-dev                         # the PNG subset's image data inflated in one call (faster than zlib)
+  libopenexr-dev                         # the common OpenEXR files read without loading OpenImageIO
   libgtest-dev libbenchmark-dev          # tests, benchmarks
   libegl-dev libgles-dev                 # GPU backend: headless EGL + OpenGL ES 3.2 headers and loaders
   libegl-mesa0 libgl1-mesa-dri           # Mesa's EGL and llvmpipe, the GPU the tests run on without one

@@ -12,6 +12,7 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
+#include "io/exr_direct.hpp"
 #include "io/png_direct.hpp"
 #include "test_util.hpp"
 
@@ -535,6 +536,165 @@ void write_png_by_hand(const std::string& p, int w, int h, int depth, int color,
   std::fclose(f);
 }
 }  // namespace
+
+TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
+  // Single-part half/float OpenEXR with one channel or R G B (A) is read
+  // with OpenEXR itself (no OpenImageIO module load): values bit for bit,
+  // FileInfo as OpenImageIO gives it, for every compression, scanline and
+  // tiled files, NaN, inf and subnormal values. Every other EXR must be
+  // declined (the direct-read counter does not move) and read by
+  // OpenImageIO as before, with the same result.
+  fs::path d = tmpdir();
+  struct Spec {
+    std::string name;
+    int w, h;
+    std::vector<std::string> channels;
+    OIIO::TypeDesc type;
+    std::string compression;
+    bool tiled = false;
+    bool offset_window = false;
+    bool mixed = false;
+    int subimages = 1;
+  };
+  auto values = [](int w, int h, int c) {
+    std::vector<float> v(static_cast<std::size_t>(w) * h * c);
+    for (std::size_t i = 0; i < v.size(); ++i)
+      v[i] = i % 31 == 0 ? NAN : i % 37 == 0 ? -INFINITY : i % 41 == 0 ? 1e-41f : 0.173f * static_cast<float>(i) - 40.0f;
+    return v;
+  };
+  auto write = [&](const Spec& s) {
+    const std::string p = (d / s.name).string();
+    const int c = static_cast<int>(s.channels.size());
+    OIIO::ImageSpec spec(s.w, s.h, c, s.type);
+    spec.channelnames = s.channels;
+    spec.attribute("compression", s.compression);
+    spec.attribute("ImageDescription", "{\"written\": \"" + s.name + "\"}");
+    if (s.tiled) spec.tile_width = spec.tile_height = 16;
+    if (s.offset_window) spec.x = 3, spec.y = 2, spec.full_width = s.w + 6, spec.full_height = s.h + 4;
+    if (s.mixed) {
+      spec.channelformats.assign(static_cast<std::size_t>(c), OIIO::TypeDesc::HALF);
+      spec.channelformats[0] = OIIO::TypeDesc::FLOAT;
+    }
+    const std::vector<float> v = values(s.w, s.h, c);
+    auto out = OIIO::ImageOutput::create(p);
+    ASSERT_TRUE(out) << p;
+    std::vector<OIIO::ImageSpec> specs(static_cast<std::size_t>(s.subimages), spec);
+    ASSERT_TRUE(out->open(p, s.subimages, specs.data())) << p << out->geterror();
+    for (int k = 0; k < s.subimages; ++k) {
+      if (k > 0) {
+        ASSERT_TRUE(out->open(p, specs[static_cast<std::size_t>(k)], OIIO::ImageOutput::AppendSubimage));
+      }
+      ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, v.data())) << p << out->geterror();
+    }
+    ASSERT_TRUE(out->close()) << p;
+  };
+  const OIIO::TypeDesc H = OIIO::TypeDesc::HALF, F = OIIO::TypeDesc::FLOAT;
+  const std::vector<Spec> subset = {
+      {"y_zip.exr", 37, 23, {"Y"}, F, "zip"},
+      {"y_half_piz.exr", 37, 23, {"Y"}, H, "piz"},
+      {"rgb_half_none.exr", 41, 19, {"R", "G", "B"}, H, "none"},
+      {"rgba_float_rle.exr", 41, 19, {"R", "G", "B", "A"}, F, "rle"},
+      {"z_tiled_zips.exr", 45, 33, {"Z"}, F, "zips"},
+      {"depthz_half_b44.exr", 40, 24, {"depth.Z"}, H, "b44"},
+      {"rgb_float_pxr24.exr", 29, 35, {"R", "G", "B"}, F, "pxr24"},
+      {"rgb_half_dwaa.exr", 70, 40, {"R", "G", "B"}, H, "dwaa"},
+  };
+  const std::vector<Spec> other = {
+      {"rgbz.exr", 21, 13, {"R", "G", "B", "Z"}, F, "zip"},
+      {"ya.exr", 21, 13, {"Y", "A"}, H, "zip"},
+      {"window.exr", 21, 13, {"Y"}, F, "zip", false, true},
+      {"mixed.exr", 21, 13, {"R", "G", "B"}, H, "zip", false, false, true},
+      {"uint.exr", 21, 13, {"Y"}, OIIO::TypeDesc::UINT, "zip"},
+      {"two_parts.exr", 21, 13, {"R", "G", "B"}, F, "zip", false, false, false, 2},
+  };
+  auto oiio_read = [](const std::string& p, OIIO::ImageSpec& spec, std::string& format) {
+    auto in = OIIO::ImageInput::open(p);
+    EXPECT_TRUE(in) << p;
+    spec = in->spec();
+    format = in->format_name();
+    std::vector<float> v(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
+    EXPECT_TRUE(in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, v.data())) << p;
+    return v;
+  };
+  auto same_bits = [](const std::vector<float>& a, const std::vector<float>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
+  };
+  auto no_check = [](int, int, int) {};
+  for (const Spec& s : subset) {
+    write(s);
+    const std::string p = (d / s.name).string();
+    OIIO::ImageSpec spec;
+    std::string format;
+    const std::vector<float> want = oiio_read(p, spec, format);
+    detail::ExrInfo info;
+    Image got;
+    ASSERT_TRUE(detail::read_exr_subset(p, &got, info, no_check, 0)) << p;
+    EXPECT_TRUE(same_bits(got.data, want)) << p;
+    EXPECT_EQ(got.width, spec.width) << p;
+    EXPECT_EQ(got.height, spec.height) << p;
+    EXPECT_EQ(info.channel_names, std::vector<std::string>(spec.channelnames.begin(), spec.channelnames.end())) << p;
+    EXPECT_EQ(info.bits, static_cast<int>(spec.format.size() * 8)) << p;
+    EXPECT_EQ(spec.get_int_attribute("oiio:BitsPerSample", 0), 0) << p << ": OpenImageIO now names a bit depth";
+    EXPECT_EQ(info.description, spec.get_string_attribute("ImageDescription")) << p;
+    EXPECT_EQ(format, "openexr");
+    // Decompressed by OpenEXR's pool: the same values.
+    Image threaded;
+    ASSERT_TRUE(detail::read_exr_subset(p, &threaded, info, no_check, 2)) << p;
+    EXPECT_TRUE(same_bits(threaded.data, want)) << p;
+    // The public readers take the subset path and report OpenImageIO's FileInfo.
+    const std::uint64_t before = detail::exr_direct_reads();
+    FileInfo fi;
+    if (s.channels.size() == 1)
+      (void)read_scalar(p, "", &fi);
+    else
+      (void)read_color(p, Transfer::linear, &fi);
+    EXPECT_EQ(detail::exr_direct_reads(), before + 1) << p;
+    EXPECT_EQ(fi.format, "openexr") << p;
+    EXPECT_FALSE(fi.integer) << p;
+    EXPECT_EQ(fi.bits, info.bits) << p;
+    EXPECT_EQ(fi.channel_names, info.channel_names) << p;
+    const ImageHeader hd = read_header(p);
+    EXPECT_EQ(hd.width, spec.width);
+    EXPECT_EQ(hd.channels, spec.nchannels);
+  }
+  for (const Spec& s : other) {
+    write(s);
+    const std::string p = (d / s.name).string();
+    OIIO::ImageSpec spec;
+    std::string format;
+    const std::vector<float> want = oiio_read(p, spec, format);
+    detail::ExrInfo info;
+    Image got;
+    EXPECT_FALSE(detail::read_exr_subset(p, &got, info, no_check, 0)) << p << " was taken by the subset reader";
+    const std::uint64_t before = detail::exr_direct_reads();
+    FileInfo fi;
+    const Image pub = s.channels.size() == 1 ? read_scalar(p, "", &fi) : read_scalar(p, s.channels[0], &fi);
+    EXPECT_EQ(detail::exr_direct_reads(), before) << p;
+    EXPECT_EQ(fi.channel_names, std::vector<std::string>(spec.channelnames.begin(), spec.channelnames.end())) << p;
+    ASSERT_EQ(pub.data.size(), want.size() / static_cast<std::size_t>(spec.nchannels)) << p;
+    if (!spec.format.is_floating_point()) continue;  // read_scalar gives an integer file's counts
+    for (std::size_t i = 0; i < pub.data.size(); ++i) {
+      const float a = pub.data[i], b = want[i * static_cast<std::size_t>(spec.nchannels)];
+      if (!(a == b || (std::isnan(a) && std::isnan(b)))) {
+        ADD_FAILURE() << p << " value " << i << ": " << a << " against OpenImageIO's " << b;
+        break;
+      }
+    }
+  }
+  // A truncated subset file is declined, and OpenImageIO's reading of it
+  // decides (here: an error naming the file, or its partial image).
+  {
+    const std::string full = (d / "y_zip.exr").string(), cut = (d / "cut.exr").string();
+    std::ifstream in(full, std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() * 2 / 3);
+    detail::ExrInfo info;
+    Image got;
+    EXPECT_FALSE(detail::read_exr_subset(cut, &got, info, no_check, 0));
+    EXPECT_TRUE(got.data.empty());
+  }
+  fs::remove_all(d);
+}
 
 TEST(IO, PngSubsetIsReadAsOpenImageIOReadsIt) {
   // 8/16-bit grey and RGB PNG are read with libpng itself (no OpenImageIO
