@@ -201,6 +201,14 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     EXPECT_EQ(png_only.output.find("codec module"), std::string::npos) << png_only.output;
     EXPECT_TRUE(fs::exists(p("o.png")));
 
+    // So are OpenEXR of one channel or R G B (A), half or float
+    // (src/io/exr_direct.hpp), in and out.
+    write_image(p("in.exr"), rgb, WriteOptions{});
+    const CliRun exr_only = run("blur --image " + p("in.exr") + " --sigma 3 --out " + p("o.exr") + " --bits half --timing");
+    ASSERT_EQ(exr_only.status, 0) << exr_only.output;
+    EXPECT_EQ(exr_only.output.find("codec module"), std::string::npos) << exr_only.output;
+    EXPECT_EQ(read_color(p("o.exr")).width, 24);
+
     const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o.tif"));
     EXPECT_EQ(bad.status, 2) << bad.output;
     for (const char* want : {"writing '", "o.tif", "brume_codec.so", "/nonexistent/brume_codec.so: no such file",

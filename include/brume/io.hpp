@@ -154,9 +154,10 @@ class OutputSet {
  private:
   struct Pending {
     std::string tmp, final_path;
-    int slot;  // in the signal handler's list of temporaries (-1: not listed)
+    int slot;          // in the signal handler's list of temporaries (-1: not listed)
+    std::string flag;  // the option that named the output, for messages
   };
-  void add_pending(const std::string& tmp, const std::string& final_path);
+  void add_pending(const std::string& tmp, const std::string& final_path, const std::string& flag);
   std::vector<Pending> pending_;
 };
 

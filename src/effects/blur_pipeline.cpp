@@ -67,7 +67,7 @@ BlurRun blur_impl(ConstImageView rgb, Image* owned, std::optional<double> sigma,
     for (; i + 16 <= d.size(); i += 16)
       for (int j = 0; j < 16; ++j) {
         const float v = d[i + j];
-        m16[j] = (v > m16[j]) & (v <= std::numeric_limits<float>::max()) ? v : m16[j];
+        m16[j] = ((v > m16[j]) & (v <= std::numeric_limits<float>::max())) ? v : m16[j];
       }
     for (; i < d.size(); ++i)
       if (std::isfinite(d[i])) m16[0] = std::max(m16[0], d[i]);

@@ -1,17 +1,21 @@
-// brume — the OpenEXR subset read with the OpenEXR library itself
-// (io/exr_direct.hpp says which files and why).
+// brume — the OpenEXR subsets read and written with the OpenEXR library
+// itself (io/exr_direct.hpp says which files and why).
 #include "io/exr_direct.hpp"
 
+#include <Imath/half.h>
 #include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFloatAttribute.h>
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStringAttribute.h>
 #include <OpenEXR/ImfThreading.h>
 #include <OpenEXR/ImfVersion.h>
 
 #include <algorithm>
 #include <atomic>
+#include <ctime>
 #include <cstring>
 #include <fstream>
 #include <memory>
@@ -20,7 +24,17 @@
 namespace brume::detail {
 
 namespace {
-std::atomic<std::uint64_t> g_direct_reads{0};
+std::atomic<std::uint64_t> g_direct_reads{0}, g_direct_writes{0};
+
+// OpenEXR compresses and decompresses through its own global pool of
+// threads, which only grows here (OpenImageIO, if loaded later, sets it
+// too). May throw (OpenEXR's exceptions).
+void ensure_pool(int threads) {
+  if (threads <= 0) return;
+  static std::mutex m;
+  std::lock_guard<std::mutex> lock(m);
+  if (Imf::globalThreadCount() < threads) Imf::setGlobalThreadCount(threads);
+}
 
 // The 8-byte preamble: the magic number and the version field, whose flags
 // say tiled, multi-part and deep (non-image) before OpenEXR parses more.
@@ -70,13 +84,7 @@ bool read_exr_subset(const std::string& path, Image* out, ExrInfo& info,
   std::unique_ptr<Imf::InputFile> in;
   Imath::Box2i dw;
   try {
-    if (threads > 0) {
-      // OpenEXR decompresses through its own global pool, which only grows
-      // here (OpenImageIO, if loaded later, sets it too).
-      static std::mutex m;
-      std::lock_guard<std::mutex> lock(m);
-      if (Imf::globalThreadCount() < threads) Imf::setGlobalThreadCount(threads);
-    }
+    ensure_pool(threads);
     in = std::make_unique<Imf::InputFile>(path.c_str(), threads);
     const Imf::Header& h = in->header();
     dw = h.dataWindow();
@@ -123,5 +131,80 @@ bool read_exr_subset(const std::string& path, Image* out, ExrInfo& info,
   *out = std::move(img);
   return true;
 }
+
+namespace {
+// The compressions of the subset by brume's names ("auto": OpenImageIO's
+// default for EXR, zip); -1 for any other.
+int exr_compression(const std::string& name) {
+  static const std::pair<const char*, Imf::Compression> names[] = {
+      {"auto", Imf::ZIP_COMPRESSION},   {"none", Imf::NO_COMPRESSION},    {"rle", Imf::RLE_COMPRESSION},
+      {"zip", Imf::ZIP_COMPRESSION},    {"zips", Imf::ZIPS_COMPRESSION},  {"piz", Imf::PIZ_COMPRESSION},
+      {"pxr24", Imf::PXR24_COMPRESSION}, {"b44", Imf::B44_COMPRESSION},   {"b44a", Imf::B44A_COMPRESSION},
+      {"dwaa", Imf::DWAA_COMPRESSION},  {"dwab", Imf::DWAB_COMPRESSION}};
+  for (const auto& [n, c] : names)
+    if (name == n) return static_cast<int>(c);
+  return -1;
+}
+}  // namespace
+
+bool exr_subset_writable(int channels, bool, bool linear, const std::string& compression) {
+  return (channels == 1 || channels == 3) && linear && exr_compression(compression) >= 0;
+}
+
+bool write_exr_subset(const std::string& path, int width, int height, int channels, bool half, const float* px,
+                      const std::string& compression, const std::string& description, int threads, std::string* why) {
+  try {
+    ensure_pool(threads);
+    // Header(w, h) holds OpenImageIO's defaults for the rest: windows from
+    // (0, 0), pixelAspectRatio 1, screenWindowCenter (0, 0), width 1,
+    // INCREASING_Y.
+    Imf::Header h(width, height);
+    h.compression() = static_cast<Imf::Compression>(exr_compression(compression));
+    const Imf::PixelType type = half ? Imf::HALF : Imf::FLOAT;
+    const std::vector<std::string> names =
+        channels == 1 ? std::vector<std::string>{"Y"} : std::vector<std::string>{"R", "G", "B"};
+    for (const std::string& n : names) h.channels().insert(n, Imf::Channel(type));
+    if (!description.empty()) h.insert("comments", Imf::StringAttribute(description));
+    // OpenImageIO names the DWA level it compresses with (its default, 45,
+    // OpenEXR's too).
+    if (h.compression() == Imf::DWAA_COMPRESSION || h.compression() == Imf::DWAB_COMPRESSION)
+      h.insert("dwaCompressionLevel", Imf::FloatAttribute(45.0f));
+    // OpenImageIO stamps its files with the time of writing (DateTime, in
+    // EXR "capDate"), in local time.
+    const std::time_t now = std::time(nullptr);
+    std::tm local{};
+    localtime_r(&now, &local);
+    char stamp[32];
+    std::strftime(stamp, sizeof stamp, "%Y:%m:%d %H:%M:%S", &local);
+    h.insert("capDate", Imf::StringAttribute(stamp));
+    const std::size_t C = static_cast<std::size_t>(channels);
+    const std::size_t n = C * static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+    // OpenEXR's writer converts no pixel type: half files get halves made
+    // by Imath's conversion (round to nearest even, as OpenImageIO's).
+    std::vector<Imath::half> halves;
+    const char* base = reinterpret_cast<const char*>(px);
+    std::size_t value_bytes = sizeof(float);
+    if (half) {
+      halves.resize(n);
+      for (std::size_t i = 0; i < n; ++i) halves[i] = Imath::half(px[i]);
+      base = reinterpret_cast<const char*>(halves.data());
+      value_bytes = sizeof(Imath::half);
+    }
+    Imf::OutputFile out(path.c_str(), h, threads);
+    const std::size_t xs = C * value_bytes, ys = xs * static_cast<std::size_t>(width);
+    Imf::FrameBuffer fb;
+    for (std::size_t c = 0; c < C; ++c)  // (Slice takes char*; the writer only reads)
+      fb.insert(names[c], Imf::Slice(type, const_cast<char*>(base) + c * value_bytes, xs, ys));
+    out.setFrameBuffer(fb);
+    out.writePixels(height);
+  } catch (const std::exception& e) {
+    if (why) *why = e.what();
+    return false;
+  }
+  ++g_direct_writes;
+  return true;
+}
+
+std::uint64_t exr_direct_writes() { return g_direct_writes.load(); }
 
 }  // namespace brume::detail

@@ -1,4 +1,5 @@
-// brume — OpenEXR files read with the OpenEXR library itself (internal).
+// brume — OpenEXR files read and written with the OpenEXR library itself
+// (internal).
 //
 // OpenImageIO is loaded on first use (src/io/codec.hpp), and that load is
 // ~0.3 s of symbol lookups across Debian's OpenImageIO and its 260
@@ -23,7 +24,8 @@
 // Anything else, or any exception from OpenEXR (a corrupt or truncated
 // file), returns false and the caller reads the file through OpenImageIO
 // as before, which gives its own result or its own error message.
-// Test: IO.ExrSubsetIsReadAsOpenImageIOReadsIt (tests/test_io.cpp).
+// Test: IO.ExrSubsetIsReadAsOpenImageIOReadsIt (tests/test_io.cpp). Writing:
+// below.
 #pragma once
 
 #include <cstdint>
@@ -53,5 +55,25 @@ bool read_exr_subset(const std::string& path, Image* out, ExrInfo& info,
 
 // How many reads of this process took the subset path (for tests).
 std::uint64_t exr_direct_reads();
+
+// The write side: the files brume writes as EXR -- 1 channel (Y) or 3 (R G
+// B), half or float, linear values, compression "auto" (OpenImageIO's
+// default, zip) or a named one without a level (none, rle, zip, zips, piz,
+// pxr24, b44, b44a, dwaa, dwab) -- written by OpenEXR as OpenImageIO's
+// writer writes them: the same header attributes (channels, compression,
+// the windows, lineOrder, pixelAspectRatio, screenWindowCenter and Width,
+// the description as "comments", the time of writing as "capDate",
+// "YYYY:MM:DD HH:MM:SS" in local time), the same values (float to half by
+// OpenEXR's conversion, which OpenImageIO uses), hence the same file byte
+// for byte bar capDate's value (test: IO.ExrSubsetWritesTheFileOpenImageIOWrites).
+// Anything else (levels, other channel counts, sRGB-encoded values) goes
+// through OpenImageIO.
+bool exr_subset_writable(int channels, bool half, bool linear, const std::string& compression);
+// Writes px (w x h x channels floats) to `path`; false and *why on failure
+// (the file may be left partial: the caller writes to a temporary).
+bool write_exr_subset(const std::string& path, int width, int height, int channels, bool half, const float* px,
+                      const std::string& compression, const std::string& description, int threads, std::string* why);
+// How many files this process wrote that way (for tests).
+std::uint64_t exr_direct_writes();
 
 }  // namespace brume::detail

@@ -1027,8 +1027,8 @@ OutputSet::~OutputSet() {
   }
 }
 
-void OutputSet::add_pending(const std::string& tmp, const std::string& final_path) {
-  pending_.push_back({tmp, final_path, register_temp(tmp)});
+void OutputSet::add_pending(const std::string& tmp, const std::string& final_path, const std::string& flag) {
+  pending_.push_back({tmp, final_path, register_temp(tmp), flag});
 }
 
 void OutputSet::write(const std::string& path, const Image& img, const WriteOptions& opts,
@@ -1063,7 +1063,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   ensure_output_folder(path, flag);
   const std::string tmp = temp_path_for(path);
   if (e == ".pfm") {
-    add_pending(tmp, path);
+    add_pending(tmp, path, flag);
     try {
       errno = 0;
       write_pfm(tmp, *src);
@@ -1080,7 +1080,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
     // libpng itself, the file OpenImageIO would write (io/png_direct.hpp),
     // at its deflate settings: png:compressionLevel below, 6 when not given.
     const detail::PngDeflate deflate = png_deflate(parse_compression(path, opts.compression, flag));
-    add_pending(tmp, path);
+    add_pending(tmp, path, flag);
     std::string why;
     errno = 0;
     if (!detail::write_png_subset(tmp, img.width, img.height, img.channels, type == codec::Type::u8 ? 8 : 16,
@@ -1092,6 +1092,23 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
     }
     return;
   }
+  const Compression comp = parse_compression(path, opts.compression, flag);
+  if (e == ".exr" && comp.level < 0 &&
+      detail::exr_subset_writable(img.channels, type == codec::Type::f16, t == Transfer::linear, comp.name)) {
+    // OpenEXR itself, the file OpenImageIO would write bar its time stamp
+    // (io/exr_direct.hpp): no module load.
+    add_pending(tmp, path, flag);
+    std::string why;
+    errno = 0;
+    if (!detail::write_exr_subset(tmp, img.width, img.height, img.channels, type == codec::Type::f16,
+                                  src->data.data(), comp.name, opts.description, exr_threads(), &why)) {
+      const int err = errno;
+      check_output_dir(path, flag);  // the directory gone since the check: say so
+      throw Error(flag + " '" + path + "': write failed: " +
+                  (err == 0 && !why.empty() ? why : write_failure(err) + (why.empty() ? "" : " (" + why + ")")));
+    }
+    return;
+  }
   std::string create_error;
   auto out = codec::api("writing '" + path + "'").create_output(path, &create_error);
   if (!out) throw Error(flag + " '" + path + "': cannot create a writer: " + create_error);
@@ -1100,8 +1117,8 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   if (img.channels == 1) spec.channel_names = {"Y"};
   spec.attributes.push_back(text_attribute("oiio:ColorSpace", t == Transfer::srgb ? "sRGB" : "linear"));
   if (!opts.description.empty()) spec.attributes.push_back(text_attribute("ImageDescription", opts.description));
-  apply_compression(spec, e, parse_compression(path, opts.compression, flag));
-  add_pending(tmp, path);
+  apply_compression(spec, e, comp);
+  add_pending(tmp, path, flag);
   errno = 0;
   if (!out->open(tmp, spec)) {
     // The directory may have gone since check_writable (loading the codec
@@ -1133,7 +1150,7 @@ void OutputSet::write_text(const std::string& path, const std::string& text, con
   if (!fs::is_directory(dir, ec))
     throw Error(flag + " '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
   const std::string tmp = temp_path_for(path);
-  add_pending(tmp, path);
+  add_pending(tmp, path, flag);
   errno = 0;
   std::ofstream f(tmp, std::ios::binary);
   f << text;
@@ -1146,7 +1163,10 @@ void OutputSet::commit() {
     const Pending& p = pending_.front();
     std::error_code ec;
     fs::rename(p.tmp, p.final_path, ec);
-    if (ec) throw Error("cannot move the finished output into place at '" + p.final_path + "': " + ec.message());
+    if (ec) {
+      check_output_dir(p.final_path, p.flag);  // the directory gone since the write: say so
+      throw Error("cannot move the finished output into place at '" + p.final_path + "': " + ec.message());
+    }
     unregister_temp(p.slot);
     pending_.erase(pending_.begin());
   }
