@@ -147,7 +147,7 @@ int exr_compression(const std::string& name) {
 }
 }  // namespace
 
-bool exr_subset_writable(int channels, bool, bool linear, const std::string& compression) {
+bool exr_subset_writable(int channels, bool linear, const std::string& compression) {
   return (channels == 1 || channels == 3) && linear && exr_compression(compression) >= 0;
 }
 

@@ -68,7 +68,7 @@ std::uint64_t exr_direct_reads();
 // for byte bar capDate's value (test: IO.ExrSubsetWritesTheFileOpenImageIOWrites).
 // Anything else (levels, other channel counts, sRGB-encoded values) goes
 // through OpenImageIO.
-bool exr_subset_writable(int channels, bool half, bool linear, const std::string& compression);
+bool exr_subset_writable(int channels, bool linear, const std::string& compression);
 // Writes px (w x h x channels floats) to `path`; false and *why on failure
 // (the file may be left partial: the caller writes to a temporary).
 bool write_exr_subset(const std::string& path, int width, int height, int channels, bool half, const float* px,

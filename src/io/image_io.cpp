@@ -1094,7 +1094,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   }
   const Compression comp = parse_compression(path, opts.compression, flag);
   if (e == ".exr" && comp.level < 0 &&
-      detail::exr_subset_writable(img.channels, type == codec::Type::f16, t == Transfer::linear, comp.name)) {
+      detail::exr_subset_writable(img.channels, t == Transfer::linear, comp.name)) {
     // OpenEXR itself, the file OpenImageIO would write bar its time stamp
     // (io/exr_direct.hpp): no module load.
     add_pending(tmp, path, flag);
