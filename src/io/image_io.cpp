@@ -526,6 +526,13 @@ int exr_threads() { return std::min(omp_get_max_threads(), 64); }
 Raw read_raw(const std::string& path, RawValues want) {
   const bool counts = want == RawValues::counts;
   check_readable(path);
+  // Before any allocation, from a header: the size limits, then memory for
+  // the decoded file (all channels) and the caller's converted copy (<= 3).
+  const auto check_size = [&](int w, int h, int c) {
+    check_declared_size(path, w, h, c);
+    const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
+    check_memory(px * 4 * static_cast<std::uint64_t>(c + 3), "reading '" + path + "'");
+  };
   {
     std::ifstream f(path, std::ios::binary);
     if (const std::optional<PfmHeader> ph = f ? parse_pfm_header(f) : std::nullopt) {
@@ -533,8 +540,7 @@ Raw read_raw(const std::string& path, RawValues want) {
       const std::uintmax_t size = fs::file_size(path, ec);
       const std::uint64_t px = static_cast<std::uint64_t>(ph->width) * static_cast<std::uint64_t>(ph->height);
       if (!ec && size >= ph->offset && (size - ph->offset) / 4 / static_cast<std::uint64_t>(ph->channels) >= px) {
-        check_declared_size(path, ph->width, ph->height, ph->channels);
-        check_memory(px * 4 * static_cast<std::uint64_t>(ph->channels + 3), "reading '" + path + "'");
+        check_size(ph->width, ph->height, ph->channels);
         Raw r;
         r.info.path = path;
         r.info.format = "pnm";  // OpenImageIO's name for the format
@@ -556,14 +562,7 @@ Raw read_raw(const std::string& path, RawValues want) {
     if (counts)  // as below
       map = [](float v, int bits) { return static_cast<float>(std::nearbyint(v * (std::ldexp(1.0, bits) - 1.0))); };
     if (want == RawValues::srgb_linear) map = [](float v, int) { return srgb_to_linear(v); };
-    if (detail::read_png_subset(
-            path, &r.img, pi,
-            [&](int w, int h, int c) {
-              check_declared_size(path, w, h, c);
-              const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
-              check_memory(px * 4 * static_cast<std::uint64_t>(c + 3), "reading '" + path + "'");
-            },
-            map)) {
+    if (detail::read_png_subset(path, &r.img, pi, check_size, map)) {
       r.info.path = path;
       r.info.format = "png";
       r.info.integer = true;
@@ -581,14 +580,7 @@ Raw read_raw(const std::string& path, RawValues want) {
     // OpenImageIO below.
     Raw r;
     detail::ExrInfo ei;
-    if (detail::read_exr_subset(
-            path, &r.img, ei,
-            [&](int w, int h, int c) {
-              check_declared_size(path, w, h, c);
-              const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
-              check_memory(px * 4 * static_cast<std::uint64_t>(c + 3), "reading '" + path + "'");
-            },
-            exr_threads())) {
+    if (detail::read_exr_subset(path, &r.img, ei, check_size, exr_threads())) {
       r.info.path = path;
       r.info.format = "openexr";
       r.info.integer = false;
@@ -610,11 +602,7 @@ Raw read_raw(const std::string& path, RawValues want) {
   r.info.description = spec.description;
   if (spec.width <= 0 || spec.height <= 0 || spec.channels <= 0)
     throw Error("cannot read '" + path + "': empty image");
-  // Refused before any allocation: the header alone decides.
-  check_declared_size(path, spec.width, spec.height, spec.channels);
-  const std::uint64_t px = static_cast<std::uint64_t>(spec.width) * static_cast<std::uint64_t>(spec.height);
-  // The decoded file (all channels) and the caller's converted copy (≤ 3 channels).
-  check_memory(px * 4 * static_cast<std::uint64_t>(spec.channels + 3), "reading '" + path + "'");
+  check_size(spec.width, spec.height, spec.channels);  // refused before any allocation: the header decides
   r.img = Image(spec.width, spec.height, spec.channels);
   if (!in->read_float(r.img.data.data())) {
     std::string e = in->error();
