@@ -208,6 +208,12 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     ASSERT_EQ(exr_only.status, 0) << exr_only.output;
     EXPECT_EQ(exr_only.output.find("codec module"), std::string::npos) << exr_only.output;
     EXPECT_EQ(read_color(p("o.exr")).width, 24);
+    // And Radiance HDR of the common form (src/io/hdr_direct.hpp).
+    write_image(p("in.hdr"), rgb, WriteOptions{});
+    const CliRun hdr_only = run("blur --image " + p("in.hdr") + " --sigma 3 --out " + p("o.hdr") + " --timing");
+    ASSERT_EQ(hdr_only.status, 0) << hdr_only.output;
+    EXPECT_EQ(hdr_only.output.find("codec module"), std::string::npos) << hdr_only.output;
+    EXPECT_EQ(read_color(p("o.hdr")).width, 24);
 
     const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o.tif"));
     EXPECT_EQ(bad.status, 2) << bad.output;

@@ -7,9 +7,9 @@
 // diffusion. So libbrume does not link OpenImageIO: the few calls it makes
 // live in a module, brume_codec.so (src/io/codec_oiio.cpp), that brume
 // dlopens the first time a file needs it. A run that reads and writes only
-// PFM (brume's own reader and writer, src/io/image_io.cpp) and the PNG and
-// OpenEXR subsets (src/io/png_direct.hpp, src/io/exr_direct.hpp), and
-// every run that fails its checks,
+// PFM (brume's own reader and writer, src/io/image_io.cpp) and the PNG,
+// OpenEXR and Radiance subsets (src/io/png_direct.hpp, exr_direct.hpp,
+// hdr_direct.hpp), and every run that fails its checks,
 // `--help` and `--version` never load it.
 //
 // Where the module is looked for: $BRUME_CODEC_MODULE (a path) when set,

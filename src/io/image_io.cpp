@@ -27,6 +27,7 @@
 #include "brume/pipeline.hpp"
 #include "io/codec.hpp"
 #include "io/exr_direct.hpp"
+#include "io/hdr_direct.hpp"
 #include "io/png_direct.hpp"
 
 namespace brume {
@@ -387,8 +388,8 @@ void check_memory(std::uint64_t bytes, const std::string& what) {
 }
 
 ImageHeader read_header(const std::string& path) {
-  // The PNG and OpenEXR subsets' headers without OpenImageIO
-  // (io/png_direct.hpp, io/exr_direct.hpp).
+  // The PNG, OpenEXR and Radiance subsets' headers without OpenImageIO
+  // (io/png_direct.hpp, io/exr_direct.hpp, io/hdr_direct.hpp).
   check_readable(path);
   detail::PngInfo pi;
   if (detail::read_png_subset(path, nullptr, pi, [&](int w, int h, int c) { check_declared_size(path, w, h, c); }))
@@ -396,6 +397,9 @@ ImageHeader read_header(const std::string& path) {
   detail::ExrInfo ei;
   if (detail::read_exr_subset(path, nullptr, ei, [&](int w, int h, int c) { check_declared_size(path, w, h, c); }, 0))
     return {ei.width, ei.height, ei.channels, "openexr"};
+  int hw = 0, hh = 0;
+  if (detail::read_hdr_subset(path, nullptr, hw, hh, [&](int w, int h, int c) { check_declared_size(path, w, h, c); }))
+    return {hw, hh, 3, "hdr"};
   auto in = open_image(path);
   const codec::InputSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.channels <= 0) throw Error("cannot read '" + path + "': empty image");
@@ -587,6 +591,19 @@ Raw read_raw(const std::string& path, RawValues want) {
       r.info.bits = ei.bits;
       r.info.channel_names = std::move(ei.channel_names);
       r.info.description = std::move(ei.description);
+      return r;
+    }
+  }
+  {
+    // Radiance HDR in its common form: brume itself (io/hdr_direct.hpp).
+    Raw r;
+    int w = 0, h = 0;
+    if (detail::read_hdr_subset(path, &r.img, w, h, check_size)) {
+      r.info.path = path;
+      r.info.format = "hdr";
+      r.info.integer = false;
+      r.info.bits = 32;
+      r.info.channel_names = {"R", "G", "B"};
       return r;
     }
   }
@@ -1094,6 +1111,17 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
       check_output_dir(path, flag);  // the directory gone since the check: say so
       throw Error(flag + " '" + path + "': write failed: " +
                   (err == 0 && !why.empty() ? why : write_failure(err) + (why.empty() ? "" : " (" + why + ")")));
+    }
+    return;
+  }
+  if (e == ".hdr" && t == Transfer::linear && detail::hdr_subset_writable(src->data.data(), src->data.size())) {
+    // brume itself, the file OpenImageIO would write (io/hdr_direct.hpp).
+    add_pending(tmp, path, flag);
+    errno = 0;
+    if (!detail::write_hdr_subset(tmp, img.width, img.height, src->data.data())) {
+      const int err = errno;
+      check_output_dir(path, flag);  // the directory gone since the check: say so
+      throw Error(flag + " '" + path + "': write failed: " + write_failure(err));
     }
     return;
   }
