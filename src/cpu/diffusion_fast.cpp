@@ -473,14 +473,16 @@ __attribute__((always_inline)) inline void general_row_body(const RowSource<floa
     const RunArgs args{in(y),        in(static_cast<int>(yu0)), in(static_cast<int>(yu1)), in(static_cast<int>(yd0)),
                        in(static_cast<int>(yd1)), orow,         t.fr.data(),              t.wl.data(),
                        t.wr.data(),  t.wu.data(),               t.wd.data()};
-    // The columns [p, q) whose horizontal taps (x -+ n, x -+ (n+1)) leave
+    // The columns [p, qe) whose horizontal taps (x -+ n, x -+ (n+1)) leave
     // the row: F's row and the rate row at the taps' columns p - n - 1 ..
-    // q + n, mirrored, are copied side by side, and the same run kernel
+    // qe + n, mirrored, are copied side by side, and the same run kernel
     // reads them through pointers shifted so that column c is copy entry
-    // c - (p - n - 1). Every tap and rate sample is then the value
-    // pixel_from_rows reads at the mirrored index, and the kernel evaluates
-    // its formulas in its order: the same bits (test: DiffusionFastPath's
-    // border cases), four to sixteen pixels a vector instead of one with
+    // c - (p - n - 1) (formed as integers: the shifted base itself may lie
+    // outside the copy, every access lands inside). Every tap and rate
+    // sample is then the value pixel_from_rows reads at the mirrored index,
+    // and the kernel evaluates its formulas in its order: the same bits
+    // (test: DiffusionSimd.OneIterationIsThePerPixelFormula, offsets up to
+    // several row widths), four to sixteen pixels a vector instead of one with
     // per-tap mirroring (the border columns, up to 2 (n + 1) a row, took 5 %
     // of a space-variant blur at sigma 25 one pixel at a time, and more in
     // the top band, whose offsets are the largest). A segment whose copy
@@ -501,10 +503,14 @@ __attribute__((always_inline)) inline void general_row_body(const RowSource<floa
         t.rpad[j] = rrow[col];
       }
       const std::ptrdiff_t shift = static_cast<std::ptrdiff_t>(n) + 1 - p;  // column c -> entry c + shift
+      auto shifted = [](const float* base, std::ptrdiff_t values) {
+        return reinterpret_cast<const float*>(reinterpret_cast<std::uintptr_t>(base) +
+                                              static_cast<std::uintptr_t>(values * static_cast<std::ptrdiff_t>(sizeof(float))));
+      };
       RunArgs pa = args;
-      pa.s = t.fpad.data() + shift * 4;
+      pa.s = shifted(t.fpad.data(), shift * 4);
       RateRows pq = q;
-      pq.c = t.rpad.data() + shift;
+      pq.c = shifted(t.rpad.data(), shift);
       run(pa, pq, edge_mode, p, qe, n);
     };
     border(x, a);

@@ -1,5 +1,7 @@
-// brume — image and range-map files: PFM directly, the other formats through
-// OpenImageIO, in the module loaded on first use (src/io/codec.hpp; see brume/io.hpp).
+// brume — image and range-map files: PFM directly; the common PNG, OpenEXR
+// and Radiance HDR files through png_direct, exr_direct (the OpenEXR
+// library) and hdr_direct; everything else through OpenImageIO, in the
+// module loaded on first use (src/io/codec.hpp; see brume/io.hpp).
 #include <omp.h>
 
 #include <openssl/evp.h>
