@@ -687,8 +687,7 @@ TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
   // decides (here: an error naming the file, or its partial image).
   {
     const std::string full = (d / "y_zip.exr").string(), cut = (d / "cut.exr").string();
-    std::ifstream in(full, std::ios::binary);
-    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string bytes = file_bytes(full);
     std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() * 2 / 3);
     detail::ExrInfo info;
     Image got;
@@ -706,10 +705,6 @@ TEST(IO, ExrSubsetWritesTheFileOpenImageIOWrites) {
   // (capDate, the time of writing) are blanked. Outside the subset (a
   // level) OpenImageIO still writes.
   fs::path d = tmpdir();
-  auto bytes_of = [](const fs::path& p) {
-    std::ifstream in(p, std::ios::binary);
-    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  };
   // The capDate attribute: name, type "string", a 4-byte size, the value.
   auto blank_stamp = [](std::string b) {
     const std::string key("capDate\0string\0", 15);
@@ -751,7 +746,7 @@ TEST(IO, ExrSubsetWritesTheFileOpenImageIOWrites) {
         ASSERT_TRUE(out && out->open(theirs.string(), spec)) << tag;
         ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, img.data.data())) << tag;
         ASSERT_TRUE(out->close()) << tag;
-        const std::string a = blank_stamp(bytes_of(mine)), b = blank_stamp(bytes_of(theirs));
+        const std::string a = blank_stamp(file_bytes(mine)), b = blank_stamp(file_bytes(theirs));
         EXPECT_NE(a, "no capDate") << tag;
         EXPECT_TRUE(a == b) << tag << ": " << a.size() << " bytes against OpenImageIO's " << b.size();
         ++compared;
@@ -840,8 +835,7 @@ TEST(IO, HdrSubsetIsReadAsOpenImageIOReadsIt) {
   // Declined: another orientation, XYZE, bytes after the image, a short
   // file (each left to OpenImageIO, whose reading or message stands).
   const std::string rle = (d / "rle.hdr").string();
-  std::ifstream in(rle, std::ios::binary);
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bytes = file_bytes(rle);
   const std::size_t res = bytes.find("-Y 11 +X 37\n");
   ASSERT_NE(res, std::string::npos);
   std::string flipped = bytes, xyze = bytes;
@@ -871,10 +865,6 @@ TEST(IO, HdrSubsetWritesTheFileOpenImageIOWrites) {
   // large and tiny exponents, NaN in each component. A negative value
   // leaves the file to OpenImageIO (the counter does not move).
   fs::path d = tmpdir();
-  auto bytes_of = [](const fs::path& p) {
-    std::ifstream in(p, std::ios::binary);
-    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  };
   int compared = 0;
   for (const auto& [w, h] : {std::pair{40, 3}, std::pair{300, 7}, std::pair{5, 4}, std::pair{8, 2}, std::pair{1, 1}}) {
     Image img(w, h, 3);
@@ -897,7 +887,7 @@ TEST(IO, HdrSubsetWritesTheFileOpenImageIOWrites) {
     ASSERT_TRUE(out && out->open(theirs.string(), spec)) << w;
     ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, img.data.data())) << w;
     ASSERT_TRUE(out->close()) << w;
-    const std::string a = bytes_of(mine), b = bytes_of(theirs);
+    const std::string a = file_bytes(mine), b = file_bytes(theirs);
     EXPECT_TRUE(a == b) << w << "x" << h << ": " << a.size() << " bytes against OpenImageIO's " << b.size();
     ++compared;
   }
