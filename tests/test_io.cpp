@@ -1192,6 +1192,36 @@ TEST(IO, PngImageDataIsDecodedExactly) {
   fs::remove_all(d);
 }
 
+namespace {
+// The PNG OpenImageIO's writer makes of img's values at `bits` (8 or 16),
+// with brume's attributes for transfer t and description desc, at the
+// compression setting comp (brume's spelling: auto, zip:N, none, rle).
+void write_png_with_oiio(const std::string& path, const Image& img, const char* bits, Transfer t,
+                         const std::string& comp, const std::string& desc) {
+  OIIO::ImageSpec spec(img.width, img.height, img.channels,
+                       std::string(bits) == "8" ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16);
+  if (img.channels == 1) spec.channelnames = {"Y"};
+  spec.attribute("oiio:ColorSpace", t == Transfer::srgb ? "sRGB" : "linear");
+  if (!desc.empty()) spec.attribute("ImageDescription", desc);
+  if (comp.rfind("zip:", 0) == 0) spec.attribute("png:compressionLevel", std::stoi(comp.substr(4)));
+  if (comp == "none") spec.attribute("png:compressionLevel", 0);
+  if (comp == "rle") spec.attribute("compression", "rle"), spec.attribute("png:filter", 0x20);
+  auto out = OIIO::ImageOutput::create(path);
+  ASSERT_TRUE(out && out->open(path, spec)) << path;
+  if (t == Transfer::srgb && std::string(bits) == "8") {
+    std::vector<std::uint8_t> codes(img.data.size());
+    srgb_encode_8(img.data.data(), codes.data(), codes.size());
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, codes.data()));
+  } else {
+    std::vector<float> v = img.data;
+    if (t == Transfer::srgb)
+      for (float& x : v) x = linear_to_srgb(std::max(x, 0.0f));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, v.data()));
+  }
+  ASSERT_TRUE(out->close());
+}
+}  // namespace
+
 TEST(IO, PngFastIsAPngOfTheSamePixels) {
   // `--compression fast` (brume batch's PNG default) writes the image data
   // itself (Up rows, libdeflate level 1, IDAT chunks of 1 MiB) after the
@@ -1257,6 +1287,95 @@ TEST(IO, PngFastIsAPngOfTheSamePixels) {
   fs::remove_all(d);
 }
 
+TEST(IO, PngLongImageDataIsDeflatedInSegments) {
+  // Image data over detail::kDeflateSegment bytes are filtered by brume with
+  // libpng's choice per row and deflated in segments on several threads
+  // (png_direct.hpp). Against OpenImageIO's writer (libpng's single stream)
+  // on the same values and settings: the same bytes before the image data,
+  // the same filtered rows once inflated (so the same filter on every row:
+  // a tie between two filters' sums, or between Paeth's up and up-left
+  // neighbours, broken the other way fails it 8x), a stream of about the
+  // same length (each segment primed with the 32 KiB before it), and the
+  // same file from 1, 2 and 3 threads. Shapes:
+  // RGB 8-bit sRGB (the 8-bit codes), grey 16-bit linear (big-endian
+  // counts), one column (libpng drops the filters that read to the left)
+  // and one row (those that read the row above).
+  fs::path d = tmpdir();
+  std::uint32_t seed = 11;
+  auto rnd = [&] { return static_cast<float>((seed = seed * 1664525u + 1013904223u) >> 8) / 16777216.0f; };
+  struct Case {
+    int w, h, c;
+    const char* bits;
+    Transfer t;
+  };
+  auto image_data = [](const std::string& b) {  // the bytes before the first IDAT, the zlib stream
+    const std::size_t first = b.find("IDAT") - 4;
+    std::string z;
+    for (std::size_t at = first; at + 8 <= b.size();) {
+      const std::uint32_t n = (std::uint32_t{static_cast<unsigned char>(b[at])} << 24) |
+                              (std::uint32_t{static_cast<unsigned char>(b[at + 1])} << 16) |
+                              (std::uint32_t{static_cast<unsigned char>(b[at + 2])} << 8) |
+                              static_cast<unsigned char>(b[at + 3]);
+      if (b.compare(at + 4, 4, "IDAT") == 0) z += b.substr(at + 8, n);
+      at += 12 + n;
+    }
+    return std::make_pair(b.substr(0, first), z);
+  };
+  auto inflate_all = [](const std::string& z, std::size_t n) {
+    std::string raw(n + 1, '\0');
+    uLongf got = static_cast<uLongf>(raw.size());
+    const int rc = uncompress(reinterpret_cast<Bytef*>(raw.data()), &got, reinterpret_cast<const Bytef*>(z.data()),
+                              static_cast<uLong>(z.size()));
+    EXPECT_EQ(rc, Z_OK);
+    raw.resize(got);
+    return raw;
+  };
+  for (const Case& k : {Case{480, 400, 3, "8", Transfer::srgb}, Case{300, 480, 1, "16", Transfer::linear},
+                        Case{1, 140000, 1, "16", Transfer::linear}, Case{270000, 1, 1, "8", Transfer::linear}}) {
+    Image img(k.w, k.h, k.c);
+    for (int y = 0; y < k.h; ++y)  // smooth gradients with noise in a band: every filter wins somewhere
+      for (int x = 0; x < k.w; ++x)
+        for (int ch = 0; ch < k.c; ++ch) {
+          const float smooth = static_cast<float>((x + 2 * y + 37 * ch) % 400) / 400.0f;
+          img.at(x, y, ch) = (y + x) % 97 < 30 ? rnd() : smooth;
+        }
+    const std::size_t raw_bytes = (static_cast<std::size_t>(k.w) * k.c * (k.bits[0] == '8' ? 1 : 2) + 1) * k.h;
+    ASSERT_GT(raw_bytes, detail::kDeflateSegment);
+    for (const char* comp : {"auto", "zip:1", "zip:9", "none", "rle"}) {
+      const std::string tag = std::to_string(k.w) + "x" + std::to_string(k.h) + "x" + std::to_string(k.c) + " " +
+                              k.bits + " bits, " + comp;
+      WriteOptions o;
+      o.bits = k.bits;
+      o.transfer = k.t;
+      o.compression = comp;
+      std::string mine[3];
+      for (int t = 1; t <= 3; ++t) {
+        const IoThreads io(t);
+        const std::string p = (d / ("mine" + std::to_string(t) + ".png")).string();
+        write_image(p, img, o);
+        mine[t - 1] = file_bytes(p);
+      }
+      EXPECT_TRUE(mine[0] == mine[1] && mine[0] == mine[2]) << tag << ": the file depends on the thread count";
+      const std::string theirs = (d / "theirs.png").string();
+      write_png_with_oiio(theirs, img, k.bits, k.t, comp, "");
+      const auto [my_head, my_z] = image_data(mine[0]);
+      const auto [their_head, their_z] = image_data(file_bytes(theirs));
+      EXPECT_EQ(my_head, their_head) << tag << ": the chunks before the image data differ";
+      EXPECT_NE(my_z, their_z) << tag << ": one stream, not segments";
+      const std::string my_raw = inflate_all(my_z, raw_bytes), their_raw = inflate_all(their_z, raw_bytes);
+      ASSERT_EQ(their_raw.size(), raw_bytes) << tag;
+      EXPECT_TRUE(my_raw == their_raw) << tag << ": other filtered rows than libpng's";
+      // Segments primed with the 32 KiB before them: within 0.5 % (+ 64
+      // bytes) of the single stream (without the priming, the random
+      // band's matches across each seam are lost).
+      EXPECT_LE(static_cast<double>(my_z.size()), 1.005 * static_cast<double>(their_z.size()) + 64) << tag;
+      auto values = [&](const std::string& p) { return k.c == 3 ? read_color(p).data : read_scalar(p).data; };
+      EXPECT_TRUE(values((d / "mine1.png").string()) == values(theirs)) << tag;
+    }
+  }
+  fs::remove_all(d);
+}
+
 TEST(IO, PngSubsetWritesTheFileOpenImageIOWrites) {
   // brume writes 1- and 3-channel 8/16-bit PNG with libpng itself: the file
   // must be the one OpenImageIO writes from the same values and attributes,
@@ -1279,26 +1398,7 @@ TEST(IO, PngSubsetWritesTheFileOpenImageIOWrites) {
               o.description = desc;
               const std::string mine = (d / "mine.png").string(), theirs = (d / "theirs.png").string();
               write_image(mine, img, o);
-              OIIO::ImageSpec spec(w, 9, c, std::string(bits) == "8" ? OIIO::TypeDesc::UINT8 : OIIO::TypeDesc::UINT16);
-              if (c == 1) spec.channelnames = {"Y"};
-              spec.attribute("oiio:ColorSpace", t == Transfer::srgb ? "sRGB" : "linear");
-              if (*desc) spec.attribute("ImageDescription", desc);
-              if (std::string(comp) == "zip:1") spec.attribute("png:compressionLevel", 1);
-              if (std::string(comp) == "none") spec.attribute("png:compressionLevel", 0);
-              if (std::string(comp) == "rle") spec.attribute("compression", "rle"), spec.attribute("png:filter", 0x20);
-              auto out = OIIO::ImageOutput::create(theirs);
-              ASSERT_TRUE(out && out->open(theirs, spec));
-              if (t == Transfer::srgb && std::string(bits) == "8") {
-                std::vector<std::uint8_t> codes(img.data.size());
-                srgb_encode_8(img.data.data(), codes.data(), codes.size());
-                ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, codes.data()));
-              } else {
-                std::vector<float> v = img.data;
-                if (t == Transfer::srgb)
-                  for (float& x : v) x = linear_to_srgb(std::max(x, 0.0f));
-                ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, v.data()));
-              }
-              ASSERT_TRUE(out->close());
+              write_png_with_oiio(theirs, img, bits, t, comp, desc);
               const std::string ba = file_bytes(mine), bb = file_bytes(theirs);
               EXPECT_TRUE(ba == bb) << "width " << w << ", " << c << " channels, " << bits << " bits, "
                                     << (t == Transfer::srgb ? "sRGB" : "linear") << ", " << comp << ", description '"

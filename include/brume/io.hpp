@@ -105,6 +105,24 @@ class CreateOutputFolders {
   bool outer_;
 };
 
+// While one lives, on its thread, the codecs of image reads and writes use
+// at most n threads (n > 0; 0: OpenMP's count, the default outside any
+// scope): OpenEXR's pool when it decompresses or compresses, the segments
+// of a PNG's deflate. The command line opens one with --threads around
+// every job, and a batch frame with its worker's --threads, so that a
+// setting that bounds the effect bounds the files' coding too. The bytes
+// written do not depend on it.
+class IoThreads {
+ public:
+  explicit IoThreads(int n);
+  ~IoThreads();
+  IoThreads(const IoThreads&) = delete;
+  IoThreads& operator=(const IoThreads&) = delete;
+
+ private:
+  int outer_;
+};
+
 // sRGB transfer (IEC 61966-2-1), exact piecewise form.
 float srgb_to_linear(float v);
 float linear_to_srgb(float v);

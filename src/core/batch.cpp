@@ -747,6 +747,7 @@ BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, c
     // The frame's folders are made as its outputs are written, so that a
     // frame that fails before writing leaves none behind.
     const CreateOutputFolders lazily;
+    const IoThreads io(exec.threads);  // the worker's --threads bounds its codecs too
     RunContext ctx;
     ctx.argv = argv;
     ctx.given = f.given;

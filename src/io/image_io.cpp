@@ -40,7 +40,11 @@ std::string to_string(Transfer t) { return enum_name(transfer_names(), t); }
 
 namespace {
 thread_local bool t_create_folders = false;  // inside a CreateOutputFolders scope
+thread_local int t_io_threads = 0;           // an IoThreads scope's count (0: none)
 }  // namespace
+
+IoThreads::IoThreads(int n) : outer_(t_io_threads) { t_io_threads = n > 0 ? n : 0; }
+IoThreads::~IoThreads() { t_io_threads = outer_; }
 
 CreateOutputFolders::CreateOutputFolders() : outer_(t_create_folders) { t_create_folders = true; }
 CreateOutputFolders::~CreateOutputFolders() { t_create_folders = outer_; }
@@ -520,12 +524,13 @@ bool read_pfm_pixels(std::ifstream& f, const PfmHeader& ph, Image& img) {
   return true;
 }
 
-// Threads OpenEXR may use to decompress a subset file (its own pool, as
-// OpenImageIO's reader used it: not --threads, which reaches no reader):
-// OpenMP's count (the cores, or OMP_NUM_THREADS). A 1600 x 1120 zip-
-// compressed float range map took 45-60 ms on the calling thread, 24-38 ms
-// with two (OpenImageIO: 29-40 ms; AMD EPYC Zen 4, 2 vCPU, 2026-12-03).
-int exr_threads() { return std::min(omp_get_max_threads(), 64); }
+// Threads the codecs may use (brume/io.hpp, IoThreads): the scope's count
+// (--threads), else OpenMP's (the cores, or OMP_NUM_THREADS). OpenEXR's pool
+// for a subset file: a 1600 x 1120 zip-compressed float range map took
+// 45-60 ms on the calling thread, 24-38 ms with two (OpenImageIO: 29-40 ms;
+// AMD EPYC Zen 4, 2 vCPU, 2026-12-03).
+int io_threads() { return t_io_threads > 0 ? t_io_threads : omp_get_max_threads(); }
+int exr_threads() { return std::min(io_threads(), 64); }
 
 // Read every channel of the first subimage as float. Integer files are read
 // as their raw counts (not normalised) when `counts` is set.
@@ -1086,7 +1091,8 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
                                                                                          : 0)) {
     // libpng itself, the file OpenImageIO would write (io/png_direct.hpp),
     // at its deflate settings: png:compressionLevel below, 6 when not given.
-    const detail::PngDeflate deflate = png_deflate(parse_compression(path, opts.compression, flag));
+    detail::PngDeflate deflate = png_deflate(parse_compression(path, opts.compression, flag));
+    deflate.threads = std::min(io_threads(), 64);
     add_pending(tmp, path, flag);
     std::string why;
     errno = 0;

@@ -13,6 +13,7 @@
 #include <libdeflate.h>
 #include <png.h>
 #include <strings.h>
+#include <omp.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -190,6 +191,71 @@ bool write_chunk(std::FILE* f, const char* type, const unsigned char* data, std:
   put_be32(crc, c);
   return std::fwrite(head, 1, 8, f) == 8 && (len == 0 || std::fwrite(data, 1, len, f) == len) &&
          std::fwrite(crc, 1, 4, f) == 4;
+}
+
+// libpng's choice of row filter (pngwutil.c, png_write_find_filter, 1.6):
+// each filter in `mask` (1 None, 2 Sub, 4 Up, 8 Average, 16 Paeth, libpng's
+// PNG_FILTER_* >> 3) is applied to row r (n bytes, bpp bytes a pixel; p the
+// row above, zeros above the first) and scored by the sum over its bytes of
+// v < 128 ? v : 256 - v (the byte read as signed, its magnitude); the first
+// least score wins (strictly less replaces, in the order None, Sub, Up,
+// Average, Paeth), and a mask of one filter applies it unscored. libpng
+// stops scoring a filter once its partial sum exceeds the best so far; the
+// full sum then exceeds it too, so the choice is the same. Writes the
+// filter byte and the filtered row to out (n + 1 bytes); tmp holds 4 n.
+unsigned filter_cost(unsigned char v) { return v < 128 ? v : 256u - v; }
+void choose_filter(const unsigned char* __restrict r, const unsigned char* __restrict p, std::size_t n, int bpp,
+                   unsigned mask, unsigned char* __restrict out, unsigned char* __restrict tmp) {
+  unsigned char* __restrict c1 = tmp;           // Sub
+  unsigned char* __restrict c2 = tmp + n;       // Up
+  unsigned char* __restrict c3 = tmp + 2 * n;   // Average
+  unsigned char* __restrict c4 = tmp + 3 * n;   // Paeth
+  const std::size_t b = std::min<std::size_t>(static_cast<std::size_t>(bpp), n);
+  for (std::size_t i = 0; i < b; ++i) {  // no pixel to the left: a = c = 0
+    c1[i] = r[i];
+    c2[i] = static_cast<unsigned char>(r[i] - p[i]);
+    c3[i] = static_cast<unsigned char>(r[i] - (p[i] >> 1));
+    c4[i] = static_cast<unsigned char>(r[i] - p[i]);  // Paeth's predictor is b there
+  }
+#pragma omp simd
+  for (std::size_t i = b; i < n; ++i) {
+    const int a = r[i - b], up = p[i], c = p[i - b];
+    c1[i] = static_cast<unsigned char>(r[i] - a);
+    c2[i] = static_cast<unsigned char>(r[i] - up);
+    c3[i] = static_cast<unsigned char>(r[i] - ((a + up) >> 1));
+    const int q = up - c, s = a - c;  // libpng's p and pc
+    const int pa = q < 0 ? -q : q, pb = s < 0 ? -s : s, pc = q + s < 0 ? -(q + s) : q + s;
+    const int pred = (pa <= pb && pa <= pc) ? a : (pb <= pc) ? up : c;
+    c4[i] = static_cast<unsigned char>(r[i] - pred);
+  }
+  const unsigned char* rows[5] = {r, c1, c2, c3, c4};
+  int best = 0;
+  if (std::popcount(mask) == 1) {
+    best = std::countr_zero(mask);
+  } else {
+    std::size_t s0 = 0, s1 = 0, s2 = 0, s3 = 0, s4 = 0;
+#pragma omp simd reduction(+ : s0, s1, s2, s3, s4)
+    for (std::size_t i = 0; i < n; ++i) {
+      s0 += filter_cost(r[i]), s1 += filter_cost(c1[i]), s2 += filter_cost(c2[i]);
+      s3 += filter_cost(c3[i]), s4 += filter_cost(c4[i]);
+    }
+    const std::size_t sums[5] = {s0, s1, s2, s3, s4};
+    std::size_t mins = (mask & 1u) ? s0 : SIZE_MAX - 256;  // libpng's start when None is not tried
+    for (int f = 1; f < 5; ++f)
+      if ((mask >> f & 1u) && sums[f] < mins) mins = sums[f], best = f;
+  }
+  out[0] = static_cast<unsigned char>(best);
+  std::memcpy(out + 1, rows[best], n);
+}
+
+// A zlib stream of image data to f as IDAT chunks of 1 MiB (the last
+// shorter), then IEND. False on a failed write (errno says why).
+bool write_image_data(std::FILE* f, const unsigned char* z, std::size_t zlen) {
+  errno = 0;
+  constexpr std::size_t kIdat = std::size_t{1} << 20;
+  for (std::size_t at = 0; at < zlen; at += kIdat)
+    if (!write_chunk(f, "IDAT", z + at, std::min(kIdat, zlen - at))) return false;
+  return write_chunk(f, "IEND", nullptr, 0);
 }
 
 // The image data of a non-interlaced PNG of the subset, unfiltered, written
@@ -403,19 +469,23 @@ bool write_png_subset(const std::string& path, int width, int height, int channe
   const std::size_t row_values = static_cast<std::size_t>(width) * channels;
   std::vector<unsigned char> row(row_values * (bits / 8));
   std::string cs = colorspace, desc = description;  // (libpng keeps char* to them until png_write_info)
-  // Row y's counts as PNG stores them (16 bits: big-endian), in `row`.
-  auto fill_row = [&](std::size_t y) {
+  const std::size_t stride_bytes = row_values * (bits / 8) + 1;  // a filtered row: its filter byte, its counts
+  // Row y's counts as PNG stores them (16 bits: big-endian), into dst.
+  auto counts_into = [&](std::size_t y, unsigned char* dst) {
     const std::size_t base = y * row_values;
     if (codes) {
-      std::memcpy(row.data(), codes + base, row_values);
+      std::memcpy(dst, codes + base, row_values);
     } else if (bits == 8) {
-      for (std::size_t i = 0; i < row_values; ++i) row[i] = static_cast<unsigned char>(oiio_count(values[base + i], 255.0f));
+      for (std::size_t i = 0; i < row_values; ++i) dst[i] = static_cast<unsigned char>(oiio_count(values[base + i], 255.0f));
     } else {
       for (std::size_t i = 0; i < row_values; ++i) {
         const unsigned c = oiio_count(values[base + i], 65535.0f);
-        row[2 * i] = static_cast<unsigned char>(c >> 8), row[2 * i + 1] = static_cast<unsigned char>(c);
+        dst[2 * i] = static_cast<unsigned char>(c >> 8), dst[2 * i + 1] = static_cast<unsigned char>(c);
       }
     }
+  };
+  auto fill_row = [&](std::size_t y) {  // into `row`
+    counts_into(y, row.data());
     return row.data();
   };
   png_text text[2];
@@ -472,15 +542,83 @@ bool write_png_subset(const std::string& path, int width, int height, int channe
       *error = "libdeflate could not compress the image data";
       return false;
     }
-    errno = 0;
-    constexpr std::size_t kIdat = std::size_t{1} << 20;
-    for (std::size_t at = 0; at < zlen; at += kIdat)
-      if (!write_chunk(g.f, "IDAT", z.data() + at, std::min(kIdat, zlen - at))) {
-        error->clear();  // errno says why
-        return false;
+    if (!write_image_data(g.f, z.data(), zlen)) {
+      error->clear();  // errno says why
+      return false;
+    }
+  } else if (stride_bytes * static_cast<std::size_t>(height) > kDeflateSegment) {
+    // zlib's deflate in segments on several threads (png_direct.hpp): the
+    // rows' counts, libpng's filter choice per row, each segment of
+    // kDeflateSegment filtered bytes deflated by its own stream primed with
+    // the 32 KiB before it, ended by a sync flush (the last by the end of
+    // the stream), the Adler-32 of all of them after.
+    const std::size_t rowbytes = stride_bytes - 1, h = static_cast<std::size_t>(height);
+    const int bpp = channels * bits / 8, t = std::max(1, deflate.threads);
+    // libpng's filters (png_write_IHDR, png_write_start_row): all five at
+    // 8 and 16 bits, Up alone for rle; none that reads the row above for a
+    // one-row image, none that reads the pixel to the left for one column.
+    unsigned mask = deflate.rle ? 4u : 31u;
+    if (height == 1) mask &= ~(4u | 8u | 16u);
+    if (width == 1) mask &= ~(2u | 8u | 16u);
+    if (mask == 0) mask = 1u;
+    std::vector<unsigned char> counts(codes ? 0 : rowbytes * h), zero(rowbytes, 0);
+    std::vector<unsigned char> raw(stride_bytes * h), tmp(4 * rowbytes * static_cast<std::size_t>(t));
+    const unsigned char* cnt = codes ? codes : counts.data();
+    if (!codes) {
+#pragma omp parallel for num_threads(t) schedule(static)
+      for (std::size_t y = 0; y < h; ++y) counts_into(y, counts.data() + y * rowbytes);
+    }
+#pragma omp parallel num_threads(t)
+    {
+      unsigned char* own = tmp.data() + static_cast<std::size_t>(omp_get_thread_num()) * 4 * rowbytes;
+#pragma omp for schedule(static)
+      for (std::size_t y = 0; y < h; ++y)
+        choose_filter(cnt + y * rowbytes, y ? cnt + (y - 1) * rowbytes : zero.data(), rowbytes, bpp, mask,
+                      raw.data() + y * stride_bytes, own);
+    }
+    const std::size_t total = raw.size(), nseg = (total + kDeflateSegment - 1) / kDeflateSegment;
+    std::vector<std::size_t> at(nseg + 1, 0), len(nseg, 0);
+    for (std::size_t i = 0; i < nseg; ++i)  // room for each segment: zlib's bound, plus the flush's few bytes
+      at[i + 1] = at[i] + compressBound(static_cast<uLong>(std::min(kDeflateSegment, total - i * kDeflateSegment))) + 64;
+    std::vector<unsigned char> z(at[nseg] + 4);
+    std::atomic<bool> failed{false};
+#pragma omp parallel for num_threads(t) schedule(dynamic, 1)
+    for (std::size_t i = 0; i < nseg; ++i) {
+      const std::size_t b = i * kDeflateSegment, e = std::min(total, b + kDeflateSegment);
+      const bool last = i + 1 == nseg;
+      z_stream zs{};
+      // The first segment carries the zlib header (window 15, as libpng's
+      // for any image this size), the others are raw deflate.
+      if (deflateInit2(&zs, deflate.level, Z_DEFLATED, i == 0 ? 15 : -15, 8, deflate.rle ? Z_RLE : Z_DEFAULT_STRATEGY) !=
+          Z_OK) {
+        failed = true;
+        continue;
       }
-    if (!write_chunk(g.f, "IEND", nullptr, 0)) {
-      error->clear();
+      const std::size_t dict = std::min<std::size_t>(32768, b);
+      bool ok = i == 0 || deflateSetDictionary(&zs, raw.data() + b - dict, static_cast<uInt>(dict)) == Z_OK;
+      zs.next_in = raw.data() + b;
+      zs.avail_in = static_cast<uInt>(e - b);
+      zs.next_out = z.data() + at[i];
+      zs.avail_out = static_cast<uInt>(at[i + 1] - at[i]);
+      const int rc = ok ? ::deflate(&zs, last ? Z_FINISH : Z_SYNC_FLUSH) : Z_STREAM_ERROR;
+      ok = ok && rc == (last ? Z_STREAM_END : Z_OK) && zs.avail_in == 0 && zs.avail_out > 0;
+      len[i] = zs.total_out;
+      deflateEnd(&zs);
+      if (!ok) failed = true;
+    }
+    if (failed) {
+      *error = "zlib could not compress the image data";
+      return false;
+    }
+    std::size_t zlen = 0;
+    for (std::size_t i = 0; i < nseg; ++i) {  // the segments side by side (each moves left, or stays)
+      std::memmove(z.data() + zlen, z.data() + at[i], len[i]);
+      zlen += len[i];
+    }
+    put_be32(z.data() + zlen, static_cast<std::uint32_t>(libdeflate_adler32(1, raw.data(), total)));
+    zlen += 4;
+    if (!write_image_data(g.f, z.data(), zlen)) {
+      error->clear();  // errno says why
       return false;
     }
   } else {

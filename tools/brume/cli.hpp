@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "brume/io.hpp"
 #include "brume/params.hpp"
 #include "brume/pipeline.hpp"
 
@@ -115,6 +116,7 @@ Command job_command(CLI::App* app, const std::string& name, const ParamTable<Job
             ctx.argv = argv;
             ctx.given = flags->apply(*job);
             if (eflags) eflags->apply(*exec);
+            const IoThreads io(exec->threads);  // --threads bounds the codecs too (0: OpenMP's count)
             const int status = run(*job, *exec, ctx);
             if (exec->timing) print_whole_run(name);
             return status;

@@ -28,6 +28,7 @@ Command add_run(CLI::App& app) {
             } catch (const nlohmann::json::exception& e) {
               throw Error("record '" + *path + "' is not JSON: " + e.what());
             }
+            const IoThreads io(exec->threads);
             const nlohmann::json out = rerun(rec, *exec, *out_dir, argv, &brume::study::sky_fit_scatter);
             std::fprintf(stderr, "brume run: repeated '%s' from %s\n", out.value("command", "?").c_str(), path->c_str());
             return 0;
