@@ -120,6 +120,16 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
 bool is_output_file(const ParamSpec& s);
 
 // ---- the shared steps -------------------------------------------------------------
+// Keep freed buffers for reuse within this process (glibc): blocks up to 32
+// MB come from the heap and its free top is not trimmed, so that a buffer
+// freed mid-run or by the previous frame is reused without the kernel
+// faulting in and clearing fresh pages (pipeline.cpp says how much that
+// saved). Resident memory stays at the run's peak, which the memory check
+// admits. Set once per process: by the command line at start and by each
+// batch frame (brume batch, brume.dask workers); a program embedding brume
+// (the Python module) is left to choose for itself.
+void keep_freed_heap();
+
 struct LoadedInputs {
   Image rgb;              // linear RGB
   FileInfo image_info;

@@ -4,7 +4,6 @@
 
 #include <unistd.h>
 
-#include <malloc.h>
 
 #include <algorithm>
 #include <atomic>
@@ -719,27 +718,8 @@ nlohmann::json result_line(const BatchFrame& f, const BatchFrameResult& r) {
 
 }  // namespace
 
-// Frames of one size, one after another: glibc hands each frame's large
-// buffers (128 kB up to its dynamic 32 MB threshold) back to the kernel when
-// they are freed, and the next frame faults them in again, zero-filled by
-// the kernel -- on a Middlebury third-size haze frame that was a quarter of the
-// frame's time (30 frames, one thread: 2.6 s, 2.0 s with the heap kept;
-// README "Datasets"). So a batch keeps its heap: blocks up to 32 MB come from
-// the heap, and its free top is not trimmed. The process's resident memory
-// stays at the peak of its frames in flight, which check_memory already
-// admits; set once per process, by the first frame (brume batch, brume.dask
-// workers), never for a single run.
-static void keep_heap_for_frames() {
-  static const bool once = [] {
-    mallopt(M_MMAP_THRESHOLD, 32 << 20);
-    mallopt(M_TRIM_THRESHOLD, 1 << 30);
-    return true;
-  }();
-  (void)once;
-}
-
 BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, const std::vector<std::string>& argv) {
-  keep_heap_for_frames();
+  keep_freed_heap();  // a frame after another: the next reuses the last one's buffers
   BatchFrameResult r;
   const auto t0 = std::chrono::steady_clock::now();
   try {

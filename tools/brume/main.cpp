@@ -96,6 +96,7 @@ int main(int argc, char** argv) {
       ->default_str("500000000")
       ->check(CLI::Range(1.0, 1e12));
   brume::install_output_signal_handlers();
+  brume::keep_freed_heap();  // a run frees and allocates image-sized buffers: reuse them (pipeline.hpp)
 
   // A parsed subcommand marks its parent parsed too: `aerial coefficients`
   // comes before `aerial` so that the first parsed command is the one asked for.
