@@ -561,20 +561,29 @@ bool write_png_subset(const std::string& path, int width, int height, int channe
     if (height == 1) mask &= ~(4u | 8u | 16u);
     if (width == 1) mask &= ~(2u | 8u | 16u);
     if (mask == 0) mask = 1u;
-    std::vector<unsigned char> counts(codes ? 0 : rowbytes * h), zero(rowbytes, 0);
-    std::vector<unsigned char> raw(stride_bytes * h), tmp(4 * rowbytes * static_cast<std::size_t>(t));
-    const unsigned char* cnt = codes ? codes : counts.data();
-    if (!codes) {
-#pragma omp parallel for num_threads(t) schedule(static)
-      for (std::size_t y = 0; y < h; ++y) counts_into(y, counts.data() + y * rowbytes);
-    }
+    // Per thread: a block of consecutive rows, their counts made a row at a
+    // time (with the row above the block's first) beside the four filtered
+    // candidates, so that no image of counts is held: the extra memory is
+    // the filtered image data and its deflated copy.
+    std::vector<unsigned char> raw(stride_bytes * h), zero(rowbytes, 0);
+    std::vector<unsigned char> tmp(6 * rowbytes * static_cast<std::size_t>(t));
 #pragma omp parallel num_threads(t)
     {
-      unsigned char* own = tmp.data() + static_cast<std::size_t>(omp_get_thread_num()) * 4 * rowbytes;
-#pragma omp for schedule(static)
-      for (std::size_t y = 0; y < h; ++y)
-        choose_filter(cnt + y * rowbytes, y ? cnt + (y - 1) * rowbytes : zero.data(), rowbytes, bpp, mask,
-                      raw.data() + y * stride_bytes, own);
+      const auto k = static_cast<std::size_t>(omp_get_thread_num()), n = static_cast<std::size_t>(omp_get_num_threads());
+      unsigned char* own = tmp.data() + k * 6 * rowbytes;
+      unsigned char* buf[2] = {own + 4 * rowbytes, own + 5 * rowbytes};
+      auto counts_of = [&](std::size_t y, unsigned char* b) -> const unsigned char* {
+        if (codes) return codes + y * rowbytes;
+        counts_into(y, b);
+        return b;
+      };
+      const std::size_t block = (h + n - 1) / n, y0 = std::min(h, k * block), y1 = std::min(h, y0 + block);
+      const unsigned char* prev = y0 > 0 && y0 < y1 ? counts_of(y0 - 1, buf[1]) : zero.data();
+      for (std::size_t y = y0; y < y1; ++y) {
+        const unsigned char* cur = counts_of(y, buf[(y - y0) & 1]);  // never the buffer prev is in
+        choose_filter(cur, prev, rowbytes, bpp, mask, raw.data() + y * stride_bytes, own);
+        prev = cur;
+      }
     }
     const std::size_t total = raw.size(), nseg = (total + kDeflateSegment - 1) / kDeflateSegment;
     std::vector<std::size_t> at(nseg + 1, 0), len(nseg, 0);

@@ -127,8 +127,10 @@ bool png_subset_writable(int channels, int bits);
 //  from libpng's single stream from the first seam on (the file is a few
 //  bytes per segment larger: +0.06 % on the 1600 x 1120 demo haze), and do
 //  not depend on the thread count (the segments are fixed by the byte
-//  count). Shorter image data go through libpng's row loop as before: the
-//  same file as OpenImageIO's, byte for byte.
+//  count). Held while writing: the filtered image data and their deflated
+//  copy (the counts are made a row at a time per thread), as for `fast`.
+//  Shorter image data go through libpng's row loop as before: the same
+//  file as OpenImageIO's, byte for byte.
 inline constexpr std::size_t kDeflateSegment = std::size_t{256} << 10;
 struct PngDeflate {
   int level = 6;
