@@ -59,6 +59,25 @@ constexpr std::uint64_t default_max_pixels = 500'000'000;
 std::uint64_t max_pixels();
 void set_max_pixels(std::uint64_t n);  // n ≥ 1
 
+// Every channel of an image as float with its alpha kept unassociated
+// (straight, as stored), for the RGBA layers `brume insert` composites:
+// integer files give each count over 2^bits - 1, alpha included
+// (OpenImageIO's reading with oiio:UnassociatedAlpha; otherwise it would
+// premultiply the sRGB-encoded values), float files their values. alpha:
+// the alpha channel's index (-1: none); unassociated: the file says its
+// alpha is straight (a float file's is premultiplied otherwise, EXR's
+// definition). 8/16-bit PNG (grey, RGB, with or without alpha) and OpenEXR
+// of R G B (A) are read without OpenImageIO's module (io/png_direct.hpp,
+// io/exr_direct.hpp), other files through it. Errors name `what` (the flag)
+// and the path.
+struct ChannelImage {
+  Image img;
+  FileInfo info;  // transfer: linear (none applied)
+  int alpha = -1;
+  bool unassociated = false;
+};
+ChannelImage read_unassociated(const std::string& path, const std::string& what);
+
 // The header of an image file (no pixels are read): size and channel count.
 struct ImageHeader {
   int width = 0, height = 0, channels = 0;

@@ -13,7 +13,7 @@
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "brume/insert.hpp"
-#include "io/codec.hpp"
+#include "brume/io.hpp"
 #include "shared/prelude_cpp.h"
 
 namespace brume {
@@ -81,36 +81,17 @@ void validate_insert(const AerialParams& p, const std::set<std::string>& given) 
 }
 
 Image read_object_rgba(const std::string& path, FileInfo* info) {
-  std::error_code ec;
   if (path.empty()) throw Error("no object given: use --object FILE (RGBA, same size as --image)");
-  if (!std::filesystem::exists(path, ec)) throw Error("cannot read --object '" + path + "': no such file");
-  // Keep PNG/TIFF alpha unassociated: OpenImageIO would otherwise premultiply
-  // the sRGB-ENCODED values, which is not linear-light coverage.
-  std::string open_error;
-  auto in = codec::api("reading --object '" + path + "'").open_input(path, true, &open_error);
-  if (!in)
-    throw Error("cannot read --object '" + path + "': " +
-                (open_error.empty() ? "unknown or unsupported image format" : open_error));
-  const codec::InputSpec& spec = in->spec();
-  const int nc = spec.channels, W = spec.width, H = spec.height;
-  if (W <= 0 || H <= 0 || nc <= 0) throw Error("cannot read --object '" + path + "': empty image");
-  Image raw(W, H, nc);
-  if (!in->read_float(raw.data.data())) {
-    const std::string e = in->error();
-    throw Error("cannot read --object '" + path + "': " + (e.empty() ? "read failed" : e));
-  }
-  const bool integer = !spec.floating;
-  FileInfo fi;
-  fi.path = path;
-  fi.format = spec.format;
-  fi.integer = integer;
-  fi.bits = spec.container_bits;
-  if (spec.bits_per_sample > 0) fi.bits = spec.bits_per_sample;
-  fi.channel_names = spec.channel_names;
+  // Alpha kept unassociated: OpenImageIO would otherwise premultiply PNG's
+  // and TIFF's sRGB-ENCODED values, which is not linear-light coverage.
+  ChannelImage ci = read_unassociated(path, "--object");
+  const Image& raw = ci.img;
+  const int nc = raw.channels, W = raw.width;
+  const bool integer = ci.info.integer;
+  FileInfo fi = ci.info;
   fi.transfer = integer ? Transfer::srgb : Transfer::linear;
-  in->close();
 
-  int alpha = spec.alpha_channel;
+  int alpha = ci.alpha;
   if (alpha < 0 && (nc == 2 || nc == 4)) alpha = nc - 1;  // grey+alpha, RGBA without a named alpha
   std::vector<int> colour;
   for (int c = 0; c < nc && colour.size() < 3; ++c)
@@ -119,8 +100,8 @@ Image read_object_rgba(const std::string& path, FileInfo* info) {
   // Integer files are sRGB-encoded with straight alpha (PNG's definition, and
   // what a TIFF without associated alpha holds); float files are linear and
   // premultiplied (EXR's definition) unless the file says its alpha is unassociated.
-  const bool straight = integer || spec.unassociated_alpha;
-  Image out(W, H, 4);
+  const bool straight = integer || ci.unassociated;
+  Image out(W, raw.height, 4);
   for (std::size_t i = 0; i < raw.pixels(); ++i) {
     const float a = alpha >= 0 ? raw.data[i * nc + alpha] : 1.0f;
     if (!(a >= 0.0f && a <= 1.0f)) {

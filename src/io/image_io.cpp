@@ -658,6 +658,68 @@ Raw read_raw(const std::string& path, RawValues want) {
 
 }  // namespace
 
+ChannelImage read_unassociated(const std::string& path, const std::string& what) {
+  const std::string name = what + " '" + path + "'";
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw FileNotFound("cannot read " + name + ": no such file");
+  const auto check_size = [&](int w, int h, int c) {  // the decoded file and the caller's RGBA copy
+    check_declared_size(path, w, h, c);
+    const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
+    check_memory(px * 4 * static_cast<std::uint64_t>(c + 4), "reading " + name);
+  };
+  ChannelImage r;
+  r.info.path = path;
+  {
+    detail::PngInfo pi;
+    if (detail::read_png_subset(path, &r.img, pi, check_size, {}, true)) {
+      static const std::vector<std::string> names[5] = {
+          {}, {"Y"}, {"Y", "A"}, {"R", "G", "B"}, {"R", "G", "B", "A"}};
+      r.info.format = "png";
+      r.info.integer = true;
+      r.info.bits = pi.bits;
+      r.info.channel_names = names[pi.channels];
+      r.info.description = pi.description;
+      r.alpha = pi.channels == 2 || pi.channels == 4 ? pi.channels - 1 : -1;
+      r.unassociated = r.alpha >= 0;  // as OpenImageIO marks it when asked to keep it so
+      return r;
+    }
+  }
+  {
+    detail::ExrInfo ei;
+    if (detail::read_exr_subset(path, nullptr, ei, [](int, int, int) {}, 0) && ei.channels >= 3 &&
+        detail::read_exr_subset(path, &r.img, ei, check_size, exr_threads())) {
+      r.info.format = "openexr";
+      r.info.bits = ei.bits;
+      r.info.channel_names = std::move(ei.channel_names);
+      r.info.description = std::move(ei.description);
+      r.alpha = ei.channels == 4 ? 3 : -1;
+      return r;
+    }
+  }
+  std::string open_error;
+  auto in = codec::api("reading " + name).open_input(path, true, &open_error);
+  if (!in)
+    throw Error("cannot read " + name + ": " + (open_error.empty() ? "unknown or unsupported image format" : open_error));
+  const codec::InputSpec& spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.channels <= 0) throw Error("cannot read " + name + ": empty image");
+  check_size(spec.width, spec.height, spec.channels);
+  r.img = Image(spec.width, spec.height, spec.channels);
+  if (!in->read_float(r.img.data.data())) {
+    const std::string e = in->error();
+    throw Error("cannot read " + name + ": " + (e.empty() ? "read failed" : e));
+  }
+  r.info.format = spec.format;
+  r.info.integer = !spec.floating;
+  r.info.bits = spec.container_bits;
+  if (spec.bits_per_sample > 0) r.info.bits = spec.bits_per_sample;
+  r.info.channel_names = spec.channel_names;
+  r.info.description = spec.description;
+  r.alpha = spec.alpha_channel;
+  r.unassociated = spec.unassociated_alpha;
+  in->close();
+  return r;
+}
+
 Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
   // An integer file's automatic transfer is sRGB; the PNG subset (always
   // integer) is decoded from it during its read.

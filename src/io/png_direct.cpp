@@ -5,8 +5,9 @@
 // is constructed, and between the setjmp and its returns only libpng calls,
 // plain values, the buffers declared before it (resized, filled) and the
 // reader's per-value map (which does not throw) run -- and read_image_data
-// and the writer's `fast` image data, which call no libpng function -- so a
-// longjmp skips no destructor; the Guard's destructor frees libpng's
+// and the writer's `fast` and segmented image data, which call no libpng
+// function after the buffers they declare -- so a longjmp skips no
+// destructor; the Guard's destructor frees libpng's
 // structures and the FILE on every return.
 #include "io/png_direct.hpp"
 
@@ -128,7 +129,8 @@ inline int paeth_predictor(int a, int b, int c) {
 
 // Undoes the filter `type` of one row of n bytes in place; prior: the row
 // above, unfiltered (zeros for the first row); kBpp: bytes per pixel (1, 2,
-// 3 or 6 in the subset). Returns false for a filter type over 4.
+// 3, 4, 6 or 8 in the subset, alpha included). Returns false for a filter
+// type over 4.
 template <int kBpp>
 bool unfilter_row(int type, unsigned char* __restrict row, const unsigned char* __restrict prior, std::size_t n) {
   switch (type) {
@@ -160,7 +162,9 @@ bool unfilter(int bpp, int type, unsigned char* row, const unsigned char* prior,
     case 1: return unfilter_row<1>(type, row, prior, n);
     case 2: return unfilter_row<2>(type, row, prior, n);
     case 3: return unfilter_row<3>(type, row, prior, n);
-    default: return unfilter_row<6>(type, row, prior, n);
+    case 4: return unfilter_row<4>(type, row, prior, n);
+    case 6: return unfilter_row<6>(type, row, prior, n);
+    default: return unfilter_row<8>(type, row, prior, n);
   }
 }
 
@@ -317,7 +321,8 @@ bool read_image_data(std::FILE* f, std::uint64_t file_size, std::size_t rowbytes
 }  // namespace
 
 bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
-                     const std::function<void(int, int, int)>& check, const std::function<float(float, int)>& map) {
+                     const std::function<void(int, int, int)>& check, const std::function<float(float, int)>& map,
+                     bool with_alpha) {
   ReadGuard g;
   g.f = std::fopen(path.c_str(), "rb");
   if (!g.f) return false;
@@ -341,12 +346,14 @@ bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
   png_uint_32 w = 0, h = 0;
   int depth = 0, color = 0;
   png_get_IHDR(g.png, g.info, &w, &h, &depth, &color, nullptr, nullptr, nullptr);
-  if (g.warned || (depth != 8 && depth != 16) || (color != PNG_COLOR_TYPE_GRAY && color != PNG_COLOR_TYPE_RGB) ||
+  const bool alpha = color == PNG_COLOR_TYPE_GRAY_ALPHA || color == PNG_COLOR_TYPE_RGB_ALPHA;
+  if (g.warned || (depth != 8 && depth != 16) ||
+      (color != PNG_COLOR_TYPE_GRAY && color != PNG_COLOR_TYPE_RGB && !(with_alpha && alpha)) ||
       png_get_valid(g.png, g.info, PNG_INFO_tRNS) || w == 0 || h == 0 || w > 0x7fffffff || h > 0x7fffffff)
     return false;
   got.width = static_cast<int>(w);
   got.height = static_cast<int>(h);
-  got.channels = color == PNG_COLOR_TYPE_RGB ? 3 : 1;
+  got.channels = color == PNG_COLOR_TYPE_RGB_ALPHA ? 4 : color == PNG_COLOR_TYPE_RGB ? 3 : alpha ? 2 : 1;
   got.bits = depth;
   // The text before the image data, as OpenImageIO reads it (it reads the
   // chunks after the image data without keeping them); the last

@@ -61,9 +61,14 @@ struct PngInfo {
 // for a PNG with a chunk that runs past the end of the file, before libpng
 // or OpenImageIO would allocate its declared length (png_direct.cpp), and
 // whatever check throws.
+// with_alpha: grey + alpha and RGBA files too (channels 2 and 4, alpha
+// last), every channel's count times 1/255 or 1/65535 as the others -- the
+// values OpenImageIO gives when asked to keep alpha unassociated, which is
+// how PNG stores it (read_unassociated, brume/io.hpp). Without it such files
+// return false, as before.
 bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
                      const std::function<void(int, int, int)>& check,
-                     const std::function<float(float, int)>& map = {});
+                     const std::function<float(float, int)>& map = {}, bool with_alpha = false);
 
 // How many reads of this process took the image data without libpng's row
 // loop (read_image_data in png_direct.cpp: libdeflate's inflate and

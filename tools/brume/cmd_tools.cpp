@@ -20,7 +20,10 @@ Command add_demo(CLI::App& app) {
   demo->add_option("--width", a->w, "width in pixels")->capture_default_str();
   demo->add_option("--height", a->h, "height in pixels")->capture_default_str();
   demo->add_option("--threads", a->threads, "worker threads (0 = all)")->capture_default_str();
-  return {demo, "demo", [a](const std::vector<std::string>&) { return run_demo(a->dir, a->w, a->h, a->threads); }};
+  return {demo, "demo", [a](const std::vector<std::string>&) {
+            const IoThreads io(a->threads);  // its files' coding too, as every job's
+            return run_demo(a->dir, a->w, a->h, a->threads);
+          }};
 }
 
 Command add_study(CLI::App& app) {
