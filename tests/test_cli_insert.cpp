@@ -134,6 +134,34 @@ TEST_F(CliInsert, PngObjectIsSrgbWithStraightAlpha) {
   EXPECT_EQ(e.at(10, 3, 3), 0.5f);
 }
 
+TEST_F(CliInsert, EverydayObjectFilesNeedNoCodecModule) {
+  // An RGBA object as OpenEXR or as 8-bit PNG is read without OpenImageIO's
+  // module (read_unassociated, brume/io.hpp): with no module to load, the
+  // run still succeeds and --timing names no module load.
+  const std::string png = p("obj.png");
+  {
+    auto out = OIIO::ImageOutput::create(png);
+    ASSERT_TRUE(out);
+    OIIO::ImageSpec spec(48, 32, 4, OIIO::TypeDesc::UINT8);
+    spec.alpha_channel = 3;
+    spec.attribute("oiio:UnassociatedAlpha", 1);
+    ASSERT_TRUE(out->open(png, spec));
+    std::vector<unsigned char> px(48 * 32 * 4, 0);
+    for (int i = 0; i < 48 * 32; i += 3) px[i * 4] = 200, px[i * 4 + 3] = 255;
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+    ASSERT_TRUE(out->close());
+  }
+  ::setenv("BRUME_CODEC_MODULE", "/nonexistent/brume_codec.so", 1);
+  const CliRun e = run(base() + " --out " + p("o1.exr") + " --timing");
+  const CliRun g = run("insert --image " + img + " --range " + range + " --object " + png + " --object-range " +
+                       orange + " --turbidity 6 --out " + p("o2.exr") + " --timing");
+  ::unsetenv("BRUME_CODEC_MODULE");
+  ASSERT_EQ(e.status, 0) << e.output;
+  EXPECT_EQ(e.output.find("codec module"), std::string::npos) << e.output;
+  ASSERT_EQ(g.status, 0) << g.output;
+  EXPECT_EQ(g.output.find("codec module"), std::string::npos) << g.output;
+}
+
 TEST_F(CliInsert, ErrorPathsAreClearAndLeaveNothing) {
   const std::string out = " --out " + p("o.exr") + " --record " + p("o.json");
   CliRun r = run("insert --image " + img + " --range " + range + " --object " + p("small.exr") + " --object-range " +

@@ -1419,3 +1419,78 @@ TEST(IO, PngSubsetWritesTheFileOpenImageIOWrites) {
             }
   fs::remove_all(d);
 }
+
+TEST(IO, UnassociatedChannelsAreReadAsOpenImageIOReadsThem) {
+  // read_unassociated (brume insert's object layer): PNG with or without
+  // alpha and OpenEXR R G B (A) are read without OpenImageIO's module; the
+  // values, the alpha's index, whether it is marked straight, and FileInfo
+  // must be OpenImageIO's own reading with oiio:UnassociatedAlpha, bit for
+  // bit. Counts cover 0 and the maximum in every channel; a TIFF goes
+  // through OpenImageIO itself.
+  fs::path d = tmpdir();
+  std::uint32_t seed = 5;
+  auto rnd = [&] { return (seed = seed * 1664525u + 1013904223u) >> 8; };
+  struct Case {
+    const char* name;
+    int c;
+    OIIO::TypeDesc type;
+    bool direct;  // read without the module
+  };
+  const Case cases[] = {{"rgba8.png", 4, OIIO::TypeDesc::UINT8, true},   {"rgba16.png", 4, OIIO::TypeDesc::UINT16, true},
+                        {"ga8.png", 2, OIIO::TypeDesc::UINT8, true},     {"ga16.png", 2, OIIO::TypeDesc::UINT16, true},
+                        {"rgb8.png", 3, OIIO::TypeDesc::UINT8, true},    {"y16.png", 1, OIIO::TypeDesc::UINT16, true},
+                        {"rgba_h.exr", 4, OIIO::TypeDesc::HALF, true},   {"rgba_f.exr", 4, OIIO::TypeDesc::FLOAT, true},
+                        {"rgb_f.exr", 3, OIIO::TypeDesc::FLOAT, true},   {"rgba8.tif", 4, OIIO::TypeDesc::UINT8, false}};
+  const int W = 67, H = 23;
+  for (const Case& k : cases) {
+    const std::string p = (d / k.name).string();
+    std::vector<float> v(static_cast<std::size_t>(W) * H * k.c);
+    const bool integer = k.type == OIIO::TypeDesc::UINT8 || k.type == OIIO::TypeDesc::UINT16;
+    const double max = k.type == OIIO::TypeDesc::UINT8 ? 255.0 : 65535.0;
+    for (std::size_t i = 0; i < v.size(); ++i)
+      v[i] = i < static_cast<std::size_t>(2 * k.c) ? (i < static_cast<std::size_t>(k.c) ? 0.0f : 1.0f)  // 0 and max
+             : integer ? static_cast<float>(static_cast<double>(rnd() % (static_cast<unsigned>(max) + 1)) / max)
+                       : static_cast<float>(rnd() % 100000) / 65536.0f;
+    OIIO::ImageSpec spec(W, H, k.c, k.type);
+    if (k.c == 2) spec.channelnames = {"Y", "A"}, spec.alpha_channel = 1;
+    if (k.c == 1) spec.channelnames = {"Y"};
+    spec.attribute("oiio:UnassociatedAlpha", 1);  // the counts as given, not un-premultiplied
+    auto out = OIIO::ImageOutput::create(p);
+    ASSERT_TRUE(out && out->open(p, spec)) << p;
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, v.data())) << p;
+    ASSERT_TRUE(out->close()) << p;
+
+    OIIO::ImageSpec config;
+    config.attribute("oiio:UnassociatedAlpha", 1);
+    auto in = OIIO::ImageInput::open(p, &config);
+    ASSERT_TRUE(in) << p;
+    const OIIO::ImageSpec& s = in->spec();
+    std::vector<float> want(static_cast<std::size_t>(s.width) * s.height * s.nchannels);
+    ASSERT_TRUE(in->read_image(0, 0, 0, s.nchannels, OIIO::TypeDesc::FLOAT, want.data())) << p;
+
+    const std::uint64_t png_before = detail::png_fast_reads();
+    const ChannelImage got = read_unassociated(p, "--object");
+    EXPECT_TRUE(got.img.data == want) << p << ": other values than OpenImageIO's";
+    EXPECT_EQ(got.img.channels, s.nchannels) << p;
+    EXPECT_EQ(got.alpha, s.alpha_channel) << p;
+    EXPECT_EQ(got.unassociated, s.get_int_attribute("oiio:UnassociatedAlpha", 0) != 0) << p;
+    EXPECT_EQ(got.info.channel_names, std::vector<std::string>(s.channelnames.begin(), s.channelnames.end())) << p;
+    EXPECT_EQ(got.info.integer, integer) << p;
+    EXPECT_EQ(got.info.bits, static_cast<int>(s.format.size() * 8)) << p;
+    EXPECT_EQ(got.info.format, std::string(in->format_name())) << p;
+    if (k.direct && std::string(k.name).find(".png") != std::string::npos) {
+      EXPECT_EQ(detail::png_fast_reads(), png_before + 1) << p << ": not read by brume's PNG reader";
+    }
+  }
+  // The PNG reader takes alpha only when asked: read_color still declines
+  // it to OpenImageIO (which premultiplies, as before).
+  detail::PngInfo pi;
+  Image img;
+  EXPECT_FALSE(detail::read_png_subset((d / "rgba8.png").string(), &img, pi, [](int, int, int) {}));
+  EXPECT_TRUE(detail::read_png_subset((d / "rgba8.png").string(), &img, pi, [](int, int, int) {}, {}, true));
+  EXPECT_EQ(pi.channels, 4);
+  const std::string e = error_of([&] { read_unassociated((d / "none.png").string(), "--object"); });
+  EXPECT_NE(e.find("cannot read --object '"), std::string::npos) << e;
+  EXPECT_NE(e.find("no such file"), std::string::npos) << e;
+  fs::remove_all(d);
+}

@@ -680,7 +680,7 @@ ChannelImage read_unassociated(const std::string& path, const std::string& what)
       r.info.channel_names = names[pi.channels];
       r.info.description = pi.description;
       r.alpha = pi.channels == 2 || pi.channels == 4 ? pi.channels - 1 : -1;
-      r.unassociated = r.alpha >= 0;  // as OpenImageIO marks it when asked to keep it so
+      r.unassociated = true;  // as OpenImageIO marks every PNG when asked to keep alpha so
       return r;
     }
   }
