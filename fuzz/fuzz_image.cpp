@@ -1,5 +1,6 @@
-// The image readers on mutated files: read_header, read_color and
-// read_scalar. The first byte picks the file's extension (OpenImageIO chooses
+// The image readers on mutated files: read_header, read_color,
+// read_scalar and read_unassociated (brume insert's object layer: PNG with
+// alpha too). The first byte picks the file's extension (OpenImageIO chooses
 // its reader by it, then by content), the rest is the file. OpenImageIO and
 // its codecs are Debian's, uninstrumented: this finds crashes and bad
 // handling in brume's use of them (sizes, channels, bit depths, limits), not
@@ -65,6 +66,14 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   try {
     const brume::Image s = brume::read_scalar(path);
     if (s.channels != 1 || s.data.size() != std::size_t(s.width) * s.height) std::abort();
+  } catch (const brume::Error&) {
+  }
+  try {
+    const brume::ChannelImage u = brume::read_unassociated(path, "--object");
+    const brume::Image& i = u.img;
+    if (i.channels <= 0 || i.data.size() != std::size_t(i.width) * i.height * i.channels || u.alpha >= i.channels ||
+        u.info.channel_names.size() != std::size_t(i.channels))
+      std::abort();
   } catch (const brume::Error&) {
   }
   return 0;
