@@ -8,6 +8,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <vector>
 #include <nlohmann/json.hpp>
 
 #include "brume/insert.hpp"
@@ -19,6 +21,18 @@ using namespace brume::test;
 namespace fs = std::filesystem;
 
 namespace {
+
+// An 8-bit RGBA PNG holding the counts px as given (straight alpha).
+void write_rgba8_png(const std::string& path, int w, int h, const std::vector<unsigned char>& px) {
+  auto out = OIIO::ImageOutput::create(path);
+  ASSERT_TRUE(out);
+  OIIO::ImageSpec spec(w, h, 4, OIIO::TypeDesc::UINT8);
+  spec.alpha_channel = 3;
+  spec.attribute("oiio:UnassociatedAlpha", 1);  // write the values as given
+  ASSERT_TRUE(out->open(path, spec));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
+  ASSERT_TRUE(out->close());
+}
 
 class CliInsert : public ::testing::Test {
  protected:
@@ -109,17 +123,7 @@ TEST_F(CliInsert, PngObjectIsSrgbWithStraightAlpha) {
   // 8-bit PNG, stored straight: colour 200/255 (sRGB) at alpha 128/255 reads as
   // linear premultiplied srgb_to_linear(200/255) x 128/255 (float rounding only).
   const std::string png = p("obj.png");
-  {
-    auto out = OIIO::ImageOutput::create(png);
-    ASSERT_TRUE(out);
-    OIIO::ImageSpec spec(2, 1, 4, OIIO::TypeDesc::UINT8);
-    spec.alpha_channel = 3;
-    spec.attribute("oiio:UnassociatedAlpha", 1);  // write the values as given
-    ASSERT_TRUE(out->open(png, spec));
-    const unsigned char px[8] = {200, 100, 50, 128, 10, 20, 30, 255};
-    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px));
-    out->close();
-  }
+  ASSERT_NO_FATAL_FAILURE(write_rgba8_png(png, 2, 1, {200, 100, 50, 128, 10, 20, 30, 255}));
   FileInfo info;
   const Image o = read_object_rgba(png, &info);
   ASSERT_EQ(o.channels, 4);
@@ -139,18 +143,9 @@ TEST_F(CliInsert, EverydayObjectFilesNeedNoCodecModule) {
   // module (read_unassociated, brume/io.hpp): with no module to load, the
   // run still succeeds and --timing names no module load.
   const std::string png = p("obj.png");
-  {
-    auto out = OIIO::ImageOutput::create(png);
-    ASSERT_TRUE(out);
-    OIIO::ImageSpec spec(48, 32, 4, OIIO::TypeDesc::UINT8);
-    spec.alpha_channel = 3;
-    spec.attribute("oiio:UnassociatedAlpha", 1);
-    ASSERT_TRUE(out->open(png, spec));
-    std::vector<unsigned char> px(48 * 32 * 4, 0);
-    for (int i = 0; i < 48 * 32; i += 3) px[i * 4] = 200, px[i * 4 + 3] = 255;
-    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, px.data()));
-    ASSERT_TRUE(out->close());
-  }
+  std::vector<unsigned char> px(48 * 32 * 4, 0);
+  for (int i = 0; i < 48 * 32; i += 3) px[i * 4] = 200, px[i * 4 + 3] = 255;
+  ASSERT_NO_FATAL_FAILURE(write_rgba8_png(png, 48, 32, px));
   ::setenv("BRUME_CODEC_MODULE", "/nonexistent/brume_codec.so", 1);
   const CliRun e = run(base() + " --out " + p("o1.exr") + " --timing");
   const CliRun g = run("insert --image " + img + " --range " + range + " --object " + png + " --object-range " +

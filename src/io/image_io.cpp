@@ -534,6 +534,18 @@ int exr_threads() { return std::min(io_threads(), 64); }
 
 // Read every channel of the first subimage as float. Integer files are read
 // as their raw counts (not normalised) when `counts` is set.
+// FileInfo of a file OpenImageIO opened (transfer: linear, none applied).
+FileInfo file_info_of(const std::string& path, const codec::InputSpec& spec) {
+  FileInfo f;
+  f.path = path;
+  f.format = spec.format;
+  f.integer = !spec.floating;
+  f.bits = spec.bits_per_sample > 0 ? spec.bits_per_sample : spec.container_bits;
+  f.channel_names = spec.channel_names;
+  f.description = spec.description;
+  return f;
+}
+
 Raw read_raw(const std::string& path, RawValues want) {
   const bool counts = want == RawValues::counts;
   check_readable(path);
@@ -617,13 +629,7 @@ Raw read_raw(const std::string& path, RawValues want) {
   auto in = open_image(path);
   const codec::InputSpec& spec = in->spec();
   Raw r;
-  r.info.path = path;
-  r.info.format = spec.format;
-  r.info.integer = !spec.floating;
-  r.info.bits = spec.container_bits;
-  if (spec.bits_per_sample > 0) r.info.bits = spec.bits_per_sample;
-  r.info.channel_names = spec.channel_names;
-  r.info.description = spec.description;
+  r.info = file_info_of(path, spec);
   if (spec.width <= 0 || spec.height <= 0 || spec.channels <= 0)
     throw Error("cannot read '" + path + "': empty image");
   check_size(spec.width, spec.height, spec.channels);  // refused before any allocation: the header decides
@@ -708,12 +714,7 @@ ChannelImage read_unassociated(const std::string& path, const std::string& what)
     const std::string e = in->error();
     throw Error("cannot read " + name + ": " + (e.empty() ? "read failed" : e));
   }
-  r.info.format = spec.format;
-  r.info.integer = !spec.floating;
-  r.info.bits = spec.container_bits;
-  if (spec.bits_per_sample > 0) r.info.bits = spec.bits_per_sample;
-  r.info.channel_names = spec.channel_names;
-  r.info.description = spec.description;
+  r.info = file_info_of(path, spec);
   r.alpha = spec.alpha_channel;
   r.unassociated = spec.unassociated_alpha;
   in->close();
