@@ -252,6 +252,17 @@ void choose_filter(const unsigned char* __restrict r, const unsigned char* __res
   std::memcpy(out + 1, rows[best], n);
 }
 
+// A byte buffer left uninitialised (std::vector would clear it first: a
+// pass over the filtered image data, and every page of a deflate bound of
+// which only the compressed part is ever written).
+struct Bytes {
+  explicit Bytes(std::size_t n) : p(new unsigned char[n]), n(n) {}
+  unsigned char* data() { return p.get(); }
+  std::size_t size() const { return n; }
+  std::unique_ptr<unsigned char[]> p;
+  std::size_t n;
+};
+
 // A zlib stream of image data to f as IDAT chunks of 1 MiB (the last
 // shorter), then IEND. False on a failed write (errno says why).
 bool write_image_data(std::FILE* f, const unsigned char* z, std::size_t zlen) {
@@ -530,7 +541,8 @@ bool write_png_subset(const std::string& path, int width, int height, int channe
     // wrote (its writes are plain fwrite calls on f, in order).
     const std::size_t rowbytes = row_values * (bits / 8), stride = rowbytes + 1;
     const std::size_t h = static_cast<std::size_t>(height);
-    std::vector<unsigned char> raw(stride * h), prev(rowbytes, 0);
+    Bytes raw(stride * h);
+    std::vector<unsigned char> prev(rowbytes, 0);
     for (std::size_t y = 0; y < h; ++y) {
       const unsigned char* r = fill_row(y);
       unsigned char* o = raw.data() + y * stride;
@@ -543,7 +555,7 @@ bool write_png_subset(const std::string& path, int width, int height, int channe
       *error = "cannot allocate libdeflate's compressor";
       return false;
     }
-    std::vector<unsigned char> z(libdeflate_zlib_compress_bound(c.get(), raw.size()));
+    Bytes z(libdeflate_zlib_compress_bound(c.get(), raw.size()));
     const std::size_t zlen = libdeflate_zlib_compress(c.get(), raw.data(), raw.size(), z.data(), z.size());
     if (zlen == 0) {  // (cannot happen within the bound)
       *error = "libdeflate could not compress the image data";
@@ -572,7 +584,8 @@ bool write_png_subset(const std::string& path, int width, int height, int channe
     // time (with the row above the block's first) beside the four filtered
     // candidates, so that no image of counts is held: the extra memory is
     // the filtered image data and its deflated copy.
-    std::vector<unsigned char> raw(stride_bytes * h), zero(rowbytes, 0);
+    Bytes raw(stride_bytes * h);
+    std::vector<unsigned char> zero(rowbytes, 0);
     std::vector<unsigned char> tmp(6 * rowbytes * static_cast<std::size_t>(t));
 #pragma omp parallel num_threads(t)
     {
@@ -596,7 +609,7 @@ bool write_png_subset(const std::string& path, int width, int height, int channe
     std::vector<std::size_t> at(nseg + 1, 0), len(nseg, 0);
     for (std::size_t i = 0; i < nseg; ++i)  // room for each segment: zlib's bound, plus the flush's few bytes
       at[i + 1] = at[i] + compressBound(static_cast<uLong>(std::min(kDeflateSegment, total - i * kDeflateSegment))) + 64;
-    std::vector<unsigned char> z(at[nseg] + 4);
+    Bytes z(at[nseg] + 4);
     std::atomic<bool> failed{false};
 #pragma omp parallel for num_threads(t) schedule(dynamic, 1)
     for (std::size_t i = 0; i < nseg; ++i) {
