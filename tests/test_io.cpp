@@ -23,6 +23,14 @@ using namespace brume::test;
 namespace fs = std::filesystem;
 
 namespace {
+// The tests' pseudo-random numbers: the 32-bit LCG of Numerical Recipes'
+// ranqd1, so that every run draws the same values. next(): the new state;
+// unit(): its top 24 bits as a float in [0, 1).
+struct Lcg {
+  std::uint32_t s;
+  std::uint32_t next() { return s = s * 1664525u + 1013904223u; }
+  float unit() { return static_cast<float>(next() >> 8) / 16777216.0f; }
+};
 
 fs::path tmpdir() {
   fs::path d = fs::temp_directory_path() / ("brume_test_io_" + std::to_string(::getpid()));
@@ -1089,8 +1097,8 @@ TEST(IO, PngImageDataIsDecodedExactly) {
   // libpng as before, which declines the broken files below.
   fs::path d = tmpdir();
   auto none = [](int, int, int) {};
-  std::uint32_t seed = 12345;
-  auto rnd = [&] { return (seed = seed * 1664525u + 1013904223u) >> 24; };
+  Lcg lcg{12345};
+  auto rnd = [&] { return lcg.next() >> 24; };
   const std::pair<int, const char*> filters[] = {{PNG_FILTER_NONE, "none"}, {PNG_FILTER_SUB, "sub"},
                                                   {PNG_FILTER_UP, "up"},     {PNG_FILTER_AVG, "avg"},
                                                   {PNG_FILTER_PAETH, "paeth"}, {PNG_ALL_FILTERS, "all"}};
@@ -1231,8 +1239,8 @@ TEST(IO, PngFastIsAPngOfTheSamePixels) {
   // image over 1 MiB deflated spans several IDAT chunks; brume reads the
   // file back on its fast path.
   fs::path d = tmpdir();
-  std::uint32_t seed = 7;
-  auto rnd = [&] { return static_cast<float>((seed = seed * 1664525u + 1013904223u) >> 8) / 16777216.0f; };
+  Lcg lcg{7};
+  auto rnd = [&] { return lcg.unit(); };
   struct Case {
     int w, h, c;
     const char* bits;
@@ -1301,8 +1309,8 @@ TEST(IO, PngLongImageDataIsDeflatedInSegments) {
   // counts), one column (libpng drops the filters that read to the left)
   // and one row (those that read the row above).
   fs::path d = tmpdir();
-  std::uint32_t seed = 11;
-  auto rnd = [&] { return static_cast<float>((seed = seed * 1664525u + 1013904223u) >> 8) / 16777216.0f; };
+  Lcg lcg{11};
+  auto rnd = [&] { return lcg.unit(); };
   struct Case {
     int w, h, c;
     const char* bits;
@@ -1428,8 +1436,8 @@ TEST(IO, UnassociatedChannelsAreReadAsOpenImageIOReadsThem) {
   // bit. Counts cover 0 and the maximum in every channel; a TIFF goes
   // through OpenImageIO itself.
   fs::path d = tmpdir();
-  std::uint32_t seed = 5;
-  auto rnd = [&] { return (seed = seed * 1664525u + 1013904223u) >> 8; };
+  Lcg lcg{5};
+  auto rnd = [&] { return lcg.next() >> 8; };
   struct Case {
     const char* name;
     int c;
