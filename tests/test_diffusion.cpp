@@ -850,6 +850,82 @@ TEST(DiffusionFusion, SpaceVariantFusedPassesGiveTheBitsOfOnePassPerIteration) {
   }
 }
 
+TEST(DiffusionChannels, RgbRowsGiveTheRgbaBits) {
+  // An RGB image in f32 on a scale or rate map of the invariant schemes runs
+  // as rows of three values a pixel (the run_rgb_* kernels, no fourth
+  // channel): every value must have the bits the same channel of an RGBA run
+  // gets. Maps whose runs are whole rows (ramp), of every length with a
+  // sharp step (dome), and one or two pixels long (noise: a new integer
+  // offset at most pixels, so the runs are nearly all the kernels' last,
+  // masked or one-value-at-a-time pixels); an image whose offsets outgrow
+  // its rows (the per-pixel border path); a tall one whose passes are fused
+  // in place, unfused too; every edge rate, both schemes, every vector
+  // width, 1, 2, 3 and 7 threads. A mutation of one lane index of a permute
+  // pattern, or of the value order in the scalar tail, fails it.
+  auto noise_map = [](int w, int h, double smax) {
+    Image m(w, h, 1);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        std::uint32_t v = static_cast<std::uint32_t>(x) * 73856093u ^ static_cast<std::uint32_t>(y) * 19349663u;
+        v ^= v >> 13, v *= 0x5bd1e995u, v ^= v >> 15;
+        m.at(x, y) = static_cast<float>(1.0 + (smax - 1.0) * static_cast<double>(v & 0xffffu) / 65535.0);
+      }
+    return m;
+  };
+  auto rgb_of = [](const Image& f) {
+    Image g(f.width, f.height, 3);
+    for (std::size_t i = 0; i < f.pixels(); ++i)
+      for (int c = 0; c < 3; ++c) g.data[i * 3 + c] = f.data[i * 4 + c];
+    return g;
+  };
+  struct Case {
+    int w, h;
+    double smax;
+    int map;  // 0 ramp, 1 dome, 2 noise
+    std::vector<int> threads;
+  };
+  const Case cases[] = {{103, 67, 9.0, 0, {1, 3}}, {103, 67, 9.0, 1, {1, 3}}, {61, 53, 12.0, 2, {1, 3}},
+                        {9, 7, 30.0, 1, {1, 2}},   {29, 260, 14.0, 1, {1, 2, 3, 7}}};
+  const cpu::FusionLimits none{0, 0, 0};
+  const int widest = cpu::diffusion_simd_level();
+  for (const Case& c : cases) {
+    const Image rgba0 = texture(c.w, c.h), rgb0 = rgb_of(rgba0);
+    const Image map = c.map == 0   ? ramp_map(c.w, c.h, 1.0, c.smax)
+                      : c.map == 1 ? dome_map(c.w, c.h, 1.0, c.smax)
+                                   : noise_map(c.w, c.h, c.smax);
+    for (Scheme s : {Scheme::invariant, Scheme::invariant_exact})
+      for (EdgeRate e : {EdgeRate::mean, EdgeRate::min, EdgeRate::harmonic})
+        for (int level = 0; level <= widest; ++level)
+          for (int threads : c.threads)
+            for (bool fused : {true, false}) {
+              if (!fused && c.h < 100) continue;
+              SimdLimit cap(level);
+              FusionScope scope(fused ? nullptr : &none);
+              DiffusionParams dp = params(s);
+              dp.edge_rate = e;
+              Exec ex;
+              ex.threads = threads;
+              Image rgba = rgba0, rgb = rgb0;
+              diffuse(rgba, map, c.smax, dp, ex);
+              diffuse(rgb, map, c.smax, dp, ex);
+              EXPECT_EQ(rgb.data, rgb_of(rgba).data)
+                  << c.w << "x" << c.h << " map " << c.map << " " << to_string(s) << " " << to_string(e)
+                  << " width level " << level << " threads " << threads << (fused ? " fused" : " one pass each");
+              EXPECT_NE(rgb.data, rgb0.data);  // it did blur
+            }
+  }
+  // The rate path (diffuse_rates) takes the same rows.
+  const Image rho = [&] {
+    Image m = noise_map(61, 53, 12.0);
+    for (float& v : m.data) v = 0.15f * (v - 1.0f) / 11.0f;
+    return m;
+  }();
+  Image rgba = texture(61, 53), rgb = rgb_of(rgba);
+  diffuse_rates(rgba, rho, 11, params(Scheme::invariant_exact));
+  diffuse_rates(rgb, rho, 11, params(Scheme::invariant_exact));
+  EXPECT_EQ(rgb.data, rgb_of(rgba).data) << "rate map";
+}
+
 TEST(DiffusionFusion, SpaceVariantRadiiBoundEveryPixelsOffset) {
   // general_radii must bound n + 1 of every pixel at every iteration (a tap
   // outside a level's ring would read another row's values): checked
@@ -1012,26 +1088,29 @@ TEST(DiffusionFusion, ConductancePassesAreThePerPixelStencilBetweenTwoImages) {
 
 TEST(DiffusionFastPath, BlurOfAnOwnedImageIsTheBlurOfItsView) {
   // run_blur(Image&&) (what `brume blur` calls with the decoded file) blurs
-  // the image's own buffer where the engine works on RGB rows (a constant
-  // scale in f32) and copies it otherwise; either way the pixels are those
-  // of run_blur on a view of the same image (the Python module's form).
+  // the image's own buffer where the engine works on RGB rows (f32, a
+  // constant scale or an invariant scheme's map) and copies it otherwise;
+  // either way the pixels are those of run_blur on a view of the same image
+  // (the Python module's form).
   Image rgb(61, 47, 3);
   for (std::size_t i = 0; i < rgb.data.size(); ++i) rgb.data[i] = static_cast<float>((i * 7919) % 1009) / 1008.0f;
   const Image map = ramp_map(61, 47, 1.0, 9.0);
-  for (Precision p : {Precision::f32, Precision::f16})
-    for (bool use_map : {false, true}) {
-      const DiffusionParams dp = params(Scheme::invariant_exact, p);
-      const std::optional<double> sigma = use_map ? std::nullopt : std::optional<double>(9.0);
-      const BlurRun want = run_blur(rgb, sigma, use_map ? &map : nullptr, dp);
-      Image owned = rgb;
-      const float* buffer = owned.data.data();
-      const BlurRun got = run_blur(std::move(owned), sigma, use_map ? &map : nullptr, dp);
-      EXPECT_EQ(got.rgb.data, want.rgb.data) << to_string(p) << (use_map ? " scale map" : " constant");
-      EXPECT_EQ(got.rgb.channels, 3);
-      // The constant f32 case blurred the given buffer itself.
-      EXPECT_EQ(got.rgb.data.data() == buffer, !use_map && p == Precision::f32)
-          << to_string(p) << (use_map ? " scale map" : " constant");
-    }
+  for (Scheme s : {Scheme::invariant_exact, Scheme::standard})
+    for (Precision p : {Precision::f32, Precision::f16})
+      for (bool use_map : {false, true}) {
+        const DiffusionParams dp = params(s, p);
+        const std::string what = to_string(s) + " " + to_string(p) + (use_map ? " scale map" : " constant");
+        const std::optional<double> sigma = use_map ? std::nullopt : std::optional<double>(9.0);
+        const BlurRun want = run_blur(rgb, sigma, use_map ? &map : nullptr, dp);
+        Image owned = rgb;
+        const float* buffer = owned.data.data();
+        const BlurRun got = run_blur(std::move(owned), sigma, use_map ? &map : nullptr, dp);
+        EXPECT_EQ(got.rgb.data, want.rgb.data) << what;
+        EXPECT_EQ(got.rgb.channels, 3);
+        // The f32 cases blurred the given buffer itself, but for the
+        // standard scheme's map (its conductance rows take RGBA).
+        EXPECT_EQ(got.rgb.data.data() == buffer, p == Precision::f32 && !(use_map && s == Scheme::standard)) << what;
+      }
 }
 
 TEST(DiffusionWorkspace, ExtraHeapIsTheStatedMultipleOfTheImage) {

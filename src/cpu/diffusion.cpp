@@ -168,6 +168,16 @@ void by_groups_of_four(Image& f, Run&& run) {
 // (one value per pixel of f).
 void run_rates_fast(Image& f, const float* rho, int iterations, const DiffusionParams& p, const Exec& exec,
                     cpu::Workspace& ws) {
+  // Three channels (RGB without an alpha) in f32 take rows of three values a
+  // pixel on the invariant schemes, as a constant scale does (diffuse(f,
+  // sigma) below): no fourth channel to carry, a quarter less arithmetic and
+  // traffic, and no copy into and out of a four-channel group; the same
+  // bits (test: DiffusionChannels.RgbRowsGiveTheRgbaBits). The standard
+  // scheme's conductance rows and binary16 storage take groups of four.
+  if (f.channels == 3 && p.precision == Precision::f32 && p.scheme != Scheme::standard) {
+    cpu::diffuse_fast(f, rho, iterations, p, exec.threads, ws);
+    return;
+  }
   by_groups_of_four(f, [&](Image& g) { cpu::diffuse_fast(g, rho, iterations, p, exec.threads, ws); });
 }
 

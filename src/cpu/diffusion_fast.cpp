@@ -39,6 +39,7 @@
 #include <cstring>
 #include <memory>
 #include <mutex>
+#include <stdexcept>
 #include <vector>
 
 #include "core/huge_pages.hpp"
@@ -197,6 +198,32 @@ void run_generic(const RunArgs& a, const RateRows& q, int edge_mode, int xa, int
   weights_then_update<run_update_generic>(a, q, edge_mode, xa, xb, n);
 }
 
+// The same run on RGB rows (three values a pixel, no fourth channel to
+// carry: the space-variant blur of an RGB image in f32). Value by value,
+// eq11's operations in eq11's order (the interpolation, then
+// brume_diffusion_update), with the pixel's fraction and weights: each value
+// gets the bits the same channel of an RGBA pixel gets (test:
+// DiffusionChannels.RgbRowsGiveTheRgbaBits). One value at a time here and for
+// the last pixels of the wider kernels.
+inline void run_update_rgb_values(const RunArgs& a, int xa, int xb, int n) {
+  const std::ptrdiff_t n3 = static_cast<std::ptrdiff_t>(n) * 3;
+  for (int x = xa; x < xb; ++x) {
+    const std::ptrdiff_t i0 = static_cast<std::ptrdiff_t>(x) * 3;
+    const float f = a.fr[x], wl = a.wl[x], wr = a.wr[x], wu = a.wu[x], wd = a.wd[x];
+    for (std::ptrdiff_t i = i0; i < i0 + 3; ++i) {
+      const float fc = a.s[i];
+      const float l = a.s[i - n3] + f * (a.s[i - n3 - 3] - a.s[i - n3]);
+      const float r = a.s[i + n3] + f * (a.s[i + n3 + 3] - a.s[i + n3]);
+      const float u = a.u0[i] + f * (a.u1[i] - a.u0[i]);
+      const float d = a.d0[i] + f * (a.d1[i] - a.d0[i]);
+      a.o[i] = brume_diffusion_update(fc, l, r, u, d, wl, wr, wu, wd);
+    }
+  }
+}
+void run_rgb_generic(const RunArgs& a, const RateRows& q, int edge_mode, int xa, int xb, int n) {
+  weights_then_update<run_update_rgb_values>(a, q, edge_mode, xa, xb, n);
+}
+
 #if defined(__x86_64__)
 // (Lambdas would not inherit the target attribute: helpers instead.)
 #define BRUME_AVX2 __attribute__((target("avx2"), always_inline)) inline
@@ -323,6 +350,95 @@ __attribute__((target("avx512f"))) void run_fused_avx512(const RunArgs& a, const
     default: run_fused_avx512_mode<0>(a, q, xa, xb, n); break;
   }
 }
+
+// RGB rows (run_update_rgb_values' arithmetic) at AVX2 width: eight pixels
+// are 24 values, three 256-bit vectors, and each value lane takes its
+// pixel's fraction and weights by one permute of the eight pixels' values
+// (pixel (8 j + l) / 3 for lane l of vector j): the broadcast that the RGBA
+// rows do over four lanes, with no lane spent on an alpha.
+__attribute__((target("avx2"))) void run_update_rgb_avx2(const RunArgs& a, int xa, int xb, int n) {
+  const std::ptrdiff_t n3 = static_cast<std::ptrdiff_t>(n) * 3;
+  const __m256i lanes[3] = {_mm256_setr_epi32(0, 0, 0, 1, 1, 1, 2, 2), _mm256_setr_epi32(2, 3, 3, 3, 4, 4, 4, 5),
+                            _mm256_setr_epi32(5, 5, 6, 6, 6, 7, 7, 7)};
+  int x = xa;
+  for (; x + 8 <= xb; x += 8) {
+    const __m256 f8 = _mm256_loadu_ps(a.fr + x);
+    const __m256 wl8 = _mm256_loadu_ps(a.wl + x), wr8 = _mm256_loadu_ps(a.wr + x);
+    const __m256 wu8 = _mm256_loadu_ps(a.wu + x), wd8 = _mm256_loadu_ps(a.wd + x);
+    for (int j = 0; j < 3; ++j) {
+      const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(x) * 3 + 8 * j;
+      const __m256 f = _mm256_permutevar8x32_ps(f8, lanes[j]);
+      const __m256 fc = _mm256_loadu_ps(a.s + i);
+      const __m256 l = lerp2(_mm256_loadu_ps(a.s + i - n3), _mm256_loadu_ps(a.s + i - n3 - 3), f);
+      const __m256 r = lerp2(_mm256_loadu_ps(a.s + i + n3), _mm256_loadu_ps(a.s + i + n3 + 3), f);
+      const __m256 u = lerp2(_mm256_loadu_ps(a.u0 + i), _mm256_loadu_ps(a.u1 + i), f);
+      const __m256 d = lerp2(_mm256_loadu_ps(a.d0 + i), _mm256_loadu_ps(a.d1 + i), f);
+      const __m256 wl = _mm256_permutevar8x32_ps(wl8, lanes[j]), wr = _mm256_permutevar8x32_ps(wr8, lanes[j]);
+      const __m256 wu = _mm256_permutevar8x32_ps(wu8, lanes[j]), wd = _mm256_permutevar8x32_ps(wd8, lanes[j]);
+      _mm256_storeu_ps(a.o + i, fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc));
+    }
+  }
+  run_update_rgb_values(a, x, xb, n);
+}
+__attribute__((target("avx2"))) void run_rgb_avx2(const RunArgs& a, const RateRows& q, int edge_mode, int xa, int xb,
+                                                  int n) {
+  weights_then_update<run_update_rgb_avx2>(a, q, edge_mode, xa, xb, n);
+}
+
+// RGB rows at AVX-512 width, the weights in registers as run_fused_avx512:
+// sixteen pixels' fractions and eq. 12 weights (weight16), then their 48
+// values as three 512-bit vectors, lane l of vector j taking pixel
+// (16 j + l) / 3's by one permute. The last < 16 pixels of a run take the
+// same code under masks (masked-off lanes are neither loaded nor stored), so
+// short runs -- a real haze map splits its rows into many -- stay vectorised.
+// Masked forms of weight16 and lerp4 (lanes outside the mask read as 0).
+template <int kMode>
+BRUME_AVX512 __m512 weight16m(__mmask16 m, __m512 rc, const float* r0, const float* r1, __m512 f) {
+  return edge16<kMode>(rc, tap16<kMode>(_mm512_maskz_loadu_ps(m, r0), _mm512_maskz_loadu_ps(m, r1), f));
+}
+BRUME_AVX512 __m512 lerp4m(__mmask16 m, const float* p0, const float* p1, __m512 f) {
+  return lerp4(_mm512_maskz_loadu_ps(m, p0), _mm512_maskz_loadu_ps(m, p1), f);
+}
+template <int kMode>
+__attribute__((target("avx512f"))) void run_rgb_avx512_mode(const RunArgs& a, const RateRows& q, int xa, int xb,
+                                                            int n) {
+  const std::ptrdiff_t n3 = static_cast<std::ptrdiff_t>(n) * 3;
+  const __m512i lanes[3] = {_mm512_setr_epi32(0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5),
+                            _mm512_setr_epi32(5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 9, 9, 9, 10, 10),
+                            _mm512_setr_epi32(10, 11, 11, 11, 12, 12, 12, 13, 13, 13, 14, 14, 14, 15, 15, 15)};
+  for (int x = xa; x < xb; x += 16) {
+    const int m = std::min(16, xb - x);                             // pixels
+    const __mmask16 pm = static_cast<__mmask16>((1u << m) - 1u);    // their lanes
+    const __m512 f16 = _mm512_maskz_loadu_ps(pm, a.fr + x), rc = _mm512_maskz_loadu_ps(pm, q.c + x);
+    const __m512 wl16 = weight16m<kMode>(pm, rc, q.c + x - n, q.c + x - n - 1, f16);
+    const __m512 wr16 = weight16m<kMode>(pm, rc, q.c + x + n, q.c + x + n + 1, f16);
+    const __m512 wu16 = weight16m<kMode>(pm, rc, q.u0 + x, q.u1 + x, f16);
+    const __m512 wd16 = weight16m<kMode>(pm, rc, q.d0 + x, q.d1 + x, f16);
+    for (int j = 0; j < 3; ++j) {
+      const int values = 3 * m - 16 * j;  // of this vector
+      if (values <= 0) break;
+      const __mmask16 vm = static_cast<__mmask16>(values >= 16 ? 0xffffu : (1u << values) - 1u);
+      const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(x) * 3 + 16 * j;
+      const __m512 f = _mm512_permutexvar_ps(lanes[j], f16);
+      const __m512 fc = _mm512_maskz_loadu_ps(vm, a.s + i);
+      const __m512 l = lerp4m(vm, a.s + i - n3, a.s + i - n3 - 3, f);
+      const __m512 r = lerp4m(vm, a.s + i + n3, a.s + i + n3 + 3, f);
+      const __m512 u = lerp4m(vm, a.u0 + i, a.u1 + i, f);
+      const __m512 d = lerp4m(vm, a.d0 + i, a.d1 + i, f);
+      const __m512 wl = _mm512_permutexvar_ps(lanes[j], wl16), wr = _mm512_permutexvar_ps(lanes[j], wr16);
+      const __m512 wu = _mm512_permutexvar_ps(lanes[j], wu16), wd = _mm512_permutexvar_ps(lanes[j], wd16);
+      _mm512_mask_storeu_ps(a.o + i, vm, fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc));
+    }
+  }
+}
+__attribute__((target("avx512f"))) void run_rgb_avx512(const RunArgs& a, const RateRows& q, int edge_mode, int xa,
+                                                       int xb, int n) {
+  switch (edge_mode) {
+    case 1: run_rgb_avx512_mode<1>(a, q, xa, xb, n); break;
+    case 2: run_rgb_avx512_mode<2>(a, q, xa, xb, n); break;
+    default: run_rgb_avx512_mode<0>(a, q, xa, xb, n); break;
+  }
+}
 #undef BRUME_AVX2
 #undef BRUME_AVX512
 #endif
@@ -445,6 +561,8 @@ __attribute__((target("avx512f"))) int run_end_avx512(const int* __restrict n, i
 // run_fused_avx512); the offset loops widen with them.
 // F's rows come through a RowSource (the whole image, or a fused group's
 // ring) and row y of the result goes to orow.
+// C: values a pixel, 4 (RGBA) or 3 (RGB rows, with the RGB run kernels).
+template <int C>
 __attribute__((always_inline)) inline void general_row_body(const RowSource<float>& in, float* orow, const float* rho,
                                                             float s0, int k, const float* growth, const float* vr,
                                                             bool exact, int edge_mode, int W, int H, int y,
@@ -492,14 +610,19 @@ __attribute__((always_inline)) inline void general_row_body(const RowSource<floa
       if (p >= qe) return;
       const std::size_t len = static_cast<std::size_t>(qe - p) + 2 * static_cast<std::size_t>(n) + 2;
       if (len > 2 * Ws + 64) {
-        for (int i = p; i < qe; ++i) pixel_from_rows<false>(in, orow, rho, 0.0f, W, H, i, y, h[i], edge_mode);
+        for (int i = p; i < qe; ++i) {
+          if constexpr (C == 4)
+            pixel_from_rows<false>(in, orow, rho, 0.0f, W, H, i, y, h[i], edge_mode);
+          else
+            pixel_values_from_rows(in, orow, rho, W, H, i, y, h[i], edge_mode, C);
+        }
         return;
       }
-      if (t.rpad.size() < len) t.fpad.resize(4 * len), t.rpad.resize(len);
+      if (t.rpad.size() < len) t.fpad.resize(C * len), t.rpad.resize(len);
       const float* s = args.s;
       for (std::size_t j = 0; j < len; ++j) {
         const int col = mirror(p - n - 1 + static_cast<int>(j), W);
-        std::memcpy(t.fpad.data() + 4 * j, s + static_cast<std::size_t>(col) * 4, 4 * sizeof(float));
+        std::memcpy(t.fpad.data() + C * j, s + static_cast<std::size_t>(col) * C, C * sizeof(float));
         t.rpad[j] = rrow[col];
       }
       const std::ptrdiff_t shift = static_cast<std::ptrdiff_t>(n) + 1 - p;  // column c -> entry c + shift
@@ -508,7 +631,7 @@ __attribute__((always_inline)) inline void general_row_body(const RowSource<floa
                                               static_cast<std::uintptr_t>(values * static_cast<std::ptrdiff_t>(sizeof(float))));
       };
       RunArgs pa = args;
-      pa.s = shifted(t.fpad.data(), shift * 4);
+      pa.s = shifted(t.fpad.data(), shift * C);
       RateRows pq = q;
       pq.c = shifted(t.rpad.data(), shift);
       run(pa, pq, edge_mode, p, qe, n);
@@ -523,16 +646,23 @@ __attribute__((always_inline)) inline void general_row_body(const RowSource<floa
 #define BRUME_GENERAL_ROW_ARGS                                                                              \
   const RowSource<float> &in, float *orow, const float *rho, float s0, int k, const float *growth,            \
       const float *vr, bool exact, int edge_mode, int W, int H, int y, RowScratch &t
-#define BRUME_GENERAL_ROW_CALL(upd, end) \
-  general_row_body(in, orow, rho, s0, k, growth, vr, exact, edge_mode, W, H, y, t, upd, end)
+#define BRUME_GENERAL_ROW_CALL(C, upd, end) \
+  general_row_body<C>(in, orow, rho, s0, k, growth, vr, exact, edge_mode, W, H, y, t, upd, end)
 using GeneralRow = void (*)(BRUME_GENERAL_ROW_ARGS);
-void general_row_generic(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(run_generic, run_end_generic); }
+void general_row_generic(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(4, run_generic, run_end_generic); }
+void general_rgb_row_generic(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(3, run_rgb_generic, run_end_generic); }
 #if defined(__x86_64__)
 __attribute__((target("avx2"))) void general_row_avx2(BRUME_GENERAL_ROW_ARGS) {
-  BRUME_GENERAL_ROW_CALL(run_avx2, run_end_avx2);
+  BRUME_GENERAL_ROW_CALL(4, run_avx2, run_end_avx2);
+}
+__attribute__((target("avx2"))) void general_rgb_row_avx2(BRUME_GENERAL_ROW_ARGS) {
+  BRUME_GENERAL_ROW_CALL(3, run_rgb_avx2, run_end_avx2);
 }
 __attribute__((target("avx512f"))) void general_row_avx512(BRUME_GENERAL_ROW_ARGS) {
-  BRUME_GENERAL_ROW_CALL(run_fused_avx512, run_end_avx512);
+  BRUME_GENERAL_ROW_CALL(4, run_fused_avx512, run_end_avx512);
+}
+__attribute__((target("avx512f"))) void general_rgb_row_avx512(BRUME_GENERAL_ROW_ARGS) {
+  BRUME_GENERAL_ROW_CALL(3, run_rgb_avx512, run_end_avx512);
 }
 #endif
 #undef BRUME_GENERAL_ROW_CALL
@@ -573,6 +703,7 @@ struct RowKernels {
   UniformRow uniform;
   GeneralRow general;
   StandardRow standard;
+  GeneralRow general_rgb;  // the space-variant row on RGB rows (three values a pixel)
 };
 std::atomic<int> g_simd_limit{-1};
 int simd_available() {
@@ -595,10 +726,10 @@ RowKernels row_kernels() {
     // their per-pixel offsets and weights are arithmetic-bound. On Zen 5
     // (AMD EPYC family 26), with the workspace rows cache-line aligned, the
     // constant rows took the same time at either width (-3..+3 %, 2026-12-02).
-    case 2: return {uniform_row_avx2, general_row_avx512, standard_row_avx512};
-    case 1: return {uniform_row_avx2, general_row_avx2, standard_row_avx2};
+    case 2: return {uniform_row_avx2, general_row_avx512, standard_row_avx512, general_rgb_row_avx512};
+    case 1: return {uniform_row_avx2, general_row_avx2, standard_row_avx2, general_rgb_row_avx2};
 #endif
-    default: return {uniform_row_generic, general_row_generic, standard_row_generic};
+    default: return {uniform_row_generic, general_row_generic, standard_row_generic, general_rgb_row_generic};
   }
 }
 
@@ -948,6 +1079,9 @@ void diffuse_fast_uniform(Image& f, float rho, int iterations, const DiffusionPa
 void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionParams& p, int threads,
                   Workspace& ws) {
   const int W = f.width, H = f.height, N = iterations;
+  const int C = f.channels;  // 4, or 3: RGB rows of the invariant schemes
+  if (C != 4 && (C != 3 || p.scheme == Scheme::standard))
+    throw std::logic_error("diffuse_fast: RGBA, or RGB rows of an invariant scheme");
   const std::size_t np = f.pixels();
   const std::size_t Ws = static_cast<std::size_t>(W);
   const FastCall c(p, threads);
@@ -993,17 +1127,19 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
   // Temporal blocking as on the constant path (diffusion_fusion.hpp), with
   // each iteration's radius bounded over the whole map.
   const Radii radii = general_radii(rates, np, N, s0, exact);
-  const std::vector<FusedGroup> groups = plan_fusion(radii, W, H, nt, sizeof(float));
+  const std::vector<FusedGroup> groups = plan_fusion(radii, W, H, nt, sizeof(float), C);
   float* fusion =
-      ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_scratch_values(radii, groups, W, H, nt)));
-  src = iterations_fused(src, partner_if_needed(ws, radii, groups, f, nt), W, H, radii, groups, nt, fusion,
-                         [&](int k, int y, const RowSource<float>& in, float* out) {
-                           RowScratch& t = scratch[static_cast<std::size_t>(omp_get_thread_num())];
-                           const std::size_t r0 = static_cast<std::size_t>(y) * Ws;
-                           kern.general(in, out, rho, s0, k, growth + r0, vratio + r0, exact, edge_mode, W, H, y,
-                                        t);
-                           if (f16) round_to_half(out, Ws * 4);
-                         });
+      ws.get(Workspace::ring, std::max<std::size_t>(1, fusion_scratch_values(radii, groups, W, H, nt, C)));
+  const GeneralRow general = C == 3 ? kern.general_rgb : kern.general;
+  src = iterations_fused(
+      src, partner_if_needed(ws, radii, groups, f, nt), W, H, radii, groups, nt, fusion,
+      [&](int k, int y, const RowSource<float>& in, float* out) {
+        RowScratch& t = scratch[static_cast<std::size_t>(omp_get_thread_num())];
+        const std::size_t r0 = static_cast<std::size_t>(y) * Ws;
+        general(in, out, rho, s0, k, growth + r0, vratio + r0, exact, edge_mode, W, H, y, t);
+        if (f16) round_to_half(out, Ws * C);
+      },
+      C);
   copy_back(f, src, nt);
 }
 

@@ -106,7 +106,9 @@ std::size_t kept_workspace_bytes();
 // The CPU schedules take validated inputs (the checks are in diffusion.cpp).
 //
 // Rate path: F with any channel count for the reference, four channels for
-// the fast path (the front end feeds it groups of four); one rate per pixel
+// the fast path (the front end feeds it groups of four) or, for the
+// invariant schemes, three (RGB rows of three values a pixel: the same bits
+// as those channels of a four-channel run); one rate per pixel
 // (double in the reference, the float map in the fast path) and the
 // iteration count N. The standard scheme is the conductance path below with
 // edge weights formed from the two ends' rates (eq. 12 or its min/harmonic

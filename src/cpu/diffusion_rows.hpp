@@ -94,6 +94,36 @@ inline void pixel_from_rows(const RowSource<typename S::T>& in, typename S::T* o
                           S::load(in(yu1) + c), S::load(in(yd0) + c), S::load(in(yd1) + c), fr, wl, wr, wu, wd));
 }
 
+// The same pixel (space-variant, float storage) on rows of C values a pixel
+// (the RGB rows): value by value, eq11's operations in eq11's order with the
+// same taps and weights, hence each value's bits as in the RGBA pixel.
+inline void pixel_values_from_rows(const RowSource<float>& in, float* orow, const float* rho, int W, int H, int x,
+                                   int y, float h, int edge_mode, int C) {
+  const int n = static_cast<int>(h);
+  const float fr = h - static_cast<float>(n);
+  const int xl0 = mirror(x - n, W), xl1 = mirror(x - n - 1, W), xr0 = mirror(x + n, W), xr1 = mirror(x + n + 1, W);
+  const int yu0 = mirror(y - n, H), yu1 = mirror(y - n - 1, H), yd0 = mirror(y + n, H), yd1 = mirror(y + n + 1, H);
+  const std::size_t Ws = static_cast<std::size_t>(W);
+  const float* rrow = rho + y * Ws;
+  const float rc = rrow[x];
+  const float wl = sh::brume_edge_rate(rc, sh::brume_tap_rate(rrow[xl0], rrow[xl1], fr, edge_mode), edge_mode);
+  const float wr = sh::brume_edge_rate(rc, sh::brume_tap_rate(rrow[xr0], rrow[xr1], fr, edge_mode), edge_mode);
+  const float wu =
+      sh::brume_edge_rate(rc, sh::brume_tap_rate(rho[yu0 * Ws + x], rho[yu1 * Ws + x], fr, edge_mode), edge_mode);
+  const float wd =
+      sh::brume_edge_rate(rc, sh::brume_tap_rate(rho[yd0 * Ws + x], rho[yd1 * Ws + x], fr, edge_mode), edge_mode);
+  const float* s = in(y);
+  const float *u0 = in(yu0), *u1 = in(yu1), *d0 = in(yd0), *d1 = in(yd1);
+  const std::ptrdiff_t cC = static_cast<std::ptrdiff_t>(x) * C;
+  for (int c = 0; c < C; ++c) {
+    const std::ptrdiff_t i = cC + c;
+    const float l = s[xl0 * C + c] + fr * (s[xl1 * C + c] - s[xl0 * C + c]);
+    const float r = s[xr0 * C + c] + fr * (s[xr1 * C + c] - s[xr0 * C + c]);
+    const float u = u0[i] + fr * (u1[i] - u0[i]), d = d0[i] + fr * (d1[i] - d0[i]);
+    orow[i] = brume_diffusion_update(s[i], l, r, u, d, wl, wr, wu, wd);
+  }
+}
+
 // The same pixel of whole images src -> dst.
 template <bool kUniform, class S = StoreF32>
 inline void update_pixel(const typename S::T* src, typename S::T* dst, const float* rho, float w_all, int W,

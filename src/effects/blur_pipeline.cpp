@@ -75,12 +75,14 @@ BlurRun blur_impl(ConstImageView rgb, Image* owned, std::optional<double> sigma,
   }
   BackendChoice backend = choose_backend(exec);
   // The engine's working buffer, filled straight from the caller's pixels
-  // (the view is read in place): on the CPU, a constant scale in f32 diffuses
-  // the RGB values themselves (rows of three values a pixel: a quarter less
-  // work and memory than RGBA, and no packing after); otherwise RGBA with
-  // alpha 1 (the space-variant rows, binary16 storage and the GPU's textures
-  // take four channels).
-  const bool rgb_rows = !backend.gpu && !scale_map && dp.precision == Precision::f32;
+  // (the view is read in place): on the CPU in f32, a constant scale or the
+  // invariant schemes' scale map diffuse the RGB values themselves (rows of
+  // three values a pixel: a quarter less work and memory than RGBA, and no
+  // packing after); otherwise RGBA with alpha 1 (the standard scheme's
+  // conductance rows, binary16 storage and the GPU's textures take four
+  // channels).
+  const bool rgb_rows = !backend.gpu && dp.precision == Precision::f32 &&
+                        (!scale_map || dp.scheme != Scheme::standard);
   const int fc = rgb_rows ? 3 : 4;
   Image f;
   if (rgb_rows && owned) {
