@@ -547,6 +547,61 @@ void write_png_by_hand(const std::string& p, int w, int h, int depth, int color,
 }
 }  // namespace
 
+namespace {
+// An EXR scanline file of one part cut into its parts: the bytes before the
+// offset table (preamble and header), and each block's first line and data.
+// lines: scanlines a block. Empty blocks when the file is too short.
+struct ExrBlocks {
+  std::string head;
+  std::vector<int> y;
+  std::vector<std::string> data;
+};
+ExrBlocks exr_blocks(const std::string& b, int height, int lines) {
+  ExrBlocks r;
+  std::size_t at = 8;
+  while (at < b.size() && b[at] != '\0') {  // name\0 type\0 size value
+    at = b.find('\0', at);
+    at = b.find('\0', at + 1) + 1;
+    if (at == 0 || at + 4 > b.size()) return {};
+    std::uint32_t n;
+    std::memcpy(&n, b.data() + at, 4);
+    at += 4 + n;
+  }
+  r.head = b.substr(0, at + 1);
+  const int blocks = (height + lines - 1) / lines;
+  for (int k = 0; k < blocks; ++k) {
+    std::uint64_t off;
+    if (at + 1 + 8 * (k + 1) > b.size()) return {};
+    std::memcpy(&off, b.data() + at + 1 + 8 * k, 8);
+    if (off + 8 > b.size()) return {};
+    std::int32_t y, n;
+    std::memcpy(&y, b.data() + off, 4);
+    std::memcpy(&n, b.data() + off + 4, 4);
+    if (n < 0 || off + 8 + static_cast<std::uint64_t>(n) > b.size()) return {};
+    r.y.push_back(y);
+    r.data.push_back(b.substr(off + 8, static_cast<std::size_t>(n)));
+  }
+  return r;
+}
+// A ZIP/ZIPS block's raw scanline bytes (raw_size of them), by OpenEXR's
+// rules read independently of brume: stored as is when it is raw_size
+// long, else zlib (inflated by zlib itself), then the deltas summed and the
+// two halves interleaved. "" when it does not inflate to exactly raw_size.
+std::string exr_zip_block(const std::string& d, std::size_t raw_size) {
+  if (d.size() == raw_size) return d;
+  std::string t(raw_size, '\0');
+  uLongf got = raw_size;
+  if (uncompress(reinterpret_cast<Bytef*>(t.data()), &got, reinterpret_cast<const Bytef*>(d.data()), d.size()) != Z_OK ||
+      got != raw_size)
+    return "";
+  for (std::size_t i = 1; i < raw_size; ++i) t[i] = static_cast<char>(t[i] + t[i - 1] - 128);
+  std::string raw(raw_size, '\0');
+  const std::size_t h = (raw_size + 1) / 2;
+  for (std::size_t i = 0; i < raw_size; ++i) raw[i] = i % 2 ? t[h + i / 2] : t[i / 2];
+  return raw;
+}
+}  // namespace
+
 TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
   // Single-part half/float OpenEXR with one channel or R G B (A) is read
   // with OpenEXR itself (no OpenImageIO module load): values bit for bit,
@@ -565,11 +620,19 @@ TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
     bool offset_window = false;
     bool mixed = false;
     int subimages = 1;
+    bool origin = false;      // data and display windows from (3, 2)
+    bool decreasing = false;  // line order DECREASING_Y
+    bool noise = false;       // values that do not deflate (stored blocks)
   };
-  auto values = [](int w, int h, int c) {
+  auto values = [](int w, int h, int c, bool noise = false) {
     std::vector<float> v(static_cast<std::size_t>(w) * h * c);
-    for (std::size_t i = 0; i < v.size(); ++i)
+    std::uint32_t state = 99;
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      state = state * 1664525u + 1013904223u;
       v[i] = i % 31 == 0 ? NAN : i % 37 == 0 ? -INFINITY : i % 41 == 0 ? 1e-41f : 0.173f * static_cast<float>(i) - 40.0f;
+      if (noise && i % 31 && i % 37 && i % 41)
+        v[i] = std::ldexp(static_cast<float>(state >> 8) / 16777216.0f - 0.5f, static_cast<int>(state % 21) - 10);
+    }
     return v;
   };
   auto write = [&](const Spec& s) {
@@ -581,11 +644,13 @@ TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
     spec.attribute("ImageDescription", "{\"written\": \"" + s.name + "\"}");
     if (s.tiled) spec.tile_width = spec.tile_height = 16;
     if (s.offset_window) spec.x = 3, spec.y = 2, spec.full_width = s.w + 6, spec.full_height = s.h + 4;
+    if (s.origin) spec.x = spec.full_x = 3, spec.y = spec.full_y = 2;
+    if (s.decreasing) spec.attribute("openexr:lineOrder", "decreasingY");
     if (s.mixed) {
       spec.channelformats.assign(static_cast<std::size_t>(c), OIIO::TypeDesc::HALF);
       spec.channelformats[0] = OIIO::TypeDesc::FLOAT;
     }
-    const std::vector<float> v = values(s.w, s.h, c);
+    const std::vector<float> v = values(s.w, s.h, c, s.noise);
     auto out = OIIO::ImageOutput::create(p);
     ASSERT_TRUE(out) << p;
     std::vector<OIIO::ImageSpec> specs(static_cast<std::size_t>(s.subimages), spec);
@@ -599,7 +664,7 @@ TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
     ASSERT_TRUE(out->close()) << p;
   };
   const OIIO::TypeDesc H = OIIO::TypeDesc::HALF, F = OIIO::TypeDesc::FLOAT;
-  const std::vector<Spec> subset = {
+  std::vector<Spec> subset = {
       {"y_zip.exr", 37, 23, {"Y"}, F, "zip"},
       {"y_half_piz.exr", 37, 23, {"Y"}, H, "piz"},
       {"rgb_half_none.exr", 41, 19, {"R", "G", "B"}, H, "none"},
@@ -609,6 +674,19 @@ TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
       {"rgb_float_pxr24.exr", 29, 35, {"R", "G", "B"}, F, "pxr24"},
       {"rgb_half_dwaa.exr", 70, 40, {"R", "G", "B"}, H, "dwaa"},
   };
+  // ZIP and ZIPS scanline files, whose blocks brume decodes itself: half
+  // and float, 1, 3 and 4 channels, a window from (3, 2), decreasing line
+  // order, blocks stored as is (noise), a short last block.
+  for (Spec z : {Spec{"rgb_half_zip_origin.exr", 70, 40, {"R", "G", "B"}, H, "zip"},
+                 Spec{"rgba_float_zips_decreasing.exr", 41, 19, {"R", "G", "B", "A"}, F, "zips"},
+                 Spec{"y_float_zip_noise.exr", 64, 41, {"Y"}, F, "zip"},
+                 Spec{"rgb_half_zips_noise.exr", 33, 9, {"R", "G", "B"}, H, "zips"},
+                 Spec{"rgba_half_zip_decreasing.exr", 19, 37, {"R", "G", "B", "A"}, H, "zip"}}) {
+    z.origin = z.name.find("origin") != std::string::npos;
+    z.decreasing = z.name.find("decreasing") != std::string::npos;
+    z.noise = z.name.find("noise") != std::string::npos;
+    subset.push_back(z);
+  }
   const std::vector<Spec> other = {
       {"rgbz.exr", 21, 13, {"R", "G", "B", "Z"}, F, "zip"},
       {"ya.exr", 21, 13, {"Y", "A"}, H, "zip"},
@@ -640,6 +718,16 @@ TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
     Image got;
     ASSERT_TRUE(detail::read_exr_subset(p, &got, info, no_check, 0)) << p;
     EXPECT_TRUE(same_bits(got.data, want)) << p;
+    if (s.noise) {  // the stored blocks are there
+      const int lines = s.compression == "zips" ? 1 : 16;
+      const ExrBlocks bl = exr_blocks(file_bytes(p), s.h, lines);
+      int stored = 0;
+      for (std::size_t k = 0; k < bl.data.size(); ++k)
+        stored += bl.data[k].size() == static_cast<std::size_t>(s.w) * s.channels.size() * s.type.size() *
+                                           static_cast<std::size_t>(std::min(lines, s.h - (bl.y[k] - bl.y[0])));
+      EXPECT_GT(stored, 0) << p << ": no block stored as is";
+      EXPECT_FALSE(bl.data.empty()) << p;
+    }
     EXPECT_EQ(got.width, spec.width) << p;
     EXPECT_EQ(got.height, spec.height) << p;
     EXPECT_EQ(info.channel_names, std::vector<std::string>(spec.channelnames.begin(), spec.channelnames.end())) << p;
@@ -691,6 +779,18 @@ TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
       }
     }
   }
+  // A ZIP block whose stream is damaged (its Adler-32 no longer matches) is
+  // declined as well.
+  {
+    const std::string full = (d / "rgb_half_zip_origin.exr").string(), bad = (d / "bad_block.exr").string();
+    std::string bytes = file_bytes(full);
+    bytes[bytes.size() - 40] = static_cast<char>(bytes[bytes.size() - 40] ^ 0x5a);
+    std::ofstream(bad, std::ios::binary) << bytes;
+    detail::ExrInfo info;
+    Image got;
+    EXPECT_FALSE(detail::read_exr_subset(bad, &got, info, no_check, 2));
+    EXPECT_TRUE(got.data.empty());
+  }
   // A truncated subset file is declined, and OpenImageIO's reading of it
   // decides (here: an error naming the file, or its partial image).
   {
@@ -707,10 +807,15 @@ TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
 
 TEST(IO, ExrSubsetWritesTheFileOpenImageIOWrites) {
   // 1- and 3-channel EXR in half or float, linear, with the default or any
-  // named compression, are written by OpenEXR itself (no OpenImageIO module
-  // load): the file must be OpenImageIO's for the same values and the
-  // attributes brume gives it, byte for byte, once both files' time stamps
-  // (capDate, the time of writing) are blanked. Outside the subset (a
+  // named compression, are written without OpenImageIO (no module load),
+  // as OpenImageIO writes them for the same values and the attributes
+  // brume gives it, once both files' time stamps (capDate, the time of
+  // writing) are blanked: byte for byte through OpenEXR's writer (none,
+  // rle, piz, pxr24, b44, b44a, dwaa, dwab); for zip (also "auto") and zips,
+  // whose blocks brume deflates itself (libdeflate), the same preamble and
+  // header bytes, the same blocks at the same lines, each block's data
+  // inflating (zlib) to the bytes of OpenImageIO's block, and the values
+  // read back by OpenImageIO equal to its file's. Outside the subset (a
   // level) OpenImageIO still writes.
   fs::path d = tmpdir();
   // The capDate attribute: name, type "string", a 4-byte size, the value.
@@ -723,8 +828,17 @@ TEST(IO, ExrSubsetWritesTheFileOpenImageIOWrites) {
     for (std::uint32_t k = 0; k < n; ++k) b[at + key.size() + 4 + k] = '#';
     return b;
   };
+  auto oiio_values = [](const fs::path& p) {
+    auto in = OIIO::ImageInput::open(p.string());
+    EXPECT_TRUE(in) << p;
+    if (!in) return std::vector<float>{};
+    const OIIO::ImageSpec& sp = in->spec();
+    std::vector<float> v(static_cast<std::size_t>(sp.width) * sp.height * sp.nchannels);
+    EXPECT_TRUE(in->read_image(0, 0, 0, sp.nchannels, OIIO::TypeDesc::FLOAT, v.data())) << p;
+    return v;
+  };
   const std::string desc = "{\"record\": \"brume\", \"n\": 1}";
-  int compared = 0;
+  int compared = 0, zipped = 0;
   for (int c : {1, 3})
     for (bool half : {false, true})
       for (const char* comp :
@@ -732,8 +846,20 @@ TEST(IO, ExrSubsetWritesTheFileOpenImageIOWrites) {
         const std::string name = comp;
         const bool lossy = name == "pxr24" || name.rfind("b44", 0) == 0 || name.rfind("dwa", 0) == 0;
         if (c == 1 && lossy) continue;  // data maps are written losslessly (refused: another test)
-        Image img = gradient(67, 45, c);
+        const bool zip = name == "auto" || name == "zip" || name == "zips";
+        // Three ZIP blocks (the last one short); rows 16-31, one whole ZIP
+        // block, of values that do not deflate (blocks stored as is).
+        const int W = 67, H = 45;
+        Image img = gradient(W, H, c);
         for (std::size_t i = 0; i < img.data.size(); i += 29) img.data[i] = i % 2 ? -3.25e-6f : 70000.0f;
+        std::uint32_t state = 12345;
+        for (int y = 16; y < 32; ++y)
+          for (int x = 0; x < W; ++x)
+            for (int k = 0; k < c; ++k) {
+              state = state * 1664525u + 1013904223u;
+              img.at(x, y, k) = std::ldexp(static_cast<float>(state >> 8) / 16777216.0f - 0.5f,
+                                           static_cast<int>(state % 21) - 10);
+            }
         const std::string tag = std::to_string(c) + (half ? "h_" : "f_") + comp;
         const fs::path mine = d / ("mine_" + tag + ".exr"), theirs = d / ("oiio_" + tag + ".exr");
         WriteOptions o;
@@ -744,7 +870,7 @@ TEST(IO, ExrSubsetWritesTheFileOpenImageIOWrites) {
         if (c == 1) o.float_reason = "metres";
         const std::uint64_t before = detail::exr_direct_writes();
         write_image(mine.string(), img, o);
-        EXPECT_EQ(detail::exr_direct_writes(), before + 1) << tag << " was not written by OpenEXR itself";
+        EXPECT_EQ(detail::exr_direct_writes(), before + 1) << tag << " was not written without OpenImageIO";
         OIIO::ImageSpec spec(img.width, img.height, c, half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT);
         if (c == 1) spec.channelnames = {"Y"};
         spec.attribute("oiio:ColorSpace", "linear");
@@ -756,10 +882,33 @@ TEST(IO, ExrSubsetWritesTheFileOpenImageIOWrites) {
         ASSERT_TRUE(out->close()) << tag;
         const std::string a = blank_stamp(file_bytes(mine)), b = blank_stamp(file_bytes(theirs));
         EXPECT_NE(a, "no capDate") << tag;
-        EXPECT_TRUE(a == b) << tag << ": " << a.size() << " bytes against OpenImageIO's " << b.size();
         ++compared;
+        if (!zip) {
+          EXPECT_TRUE(a == b) << tag << ": " << a.size() << " bytes against OpenImageIO's " << b.size();
+          continue;
+        }
+        const int lines = name == "zips" ? 1 : 16;
+        const ExrBlocks ma = exr_blocks(a, H, lines), mb = exr_blocks(b, H, lines);
+        ASSERT_FALSE(ma.data.empty()) << tag << ": brume's file does not parse";
+        ASSERT_FALSE(mb.data.empty()) << tag << ": OpenImageIO's file does not parse";
+        EXPECT_TRUE(ma.head == mb.head) << tag << ": the preamble and header differ";
+        EXPECT_EQ(ma.y, mb.y) << tag;
+        const std::size_t row = static_cast<std::size_t>(W) * c * (half ? 2 : 4);
+        int stored = 0;
+        for (std::size_t k = 0; k < ma.data.size() && k < mb.data.size(); ++k) {
+          const std::size_t raw = row * static_cast<std::size_t>(std::min(lines, H - ma.y[k]));
+          const std::string ra = exr_zip_block(ma.data[k], raw), rb = exr_zip_block(mb.data[k], raw);
+          EXPECT_FALSE(ra.empty()) << tag << " block " << k << " does not inflate";
+          EXPECT_TRUE(ra == rb) << tag << " block " << k << " holds other values";
+          stored += ma.data[k].size() == raw;
+        }
+        EXPECT_GT(stored, 0) << tag << ": no block stored as is (the test's noise)";
+        EXPECT_LT(stored, static_cast<int>(ma.data.size())) << tag << ": no block deflated";
+        EXPECT_EQ(oiio_values(mine), oiio_values(theirs)) << tag;
+        ++zipped;
       }
   EXPECT_EQ(compared, 34);
+  EXPECT_EQ(zipped, 12);
   // A compression level is left to OpenImageIO (which names it in the file).
   {
     WriteOptions o;
