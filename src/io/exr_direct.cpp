@@ -27,6 +27,7 @@
 #include <fstream>
 #include <memory>
 #include <mutex>
+#include <new>
 
 namespace brume::detail {
 
@@ -121,8 +122,15 @@ bool read_zip_blocks(Imf::InputFile& in, const std::vector<std::string>& names, 
   std::atomic<bool> bad{false};
 #pragma omp parallel num_threads(std::max(1, threads))
   {
+    // (Nothing may throw out of the parallel region: an allocation that
+    // fails marks the read bad.)
     std::unique_ptr<libdeflate_decompressor, DecompressorFree> z(libdeflate_alloc_decompressor());
-    std::vector<unsigned char> delta(row * lines), raw(row * lines);
+    std::vector<unsigned char> delta, raw;
+    try {
+      delta.resize(row * lines), raw.resize(row * lines);
+    } catch (const std::bad_alloc&) {
+      z.reset();
+    }
     if (!z) bad = true;
 #pragma omp for schedule(dynamic, 1)
     for (int b = 0; b < blocks; ++b) {
@@ -294,18 +302,22 @@ bool write_zip_blocks(const std::string& path, const Imf::Header& h, int W, int 
   const std::size_t row_bytes = static_cast<std::size_t>(W) * static_cast<std::size_t>(C) * vb;
   std::vector<std::vector<unsigned char>> out(static_cast<std::size_t>(blocks));
   const int level = h.zipCompressionLevel();
-  bool failed = false;
+  std::atomic<bool> failed{false};
 #pragma omp parallel num_threads(std::max(1, threads))
   {
+    // (Nothing may throw out of the parallel region: an allocation that
+    // fails marks the write failed.)
     std::unique_ptr<libdeflate_compressor, CompressorFree> z(libdeflate_alloc_compressor(level));
-    std::vector<unsigned char> raw(row_bytes * lines), split(raw.size()), delta(raw.size());
-    if (!z) {
-#pragma omp atomic write
-      failed = true;
+    std::vector<unsigned char> raw, split, delta;
+    try {
+      raw.resize(row_bytes * lines), split.resize(raw.size()), delta.resize(raw.size());
+    } catch (const std::bad_alloc&) {
+      z.reset();
     }
+    if (!z) failed = true;
 #pragma omp for schedule(dynamic, 1)
     for (int b = 0; b < blocks; ++b) {
-      if (!z) continue;
+      if (failed.load(std::memory_order_relaxed)) continue;
       const int y0 = b * lines, n = std::min(lines, H - y0);
       const std::size_t size = row_bytes * static_cast<std::size_t>(n);
       unsigned char* r = raw.data();
@@ -329,16 +341,20 @@ bool write_zip_blocks(const std::string& path, const Imf::Header& h, int W, int 
       delta[0] = split[0];
       for (std::size_t i = 1; i < size; ++i) delta[i] = static_cast<unsigned char>(split[i] - split[i - 1] + 128);
       std::vector<unsigned char>& o = out[static_cast<std::size_t>(b)];
-      o.resize(libdeflate_zlib_compress_bound(z.get(), size));
-      const std::size_t got = libdeflate_zlib_compress(z.get(), delta.data(), size, o.data(), o.size());
-      if (got > 0 && got < size) {
-        o.resize(got);
-      } else {
-        o.assign(raw.data(), raw.data() + size);
+      try {
+        o.resize(libdeflate_zlib_compress_bound(z.get(), size));
+        const std::size_t got = libdeflate_zlib_compress(z.get(), delta.data(), size, o.data(), o.size());
+        if (got > 0 && got < size) {
+          o.resize(got);
+        } else {
+          o.assign(raw.data(), raw.data() + size);
+        }
+      } catch (const std::bad_alloc&) {
+        failed = true;
       }
     }
   }
-  if (failed) throw std::runtime_error("libdeflate could not allocate a compressor");
+  if (failed) throw std::runtime_error("out of memory deflating the EXR blocks");
   Imf::StdOSStream head;
   Preamble().write(head, h);
   h.writeTo(head);
