@@ -11,7 +11,9 @@
 //    only on the previous iteration, so results do not depend on the thread
 //    count;
 //  - F stays interleaved RGBA float, so a pixel is one 128-bit vector and the
-//    channel loops vectorise;
+//    channel loops vectorise -- or, for an RGB image in f32, interleaved RGB
+//    (rows of three values a pixel: the constant row is a loop over values,
+//    and the space-variant run kernels have RGB forms, run_rgb_*);
 //  - the invariant schemes form sigma_k(x) as a running product
 //    sigma_0 e^{rho} ... e^{rho} (multiplies instead of an exp per pixel and
 //    iteration; relative drift < 1e-6 after 13 steps, covered by the
