@@ -183,6 +183,7 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
   Image rgb(24, 16, 3, 0.5f);
   rgb.at(3, 4, 1) = 2.0f;
   write_image(p("in.pfm"), rgb, WriteOptions{});  // brume's own PFM writer
+  write_image(p("in.jpg"), rgb, WriteOptions{});  // (OpenImageIO writes JPEG)
   struct EnvGuard {
     explicit EnvGuard(const char* v) { ::setenv("BRUME_CODEC_MODULE", v, 1); }
     ~EnvGuard() { ::unsetenv("BRUME_CODEC_MODULE"); }
@@ -200,6 +201,12 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     ASSERT_EQ(png_only.status, 0) << png_only.output;
     EXPECT_EQ(png_only.output.find("codec module"), std::string::npos) << png_only.output;
     EXPECT_TRUE(fs::exists(p("o.png")));
+
+    // 8-bit grey and colour JPEG are read without it (src/io/jpeg_direct.hpp).
+    const CliRun jpeg_in = run("blur --image " + p("in.jpg") + " --sigma 3 --out " + p("oj.png") + " --timing");
+    ASSERT_EQ(jpeg_in.status, 0) << jpeg_in.output;
+    EXPECT_EQ(jpeg_in.output.find("codec module"), std::string::npos) << jpeg_in.output;
+    EXPECT_TRUE(fs::exists(p("oj.png")));
 
     // So are OpenEXR of one channel or R G B (A), half or float
     // (src/io/exr_direct.hpp), in and out.

@@ -30,6 +30,7 @@
 #include "io/codec.hpp"
 #include "io/exr_direct.hpp"
 #include "io/hdr_direct.hpp"
+#include "io/jpeg_direct.hpp"
 #include "io/png_direct.hpp"
 
 namespace brume {
@@ -394,12 +395,16 @@ void check_memory(std::uint64_t bytes, const std::string& what) {
 }
 
 ImageHeader read_header(const std::string& path) {
-  // The PNG, OpenEXR and Radiance subsets' headers without OpenImageIO
-  // (io/png_direct.hpp, io/exr_direct.hpp, io/hdr_direct.hpp).
+  // The PNG, JPEG, OpenEXR and Radiance subsets' headers without
+  // OpenImageIO (io/png_direct.hpp, io/jpeg_direct.hpp, io/exr_direct.hpp,
+  // io/hdr_direct.hpp).
   check_readable(path);
   detail::PngInfo pi;
   if (detail::read_png_subset(path, nullptr, pi, [&](int w, int h, int c) { check_declared_size(path, w, h, c); }))
     return {pi.width, pi.height, pi.channels, "png"};
+  detail::JpegInfo ji;
+  if (detail::read_jpeg_subset(path, nullptr, ji, [&](int w, int h, int c) { check_declared_size(path, w, h, c); }))
+    return {ji.width, ji.height, ji.channels, "jpeg"};
   detail::ExrInfo ei;
   if (detail::read_exr_subset(path, nullptr, ei, [&](int w, int h, int c) { check_declared_size(path, w, h, c); }, 0))
     return {ei.width, ei.height, ei.channels, "openexr"};
@@ -593,6 +598,20 @@ Raw read_raw(const std::string& path, RawValues want) {
       r.info.channel_names =
           pi.channels == 3 ? std::vector<std::string>{"R", "G", "B"} : std::vector<std::string>{"Y"};
       r.info.description = pi.description;
+      r.linear = want == RawValues::srgb_linear;
+      return r;
+    }
+    // 8-bit grey and colour JPEG: libjpeg itself (io/jpeg_direct.hpp), the
+    // same way.
+    detail::JpegInfo ji;
+    if (detail::read_jpeg_subset(path, &r.img, ji, check_size, map)) {
+      r.info.path = path;
+      r.info.format = "jpeg";
+      r.info.integer = true;
+      r.info.bits = 8;
+      r.info.channel_names =
+          ji.channels == 3 ? std::vector<std::string>{"R", "G", "B"} : std::vector<std::string>{"Y"};
+      r.info.description = ji.description;
       r.linear = want == RawValues::srgb_linear;
       return r;
     }
