@@ -75,6 +75,20 @@ Image gradient(int w, int h, int c) {
   return im;
 }
 
+// Every channel of a file as OpenImageIO reads it, as floats (the peer of
+// brume's own readers); its spec and format name through the pointers.
+std::vector<float> oiio_pixels(const std::string& p, OIIO::ImageSpec* spec = nullptr, std::string* format = nullptr) {
+  auto in = OIIO::ImageInput::open(p);
+  EXPECT_TRUE(in) << p;
+  if (!in) return {};
+  const OIIO::ImageSpec& s = in->spec();
+  if (spec) *spec = s;
+  if (format) *format = in->format_name();
+  std::vector<float> v(static_cast<std::size_t>(s.width) * s.height * s.nchannels);
+  EXPECT_TRUE(in->read_image(0, 0, 0, s.nchannels, OIIO::TypeDesc::FLOAT, v.data())) << p;
+  return v;
+}
+
 }  // namespace
 
 TEST(IO, PfmMatchesIndependentParserOnEth3d) {
@@ -435,14 +449,6 @@ TEST(IO, SrgbTablesGiveThePerValueBits) {
 // non-finite values, and ETH3D's disparity maps.
 TEST(IO, PfmPixelsReadStraightEqualOpenImageIO) {
   fs::path d = tmpdir();
-  auto oiio_floats = [](const std::string& p) {
-    auto in = OIIO::ImageInput::open(p);
-    EXPECT_TRUE(in) << p;
-    const OIIO::ImageSpec& s = in->spec();
-    std::vector<float> v(static_cast<std::size_t>(s.width) * s.height * s.nchannels);
-    EXPECT_TRUE(in->read_image(0, 0, 0, s.nchannels, OIIO::TypeDesc::FLOAT, v.data())) << p;
-    return v;
-  };
   auto write_by_hand = [](const std::string& p, const std::string& header, int w, int h, int c, bool big) {
     std::ofstream f(p, std::ios::binary);
     f << header;
@@ -472,7 +478,7 @@ TEST(IO, PfmPixelsReadStraightEqualOpenImageIO) {
   for (const char* rel : {"eth3d_two_view/playground_1l/disp0.pfm", "eth3d_two_view/playground_1l/disp0GT.pfm"})
     if (have_data(rel)) files.push_back(data_path(rel));
   for (const std::string& p : files) {
-    const std::vector<float> want = oiio_floats(p);
+    const std::vector<float> want = oiio_pixels(p);
     FileInfo info;
     auto in = OIIO::ImageInput::open(p);
     ASSERT_TRUE(in) << p;
@@ -696,15 +702,6 @@ TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
       {"uint.exr", 21, 13, {"Y"}, OIIO::TypeDesc::UINT, "zip"},
       {"two_parts.exr", 21, 13, {"R", "G", "B"}, F, "zip", false, false, false, 2},
   };
-  auto oiio_read = [](const std::string& p, OIIO::ImageSpec& spec, std::string& format) {
-    auto in = OIIO::ImageInput::open(p);
-    EXPECT_TRUE(in) << p;
-    spec = in->spec();
-    format = in->format_name();
-    std::vector<float> v(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
-    EXPECT_TRUE(in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, v.data())) << p;
-    return v;
-  };
   auto same_bits = [](const std::vector<float>& a, const std::vector<float>& b) {
     return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
   };
@@ -714,7 +711,7 @@ TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
     const std::string p = (d / s.name).string();
     OIIO::ImageSpec spec;
     std::string format;
-    const std::vector<float> want = oiio_read(p, spec, format);
+    const std::vector<float> want = oiio_pixels(p, &spec, &format);
     detail::ExrInfo info;
     Image got;
     ASSERT_TRUE(detail::read_exr_subset(p, &got, info, no_check, 0)) << p;
@@ -761,7 +758,7 @@ TEST(IO, ExrSubsetIsReadAsOpenImageIOReadsIt) {
     const std::string p = (d / s.name).string();
     OIIO::ImageSpec spec;
     std::string format;
-    const std::vector<float> want = oiio_read(p, spec, format);
+    const std::vector<float> want = oiio_pixels(p, &spec, &format);
     detail::ExrInfo info;
     Image got;
     EXPECT_FALSE(detail::read_exr_subset(p, &got, info, no_check, 0)) << p << " was taken by the subset reader";
@@ -828,15 +825,6 @@ TEST(IO, ExrSubsetWritesTheFileOpenImageIOWrites) {
     std::memcpy(&n, b.data() + at + key.size(), 4);
     for (std::uint32_t k = 0; k < n; ++k) b[at + key.size() + 4 + k] = '#';
     return b;
-  };
-  auto oiio_values = [](const fs::path& p) {
-    auto in = OIIO::ImageInput::open(p.string());
-    EXPECT_TRUE(in) << p;
-    if (!in) return std::vector<float>{};
-    const OIIO::ImageSpec& sp = in->spec();
-    std::vector<float> v(static_cast<std::size_t>(sp.width) * sp.height * sp.nchannels);
-    EXPECT_TRUE(in->read_image(0, 0, 0, sp.nchannels, OIIO::TypeDesc::FLOAT, v.data())) << p;
-    return v;
   };
   const std::string desc = "{\"record\": \"brume\", \"n\": 1}";
   int compared = 0, zipped = 0;
@@ -905,7 +893,7 @@ TEST(IO, ExrSubsetWritesTheFileOpenImageIOWrites) {
         }
         EXPECT_GT(stored, 0) << tag << ": no block stored as is (the test's noise)";
         EXPECT_LT(stored, static_cast<int>(ma.data.size())) << tag << ": no block deflated";
-        EXPECT_EQ(oiio_values(mine), oiio_values(theirs)) << tag;
+        EXPECT_EQ(oiio_pixels(mine.string()), oiio_pixels(theirs.string())) << tag;
         ++zipped;
       }
   EXPECT_EQ(compared, 34);
@@ -961,15 +949,6 @@ TEST(IO, JpegSubsetIsReadAsOpenImageIOReadsIt) {
     ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, pixels(s.w, s.h, s.c).data())) << p;
     ASSERT_TRUE(out->close()) << p;
   };
-  auto oiio_read = [](const std::string& p, OIIO::ImageSpec& spec) {
-    auto in = OIIO::ImageInput::open(p);
-    EXPECT_TRUE(in) << p;
-    if (!in) return std::vector<float>{};
-    spec = in->spec();
-    std::vector<float> v(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
-    EXPECT_TRUE(in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, v.data())) << p;
-    return v;
-  };
   auto no_check = [](int, int, int) {};
   const std::vector<Spec> subset = {
       {"rgb.jpg", 64, 48, 3, "", false, "", "", 90},
@@ -988,7 +967,7 @@ TEST(IO, JpegSubsetIsReadAsOpenImageIOReadsIt) {
     write(s);
     const std::string p = (d / s.name).string();
     OIIO::ImageSpec spec;
-    const std::vector<float> want = oiio_read(p, spec);
+    const std::vector<float> want = oiio_pixels(p, &spec);
     detail::JpegInfo info;
     Image got;
     ASSERT_TRUE(detail::read_jpeg_subset(p, &got, info, no_check)) << p;
@@ -1059,15 +1038,6 @@ TEST(IO, HdrSubsetIsReadAsOpenImageIOReadsIt) {
   // wide), a flat file by hand; the forms brume leaves to OpenImageIO are
   // declined (the direct-read counter does not move).
   fs::path d = tmpdir();
-  auto oiio_floats = [](const std::string& p, OIIO::ImageSpec& spec) {
-    auto in = OIIO::ImageInput::open(p);
-    EXPECT_TRUE(in) << p;
-    if (!in) return std::vector<float>{};
-    spec = in->spec();
-    std::vector<float> v(static_cast<std::size_t>(spec.width) * spec.height * spec.nchannels);
-    EXPECT_TRUE(in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, v.data())) << p;
-    return v;
-  };
   auto oiio_write = [](const std::string& p, const Image& img) {
     OIIO::ImageSpec spec(img.width, img.height, 3, OIIO::TypeDesc::FLOAT);
     auto out = OIIO::ImageOutput::create(p);
@@ -1103,7 +1073,7 @@ TEST(IO, HdrSubsetIsReadAsOpenImageIOReadsIt) {
   subset.push_back((d / "flat.hdr").string());
   for (const std::string& p : subset) {
     OIIO::ImageSpec spec;
-    const std::vector<float> want = oiio_floats(p, spec);
+    const std::vector<float> want = oiio_pixels(p, &spec);
     const std::uint64_t before = detail::hdr_direct_reads();
     FileInfo fi;
     const Image got = read_color(p, Transfer::linear, &fi);
