@@ -1,7 +1,8 @@
 // brume — 8- and 16-bit grey and RGB PNG read and written with libpng itself
 // (internal).
 //
-// Every other image format goes through OpenImageIO, loaded on first use
+// Every image format brume does not read itself (PNG here, JPEG, OpenEXR,
+// Radiance HDR and PFM elsewhere) goes through OpenImageIO, loaded on first use
 // (src/io/codec.hpp), and that load is ~0.4 s of symbol lookups across
 // Debian's OpenImageIO and its 260 libraries -- more than a whole haze run on
 // a Middlebury frame, paid by every `brume haze in.png ... --out out.png`
