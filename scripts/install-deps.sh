@@ -11,6 +11,7 @@ PKGS=(
   libssl-dev                             # SHA-256 of input files in the records
   libpng-dev                             # 8/16-bit grey and RGB PNG without loading OpenImageIO
   libjpeg-dev                            # 8-bit grey and colour JPEG read without loading OpenImageIO
+  libtiff-dev                            # the common TIFF files read without loading OpenImageIO
   libdeflate-dev                         # the PNG subset's image data inflated in one call (faster than zlib)
   libopenexr-dev                         # the common OpenEXR files read without loading OpenImageIO
   libgtest-dev libbenchmark-dev          # tests, benchmarks

@@ -176,8 +176,8 @@ TEST_F(Cli, TimingPrintsTheWholeRunBreakdown) {
 }
 
 // OpenImageIO lives in brume_codec.so, loaded only when a file needs it
-// (src/io/codec.hpp): a PFM-only run works with no module at all, a PNG run
-// names the module's load in --timing, and a module that cannot be loaded is
+// (src/io/codec.hpp): PFM, PNG, JPEG (in), EXR, HDR and TIFF runs work with
+// no module at all, a JPEG output names the module's load in --timing, and a module that cannot be loaded is
 // an error naming every path tried, with nothing written.
 TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
   Image rgb(24, 16, 3, 0.5f);
@@ -222,24 +222,32 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     EXPECT_EQ(hdr_only.output.find("codec module"), std::string::npos) << hdr_only.output;
     EXPECT_EQ(read_color(p("o.hdr")).width, 24);
 
-    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o.tif"));
+    // And TIFF of 1 or 3 channels, 8/16-bit or float (src/io/tiff_direct.hpp), in and out.
+    write_image(p("in.tif"), rgb, WriteOptions{});
+    const CliRun tif_only = run("blur --image " + p("in.tif") + " --sigma 3 --out " + p("o.tif") + " --timing");
+    ASSERT_EQ(tif_only.status, 0) << tif_only.output;
+    EXPECT_EQ(tif_only.output.find("codec module"), std::string::npos) << tif_only.output;
+    EXPECT_EQ(read_color(p("o.tif")).width, 24);
+
+    // A JPEG output is still OpenImageIO's.
+    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o.jpg"));
     EXPECT_EQ(bad.status, 2) << bad.output;
-    for (const char* want : {"writing '", "o.tif", "brume_codec.so", "/nonexistent/brume_codec.so: no such file",
+    for (const char* want : {"writing '", "o.jpg", "brume_codec.so", "/nonexistent/brume_codec.so: no such file",
                              "BRUME_CODEC_MODULE"})
       EXPECT_NE(bad.output.find(want), std::string::npos) << want << "\n" << bad.output;
-    EXPECT_FALSE(fs::exists(p("o.tif")));
+    EXPECT_FALSE(fs::exists(p("o.jpg")));
   }
   for (const char* lib : {"/lib/x86_64-linux-gnu/libz.so.1", "/usr/lib/x86_64-linux-gnu/libz.so.1"}) {
     if (!fs::exists(lib)) continue;
     EnvGuard other(lib);  // a shared object, but not brume's module
-    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o.tif"));
+    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o.jpg"));
     EXPECT_EQ(bad.status, 2) << bad.output;
     EXPECT_NE(bad.output.find("no brume_codec_api in it"), std::string::npos) << bad.output;
     break;
   }
-  const CliRun tif = run("blur --image " + img + " --sigma 3 --out " + p("o.tif") + " --timing");
-  ASSERT_EQ(tif.status, 0) << tif.output;
-  EXPECT_NE(tif.output.find("of which loading the OpenImageIO codec module"), std::string::npos) << tif.output;
+  const CliRun jpg = run("blur --image " + img + " --sigma 3 --out " + p("o.jpg") + " --timing");
+  ASSERT_EQ(jpg.status, 0) << jpg.output;
+  EXPECT_NE(jpg.output.find("of which loading the OpenImageIO codec module"), std::string::npos) << jpg.output;
   for (auto& e : fs::directory_iterator(dir))
     EXPECT_EQ(e.path().filename().string().find(".brume-tmp-"), std::string::npos) << e.path();
 }

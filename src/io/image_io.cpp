@@ -31,6 +31,7 @@
 #include "io/exr_direct.hpp"
 #include "io/hdr_direct.hpp"
 #include "io/jpeg_direct.hpp"
+#include "io/tiff_direct.hpp"
 #include "io/png_direct.hpp"
 
 namespace brume {
@@ -395,9 +396,9 @@ void check_memory(std::uint64_t bytes, const std::string& what) {
 }
 
 ImageHeader read_header(const std::string& path) {
-  // The PNG, JPEG, OpenEXR and Radiance subsets' headers without
-  // OpenImageIO (io/png_direct.hpp, io/jpeg_direct.hpp, io/exr_direct.hpp,
-  // io/hdr_direct.hpp).
+  // The PNG, JPEG, TIFF, OpenEXR and Radiance subsets' headers without
+  // OpenImageIO (io/png_direct.hpp, io/jpeg_direct.hpp, io/tiff_direct.hpp,
+  // io/exr_direct.hpp, io/hdr_direct.hpp).
   check_readable(path);
   detail::PngInfo pi;
   if (detail::read_png_subset(path, nullptr, pi, [&](int w, int h, int c) { check_declared_size(path, w, h, c); }))
@@ -405,6 +406,9 @@ ImageHeader read_header(const std::string& path) {
   detail::JpegInfo ji;
   if (detail::read_jpeg_subset(path, nullptr, ji, [&](int w, int h, int c) { check_declared_size(path, w, h, c); }))
     return {ji.width, ji.height, ji.channels, "jpeg"};
+  detail::TiffInfo ti;
+  if (detail::read_tiff_subset(path, nullptr, ti, [&](int w, int h, int c) { check_declared_size(path, w, h, c); }))
+    return {ti.width, ti.height, ti.channels, "tiff"};
   detail::ExrInfo ei;
   if (detail::read_exr_subset(path, nullptr, ei, [&](int w, int h, int c) { check_declared_size(path, w, h, c); }, 0))
     return {ei.width, ei.height, ei.channels, "openexr"};
@@ -613,6 +617,21 @@ Raw read_raw(const std::string& path, RawValues want) {
           ji.channels == 3 ? std::vector<std::string>{"R", "G", "B"} : std::vector<std::string>{"Y"};
       r.info.description = ji.description;
       r.linear = want == RawValues::srgb_linear;
+      return r;
+    }
+    // The common TIFF files: libtiff itself (io/tiff_direct.hpp); integer
+    // ones the same way, floats as stored (no map: they are linear values,
+    // and counts are asked of integer files only).
+    detail::TiffInfo ti;
+    if (detail::read_tiff_subset(path, &r.img, ti, check_size, map)) {
+      r.info.path = path;
+      r.info.format = "tiff";
+      r.info.integer = !ti.floating;
+      r.info.bits = ti.bits;
+      r.info.channel_names =
+          ti.channels == 3 ? std::vector<std::string>{"R", "G", "B"} : std::vector<std::string>{"Y"};
+      r.info.description = ti.description;
+      r.linear = !ti.floating && want == RawValues::srgb_linear;
       return r;
     }
   }
@@ -1197,6 +1216,23 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
     errno = 0;
     if (!detail::write_exr_subset(tmp, img.width, img.height, img.channels, type == codec::Type::f16,
                                   src->data.data(), comp.name, opts.description, exr_threads(), &why)) {
+      const int err = errno;
+      check_output_dir(path, flag);  // the directory gone since the check: say so
+      throw Error(flag + " '" + path + "': write failed: " +
+                  (err == 0 && !why.empty() ? why : write_failure(err) + (why.empty() ? "" : " (" + why + ")")));
+    }
+    return;
+  }
+  const int tiff_bits = type == codec::Type::u8 ? 8 : type == codec::Type::u16 ? 16 : type == codec::Type::f32 ? 32 : 0;
+  if ((e == ".tif" || e == ".tiff") && detail::tiff_subset_writable(img.channels, tiff_bits)) {
+    // libtiff itself, the file OpenImageIO would write bar its time stamp
+    // (io/tiff_direct.hpp): no module load, Deflate strips on all threads.
+    add_pending(tmp, path, flag);
+    std::string why;
+    errno = 0;
+    if (!detail::write_tiff_subset(tmp, img.width, img.height, img.channels, tiff_bits,
+                                   codes.empty() ? nullptr : codes.data(), src->data.data(), t == Transfer::srgb,
+                                   opts.description, comp.name, comp.level, std::min(io_threads(), 64), &why)) {
       const int err = errno;
       check_output_dir(path, flag);  // the directory gone since the check: say so
       throw Error(flag + " '" + path + "': write failed: " +
