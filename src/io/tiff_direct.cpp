@@ -4,7 +4,7 @@
 
 #include <omp.h>
 #include <tiffio.h>
-#include <zlib.h>
+#include <libdeflate.h>
 
 #include <algorithm>
 #include <bit>
@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <cstring>
 #include <ctime>
+#include <memory>
 #include <vector>
 
 #include "io/png_direct.hpp"  // oiio_count
@@ -235,6 +236,10 @@ int on_write_error(TIFF*, void* user, const char*, const char* fmt, va_list ap) 
 }
 int on_write_warning(TIFF*, void*, const char*, const char*, va_list) { return 1; }
 
+struct CompressorFree {
+  void operator()(libdeflate_compressor* z) const { libdeflate_free_compressor(z); }
+};
+
 // libtiff's horizontal differencing of one row (horDiff8/16, and
 // OpenImageIO's horizontal_predictor): each sample minus the same channel's
 // sample to its left, modulo 2^bits, from the right end.
@@ -361,21 +366,34 @@ bool write_tiff_subset(const std::string& path, int width, int height, int chann
     }
   };
   // Whole strips of a Deflate file with more than one strip: predicted and
-  // deflated here (OpenImageIO's write_scanlines does the same for counts;
-  // for floats it goes through libtiff, whose zlib stream for the same
-  // bytes and level is the same), then written raw in order.
+  // deflated here on `threads` threads, then written raw in order
+  // (OpenImageIO does the same for counts, with zlib's compress2; for
+  // floats it goes through libtiff). libdeflate at the same level instead
+  // of zlib: 2.1x faster (a 1600 x 1120 16-bit RGB haze written in 151
+  // against 324 ms on 2 threads, AMD EPYC Zen 4), the file 0.8 % larger;
+  // each strip inflates to the bytes zlib was given (libtiff itself deflates
+  // a whole strip with libdeflate when it has it, as Debian's does).
   std::size_t y = 0;
   const std::size_t H = static_cast<std::size_t>(height);
   const std::size_t whole = comp == COMPRESSION_ADOBE_DEFLATE && H > static_cast<std::size_t>(rps) ? H / rps : 0;
   if (whole > 0) {
     const std::size_t strip_bytes = row_bytes * rps;
-    const uLong bound = compressBound(static_cast<uLong>(strip_bytes));
+    std::size_t bound = 0;
+    {
+      std::unique_ptr<libdeflate_compressor, CompressorFree> z(libdeflate_alloc_compressor(zip_level));
+      if (!z) {
+        *why = "cannot allocate libdeflate's compressor";
+        return false;
+      }
+      bound = libdeflate_zlib_compress_bound(z.get(), strip_bytes);
+    }
     std::vector<unsigned char> packed(bound * whole);
-    std::vector<uLong> sizes(whole, 0);
+    std::vector<std::size_t> sizes(whole, 0);
     bool ok = true;
 #pragma omp parallel num_threads(std::max(1, threads))
     {
       std::vector<unsigned char> strip(strip_bytes), tmp;
+      std::unique_ptr<libdeflate_compressor, CompressorFree> z(libdeflate_alloc_compressor(zip_level));
 #pragma omp for schedule(dynamic, 1)
       for (std::size_t s = 0; s < whole; ++s) {
         for (int r = 0; r < rps; ++r) {
@@ -388,16 +406,15 @@ bool write_tiff_subset(const std::string& path, int width, int height, int chann
           else
             float_difference(row, row_bytes, channels, tmp);
         }
-        uLongf n = bound;
-        if (compress2(packed.data() + s * bound, &n, strip.data(), static_cast<uLong>(strip_bytes), zip_level) != Z_OK) {
+        sizes[s] = z ? libdeflate_zlib_compress(z.get(), strip.data(), strip_bytes, packed.data() + s * bound, bound) : 0;
+        if (sizes[s] == 0) {
 #pragma omp atomic write
           ok = false;
         }
-        sizes[s] = n;
       }
     }
     if (!ok) {
-      *why = "zlib could not deflate a strip";
+      *why = "libdeflate could not deflate a strip";
       return false;
     }
     for (std::size_t s = 0; s < whole; ++s)

@@ -62,14 +62,18 @@ std::uint64_t tiff_direct_reads();
 // PhotometricInterpretation, contiguous planes, the description, the time
 // of writing as DateTime "YYYY:MM:DD HH:MM:SS" in local time, an Exif
 // directory holding ColorSpace = 1 for sRGB-encoded counts; its early
-// directory checkpoint), the same counts (oiio_count: OpenImageIO's
-// rounding), hence the same file byte for byte bar DateTime's value. As
-// OpenImageIO does, the whole 32-row strips of a Deflate file are
-// predicted and deflated by zlib (compress2 at the file's level) outside
-// libtiff and written raw -- here on `threads` threads, for floats too
-// (libtiff's floating-point predictor, re-done here, row by row); rows
-// after the last whole strip, and every row of the other compressions, go
-// through libtiff's scanline writer (test: IO.TiffSubsetWritesTheFileOpenImageIOWrites).
+// directory checkpoint, its directory write at close) and the same counts
+// (oiio_count: OpenImageIO's rounding). Every file but a Deflate one taller
+// than a strip is OpenImageIO's byte for byte bar DateTime's value. As
+// OpenImageIO does for counts, the whole 32-row strips of a Deflate file
+// are predicted and deflated outside libtiff and written raw -- here for
+// floats too (libtiff's floating-point predictor, re-done row by row), on
+// `threads` threads, by libdeflate at the file's level rather than zlib:
+// those strips' streams differ from OpenImageIO's while each inflates to
+// the same bytes, and the directories hold the same tags and values bar
+// the strip offsets and sizes. Rows after the last whole strip, and every
+// row of the other compressions, go through libtiff's scanline writer
+// (test: IO.TiffSubsetWritesTheFileOpenImageIOWrites).
 // codes: 8-bit counts as they are (the sRGB encoder's), else values.
 bool tiff_subset_writable(int channels, int bits);
 // `level` -1: none given (Deflate's default 6). false and *why on failure
