@@ -176,8 +176,8 @@ TEST_F(Cli, TimingPrintsTheWholeRunBreakdown) {
 }
 
 // OpenImageIO lives in brume_codec.so, loaded only when a file needs it
-// (src/io/codec.hpp): PFM, PNG, JPEG (in), EXR, HDR and TIFF runs work with
-// no module at all, a JPEG output names the module's load in --timing, and a module that cannot be loaded is
+// (src/io/codec.hpp): PFM, PNG, JPEG, EXR, HDR and TIFF runs work with no
+// module at all, an EXR output with a level names the module's load in --timing, and a module that cannot be loaded is
 // an error naming every path tried, with nothing written.
 TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
   Image rgb(24, 16, 3, 0.5f);
@@ -229,25 +229,31 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     EXPECT_EQ(tif_only.output.find("codec module"), std::string::npos) << tif_only.output;
     EXPECT_EQ(read_color(p("o.tif")).width, 24);
 
-    // A JPEG output is still OpenImageIO's.
-    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o.jpg"));
+    // And JPEG out (src/io/jpeg_direct.hpp).
+    const CliRun jpeg_out = run("blur --image " + img + " --sigma 3 --out " + p("o.jpg") + " --timing");
+    ASSERT_EQ(jpeg_out.status, 0) << jpeg_out.output;
+    EXPECT_EQ(jpeg_out.output.find("codec module"), std::string::npos) << jpeg_out.output;
+    EXPECT_TRUE(fs::exists(p("o.jpg")));
+
+    // An EXR with a compression level is still OpenImageIO's.
+    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o9.exr") + " --compression zip:9");
     EXPECT_EQ(bad.status, 2) << bad.output;
-    for (const char* want : {"writing '", "o.jpg", "brume_codec.so", "/nonexistent/brume_codec.so: no such file",
+    for (const char* want : {"writing '", "o9.exr", "brume_codec.so", "/nonexistent/brume_codec.so: no such file",
                              "BRUME_CODEC_MODULE"})
       EXPECT_NE(bad.output.find(want), std::string::npos) << want << "\n" << bad.output;
-    EXPECT_FALSE(fs::exists(p("o.jpg")));
+    EXPECT_FALSE(fs::exists(p("o9.exr")));
   }
   for (const char* lib : {"/lib/x86_64-linux-gnu/libz.so.1", "/usr/lib/x86_64-linux-gnu/libz.so.1"}) {
     if (!fs::exists(lib)) continue;
     EnvGuard other(lib);  // a shared object, but not brume's module
-    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o.jpg"));
+    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o9.exr") + " --compression zip:9");
     EXPECT_EQ(bad.status, 2) << bad.output;
     EXPECT_NE(bad.output.find("no brume_codec_api in it"), std::string::npos) << bad.output;
     break;
   }
-  const CliRun jpg = run("blur --image " + img + " --sigma 3 --out " + p("o.jpg") + " --timing");
-  ASSERT_EQ(jpg.status, 0) << jpg.output;
-  EXPECT_NE(jpg.output.find("of which loading the OpenImageIO codec module"), std::string::npos) << jpg.output;
+  const CliRun exr9 = run("blur --image " + img + " --sigma 3 --out " + p("o.exr") + " --compression zip:9 --timing");
+  ASSERT_EQ(exr9.status, 0) << exr9.output;
+  EXPECT_NE(exr9.output.find("of which loading the OpenImageIO codec module"), std::string::npos) << exr9.output;
   for (auto& e : fs::directory_iterator(dir))
     EXPECT_EQ(e.path().filename().string().find(".brume-tmp-"), std::string::npos) << e.path();
 }
@@ -569,7 +575,7 @@ TEST_F(Cli, UnknownValueTurnsASkySentinelIntoSky) {
   EXPECT_NE(bad.status, 0);
   EXPECT_NE(bad.output.find("--unknown-value -1"), std::string::npos) << bad.output;
   EXPECT_NE(bad.output.find("geo.exr"), std::string::npos) << bad.output;
-  EXPECT_FALSE(fs::exists(p("o.exr")));
+  EXPECT_FALSE(fs::exists(p("o9.exr")));
 
   CliRun ok = run("haze --image " + img + " --range " + p("geo.exr") + " --unknown-value -1 --out " + p("o.exr") +
                   " --record " + p("o.json"));

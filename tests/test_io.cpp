@@ -126,6 +126,36 @@ std::vector<std::uint32_t> tiff_longs(const TiffEntry& e) {
   return v;
 }
 
+// The file OpenImageIO writes for what brume's general write path gives it
+// (image_io.cpp, OutputSet::write): the storage type, Y for one channel,
+// the colour space, the description, the compression attributes; 8-bit
+// sRGB as brume's own codes, other sRGB values encoded first, else the
+// floats.
+void oiio_write_as_brume(const fs::path& path, const Image& img, OIIO::TypeDesc type, bool srgb,
+                         const std::string& desc, const std::string& compression) {
+  OIIO::ImageSpec spec(img.width, img.height, img.channels, type);
+  if (img.channels == 1) spec.channelnames = {"Y"};
+  spec.attribute("oiio:ColorSpace", srgb ? "sRGB" : "linear");
+  if (!desc.empty()) spec.attribute("ImageDescription", desc);
+  if (compression != "auto") spec.attribute("compression", compression);
+  const std::string e = path.extension().string();
+  if ((e == ".tif" || e == ".tiff") && compression.rfind("zip:", 0) == 0)
+    spec.attribute("tiff:zipquality", std::stoi(compression.substr(4)));
+  auto out = OIIO::ImageOutput::create(path.string());
+  ASSERT_TRUE(out && out->open(path.string(), spec)) << path;
+  if (srgb && type == OIIO::TypeDesc::UINT8) {
+    std::vector<std::uint8_t> codes(img.data.size());
+    srgb_encode_8(img.data.data(), codes.data(), codes.size());
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, codes.data())) << path;
+  } else {
+    std::vector<float> v = img.data;
+    if (srgb)
+      for (float& x : v) x = linear_to_srgb(std::max(x, 0.0f));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, v.data())) << path;
+  }
+  ASSERT_TRUE(out->close()) << path;
+}
+
 // A subset reader's image against OpenImageIO's reading of the same file:
 // the size and every value's bits.
 void expect_oiio_image(const std::string& p, const Image& got, const OIIO::ImageSpec& spec,
@@ -1385,29 +1415,10 @@ TEST(IO, TiffSubsetWritesTheFileOpenImageIOWrites) {
         const std::uint64_t before = detail::tiff_direct_writes();
         write_image(mine.string(), img, o);
         EXPECT_EQ(detail::tiff_direct_writes(), before + 1) << tag << " was not written without OpenImageIO";
-        // OpenImageIO's file from what brume's general path gives it.
         const bool srgb = f.c == 3 && f.bits != "float" && f.transfer != Transfer::linear;
-        const OIIO::TypeDesc type = f.bits == "8" ? OIIO::TypeDesc::UINT8 : f.bits == "16" ? OIIO::TypeDesc::UINT16 : OIIO::TypeDesc::FLOAT;
-        OIIO::ImageSpec spec(W, H, f.c, type);
-        if (f.c == 1) spec.channelnames = {"Y"};
-        spec.attribute("oiio:ColorSpace", srgb ? "sRGB" : "linear");
-        spec.attribute("ImageDescription", desc);
         const std::string cs = comp;
-        if (cs != "auto") spec.attribute("compression", cs);
-        if (cs.rfind("zip:", 0) == 0) spec.attribute("tiff:zipquality", std::stoi(cs.substr(4)));
-        auto out = OIIO::ImageOutput::create(theirs.string());
-        ASSERT_TRUE(out && out->open(theirs.string(), spec)) << tag;
-        if (srgb && f.bits == "8") {
-          std::vector<std::uint8_t> codes(img.data.size());
-          srgb_encode_8(img.data.data(), codes.data(), codes.size());
-          ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, codes.data())) << tag;
-        } else {
-          std::vector<float> v = img.data;
-          if (srgb)
-            for (float& x : v) x = linear_to_srgb(std::max(x, 0.0f));
-          ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, v.data())) << tag;
-        }
-        ASSERT_TRUE(out->close()) << tag;
+        oiio_write_as_brume(theirs, img, f.bits == "8" ? OIIO::TypeDesc::UINT8 : f.bits == "16" ? OIIO::TypeDesc::UINT16 : OIIO::TypeDesc::FLOAT,
+                            srgb, desc, cs);
         const std::string a = blank_date(file_bytes(mine)), b = blank_date(file_bytes(theirs));
         EXPECT_NE(a, "no DateTime") << tag;
         ++compared;
@@ -1470,6 +1481,57 @@ TEST(IO, TiffSubsetWritesTheFileOpenImageIOWrites) {
       EXPECT_TRUE(b == first) << threads << " threads";
     }
   }
+  fs::remove_all(d);
+}
+
+TEST(IO, JpegSubsetWritesTheFileOpenImageIOWrites) {
+  // Grey and colour JPEG, sRGB-encoded or linear, at the default quality
+  // (98) and others, are written with libjpeg itself (no module load) as
+  // OpenImageIO writes them for the same values and the attributes brume
+  // gives it: byte for byte -- its comment, Exif block (the description
+  // inline when it fits an entry, else before IFD0; the Exif directory for
+  // sRGB; an empty IFD0 with neither) and IPTC caption, the same tables and
+  // scan. Descriptions of 0, 1, 3, 4, 5 and 1 175 bytes and one of 40 000
+  // (past IPTC's 32 767: OpenImageIO still writes two length bytes);
+  // sizes from 1 x 1 to partial MCUs.
+  fs::path d = tmpdir();
+  struct Form {
+    int c;
+    Transfer transfer;
+  };
+  int compared = 0;
+  for (const Form& f : {Form{3, Transfer::automatic}, Form{3, Transfer::linear}, Form{1, Transfer::linear}})
+    for (const char* comp : {"auto", "jpeg:1", "jpeg:50", "jpeg:90", "jpeg:100"})
+      for (std::size_t dl : {std::size_t{0}, std::size_t{1}, std::size_t{3}, std::size_t{4}, std::size_t{5},
+                             std::size_t{1175}, std::size_t{40000}})
+        for (auto [W, H] : {std::pair{1, 1}, std::pair{37, 21}, std::pair{64, 48}}) {
+          const std::string cs = comp;
+          if (dl == 40000 && (cs != "auto" || W != 37)) continue;  // one long description is enough
+          std::string desc;
+          for (std::size_t i = 0; i < dl; ++i) desc += static_cast<char>(i % 61 == 60 ? ' ' : 'a' + i % 26);
+          Image img = gradient(W, H, f.c);
+          std::uint32_t state = 777;
+          for (float& v : img.data)
+            if ((state = state * 1664525u + 1013904223u) % 5 == 0) v = static_cast<float>(state >> 8) / 16777216.0f;
+          const std::string tag = std::to_string(f.c) + "c" + (f.transfer == Transfer::linear ? "_lin_" : "_") + cs +
+                                  "_d" + std::to_string(dl) + "_" + std::to_string(W) + "x" + std::to_string(H);
+          std::string name = tag;
+          std::replace(name.begin(), name.end(), ':', '-');
+          const fs::path mine = d / ("mine_" + name + ".jpg"), theirs = d / ("oiio_" + name + ".jpg");
+          WriteOptions o;
+          o.compression = comp;
+          o.description = desc;
+          o.is_color = f.c == 3;
+          o.transfer = f.transfer;
+          const std::uint64_t before = detail::jpeg_direct_writes();
+          write_image(mine.string(), img, o);
+          EXPECT_EQ(detail::jpeg_direct_writes(), before + 1) << tag << " was not written without OpenImageIO";
+          oiio_write_as_brume(theirs, img, OIIO::TypeDesc::UINT8, f.c == 3 && f.transfer != Transfer::linear, desc, cs);
+          const std::string a = file_bytes(mine), b = file_bytes(theirs);
+          EXPECT_TRUE(a == b) << tag << ": " << a.size() << " bytes against OpenImageIO's " << b.size();
+          ++compared;
+        }
+  EXPECT_EQ(compared, 3 * (5 * 6 * 3 + 1));
   fs::remove_all(d);
 }
 

@@ -1223,6 +1223,23 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
     }
     return;
   }
+  if ((e == ".jpg" || e == ".jpeg") && type == codec::Type::u8 &&
+      detail::jpeg_subset_writable(img.channels, opts.description.size())) {
+    // libjpeg itself, the file OpenImageIO would write (io/jpeg_direct.hpp),
+    // at its quality: 98 when none is given.
+    add_pending(tmp, path, flag);
+    std::string why;
+    errno = 0;
+    if (!detail::write_jpeg_subset(tmp, img.width, img.height, img.channels, codes.empty() ? nullptr : codes.data(),
+                                   src->data.data(), t == Transfer::srgb, opts.description,
+                                   comp.level >= 0 ? comp.level : 98, &why)) {
+      const int err = errno;
+      check_output_dir(path, flag);  // the directory gone since the check: say so
+      throw Error(flag + " '" + path + "': write failed: " +
+                  (err == 0 && !why.empty() ? why : write_failure(err) + (why.empty() ? "" : " (" + why + ")")));
+    }
+    return;
+  }
   const int tiff_bits = type == codec::Type::u8 ? 8 : type == codec::Type::u16 ? 16 : type == codec::Type::f32 ? 32 : 0;
   if ((e == ".tif" || e == ".tiff") && detail::tiff_subset_writable(img.channels, tiff_bits)) {
     // libtiff itself, the file OpenImageIO would write bar its time stamp

@@ -21,6 +21,7 @@
 // Test: IO.JpegSubsetIsReadAsOpenImageIOReadsIt (tests/test_io.cpp).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -47,5 +48,29 @@ bool read_jpeg_subset(const std::string& path, Image* out, JpegInfo& info,
 
 // How many reads of this process took the subset path (for tests).
 std::uint64_t jpeg_direct_reads();
+
+// The write side: brume's JPEG outputs -- 1 channel (grey) or 3 (RGB), 8
+// bits, any quality, a description of at most 60 000 bytes -- written with
+// libjpeg as OpenImageIO 2.4's writer writes them: libjpeg's defaults
+// (JFIF 1.01, density 1:1, 4:2:0 for colour, the standard Huffman tables,
+// baseline) at the quality (98 when none is given), then its markers: the
+// description as a comment (with its NUL), an Exif block (a little-endian
+// TIFF structure: the description's bytes, then IFD0 with
+// ImageDescription and, for sRGB-encoded counts, a pointer to an Exif
+// directory holding ExifVersion 0230, ComponentsConfiguration,
+// FlashpixVersion 0100 and ColorSpace 1; an empty IFD0 when there is
+// neither) and, with a description, a Photoshop 3.0 IPTC block with it as
+// the caption (2:120), and the same counts (oiio_count: OpenImageIO's
+// rounding) -- hence the same file byte for byte
+// (test: IO.JpegSubsetWritesTheFileOpenImageIOWrites). A longer
+// description goes to OpenImageIO (its markers would overflow).
+bool jpeg_subset_writable(int channels, std::size_t description_bytes);
+// codes: 8-bit counts as they are (the sRGB encoder's), else values. false
+// and *why on failure (the file may be left partial: the caller writes to
+// a temporary).
+bool write_jpeg_subset(const std::string& path, int width, int height, int channels, const std::uint8_t* codes,
+                       const float* values, bool srgb, const std::string& description, int quality, std::string* why);
+// How many files this process wrote that way (for tests).
+std::uint64_t jpeg_direct_writes();
 
 }  // namespace brume::detail

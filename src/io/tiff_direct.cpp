@@ -21,25 +21,25 @@
 namespace brume::detail {
 
 namespace {
-std::atomic<std::uint64_t> g_reads{0}, g_writes{0};
+std::atomic<std::uint64_t> g_tiff_reads{0}, g_tiff_writes{0};
 
 // libtiff's messages for this file only (libtiff >= 4.5: per-file handlers;
 // returning 1 keeps them from the process-wide handlers, which print).
-struct Messages {
+struct TiffMessages {
   bool error = false, warned = false;
 };
-int on_error(TIFF*, void* user, const char*, const char*, va_list) {
-  static_cast<Messages*>(user)->error = true;
+int on_tiff_error(TIFF*, void* user, const char*, const char*, va_list) {
+  static_cast<TiffMessages*>(user)->error = true;
   return 1;
 }
-int on_warning(TIFF*, void* user, const char*, const char*, va_list) {
-  static_cast<Messages*>(user)->warned = true;
+int on_tiff_warning(TIFF*, void* user, const char*, const char*, va_list) {
+  static_cast<TiffMessages*>(user)->warned = true;
   return 1;
 }
 
-struct Handle {
+struct TiffHandle {
   TIFF* t = nullptr;
-  ~Handle() {
+  ~TiffHandle() {
     if (t) TIFFClose(t);
   }
 };
@@ -72,19 +72,19 @@ bool codec_in_subset(uint16_t c) {
 }
 }  // namespace
 
-std::uint64_t tiff_direct_reads() { return g_reads.load(); }
+std::uint64_t tiff_direct_reads() { return g_tiff_reads.load(); }
 
 bool read_tiff_subset(const std::string& path, Image* out, TiffInfo& info,
                       const std::function<void(int, int, int)>& check,
                       const std::function<float(float, int)>& map) {
   if (!tiff_magic(path)) return false;  // not a TIFF: libtiff is not asked
-  Messages msg;
-  Handle h;
+  TiffMessages msg;
+  TiffHandle h;
   {
     TIFFOpenOptions* o = TIFFOpenOptionsAlloc();
     if (!o) return false;
-    TIFFOpenOptionsSetErrorHandlerExtR(o, on_error, &msg);
-    TIFFOpenOptionsSetWarningHandlerExtR(o, on_warning, &msg);
+    TIFFOpenOptionsSetErrorHandlerExtR(o, on_tiff_error, &msg);
+    TIFFOpenOptionsSetWarningHandlerExtR(o, on_tiff_warning, &msg);
     h.t = TIFFOpenExt(path.c_str(), "r", o);
     TIFFOpenOptionsFree(o);
   }
@@ -123,7 +123,7 @@ bool read_tiff_subset(const std::string& path, Image* out, TiffInfo& info,
   check(got.width, got.height, got.channels);  // may throw (no libtiff call is in progress)
   if (!out) {
     info = std::move(got);
-    ++g_reads;
+    ++g_tiff_reads;
     return true;
   }
 
@@ -214,7 +214,7 @@ bool read_tiff_subset(const std::string& path, Image* out, TiffInfo& info,
   }
   *out = std::move(img);
   info = std::move(got);
-  ++g_reads;
+  ++g_tiff_reads;
   return true;
 }
 
@@ -222,21 +222,21 @@ bool read_tiff_subset(const std::string& path, Image* out, TiffInfo& info,
 
 namespace {
 
-struct WriteMessages {
+struct TiffWriteMessages {
   bool error = false;
   std::string last;
 };
-int on_write_error(TIFF*, void* user, const char*, const char* fmt, va_list ap) {
-  auto* m = static_cast<WriteMessages*>(user);
+int on_tiff_write_error(TIFF*, void* user, const char*, const char* fmt, va_list ap) {
+  auto* m = static_cast<TiffWriteMessages*>(user);
   char b[512];
   std::vsnprintf(b, sizeof b, fmt, ap);
   m->error = true;
   m->last = b;
   return 1;
 }
-int on_write_warning(TIFF*, void*, const char*, const char*, va_list) { return 1; }
+int on_tiff_write_warning(TIFF*, void*, const char*, const char*, va_list) { return 1; }
 
-struct CompressorFree {
+struct TiffCompressorFree {
   void operator()(libdeflate_compressor* z) const { libdeflate_free_compressor(z); }
 };
 
@@ -272,7 +272,7 @@ bool tiff_subset_writable(int channels, int bits) {
   return (channels == 1 || channels == 3) && (bits == 8 || bits == 16 || bits == 32);
 }
 
-std::uint64_t tiff_direct_writes() { return g_writes.load(); }
+std::uint64_t tiff_direct_writes() { return g_tiff_writes.load(); }
 
 bool write_tiff_subset(const std::string& path, int width, int height, int channels, int bits,
                        const std::uint8_t* codes, const float* values, bool srgb, const std::string& description,
@@ -286,16 +286,16 @@ bool write_tiff_subset(const std::string& path, int width, int height, int chann
   const std::size_t row_values = W * C, row_bytes = row_values * static_cast<std::size_t>(bits / 8);
   // OpenImageIO switches to BigTIFF above 4000 MiB of pixels.
   const bool big = row_bytes * static_cast<std::size_t>(height) > 4000ull * 1024 * 1024;
-  WriteMessages msg;
-  Handle h;
+  TiffWriteMessages msg;
+  TiffHandle h;
   {
     TIFFOpenOptions* o = TIFFOpenOptionsAlloc();
     if (!o) {
       *why = "cannot allocate libtiff's options";
       return false;
     }
-    TIFFOpenOptionsSetErrorHandlerExtR(o, on_write_error, &msg);
-    TIFFOpenOptionsSetWarningHandlerExtR(o, on_write_warning, &msg);
+    TIFFOpenOptionsSetErrorHandlerExtR(o, on_tiff_write_error, &msg);
+    TIFFOpenOptionsSetWarningHandlerExtR(o, on_tiff_write_warning, &msg);
     h.t = TIFFOpenExt(path.c_str(), big ? "w8" : "w", o);
     TIFFOpenOptionsFree(o);
   }
@@ -380,7 +380,7 @@ bool write_tiff_subset(const std::string& path, int width, int height, int chann
     const std::size_t strip_bytes = row_bytes * rps;
     std::size_t bound = 0;
     {
-      std::unique_ptr<libdeflate_compressor, CompressorFree> z(libdeflate_alloc_compressor(zip_level));
+      std::unique_ptr<libdeflate_compressor, TiffCompressorFree> z(libdeflate_alloc_compressor(zip_level));
       if (!z) {
         *why = "cannot allocate libdeflate's compressor";
         return false;
@@ -393,7 +393,7 @@ bool write_tiff_subset(const std::string& path, int width, int height, int chann
 #pragma omp parallel num_threads(std::max(1, threads))
     {
       std::vector<unsigned char> strip(strip_bytes), tmp;
-      std::unique_ptr<libdeflate_compressor, CompressorFree> z(libdeflate_alloc_compressor(zip_level));
+      std::unique_ptr<libdeflate_compressor, TiffCompressorFree> z(libdeflate_alloc_compressor(zip_level));
 #pragma omp for schedule(dynamic, 1)
       for (std::size_t s = 0; s < whole; ++s) {
         for (int r = 0; r < rps; ++r) {
@@ -459,7 +459,7 @@ bool write_tiff_subset(const std::string& path, int width, int height, int chann
     *why = msg.last;
     return false;
   }
-  ++g_writes;
+  ++g_tiff_writes;
   return true;
 }
 
