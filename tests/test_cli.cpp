@@ -133,6 +133,7 @@ TEST_F(Cli, ErrorPathsAreClearAndLeaveNothing) {
       {"haze --image " + img + " --range " + range + " --out " + p("missing/dir/o.png"), "missing/dir"},
       {"haze --image " + img + " --range " + range + " --out " + p("o.xyz"), "o.xyz"},
       {"haze --image " + img + " --range " + range + " --out " + p("o.jpg") + " --bits 16", "--bits"},
+      {"haze --image " + img + " --range " + range + " --out " + p("o.tif") + " --bits half", "8, 16 or float (or write half to .exr)"},
       {"haze --image " + img + " --range " + range + io + " --record " + p("no/r.json"), "--record"},
       {"haze --image " + img + " --range " + range + io + " --compression lzw", "none, zip, zip:0..9"},
       {"haze --image " + img + " --range " + range + " --out " + p("o.exr") + " --compression zip:12", "1..9"},

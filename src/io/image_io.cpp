@@ -863,6 +863,10 @@ codec::Type storage_type(const std::string& path, const std::string& bits, const
   if (is_png && b != "8" && b != "16") throw bad("8 or 16");
   if (is_exr && b != "half" && b != "float") throw bad("half or float");
   if ((is_pfm || is_hdr) && b != "float") throw bad("float");
+  // Half-float TIFF (Adobe's extension) is read by few programs: OpenImageIO
+  // writes float instead, silently, unless told otherwise. brume refuses
+  // rather than store other than what was asked (.exr holds half).
+  if (is_tif && b == "half") throw bad("8, 16 or float (or write half to .exr)");
   if (b == "8") return codec::Type::u8;
   if (b == "16") return codec::Type::u16;
   if (b == "half") return codec::Type::f16;
