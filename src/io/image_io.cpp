@@ -1179,6 +1179,14 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
 
   ensure_output_folder(path, flag);
   const std::string tmp = temp_path_for(path);
+  // A subset writer's failure: errno's reason (or the writer's own when
+  // errno says nothing), the directory's if it has gone since the check.
+  auto write_failed = [&](const std::string& why) {
+    const int err = errno;
+    check_output_dir(path, flag);
+    return Error(flag + " '" + path + "': write failed: " +
+                 (err == 0 && !why.empty() ? why : write_failure(err) + (why.empty() ? "" : " (" + why + ")")));
+  };
   if (e == ".pfm") {
     add_pending(tmp, path, flag);
     try {
@@ -1220,10 +1228,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
     errno = 0;
     if (!detail::write_exr_subset(tmp, img.width, img.height, img.channels, type == codec::Type::f16,
                                   src->data.data(), comp.name, opts.description, exr_threads(), &why)) {
-      const int err = errno;
-      check_output_dir(path, flag);  // the directory gone since the check: say so
-      throw Error(flag + " '" + path + "': write failed: " +
-                  (err == 0 && !why.empty() ? why : write_failure(err) + (why.empty() ? "" : " (" + why + ")")));
+      throw write_failed(why);
     }
     return;
   }
@@ -1237,10 +1242,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
     if (!detail::write_jpeg_subset(tmp, img.width, img.height, img.channels, codes.empty() ? nullptr : codes.data(),
                                    src->data.data(), t == Transfer::srgb, opts.description,
                                    comp.level >= 0 ? comp.level : 98, &why)) {
-      const int err = errno;
-      check_output_dir(path, flag);  // the directory gone since the check: say so
-      throw Error(flag + " '" + path + "': write failed: " +
-                  (err == 0 && !why.empty() ? why : write_failure(err) + (why.empty() ? "" : " (" + why + ")")));
+      throw write_failed(why);
     }
     return;
   }
@@ -1254,10 +1256,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
     if (!detail::write_tiff_subset(tmp, img.width, img.height, img.channels, tiff_bits,
                                    codes.empty() ? nullptr : codes.data(), src->data.data(), t == Transfer::srgb,
                                    opts.description, comp.name, comp.level, std::min(io_threads(), 64), &why)) {
-      const int err = errno;
-      check_output_dir(path, flag);  // the directory gone since the check: say so
-      throw Error(flag + " '" + path + "': write failed: " +
-                  (err == 0 && !why.empty() ? why : write_failure(err) + (why.empty() ? "" : " (" + why + ")")));
+      throw write_failed(why);
     }
     return;
   }
