@@ -1281,6 +1281,26 @@ TEST(IO, TiffSubsetIsReadAsOpenImageIOReadsIt) {
     if ((c.comp == COMPRESSION_JPEG) && !TIFFIsCODECConfigured(COMPRESSION_JPEG)) continue;
     raw_write(c);
   }
+  // A private tag libtiff does not know when reading (it warns while
+  // opening, which does not change the pixels): still the subset's.
+  {
+    const std::string p = (d / "private_tag.tif").string();
+    static const TIFFFieldInfo info[] = {{65000, 1, 1, TIFF_LONG, FIELD_CUSTOM, 1, 0, const_cast<char*>("BrumePrivate")}};
+    TIFF* t = TIFFOpen(p.c_str(), "w");
+    ASSERT_TRUE(t);
+    ASSERT_EQ(TIFFMergeFieldInfo(t, info, 1), 0);
+    TIFFSetField(t, TIFFTAG_IMAGEWIDTH, 12);
+    TIFFSetField(t, TIFFTAG_IMAGELENGTH, 5);
+    TIFFSetField(t, TIFFTAG_SAMPLESPERPIXEL, 1);
+    TIFFSetField(t, TIFFTAG_BITSPERSAMPLE, 8);
+    TIFFSetField(t, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
+    TIFFSetField(t, TIFFTAG_ROWSPERSTRIP, 5);
+    TIFFSetField(t, 65000, 1234u);
+    std::vector<unsigned char> px(60);
+    for (std::size_t i = 0; i < px.size(); ++i) px[i] = static_cast<unsigned char>(i * 4);
+    ASSERT_GE(TIFFWriteEncodedStrip(t, 0, px.data(), 60), 0);
+    TIFFClose(t);
+  }
   // A corrupt strip: bytes inside the first strip of a Deflate file overwritten.
   {
     std::string b = file_bytes(d / "u8_rgb_zip.tif");
@@ -1343,7 +1363,7 @@ TEST(IO, TiffSubsetIsReadAsOpenImageIOReadsIt) {
     }
     ++read;
   }
-  EXPECT_EQ(read, 17);
+  EXPECT_EQ(read, 18);
   EXPECT_EQ(refused, TIFFIsCODECConfigured(COMPRESSION_JPEG) ? 7 : 6);
   fs::remove_all(d);
 }

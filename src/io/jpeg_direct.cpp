@@ -97,7 +97,7 @@ bool read_jpeg_subset(const std::string& path, Image* out, JpegInfo& info,
   JpegInfo got;
   std::vector<unsigned char> row;
   Image img;
-  float table[256];
+  CountValues values;
   d.c.err = jpeg_std_error(&err.pub);
   err.pub.error_exit = error_exit;
   err.pub.emit_message = emit_message;
@@ -146,14 +146,13 @@ bool read_jpeg_subset(const std::string& path, Image* out, JpegInfo& info,
     const std::size_t rv = static_cast<std::size_t>(got.width) * static_cast<std::size_t>(got.channels);
     row.resize(rv);
     img = Image(got.width, got.height, got.channels);
-    const float k = 1.0f / 255.0f;
-    for (unsigned c = 0; c < 256; ++c) table[c] = map ? map(static_cast<float>(c) * k, 8) : static_cast<float>(c) * k;
+    values.reset(8, map);
     while (d.c.output_scanline < d.c.output_height) {
       const int y = static_cast<int>(d.c.output_scanline);
       JSAMPROW r = row.data();
       if (jpeg_read_scanlines(&d.c, &r, 1) != 1) return false;
       float* dst = img.data.data() + static_cast<std::size_t>(y) * rv;
-      for (std::size_t i = 0; i < rv; ++i) dst[i] = table[row[i]];
+      values.convert(row.data(), dst, rv);
     }
     jpeg_finish_decompress(&d.c);
     if (err.warned) return false;  // corrupt data libjpeg read past

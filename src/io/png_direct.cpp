@@ -346,8 +346,7 @@ bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
   if (!g.info) return false;
   std::vector<unsigned char> rows;
   std::vector<png_bytep> row_ptrs;
-  std::vector<float> table;           // [count]: its value (8 bits: every count; 16 bits with a map: as met)
-  std::vector<unsigned char> known;   // 16 bits with a map: table[count] computed
+  CountValues values;
   Image img;
   PngInfo got;
   if (setjmp(png_jmpbuf(g.png))) return false;
@@ -383,35 +382,10 @@ bool read_png_subset(const std::string& path, Image* out, PngInfo& info,
   png_read_update_info(g.png, g.info);
   const std::size_t rowbytes = png_get_rowbytes(g.png, g.info);
   if (rowbytes != static_cast<std::size_t>(w) * got.channels * (depth / 8)) return false;
-  // A count's value: the count times the float 1/255 or 1/65535, as
-  // OpenImageIO returns it, then `map` (the caller's per-value function,
-  // evaluated once per distinct count, so the result is map's bit for bit).
-  const float k = depth == 8 ? 1.0f / 255.0f : 1.0f / 65535.0f;
-  if (depth == 8) {
-    table.resize(256);
-    for (unsigned c = 0; c < 256; ++c) table[c] = map ? map(static_cast<float>(c) * k, 8) : static_cast<float>(c) * k;
-  } else if (map) {
-    table.resize(65536);
-    known.assign(65536, 0);
-  }
+  values.reset(depth, map);  // a count's value, as OpenImageIO returns it, then map
   const std::size_t row_values = static_cast<std::size_t>(w) * got.channels;
   img = Image(got.width, got.height, got.channels);
-  auto convert = [&](const unsigned char* src, float* dst) {
-    if (depth == 8) {
-      for (std::size_t i = 0; i < row_values; ++i) dst[i] = table[src[i]];
-      return;
-    }
-    for (std::size_t i = 0; i < row_values; ++i) {
-      std::uint16_t c;
-      std::memcpy(&c, src + 2 * i, 2);
-      if (!map) {
-        dst[i] = static_cast<float>(c) * k;
-      } else {
-        if (!known[c]) table[c] = map(static_cast<float>(c) * k, 16), known[c] = 1;
-        dst[i] = table[c];
-      }
-    }
-  };
+  auto convert = [&](const unsigned char* src, float* dst) { values.convert(src, dst, row_values); };
   if (passes == 1) {
     // The image data inflated and unfiltered without libpng's row loop
     // (read_image_data), into the tail of the float image's own buffer --

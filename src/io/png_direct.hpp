@@ -38,6 +38,9 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
+#include <functional>
+#include <vector>
 #include <functional>
 #include <string>
 
@@ -88,6 +91,55 @@ inline unsigned oiio_count(float v, float max) {
   const float r = std::round(v * max);
   return static_cast<unsigned>(r < 0.0f ? 0.0f : r > max ? max : r);
 }
+
+// The values of 8- or 16-bit counts as OpenImageIO returns them -- the
+// count times the float 1/255 or 1/65535 -- then `map` (the caller's
+// per-value function, evaluated once per distinct count, so the result is
+// map's bit for bit): the one conversion of the PNG, JPEG and TIFF subset
+// readers. Default-constructed before a reader's setjmp, reset once the
+// header gives the bit depth.
+class CountValues {
+ public:
+  void reset(int bits, const std::function<float(float, int)>& map) {
+    bits_ = bits;
+    map_ = map;
+    k_ = bits == 8 ? 1.0f / 255.0f : 1.0f / 65535.0f;
+    table_.clear();
+    known_.clear();
+    if (bits == 8) {
+      table_.resize(256);
+      for (unsigned c = 0; c < 256; ++c) table_[c] = map_ ? map_(static_cast<float>(c) * k_, 8) : static_cast<float>(c) * k_;
+    } else if (map_) {
+      table_.assign(65536, 0.0f);  // [count]: its value, as met
+      known_.assign(65536, 0);
+    }
+  }
+  // n counts at src (a byte each, or two in native byte order) to every
+  // step-th float of dst.
+  void convert(const unsigned char* src, float* dst, std::size_t n, std::size_t step = 1) {
+    if (bits_ == 8) {
+      for (std::size_t i = 0; i < n; ++i) dst[i * step] = table_[src[i]];
+      return;
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      std::uint16_t c;
+      std::memcpy(&c, src + 2 * i, 2);
+      if (!map_) {
+        dst[i * step] = static_cast<float>(c) * k_;
+      } else {
+        if (!known_[c]) table_[c] = map_(static_cast<float>(c) * k_, 16), known_[c] = 1;
+        dst[i * step] = table_[c];
+      }
+    }
+  }
+
+ private:
+  int bits_ = 8;
+  float k_ = 1.0f / 255.0f;
+  std::function<float(float, int)> map_;
+  std::vector<float> table_;
+  std::vector<unsigned char> known_;
+};
 
 // Whether write_png_subset writes this output (else OpenImageIO does).
 bool png_subset_writable(int channels, int bits);

@@ -2,7 +2,6 @@
 // which files and why).
 #include "io/tiff_direct.hpp"
 
-#include <omp.h>
 #include <tiffio.h>
 #include <libdeflate.h>
 
@@ -24,12 +23,19 @@ namespace {
 std::atomic<std::uint64_t> g_tiff_reads{0}, g_tiff_writes{0};
 
 // libtiff's messages for this file only (libtiff >= 4.5: per-file handlers;
-// returning 1 keeps them from the process-wide handlers, which print).
+// returning 1 keeps them from the process-wide handlers, which print): the
+// reader declines on an error or a decoding warning, the writer reports the
+// last error's text.
 struct TiffMessages {
   bool error = false, warned = false;
+  std::string last;
 };
-int on_tiff_error(TIFF*, void* user, const char*, const char*, va_list) {
-  static_cast<TiffMessages*>(user)->error = true;
+int on_tiff_error(TIFF*, void* user, const char*, const char* fmt, va_list ap) {
+  auto* m = static_cast<TiffMessages*>(user);
+  char b[512];
+  std::vsnprintf(b, sizeof b, fmt, ap);
+  m->error = true;
+  m->last = b;
   return 1;
 }
 int on_tiff_warning(TIFF*, void* user, const char*, const char*, va_list) {
@@ -91,6 +97,7 @@ bool read_tiff_subset(const std::string& path, Image* out, TiffInfo& info,
   // Warnings while opening (unknown private tags, say) do not change the
   // pixels and are not errors to OpenImageIO either; an error is.
   if (!h.t || msg.error) return false;
+  msg.warned = false;  // from here on a warning (while decoding) declines the file
   TIFF* t = h.t;
   uint32_t w = 0, hgt = 0;
   uint16_t spp = 1, bps = 1, fmt = SAMPLEFORMAT_UINT, photo = 0, planar = PLANARCONFIG_CONTIG, comp = 0;
@@ -127,39 +134,15 @@ bool read_tiff_subset(const std::string& path, Image* out, TiffInfo& info,
     return true;
   }
 
-  // A count's value: the count times the float 1/255 or 1/65535, as
-  // OpenImageIO returns it, then `map` (once per distinct count, so the
-  // result is map's bit for bit). Floats as stored.
+  // Counts as OpenImageIO returns them, then map (CountValues); floats as
+  // stored. n samples from src (native byte order: libtiff swaps them) to
+  // every `step`-th float of dst.
   const int bytes = bps / 8;
-  const float k = bps == 8 ? 1.0f / 255.0f : 1.0f / 65535.0f;
-  std::vector<float> table;
-  std::vector<unsigned char> known;
-  if (integer && bps == 8) {
-    table.resize(256);
-    for (unsigned c = 0; c < 256; ++c) table[c] = map ? map(static_cast<float>(c) * k, 8) : static_cast<float>(c) * k;
-  } else if (integer && map) {
-    table.assign(65536, 0.0f);
-    known.assign(65536, 0);
-  }
-  // n samples from src (native byte order: libtiff swaps them) to every
-  // `step`-th float of dst.
+  CountValues values;
+  if (integer) values.reset(bps, map);
   auto convert = [&](const unsigned char* src, float* dst, std::size_t n, std::size_t step) {
-    if (floating) {
-      for (std::size_t i = 0; i < n; ++i) std::memcpy(dst + i * step, src + 4 * i, 4);
-    } else if (bps == 8) {
-      for (std::size_t i = 0; i < n; ++i) dst[i * step] = table[src[i]];
-    } else {
-      for (std::size_t i = 0; i < n; ++i) {
-        std::uint16_t c;
-        std::memcpy(&c, src + 2 * i, 2);
-        if (!map) {
-          dst[i * step] = static_cast<float>(c) * k;
-        } else {
-          if (!known[c]) table[c] = map(static_cast<float>(c) * k, 16), known[c] = 1;
-          dst[i * step] = table[c];
-        }
-      }
-    }
+    if (!floating) return values.convert(src, dst, n, step);
+    for (std::size_t i = 0; i < n; ++i) std::memcpy(dst + i * step, src + 4 * i, 4);
   };
 
   Image img(got.width, got.height, got.channels);
@@ -222,20 +205,6 @@ bool read_tiff_subset(const std::string& path, Image* out, TiffInfo& info,
 
 namespace {
 
-struct TiffWriteMessages {
-  bool error = false;
-  std::string last;
-};
-int on_tiff_write_error(TIFF*, void* user, const char*, const char* fmt, va_list ap) {
-  auto* m = static_cast<TiffWriteMessages*>(user);
-  char b[512];
-  std::vsnprintf(b, sizeof b, fmt, ap);
-  m->error = true;
-  m->last = b;
-  return 1;
-}
-int on_tiff_write_warning(TIFF*, void*, const char*, const char*, va_list) { return 1; }
-
 struct TiffCompressorFree {
   void operator()(libdeflate_compressor* z) const { libdeflate_free_compressor(z); }
 };
@@ -286,7 +255,7 @@ bool write_tiff_subset(const std::string& path, int width, int height, int chann
   const std::size_t row_values = W * C, row_bytes = row_values * static_cast<std::size_t>(bits / 8);
   // OpenImageIO switches to BigTIFF above 4000 MiB of pixels.
   const bool big = row_bytes * static_cast<std::size_t>(height) > 4000ull * 1024 * 1024;
-  TiffWriteMessages msg;
+  TiffMessages msg;
   TiffHandle h;
   {
     TIFFOpenOptions* o = TIFFOpenOptionsAlloc();
@@ -294,8 +263,8 @@ bool write_tiff_subset(const std::string& path, int width, int height, int chann
       *why = "cannot allocate libtiff's options";
       return false;
     }
-    TIFFOpenOptionsSetErrorHandlerExtR(o, on_tiff_write_error, &msg);
-    TIFFOpenOptionsSetWarningHandlerExtR(o, on_tiff_write_warning, &msg);
+    TIFFOpenOptionsSetErrorHandlerExtR(o, on_tiff_error, &msg);
+    TIFFOpenOptionsSetWarningHandlerExtR(o, on_tiff_warning, &msg);
     h.t = TIFFOpenExt(path.c_str(), big ? "w8" : "w", o);
     TIFFOpenOptionsFree(o);
   }
