@@ -4,6 +4,7 @@
 // through the command's parameter table). Nothing is run and no file is read.
 #include "brume/error.hpp"
 #include "brume/pipeline.hpp"
+#include "brume/rerun.hpp"
 #include "fuzz_util.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

@@ -176,7 +176,7 @@ TEST(Sample, BoundsRespected) {
 TEST(Sample, EveryEffectsDefaultsValidate) {
   for (const std::string& e : sample_effects())
     for (int i = 0; i < 300; ++i) EXPECT_NO_THROW(random_params(e, 1, key_of(i), {})) << e << " " << key_of(i);
-  EXPECT_EQ(sample_effects(), (std::vector<std::string>{"haze", "fog", "aerial", "dof"}));
+  EXPECT_EQ(sample_effects(), (std::vector<std::string>{"haze", "aerial", "fog", "dof"}));
 }
 
 TEST(Sample, SpecsParseWhitespaceAndKinds) {
@@ -249,7 +249,7 @@ TEST(Sample, BadSpecsGiveClearErrors) {
   m = error_of([] { random_params("haze", 1, "k", {{"kappa-s", "0.5"}, {"kappa_s", "0.6"}}); });
   EXPECT_NE(m.find("same parameter"), std::string::npos) << m;
   m = error_of([] { random_params("smoke", 1, "k", {}); });
-  EXPECT_NE(m.find("use one of: haze, fog, aerial, dof"), std::string::npos) << m;
+  EXPECT_NE(m.find("use one of: haze, aerial, fog, dof"), std::string::npos) << m;
   // A combination the effect refuses, named with the key and the effect's own message.
   m = error_of([] { random_params("haze", 1, "Art/view1.png", {{"visibility", "800"}, {"kappa-a", "0.1"}}); });
   EXPECT_NE(m.find("key 'Art/view1.png'"), std::string::npos) << m;

@@ -159,6 +159,10 @@ struct HazeJob {
 };
 const std::vector<MapOutput>& haze_map_outputs();
 const ParamTable<HazeJob>& haze_job_table();
+// The command line's summary line of a haze record (stderr).
+void print_haze_summary(const std::string& out, const nlohmann::json& record);
+// The record's "haze" block: parameters, units, diffusion plan, derived values.
+nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a);
 // Returns the record it wrote (also embedded in the outputs).
 nlohmann::json run_haze_job(const HazeJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 

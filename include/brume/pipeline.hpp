@@ -14,6 +14,7 @@
 #pragma once
 
 #include <chrono>
+#include <functional>
 #include <map>
 #include <memory>
 #include <set>
@@ -210,22 +211,6 @@ struct GpuTiming;
 nlohmann::json gpu_timing_record(const GpuTiming& t);
 nlohmann::json cpu_timing_record(std::chrono::steady_clock::time_point t0, int iterations);
 
-// The checks rerun makes before it runs anything, without running or reading
-// a file: the record is brume's, of the schema brume run reads, its command
-// can be repeated and its job reads back through that command's parameter
-// table (every key declared, every value type- and range-checked). Returns
-// the command ("haze", "sky fit", ...); throws brume::Error as rerun does.
-std::string check_record(const nlohmann::json& record);
-
-// `brume run`: repeat the run a record describes (schema_version 2). Inputs
-// must still have the SHA-256 the record names; with a non-empty out_dir,
-// every output goes into out_dir under its recorded file name. Returns the
-// new record. A `brume sky fit` JSON is repeated too (its record is under
-// "record"); its --plot is drawn by `sky_plot` (the command line's plotter;
-// a library caller without one gets an error naming --plot).
-nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, const std::string& out_dir,
-                     const std::vector<std::string>& argv, Image (*sky_plot)(const nlohmann::json& fit) = nullptr);
-
 // What a pipeline needs to know about the run beyond its job.
 struct RunContext {
   std::vector<std::string> argv;  // for the record
@@ -233,6 +218,9 @@ struct RunContext {
   // Top-level blocks added to the record (an object, or null for none), e.g.
   // `brume batch`'s {"batch": {key, seed, sampling, values}}.
   nlohmann::json extra;
+  // Draws a command's figure from its result (sky fit's --plot): the command
+  // line's plotter; a library caller without one gets an error naming the flag.
+  Image (*plot)(const nlohmann::json& result) = nullptr;
 };
 
 // A job's record: header, the whole job, its inputs, then what the run
@@ -240,5 +228,53 @@ struct RunContext {
 // to stderr. Every effect's run_*_job ends with it.
 nlohmann::json job_record(const std::string& command, const RunContext& ctx, nlohmann::json job, nlohmann::json inputs,
                           const nlohmann::json& run_record, bool print_timing);
+
+// ---- the job of an effect on an RGB-D frame, from files to files --------------------
+// What an effect's run hands its job: the main image, its declared maps and
+// the record's blocks (run_record).
+struct EffectOutput {
+  Image main;
+  std::map<std::string, Image> maps;
+  nlohmann::json record;
+};
+
+// The steps every such job takes, in this order: every parameter checked (the
+// table's ranges, the effect's `check` -- cross-field rules, backend limits
+// --, the range step) and every output location, before any file is read;
+// the image and depth read (load_inputs); the working memory checked
+// (`bytes_per_pixel`: the effect's measured peak, README "Reliability");
+// `apply` on the loaded inputs (it may add to in.record, the record's
+// "inputs"); the record (of `recorded`, when the job recorded differs from the
+// one run: aerial's fitted turbidity is recorded as auto); the outputs
+// written together. Job has the members input, prepare and output.
+template <class Job>
+struct EffectJob {
+  const char* command;
+  const ParamTable<Job>& table;
+  const std::vector<MapOutput>& maps;
+  double bytes_per_pixel;
+  std::function<void(const Job&, const ExecOptions&)> check;
+  std::function<EffectOutput(const Job&, LoadedInputs&, const Exec&)> apply;
+};
+
+template <class Job>
+nlohmann::json run_effect_job(const EffectJob<Job>& e, const Job& job, const ExecOptions& eo, const RunContext& ctx,
+                              const Job* recorded = nullptr) {
+  // Every parameter is checked before any file is touched, whatever the input.
+  e.table.validate(job);
+  e.check(job, eo);
+  check_range_step(job.prepare, ctx.given);
+  const Exec exec = eo.exec();
+  check_outputs(job.output, e.maps);
+
+  LoadedInputs in = load_inputs(job.input, true);
+  check_working_memory(e.command, in.rgb, e.bytes_per_pixel);
+  EffectOutput out = e.apply(job, in, exec);
+
+  const nlohmann::json rec =
+      job_record(e.command, ctx, e.table.to_json(recorded ? *recorded : job), in.record, out.record, eo.timing);
+  write_outputs(job.output, e.maps, out.main, out.maps, &in.image_info, rec);
+  return rec;
+}
 
 }  // namespace brume

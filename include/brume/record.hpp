@@ -12,7 +12,6 @@
 #include <vector>
 
 #include "brume/diffusion.hpp"
-#include "brume/haze.hpp"
 #include "brume/io.hpp"
 #include "brume/params.hpp"
 #include "brume/prepare.hpp"
@@ -26,7 +25,6 @@ nlohmann::json record_header(const std::string& command, const std::vector<std::
 nlohmann::json file_record(const std::string& path, const FileInfo& info, const Image& img);
 
 nlohmann::json diffusion_record(const DiffusionParams& p, const DiffusionPlan& plan);
-nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a);
 nlohmann::json prepare_record(const PrepareParams& p, const PrepareResult& r);
 
 }  // namespace brume

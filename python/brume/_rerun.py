@@ -1,7 +1,9 @@
 """brume.rerun: repeat the run a parameter record describes, on arrays."""
 from . import _brume
 
-_EFFECTS = {"haze": _brume.haze, "aerial": _brume.aerial, "fog": _brume.fog, "dof": _brume.dof}
+# The commands of the library's list (brume/command.hpp) that this module runs
+# on arrays and that take a record's job: {command: function}.
+_REPLAYABLE = {c["name"]: getattr(_brume, c["function"]) for c in _brume._commands() if c["function"]}
 
 
 def rerun(record, rgb, range, **keywords):
@@ -17,13 +19,14 @@ def rerun(record, rgb, range, **keywords):
     refused). ``keywords`` override single values (``threads=``,
     ``backend=`` ...). The inputs are the arrays given, not the record's files:
     pass the same pixels for the same bits (a CLI record's ``inputs`` name
-    and hash its files). Commands: haze, aerial, fog, dof.
+    and hash its files). Commands: the effects with an array form (haze,
+    aerial, fog, dof).
     """
     if not isinstance(record, dict) or record.get("tool") != "brume" or "job" not in record:
         raise ValueError("brume.rerun(): record is not a brume parameter record (a dict with \"tool\": \"brume\" "
                          "and \"job\"); pass a Result's .record or a record JSON loaded with json.load")
     command = record.get("command")
-    if command not in _EFFECTS:
+    if command not in _REPLAYABLE:
         raise ValueError(f"brume.rerun(): the record's command {command!r} is not one of "
-                         f"{', '.join(sorted(_EFFECTS))}; rerun other records with `brume run`")
-    return _EFFECTS[command](rgb, range, job=record["job"], **keywords)
+                         f"{', '.join(sorted(_REPLAYABLE))}; rerun other records with `brume run`")
+    return _REPLAYABLE[command](rgb, range, job=record["job"], **keywords)

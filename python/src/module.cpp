@@ -51,6 +51,7 @@
 #include "brume/aerial.hpp"
 #include "brume/batch.hpp"
 #include "brume/blur.hpp"
+#include "brume/command.hpp"
 #include "brume/depth.hpp"
 #include "brume/depth_pipeline.hpp"
 #include "brume/dof.hpp"
@@ -388,6 +389,8 @@ struct FunctionDoc {
   std::vector<Extra> extras;
   std::vector<std::string> fields;  // result fields
   std::string returns = "Result";
+  std::string command = {};  // the command of the library's list it runs on arrays ("" for none)
+  bool replays = false;  // takes job= (a record's job), so brume.rerun repeats that command with it
 };
 std::vector<FunctionDoc>& registry() {
   static std::vector<FunctionDoc> r;
@@ -463,7 +466,9 @@ std::string stub_text() {
     }
     o << "\"\"\"\n\n";
   }
-  o << "def random_params(effect: Literal['haze', 'fog', 'aerial', 'dof'], seed: int, key: str,\n"
+  std::string effects;  // the sampleable commands of the list (brume/command.hpp)
+  for (const std::string& e : sample_effects()) effects += (effects.empty() ? "'" : ", '") + e + "'";
+  o << "def random_params(effect: Literal[" << effects << "], seed: int, key: str,\n"
        "                  **ranges: str | float | int | bool | Sequence[str | float]) -> dict[str, Any]:\n"
        "    \"\"\"Plausible parameters of an effect for the frame `key`, keyed by (seed, key, name).\"\"\"\n\n";
   o << "def set_max_pixels(pixels: int) -> None:\n"
@@ -710,6 +715,8 @@ void def_effect(py::module_& m, const char* name, const char* command, const Par
                                "a record's \"job\" (Result.record['job'], or a CLI record's): replays that run, "
                                "bit for bit on the CPU, as `brume run` does; other keywords override its values"}},
                              fields);
+  doc.command = command;
+  doc.replays = true;
   registry().push_back(doc);
   m.def(
       name,
@@ -1231,6 +1238,31 @@ PYBIND11_MODULE(_brume, m) {
       "Run one planned frame through its pipeline, the GIL released; returns its results line as JSON (private).");
   // ---- introspection, tests and benchmarks -----------------------------------------------
   m.def("_stub_text", &stub_text, "The type stubs of this module, generated from the parameter tables.");
+  m.def(
+      "_commands",
+      []() {
+        // The library's list of commands (brume/command.hpp), with the name of
+        // this module's function that runs each one on arrays (None when a
+        // command has no array form): brume.rerun and the tests walk it.
+        py::list out;
+        for (const CommandDef& c : commands()) {
+          py::dict d;
+          d["name"] = c.name;
+          d["cli"] = c.cli;
+          d["summary"] = c.summary;
+          d["record"] = c.record;
+          d["batch"] = c.batch;
+          d["sample"] = c.sampling.has_value();
+          d["gpu_passes"] = to_py(json(c.gpu_passes));
+          std::string fn;
+          for (const FunctionDoc& f : registry())
+            if (f.command == c.name && f.replays) fn = f.name;
+          d["function"] = fn.empty() ? py::object(py::none()) : py::object(py::str(fn));
+          out.append(d);
+        }
+        return out;
+      },
+      "The library's list of commands: name, cli, summary, record, batch, sample, gpu_passes, function.");
   m.def(
       "_debug_last_inputs",
       []() {

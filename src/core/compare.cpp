@@ -1,7 +1,9 @@
 // brume — image comparison: Morales eq. 3.14 histogram correlations and PSNR
 // (see brume/compare.hpp for the definitions).
+#include "brume/command.hpp"
 #include "brume/compare.hpp"
 
+#include <cstdio>
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -201,6 +203,39 @@ nlohmann::json run_compare_job(const CompareJob& job, const RunContext& ctx) {
     outs.commit();
   }
   return rec;
+}
+
+namespace {
+std::string db_text(const nlohmann::json& v) {
+  if (v.is_string()) return v.get<std::string>() + " dB (identical)";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3f dB", v.get<double>());
+  return buf;
+}
+}  // namespace
+
+CommandDef compare_command() {
+  return make_command<CompareJob>({
+      .name = "compare",
+      .cli = "compare",
+      .summary = "compare two images: HSV histogram correlations (Morales eq. 3.14) and PSNR",
+      .table = &compare_job_table(),
+      .run = [](const CompareJob& j, const ExecOptions&, const RunContext& ctx) { return run_compare_job(j, ctx); },
+      .report = [](const CompareJob&, const nlohmann::json& result) {
+        const nlohmann::json& r = result["result"];
+        // The result is this command's product: stdout, not stderr.
+        std::printf("pixels compared            %zu\n"
+                    "hue-saturation correlation %.6f  (eq. 3.14, HSV of 8-bit sRGB, H x S = %d x %d bins)\n"
+                    "brightness correlation     %.6f  (eq. 3.14, V, %d bins)\n"
+                    "PSNR linear RGB            %s  (peak 1)\n"
+                    "PSNR 8-bit sRGB            %s  (peak 255)\n",
+                    r["pixels_compared"].get<std::size_t>(), r["hue_saturation_correlation"].get<double>(),
+                    kCompareHueBins, kCompareSaturationBins, r["brightness_correlation"].get<double>(),
+                    kCompareValueBins, db_text(r["psnr_linear_db"]).c_str(), db_text(r["psnr_srgb8_db"]).c_str());
+        const auto ca = r["clipped_samples_a"].get<std::size_t>(), cb = r["clipped_samples_b"].get<std::size_t>();
+        if (ca || cb) std::printf("clipped to [0,1] for the 8-bit encoding: %zu samples of A, %zu of B\n", ca, cb);
+      },
+  });
 }
 
 }  // namespace brume

@@ -12,7 +12,7 @@
 #include <unistd.h>
 
 #include "brume/error.hpp"
-#include "brume/gpu.hpp"
+#include "brume/gpu_context.hpp"
 #include "brume/record.hpp"
 
 namespace fs = std::filesystem;

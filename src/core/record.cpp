@@ -39,30 +39,6 @@ nlohmann::json diffusion_record(const DiffusionParams& p, const DiffusionPlan& p
           {"boundary", "half-sample mirror"}};
 }
 
-nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a) {
-  nlohmann::json j;
-  j["parameters"] = haze_param_table().to_json(p);
-  j["parameters"]["haze"]["kappa_source"] =
-      p.visibility_m ? "visibility and albedo (values in derived)" : "kappa-a and kappa-s";
-  j["units"] = haze_param_table().units();
-  j["diffusion"] = diffusion_record(p.diffusion, a.plan);
-  j["derived"] = {
-      {"range_max_m", a.range_max_m},
-      {"range_min_m", a.range_min_m},
-      {"unknown_range_pixels", a.unknown_pixels},
-      {"unknown_range_rule", "unknown (NaN, inf, 0) treated as R = R_max"},
-      {"kappa_a_normalised", a.kappa_a},
-      {"kappa_s_normalised", a.kappa_s},
-      {"extinction_per_m", a.extinction_per_m},
-      {"kappa_a_per_m", a.kappa_a / a.range_max_m},
-      {"kappa_s_per_m", a.kappa_s / a.range_max_m},
-      {"sigma_max_px", a.sigma_max},
-      {"airlight_linear_rgb", a.airlight},
-      {"airlight_source", a.airlight_source},
-  };
-  return j;
-}
-
 nlohmann::json prepare_record(const PrepareParams& p, const PrepareResult& r) {
   const double n = static_cast<double>(r.range.pixels());
   return {{"rule", "Hansard 4.1: holes filled by RANSAC from their boundary; unknown components touching the top "

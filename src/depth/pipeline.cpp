@@ -1,4 +1,5 @@
 // brume — depth conversion and preparation as pipelines (brume/depth_pipeline.hpp).
+#include "brume/command.hpp"
 #include "brume/depth_pipeline.hpp"
 
 #include <cstdio>
@@ -117,6 +118,55 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
   if (!job.record.empty()) outs.write_text(job.record, rec.dump(2) + "\n", "--record");
   outs.commit();
   return rec;
+}
+
+CommandDef depth_convert_command() {
+  return make_command<DepthConvertJob>({
+      .name = "depth convert",
+      .cli = "depth convert",
+      .summary = "convert a depth source to a range (or z) map in metres",
+      .table = &depth_convert_job_table(),
+      .record = true,
+      .run = [](const DepthConvertJob& j, const ExecOptions&, const RunContext& ctx) {
+        return run_depth_convert_job(j, ctx);
+      },
+      .report = [](const DepthConvertJob& job, const nlohmann::json& rec) {
+        const auto& d = rec["depth"];
+        const double w = rec["result"]["width"].get<double>(), h = rec["result"]["height"].get<double>();
+        const std::size_t unknown = rec["result"]["unknown_pixels"].get<std::size_t>();
+        std::fprintf(stderr, "brume depth convert: %s  %s  %.0fx%.0f  %.2f %% unknown", job.out.c_str(),
+                     job.kind.c_str(), w, h, w * h > 0 ? 100.0 * unknown / (w * h) : 0.0);
+        if (!job.depth.velodyne.empty())
+          std::fprintf(stderr, "  (lidar: %zu of %zu points in view, coverage %.2f %% of pixels)",
+                       d["points_in_view"].get<std::size_t>(), d["points"].get<std::size_t>(),
+                       100.0 * d["coverage"].get<double>());
+        std::fprintf(stderr, "\n");
+      },
+  });
+}
+
+CommandDef depth_prepare_command() {
+  return make_command<DepthPrepareJob>({
+      .name = "depth prepare",
+      .cli = "depth prepare",
+      .summary = "fill holes, identify the sky and matte the horizon (Hansard 4.1)",
+      .table = &depth_prepare_job_table(),
+      .record = true,
+      .run = [](const DepthPrepareJob& j, const ExecOptions&, const RunContext& ctx) {
+        return run_depth_prepare_job(j, ctx);
+      },
+      .report = [](const DepthPrepareJob& job, const nlohmann::json& rec) {
+        const auto& p = rec["prepare"];
+        std::fprintf(stderr,
+                     "brume depth prepare: %s  known %.1f %%, %zu holes (%.2f %%), sky %.1f %% at S_max %.4g m "
+                     "(R_max %.4g m), margin %.2f %% solved to residual %.2g in %d iterations\n",
+                     job.out.c_str(), 100 * p["known_fraction"].get<double>(), p["holes"].get<std::size_t>(),
+                     100 * p["hole_fraction"].get<double>(), 100 * p["sky_fraction"].get<double>(),
+                     p["s_max_m"].get<double>(), p["range_max_m"].get<double>(),
+                     100 * p["margin_fraction"].get<double>(), p["margin_residual"].get<double>(),
+                     p["solver_iterations"].get<int>());
+      },
+  });
 }
 
 }  // namespace brume

@@ -1,4 +1,5 @@
 // brume — `brume aerial coefficients` (brume/aerial_coefficients.hpp).
+#include "brume/command.hpp"
 #include "brume/aerial_coefficients.hpp"
 
 #include <cmath>
@@ -117,6 +118,29 @@ nlohmann::json run_coefficients_job(const CoefficientsJob& job, const RunContext
   r["beta_550nm_per_m"] = {{"rayleigh", rayleigh_beta_per_m(550.0, job.atmosphere.altitude_m)},
                            {"mie", mie_beta_per_m(550.0, job.atmosphere.turbidity, job.atmosphere.altitude_m)}};
   return {{"aerial coefficients", r}};
+}
+
+CommandDef aerial_coefficients_command() {
+  return make_command<CoefficientsJob>({
+      .name = "aerial coefficients",
+      .cli = "aerial coefficients",
+      .summary = "write Gamma_c(s) at given distances (distance_m,gamma_r,gamma_g,gamma_b; gamma_x,gamma_y,gamma_z for "
+                 "the default CIE sensitivity) and optionally beta_R, beta_M per wavelength",
+      .table = &coefficients_job_table(),
+      .run = [](const CoefficientsJob& j, const ExecOptions&, const RunContext& ctx) {
+        return run_coefficients_job(j, ctx);
+      },
+      .report = [](const CoefficientsJob& job, const nlohmann::json& result) {
+        const nlohmann::json& r = result["aerial coefficients"];
+        std::fprintf(stderr,
+                     "brume aerial coefficients: %s  T %.4g  h0 %.4g m  beta_R(550) %.4g /km  beta_M(550) %.4g /km  "
+                     "%zu rows (%s)\n",
+                     job.out.c_str(), job.atmosphere.turbidity, job.atmosphere.altitude_m,
+                     1e3 * r["beta_550nm_per_m"]["rayleigh"].get<double>(),
+                     1e3 * r["beta_550nm_per_m"]["mie"].get<double>(), r["rows"].get<std::size_t>(),
+                     r["columns"].get<std::string>().c_str());
+      },
+  });
 }
 
 }  // namespace brume

@@ -2,12 +2,14 @@
 // in the shape every effect follows (brume/pipeline.hpp): analyse the
 // measured range (R_max, Iinf from the sky, the Gamma tables), prepare it,
 // dispatch once on Exec, record.
+#include <cstdio>
 #include <chrono>
 
+#include "brume/command.hpp"
 #include "brume/aerial.hpp"
 #include "brume/sky.hpp"
 #include "brume/error.hpp"
-#include "brume/gpu.hpp"
+#include "brume/gpu_aerial.hpp"
 #include "brume/record.hpp"
 
 namespace brume {
@@ -186,31 +188,60 @@ AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::str
 nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo, const RunContext& ctx) {
   AerialJob job = given_job;
   const AerialTurbidity tf = resolve_aerial_turbidity(job, ctx.given);
-  const nlohmann::json& sky_fit_record = tf.fit_record;
-  const nlohmann::json& sky_image_record = tf.image_record;
-  // Every parameter is checked before any file is touched, whatever the input.
-  aerial_job_table().validate(job);
-  validate_aerial(job.aerial, ctx.given);
-  check_range_step(job.prepare, ctx.given);
-  const Exec exec = eo.exec();
-  check_outputs(job.output, aerial_map_outputs());
-
-  LoadedInputs in = load_inputs(job.input, true);
-
-  check_working_memory("aerial", in.rgb, 190);  // measured peak bytes per pixel (README "Reliability")
-  AerialRun run = run_aerial(in.rgb, in.depth.range, job.aerial, job.prepare, exec, ctx.given);
-  if (!sky_fit_record.is_null()) {
-    run.record["turbidity_fit"] = sky_fit_record;
-    in.record["sky_image"] = sky_image_record;
-  }
-
+  const EffectJob<AerialJob> e{
+      "aerial", aerial_job_table(), aerial_map_outputs(), 190,
+      [&](const AerialJob& j, const ExecOptions&) { validate_aerial(j.aerial, ctx.given); },
+      [&](const AerialJob& j, LoadedInputs& in, const Exec& exec) {
+        AerialRun run = run_aerial(in.rgb, in.depth.range, j.aerial, j.prepare, exec, ctx.given);
+        if (!tf.fit_record.is_null()) {
+          run.record["turbidity_fit"] = tf.fit_record;
+          in.record["sky_image"] = tf.image_record;
+        }
+        return EffectOutput{std::move(run.result.rgb),
+                            {{"attenuation", std::move(run.result.attenuation)},
+                             {"scale-map", std::move(run.result.scale)}},
+                            std::move(run.record)};
+      }};
   AerialJob recorded = job;
-  if (!sky_fit_record.is_null()) recorded.aerial.atmosphere.turbidity = NAN;  // auto: refitted by brume run
-  const nlohmann::json rec =
-      job_record("aerial", ctx, aerial_job_table().to_json(recorded), in.record, run.record, eo.timing);
-  write_outputs(job.output, aerial_map_outputs(), run.result.rgb,
-                {{"attenuation", run.result.attenuation}, {"scale-map", run.result.scale}}, &in.image_info, rec);
-  return rec;
+  if (!tf.fit_record.is_null()) recorded.aerial.atmosphere.turbidity = NAN;  // auto: refitted by brume run
+  return run_effect_job(e, job, eo, ctx, &recorded);
+}
+
+CommandDef aerial_command() {
+  CommandDef c = make_command<AerialJob>({
+      .name = "aerial",
+      .cli = "aerial",
+      .summary = "spectral aerial perspective from turbidity: render, re-render, remove (Morales eq. 3.11-3.13)",
+      .table = &aerial_job_table(),
+      .exec = true,
+      .record = true,
+      .batch = true,
+      .check = [](const AerialJob& j, const std::set<std::string>& g) {
+        validate_aerial(j.aerial, g);
+        check_range_step(j.prepare, g);
+      },
+      .run = &run_aerial_job,
+      .report = [](const AerialJob& j, const nlohmann::json& rec) {
+        const auto& d = rec["aerial"]["derived"];
+        const auto& g = d["gamma_at"]["1000_m"];
+        std::fprintf(stderr, "brume aerial: %s  %s  R_max %.4g m  Gamma(1 km) %.4f %.4f %.4f  sigma_max %.3g px (%s)\n",
+                     j.output.out.c_str(), d["mode"].get<std::string>().c_str(), d["range_max_m"].get<double>(),
+                     g[0].get<double>(), g[1].get<double>(), g[2].get<double>(), d["sigma_max_px"].get<double>(),
+                     rec["execution"]["backend"].get<std::string>().c_str());
+      },
+  });
+  // Turbidity 2-10 (Morales Table 3.1, corrected: clear air from about 2.7,
+  // light haze 4.5, haze 9.8; fog at 19 is haze's and fog's job), uniform
+  // since the Mie coefficient is affine in T; observer altitude 0-1500 m (sea
+  // level to high plateaus, where most outdoor datasets are shot); blur gain
+  // as haze.
+  c.sampling = make_sampling<AerialParams>(aerial_param_table(),
+                                           {{"turbidity", "uniform(2, 10)", {}},
+                                            {"altitude", "uniform(0, 1500)", {}},
+                                            {"lambda", "uniform(0, 8)", {}}},
+                                           &validate_aerial);
+  c.gpu_passes = {"aerial.premultiply", "diffusion.rates", "diffusion.iterate", "aerial.composite"};
+  return c;
 }
 
 }  // namespace brume

@@ -1,13 +1,15 @@
 // brume — `brume blur`: the diffusion engine alone (brume/blur.hpp).
+#include "brume/command.hpp"
 #include "brume/blur.hpp"
 
+#include <cstdio>
 #include <chrono>
 #include <cmath>
 #include <limits>
 #include <sstream>
 
 #include "brume/error.hpp"
-#include "brume/gpu.hpp"
+#include "brume/gpu_context.hpp"
 #include "brume/record.hpp"
 
 namespace brume {
@@ -173,6 +175,26 @@ nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& eo, const Run
       job_record("blur", ctx, blur_job_table().to_json(job), std::move(inputs), run.record, eo.timing);
   write_outputs(job.output, {}, run.rgb, {}, &in.image_info, rec);
   return rec;
+}
+
+CommandDef blur_command() {
+  CommandDef c = make_command<BlurJob>({
+      .name = "blur",
+      .cli = "blur",
+      .summary = "the diffusion engine alone: Gaussian or space-variant blur",
+      .table = &blur_job_table(),
+      .exec = true,
+      .record = true,
+      .run = &run_blur_job,
+      .report = [](const BlurJob& j, const nlohmann::json& rec) {
+        std::fprintf(stderr, "brume blur: %s  sigma_max %.3g px  %d iterations (%s, %s)\n", j.output.out.c_str(),
+                     rec["diffusion"]["sigma_max_px"].get<double>(), rec["diffusion"]["iterations"].get<int>(),
+                     rec["diffusion"]["scheme"].get<std::string>().c_str(),
+                     rec["diffusion"]["precision"].get<std::string>().c_str());
+      },
+  });
+  c.gpu_passes = {"diffusion.rates", "diffusion.iterate"};
+  return c;
 }
 
 }  // namespace brume

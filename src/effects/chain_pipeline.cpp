@@ -1,9 +1,11 @@
 // brume — haze then depth of field in one run (brume/chain.hpp): the range
 // prepared once, the haze stage, its linear RGB handed to the DOF stage in
 // memory, one record holding both parameter blocks.
+#include <cstdio>
 #include <chrono>
 #include <utility>
 
+#include "brume/command.hpp"
 #include "brume/chain.hpp"
 #include "brume/error.hpp"
 #include "brume/record.hpp"
@@ -167,6 +169,48 @@ nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, co
                  {"dof-scale-map", run.dof.result.scale}},
                 &in.image_info, rec);
   return rec;
+}
+
+CommandDef haze_dof_command() {
+  CommandDef c = make_command<HazeDofJob>({
+      .name = "haze+dof",
+      .cli = "haze",
+      .summary = "haze and fog with scattering blur (Hansard eq. 1-7); any --dof-... flag adds depth of field after it",
+      .table = &haze_dof_job_table(),
+      .exec = true,
+      .record = true,
+      .batch = true,
+      .check = [](const HazeDofJob& j, const std::set<std::string>& g) {
+        const std::set<std::string> gh = haze_given(g);
+        validate_haze(j.haze, gh);
+        check_range_step(j.prepare, gh);
+        try {
+          validate_dof(j.dof, dof_given(g));
+        } catch (const Error& e) {
+          throw Error(std::string("depth-of-field stage (dof.*): ") + e.what());
+        }
+      },
+      .run = &run_haze_dof_job,
+      .report = [](const HazeDofJob& j, const nlohmann::json& rec) {
+        print_haze_summary(j.output.out, rec);
+        if (!rec.contains("dof")) return;  // `brume haze` without a --dof-... flag ran plain haze
+        const auto& f = rec["dof"]["derived"];
+        std::fprintf(stderr, "  then dof: CoC at infinity %.3g px  sigma_max %.3g px (%zu capped)  %d iterations (%s)\n",
+                     f["coc_infinity_px"].get<double>(), f["sigma_max_px"].get<double>(),
+                     f["capped_pixels"].get<std::size_t>(), rec["dof"]["diffusion"]["iterations"].get<int>(),
+                     rec["dof"]["diffusion"]["dof_scheme"].get<std::string>().c_str());
+      },
+  });
+  c.stage_prefix = kDofPrefix;
+  // `brume haze`: a DOF flag given enables the DOF stage; without one the
+  // run, its record and `brume run` are plain haze's.
+  c.cli_run = [](const nlohmann::json& job, const ExecOptions& e, const RunContext& ctx) {
+    HazeDofJob j;
+    haze_dof_job_table().from_json(j, job, "job");
+    return dof_stage_requested(ctx.given) ? run_haze_dof_job(j, e, ctx) : run_haze_job(haze_part(j, ctx.given), e, ctx);
+  };
+  c.gpu_passes = {"haze.premultiply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
+  return c;
 }
 
 }  // namespace brume

@@ -2,13 +2,15 @@
 // call, in the shape every effect follows (brume/pipeline.hpp): prepare the
 // range, turn it into planar depth, form the scale map from the CoC, dispatch
 // once on Exec (the GPU runs the engine's own passes on that map), record.
+#include <cstdio>
 #include <chrono>
 #include <cmath>
 #include <sstream>
 
+#include "brume/command.hpp"
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
-#include "brume/gpu.hpp"
+#include "brume/gpu_context.hpp"
 #include "brume/record.hpp"
 
 namespace brume {
@@ -159,25 +161,60 @@ DofRun run_dof_prepared(DenseImageRef rgb, const PreparedRange& prep, const Intr
 }
 
 nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& eo, const RunContext& ctx) {
-  // Every parameter is checked before any file is touched, whatever the input.
-  dof_job_table().validate(job);
-  validate_dof(job.dof, ctx.given);
-  check_range_step(job.prepare, ctx.given);
-  check_gpu_scheme(job.dof, eo.backend);
-  const Exec exec = eo.exec();
-  check_outputs(job.output, dof_map_outputs());
+  const EffectJob<DofJob> e{
+      "dof", dof_job_table(), dof_map_outputs(), 90,
+      [&](const DofJob& j, const ExecOptions& x) {
+        validate_dof(j.dof, ctx.given);
+        check_gpu_scheme(j.dof, x.backend);
+      },
+      [&](const DofJob& j, LoadedInputs& in, const Exec& exec) {
+        const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height);
+        DofRun run = run_dof(in.rgb, in.depth.range, k, j.dof, j.prepare, exec, ctx.given);
+        run.record["dof"]["derived"]["intrinsics"]["source"] =
+            depth_flags_give_intrinsics(j.input.depth) ? "depth flags" : "lens (focal length x width / sensor width)";
+        return EffectOutput{std::move(run.result.rgb), {{"scale-map", std::move(run.result.scale)}},
+                            std::move(run.record)};
+      }};
+  return run_effect_job(e, job, eo, ctx);
+}
 
-  LoadedInputs in = load_inputs(job.input, true);
-
-  check_working_memory("dof", in.rgb, 90);  // measured peak bytes per pixel (README "Reliability")
-  const Intrinsics k = dof_intrinsics(job.input.depth, job.dof, in.rgb.width, in.rgb.height);
-  DofRun run = run_dof(in.rgb, in.depth.range, k, job.dof, job.prepare, exec, ctx.given);
-  run.record["dof"]["derived"]["intrinsics"]["source"] =
-      depth_flags_give_intrinsics(job.input.depth) ? "depth flags" : "lens (focal length x width / sensor width)";
-
-  const nlohmann::json rec = job_record("dof", ctx, dof_job_table().to_json(job), in.record, run.record, eo.timing);
-  write_outputs(job.output, dof_map_outputs(), run.result.rgb, {{"scale-map", run.result.scale}}, &in.image_info, rec);
-  return rec;
+CommandDef dof_command() {
+  CommandDef c = make_command<DofJob>({
+      .name = "dof",
+      .cli = "dof",
+      .summary = "depth of field by leak-free diffusion (thin-lens CoC, Bertalmio eq. 1-2, 16)",
+      .table = &dof_job_table(),
+      .exec = true,
+      .record = true,
+      .batch = true,
+      .check = [](const DofJob& j, const std::set<std::string>& g) {
+        validate_dof(j.dof, g);
+        check_range_step(j.prepare, g);
+      },
+      .run = &run_dof_job,
+      .report = [](const DofJob& j, const nlohmann::json& rec) {
+        const auto& d = rec["dof"]["derived"];
+        std::fprintf(stderr, "brume dof: %s  CoC at infinity %.3g px  sigma_max %.3g px (%zu capped)  %d iterations (%s, %s)\n",
+                     j.output.out.c_str(), d["coc_infinity_px"].get<double>(), d["sigma_max_px"].get<double>(),
+                     d["capped_pixels"].get<std::size_t>(), rec["dof"]["diffusion"]["iterations"].get<int>(),
+                     rec["dof"]["diffusion"]["dof_scheme"].get<std::string>().c_str(),
+                     rec["execution"]["backend"].get<std::string>().c_str());
+      },
+  });
+  // A 50 mm lens on a 36 mm (full-frame) sensor, the "normal" lens whose
+  // field of view is close to most datasets' cameras (fix --focal-length and
+  // --sensor-width to your camera), at the full stops f/1.4-f/8 (where depth
+  // of field is visible at all), focused log-uniformly from 1 m (close-up) to
+  // 50 m (street scenes; beyond, the scene is all in focus). --coc-infinity
+  // replaces the lens.
+  c.sampling = make_sampling<DofParams>(dof_param_table(),
+                                        {{"focus-distance", "loguniform(1, 50)", {}},
+                                         {"f-number", "choice(1.4, 2, 2.8, 4, 5.6, 8)", {"coc-infinity"}},
+                                         {"focal-length", "50", {"coc-infinity"}},
+                                         {"sensor-width", "36", {"coc-infinity"}}},
+                                        &validate_dof);
+  c.gpu_passes = {"diffusion.rates", "diffusion.iterate"};
+  return c;
 }
 
 }  // namespace brume

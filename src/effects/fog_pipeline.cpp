@@ -2,12 +2,15 @@
 // in the shape every effect follows (brume/pipeline.hpp): analyse the
 // measured range (R_max, the sky's colour), prepare it, dispatch once on
 // Exec, record.
+#include <optional>
+#include <cstdio>
 #include <chrono>
 #include <memory>
 
+#include "brume/command.hpp"
 #include "brume/error.hpp"
 #include "brume/fog.hpp"
-#include "brume/gpu.hpp"
+#include "brume/gpu_fog.hpp"
 #include "brume/record.hpp"
 
 namespace brume {
@@ -127,23 +130,65 @@ FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSourc
 }
 
 nlohmann::json run_fog_job(const FogJob& job, const ExecOptions& eo, const RunContext& ctx) {
-  // Every parameter is checked before any file is touched, whatever the input.
-  fog_job_table().validate(job);
-  validate_fog(job.fog, ctx.given);
-  check_range_step(job.prepare, ctx.given);
-  const Exec exec = eo.exec();
-  check_outputs(job.output, fog_map_outputs());
+  const EffectJob<FogJob> e{
+      "fog", fog_job_table(), fog_map_outputs(), 150,
+      [&](const FogJob& j, const ExecOptions&) { validate_fog(j.fog, ctx.given); },
+      [&](const FogJob& j, LoadedInputs& in, const Exec& exec) {
+        FogRun run = run_fog(in.rgb, in.depth.range, j.input.depth, j.fog, j.prepare, exec, ctx.given,
+                             &in.depth.window_depth);
+        return EffectOutput{std::move(run.result.rgb),
+                            {{"optical-depth", std::move(run.result.optical_depth)},
+                             {"transmission", std::move(run.result.transmission)}},
+                            std::move(run.record)};
+      }};
+  return run_effect_job(e, job, eo, ctx);
+}
 
-  LoadedInputs in = load_inputs(job.input, true);
-  check_working_memory("fog", in.rgb, 150);  // measured peak bytes per pixel (README "Reliability")
-  FogRun run =
-      run_fog(in.rgb, in.depth.range, job.input.depth, job.fog, job.prepare, exec, ctx.given, &in.depth.window_depth);
-
-  const nlohmann::json rec = job_record("fog", ctx, fog_job_table().to_json(job), in.record, run.record, eo.timing);
-  write_outputs(job.output, fog_map_outputs(), run.result.rgb,
-                {{"optical-depth", run.result.optical_depth}, {"transmission", run.result.transmission}},
-                &in.image_info, rec);
-  return rec;
+CommandDef fog_command() {
+  CommandDef c = make_command<FogJob>({
+      .name = "fog",
+      .cli = "fog",
+      .summary = "layered fog: height densities integrated along each pixel's ray (Zhou, Chen, Smith), optional "
+                 "scattering blur",
+      .table = &fog_job_table(),
+      .exec = true,
+      .record = true,
+      .batch = true,
+      .check = [](const FogJob& j, const std::set<std::string>& g) {
+        validate_fog(j.fog, g);
+        check_range_step(j.prepare, g);
+      },
+      .run = &run_fog_job,
+      .report = [](const FogJob& j, const nlohmann::json& rec) {
+        const auto& d = rec["fog"]["derived"];
+        std::fprintf(stderr, "brume fog: %s  R_max %.4g m  sky distance %.4g m  sigma_max %.3g px (%s)\n",
+                     j.output.out.c_str(), d["range_max_m"].get<double>(), d["sky_distance_m"].get<double>(),
+                     d["sigma_max_px"].get<double>(), rec["execution"]["backend"].get<std::string>().c_str());
+      },
+  });
+  // Ground density D0 0.002-0.08 /m, i.e. a Koschmieder visibility 3.912/D0
+  // of 2 km (mist) down to 50 m (thick fog), log-uniform as for haze;
+  // falloff B 0.005-0.2 /m, a scale height 1/B of 200 m (a deep hazy
+  // boundary layer) down to 5 m (valley fog lying on the ground); blur gain
+  // and albedo as haze. --profile or --classic make the exponential's
+  // parameters meaningless, so they drop them.
+  c.sampling = make_sampling<FogParams>(fog_param_table(),
+                                        {{"density", "loguniform(0.002, 0.08)", {"classic", "profile"}},
+                                         {"falloff", "loguniform(0.005, 0.2)", {"classic", "profile"}},
+                                         {"lambda", "uniform(0, 8)", {"classic"}},
+                                         {"albedo", "uniform(0.8, 1)", {"classic"}}},
+                                        &validate_fog);
+  c.gpu_passes = {"fog.apply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
+  // The height profile's density (a table profile reads its file); classic
+  // OpenGL fog is a look, not a medium.
+  c.extinction_per_m = [](const nlohmann::json& job, double height_m) -> std::optional<double> {
+    FogJob j;
+    fog_job_table().from_json(j, job, "job");
+    if (j.fog.classic != ClassicFog::none) return std::nullopt;
+    const FogTable table = j.fog.profile == FogProfile::table ? read_fog_table(j.fog.table_file) : FogTable{};
+    return fog_density(j.fog, table, 0.0).at(height_m);
+  };
+  return c;
 }
 
 }  // namespace brume

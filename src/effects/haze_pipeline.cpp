@@ -2,10 +2,13 @@
 // the shape every effect follows (brume/pipeline.hpp): analyse the measured
 // range, prepare it, dispatch once on Exec, record.
 #include <chrono>
+#include <cstdio>
+#include <optional>
 #include <utility>
 
+#include "brume/command.hpp"
 #include "brume/error.hpp"
-#include "brume/gpu.hpp"
+#include "brume/gpu_haze.hpp"
 #include "brume/haze.hpp"
 #include "brume/record.hpp"
 
@@ -29,6 +32,32 @@ const ParamTable<HazeJob>& haze_job_table() {
     return d;
   }();
   return t;
+}
+
+// The "haze" block of a record: parameters, units, the diffusion plan and
+// what the analysis derived.
+nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a) {
+  nlohmann::json j;
+  j["parameters"] = haze_param_table().to_json(p);
+  j["parameters"]["haze"]["kappa_source"] =
+      p.visibility_m ? "visibility and albedo (values in derived)" : "kappa-a and kappa-s";
+  j["units"] = haze_param_table().units();
+  j["diffusion"] = diffusion_record(p.diffusion, a.plan);
+  j["derived"] = {
+      {"range_max_m", a.range_max_m},
+      {"range_min_m", a.range_min_m},
+      {"unknown_range_pixels", a.unknown_pixels},
+      {"unknown_range_rule", "unknown (NaN, inf, 0) treated as R = R_max"},
+      {"kappa_a_normalised", a.kappa_a},
+      {"kappa_s_normalised", a.kappa_s},
+      {"extinction_per_m", a.extinction_per_m},
+      {"kappa_a_per_m", a.kappa_a / a.range_max_m},
+      {"kappa_s_per_m", a.kappa_s / a.range_max_m},
+      {"sigma_max_px", a.sigma_max},
+      {"airlight_linear_rgb", a.airlight},
+      {"airlight_source", a.airlight_source},
+  };
+  return j;
 }
 
 namespace {
@@ -82,22 +111,68 @@ HazeRun run_haze_prepared(const Image& rgb, const Image& measured_range, const P
 }
 
 nlohmann::json run_haze_job(const HazeJob& job, const ExecOptions& eo, const RunContext& ctx) {
-  // Every parameter is checked before any file is touched, whatever the input.
-  haze_job_table().validate(job);
-  validate_haze(job.haze, ctx.given);
-  check_range_step(job.prepare, ctx.given);
-  const Exec exec = eo.exec();
-  check_outputs(job.output, haze_map_outputs());
+  const EffectJob<HazeJob> e{
+      "haze", haze_job_table(), haze_map_outputs(), 140,
+      [&](const HazeJob& j, const ExecOptions&) { validate_haze(j.haze, ctx.given); },
+      [&](const HazeJob& j, LoadedInputs& in, const Exec& exec) {
+        HazeRun run = run_haze(in.rgb, in.depth.range, j.haze, j.prepare, exec, ctx.given);
+        return EffectOutput{std::move(run.result.rgb),
+                            {{"transmission", std::move(run.result.transmission)},
+                             {"scale-map", std::move(run.result.scale)}},
+                            std::move(run.record)};
+      }};
+  return run_effect_job(e, job, eo, ctx);
+}
 
-  LoadedInputs in = load_inputs(job.input, true);
+void print_haze_summary(const std::string& out, const nlohmann::json& rec) {
+  const auto& d = rec["haze"]["derived"];
+  std::fprintf(stderr, "brume haze: %s  R_max %.4g m  sigma_max %.3g px  %d iterations (%s, %s)\n", out.c_str(),
+               d["range_max_m"].get<double>(), d["sigma_max_px"].get<double>(),
+               rec["haze"]["diffusion"]["iterations"].get<int>(),
+               rec["haze"]["diffusion"]["scheme"].get<std::string>().c_str(),
+               rec["execution"]["backend"].get<std::string>().c_str());
+}
 
-  check_working_memory("haze", in.rgb, 140);  // measured peak bytes per pixel (README "Reliability")
-  HazeRun run = run_haze(in.rgb, in.depth.range, job.haze, job.prepare, exec, ctx.given);
-
-  const nlohmann::json rec = job_record("haze", ctx, haze_job_table().to_json(job), in.record, run.record, eo.timing);
-  write_outputs(job.output, haze_map_outputs(), run.result.rgb,
-                {{"transmission", run.result.transmission}, {"scale-map", run.result.scale}}, &in.image_info, rec);
-  return rec;
+CommandDef haze_command() {
+  CommandDef c = make_command<HazeJob>({
+      .name = "haze",
+      .cli = "",  // `brume haze` is haze+dof's subcommand: plain haze without a --dof-... flag
+      .summary = "haze and fog with scattering blur (Hansard eq. 1-7)",
+      .table = &haze_job_table(),
+      .exec = true,
+      .record = true,
+      .batch = true,
+      .check = [](const HazeJob& j, const std::set<std::string>& g) {
+        validate_haze(j.haze, g);
+        check_range_step(j.prepare, g);
+      },
+      .run = &run_haze_job,
+      .report = [](const HazeJob& j, const nlohmann::json& rec) { print_haze_summary(j.output.out, rec); },
+  });
+  // Visibility from dense fog (50 m, the fog threshold is 1 km) to light haze
+  // (5 km), log-uniform because perceived haze follows optical depth ~ 1/V
+  // over orders of magnitude; albedo 0.8-1 (water droplets and most aerosols
+  // scatter far more than they absorb; soot-laden smog reaches 0.8); lambda
+  // 0-8 px of blur gain (0: Koschmieder's clean haze; 8 keeps the scattering
+  // blur at sigma ~ 8 px at kappa_s' = 1, the soft look of real fog without
+  // erasing detail at Middlebury/KITTI sizes). kappa-a and kappa-s take over
+  // visibility's role (validate_haze refuses both).
+  c.sampling = make_sampling<HazeParams>(haze_param_table(),
+                                         {{"visibility", "loguniform(50, 5000)", {"kappa-a", "kappa-s"}},
+                                          {"albedo", "uniform(0.8, 1)", {"kappa-a", "kappa-s"}},
+                                          {"lambda", "uniform(0, 8)", {}}},
+                                         &validate_haze);
+  c.gpu_passes = {"haze.premultiply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
+  // A homogeneous medium: Koschmieder's 3.912 / V with a visibility, else the
+  // normalised kappas over a given R_max; without either it has no unit.
+  c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {
+    HazeJob j;
+    haze_job_table().from_json(j, job, "job");
+    if (j.haze.visibility_m) return 3.912 / *j.haze.visibility_m;  // as analyse_haze: -ln 0.02 / V
+    if (j.haze.range_max_m) return (j.haze.kappa_a + j.haze.kappa_s) / *j.haze.range_max_m;
+    return std::nullopt;
+  };
+  return c;
 }
 
 }  // namespace brume

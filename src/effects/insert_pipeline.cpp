@@ -3,8 +3,10 @@
 // load_inputs, the object and its range declared in the job, the aerial
 // analysis on the photo's measured range, the depth test, prepare, apply,
 // record, write.
+#include <cstdio>
 #include <chrono>
 
+#include "brume/command.hpp"
 #include "brume/error.hpp"
 #include "brume/insert.hpp"
 #include "brume/record.hpp"
@@ -105,51 +107,70 @@ InsertRun insert_object(const Image& photo, const Image& scene_range, const Imag
 }
 
 nlohmann::json run_insert_job(const InsertJob& job, const ExecOptions& eo, const RunContext& ctx) {
-  // Every parameter is checked before any file is touched, whatever the input.
-  insert_job_table().validate(job);
-  validate_insert(job.aerial, ctx.given);
-  check_range_step(job.prepare, ctx.given);
-  const Exec exec = eo.exec();
-  if (exec.backend == Backend::gpu)
-    throw Error("insert runs on the CPU only (no GPU passes yet); use --backend cpu (or auto)");
-  if (job.object.object.empty()) throw Error("no object given: use --object FILE (RGBA, same size as --image)");
-  if (job.object.object_range.empty())
-    throw Error("no object range given: use --object-range FILE (metres along the ray, unknown where the object "
-                "is absent)");
-  check_outputs(job.output, insert_map_outputs());
+  const EffectJob<InsertJob> e{
+      "insert", insert_job_table(), insert_map_outputs(),
+      190,  // aerial's measured peak (insert runs aerial; its own is not measured)
+      [&](const InsertJob& j, const ExecOptions& x) {
+        validate_insert(j.aerial, ctx.given);
+        if (x.backend == Backend::gpu)
+          throw Error("insert runs on the CPU only (no GPU passes yet); use --backend cpu (or auto)");
+        if (j.object.object.empty()) throw Error("no object given: use --object FILE (RGBA, same size as --image)");
+        if (j.object.object_range.empty())
+          throw Error("no object range given: use --object-range FILE (metres along the ray, unknown where the "
+                      "object is absent)");
+      },
+      [&](const InsertJob& j, LoadedInputs& in, const Exec& exec) {
+        FileInfo oinfo;
+        const Image obj = read_object_rgba(j.object.object, &oinfo);
+        if (obj.width != in.rgb.width || obj.height != in.rgb.height)
+          throw Error("--object '" + j.object.object + "' is " + obj.size_string() + " but --image '" +
+                      j.input.image + "' is " + in.rgb.size_string() +
+                      "; render the object at the photo's size with the photo's camera");
+        DepthSource os;
+        os.range = j.object.object_range;
+        os.channel = j.object.object_range_channel;
+        os.depth_scale = j.object.object_depth_scale;
+        os.unknown_value = j.object.object_unknown_value;
+        LoadedDepth orange = load_depth(os, in.rgb.width, in.rgb.height);
+        if (orange.range.width != in.rgb.width || orange.range.height != in.rgb.height)
+          throw Error("--object-range '" + j.object.object_range + "' is " + orange.range.size_string() +
+                      " but --image '" + j.input.image + "' is " + in.rgb.size_string() +
+                      "; they must be the same size (render the object's range with the photo's camera)");
+        InsertRun run = insert_object(in.rgb, in.depth.range, obj, orange.range, j.aerial, j.prepare, exec, ctx.given);
+        in.record["object"] = file_record(j.object.object, oinfo, obj);
+        in.record["object"]["convention"] = oinfo.integer
+                                                ? "sRGB-encoded colour, straight alpha: decoded to linear, then premultiplied"
+                                                : "linear, premultiplied (as stored)";
+        in.record["object_range"] = orange.record;
+        return EffectOutput{std::move(run.result.rgb),
+                            {{"coverage", std::move(run.result.coverage)}, {"scale-map", std::move(run.result.scale)}},
+                            std::move(run.record)};
+      }};
+  return run_effect_job(e, job, eo, ctx);
+}
 
-  LoadedInputs in = load_inputs(job.input, true);
-
-  check_working_memory("insert", in.rgb, 190);  // aerial's measured peak (insert runs aerial; its own is not measured)
-  FileInfo oinfo;
-  const Image obj = read_object_rgba(job.object.object, &oinfo);
-  if (obj.width != in.rgb.width || obj.height != in.rgb.height)
-    throw Error("--object '" + job.object.object + "' is " + obj.size_string() + " but --image '" + job.input.image +
-                "' is " + in.rgb.size_string() + "; render the object at the photo's size with the photo's camera");
-  DepthSource os;
-  os.range = job.object.object_range;
-  os.channel = job.object.object_range_channel;
-  os.depth_scale = job.object.object_depth_scale;
-  os.unknown_value = job.object.object_unknown_value;
-  LoadedDepth orange = load_depth(os, in.rgb.width, in.rgb.height);
-  if (orange.range.width != in.rgb.width || orange.range.height != in.rgb.height)
-    throw Error("--object-range '" + job.object.object_range + "' is " + orange.range.size_string() +
-                " but --image '" + job.input.image + "' is " + in.rgb.size_string() +
-                "; they must be the same size (render the object's range with the photo's camera)");
-
-  InsertRun run = insert_object(in.rgb, in.depth.range, obj, orange.range, job.aerial, job.prepare, exec, ctx.given);
-
-  nlohmann::json inputs = in.record;
-  inputs["object"] = file_record(job.object.object, oinfo, obj);
-  inputs["object"]["convention"] = oinfo.integer
-                                       ? "sRGB-encoded colour, straight alpha: decoded to linear, then premultiplied"
-                                       : "linear, premultiplied (as stored)";
-  inputs["object_range"] = orange.record;
-  const nlohmann::json rec =
-      job_record("insert", ctx, insert_job_table().to_json(job), std::move(inputs), run.record, eo.timing);
-  write_outputs(job.output, insert_map_outputs(), run.result.rgb,
-                {{"coverage", run.result.coverage}, {"scale-map", run.result.scale}}, &in.image_info, rec);
-  return rec;
+CommandDef insert_command() {
+  CommandDef c = make_command<InsertJob>({
+      .name = "insert",
+      .cli = "insert",
+      .summary = "insert a virtual object (RGBA + range) into a photo with aerial perspective at its own range",
+      .table = &insert_job_table(),
+      .exec = true,
+      .record = true,
+      .run = &run_insert_job,
+      .report = [](const InsertJob& j, const nlohmann::json& rec) {
+        const auto& d = rec["insert"]["derived"];
+        const auto& g = d["gamma_at"]["1000_m"];
+        std::fprintf(stderr,
+                     "brume insert: %s  object %zu px: %zu visible, %zu hidden  range %.4g..%.4g m  Gamma(1 km) "
+                     "%.4f %.4f %.4f  sigma_max %.3g px\n",
+                     j.output.out.c_str(), d["object_pixels"].get<std::size_t>(), d["visible_pixels"].get<std::size_t>(),
+                     d["hidden_pixels"].get<std::size_t>(), d["object_range_min_m"].get<double>(),
+                     d["object_range_max_m"].get<double>(), g[0].get<double>(), g[1].get<double>(), g[2].get<double>(),
+                     d["sigma_max_px"].get<double>());
+      },
+  });
+  return c;
 }
 
 }  // namespace brume

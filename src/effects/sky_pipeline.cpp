@@ -1,6 +1,7 @@
 // brume — the sky commands' pipelines: `brume sky render` (files out) and
 // `brume sky fit` (image in, JSON and an optional scatter plot out), with
 // their declared parameters (include/brume/sky.hpp).
+#include <cstdio>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -9,8 +10,9 @@
 #include <set>
 #include <unistd.h>
 
+#include "brume/command.hpp"
 #include "brume/error.hpp"
-#include "brume/gpu.hpp"
+#include "brume/gpu_sky.hpp"
 #include "brume/record.hpp"
 #include "brume/sky.hpp"
 
@@ -140,7 +142,9 @@ const ParamTable<SkyFitJob>& sky_fit_job_table() {
         .nest(&SkyFitJob::sun, sun_param_table())
         .nest(&SkyFitJob::fit, sky_fit_param_table())
         .text("out", &SkyFitJob::out, "the fit as JSON (turbidity, spread, sun, inliers, residual, reliable, samples)")
-        .text("plot", &SkyFitJob::plot, "PNG scatter of measured against model luminance (Morales Fig. 2.5)");
+        .writes_file()
+        .text("plot", &SkyFitJob::plot, "PNG scatter of measured against model luminance (Morales Fig. 2.5)")
+        .writes_file();
     return d;
   }();
   return t;
@@ -230,6 +234,7 @@ SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, cons
 }
 
 nlohmann::json run_sky_fit_job(const SkyFitJob& job, const RunContext& ctx, SkyPlotter plotter) {
+  if (!plotter) plotter = ctx.plot;
   sky_fit_job_table().validate(job);
   if (job.image.empty()) throw Error("sky fit needs a sky photo: give --image FILE");
   if (job.out.empty()) throw Error("sky fit writes its result as JSON: give --out fit.json");
@@ -294,6 +299,46 @@ double turbidity_from_fit_json(const std::string& path, const std::string& flag)
   const double t = j["turbidity"].get<double>();
   if (!(t >= 1.0 && t <= 20.0)) throw Error(flag + " '" + path + "': turbidity " + std::to_string(t) + " is outside [1, 20]");
   return t;
+}
+
+CommandDef sky_render_command() {
+  CommandDef c = make_command<SkyRenderJob>({
+      .name = "sky render",
+      .cli = "sky render",
+      .summary = "render a Preetham sky (linear sRGB, kcd/m^2) for a turbidity and a sun",
+      .table = &sky_render_job_table(),
+      .exec = true,
+      .record = true,
+      .run = &run_sky_render_job,
+      .report = [](const SkyRenderJob& j, const nlohmann::json& rec) {
+        const auto& s = rec["sky"]["sun"];
+        std::fprintf(stderr, "brume sky render: %s  T %.4g  sun zenith %.3f azimuth %.3f (%s)\n", j.output.out.c_str(),
+                     j.sky.turbidity, s["zenith_deg"].get<double>(), s["azimuth_deg"].get<double>(),
+                     s["source"].get<std::string>().c_str());
+      },
+  });
+  c.gpu_passes = {"sky.render"};
+  return c;
+}
+
+CommandDef sky_fit_command() {
+  return make_command<SkyFitJob>({
+      .name = "sky fit",
+      .cli = "sky fit",
+      .summary = "estimate the turbidity of a sky photo (RANSAC + Levenberg-Marquardt), JSON out",
+      .table = &sky_fit_job_table(),
+      .record = true,
+      .run = [](const SkyFitJob& j, const ExecOptions&, const RunContext& ctx) { return run_sky_fit_job(j, ctx); },
+      .report = [](const SkyFitJob&, const nlohmann::json& j) {
+        // The result is this command's product: stdout.
+        std::printf("turbidity %.4f  spread %.4f  sun zenith %.3f azimuth %.3f (%s)  inliers %.0f %%  residual %.4f  %s\n",
+                    j["turbidity"].get<double>(), j["turbidity_spread"].get<double>(),
+                    j["sun"]["zenith_deg"].get<double>(), j["sun"]["azimuth_deg"].get<double>(),
+                    j["sun"]["source"].get<std::string>().c_str(), 100 * j["inlier_fraction"].get<double>(),
+                    j["residual"].get<double>(), j["reliable"].get<bool>() ? "reliable" : "UNRELIABLE");
+        for (const auto& w : j["unreliable_because"]) std::printf("  unreliable: %s\n", w.get<std::string>().c_str());
+      },
+  });
 }
 
 }  // namespace brume

@@ -7,6 +7,9 @@
 //                are the CPU's six channels diffused with one sigma map
 //   composite    out = F + (1 - rho) A per channel, XYZ -> sRGB, sky kept
 // Remove skips the diffusion (a blur cannot be undone).
+#include "brume/gpu_aerial.hpp"
+
+#if BRUME_HAVE_GPU
 #include <cmath>
 #include <vector>
 
@@ -44,7 +47,7 @@ struct GpuAerial::State {
 };
 
 GpuAerial::GpuAerial(GpuContext& ctx, DenseImageRef rgb, const Image& range)
-    : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
+    : GpuEffect(ctx, rgb.width, rgb.height), s_(std::make_unique<State>()) {
   s_->in = gpu::upload_color_and_range(rgb, range, "aerial", &timing_.upload_ms);
 }
 
@@ -179,3 +182,16 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
 }
 
 }  // namespace brume
+
+#else  // a build without the GPU backend: every entry point says why
+
+namespace brume {
+
+struct GpuAerial::State {};
+GpuAerial::GpuAerial(GpuContext& ctx, DenseImageRef, const Image&) : GpuEffect(ctx, 0, 0) { gpu_unavailable(); }
+GpuAerial::~GpuAerial() = default;
+AerialResult GpuAerial::render(const AerialParams&, const AerialAnalysis&, GpuFilter) { gpu_unavailable(); }
+
+}  // namespace brume
+
+#endif

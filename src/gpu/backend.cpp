@@ -1,6 +1,7 @@
 // brume — backend names (compiled with or without the GPU backend).
 #include "brume/error.hpp"
 #include "brume/exec.hpp"
+#include "brume/gpu_context.hpp"
 #include "brume/pipeline.hpp"
 
 namespace brume {
@@ -10,5 +11,10 @@ Backend parse_backend(const std::string& s) { return parse_enum(backend_names(),
 std::string to_string(Backend b) { return enum_name(backend_names(), b); }
 GpuFilter parse_gpu_filter(const std::string& s) { return parse_enum(gpu_filter_names(), s, "--gpu-filter"); }
 std::string to_string(GpuFilter f) { return enum_name(gpu_filter_names(), f); }
+
+void gpu_unavailable() {
+  throw GpuUnavailable("no OpenGL ES 3.2 context: this brume was built without the GPU backend (EGL/GLES 3.2 headers were "
+                       "missing at build time: apt libegl-dev libgles-dev); use --backend cpu");
+}
 
 }  // namespace brume

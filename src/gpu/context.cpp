@@ -18,18 +18,14 @@ namespace shaders = gpu::shaders;
 
 namespace {
 
-// The shared topic files a pass can declare (src/shared/*.glsl), by name.
+// The shared topic files a pass can declare (src/shared/*.glsl), by name:
+// generated from the brume_part() declarations (CMakeLists.txt).
 struct Topic {
   const char* name;
   const char* text;
 };
 constexpr Topic kTopics[] = {
-    {"diffusion_math", shaders::diffusion_math_glsl},
-    {"haze_math", shaders::haze_math_glsl},
-    {"aerial_math", shaders::aerial_math_glsl},
-    {"sky_math", shaders::sky_math_glsl},
-    {"fog_math", shaders::fog_math_glsl},
-    {"depth_math", shaders::depth_math_glsl},
+#include "gpu/topics.inc"
 };
 
 std::string hex(unsigned v) {
@@ -182,7 +178,7 @@ const gpu::Program& GpuContext::Impl::program(const gpu::PassSpec& spec) {
       if (std::strcmp(t.name, topic) == 0) found = &t;
     if (!found)
       throw Error(std::string("GPU backend: pass '") + spec.name + "' needs unknown shared topic '" + topic +
-                  "' (a brume bug: add it to kTopics in src/gpu/context.cpp)");
+                  "' (a brume bug: declare it in its part's brume_part(... TOPICS) in CMakeLists.txt)");
     fs += found->text;
     fs += "\n";
   }

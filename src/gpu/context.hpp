@@ -27,7 +27,7 @@
 #include <string>
 #include <vector>
 
-#include "brume/gpu.hpp"
+#include "brume/gpu_context.hpp"
 #include "gpu/gl.hpp"
 
 namespace brume {

@@ -4,6 +4,9 @@
 // haze's passes finish: rates (sigma -> rho), N diffusion passes, composite
 // out = F.rgb + (1 - F.a) B. The per-pixel maths is src/shared/fog_math.glsl,
 // the text the CPU compiles.
+#include "brume/gpu_fog.hpp"
+
+#if BRUME_HAVE_GPU
 #include <cmath>
 #include <vector>
 
@@ -29,13 +32,13 @@ struct GpuFog::State {
 };
 
 GpuFog::GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& range)
-    : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
+    : GpuEffect(ctx, rgb.width, rgb.height), s_(std::make_unique<State>()) {
   s_->in = gpu::upload_color_and_range(rgb, range, "fog", &timing_.upload_ms);
 }
 
 GpuFog::GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& window_depth, DepthBufferConvention c, double near_m,
                double far_m)
-    : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
+    : GpuEffect(ctx, rgb.width, rgb.height), s_(std::make_unique<State>()) {
   s_->depth_buffer = true;
   s_->lin = depth_buffer_linear(c, near_m, far_m);
   // Window depth as stored: the pass linearises it. NaN (an unknown stored
@@ -141,3 +144,20 @@ FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter fil
 }
 
 }  // namespace brume
+
+#else  // a build without the GPU backend: every entry point says why
+
+namespace brume {
+
+struct GpuFog::State {};
+GpuFog::GpuFog(GpuContext& ctx, DenseImageRef, const Image&) : GpuEffect(ctx, 0, 0) { gpu_unavailable(); }
+GpuFog::GpuFog(GpuContext& ctx, DenseImageRef, const Image&, DepthBufferConvention, double, double)
+    : GpuEffect(ctx, 0, 0) {
+  gpu_unavailable();
+}
+GpuFog::~GpuFog() = default;
+FogResult GpuFog::render(const FogParams&, const FogAnalysis&, GpuFilter) { gpu_unavailable(); }
+
+}  // namespace brume
+
+#endif

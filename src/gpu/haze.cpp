@@ -6,6 +6,9 @@
 //   composite    out = F.rgb + (1 - F.a) B                    (eq. 4)
 // The last three are the diffusion layer's and the composite's passes; the
 // render targets live on the GpuHaze so a re-render allocates nothing.
+#include "brume/gpu_haze.hpp"
+
+#if BRUME_HAVE_GPU
 #include <cmath>
 #include <vector>
 
@@ -77,7 +80,7 @@ struct GpuHaze::State {
 };
 
 GpuHaze::GpuHaze(GpuContext& ctx, const Image& rgb, const Image& range)
-    : ctx_(ctx), w_(rgb.width), h_(rgb.height), s_(std::make_unique<State>()) {
+    : GpuEffect(ctx, rgb.width, rgb.height), s_(std::make_unique<State>()) {
   s_->in = gpu::upload_color_and_range(rgb, range, "haze", &timing_.upload_ms);
 }
 
@@ -126,3 +129,16 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
 }
 
 }  // namespace brume
+
+#else  // a build without the GPU backend: every entry point says why
+
+namespace brume {
+
+struct GpuHaze::State {};
+GpuHaze::GpuHaze(GpuContext& ctx, const Image&, const Image&) : GpuEffect(ctx, 0, 0) { gpu_unavailable(); }
+GpuHaze::~GpuHaze() = default;
+HazeResult GpuHaze::render(const HazeParams&, const HazeAnalysis&, GpuFilter) { gpu_unavailable(); }
+
+}  // namespace brume
+
+#endif

@@ -3,6 +3,9 @@
 // src/shared/sky_math.glsl. The per-image constants (Perez coefficients,
 // zenith values over F(0, theta_s)) are computed here with the very shared
 // functions the CPU renderer calls, so both backends start from the same floats.
+#include "brume/gpu_sky.hpp"
+
+#if BRUME_HAVE_GPU
 #include <cmath>
 #include <vector>
 
@@ -101,3 +104,15 @@ Image render_sky_gpu(GpuContext& ctx, const SkyRenderParams& p, const SkyDirecti
 }
 
 }  // namespace brume
+
+#else  // a build without the GPU backend: every entry point says why
+
+namespace brume {
+
+Image render_sky_gpu(GpuContext&, const SkyRenderParams&, const SkyDirection&, const SkyGeometry&, GpuTiming*) {
+  gpu_unavailable();
+}
+
+}  // namespace brume
+
+#endif

@@ -1,6 +1,7 @@
 // brume CLI — flags from parameter declarations (brume/params.hpp). A
-// subcommand binds its job's table and the execution table; no flag is
-// declared by hand, so flags, checks, records and `brume run` agree.
+// command's subcommand binds its job's declarations and the execution table;
+// no flag is declared by hand, so flags, checks, records and `brume run`
+// agree.
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -10,55 +11,57 @@
 #include <string>
 #include <vector>
 
+#include "brume/command.hpp"
 #include "brume/io.hpp"
 #include "brume/params.hpp"
 #include "brume/pipeline.hpp"
 
 namespace brume::cli {
 
-// The flags of one table on a subcommand. Values are kept as the text the
-// user typed and applied after parsing, through the declaration's own parser
-// and range check, so messages name the flag.
-template <class P>
-class Flags {
+// The flags of a list of declarations on a subcommand. Values are kept as
+// the text the user typed and parsed after parsing, through the
+// declaration's own parser and range check, so messages name the flag.
+class SpecFlags {
  public:
-  Flags(CLI::App* app, const ParamTable<P>& table) : table_(table) {
-    const P defaults{};
-    for (const Param<P>& d : table.params()) {
+  // `defaults`: the table's JSON of a default job (for --help's defaults).
+  SpecFlags(CLI::App* app, const std::vector<ParamSpec>& specs, const nlohmann::json& defaults) {
+    for (const ParamSpec& s : specs) {
       auto b = std::make_unique<Bound>();
-      b->name = d.spec.name;
-      std::string names = "--" + d.spec.name;
-      for (const auto& a : d.spec.aliases) names += ",--" + a;
-      if (d.spec.kind == ParamKind::boolean) {
-        b->opt = app->add_flag(names, b->flag, d.spec.describe());
+      b->spec = s;
+      std::string names = "--" + s.name;
+      for (const auto& a : s.aliases) names += ",--" + a;
+      if (s.kind == ParamKind::boolean) {
+        b->opt = app->add_flag(names, b->flag, s.describe());
         b->is_flag = true;
       } else {
-        b->opt = app->add_option(names, b->text, d.spec.describe())
-                     ->type_name(type_name(d.spec))
-                     ->default_str(d.spec.format(d.get(defaults)));
+        b->opt = app->add_option(names, b->text, s.describe())
+                     ->type_name(type_name(s))
+                     ->default_str(s.format(defaults.at(s.block).at(s.name)));
       }
-      b->opt->group(group_name(d.spec.block));
+      b->opt->group(group_name(s.block));
       bound_.push_back(std::move(b));
     }
   }
-  // Apply every given flag to p (parsed and range-checked); returns the names given.
-  std::set<std::string> apply(P& p) const {
-    std::set<std::string> given;
+  // Every given flag's value (parsed and range-checked), in declaration order.
+  JobValues values() const {
+    JobValues v;
     for (const auto& b : bound_) {
       if (b->opt->count() == 0) continue;
-      given.insert(b->name);
       if (b->is_flag) {
-        table_.at(b->name).set(p, nlohmann::json(b->flag));
+        v.emplace_back(b->spec.name, nlohmann::json(b->flag));
       } else {
-        table_.set_text(p, b->name, b->text);
+        nlohmann::json x = b->spec.parse(b->text);
+        b->spec.check(x);
+        v.emplace_back(b->spec.name, std::move(x));
       }
     }
-    return given;
+    return v;
   }
 
  private:
   struct Bound {
-    std::string name, text;
+    ParamSpec spec;
+    std::string text;
     bool flag = false, is_flag = false;
     CLI::Option* opt = nullptr;
   };
@@ -83,8 +86,33 @@ class Flags {
     if (!g.empty()) g[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(g[0])));
     return g + " parameters";
   }
-  const ParamTable<P>& table_;
   std::vector<std::unique_ptr<Bound>> bound_;
+};
+
+// The same on one table's struct (the execution flags of run and batch).
+template <class P>
+class Flags {
+ public:
+  Flags(CLI::App* app, const ParamTable<P>& table)
+      : table_(table), flags_(app, specs_of(table), table.to_json(P{})) {}
+  // Apply every given flag to p; returns the names given.
+  std::set<std::string> apply(P& p) const {
+    std::set<std::string> given;
+    for (const auto& [name, v] : flags_.values()) {
+      table_.at(name).set(p, v);
+      given.insert(name);
+    }
+    return given;
+  }
+
+ private:
+  static std::vector<ParamSpec> specs_of(const ParamTable<P>& t) {
+    std::vector<ParamSpec> s;
+    for (const Param<P>& d : t.params()) s.push_back(d.spec);
+    return s;
+  }
+  const ParamTable<P>& table_;
+  SpecFlags flags_;
 };
 
 // A subcommand and what it does once the command line has been parsed.
@@ -101,45 +129,17 @@ struct Command {
 // checks, the record), from brume::run_phases().
 void print_whole_run(const std::string& command);
 
-// A subcommand running a job: its table's flags (plus the execution flags
-// when with_exec), then `run(job, exec, ctx)`.
-template <class Job>
-Command job_command(CLI::App* app, const std::string& name, const ParamTable<Job>& table, bool with_exec,
-                    std::function<int(const Job&, const ExecOptions&, const RunContext&)> run) {
-  auto job = std::make_shared<Job>();
-  auto exec = std::make_shared<ExecOptions>();
-  auto flags = std::make_shared<Flags<Job>>(app, table);
-  std::shared_ptr<Flags<ExecOptions>> eflags;
-  if (with_exec) eflags = std::make_shared<Flags<ExecOptions>>(app, exec_param_table());
-  return {app, name, [=](const std::vector<std::string>& argv) {
-            RunContext ctx;
-            ctx.argv = argv;
-            ctx.given = flags->apply(*job);
-            if (eflags) eflags->apply(*exec);
-            const IoThreads io(exec->threads);  // --threads bounds the codecs too (0: OpenMP's count)
-            const int status = run(*job, *exec, ctx);
-            if (exec->timing) print_whole_run(name);
-            return status;
-          }};
-}
+// Every command of the list (brume/command.hpp) as a subcommand: its
+// table's flags (plus the execution flags when it takes them), then its
+// run and its summary line. Parents that are not commands themselves
+// (depth, sky) are made on the way.
+std::vector<Command> add_commands(CLI::App& app);
 
-// One file per subcommand registers it.
-Command add_haze(CLI::App& app);
-Command add_fog(CLI::App& app);
-Command add_aerial(CLI::App& app);
-Command add_insert(CLI::App& app);
-Command add_blur(CLI::App& app);
-Command add_dof(CLI::App& app);
-Command add_compare(CLI::App& app);
-std::vector<Command> add_depth(CLI::App& app);
+// The tools around the commands, one file each.
 Command add_run(CLI::App& app);
 Command add_demo(CLI::App& app);
 Command add_study(CLI::App& app);
 Command add_sample(CLI::App& app);
 Command add_batch(CLI::App& app);
-// `brume aerial coefficients`, under the `aerial` parent subcommand.
-Command add_aerial_coefficients(CLI::App* aerial);
-// `brume sky render` and `brume sky fit`.
-std::vector<Command> add_sky(CLI::App& app);
 
 }  // namespace brume::cli

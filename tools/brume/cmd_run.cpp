@@ -3,6 +3,7 @@
 #include <fstream>
 
 #include "brume/error.hpp"
+#include "brume/rerun.hpp"
 #include "cli.hpp"
 #include "brume_study/sky_plot.hpp"
 
@@ -10,7 +11,8 @@ namespace brume::cli {
 
 Command add_run(CLI::App& app) {
   CLI::App* sub = app.add_subcommand(
-      "run", "repeat the run a parameter record describes (--record FILE.json of haze, aerial, insert, blur, depth convert/prepare, sky render; a sky fit's JSON)");
+      "run", "repeat the run a parameter record describes (the --record FILE.json of " +
+                 command_names([](const CommandDef& c) { return c.record; }) + "; a sky fit's JSON)");
   auto path = std::make_shared<std::string>();
   auto out_dir = std::make_shared<std::string>();
   sub->add_option("record", *path, "the JSON record (or a record embedded in nothing else: the file itself)")->required();

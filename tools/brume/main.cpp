@@ -1,7 +1,8 @@
-// brume — command-line tool: one subcommand per effect, one file per
-// subcommand (cmd_*.cpp). The flags of every effect come from its parameter
-// declarations (brume/params.hpp, bound in cli.hpp) and each subcommand calls
-// its library pipeline; this file only parses and reports errors.
+// brume — command-line tool: one subcommand per command of the library's
+// list (brume/command.hpp; cmd_commands.cpp binds them) and one file per tool
+// around them (run, demo, study, sample, batch). The flags come from the
+// parameter declarations (brume/params.hpp, bound in cli.hpp); this file only
+// parses and reports errors.
 //
 // Errors name the file or flag, the value, what is allowed and the fix; the
 // exit status is 2 (3 for an internal error) and no output file is left behind.
@@ -9,6 +10,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
@@ -98,21 +100,14 @@ int main(int argc, char** argv) {
   brume::install_output_signal_handlers();
   brume::keep_freed_heap();  // a run frees and allocates image-sized buffers: reuse them (pipeline.hpp)
 
-  // A parsed subcommand marks its parent parsed too: `aerial coefficients`
-  // comes before `aerial` so that the first parsed command is the one asked for.
-  Command aerial = add_aerial(app);
-  std::vector<Command> commands = {add_haze(app), add_aerial_coefficients(aerial.app), aerial, add_blur(app)};
-  for (Command& c : add_depth(app)) commands.push_back(std::move(c));
-  commands.push_back(add_insert(app));
-  commands.push_back(add_fog(app));
-  commands.push_back(add_dof(app));
-  commands.push_back(add_compare(app));
-  for (Command& c : add_sky(app)) commands.push_back(std::move(c));
-  commands.push_back(add_run(app));
-  commands.push_back(add_demo(app));
-  commands.push_back(add_study(app));
-  commands.push_back(add_sample(app));
-  commands.push_back(add_batch(app));
+  // Every command of the list (brume/command.hpp), then the tools around them.
+  std::vector<Command> commands = add_commands(app);
+  for (auto add : {add_run, add_demo, add_study, add_sample, add_batch}) commands.push_back(add(app));
+  // A parsed subcommand marks its parent parsed too (`aerial coefficients`
+  // parses `aerial`): the command asked for is the deepest one parsed.
+  std::stable_sort(commands.begin(), commands.end(), [](const Command& a, const Command& b) {
+    return std::count(a.name.begin(), a.name.end(), ' ') > std::count(b.name.begin(), b.name.end(), ' ');
+  });
 
   // Every argument goes into the run's record (JSON, UTF-8 only): refuse one
   // that is not UTF-8 before any work, naming it, instead of failing at the

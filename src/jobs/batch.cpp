@@ -22,13 +22,9 @@
 #include <sstream>
 #include <thread>
 
-#include "brume/aerial.hpp"
-#include "brume/chain.hpp"
-#include "brume/dof.hpp"
+#include "brume/command.hpp"
 #include "brume/error.hpp"
-#include "brume/fog.hpp"
-#include "brume/gpu.hpp"
-#include "brume/haze.hpp"
+#include "brume/gpu_context.hpp"
 #include "brume/io.hpp"
 #include "brume/sample.hpp"
 #include "core/text.hpp"
@@ -174,118 +170,17 @@ Manifest read_manifest(const std::string& path) {
 
 namespace {
 
-// One effect, type-erased over its job: its table's declarations, and how to
-// build, check and run a job given as its table's JSON.
-struct EffectDef {
-  std::string name;
-  std::string stage_prefix;           // chain: the later stage's flag prefix ("dof-"), else ""
-  std::vector<ParamSpec> specs;
-  std::function<nlohmann::json(const std::vector<std::pair<std::string, nlohmann::json>>&)> build;
-  std::function<void(const nlohmann::json&, const std::set<std::string>&)> check;
-  std::function<nlohmann::json(const nlohmann::json&, const ExecOptions&, const RunContext&)> run;
-};
+// The commands a row can name: the batchable ones of the list of commands
+// (brume/command.hpp), each with its job table, build, check and run.
+bool batchable(const CommandDef& c) { return c.batch; }
 
-template <class Job>
-EffectDef effect_def(const char* name, const char* prefix, const ParamTable<Job>& t,
-                     std::function<void(const Job&, const std::set<std::string>&)> check,
-                     nlohmann::json (*run)(const Job&, const ExecOptions&, const RunContext&)) {
-  EffectDef e;
-  e.name = name;
-  e.stage_prefix = prefix;
-  for (const Param<Job>& d : t.params()) e.specs.push_back(d.spec);
-  e.build = [&t](const std::vector<std::pair<std::string, nlohmann::json>>& values) {
-    Job j;
-    for (const auto& [n, v] : values) {
-      const Param<Job>& d = t.at(n);
-      d.spec.check(v);
-      d.set(j, v);
-    }
-    return t.to_json(j);
-  };
-  e.check = [&t, check](const nlohmann::json& job, const std::set<std::string>& given) {
-    Job j;
-    t.from_json(j, job, "job");
-    t.validate(j);
-    check(j, given);
-  };
-  e.run = [&t, run](const nlohmann::json& job, const ExecOptions& eo, const RunContext& ctx) {
-    Job j;
-    t.from_json(j, job, "job");
-    return run(j, eo, ctx);
-  };
-  return e;
-}
-
-std::set<std::string> strip_prefixed(const std::set<std::string>& given, const std::string& prefix, bool keep) {
-  std::set<std::string> out;
-  for (const std::string& n : given) {
-    const bool p = n.rfind(prefix, 0) == 0;
-    if (p && keep) out.insert(n.substr(prefix.size()));
-    if (!p && !keep) out.insert(n);
-  }
-  return out;
-}
-
-const std::vector<EffectDef>& effect_defs() {
-  static const std::vector<EffectDef> v = [] {
-    std::vector<EffectDef> d;
-    d.push_back(effect_def<HazeJob>(
-        "haze", "", haze_job_table(),
-        [](const HazeJob& j, const std::set<std::string>& g) {
-          validate_haze(j.haze, g);
-          check_range_step(j.prepare, g);
-        },
-        &run_haze_job));
-    d.push_back(effect_def<FogJob>(
-        "fog", "", fog_job_table(),
-        [](const FogJob& j, const std::set<std::string>& g) {
-          validate_fog(j.fog, g);
-          check_range_step(j.prepare, g);
-        },
-        &run_fog_job));
-    d.push_back(effect_def<AerialJob>(
-        "aerial", "", aerial_job_table(),
-        [](const AerialJob& j, const std::set<std::string>& g) {
-          validate_aerial(j.aerial, g);
-          check_range_step(j.prepare, g);
-        },
-        &run_aerial_job));
-    d.push_back(effect_def<DofJob>(
-        "dof", "", dof_job_table(),
-        [](const DofJob& j, const std::set<std::string>& g) {
-          validate_dof(j.dof, g);
-          check_range_step(j.prepare, g);
-        },
-        &run_dof_job));
-    d.push_back(effect_def<HazeDofJob>(
-        "haze+dof", kDofPrefix, haze_dof_job_table(),
-        [](const HazeDofJob& j, const std::set<std::string>& g) {
-          const std::set<std::string> gh = strip_prefixed(g, kDofPrefix, false);
-          validate_haze(j.haze, gh);
-          check_range_step(j.prepare, gh);
-          try {
-            validate_dof(j.dof, strip_prefixed(g, kDofPrefix, true));
-          } catch (const Error& e) {
-            throw Error(std::string("depth-of-field stage (dof.*): ") + e.what());
-          }
-        },
-        &run_haze_dof_job));
-    return d;
-  }();
-  return v;
-}
-
-const EffectDef& effect_named(const std::string& name, const std::string& where) {
+const CommandDef& effect_named(const std::string& name, const std::string& where) {
   std::string n = lower(trim(name));
   n.erase(std::remove_if(n.begin(), n.end(), [](char c) { return std::isspace(static_cast<unsigned char>(c)); }),
           n.end());
-  for (const EffectDef& e : effect_defs())
-    if (e.name == n) return e;
-  throw Error(where + ": effect '" + name + "' is not available in brume batch; use one of: " + [] {
-    std::string all;
-    for (const EffectDef& e : effect_defs()) all += (all.empty() ? "" : ", ") + e.name;
-    return all;
-  }() + " (chains: '+'-joined stages, the later stages' parameters prefixed with their name: dof.focus-distance)");
+  if (const CommandDef* c = find_command(n); c && c->batch) return *c;
+  throw Error(where + ": effect '" + name + "' is not available in brume batch; use one of: " +
+              command_names(batchable) + " (chains: '+'-joined stages, the later stages' parameters prefixed with their name: dof.focus-distance)");
 }
 
 // ---- names -----------------------------------------------------------------------------
@@ -343,7 +238,8 @@ std::string cell_where(const Manifest& m, const ManifestRow& r, const std::strin
 const std::vector<std::string>& batch_effects() {
   static const std::vector<std::string> v = [] {
     std::vector<std::string> n;
-    for (const EffectDef& e : effect_defs()) n.push_back(e.name);
+    for (const CommandDef& c : commands())
+      if (c.batch) n.push_back(c.name);
     return n;
   }();
   return v;
@@ -426,12 +322,9 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
         }
       }
       if (trim(effect).empty())
-        throw Error(cell_where(m, r, "") + ": no effect; add an 'effect' column or give --effect (" + [] {
-          std::string all;
-          for (const EffectDef& e : effect_defs()) all += (all.empty() ? "" : ", ") + e.name;
-          return all;
-        }() + ")");
-      const EffectDef& e = effect_named(effect, cell_where(m, r, "effect"));
+        throw Error(cell_where(m, r, "") + ": no effect; add an 'effect' column or give --effect (" +
+                    command_names(batchable) + ")");
+      const CommandDef& e = effect_named(effect, cell_where(m, r, "effect"));
       // --param NAME=SPEC fills the columns a row does not have.
       std::vector<std::pair<std::string, nlohmann::json>> all = cells;
       // Resolve a column name to (job parameter, name hashed by the sampler).
@@ -577,7 +470,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       f.job = e.build(values);
       f.given = given;
       try {
-        e.check(f.job, f.given);
+        e.check(f.job, f.given, true);
         // The output's encoding (bits, compression) against its format, now
         // rather than when the frame's turn comes.
         WriteOptions wo;
@@ -654,9 +547,8 @@ void remove_stale_temporaries(const BatchFrame& f) {
   }
 }
 
-const EffectDef& def_of(const std::string& name) {
-  for (const EffectDef& e : effect_defs())
-    if (e.name == name) return e;
+const CommandDef& def_of(const std::string& name) {
+  if (const CommandDef* c = find_command(name); c && c->batch) return *c;
   throw Error("internal: batch effect '" + name + "'");
 }
 
@@ -704,11 +596,15 @@ nlohmann::json result_line(const BatchFrame& f, const BatchFrameResult& r) {
     if (v.is_string() && !v.get<std::string>().empty()) inputs[s.name] = v;
   }
   nlohmann::json params = nlohmann::json::object();
-  // The parameters the row set (fixed and drawn), as the job holds them.
+  // The parameters the row set (fixed and drawn), as the job holds them; a
+  // chain's later stage by its stage name ("dof.focus-distance").
+  const std::string& prefix = def_of(f.effect).stage_prefix;
   for (const std::string& n : f.given)
     for (const auto& [block, vals] : f.job.items())
       if (block != "input" && block != "depth" && block != "output" && vals.is_object() && vals.contains(n))
-        params[f.effect == "haze+dof" && n.rfind(kDofPrefix, 0) == 0 ? "dof." + n.substr(4) : n] = vals[n];
+        params[!prefix.empty() && n.rfind(prefix, 0) == 0
+                   ? prefix.substr(0, prefix.size() - 1) + "." + n.substr(prefix.size())
+                   : n] = vals[n];
   nlohmann::json l = {{"key", f.key},        {"status", r.status},  {"effect", f.effect}, {"inputs", inputs},
                       {"outputs", outputs},  {"parameters", params}, {"sampling", f.batch["sampling"]},
                       {"seconds", r.seconds}};

@@ -12,10 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "brume/aerial.hpp"
-#include "brume/dof.hpp"
-#include "brume/fog.hpp"
-#include "brume/haze.hpp"
+#include "brume/command.hpp"
 #include "core/text.hpp"
 
 namespace brume {
@@ -49,92 +46,22 @@ const char* kAllowed =
     "a fixed value as the flag takes it (0.9, auto, a name), uniform(a, b), loguniform(a, b) with 0 < a, or "
     "choice(x, y, ...)";
 
-// A default distribution of an effect, dropped when the user gives one of
+// An effect's sampling, from its entry in the list of commands
+// (CommandDef::sampling; the default ranges and their reasons are in each
+// effect's definition). A default is dropped when the user gives one of its
 // `dropped_by` (a parameter that takes over its role, so that the pair would
 // be refused by validate_<effect>).
-struct DefaultSpec {
-  const char* name;
-  const char* spec;
-  std::vector<std::string> dropped_by;
-};
-
 struct EffectSampling {
   std::string effect;
-  std::vector<ParamSpec> specs;  // the effect's declarations (its table, nested blocks included)
-  std::vector<DefaultSpec> defaults;
-  // Applies {name: value} to a default-constructed parameter struct and runs validate_<effect>.
-  std::function<void(const nlohmann::json&)> validate;
+  const CommandSampling* s = nullptr;
+  const std::vector<ParamSpec>& specs() const { return s->specs; }
 };
 
-template <class P>
-EffectSampling make_sampling(const char* effect, const ParamTable<P>& table, std::vector<DefaultSpec> defaults,
-                             void (*validate)(const P&, const std::set<std::string>&)) {
-  EffectSampling s;
-  s.effect = effect;
-  for (const Param<P>& d : table.params()) s.specs.push_back(d.spec);
-  s.defaults = std::move(defaults);
-  s.validate = [&table, validate](const nlohmann::json& values) {
-    P p{};
-    const std::set<std::string> given = apply_params(table, p, values);
-    validate(p, given);
-  };
-  return s;
-}
-
-// The default plausible ranges. Each is a physical range a dataset of
-// outdoor photographs can meet, wide enough to augment and narrow enough that
-// every draw is a picture a camera could take; users narrow or widen them per
-// parameter.
 const std::vector<EffectSampling>& samplings() {
   static const std::vector<EffectSampling> all = [] {
     std::vector<EffectSampling> v;
-    // Haze: visibility from dense fog (50 m, the fog threshold is 1 km) to light
-    // haze (5 km), log-uniform because perceived haze follows optical depth
-    // ~ 1/V over orders of magnitude; albedo 0.8-1 (water droplets and most
-    // aerosols scatter far more than they absorb; soot-laden smog reaches
-    // 0.8); lambda 0-8 px of blur gain (0: Koschmieder's clean haze; 8 keeps
-    // the scattering blur at sigma ~ 8 px at kappa_s' = 1, the soft look of
-    // real fog without erasing detail at Middlebury/KITTI sizes). kappa-a and
-    // kappa-s take over visibility's role (validate_haze refuses both).
-    v.push_back(make_sampling<HazeParams>("haze", haze_param_table(),
-                                          {{"visibility", "loguniform(50, 5000)", {"kappa-a", "kappa-s"}},
-                                           {"albedo", "uniform(0.8, 1)", {"kappa-a", "kappa-s"}},
-                                           {"lambda", "uniform(0, 8)", {}}},
-                                          &validate_haze));
-    // Layered (exponential) fog: ground density D0 0.002-0.08 /m, i.e. a
-    // Koschmieder visibility 3.912/D0 of 2 km (mist) down to 50 m (thick
-    // fog), log-uniform as for haze; falloff B 0.005-0.2 /m, a scale height
-    // 1/B of 200 m (a deep hazy boundary layer) down to 5 m (valley fog lying
-    // on the ground); blur gain and albedo as haze. --profile or --classic
-    // make the exponential's parameters meaningless, so they drop them.
-    v.push_back(make_sampling<FogParams>("fog", fog_param_table(),
-                                         {{"density", "loguniform(0.002, 0.08)", {"classic", "profile"}},
-                                          {"falloff", "loguniform(0.005, 0.2)", {"classic", "profile"}},
-                                          {"lambda", "uniform(0, 8)", {"classic"}},
-                                          {"albedo", "uniform(0.8, 1)", {"classic"}}},
-                                         &validate_fog));
-    // Spectral aerial perspective: turbidity 2-10 (Morales Table 3.1,
-    // corrected: clear air from about 2.7, light haze 4.5, haze 9.8; fog at 19
-    // is haze's and fog's job), uniform since the Mie coefficient is affine
-    // in T; observer altitude 0-1500 m (sea level to high plateaus, where most
-    // outdoor datasets are shot); blur gain as haze.
-    v.push_back(make_sampling<AerialParams>("aerial", aerial_param_table(),
-                                            {{"turbidity", "uniform(2, 10)", {}},
-                                             {"altitude", "uniform(0, 1500)", {}},
-                                             {"lambda", "uniform(0, 8)", {}}},
-                                            &validate_aerial));
-    // Depth of field through a lens: a 50 mm lens on a 36 mm (full-frame)
-    // sensor, the "normal" lens whose field of view is close to most datasets'
-    // cameras (fix --focal-length and --sensor-width to your camera), at the
-    // full stops f/1.4-f/8 (where depth of field is visible at all), focused
-    // log-uniformly from 1 m (close-up) to 50 m (street scenes; beyond, the
-    // scene is all in focus). --coc-infinity replaces the lens.
-    v.push_back(make_sampling<DofParams>("dof", dof_param_table(),
-                                         {{"focus-distance", "loguniform(1, 50)", {}},
-                                          {"f-number", "choice(1.4, 2, 2.8, 4, 5.6, 8)", {"coc-infinity"}},
-                                          {"focal-length", "50", {"coc-infinity"}},
-                                          {"sensor-width", "36", {"coc-infinity"}}},
-                                         &validate_dof));
+    for (const CommandDef& c : commands())
+      if (c.sampling) v.push_back({c.name, &*c.sampling});
     return v;
   }();
   return all;
@@ -149,7 +76,7 @@ const EffectSampling& sampling_of(std::string_view effect) {
 }
 
 const ParamSpec& spec_of(const EffectSampling& s, const std::string& canon) {
-  for (const ParamSpec& p : s.specs)
+  for (const ParamSpec& p : s.specs())
     if (p.name == canon) return p;
   throw Error("internal: sampling: no declaration of '" + canon + "' in " + s.effect);
 }
@@ -172,14 +99,14 @@ std::map<std::string, Distribution> resolve(const EffectSampling& es, const std:
   for (const auto& [name, text] : specs) {
     std::string canon;
     try {
-      canon = detail::canonical_param_name(es.specs, name, es.effect);
+      canon = detail::canonical_param_name(es.specs(), name, es.effect);
     } catch (const Error& e) {
       // A parameter of another effect (visibility given for fog) says so: the fix is the effect, not the spelling.
       std::string others;
       for (const EffectSampling& o : samplings()) {
         if (o.effect == es.effect) continue;
         try {
-          detail::canonical_param_name(o.specs, name, o.effect);
+          detail::canonical_param_name(o.specs(), name, o.effect);
           others += (others.empty() ? "" : ", ") + o.effect;
         } catch (const Error&) {
         }
@@ -194,7 +121,7 @@ std::map<std::string, Distribution> resolve(const EffectSampling& es, const std:
     spelled[canon] = name;
   }
   std::map<std::string, Distribution> out;
-  for (const DefaultSpec& d : es.defaults) {
+  for (const SampleDefault& d : es.s->defaults) {
     if (user.count(d.name)) continue;
     const bool dropped = std::any_of(d.dropped_by.begin(), d.dropped_by.end(),
                                      [&](const std::string& n) { return user.count(n) > 0; });
@@ -365,7 +292,7 @@ const std::vector<std::string>& sample_effects() {
 
 std::map<std::string, std::string> default_sample_specs(std::string_view effect) {
   std::map<std::string, std::string> out;
-  for (const DefaultSpec& d : sampling_of(effect).defaults) out[d.name] = d.spec;
+  for (const SampleDefault& d : sampling_of(effect).s->defaults) out[d.name] = d.spec;
   return out;
 }
 
@@ -383,7 +310,7 @@ nlohmann::json random_params(std::string_view effect, std::uint64_t seed, std::s
   for (const auto& [name, d] : resolve(es, specs))
     values[name] = d.kind == Distribution::Kind::fixed ? d.values.at(0) : draw(d, sample_unit(seed, key, name));
   try {
-    es.validate(values);
+    es.s->validate(values);
   } catch (const Error& e) {
     // A value may hold bytes that are not UTF-8 (a text parameter as typed):
     // the message shows them as U+FFFD rather than failing to be written

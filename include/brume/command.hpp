@@ -1,0 +1,192 @@
+// brume — the one list of commands (issue #37).
+//
+// A command is a job table (brume/params.hpp: its flags, checks, record and
+// Python keywords) and what is done with a job of it. Everything that joins
+// commands together walks one list, commands(), and names no effect:
+//
+//   commands() ──► brume --help, the subcommands and their flags (tools/brume)
+//              ──► check_record / brume run (a record's "command" looked up)
+//              ──► brume batch (batchable ones), brume sample / random_params (sampleable ones)
+//              ──► the Python module's list of commands, the generated reference
+//
+// Each command's definition lives in its own pipeline file (haze's in
+// src/effects/haze_pipeline.cpp: `CommandDef haze_command()`), built with
+// make_command below; the list itself is one line per command in
+// src/jobs/commands.cpp, an explicit list rather than self-registering statics
+// (libbrume.a is static: the linker drops objects nothing references).
+//
+// Jobs travel type-erased as their table's JSON ({"block": {"name": value}},
+// ParamTable::to_json): exact for every value (doubles stay doubles), so a job
+// built from flags, a record or a manifest row runs bit for bit as the typed
+// job would.
+#pragma once
+
+#include <functional>
+#include <optional>
+#include <set>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "brume/params.hpp"
+#include "brume/pipeline.hpp"
+
+namespace brume {
+
+// A default plausible distribution of one sampled parameter (brume/sample.hpp):
+// its canonical name, the spec text, and the parameters whose explicit
+// value drops it (haze's visibility when kappa-s is given).
+struct SampleDefault {
+  std::string name, spec;
+  std::vector<std::string> dropped_by;
+};
+
+// How a command's parameters are sampled: the effect's own block (the names
+// random_params returns), the default ranges, and the effect's cross-field
+// check of a drawn set ({canonical name: value} applied to default parameters).
+struct CommandSampling {
+  std::vector<ParamSpec> specs;
+  std::vector<SampleDefault> defaults;
+  std::function<void(const nlohmann::json& values)> validate;
+};
+
+using JobValues = std::vector<std::pair<std::string, nlohmann::json>>;
+
+struct CommandDef {
+  // ---- what it is ------------------------------------------------------------------
+  std::string name;      // as recorded and as typed after `brume`: "haze", "sky render", "haze+dof"
+  std::string cli;       // the subcommand that runs it ("sky render"), "" when none of its own
+                         // (plain haze is `brume haze` without --dof-... flags: haze+dof's subcommand)
+  std::string summary;   // one line for --help and the reference
+  std::vector<ParamSpec> specs;  // the job table's declarations, nested blocks included, in order
+  nlohmann::json defaults;       // the default job as the table's JSON
+  bool exec = false;             // takes the execution flags (--threads, --backend, ...)
+  bool record = false;           // writes a parameter record that `brume run` repeats
+  bool batch = false;            // a `brume batch` manifest row can name it
+  std::string stage_prefix;      // a chain: the later stage's flag prefix ("dof-"), else ""
+  std::optional<CommandSampling> sampling;  // `brume sample`, random_params, batch distributions
+  std::vector<std::string> gpu_passes;      // its GPU passes (PassSpec names, "haze.premultiply"), in order
+
+  // ---- what is done with a job (the table's JSON) --------------------------------------
+  // The default job with `values` set, each checked by its declaration.
+  std::function<nlohmann::json(const JobValues& values)> build;
+  // Reads a job (every key declared, every value type- and range-checked);
+  // with `full`, also every value's range as a whole and the command's
+  // cross-field checks (`given`: the names set explicitly).
+  std::function<void(const nlohmann::json& job, const std::set<std::string>& given, bool full)> check;
+  // Runs it from files to files; returns its result: the record it wrote
+  // (sky fit: the fit's JSON, its record under "record").
+  std::function<nlohmann::json(const nlohmann::json& job, const ExecOptions& exec, const RunContext& ctx)> run;
+  // The command line's run where it differs from `run` (haze+dof's subcommand
+  // runs plain haze unless a --dof-... flag is given).
+  std::function<nlohmann::json(const nlohmann::json& job, const ExecOptions& exec, const RunContext& ctx)> cli_run;
+  // The command line's summary of a result: one line on stderr, or the
+  // product on stdout (compare, sky fit).
+  std::function<void(const nlohmann::json& job, const nlohmann::json& result)> report;
+  // The medium it models, for effects that read another's (the LiDAR fog):
+  // the extinction coefficient [1/m] at a world height [m] (camera
+  // conventions of brume/camera.hpp), or nullopt where the job has no
+  // physical units (haze in normalised kappa without --visibility or
+  // --range-max) or models no medium. Empty for commands that model none.
+  std::function<std::optional<double>(const nlohmann::json& job, double height_m)> extinction_per_m;
+
+  // A declaration by name (not an alias); null when there is none.
+  const ParamSpec* spec(std::string_view param) const;
+  // The words of `cli` ({"sky", "render"}): the path of subcommands.
+  std::vector<std::string> cli_words() const;
+};
+
+// Every command, in --help's order.
+const std::vector<CommandDef>& commands();
+// The parents of nested commands that are no command themselves ("depth" of
+// "depth convert"): name and --help line.
+struct CommandGroup {
+  std::string name, summary;
+};
+const std::vector<CommandGroup>& command_groups();
+// The command named `name`, or null.
+const CommandDef* find_command(std::string_view name);
+// The names of the commands for which `pred` holds, ", "-joined (messages).
+std::string command_names(const std::function<bool(const CommandDef&)>& pred);
+
+// ---- building a definition from a typed job -------------------------------------------
+// What a command's own file gives: its table, its typed run and (optional)
+// its cross-field check and summary line; make_command fills the JSON forms.
+template <class Job>
+struct CommandParts {
+  std::string name = {}, cli = {}, summary = {};
+  const ParamTable<Job>* table = nullptr;
+  bool exec = false, record = false, batch = false;
+  std::function<void(const Job&, const std::set<std::string>& given)> check = {};  // beyond the table's range checks
+  std::function<nlohmann::json(const Job&, const ExecOptions&, const RunContext&)> run = {};
+  std::function<void(const Job&, const nlohmann::json& result)> report = {};
+};
+
+template <class Job>
+CommandDef make_command(CommandParts<Job> parts) {
+  const ParamTable<Job>& t = *parts.table;
+  CommandDef c;
+  c.name = parts.name;
+  c.cli = parts.cli;
+  c.summary = parts.summary;
+  for (const Param<Job>& d : t.params()) c.specs.push_back(d.spec);
+  c.defaults = t.to_json(Job{});
+  c.exec = parts.exec;
+  c.record = parts.record;
+  c.batch = parts.batch;
+  c.build = [&t](const JobValues& values) {
+    Job j;
+    for (const auto& [n, v] : values) {
+      const Param<Job>& d = t.at(n);
+      d.spec.check(v);
+      d.set(j, v);
+    }
+    return t.to_json(j);
+  };
+  c.check = [&t, check = parts.check](const nlohmann::json& job, const std::set<std::string>& given, bool full) {
+    Job j;
+    t.from_json(j, job, "job");
+    if (!full) return;
+    t.validate(j);
+    if (check) check(j, given);
+  };
+  c.run = [&t, run = parts.run](const nlohmann::json& job, const ExecOptions& eo, const RunContext& ctx) {
+    Job j;
+    t.from_json(j, job, "job");
+    return run(j, eo, ctx);
+  };
+  if (parts.report)
+    c.report = [&t, report = parts.report](const nlohmann::json& job, const nlohmann::json& result) {
+      Job j;
+      t.from_json(j, job, "job");
+      report(j, result);
+    };
+  return c;
+}
+
+// The sampling of an effect whose parameters live in one block P (its
+// table's names are the names random_params returns).
+template <class P>
+CommandSampling make_sampling(const ParamTable<P>& table, std::vector<SampleDefault> defaults,
+                              void (*validate)(const P&, const std::set<std::string>&)) {
+  CommandSampling s;
+  for (const Param<P>& d : table.params()) s.specs.push_back(d.spec);
+  s.defaults = std::move(defaults);
+  s.validate = [&table, validate](const nlohmann::json& values) {
+    P p{};
+    std::set<std::string> given;
+    for (const auto& [name, v] : values.items()) {
+      const Param<P>& d = table.at(name);
+      d.spec.check(v);
+      d.set(p, v);
+      given.insert(name);
+    }
+    validate(p, given);
+  };
+  return s;
+}
+
+}  // namespace brume

@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# Runs one of every command on the demo scene with two brume binaries and
+# compares what they write: every image's pixels (float PFM outputs, byte for
+# byte) and every record's content less its time, argv and timings.
+#   scripts/compare-builds.sh OLD_BRUME NEW_BRUME [WORK_DIR]
+# Exit 1 at the first difference. Used to hold refactors to bit-identical
+# outputs on the CPU backend (issue #37).
+set -euo pipefail
+old=$1 new=$2
+work=${3:-$(mktemp -d)}
+mkdir -p "$work"
+cd "$work"
+"$old" demo --out-dir scene --width 320 --height 224 >/dev/null 2>&1
+"$old" sky render --turbidity 3 --sun-zenith 50 --sun-azimuth 10 --width 256 --height 128 --out scene/sky.exr >/dev/null 2>&1
+S=scene
+runs=(
+  "haze --image $S/clean.png --range $S/range.exr --visibility 800 --out OUT.pfm --transmission OUT.t.pfm --scale-map OUT.s.pfm --record OUT.json"
+  "haze --image $S/clean.png --range $S/range.exr --kappa-s 0.4 --lambda 10 --out OUT.pfm --record OUT.json"
+  "haze --image $S/clean.png --range $S/range.exr --visibility 800 --dof-focus-distance 30 --dof-f-number 2 --dof-focal-length 35 --dof-sensor-width 36 --out OUT.pfm --record OUT.json"
+  "fog --image $S/clean.png --range $S/range.exr --density 0.01 --falloff 0.02 --lambda 4 --camera-height 2 --fov-x 60 --out OUT.pfm --record OUT.json"
+  "aerial --image $S/clean.png --range $S/range.exr --turbidity 4 --lambda 2 --out OUT.pfm --record OUT.json"
+  "dof --image $S/clean.png --range $S/range.exr --focus-distance 50 --coc-infinity 6 --fov-x 60 --out OUT.pfm --record OUT.json"
+  "blur --image $S/clean.png --sigma 3 --out OUT.pfm --record OUT.json"
+  "depth convert --range $S/range.exr --out OUT.pfm --record OUT.json"
+  "depth prepare --range $S/range.exr --out OUT.pfm --record OUT.json"
+  "sky render --turbidity 3 --sun-zenith 40 --sun-azimuth 10 --width 64 --height 48 --out OUT.pfm --record OUT.json"
+  "aerial coefficients --out OUT.csv"
+  "compare --a $S/clean.png --b $S/haze.png --json OUT.json"
+  "sky fit --image $S/sky.exr --sun-zenith 50 --sun-azimuth 10 --out OUT.json"
+  "sample --effect fog --seed 4 --key frame/1"
+  "haze --image $S/clean.png --range $S/range.exr --visibility 800 --backend gpu --out OUT.pfm"
+)
+i=0
+for r in "${runs[@]}"; do
+  i=$((i + 1))
+  for side in old new; do
+    bin=${!side}
+    args=${r//OUT/$side-$i}
+    # shellcheck disable=SC2086
+    "$bin" $args >"$side-$i.stdout" 2>"$side-$i.stderr" || { echo "compare-builds: $side failed: brume $args"; cat "$side-$i.stderr"; exit 1; }
+  done
+  for f in old-$i.*; do
+    g=new-${f#old-}
+    case $f in
+      *.json) python3 - "$f" "$g" "old-$i" "new-$i" <<'PY' || { echo "compare-builds: records differ: brume $r"; exit 1; }
+import json, sys
+def clean(j):
+    if isinstance(j, dict):
+        return {k: clean(v) for k, v in j.items() if k not in ("time_utc", "argv", "timing", "path") and not k.endswith("_ms")}
+    if isinstance(j, list):
+        return [clean(v) for v in j]
+    return j
+a, b = (clean(json.loads(open(p).read().replace(n, "X"))) for p, n in ((sys.argv[1], sys.argv[3]), (sys.argv[2], sys.argv[4])))
+if a != b:
+    for k in sorted(set(a) | set(b)):
+        if a.get(k) != b.get(k): print("  differs:", k, json.dumps(a.get(k))[:300], "|", json.dumps(b.get(k))[:300])
+    sys.exit(1)
+PY
+      ;;
+      *.stderr|*.stdout) sed "s/old-$i/X/g" "$f" | grep -v "ms" >"$f.cmp" || true
+                         sed "s/new-$i/X/g" "$g" | grep -v "ms" >"$g.cmp" || true
+                         cmp -s "$f.cmp" "$g.cmp" || { echo "compare-builds: messages differ: brume $r"; diff "$f.cmp" "$g.cmp"; exit 1; } ;;
+      *.cmp) ;;
+      *) cmp -s "$f" "$g" || { echo "compare-builds: $f and $g differ: brume $r"; exit 1; } ;;
+    esac
+  done
+  echo "same: brume $r"
+done
+echo "compare-builds: all ${#runs[@]} runs identical"

@@ -1,0 +1,74 @@
+// brume — the list of commands (brume/command.hpp): one line a command, in
+// --help's order. A command's definition is in its own files
+// (`CommandDef <name>_command()` beside its pipeline); adding a command is
+// one line here and its files in CMakeLists.txt.
+#include "brume/command.hpp"
+
+#include <algorithm>
+#include <sstream>
+
+namespace brume {
+
+// X(definition function). The order is --help's (a parent's own command, as
+// aerial, before its children; haze has no subcommand of its own, haze+dof's
+// is `brume haze`) and that of every list a message gives.
+#define BRUME_COMMANDS(X) \
+  X(haze_command) \
+  X(haze_dof_command) \
+  X(aerial_command) \
+  X(aerial_coefficients_command) \
+  X(blur_command) \
+  X(depth_convert_command) \
+  X(depth_prepare_command) \
+  X(insert_command) \
+  X(fog_command) \
+  X(dof_command) \
+  X(compare_command) \
+  X(sky_render_command) \
+  X(sky_fit_command)
+
+#define BRUME_DECLARE(f) CommandDef f();
+BRUME_COMMANDS(BRUME_DECLARE)
+#undef BRUME_DECLARE
+
+const std::vector<CommandDef>& commands() {
+#define BRUME_LIST(f) f(),
+  static const std::vector<CommandDef> all = {BRUME_COMMANDS(BRUME_LIST)};
+#undef BRUME_LIST
+  return all;
+}
+
+const std::vector<CommandGroup>& command_groups() {
+  static const std::vector<CommandGroup> g = {
+      {"depth", "depth maps: convert any depth source to range or planar z, prepare it"},
+      {"sky", "the Preetham sky: render one, or fit the turbidity of a sky photo (Morales ch. 2)"},
+  };
+  return g;
+}
+
+const CommandDef* find_command(std::string_view name) {
+  for (const CommandDef& c : commands())
+    if (c.name == name) return &c;
+  return nullptr;
+}
+
+std::string command_names(const std::function<bool(const CommandDef&)>& pred) {
+  std::string all;
+  for (const CommandDef& c : commands())
+    if (pred(c)) all += (all.empty() ? "" : ", ") + c.name;
+  return all;
+}
+
+const ParamSpec* CommandDef::spec(std::string_view param) const {
+  const auto it = std::find_if(specs.begin(), specs.end(), [&](const ParamSpec& s) { return s.name == param; });
+  return it == specs.end() ? nullptr : &*it;
+}
+
+std::vector<std::string> CommandDef::cli_words() const {
+  std::vector<std::string> w;
+  std::istringstream in(cli);
+  for (std::string x; in >> x;) w.push_back(x);
+  return w;
+}
+
+}  // namespace brume

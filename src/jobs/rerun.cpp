@@ -1,0 +1,127 @@
+// brume — `brume run record.json`: repeat the run a parameter record
+// describes. The record's "job" holds every declared parameter of the
+// command (brume/params.hpp), so the same declaration that made the flags
+// reads it back; nothing here knows an effect's parameters.
+#include <filesystem>
+#include <functional>
+#include <map>
+
+#include "brume/command.hpp"
+#include "brume/error.hpp"
+#include "brume/io.hpp"
+#include "brume/pipeline.hpp"
+#include "brume/rerun.hpp"
+
+namespace fs = std::filesystem;
+
+namespace brume {
+
+namespace {
+
+// Every {"path", "sha256"} below `j` must still match the file on disk: a
+// record describes a run on those bytes, not on whatever now has the name.
+void verify_inputs(const nlohmann::json& j) {
+  if (j.is_object()) {
+    if (j.contains("path") && j.contains("sha256") && j["path"].is_string() && j["sha256"].is_string()) {
+      const std::string path = j["path"].get<std::string>();
+      std::error_code ec;
+      if (!fs::exists(path, ec))
+        throw Error("the record's input '" + path + "' does not exist; run from the directory the record was made "
+                    "in, or restore the file");
+      if (sha256_file(path) != j["sha256"].get<std::string>())
+        throw Error("the record's input '" + path + "' has changed since the record was made (SHA-256 differs); "
+                    "the run would not be the one recorded");
+    }
+    for (const auto& [k, v] : j.items()) verify_inputs(v);
+  } else if (j.is_array()) {
+    for (const auto& v : j) verify_inputs(v);
+  }
+}
+
+// Outputs are the parameters that name files the run writes (the output
+// block's, depth prepare's --masks directory, sky fit's --out and --plot):
+// moved into out_dir under their file names.
+void redirect_outputs(const CommandDef& c, nlohmann::json& job, const std::string& out_dir) {
+  if (out_dir.empty()) return;
+  std::error_code ec;
+  fs::create_directories(out_dir, ec);
+  if (!fs::is_directory(out_dir)) throw Error("--out-dir '" + out_dir + "' cannot be created: " + ec.message());
+  for (const ParamSpec& s : c.specs) {
+    if (!is_output_file(s)) continue;
+    auto b = job.find(s.block);
+    if (b == job.end() || !b->is_object()) continue;
+    auto v = b->find(s.name);
+    if (v == b->end() || !v->is_string() || v->get<std::string>().empty()) continue;
+    *v = (fs::path(out_dir) / fs::path(v->get<std::string>()).filename()).string();
+  }
+}
+
+// The command that repeats a record's, with its job read back through that
+// command's table (every key declared, every value type- and range-checked).
+// Every parameter is recorded, so none counts as "given": conflicts are
+// judged against the defaults, as for a library caller.
+const CommandDef& repeatable(const std::string& cmd, const nlohmann::json& record) {
+  const CommandDef* c = find_command(cmd);
+  if (!c || !c->record)
+    throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (" +
+                command_names([](const CommandDef& d) { return d.record; }) + " can)");
+  c->check(record.at("job"), {}, false);
+  return *c;
+}
+
+// A record's text field, or "" when absent or not a string: a hand-edited or
+// corrupt record must end in brume's message, not in a JSON type error
+// ("internal error"; found by fuzz/fuzz_record.cpp: {"tool": 1}).
+std::string text_field(const nlohmann::json& j, const char* key) {
+  if (!j.is_object()) return "";
+  const auto it = j.find(key);
+  return it != j.end() && it->is_string() ? it->get<std::string>() : std::string();
+}
+
+// A `brume sky fit` JSON holds its record under "record".
+bool is_sky_fit_json(const nlohmann::json& record) {
+  return record.is_object() && !record.contains("tool") && record.contains("record") &&
+         record["record"].is_object() && text_field(record["record"], "command") == "sky fit";
+}
+
+// The record's command, after the checks every record must pass.
+std::string record_command(const nlohmann::json& record) {
+  if (text_field(record, "tool") != "brume") throw Error("not a brume parameter record (no \"tool\": \"brume\")");
+  const auto v = record.find("schema_version");
+  const bool integral = v == record.end() || v->is_number_integer();
+  const long long version = v == record.end() ? 1 : integral ? v->get<long long>() : -1;
+  if (version != kRecordSchemaVersion || !record.contains("job"))
+    throw Error("this record has schema_version " + (integral ? std::to_string(version) : v->dump()) +
+                "; brume run reads version " + std::to_string(kRecordSchemaVersion) +
+                " (records written by brume " BRUME_VERSION " and later, which hold the whole job)");
+  return text_field(record, "command");
+}
+
+}  // namespace
+
+std::string check_record(const nlohmann::json& record) {
+  if (is_sky_fit_json(record)) return check_record(record["record"]);
+  const std::string cmd = record_command(record);
+  repeatable(cmd, record);
+  return cmd;
+}
+
+nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, const std::string& out_dir,
+                     const std::vector<std::string>& argv, Image (*plot)(const nlohmann::json& result)) {
+  if (is_sky_fit_json(record)) return rerun(record["record"], exec, out_dir, argv, plot);
+  const std::string cmd = record_command(record);
+  // Every {"path", "sha256"} input the record names (the density table of fog under "fog").
+  for (const char* block : {"inputs", "depth", "fog"})
+    if (record.contains(block)) verify_inputs(record[block]);
+  const CommandDef& c = repeatable(cmd, record);
+  nlohmann::json job = record.at("job");
+  redirect_outputs(c, job, out_dir);
+  RunContext ctx;
+  ctx.argv = argv;
+  ctx.plot = plot;
+  const nlohmann::json out = c.run(job, exec, ctx);
+  // A command whose product holds its record (sky fit's JSON) returns the record.
+  return is_sky_fit_json(out) ? out["record"] : out;
+}
+
+}  // namespace brume

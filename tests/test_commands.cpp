@@ -1,0 +1,221 @@
+// The one list of commands (brume/command.hpp, issue #37): every command of
+// the list reaches every place that iterates it -- `brume --help` and its
+// flags, `brume run` (check_record), `brume batch` and `brume sample` -- and
+// the media the effects model give their extinction in closed form.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "brume/batch.hpp"
+#include "brume/command.hpp"
+#include "brume/error.hpp"
+#include "brume/io.hpp"
+#include "brume/rerun.hpp"
+#include "brume/sample.hpp"
+#include "test_util.hpp"
+
+namespace fs = std::filesystem;
+using namespace brume;
+using namespace brume::test;
+
+namespace {
+
+std::string join(const std::vector<std::string>& w, std::size_t n) {
+  std::string s;
+  for (std::size_t i = 0; i < n; ++i) s += (i ? " " : "") + w[i];
+  return s;
+}
+
+// A command's help line in its parent's --help: two spaces, the name, then its summary.
+bool lists(const std::string& help, const std::string& name) {
+  std::istringstream in(help);
+  for (std::string line; std::getline(in, line);) {
+    std::istringstream l(line);
+    std::string first;
+    if (l >> first && first == name && line.rfind("  ", 0) == 0) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+// The list is well formed: unique names, each command's table declared with
+// defaults for every parameter, every function present, the CLI names unique.
+TEST(Commands, ListIsWellFormed) {
+  std::set<std::string> names, clis;
+  ASSERT_GE(commands().size(), 10u);
+  for (const CommandDef& c : commands()) {
+    SCOPED_TRACE(c.name);
+    EXPECT_TRUE(names.insert(c.name).second) << "two commands named " << c.name;
+    if (!c.cli.empty()) {
+      EXPECT_TRUE(clis.insert(c.cli).second) << "two commands on `brume " << c.cli << "`";
+    }
+    EXPECT_FALSE(c.summary.empty());
+    EXPECT_FALSE(c.specs.empty());
+    ASSERT_TRUE(c.build && c.check && c.run && c.report);
+    for (const ParamSpec& s : c.specs) {
+      ASSERT_TRUE(c.defaults.contains(s.block) && c.defaults[s.block].contains(s.name)) << s.block << "." << s.name;
+      EXPECT_EQ(c.spec(s.name), &s);
+    }
+    // The default job reads back (every value is its declaration's).
+    EXPECT_NO_THROW(c.check(c.defaults, {}, false));
+    EXPECT_EQ(c.build({}), c.defaults);
+    EXPECT_EQ(find_command(c.name), &c);
+    if (c.sampling) {
+      for (const SampleDefault& d : c.sampling->defaults) EXPECT_TRUE(c.spec(d.name)) << d.name;
+    }
+    if (!c.stage_prefix.empty()) {
+      EXPECT_EQ(c.stage_prefix.back(), '-');
+    }
+  }
+  EXPECT_EQ(find_command("no such command"), nullptr);
+}
+
+// Every command with a subcommand is listed by its parent's --help, and its
+// own --help shows every flag of its table (and the execution flags when it
+// takes them).
+TEST(Commands, EveryCommandIsOnTheCommandLine) {
+  for (const CommandDef& c : commands()) {
+    if (c.cli.empty()) continue;
+    SCOPED_TRACE(c.name);
+    const std::vector<std::string> w = c.cli_words();
+    const CliRun parent = run(join(w, w.size() - 1) + " --help");
+    ASSERT_EQ(parent.status, 0) << parent.output;
+    EXPECT_TRUE(lists(parent.output, w.back())) << parent.output;
+    const CliRun own = run(c.cli + " --help");
+    ASSERT_EQ(own.status, 0) << own.output;
+    for (const ParamSpec& s : c.specs) {
+      // "--name TYPE", "--name,--alias TYPE" or "--alias,--name TYPE".
+      const std::string f = "--" + s.name;
+      bool shown = false;
+      for (std::size_t at = own.output.find(f); at != std::string::npos && !shown; at = own.output.find(f, at + 1))
+        shown = at + f.size() < own.output.size() && std::string(" ,=").find(own.output[at + f.size()]) != std::string::npos;
+      EXPECT_TRUE(shown) << s.name;
+    }
+    EXPECT_EQ(own.output.find("--threads") != std::string::npos, c.exec);
+  }
+  // A command without a subcommand of its own is reached through one that has
+  // every one of its flags (plain haze through haze+dof's `brume haze`).
+  for (const CommandDef& c : commands()) {
+    if (!c.cli.empty()) continue;
+    bool reached = false;
+    for (const CommandDef& d : commands())
+      if (d.cli == c.name && std::all_of(c.specs.begin(), c.specs.end(), [&](const ParamSpec& s) { return d.spec(s.name); }))
+        reached = true;
+    EXPECT_TRUE(reached) << c.name << " has no subcommand that takes its flags";
+  }
+}
+
+// `brume run` accepts the record of every command that writes one (its
+// default job, read back through the command's table) and refuses the others
+// naming those it repeats.
+TEST(Commands, EveryRecordCommandIsAcceptedByRun) {
+  for (const CommandDef& c : commands()) {
+    SCOPED_TRACE(c.name);
+    const nlohmann::json rec = {
+        {"tool", "brume"}, {"schema_version", kRecordSchemaVersion}, {"command", c.name}, {"job", c.defaults}};
+    if (c.record) {
+      EXPECT_EQ(check_record(rec), c.name);
+      // A key the command does not declare is refused by its table.
+      nlohmann::json bad = rec;
+      bad["job"][c.specs.front().block]["no-such-flag"] = 1;
+      EXPECT_NE(error_of([&] { check_record(bad); }).find("no-such-flag"), std::string::npos);
+    } else {
+      const std::string e = error_of([&] { check_record(rec); });
+      EXPECT_NE(e.find("cannot be repeated by brume run"), std::string::npos) << e;
+      for (const CommandDef& d : commands())
+        if (d.record) {
+          EXPECT_NE(e.find(d.name), std::string::npos) << e;
+        }
+    }
+  }
+}
+
+// Every batchable command is planned by `brume batch` from a manifest row
+// naming it, with its sampled parameters (a chain: each stage's, the later
+// ones under "<stage>."), and every sampleable one draws its defaults through
+// random_params and `brume sample`.
+TEST(Commands, BatchableAndSampleableOnesReachBatchAndSample) {
+  const fs::path dir = fs::temp_directory_path() / ("brume_commands_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const Scene s = scene(24, 16, 4);
+  write_image((dir / "a.pfm").string(), s.rgb, WriteOptions{}, "");
+  write_image((dir / "a.range.pfm").string(), s.range, WriteOptions{}, "");
+  std::vector<std::string> batchable;
+  std::ofstream m(dir / "m.jsonl");
+  for (const CommandDef& c : commands()) {
+    if (c.sampling) {
+      SCOPED_TRACE(c.name);
+      const nlohmann::json v = random_params(c.name, 3, "frame", {});
+      for (const SampleDefault& d : c.sampling->defaults)
+        if (d.dropped_by.empty()) {
+          EXPECT_TRUE(v.contains(d.name)) << d.name;
+        }
+      const CliRun r = run("sample --effect '" + c.name + "' --seed 3 --key frame");
+      EXPECT_EQ(r.status, 0) << r.output;
+      EXPECT_EQ(nlohmann::json::parse(r.output.substr(r.output.find('{')))["params"], v);
+    }
+    if (!c.batch) continue;
+    batchable.push_back(c.name);
+    nlohmann::json row = {{"key", c.name + "/f.pfm"}, {"image", (dir / "a.pfm").string()},
+                          {"range", (dir / "a.range.pfm").string()}, {"effect", c.name}};
+    const std::vector<std::string> stages = [&] {
+      std::vector<std::string> st;
+      std::string n = c.name;
+      for (std::size_t at; (at = n.find('+')) != std::string::npos; n = n.substr(at + 1)) st.push_back(n.substr(0, at));
+      st.push_back(n);
+      return st;
+    }();
+    for (std::size_t i = 0; i < stages.size(); ++i) {
+      const CommandDef* stage = find_command(stages[i]);
+      ASSERT_TRUE(stage) << stages[i];
+      if (!stage->sampling) continue;
+      for (const SampleDefault& d : stage->sampling->defaults) row[(i ? stages[i] + "." : "") + d.name] = d.spec;
+    }
+    m << row.dump() << "\n";
+  }
+  m.close();
+  ASSERT_FALSE(batchable.empty());
+  BatchOptions o;
+  o.manifest = (dir / "m.jsonl").string();
+  o.out_dir = (dir / "out").string();
+  o.seed = 5;
+  std::vector<BatchFrame> frames;
+  try {
+    frames = plan_batch(o);
+  } catch (const Error& e) {
+    FAIL() << e.what();
+  }
+  ASSERT_EQ(frames.size(), batchable.size());
+  for (std::size_t i = 0; i < frames.size(); ++i) EXPECT_EQ(frames[i].effect, batchable[i]);
+  EXPECT_EQ(batch_effects(), batchable);
+  std::vector<std::string> sampleable;
+  for (const CommandDef& c : commands())
+    if (c.sampling) sampleable.push_back(c.name);
+  EXPECT_EQ(sample_effects(), sampleable);
+  fs::remove_all(dir);
+}
+
+// The medium of a camera effect, as the LiDAR fog reads it: haze's is
+// Koschmieder's 3.912 / V (or the normalised kappas over a given R_max, none
+// without), fog's exponential profile D0 exp(-B (y - Y0)) in closed form.
+// Tolerance: the same double expression, 1e-15 relative.
+TEST(Commands, ExtinctionOfTheModelledMedium) {
+  const CommandDef* haze = find_command("haze");
+  const CommandDef* fog = find_command("fog");
+  ASSERT_TRUE(haze && fog && haze->extinction_per_m && fog->extinction_per_m);
+  EXPECT_EQ(haze->extinction_per_m(haze->defaults, 0.0), std::nullopt);
+  EXPECT_NEAR(*haze->extinction_per_m(haze->build({{"visibility", 1000.0}}), 12.0), 3.912e-3, 1e-18);
+  EXPECT_NEAR(*haze->extinction_per_m(haze->build({{"kappa-a", 0.1}, {"kappa-s", 0.3}, {"range-max", 200.0}}), 0.0),
+              0.4 / 200.0, 1e-18);
+  const nlohmann::json f = fog->build({{"density", 0.03}, {"falloff", 0.1}, {"base-height", 5.0}});
+  for (double y : {-10.0, 0.0, 5.0, 42.0})
+    EXPECT_NEAR(*fog->extinction_per_m(f, y), 0.03 * std::exp(-0.1 * (y - 5.0)), 1e-15 * 0.03 * std::exp(1.5)) << y;
+  EXPECT_EQ(fog->extinction_per_m(fog->build({{"classic", "linear"}}), 0.0), std::nullopt);
+  // Commands that model no medium have none.
+  for (const char* n : {"blur", "depth convert", "compare"}) EXPECT_FALSE(find_command(n)->extinction_per_m) << n;
+}
