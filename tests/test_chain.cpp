@@ -39,15 +39,6 @@ ChainScene chain_scene(int w, int h, int sky_rows) {
   return s;
 }
 
-GpuContext* gpu_or_skip(std::string* why) {
-  GpuContext* ctx = shared_gpu_context(why);
-  if (!ctx) {
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");
-    if (req && std::string(req) == "1") ADD_FAILURE() << "BRUME_REQUIRE_GPU=1 but " << *why;
-  }
-  return ctx;
-}
-
 }  // namespace
 
 TEST(Params, ChainIsDeclaredCompletelyWithPrefixedDofFlags) {
@@ -142,9 +133,7 @@ TEST(ChainHazeDof, ErrorsOfTheDofStageNameThePrefixedFlags) {
 }
 
 TEST(ChainHazeDof, GpuMatchesCpu) {
-  std::string why;
-  GpuContext* ctx = gpu_or_skip(&why);
-  if (!ctx) GTEST_SKIP() << why;
+  BRUME_REQUIRE_GPU(ctx);
   const ChainScene s = chain_scene(96, 64, 10);
   HazeParams h;
   h.kappa_s = 0.5;

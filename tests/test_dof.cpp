@@ -337,13 +337,7 @@ TEST(DofForeground, NearFieldRaiseMatchesItsDefinition) {
 }
 
 TEST(DofGpu, MatchesCpu) {
-  std::string why;
-  GpuContext* ctx = shared_gpu_context(&why);
-  if (!ctx) {
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");
-    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
-    GTEST_SKIP() << why;
-  }
+  BRUME_REQUIRE_GPU(ctx);
   Scene sc = scene(96, 64, 0);
   Image range = sc.range;
   for (int y = 0; y < 64; ++y)
@@ -571,13 +565,7 @@ TEST(DiffusionStreaks, InvariantSchemesNoLongerStreak) {
 }
 
 TEST(DiffusionStreaks, GpuNoLongerStreaks) {
-  std::string why;
-  GpuContext* ctx = shared_gpu_context(&why);
-  if (!ctx) {
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");
-    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
-    GTEST_SKIP() << why;
-  }
+  BRUME_REQUIRE_GPU(ctx);
   for (EdgeRate e : {EdgeRate::min, EdgeRate::harmonic}) {
     const double g = study_into_far_mean(Scheme::invariant_exact, e, {}, ctx);
     std::printf("  GPU invariant-exact %s: into_far_mean %.3g\n", to_string(e).c_str(), g);

@@ -11,6 +11,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <functional>
@@ -156,6 +157,28 @@ inline GpuContext* shared_gpu_context(std::string* why) {
   *why = reason;
   return ctx.get();
 }
+
+// BRUME_REQUIRE_GPU=1 (set by .ci/run, which has Mesa's llvmpipe): a test
+// that finds no GPU context fails instead of skipping.
+inline bool gpu_required() {
+  const char* req = std::getenv("BRUME_REQUIRE_GPU");
+  return req && std::string(req) == "1";
+}
+
+// No GPU context, for the reason `why`: the test fails under
+// BRUME_REQUIRE_GPU=1 and skips otherwise (returns from the test either way).
+#define BRUME_NO_GPU(why)                                                                  \
+  do {                                                                                     \
+    if (::brume::test::gpu_required()) FAIL() << "BRUME_REQUIRE_GPU=1 but " << (why);      \
+    GTEST_SKIP() << (why);                                                                 \
+  } while (0)
+
+// Declares `GpuContext* ctx`, the test binary's shared context; without one
+// the test skips, or fails under BRUME_REQUIRE_GPU=1 (BRUME_NO_GPU).
+#define BRUME_REQUIRE_GPU(ctx)                                                             \
+  std::string ctx##_why;                                                                   \
+  ::brume::GpuContext* ctx = ::brume::test::shared_gpu_context(&ctx##_why);                \
+  if (!ctx) BRUME_NO_GPU(ctx##_why)
 
 // A random RGB-D scene for the aerial and insert tests.
 struct Scene {
