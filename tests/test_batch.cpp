@@ -53,17 +53,9 @@ std::string slurp(const fs::path& p) {
   return ss.str();
 }
 
-class Batch : public ::testing::Test {
+class Batch : public ScratchDirTest {
  protected:
-  fs::path dir;
-  void SetUp() override {
-    dir = fs::temp_directory_path() / ("brume_test_batch_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir);
-    fs::create_directories(dir / "data");
-  }
-  void TearDown() override { fs::remove_all(dir); }
-  std::string p(const std::string& rel) const { return (dir / rel).string(); }
+  void SetUp() override { fs::create_directories(dir / "data"); }
 
   // n small RGB-D frames data/<sub>/fI.png + fI.exr, in two subfolders (keys with '/').
   std::vector<std::string> make_frames(int n, int w = 64, int h = 48) {

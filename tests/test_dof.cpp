@@ -455,21 +455,15 @@ TEST(DofErrors, BadParametersAreRefused) {
 }
 
 // ---- the command line -------------------------------------------------------------
-class CliDof : public ::testing::Test {
+class CliDof : public ScratchDirTest {
  protected:
-  fs::path dir;
   void SetUp() override {
-    dir = fs::temp_directory_path() / ("brume_test_cli_dof_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir);
     const SquareScene s = square_scene(48, 16, 32, 6.0f, 2.0f);
     write_image(p("img.exr"), s.rgb, WriteOptions{});
     WriteOptions data;
     data.is_color = false;
     write_image(p("z.exr"), s.z, data);
   }
-  void TearDown() override { fs::remove_all(dir); }
-  std::string p(const std::string& n) const { return (dir / n).string(); }
   std::string base() const {
     return "dof --image " + p("img.exr") + " --z " + p("z.exr") + " --fx 60 --focus-distance 2 --coc-infinity 12";
   }

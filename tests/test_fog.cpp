@@ -626,21 +626,15 @@ TEST(Fog, DepthBuffersGiveTheFogOfTheRange) {
 
 // ---- the command line ------------------------------------------------------------------------
 
-class CliFog : public ::testing::Test {
+class CliFog : public ScratchDirTest {
  protected:
-  fs::path dir;
   void SetUp() override {
-    dir = fs::temp_directory_path() / ("brume_test_cli_fog_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir);
     const Scene s = scene(40, 30, 6);
     WriteOptions data;
     data.is_color = false;
     write_image(p("img.exr"), s.rgb, WriteOptions{});
     write_image(p("range.exr"), s.range, data);
   }
-  void TearDown() override { fs::remove_all(dir); }
-  std::string p(const std::string& name) const { return (dir / name).string(); }
   std::string base() const {
     return "fog --image " + p("img.exr") + " --range " + p("range.exr") + " --fov-y 50 --camera-height 20 --pitch 3";
   }

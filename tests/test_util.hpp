@@ -5,7 +5,9 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <sys/wait.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 
@@ -138,6 +140,30 @@ inline CliRun run(const std::string& args) {
   r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
   return r;
 }
+
+// A fixture with a scratch folder per test (the CLI suites and others that
+// write files): `dir`, <tmp>/brume_test_<suite>_<pid>_<test> (the process id
+// keeps concurrent ctest runs apart), made empty before the fixture's SetUp
+// and removed with its contents after its TearDown; p(name) is a path in it.
+class ScratchDirTest : public ::testing::Test {
+ protected:
+  std::filesystem::path dir;
+  ScratchDirTest() {
+    const ::testing::TestInfo* t = ::testing::UnitTest::GetInstance()->current_test_info();
+    std::string name =
+        std::string("brume_test_") + t->test_suite_name() + "_" + std::to_string(::getpid()) + "_" + t->name();
+    std::replace(name.begin(), name.end(), '/', '_');  // a parameterised suite's or test's name
+    dir = std::filesystem::temp_directory_path() / name;
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directories(dir);
+  }
+  ~ScratchDirTest() override {
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+    if (ec) ADD_FAILURE() << "could not remove " << dir << ": " << ec.message();
+  }
+  std::string p(const std::string& name) const { return (dir / name).string(); }
+};
 
 // One GPU context for the whole test binary (contexts belong to the thread
 // that made them; gtest runs tests on the main thread), or null with the
