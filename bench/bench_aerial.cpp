@@ -63,11 +63,6 @@ double cpu_ms() {
   return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
 }
 
-bench::Spread spread(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return {v[v.size() / 2], v.front(), v.back()};
-}
-
 // Linear sRGB (D65) <-> CIE XYZ: the library's matrices (src/shared/aerial_math.glsl).
 constexpr float kToXyz[3][3] = {{0.4124f, 0.3576f, 0.1805f}, {0.2126f, 0.7152f, 0.0722f}, {0.0193f, 0.1192f, 0.9505f}};
 constexpr float kToRgb[3][3] = {{3.2406255f, -1.5372080f, -0.4986286f},
@@ -244,11 +239,11 @@ int main(int argc, char** argv) {
               w, h, rounds, row_step, row_step);
   for (std::size_t k = 0; k < cases.size(); ++k) {
     const Figures& f = fig[k];
-    const bench::Spread L = spread(f.lib), An = spread(f.analyse), Ap = spread(f.apply), T = spread(f.table),
-                        B = spread(f.peer_b), C = spread(f.peer_c), S = spread(f.steady),
-                        SAn = spread(f.st_analyse), SAp = spread(f.st_apply), G = spread(f.st_given),
-                        cL = spread(f.cpu_lib), cS = spread(f.cpu_steady), cB = spread(f.cpu_b), cC = spread(f.cpu_c),
-                        cSAn = spread(f.cpu_st_analyse), cSAp = spread(f.cpu_st_apply), cG = spread(f.cpu_st_given);
+    const bench::Spread L = bench::spread(f.lib), An = bench::spread(f.analyse), Ap = bench::spread(f.apply), T = bench::spread(f.table),
+                        B = bench::spread(f.peer_b), C = bench::spread(f.peer_c), S = bench::spread(f.steady),
+                        SAn = bench::spread(f.st_analyse), SAp = bench::spread(f.st_apply), G = bench::spread(f.st_given),
+                        cL = bench::spread(f.cpu_lib), cS = bench::spread(f.cpu_steady), cB = bench::spread(f.cpu_b), cC = bench::spread(f.cpu_c),
+                        cSAn = bench::spread(f.cpu_st_analyse), cSAp = bench::spread(f.cpu_st_apply), cG = bench::spread(f.cpu_st_given);
     const std::string name = cases[k].sensitivity == "default" ? "default (XYZ)" : "camera CSV (RGB)";
     std::printf("  %-16s T %2.0f\n", name.c_str(), cases[k].turbidity);
     std::printf("    (a) library analyse+apply:   %8.2f ms (%.2f..%.2f)  %7.1f Mpx/s"

@@ -39,7 +39,6 @@
 #include <algorithm>
 #include <random>
 #include <thread>
-#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -185,10 +184,6 @@ int run_ab(const std::string& image, const std::string& label, int threads, int 
         if (cs[j].name.rfind("OpenCV", 0) == 0 && cs[j].sigma == cs[i].sigma) cs[i].ratio.push_back(t[i] / t[j]);
     std::fprintf(stderr, "round %d/%d done\n", r + 1, rounds);
   }
-  auto med = [](std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    return std::array<double, 3>{v[v.size() / 2], v.front(), v.back()};
-  };
   std::printf("# brume_bench_blur --ab\n\n- machine: %s, %d threads\n- image: %dx%d RGB float (%s)\n"
               "- %d interleaved rounds after a warm-up round; median (min..max); ratio: median (min..max) of the "
               "per-round ratios to OpenCV at the same sigma\n\n",
@@ -197,8 +192,9 @@ int run_ab(const std::string& image, const std::string& label, int threads, int 
               fusion.ring_bytes, fusion.band_halos);
   std::printf("| contender | time ms | vs OpenCV same sigma |\n|---|---:|---:|\n");
   for (const Contender& c : cs) {
-    const auto t = med(c.ms), q = med(c.ratio);
-    std::printf("| %s | %.1f (%.1f..%.1f) | %.3fx (%.3f..%.3f) |\n", c.name.c_str(), t[0], t[1], t[2], q[0], q[1], q[2]);
+    const bench::Spread t = bench::spread(c.ms), q = bench::spread(c.ratio);
+    std::printf("| %s | %.1f (%.1f..%.1f) | %.3fx (%.3f..%.3f) |\n", c.name.c_str(), t.median, t.lo, t.hi, q.median,
+                q.lo, q.hi);
   }
   return 0;
 }

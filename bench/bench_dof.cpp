@@ -29,11 +29,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
 
-bench::Spread spread(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return {v[v.size() / 2], v.front(), v.back()};
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -68,7 +63,7 @@ int main(int argc, char** argv) {
       else apply_dof(s.rgb, z, p, a);
       if (r > 0) tm.push_back(ms_since(t0));
     }
-    const bench::Spread m = spread(tm);
+    const bench::Spread m = bench::spread(tm);
     std::printf("%s: %.1f ms (%.1f..%.1f)\n", only.c_str(), m.median, m.lo, m.hi);
     return 0;
   }
@@ -93,11 +88,11 @@ int main(int argc, char** argv) {
     }
   std::printf("brume_bench_dof: %dx%d demo scene, sigma_max 20 px, %s, %d threads, %d rounds (median, min..max)\n", W,
               H, bench::cpu_name().c_str(), omp_get_max_threads(), rounds);
-  const bench::Spread d = spread(t[0]), m = spread(tmap);
+  const bench::Spread d = bench::spread(t[0]), m = bench::spread(tmap);
   std::printf("  scale map (CoC, cap, foreground rule): %.1f ms (%.1f..%.1f), in every scheme's time\n", m.median, m.lo,
               m.hi);
   for (int i = 0; i < 3; ++i) {
-    const bench::Spread x = spread(t[i]);
+    const bench::Spread x = bench::spread(t[i]);
     std::printf("  %-16s %5d iterations  %9.1f ms (%.1f..%.1f)  %6.1fx the default's time\n",
                 to_string(schemes[i]).c_str(), iters[i], x.median, x.lo, x.hi, x.median / d.median);
   }

@@ -39,11 +39,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
 
-bench::Spread spread(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return {v[v.size() / 2], v.front(), v.back()};
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -100,7 +95,7 @@ int main(int argc, char** argv) {
     floor_ratio.push_back(da / dc), loop_ratio.push_back(de / da);  // per round: both under the same load
   }
   const double mpx = W * static_cast<double>(H) / 1e6;
-  const bench::Spread A = spread(ta), B = spread(tb), C = spread(tc), D = spread(td), E = spread(te);
+  const bench::Spread A = bench::spread(ta), B = bench::spread(tb), C = bench::spread(tc), D = bench::spread(td), E = bench::spread(te);
   std::printf("brume_bench_fog: %dx%d exponential, no blur, %d threads, %s, %d rounds (median, min..max)\n", W, H,
               threads, bench::cpu_name().c_str(), rounds);
   std::printf("  (a) apply_fog, reused    %7.2f ms (%.2f..%.2f)  %6.1f Mpx/s\n", A.median, A.lo, A.hi, mpx / A.median * 1e3);
@@ -108,7 +103,7 @@ int main(int argc, char** argv) {
   std::printf("  (b) apply_fog, new images %7.2f ms (%.2f..%.2f)  %6.1f Mpx/s\n", D.median, D.lo, D.hi, mpx / D.median * 1e3);
   std::printf("  (d) analyse + apply      %7.2f ms (%.2f..%.2f)  %6.1f Mpx/s\n", B.median, B.lo, B.hi, mpx / B.median * 1e3);
   std::printf("  (c) memory floor         %7.2f ms (%.2f..%.2f)  %6.1f Mpx/s\n", C.median, C.lo, C.hi, mpx / C.median * 1e3);
-  const bench::Spread FR = spread(floor_ratio), LR = spread(loop_ratio);
+  const bench::Spread FR = bench::spread(floor_ratio), LR = bench::spread(loop_ratio);
   std::printf("  apply / floor     = %.2fx (%.2f..%.2f), ratio per round\n", FR.median, FR.lo, FR.hi);
   std::printf("  per-pixel / apply = %.2fx (%.2f..%.2f), ratio per round\n", LR.median, LR.lo, LR.hi);
   return 0;

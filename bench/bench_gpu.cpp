@@ -18,19 +18,13 @@
 #include <string>
 #include <vector>
 
+#include "bench_util.hpp"
 #include "brume/demo_scene.hpp"
 #include "brume/gpu.hpp"
 #include "brume/haze.hpp"
 
 using namespace brume;
 using Clock = std::chrono::steady_clock;
-
-namespace {
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
-}  // namespace
 
 int main(int argc, char** argv) {
   int runs = 3, threads = 0;
@@ -96,10 +90,10 @@ int main(int argc, char** argv) {
         apply_haze(scene.rgb, scene.range, p, a, ex);
         if (r > 0) cpu_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
       }
-      const double g = median(gpu_ms);
+      const double g = bench::spread(gpu_ms).median;
       std::printf("| %dx%d | %s | %s | %.1f | %d | %.2f | %.3f | %.1f | %s | %.1f |\n", w, h, to_string(c.s).c_str(),
                   to_string(c.p).c_str(), a.sigma_max, a.plan.iterations + 3, g, g / (a.plan.iterations + 3),
-                  median(rerender_ms), timer ? "query" : "wall", median(cpu_ms));
+                  bench::spread(rerender_ms).median, timer ? "query" : "wall", bench::spread(cpu_ms).median);
       std::fflush(stdout);
     }
   }

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace brume::bench {
@@ -15,6 +16,12 @@ namespace brume::bench {
 struct Spread {
   double median, lo, hi;  // milliseconds
 };
+
+// The median (the upper one of an even count) and the range of v, not empty.
+inline Spread spread(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return {v[v.size() / 2], v.front(), v.back()};
+}
 
 inline Spread time_ms(const std::function<void()>& fn, int runs) {
   fn();  // warm-up
@@ -24,8 +31,7 @@ inline Spread time_ms(const std::function<void()>& fn, int runs) {
     fn();
     t.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - a).count());
   }
-  std::sort(t.begin(), t.end());
-  return {t[t.size() / 2], t.front(), t.back()};
+  return spread(std::move(t));
 }
 
 // The CPU's model name with its family and model numbers: virtual hosts

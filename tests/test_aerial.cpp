@@ -357,13 +357,7 @@ TEST(Aerial, DeclarationHasEveryFlag) {
 // ---- GPU = CPU --------------------------------------------------------------------------
 
 TEST(AerialGpu, MatchesTheCpuInEveryMode) {
-  std::string why;
-  GpuContext* ctx = shared_gpu_context(&why);
-  if (!ctx) {
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");
-    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
-    GTEST_SKIP() << why;
-  }
+  BRUME_REQUIRE_GPU(ctx);
   const Scene s = scene(64, 48, 8);
   Image prepared = s.range;
   for (float& v : prepared.data)

@@ -52,15 +52,8 @@ double flat_gamma_fine(const Atmosphere& a, double s_m) {
   return sum * h / 3.0 / 400.0;
 }
 
-class SpectralFiles : public ::testing::Test {
+class SpectralFiles : public ScratchDirTest {
  protected:
-  fs::path dir;
-  void SetUp() override {
-    dir = fs::temp_directory_path() / ("brume_test_spectral_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir);
-  }
-  void TearDown() override { fs::remove_all(dir); }
   std::string file(const std::string& name, const std::string& text) const {
     const std::string p = (dir / name).string();
     std::ofstream(p) << text;

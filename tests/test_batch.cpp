@@ -53,17 +53,9 @@ std::string slurp(const fs::path& p) {
   return ss.str();
 }
 
-class Batch : public ::testing::Test {
+class Batch : public ScratchDirTest {
  protected:
-  fs::path dir;
-  void SetUp() override {
-    dir = fs::temp_directory_path() / ("brume_test_batch_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir);
-    fs::create_directories(dir / "data");
-  }
-  void TearDown() override { fs::remove_all(dir); }
-  std::string p(const std::string& rel) const { return (dir / rel).string(); }
+  void SetUp() override { fs::create_directories(dir / "data"); }
 
   // n small RGB-D frames data/<sub>/fI.png + fI.exr, in two subfolders (keys with '/').
   std::vector<std::string> make_frames(int n, int w = 64, int h = 48) {
@@ -214,9 +206,7 @@ TEST_F(Batch, GpuFramesShareAWorkerContextAndEqualSingleRuns) {
   try {
     GpuContext probe;
   } catch (const Error& e) {
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");
-    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << e.what();
-    GTEST_SKIP() << e.what();
+    BRUME_NO_GPU(e.what());
   }
   const std::vector<std::string> keys = make_frames(4);
   const std::string m = csv(keys, "effect,visibility,albedo", "haze,300,0.9");

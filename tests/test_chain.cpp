@@ -39,15 +39,6 @@ ChainScene chain_scene(int w, int h, int sky_rows) {
   return s;
 }
 
-GpuContext* gpu_or_skip(std::string* why) {
-  GpuContext* ctx = shared_gpu_context(why);
-  if (!ctx) {
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");
-    if (req && std::string(req) == "1") ADD_FAILURE() << "BRUME_REQUIRE_GPU=1 but " << *why;
-  }
-  return ctx;
-}
-
 }  // namespace
 
 TEST(Params, ChainIsDeclaredCompletelyWithPrefixedDofFlags) {
@@ -142,9 +133,7 @@ TEST(ChainHazeDof, ErrorsOfTheDofStageNameThePrefixedFlags) {
 }
 
 TEST(ChainHazeDof, GpuMatchesCpu) {
-  std::string why;
-  GpuContext* ctx = gpu_or_skip(&why);
-  if (!ctx) GTEST_SKIP() << why;
+  BRUME_REQUIRE_GPU(ctx);
   const ChainScene s = chain_scene(96, 64, 10);
   HazeParams h;
   h.kappa_s = 0.5;
@@ -173,21 +162,15 @@ TEST(ChainHazeDof, GpuMatchesCpu) {
 }
 
 // ---- the command line -------------------------------------------------------------
-class CliChain : public ::testing::Test {
+class CliChain : public ScratchDirTest {
  protected:
-  fs::path dir;
   void SetUp() override {
-    dir = fs::temp_directory_path() / ("brume_test_cli_chain_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir);
     const ChainScene s = chain_scene(96, 64, 10);
     write_image(p("img.exr"), s.rgb, WriteOptions{});
     WriteOptions data;
     data.is_color = false;
     write_image(p("range.exr"), s.range, data);
   }
-  void TearDown() override { fs::remove_all(dir); }
-  std::string p(const std::string& n) const { return (dir / n).string(); }
   std::string depth() const { return " --range " + p("range.exr") + " --fx 80"; }
   std::string haze_flags() const { return " --kappa-s 0.5 --lambda 6"; }
   std::string dof_flags(const std::string& pre) const {

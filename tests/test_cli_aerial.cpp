@@ -20,14 +20,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class CliAerial : public ::testing::Test {
+class CliAerial : public ScratchDirTest {
  protected:
-  fs::path dir;
   std::string img, range;
   void SetUp() override {
-    dir = fs::temp_directory_path() / ("brume_test_cli_aerial_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir);
     Image rgb(48, 32, 3), r(48, 32, 1);
     for (int y = 0; y < 32; ++y)
       for (int x = 0; x < 48; ++x) {
@@ -41,8 +37,6 @@ class CliAerial : public ::testing::Test {
     data.is_color = false;
     write_image(range, r, data);
   }
-  void TearDown() override { fs::remove_all(dir); }
-  std::string p(const std::string& name) const { return (dir / name).string(); }
   bool only_inputs_left() const {
     for (auto& e : fs::directory_iterator(dir)) {
       const std::string n = e.path().filename().string();

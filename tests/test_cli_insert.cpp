@@ -34,15 +34,11 @@ void write_rgba8_png(const std::string& path, int w, int h, const std::vector<un
   ASSERT_TRUE(out->close());
 }
 
-class CliInsert : public ::testing::Test {
+class CliInsert : public ScratchDirTest {
  protected:
-  fs::path dir;
   std::string img, range, obj, orange;
   const std::set<std::string> inputs = {"img.exr", "range.exr", "obj.exr", "orange.exr", "small.exr"};
   void SetUp() override {
-    dir = fs::temp_directory_path() / ("brume_test_cli_insert_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir);
     Image rgb(48, 32, 3), r(48, 32, 1), o(48, 32, 4, 0.0f), orr(48, 32, 1, NAN);
     for (int y = 0; y < 32; ++y)
       for (int x = 0; x < 48; ++x) {
@@ -63,8 +59,6 @@ class CliInsert : public ::testing::Test {
     write_image(orange, orr, data);
     write_image(p("small.exr"), Image(40, 32, 4, 0.5f), WriteOptions{});
   }
-  void TearDown() override { fs::remove_all(dir); }
-  std::string p(const std::string& name) const { return (dir / name).string(); }
   std::string base() const {
     return "insert --image " + img + " --range " + range + " --object " + obj + " --object-range " + orange +
            " --turbidity 6";

@@ -138,10 +138,9 @@ TEST(Commands, EveryRecordCommandIsAcceptedByRun) {
 // naming it, with its sampled parameters (a chain: each stage's, the later
 // ones under "<stage>."), and every sampleable one draws its defaults through
 // random_params and `brume sample`.
-TEST(Commands, BatchableAndSampleableOnesReachBatchAndSample) {
-  const fs::path dir = fs::temp_directory_path() / ("brume_commands_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
+class CommandsInFiles : public ScratchDirTest {};
+
+TEST_F(CommandsInFiles, ManifestRowsAndTheSamplerTakeEveryOne) {
   const Scene s = scene(24, 16, 4);
   write_image((dir / "a.pfm").string(), s.rgb, WriteOptions{}, "");
   write_image((dir / "a.range.pfm").string(), s.range, WriteOptions{}, "");
@@ -197,7 +196,6 @@ TEST(Commands, BatchableAndSampleableOnesReachBatchAndSample) {
   for (const CommandDef& c : commands())
     if (c.sampling) sampleable.push_back(c.name);
   EXPECT_EQ(sample_effects(), sampleable);
-  fs::remove_all(dir);
 }
 
 // The medium of a camera effect, as the LiDAR fog reads it: haze's is

@@ -337,13 +337,7 @@ TEST(DofForeground, NearFieldRaiseMatchesItsDefinition) {
 }
 
 TEST(DofGpu, MatchesCpu) {
-  std::string why;
-  GpuContext* ctx = shared_gpu_context(&why);
-  if (!ctx) {
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");
-    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
-    GTEST_SKIP() << why;
-  }
+  BRUME_REQUIRE_GPU(ctx);
   Scene sc = scene(96, 64, 0);
   Image range = sc.range;
   for (int y = 0; y < 64; ++y)
@@ -461,21 +455,15 @@ TEST(DofErrors, BadParametersAreRefused) {
 }
 
 // ---- the command line -------------------------------------------------------------
-class CliDof : public ::testing::Test {
+class CliDof : public ScratchDirTest {
  protected:
-  fs::path dir;
   void SetUp() override {
-    dir = fs::temp_directory_path() / ("brume_test_cli_dof_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir);
     const SquareScene s = square_scene(48, 16, 32, 6.0f, 2.0f);
     write_image(p("img.exr"), s.rgb, WriteOptions{});
     WriteOptions data;
     data.is_color = false;
     write_image(p("z.exr"), s.z, data);
   }
-  void TearDown() override { fs::remove_all(dir); }
-  std::string p(const std::string& n) const { return (dir / n).string(); }
   std::string base() const {
     return "dof --image " + p("img.exr") + " --z " + p("z.exr") + " --fx 60 --focus-distance 2 --coc-infinity 12";
   }
@@ -571,13 +559,7 @@ TEST(DiffusionStreaks, InvariantSchemesNoLongerStreak) {
 }
 
 TEST(DiffusionStreaks, GpuNoLongerStreaks) {
-  std::string why;
-  GpuContext* ctx = shared_gpu_context(&why);
-  if (!ctx) {
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");
-    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
-    GTEST_SKIP() << why;
-  }
+  BRUME_REQUIRE_GPU(ctx);
   for (EdgeRate e : {EdgeRate::min, EdgeRate::harmonic}) {
     const double g = study_into_far_mean(Scheme::invariant_exact, e, {}, ctx);
     std::printf("  GPU invariant-exact %s: into_far_mean %.3g\n", to_string(e).c_str(), g);

@@ -496,13 +496,7 @@ TEST(Fog, GpuMatchesCpu) {
   // Every profile, sky included, with and without the blur: the GPU pass
   // against the CPU, RMS <= 1e-3 (f32; transcendental functions differ in
   // the last bits between the GPU and libm, and the diffusion accumulates).
-  std::string why;
-  GpuContext* ctx = shared_gpu_context(&why);
-  if (!ctx) {
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");
-    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
-    GTEST_SKIP() << why;
-  }
+  BRUME_REQUIRE_GPU(ctx);
   const Scene s = scene(96, 64, 0);
   std::vector<FogParams> ps(6);
   ps[0] = exp_params(10.0, -5.0);
@@ -538,13 +532,7 @@ TEST(Fog, GpuReadsTheDepthBufferAsTheCpuReadsTheRange) {
   // value and NaN as sky, with and without the blur. RMS <= 1e-3 (f32, as
   // GpuMatchesCpu); the optical depth to 1e-4 relative RMS (the linearisation
   // in highp, a few ulp, times dF/dl l / F <= a few).
-  std::string why;
-  GpuContext* ctx = shared_gpu_context(&why);
-  if (!ctx) {
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");
-    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
-    GTEST_SKIP() << why;
-  }
+  BRUME_REQUIRE_GPU(ctx);
   const int W = 96, H = 64;
   const Scene s = scene(W, H, 0);
   FogParams p = exp_params(10.0, -5.0);
@@ -638,21 +626,15 @@ TEST(Fog, DepthBuffersGiveTheFogOfTheRange) {
 
 // ---- the command line ------------------------------------------------------------------------
 
-class CliFog : public ::testing::Test {
+class CliFog : public ScratchDirTest {
  protected:
-  fs::path dir;
   void SetUp() override {
-    dir = fs::temp_directory_path() / ("brume_test_cli_fog_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir);
     const Scene s = scene(40, 30, 6);
     WriteOptions data;
     data.is_color = false;
     write_image(p("img.exr"), s.rgb, WriteOptions{});
     write_image(p("range.exr"), s.range, data);
   }
-  void TearDown() override { fs::remove_all(dir); }
-  std::string p(const std::string& name) const { return (dir / name).string(); }
   std::string base() const {
     return "fog --image " + p("img.exr") + " --range " + p("range.exr") + " --fov-y 50 --camera-height 20 --pitch 3";
   }
@@ -737,12 +719,7 @@ TEST_F(CliFog, GpuDepthBufferRunsTheDepthPassWhenUnprepared) {
   // window depth to the fog pass (the record says so, and names the pass's
   // time fog_pass_ms); the result equals the CPU's on the same flags (RMS
   // 1e-3, f32). With --prepare auto and sky present, the CPU prepares the range.
-  std::string why;
-  if (!shared_gpu_context(&why)) {
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");
-    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why;
-    GTEST_SKIP() << why;
-  }
+  BRUME_REQUIRE_GPU(ctx);
   const Image range = read_scalar(p("range.exr"));
   const Intrinsics k = intrinsics_from_fov(range.width, range.height, NAN, 50.0);
   const Image z = range_to_z(range, k);

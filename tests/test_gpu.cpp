@@ -34,16 +34,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-
-#define BRUME_REQUIRE_GPU(ctx)                                                                  \
-  std::string why_;                                                                             \
-  GpuContext* ctx = shared_gpu_context(&why_);                                                             \
-  if (!ctx) {                                                                                   \
-    const char* req = std::getenv("BRUME_REQUIRE_GPU");                                         \
-    if (req && std::string(req) == "1") FAIL() << "BRUME_REQUIRE_GPU=1 but " << why_;           \
-    GTEST_SKIP() << why_;                                                                       \
-  }
-
 Image middlebury_range(const std::string& scene, Image& rgb) {
   rgb = read_color(data_path("middlebury2005_thirdsize/" + scene + "/view1.png"));
   return load_depth(middlebury2005(scene), rgb.width, rgb.height).range;

@@ -27,19 +27,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class Reliability : public ::testing::Test {
+class Reliability : public ScratchDirTest {
  protected:
-  fs::path dir;
-  void SetUp() override {
-    dir = fs::temp_directory_path() / ("brume_test_rel_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir);
-  }
-  void TearDown() override {
-    set_max_pixels(default_max_pixels);
-    fs::remove_all(dir);
-  }
-  std::string p(const std::string& name) const { return (dir / name).string(); }
+  void TearDown() override { set_max_pixels(default_max_pixels); }
   int temporaries() const {
     int n = 0;
     for (auto& e : fs::directory_iterator(dir)) n += e.path().filename().string().find(".brume-tmp-") != std::string::npos;

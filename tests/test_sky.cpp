@@ -209,13 +209,6 @@ TEST(SkyProjection, ConventionsAsStated) {
 }
 
 // ---- GPU = CPU ------------------------------------------------------------------------------
-GpuContext* sky_gpu_or_skip(std::string* why) {
-  GpuContext* ctx = test::shared_gpu_context(why);
-  const char* req = std::getenv("BRUME_REQUIRE_GPU");
-  if (!ctx && req && std::string(req) == "1") ADD_FAILURE() << "BRUME_REQUIRE_GPU=1 but " << *why;
-  return ctx;
-}
-
 // RMS of (a - b) over pixels finite in both, relative to the RMS of b; the
 // NaN masks must agree exactly (no direction, or below the horizon).
 double relative_rms(const Image& a, const Image& b, int* mask_mismatch) {
@@ -232,9 +225,7 @@ double relative_rms(const Image& a, const Image& b, int* mask_mismatch) {
 }
 
 TEST(SkyGpu, MatchesTheCpuInEveryProjection) {
-  std::string why;
-  GpuContext* ctx = sky_gpu_or_skip(&why);
-  if (!ctx) GTEST_SKIP() << why;
+  BRUME_REQUIRE_GPU(ctx);
   // Sun at zenith 60, azimuth 40: inside the pinhole's view (axis at zenith 65,
   // azimuth 30, 70 deg wide), so its disc and the circumsolar peak are tested there too.
   const SkyDirection sun{60.0, 40.0};
@@ -496,9 +487,7 @@ struct TempDir {
 };
 
 TEST(SkyGpu, CliBackendGpuWritesTheCpuImage) {
-  std::string why;
-  GpuContext* ctx = sky_gpu_or_skip(&why);
-  if (!ctx) GTEST_SKIP() << why;
+  BRUME_REQUIRE_GPU(ctx);
   TempDir d;
   const std::string base = "sky render --turbidity 5 --sun-zenith 40 --sun-azimuth 200 --projection fisheye "
                            "--width 90 --height 90 --sun-disc --ground 0.1,0.1,0.1 --record ";

@@ -5,12 +5,15 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <sys/wait.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 
 #include <cmath>
 #include <filesystem>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <functional>
@@ -138,6 +141,30 @@ inline CliRun run(const std::string& args) {
   return r;
 }
 
+// A fixture with a scratch folder per test (the CLI suites and others that
+// write files): `dir`, <tmp>/brume_test_<suite>_<pid>_<test> (the process id
+// keeps concurrent ctest runs apart), made empty before the fixture's SetUp
+// and removed with its contents after its TearDown; p(name) is a path in it.
+class ScratchDirTest : public ::testing::Test {
+ protected:
+  std::filesystem::path dir;
+  ScratchDirTest() {
+    const ::testing::TestInfo* t = ::testing::UnitTest::GetInstance()->current_test_info();
+    std::string name =
+        std::string("brume_test_") + t->test_suite_name() + "_" + std::to_string(::getpid()) + "_" + t->name();
+    std::replace(name.begin(), name.end(), '/', '_');  // a parameterised suite's or test's name
+    dir = std::filesystem::temp_directory_path() / name;
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directories(dir);
+  }
+  ~ScratchDirTest() override {
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+    if (ec) ADD_FAILURE() << "could not remove " << dir << ": " << ec.message();
+  }
+  std::string p(const std::string& name) const { return (dir / name).string(); }
+};
+
 // One GPU context for the whole test binary (contexts belong to the thread
 // that made them; gtest runs tests on the main thread), or null with the
 // reason when none can be made.
@@ -156,6 +183,28 @@ inline GpuContext* shared_gpu_context(std::string* why) {
   *why = reason;
   return ctx.get();
 }
+
+// BRUME_REQUIRE_GPU=1 (set by .ci/run, which has Mesa's llvmpipe): a test
+// that finds no GPU context fails instead of skipping.
+inline bool gpu_required() {
+  const char* req = std::getenv("BRUME_REQUIRE_GPU");
+  return req && std::string(req) == "1";
+}
+
+// No GPU context, for the reason `why`: the test fails under
+// BRUME_REQUIRE_GPU=1 and skips otherwise (returns from the test either way).
+#define BRUME_NO_GPU(why)                                                                  \
+  do {                                                                                     \
+    if (::brume::test::gpu_required()) FAIL() << "BRUME_REQUIRE_GPU=1 but " << (why);      \
+    GTEST_SKIP() << (why);                                                                 \
+  } while (0)
+
+// Declares `GpuContext* ctx`, the test binary's shared context; without one
+// the test skips, or fails under BRUME_REQUIRE_GPU=1 (BRUME_NO_GPU).
+#define BRUME_REQUIRE_GPU(ctx)                                                             \
+  std::string ctx##_why;                                                                   \
+  ::brume::GpuContext* ctx = ::brume::test::shared_gpu_context(&ctx##_why);                \
+  if (!ctx) BRUME_NO_GPU(ctx##_why)
 
 // A random RGB-D scene for the aerial and insert tests.
 struct Scene {
