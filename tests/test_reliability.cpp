@@ -10,6 +10,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -334,6 +335,42 @@ TEST_F(Reliability, OutputDirectoryRemovedMidRun) {
     EXPECT_EQ(temporaries(), 0);
   }
   ASSERT_EQ(removed_mid_run, 1) << "every run (" << full_ms << " ms) ended before the directory was removed";
+}
+
+// Error text is printable UTF-8 even when it quotes a damaged file: an
+// OpenEXR header whose attribute name holds byte 0xFD (and whose size field
+// is absurd) is refused naming the attribute with that byte as \xFD, from
+// the library and from the CLI; control characters in a message are escaped
+// too, newlines and tabs kept (issue #38's example). The file has two
+// channels, which the direct EXR reader leaves to the guarded OpenImageIO
+// path (the header scan of image_io.cpp that quotes the name).
+TEST_F(Reliability, ErrorTextQuotingADamagedFileIsPrintableUtf8) {
+  Image img(8, 6, 2);
+  for (float& v : img.data) v = 0.5f;
+  write_image(p("ok.exr"), img, WriteOptions{}, "");
+  std::string bytes;
+  {
+    std::ifstream in(p("ok.exr"), std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const std::size_t at = bytes.find(std::string("compression\0compression\0", 24));
+  ASSERT_NE(at, std::string::npos);
+  bytes[at + 9] = static_cast<char>(0xFD);                         // "compressi\xFDn"
+  const std::uint32_t huge = 1690501120u;                          // the declared size, past the file's end
+  std::memcpy(&bytes[at + 24], &huge, 4);
+  {
+    std::ofstream out(p("bad.exr"), std::ios::binary);
+    out << bytes;
+  }
+  const std::string e = error_of([&] { read_color(p("bad.exr")); });
+  EXPECT_NE(e.find("attribute 'compressi\\xFDn' declares 1690501120 bytes"), std::string::npos) << e;
+  EXPECT_EQ(first_invalid_utf8(e), std::string::npos);
+  const CliRun r = run("blur --image " + p("bad.exr") + " --sigma 1 --out " + p("o.exr"));
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.output.find("compressi\\xFDn"), std::string::npos) << r.output;
+  EXPECT_EQ(first_invalid_utf8(r.output), std::string::npos);
+  EXPECT_FALSE(fs::exists(p("o.exr"))) << r.output;
+  EXPECT_STREQ(Error(std::string("a\x01" "b\x1B[31m\nc\td\x7F\xC3\xA9\xC3")).what(), "a\\x01b\\x1B[31m\nc\td\\x7F\xC3\xA9\\xC3");
 }
 
 // Paths, keys and arguments go into JSON records and manifests, which hold

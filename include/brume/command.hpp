@@ -22,6 +22,7 @@
 #pragma once
 
 #include <functional>
+#include <map>
 #include <optional>
 #include <set>
 #include <string>
@@ -31,6 +32,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "brume/image.hpp"
 #include "brume/params.hpp"
 #include "brume/pipeline.hpp"
 
@@ -55,6 +57,51 @@ struct CommandSampling {
 
 using JobValues = std::vector<std::pair<std::string, nlohmann::json>>;
 
+// ---- a command on arrays: the Python module's brume.<function>(rgb, range, **keywords) ----
+// The keywords of an array form: the effect's parameters and the shared
+// blocks it takes (no files: the arrays stand for the input, the Result for
+// the outputs).
+template <class P>
+struct ArrayCall {
+  P p;
+  RangeStep prepare;
+  DepthSource depth;  // intrinsics only (fog, dof): fx, fy, cx, cy, fov-x, fov-y, calib
+  ExecOptions exec;
+};
+enum ArrayBlocks : unsigned { kArrayNone = 0, kArrayPrepare = 1, kArrayIntrinsics = 2, kArrayExec = 4 };
+// The call's table: `own` (less `skip`) with the blocks asked for.
+template <class P>
+ParamTable<ArrayCall<P>> array_call_table(const ParamTable<P>& own, unsigned blocks,
+                                          const std::set<std::string>& skip = {});
+
+// The two arrays a form runs on: in place as (strided) views, and as dense
+// images when the form takes those (the caller's pixels when C-contiguous,
+// else a copy the caller keeps).
+struct ArrayInputs {
+  ConstImageView rgb_view, range_view;
+  DenseImageRef rgb, range;
+};
+struct ArrayResult {
+  std::map<std::string, Image> images;  // the Result's arrays by field
+  nlohmann::json record;                 // the run's blocks; a "sky_image" block belongs under the record's "inputs"
+  nlohmann::json job;                    // the call as recorded (less the execution block)
+};
+struct ArrayForm {
+  std::string function;            // brume.<function>
+  std::string summary;             // the docstring's first paragraph
+  std::vector<ParamSpec> specs;    // the keywords' declarations
+  nlohmann::json defaults;         // the default call as its table's JSON
+  std::vector<std::string> fields; // the Result's fields, "record" last
+  bool dense = false;              // reads ArrayInputs::rgb/range (else the views)
+  // The default call with `values` set, each checked by its declaration.
+  std::function<nlohmann::json(const JobValues& values)> build;
+  // Runs the call on the arrays (`exec` from the call's execution block, with
+  // the caller's GPU context); `given`: the keywords set explicitly.
+  std::function<ArrayResult(const ArrayInputs&, const nlohmann::json& call, const Exec& exec,
+                            const std::set<std::string>& given)>
+      run;
+};
+
 struct CommandDef {
   // ---- what it is ------------------------------------------------------------------
   std::string name;      // as recorded and as typed after `brume`: "haze", "sky render", "haze+dof"
@@ -69,6 +116,7 @@ struct CommandDef {
   std::string stage_prefix;      // a chain: the later stage's flag prefix ("dof-"), else ""
   std::optional<CommandSampling> sampling;  // `brume sample`, random_params, batch distributions
   std::vector<std::string> gpu_passes;      // its GPU passes (PassSpec names, "haze.premultiply"), in order
+  std::optional<ArrayForm> arrays;          // the command on arrays (the Python module), where it has one
 
   // ---- what is done with a job (the table's JSON) --------------------------------------
   // The default job with `values` set, each checked by its declaration.
@@ -165,6 +213,54 @@ CommandDef make_command(CommandParts<Job> parts) {
       report(j, result);
     };
   return c;
+}
+
+template <class P>
+ParamTable<ArrayCall<P>> array_call_table(const ParamTable<P>& own, unsigned blocks, const std::set<std::string>& skip) {
+  ParamTable<ArrayCall<P>> t(own.block());
+  t.nest_except(&ArrayCall<P>::p, own, skip);
+  if (blocks & kArrayPrepare) t.nest(&ArrayCall<P>::prepare, range_step_param_table());
+  if (blocks & kArrayIntrinsics) t.nest_except(&ArrayCall<P>::depth, depth_param_table(), depth_file_params());
+  if (blocks & kArrayExec) t.nest(&ArrayCall<P>::exec, exec_param_table());
+  return t;
+}
+
+// The array form of a command whose keywords are the call table `t` (kept
+// alive by the caller: a function-local static), run by `run` on the typed
+// call (which it may change for the record: aerial's fitted turbidity is
+// recorded as auto).
+template <class P>
+ArrayForm make_array_form(std::string function, std::string summary, const ParamTable<ArrayCall<P>>& t,
+                          std::vector<std::string> fields, bool dense,
+                          std::function<ArrayResult(const ArrayInputs&, ArrayCall<P>&, const Exec&,
+                                                    const std::set<std::string>&)>
+                              run) {
+  ArrayForm a;
+  a.function = std::move(function);
+  a.summary = std::move(summary);
+  for (const Param<ArrayCall<P>>& d : t.params()) a.specs.push_back(d.spec);
+  a.defaults = t.to_json(ArrayCall<P>{});
+  a.fields = std::move(fields);
+  a.dense = dense;
+  a.build = [&t](const JobValues& values) {
+    ArrayCall<P> c;
+    for (const auto& [n, v] : values) {
+      const Param<ArrayCall<P>>& d = t.at(n);
+      d.spec.check(v);
+      d.set(c, v);
+    }
+    return t.to_json(c);
+  };
+  a.run = [&t, run](const ArrayInputs& in, const nlohmann::json& call, const Exec& exec,
+                    const std::set<std::string>& given) {
+    ArrayCall<P> c;
+    t.from_json(c, call, "call");
+    ArrayResult r = run(in, c, exec, given);
+    r.job = t.to_json(c);
+    r.job.erase("execution");
+    return r;
+  };
+  return a;
 }
 
 // The sampling of an effect whose parameters live in one block P (its

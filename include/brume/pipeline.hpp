@@ -48,6 +48,10 @@ const EnumNames<GpuFilter>& gpu_filter_names();
 const ParamTable<DiffusionParams>& diffusion_param_table();  // scheme, precision, sigma0, rho-max, edge-rate
 const ParamTable<PrepareParams>& prepare_param_table();      // all eight preparation parameters
 const ParamTable<DepthSource>& depth_param_table();          // every depth source and convention flag
+// The names of the depth block that name files or say how to read them: all
+// but the intrinsics (fx, fy, cx, cy, fov-x, fov-y, calib), which an array
+// caller still gives for fog's and dof's camera.
+const std::set<std::string>& depth_file_params();
 
 // The camera's pose (brume/camera.hpp: conventions fixed once for every
 // effect): --yaw, --pitch, --roll, --camera-height, --camera-x, --camera-z,

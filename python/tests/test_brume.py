@@ -588,3 +588,34 @@ def test_rerun_other_effects_and_bad_records(demo):
         brume.haze(rgb, rng, job={"haze": {"visibility": -5}})
     with pytest.raises(TypeError, match="job"):
         brume.haze(rgb, rng, job="haze")
+
+
+# ---- the library's list of commands (brume/command.hpp) reaches Python -------------------
+CAMERA = {"fog": {"fov_y": 55, "camera_height": 1.6}, "dof": {"fov_x": 2 * math.degrees(math.atan(18 / 50))}}
+
+
+def test_every_command_of_the_list_reaches_python(demo):
+    """Each command with an array form is a function of the module that runs on
+    the demo's arrays, records its command, and is repeated by brume.rerun bit
+    for bit; each sampleable one draws through random_params; the stubs list
+    every function and the sampleable effects."""
+    commands = _brume._commands()
+    names = [c["name"] for c in commands]
+    assert len(names) == len(set(names)) and "haze" in names
+    stubs = _brume._stub_text()
+    rgb, rng = demo["rgb"][::4, ::4], demo["range"][::4, ::4]
+    for c in commands:
+        if c["sample"]:
+            drawn = brume.random_params(c["name"], 7, "frame/1")
+            assert drawn and f"'{c['name']}'" in stubs.split("def random_params(")[1].split(")")[0]
+        if not c["function"]:
+            continue
+        f = getattr(brume, c["function"])
+        assert f"def {c['function']}(" in stubs
+        # Its sampled parameters, with the camera the fog's heights and the lens's planar depth need.
+        kw = brume.random_params(c["name"], 7, "frame/1") if c["sample"] else {}
+        kw.update(CAMERA.get(c["name"], {}))
+        r = f(rgb, rng, threads=1, **kw)
+        assert r.record["command"] == c["name"]
+        again = brume.rerun(r.record, rgb, rng, threads=1)
+        same(again.rgb, r.rgb)

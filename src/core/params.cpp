@@ -58,6 +58,32 @@ std::size_t first_invalid_utf8(const std::string& s) {
   return std::string::npos;
 }
 
+std::string printable_text(std::string_view text) {
+  std::string out;
+  out.reserve(text.size());
+  char hex[8];
+  std::size_t i = 0;
+  while (i < text.size()) {
+    const std::string rest(text.substr(i));
+    const std::size_t bad = first_invalid_utf8(rest);
+    const std::size_t good = bad == std::string::npos ? rest.size() : bad;
+    for (std::size_t k = 0; k < good; ++k) {
+      const unsigned char c = static_cast<unsigned char>(rest[k]);
+      if ((c < 0x20 && c != '\n' && c != '\t') || c == 0x7F) {
+        std::snprintf(hex, sizeof hex, "\\x%02X", c);
+        out += hex;
+      } else {
+        out += static_cast<char>(c);
+      }
+    }
+    if (bad == std::string::npos) break;
+    std::snprintf(hex, sizeof hex, "\\x%02X", static_cast<unsigned char>(rest[bad]));
+    out += hex;
+    i += bad + 1;
+  }
+  return out;
+}
+
 void check_utf8(const std::string& text, const std::string& what) {
   std::size_t bad = first_invalid_utf8(text);
   if (bad == std::string::npos) return;

@@ -303,6 +303,18 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
 
 bool is_output_file(const ParamSpec& s) { return s.output_file; }
 
+const std::set<std::string>& depth_file_params() {
+  static const std::set<std::string> skip = [] {
+    static const std::set<std::string> keep = {"fx", "fy", "cx", "cy", "fov-x", "fov-y", "calib"};
+    std::set<std::string> s;
+    for (const auto& d : depth_param_table().params())
+      if (!keep.count(d.spec.name)) s.insert(d.spec.name);
+    return s;
+  }();
+  return skip;
+}
+
+
 // ---- steps ---------------------------------------------------------------------------
 RunPhases& run_phases() {
   thread_local RunPhases p;

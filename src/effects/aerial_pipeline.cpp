@@ -241,6 +241,40 @@ CommandDef aerial_command() {
                                             {"lambda", "uniform(0, 8)", {}}},
                                            &validate_aerial);
   c.gpu_passes = {"aerial.premultiply", "diffusion.rates", "diffusion.iterate", "aerial.composite"};
+  // brume.aerial takes the whole `brume aerial` job but its files: the
+  // turbidity from a sky fit's JSON (turbidity_from=) or fitted on a sky photo
+  // (turbidity="auto", sky_image=, the sky_* keywords) resolves as the CLI
+  // resolves it, and the record holds the same "turbidity_fit" and inputs'
+  // "sky_image". sky_image is a file, as on the command line (its record
+  // hashes it, so `brume run` can refit it); for a sky already in memory call
+  // brume.sky.fit and pass turbidity=.
+  static const auto call = [] {
+    std::set<std::string> skip;
+    for (const auto& d : input_param_table(true).params()) skip.insert(d.spec.name);
+    for (const auto& d : output_param_table(aerial_map_outputs()).params()) skip.insert(d.spec.name);
+    return array_call_table(aerial_job_table(), kArrayExec, skip);
+  }();
+  c.arrays = make_array_form<AerialJob>(
+      "aerial",
+      "Spectral aerial perspective from turbidity (Morales): render, re-render (from_turbidity) or remove, with "
+      "optional scattering blur (lambda_). The turbidity is given, read from a `brume sky fit` JSON "
+      "(turbidity_from=) or fitted on a sky photo (turbidity='auto', sky_image=FILE, sky_* keywords), refused "
+      "when the fit is unreliable. As `brume aerial`.",
+      call, {"rgb", "attenuation", "scale", "record"}, true,
+      [](const ArrayInputs& in, ArrayCall<AerialJob>& k, const Exec& e, const std::set<std::string>& g) {
+        const AerialTurbidity tf = resolve_aerial_turbidity(k.p, g);
+        AerialRun r = run_aerial(in.rgb, in.range, k.p.aerial, k.p.prepare, e, g);
+        if (!tf.fit_record.is_null()) {
+          r.record["turbidity_fit"] = tf.fit_record;
+          r.record["sky_image"] = tf.image_record;  // under "inputs", as in the CLI's record
+          k.p.aerial.atmosphere.turbidity = NAN;     // recorded as given (auto), as the CLI does
+        }
+        return ArrayResult{{{"rgb", std::move(r.result.rgb)},
+                            {"attenuation", std::move(r.result.attenuation)},
+                            {"scale", std::move(r.result.scale)}},
+                           std::move(r.record),
+                           {}};
+      });
   return c;
 }
 

@@ -188,6 +188,20 @@ CommandDef fog_command() {
     const FogTable table = j.fog.profile == FogProfile::table ? read_fog_table(j.fog.table_file) : FogTable{};
     return fog_density(j.fog, table, 0.0).at(height_m);
   };
+  static const auto call = array_call_table(fog_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
+  c.arrays = make_array_form<FogParams>(
+      "fog",
+      "Layered fog from the range and the camera (Zhou, Chen, Smith), with scattering blur for lambda_ > 0. "
+      "The intrinsics (fx.. or fov_x/fov_y) and the pose are keywords. As `brume fog`.",
+      call, {"rgb", "optical_depth", "transmission", "record"}, true,
+      [](const ArrayInputs& in, ArrayCall<FogParams>& k, const Exec& e, const std::set<std::string>& g) {
+        FogRun r = run_fog(in.rgb, in.range, k.depth, k.p, k.prepare, e, g);
+        return ArrayResult{{{"rgb", std::move(r.result.rgb)},
+                            {"optical_depth", std::move(r.result.optical_depth)},
+                            {"transmission", std::move(r.result.transmission)}},
+                           std::move(r.record),
+                           {}};
+      });
   return c;
 }
 

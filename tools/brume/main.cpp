@@ -136,7 +136,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "brume %s: error: %s\n", c.name.c_str(), e.what());
       return 2;
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "brume %s: internal error: %s\n", c.name.c_str(), e.what());
+      std::fprintf(stderr, "brume %s: internal error: %s\n", c.name.c_str(), brume::printable_text(e.what()).c_str());
       return 3;
     }
   }

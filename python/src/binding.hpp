@@ -1,0 +1,159 @@
+// brume._brume — what the binding's files share (python/src): JSON and
+// arrays in and out (convert.cpp), keywords, docstrings and stubs from the
+// parameter tables (keywords.cpp), the GPU context of each Python thread
+// (gpu.cpp); module.cpp holds the definitions. Conventions: module.cpp's head.
+#pragma once
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "brume/command.hpp"
+#include "brume/gpu_context.hpp"
+#include "brume/image.hpp"
+#include "brume/io.hpp"
+#include "brume/params.hpp"
+#include "brume/pipeline.hpp"
+
+namespace brume::python {
+
+namespace py = pybind11;
+using json = nlohmann::json;
+
+// ---- JSON <-> Python (convert.cpp) -------------------------------------------------------
+py::object to_py(const json& j);
+json from_py(py::handle o, const std::string& where);
+std::string type_name(py::handle o);
+
+// ---- keywords from the parameter tables (keywords.cpp) -------------------------------------
+// `--f-number` -> f_number; a Python keyword gets a trailing underscore.
+std::string py_name(const std::string& flag);
+// A str as UTF-8 text (check_utf8's message for lone surrogates).
+std::string utf8_of(py::handle v, const std::string& what);
+// The value a keyword holds, as the JSON the table's setter takes (TypeError for a wrong Python type).
+json keyword_value(const ParamSpec& s, py::handle v, const std::string& where);
+// A text parameter named "path" (read_image, write_image).
+ParamSpec path_spec();
+const ParamSpec* find_keyword(const std::vector<ParamSpec>& specs, const std::string& k);
+JobValues keyword_values(const std::vector<ParamSpec>& specs, const py::dict& kw, const std::string& fn,
+                         std::set<std::string>& given);
+JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const std::string& fn);
+
+template <class P>
+std::vector<ParamSpec> specs_of(const ParamTable<P>& t) {
+  std::vector<ParamSpec> v;
+  for (const Param<P>& d : t.params()) v.push_back(d.spec);
+  return v;
+}
+
+// The same set on p through its table; returns the names given.
+template <class P>
+std::set<std::string> set_keywords(const ParamTable<P>& t, P& p, const py::dict& kw, const std::string& fn) {
+  std::set<std::string> given;
+  for (const auto& [name, v] : keyword_values(specs_of(t), kw, fn, given)) t.at(name).set(p, v);
+  return given;
+}
+
+// ==== the call tables: a command's table nested with shared blocks ===========
+// Every Python function sets one ArrayCall<P> (brume/command.hpp): the
+// parameters and the blocks it takes. Which members a function exposes is its
+// table's choice.
+template <class P>
+using Call = ArrayCall<P>;
+constexpr unsigned kNone = kArrayNone, kPrepare = kArrayPrepare, kIntrinsics = kArrayIntrinsics, kExec = kArrayExec;
+template <class P>
+ParamTable<Call<P>> call_table(const ParamTable<P>& own, unsigned blocks, const std::set<std::string>& skip = {}) {
+  return array_call_table(own, blocks, skip);
+}
+
+template <class T>
+std::set<std::string> names_of(const ParamTable<T>& t) {
+  std::set<std::string> n;
+  for (const auto& d : t.params()) n.insert(d.spec.name);
+  return n;
+}
+
+// The job's parameters for the record, as the CLI's "job" (without the
+// execution block, which the record holds under "execution").
+template <class P>
+json job_json(const ParamTable<Call<P>>& t, const Call<P>& c) {
+  json j = t.to_json(c);
+  j.erase("execution");
+  return j;
+}
+
+// ---- docstrings and stubs (keywords.cpp) -------------------------------------------------------
+struct Extra {  // a keyword of the binding itself (not a parameter of the run)
+  std::string name, stub_type, help;
+};
+struct FunctionDoc {
+  std::string name;        // as bound in _brume: haze, depth_convert, ...
+  std::string public_name; // brume.haze, brume.depth.convert, ...
+  std::string positional;  // stub text of the positional parameters
+  std::string summary;
+  std::vector<std::pair<ParamSpec, json>> params;  // spec and default
+  std::vector<Extra> extras;
+  std::vector<std::string> fields;  // result fields
+  std::string returns = "Result";
+  std::string command = {};  // the command of the library's list it runs on arrays ("" for none)
+  bool replays = false;  // takes job= (a record's job), so brume.rerun repeats that command with it
+};
+std::vector<FunctionDoc>& registry();
+std::string docstring(const FunctionDoc& f);
+std::string stub_text();
+// `defaults`: the table's JSON of a default call ({block: {name: value}}).
+FunctionDoc make_doc(const std::string& name, const std::string& public_name, const char* positional,
+                     const std::string& summary, const std::vector<ParamSpec>& specs, const json& defaults,
+                     std::vector<Extra> extras, std::vector<std::string> fields);
+template <class C>
+FunctionDoc make_doc(const char* name, const char* public_name, const char* positional, const char* summary,
+                     const ParamTable<C>& t, std::vector<Extra> extras, std::vector<std::string> fields) {
+  return make_doc(name, public_name, positional, summary, specs_of(t), t.to_json(C{}), std::move(extras),
+                  std::move(fields));
+}
+
+// ---- the GPU context of each Python thread (gpu.cpp) -------------------------------------------
+// The calling thread's context (made by its first GPU call; null before or when none could be made).
+extern thread_local std::unique_ptr<GpuContext> t_gpu;
+GpuContext* thread_gpu(const Exec& exec);
+Exec with_thread_gpu(Exec e);
+
+// ---- arrays in and out (convert.cpp) --------------------------------------------------------
+// What each input of the last call on this thread became (the zero-copy test
+// reads it): the address the library read and whether that was a copy.
+struct InputTrace {
+  std::uintptr_t address = 0;
+  bool copied = false;
+  std::string how;
+};
+extern thread_local std::map<std::string, InputTrace> g_last_inputs;
+
+// One input image as the library sees it: a view of the caller's pixels
+// (float32 with contiguous channels), or of `owned` (a conversion).
+struct Input {
+  ConstImageView view;
+  Image owned;
+  py::object keep;  // the array the view points into
+  json record;
+  DenseImageRef dense;  // as_dense: the same pixels for the dense-image APIs
+};
+
+Transfer parse_transfer_kw(py::handle t, const std::string& where);
+Input read_input(py::handle obj, const std::string& arg, int channels, Transfer transfer, const std::string& fn);
+DenseImageRef as_dense(Input& in, const std::string& arg);
+const Image& as_image(Input& in, const std::string& arg);
+py::array to_numpy(Image&& img);
+py::object make_result(std::map<std::string, Image>&& images, const json& record,
+                       const std::map<std::string, py::object>& more = {});
+json python_header(const std::string& command, const std::string& fn);
+
+}  // namespace brume::python
