@@ -74,30 +74,48 @@ template <class P>
 ParamTable<ArrayCall<P>> array_call_table(const ParamTable<P>& own, unsigned blocks,
                                           const std::set<std::string>& skip = {});
 
-// The two arrays a form runs on: in place as (strided) views, and as dense
-// images when the form takes those (the caller's pixels when C-contiguous,
-// else a copy the caller keeps).
-struct ArrayInputs {
-  ConstImageView rgb_view, range_view;
-  DenseImageRef rgb, range;
+// A positional array argument of an array form (brume.haze(rgb, range)):
+// its name, its channels (3: colour, read with the transfer= keyword when
+// integer; 1: a map), whether it may be None, and how the run reads it.
+struct ArrayArg {
+  enum class As { view, dense, image };  // a strided view in place; dense (in place when C-contiguous); an owned Image
+  std::string name;
+  int channels = 1;
+  bool optional = false;
+  As as = As::view;
+};
+// One array as the run gets it, filled as its ArrayArg asks: `view` always,
+// `dense` for As::dense, `image` (the call's own copy, free to change) for
+// As::image; `present` false for an optional one not given; `integer` for a
+// uint8/uint16 array (its counts were decoded by the transfer keyword).
+struct ArrayIn {
+  bool present = false;
+  bool integer = false;
+  ConstImageView view;
+  DenseImageRef dense;
+  Image* image = nullptr;
 };
 struct ArrayResult {
-  std::map<std::string, Image> images;  // the Result's arrays by field
+  std::map<std::string, Image> images;  // the Result's arrays by field (empty Image: None)
   nlohmann::json record;                 // the run's blocks; a "sky_image" block belongs under the record's "inputs"
   nlohmann::json job;                    // the call as recorded (less the execution block)
+  nlohmann::json more = nlohmann::json::object();  // the Result's other fields (sky fit's turbidity, fit)
 };
 struct ArrayForm {
-  std::string function;            // brume.<function>
+  std::string function;            // the module's name (haze, depth_convert)
+  std::string public_name;         // as users call it (brume.haze, brume.depth.convert)
   std::string summary;             // the docstring's first paragraph
+  std::vector<ArrayArg> args;      // the positional arrays, in order
   std::vector<ParamSpec> specs;    // the keywords' declarations
   nlohmann::json defaults;         // the default call as its table's JSON
   std::vector<std::string> fields; // the Result's fields, "record" last
-  bool dense = false;              // reads ArrayInputs::rgb/range (else the views)
+  bool replays = false;            // takes job= (a record's job, as brume run reads it)
   // The default call with `values` set, each checked by its declaration.
   std::function<nlohmann::json(const JobValues& values)> build;
-  // Runs the call on the arrays (`exec` from the call's execution block, with
-  // the caller's GPU context); `given`: the keywords set explicitly.
-  std::function<ArrayResult(const ArrayInputs&, const nlohmann::json& call, const Exec& exec,
+  // Runs the call on the arrays (one per ArrayArg; `exec` from the call's
+  // execution block, with the caller's GPU context); `given`: the keywords
+  // set explicitly.
+  std::function<ArrayResult(const std::vector<ArrayIn>&, const nlohmann::json& call, const Exec& exec,
                             const std::set<std::string>& given)>
       run;
 };
@@ -228,20 +246,24 @@ ParamTable<ArrayCall<P>> array_call_table(const ParamTable<P>& own, unsigned blo
 // The array form of a command whose keywords are the call table `t` (kept
 // alive by the caller: a function-local static), run by `run` on the typed
 // call (which it may change for the record: aerial's fitted turbidity is
-// recorded as auto).
+// recorded as auto). `function` is the module's name, `public_name` the one
+// users call ("" : brume.<function>).
 template <class P>
-ArrayForm make_array_form(std::string function, std::string summary, const ParamTable<ArrayCall<P>>& t,
-                          std::vector<std::string> fields, bool dense,
-                          std::function<ArrayResult(const ArrayInputs&, ArrayCall<P>&, const Exec&,
+ArrayForm make_array_form(std::string function, std::string public_name, std::string summary,
+                          std::vector<ArrayArg> args, const ParamTable<ArrayCall<P>>& t,
+                          std::vector<std::string> fields, bool replays,
+                          std::function<ArrayResult(const std::vector<ArrayIn>&, ArrayCall<P>&, const Exec&,
                                                     const std::set<std::string>&)>
                               run) {
   ArrayForm a;
+  a.public_name = public_name.empty() ? "brume." + function : std::move(public_name);
   a.function = std::move(function);
   a.summary = std::move(summary);
+  a.args = std::move(args);
   for (const Param<ArrayCall<P>>& d : t.params()) a.specs.push_back(d.spec);
   a.defaults = t.to_json(ArrayCall<P>{});
   a.fields = std::move(fields);
-  a.dense = dense;
+  a.replays = replays;
   a.build = [&t](const JobValues& values) {
     ArrayCall<P> c;
     for (const auto& [n, v] : values) {
@@ -251,7 +273,7 @@ ArrayForm make_array_form(std::string function, std::string summary, const Param
     }
     return t.to_json(c);
   };
-  a.run = [&t, run](const ArrayInputs& in, const nlohmann::json& call, const Exec& exec,
+  a.run = [&t, run](const std::vector<ArrayIn>& in, const nlohmann::json& call, const Exec& exec,
                     const std::set<std::string>& given) {
     ArrayCall<P> c;
     t.from_json(c, call, "call");
@@ -262,6 +284,9 @@ ArrayForm make_array_form(std::string function, std::string summary, const Param
   };
   return a;
 }
+
+// The (rgb, range) arguments of the effects: colour and range as views, or both dense.
+std::vector<ArrayArg> rgb_range_args(ArrayArg::As as);
 
 // The sampling of an effect whose parameters live in one block P (its
 // table's names are the names random_params returns).

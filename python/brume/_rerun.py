@@ -3,7 +3,8 @@ from . import _brume
 
 # The commands of the library's list (brume/command.hpp) that this module runs
 # on arrays and that take a record's job: {command: function}.
-_REPLAYABLE = {c["name"]: getattr(_brume, c["function"]) for c in _brume._commands() if c["function"]}
+_REPLAYABLE = {c["name"]: getattr(_brume, c["function"]) for c in _brume._commands()
+               if c["replays"] and c["arrays"] == ["rgb", "range"]}
 
 
 def rerun(record, rgb, range, **keywords):

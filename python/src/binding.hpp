@@ -48,49 +48,6 @@ JobValues keyword_values(const std::vector<ParamSpec>& specs, const py::dict& kw
                          std::set<std::string>& given);
 JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const std::string& fn);
 
-template <class P>
-std::vector<ParamSpec> specs_of(const ParamTable<P>& t) {
-  std::vector<ParamSpec> v;
-  for (const Param<P>& d : t.params()) v.push_back(d.spec);
-  return v;
-}
-
-// The same set on p through its table; returns the names given.
-template <class P>
-std::set<std::string> set_keywords(const ParamTable<P>& t, P& p, const py::dict& kw, const std::string& fn) {
-  std::set<std::string> given;
-  for (const auto& [name, v] : keyword_values(specs_of(t), kw, fn, given)) t.at(name).set(p, v);
-  return given;
-}
-
-// ==== the call tables: a command's table nested with shared blocks ===========
-// Every Python function sets one ArrayCall<P> (brume/command.hpp): the
-// parameters and the blocks it takes. Which members a function exposes is its
-// table's choice.
-template <class P>
-using Call = ArrayCall<P>;
-constexpr unsigned kNone = kArrayNone, kPrepare = kArrayPrepare, kIntrinsics = kArrayIntrinsics, kExec = kArrayExec;
-template <class P>
-ParamTable<Call<P>> call_table(const ParamTable<P>& own, unsigned blocks, const std::set<std::string>& skip = {}) {
-  return array_call_table(own, blocks, skip);
-}
-
-template <class T>
-std::set<std::string> names_of(const ParamTable<T>& t) {
-  std::set<std::string> n;
-  for (const auto& d : t.params()) n.insert(d.spec.name);
-  return n;
-}
-
-// The job's parameters for the record, as the CLI's "job" (without the
-// execution block, which the record holds under "execution").
-template <class P>
-json job_json(const ParamTable<Call<P>>& t, const Call<P>& c) {
-  json j = t.to_json(c);
-  j.erase("execution");
-  return j;
-}
-
 // ---- docstrings and stubs (keywords.cpp) -------------------------------------------------------
 struct Extra {  // a keyword of the binding itself (not a parameter of the run)
   std::string name, stub_type, help;
@@ -114,12 +71,6 @@ std::string stub_text();
 FunctionDoc make_doc(const std::string& name, const std::string& public_name, const char* positional,
                      const std::string& summary, const std::vector<ParamSpec>& specs, const json& defaults,
                      std::vector<Extra> extras, std::vector<std::string> fields);
-template <class C>
-FunctionDoc make_doc(const char* name, const char* public_name, const char* positional, const char* summary,
-                     const ParamTable<C>& t, std::vector<Extra> extras, std::vector<std::string> fields) {
-  return make_doc(name, public_name, positional, summary, specs_of(t), t.to_json(C{}), std::move(extras),
-                  std::move(fields));
-}
 
 // ---- the GPU context of each Python thread (gpu.cpp) -------------------------------------------
 // The calling thread's context (made by its first GPU call; null before or when none could be made).

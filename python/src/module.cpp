@@ -8,10 +8,12 @@
 // the type stubs (_brume.pyi, written at build time by python/gen_stubs.py)
 // are generated from the same tables, so help(brume.haze) shows the CLI's help.
 //
-// The effects on (rgb, range) arrays are the array forms of the library's
-// list of commands (CommandDef::arrays, defined beside each pipeline): one
-// loop binds them all (def_array_command). The other functions (blur, depth,
-// sky, random_params, I/O) are bound below, each a table and a lambda.
+// The functions on arrays (brume.haze(rgb, range), brume.blur(rgb),
+// brume.depth.prepare(range), brume.sky.fit(rgb, mask), ...) are the array
+// forms of the library's list of commands (CommandDef::arrays, defined
+// beside each pipeline): one loop binds them all (def_array_command). The
+// process-wide functions (random_params, read_image, write_image, the limits,
+// the batch hooks of brume.dask) are bound below.
 //
 // Conventions (the README's Python section):
 //  - images are numpy arrays H x W x 3 (or x 4, alpha ignored) of linear RGB;
@@ -43,84 +45,133 @@
 
 #include "binding.hpp"
 #include "brume/batch.hpp"
-#include "brume/blur.hpp"
-#include "brume/depth.hpp"
-#include "brume/depth_pipeline.hpp"
+#include "brume/blur.hpp"  // _bench_blur_cpp
 #include "brume/error.hpp"
-#include "brume/prepare.hpp"
-#include "brume/record.hpp"
 #include "brume/sample.hpp"
-#include "brume/sky.hpp"
 
 namespace brume::python {
 
-// ==== the commands on arrays: (rgb, range, **keywords) -> Result ===========================
-// Every command of the library's list with an array form (CommandDef::arrays:
-// haze, aerial, fog, dof) is bound here as brume.<function>; nothing here
-// names one. The form runs without the GIL on the arrays in place (its
-// views), or on dense images (the caller's pixels when C-contiguous).
-void def_array_command(py::module_& m, const CommandDef& c) {
-  const ArrayForm& a = *c.arrays;
-  const std::string fn = "brume." + a.function;
-  FunctionDoc doc = make_doc(a.function, fn, "rgb: npt.NDArray[Any], range: npt.NDArray[Any]", a.summary, a.specs,
-                             a.defaults,
-                             {{"transfer", "Literal[\"srgb\", \"linear\"] | None",
-                               "uint8/uint16 rgb only: 'srgb' (PNG/JPEG-like) or 'linear'; float arrays are linear"},
-                              {"job", "dict[str, Any] | None",
-                               "a record's \"job\" (Result.record['job'], or a CLI record's): replays that run, "
-                               "bit for bit on the CPU, as `brume run` does; other keywords override its values"}},
-                             a.fields);
-  doc.command = c.name;
-  doc.replays = true;
-  registry().push_back(doc);
-  const std::string command = c.name;
-  m.def(
-      a.function.c_str(),
-      [&a, fn, command](py::object rgb_obj, py::object range_obj, py::kwargs kw) {
-        py::dict k = py::dict(kw);
-        const Transfer tr = parse_transfer_kw(k.contains("transfer") ? py::object(k["transfer"]) : py::object(py::none()), fn + "()");
-        if (k.contains("transfer")) PyDict_DelItemString(k.ptr(), "transfer");
-        JobValues values;
-        if (k.contains("job")) {
-          py::object job = k["job"];
-          PyDict_DelItemString(k.ptr(), "job");
-          if (!job.is_none()) values = job_values(a.specs, job, fn);
-        }
-        std::set<std::string> given;
-        for (auto& v : keyword_values(a.specs, k, fn, given)) values.push_back(std::move(v));
-        const json call = a.build(values);
-        g_last_inputs.clear();
-        Input rgb = read_input(rgb_obj, "rgb", 3, tr, fn);
-        Input range = read_input(range_obj, "range", 1, Transfer::automatic, fn);
-        if (a.dense) {
-          as_dense(rgb, "rgb");
-          as_dense(range, "range");
-        }
-        ExecOptions eo;
-        if (call.contains("execution")) exec_param_table().from_json(eo, {{"execution", call["execution"]}}, fn);
-        const Exec exec = eo.exec();
-        ArrayResult out;
-        {
-          py::gil_scoped_release nogil;
-          out = a.run({rgb.view, range.view, rgb.dense, range.dense}, call, with_thread_gpu(exec), given);
-        }
-        json rec = python_header(command, fn);
-        rec["job"] = std::move(out.job);
-        rec["inputs"] = {{"rgb", rgb.record}, {"range", range.record}};
-        if (out.record.contains("sky_image")) {  // aerial's sky photo is an input, as in the CLI's record
-          rec["inputs"]["sky_image"] = out.record["sky_image"];
-          out.record.erase("sky_image");
-        }
-        rec.update(out.record);
-        return make_result(std::move(out.images), rec);
-      },
-      py::arg("rgb"), py::arg("range"), docstring(doc).c_str());
+// ==== the commands on arrays: brume.<function>(arrays..., **keywords) -> Result ==================
+// Every command of the library's list with an array form (CommandDef::arrays)
+// is bound here; nothing here names one. Its positional arrays are read as
+// its ArrayArgs ask (in place as views; dense, in place when C-contiguous; or
+// an Image of the call's own), its keywords through its declarations, and it
+// runs without the GIL.
+namespace {
+
+std::string positional_stub(const ArrayForm& a) {
+  std::string p;
+  for (const ArrayArg& g : a.args)
+    p += (p.empty() ? "" : ", ") + g.name + ": npt.NDArray[Any]" + (g.optional ? " | None = None" : "");
+  return p;
 }
 
-// A table that lives as long as the module (functions keep a pointer).
-template <class T>
-const T* keep(T t) {
-  return new T(std::move(t));
+py::object call_array_form(const ArrayForm& a, const std::string& command, const std::vector<py::object>& arrays,
+                           py::kwargs kw) {
+  const std::string& fn = a.public_name;
+  py::dict k = py::dict(kw);
+  const bool colour = !a.args.empty() && a.args.front().channels == 3;
+  Transfer tr = Transfer::automatic;
+  if (colour) {
+    tr = parse_transfer_kw(k.contains("transfer") ? py::object(k["transfer"]) : py::object(py::none()), fn + "()");
+    if (k.contains("transfer")) PyDict_DelItemString(k.ptr(), "transfer");
+  }
+  JobValues values;
+  if (a.replays && k.contains("job")) {
+    py::object job = k["job"];
+    PyDict_DelItemString(k.ptr(), "job");
+    if (!job.is_none()) values = job_values(a.specs, job, fn);
+  }
+  std::set<std::string> given;
+  for (auto& v : keyword_values(a.specs, k, fn, given)) values.push_back(std::move(v));
+  const json call = a.build(values);
+  g_last_inputs.clear();
+  std::vector<Input> inputs(a.args.size());
+  std::vector<ArrayIn> in(a.args.size());
+  for (std::size_t i = 0; i < a.args.size(); ++i) {
+    const ArrayArg& g = a.args[i];
+    if (arrays[i].is_none() && g.optional) continue;
+    inputs[i] = read_input(arrays[i], g.name, g.channels, g.channels == 3 ? tr : Transfer::automatic, fn);
+    in[i].present = true;
+    in[i].integer = py::isinstance<py::array>(arrays[i]) &&
+                    py::reinterpret_borrow<py::array>(arrays[i]).dtype().kind() == 'u';
+    if (g.as == ArrayArg::As::dense) as_dense(inputs[i], g.name);
+    if (g.as == ArrayArg::As::image) as_image(inputs[i], g.name);
+    in[i].view = inputs[i].view;
+    in[i].dense = inputs[i].dense;
+    if (g.as == ArrayArg::As::image) in[i].image = &inputs[i].owned;
+  }
+  ExecOptions eo;
+  if (call.contains("execution")) exec_param_table().from_json(eo, {{"execution", call["execution"]}}, fn);
+  const Exec exec = eo.exec();
+  ArrayResult out;
+  {
+    py::gil_scoped_release nogil;
+    out = a.run(in, call, with_thread_gpu(exec), given);
+  }
+  json rec = python_header(command, fn);
+  rec["job"] = std::move(out.job);
+  if (!a.args.empty()) {
+    rec["inputs"] = json::object();
+    for (std::size_t i = 0; i < a.args.size(); ++i)
+      if (in[i].present) rec["inputs"][a.args[i].name] = inputs[i].record;
+  }
+  if (out.record.contains("sky_image")) {  // aerial's sky photo is an input, as in the CLI's record
+    rec["inputs"]["sky_image"] = out.record["sky_image"];
+    out.record.erase("sky_image");
+  }
+  rec.update(out.record);
+  std::map<std::string, py::object> more;
+  for (const auto& [name, v] : out.more.items()) more[name] = to_py(v);
+  return make_result(std::move(out.images), rec, more);
+}
+
+}  // namespace
+
+void def_array_command(py::module_& m, const CommandDef& c) {
+  const ArrayForm& a = *c.arrays;
+  std::vector<Extra> extras;
+  if (!a.args.empty() && a.args.front().channels == 3)
+    extras.push_back({"transfer", "Literal[\"srgb\", \"linear\"] | None",
+                      "uint8/uint16 rgb only: 'srgb' (PNG/JPEG-like) or 'linear'; float arrays are linear"});
+  if (a.replays)
+    extras.push_back({"job", "dict[str, Any] | None",
+                      "a record's \"job\" (Result.record['job'], or a CLI record's): replays that run, bit for bit "
+                      "on the CPU, as `brume run` does; other keywords override its values"});
+  const std::string positional = positional_stub(a);
+  FunctionDoc doc = make_doc(a.function, a.public_name, positional.c_str(), a.summary, a.specs, a.defaults,
+                             std::move(extras), a.fields);
+  doc.command = c.name;
+  doc.replays = a.replays;
+  registry().push_back(doc);
+  const std::string command = c.name;
+  const std::string ds = docstring(doc);
+  switch (a.args.size()) {
+    case 0:
+      m.def(a.function.c_str(), [&a, command](py::kwargs kw) { return call_array_form(a, command, {}, kw); },
+            ds.c_str());
+      break;
+    case 1:  // (a required one: no form takes a lone optional array)
+      m.def(
+          a.function.c_str(),
+          [&a, command](py::object x, py::kwargs kw) { return call_array_form(a, command, {x}, kw); },
+          py::arg(a.args[0].name.c_str()), ds.c_str());
+      break;
+    case 2:
+      if (a.args[1].optional)
+        m.def(
+            a.function.c_str(),
+            [&a, command](py::object x, py::object y, py::kwargs kw) { return call_array_form(a, command, {x, y}, kw); },
+            py::arg(a.args[0].name.c_str()), py::arg(a.args[1].name.c_str()) = py::none(), ds.c_str());
+      else
+        m.def(
+            a.function.c_str(),
+            [&a, command](py::object x, py::object y, py::kwargs kw) { return call_array_form(a, command, {x, y}, kw); },
+            py::arg(a.args[0].name.c_str()), py::arg(a.args[1].name.c_str()), ds.c_str());
+      break;
+    default:
+      throw Error("internal: array form " + a.function + " takes more than two arrays");
+  }
 }
 
 // ==== errors as Python exceptions ===========================
@@ -153,209 +204,9 @@ PYBIND11_MODULE(_brume, m) {
   m.attr("__version__") = BRUME_VERSION;
   register_errors();
 
-  // ---- the commands on arrays (the library's list) ------------------------------------
+  // ---- the commands on arrays (the library's list): effects, blur, depth, sky -----------
   for (const CommandDef& c : commands())
     if (c.arrays) def_array_command(m, c);
-
-  // ---- blur: the engine alone, the image read in place ---------------------------------
-  {
-    std::set<std::string> skip = names_of(input_param_table(false));
-    for (const auto& n : names_of(output_param_table({}))) skip.insert(n);
-    skip.insert("scale-map");  // a numpy argument here, not a file
-    const auto* table = keep(call_table(blur_job_table(), kExec, skip));
-    FunctionDoc doc = make_doc("blur", "brume.blur", "rgb: npt.NDArray[Any], scale_map: npt.NDArray[Any] | None = None",
-                               "The diffusion engine alone: a Gaussian of sqrt(sigma^2 - sigma0^2) (sigma=) or a "
-                               "space-variant blur to a per-pixel scale map in px (scale_map=). As `brume blur`. "
-                               "A float32 rgb is read in place (no copy).",
-                               *table,
-                               {{"transfer", "Literal[\"srgb\", \"linear\"] | None", "uint8/uint16 rgb only"}},
-                               {"rgb", "record"});
-    registry().push_back(doc);
-    m.def(
-        "blur",
-        [table](py::object rgb_obj, py::object map_obj, py::kwargs kw) {
-          const std::string fn = "brume.blur";
-          py::dict k = py::dict(kw);
-          const Transfer tr = parse_transfer_kw(k.contains("transfer") ? py::object(k["transfer"]) : py::object(py::none()), fn + "()");
-          if (k.contains("transfer")) PyDict_DelItemString(k.ptr(), "transfer");
-          Call<BlurJob> c;
-          set_keywords(*table, c, k, fn);
-          g_last_inputs.clear();
-          Input rgb = read_input(rgb_obj, "rgb", 3, tr, fn);
-          std::optional<Input> smap;
-          if (!map_obj.is_none()) {
-            smap = read_input(map_obj, "scale_map", 1, Transfer::automatic, fn);
-            as_image(*smap, "scale_map");
-          }
-          const Exec exec = c.exec.exec();
-          BlurRun r;
-          {
-            py::gil_scoped_release nogil;
-            r = run_blur(rgb.view, c.p.sigma, smap ? &smap->owned : nullptr, c.p.diffusion, with_thread_gpu(exec));
-          }
-          json rec = python_header("blur", fn);
-          rec["job"] = job_json(*table, c);
-          rec["inputs"] = {{"rgb", rgb.record}};
-          if (smap) rec["inputs"]["scale_map"] = smap->record;
-          rec.update(r.record);
-          return make_result({{"rgb", std::move(r.rgb)}}, rec);
-        },
-        py::arg("rgb"), py::arg("scale_map") = py::none(), docstring(doc).c_str());
-  }
-
-  // ---- depth ----------------------------------------------------------------------------
-  {
-    std::set<std::string> skip = {"out", "record"};
-    const auto* table = keep(call_table(depth_convert_job_table(), kNone, skip));
-    FunctionDoc doc = make_doc("depth_convert", "brume.depth.convert", "",
-                               "Every depth source to a range map (metres along the ray; kind='z': planar depth), "
-                               "read from its file with its conventions. Exactly one source keyword (range=, z=, "
-                               "disparity=, depth_buffer=, inverse_depth=, normalized_depth=, velodyne=). As "
-                               "`brume depth convert`.",
-                               *table, {}, {"range", "record"});
-    registry().push_back(doc);
-    m.def(
-        "depth_convert",
-        [table](py::kwargs kw) {
-          const std::string fn = "brume.depth.convert";
-          Call<DepthConvertJob> c;
-          set_keywords(*table, c, py::dict(kw), fn);
-          Image result;
-          json rec = python_header("depth convert", fn);
-          {
-            py::gil_scoped_release nogil;
-            depth_convert_job_table().validate(c.p);
-            LoadedDepth ld = load_depth(c.p.depth);
-            result = std::move(ld.range);
-            rec["depth"] = ld.record;
-            if (c.p.kind == "z") {
-              const Intrinsics k = depth_camera(c.p.depth, result.width, result.height).k;
-              result = range_to_z(result, k);
-              rec["z_intrinsics"] = {{"fx_px", k.fx}, {"fy_px", k.fy}, {"cx_px", k.cx}, {"cy_px", k.cy}};
-            }
-          }
-          rec["job"] = table->to_json(c);
-          rec["kind"] = c.p.kind;
-          rec["result"] = {{"width", result.width}, {"height", result.height},
-                           {"unknown_pixels", unknown_range_pixels(result)}};
-          return make_result({{c.p.kind == "z" ? "z" : "range", std::move(result)}}, rec);
-        },
-        docstring(doc).c_str());
-  }
-  {
-    const auto* table = keep(call_table(prepare_param_table(), kNone));
-    FunctionDoc doc = make_doc("depth_prepare", "brume.depth.prepare", "range: npt.NDArray[Any]",
-                               "Range preparation (Hansard 4.1): fill holes, identify the sky (set to S_max) and "
-                               "matte the horizon. As `brume depth prepare`, on an array.",
-                               *table, {}, {"range", "sky_mask", "hole_mask", "margin_mask", "record"});
-    registry().push_back(doc);
-    m.def(
-        "depth_prepare",
-        [table](py::object range_obj, py::kwargs kw) {
-          const std::string fn = "brume.depth.prepare";
-          Call<PrepareParams> c;
-          set_keywords(*table, c, py::dict(kw), fn);
-          g_last_inputs.clear();
-          Input range = read_input(range_obj, "range", 1, Transfer::automatic, fn);
-          const DenseImageRef r_img = as_dense(range, "range");
-          PrepareResult pr;
-          {
-            py::gil_scoped_release nogil;
-            prepare_param_table().validate(c.p);
-            pr = prepare_range(r_img, c.p);
-          }
-          json rec = python_header("depth prepare", fn);
-          rec["job"] = table->to_json(c);
-          rec["inputs"] = {{"range", range.record}};
-          rec["prepare"] = prepare_record(c.p, pr);
-          return make_result({{"range", std::move(pr.range)},
-                              {"sky_mask", std::move(pr.sky_mask)},
-                              {"hole_mask", std::move(pr.hole_mask)},
-                              {"margin_mask", std::move(pr.margin_mask)}},
-                             rec);
-        },
-        py::arg("range"), docstring(doc).c_str());
-  }
-
-  // ---- sky ------------------------------------------------------------------------------
-  {
-    const auto* table = keep(call_table(sky_render_param_table(), kExec));
-    FunctionDoc doc = make_doc("sky_render", "brume.sky.render", "",
-                               "A Preetham sky in linear sRGB (kcd/m^2 x exposure), NaN (or ground) below the "
-                               "horizon. As `brume sky render`.",
-                               *table, {}, {"rgb", "record"});
-    registry().push_back(doc);
-    m.def(
-        "sky_render",
-        [table](py::kwargs kw) {
-          const std::string fn = "brume.sky.render";
-          Call<SkyRenderParams> c;
-          set_keywords(*table, c, py::dict(kw), fn);
-          const Exec exec = c.exec.exec();
-          SkyRenderRun r;
-          {
-            py::gil_scoped_release nogil;
-            r = run_sky_render(c.p, with_thread_gpu(exec));
-          }
-          json rec = python_header("sky render", fn);
-          rec["job"] = job_json(*table, c);
-          rec["inputs"] = json::object();
-          rec.update(r.record);
-          return make_result({{"rgb", std::move(r.rgb)}}, rec);
-        },
-        docstring(doc).c_str());
-  }
-  {
-    std::set<std::string> skip = {"image", "image-transfer", "mask", "out", "plot"};
-    const auto* table = keep(call_table(sky_fit_job_table(), kNone, skip));
-    FunctionDoc doc = make_doc("sky_fit", "brume.sky.fit", "rgb: npt.NDArray[Any], mask: npt.NDArray[Any] | None = None",
-                               "Turbidity of a sky photo (Preetham model, RANSAC against clouds). mask: > 0.5 marks "
-                               "usable sky. Integer rgb (transfer=) enables saturation detection, as an 8/16-bit "
-                               "file does. As `brume sky fit`; the result's `fit` is its JSON.",
-                               *table,
-                               {{"transfer", "Literal[\"srgb\", \"linear\"] | None", "uint8/uint16 rgb only"}},
-                               {"turbidity", "reliable", "fit", "record"});
-    registry().push_back(doc);
-    m.def(
-        "sky_fit",
-        [table](py::object rgb_obj, py::object mask_obj, py::kwargs kw) {
-          const std::string fn = "brume.sky.fit";
-          py::dict k = py::dict(kw);
-          const Transfer tr = parse_transfer_kw(k.contains("transfer") ? py::object(k["transfer"]) : py::object(py::none()), fn + "()");
-          if (k.contains("transfer")) PyDict_DelItemString(k.ptr(), "transfer");
-          Call<SkyFitJob> c;
-          set_keywords(*table, c, k, fn);
-          g_last_inputs.clear();
-          Input rgb = read_input(rgb_obj, "rgb", 3, tr, fn);
-          const bool integer = py::reinterpret_borrow<py::array>(rgb_obj).dtype().kind() == 'u';
-          const DenseImageRef img = as_dense(rgb, "rgb");
-          std::optional<Input> mask;
-          if (!mask_obj.is_none()) {
-            mask = read_input(mask_obj, "mask", 1, Transfer::automatic, fn);
-            Image& mk = const_cast<Image&>(as_image(*mask, "mask"));
-            if (mk.width != img.width || mk.height != img.height)
-              throw py::value_error(fn + "(): mask is " + mk.size_string() + " but rgb is " + img.size_string() +
-                                    "; give a mask of the image's size");
-            for (float& v : mk.data) v = v > 0.5f ? 1.0f : 0.0f;
-          }
-          SkyImageFit f;
-          {
-            py::gil_scoped_release nogil;
-            sky_fit_job_table().validate(c.p);
-            f = fit_sky_data(img, integer, mask ? &mask->owned : nullptr, c.p.view, c.p.sun, c.p.fit);
-          }
-          json rec = python_header("sky fit", fn);
-          rec["job"] = table->to_json(c);
-          rec["inputs"] = {{"rgb", rgb.record}};
-          if (mask) rec["inputs"]["mask"] = mask->record;
-          rec["fit_ms"] = f.fit_ms;
-          return make_result({}, rec,
-                             {{"turbidity", to_py(f.fit.value("turbidity", json()))},
-                              {"reliable", to_py(f.fit.value("reliable", json(false)))},
-                              {"fit", to_py(f.fit)}});
-        },
-        py::arg("rgb"), py::arg("mask") = py::none(), docstring(doc).c_str());
-  }
 
   // ---- brume.random_params (issue #14 item 3): the library's sampler ------------------
   // Keyed by (seed, frame key, parameter name), never by call order, so the
@@ -540,9 +391,9 @@ PYBIND11_MODULE(_brume, m) {
   m.def(
       "_commands",
       []() {
-        // The library's list of commands (brume/command.hpp), with the name of
-        // this module's function that runs each one on arrays (None when a
-        // command has no array form): brume.rerun and the tests walk it.
+        // The library's list of commands (brume/command.hpp), with this
+        // module's function that runs each one on arrays (None when a command
+        // has no array form): brume.rerun and the tests walk it.
         py::list out;
         for (const CommandDef& c : commands()) {
           py::dict d;
@@ -553,15 +404,19 @@ PYBIND11_MODULE(_brume, m) {
           d["batch"] = c.batch;
           d["sample"] = c.sampling.has_value();
           d["gpu_passes"] = to_py(json(c.gpu_passes));
-          std::string fn;
-          for (const FunctionDoc& f : registry())
-            if (f.command == c.name && f.replays) fn = f.name;
-          d["function"] = fn.empty() ? py::object(py::none()) : py::object(py::str(fn));
+          d["function"] = c.arrays ? py::object(py::str(c.arrays->function)) : py::object(py::none());
+          d["public_name"] = c.arrays ? py::object(py::str(c.arrays->public_name)) : py::object(py::none());
+          py::list args;
+          if (c.arrays)
+            for (const ArrayArg& g : c.arrays->args) args.append(g.name);
+          d["arrays"] = args;
+          d["replays"] = c.arrays && c.arrays->replays;
           out.append(d);
         }
         return out;
       },
-      "The library's list of commands: name, cli, summary, record, batch, sample, gpu_passes, function.");
+      "The library's list of commands: name, cli, summary, record, batch, sample, gpu_passes, and its array form "
+      "(function, public_name, arrays: the positional array names, replays: takes job=).");
   m.def(
       "_debug_last_inputs",
       []() {

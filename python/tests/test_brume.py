@@ -595,27 +595,37 @@ CAMERA = {"fog": {"fov_y": 55, "camera_height": 1.6}, "dof": {"fov_x": 2 * math.
 
 
 def test_every_command_of_the_list_reaches_python(demo):
-    """Each command with an array form is a function of the module that runs on
-    the demo's arrays, records its command, and is repeated by brume.rerun bit
-    for bit; each sampleable one draws through random_params; the stubs list
-    every function and the sampleable effects."""
+    """Each command with an array form is a function of the module, with its
+    positional arrays in its stub; those on (rgb, range) run on the demo's
+    arrays, record their command, and are repeated by brume.rerun bit for bit;
+    each sampleable one draws through random_params; the stubs list every
+    function and the sampleable effects."""
     commands = _brume._commands()
     names = [c["name"] for c in commands]
     assert len(names) == len(set(names)) and "haze" in names
     stubs = _brume._stub_text()
     rgb, rng = demo["rgb"][::4, ::4], demo["range"][::4, ::4]
+    forms = [c for c in commands if c["function"]]
+    assert {"haze", "aerial", "fog", "dof", "blur", "depth convert", "depth prepare", "sky render",
+            "sky fit"} <= {c["name"] for c in forms}
     for c in commands:
         if c["sample"]:
-            drawn = brume.random_params(c["name"], 7, "frame/1")
-            assert drawn and f"'{c['name']}'" in stubs.split("def random_params(")[1].split(")")[0]
-        if not c["function"]:
+            assert brume.random_params(c["name"], 7, "frame/1")
+            assert f"'{c['name']}'" in stubs.split("def random_params(")[1].split(")")[0]
+    for c in forms:
+        stub = stubs.split(f"def {c['function']}(")[1].split(")")[0]
+        assert [a.split(":")[0].strip() for a in stub.split(", ") if "NDArray" in a] == c["arrays"]
+        public = brume
+        for part in c["public_name"].split(".")[1:]:
+            public = getattr(public, part)
+        assert public is getattr(_brume, c["function"])
+        if c["arrays"] != ["rgb", "range"]:
             continue
-        f = getattr(brume, c["function"])
-        assert f"def {c['function']}(" in stubs
+        assert c["replays"]
         # Its sampled parameters, with the camera the fog's heights and the lens's planar depth need.
         kw = brume.random_params(c["name"], 7, "frame/1") if c["sample"] else {}
         kw.update(CAMERA.get(c["name"], {}))
-        r = f(rgb, rng, threads=1, **kw)
+        r = public(rgb, rng, threads=1, **kw)
         assert r.record["command"] == c["name"]
         again = brume.rerun(r.record, rgb, rng, threads=1)
         same(again.rgb, r.rgb)

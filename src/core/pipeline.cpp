@@ -1,5 +1,6 @@
 // brume — the steps every effect's pipeline shares (see brume/pipeline.hpp).
 #include "brume/pipeline.hpp"
+#include "brume/command.hpp"
 
 #include <chrono>
 #include <cmath>
@@ -302,6 +303,10 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
 }
 
 bool is_output_file(const ParamSpec& s) { return s.output_file; }
+
+std::vector<ArrayArg> rgb_range_args(ArrayArg::As as) {
+  return {{"rgb", 3, false, as}, {"range", 1, false, as}};
+}
 
 const std::set<std::string>& depth_file_params() {
   static const std::set<std::string> skip = [] {

@@ -8,6 +8,7 @@
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "brume/io.hpp"
+#include "brume/prepare.hpp"
 #include "brume/record.hpp"
 
 namespace fs = std::filesystem;
@@ -121,7 +122,7 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
 }
 
 CommandDef depth_convert_command() {
-  return make_command<DepthConvertJob>({
+  CommandDef c = make_command<DepthConvertJob>({
       .name = "depth convert",
       .cli = "depth convert",
       .summary = "convert a depth source to a range (or z) map in metres",
@@ -143,10 +144,36 @@ CommandDef depth_convert_command() {
         std::fprintf(stderr, "\n");
       },
   });
+  // brume.depth.convert(**sources): the file in, the map out as an array.
+  static const auto call = array_call_table(depth_convert_job_table(), kArrayNone, {"out", "record"});
+  c.arrays = make_array_form<DepthConvertJob>(
+      "depth_convert", "brume.depth.convert",
+      "Every depth source to a range map (metres along the ray; kind='z': planar depth), read from its file with "
+      "its conventions. Exactly one source keyword (range=, z=, disparity=, depth_buffer=, inverse_depth=, "
+      "normalized_depth=, velodyne=). As `brume depth convert`.",
+      {}, call, {"range", "record"}, false,
+      [](const std::vector<ArrayIn>&, ArrayCall<DepthConvertJob>& k, const Exec&, const std::set<std::string>&) {
+        ArrayResult r;
+        depth_convert_job_table().validate(k.p);
+        LoadedDepth ld = load_depth(k.p.depth);
+        Image result = std::move(ld.range);
+        r.record["depth"] = ld.record;
+        if (k.p.kind == "z") {
+          const Intrinsics ki = depth_camera(k.p.depth, result.width, result.height).k;
+          result = range_to_z(result, ki);
+          r.record["z_intrinsics"] = {{"fx_px", ki.fx}, {"fy_px", ki.fy}, {"cx_px", ki.cx}, {"cy_px", ki.cy}};
+        }
+        r.record["kind"] = k.p.kind;
+        r.record["result"] = {{"width", result.width}, {"height", result.height},
+                              {"unknown_pixels", unknown_range_pixels(result)}};
+        r.images[k.p.kind == "z" ? "z" : "range"] = std::move(result);
+        return r;
+      });
+  return c;
 }
 
 CommandDef depth_prepare_command() {
-  return make_command<DepthPrepareJob>({
+  CommandDef c = make_command<DepthPrepareJob>({
       .name = "depth prepare",
       .cli = "depth prepare",
       .summary = "fill holes, identify the sky and matte the horizon (Hansard 4.1)",
@@ -167,6 +194,25 @@ CommandDef depth_prepare_command() {
                      p["solver_iterations"].get<int>());
       },
   });
+  // brume.depth.prepare(range): the preparation on an array.
+  static const auto call = array_call_table(prepare_param_table(), kArrayNone);
+  c.arrays = make_array_form<PrepareParams>(
+      "depth_prepare", "brume.depth.prepare",
+      "Range preparation (Hansard 4.1): fill holes, identify the sky (set to S_max) and matte the horizon. As "
+      "`brume depth prepare`, on an array.",
+      {{"range", 1, false, ArrayArg::As::dense}}, call, {"range", "sky_mask", "hole_mask", "margin_mask", "record"},
+      false, [](const std::vector<ArrayIn>& in, ArrayCall<PrepareParams>& k, const Exec&, const std::set<std::string>&) {
+        prepare_param_table().validate(k.p);
+        PrepareResult pr = prepare_range(in[0].dense, k.p);
+        ArrayResult r;
+        r.record["prepare"] = prepare_record(k.p, pr);
+        r.images = {{"range", std::move(pr.range)},
+                    {"sky_mask", std::move(pr.sky_mask)},
+                    {"hole_mask", std::move(pr.hole_mask)},
+                    {"margin_mask", std::move(pr.margin_mask)}};
+        return r;
+      });
+  return c;
 }
 
 }  // namespace brume

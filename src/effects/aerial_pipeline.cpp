@@ -255,15 +255,15 @@ CommandDef aerial_command() {
     return array_call_table(aerial_job_table(), kArrayExec, skip);
   }();
   c.arrays = make_array_form<AerialJob>(
-      "aerial",
+      "aerial", "",
       "Spectral aerial perspective from turbidity (Morales): render, re-render (from_turbidity) or remove, with "
       "optional scattering blur (lambda_). The turbidity is given, read from a `brume sky fit` JSON "
       "(turbidity_from=) or fitted on a sky photo (turbidity='auto', sky_image=FILE, sky_* keywords), refused "
       "when the fit is unreliable. As `brume aerial`.",
-      call, {"rgb", "attenuation", "scale", "record"}, true,
-      [](const ArrayInputs& in, ArrayCall<AerialJob>& k, const Exec& e, const std::set<std::string>& g) {
+      rgb_range_args(ArrayArg::As::dense), call, {"rgb", "attenuation", "scale", "record"}, true,
+      [](const std::vector<ArrayIn>& in, ArrayCall<AerialJob>& k, const Exec& e, const std::set<std::string>& g) {
         const AerialTurbidity tf = resolve_aerial_turbidity(k.p, g);
-        AerialRun r = run_aerial(in.rgb, in.range, k.p.aerial, k.p.prepare, e, g);
+        AerialRun r = run_aerial(in[0].dense, in[1].dense, k.p.aerial, k.p.prepare, e, g);
         if (!tf.fit_record.is_null()) {
           r.record["turbidity_fit"] = tf.fit_record;
           r.record["sky_image"] = tf.image_record;  // under "inputs", as in the CLI's record
@@ -273,6 +273,7 @@ CommandDef aerial_command() {
                             {"attenuation", std::move(r.result.attenuation)},
                             {"scale", std::move(r.result.scale)}},
                            std::move(r.record),
+                           {},
                            {}};
       });
   return c;

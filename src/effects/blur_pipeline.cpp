@@ -194,6 +194,24 @@ CommandDef blur_command() {
       },
   });
   c.gpu_passes = {"diffusion.rates", "diffusion.iterate"};
+  // brume.blur(rgb, scale_map=None): the image read in place (a view), the
+  // scale map an Image; the input and output files are the arrays.
+  static const auto call = [] {
+    std::set<std::string> skip;
+    for (const auto& d : input_param_table(false).params()) skip.insert(d.spec.name);
+    for (const auto& d : output_param_table({}).params()) skip.insert(d.spec.name);
+    skip.insert("scale-map");  // a numpy argument here, not a file
+    return array_call_table(blur_job_table(), kArrayExec, skip);
+  }();
+  c.arrays = make_array_form<BlurJob>(
+      "blur", "",
+      "The diffusion engine alone: a Gaussian of sqrt(sigma^2 - sigma0^2) (sigma=) or a space-variant blur to a "
+      "per-pixel scale map in px (scale_map=). As `brume blur`. A float32 rgb is read in place (no copy).",
+      {{"rgb", 3, false, ArrayArg::As::view}, {"scale_map", 1, true, ArrayArg::As::image}}, call, {"rgb", "record"},
+      false, [](const std::vector<ArrayIn>& in, ArrayCall<BlurJob>& k, const Exec& e, const std::set<std::string>&) {
+        BlurRun r = run_blur(in[0].view, k.p.sigma, in[1].present ? in[1].image : nullptr, k.p.diffusion, e);
+        return ArrayResult{{{"rgb", std::move(r.rgb)}}, std::move(r.record), {}, {}};
+      });
   return c;
 }
 

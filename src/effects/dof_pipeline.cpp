@@ -216,19 +216,20 @@ CommandDef dof_command() {
   c.gpu_passes = {"diffusion.rates", "diffusion.iterate"};
   static const auto call = array_call_table(dof_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
   c.arrays = make_array_form<DofParams>(
-      "dof",
+      "dof", "",
       "Depth of field by leak-free diffusion (thin-lens circle of confusion). `range` is metres along the ray; "
       "planar depth comes from the intrinsics or the lens. As `brume dof`.",
-      call, {"rgb", "scale", "record"}, true,
-      [](const ArrayInputs& in, ArrayCall<DofParams>& k, const Exec& e, const std::set<std::string>& g) {
-        const Intrinsics ki = dof_intrinsics(k.depth, k.p, in.rgb.width, in.rgb.height);
+      rgb_range_args(ArrayArg::As::dense), call, {"rgb", "scale", "record"}, true,
+      [](const std::vector<ArrayIn>& in, ArrayCall<DofParams>& k, const Exec& e, const std::set<std::string>& g) {
+        const Intrinsics ki = dof_intrinsics(k.depth, k.p, in[0].dense.width, in[0].dense.height);
         // run_dof reads a given context as backend gpu (its CPU-only schemes
         // would be refused), so with auto it makes its own.
         Exec ex = e;
         if (ex.backend != Backend::gpu) ex.gpu = nullptr;
-        DofRun r = run_dof(in.rgb, in.range, ki, k.p, k.prepare, ex, g);
+        DofRun r = run_dof(in[0].dense, in[1].dense, ki, k.p, k.prepare, ex, g);
         return ArrayResult{{{"rgb", std::move(r.result.rgb)}, {"scale", std::move(r.result.scale)}},
                            std::move(r.record),
+                           {},
                            {}};
       });
   return c;

@@ -190,16 +190,17 @@ CommandDef fog_command() {
   };
   static const auto call = array_call_table(fog_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
   c.arrays = make_array_form<FogParams>(
-      "fog",
+      "fog", "",
       "Layered fog from the range and the camera (Zhou, Chen, Smith), with scattering blur for lambda_ > 0. "
       "The intrinsics (fx.. or fov_x/fov_y) and the pose are keywords. As `brume fog`.",
-      call, {"rgb", "optical_depth", "transmission", "record"}, true,
-      [](const ArrayInputs& in, ArrayCall<FogParams>& k, const Exec& e, const std::set<std::string>& g) {
-        FogRun r = run_fog(in.rgb, in.range, k.depth, k.p, k.prepare, e, g);
+      rgb_range_args(ArrayArg::As::dense), call, {"rgb", "optical_depth", "transmission", "record"}, true,
+      [](const std::vector<ArrayIn>& in, ArrayCall<FogParams>& k, const Exec& e, const std::set<std::string>& g) {
+        FogRun r = run_fog(in[0].dense, in[1].dense, k.depth, k.p, k.prepare, e, g);
         return ArrayResult{{{"rgb", std::move(r.result.rgb)},
                             {"optical_depth", std::move(r.result.optical_depth)},
                             {"transmission", std::move(r.result.transmission)}},
                            std::move(r.record),
+                           {},
                            {}};
       });
   return c;

@@ -175,16 +175,17 @@ CommandDef haze_command() {
   // brume.haze(rgb, range, ...): the arrays read in place (views).
   static const auto call = array_call_table(haze_param_table(), kArrayPrepare | kArrayExec);
   c.arrays = make_array_form<HazeParams>(
-      "haze",
+      "haze", "",
       "Haze and fog with scattering blur (Hansard): Beer-Lambert transmission from the range, premultiplied "
       "compositing with the airlight, depth-dependent blur by inhomogeneous diffusion. As `brume haze`.",
-      call, {"rgb", "transmission", "scale", "record"}, false,
-      [](const ArrayInputs& in, ArrayCall<HazeParams>& k, const Exec& e, const std::set<std::string>& g) {
-        HazeRun r = run_haze(in.rgb_view, in.range_view, k.p, k.prepare, e, g);
+      rgb_range_args(ArrayArg::As::view), call, {"rgb", "transmission", "scale", "record"}, true,
+      [](const std::vector<ArrayIn>& in, ArrayCall<HazeParams>& k, const Exec& e, const std::set<std::string>& g) {
+        HazeRun r = run_haze(in[0].view, in[1].view, k.p, k.prepare, e, g);
         return ArrayResult{{{"rgb", std::move(r.result.rgb)},
                             {"transmission", std::move(r.result.transmission)},
                             {"scale", std::move(r.result.scale)}},
                            std::move(r.record),
+                           {},
                            {}};
       });
   return c;

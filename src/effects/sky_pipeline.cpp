@@ -318,11 +318,24 @@ CommandDef sky_render_command() {
       },
   });
   c.gpu_passes = {"sky.render"};
+  // brume.sky.render(**keywords): a sky image, no input array.
+  static const auto call = array_call_table(sky_render_param_table(), kArrayExec);
+  c.arrays = make_array_form<SkyRenderParams>(
+      "sky_render", "brume.sky.render",
+      "A Preetham sky in linear sRGB (kcd/m^2 x exposure), NaN (or ground) below the horizon. As `brume sky "
+      "render`.",
+      {}, call, {"rgb", "record"}, false,
+      [](const std::vector<ArrayIn>&, ArrayCall<SkyRenderParams>& k, const Exec& e, const std::set<std::string>&) {
+        SkyRenderRun r = run_sky_render(k.p, e);
+        ArrayResult out{{{"rgb", std::move(r.rgb)}}, std::move(r.record), {}, {}};
+        out.record["inputs"] = nlohmann::json::object();
+        return out;
+      });
   return c;
 }
 
 CommandDef sky_fit_command() {
-  return make_command<SkyFitJob>({
+  CommandDef c = make_command<SkyFitJob>({
       .name = "sky fit",
       .cli = "sky fit",
       .summary = "estimate the turbidity of a sky photo (RANSAC + Levenberg-Marquardt), JSON out",
@@ -339,6 +352,37 @@ CommandDef sky_fit_command() {
         for (const auto& w : j["unreliable_because"]) std::printf("  unreliable: %s\n", w.get<std::string>().c_str());
       },
   });
+  // brume.sky.fit(rgb, mask=None): the photo as an array (an integer one
+  // enables saturation detection, as an 8/16-bit file does), the mask > 0.5
+  // marking usable sky; the Result's fit is the JSON `brume sky fit` writes.
+  static const auto call =
+      array_call_table(sky_fit_job_table(), kArrayNone, {"image", "image-transfer", "mask", "out", "plot"});
+  c.arrays = make_array_form<SkyFitJob>(
+      "sky_fit", "brume.sky.fit",
+      "Turbidity of a sky photo (Preetham model, RANSAC against clouds). mask: > 0.5 marks usable sky. Integer rgb "
+      "(transfer=) enables saturation detection, as an 8/16-bit file does. As `brume sky fit`; the result's `fit` is "
+      "its JSON.",
+      {{"rgb", 3, false, ArrayArg::As::dense}, {"mask", 1, true, ArrayArg::As::image}}, call,
+      {"turbidity", "reliable", "fit", "record"}, false,
+      [](const std::vector<ArrayIn>& in, ArrayCall<SkyFitJob>& k, const Exec&, const std::set<std::string>&) {
+        const DenseImageRef img = in[0].dense;
+        Image* mask = in[1].present ? in[1].image : nullptr;
+        if (mask) {
+          if (mask->width != img.width || mask->height != img.height)
+            throw Error("brume.sky.fit(): mask is " + mask->size_string() + " but rgb is " + img.size_string() +
+                        "; give a mask of the image's size");
+          for (float& v : mask->data) v = v > 0.5f ? 1.0f : 0.0f;
+        }
+        sky_fit_job_table().validate(k.p);
+        const SkyImageFit f = fit_sky_data(img, in[0].integer, mask, k.p.view, k.p.sun, k.p.fit);
+        ArrayResult r;
+        r.record["fit_ms"] = f.fit_ms;
+        r.more = {{"turbidity", f.fit.value("turbidity", nlohmann::json())},
+                  {"reliable", f.fit.value("reliable", nlohmann::json(false))},
+                  {"fit", f.fit}};
+        return r;
+      });
+  return c;
 }
 
 }  // namespace brume
