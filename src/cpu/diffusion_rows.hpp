@@ -63,7 +63,8 @@ struct RowSource {
 // `h` is the pixel's neighbour offset; indices are mirrored only when a tap
 // falls outside the image. kUniform: every rate is `w_all` (a constant target
 // scale), so the eq. 12 weights need no look-up. The arithmetic, channel by
-// channel, is the same as uniform_row_interior's, so both give the same bits.
+// channel, is the same as uniform_row_body's (diffusion_fast_kernels.cpp), so
+// both give the same bits.
 // F's rows come through `in` (the image or a fused group's ring) and the
 // pixel goes to row `orow` of the result.
 template <bool kUniform, class S = StoreF32>
