@@ -73,8 +73,8 @@ inline __m256 ld8(const std::uint16_t* p) {
   return _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
 }
 
-// uniform_row_interior of diffusion_fast.cpp on binary16 storage, 8 floats
-// (two RGBA pixels) per step, same operation order.
+// uniform_row_body of diffusion_fast_kernels.cpp on binary16 storage, 8
+// floats (two RGBA pixels) per step, same operation order.
 void row_interior_f16(const std::uint16_t* s, const std::uint16_t* u0, const std::uint16_t* u1,
                       const std::uint16_t* d0, const std::uint16_t* d1, std::uint16_t* o, std::size_t begin,
                       std::size_t end, std::ptrdiff_t n4, float fr, float w) {
@@ -87,10 +87,10 @@ void row_interior_f16(const std::uint16_t* s, const std::uint16_t* u0, const std
     const __m256 r = lerp(ld8(s + i + n4), ld8(s + i + n4 + 4));
     const __m256 u = lerp(ld8(u0 + i), ld8(u1 + i));
     const __m256 d = lerp(ld8(d0 + i), ld8(d1 + i));
-    // brume_diffusion_update's expression, term by term (as diffusion_fast.cpp's
-    // AVX2 and AVX-512 rows write it): the shared template, instantiated
-    // outside the target pragma, would take 256-bit vectors across a
-    // baseline call, which clang refuses (it changes the ABI).
+    // brume_diffusion_update's expression, term by term (as the AVX2 and
+    // AVX-512 rows of diffusion_fast_kernels.cpp write it): the shared
+    // template, instantiated outside the target pragma, would take 256-bit
+    // vectors across a baseline call, which clang refuses (it changes the ABI).
     const __m256 acc = fc + vw * (l - fc) + vw * (r - fc) + vw * (u - fc) + vw * (d - fc);
     _mm_storeu_si128(reinterpret_cast<__m128i*>(o + i), _mm256_cvtps_ph(acc, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC));
   }

@@ -63,7 +63,8 @@ struct RowSource {
 // `h` is the pixel's neighbour offset; indices are mirrored only when a tap
 // falls outside the image. kUniform: every rate is `w_all` (a constant target
 // scale), so the eq. 12 weights need no look-up. The arithmetic, channel by
-// channel, is the same as uniform_row_interior's, so both give the same bits.
+// channel, is the same as uniform_row_body's (diffusion_fast_kernels.cpp), so
+// both give the same bits.
 // F's rows come through `in` (the image or a fused group's ring) and the
 // pixel goes to row `orow` of the result.
 template <bool kUniform, class S = StoreF32>
@@ -152,6 +153,25 @@ __attribute__((always_inline)) inline void uniform_border_pixel(const typename S
                        S::load(u1 + c), S::load(d0 + c), S::load(d1 + c), fr, w, w, w, w));
 }
 
+// A border pixel of a constant-scale row of C values a pixel (the 3-channel
+// rows): uniform_border_pixel's taps and, value by value, eq11's operations
+// in eq11's order (the interpolation, then brume_diffusion_update; no
+// contraction where it is compiled: diffusion_fast.cpp), hence the bits a
+// 4-channel row gives the same values.
+inline void uniform_border_values(const float* s, const float* u0, const float* u1, const float* d0, const float* d1,
+                                  float* o, int W, int x, int n, float fr, float w, int C) {
+  const std::ptrdiff_t c0 = static_cast<std::ptrdiff_t>(x) * C;
+  const std::ptrdiff_t l0 = static_cast<std::ptrdiff_t>(mirror(x - n, W)) * C,
+                       l1 = static_cast<std::ptrdiff_t>(mirror(x - n - 1, W)) * C;
+  const std::ptrdiff_t r0 = static_cast<std::ptrdiff_t>(mirror(x + n, W)) * C,
+                       r1 = static_cast<std::ptrdiff_t>(mirror(x + n + 1, W)) * C;
+  for (int c = 0; c < C; ++c) {
+    const float l = s[l0 + c] + fr * (s[l1 + c] - s[l0 + c]), r = s[r0 + c] + fr * (s[r1 + c] - s[r0 + c]);
+    const float u = u0[c0 + c] + fr * (u1[c0 + c] - u0[c0 + c]), d = d0[c0 + c] + fr * (d1[c0 + c] - d0[c0 + c]);
+    o[c0 + c] = brume_diffusion_update(s[c0 + c], l, r, u, d, w, w, w, w);
+  }
+}
+
 // Offset, interpolation fraction and eq. 12 weight of one iteration when the
 // target scale is the same everywhere (every pixel has the same sigma_k).
 struct UniformStep {
@@ -188,5 +208,56 @@ struct FusedGroup {
 bool uniform_iterations_f16(float* f, int W, int H, const std::vector<UniformStep>& steps,
                             const std::vector<FusedGroup>& groups, int threads, std::uint16_t* a, std::uint16_t* b,
                             std::uint16_t* ring);
+
+// The row kernels of the float path (diffusion_fast_kernels.cpp), each at
+// three vector widths -- 128-bit (any CPU), AVX2, AVX-512F -- that evaluate
+// the same operations in the same order (the same bits). The schedule
+// (diffusion_fast.cpp) picks the widths once per call (row_kernels) and
+// calls them through these pointers, a row at a time.
+//
+// The interior of a constant-scale row, every pixel with the offset
+// h = n + fr and the eq. 12 weight w: the values [begin, end) of row o from
+// the rows s (y), u0, u1 (y -+ n, y -+ (n+1) above) and d0, d1 (below);
+// px values a pixel (4, or 3 for RGB rows), n4 = n px. The border columns,
+// whose taps are mirrored, are uniform_border_pixel's and
+// uniform_border_values'.
+using UniformRow = void (*)(const float* __restrict s, const float* __restrict u0, const float* __restrict u1,
+                            const float* __restrict d0, const float* __restrict d1, float* __restrict o,
+                            std::size_t begin, std::size_t end, std::ptrdiff_t n4, std::ptrdiff_t px, float fr,
+                            float w);
+// Per-thread scratch of the general (space-variant) row: offsets, their
+// integer and fractional parts, and the four eq. 12 weights of each pixel.
+struct RowScratch {
+  std::vector<float> h, fr, wl, wr, wu, wd;
+  std::vector<int> n;
+  // The mirrored columns of a border segment (general_row_body): F's
+  // values and the rates, grown on demand.
+  std::vector<float> fpad, rpad;
+  explicit RowScratch(int W) : h(W), fr(W), wl(W), wr(W), wu(W), wd(W), n(W) {}
+};
+// Row y of iteration k of the space-variant invariant schemes, into orow:
+// F's rows from `in` (the image or a fused group's ring), the rate map rho
+// (W x H), the row's growth e^rho and (exact scheme) variance ratio vr, s0
+// the starting scale, t the calling thread's scratch.
+using GeneralRow = void (*)(const RowSource<float>& in, float* orow, const float* rho, float s0, int k,
+                            const float* growth, const float* vr, bool exact, int edge_mode, int W, int H, int y,
+                            RowScratch& t);
+// One row of the conductance stencil (the standard scheme once its edge
+// rates are formed), RGBA: wr[x] couples x and x+1 (0 at the last column:
+// zero flux), wd_up couples the row to the one above, wd to the one below;
+// up and dn are those rows (clamped at the image's edges, where the weights
+// are 0).
+using StandardRow = void (*)(const float* __restrict s, const float* __restrict up, const float* __restrict dn,
+                             const float* __restrict wr, const float* __restrict wd_up, const float* __restrict wd,
+                             float* __restrict o, int W);
+// The widths of every row kernel, picked once per call.
+struct RowKernels {
+  UniformRow uniform;
+  GeneralRow general;
+  StandardRow standard;
+  GeneralRow general_rgb;  // the space-variant row on RGB rows (three values a pixel)
+};
+// The widths diffusion_simd_level() allows.
+RowKernels row_kernels();
 
 }  // namespace brume::cpu
