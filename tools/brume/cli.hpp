@@ -141,5 +141,7 @@ Command add_demo(CLI::App& app);
 Command add_study(CLI::App& app);
 Command add_sample(CLI::App& app);
 Command add_batch(CLI::App& app);
+// `brume reference --out-dir docs/cli` (hidden): the command-line reference as Markdown.
+Command add_reference(CLI::App& app);
 
 }  // namespace brume::cli

@@ -102,7 +102,7 @@ int main(int argc, char** argv) {
 
   // Every command of the list (brume/command.hpp), then the tools around them.
   std::vector<Command> commands = add_commands(app);
-  for (auto add : {add_run, add_demo, add_study, add_sample, add_batch}) commands.push_back(add(app));
+  for (auto add : {add_run, add_demo, add_study, add_sample, add_batch, add_reference}) commands.push_back(add(app));
   // A parsed subcommand marks its parent parsed too (`aerial coefficients`
   // parses `aerial`): the command asked for is the deepest one parsed.
   std::stable_sort(commands.begin(), commands.end(), [](const Command& a, const Command& b) {
