@@ -27,7 +27,7 @@ d=$(mktemp -d)
   done
   build/brume compare --a "$d/a_gpu.exr" --b "$d/a_cpu.exr"
 } > "$OUT/effects.txt" 2>&1
-{ BRUME_REQUIRE_GPU=1 timeout 120 build/tests/brume_tests --gtest_filter='*Gpu*' --gtest_brief=1; echo "gpu tests rc=$?"; } > "$OUT/tests.log" 2>&1
+{ BRUME_REQUIRE_GPU=1 timeout 120 build/tests/brume_tests --gtest_filter='*Gpu*:*GPU*' --gtest_brief=1; echo "gpu tests rc=$?"; } > "$OUT/tests.log" 2>&1
 timeout 60 build/brume study diffusion --quick --backend gpu --out-dir "$d/sq" > "$OUT/study_quick.md" 2>&1
 cat "$d/sq/summary.md" >> "$OUT/study_quick.md" 2>/dev/null
 timeout 240 build/brume study diffusion --backend gpu --out-dir "$d/sf" > "$d/sf.log" 2>&1
