@@ -16,7 +16,7 @@ runs, in an order that rotates from round to round:
 
 and reports each command's wall time (median, min..max over the rounds) and
 the ratios to the peer within each round (median). Every process pays its
-own start-up: brume's 0.36-0.39 s of dynamic loading (README "Speed") is
+own start-up: brume's 0.36-0.39 s of dynamic loading (docs/performance.md) is
 part of what is compared, as it is part of what a user waits for.
 
   python3 bench/bench_whole_run.py [--cli build/brume] [--peer build/bench/brume_oneshot_gaussian]

@@ -15,7 +15,7 @@
 # file), its suites 35-37 s. Intel Xeon family 6 model 207, 2026-12-04: ASan+UBSan
 # build 235 s, its 381 tests (fuzz corpora included) 247 s; TSan build 113 s,
 # its suites 46 s
-# (README "Reliability"). Options: --asan-only, --tsan-only, and --ci, a
+# (docs/reliability.md). Options: --asan-only, --tsan-only, and --ci, a
 # shorter form: every test under ASan except those that mostly re-run the CLI
 # or the GPU passes (CI_SKIP_LABELS below; 297 tests on 2026-12-04, plus the fuzz replays),
 # then TSan.
@@ -45,7 +45,7 @@ esac
 # unit): the instrumented compiles are mostly the same headers parsed and the
 # same templates (nlohmann::json, OpenImageIO, gtest) instantiated and
 # instrumented again in every file, so joining them is what makes both
-# sanitizer builds fit CI (measured in README "Reliability"). It needs every
+# sanitizer builds fit CI (measured in docs/reliability.md). It needs every
 # file-local name to be unique across a target's files; this build is what
 # checks that.
 common=(-DCMAKE_CXX_COMPILER=clang++-14 -DCMAKE_BUILD_TYPE=RelWithDebInfo

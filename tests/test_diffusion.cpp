@@ -356,7 +356,7 @@ TEST(DiffusionPrecision, StandardSchemeDriftsInF16AndInvariantDoesNot) {
   // iterations leave its error where f32 has it. What is asserted is the
   // ordering of the drifts (f16 error minus f32 error). With round-to-nearest
   // storage (IEEE, as here) the standard scheme's drift is ~4x its f32 error
-  // but not the paper's catastrophe; see the README's note on rounding modes.
+  // but not the paper's catastrophe; see docs/diffusion.md's note on rounding modes.
   BRUME_REQUIRE_DATA(kArt);
   Image f = load_art();
   const double sigma = 10.0;
@@ -1114,7 +1114,7 @@ TEST(DiffusionFastPath, BlurOfAnOwnedImageIsTheBlurOfItsView) {
 }
 
 TEST(DiffusionWorkspace, ExtraHeapIsTheStatedMultipleOfTheImage) {
-  // README "Speed" states the memory a diffusion call keeps: the rate map
+  // docs/performance.md states the memory a diffusion call keeps: the rate map
   // (1/4 of the RGBA image), for a space-variant map e^{rho} and the
   // variance ratio (2/4; sigma_k is formed per row, not kept), and the fused
   // schedule's scratch: rings (at most ring_bytes per thread, whatever the

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-# Writes the README's virtual object for `brume insert`: tower.png (sRGB colour,
+# Writes docs/aerial.md's virtual object for `brume insert`: tower.png (sRGB colour,
 # straight alpha, 1-px soft edges) and tower_range.pfm (450 m where the object
 # is, NaN elsewhere), 800x560 like `brume demo --width 800 --height 560`.
 # Standard library only.

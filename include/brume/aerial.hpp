@@ -63,7 +63,7 @@ struct SpectralSensitivity {
 };
 constexpr int kSensitivitySamples = 401;
 
-// --sensitivity default | FILE.csv | DATABASE.txt#CAMERA NAME (see the README);
+// --sensitivity default | FILE.csv | DATABASE.txt#CAMERA NAME (see docs/aerial.md);
 // throws brume::Error naming the file, the line and the value.
 SpectralSensitivity load_sensitivity(const std::string& spec);
 

@@ -246,7 +246,7 @@ struct EffectOutput {
 // table's ranges, the effect's `check` -- cross-field rules, backend limits
 // --, the range step) and every output location, before any file is read;
 // the image and depth read (load_inputs); the working memory checked
-// (`bytes_per_pixel`: the effect's measured peak, README "Reliability");
+// (`bytes_per_pixel`: the effect's measured peak, docs/reliability.md);
 // `apply` on the loaded inputs (it may add to in.record, the record's
 // "inputs"); the record (of `recorded`, when the job recorded differs from the
 // one run: aerial's fitted turbidity is recorded as auto); the outputs

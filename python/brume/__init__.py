@@ -12,7 +12,7 @@ default and range.
 Images are H x W x 3 (or x 4, alpha ignored) linear RGB; ranges H x W float
 metres along each pixel's ray (NaN: unknown). float32 is read in place,
 float64 converted once, uint8/uint16 need ``transfer="srgb"|"linear"``. The
-GIL is released while an effect runs. See the README's Python section.
+GIL is released while an effect runs. See docs/python.md.
 """
 from ._brume import (__version__, aerial, blur, dof, fog, haze, max_pixels, random_params, read_image,
                      set_max_pixels, write_image)

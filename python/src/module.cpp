@@ -15,7 +15,7 @@
 // process-wide functions (random_params, read_image, write_image, the limits,
 // the batch hooks of brume.dask) are bound below.
 //
-// Conventions (the README's Python section):
+// Conventions (docs/python.md):
 //  - images are numpy arrays H x W x 3 (or x 4, alpha ignored) of linear RGB;
 //    ranges H x W (or H x W x 1) float metres. float32 is read in place
 //    whenever its channels are contiguous (any row/pixel strides: a crop is

@@ -8,7 +8,7 @@
 // MADV_HUGEPAGE; hosts whose /sys/kernel/mm/transparent_hugepage/enabled is
 // "madvise", Debian's default, honour it only when asked) turns those 7000
 // faults into 14: 6.5 ms instead of 78 ms for that buffer on the AMD EPYC
-// host (README "Speed"). It is a hint: the bytes, their values and every
+// host (docs/performance.md). It is a hint: the bytes, their values and every
 // result are unchanged, and a host with huge pages "never" (or not Linux)
 // ignores it.
 #pragma once

@@ -56,7 +56,7 @@ namespace {
 int thread_count(int requested) { return requested > 0 ? requested : omp_get_max_threads(); }
 
 // Defaults of the fusion limits (what they bound: diffusion_fusion.hpp),
-// measured in README "Speed".
+// measured in docs/performance.md.
 constexpr FusionLimits kFusionDefaults{32, 1536 * 1024, 4};
 std::mutex g_fusion_mutex;
 FusionLimits g_fusion = kFusionDefaults;

@@ -5,7 +5,7 @@
 // Every iteration of the invariant schemes reads the whole image and writes
 // the whole image: at 1600x1120 RGBA float, 17 iterations move ~1 GB. When
 // the image does not stay in the last-level cache that traffic, not the
-// arithmetic, sets the time (the Intel host of README "Speed": 100 of 134 ms
+// arithmetic, sets the time (the Intel host of docs/performance.md: 100 of 134 ms
 // were the memory floor). Temporal blocking runs several iterations per pass
 // over the image: a group of m consecutive iterations reads the image once
 // (level 0) and writes it once (level m); the m - 1 levels between live in

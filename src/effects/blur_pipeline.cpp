@@ -155,7 +155,7 @@ nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& eo, const Run
 
   LoadedInputs in = load_inputs(job.input, false);
 
-  check_working_memory("blur", in.rgb, 110);  // measured peak bytes per pixel (README "Reliability")
+  check_working_memory("blur", in.rgb, 110);  // measured peak bytes per pixel (docs/reliability.md)
   const Image& rgb = in.rgb;
   Image smap;
   FileInfo map_info;

@@ -2,7 +2,7 @@
 //
 // Debian's OpenImageIO links 260 shared libraries (ffmpeg, GDAL, DCMTK,
 // libheif, OpenVDB, ...). Loading and relocating them is ~0.4 s of every
-// process that links it -- 20x the rest of brume's start-up (README "Speed":
+// process that links it -- 20x the rest of brume's start-up (docs/performance.md:
 // `brume --version` 0.42 s linked, 0.02 s without) and more than a whole
 // diffusion. So libbrume does not link OpenImageIO: the few calls it makes
 // live in a module, brume_codec.so (src/io/codec_oiio.cpp), that brume

@@ -441,7 +441,7 @@ enum class RawValues { values, counts, srgb_linear };
 // for a 1600x1120 RGB PFM (21.5 MB) that is two passes over the data and
 // ~10 500 pages first touched. Reading the file here instead took brume
 // blur's read from ~300 to ~45 ms on the AMD EPYC VM, the huge-page hint
-// included (README "Speed"). A PFM is a three-token text header and raw floats, so
+// included (docs/performance.md). A PFM is a three-token text header and raw floats, so
 // brume reads the common form itself, straight into the image (rows flipped:
 // PFM stores the picture's bottom row first; bytes swapped for a big-endian
 // file, positive scale; values times |scale|, in float, as OpenImageIO
@@ -975,7 +975,7 @@ void install_output_signal_handlers() {
 // a name it does not know, silently). The encoder's time is most of a
 // dataset frame's write: a 463x370 8-bit Middlebury frame took 13.5 ms to
 // write at PNG's default level 6, 8.2 ms at level 1 (~6 % larger) and 7.9
-// ms stored (README "Datasets").
+// ms stored (docs/datasets.md).
 namespace {
 
 struct CompressionRule {

@@ -245,7 +245,7 @@ BatchSummary run_batch(const BatchOptions& o) {
     // On a GPU backend each worker makes one context on its own thread (a
     // context belongs to the thread that made it) and runs all its frames on
     // it: a context per frame cost its creation and the compilation of every
-    // pass again, per frame (README "Datasets"). Made before the first frame
+    // pass again, per frame (docs/datasets.md). Made before the first frame
     // that needs it; when it cannot be made, each frame decides as a single
     // run would (gpu: the frame fails, naming why; auto: the CPU, recorded).
     std::unique_ptr<GpuContext> gpu;
