@@ -90,12 +90,14 @@ struct WriteRequest {
 
 struct Format {
   const char* name;                     // FileInfo::format: OpenImageIO's name ("png", "openexr", "pnm")
+  const char* title;                    // for messages ("PNG", "Radiance HDR")
   std::vector<std::string> extensions;  // lower case with the dot; the first is the one messages give
   std::vector<std::string> bits;        // what --bits takes
   const char* color_bits;               // --bits auto for colour
   const char* data_bits;                // --bits auto for data maps
   std::vector<CompressionRule> compressions;
-  const char* holds;                    // what the format holds, for messages ("RGB only"); null: any channels
+  std::vector<int> channel_counts;      // what a file holds (empty: any count); others are refused
+  bool holds_data;                      // stores any float exactly enough for data maps (not Radiance's RGBE)
   // The first bytes (at most 16) are this format's signature.
   bool (*sniff)(const unsigned char* head, std::size_t n);
   // Header and read: false when the row does not take this file (it goes on
@@ -153,5 +155,10 @@ inline unsigned to_count(float v, float max) {
 
 // Threads the codecs may use: the IoThreads scope's count, else OpenMP's.
 int io_threads();
+
+// The row that read and the row that wrote this thread's last file ("oiio":
+// OpenImageIO's module), for tests that a file took its row.
+const char* last_reader();
+const char* last_writer();
 
 }  // namespace brume::io
