@@ -87,7 +87,9 @@ TIFF* open(const std::string& path, const char* mode, Messages& m) {
 }
 
 [[noreturn]] void fail(const std::string& path, const Messages& m, const char* otherwise) {
-  throw Error("cannot read '" + path + "': " + (m.error.empty() ? otherwise : m.error));
+  std::string why = m.error.empty() ? otherwise : m.error;
+  if (why.rfind(path + ": ", 0) == 0) why.erase(0, path.size() + 2);  // libtiff's "NAME: ..." names it again
+  throw Error("cannot read '" + path + "': " + why);
 }
 
 bool sniff(const unsigned char* h, std::size_t n) {
