@@ -37,7 +37,7 @@
 #include "io/formats/format.hpp"
 
 namespace brume::io {
-namespace {
+namespace jpeg_row {
 
 // The most bytes of text one COM marker holds: 65535 less the two bytes of
 // the length field itself.
@@ -275,9 +275,10 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
   file.f = nullptr;
   return closed == 0;
 }
-}  // namespace
+}  // namespace jpeg_row
 
 const Format& jpeg_format() {
+  using namespace jpeg_row;
   static const Format f{"jpeg",  "JPEG", {".jpg", ".jpeg"}, {"8"},  "8",    "8", {{"jpeg", 1, 100, true}},
                         {1, 3}, false,  sniff,             header, read, refuse, write};
   return f;
