@@ -42,7 +42,7 @@ bool jpeg_write(const std::string& tmp, const WriteRequest& r, std::string* why)
 
 const Format& jpeg_format() {
   static const Format f{"jpeg", "JPEG", {".jpg", ".jpeg"}, {"8"}, "8", "8", {{"jpeg", 1, 100, true}},
-                        {}, false, jpeg_sniff, jpeg_header, jpeg_read, jpeg_refuse, jpeg_write};
+                        {}, false, jpeg_sniff, jpeg_header, jpeg_read, jpeg_refuse, jpeg_write, "jpeg:98"};
   return f;
 }
 
@@ -84,7 +84,7 @@ bool tiff_write(const std::string& tmp, const WriteRequest& r, std::string* why)
 const Format& tiff_format() {
   static const Format f{"tiff", "TIFF", {".tif", ".tiff"}, {"8", "16", "float"}, "16", "float",
                         {{"none", 1, 0, false}, {"lzw", 1, 0, false}, {"zip", 1, 9, false}, {"packbits", 1, 0, false}},
-                        {}, true, tiff_sniff, tiff_header, tiff_read, tiff_refuse, tiff_write};
+                        {}, true, tiff_sniff, tiff_header, tiff_read, tiff_refuse, tiff_write, "zip"};
   return f;
 }
 
@@ -128,7 +128,7 @@ const Format& exr_format() {
                         {{"none", 1, 0, false}, {"rle", 1, 0, false}, {"zip", 1, 9, false}, {"zips", 1, 9, false},
                          {"piz", 1, 0, false}, {"pxr24", 1, 0, true}, {"b44", 1, 0, true}, {"b44a", 1, 0, true},
                          {"dwaa", 1, 1000, true}, {"dwab", 1, 1000, true}},
-                        {}, true, exr_sniff, exr_header, exr_read, exr_refuse, exr_write};
+                        {}, true, exr_sniff, exr_header, exr_read, exr_refuse, exr_write, "zip"};
   return f;
 }
 
