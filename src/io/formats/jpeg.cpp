@@ -280,7 +280,7 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
 const Format& jpeg_format() {
   using namespace jpeg_row;
   static const Format f{"jpeg",  "JPEG", {".jpg", ".jpeg"}, {"8"},  "8",    "8", {{"jpeg", 1, 100, true}},
-                        {1, 3}, false,  sniff,             header, read, refuse, write};
+                        {1, 3}, false,  sniff,             header, read, refuse, write, "jpeg:98"};
   return f;
 }
 

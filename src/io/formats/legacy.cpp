@@ -44,7 +44,7 @@ const Format& exr_format() {
                         {{"none", 1, 0, false}, {"rle", 1, 0, false}, {"zip", 1, 9, false}, {"zips", 1, 9, false},
                          {"piz", 1, 0, false}, {"pxr24", 1, 0, true}, {"b44", 1, 0, true}, {"b44a", 1, 0, true},
                          {"dwaa", 1, 1000, true}, {"dwab", 1, 1000, true}},
-                        {}, true, exr_sniff, exr_header, exr_read, exr_refuse, exr_write};
+                        {}, true, exr_sniff, exr_header, exr_read, exr_refuse, exr_write, "zip"};
   return f;
 }
 

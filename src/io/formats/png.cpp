@@ -262,7 +262,8 @@ const Format& png_format() {
                         header,
                         read,
                         refuse,
-                        write};
+                        write,
+                        "Sub-filtered run-length deflate"};
   return f;
 }
 

@@ -341,7 +341,8 @@ const Format& tiff_format() {
                         header,
                         read,
                         refuse,
-                        write};
+                        write,
+                        "zip:1"};
   return f;
 }
 
