@@ -191,7 +191,7 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     EXPECT_EQ(read_color(p("o.pfm")).width, 24);
 
     // 8/16-bit grey and RGB PNG are read and written without the module
-    // (src/io/png_direct.hpp).
+    // (src/io/formats/png.cpp).
     const CliRun png_only = run("blur --image " + img + " --sigma 3 --out " + p("o.png") + " --timing");
     ASSERT_EQ(png_only.status, 0) << png_only.output;
     EXPECT_EQ(png_only.output.find("codec module"), std::string::npos) << png_only.output;

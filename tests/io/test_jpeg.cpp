@@ -68,7 +68,9 @@ TEST(IO, JpegRoundTripsGreyAndColourAtEveryQuality) {
           EXPECT_EQ(got.info.description, desc) << tag;
           const std::string od = spec.get_string_attribute("ImageDescription");
           EXPECT_EQ(od, desc.substr(0, 65533)) << tag << ": OpenImageIO's description";
-          if (c == 3) EXPECT_EQ(spec.get_string_attribute("jpeg:subsampling"), q.subsampling) << tag;
+          if (c == 3) {
+            EXPECT_EQ(spec.get_string_attribute("jpeg:subsampling"), q.subsampling) << tag;
+          }
           // The stored counts: sRGB codes for colour, round(v x 255) for grey data.
           std::vector<std::uint8_t> codes(img.data.size());
           if (c == 3) {
@@ -149,8 +151,9 @@ TEST(IO, JpegFilesOthersWriteReadAsOpenImageIOReadsThem) {
     EXPECT_EQ(fi.format, "jpeg") << p;
     EXPECT_EQ(fi.bits, 8) << p;
     EXPECT_EQ(fi.description, spec.get_string_attribute("ImageDescription")) << p;
-    if (spec.nchannels == 3)
+    if (spec.nchannels == 3) {
       for (std::size_t i = 0; i < want.size(); i += 7) ASSERT_EQ(lin.data[i], srgb_to_linear(want[i])) << p << " " << i;
+    }
     const ImageHeader hd = read_header(p);
     EXPECT_TRUE(hd.width == spec.width && hd.height == spec.height && hd.channels == spec.nchannels && hd.format == "jpeg") << p;
   }

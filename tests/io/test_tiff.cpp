@@ -86,7 +86,9 @@ TEST(IO, TiffRoundTripsEveryDepthChannelCountAndCompression) {
           EXPECT_EQ(got.info.bits, floating ? 32 : std::stoi(bits)) << tag;
           EXPECT_EQ(got.info.description, desc) << tag;
           EXPECT_EQ(got.alpha, c == 2 || c == 4 ? c - 1 : -1) << tag;
-          if (c == 2 || c == 4) EXPECT_TRUE(got.unassociated) << tag;
+          if (c == 2 || c == 4) {
+            EXPECT_TRUE(got.unassociated) << tag;
+          }
           OIIO::ImageSpec spec;
           const std::vector<float> theirs = tiff_oiio_straight(p, &spec);
           EXPECT_TRUE(tiff_same_bits(theirs, want)) << tag << ": OpenImageIO reads other values than were stored";

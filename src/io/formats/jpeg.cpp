@@ -187,6 +187,8 @@ bool read(const ReadRequest& r, Decoded& out) {
       exif = exif_description(m->data, m->data_length);
     }
   }
+  // Settled before the setjmp below: nothing after it changes a local.
+  const std::string description = has_com ? com : exif;
   // Everything a longjmp would skip is made before the setjmp below.
   Image img(w, h, ch);
   const std::size_t n = static_cast<std::size_t>(w) * static_cast<std::size_t>(ch);
@@ -209,7 +211,7 @@ bool read(const ReadRequest& r, Decoded& out) {
   out.info.integer = true;
   out.info.bits = 8;
   out.info.channel_names = ch == 1 ? std::vector<std::string>{"Y"} : std::vector<std::string>{"R", "G", "B"};
-  out.info.description = has_com ? com : exif;
+  out.info.description = description;
   out.mapped = static_cast<bool>(r.map);
   return true;
 }
