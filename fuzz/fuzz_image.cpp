@@ -4,10 +4,10 @@
 // its reader by it, then by content), the rest is the file. OpenImageIO and
 // its codecs are Debian's, uninstrumented: this finds crashes and bad
 // handling in brume's use of them (sizes, channels, bit depths, limits), not
-// coverage inside them. A .png goes first through brume's own libpng reader
-// (src/io/png_direct.cpp: its setjmp error path, its fall-back to
-// OpenImageIO on anything outside the subset or any libpng complaint).
-// Mutations rarely keep a chunk's CRC right, so nearly every mutated PNG
+// coverage inside them. A file goes first to the row of the table of formats
+// its first bytes name (src/io/formats/: libspng, libjpeg, libtiff,
+// OpenEXR, brume's PFM and HDR readers), then, when the row does not take
+// it, to OpenImageIO. Mutations rarely keep a chunk's CRC right, so nearly every mutated PNG
 // would stop at the first CRC check, before its image data is inflated and
 // unfiltered: for a .png whose first byte is 6 (mod 12), the harness
 // writes every chunk's CRC anew (the chunks it can walk), so that mutated

@@ -9,7 +9,8 @@ PKGS=(
   libeigen3-dev                          # bounded least squares (sky turbidity fit: Levenberg-Marquardt)
   libcli11-dev nlohmann-json3-dev        # command line, parameter records
   libssl-dev                             # SHA-256 of input files in the records
-  libpng-dev                             # 8/16-bit grey and RGB PNG without loading OpenImageIO
+  libspng-dev                            # PNG read and written without loading OpenImageIO (src/io/formats/png.cpp)
+  libpng-dev                             # the tests write unusual PNGs (interlaced, palette) with libpng
   libjpeg-dev                            # 8-bit grey and colour JPEG read without loading OpenImageIO
   libtiff-dev                            # the common TIFF files read without loading OpenImageIO
   libdeflate-dev                         # the PNG subset's image data inflated in one call (faster than zlib)

@@ -18,7 +18,6 @@
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "io/exr_direct.hpp"
-#include "io/hdr_direct.hpp"
 #include "io/jpeg_direct.hpp"
 #include "io/png_direct.hpp"
 #include "io/tiff_direct.hpp"

@@ -1,6 +1,7 @@
 // Image I/O through the table of formats: PFM against an independent parser,
 // round trips through every format, named EXR channels, raw integer counts,
 // sRGB, compression settings, alpha, and error paths.
+#include "io/formats/format.hpp"
 #include "io/io_test_util.hpp"
 
 using namespace brume::test_io;
@@ -476,7 +477,6 @@ TEST(IO, UnassociatedChannelsAreReadAsOpenImageIOReadsThem) {
     std::vector<float> want(static_cast<std::size_t>(s.width) * s.height * s.nchannels);
     ASSERT_TRUE(in->read_image(0, 0, 0, s.nchannels, OIIO::TypeDesc::FLOAT, want.data())) << p;
 
-    const std::uint64_t png_before = detail::png_fast_reads();
     const ChannelImage got = read_unassociated(p, "--object");
     EXPECT_TRUE(got.img.data == want) << p << ": other values than OpenImageIO's";
     EXPECT_EQ(got.img.channels, s.nchannels) << p;
@@ -487,16 +487,15 @@ TEST(IO, UnassociatedChannelsAreReadAsOpenImageIOReadsThem) {
     EXPECT_EQ(got.info.bits, static_cast<int>(s.format.size() * 8)) << p;
     EXPECT_EQ(got.info.format, std::string(in->format_name())) << p;
     if (k.direct && std::string(k.name).find(".png") != std::string::npos) {
-      EXPECT_EQ(detail::png_fast_reads(), png_before + 1) << p << ": not read by brume's PNG reader";
+      EXPECT_STREQ(io::last_reader(), "png") << p << ": not read by the PNG row";
     }
   }
-  // The PNG reader takes alpha only when asked: read_color still declines
-  // it to OpenImageIO (which premultiplies, as before).
-  detail::PngInfo pi;
-  Image img;
-  EXPECT_FALSE(detail::read_png_subset((d / "rgba8.png").string(), &img, pi, [](int, int, int) {}));
-  EXPECT_TRUE(detail::read_png_subset((d / "rgba8.png").string(), &img, pi, [](int, int, int) {}, {}, true));
-  EXPECT_EQ(pi.channels, 4);
+  // The PNG row takes alpha only when asked: read_color leaves it to
+  // OpenImageIO (which premultiplies).
+  read_color((d / "rgba8.png").string());
+  EXPECT_STREQ(io::last_reader(), "oiio");
+  EXPECT_EQ(read_unassociated((d / "rgba8.png").string(), "--object").img.channels, 4);
+  EXPECT_STREQ(io::last_reader(), "png");
   const std::string e = error_of([&] { read_unassociated((d / "none.png").string(), "--object"); });
   EXPECT_NE(e.find("cannot read --object '"), std::string::npos) << e;
   EXPECT_NE(e.find("no such file"), std::string::npos) << e;

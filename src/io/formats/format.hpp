@@ -160,5 +160,7 @@ int io_threads();
 // OpenImageIO's module), for tests that a file took its row.
 const char* last_reader();
 const char* last_writer();
+void note_reader(const char* row);
+void note_writer(const char* row);
 
 }  // namespace brume::io

@@ -1,9 +1,25 @@
-// brume — the Radiance HDR subset read by brume itself (io/hdr_direct.hpp
-// says which files and why).
-#include "io/hdr_direct.hpp"
-
+// Radiance HDR (RGBE), read and written by brume itself: a text header and
+// run-length coded RGBE pixels, which no Debian library reads better, and
+// `brume sky fit`'s sky photos are such files.
+//  - read: the magic line "#?RADIANCE" or "#?RGBE", header lines up to an
+//    empty line (FORMAT, if given, 32-bit_rle_rgbe; other variables and
+//    comments change no value), the resolution line "-Y H +X W" (rows top to
+//    bottom), then every scanline run-length coded (the "2 2 hi lo" form, for
+//    8 <= W < 32768) or, when the first scanline is not, the whole image
+//    stored flat, four bytes a pixel. Values (m_R, m_G, m_B) x 2^(e - 136)
+//    for e > 0, else 0 (Walter's rgbe2float, as OpenImageIO reads them):
+//    exact in float. FileInfo: format "hdr", 32-bit float, R G B. Anything
+//    else (XYZE, another orientation, the old run-length form, a malformed
+//    scanline, bytes after the image) goes to OpenImageIO.
+//  - write: RGB whose values are all >= 0 or NaN (a sky render's ground is
+//    NaN): the header "#?RADIANCE", "FORMAT=32-bit_rle_rgbe", "-Y H +X W";
+//    each pixel by Walter's float2rgbe (frexp of the largest component);
+//    scanlines of 8 to 32767 px run-length coded component by component
+//    (runs of 4 or more, at most 127; literal stretches of at most 128),
+//    others flat. Negative or infinite values, which RGBE cannot hold, are
+//    left to OpenImageIO's writer.
+// Tests: IO.Hdr* (tests/io/test_hdr.cpp).
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -12,11 +28,10 @@
 #include <string>
 #include <vector>
 
-namespace brume::detail {
+#include "io/formats/format.hpp"
 
-namespace {
-std::atomic<std::uint64_t> g_hdr_reads{0}, g_hdr_writes{0};
-
+namespace brume::io {
+namespace hdr_row {
 // One RGBE pixel to floats: Walter's rgbe2float.
 inline void rgbe_to_float(const unsigned char* p, float* out) {
   if (p[3] == 0) {
@@ -89,11 +104,9 @@ std::size_t rle_scanline(const std::string& b, std::size_t i, int W, unsigned ch
   }
   return i;
 }
-}  // namespace
 
-std::uint64_t hdr_direct_reads() { return g_hdr_reads.load(); }
 
-bool read_hdr_subset(const std::string& path, Image* out, int& width, int& height,
+bool read_hdr(const std::string& path, Image* out, int& width, int& height,
                      const std::function<void(int, int, int)>& check) {
   std::string b;
   {
@@ -131,12 +144,10 @@ bool read_hdr_subset(const std::string& path, Image* out, int& width, int& heigh
     if (i != b.size()) return false;  // bytes after the image: left to OpenImageIO
   }
   width = W, height = H;
-  ++g_hdr_reads;
   *out = std::move(img);
   return true;
 }
 
-namespace {
 // Walter's float2rgbe: the largest component's frexp sets the exponent.
 // NaN takes the path it takes there (comparisons with it are false): a NaN
 // red makes the pixel (0, 0, 0, 128) -- frexp's exponent of NaN is 0 in
@@ -194,15 +205,9 @@ void rle_bytes(const unsigned char* data, int n, std::string& out) {
     }
   }
 }
-}  // namespace
 
-bool hdr_subset_writable(const float* px, std::size_t n) {
-  bool ok = true;
-  for (std::size_t i = 0; i < n; ++i) ok &= !(px[i] < 0.0f) && !(px[i] > 3.4028235e38f);  // NaN passes; -x, inf not
-  return ok;
-}
 
-bool write_hdr_subset(const std::string& path, int width, int height, const float* px) {
+bool write_hdr(const std::string& path, int width, int height, const float* px) {
   std::string out = "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y " + std::to_string(height) + " +X " +
                     std::to_string(width) + "\n";
   const std::size_t W = static_cast<std::size_t>(width);
@@ -227,10 +232,45 @@ bool write_hdr_subset(const std::string& path, int width, int height, const floa
   f.write(out.data(), static_cast<std::streamsize>(out.size()));
   f.close();
   if (!f) return false;
-  ++g_hdr_writes;
   return true;
 }
 
-std::uint64_t hdr_direct_writes() { return g_hdr_writes.load(); }
+bool sniff(const unsigned char* h, std::size_t n) { return n >= 2 && h[0] == '#' && h[1] == '?'; }
 
-}  // namespace brume::detail
+bool header(const std::string& path, Header& out) {
+  int w = 0, h = 0;
+  if (!read_hdr(path, nullptr, w, h, [](int, int, int) {})) return false;
+  out = {w, h, 3};
+  return true;
+}
+
+bool read(const ReadRequest& r, Decoded& out) {
+  int w = 0, h = 0;
+  if (!read_hdr(r.path, &out.img, w, h, r.check)) return false;
+  out.info.format = "hdr";
+  out.info.integer = false;
+  out.info.bits = 32;
+  out.info.channel_names = {"R", "G", "B"};
+  return true;
+}
+
+std::string refuse(const WriteRequest& r) {
+  if (r.srgb) return "Radiance HDR holds linear values";
+  const std::size_t n = static_cast<std::size_t>(r.width) * static_cast<std::size_t>(r.height) * 3;
+  for (std::size_t i = 0; i < n; ++i)
+    if (r.values[i] < 0.0f || r.values[i] > 3.4028235e38f)  // NaN passes; -x, inf not
+      return "RGBE holds no negative or infinite values";
+  return {};
+}
+
+bool write(const std::string& tmp, const WriteRequest& r, std::string*) { return write_hdr(tmp, r.width, r.height, r.values); }
+}  // namespace hdr_row
+
+const Format& hdr_format() {
+  using namespace hdr_row;
+  static const Format f{"hdr", "Radiance HDR", {".hdr"}, {"float"}, "float", "float", {{"rle", 1, 0, false}},
+                        {3}, false, sniff, header, read, refuse, write};
+  return f;
+}
+
+}  // namespace brume::io
