@@ -8,7 +8,7 @@
 // live in a module, brume_codec.so (src/io/codec_oiio.cpp), that brume
 // dlopens the first time a file needs it. A run that reads and writes only
 // PFM (brume's own reader and writer, src/io/image_io.cpp) and the PNG,
-// OpenEXR and Radiance subsets (src/io/png_direct.hpp, exr_direct.hpp,
+// OpenEXR and Radiance subsets (src/io/png_direct.hpp, formats/exr.cpp,
 // hdr_direct.hpp), and every run that fails its checks,
 // `--help` and `--version` never load it.
 //
