@@ -7,11 +7,12 @@
 //    read_image gives them), every channel of one pixel type, half or float,
 //    not subsampled, and either one channel (any name) or R G B or R G B A --
 //    given in the order OpenImageIO gives those sets (R, G, B, A first; the
-//    file stores channels sorted by name). Other sets, orders by OpenImageIO's
-//    own rules, go to it. FileInfo as OpenImageIO gives it: "openexr", 16
-//    bits (half) or 32 (float), the channel names, the "comments" attribute
-//    (OpenImageIO's ImageDescription). Every open first runs the attribute
-//    guard (check_exr_attributes, below).
+//    file stores channels sorted by name). Other sets, which OpenImageIO
+//    orders by rules of its own, go to it, as does one channel when alpha is
+//    asked for (OpenImageIO calls a lone "A" alpha). FileInfo as OpenImageIO
+//    gives it: "openexr", 16 bits (half) or 32 (float), the channel names,
+//    the "comments" attribute (OpenImageIO's ImageDescription). Every open
+//    first runs the attribute guard (check_exr_attributes, below).
 //  - write: any channel count, named as OpenImageIO names them (1: Y; else R,
 //    G, B, A, channel4, channel5, ...), half or float, the compression and
 //    level asked for (auto: zip), the description as "comments", an sRGB
