@@ -73,9 +73,8 @@ Manifest read_manifest(const std::string& path);
 const std::vector<std::string>& batch_effects();
 
 // The compression of a batch's PNG frames when neither the row nor --param
-// sets one (single runs keep the writer's default, zip:6): the Up filter and
-// libdeflate's level 1 (io/png_direct.hpp; "rle" until 2026-12-02's fourth
-// session).
+// sets one: the Sub filter with run-length deflate (io/formats/png.cpp),
+// named so that a frame's record says it.
 inline constexpr const char* kBatchPngCompression = "fast";
 
 struct BatchOptions {

@@ -2,12 +2,13 @@
 //
 // Formats: PNG (8/16-bit), JPEG, TIFF (integer and float), OpenEXR (any
 // channel by name), PFM (Middlebury's: rows stored bottom to top, the sign of
-// the scale gives the byte order, 1 or 3 channels) and Radiance HDR. brume
-// reads and writes PFM itself; the others go through OpenImageIO, which
-// libbrume loads on first use from its module brume_codec.so (looked for
-// beside the executable or Python extension, in ../lib/brume/, at the
-// configured install and build paths, or only at $BRUME_CODEC_MODULE when
-// that is set; src/io/codec.hpp).
+// the scale gives the byte order, 1 or 3 channels) and Radiance HDR, each a
+// row of the table of formats (src/io/formats/format.hpp) over its library
+// (libspng, libjpeg-turbo, libtiff, OpenEXR; PFM and HDR brume's own). What
+// no row takes goes through OpenImageIO, which libbrume loads on first use
+// from its module brume_codec.so (looked for beside the executable or Python
+// extension, in ../lib/brume/, at the configured install and build paths, or
+// only at $BRUME_CODEC_MODULE when that is set; src/io/codec.hpp).
 //
 // Colour convention: integer files (8/16-bit) are sRGB-encoded and float files
 // (EXR, PFM, float TIFF, HDR) are linear, unless a Transfer says otherwise.
@@ -66,10 +67,10 @@ void set_max_pixels(std::uint64_t n);  // n ≥ 1
 // premultiply the sRGB-encoded values), float files their values. alpha:
 // the alpha channel's index (-1: none); unassociated: the file says its
 // alpha is straight (a float file's is premultiplied otherwise, EXR's
-// definition). 8/16-bit PNG (grey, RGB, with or without alpha) and OpenEXR
-// of R G B (A) are read without OpenImageIO's module (io/png_direct.hpp,
-// io/exr_direct.hpp), other files through it. Errors name `what` (the flag)
-// and the path.
+// definition). The table of formats' rows (src/io/formats/) read what they
+// take -- 8/16-bit PNG with or without alpha, OpenEXR of R G B (A), ... --
+// other files go through OpenImageIO. Errors name `what` (the flag) and the
+// path.
 struct ChannelImage {
   Image img;
   FileInfo info;  // transfer: linear (none applied)
@@ -159,14 +160,16 @@ struct WriteOptions {
   std::string float_reason;
   std::string description;     // embedded as ImageDescription where the format allows
   // The file's compression, NAME[:LEVEL] as OpenImageIO spells it: "auto" is
-  // the writer's default (PNG deflate level 6, TIFF zip, EXR zip, JPEG
-  // quality 98, measured: a file at auto equals one at jpeg:98). Which names a format takes: see compression_names().
+  // each format's default (compression_help()); which names a format takes:
+  // compression_names().
   std::string compression = "auto";
 };
 
 // The --compression values a file of this extension takes (".png" -> "auto,
 // none, zip, zip:0..9"), for help texts and messages.
 std::string compression_names(const std::string& ext);
+// The --compression help: every format's names and what auto writes.
+std::string compression_help();
 
 // Check, before any work is done, that `path` can be written with `opts`
 // (known extension, existing writable directory, bit depth supported).

@@ -122,6 +122,15 @@ const ParamTable<PrepareParams>& prepare_param_table() {
 }
 
 namespace {
+// The --compression help, from the table of formats (built once: the specs
+// hold C strings).
+const char* compression_help_text() {
+  static const std::string help = compression_help();
+  return help.c_str();
+}
+}  // namespace
+
+namespace {
 
 ParamTable<Intrinsics> intrinsics_table() {
   ParamTable<Intrinsics> k("depth");
@@ -271,14 +280,7 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
               "output storage: auto (PNG/TIFF: the input's 8 or 16 bits, else 16; JPEG 8; EXR/PFM/HDR float)")
       .choice("out-transfer", &OutputFiles::transfer, transfer_names(),
               "transfer function of the output: auto (sRGB for 8/16-bit, linear for float), srgb, linear")
-      .text("compression", &OutputFiles::compression,
-            "compression of the output image, NAME[:LEVEL]: auto (the writer's default: PNG zip:6, TIFF and EXR "
-            "zip, JPEG jpeg:98); PNG none, zip, zip:0..9 (deflate level: 1 is fastest, 9 smallest), rle (Up filter and "
-            "run-length deflate: about twice as fast to write and to read as zip:1), fast (Up filter and libdeflate's "
-            "level 1: faster again, about rle's size; brume batch's PNG default); TIFF none, lzw, zip, "
-            "zip:1..9, packbits; EXR none, rle, zip, zip:1..9, zips, piz, and the lossy pxr24, b44, b44a, "
-            "dwaa[:L], dwab[:L]; JPEG jpeg:1..100 (quality); PFM none; HDR rle. Lossless forms give the same "
-            "pixels. Maps keep their format's default lossless compression")
+      .text("compression", &OutputFiles::compression, compression_help_text())
       .text("record", &OutputFiles::record, "write a JSON record of every parameter, derived value and input hash")
       .writes_file();
   for (const MapOutput& m : maps) {

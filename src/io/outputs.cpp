@@ -257,6 +257,19 @@ std::string compression_names(const std::string& ext) {
   return s;
 }
 
+std::string compression_help() {
+  std::string by_format, autos;
+  for (const io::Format* f : io::formats()) {
+    autos += std::string(autos.empty() ? "" : "; ") + f->title + ": " + f->auto_is;
+    std::string names = compression_names(f->extensions.front());
+    names = names.substr(names.find(", ") + 2);  // less "auto"
+    by_format += std::string("; ") + f->title + ": " + names;
+  }
+  return "compression of the output image, NAME[:LEVEL]: auto is each format's default (" + autos + ")" + by_format +
+         ". Lossless forms give the same pixels; maps keep their format's default lossless compression "
+         "(docs/formats.md)";
+}
+
 void check_encoding(const std::string& path, const WriteOptions& opts, const std::string& flag) {
   const io::Format& f = row_for(path, flag);
   const io::Storage type = storage_type(f, path, opts.bits, flag, opts.is_color);

@@ -282,14 +282,10 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       const std::string out = (od / (stem + ext)).generic_string();
       const std::string rec = (od / (stem + ".json")).generic_string();
       values.emplace_back("out", out);
-      // PNG frames are written with `fast` (the Up filter, libdeflate's
-      // level 1) unless the row or --param says otherwise: at the writer's
-      // default zip:6 the encoder was the largest cost of a dataset frame
-      // after the effect, for files ~6 % smaller than zip:1; rle writes
-      // 1.9-2.4x faster than zip:1 and reads back 1.3-2.1x faster, for
-      // files 27 % smaller to 5 % larger, and fast writes 1.2-1.5x faster
-      // than rle, for files 9 % smaller to 2 % larger (io/png_direct.hpp).
-      // Recorded like any value.
+      // PNG frames are written with `fast` (the Sub filter, run-length
+      // deflate; io/formats/png.cpp) unless the row or --param says
+      // otherwise: at zip:6 the encoder is the largest cost of a dataset
+      // frame after the effect. Recorded like any value.
       if (ext == ".png" && !given.count("compression")) values.emplace_back("compression", std::string(kBatchPngCompression));
       f.outputs.push_back(out);
       for (const std::string& map : o.maps) {

@@ -406,7 +406,8 @@ const Format& exr_format() {
                         header,
                         read,
                         refuse,
-                        write};
+                        write,
+                        "zip"};
   return f;
 }
 

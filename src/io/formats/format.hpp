@@ -110,6 +110,7 @@ struct Format {
   std::string (*refuse)(const WriteRequest& request);
   // Writes `tmp`; false with *why (errno left as the failure set it).
   bool (*write)(const std::string& tmp, const WriteRequest& request, std::string* why);
+  const char* auto_is;  // what --compression auto writes, for the help ("zip", "Sub filter, run-length deflate")
 };
 
 // The rows, in the order a read's sniff tries them.

@@ -269,7 +269,7 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string*) { return
 const Format& hdr_format() {
   using namespace hdr_row;
   static const Format f{"hdr", "Radiance HDR", {".hdr"}, {"float"}, "float", "float", {{"rle", 1, 0, false}},
-                        {3}, false, sniff, header, read, refuse, write};
+                        {3}, false, sniff, header, read, refuse, write, "rle"};
   return f;
 }
 

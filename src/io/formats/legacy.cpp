@@ -41,7 +41,7 @@ bool jpeg_write(const std::string& tmp, const WriteRequest& r, std::string* why)
 
 const Format& jpeg_format() {
   static const Format f{"jpeg", "JPEG", {".jpg", ".jpeg"}, {"8"}, "8", "8", {{"jpeg", 1, 100, true}},
-                        {}, false, jpeg_sniff, jpeg_header, jpeg_read, jpeg_refuse, jpeg_write};
+                        {}, false, jpeg_sniff, jpeg_header, jpeg_read, jpeg_refuse, jpeg_write, "jpeg:98"};
   return f;
 }
 
@@ -83,7 +83,7 @@ bool tiff_write(const std::string& tmp, const WriteRequest& r, std::string* why)
 const Format& tiff_format() {
   static const Format f{"tiff", "TIFF", {".tif", ".tiff"}, {"8", "16", "float"}, "16", "float",
                         {{"none", 1, 0, false}, {"lzw", 1, 0, false}, {"zip", 1, 9, false}, {"packbits", 1, 0, false}},
-                        {}, true, tiff_sniff, tiff_header, tiff_read, tiff_refuse, tiff_write};
+                        {}, true, tiff_sniff, tiff_header, tiff_read, tiff_refuse, tiff_write, "zip"};
   return f;
 }
 

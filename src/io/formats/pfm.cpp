@@ -161,7 +161,7 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string*) {
 const Format& pfm_format() {
   using namespace pfm_row;
   static const Format f{"pnm", "PFM", {".pfm"}, {"float"}, "float", "float", {{"none", 1, 0, false}},
-                        {1, 3}, true, sniff, header, read, refuse, write};
+                        {1, 3}, true, sniff, header, read, refuse, write, "none"};
   return f;
 }
 

@@ -13,12 +13,12 @@
 //    gAMA 1.0; the description as a tEXt "Description" chunk (iTXt when it
 //    is not Latin-1's ASCII part), the chunk OpenImageIO reads as
 //    ImageDescription. Counts are round(v x (2^bits - 1)), clamped, NaN 0
-//    (io::to_count). Compression (see kAutoFilters for the default's choice):
-//      auto, zip     deflate level 6 (zip:N level N), libspng's filter choice
-//                    (auto: the Sub filter on every row)
+//    (io::to_count). Compression (see kAuto for the default's measurements):
+//      auto, fast    the Sub filter on every row, zlib's run-length strategy
+//      zip           deflate level 6 (zip:N level N), libspng's per-row
+//                    choice of the five filters: the smallest files
 //      none          level 0 (stored blocks: PNG always deflates)
-//      rle           zlib's Z_RLE strategy with the Up filter
-//      fast          level 1 with the Up filter
+//      rle           the Up filter, zlib's run-length strategy
 //    2 or 4 channels go to OpenImageIO's writer (it un-associates alpha).
 // Rows are decoded and encoded one at a time (libspng's progressive calls),
 // so no second copy of the image is held. Tests: tests/io/test_png.cpp.
@@ -38,13 +38,19 @@ namespace brume::io {
 namespace png_row {
 namespace fs = std::filesystem;
 
-// The filter "auto" gives every row. Measured on this project's outputs
-// (1600x1120 8-bit RGB, level 6, Intel Xeon family 6 model 207,
-// 2026-12-05): Sub alone 182 ms / 853 KB, libspng's per-row choice of all
-// five 249 ms / 865 KB on the demo haze; on KITTI's frame 78 ms / 752 KB
-// against 103 ms / 725 KB. zlib's single thread is most of a PNG run's
-// write, so "auto" takes Sub; "zip" keeps the per-row choice.
+// "auto": zlib's single thread is most of a PNG run's write, and on the
+// photographs and renders brume writes, Sub-filtered rows deflated with the
+// run-length strategy cost a fraction of level 6's time for files 0-14 %
+// larger. Measured with libspng 0.7.3 (Intel Xeon family 6 model 207,
+// 2026-12-05), 1600x1120 RGB:
+//                         Sub + RLE          level 6, per-row choice
+//   demo haze,  8-bit     40 ms / 976 KB     249 ms / 865 KB
+//   demo haze, 16-bit    106 ms / 4.34 MB    622 ms / 3.94 MB
+//   KITTI frame, 8-bit    15 ms / 709 KB     103 ms / 725 KB
+// (Sub alone at level 6: 176 ms / 853 KB on the first.) `zip` is there for
+// the smallest file.
 constexpr int kAutoFilters = SPNG_FILTER_CHOICE_SUB;
+constexpr int kAutoStrategy = Z_RLE;
 
 struct File {
   std::FILE* f = nullptr;
@@ -203,11 +209,10 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
     e = spng_set_text(c, &text, 1);
   }
   const Compression& k = r.compression;
-  int level = 6, filters = kAutoFilters, strategy = Z_FILTERED;
-  if (k.name == "zip") level = k.level >= 0 ? k.level : 6, filters = SPNG_FILTER_CHOICE_ALL;
+  int level = 6, filters = kAutoFilters, strategy = kAutoStrategy;  // auto, fast
+  if (k.name == "zip") level = k.level >= 0 ? k.level : 6, filters = SPNG_FILTER_CHOICE_ALL, strategy = Z_FILTERED;
   if (k.name == "none") level = 0, filters = SPNG_FILTER_CHOICE_NONE, strategy = Z_DEFAULT_STRATEGY;
-  if (k.name == "rle") strategy = Z_RLE, filters = SPNG_FILTER_CHOICE_UP;
-  if (k.name == "fast") level = 1, filters = SPNG_FILTER_CHOICE_UP;
+  if (k.name == "rle") filters = SPNG_FILTER_CHOICE_UP;
   if (!e) e = spng_set_option(c, SPNG_IMG_COMPRESSION_LEVEL, level);
   if (!e) e = spng_set_option(c, SPNG_IMG_COMPRESSION_STRATEGY, strategy);
   if (!e) e = spng_set_option(c, SPNG_FILTER_CHOICE, filters);
@@ -257,7 +262,8 @@ const Format& png_format() {
                         header,
                         read,
                         refuse,
-                        write};
+                        write,
+                        "Sub-filtered run-length deflate"};
   return f;
 }
 
