@@ -208,7 +208,7 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     EXPECT_EQ(png_only.output.find("codec module"), std::string::npos) << png_only.output;
     EXPECT_TRUE(fs::exists(p("o.png")));
 
-    // 8-bit grey and colour JPEG are read without it (src/io/jpeg_direct.hpp).
+    // 8-bit grey and colour JPEG are read without it (src/io/formats/jpeg.cpp).
     const CliRun jpeg_in = run("blur --image " + p("in.jpg") + " --sigma 3 --out " + p("oj.png") + " --timing");
     ASSERT_EQ(jpeg_in.status, 0) << jpeg_in.output;
     EXPECT_EQ(jpeg_in.output.find("codec module"), std::string::npos) << jpeg_in.output;
@@ -232,14 +232,14 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     EXPECT_EQ(hdr_only.output.find("codec module"), std::string::npos) << hdr_only.output;
     EXPECT_EQ(read_color(p("o.hdr")).width, 24);
 
-    // And TIFF of 1 or 3 channels, 8/16-bit or float (src/io/tiff_direct.hpp), in and out.
+    // And TIFF of 1 to 4 channels, 8/16-bit or float (src/io/formats/tiff.cpp), in and out.
     write_image(p("in.tif"), rgb, WriteOptions{});
     const CliRun tif_only = run("blur --image " + p("in.tif") + " --sigma 3 --out " + p("o.tif") + " --timing");
     ASSERT_EQ(tif_only.status, 0) << tif_only.output;
     EXPECT_EQ(tif_only.output.find("codec module"), std::string::npos) << tif_only.output;
     EXPECT_EQ(read_color(p("o.tif")).width, 24);
 
-    // And JPEG out (src/io/jpeg_direct.hpp).
+    // And JPEG out (src/io/formats/jpeg.cpp).
     const CliRun jpeg_out = run("blur --image " + img + " --sigma 3 --out " + p("o.jpg") + " --timing");
     ASSERT_EQ(jpeg_out.status, 0) << jpeg_out.output;
     EXPECT_EQ(jpeg_out.output.find("codec module"), std::string::npos) << jpeg_out.output;

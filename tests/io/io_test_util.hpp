@@ -17,9 +17,7 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
-#include "io/jpeg_direct.hpp"
 #include "io/png_direct.hpp"
-#include "io/tiff_direct.hpp"
 #include "test_util.hpp"
 
 namespace fs = std::filesystem;
