@@ -13,7 +13,6 @@ PKGS=(
   libpng-dev                             # the tests write unusual PNGs (interlaced, palette) with libpng
   libjpeg-dev                            # 8-bit grey and colour JPEG read without loading OpenImageIO
   libtiff-dev                            # the common TIFF files read without loading OpenImageIO
-  libdeflate-dev                         # the PNG subset's image data inflated in one call (faster than zlib)
   libopenexr-dev                         # the common OpenEXR files read without loading OpenImageIO
   libgtest-dev libbenchmark-dev          # tests, benchmarks
   libegl-dev libgles-dev                 # GPU backend: headless EGL + OpenGL ES 3.2 headers and loaders

@@ -172,13 +172,24 @@ TEST_F(Cli, TimingPrintsTheWholeRunBreakdown) {
 
 // OpenImageIO lives in brume_codec.so, loaded only when a file needs it
 // (src/io/codec.hpp): PFM, PNG, JPEG, EXR, HDR and TIFF runs work with no
-// module at all, an EXR output with a level names the module's load in --timing, and a module that cannot be loaded is
+// module at all, a two-part EXR input names the module's load in --timing, and a module that cannot be loaded is
 // an error naming every path tried, with nothing written.
 TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
   Image rgb(24, 16, 3, 0.5f);
   rgb.at(3, 4, 1) = 2.0f;
   write_image(p("in.pfm"), rgb, WriteOptions{});  // brume's own PFM writer
   write_image(p("in.jpg"), rgb, WriteOptions{});  // (OpenImageIO writes JPEG)
+  {
+    // A two-part EXR, which the OpenEXR row leaves to OpenImageIO.
+    OIIO::ImageSpec specs[2] = {OIIO::ImageSpec(24, 16, 3, OIIO::TypeDesc::HALF),
+                                OIIO::ImageSpec(24, 16, 3, OIIO::TypeDesc::HALF)};
+    auto out = OIIO::ImageOutput::create(p("two.exr"));
+    ASSERT_TRUE(out && out->open(p("two.exr"), 2, specs));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, rgb.data.data()));
+    ASSERT_TRUE(out->open(p("two.exr"), specs[1], OIIO::ImageOutput::AppendSubimage));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, rgb.data.data()));
+    ASSERT_TRUE(out->close());
+  }
   struct EnvGuard {
     explicit EnvGuard(const char* v) { ::setenv("BRUME_CODEC_MODULE", v, 1); }
     ~EnvGuard() { ::unsetenv("BRUME_CODEC_MODULE"); }
@@ -203,13 +214,17 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     EXPECT_EQ(jpeg_in.output.find("codec module"), std::string::npos) << jpeg_in.output;
     EXPECT_TRUE(fs::exists(p("oj.png")));
 
-    // So are OpenEXR of one channel or R G B (A), half or float
-    // (src/io/exr_direct.hpp), in and out.
+    // So are single-part OpenEXR of one channel or R G B (A), half or float
+    // (src/io/formats/exr.cpp), in and out, at any compression and level.
     write_image(p("in.exr"), rgb, WriteOptions{});
     const CliRun exr_only = run("blur --image " + p("in.exr") + " --sigma 3 --out " + p("o.exr") + " --bits half --timing");
     ASSERT_EQ(exr_only.status, 0) << exr_only.output;
     EXPECT_EQ(exr_only.output.find("codec module"), std::string::npos) << exr_only.output;
     EXPECT_EQ(read_color(p("o.exr")).width, 24);
+    const CliRun exr_level = run("blur --image " + p("in.exr") + " --sigma 3 --out " + p("o9.exr") + " --compression zip:9");
+    ASSERT_EQ(exr_level.status, 0) << exr_level.output;
+    EXPECT_EQ(read_color(p("o9.exr")).width, 24);
+    fs::remove(p("o9.exr"));
     // And Radiance HDR of the common form (src/io/hdr_direct.hpp).
     write_image(p("in.hdr"), rgb, WriteOptions{});
     const CliRun hdr_only = run("blur --image " + p("in.hdr") + " --sigma 3 --out " + p("o.hdr") + " --timing");
@@ -230,10 +245,10 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     EXPECT_EQ(jpeg_out.output.find("codec module"), std::string::npos) << jpeg_out.output;
     EXPECT_TRUE(fs::exists(p("o.jpg")));
 
-    // An EXR with a compression level is still OpenImageIO's.
-    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o9.exr") + " --compression zip:9");
+    // A two-part EXR is still OpenImageIO's.
+    const CliRun bad = run("blur --image " + p("two.exr") + " --sigma 3 --out " + p("o9.exr"));
     EXPECT_EQ(bad.status, 2) << bad.output;
-    for (const char* want : {"writing '", "o9.exr", "brume_codec.so", "/nonexistent/brume_codec.so: no such file",
+    for (const char* want : {"reading '", "two.exr", "brume_codec.so", "/nonexistent/brume_codec.so: no such file",
                              "BRUME_CODEC_MODULE"})
       EXPECT_NE(bad.output.find(want), std::string::npos) << want << "\n" << bad.output;
     EXPECT_FALSE(fs::exists(p("o9.exr")));
@@ -241,12 +256,12 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
   for (const char* lib : {"/lib/x86_64-linux-gnu/libz.so.1", "/usr/lib/x86_64-linux-gnu/libz.so.1"}) {
     if (!fs::exists(lib)) continue;
     EnvGuard other(lib);  // a shared object, but not brume's module
-    const CliRun bad = run("blur --image " + img + " --sigma 3 --out " + p("o9.exr") + " --compression zip:9");
+    const CliRun bad = run("blur --image " + p("two.exr") + " --sigma 3 --out " + p("o9.exr"));
     EXPECT_EQ(bad.status, 2) << bad.output;
     EXPECT_NE(bad.output.find("no brume_codec_api in it"), std::string::npos) << bad.output;
     break;
   }
-  const CliRun exr9 = run("blur --image " + img + " --sigma 3 --out " + p("o.exr") + " --compression zip:9 --timing");
+  const CliRun exr9 = run("blur --image " + p("two.exr") + " --sigma 3 --out " + p("o.exr") + " --timing");
   ASSERT_EQ(exr9.status, 0) << exr9.output;
   EXPECT_NE(exr9.output.find("of which loading the OpenImageIO codec module"), std::string::npos) << exr9.output;
   for (auto& e : fs::directory_iterator(dir))

@@ -6,11 +6,10 @@
 // `brume --version` 0.42 s linked, 0.02 s without) and more than a whole
 // diffusion. So libbrume does not link OpenImageIO: the few calls it makes
 // live in a module, brume_codec.so (src/io/codec_oiio.cpp), that brume
-// dlopens the first time a file needs it. A run that reads and writes only
-// PFM (brume's own reader and writer, src/io/image_io.cpp) and the PNG,
-// OpenEXR and Radiance subsets (src/io/png_direct.hpp, exr_direct.hpp,
-// hdr_direct.hpp), and every run that fails its checks,
-// `--help` and `--version` never load it.
+// dlopens the first time a file needs it: the files no row of the table of
+// formats takes (src/io/formats/format.hpp). A run whose files the rows
+// take, every run that fails its checks, `--help` and `--version` never
+// load it.
 //
 // Where the module is looked for: $BRUME_CODEC_MODULE (a path) when set,
 // and only there -- for a relocated install. Otherwise, first found wins

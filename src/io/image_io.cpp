@@ -20,6 +20,7 @@
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
 #include "io/codec.hpp"
+#include "io/formats/exr.hpp"
 #include "io/formats/format.hpp"
 #include "io/io_internal.hpp"
 #include "io/srgb.hpp"
@@ -49,53 +50,6 @@ void note_writer(const char* row) { t_last_writer = row; }
 }  // namespace io
 
 namespace {
-// The file opened for reading (its header parsed), or an error naming it.
-// OpenEXR 3.1 (Debian 12) allocates each header attribute at the size the
-// file declares before it reads the bytes, so a 1 kB file declaring a 1.7 GB
-// attribute costs 1.7 GB and seconds per open (found by fuzz/fuzz_image.cpp;
-// reproducer fuzz/corpus/image/openexr_huge_attribute.bin). Refused here
-// first: an attribute (name, type, int32 size, bytes; every header of a
-// multi-part file) cannot be larger than what is left of the file. Headers
-// this scan cannot follow are left to OpenEXR, which reports them.
-void check_exr_attributes(const std::string& path) {
-  // Only the first MB is read (it holds any real header's attributes but a
-  // large preview); the scan stops at its end and leaves the rest to OpenEXR.
-  std::error_code ec;
-  const std::uintmax_t total = fs::file_size(path, ec);
-  if (ec) return;
-  std::vector<char> b(static_cast<std::size_t>(std::min<std::uintmax_t>(total, 1u << 20)));
-  std::ifstream f(path, std::ios::binary);
-  if (!f.read(b.data(), static_cast<std::streamsize>(b.size()))) return;
-  const std::size_t n = b.size();
-  if (n < 8 || static_cast<unsigned char>(b[0]) != 0x76 || b[1] != 0x2f || b[2] != 0x31 || b[3] != 0x01) return;
-  const bool multipart = (static_cast<unsigned char>(b[5]) & 0x10) != 0;  // version bit 12
-  std::size_t i = 8;
-  auto cstring = [&](std::string& out) {
-    const std::size_t start = i;
-    while (i < n && b[i] != '\0' && i - start < 256) ++i;
-    if (i >= n || b[i] != '\0') return false;
-    out.assign(&b[start], i - start);
-    ++i;
-    return true;
-  };
-  for (;;) {  // headers
-    std::string name, type;
-    if (!cstring(name)) return;
-    if (name.empty()) {  // end of this header; a multi-part file ends its list with an empty header
-      if (!multipart || i >= n || b[i] == '\0') return;
-      continue;
-    }
-    if (!cstring(type) || i + 4 > n) return;
-    std::int32_t size = 0;
-    std::memcpy(&size, &b[i], 4);  // little-endian, as x86-64
-    i += 4;
-    if (size < 0 || static_cast<std::uintmax_t>(size) > total - i)
-      throw Error("cannot read '" + path + "': a corrupt OpenEXR header (attribute '" + name + "' declares " +
-                  std::to_string(size) + " bytes, but " + std::to_string(total - i) + " remain in the file)");
-    i += static_cast<std::size_t>(size);
-  }
-}
-
 void check_readable(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw FileNotFound("cannot read '" + path + "': no such file");
@@ -103,9 +57,11 @@ void check_readable(const std::string& path) {
     throw Error("cannot read '" + path + "': it is a directory, not an image file");
 }
 
+// The file opened for reading (its header parsed), or an error naming it;
+// an OpenEXR file passes the attribute guard first (io/formats/exr.hpp).
 std::unique_ptr<codec::Input> open_image(const std::string& path) {
   check_readable(path);
-  check_exr_attributes(path);
+  io::check_exr_attributes(path);
   std::string e;
   auto in = codec::api("reading '" + path + "'").open_input(path, false, &e);
   if (!in) throw Error("cannot read '" + path + "': " + (e.empty() ? "unknown or unsupported image format" : e));
@@ -114,9 +70,7 @@ std::unique_ptr<codec::Input> open_image(const std::string& path) {
 
 // The row for a file, nullptr when none takes it (OpenImageIO's turn).
 const io::Format* row_of(const std::string& path) {
-  const io::Format* f = io::format_of_file(path);
-  if (f && f->name == std::string("openexr")) check_exr_attributes(path);
-  return f;
+  return io::format_of_file(path);
 }
 
 // FileInfo of a file OpenImageIO opened (transfer: linear, none applied).

@@ -17,7 +17,6 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
-#include "io/exr_direct.hpp"
 #include "test_util.hpp"
 
 namespace fs = std::filesystem;
@@ -220,59 +219,6 @@ inline void write_png_by_hand(const std::string& p, int w, int h, int depth, int
   png_write_end(png, nullptr);
   png_destroy_write_struct(&png, &info);
   std::fclose(f);
-}
-
-// An EXR scanline file of one part cut into its parts: the bytes before the
-// offset table (preamble and header), and each block's first line and data.
-// lines: scanlines a block. Empty blocks when the file is too short.
-struct ExrBlocks {
-  std::string head;
-  std::vector<int> y;
-  std::vector<std::string> data;
-};
-inline ExrBlocks exr_blocks(const std::string& b, int height, int lines) {
-  ExrBlocks r;
-  std::size_t at = 8;
-  while (at < b.size() && b[at] != '\0') {  // name\0 type\0 size value
-    at = b.find('\0', at);
-    at = b.find('\0', at + 1) + 1;
-    if (at == 0 || at + 4 > b.size()) return {};
-    std::uint32_t n;
-    std::memcpy(&n, b.data() + at, 4);
-    at += 4 + n;
-  }
-  r.head = b.substr(0, at + 1);
-  const int blocks = (height + lines - 1) / lines;
-  for (int k = 0; k < blocks; ++k) {
-    std::uint64_t off;
-    if (at + 1 + 8 * (k + 1) > b.size()) return {};
-    std::memcpy(&off, b.data() + at + 1 + 8 * k, 8);
-    if (off + 8 > b.size()) return {};
-    std::int32_t y, n;
-    std::memcpy(&y, b.data() + off, 4);
-    std::memcpy(&n, b.data() + off + 4, 4);
-    if (n < 0 || off + 8 + static_cast<std::uint64_t>(n) > b.size()) return {};
-    r.y.push_back(y);
-    r.data.push_back(b.substr(off + 8, static_cast<std::size_t>(n)));
-  }
-  return r;
-}
-// A ZIP/ZIPS block's raw scanline bytes (raw_size of them), by OpenEXR's
-// rules read independently of brume: stored as is when it is raw_size
-// long, else zlib (inflated by zlib itself), then the deltas summed and the
-// two halves interleaved. "" when it does not inflate to exactly raw_size.
-inline std::string exr_zip_block(const std::string& d, std::size_t raw_size) {
-  if (d.size() == raw_size) return d;
-  std::string t(raw_size, '\0');
-  uLongf got = raw_size;
-  if (uncompress(reinterpret_cast<Bytef*>(t.data()), &got, reinterpret_cast<const Bytef*>(d.data()), d.size()) != Z_OK ||
-      got != raw_size)
-    return "";
-  for (std::size_t i = 1; i < raw_size; ++i) t[i] = static_cast<char>(t[i] + t[i - 1] - 128);
-  std::string raw(raw_size, '\0');
-  const std::size_t h = (raw_size + 1) / 2;
-  for (std::size_t i = 0; i < raw_size; ++i) raw[i] = i % 2 ? t[h + i / 2] : t[i / 2];
-  return raw;
 }
 
 }  // namespace brume::test_io

@@ -1,0 +1,414 @@
+// OpenEXR, read and written through OpenEXR 3.1's public API (Imf::InputFile
+// and Imf::OutputFile with a FrameBuffer of slices over brume's interleaved
+// image; OpenEXR converts half to float on reading and (de)compresses line
+// blocks on its global thread pool).
+//  - read: a single-part image file, scanline or tiled (deep and multi-part
+//    files go to OpenImageIO), any data window (its pixels, as OpenImageIO's
+//    read_image gives them), every channel of one pixel type, half or float,
+//    not subsampled, and either one channel (any name) or R G B or R G B A --
+//    given in the order OpenImageIO gives those sets (R, G, B, A first; the
+//    file stores channels sorted by name). Other sets, which OpenImageIO
+//    orders by rules of its own, go to it, as does one channel when alpha is
+//    asked for (OpenImageIO calls a lone "A" alpha). FileInfo as OpenImageIO
+//    gives it: "openexr", 16 bits (half) or 32 (float), the channel names,
+//    the "comments" attribute (OpenImageIO's ImageDescription). Every open
+//    first runs the attribute guard (check_exr_attributes, below).
+//  - write: any channel count, named as OpenImageIO names them (1: Y; else R,
+//    G, B, A, channel4, channel5, ...), half or float, the compression and
+//    level asked for (auto: zip), the description as "comments", an sRGB
+//    request marked with the string attribute "oiio:ColorSpace" = "sRGB"
+//    (OpenImageIO reads it back; linear files carry nothing, which
+//    OpenImageIO reports as linear). The file goes through brume's own
+//    stream, so a failed write or close (ENOSPC, EFBIG) is an error with its
+//    errno rather than a file OpenEXR's destructor could not finish.
+// Tests: IO.Exr* (tests/io/test_exr.cpp).
+#include "io/formats/exr.hpp"
+
+#include <Imath/half.h>
+#include <OpenEXR/Iex.h>
+#include <OpenEXR/IexThrowErrnoExc.h>
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFloatAttribute.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfIO.h>
+#include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfStdIO.h>
+#include <OpenEXR/ImfStringAttribute.h>
+#include <OpenEXR/ImfThreading.h>
+#include <OpenEXR/ImfVersion.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <climits>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <mutex>
+
+#include "brume/error.hpp"
+#include "io/formats/format.hpp"
+
+namespace brume::io {
+
+void check_exr_attributes(const std::string& path) {
+  // Only the first MB is read (it holds any real header's attributes but a
+  // large preview); the scan stops at its end and leaves the rest to OpenEXR.
+  std::error_code ec;
+  const std::uintmax_t total = std::filesystem::file_size(path, ec);
+  if (ec) return;
+  std::vector<char> b(static_cast<std::size_t>(std::min<std::uintmax_t>(total, 1u << 20)));
+  std::ifstream f(path, std::ios::binary);
+  if (!f.read(b.data(), static_cast<std::streamsize>(b.size()))) return;
+  const std::size_t n = b.size();
+  if (n < 8 || static_cast<unsigned char>(b[0]) != 0x76 || b[1] != 0x2f || b[2] != 0x31 || b[3] != 0x01) return;
+  const bool multipart = (static_cast<unsigned char>(b[5]) & 0x10) != 0;  // version bit 12
+  std::size_t i = 8;
+  auto cstring = [&](std::string& out) {
+    const std::size_t start = i;
+    while (i < n && b[i] != '\0' && i - start < 256) ++i;
+    if (i >= n || b[i] != '\0') return false;
+    out.assign(&b[start], i - start);
+    ++i;
+    return true;
+  };
+  for (;;) {  // headers: attributes of name, type, int32 size, bytes
+    std::string name, type;
+    if (!cstring(name)) return;
+    if (name.empty()) {  // end of this header; a multi-part file ends its list with an empty header
+      if (!multipart || i >= n || b[i] == '\0') return;
+      continue;
+    }
+    if (!cstring(type) || i + 4 > n) return;
+    std::int32_t size = 0;
+    std::memcpy(&size, &b[i], 4);  // little-endian, as the hosts brume builds for (x86-64, arm64)
+    i += 4;
+    if (size < 0 || static_cast<std::uintmax_t>(size) > total - i)
+      throw Error("cannot read '" + path + "': a corrupt OpenEXR header (attribute '" + name + "' declares " +
+                  std::to_string(size) + " bytes, but " + std::to_string(total - i) + " remain in the file)");
+    i += static_cast<std::size_t>(size);
+  }
+}
+
+// The row's parts, in a namespace of their own: a unity build joins the rows'
+// files into one unit.
+namespace exr_row {
+namespace {
+
+// OpenEXR (de)compresses on its global pool, which only grows here: another
+// thread's read or write, or OpenImageIO (which sets the pool too), may be
+// using it. 0 or 1 thread: the calling thread does the work (no pool hand-off).
+// Returns the thread count to give a file.
+int ensure_pool(int threads) {
+  threads = std::min(threads, 64);
+  if (threads <= 1) return 0;
+  static std::mutex m;
+  std::lock_guard<std::mutex> lock(m);
+  if (Imf::globalThreadCount() < threads) Imf::setGlobalThreadCount(threads);
+  return threads;
+}
+
+bool sniff(const unsigned char* head, std::size_t n) {
+  return n >= 4 && head[0] == 0x76 && head[1] == 0x2f && head[2] == 0x31 && head[3] == 0x01;
+}
+
+// The channel order OpenImageIO gives, for the sets the row takes; empty for
+// any other set (left to OpenImageIO).
+std::vector<std::string> channel_order(const Imf::ChannelList& list, Imf::PixelType& type) {
+  std::vector<std::string> names;
+  bool first = true;
+  for (auto it = list.begin(); it != list.end(); ++it) {
+    const Imf::Channel& c = it.channel();
+    if (c.xSampling != 1 || c.ySampling != 1) return {};
+    if (c.type != Imf::HALF && c.type != Imf::FLOAT) return {};
+    if (!first && c.type != type) return {};
+    type = c.type;
+    first = false;
+    names.emplace_back(it.name());
+  }
+  if (names.size() == 1) return names;
+  std::vector<std::string> sorted = names;
+  std::sort(sorted.begin(), sorted.end());  // the ChannelList's own order, by name
+  if (sorted == std::vector<std::string>{"B", "G", "R"}) return {"R", "G", "B"};
+  if (sorted == std::vector<std::string>{"A", "B", "G", "R"}) return {"R", "G", "B", "A"};
+  return {};
+}
+
+// A file's header, when the row takes the file.
+struct Opened {
+  std::unique_ptr<Imf::StdIFStream> stream;  // at the header's end
+  Imath::Box2i window;                       // the data window
+  int width = 0, height = 0;
+  std::vector<std::string> names;  // in OpenImageIO's order
+  int bits = 32;
+  std::string description;
+};
+
+[[noreturn]] void fail(const std::string& path, const std::exception& e) {
+  throw Error("cannot read '" + path + "': " + e.what());
+}
+
+// False for a file the row does not take; brume::Error for a damaged one.
+bool open_exr(const std::string& path, Opened& o) {
+  check_exr_attributes(path);
+  // The preamble: the magic number and the version field, whose flags say
+  // multi-part and deep (non-image) before OpenEXR parses more.
+  char b[8];
+  {
+    std::ifstream f(path, std::ios::binary);
+    if (!f.read(b, 8) || !Imf::isImfMagic(b)) return false;
+  }
+  int version;
+  std::memcpy(&version, b + 4, 4);  // little-endian, as the hosts brume builds for
+  if (Imf::getVersion(version) != 2 || Imf::isMultiPart(version) || Imf::isNonImage(version) ||
+      !Imf::supportsFlags(Imf::getFlags(version)))
+    return false;
+  Imf::Header h;
+  try {
+    o.stream = std::make_unique<Imf::StdIFStream>(path.c_str());
+    o.stream->seekg(8);
+    h.readFrom(*o.stream, version);
+    h.sanityCheck(Imf::isTiled(version));
+  } catch (const std::exception& e) {
+    fail(path, e);
+  }
+  Imf::PixelType type = Imf::HALF;
+  o.names = channel_order(h.channels(), type);
+  if (o.names.empty()) return false;
+  o.window = h.dataWindow();
+  const long long w = static_cast<long long>(o.window.max.x) - o.window.min.x + 1;
+  const long long hh = static_cast<long long>(o.window.max.y) - o.window.min.y + 1;
+  if (w > INT_MAX || hh > INT_MAX)
+    throw Error("cannot read '" + path + "': its data window declares " + std::to_string(w) + " x " +
+                std::to_string(hh) + " pixels");
+  o.width = static_cast<int>(w);
+  o.height = static_cast<int>(hh);
+  o.bits = type == Imf::HALF ? 16 : 32;
+  if (const auto* c = h.findTypedAttribute<Imf::StringAttribute>("comments")) o.description = c->value();
+  return true;
+}
+
+bool header(const std::string& path, Header& out) {
+  Opened o;
+  if (!open_exr(path, o)) return false;
+  out.width = o.width;
+  out.height = o.height;
+  out.channels = static_cast<int>(o.names.size());
+  return true;
+}
+
+bool read(const ReadRequest& request, Decoded& out) {
+  const std::string& path = request.path;
+  Opened o;
+  if (!open_exr(path, o)) return false;
+  const int C = static_cast<int>(o.names.size());
+  // One channel with alpha kept: OpenImageIO's call (a lone "A" is alpha).
+  if (request.with_alpha && C == 1) return false;
+  if (request.check) request.check(o.width, o.height, C);
+  Image img(o.width, o.height, C);
+  try {
+    o.stream->seekg(0);
+    Imf::InputFile in(*o.stream, ensure_pool(request.threads));
+    if (in.header().dataWindow() != o.window) throw Iex::InputExc("the file changed while it was read");
+    // OpenEXR addresses a slice by (x, y) in the file's coordinates: the base
+    // is where pixel (0, 0) would be, before the data window's origin.
+    const std::size_t xs = static_cast<std::size_t>(C) * sizeof(float);
+    const std::size_t ys = xs * static_cast<std::size_t>(o.width);
+    char* base = reinterpret_cast<char*>(img.data.data()) -
+                 static_cast<std::ptrdiff_t>(o.window.min.x) * static_cast<std::ptrdiff_t>(xs) -
+                 static_cast<std::ptrdiff_t>(o.window.min.y) * static_cast<std::ptrdiff_t>(ys);
+    Imf::FrameBuffer fb;
+    for (int c = 0; c < C; ++c) {
+      if (!in.header().channels().findChannel(o.names[static_cast<std::size_t>(c)]))
+        throw Iex::InputExc("the file changed while it was read");
+      fb.insert(o.names[static_cast<std::size_t>(c)],
+                Imf::Slice(Imf::FLOAT, base + static_cast<std::size_t>(c) * sizeof(float), xs, ys));
+    }
+    in.setFrameBuffer(fb);
+    in.readPixels(o.window.min.y, o.window.max.y);
+  } catch (const std::exception& e) {
+    fail(path, e);
+  }
+  out.img = std::move(img);
+  out.info.format = "openexr";
+  out.info.integer = false;
+  out.info.bits = o.bits;
+  out.info.channel_names = std::move(o.names);
+  out.info.description = std::move(o.description);
+  out.alpha = C == 4 ? 3 : -1;
+  out.unassociated = false;  // OpenEXR's colour is premultiplied by alpha, by definition
+  return true;
+}
+
+// The file a write goes to: stdio under OpenEXR's stream interface, keeping
+// the first failure (and its errno) so that close() reports a write that
+// OpenEXR's destructor could not finish (it swallows its exceptions).
+class FileStream : public Imf::OStream {
+ public:
+  explicit FileStream(const std::string& path) : Imf::OStream(path.c_str()), f_(std::fopen(path.c_str(), "wb")) {
+    if (!f_) Iex::throwErrnoExc("cannot open " + path + " for writing: %T.");
+  }
+  ~FileStream() override {
+    if (f_) std::fclose(f_);
+  }
+  void write(const char c[], int n) override {
+    if (std::fwrite(c, 1, static_cast<std::size_t>(n), f_) != static_cast<std::size_t>(n)) failed();
+  }
+  // Never throws: OutputFile's destructor calls it outside its try; a
+  // failure is kept for close().
+  std::uint64_t tellp() override {
+    const off_t at = ftello(f_);
+    if (at >= 0) return static_cast<std::uint64_t>(at);
+    if (err_ == 0) err_ = errno != 0 ? errno : EIO;
+    return 0;
+  }
+  void seekp(std::uint64_t pos) override {
+    if (fseeko(f_, static_cast<off_t>(pos), SEEK_SET) != 0) failed();
+  }
+  int error() const { return err_; }  // the first failure's errno, 0 if none
+  // Flushes and closes; false with errno set on this or an earlier failure.
+  bool close() {
+    const int r = std::fclose(f_);
+    f_ = nullptr;
+    if (err_ != 0) {
+      errno = err_;
+      return false;
+    }
+    return r == 0;
+  }
+
+ private:
+  void failed() {
+    if (err_ == 0) err_ = errno != 0 ? errno : EIO;
+    Iex::throwErrnoExc("cannot write " + std::string(fileName()) + ": %T.", err_);
+  }
+  std::FILE* f_;
+  int err_ = 0;
+};
+
+// Compressions by brume's names (format.hpp's rules: compression_rules).
+Imf::Compression compression_of(const std::string& name) {
+  static const std::pair<const char*, Imf::Compression> names[] = {
+      {"auto", Imf::ZIP_COMPRESSION},    {"none", Imf::NO_COMPRESSION},   {"rle", Imf::RLE_COMPRESSION},
+      {"zip", Imf::ZIP_COMPRESSION},     {"zips", Imf::ZIPS_COMPRESSION}, {"piz", Imf::PIZ_COMPRESSION},
+      {"pxr24", Imf::PXR24_COMPRESSION}, {"b44", Imf::B44_COMPRESSION},   {"b44a", Imf::B44A_COMPRESSION},
+      {"dwaa", Imf::DWAA_COMPRESSION},   {"dwab", Imf::DWAB_COMPRESSION}};
+  for (const auto& [n, c] : names)
+    if (name == n) return c;
+  throw Iex::ArgExc("'" + name + "' is not an OpenEXR compression");
+}
+
+// The names OpenImageIO gives n channels (ImageSpec::default_channel_names,
+// with Y for one, as brume always asked of it).
+std::vector<std::string> channel_names(int n) {
+  if (n == 1) return {"Y"};
+  static const char* rgba[] = {"R", "G", "B", "A"};
+  std::vector<std::string> names;
+  for (int c = 0; c < n; ++c) names.emplace_back(c < 4 ? rgba[c] : "channel" + std::to_string(c));
+  return names;
+}
+
+std::string refuse(const WriteRequest& r) {
+  if (r.type != Storage::f16 && r.type != Storage::f32) return "OpenEXR holds half or float values";
+  return {};
+}
+
+bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
+  std::unique_ptr<FileStream> file;
+  std::unique_ptr<Imf::OutputFile> out;
+  try {
+    // Header(w, h): windows from (0, 0), pixel aspect ratio 1, increasing y.
+    Imf::Header h(r.width, r.height);
+    const std::string& comp = r.compression.name;
+    h.compression() = compression_of(comp);
+    if (r.compression.level >= 0 && (comp == "zip" || comp == "zips")) h.zipCompressionLevel() = r.compression.level;
+    if (comp == "dwaa" || comp == "dwab") {
+      // OpenEXR's and OpenImageIO's default 45; the attribute names it for readers.
+      if (r.compression.level >= 0) h.dwaCompressionLevel() = static_cast<float>(r.compression.level);
+      h.insert("dwaCompressionLevel", Imf::FloatAttribute(h.dwaCompressionLevel()));
+    }
+    const Imf::PixelType type = r.type == Storage::f16 ? Imf::HALF : Imf::FLOAT;
+    const std::vector<std::string> names = channel_names(r.channels);
+    for (const std::string& n : names) h.channels().insert(n, Imf::Channel(type));
+    if (!r.description.empty()) h.insert("comments", Imf::StringAttribute(r.description));
+    if (r.srgb) h.insert("oiio:ColorSpace", Imf::StringAttribute("sRGB"));
+    const int threads = ensure_pool(r.threads);
+    file = std::make_unique<FileStream>(tmp);
+    out = std::make_unique<Imf::OutputFile>(*file, h, threads);
+    // OpenEXR's writer takes slices of the file's own pixel type: a half
+    // file's values are converted first, by Imath (round to nearest even, as
+    // OpenImageIO converts), on the row's threads.
+    const std::size_t C = static_cast<std::size_t>(r.channels);
+    const std::size_t n = C * static_cast<std::size_t>(r.width) * static_cast<std::size_t>(r.height);
+    std::vector<Imath::half> halves;
+    const char* base = reinterpret_cast<const char*>(r.values);
+    std::size_t value_bytes = sizeof(float);
+    if (type == Imf::HALF) {
+      halves.resize(n);
+      const std::ptrdiff_t rows = r.height, row = static_cast<std::ptrdiff_t>(C) * r.width;
+#pragma omp parallel for num_threads(std::max(1, std::min(r.threads, 64))) schedule(static)
+      for (std::ptrdiff_t y = 0; y < rows; ++y)
+        for (std::ptrdiff_t i = y * row; i < (y + 1) * row; ++i) halves[static_cast<std::size_t>(i)] = Imath::half(r.values[i]);
+      base = reinterpret_cast<const char*>(halves.data());
+      value_bytes = sizeof(Imath::half);
+    }
+    const std::size_t xs = C * value_bytes, ys = xs * static_cast<std::size_t>(r.width);
+    Imf::FrameBuffer fb;
+    for (std::size_t c = 0; c < C; ++c)  // (Slice takes char*; the writer only reads)
+      fb.insert(names[c], Imf::Slice(type, const_cast<char*>(base) + c * value_bytes, xs, ys));
+    out->setFrameBuffer(fb);
+    out->writePixels(r.height);
+    out.reset();  // writes the line offset table
+    if (!file->close()) {
+      const int err = errno;
+      if (why) *why = std::strerror(err);
+      errno = err;
+      return false;
+    }
+  } catch (const std::exception& e) {
+    const int err = file && file->error() != 0 ? file->error() : errno;
+    out.reset();
+    file.reset();
+    if (why) *why = e.what();
+    errno = err;
+    return false;
+  }
+  return true;
+}
+
+}  // namespace
+}  // namespace exr_row
+
+const Format& exr_format() {
+  using namespace exr_row;
+  static const Format f{"openexr",
+                        "OpenEXR",
+                        {".exr"},
+                        {"half", "float"},
+                        "float",
+                        "float",
+                        {{"none", 1, 0, false},
+                         {"rle", 1, 0, false},
+                         {"zip", 1, 9, false},
+                         {"zips", 1, 9, false},
+                         {"piz", 1, 0, false},
+                         {"pxr24", 1, 0, true},
+                         {"b44", 1, 0, true},
+                         {"b44a", 1, 0, true},
+                         {"dwaa", 1, 1000, true},
+                         {"dwab", 1, 1000, true}},
+                        {},
+                        true,
+                        sniff,
+                        header,
+                        read,
+                        refuse,
+                        write,
+                        "zip"};
+  return f;
+}
+
+}  // namespace brume::io
