@@ -68,28 +68,11 @@ std::unique_ptr<codec::Input> open_image(const std::string& path) {
   return in;
 }
 
-// The row for a file, nullptr when none takes it (OpenImageIO's turn).
-const io::Format* row_of(const std::string& path) {
-  return io::format_of_file(path);
-}
-
-// FileInfo of a file OpenImageIO opened (transfer: linear, none applied).
-FileInfo file_info_of(const std::string& path, const codec::InputSpec& spec) {
-  FileInfo f;
-  f.path = path;
-  f.format = spec.format;
-  f.integer = !spec.floating;
-  f.bits = spec.bits_per_sample > 0 ? spec.bits_per_sample : spec.container_bits;
-  f.channel_names = spec.channel_names;
-  f.description = spec.description;
-  return f;
-}
-
 }  // namespace
 
 ImageHeader read_header(const std::string& path) {
   check_readable(path);
-  if (const io::Format* f = row_of(path)) {
+  if (const io::Format* f = io::format_of_file(path)) {
     io::Header h;
     if (f->header(path, h)) {
       check_declared_size(path, h.width, h.height, h.channels);
@@ -105,64 +88,64 @@ ImageHeader read_header(const std::string& path) {
 
 namespace {
 
-// What read_raw returns: the values as OpenImageIO reads them, the integer
-// counts (read_scalar), or, for read_color, the values already decoded from
-// sRGB where a row can do that during its decode (per count, srgb_to_linear
-// of the value: bit for bit what decoding them after gives).
-enum class RawValues { values, counts, srgb_linear };
+// What a reader asks for: the values (the count over 2^bits - 1 for integer
+// files), the counts themselves (read_scalar), or the values decoded from
+// sRGB where a row can do that during its decode (per count: bit for bit
+// what decoding them after gives); with_alpha keeps alpha unassociated.
+enum class Want { values, counts, srgb_linear, with_alpha };
 
-struct Raw {
-  Image img;
-  FileInfo info;
-  bool linear = false;  // already decoded from sRGB (RawValues::srgb_linear by a row)
-};
-
-// Every channel of the first subimage as float.
-Raw read_raw(const std::string& path, RawValues want) {
-  check_readable(path);
-  // Before any allocation, from a header: the size limits, then memory for
-  // the decoded file (all channels) and the caller's converted copy (<= 3).
+// Every channel of the first subimage as float, by the file's row or else
+// OpenImageIO. `name` names the file in messages; `extra`: the channels of
+// the caller's copy, for the memory check before any allocation.
+io::Decoded decode(const std::string& path, const std::string& name, Want want, int extra) {
   const auto check_size = [&](int w, int h, int c) {
     check_declared_size(path, w, h, c);
     const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
-    check_memory(px * 4 * static_cast<std::uint64_t>(c + 3), "reading '" + path + "'");
+    check_memory(px * 4 * static_cast<std::uint64_t>(c + extra), "reading " + name);
   };
-  if (const io::Format* f = row_of(path)) {
+  io::Decoded d;
+  if (const io::Format* f = io::format_of_file(path)) {
     io::ReadRequest req;
     req.path = path;
     req.check = check_size;
-    if (want == RawValues::counts)
+    if (want == Want::counts)
       req.map = [](float v, int bits) { return static_cast<float>(std::nearbyint(v * (std::ldexp(1.0, bits) - 1.0))); };
-    if (want == RawValues::srgb_linear) req.map = [](float v, int) { return srgb_to_linear(v); };
+    if (want == Want::srgb_linear) req.map = [](float v, int) { return srgb_to_linear(v); };
+    req.with_alpha = want == Want::with_alpha;
     req.threads = std::min(io::io_threads(), 64);
-    io::Decoded d;
     if (f->read(req, d)) {
       io::note_reader(f->name);
-      Raw r;
-      r.img = std::move(d.img);
-      r.info = std::move(d.info);
-      r.info.path = path;
-      r.linear = d.mapped && want == RawValues::srgb_linear;
-      return r;
+      d.info.path = path;
+      return d;
     }
+    d = {};
   }
-  auto in = open_image(path);
+  io::check_exr_attributes(path);
+  std::string e;
+  auto in = codec::api("reading " + name).open_input(path, want == Want::with_alpha, &e);
+  if (!in) throw Error("cannot read " + name + ": " + (e.empty() ? "unknown or unsupported image format" : e));
   const codec::InputSpec& spec = in->spec();
-  Raw r;
-  r.info = file_info_of(path, spec);
-  if (spec.width <= 0 || spec.height <= 0 || spec.channels <= 0)
-    throw Error("cannot read '" + path + "': empty image");
+  if (spec.width <= 0 || spec.height <= 0 || spec.channels <= 0) throw Error("cannot read " + name + ": empty image");
   check_size(spec.width, spec.height, spec.channels);  // refused before any allocation: the header decides
-  r.img = Image(spec.width, spec.height, spec.channels);
-  if (!in->read_float(r.img.data.data())) {
-    std::string e = in->error();
-    throw Error("cannot read '" + path + "': " + (e.empty() ? "read failed (truncated or corrupt file?)" : e));
+  d.img = Image(spec.width, spec.height, spec.channels);
+  if (!in->read_float(d.img.data.data())) {
+    e = in->error();
+    throw Error("cannot read " + name + ": " + (e.empty() ? "read failed (truncated or corrupt file?)" : e));
   }
   in->close();
   io::note_reader("oiio");
+  d.info.path = path;
+  d.info.format = spec.format;
+  d.info.integer = !spec.floating;
+  d.info.bits = spec.bits_per_sample > 0 ? spec.bits_per_sample : spec.container_bits;
+  d.info.channel_names = spec.channel_names;
+  d.info.description = spec.description;
+  d.alpha = spec.alpha_channel;
+  d.unassociated = spec.unassociated_alpha;
+  if (want == Want::with_alpha) return d;
   const int container = spec.container_bits;
-  const int stored = std::min(r.info.bits, container);
-  if (r.info.integer && stored < container && container <= 16) {
+  const int stored = std::min(d.info.bits, container);
+  if (d.info.integer && stored < container && container <= 16) {
     // Fewer bits than the container (a 12-bit TIFF in 16 bits): OpenImageIO
     // widens a count k by bit replication ((k << 4) | (k >> 8)), so the float
     // it returns is not k/4095 (2048 reads as 0.500114, not 0.500122). The top
@@ -170,17 +153,23 @@ Raw read_raw(const std::string& path, RawValues want) {
     // by 65535/4095 instead — and k/(2^stored − 1) is the true value.
     const double wide = std::ldexp(1.0, container) - 1.0, narrow = std::ldexp(1.0, stored) - 1.0;
     const int shift = container - stored;
-    for (float& v : r.img.data) {
+    for (float& v : d.img.data) {
       const auto k = static_cast<std::uint32_t>(std::nearbyint(v * wide)) >> shift;
       v = static_cast<float>(k / narrow);
     }
   }
-  if (want == RawValues::counts && r.info.integer) {
+  if (want == Want::counts && d.info.integer) {
     // Counts of the stored bit depth: a 12-bit depth map's 4095 is 4095.
     const double maxval = std::ldexp(1.0, stored) - 1.0;
-    for (float& v : r.img.data) v = static_cast<float>(std::nearbyint(v * maxval));
+    for (float& v : d.img.data) v = static_cast<float>(std::nearbyint(v * maxval));
   }
-  return r;
+  return d;
+}
+
+std::string channel_list(const std::vector<std::string>& names) {
+  std::string all;
+  for (const std::string& n : names) all += (all.empty() ? "" : ", ") + n;
+  return all;
 }
 
 }  // namespace
@@ -189,125 +178,64 @@ ChannelImage read_unassociated(const std::string& path, const std::string& what)
   const std::string name = what + " '" + path + "'";
   std::error_code ec;
   if (!fs::exists(path, ec)) throw FileNotFound("cannot read " + name + ": no such file");
-  const auto check_size = [&](int w, int h, int c) {  // the decoded file and the caller's RGBA copy
-    check_declared_size(path, w, h, c);
-    const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
-    check_memory(px * 4 * static_cast<std::uint64_t>(c + 4), "reading " + name);
-  };
-  ChannelImage r;
-  r.info.path = path;
-  if (const io::Format* f = row_of(path)) {
-    io::ReadRequest req;
-    req.path = path;
-    req.check = check_size;
-    req.with_alpha = true;
-    req.threads = std::min(io::io_threads(), 64);
-    io::Decoded d;
-    if (f->read(req, d)) {
-      io::note_reader(f->name);
-      r.img = std::move(d.img);
-      r.info = std::move(d.info);
-      r.info.path = path;
-      r.alpha = d.alpha;
-      r.unassociated = d.unassociated;
-      return r;
-    }
-  }
-  std::string open_error;
-  auto in = codec::api("reading " + name).open_input(path, true, &open_error);
-  if (!in)
-    throw Error("cannot read " + name + ": " + (open_error.empty() ? "unknown or unsupported image format" : open_error));
-  const codec::InputSpec& spec = in->spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.channels <= 0) throw Error("cannot read " + name + ": empty image");
-  check_size(spec.width, spec.height, spec.channels);
-  r.img = Image(spec.width, spec.height, spec.channels);
-  if (!in->read_float(r.img.data.data())) {
-    const std::string e = in->error();
-    throw Error("cannot read " + name + ": " + (e.empty() ? "read failed" : e));
-  }
-  r.info = file_info_of(path, spec);
-  r.alpha = spec.alpha_channel;
-  r.unassociated = spec.unassociated_alpha;
-  in->close();
-  io::note_reader("oiio");
-  return r;
+  io::Decoded d = decode(path, name, Want::with_alpha, 4);  // and the caller's RGBA copy
+  return {std::move(d.img), std::move(d.info), d.alpha, d.unassociated};
 }
 
 Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
-  // An integer file's automatic transfer is sRGB; the PNG subset (always
-  // integer) is decoded from it during its read.
-  Raw r = read_raw(path, transfer == Transfer::linear ? RawValues::values : RawValues::srgb_linear);
+  // An integer file's automatic transfer is sRGB, which a row decodes during
+  // its read.
+  check_readable(path);
+  io::Decoded d = decode(path, "'" + path + "'", transfer == Transfer::linear ? Want::values : Want::srgb_linear, 3);
   Transfer t = transfer;
-  if (t == Transfer::automatic) t = r.info.integer ? Transfer::srgb : Transfer::linear;
-  r.info.transfer = t;
-  if (info) *info = r.info;
-  if (r.linear) {
-    if (r.img.channels == 3) return std::move(r.img);
-    Image out(r.img.width, r.img.height, 3);  // grey: the one channel three times
-    for (std::size_t i = 0; i < r.img.pixels(); ++i)
-      out.data[i * 3] = out.data[i * 3 + 1] = out.data[i * 3 + 2] = r.img.data[i];
-    return out;
-  }
-  // Three channels: converted in place and returned, no second image (a
-  // fresh 960x672 RGB float buffer costs ~15 ms of page faults on a VM).
-  if (r.img.channels == 3) {
-    if (t == Transfer::srgb && r.info.integer && r.info.bits <= 16) {
-      io::SrgbDecodeTable decode(r.info.bits <= 8 ? 8 : 16);
-      for (float& v : r.img.data) v = decode(v);
-    } else if (t == Transfer::srgb) {
-      for (float& v : r.img.data) v = srgb_to_linear(v);
+  if (t == Transfer::automatic) t = d.info.integer ? Transfer::srgb : Transfer::linear;
+  d.info.transfer = t;
+  if (info) *info = d.info;
+  Image& s = d.img;
+  if (t == Transfer::srgb && !(d.mapped && d.info.integer)) {
+    // In place (a fresh 960x672 RGB float buffer costs ~15 ms of page faults
+    // on a VM); integer files through a table of their distinct values.
+    if (d.info.integer && d.info.bits <= 16) {
+      io::SrgbDecodeTable decode_value(d.info.bits <= 8 ? 8 : 16);
+      for (float& v : s.data) v = decode_value(v);
+    } else {
+      for (float& v : s.data) v = srgb_to_linear(v);
     }
-    return std::move(r.img);
   }
-  const Image& s = r.img;
-  Image out(s.width, s.height, 3);
+  if (s.channels == 3) return std::move(s);
+  Image out(s.width, s.height, 3);  // grey: the one channel three times; alpha dropped
   const int c = s.channels;
-  if (t == Transfer::srgb && r.info.integer && r.info.bits <= 16) {
-    io::SrgbDecodeTable decode(r.info.bits <= 8 ? 8 : 16);
-    for (std::size_t i = 0; i < s.pixels(); ++i)
-      for (int k = 0; k < 3; ++k) out.data[i * 3 + k] = decode(s.data[i * c + (c >= 3 ? k : 0)]);
-  } else {
-    for (std::size_t i = 0; i < s.pixels(); ++i) {
-      for (int k = 0; k < 3; ++k) {
-        float v = s.data[i * c + (c >= 3 ? k : 0)];
-        if (t == Transfer::srgb) v = srgb_to_linear(v);
-        out.data[i * 3 + k] = v;
-      }
-    }
-  }
+  for (std::size_t i = 0; i < s.pixels(); ++i)
+    for (int k = 0; k < 3; ++k) out.data[i * 3 + k] = s.data[i * c + (c >= 3 ? k : 0)];
   return out;
 }
 
 Image read_scalar(const std::string& path, const std::string& channel, FileInfo* info) {
-  Raw r = read_raw(path, RawValues::counts);
-  const Image& s = r.img;
+  check_readable(path);
+  io::Decoded d = decode(path, "'" + path + "'", Want::counts, 3);
+  const Image& s = d.img;
   int pick = 0;
   if (!channel.empty()) {
-    auto& names = r.info.channel_names;
-    auto it = std::find(names.begin(), names.end(), channel);
-    if (it == names.end()) {
-      std::string all;
-      for (auto& n : names) all += (all.empty() ? "" : ", ") + n;
-      throw Error("'" + path + "' has no channel named '" + channel + "'; its channels are: " + all);
-    }
+    const auto& names = d.info.channel_names;
+    const auto it = std::find(names.begin(), names.end(), channel);
+    if (it == names.end())
+      throw Error("'" + path + "' has no channel named '" + channel + "'; its channels are: " + channel_list(names));
     pick = static_cast<int>(it - names.begin());
   } else if (s.channels > 1) {
     // A grey picture stored as RGB is one channel in disguise; anything else is ambiguous.
     const int nc = std::min(s.channels, 3);
     for (std::size_t i = 0; i < s.pixels(); ++i)
       for (int k = 1; k < nc; ++k) {
-        float a = s.data[i * s.channels], b = s.data[i * s.channels + k];
-        if (!(a == b || (std::isnan(a) && std::isnan(b)))) {
-          std::string all;
-          for (auto& n : r.info.channel_names) all += (all.empty() ? "" : ", ") + n;
-          throw Error("'" + path + "' has " + std::to_string(s.channels) + " channels (" + all +
+        const float a = s.data[i * s.channels], b = s.data[i * s.channels + k];
+        if (!(a == b || (std::isnan(a) && std::isnan(b))))
+          throw Error("'" + path + "' has " + std::to_string(s.channels) + " channels (" +
+                      channel_list(d.info.channel_names) +
                       ") that differ; say which one holds the values with --range-channel NAME");
-        }
       }
   }
-  r.info.transfer = Transfer::linear;
-  if (info) *info = r.info;
-  if (s.channels == 1) return std::move(r.img);  // the file's one channel, no copy
+  d.info.transfer = Transfer::linear;
+  if (info) *info = d.info;
+  if (s.channels == 1) return std::move(d.img);  // the file's one channel, no copy
   Image out(s.width, s.height, 1);
   for (std::size_t i = 0; i < s.pixels(); ++i) out.data[i] = s.data[i * s.channels + pick];
   return out;
@@ -335,6 +263,5 @@ std::string sha256_file(const std::string& path) {
   }
   return hex.str();
 }
-
 
 }  // namespace brume
