@@ -34,9 +34,6 @@
 
 namespace brume::codec {
 
-// The storage type of a file's values.
-enum class Type { u8, u16, f16, f32 };
-
 struct InputSpec {
   int width = 0, height = 0, channels = 0;
   bool floating = false;     // the stored values are floating point
@@ -59,44 +56,16 @@ class Input {
   virtual void close() = 0;
 };
 
-// An attribute for the writer: an int or a string value.
-struct Attribute {
-  std::string name;
-  bool is_int = false;
-  int i = 0;
-  std::string s;
-};
-
-struct OutputSpec {
-  int width = 0, height = 0, channels = 0;
-  Type type = Type::f32;
-  std::vector<std::string> channel_names;  // empty: the writer's default
-  std::vector<Attribute> attributes;
-};
-
-class Output {
- public:
-  virtual ~Output() = default;
-  virtual bool open(const std::string& path, const OutputSpec& spec) = 0;
-  // All pixels, as floats or (u8 files) as the codes themselves.
-  virtual bool write_float(const float* px) = 0;
-  virtual bool write_u8(const std::uint8_t* px) = 0;
-  virtual bool close() = 0;
-  virtual std::string error() = 0;
-};
-
 // The module's entry points. `tag` identifies the build (kCodecTag).
 struct Api {
   const char* tag;
   // null and *err set when the file cannot be opened (err may be empty).
   std::unique_ptr<Input> (*open_input)(const std::string& path, bool unassociated_alpha, std::string* err);
-  // A writer chosen by `path`'s extension; null and *err set when none.
-  std::unique_ptr<Output> (*create_output)(const std::string& path, std::string* err);
 };
 
 // The tag both sides are built with (interface revision, brume's version,
 // the compiler's): the module is used only if it matches.
-inline constexpr const char* kCodecTag = "brume-codec-2 " BRUME_VERSION " " __VERSION__;
+inline constexpr const char* kCodecTag = "brume-codec-3 " BRUME_VERSION " " __VERSION__;
 
 // The module's entry symbol: extern "C" const Api* brume_codec_api();
 inline constexpr const char* kEntrySymbol = "brume_codec_api";

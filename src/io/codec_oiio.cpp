@@ -9,19 +9,7 @@
 
 namespace {
 using brume::codec::Api;
-using brume::codec::Attribute;
 using brume::codec::InputSpec;
-using brume::codec::OutputSpec;
-using brume::codec::Type;
-
-OIIO::TypeDesc type_desc(Type t) {
-  switch (t) {
-    case Type::u8: return OIIO::TypeDesc::UINT8;
-    case Type::u16: return OIIO::TypeDesc::UINT16;
-    case Type::f16: return OIIO::TypeDesc::HALF;
-    default: return OIIO::TypeDesc::FLOAT;
-  }
-}
 
 class OiioInput final : public brume::codec::Input {
  public:
@@ -60,48 +48,6 @@ class OiioInput final : public brume::codec::Input {
   std::string extra_;
 };
 
-class OiioOutput final : public brume::codec::Output {
- public:
-  explicit OiioOutput(std::unique_ptr<OIIO::ImageOutput> out) : out_(std::move(out)) {}
-  bool open(const std::string& path, const OutputSpec& s) override {
-    OIIO::ImageSpec spec(s.width, s.height, s.channels, type_desc(s.type));
-    if (!s.channel_names.empty()) spec.channelnames = s.channel_names;
-    for (const Attribute& a : s.attributes) {
-      if (a.is_int)
-        spec.attribute(a.name, a.i);
-      else
-        spec.attribute(a.name, a.s);
-    }
-    return guard([&] { return out_->open(path, spec); });
-  }
-  bool write_float(const float* px) override {
-    return guard([&] { return out_->write_image(OIIO::TypeDesc::FLOAT, px); });
-  }
-  bool write_u8(const std::uint8_t* px) override {
-    return guard([&] { return out_->write_image(OIIO::TypeDesc::UINT8, px); });
-  }
-  bool close() override {
-    return guard([&] { return out_->close(); });
-  }
-  std::string error() override {
-    std::string e = out_->geterror();
-    return e.empty() ? extra_ : e;
-  }
-
- private:
-  template <class F>
-  bool guard(F&& f) {
-    try {
-      return f();
-    } catch (const std::exception& e) {
-      extra_ = e.what();
-      return false;
-    }
-  }
-  std::unique_ptr<OIIO::ImageOutput> out_;
-  std::string extra_;
-};
-
 std::unique_ptr<brume::codec::Input> open_input(const std::string& path, bool unassociated_alpha, std::string* err) {
   try {
     std::unique_ptr<OIIO::ImageInput> in;
@@ -125,21 +71,7 @@ std::unique_ptr<brume::codec::Input> open_input(const std::string& path, bool un
   }
 }
 
-std::unique_ptr<brume::codec::Output> create_output(const std::string& path, std::string* err) {
-  try {
-    auto out = OIIO::ImageOutput::create(path);
-    if (!out) {
-      *err = OIIO::geterror();
-      return nullptr;
-    }
-    return std::make_unique<OiioOutput>(std::move(out));
-  } catch (const std::exception& e) {
-    *err = e.what();
-    return nullptr;
-  }
-}
-
-const Api kApi{brume::codec::kCodecTag, &open_input, &create_output};
+const Api kApi{brume::codec::kCodecTag, &open_input};
 }  // namespace
 
 extern "C" __attribute__((visibility("default"))) const Api* brume_codec_api() { return &kApi; }

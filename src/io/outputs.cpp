@@ -1,7 +1,7 @@
 // brume — writing outputs: the checks before any work (extension, --bits,
-// --compression, the folder), encoding through the table of formats
-// (io/formats/format.hpp) or, for what no row writes, OpenImageIO's module,
-// to a temporary beside the target, and the renames that commit a run's
+// --compression, the folder), encoding by the output's row of the table of
+// formats (io/formats/format.hpp; a shape the row does not hold is an error
+// naming it), to a temporary beside the target, and the renames that commit a run's
 // outputs together; the signal handlers that remove temporaries.
 #include <unistd.h>
 
@@ -17,7 +17,6 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
-#include "io/codec.hpp"
 #include "io/formats/format.hpp"
 #include "io/io_internal.hpp"
 
@@ -218,27 +217,6 @@ io::Compression parse_compression(const io::Format& f, const std::string& path, 
   return c;
 }
 
-// The attributes that carry a compression to OpenImageIO's writer, for the
-// files no row writes (a 2- or 4-channel PNG, ...).
-codec::Attribute int_attribute(const std::string& name, int v) { return {name, true, v, {}}; }
-codec::Attribute text_attribute(const std::string& name, const std::string& v) { return {name, false, 0, v}; }
-void apply_compression(codec::OutputSpec& spec, const std::string& e, const io::Compression& c) {
-  if (c.name == "auto") return;
-  if (e == ".png") {
-    const int level = c.name == "none" ? 0 : c.name == "fast" ? 1 : (c.name == "zip" && c.level >= 0) ? c.level : 6;
-    spec.attributes.push_back(int_attribute("png:compressionLevel", level));
-    if (c.name == "rle" || c.name == "fast") {
-      spec.attributes.push_back(text_attribute("compression", "rle"));
-      spec.attributes.push_back(int_attribute("png:filter", 0x20));  // Up
-    }
-    return;
-  }
-  if (e == ".hdr") return;  // Radiance HDR's run-length encoding is the writer's only form
-  spec.attributes.push_back(text_attribute("compression", c.level >= 0 ? c.name + ":" + std::to_string(c.level) : c.name));
-  if ((e == ".tif" || e == ".tiff") && c.name == "zip" && c.level >= 0)
-    spec.attributes.push_back(int_attribute("tiff:zipquality", c.level));
-}
-
 }  // namespace
 
 std::string compression_names(const std::string& ext) {
@@ -345,16 +323,23 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   if (t == Transfer::automatic) t = (integer && opts.is_color) ? Transfer::srgb : Transfer::linear;
 
   // The values as stored: the image itself, or an sRGB-encoded copy (8-bit:
-  // the codes themselves, by srgb_encode_8).
+  // the codes themselves, by srgb_encode_8). An alpha channel (the last of
+  // 2 or 4) is coverage, stored as it is.
   Image encoded;
   std::vector<std::uint8_t> codes;
   const Image* src = &img;
+  const int c = img.channels, alpha = c == 2 || c == 4 ? c - 1 : -1;
   if (t == Transfer::srgb && type == io::Storage::u8) {
     codes.resize(img.data.size());
     srgb_encode_8(img.data.data(), codes.data(), codes.size());
+    if (alpha >= 0)
+      for (std::size_t i = static_cast<std::size_t>(alpha); i < codes.size(); i += static_cast<std::size_t>(c))
+        codes[i] = static_cast<std::uint8_t>(io::to_count(img.data[i], 255.0f));
   } else if (t == Transfer::srgb) {
     encoded = img;
-    for (float& v : encoded.data) v = linear_to_srgb(std::max(v, 0.0f));
+    for (std::size_t i = 0; i < encoded.data.size(); ++i)
+      if (static_cast<int>(i % static_cast<std::size_t>(c)) != alpha)
+        encoded.data[i] = linear_to_srgb(std::max(encoded.data[i], 0.0f));
     src = &encoded;
   }
 
@@ -367,56 +352,21 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   req.compression = parse_compression(f, path, opts.compression, flag);
   req.threads = std::min(io::io_threads(), 64);
 
+  if (const std::string why = f.refuse(req); !why.empty()) throw Error(flag + " '" + path + "': " + why);
   ensure_output_folder(path, flag);
   const std::string tmp = temp_path_for(path);
-  if (f.refuse(req).empty()) {
-    add_pending(tmp, path, flag);
-    std::string why;
-    errno = 0;
-    if (!f.write(tmp, req, &why)) {
-      // errno's reason (or the writer's own when errno says nothing), the
-      // directory's if it has gone since the check.
-      const int err = errno;
-      check_output_dir(path, flag);
-      throw Error(flag + " '" + path + "': write failed: " +
-                  (err == 0 && !why.empty() ? why : write_failure(err) + (why.empty() ? "" : " (" + why + ")")));
-    }
-    io::note_writer(f.name);
-    return;
-  }
-  std::string create_error;
-  auto out = codec::api("writing '" + path + "'").create_output(path, &create_error);
-  if (!out) throw Error(flag + " '" + path + "': cannot create a writer: " + create_error);
-  codec::OutputSpec spec;
-  spec.width = img.width, spec.height = img.height, spec.channels = img.channels;
-  spec.type = static_cast<codec::Type>(type);
-  if (img.channels == 1) spec.channel_names = {"Y"};
-  spec.attributes.push_back(text_attribute("oiio:ColorSpace", t == Transfer::srgb ? "sRGB" : "linear"));
-  if (!opts.description.empty()) spec.attributes.push_back(text_attribute("ImageDescription", opts.description));
-  apply_compression(spec, e, req.compression);
   add_pending(tmp, path, flag);
+  std::string why;
   errno = 0;
-  if (!out->open(tmp, spec)) {
-    // The directory may have gone since check_writable (loading the codec
-    // module above takes ~0.3 s): say so, as check_writable would.
-    const std::string why = out->error();
+  if (!f.write(tmp, req, &why)) {
+    // errno's reason (or the writer's own when errno says nothing), the
+    // directory's if it has gone since the check.
+    const int err = errno;
     check_output_dir(path, flag);
-    throw Error(flag + " '" + path + "': cannot open for writing: " + why);
+    throw Error(flag + " '" + path + "': write failed: " +
+                (err == 0 && !why.empty() ? why : write_failure(err) + (why.empty() ? "" : " (" + why + ")")));
   }
-  const bool ok = codes.empty() ? out->write_float(src->data.data()) : out->write_u8(codes.data());
-  if (!ok) {
-    const int err = errno;
-    throw Error(flag + " '" + path + "': write failed: " + write_failure(err) + " (" + out->error() + ")");
-  }
-  if (!out->close()) {
-    const int err = errno;
-    throw Error(flag + " '" + path + "': close failed: " + write_failure(err) + " (" + out->error() + ")");
-  }
-  // Some writers report a short write only through the file's size: verify it exists whole.
-  std::error_code ec;
-  if (!fs::exists(tmp, ec) || fs::file_size(tmp, ec) == 0 || ec)
-    throw Error(flag + " '" + path + "': write failed: " + write_failure(errno));
-  io::note_writer("oiio");
+  io::note_writer(f.name);
 }
 
 void OutputSet::write_text(const std::string& path, const std::string& text, const std::string& flag) {

@@ -97,7 +97,8 @@ TEST(IO, HdrRoundTripsWithinRgbePrecision) {
   // reads back within m / 128 (its exponent e has m in [2^(e-1), 2^e), the
   // mantissa steps 2^(e-8)); values under 1e-32 and a NaN pixel's are 0.
   // OpenImageIO reads the same floats from the file as brume. A negative
-  // value, which RGBE cannot hold, leaves the file to OpenImageIO.
+  // value, which RGBE cannot hold, is an error naming the pixel (never
+  // clamped), and nothing is written.
   fs::path d = tmpdir();
   int compared = 0;
   for (const auto& [w, h] : {std::pair{40, 3}, std::pair{300, 7}, std::pair{5, 4}, std::pair{8, 2}, std::pair{1, 1}}) {
@@ -141,7 +142,14 @@ TEST(IO, HdrRoundTripsWithinRgbePrecision) {
   EXPECT_EQ(compared, 5);
   Image neg(9, 2, 3, 0.25f);
   neg.data[4] = -1.0f;
-  write_image((d / "neg.hdr").string(), neg, WriteOptions{});
-  EXPECT_STREQ(io::last_writer(), "oiio");
+  try {
+    write_image((d / "neg.hdr").string(), neg, WriteOptions{});
+    ADD_FAILURE() << "a negative value was written to Radiance HDR";
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("neg.hdr"), std::string::npos) << m;
+    EXPECT_NE(m.find("pixel (1, 0) is -1"), std::string::npos) << m;
+  }
+  EXPECT_FALSE(fs::exists(d / "neg.hdr"));
   fs::remove_all(d);
 }

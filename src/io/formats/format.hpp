@@ -5,10 +5,10 @@
 // limits before any allocation), a read and a write, each a thin layer over
 // the format's own library (libspng, libjpeg-turbo, libtiff, OpenEXR) or, for
 // PFM and Radiance HDR, which no Debian library does better, brume's own.
-// Everything else -- a format not in the table, or a file of a row's format
-// that the row does not take (a palette PNG read as colour, a tiled TIFF, a
+// Every file a read's rows do not take -- a format not in the table, or a
+// file of a row's format that the row leaves (a palette PNG, a CMYK JPEG, a
 // multi-part OpenEXR) -- goes to the last, implicit row: OpenImageIO, loaded
-// on first use (io/codec.hpp).
+// on first use (io/codec.hpp). Outputs are written by their rows only.
 //
 // read_image's readers, OutputSet::write, the --bits and --compression checks
 // and the help texts iterate this table (image_io.cpp, outputs.cpp); adding a
@@ -105,8 +105,8 @@ struct Format {
   // recognises (naming the file), and whatever check throws.
   bool (*header)(const std::string& path, Header& out);
   bool (*read)(const ReadRequest& request, Decoded& out);
-  // Empty: the request is written by this row; otherwise why not (channels,
-  // storage): a message for the user when OpenImageIO cannot either.
+  // Empty: the row writes the request; otherwise why not (channels, storage,
+  // values the format cannot hold), the error the user gets.
   std::string (*refuse)(const WriteRequest& request);
   // Writes `tmp`; false with *why (errno left as the failure set it).
   bool (*write)(const std::string& tmp, const WriteRequest& request, std::string* why);

@@ -17,7 +17,7 @@
 //    scanlines of 8 to 32767 px run-length coded component by component
 //    (runs of 4 or more, at most 127; literal stretches of at most 128),
 //    others flat. Negative or infinite values, which RGBE cannot hold, are
-//    left to OpenImageIO's writer.
+//    an error naming the first (never clamped).
 // Tests: IO.Hdr* (tests/io/test_hdr.cpp).
 #include <algorithm>
 #include <cmath>
@@ -255,11 +255,18 @@ bool read(const ReadRequest& r, Decoded& out) {
 }
 
 std::string refuse(const WriteRequest& r) {
-  if (r.srgb) return "Radiance HDR holds linear values";
+  if (r.srgb) return "Radiance HDR holds linear values; drop --out-transfer srgb or write .exr";
   const std::size_t n = static_cast<std::size_t>(r.width) * static_cast<std::size_t>(r.height) * 3;
   for (std::size_t i = 0; i < n; ++i)
     if (r.values[i] < 0.0f || r.values[i] > 3.4028235e38f)  // NaN passes; -x, inf not
-      return "RGBE holds no negative or infinite values";
+    {
+      char v[32];
+      std::snprintf(v, sizeof v, "%g", static_cast<double>(r.values[i]));
+      return "Radiance HDR (RGBE) holds no negative or infinite values, and pixel (" +
+             std::to_string(i / 3 % static_cast<std::size_t>(r.width)) + ", " +
+             std::to_string(i / 3 / static_cast<std::size_t>(r.width)) + ") is " + v +
+             "; write .exr, .pfm or .tif (float), which hold any value";
+    }
   return {};
 }
 

@@ -8,7 +8,8 @@
 //    1/2/4-bit or tRNS file goes to OpenImageIO, which reads those (and
 //    associates an alpha the way brume's readers do not); a damaged PNG is an
 //    error naming the file and libspng's reason.
-//  - write: 1 or 3 channels, 8 or 16 bits; sRGB values with an sRGB chunk
+//  - write: 1 to 4 channels (grey, grey+alpha, RGB, RGBA; alpha stored as
+//    given, straight as PNG defines it), 8 or 16 bits; sRGB values with an sRGB chunk
 //    (and gAMA 1/2.2, for decoders that know only gAMA), linear ones with
 //    gAMA 1.0; the description as a tEXt "Description" chunk (iTXt when it
 //    is not Latin-1's ASCII part), the chunk OpenImageIO reads as
@@ -19,7 +20,6 @@
 //                    choice of the five filters: the smallest files
 //      none          level 0 (stored blocks: PNG always deflates)
 //      rle           the Up filter, zlib's run-length strategy
-//    2 or 4 channels go to OpenImageIO's writer (it un-associates alpha).
 // Rows are decoded and encoded one at a time (libspng's progressive calls),
 // so no second copy of the image is held. Tests: tests/io/test_png.cpp.
 #include <spng.h>
@@ -168,7 +168,7 @@ bool read(const ReadRequest& r, Decoded& out) {
 }
 
 std::string refuse(const WriteRequest& r) {
-  if (r.channels != 1 && r.channels != 3) return "brume's PNG writer takes 1 or 3 channels";
+  if (r.channels < 1 || r.channels > 4) return "PNG holds 1 to 4 channels (grey, grey+alpha, RGB, RGBA)";
   if (r.type != Storage::u8 && r.type != Storage::u16) return "PNG holds 8 or 16 bits";
   return {};
 }
@@ -192,7 +192,9 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
   ihdr.width = static_cast<std::uint32_t>(r.width);
   ihdr.height = static_cast<std::uint32_t>(r.height);
   ihdr.bit_depth = static_cast<std::uint8_t>(bits);
-  ihdr.color_type = r.channels == 1 ? SPNG_COLOR_TYPE_GRAYSCALE : SPNG_COLOR_TYPE_TRUECOLOR;
+  static const std::uint8_t types[5] = {0, SPNG_COLOR_TYPE_GRAYSCALE, SPNG_COLOR_TYPE_GRAYSCALE_ALPHA,
+                                        SPNG_COLOR_TYPE_TRUECOLOR, SPNG_COLOR_TYPE_TRUECOLOR_ALPHA};
+  ihdr.color_type = types[r.channels];
   int e = spng_set_png_file(c, file.f);
   if (!e) e = spng_set_ihdr(c, &ihdr);
   if (!e && r.srgb) e = spng_set_srgb(c, 0);  // perceptual intent
