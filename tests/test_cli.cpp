@@ -225,7 +225,7 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     ASSERT_EQ(exr_level.status, 0) << exr_level.output;
     EXPECT_EQ(read_color(p("o9.exr")).width, 24);
     fs::remove(p("o9.exr"));
-    // And Radiance HDR of the common form (src/io/hdr_direct.hpp).
+    // And Radiance HDR of the common form (src/io/formats/hdr.cpp).
     write_image(p("in.hdr"), rgb, WriteOptions{});
     const CliRun hdr_only = run("blur --image " + p("in.hdr") + " --sigma 3 --out " + p("o.hdr") + " --timing");
     ASSERT_EQ(hdr_only.status, 0) << hdr_only.output;
