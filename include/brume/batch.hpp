@@ -73,7 +73,7 @@ Manifest read_manifest(const std::string& path);
 const std::vector<std::string>& batch_effects();
 
 // The compression of a batch's PNG frames when neither the row nor --param
-// sets one: the Sub filter with run-length deflate (io/formats/png.cpp),
+// sets one: the Up filter with run-length deflate (io/formats/png.cpp),
 // named so that a frame's record says it.
 inline constexpr const char* kBatchPngCompression = "fast";
 

@@ -282,7 +282,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       const std::string out = (od / (stem + ext)).generic_string();
       const std::string rec = (od / (stem + ".json")).generic_string();
       values.emplace_back("out", out);
-      // PNG frames are written with `fast` (the Sub filter, run-length
+      // PNG frames are written with `fast` (the Up filter, run-length
       // deflate; io/formats/png.cpp) unless the row or --param says
       // otherwise: at zip:6 the encoder is the largest cost of a dataset
       // frame after the effect. Recorded like any value.

@@ -43,7 +43,7 @@ Command add_batch(CLI::App& app) {
   sub->add_option("--seed", a->o.seed, "the dataset's seed for sampled parameters")->default_str("0");
   sub->add_option("--format", a->o.format,
                   "output format by extension (png, exr, ...); default the input's. PNG frames are written at "
-                  "--compression fast (Sub filter, run-length deflate: fast to write and read) unless a column or --param "
+                  "--compression fast (Up filter, run-length deflate: fast to write and read) unless a column or --param "
                   "compression=... says otherwise");
   sub->add_option("--effect", a->o.effect, "effect for rows without an 'effect' column: " + effects);
   sub->add_option("--param", a->params,
