@@ -57,7 +57,9 @@ TEST(IO, PngIsReadAsOpenImageIOReadsIt) {
     for (const char* n : {"rgba.png", "ga.png", "palette.png", "bits1.png", "trns.png"})
       other.push_back((d / n).string());
   }
-  for (const char* rel : {"middlebury2005_thirdsize/Art/view1.png", "middlebury2005_thirdsize/Art/disp1.png"})
+  for (const char* rel : {"middlebury2005_thirdsize/Art/view1.png", "middlebury2005_thirdsize/Art/disp1.png",
+                          "kitti_object_000001/image_2/000001.png", "eth3d_two_view/terrace/im0.png",
+                          "eth3d_two_view/playground_1l/im1.png"})
     if (have_data(rel)) subset.push_back(data_path(rel));
   for (const std::string& p : subset) {
     read_color(p);
