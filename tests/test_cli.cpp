@@ -178,7 +178,7 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
   Image rgb(24, 16, 3, 0.5f);
   rgb.at(3, 4, 1) = 2.0f;
   write_image(p("in.pfm"), rgb, WriteOptions{});  // brume's own PFM writer
-  write_image(p("in.jpg"), rgb, WriteOptions{});  // (OpenImageIO writes JPEG)
+  write_image(p("in.jpg"), rgb, WriteOptions{});  // the JPEG row
   {
     // A two-part EXR, which the OpenEXR row leaves to OpenImageIO.
     OIIO::ImageSpec specs[2] = {OIIO::ImageSpec(24, 16, 3, OIIO::TypeDesc::HALF),

@@ -228,8 +228,8 @@ TEST(IO, CompressionReachesTheWriterAndKeepsLosslessPixels) {
     EXPECT_EQ(read_color(p).data, tif_auto.data) << c;
     EXPECT_EQ(stored_compression(p), n) << c;
   }
-  // JPEG: the quality is the compression; auto is OpenImageIO's 98, as the
-  // help and io.hpp say (the same encoder at the same quality: the same bytes).
+  // JPEG: the quality is the compression; auto is 98, as the help says (the
+  // same encoder at the same quality: the same file).
   EXPECT_EQ(fs::file_size(write_as("auto.jpg", "8", "auto")), fs::file_size(write_as("q98.jpg", "8", "jpeg:98")));
   EXPECT_LT(fs::file_size(write_as("q20.jpg", "8", "jpeg:20")), fs::file_size(write_as("q100.jpg", "8", "jpeg:100")));
 
