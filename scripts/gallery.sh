@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# The pictures of docs/gallery.md: each effect on the third-party data in
+# ../shared/data (read in place, never copied). What is committed depends on
+# the data's licence (docs/gallery/LICENSE): pictures derived from CC0 (Poly
+# Haven) and CC BY-NC-SA (ETH3D) data go to $OUT (docs/gallery); pictures
+# derived from research-use data without redistribution terms (Middlebury,
+# GeoPose3K) go to $LOCAL (docs/gallery/local, ignored by git).
+# Usage: bash scripts/gallery.sh   (BRUME, DATA, OUT, LOCAL override the defaults)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+B=${BRUME:-build/brume}
+D=${DATA:-../shared/data}
+OUT=${OUT:-docs/gallery}
+LOCAL=${LOCAL:-docs/gallery/local}
+if [ ! -d "$D" ]; then echo "gallery: no data at $D (../shared/data)" >&2; exit 2; fi
+mkdir -p "$OUT" "$LOCAL"
+q=(--compression jpeg:85)  # JPEG at quality 85 keeps each picture well under 200 kB
+E=$D/eth3d_two_view
+eth() { echo --image "$E/$1/im0.png" --disparity "$E/$1/disp0.pfm" --calib "$E/$1/calib.txt"; }
+
+# haze with scattering blur (Hansard) on ETH3D terrace: visibility 25 m over a 6 m deep scene
+$B haze $(eth terrace) --visibility 25 --lambda 3 --out "$OUT/eth3d-terrace-haze.jpg" "${q[@]}"
+# layered fog (Zhou, Chen, Smith) lying on ETH3D playground: density 0.15/m at the camera's feet, e-folding 1.25 m
+$B fog $(eth playground_1l) --density 0.15 --falloff 0.8 --camera-height 1.5 --lambda 3 \
+   --out "$OUT/eth3d-playground-fog.jpg" "${q[@]}"
+# depth of field (Bertalmío et al.) on ETH3D terrace, focused at 2.5 m
+$B dof $(eth terrace) --focus-distance 2.5 --coc-infinity 14 --out "$OUT/eth3d-terrace-dof.jpg" "${q[@]}"
+# the turbidity fit (Preetham sky) on each Poly Haven sky
+for s in park sky sunrise; do
+  $B sky fit --image "$D/sky_hdr_polyhaven/$s.hdr" --sun auto --out "$LOCAL/fit-$s.json" --plot "$OUT/polyhaven-$s-fit.png"
+done
+
+# Research-use data: written to $LOCAL only.
+M=$D/middlebury2005_thirdsize/Art
+mb=(--image "$M/view1.png" --disparity "$M/disp1.png" --fx 1246.667 --baseline 0.16
+    --disparity-scale 0.3333333 --disparity-offset 66.667)
+$B haze "${mb[@]}" --visibility 8 --lambda 4 --out "$LOCAL/middlebury-art-haze.jpg" "${q[@]}"
+$B dof "${mb[@]}" --focus-distance 1.3 --coc-infinity 12 --out "$LOCAL/middlebury-art-dof.jpg" "${q[@]}"
+G=$D/geopose3k_matterhorn
+geo=(--image "$G/photo.jpg" --range "$G/distance.pfm" --unknown-value -1)
+$B aerial "${geo[@]}" --turbidity 4 --out "$LOCAL/matterhorn-t4.jpg" "${q[@]}"
+for t in 1.6 2 4; do
+  $B aerial "${geo[@]}" --turbidity "$t" --remove --out "$LOCAL/matterhorn-remove-t$t.exr"
+done
+echo "gallery: $(find "$OUT" -maxdepth 1 -type f | wc -l) files in $OUT, $(find "$LOCAL" -maxdepth 1 -type f | wc -l) in $LOCAL"
