@@ -501,3 +501,33 @@ TEST(IO, UnassociatedChannelsAreReadAsOpenImageIOReadsThem) {
   EXPECT_NE(e.find("no such file"), std::string::npos) << e;
   fs::remove_all(d);
 }
+
+TEST(IO, EveryRowChecksTheSizeLimitBeforeDecoding) {
+  // Each row of the table calls the size check after its header and before
+  // it allocates: one pixel over --max-pixels is refused by read_color and
+  // read_header with the limit to give; exactly enough reads, by the row.
+  struct Reset {
+    ~Reset() { set_max_pixels(default_max_pixels); }
+  } reset;
+  fs::path d = tmpdir();
+  const Image img(8, 6, 3, 0.25f);  // 48 pixels
+  const std::pair<const char*, const char*> rows[] = {{"png", "png"},      {"jpg", "jpeg"}, {"tif", "tiff"},
+                                                      {"exr", "openexr"}, {"pfm", "pnm"},  {"hdr", "hdr"}};
+  for (const auto& [ext, row] : rows) {
+    const std::string p = (d / (std::string("limit.") + ext)).string();
+    write_image(p, img, WriteOptions{});
+    set_max_pixels(47);
+    for (auto read : std::vector<std::function<void()>>{[&] { read_color(p); }, [&] { read_header(p); }}) {
+      try {
+        read();
+        ADD_FAILURE() << p << " was read over the limit";
+      } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("--max-pixels 48"), std::string::npos) << e.what();
+      }
+    }
+    set_max_pixels(48);
+    EXPECT_EQ(read_color(p).pixels(), 48u) << p;
+    EXPECT_STREQ(io::last_reader(), row) << p;
+  }
+  fs::remove_all(d);
+}
