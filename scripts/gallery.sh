@@ -39,7 +39,8 @@ $B dof "${mb[@]}" --focus-distance 1.3 --coc-infinity 12 --out "$LOCAL/middlebur
 G=$D/geopose3k_matterhorn
 geo=(--image "$G/photo.jpg" --range "$G/distance.pfm" --unknown-value -1)
 $B aerial "${geo[@]}" --turbidity 4 --out "$LOCAL/matterhorn-t4.jpg" "${q[@]}"
-for t in 1.6 2 4; do
+for t in 1.6 2 4 8; do
   $B aerial "${geo[@]}" --turbidity "$t" --remove --out "$LOCAL/matterhorn-remove-t$t.exr"
+  $B aerial "${geo[@]}" --turbidity "$t" --altitude 2500 --remove --out "$LOCAL/matterhorn-remove-t$t-2500m.exr"
 done
 echo "gallery: $(find "$OUT" -maxdepth 1 -type f | wc -l) files in $OUT, $(find "$LOCAL" -maxdepth 1 -type f | wc -l) in $LOCAL"
