@@ -352,7 +352,8 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   req.compression = parse_compression(f, path, opts.compression, flag);
   req.threads = std::min(io::io_threads(), 64);
 
-  if (const std::string why = f.refuse(req); !why.empty()) throw Error(flag + " '" + path + "': " + why);
+  if (f.refuse)
+    if (const std::string why = f.refuse(req); !why.empty()) throw Error(flag + " '" + path + "': " + why);
   ensure_output_folder(path, flag);
   const std::string tmp = temp_path_for(path);
   add_pending(tmp, path, flag);

@@ -515,7 +515,14 @@ TEST(IO, ExrWriteFailureGivesTheReasonAndErrno) {
   EXPECT_FALSE(io::exr_format().write("/nonexistent-brume-dir/x.exr", r, &why));
   EXPECT_EQ(errno, ENOENT);
   EXPECT_NE(why.find("/nonexistent-brume-dir/x.exr"), std::string::npos) << why;
-  // Integer storage is not OpenEXR's (--bits takes half or float only).
-  r.type = io::Storage::u16;
-  EXPECT_NE(io::exr_format().refuse(r), "");
+  // Integer storage is not OpenEXR's: --bits 16 is refused by the table,
+  // before any work, naming what .exr takes.
+  WriteOptions o;
+  o.bits = "16";
+  try {
+    write_image((fs::temp_directory_path() / "brume_exr_bits16.exr").string(), Image(2, 2, 3, 0.5f), o);
+    ADD_FAILURE() << "16-bit integer EXR was written";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("half or float"), std::string::npos) << e.what();
+  }
 }

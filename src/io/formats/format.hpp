@@ -105,8 +105,9 @@ struct Format {
   // recognises (naming the file), and whatever check throws.
   bool (*header)(const std::string& path, Header& out);
   bool (*read)(const ReadRequest& request, Decoded& out);
-  // Empty: the row writes the request; otherwise why not (channels, storage,
-  // values the format cannot hold), the error the user gets.
+  // What the request's values or size hold that the format cannot (its bit
+  // depths and channel counts above are checked before it is called): the
+  // error the user gets, or empty. Null: the row writes whatever passes them.
   std::string (*refuse)(const WriteRequest& request);
   // Writes `tmp`; false with *why (errno left as the failure set it).
   bool (*write)(const std::string& tmp, const WriteRequest& request, std::string* why);

@@ -105,17 +105,24 @@ std::size_t rle_scanline(const std::string& b, std::size_t i, int W, unsigned ch
   return i;
 }
 
-
+// out == nullptr: the header only, from the file's first 64 KiB (a header
+// longer than that is left to OpenImageIO).
 bool read_hdr(const std::string& path, Image* out, int& width, int& height,
-                     const std::function<void(int, int, int)>& check) {
+              const std::function<void(int, int, int)>& check) {
   std::string b;
   {
     std::ifstream f(path, std::ios::binary);
     char magic[2];
     if (!f.read(magic, 2) || magic[0] != '#' || magic[1] != '?') return false;
     f.seekg(0);
-    b.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
-    if (!f.eof() && f.fail()) return false;
+    if (out) {
+      b.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+      if (!f.eof() && f.fail()) return false;
+    } else {
+      b.resize(64 * 1024);
+      f.read(b.data(), static_cast<std::streamsize>(b.size()));
+      b.resize(static_cast<std::size_t>(f.gcount()));
+    }
   }
   int W = 0, H = 0;
   std::size_t i = parse_header(b, W, H);

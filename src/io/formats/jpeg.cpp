@@ -217,8 +217,6 @@ bool read(const ReadRequest& r, Decoded& out) {
 }
 
 std::string refuse(const WriteRequest& r) {
-  if (r.channels != 1 && r.channels != 3) return "JPEG holds 1 or 3 channels (write alpha to .png, .tif or .exr)";
-  if (r.type != Storage::u8) return "JPEG holds 8 bits";
   if (r.width > JPEG_MAX_DIMENSION || r.height > JPEG_MAX_DIMENSION)
     return "JPEG holds at most " + std::to_string(JPEG_MAX_DIMENSION) + " pixels a side";
   return {};

@@ -133,8 +133,6 @@ bool read(const ReadRequest& r, Decoded& out) {
   return true;
 }
 
-std::string refuse(const WriteRequest&) { return {}; }
-
 bool write(const std::string& tmp, const WriteRequest& r, std::string*) {
   std::ofstream f(tmp, std::ios::binary);
   f << (r.channels == 1 ? "Pf" : "PF") << "\n" << r.width << " " << r.height << "\n-1.0\n";
@@ -161,7 +159,7 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string*) {
 const Format& pfm_format() {
   using namespace pfm_row;
   static const Format f{"pnm", "PFM", {".pfm"}, {"float"}, "float", "float", {{"none", 1, 0, false}},
-                        {1, 3}, true, sniff, header, read, refuse, write, "none"};
+                        {1, 3}, true, sniff, header, read, nullptr, write, "none"};
   return f;
 }
 

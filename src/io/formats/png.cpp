@@ -171,12 +171,6 @@ bool read(const ReadRequest& r, Decoded& out) {
   return true;
 }
 
-std::string refuse(const WriteRequest& r) {
-  if (r.channels < 1 || r.channels > 4) return "PNG holds 1 to 4 channels (grey, grey+alpha, RGB, RGBA)";
-  if (r.type != Storage::u8 && r.type != Storage::u16) return "PNG holds 8 or 16 bits";
-  return {};
-}
-
 bool ascii(const std::string& s) {
   for (unsigned char ch : s)
     if (ch >= 0x80 || ch == 0) return false;
@@ -267,7 +261,7 @@ const Format& png_format() {
                         sniff,
                         header,
                         read,
-                        refuse,
+                        nullptr,
                         write,
                         "Sub-filtered run-length deflate"};
   return f;

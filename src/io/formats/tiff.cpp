@@ -236,12 +236,6 @@ bool read(const ReadRequest& r, Decoded& out) {
 
 int bits_of(Storage s) { return s == Storage::u8 ? 8 : s == Storage::u16 ? 16 : 32; }
 
-std::string refuse(const WriteRequest& r) {
-  if (r.channels < 1 || r.channels > 4) return "brume's TIFF writer takes 1 to 4 channels";
-  if (r.type == Storage::f16) return "TIFF holds 8, 16 or float (or write half to .exr)";
-  return {};
-}
-
 bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
   const int bits = bits_of(r.type);
   const bool floating = r.type == Storage::f32;
@@ -340,7 +334,7 @@ const Format& tiff_format() {
                         sniff,
                         header,
                         read,
-                        refuse,
+                        nullptr,
                         write,
                         "zip:1"};
   return f;
