@@ -20,7 +20,6 @@
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
 #include "io/codec.hpp"
-#include "io/formats/exr.hpp"
 #include "io/formats/format.hpp"
 #include "io/io_internal.hpp"
 #include "io/srgb.hpp"
@@ -57,11 +56,11 @@ void check_readable(const std::string& path) {
     throw Error("cannot read '" + path + "': it is a directory, not an image file");
 }
 
-// The file opened for reading (its header parsed), or an error naming it;
-// an OpenEXR file passes the attribute guard first (io/formats/exr.hpp).
+// The file opened by OpenImageIO (its header parsed), or an error naming it.
+// A file with OpenEXR's magic reaches it only after the OpenEXR row, whose
+// every open runs the attribute guard first (io/formats/exr.hpp).
 std::unique_ptr<codec::Input> open_image(const std::string& path) {
   check_readable(path);
-  io::check_exr_attributes(path);
   std::string e;
   auto in = codec::api("reading '" + path + "'").open_input(path, false, &e);
   if (!in) throw Error("cannot read '" + path + "': " + (e.empty() ? "unknown or unsupported image format" : e));
@@ -120,8 +119,7 @@ io::Decoded decode(const std::string& path, const std::string& name, Want want, 
     }
     d = {};
   }
-  io::check_exr_attributes(path);
-  std::string e;
+  std::string e;  // (an OpenEXR file has passed the row's attribute guard: open_image)
   auto in = codec::api("reading " + name).open_input(path, want == Want::with_alpha, &e);
   if (!in) throw Error("cannot read " + name + ": " + (e.empty() ? "unknown or unsupported image format" : e));
   const codec::InputSpec& spec = in->spec();

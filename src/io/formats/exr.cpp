@@ -59,12 +59,13 @@ void check_exr_attributes(const std::string& path) {
   // large preview); the scan stops at its end and leaves the rest to OpenEXR.
   std::error_code ec;
   const std::uintmax_t total = std::filesystem::file_size(path, ec);
-  if (ec) return;
-  std::vector<char> b(static_cast<std::size_t>(std::min<std::uintmax_t>(total, 1u << 20)));
+  if (ec || total < 8) return;
   std::ifstream f(path, std::ios::binary);
-  if (!f.read(b.data(), static_cast<std::streamsize>(b.size()))) return;
+  std::vector<char> b(8);
+  if (!f.read(b.data(), 8) || !Imf::isImfMagic(b.data())) return;  // not OpenEXR: nothing more is read
+  b.resize(static_cast<std::size_t>(std::min<std::uintmax_t>(total, 1u << 20)));
+  if (!f.read(b.data() + 8, static_cast<std::streamsize>(b.size() - 8))) return;
   const std::size_t n = b.size();
-  if (n < 8 || static_cast<unsigned char>(b[0]) != 0x76 || b[1] != 0x2f || b[2] != 0x31 || b[3] != 0x01) return;
   const bool multipart = (static_cast<unsigned char>(b[5]) & 0x10) != 0;  // version bit 12
   std::size_t i = 8;
   auto cstring = [&](std::string& out) {

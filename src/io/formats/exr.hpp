@@ -1,6 +1,6 @@
-// brume — the OpenEXR header guard, shared by the OpenEXR row
-// (src/io/formats/exr.cpp) and OpenImageIO's path (image_io.cpp, open_image),
-// which opens the files the row does not take (internal).
+// brume — the OpenEXR header guard (internal). The OpenEXR row runs it
+// before every open, and every file with OpenEXR's magic goes to that row
+// first, so OpenImageIO never opens an unguarded one (image_io.cpp).
 #pragma once
 
 #include <string>
