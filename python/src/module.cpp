@@ -412,12 +412,34 @@ PYBIND11_MODULE(_brume, m) {
             for (const ArrayArg& g : c.arrays->args) args.append(g.name);
           d["arrays"] = args;
           d["replays"] = c.arrays && c.arrays->replays;
+          d["stage_prefix"] = c.stage_prefix;
+          py::list keywords;  // the array form's keywords, as Python spells them (lambda_)
+          if (c.arrays)
+            for (const ParamSpec& s : c.arrays->specs) keywords.append(py_name(s.name));
+          d["keywords"] = keywords;
+          py::dict sampling;  // brume sample's table: the effect's parameters and their default ranges
+          if (c.sampling) {
+            py::dict params;  // {record name: [the names it also answers to]}
+            for (const ParamSpec& s : c.sampling->specs) {
+              py::list names;
+              names.append(py_name(s.name));
+              for (const std::string& al : s.aliases) names.append(al), names.append(py_name(al));
+              params[py::str(s.name)] = names;
+            }
+            py::dict defaults;
+            for (const SampleDefault& sd : c.sampling->defaults) defaults[py::str(sd.name)] = sd.spec;
+            sampling["params"] = params;
+            sampling["defaults"] = defaults;
+          }
+          d["sampling"] = sampling;
           out.append(d);
         }
         return out;
       },
-      "The library's list of commands: name, cli, summary, record, batch, sample, gpu_passes, and its array form "
-      "(function, public_name, arrays: the positional array names, replays: takes job=).");
+      "The library's list of commands: name, cli, summary, record, batch, sample, gpu_passes, stage_prefix (a "
+      "chain's later stage's flag prefix), sampling (params: {name: other names}, defaults: {name: spec}; empty "
+      "when it is not sampled), and its array form (function, public_name, arrays: the positional array names, "
+      "replays: takes job=, keywords: its Python keywords).");
   m.def(
       "_debug_last_inputs",
       []() {
