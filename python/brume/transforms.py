@@ -181,6 +181,14 @@ def _depth_array(d, shape, kind, unit, intr, arg):
     elif d.dtype.kind != "f":
         raise ValueError(f"{arg}: dtype {d.dtype} is not a depth (float or unsigned integer)")
     scale = 0.001 if unit == "mm" else 1.0
+    if kind == "range" and d.dtype == np.float32 and scale == 1.0:
+        # metres as the library takes them (NaN: unknown): read in place unless 0, inf or < 0 must become NaN
+        invalid = (d <= 0) | np.isinf(d)
+        if not invalid.any():
+            return d
+        v = d.copy()
+        v[invalid] = np.nan
+        return v
     if kind in ("range", "z"):
         v = d.astype(np.float64) * scale
     elif kind == "disparity":  # pixels: z = fx baseline / d
