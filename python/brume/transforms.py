@@ -229,7 +229,6 @@ class _Stage:
 
     def __init__(self, command, kw, where):
         self.command = command
-        self.function = getattr(_brume, command["function"])
         self.specs = {}
         self.fixed = {}
         for name, v in kw.items():
@@ -249,6 +248,10 @@ class _Stage:
             _brume.random_params(command["name"], 0, "", **self.specs)
         except ValueError as e:
             raise ValueError(f"{where}: {e}") from None
+
+    @property
+    def function(self):  # looked up on use: a transform pickles (spawned workers) without the module's functions
+        return getattr(_brume, self.command["function"])
 
     def draw(self, seed, key):
         return _brume.random_params(self.command["name"], seed, key, **self.specs)

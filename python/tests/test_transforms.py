@@ -348,3 +348,14 @@ def test_gil_is_released_during_the_effect():
     rng = (10 + 500 * g.random((700, 1000))).astype(np.float32)
     t = T.Haze(visibility=200, lambda_=8, threads=1)
     assert_gil_released(lambda: t(image=rgb, depth=rng, key="k"), "transform")
+
+
+def test_transforms_pickle():
+    """Spawned workers (and DataLoader's spawn context) receive the transform
+    pickled: the copy draws and runs the same."""
+    import pickle
+    rgb, rng = _scene()
+    t = T.HazeThenDof(visibility=(100, 200), dof_f_number=2.8, seed=6)
+    u = pickle.loads(pickle.dumps(t))
+    assert type(u) is T.HazeThenDof
+    np.testing.assert_array_equal(u(image=rgb, depth=rng, key="a")["image"], t(image=rgb, depth=rng, key="a")["image"])
