@@ -174,7 +174,7 @@ def _depth_array(d, shape, kind, unit, intr, arg):
     if d.shape != tuple(shape):
         raise ValueError(f"{arg}: shape {d.shape} does not match the image's {tuple(shape)} (H x W); give a depth "
                          f"map of the image's size")
-    if d.dtype.kind in "ui":
+    if d.dtype.kind in "ui" and kind != "disparity":  # (disparity is in pixels)
         if unit is None:
             raise ValueError(f"depth_unit: {arg} is {d.dtype} (integer); say its unit: depth_unit='m' or 'mm' "
                              f"(a 16-bit PNG in millimetres is depth_unit='mm')")
@@ -196,9 +196,9 @@ def _depth_array(d, shape, kind, unit, intr, arg):
             raise ValueError("baseline: depth_kind='disparity' needs baseline= (metres between the cameras)")
         with np.errstate(divide="ignore", invalid="ignore"):
             v = intr["fx"] * intr["baseline"] / d.astype(np.float64)
-    else:  # inverse depth 1/z, in 1/unit
+    else:  # inverse depth 1/z in 1/unit: z = unit / d metres
         with np.errstate(divide="ignore", invalid="ignore"):
-            v = 1.0 / (d.astype(np.float64) * scale)
+            v = scale / d.astype(np.float64)
     v[~np.isfinite(v) | (v <= 0)] = np.nan
     if kind != "range":  # z along the optical axis -> range along the pixel's ray
         h, w = shape

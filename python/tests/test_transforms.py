@@ -225,6 +225,13 @@ def test_invalid_depth_is_unknown_and_units():
     np.testing.assert_array_equal(T.Haze(visibility=300, depth_kind="z", fx=50.0)(image=rgb, depth=rng,
                                                                                      key="k")["image"],
                                   t(image=rgb, depth=ray, key="k")["image"])
+    # disparity (px) and inverse depth (1/mm) of the same z: z = fx B / d, z = 0.001 / d metres. The double
+    # round trip may move a range by one float32 ulp (~4e-6 m at 60 m), which moves an output value by far
+    # less than 1e-5; a wrong formula (a missing factor of fx B or 1000) moves it by tenths.
+    for kw, d in ((dict(depth_kind="disparity", fx=50.0, baseline=0.2), 50.0 * 0.2 / z),
+                  (dict(depth_kind="inverse", depth_unit="mm", fx=50.0), 0.001 / z)):
+        np.testing.assert_allclose(T.Haze(visibility=300, **kw)(image=rgb, depth=d, key="k")["image"],
+                                   t(image=rgb, depth=ray, key="k")["image"], rtol=0, atol=1e-5)
 
 
 def test_clips_share_one_draw_and_per_frame_draws_each():
