@@ -86,6 +86,28 @@ class Frames:
         return self.t(image=rgb, depth=rng, key=str(i))["image"]
 
 
+def _bare(i):
+    rgb, rng = scene(i % 4)
+    return float(brume.haze(rgb, rng, visibility=300, threads=1).rgb[0, 0, 0])
+
+
+def host_ceiling(samples):
+    """The same effect in 1 and 2 forked processes without a loader (a Pool,
+    threads=1): what the host gives two processes now -- on a shared VM the
+    loader's ratio is read against it."""
+    import multiprocessing
+    rate = {}
+    for workers in (1, 2, 1, 2):
+        with multiprocessing.get_context("fork").Pool(workers) as pool:
+            pool.map(_bare, range(workers))
+            t0 = time.perf_counter()
+            pool.map(_bare, range(samples), chunksize=1)
+            rate.setdefault(workers, []).append(samples / (time.perf_counter() - t0))
+    r1, r2 = max(rate[1]), max(rate[2])
+    print(f"host ceiling, brume.haze in a fork Pool, {samples} frames, best of 2 runs each:")
+    print(f"  1 process {r1:6.2f} frames/s    2 processes {r2:6.2f} frames/s   {r2 / r1:.2f}x")
+
+
 def loader(samples):
     try:
         import torch
@@ -117,6 +139,7 @@ def main():
     print(f"CPU: {cpu_model()}; Python {platform.python_version()}; numpy {np.__version__}; brume {brume.__version__}")
     print(time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()))
     overhead(a.rounds)
+    host_ceiling(a.samples)
     loader(a.samples)
 
 
