@@ -22,6 +22,7 @@ PKGS=(
   python3-pytest                         # the Python tests (ctest `python`)
   python3-matplotlib                     # the diffusion study's plots (brume.plots)
   python3-distributed                    # brume.dask: a batch's frames as Dask tasks (and its LocalCluster test)
+  python3-torch python3-torchvision      # brume.transforms' torch tensors and DataLoader tests, examples/train_loader.py
   clang-14 libclang-rt-14-dev            # sanitizer builds and libFuzzer (scripts/test-sanitize.sh, fuzz/)
   libomp-14-dev                          # LLVM OpenMP + Archer, so that ThreadSanitizer sees OpenMP's synchronisation
 )

@@ -9,6 +9,7 @@
 #include <pybind11/stl.h>
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <set>
@@ -77,6 +78,17 @@ FunctionDoc make_doc(const std::string& name, const std::string& public_name, co
 extern thread_local std::unique_ptr<GpuContext> t_gpu;
 GpuContext* thread_gpu(const Exec& exec);
 Exec with_thread_gpu(Exec e);
+
+// ---- fork safety (fork.cpp) ------------------------------------------------------------------
+// In a process forked from one that loaded the module (a multiprocessing or
+// DataLoader worker), libgomp's inherited pool cannot run a parallel region
+// of more than one thread on the forking thread. fork_safe: threads=0 means
+// 1 there. run_fork_safe: runs f (GIL released, the library call), on a
+// thread of its own when the child asked for more than one thread.
+void install_fork_handlers();
+bool in_forked_child();
+Exec fork_safe(Exec e);
+void run_fork_safe(const Exec& e, const std::function<void()>& f);
 
 // ---- arrays in and out (convert.cpp) --------------------------------------------------------
 // What each input of the last call on this thread became (the zero-copy test

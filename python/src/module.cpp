@@ -103,11 +103,11 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
   }
   ExecOptions eo;
   if (call.contains("execution")) exec_param_table().from_json(eo, {{"execution", call["execution"]}}, fn);
-  const Exec exec = eo.exec();
+  const Exec exec = fork_safe(eo.exec());
   ArrayResult out;
   {
     py::gil_scoped_release nogil;
-    out = a.run(in, call, with_thread_gpu(exec), given);
+    run_fork_safe(exec, [&] { out = a.run(in, call, with_thread_gpu(exec), given); });
   }
   json rec = python_header(command, fn);
   rec["job"] = std::move(out.job);
@@ -203,6 +203,7 @@ PYBIND11_MODULE(_brume, m) {
   m.doc() = "brume: physically based, depth-aware atmospheric and lens effects on numpy RGB-D images";
   m.attr("__version__") = BRUME_VERSION;
   register_errors();
+  install_fork_handlers();
 
   // ---- the commands on arrays (the library's list): effects, blur, depth, sky -----------
   for (const CommandDef& c : commands())
@@ -376,11 +377,11 @@ PYBIND11_MODULE(_brume, m) {
       [](const std::string& frame, const std::vector<std::string>& argv, int threads) {
         const BatchFrame f = batch_frame_from_json(nlohmann::json::parse(frame));
         ExecOptions eo;
-        eo.threads = threads;
+        eo.threads = fork_safe(Exec{threads}).threads;
         BatchFrameResult r;
         {
           py::gil_scoped_release release;
-          r = run_batch_frame(f, eo, argv);
+          run_fork_safe(Exec{eo.threads}, [&] { r = run_batch_frame(f, eo, argv); });
         }
         return r.line.dump();
       },
@@ -411,12 +412,34 @@ PYBIND11_MODULE(_brume, m) {
             for (const ArrayArg& g : c.arrays->args) args.append(g.name);
           d["arrays"] = args;
           d["replays"] = c.arrays && c.arrays->replays;
+          d["stage_prefix"] = c.stage_prefix;
+          py::list keywords;  // the array form's keywords, as Python spells them (lambda_)
+          if (c.arrays)
+            for (const ParamSpec& s : c.arrays->specs) keywords.append(py_name(s.name));
+          d["keywords"] = keywords;
+          py::dict sampling;  // brume sample's table: the effect's parameters and their default ranges
+          if (c.sampling) {
+            py::dict params;  // {record name: [the names it also answers to]}
+            for (const ParamSpec& s : c.sampling->specs) {
+              py::list names;
+              names.append(py_name(s.name));
+              for (const std::string& al : s.aliases) names.append(al), names.append(py_name(al));
+              params[py::str(s.name)] = names;
+            }
+            py::dict defaults;
+            for (const SampleDefault& sd : c.sampling->defaults) defaults[py::str(sd.name)] = sd.spec;
+            sampling["params"] = params;
+            sampling["defaults"] = defaults;
+          }
+          d["sampling"] = sampling;
           out.append(d);
         }
         return out;
       },
-      "The library's list of commands: name, cli, summary, record, batch, sample, gpu_passes, and its array form "
-      "(function, public_name, arrays: the positional array names, replays: takes job=).");
+      "The library's list of commands: name, cli, summary, record, batch, sample, gpu_passes, stage_prefix (a "
+      "chain's later stage's flag prefix), sampling (params: {name: other names}, defaults: {name: spec}; empty "
+      "when it is not sampled), and its array form (function, public_name, arrays: the positional array names, "
+      "replays: takes job=, keywords: its Python keywords).");
   m.def(
       "_debug_last_inputs",
       []() {
@@ -428,6 +451,9 @@ PYBIND11_MODULE(_brume, m) {
       },
       "For the zero-copy test: per input of this thread's last call, the address of the pixels the library "
       "read and whether they were a copy.");
+  m.def("_in_forked_child", &in_forked_child,
+        "Whether this process was forked from one that had loaded brume (its effects then run with one thread "
+        "unless threads= says otherwise; see docs/transforms.md).");
   m.def(
       "_debug_thread_gpu",
       []() -> py::object {

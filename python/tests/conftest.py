@@ -56,3 +56,30 @@ def gpu():
             pytest.fail(f"BRUME_REQUIRE_GPU=1 but no GPU context: {e}")
         pytest.skip(f"no GPU context: {e}")
     return True
+
+
+def assert_gil_released(call, what):
+    """Runs call() while a Python thread counts. Held GIL: the counter gets
+    nothing until the call returns (a few ticks at most around the switch).
+    Released: it counts the whole time (millions per second in CPython 3.11;
+    10^4 per second is a safe floor). The call must take over 50 ms to tell."""
+    import threading
+    import time
+    ticks, running = [0], [True]
+
+    def count():
+        while running[0]:
+            ticks[0] += 1
+
+    t = threading.Thread(target=count)
+    t.start()
+    time.sleep(0.05)
+    before = ticks[0]
+    t0 = time.perf_counter()
+    call()
+    elapsed = time.perf_counter() - t0
+    during = ticks[0] - before
+    running[0] = False
+    t.join()
+    assert elapsed > 0.05, f"the {what} was too short to tell"
+    assert during > 1e4 * elapsed, f"{during} ticks in {elapsed:.3f} s: the GIL was held"

@@ -1,0 +1,444 @@
+"""brume.transforms: the effects as augmentation transforms for training
+pipelines (issue #42), in the albumentations call protocol without importing
+albumentations, for numpy and torch images, seeded, replayable, fork-safe.
+
+    t = brume.transforms.Haze(visibility=(150, 600), albedo=0.9, seed=7)
+    out = t(image=img, depth=range_m, key="Art/view1.png")
+    out["image"], out["depth"], out["params"]      # params: {"values", "seed", "key", "record"}
+    t.replay(out["params"])(image=img, depth=range_m)["image"]   # the same bits
+
+The classes are made from the library's list of commands
+(``_brume._commands()``): every effect ``brume sample`` draws for and that
+runs on ``(rgb, range)`` arrays gets one (Haze, Aerial, Fog, DepthOfField),
+every chain of them one more (HazeThenDof); their parameters, ranges and
+default distributions are the tables' (``brume sample``'s, with their
+reasons in each effect's file). See docs/transforms.md.
+"""
+import hashlib
+import json
+import math
+import multiprocessing
+import sys
+
+import numpy as np
+
+from . import _brume
+
+__all__ = ["Transform", "loguniform", "uniform", "choice"]
+
+_SAMPLER = "brume-sample-v1"
+
+
+# ---- distributions in physical units ------------------------------------------------------------
+class _Spec:
+    """A distribution a parameter is drawn from, as the sampler's spec text."""
+
+    def __init__(self, text):
+        self.text = text
+
+    def __repr__(self):
+        return self.text
+
+
+def uniform(lo, hi):
+    """Uniform in [lo, hi); the same as passing the tuple ``(lo, hi)``."""
+    return _Spec(f"uniform({lo!r}, {hi!r})")
+
+
+def loguniform(lo, hi):
+    """Log-uniform in [lo, hi), lo > 0 (a visibility, a density)."""
+    return _Spec(f"loguniform({lo!r}, {hi!r})")
+
+
+def choice(*items):
+    """One of the items, each with probability 1/n (numbers or names)."""
+    if not items:
+        raise ValueError("brume.transforms.choice(): give at least one item")
+    return _Spec("choice(" + ", ".join(str(i) for i in items) + ")")
+
+
+def _spec_text(name, v):
+    """The sampler's spec text for what a user gave: a fixed value, a
+    (lo, hi) tuple (uniform), or a distribution above."""
+    if isinstance(v, _Spec):
+        return v.text
+    if isinstance(v, tuple):
+        if len(v) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+            raise ValueError(f"{name}={v!r}: a tuple is a uniform range (lo, hi) of two numbers; use "
+                             f"brume.transforms.choice(...) for a set of values")
+        return f"uniform({v[0]!r}, {v[1]!r})"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (list,)):
+        return ",".join(str(x) for x in v)  # an RGB triple, as the flag takes it
+    if v is None:
+        return "auto"
+    return str(v)
+
+
+def _unit(seed, key, name):
+    """u in [0, 1) of the library's sampler for (seed, key, name): the scheme
+    brume-sample-v1 (brume/sample.hpp), here for the transform's own draws
+    (whether it applies: name "p")."""
+    msg = b"brume-sample-v1\0" + str(seed).encode() + b"\0" + key.encode() + b"\0" + name.encode()
+    n = int.from_bytes(hashlib.sha256(msg).digest()[:8], "big")
+    return (n >> 11) / 2.0 ** 53
+
+
+# ---- images and depth in, and back out in their own type -----------------------------------------
+def _srgb_decode(x):
+    x = np.asarray(x, np.float32)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def _srgb_encode(x):
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, x * 12.92, 1.055 * np.power(x, 1 / 2.4) - 0.055).astype(np.float32)
+
+
+def _is_torch(x):
+    t = sys.modules.get("torch")
+    return t is not None and isinstance(x, t.Tensor)
+
+
+class _Image:
+    """An image as the library reads it (H x W x 3 float32 linear, or an
+    integer array with its transfer), and how to give the result back in the
+    caller's type, dtype, layout and range."""
+
+    def __init__(self, x, transfer, arg):
+        self.torch = _is_torch(x)
+        if self.torch:
+            if x.device.type != "cpu":
+                raise ValueError(f"{arg}: a torch tensor on {x.device}; brume runs on CPU tensors "
+                                 f"(call .cpu() first)")
+            if x.ndim != 3 or x.shape[0] not in (3, 4):
+                raise ValueError(f"{arg}: a torch tensor must be C x H x W with 3 (or 4) channels, got "
+                                 f"shape {tuple(x.shape)}")
+            self.torch_dtype = x.dtype
+            a = x.detach().permute(1, 2, 0).contiguous().numpy()  # the one copy: CHW -> interleaved
+        else:
+            if not isinstance(x, np.ndarray):
+                raise ValueError(f"{arg}: expected a numpy array H x W x 3 or a torch tensor C x H x W, got "
+                                 f"{type(x).__name__}")
+            a = x
+        if a.ndim != 3 or a.shape[2] not in (3, 4):
+            raise ValueError(f"{arg}: expected H x W x 3 (or x 4), got shape {a.shape} ({a.dtype})")
+        self.dtype = a.dtype
+        self.shape = a.shape
+        if a.dtype == np.uint8 or a.dtype == np.uint16:
+            self.transfer = transfer or "srgb"
+        elif a.dtype == np.float32 or a.dtype == np.float64:
+            self.transfer = transfer or "linear"
+        else:
+            raise ValueError(f"{arg}: dtype {a.dtype} is not one of uint8, uint16, float32, float64")
+        if self.transfer not in ("srgb", "linear"):
+            raise ValueError(f"transfer={self.transfer!r}: 'srgb' or 'linear'")
+        if a.dtype.kind == "f" and self.transfer == "srgb":
+            a = _srgb_decode(a[..., :3])
+        if a.shape[2] == 4:
+            self.alpha = a[..., 3:].copy()
+        self.array = a  # float32 linear: read in place by the library
+        self.kw = {"transfer": self.transfer} if a.dtype.kind == "u" else {}
+
+    def back(self, rgb):
+        """The library's linear float32 H x W x 3 in the caller's form."""
+        if self.dtype.kind == "u":
+            top = np.iinfo(self.dtype).max
+            out = rgb if self.transfer == "linear" else _srgb_encode(rgb)
+            out = np.floor(np.clip(out, 0.0, 1.0) * top + 0.5).astype(self.dtype)
+        elif self.transfer == "srgb" or self.torch:
+            out = _srgb_encode(rgb) if self.transfer == "srgb" else np.clip(rgb, 0.0, 1.0)
+            out = out.astype(self.dtype, copy=False)
+        else:
+            out = rgb.astype(self.dtype, copy=False)
+        if self.shape[2] == 4:  # alpha passes through untouched
+            out = np.concatenate([out, self.alpha.astype(out.dtype)], axis=2)
+        if self.torch:
+            torch = sys.modules["torch"]
+            return torch.from_numpy(np.ascontiguousarray(out.transpose(2, 0, 1)))
+        return out
+
+
+def _depth_array(d, shape, kind, unit, intr, arg):
+    """Depth as the library reads it: H x W float32 metres along each pixel's
+    ray, unknown (0, NaN, inf, negative) as NaN."""
+    if _is_torch(d):
+        d = d.detach().cpu().numpy()
+        if d.ndim == 3 and d.shape[0] == 1:
+            d = d[0]
+    if not isinstance(d, np.ndarray):
+        raise ValueError(f"{arg}: expected a numpy array H x W (or a torch tensor), got {type(d).__name__}")
+    if d.ndim == 3 and d.shape[2] == 1:
+        d = d[..., 0]
+    if d.shape != tuple(shape):
+        raise ValueError(f"{arg}: shape {d.shape} does not match the image's {tuple(shape)} (H x W); give a depth "
+                         f"map of the image's size")
+    if d.dtype.kind in "ui" and kind != "disparity":  # (disparity is in pixels)
+        if unit is None:
+            raise ValueError(f"depth_unit: {arg} is {d.dtype} (integer); say its unit: depth_unit='m' or 'mm' "
+                             f"(a 16-bit PNG in millimetres is depth_unit='mm')")
+    elif d.dtype.kind != "f":
+        raise ValueError(f"{arg}: dtype {d.dtype} is not a depth (float or unsigned integer)")
+    scale = 0.001 if unit == "mm" else 1.0
+    if kind == "range" and d.dtype == np.float32 and scale == 1.0:
+        # metres as the library takes them (NaN: unknown): read in place unless 0, inf or < 0 must become NaN
+        invalid = (d <= 0) | np.isinf(d)
+        if not invalid.any():
+            return d
+        v = d.copy()
+        v[invalid] = np.nan
+        return v
+    if kind in ("range", "z"):
+        v = d.astype(np.float64) * scale
+    elif kind == "disparity":  # pixels: z = fx baseline / d
+        if intr.get("baseline") is None:
+            raise ValueError("baseline: depth_kind='disparity' needs baseline= (metres between the cameras)")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v = intr["fx"] * intr["baseline"] / d.astype(np.float64)
+    else:  # inverse depth 1/z in 1/unit: z = unit / d metres
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v = scale / d.astype(np.float64)
+    v[~np.isfinite(v) | (v <= 0)] = np.nan
+    if kind != "range":  # z along the optical axis -> range along the pixel's ray
+        h, w = shape
+        u = (np.arange(w) - intr["cx"]) / intr["fx"]
+        t = (np.arange(h) - intr["cy"]) / intr["fy"]
+        v = v * np.sqrt(1.0 + u[None, :] ** 2 + t[:, None] ** 2)
+    return v.astype(np.float32)
+
+
+# ---- the transforms ---------------------------------------------------------------------------
+_COMMANDS = {c["name"]: c for c in _brume._commands()}
+_INTRINSICS = ("fx", "fy", "cx", "cy", "fov_x", "fov_y", "baseline")
+_OWN = ("p", "seed", "depth_kind", "depth_unit", "transfer", "per_frame") + _INTRINSICS
+
+
+def _canonical(command, name):
+    """The record name of a sampled parameter given as `name`, or None when
+    the name is not one of the effect's own (a shared block's keyword)."""
+    for canon, others in command["sampling"].get("params", {}).items():
+        if name == canon or name in others:
+            return canon
+    return None
+
+
+class _Stage:
+    """One effect of a transform: its command, its distributions (the
+    table's defaults overridden by the user's) and its other keywords."""
+
+    def __init__(self, command, kw, where):
+        self.command = command
+        self.specs = {}
+        self.fixed = {}
+        for name, v in kw.items():
+            canon = _canonical(command, name)
+            if canon is not None:
+                self.specs[canon] = _spec_text(name, v)
+            elif name in command["keywords"]:
+                if isinstance(v, (_Spec, tuple)):
+                    raise ValueError(f"{name}={v!r}: {name} is not one of the parameters {command['name']} draws "
+                                     f"(those of `brume sample {command['name']}`); give it a fixed value")
+                self.fixed[name] = v
+            else:
+                raise TypeError(f"{where}: unknown argument {name!r}; the parameters are "
+                                f"{', '.join(command['keywords'])} and {', '.join(_OWN)}")
+        # every value each distribution can produce is checked against the table now (ValueError naming it)
+        try:
+            _brume.random_params(command["name"], 0, "", **self.specs)
+        except ValueError as e:
+            raise ValueError(f"{where}: {e}") from None
+
+    @property
+    def function(self):  # looked up on use: a transform pickles (spawned workers) without the module's functions
+        return getattr(_brume, self.command["function"])
+
+    def draw(self, seed, key):
+        return _brume.random_params(self.command["name"], seed, key, **self.specs)
+
+
+class Transform:
+    """An effect (or a chain of effects) of the library as an augmentation
+    transform; the classes below (Haze, Fog, Aerial, DepthOfField,
+    HazeThenDof) are made from the library's list of commands."""
+
+    _commands = ()  # the commands run, in order: ("haze",) or ("haze", "dof")
+    _prefixes = ()  # each later stage's keyword prefix ("dof_")
+
+    def __init__(self, p=1.0, seed=0, depth_kind="range", depth_unit=None, transfer=None, per_frame=False,
+                 fx=None, fy=None, cx=None, cy=None, fov_x=None, fov_y=None, baseline=None, **params):
+        where = f"brume.transforms.{type(self).__name__}()"
+        if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
+            raise ValueError(f"p={p!r}: the probability of applying, a number in [0, 1]")
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise ValueError(f"seed={seed!r}: a non-negative integer")
+        if depth_kind not in ("range", "z", "disparity", "inverse"):
+            raise ValueError(f"depth_kind={depth_kind!r}: 'range' (metres along the ray), 'z' (along the optical "
+                             f"axis), 'disparity' (pixels; needs fx, baseline) or 'inverse' (1/z)")
+        if depth_unit not in (None, "m", "mm"):
+            raise ValueError(f"depth_unit={depth_unit!r}: 'm' or 'mm'")
+        if transfer not in (None, "srgb", "linear"):
+            raise ValueError(f"transfer={transfer!r}: 'srgb' or 'linear' (default: srgb for integer images, "
+                             f"linear for float)")
+        self.p, self.seed, self.depth_kind, self.depth_unit = float(p), seed, depth_kind, depth_unit
+        self.transfer, self.per_frame = transfer, bool(per_frame)
+        self.intrinsics = {k: v for k, v in dict(fx=fx, fy=fy, cx=cx, cy=cy, fov_x=fov_x, fov_y=fov_y,
+                                                 baseline=baseline).items() if v is not None}
+        if depth_kind != "range" and "fx" not in self.intrinsics and "fov_x" not in self.intrinsics:
+            raise ValueError(f"fx: depth_kind={depth_kind!r} needs the camera's intrinsics (fx [px], or fov_x "
+                             f"[degrees]; fy, cx, cy default to fx and the image centre)")
+        # split the keywords among the stages: a later stage's carry its prefix (dof_f_number)
+        per_stage = [dict() for _ in self._commands]
+        for name, v in params.items():
+            i = 0
+            for j, pre in enumerate(self._prefixes, start=1):
+                if name.startswith(pre):
+                    i, name = j, name[len(pre):]
+            per_stage[i][name] = v
+        self._stages = []
+        for c, kw in zip(self._commands, per_stage):
+            command = _COMMANDS[c]
+            for k in _INTRINSICS:  # the effects that take intrinsics (fog, dof) get the transform's
+                if k in self.intrinsics and k in command["keywords"]:
+                    kw.setdefault(k, self.intrinsics[k])
+            self._stages.append(_Stage(command, kw, where))
+        self._calls = 0
+
+    # ---- keys and draws ------------------------------------------------------------------------
+    def _auto_key(self):
+        """(call counter, worker id) when no key= is given: a torch DataLoader
+        worker's id, a multiprocessing worker's index, else 0."""
+        worker = 0
+        torch = sys.modules.get("torch")
+        info = torch.utils.data.get_worker_info() if torch is not None and hasattr(torch, "utils") else None
+        if info is not None:
+            worker = info.id
+        elif multiprocessing.current_process()._identity:
+            worker = multiprocessing.current_process()._identity[-1]
+        key = f"call:{worker}:{self._calls}"
+        self._calls += 1
+        return key
+
+    def draw(self, key):
+        """The parameters for `key`: whether it applies, and each stage's
+        values (the library's sampler: a function of (seed, key, name))."""
+        applied = self.p >= 1.0 or _unit(self.seed, key, "p") < self.p
+        values = [s.draw(self.seed, key if i == 0 else f"{key}/{s.command['name']}")
+                  for i, s in enumerate(self._stages)] if applied else []
+        return applied, values
+
+    # ---- the call protocol -----------------------------------------------------------------------
+    def __call__(self, image=None, depth=None, key=None, images=None, depths=None, **targets):
+        if images is not None:
+            return self._clip(images, depths, key, targets)
+        if image is None or depth is None:
+            raise ValueError("image and depth: call t(image=..., depth=...) or, for a clip, t(images=[...], "
+                             "depths=[...])")
+        key = self._auto_key() if key is None else str(key)
+        applied, values = self.draw(key)
+        out_image, record = self._apply(image, depth, values, "image", "depth") if applied else (image, None)
+        params = self._params(key, applied, values, record)
+        return dict(targets, image=out_image, depth=depth, params=params)
+
+    def _clip(self, images, depths, key, targets):
+        if depths is None or len(depths) != len(images):
+            raise ValueError(f"depths: a clip needs one depth per image ({len(images)} images, "
+                             f"{'none' if depths is None else len(depths)} depths)")
+        key = self._auto_key() if key is None else str(key)
+        out, frames = [], []
+        applied, values = self.draw(key)
+        for i, (im, d) in enumerate(zip(images, depths)):
+            if self.per_frame:
+                applied, values = self.draw(f"{key}/{i}")
+            o, rec = self._apply(im, d, values, f"images[{i}]", f"depths[{i}]") if applied else (im, None)
+            out.append(o)
+            frames.append(self._params(f"{key}/{i}" if self.per_frame else key, applied, values, rec))
+        params = frames[0] if not self.per_frame else {"seed": self.seed, "key": key, "frames": frames}
+        if not self.per_frame:
+            params = dict(params, records=[f["record"] for f in frames])
+            params["record"] = frames[0]["record"]
+        return dict(targets, images=out, depths=list(depths), params=params)
+
+    def _params(self, key, applied, values, record):
+        vals = values[0] if len(values) == 1 else {s.command["name"]: v for s, v in zip(self._stages, values)}
+        return {"values": vals, "applied": applied, "seed": self.seed, "key": key, "record": record}
+
+    def _apply(self, image, depth, values, image_arg, depth_arg, jobs=None):
+        img = _Image(image, self.transfer, image_arg)
+        h, w = img.shape[:2]
+        intr = dict(self.intrinsics)
+        if self.depth_kind != "range":
+            if "fx" not in intr:
+                intr["fx"] = (w / 2.0) / math.tan(math.radians(intr["fov_x"]) / 2.0)
+            if "fy" not in intr:
+                intr["fy"] = ((h / 2.0) / math.tan(math.radians(intr["fov_y"]) / 2.0) if "fov_y" in intr
+                              else intr["fx"])
+            intr.setdefault("cx", (w - 1) / 2.0)
+            intr.setdefault("cy", (h - 1) / 2.0)
+        rng = _depth_array(depth, (h, w), self.depth_kind, self.depth_unit, intr, depth_arg)
+        rgb, kw = img.array, img.kw
+        records = []
+        for i, s in enumerate(self._stages):
+            if jobs is not None:
+                r = s.function(rgb, rng, job=jobs[i], **kw)
+            else:
+                r = s.function(rgb, rng, **kw, **s.fixed, **values[i])
+            records.append(r.record)
+            rgb, kw = r.rgb, {}
+        record = records[0] if len(records) == 1 else {"stages": records}
+        return img.back(rgb), record
+
+    # ---- replay ------------------------------------------------------------------------------
+    def replay(self, params):
+        """A callable that repeats the sample `params` (a call's "params",
+        also after a JSON round trip) bit for bit on the same inputs:
+        replay(params)(image=..., depth=...)."""
+        if not isinstance(params, dict) or "record" not in params or "applied" not in params:
+            raise ValueError("params: a transform call's \"params\" dict (with \"record\" and \"applied\")")
+        record = params["record"]
+        parent = self
+
+        def again(image=None, depth=None, **targets):
+            if not params["applied"]:
+                return dict(targets, image=image, depth=depth, params=params)
+            recs = record["stages"] if "stages" in record else [record]
+            jobs = [r["job"] for r in recs]
+            out, _ = parent._apply(image, depth, None, "image", "depth", jobs=jobs)
+            return dict(targets, image=out, depth=depth, params=params)
+
+        return again
+
+    def __repr__(self):
+        specs = {k: v for s in self._stages for k, v in s.specs.items()}
+        return f"{type(self).__name__}(p={self.p}, seed={self.seed}, {json.dumps(specs)})"
+
+
+def _class_name(command):
+    """Haze, Aerial, Fog, DepthOfField; a chain haze+dof: HazeThenDof."""
+    parts = command.split("+")
+    if len(parts) == 1:
+        return {"dof": "DepthOfField"}.get(command, command.title().replace(" ", ""))
+    return "Then".join(p.title() for p in parts)
+
+
+def _make_classes():
+    made = {}
+    for c in _COMMANDS.values():
+        stages = c["name"].split("+")
+        ok = all(s in _COMMANDS and _COMMANDS[s]["sampling"] and _COMMANDS[s]["arrays"] == ["rgb", "range"]
+                 for s in stages)
+        if not ok or (len(stages) > 1 and not c["stage_prefix"]):
+            continue
+        prefixes = tuple(c["stage_prefix"].replace("-", "_") for _ in stages[1:])
+        doc = (f"{c['summary']}.\n\nAs a transform: every parameter of `brume sample {stages[0]}`"
+               + (f" (the later stage's with the prefix {prefixes[0]!r})" if prefixes else "")
+               + " takes a fixed value, a (lo, hi) tuple (uniform), loguniform(lo, hi) or choice(...); "
+                 "see docs/transforms.md.")
+        made[_class_name(c["name"])] = type(_class_name(c["name"]), (Transform,),
+                                            {"_commands": tuple(stages), "_prefixes": prefixes, "__doc__": doc})
+    return made
+
+
+_CLASSES = _make_classes()
+globals().update(_CLASSES)
+__all__ += sorted(_CLASSES)
