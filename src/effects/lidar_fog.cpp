@@ -311,8 +311,8 @@ LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarF
     if (static_cast<double>(q[3]) * p.intensity_scale > 255.0) ++above;
   }
   if (n > 0 && 2 * above > n)
-    throw Error("--intensity-scale " + num(p.intensity_scale) + ": " + num(100.0 * above / n) + " % of " + what +
-                "'s intensities times it exceed 255, the model's scale [0, 255]; KITTI's reflectance is in [0, 1] "
+    throw Error("--intensity-scale " + num(p.intensity_scale) + ": " + num(100.0 * above / n) +
+                " % of the intensities of " + what + " times it exceed 255, the model's scale [0, 255]; KITTI's reflectance is in [0, 1] "
                 "(scale 255); for a scan already in [0, 255] give --intensity-scale 1");
   LidarFogStats st;
   st.points = n;
