@@ -359,6 +359,10 @@ LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarF
     const double k = r / r0;
     o[0] = static_cast<float>(x * k), o[1] = static_cast<float>(y * k), o[2] = static_cast<float>(z * k);
     o[3] = static_cast<float>(inten * ratio);
+    if (!std::isfinite(o[3]))
+      throw Error(what + ": point " + std::to_string(i) + " (intensity " + num(inten) + ", range " + num(r0) +
+                  " m) gives a fog return whose intensity " + num(inten * ratio) +
+                  " overflows float32; its intensity or range is not a LiDAR's: drop the point or check the scan");
     ++soft;
   }
   const auto t2 = std::chrono::steady_clock::now();
