@@ -294,6 +294,10 @@ TEST(LidarFog, BadInputsAreRefused) {
   LidarFogParams one = with_alpha(0.1);
   one.intensity_scale = 1.0;
   EXPECT_NO_THROW(lidar_fog(in.data(), out.data(), 10, one));
+  // A fog return beyond float32 is an Error, not inf.
+  in[4 * 6 + 3] = 1e37f;
+  one.beta_b = 1e6;
+  EXPECT_NE(error_of([&] { lidar_fog(in.data(), out.data(), 10, one); }).find("point 6"), std::string::npos);
 }
 
 // `brume lidar fog` end to end: the .bin and the soft curve written, the
