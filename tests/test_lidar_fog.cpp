@@ -12,6 +12,7 @@
 #include <random>
 #include <sstream>
 
+#include "brume/command.hpp"
 #include "brume/error.hpp"
 #include "brume/lidar_fog.hpp"
 #include "test_util.hpp"
@@ -264,6 +265,25 @@ TEST(LidarFog, ZeroReflectanceNeverBecomesFogAndTheNoiseIsSeeded) {
     if (std::memcmp(&in[4 * i], &out[4 * i], 3 * sizeof(float)) != 0 && range_of(&in[4 * i]) > s2.peak_range_m) {
       EXPECT_NEAR(range_of(&out[4 * i]), s2.peak_range_m, 1e-5);
     }
+}
+
+// The camera's medium and the LiDAR's are one number: haze's extinction for
+// --visibility V (the list of commands' extinction_per_m) is the LiDAR fog's
+// α for the same V, to the bit, and the record says so.
+TEST(LidarFog, CameraAndLidarShareTheExtinction) {
+  const CommandDef* haze = find_command("haze");
+  const CommandDef* lidar = find_command("lidar fog");
+  ASSERT_TRUE(haze && lidar && haze->extinction_per_m && lidar->extinction_per_m);
+  EXPECT_EQ(lidar->extinction_per_m(lidar->defaults, 0.0), std::nullopt);
+  for (double v : {20.0, 50.0, 333.0, 1000.0}) {
+    const std::optional<double> cam = haze->extinction_per_m(haze->build({{"visibility", v}}), 0.0);
+    const std::optional<double> lid = lidar->extinction_per_m(lidar->build({{"visibility", v}}), 0.0);
+    ASSERT_TRUE(cam && lid);
+    EXPECT_EQ(*cam, *lid) << v;
+    LidarFogParams p;
+    p.visibility_m = v;
+    EXPECT_EQ(lidar_fog_medium(p).alpha, *cam);
+  }
 }
 
 // Bad inputs: a clear Error naming the problem.

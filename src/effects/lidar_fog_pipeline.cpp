@@ -110,6 +110,7 @@ CommandDef lidar_fog_command() {
   c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {
     LidarFogJob j;
     lidar_fog_job_table().from_json(j, job, "job");
+    if (!j.fog.visibility_m && !j.fog.alpha_per_m) return std::nullopt;  // no fog given yet
     return lidar_fog_medium(j.fog).alpha;
   };
   // brume.lidar.fog(points): an (N, 4) float32 array (x, y, z, intensity),
