@@ -17,8 +17,8 @@ GIL is released while an effect runs. See docs/python.md.
 from ._brume import (__version__, aerial, blur, dof, fog, haze, max_pixels, random_params, read_image,
                      set_max_pixels, write_image)
 from ._result import Result
-from . import depth, sky
+from . import depth, lidar, sky
 from ._rerun import rerun
 
-__all__ = ["Result", "__version__", "aerial", "blur", "depth", "dof", "fog", "haze", "max_pixels", "random_params",
+__all__ = ["Result", "__version__", "aerial", "blur", "depth", "dof", "fog", "haze", "lidar", "max_pixels", "random_params",
            "read_image", "rerun", "set_max_pixels", "sky", "write_image"]

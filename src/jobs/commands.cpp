@@ -25,7 +25,8 @@ namespace brume {
   X(dof_command) \
   X(compare_command) \
   X(sky_render_command) \
-  X(sky_fit_command)
+  X(sky_fit_command) \
+  X(lidar_fog_command)
 
 #define BRUME_DECLARE(f) CommandDef f();
 BRUME_COMMANDS(BRUME_DECLARE)
@@ -42,6 +43,7 @@ const std::vector<CommandGroup>& command_groups() {
   static const std::vector<CommandGroup> g = {
       {"depth", "depth maps: convert any depth source to range or planar z, prepare it"},
       {"sky", "the Preetham sky: render one, or fit the turbidity of a sky photo (Morales ch. 2)"},
+      {"lidar", "LiDAR scans: fog one (attenuation and fog returns, Hahner et al. 2021)"},
   };
   return g;
 }

@@ -1,0 +1,151 @@
+// brume — fog on a LiDAR scan: the homogeneous model of Hahner, Sakaridis,
+// Dai, Van Gool, "Fog Simulation on Real LiDAR Point Clouds for 3D Object
+// Detection in Adverse Weather", ICCV 2021, §3, implemented from its
+// equations (their code is CC BY-NC and was not read). Issue #41,
+// docs/lidar.md.
+//
+// Symbols and units (SI throughout; c = 299 792 458 m/s):
+//   α    extinction coefficient of the fog [1/m]: --alpha, or 3.912/V from
+//        --visibility V (Koschmieder, 2 % contrast: the camera effects' rule)
+//   MOR  meteorological optical range ln 20/α [m] (5 % contrast)
+//   β_b  backscatter coefficient of the fog [1/(m·sr)], default 0.046/MOR
+//   β0   = Γ/π, the hard target's backscatter [1/sr] (Γ: --gamma)
+//   τ_H  half-power pulse width [s]; P0 peak power [W]
+//   A_r  receiver aperture [m²]; l_r  receiver efficiency [1]
+//   C_A  = c·l_r·A_r/2, the system constant [m³/s]
+//   R1, R2  the transmitter–receiver overlap ξ(R): 0 below R1, 1 above R2,
+//        (R − R1)/(R2 − R1) between [m]
+//
+// Pulse (paper §3.1):   P_T(t) = P0·sin²(πt/(2τ_H)) for 0 ≤ t ≤ 2τ_H, else 0
+// Channel (eqs. 4–7):   H_C(R) = ξ(R)·e^{−2αR}/R²;  H = H_C·H_T
+// Hard target (eq. 9):  H_T = β0·δ(R − R0): the surface's return is attenuated
+//                       by e^{−2αR0}; its clear-weather peak (eq. 12, as the
+//                       paper writes it) is P_hard,clear(R0) = C_A·P0·β0·ξ(R0)/R0².
+// Soft target (§3.2):   H_T = β_b·U(R0 − R) (fog in front of the surface, none
+//                       behind it), received power
+//   P_soft(R; R0) = C_A·∫ P_T(t)·H(R − ct/2) dt
+//                 = C_A·P0·β_b·(2/c)·∫_{R−L}^{min(R, R0)} sin²(π(R − r)/L)·g(r) dr,
+//   g(r) = ξ(r)·e^{−2αr}/r², L = c·τ_H (r = R − ct/2: the range of the fog
+//   that scatters, t ∈ [0, 2τ_H] ↔ r ∈ [R − L, R]).
+//
+// Per point (x, y, z, i) at range R0 (paper's Algorithm 1, our reading):
+//   i_hard = i·e^{−2αR0}
+//   i_soft = i·max_R P_soft(R; R0) / P_hard,clear(R0)   (0 for R0 ≤ R1: ξ = 0)
+//   i_soft > i_hard: the point moves along its beam to the soft peak's range
+//   (plus seeded Gaussian range noise, --range-noise, redrawn below R1) with
+//   intensity i_soft; else it stays with i_hard. The point count never changes;
+//   a zero-reflectance point never becomes fog. Both intensities are
+//   proportional to i, so --intensity-scale cancels from the model: it only
+//   puts the input on the model's [0, 255] to check that the scan is on the
+//   scale it claims (most scaled values above 255 are refused, the trap of
+//   mixing KITTI's [0, 1] reflectance with [0, 255] intensities).
+//
+// Numerics (one table per run, built in O(table) and searched in O(1) per point):
+//   * sin² = ½ − ½cos(2π(R − r)/L) splits the soft integral into three
+//     cumulative integrals G_f(r) = ∫_0^r g(x)·f(x) dx with f ∈ {1, cos 2πx/L,
+//     sin 2πx/L}, tabulated at r_j = j·h, h = L/kLidarStepsPerPulse (≈ 1 cm at
+//     20 ns) by composite Simpson on each cell, cells split at R1 and R2 (ξ's
+//     kinks). The uncut curve and the curve cut at any node are then O(1) a
+//     node: P(R_j; R0=r_k) from G at nodes min(j, k) and j − n.
+//   * For R ≥ R2 + L the window lies where g strictly decreases, so the uncut
+//     curve does too: its maximum P* (at R*) is in [0, R2 + L]. A cut at
+//     R0 ≥ R* keeps the uncut curve up to R* and lowers it beyond, so its peak
+//     is P* at R*. For R0 < R* the peak of the cut curve is the larger of the
+//     uncut curve's prefix maximum up to R0 and the cut tail's maximum on
+//     (R0, R0 + L), tabulated at the nodes below R* and interpolated in R0
+//     (the power quadratically through three nodes, the range linearly).
+//   * Peaks are the tables' node maxima: the range within h/2, the power
+//     within O(h²·P'') of the continuous peak.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "brume/params.hpp"
+
+namespace brume {
+
+constexpr double kSpeedOfLight = 299792458.0;  // [m/s]
+constexpr int kLidarStepsPerPulse = 600;         // table steps per pulse length L = c·τ_H
+
+// The parameters of the LiDAR fog, in physical units (the paper's defaults).
+struct LidarFogParams {
+  std::optional<double> visibility_m;  // [m] > 0; α = 3.912/V (exactly one of visibility, alpha)
+  std::optional<double> alpha_per_m;   // [1/m] >= 0, the extinction coefficient
+  double tau_h_ns = 20.0;              // [ns] > 0, half-power pulse width τ_H
+  double p0_w = 80.0;                  // [W] > 0, peak pulse power P0
+  double a_r_m2 = 0.25;                // [m²] > 0, receiver aperture A_r
+  double l_r = 0.05;                   // [1] (0, 1], receiver efficiency l_r
+  double gamma = 1e-6;                 // [1] > 0, hard-target reflectivity Γ (β0 = Γ/π)
+  double r1_m = 0.9;                   // [m] > 0, overlap starts
+  double r2_m = 1.0;                   // [m] > R1, full overlap
+  std::optional<double> beta_b;        // [1/(m·sr)] >= 0; unset: 0.046/MOR, MOR = ln 20/α
+  double intensity_scale = 255.0;      // [1] > 0, input intensity × scale = the model's [0, 255]
+  std::string noise = "on";            // on | off: the soft points' range noise
+  double range_noise_m = 0.5;          // [m] >= 0, σ of that noise (brume's choice, docs/lidar.md)
+  std::uint64_t seed = 0;              // the noise's seed (same seed, same scan)
+};
+const ParamTable<LidarFogParams>& lidar_fog_param_table();
+// Cross-field rules: exactly one of visibility and alpha; R2 > R1.
+void validate_lidar_fog(const LidarFogParams& p);
+
+// The constants a run derives from its parameters.
+struct LidarFogMedium {
+  double alpha = 0.0;       // [1/m]
+  double mor_m = INFINITY;  // [m] ln 20/α
+  double beta_b = 0.0;      // [1/(m·sr)]
+  double beta0 = 0.0;       // [1/sr] Γ/π
+  double c_a = 0.0;         // [m³/s] c·l_r·A_r/2
+  double pulse_m = 0.0;     // [m] L = c·τ_H
+};
+LidarFogMedium lidar_fog_medium(const LidarFogParams& p);
+
+// The uncut soft-target power P_soft(R) [W] at R_j = j·step_m, j = 0..n-1,
+// and its maximum (the table's node maximum).
+struct SoftCurve {
+  double step_m = 0.0;
+  std::vector<double> power_w;
+  double peak_w = 0.0, peak_range_m = 0.0;
+};
+// The table from 0 to at least `range_end_m` (and at least R2 + L).
+SoftCurve lidar_soft_curve(const LidarFogParams& p, double range_end_m);
+// "range_m,power_w\n" and one row a node (%.9g).
+std::string soft_curve_csv(const SoftCurve& c);
+
+// What a run did.
+struct LidarFogStats {
+  std::size_t points = 0, soft = 0;  // all points, those turned into fog
+  std::size_t zero_range = 0;        // points at R0 ≤ R1 (no overlap: attenuated only)
+  double peak_w = 0.0, peak_range_m = 0.0;  // the uncut soft curve's maximum
+  double table_ms = 0.0, points_ms = 0.0;
+  nlohmann::json record() const;
+};
+
+// Fogs n points (x, y, z, i as float32, 16 bytes each) from `in` into `out`
+// (may be the same buffer). Refuses (brume::Error naming `what`) non-finite
+// values, negative intensities and a scan whose intensities × scale mostly
+// exceed 255, before writing anything. α = 0 copies the points bit for bit.
+LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarFogParams& p,
+                        const std::string& what = "the scan");
+
+// KITTI velodyne .bin: little-endian float32 x, y, z, reflectance per point.
+// Throws an Error naming `what` when the size is not a multiple of 16 bytes.
+std::vector<float> parse_kitti_bin(const std::string& bytes, const std::string& what);
+std::vector<float> read_kitti_bin(const std::string& path, const std::string& flag);
+std::string kitti_bin_bytes(const float* points, std::size_t n);
+
+// ---- the command: brume lidar fog ----
+struct LidarFogJob {
+  std::string points;  // input .bin
+  LidarFogParams fog;
+  std::string out, record, soft_curve;
+};
+const ParamTable<LidarFogJob>& lidar_fog_job_table();
+
+}  // namespace brume

@@ -1,0 +1,45 @@
+"""brume.lidar.fog: an (N, 4) float32 scan read in place, the same points as
+`brume lidar fog` on the same scan (bit for bit), its errors."""
+import numpy as np
+import pytest
+
+import brume
+from brume import _brume
+from conftest import run_cli
+
+
+def scan(n=4000, seed=2):
+    g = np.random.default_rng(seed)
+    d = g.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    r = g.uniform(1.5, 90.0, size=(n, 1))
+    return np.hstack([d * r, g.uniform(0, 1, size=(n, 1))]).astype(np.float32)
+
+
+def test_lidar_fog_equals_cli_and_reads_in_place(tmp_path):
+    pts = scan()
+    pts.tofile(tmp_path / "in.bin")
+    run_cli("lidar", "fog", "--points", tmp_path / "in.bin", "--visibility", 40, "--seed", 5,
+            "--out", tmp_path / "out.bin")
+    r = brume.lidar.fog(pts, visibility=40.0, seed=5)
+    assert r.points.shape == pts.shape and r.points.dtype == np.float32
+    assert np.array_equal(r.points, np.fromfile(tmp_path / "out.bin", dtype=np.float32).reshape(-1, 4))
+    assert r.record["inputs"]["points"]["copied"] is False
+    assert r.record["lidar"]["alpha_per_m"] == 3.912 / 40
+    assert r.record["lidar"]["soft_points"] > 0
+    assert r.record["command"] == "lidar fog"
+    # No fog: the same points, bit for bit.
+    assert np.array_equal(brume.lidar.fog(pts, alpha=0.0).points, pts)
+    assert brume.lidar.fog is _brume.lidar_fog
+
+
+def test_lidar_fog_errors():
+    pts = scan(50)
+    with pytest.raises(ValueError, match=r"\(N, 4\)"):
+        brume.lidar.fog(pts[:, :3], alpha=0.1)
+    with pytest.raises(ValueError, match="alpha"):
+        brume.lidar.fog(pts, alpha=-1.0)
+    with pytest.raises(ValueError, match="intensity-scale 1"):
+        brume.lidar.fog(pts * 255, alpha=0.1)
+    with pytest.raises(ValueError, match="visibility"):
+        brume.lidar.fog(pts)

@@ -1,0 +1,150 @@
+// brume — `brume lidar fog`: a KITTI .bin scan in, the foggy scan out, with
+// its record and optionally the uncut soft-target curve (brume/lidar_fog.hpp).
+#include <cstdio>
+#include <filesystem>
+
+#include "brume/command.hpp"
+#include "brume/error.hpp"
+#include "brume/io.hpp"
+#include "brume/lidar_fog.hpp"
+#include "brume/record.hpp"
+
+namespace brume {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// The medium's constants and the run's figures, for the record.
+nlohmann::json lidar_record(const LidarFogParams& p, const LidarFogStats& st) {
+  const LidarFogMedium m = lidar_fog_medium(p);
+  nlohmann::json j = {{"model", "Hahner et al. ICCV 2021, homogeneous fog (from the paper's equations)"},
+                      {"alpha_per_m", m.alpha},
+                      {"alpha_from", p.alpha_per_m ? "alpha" : "visibility (3.912/V)"},
+                      {"mor_m", std::isfinite(m.mor_m) ? nlohmann::json(m.mor_m) : nlohmann::json(nullptr)},
+                      {"beta_b_per_m_sr", m.beta_b},
+                      {"beta0_per_sr", m.beta0},
+                      {"c_a_m3_per_s", m.c_a},
+                      {"pulse_length_m", m.pulse_m},
+                      {"table_step_m", m.pulse_m / kLidarStepsPerPulse},
+                      {"seed", p.seed},
+                      {"noise", p.noise}};
+  j.update(st.record());
+  return j;
+}
+
+void check_bin_path(const std::string& path, const std::string& flag) {
+  if (fs::path(path).extension() != ".bin")
+    throw Error(flag + " '" + path + "': a scan is written as a KITTI .bin (float32 x, y, z, intensity); name it *.bin");
+  check_output_dir(path, flag);
+}
+
+}  // namespace
+
+const ParamTable<LidarFogJob>& lidar_fog_job_table() {
+  static const ParamTable<LidarFogJob> t = [] {
+    ParamTable<LidarFogJob> d("files");
+    d.text("points", &LidarFogJob::points, "the scan: KITTI velodyne .bin (float32 x, y, z, reflectance)")
+        .nest(&LidarFogJob::fog, lidar_fog_param_table())
+        .text("out", &LidarFogJob::out, "the foggy scan, KITTI .bin (same points, same order, same count)")
+        .writes_file()
+        .text("record", &LidarFogJob::record, "write a JSON record that `brume run` repeats")
+        .writes_file()
+        .text("soft-curve", &LidarFogJob::soft_curve,
+              "write the uncut soft-target power P_soft(R) as CSV range_m,power_w (0 to the scan's farthest point)")
+        .writes_file();
+    return d;
+  }();
+  return t;
+}
+
+nlohmann::json run_lidar_fog_job(const LidarFogJob& job, const RunContext& ctx) {
+  lidar_fog_job_table().validate(job);
+  validate_lidar_fog(job.fog);
+  if (job.points.empty()) throw Error("no scan given: use --points FILE.bin (KITTI velodyne)");
+  if (job.out.empty()) throw Error("no output given: use --out FILE.bin");
+  check_bin_path(job.out, "--out");
+  if (!job.record.empty()) check_record_path(job.record);
+  if (!job.soft_curve.empty()) check_output_dir(job.soft_curve, "--soft-curve");
+
+  const std::vector<float> in = read_kitti_bin(job.points, "--points");
+  const std::size_t n = in.size() / 4;
+  std::vector<float> out(in.size());
+  const LidarFogStats st = lidar_fog(in.data(), out.data(), n, job.fog, "--points '" + job.points + "'");
+
+  nlohmann::json inputs = {{"points", {{"path", job.points}, {"sha256", sha256_file(job.points)}, {"points", n}}}};
+  const nlohmann::json rec =
+      job_record("lidar fog", ctx, lidar_fog_job_table().to_json(job), inputs, {{"lidar", lidar_record(job.fog, st)}},
+                 false);
+  OutputSet outs;
+  outs.write_text(job.out, kitti_bin_bytes(out.data(), n), "--out");
+  if (!job.soft_curve.empty()) {
+    double far = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double x = in[4 * i], y = in[4 * i + 1], z = in[4 * i + 2];
+      far = std::max(far, std::sqrt(x * x + y * y + z * z));
+    }
+    outs.write_text(job.soft_curve, soft_curve_csv(lidar_soft_curve(job.fog, far)), "--soft-curve");
+  }
+  if (!job.record.empty()) outs.write_text(job.record, rec.dump(2) + "\n", "--record");
+  outs.commit();
+  return rec;
+}
+
+CommandDef lidar_fog_command() {
+  CommandDef c = make_command<LidarFogJob>({
+      .name = "lidar fog",
+      .cli = "lidar fog",
+      .summary = "fog a LiDAR scan (KITTI .bin): attenuated returns and fog returns (Hahner et al. 2021)",
+      .table = &lidar_fog_job_table(),
+      .record = true,
+      .check = [](const LidarFogJob& j, const std::set<std::string>&) { validate_lidar_fog(j.fog); },
+      .run = [](const LidarFogJob& j, const ExecOptions&, const RunContext& ctx) { return run_lidar_fog_job(j, ctx); },
+      .report = [](const LidarFogJob& j, const nlohmann::json& rec) {
+        const auto& l = rec["lidar"];
+        std::fprintf(stderr, "brume lidar fog: %s  alpha %.4g 1/m  %zu of %zu points turned into fog (%.2f %%)\n",
+                     j.out.c_str(), l["alpha_per_m"].get<double>(), l["soft_points"].get<std::size_t>(),
+                     l["points"].get<std::size_t>(), 100 * l["soft_fraction"].get<double>());
+      },
+  });
+  c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {
+    LidarFogJob j;
+    lidar_fog_job_table().from_json(j, job, "job");
+    if (!j.fog.visibility_m && !j.fog.alpha_per_m) return std::nullopt;  // no fog given yet
+    return lidar_fog_medium(j.fog).alpha;
+  };
+  // brume.lidar.fog(points): an (N, 4) float32 array (x, y, z, intensity),
+  // read in place when C-contiguous; the foggy points as a new (N, 4) array.
+  static const auto call = array_call_table(lidar_fog_param_table(), kArrayNone);
+  c.arrays = make_array_form<LidarFogParams>(
+      "lidar_fog", "brume.lidar.fog",
+      "Fog on a LiDAR scan (Hahner et al. 2021, homogeneous): points is an (N, 4) float32 array of x, y, z [m] and "
+      "intensity (KITTI reflectance in [0, 1] with the default intensity_scale 255). Returns the foggy (N, 4) points: "
+      "attenuated returns and returns moved to the fog's peak. Exactly one of visibility, alpha. As `brume lidar fog`.",
+      {{"points", 1, false, ArrayArg::As::view}}, call, {"points", "record"}, false,
+      [](const std::vector<ArrayIn>& in, ArrayCall<LidarFogParams>& k, const Exec&, const std::set<std::string>&) {
+        const ConstImageView& v = in[0].view;
+        if (v.width() != 4 || v.channels() != 1)
+          throw Error("brume.lidar.fog(): points must be an (N, 4) array of x, y, z, intensity; got " +
+                      std::to_string(v.height()) + " x " + std::to_string(v.width()) +
+                      (v.channels() > 1 ? " x " + std::to_string(v.channels()) : std::string()));
+        const std::size_t n = static_cast<std::size_t>(v.height());
+        Image out(4, v.height(), 1);
+        const float* src = v.data();
+        std::vector<float> dense;
+        if (!v.contiguous()) {  // a strided array: gathered once
+          dense.resize(n * 4);
+          for (std::size_t i = 0; i < n; ++i)
+            for (int c = 0; c < 4; ++c) dense[4 * i + c] = v.at(c, static_cast<int>(i), 0);
+          src = dense.data();
+        }
+        const LidarFogStats st = lidar_fog(src, out.data.data(), n, k.p, "points");
+        ArrayResult r;
+        r.record["lidar"] = lidar_record(k.p, st);
+        r.images["points"] = std::move(out);
+        return r;
+      });
+  return c;
+}
+
+}  // namespace brume
