@@ -125,6 +125,13 @@ nlohmann::json job_as_recorded(const CommandDef& c, const nlohmann::json& record
 
 }  // namespace
 
+nlohmann::json record_job(const nlohmann::json& record) {
+  const std::string cmd = record_command(record);
+  const CommandDef* c = find_command(cmd);
+  if (!c) throw Error("the record's command '" + cmd + "' is not a brume command");
+  return job_as_recorded(*c, record);
+}
+
 std::string check_record(const nlohmann::json& record) {
   if (is_sky_fit_json(record)) return check_record(record["record"]);
   const std::string cmd = record_command(record);
