@@ -289,16 +289,21 @@ void check_fog_exponential(const Exec& e) {
   }
 }
 
+// Every fog closed form on one backend: at infinity, at --sky-distance 30 m, climbing.
+void check_fog_rules(const Exec& e) {
+  check_fog_constant(fog_constant(), 0.0, e);
+  FogParams m = fog_constant();
+  m.sky_distance_m = 30.0;
+  check_fog_constant(m, std::exp(-0.05 * 30.0), e);
+  check_fog_exponential(e);
+}
+
 }  // namespace
 
 TEST(SkyUnits, FogHomogeneousSkyIsTheFogColour) {
   for (const auto& [name, e] : cpu_paths()) {
     SCOPED_TRACE(name);
-    check_fog_constant(fog_constant(), 0.0, e);
-    FogParams m = fog_constant();
-    m.sky_distance_m = 30.0;
-    check_fog_constant(m, std::exp(-0.05 * 30.0), e);
-    check_fog_exponential(e);
+    check_fog_rules(e);
   }
 }
 
@@ -354,11 +359,7 @@ TEST(SkyUnits, GpuHazeAndFogFollowTheSameRule) {
   HazeParams p = haze_visibility(50.0);
   p.sky_distance_m = 30.0;
   check_haze_rule(p, 3.912 / 50.0, std::exp(-3.912 / 50.0 * 30.0), g);
-  check_fog_constant(fog_constant(), 0.0, g);
-  FogParams m = fog_constant();
-  m.sky_distance_m = 30.0;
-  check_fog_constant(m, std::exp(-0.05 * 30.0), g);
-  check_fog_exponential(g);
+  check_fog_rules(g);
 }
 
 // ---- records -----------------------------------------------------------------------------

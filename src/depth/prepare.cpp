@@ -267,6 +267,21 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target, int n
   return iters;
 }
 
+// max |b - A v| over the margin, v the float values written to `out`.
+double float_residual(const MarginSystem& s, const float* out, int nt) {
+  double worst = 0.0;
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(max : worst)
+  for (std::size_t i = 0; i < s.n; ++i) {
+    double a = s.b[i] - s.diag[i] * static_cast<double>(out[s.pix[i]]);
+    for (int k = 0; k < 4; ++k) {
+      const std::size_t j = static_cast<std::size_t>(s.nb[4 * i + k]);
+      if (j < s.n) a += out[s.pix[j]];
+    }
+    worst = std::max(worst, std::abs(a));
+  }
+  return worst;
+}
+
 }  // namespace
 
 PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int threads) {
@@ -594,17 +609,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   // Write back in float and measure the residual actually delivered.
   float* out = res.range.data.data();
   for (std::size_t i = 0; i < n; ++i) out[sys.pix[i]] = static_cast<float>(u[i]);
-  double worst = 0.0;
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(max : worst)
-  for (std::size_t i = 0; i < n; ++i) {
-    double a = sys.b[i] - sys.diag[i] * static_cast<double>(out[sys.pix[i]]);
-    for (int k = 0; k < 4; ++k) {
-      const std::size_t j = static_cast<std::size_t>(sys.nb[4 * i + k]);
-      if (j < n) a += out[sys.pix[j]];
-    }
-    worst = std::max(worst, std::abs(a));
-  }
-  res.margin_residual = worst / smax;
+  res.margin_residual = float_residual(sys, out, nt) / smax;
 
   // The sky weight: the same operator, 0 on the scene side, 1 on the sky's
   // and above the frame.
@@ -612,17 +617,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   res.weight_iterations = solve_cg(sys, w, 0.25 * p.residual_tol, nt);
   float* skyw = res.sky_weight.data.data();
   for (std::size_t i = 0; i < n; ++i) skyw[sys.pix[i]] = static_cast<float>(std::clamp(w[i], 0.0, 1.0));
-  double worst_w = 0.0;
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(max : worst_w)
-  for (std::size_t i = 0; i < n; ++i) {
-    double a = sys.b[i] - sys.diag[i] * static_cast<double>(skyw[sys.pix[i]]);
-    for (int k = 0; k < 4; ++k) {
-      const std::size_t j = static_cast<std::size_t>(sys.nb[4 * i + k]);
-      if (j < n) a += skyw[sys.pix[j]];
-    }
-    worst_w = std::max(worst_w, std::abs(a));
-  }
-  res.weight_residual = worst_w;
+  res.weight_residual = float_residual(sys, skyw, nt);
   return res;
 }
 
