@@ -173,9 +173,11 @@ CommandDef fog_command() {
       .run = &run_fog_job,
       .report = [](const FogJob& j, const nlohmann::json& rec) {
         const auto& d = rec["fog"]["derived"];
-        std::fprintf(stderr, "brume fog: %s  R_max %.4g m  sky distance %.4g m  sigma_max %.3g px (%s)\n",
-                     j.output.out.c_str(), d["range_max_m"].get<double>(), d["sky_distance_m"].get<double>(),
-                     d["sigma_max_px"].get<double>(), rec["execution"]["backend"].get<std::string>().c_str());
+        const bool inf = d["sky_distance_source"].get<std::string>().rfind("infinity", 0) == 0;
+        std::fprintf(stderr, "brume fog: %s  R_max %.4g m  sky %s%.4g m  sigma_max %.3g px (%s)\n",
+                     j.output.out.c_str(), d["range_max_m"].get<double>(), inf ? "at infinity, its blur at " : "at ",
+                     d["sky_distance_m"].get<double>(), d["sigma_max_px"].get<double>(),
+                     rec["execution"]["backend"].get<std::string>().c_str());
       },
   });
   // Ground density D0 0.002-0.08 /m, i.e. a Koschmieder visibility 3.912/D0
