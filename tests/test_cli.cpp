@@ -474,7 +474,7 @@ TEST_F(Cli, RunRepeatsARecordBitForBit) {
   nlohmann::json r1 = nlohmann::json::parse(j1), r2 = nlohmann::json::parse(j2);
   r1["job"]["output"] = r2["job"]["output"] = nullptr;  // the paths moved to --out-dir
   EXPECT_EQ(r1["job"], r2["job"]);
-  EXPECT_EQ(r2["schema_version"], 2);
+  EXPECT_EQ(r2["schema_version"], kRecordSchemaVersion);
   // A changed input is refused: the record describes a run on other bytes.
   write_image(img, Image(48, 32, 3, 0.5f), WriteOptions{});
   CliRun changed = run("run " + p("first/h.json") + " --out-dir " + p("third"));

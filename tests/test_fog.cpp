@@ -408,15 +408,15 @@ TEST(Fog, BlurredTransmissionReachesOneWhereNoFogIsCrossed) {
 
 TEST(Fog, PreparationFillsHolesAndKeepsTheSkySky) {
   // --prepare auto: a small hole is filled from its boundary (50 m) and
-  // fogged as scene; the top rows, identified as sky, integrate along their
-  // climbing rays (exponential: delta(y_c) / (B d_y), closed form). With
-  // --prepare off the hole is sky too.
+  // fogged as scene; the top rows, identified as sky beyond the 8 px
+  // horizon margin, integrate along their climbing rays (exponential:
+  // delta(y_c) / (B d_y), closed form). With --prepare off the hole is sky too.
   FogParams p = exp_params(10.0, 10.0);
   DepthSource ds;
   ds.k = fog_k(40.0);
   const Camera c = make_camera(fog_k(40.0), 48, 32, p.camera);
   Image range(48, 32, 1, 50.0f);
-  for (int v = 0; v < 6; ++v)
+  for (int v = 0; v < 14; ++v)
     for (int u = 0; u < 48; ++u) range.at(u, v) = NAN;
   range.at(30, 20) = range.at(31, 20) = range.at(30, 21) = range.at(31, 21) = NAN;
   const FogRun on = run_fog(flat_rgb(48, 32), range, ds, p, RangeStep{});

@@ -31,12 +31,18 @@
 //   exp2    f = exp(-(D0 l)^2)                            (F = (D0 l)^2)
 //
 // Sky (unknown range: NaN, inf, 0, a depth buffer's clear value; with
-// --prepare auto the sky the preparation identifies, holes being filled) is
-// integrated to infinity along its ray: finite where the density vanishes
-// upwards along it (exponential with B > 0 looking up: F = delta(y_c) / (B d_y);
-// band, ramp, table ending at density 0: the integral to the top of the fog
-// divided by d_y), and over --sky-distance (default S_max = s-max-factor R_max,
-// the preparation's sky distance) where it diverges.
+// --prepare auto the sky the preparation identifies beyond its horizon
+// margin, holes being filled) is integrated to infinity along its ray: finite
+// where the density vanishes upwards along it (exponential with B > 0 looking
+// up: F = delta(y_c) / (B d_y); band, ramp, table ending at density 0: the
+// integral to the top of the fog divided by d_y), and infinite where it
+// diverges (the densities are in metres and the medium unbounded: F = +inf,
+// f = 0, the sky is the fog colour; Koschmieder's horizon), unless
+// --sky-distance M bounds it (F over M metres). Across the horizon margin
+// the transmission blends the scene's (at the margin's harmonic range) and
+// the sky's with the preparation's sky weight (brume/haze.hpp, "The sky").
+// --sky-rule s-max gives the rule of records before schema 3: diverging sky
+// rays over --sky-distance or S_max = s-max-factor R_max, the margin as sky.
 //
 // Scattering blur (--lambda > 0, default 0: Zhou's fog has none): haze's
 // premultiplied diffusion (brume/haze.hpp, Hansard eq. 2-4) with the target scale
@@ -45,8 +51,9 @@
 //
 // which is haze's sigma0 + lambda sqrt(kappa_s') R'^{3/2} when the density is
 // constant (omega F = kappa_s' R'), but grows with the fog crossed rather than
-// with range. Sky pixels blur as at --sky-distance (F over that distance), so
-// sigma_max is known before the diffusion is planned.
+// with range. Sky pixels blur as at --sky-distance or, without it, at S_max (F
+// over that distance), so sigma_max is known before the diffusion is planned
+// and the sky's blur stays bounded when its transmission is 0.
 #pragma once
 
 #include <optional>
@@ -82,7 +89,8 @@ struct FogParams {
   ClassicFog classic = ClassicFog::none;  // classic OpenGL fog on range instead of a height profile
   double fog_start_m = 0.0;         // [m]   classic linear: f = 1 nearer than this, >= 0
   double fog_end_m = 1000.0;        // [m]   classic linear: f = 0 beyond this, > fog_start_m
-  std::optional<double> sky_distance_m;  // [m] > 0; unset: S_max = s-max-factor R_max
+  std::optional<double> sky_distance_m;  // [m] > 0; unset: infinity (blur: S_max = s-max-factor R_max)
+  SkyRule sky_rule = SkyRule::automatic;  // s-max: the rule of records before schema 3
   std::optional<Rgb> airlight;      // linear RGB fog colour, >= 0; unset: estimated (estimate_airlight)
   double lambda = 0.0;              // [px] blur gain, >= 0 (0: no blur, Zhou's fog)
   double albedo = 1.0;              // [1] single-scattering albedo omega in sigma, [0, 1]
@@ -136,8 +144,10 @@ float fog_optical_depth(const FogDensity& d, float range_m, float ray_y, bool sk
 struct FogAnalysis {
   double range_max_m = 0.0, range_min_m = 0.0;
   std::size_t unknown_pixels = 0;
-  double sky_distance_m = 0.0;       // used for diverging sky rays and the sky's blur
+  double sky_distance_m = 0.0;       // the sky's blur distance, and diverging sky rays' unless sky_at_infinity
   std::string sky_distance_source;
+  bool sky_at_infinity = false;      // diverging sky rays: F = +inf
+  bool sky_blend = false;            // blend across the horizon margin with the sky weight (else margin = sky)
   Camera camera;                     // intrinsics and pose (height unknown for constant/classic)
   bool camera_used = false;
   FogTable table;                    // profile table only
@@ -159,14 +169,16 @@ struct FogResult {
   Image transmission;   // f = exp(-F), after the blur when lambda > 0, 1 channel
 };
 
-// The per-pixel apply on the CPU. `range` in metres; unknown (NaN, inf, 0) is sky.
+// The per-pixel apply on the CPU. `range` in metres; unknown (NaN, inf, 0) is
+// sky. sky_weight: the preparation's, used when a.sky_blend (known pixels of
+// weight > 0 are the horizon margin); empty: none.
 FogResult apply_fog(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a,
-                    const Exec& exec = {});
+                    const Exec& exec = {}, DenseImageRef sky_weight = {});
 // The same into `out`, reusing its images when they already have the
 // frame's size (a renderer's per-frame loop then allocates nothing: fresh
 // output images cost more in page faults and zero-filling than the fog itself).
 void apply_fog(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a, FogResult& out,
-               const Exec& exec = {});
+               const Exec& exec = {}, DenseImageRef sky_weight = {});
 
 // ---- the pipeline -----------------------------------------------------------------
 struct FogRun {

@@ -24,7 +24,8 @@ namespace brume {
 // image-wide statistics (R_max, the sky's colour).
 class GpuFog : public GpuEffect {
  public:
-  GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& range);
+  // sky_weight: the preparation's, for the horizon margin's blend; null or empty: none.
+  GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& range, const Image* sky_weight = nullptr);
   GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& window_depth, DepthBufferConvention c, double near_m,
          double far_m);
   ~GpuFog();

@@ -14,7 +14,9 @@ namespace brume {
 // interactive control).
 class GpuHaze : public GpuEffect {
  public:
-  GpuHaze(GpuContext& ctx, const Image& rgb, const Image& range);
+  // sky_weight: the preparation's (brume/prepare.hpp), uploaded when the
+  // sky lies beyond the medium (HazeAnalysis::sky_beyond); null: none.
+  GpuHaze(GpuContext& ctx, const Image& rgb, const Image& range, const Image* sky_weight = nullptr);
   ~GpuHaze();
   // Render targets are kept between renders (remade when the precision
   // changes); `a` must come from analyse_haze for these inputs and `p`.

@@ -16,8 +16,28 @@
 //
 // Unknown range (NaN, +-inf or 0, e.g. lidar sky) that reaches apply_haze is
 // treated as the far end of the scene, R = R_max: the largest blur and the far
-// transmission, which is what sky looks like under haze. The pipeline
-// (run_haze) prepares the range first (brume/prepare.hpp) unless told not to.
+// transmission. The pipeline (run_haze) prepares the range first
+// (brume/prepare.hpp) unless told not to.
+//
+// The sky (the preparation's sky; --sky-rule auto). In normalised units
+// (--kappa-a/--kappa-s) the sky lies at Hansard's S_max = s-max-factor R_max,
+// as the paper has it: tau = exp(-kappa' S_max / R_max). With a visibility in
+// metres the medium is physical and unbounded: a sky ray crosses it to
+// infinity, so the sky's transmission is 0 and the sky becomes the airlight
+// (Koschmieder's horizon; HazeRD places the sky at 2 V, tau = e^-7.8), or
+// tau_sky = exp(-beta M) with --sky-distance M (beta = 3.912 / V). Across the
+// horizon margin the transmission blends (brume_sky_blend):
+//   tau = (1 - w) exp(-beta S) + w tau_sky,
+// S the margin's harmonic range and w the preparation's sky weight, the
+// harmonic function that is 0 on the scene and 1 on the sky beyond the margin
+// (PrepareResult::sky_weight). The weight is solved, not derived from S: S
+// runs from each boundary pixel's own range to S_max, so no one affine map of
+// S is 0 on the whole scene side, while w is, and w is what the margin does to
+// the ranges today (Laplace's interpolation between the two sides). Blending
+// transmissions rather than optical depths keeps tau_sky = 0 finite. The
+// scattering blur keeps sigma at S (sigma_max on the sky): bounded.
+// --sky-rule s-max puts the sky at S_max whatever the units (the rule of
+// records before schema 3, which `brume run` gives them).
 #pragma once
 
 #include <array>
@@ -39,6 +59,10 @@ Composite parse_composite(const std::string& s);
 std::string to_string(Composite c);
 const EnumNames<Composite>& composite_names();
 
+// Where the sky lies (see above): auto, or Hansard's S_max whatever the units.
+enum class SkyRule { automatic, s_max };
+const EnumNames<SkyRule>& sky_rule_names();
+
 struct HazeParams {
   double kappa_a = 0.0;      // [1] absorption, normalised kappa_a R_max, >= 0
   double kappa_s = 0.25;     // [1] scattering, normalised kappa_s R_max, >= 0
@@ -48,6 +72,8 @@ struct HazeParams {
   double albedo = 1.0;       // [1] single-scattering albedo with visibility, [0, 1]
   std::optional<Rgb> airlight;         // linear RGB, >= 0; unset: estimated (analyse_haze)
   Composite composite = Composite::premultiplied;
+  SkyRule sky_rule = SkyRule::automatic;
+  std::optional<double> sky_distance_m;  // [m] > 0: the sky's distance; unset: see sky_rule
   DiffusionParams diffusion;  // scheme, precision, sigma0 (the image's inner scale), rho_max, edge rate
 };
 
@@ -70,6 +96,9 @@ struct HazeAnalysis {
   std::array<float, 3> airlight{};      // linear RGB used
   std::string airlight_source;          // "given", "sky median", "99th percentile luminance"
   DiffusionPlan plan;
+  bool sky_beyond = false;    // the sky lies beyond the medium: blend with the sky weight (else S_max as range)
+  float sky_transmission = 0.0f;  // tau_sky when sky_beyond (0: at infinity)
+  std::string sky_rule;           // the rule in words, for the record
 };
 
 // Validates parameters and inputs (throws brume::Error) and gathers the
@@ -82,9 +111,11 @@ struct HazeResult {
   Image scale;         // target scale sigma(x) in px, 1 channel
 };
 
-// The per-pixel apply on the CPU (exec.path: fast or reference).
+// The per-pixel apply on the CPU (exec.path: fast or reference). sky_weight:
+// the preparation's (PreparedRange::sky_weight), used when a.sky_beyond; an
+// empty view (none prepared) weighs nothing.
 HazeResult apply_haze(ConstImageView rgb, ConstImageView range, const HazeParams& p,
-                      const HazeAnalysis& a, const Exec& exec = {});
+                      const HazeAnalysis& a, const Exec& exec = {}, ConstImageView sky_weight = {});
 
 // The airlight B when none is given (shared by the effects that take
 // --airlight): the per-channel median colour of the unknown-range (sky)
@@ -137,8 +168,8 @@ inline HazeAnalysis analyse_haze(const Image& rgb, const Image& range, const Haz
   return analyse_haze(ConstImageView(rgb), ConstImageView(range), p);
 }
 inline HazeResult apply_haze(const Image& rgb, const Image& range, const HazeParams& p, const HazeAnalysis& a,
-                             const Exec& exec = {}) {
-  return apply_haze(ConstImageView(rgb), ConstImageView(range), p, a, exec);
+                             const Exec& exec = {}, const Image& sky_weight = {}) {
+  return apply_haze(ConstImageView(rgb), ConstImageView(range), p, a, exec, ConstImageView(sky_weight));
 }
 inline ScatterBlur scatter_blur(const Image& rgb, const Image& tau0, const Image& sigma, double sigma_max,
                                 const DiffusionParams& p, Composite composite, const std::array<float, 3>& airlight,

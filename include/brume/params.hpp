@@ -69,6 +69,8 @@ struct ParamSpec {
   bool output_file = false;          // text: names a file (depth prepare's --masks: a directory) the run
                                      // writes; brume run moves it under --out-dir, brume batch names its
                                      // own outputs after the frame's key
+  int since_schema = 0;              // the record schema that introduced it (0: always there); a job of an
+  nlohmann::json before_schema;      // older record lacks it and ran as this value says (brume run sets it)
 
   // Help with unit, range or choices, for --help and docs.
   std::string describe() const;
@@ -222,6 +224,13 @@ class ParamTable {
   // The last declared (text) parameter names a file the run writes.
   ParamTable& writes_file() {
     params_.back().spec.output_file = true;
+    return *this;
+  }
+  // The last declared parameter came with record schema `version` and a new
+  // rule; `older` is its value that gives the rule of the records before.
+  ParamTable& since(int version, nlohmann::json older) {
+    params_.back().spec.since_schema = version;
+    params_.back().spec.before_schema = std::move(older);
     return *this;
   }
   // Other accepted flag names for the last declared parameter.

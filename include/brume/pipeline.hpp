@@ -8,9 +8,12 @@
 //   files ──► load_inputs (decode, depth → range) ──► prepare_step ──► effect
 //         ──► write_outputs (encoding rules, record, atomic rename)
 //
-// Records (schema_version 2) hold the whole job — every declared parameter
+// Records (schema_version 3) hold the whole job — every declared parameter
 // of every block, under "job" — next to what the run derived and measured,
-// so `brume run record.json` repeats the run.
+// so `brume run record.json` repeats the run. Schema 3 (issue #40) changed the sky under a medium in metres (brume/haze.hpp, "The sky");
+// a parameter that a later schema introduced with a new rule declares the
+// value that reproduces the older rule (ParamSpec::since_schema), and
+// `brume run` gives it to an older record's job that lacks it.
 #pragma once
 
 #include <chrono>
@@ -34,7 +37,8 @@
 
 namespace brume {
 
-constexpr int kRecordSchemaVersion = 2;
+constexpr int kRecordSchemaVersion = 3;
+constexpr int kOldestRecordSchemaVersion = 2;  // the oldest `brume run` repeats
 
 // ---- name tables (one per enum: flags, records and messages use them) ----
 const EnumNames<Scheme>& scheme_names();
@@ -165,6 +169,7 @@ std::size_t unknown_range_pixels(const Image& range);
 struct PreparedRange {
   Image range;            // the range the effect runs on (a copy of the measured one when not prepared)
   Image sky_mask;         // when applied: 1 where the preparation identified sky (margin included), else 0
+  Image sky_weight;       // when applied: PrepareResult::sky_weight (1 beyond the margin, harmonic across it)
   bool applied = false;
   nlohmann::json record;  // {"mode", "applied", and the preparation's record when applied}
 };

@@ -15,6 +15,11 @@
 //     pixels whose exact Euclidean distance to the scene is <= mu -- is solved
 //     for Laplace's equation, S = R on the scene side and S = S_max on the sky
 //     side, to a stated residual (not the paper's fixed ~2 mu Jacobi sweeps).
+//     The same system with 0 on the scene side and 1 on the sky side (and
+//     above the top row: the sky goes on above the frame) gives the sky
+//     weight w (harmonic across the margin, exactly 1 on the sky beyond it,
+//     0 elsewhere): the effects in physical units blend the
+//     scene's and the sky's transmissions with it (brume/haze.hpp, "The sky").
 //  5. Inputs whose known pixels cover less than min_coverage of the image (a
 //     projected lidar scan) are refused with a message: filling them would
 //     invent most of the map.
@@ -43,12 +48,15 @@ struct PrepareResult {
   Image sky_mask;     // 1 where the pixel is sky (including the margin), else 0
   Image hole_mask;    // 1 where a hole was filled, else 0
   Image margin_mask;  // 1 where the margin was solved, else 0
+  Image sky_weight;   // 1 on the sky beyond the margin, harmonic in (0, 1) across the margin, else 0
   double range_max_m = 0.0;  // R_max: largest known range
   double s_max_m = 0.0;      // S_max assigned to the sky
   double known_fraction = 0.0;
   std::size_t holes = 0, hole_pixels = 0, sky_pixels = 0, margin_pixels = 0;
   double margin_residual = 0.0;  // achieved max |discrete Laplacian| / S_max over the margin
   int solver_iterations = 0;
+  double weight_residual = 0.0;  // the sky weight's max |discrete Laplacian| (of 1) over the margin
+  int weight_iterations = 0;
 };
 
 // Throws brume::Error for sparse or empty inputs (message says what to do).

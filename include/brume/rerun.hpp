@@ -20,6 +20,12 @@ namespace brume {
 // the command ("haze", "sky fit", ...); throws brume::Error as rerun does.
 std::string check_record(const nlohmann::json& record);
 
+// The record's job as `brume run` runs it: a parameter that a later record
+// schema introduced with a new rule (ParamSpec::since_schema), absent from an
+// older record's job, set to the value that gives the rule it ran under.
+// Throws brume::Error as check_record does for a record of no known schema.
+nlohmann::json record_job(const nlohmann::json& record);
+
 // `brume run`: repeat the run a record describes (schema_version 2). Inputs
 // must still have the SHA-256 the record names; with a non-empty out_dir,
 // every output goes into out_dir under its recorded file name. Returns the

@@ -17,7 +17,9 @@ def rerun(record, rgb, range, **keywords):
     recorded, so none counts as given, and a haze record holding both
     ``visibility`` and the default ``kappa-a`` replays (spreading the job's
     blocks as keywords, ``**record["job"]["haze"]``, would give both and be
-    refused). ``keywords`` override single values (``threads=``,
+    refused), and a record of an older schema runs under the rules it ran
+    under (its job completed as ``brume run`` completes it: a schema-2 haze or
+    fog record keeps the sky at S_max). ``keywords`` override single values (``threads=``,
     ``backend=`` ...). The inputs are the arrays given, not the record's files:
     pass the same pixels for the same bits (a CLI record's ``inputs`` name
     and hash its files). Commands: the effects with an array form (haze,
@@ -30,4 +32,4 @@ def rerun(record, rgb, range, **keywords):
     if command not in _REPLAYABLE:
         raise ValueError(f"brume.rerun(): the record's command {command!r} is not one of "
                          f"{', '.join(sorted(_REPLAYABLE))}; rerun other records with `brume run`")
-    return _REPLAYABLE[command](rgb, range, job=record["job"], **keywords)
+    return _REPLAYABLE[command](rgb, range, job=_brume._record_job(record), **keywords)

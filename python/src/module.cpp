@@ -47,6 +47,7 @@
 #include "brume/batch.hpp"
 #include "brume/blur.hpp"  // _bench_blur_cpp
 #include "brume/error.hpp"
+#include "brume/rerun.hpp"
 #include "brume/sample.hpp"
 
 namespace brume::python {
@@ -389,6 +390,11 @@ PYBIND11_MODULE(_brume, m) {
       "Run one planned frame through its pipeline, the GIL released; returns its results line as JSON (private).");
   // ---- introspection, tests and benchmarks -----------------------------------------------
   m.def("_stub_text", &stub_text, "The type stubs of this module, generated from the parameter tables.");
+  m.def(
+      "_record_job", [](py::handle record) { return to_py(record_job(from_py(record, "record"))); },
+      py::arg("record"),
+      "A record's job as `brume run` runs it (an older schema's job with the values that give its rules; private: "
+      "brume.rerun).");
   m.def(
       "_commands",
       []() {

@@ -569,6 +569,20 @@ def test_rerun_other_effects_and_bad_records(demo):
         brume.haze(rgb, rng, job="haze")
 
 
+def test_rerun_of_an_older_schema_keeps_its_sky_rule(demo):
+    """A schema-2 record (its job without sky-rule) replays under the rule it
+    ran under, the sky at S_max, as `brume run` replays it: bit for bit the
+    run with sky_rule="s-max", not the new rule's airlight sky."""
+    rgb, rng = demo["rgb"], demo["range"]
+    new = brume.haze(rgb, rng, visibility=300, lambda_=0)
+    old = brume.haze(rgb, rng, visibility=300, lambda_=0, sky_rule="s-max")
+    assert not np.array_equal(new.rgb, old.rgb)  # the demo scene has sky
+    v2 = dict(new.record, schema_version=2, job={k: dict(v) for k, v in new.record["job"].items()})
+    del v2["job"]["haze"]["sky-rule"]
+    same(brume.rerun(v2, rgb, rng).rgb, old.rgb)
+    same(brume.rerun(new.record, rgb, rng).rgb, new.rgb)
+
+
 # ---- the library's list of commands (brume/command.hpp) reaches Python -------------------
 CAMERA = {"fog": {"fov_y": 55, "camera_height": 1.6}, "dof": {"fov_x": 2 * math.degrees(math.atan(18 / 50))}}
 

@@ -410,6 +410,7 @@ PreparedRange prepare_step(const Image& measured, const RangeStep& step, const s
     out.record = prepare_record(step.params, pr);
     out.range = std::move(pr.range);
     out.sky_mask = std::move(pr.sky_mask);
+    out.sky_weight = std::move(pr.sky_weight);
     out.applied = true;
     out.record["mode"] = "auto";
     out.record["applied"] = true;

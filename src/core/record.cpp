@@ -59,7 +59,10 @@ nlohmann::json prepare_record(const PrepareParams& p, const PrepareResult& r) {
           {"sky_fraction", r.sky_pixels / n},
           {"margin_fraction", r.margin_pixels / n},
           {"margin_residual", r.margin_residual},
-          {"solver_iterations", r.solver_iterations}};
+          {"solver_iterations", r.solver_iterations},
+          {"sky_weight_rule", "harmonic across the margin: 0 at the scene, 1 at the sky beyond it (same operator)"},
+          {"sky_weight_residual", r.weight_residual},
+          {"sky_weight_iterations", r.weight_iterations}};
 }
 
 }  // namespace brume

@@ -43,7 +43,16 @@
 //     exactly the discrete Laplacian. Rounding the solution to float adds at
 //     most 8 * 2^-24 S_max = 4.8e-7 S_max to the Laplacian, so the float output
 //     meets residual_tol (which must be >= 1e-6); the residual reported is the
-//     one measured on the float output. CG iterations grow like mu (condition
+//     one measured on the float output. The sky weight w solves the same
+//     system with 0 at scene neighbours and 1 at sky neighbours outside the
+//     margin (b = the count of those), by the same CG from the same strip
+//     start, to max|r| <= residual_tol / 4. One boundary differs: above the
+//     top row lies sky (w = 1 there, a Dirichlet neighbour, where the range
+//     has its mirror), because the sky goes on above the frame -- a sky
+//     strip narrower than mu, all of it margin, would otherwise have no sky
+//     side and weigh 0. It is written clamped to [0, 1]
+//     (the maximum principle keeps it there up to the tolerance), 1 on the
+//     sky beyond the margin. CG iterations grow like mu (condition
 //     number ~ mu^2); Jacobi sweeps roughly like mu^1.5..2. Measured on the
 //     1600x1120 benchmark scene for mu = 4/8/16/32: CG 46/75/130/241
 //     iterations, Jacobi 273/767/2321/6845 sweeps to the same residual; the
@@ -258,6 +267,21 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target, int n
   return iters;
 }
 
+// max |b - A v| over the margin, v the float values written to `out`.
+double float_residual(const MarginSystem& s, const float* out, int nt) {
+  double worst = 0.0;
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(max : worst)
+  for (std::size_t i = 0; i < s.n; ++i) {
+    double a = s.b[i] - s.diag[i] * static_cast<double>(out[s.pix[i]]);
+    for (int k = 0; k < 4; ++k) {
+      const std::size_t j = static_cast<std::size_t>(s.nb[4 * i + k]);
+      if (j < s.n) a += out[s.pix[j]];
+    }
+    worst = std::max(worst, std::abs(a));
+  }
+  return worst;
+}
+
 }  // namespace
 
 PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int threads) {
@@ -336,6 +360,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   res.sky_mask = Image(W, H, 1, 0.0f);
   res.hole_mask = Image(W, H, 1, 0.0f);
   res.margin_mask = Image(W, H, 1, 0.0f);
+  res.sky_weight = Image(W, H, 1, 0.0f);
   if (known == N) return res;  // nothing to fill
 
   cv::Mat labels, stats, centroids;
@@ -434,6 +459,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
     float* out = res.range.data.data();
     float* skym = res.sky_mask.data.data();
     float* holem = res.hole_mask.data.data();
+    float* skyw = res.sky_weight.data.data();
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y) {
       const int* L = labels.ptr<int>(y);
@@ -447,6 +473,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
         } else {
           out[o + x] = smax;
           skym[o + x] = 1.0f;
+          skyw[o + x] = 1.0f;
         }
       }
     }
@@ -520,7 +547,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   sys.diag.assign(n, 0.0);
   sys.b.assign(n, 0.0);
   std::vector<double> scene_sum(n, 0.0);
-  std::vector<unsigned char> scene_cnt(n, 0);
+  std::vector<unsigned char> scene_cnt(n, 0), sky_cnt(n, 0), top_row(n, 0);
   {
     const float* out = res.range.data.data();
     const float* skym = res.sky_mask.data.data();
@@ -530,6 +557,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
       const std::size_t pi = sys.pix[i];
       mm[pi] = 1.0f;
       const int x = static_cast<int>(pi % W), y = static_cast<int>(pi / W);
+      top_row[i] = y == 0;
       const int nx[4] = {x - 1, x + 1, x, x};
       const int ny[4] = {y, y, y - 1, y + 1};
       for (int k = 0; k < 4; ++k) {
@@ -545,6 +573,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
         } else {
           sys.b[i] += out[q];
           if (skym[q] == 0.0f) scene_sum[i] += out[q], ++scene_cnt[i];
+          else ++sky_cnt[i];
         }
       }
     }
@@ -552,7 +581,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
 
   // Start: breadth-first nearest scene value v, then v + (S_max - v) t with
   // t = distance / (floor(mu) + 1), the exact solution across a straight strip.
-  std::vector<double> u(n);
+  std::vector<double> u(n), w(n);
   {
     std::vector<double> v(n, smax);
     std::vector<unsigned char> seen(n, 0);
@@ -571,6 +600,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
     for (std::size_t i = 0; i < n; ++i) {
       const double t = std::min(1.0, mdist[i] / span);
       u[i] = v[i] + (smax - v[i]) * t;
+      w[i] = t;
     }
   }
 
@@ -579,17 +609,15 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   // Write back in float and measure the residual actually delivered.
   float* out = res.range.data.data();
   for (std::size_t i = 0; i < n; ++i) out[sys.pix[i]] = static_cast<float>(u[i]);
-  double worst = 0.0;
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(max : worst)
-  for (std::size_t i = 0; i < n; ++i) {
-    double a = sys.b[i] - sys.diag[i] * static_cast<double>(out[sys.pix[i]]);
-    for (int k = 0; k < 4; ++k) {
-      const std::size_t j = static_cast<std::size_t>(sys.nb[4 * i + k]);
-      if (j < n) a += out[sys.pix[j]];
-    }
-    worst = std::max(worst, std::abs(a));
-  }
-  res.margin_residual = worst / smax;
+  res.margin_residual = float_residual(sys, out, nt) / smax;
+
+  // The sky weight: the same operator, 0 on the scene side, 1 on the sky's
+  // and above the frame.
+  for (std::size_t i = 0; i < n; ++i) sys.b[i] = sky_cnt[i] + top_row[i], sys.diag[i] += top_row[i];
+  res.weight_iterations = solve_cg(sys, w, 0.25 * p.residual_tol, nt);
+  float* skyw = res.sky_weight.data.data();
+  for (std::size_t i = 0; i < n; ++i) skyw[sys.pix[i]] = static_cast<float>(std::clamp(w[i], 0.0, 1.0));
+  res.weight_residual = float_residual(sys, skyw, nt);
   return res;
 }
 

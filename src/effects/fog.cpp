@@ -62,7 +62,11 @@ const ParamTable<FogParams>& fog_param_table() {
               "classic linear: full fog beyond this (must exceed --fog-start)")
         .real("sky-distance", &FogParams::sky_distance_m, "m", Range::above(0.0),
               "distance sky rays integrate over where the fog does not vanish along them, and the sky's blur "
-              "distance; auto: S_max = s-max-factor R_max")
+              "distance; auto: infinity (transmission 0; the blur as at S_max = s-max-factor R_max)")
+        .choice("sky-rule", &FogParams::sky_rule, sky_rule_names(),
+                "auto (the sky beyond the medium, blended across the horizon margin), or s-max (diverging sky rays "
+                "over --sky-distance or S_max, the margin as sky: the rule of records before schema 3)")
+        .since(3, "s-max")
         .rgb("airlight", &FogParams::airlight, "linear RGB", Range::at_least(0.0),
              "fog colour C_fog; auto: the median sky colour (unknown range >= 0.5 % of the frame), else a grey at "
              "the 99th percentile of luminance")
@@ -350,6 +354,11 @@ FogAnalysis analyse_fog(DenseImageRef rgb, DenseImageRef measured, DenseImageRef
     a.sky_distance_m = s_max_factor * rmax;
     a.sky_distance_source = "S_max = s-max-factor R_max";
   }
+  // The densities are in metres: diverging sky rays cross an unbounded
+  // medium (brume/fog.hpp), unless placed by --sky-distance or the old rule.
+  a.sky_blend = p.sky_rule == SkyRule::automatic;
+  a.sky_at_infinity = a.sky_blend && !p.sky_distance_m;
+  if (a.sky_at_infinity) a.sky_distance_source = "infinity (the blur: S_max = s-max-factor R_max)";
 
   double yc = NAN;
   if (a.camera_used) {
@@ -397,21 +406,22 @@ FogAnalysis analyse_fog(DenseImageRef rgb, DenseImageRef measured, DenseImageRef
   return a;
 }
 
-FogResult apply_fog(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a, const Exec& exec) {
+FogResult apply_fog(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a, const Exec& exec,
+                    DenseImageRef sky_weight) {
   FogResult out;
-  apply_fog(rgb, range, p, a, out, exec);
+  apply_fog(rgb, range, p, a, out, exec, sky_weight);
   return out;
 }
 
 void apply_fog(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a, FogResult& out,
-               const Exec& exec) {
-  detail::apply_fog_rows(rgb, range, p, a, out, exec, true);
+               const Exec& exec, DenseImageRef sky_weight) {
+  detail::apply_fog_rows(rgb, range, p, a, out, exec, true, sky_weight);
 }
 
 namespace detail {
 
 void apply_fog_rows(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a, FogResult& out,
-                    const Exec& exec, bool vector_rows) {
+                    const Exec& exec, bool vector_rows, DenseImageRef sky_weight) {
   const int W = rgb.width, H = rgb.height;
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const RayY ray(a.camera);
@@ -419,6 +429,11 @@ void apply_fog_rows(DenseImageRef rgb, DenseImageRef range, const FogParams& p, 
   const float s0 = static_cast<float>(p.diffusion.sigma0), lam = static_cast<float>(p.lambda),
               om = static_cast<float>(p.albedo), inv_rmax = static_cast<float>(1.0 / a.range_max_m),
               sky_l = static_cast<float>(a.sky_distance_m);
+  // The sky's transmission distance (< 0: infinity), and its blur's (sky_l).
+  const float sky_t = a.sky_at_infinity ? -1.0f : sky_l;
+  const bool blend = a.sky_blend && !sky_weight.empty();
+  if (blend && (sky_weight.width != W || sky_weight.height != H || sky_weight.channels != 1))
+    throw Error("internal: the sky weight is " + sky_weight.size_string() + ", the image " + rgb.size_string());
   const sh::BrumeFog fog = to_shared(a.density);
 
   auto sized = [&](Image& m, int c) {
@@ -439,9 +454,25 @@ void apply_fog_rows(DenseImageRef rgb, DenseImageRef range, const FogParams& p, 
     fr.width = W;
     fr.r0 = ray.r0, fr.r1 = ray.r1, fr.r2 = ray.r2, fr.cx = ray.cx, fr.cy = ray.cy, fr.ifx = ray.ifx, fr.ify = ray.ify;
     fr.d0 = fog.d0, fr.falloff = fog.falloff, fr.exponent_c = fog.exponent_c, fr.sky_distance = sky_l;
+    fr.sky_infinite = a.sky_at_infinity;
     for (int c = 0; c < 3; ++c) fr.airlight[c] = a.airlight[c];
 #pragma omp parallel for num_threads(nt) schedule(static)
-    for (int v = 0; v < H; ++v) detail::fog_exponential_row(fr, v);
+    for (int v = 0; v < H; ++v) {
+      detail::fog_exponential_row(fr, v);
+      if (!blend) continue;
+      // The horizon margin's few pixels: the per-pixel blend (brume_fog_pixel).
+      for (int u = 0; u < W; ++u) {
+        const std::size_t i = static_cast<std::size_t>(v) * W + u;
+        const float w = sky_weight.data[i];
+        if (!(w > 0.0f) || !known_range(range.data[i])) continue;
+        const float F = sh::brume_fog_pixel(fog, range.data[i], ray.at(u, v), false, sky_t, w);
+        const float f = std::exp(-F);
+        out.optical_depth.data[i] = F;
+        out.transmission.data[i] = f;
+        for (int c = 0; c < 3; ++c)
+          out.rgb.data[i * 3 + c] = sh::brume_fog_composite(rgb.data[i * 3 + c], f, a.airlight[c]);
+      }
+    }
     return;
   }
 #pragma omp parallel for num_threads(nt) schedule(static)
@@ -451,14 +482,16 @@ void apply_fog_rows(DenseImageRef rgb, DenseImageRef range, const FogParams& p, 
       const float r = range.data[i];
       const bool sky = !known_range(r);
       const float ry = heights ? ray.at(u, v) : 0.0f;
-      const float F = sky ? sh::brume_fog_sky(fog, ry, sky_l) : sh::brume_fog_along(fog, r, ry);
+      const float w = blend ? sky_weight.data[i] : 0.0f;
+      const float F = sh::brume_fog_pixel(fog, r, ry, sky, sky_t, w);
       const float f = std::exp(-F);
       out.optical_depth.data[i] = F;
       out.transmission.data[i] = f;
       if (blur) {
-        // Sky pixels blur as at the sky distance (F over it), bounded in advance.
+        // Sky pixels blur as at the sky distance (F over it), bounded in
+        // advance; a margin pixel as at its range.
         const float l = sky ? sky_l : r;
-        const float Fb = sky ? sh::brume_fog_along(fog, l, ry) : F;
+        const float Fb = sky || w > 0.0f ? sh::brume_fog_along(fog, l, ry) : F;
         sigma.data[i] = std::min(sh::brume_fog_scale(s0, lam, om, Fb, l * inv_rmax), static_cast<float>(a.sigma_max));
       } else {
         for (int c = 0; c < 3; ++c)

@@ -101,7 +101,8 @@ void fog_exponential_row(const FogExpFrame& fr, int v) {
     const float N_sky = ry > climb ? dc : N_ray, D_sky = ry > climb ? B * ry : D_ray;
     const float N = known ? N_ray : N_sky;
     const float D = known ? D_ray : D_sky;
-    const float F = N / D;
+    const bool infinite = fr.sky_infinite && !known && !(ry > climb);  // diverging, across an unbounded medium
+    const float F = infinite ? kInf : N / D;
     const float f = exp_neg(-F);
     Fo[u] = F;
     fo[u] = f;

@@ -25,6 +25,7 @@ struct FogExpFrame {
   // the density (FogDensity, exponential, d0 > 0) and the sky
   float d0 = 0, falloff = 0, exponent_c = 0;
   float sky_distance = 0;  // [m] diverging sky rays (looking level or down, or B = 0)
+  bool sky_infinite = false;  // diverging sky rays: F = +inf instead
   float airlight[3] = {0, 0, 0};
 };
 
@@ -34,6 +35,6 @@ void fog_exponential_row(const FogExpFrame& fr, int v);
 // apply_fog itself; vector_rows = false forces the per-pixel loop (every
 // profile; the vector rows' peer in tests/test_fog.cpp and bench/bench_fog.cpp).
 void apply_fog_rows(DenseImageRef rgb, DenseImageRef range, const FogParams& p, const FogAnalysis& a, FogResult& out,
-                    const Exec& exec, bool vector_rows);
+                    const Exec& exec, bool vector_rows, DenseImageRef sky_weight = {});
 
 }  // namespace brume::detail

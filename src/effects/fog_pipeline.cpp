@@ -29,8 +29,16 @@ nlohmann::json fog_record(const FogParams& p, const FogAnalysis& a) {
       {"sky_distance_m", a.sky_distance_m},
       {"sky_distance_source", a.sky_distance_source},
       {"sky_rule",
-       "sky pixels integrate to infinity along their ray where the density vanishes along it, else over "
-       "sky_distance_m; they blur as at sky_distance_m"},
+       a.sky_at_infinity
+           ? "sky pixels integrate to infinity along their ray: finite where the density vanishes along it, else "
+             "infinite (transmission 0, the fog colour); they blur as at sky_distance_m; across the horizon margin "
+             "the scene's and the sky's transmissions blend by the preparation's sky weight"
+       : a.sky_blend
+           ? "sky pixels integrate to infinity along their ray where the density vanishes along it, else over "
+             "sky_distance_m (given); they blur as at sky_distance_m; across the horizon margin the scene's and the "
+             "sky's transmissions blend by the preparation's sky weight"
+           : "--sky-rule s-max: sky pixels (the margin included) integrate to infinity along their ray where the "
+             "density vanishes along it, else over sky_distance_m; they blur as at sky_distance_m"},
       {"optical_depth_rule", "F = l (D(y_f) - D(y_c)) / (y_f - y_c), the mean density over the height interval"},
       {"sigma_max_px", a.sigma_max},
       {"airlight_linear_rgb", a.airlight},
@@ -47,13 +55,14 @@ nlohmann::json fog_record(const FogParams& p, const FogAnalysis& a) {
 }
 
 // The range the effect runs on: the prepared one with the identified sky
-// (margin included) unknown again, so that it integrates along its ray; or,
-// unprepared, the measured one, where every unknown pixel is sky.
-Image effect_range(const PreparedRange& prep) {
+// unknown again, so that it integrates along its ray (the margin keeps its
+// harmonic range, blended by the sky weight; --sky-rule s-max: the margin
+// too is sky); or, unprepared, the measured one, where every unknown pixel is sky.
+Image effect_range(const PreparedRange& prep, bool blend) {
   Image r = prep.range;
   if (prep.applied)
     for (std::size_t i = 0; i < r.pixels(); ++i)
-      if (prep.sky_mask.data[i] != 0.0f) r.data[i] = 0.0f;
+      if (blend ? prep.sky_weight.data[i] >= 1.0f : prep.sky_mask.data[i] != 0.0f) r.data[i] = 0.0f;
   return r;
 }
 
@@ -92,7 +101,10 @@ FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSourc
                                 : make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, rgb.width, rgb.height);
   FogRun run;
   PreparedRange prep = prepare_step(measured_range.view(), prepare, given, exec.threads);
-  const Image range = effect_range(prep);
+  const bool blend = p.sky_rule == SkyRule::automatic && prep.applied;
+  const Image range = effect_range(prep, blend);
+  const Image no_weight;
+  const Image& weight = blend ? prep.sky_weight : no_weight;
   run.analysis = analyse_fog(rgb, measured_range, range, camera, p, prepare.params.s_max_factor);
   BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();
@@ -106,7 +118,7 @@ FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSourc
     std::unique_ptr<GpuFog> gf =
         gpu_depth ? std::make_unique<GpuFog>(*backend.gpu, rgb, *window_depth,
                                              parse_depth_buffer_convention(depth.convention), depth.near_m, depth.far_m)
-                  : std::make_unique<GpuFog>(*backend.gpu, rgb, range);
+                  : std::make_unique<GpuFog>(*backend.gpu, rgb, range, &weight);
     run.result = gf->render(p, run.analysis, exec.gpu_filter);
     timing = gpu_timing_record(gf->timing());
     // GpuTiming's first-pass slot is haze's premultiply; here it times the
@@ -116,7 +128,7 @@ FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSourc
       timing.erase("premultiply_ms");
     }
   } else {
-    run.result = apply_fog(rgb, range, p, run.analysis, exec);
+    run.result = apply_fog(rgb, range, p, run.analysis, exec, weight);
     timing = cpu_timing_record(t0, run.analysis.plan.iterations);
   }
   run.record["fog"] = fog_record(p, run.analysis);
@@ -161,9 +173,11 @@ CommandDef fog_command() {
       .run = &run_fog_job,
       .report = [](const FogJob& j, const nlohmann::json& rec) {
         const auto& d = rec["fog"]["derived"];
-        std::fprintf(stderr, "brume fog: %s  R_max %.4g m  sky distance %.4g m  sigma_max %.3g px (%s)\n",
-                     j.output.out.c_str(), d["range_max_m"].get<double>(), d["sky_distance_m"].get<double>(),
-                     d["sigma_max_px"].get<double>(), rec["execution"]["backend"].get<std::string>().c_str());
+        const bool inf = d["sky_distance_source"].get<std::string>().rfind("infinity", 0) == 0;
+        std::fprintf(stderr, "brume fog: %s  R_max %.4g m  sky %s%.4g m  sigma_max %.3g px (%s)\n",
+                     j.output.out.c_str(), d["range_max_m"].get<double>(), inf ? "at infinity, its blur at " : "at ",
+                     d["sky_distance_m"].get<double>(), d["sigma_max_px"].get<double>(),
+                     rec["execution"]["backend"].get<std::string>().c_str());
       },
   });
   // Ground density D0 0.002-0.08 /m, i.e. a Koschmieder visibility 3.912/D0

@@ -21,6 +21,10 @@ const EnumNames<Composite>& composite_names() {
 }
 Composite parse_composite(const std::string& s) { return parse_enum(composite_names(), s, "--composite"); }
 std::string to_string(Composite c) { return enum_name(composite_names(), c); }
+const EnumNames<SkyRule>& sky_rule_names() {
+  static const EnumNames<SkyRule> n = {{SkyRule::automatic, "auto"}, {SkyRule::s_max, "s-max"}};
+  return n;
+}
 
 const ParamTable<HazeParams>& haze_param_table() {
   static const ParamTable<HazeParams> t = [] {
@@ -45,6 +49,14 @@ const ParamTable<HazeParams>& haze_param_table() {
         .alias("horizon")
         .choice("composite", &HazeParams::composite, composite_names(),
                 "premultiplied (eq. 4), or naive (the ghost-edged composite the paper warns against, for comparison)")
+        .choice("sky-rule", &HazeParams::sky_rule, sky_rule_names(),
+                "where the prepared sky lies: auto (with --visibility beyond the medium: at infinity, transmission "
+                "0, or at --sky-distance; with --kappa-a/--kappa-s at S_max = s-max-factor R_max), or s-max (S_max "
+                "whatever the units: the rule of records before schema 3)")
+        .since(3, "s-max")
+        .real("sky-distance", &HazeParams::sky_distance_m, "m", Range::above(0.0),
+              "distance of the prepared sky: its transmission is exp(-beta M), blended across the horizon margin; "
+              "auto: as --sky-rule says")
         .nest(&HazeParams::diffusion, diffusion_param_table());
     return d;
   }();
@@ -58,6 +70,12 @@ void validate_haze(const HazeParams& p, const std::set<std::string>& given) {
     throw Error("--visibility sets the extinction; do not also give --kappa-a/--kappa-s (use --albedo to split it)");
   if (!p.visibility_m && t.is_set(p, "albedo", given))
     throw Error("--albedo only applies with --visibility; with --kappa-a/--kappa-s the split is explicit");
+  if (p.sky_rule == SkyRule::s_max && p.sky_distance_m) {
+    std::ostringstream m;
+    m << "--sky-distance " << *p.sky_distance_m
+      << " m places the sky, but --sky-rule s-max puts it at S_max = s-max-factor R_max; drop one of them";
+    throw Error(m.str());
+  }
 }
 
 namespace {
@@ -143,6 +161,23 @@ HazeAnalysis analyse_haze(ConstImageView rgb, ConstImageView range, const HazePa
                                     static_cast<float>(a.kappa_s));
   a.plan = plan_diffusion(p.diffusion, a.sigma_max);
 
+  // The sky (brume/haze.hpp): beyond the medium when it is in metres or the
+  // user places it; else (normalised units, or --sky-rule s-max) at S_max.
+  if (p.sky_rule == SkyRule::automatic && p.sky_distance_m) {
+    a.sky_beyond = true;
+    a.sky_transmission = static_cast<float>(std::exp(-a.extinction_per_m * *p.sky_distance_m));
+    a.sky_rule = "sky at --sky-distance: transmission exp(-extinction_per_m sky_distance), blended across the "
+                 "horizon margin by the preparation's sky weight";
+  } else if (p.sky_rule == SkyRule::automatic && p.visibility_m) {
+    a.sky_beyond = true;
+    a.sky_transmission = 0.0f;
+    a.sky_rule = "physical units (visibility): the sky lies beyond the unbounded medium, transmission 0 (the "
+                 "airlight), blended across the horizon margin by the preparation's sky weight";
+  } else {
+    a.sky_rule = p.sky_rule == SkyRule::s_max ? "--sky-rule s-max: the sky at S_max = s-max-factor R_max"
+                                              : "normalised units: the sky at S_max = s-max-factor R_max (Hansard)";
+  }
+
   if (p.airlight) {
     a.airlight = *p.airlight;
     a.airlight_source = "given";
@@ -194,12 +229,16 @@ ScatterBlur scatter_blur(ConstImageView rgb, const Image& tau0, const Image& sig
 }
 
 HazeResult apply_haze(ConstImageView rgb, ConstImageView range, const HazeParams& p,
-                      const HazeAnalysis& a, const Exec& exec) {
+                      const HazeAnalysis& a, const Exec& exec, ConstImageView sky_weight) {
   const int W = rgb.width(), H = rgb.height();
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const float kappa = static_cast<float>(a.kappa_a + a.kappa_s);
   const float s0 = static_cast<float>(p.diffusion.sigma0), smax = static_cast<float>(a.sigma_max);
   const float inv_rmax = static_cast<float>(1.0 / a.range_max_m);
+  const bool blend = a.sky_beyond && !sky_weight.empty();
+  if (blend && (sky_weight.width() != W || sky_weight.height() != H || sky_weight.channels() != 1))
+    throw Error("internal: the sky weight is " + sky_weight.size_string() + ", the image " + rgb.size_string());
+  const float tau_sky = a.sky_transmission;
 
   HazeResult out;
   Image tau0(W, H, 1);
@@ -210,7 +249,8 @@ HazeResult apply_haze(ConstImageView rgb, ConstImageView range, const HazeParams
       const std::size_t i = static_cast<std::size_t>(y) * W + x;
       const float r = range.at(x, y);
       const float rn = known_range(r) ? r * inv_rmax : 1.0f;  // unknown -> R_max
-      tau0.data[i] = sh::brume_transmission(kappa, rn);
+      const float tau = sh::brume_transmission(kappa, rn);
+      tau0.data[i] = blend ? sh::brume_sky_blend(tau, tau_sky, sky_weight.at(x, y)) : tau;
       out.scale.data[i] = sh::brume_target_scale(rn, s0, smax);
     }
   ScatterBlur b = scatter_blur(rgb, tau0, out.scale, a.sigma_max, p.diffusion, p.composite, a.airlight, exec);

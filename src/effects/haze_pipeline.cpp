@@ -48,6 +48,8 @@ nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a) {
       {"range_min_m", a.range_min_m},
       {"unknown_range_pixels", a.unknown_pixels},
       {"unknown_range_rule", "unknown (NaN, inf, 0) treated as R = R_max"},
+      {"sky_rule", a.sky_rule},
+      {"sky_transmission", a.sky_beyond ? nlohmann::json(a.sky_transmission) : nlohmann::json()},
       {"kappa_a_normalised", a.kappa_a},
       {"kappa_s_normalised", a.kappa_s},
       {"extinction_per_m", a.extinction_per_m},
@@ -71,17 +73,21 @@ HazeRun haze_on_prepared(ConstImageView rgb, HazeAnalysis analysis, const Prepar
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;
   if (backend.gpu) {
-    GpuHaze gh(*backend.gpu, copy_of(rgb), prep.range);  // the upload's dense staging copy
+    GpuHaze gh(*backend.gpu, copy_of(rgb), prep.range,  // the upload's dense staging copy
+               run.analysis.sky_beyond ? &prep.sky_weight : nullptr);
     run.result = gh.render(p, run.analysis, exec.gpu_filter);
     timing = gpu_timing_record(gh.timing());
   } else {
-    run.result = apply_haze(rgb, prep.range, p, run.analysis, exec);
+    run.result = apply_haze(rgb, prep.range, p, run.analysis, exec, prep.sky_weight);
     timing = cpu_timing_record(t0, run.analysis.plan.iterations);
   }
   run.record["haze"] = haze_record(p, run.analysis);
   if (prep.applied)
     run.record["haze"]["derived"]["unknown_range_rule"] =
-        "prepared: holes filled, sky at S_max, horizon margin matted (see prepare)";
+        run.analysis.sky_beyond
+            ? "prepared: holes filled, the sky's range at S_max (its blur), its transmission as sky_rule says, "
+              "horizon margin matted (see prepare)"
+            : "prepared: holes filled, sky at S_max, horizon margin matted (see prepare)";
   run.record["prepare"] = prep.record;
   run.record["execution"] = backend.record;
   run.record["execution"]["timing"] = timing;
@@ -145,6 +151,9 @@ CommandDef haze_command() {
       .check = [](const HazeJob& j, const std::set<std::string>& g) {
         validate_haze(j.haze, g);
         check_range_step(j.prepare, g);
+        if (j.prepare.mode == PrepareMode::off && haze_param_table().is_set(j.haze, "sky-distance", g))
+          throw Error("--sky-distance places the sky the preparation identifies, but --prepare off identifies none "
+                      "(unknown range is taken as R_max); drop --sky-distance or use --prepare auto");
       },
       .run = &run_haze_job,
       .report = [](const HazeJob& j, const nlohmann::json& rec) { print_haze_summary(j.output.out, rec); },

@@ -309,6 +309,18 @@ ColorAndRange upload_color_and_range(DenseImageRef rgb, const Image& range, cons
   return c;
 }
 
+gl::Texture upload_sky_weight(const Image* sky_weight, int w, int h, const char* what, double* upload_ms) {
+  if (!sky_weight || sky_weight->empty()) return {};
+  if (sky_weight->channels != 1 || sky_weight->width != w || sky_weight->height != h)
+    throw Error(std::string("GPU ") + what + ": sky weight " + sky_weight->size_string() + " does not match the image " +
+                std::to_string(w) + "x" + std::to_string(h));
+  const auto t0 = Clock::now();
+  gl::Texture t = make_texture(GL_R32F, w, h, GL_RED, GL_FLOAT, sky_weight->data.data());
+  glFinish();
+  *upload_ms += ms_since(t0);
+  return t;
+}
+
 std::vector<float> read_rgba(GpuTexture tex) {
   Target t = make_target({tex});
   t.bind();

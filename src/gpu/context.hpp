@@ -82,6 +82,9 @@ struct ColorAndRange {
 };
 // Finishes the upload (glFinish) and stores its wall time in *upload_ms.
 ColorAndRange upload_color_and_range(DenseImageRef rgb, const Image& range, const char* what, double* upload_ms);
+// The preparation's sky weight (brume/prepare.hpp) as R32F, its upload time
+// added to *upload_ms; an empty texture (id 0) for null or an empty image.
+gl::Texture upload_sky_weight(const Image* sky_weight, int w, int h, const char* what, double* upload_ms);
 
 // Reads `tex` (any float colour format) back as RGBA floats, w * h * 4.
 std::vector<float> read_rgba(GpuTexture tex);

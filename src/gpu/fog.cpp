@@ -18,7 +18,7 @@ namespace brume {
 namespace {
 
 constexpr int kMaxKnots = 32;  // BRUME_FOG_MAX_KNOTS in GLSL
-const gpu::PassSpec kFogPass{"fog.apply", {"fog_math", "depth_math"}, gpu::shaders::fog_frag};
+const gpu::PassSpec kFogPass{"fog.apply", {"haze_math", "fog_math", "depth_math"}, gpu::shaders::fog_frag};
 
 GpuTexture fog_tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
 
@@ -26,14 +26,16 @@ GpuTexture fog_tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; 
 
 struct GpuFog::State {
   gpu::ColorAndRange in;  // colour and range (or window depth), uploaded once
+  gl::Texture sky_weight;  // the preparation's sky weight (R32F), when given
   gpu::ScatterTargets t;     // haze's blur textures; aux holds sigma, F0 alpha, F
   bool depth_buffer = false;  // in.range holds window depth (NaN set to the clear value)
   DepthBufferLinear lin;
 };
 
-GpuFog::GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& range)
+GpuFog::GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& range, const Image* sky_weight)
     : GpuEffect(ctx, rgb.width, rgb.height), s_(std::make_unique<State>()) {
   s_->in = gpu::upload_color_and_range(rgb, range, "fog", &timing_.upload_ms);
+  s_->sky_weight = gpu::upload_sky_weight(sky_weight, w_, h_, "fog", &timing_.upload_ms);
 }
 
 GpuFog::GpuFog(GpuContext& ctx, DenseImageRef rgb, const Image& window_depth, DepthBufferConvention c, double near_m,
@@ -109,7 +111,12 @@ FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter fil
   glUniform1i(pr.loc("uKnots"), static_cast<int>(d.knot_u.size()));
   glUniform1fv(pr.loc("uKnotU"), kMaxKnots, ku.data());
   glUniform1fv(pr.loc("uKnotD"), kMaxKnots, kd.data());
-  glUniform1f(pr.loc("uSkyDistance"), static_cast<float>(a.sky_distance_m));
+  glUniform1f(pr.loc("uSkyDistance"), a.sky_at_infinity ? -1.0f : static_cast<float>(a.sky_distance_m));
+  glUniform1f(pr.loc("uSkyBlurDistance"), static_cast<float>(a.sky_distance_m));
+  const bool blend = a.sky_blend && s.sky_weight.id() != 0;
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, blend ? s.sky_weight.id() : 0);
+  glUniform1i(pr.loc("uSkyBlend"), blend ? 1 : 0);
   glUniform3f(pr.loc("uAirlight"), a.airlight[0], a.airlight[1], a.airlight[2]);
   glUniform1i(pr.loc("uBlur"), blur ? 1 : 0);
   glUniform4f(pr.loc("uScale"), static_cast<float>(p.diffusion.sigma0), static_cast<float>(p.lambda),
@@ -118,6 +125,8 @@ FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter fil
   glUniform1i(pr.loc("uDepthBuffer"), s.depth_buffer ? 1 : 0);
   glUniform3f(pr.loc("uDepthLinear"), static_cast<float>(s.lin.a), static_cast<float>(s.lin.b), s.lin.clear);
   GpuContext::Impl::draw();
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, 0);
   gpu::check_gl("fog");
   if (blur) gpu::scatter_rates(ctx_, s.t, p.diffusion, a.plan);
   timing_.premultiply_ms = t1.stop();
@@ -150,7 +159,9 @@ FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter fil
 namespace brume {
 
 struct GpuFog::State {};
-GpuFog::GpuFog(GpuContext& ctx, DenseImageRef, const Image&) : GpuEffect(ctx, 0, 0) { gpu_unavailable(); }
+GpuFog::GpuFog(GpuContext& ctx, DenseImageRef, const Image&, const Image*) : GpuEffect(ctx, 0, 0) {
+  gpu_unavailable();
+}
 GpuFog::GpuFog(GpuContext& ctx, DenseImageRef, const Image&, DepthBufferConvention, double, double)
     : GpuEffect(ctx, 0, 0) {
   gpu_unavailable();

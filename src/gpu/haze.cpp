@@ -76,12 +76,14 @@ void scatter_diffuse_composite(GpuContext& ctx, ScatterTargets& s, const Diffusi
 
 struct GpuHaze::State {
   gpu::ColorAndRange in;  // colour and range, uploaded once
+  gl::Texture sky_weight;  // the preparation's sky weight (R32F), when given
   gpu::ScatterTargets t;
 };
 
-GpuHaze::GpuHaze(GpuContext& ctx, const Image& rgb, const Image& range)
+GpuHaze::GpuHaze(GpuContext& ctx, const Image& rgb, const Image& range, const Image* sky_weight)
     : GpuEffect(ctx, rgb.width, rgb.height), s_(std::make_unique<State>()) {
   s_->in = gpu::upload_color_and_range(rgb, range, "haze", &timing_.upload_ms);
+  s_->sky_weight = gpu::upload_sky_weight(sky_weight, w_, h_, "haze", &timing_.upload_ms);
 }
 
 GpuHaze::~GpuHaze() = default;
@@ -107,7 +109,14 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
   glUniform1f(pr.loc("uSigma0"), static_cast<float>(p.diffusion.sigma0));
   glUniform1f(pr.loc("uSigmaMax"), static_cast<float>(a.sigma_max));
   glUniform1i(pr.loc("uNaive"), naive ? 1 : 0);
+  const bool blend = a.sky_beyond && s.sky_weight.id() != 0;
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, blend ? s.sky_weight.id() : 0);
+  glUniform1i(pr.loc("uSkyBlend"), blend ? 1 : 0);
+  glUniform1f(pr.loc("uSkyTau"), a.sky_transmission);
   GpuContext::Impl::draw();
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, 0);
   gpu::check_gl("premultiply");
   gpu::scatter_rates(ctx_, s.t, p.diffusion, a.plan);
   timing_.premultiply_ms = t1.stop();
@@ -135,7 +144,9 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
 namespace brume {
 
 struct GpuHaze::State {};
-GpuHaze::GpuHaze(GpuContext& ctx, const Image&, const Image&) : GpuEffect(ctx, 0, 0) { gpu_unavailable(); }
+GpuHaze::GpuHaze(GpuContext& ctx, const Image&, const Image&, const Image*) : GpuEffect(ctx, 0, 0) {
+  gpu_unavailable();
+}
 GpuHaze::~GpuHaze() = default;
 HazeResult GpuHaze::render(const HazeParams&, const HazeAnalysis&, GpuFilter) { gpu_unavailable(); }
 

@@ -56,6 +56,8 @@ void redirect_outputs(const CommandDef& c, nlohmann::json& job, const std::strin
   }
 }
 
+nlohmann::json job_as_recorded(const CommandDef& c, const nlohmann::json& record);
+
 // The command that repeats a record's, with its job read back through that
 // command's table (every key declared, every value type- and range-checked).
 // Every parameter is recorded, so none counts as "given": conflicts are
@@ -65,7 +67,7 @@ const CommandDef& repeatable(const std::string& cmd, const nlohmann::json& recor
   if (!c || !c->record)
     throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (" +
                 command_names([](const CommandDef& d) { return d.record; }) + " can)");
-  c->check(record.at("job"), {}, false);
+  c->check(job_as_recorded(*c, record), {}, false);
   return *c;
 }
 
@@ -84,20 +86,51 @@ bool is_sky_fit_json(const nlohmann::json& record) {
          record["record"].is_object() && text_field(record["record"], "command") == "sky fit";
 }
 
-// The record's command, after the checks every record must pass.
-std::string record_command(const nlohmann::json& record) {
+// The record's schema version, after the checks every record must pass.
+int record_version(const nlohmann::json& record) {
   if (text_field(record, "tool") != "brume") throw Error("not a brume parameter record (no \"tool\": \"brume\")");
   const auto v = record.find("schema_version");
   const bool integral = v == record.end() || v->is_number_integer();
   const long long version = v == record.end() ? 1 : integral ? v->get<long long>() : -1;
-  if (version != kRecordSchemaVersion || !record.contains("job"))
+  if (version < kOldestRecordSchemaVersion || version > kRecordSchemaVersion || !record.contains("job"))
     throw Error("this record has schema_version " + (integral ? std::to_string(version) : v->dump()) +
-                "; brume run reads version " + std::to_string(kRecordSchemaVersion) +
-                " (records written by brume " BRUME_VERSION " and later, which hold the whole job)");
+                "; brume run reads versions " + std::to_string(kOldestRecordSchemaVersion) + " to " +
+                std::to_string(kRecordSchemaVersion) + " (records that hold the whole job; this is brume " BRUME_VERSION
+                ")");
+  return static_cast<int>(version);
+}
+
+// The record's command, after the checks every record must pass.
+std::string record_command(const nlohmann::json& record) {
+  record_version(record);
   return text_field(record, "command");
 }
 
+// The job as this brume runs it: a parameter that a later schema introduced
+// with a new rule, absent from an older record's job, takes the value that
+// gives the rule that record ran under (ParamSpec::since_schema), so that
+// the record repeats as it ran.
+nlohmann::json job_as_recorded(const CommandDef& c, const nlohmann::json& record) {
+  nlohmann::json job = record.at("job");
+  const int version = record_version(record);
+  if (!job.is_object()) return job;
+  for (const ParamSpec& s : c.specs) {
+    if (s.since_schema <= version) continue;
+    auto b = job.find(s.block);
+    if (b == job.end() || !b->is_object() || b->contains(s.name)) continue;
+    (*b)[s.name] = s.before_schema;
+  }
+  return job;
+}
+
 }  // namespace
+
+nlohmann::json record_job(const nlohmann::json& record) {
+  const std::string cmd = record_command(record);
+  const CommandDef* c = find_command(cmd);
+  if (!c) throw Error("the record's command '" + cmd + "' is not a brume command");
+  return job_as_recorded(*c, record);
+}
 
 std::string check_record(const nlohmann::json& record) {
   if (is_sky_fit_json(record)) return check_record(record["record"]);
@@ -114,7 +147,7 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
   for (const char* block : {"inputs", "depth", "fog"})
     if (record.contains(block)) verify_inputs(record[block]);
   const CommandDef& c = repeatable(cmd, record);
-  nlohmann::json job = record.at("job");
+  nlohmann::json job = job_as_recorded(c, record);
   redirect_outputs(c, job, out_dir);
   RunContext ctx;
   ctx.argv = argv;

@@ -141,10 +141,14 @@ BRUME_FN float brume_fog_along(BRUME_IN(BrumeFog) f, float l, float ray_y) {
   return l * brume_fog_mean(f, l * ray_y);
 }
 
+// +inf, the optical depth of a sky ray across an unbounded medium.
+BRUME_FN float brume_fog_infinity() { return uintBitsToFloat(0x7F800000u); }
+
 // A sky ray: integrated to infinity where the density vanishes along it
 // (exponential climbing with B > 0: delta(y_c) / (B d_y); band: to its far
 // edge; piecewise: to its last (first) knot when the density there is 0),
-// else over sky_distance metres.
+// else, where the integral diverges, over sky_distance metres or, for
+// sky_distance < 0, to infinity: F = +inf (f = 0, the sky is the fog colour).
 BRUME_FN float brume_fog_sky(BRUME_IN(BrumeFog) f, float ray_y, float sky_distance) {
   if (f.kind == 0) {
     if (f.d0 == 0.0f) return 0.0f;
@@ -168,7 +172,19 @@ BRUME_FN float brume_fog_sky(BRUME_IN(BrumeFog) f, float ray_y, float sky_distan
     }
     if (ray_y == 0.0f && brume_fog_mean(f, 0.0f) == 0.0f) return 0.0f;
   }
+  if (sky_distance < 0.0f) return f.kind == 4 && f.d0 == 0.0f ? 0.0f : brume_fog_infinity();
   return brume_fog_along(f, sky_distance, ray_y);
+}
+
+// The optical depth of a pixel: a sky pixel's (brume_fog_sky), a scene
+// pixel's along its range l, or, across the horizon margin (sky weight
+// 0 < w < 1, l the margin's harmonic range), -ln of the blend of the two
+// transmissions (brume_sky_blend, haze_math).
+BRUME_FN float brume_fog_pixel(BRUME_IN(BrumeFog) f, float l, float ray_y, bool sky, float sky_distance, float w) {
+  if (sky) return brume_fog_sky(f, ray_y, sky_distance);
+  float F = brume_fog_along(f, l, ray_y);
+  if (w <= 0.0f) return F;
+  return -log(brume_sky_blend(exp(-F), exp(-brume_fog_sky(f, ray_y, sky_distance)), w));
 }
 
 // The world-up component of pixel (u, v)'s unit ray: r . ((u - cx)/fx, (v - cy)/fy, 1) / |.|,

@@ -38,3 +38,15 @@ BRUME_FN float brume_composite_premultiplied(float f, float alpha, float airligh
 BRUME_FN float brume_composite_naive(float e_blurred, float tau0, float airlight) {
   return tau0 * e_blurred + (1.0f - tau0) * airlight;
 }
+
+// The sky in physical units (brume/haze.hpp, "The sky"): a pixel of the
+// preparation's sky weight w (0 on the scene, 1 on the sky beyond the
+// horizon margin, harmonic across the margin) takes the transmission
+// (1 - w) tau_scene + w tau_sky, tau_scene that of its prepared range and
+// tau_sky the sky's own (0 at infinity, exp(-beta M) at --sky-distance M).
+// The ends are exact: w <= 0 keeps tau_scene, w >= 1 gives tau_sky.
+BRUME_FN float brume_sky_blend(float tau_scene, float tau_sky, float w) {
+  if (w <= 0.0f) return tau_scene;
+  if (w >= 1.0f) return tau_sky;
+  return (1.0f - w) * tau_scene + w * tau_sky;
+}

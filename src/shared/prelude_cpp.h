@@ -8,6 +8,7 @@
 // this prelude's includes and the GPU's topic table are generated from it.
 #pragma once
 #include <cmath>
+#include <cstring>
 
 namespace brume::shared {
 #define BRUME_FN inline
@@ -28,6 +29,12 @@ inline float clamp(float x, float lo, float hi) { return x < lo ? lo : (x > hi ?
 inline float min(float a, float b) { return b < a ? b : a; }
 inline float max(float a, float b) { return a < b ? b : a; }
 inline float mix(float a, float b, float t) { return a + t * (b - a); }
+// GLSL ES 3's bit cast (the shared maths' +inf: uintBitsToFloat(0x7F800000u)).
+inline float uintBitsToFloat(unsigned u) {
+  float f;
+  std::memcpy(&f, &u, sizeof f);
+  return f;
+}
 // GLSL's two-argument atan(y, x) is C's atan2.
 inline float atan(float y, float x) { return std::atan2(y, x); }
 // The CPU holds density tables of up to 1024 rows (the GPU 32).

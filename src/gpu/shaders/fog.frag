@@ -8,7 +8,9 @@
 // isnan() away); with uDepthBuffer == 1, a renderer's window depth in [0, 1]
 // (the depth texture itself), linearised here by the CPU conversion's
 // expression (depth_math.glsl), the cleared value uDepthLinear.z being sky.
-// Topics: fog_math, depth_math.
+// uSkyWeight (with uSkyBlend == 1): the preparation's sky weight; a known
+// pixel of weight > 0 is the horizon margin (brume_fog_pixel).
+// Topics: haze_math, fog_math, depth_math.
 layout(binding = 0) uniform highp sampler2D uImage;
 layout(binding = 1) uniform highp sampler2D uRange;
 uniform vec3 uRayRow;          // second row of world_from_cv
@@ -20,7 +22,10 @@ uniform vec2 uClassic;         // fog start, end
 uniform int uKnots;
 uniform float uKnotU[BRUME_FOG_MAX_KNOTS];
 uniform float uKnotD[BRUME_FOG_MAX_KNOTS];
-uniform float uSkyDistance;    // m
+uniform float uSkyDistance;    // m, diverging sky rays (< 0: infinity, F = +inf)
+uniform float uSkyBlurDistance;  // m, the sky's blur distance
+layout(binding = 2) uniform highp sampler2D uSkyWeight;
+uniform int uSkyBlend;         // 1: blend the horizon margin by uSkyWeight
 uniform vec3 uAirlight;        // linear RGB
 uniform int uBlur;             // 1: premultiplied output for the diffusion passes
 uniform vec4 uScale;           // sigma0, lambda, albedo, 1 / R_max
@@ -55,12 +60,13 @@ void main() {
     fog.kd[i] = uKnotD[i];
   }
   float ry = brume_fog_ray_y(uRayRow.x, uRayRow.y, uRayRow.z, uK.x, uK.y, uK.z, uK.w, float(p.x), float(p.y));
-  float F = sky ? brume_fog_sky(fog, ry, uSkyDistance) : brume_fog_along(fog, r, ry);
+  float w = uSkyBlend == 1 ? texelFetch(uSkyWeight, p, 0).r : 0.0;
+  float F = brume_fog_pixel(fog, r, ry, sky, uSkyDistance, w);
   float f = exp(-F);
   float sigma = 0.0;
   if (uBlur == 1) {
-    float l = sky ? uSkyDistance : r;
-    float Fb = sky ? brume_fog_along(fog, l, ry) : F;
+    float l = sky ? uSkyBlurDistance : r;
+    float Fb = sky || w > 0.0 ? brume_fog_along(fog, l, ry) : F;
     sigma = min(brume_fog_scale(uScale.x, uScale.y, uScale.z, Fb, l * uScale.w), uSigmaMax);
     oColor = vec4(f * c, f);
   } else {
