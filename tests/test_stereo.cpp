@@ -393,6 +393,20 @@ TEST_F(StereoCli, BadInputsNameTheProblem) {
     EXPECT_NE(r.status, 0);
     EXPECT_NE(r.output.find("--max-disparity 941 is not allowed"), std::string::npos) << r.output;
   }
+  // A matching parameter without a pair to match is refused, not ignored.
+  {
+    CliRun r = run("depth convert --disparity " + data_path(rel + "disp0.pfm") + " --calib " + calib +
+                   " --max-disparity 40 --out " + p("d.pfm"));
+    EXPECT_NE(r.status, 0);
+    EXPECT_NE(r.output.find("--max-disparity 40 is a stereo matching parameter"), std::string::npos) << r.output;
+  }
+  // An effect's --stereo-left must be its --image.
+  {
+    CliRun r = run("haze --image " + im0 + " --stereo-left " + im1 + " --stereo-right " + im1 + " --calib " + calib +
+                   " --visibility 50 --out " + p("h.png"));
+    EXPECT_NE(r.status, 0);
+    EXPECT_NE(r.output.find("differs from --image"), std::string::npos) << r.output;
+  }
   // No camera, both cameras.
   EXPECT_NE(run(pair + " --out " + p("d.pfm")).status, 0);
   EXPECT_NE(run(pair + " --calib " + calib + " --fx 500 --baseline 0.1 --out " + p("d.pfm")).status, 0);
@@ -403,4 +417,5 @@ TEST_F(StereoCli, BadInputsNameTheProblem) {
     EXPECT_NE(r.output.find("float"), std::string::npos) << r.output;
   }
   EXPECT_FALSE(fs::exists(p("d.pfm")));
+  EXPECT_FALSE(fs::exists(p("h.png")));
 }

@@ -13,8 +13,9 @@
 //     matching and mutual information", PAMI 30(2) 2008, as OpenCV's
 //     StereoSGBM computes it: the Birchfield-Tomasi sampling-insensitive
 //     cost on the x-derivative prefiltered image and on the colour, summed
-//     over a block x block window, aggregated along 5 directions (`sgbm`),
-//     8 (`hh`) or 3 (`3way`), with smoothness penalties P1 = 8 C b^2 for a
+//     over a block x block window, aggregated along 3 directions (`3way`,
+//     the default: OpenCV's MODE_SGBM_3WAY, run in parallel strips), 5
+//     (`sgbm`) or 8 (`hh`), with smoothness penalties P1 = 8 C b^2 for a
 //     1 px step and P2 = 32 C b^2 for larger ones (C channels, b the block
 //     size); sub-pixel disparity by the parabola through the aggregated costs
 //     at d - 1, d, d + 1 (1/16 px steps); a best cost that does not beat the
@@ -63,7 +64,7 @@ namespace brume {
 
 struct StereoParams {
   std::optional<double> max_disparity;  // [px] largest disparity searched, whole, 1..width-1; unset: auto
-  std::string mode = "sgbm";            // sgbm (5 directions) | hh (8) | 3way
+  std::string mode = "3way";            // 3way (3 directions, parallel) | sgbm (5) | hh (8)
   int block = 5;                        // [px] odd, 1..11: matching window
   double uniqueness = 10.0;             // [%] 0..100: margin of the best cost over the second best
   double lr_tolerance_px = 1.0;         // [px] > 0: left-right consistency

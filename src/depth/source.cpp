@@ -163,6 +163,12 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
     throw Error(given == 0 ? "no depth given: use one of --range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne, --stereo-right"
                            : "give exactly one depth source (--range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne or --stereo-right)");
   if (!s.stereo_right.empty()) return stereo_depth(s, width, height);
+  // The matching's parameters mean nothing to the other sources: one set
+  // away from its default is refused rather than ignored.
+  for (const auto& d : stereo_param_table().params())
+    if (stereo_param_table().is_set(s.stereo, d.spec.name, {}))
+      throw Error("--" + d.spec.name + " " + d.spec.format(d.get(s.stereo)) + " is a stereo matching parameter, but "
+                  "no --stereo-right was given; drop --" + d.spec.name + " or match a pair with --stereo-right FILE");
   if (!s.stereo_left.empty())
     throw Error("--stereo-left '" + s.stereo_left + "' is the left view of a pair, but no --stereo-right was given; "
                 "add --stereo-right FILE, or drop --stereo-left");
