@@ -21,7 +21,7 @@
 #include "brume/stereo.hpp"
 
 #include "bench_util.hpp"
-#include "brume_opencv_stereo.hpp"
+#include "brume_opencv.hpp"
 
 using namespace brume;
 

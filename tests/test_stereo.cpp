@@ -15,7 +15,7 @@
 
 #include "brume/stereo.hpp"
 #include "brume/stereo_pipeline.hpp"
-#include "brume_opencv_stereo.hpp"
+#include "brume_opencv.hpp"
 #include "test_util.hpp"
 
 namespace fs = std::filesystem;

@@ -15,7 +15,7 @@
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "brume/record.hpp"
-#include "brume_opencv_stereo.hpp"
+#include "brume_opencv.hpp"
 
 namespace brume {
 
