@@ -175,6 +175,33 @@ TEST(Stereo, SyntheticPlanesAreRecoveredToSubPixel) {
   }
 }
 
+TEST(Stereo, FillTakesTheBackgroundOfBoundedRunsOnly) {
+  // The rectangle (14.5 px) occludes an 8.25 px strip of background (6.25 px)
+  // at its left edge in the right view: with fill occlusions the strip's
+  // pixels take the background's disparity (the farther neighbour), never
+  // the rectangle's; with fill none they stay unknown.
+  const Synthetic s = synthetic_pair(320, 200, 6.25, 14.5);
+  StereoParams p;
+  p.max_disparity = 31;
+  const StereoResult filled = compute_stereo(s.left, s.right, p);
+  p.fill = "none";
+  const StereoResult none = compute_stereo(s.left, s.right, p);
+  EXPECT_EQ(none.record["filled_fraction"].get<double>(), 0.0);
+  EXPECT_GT(filled.record["filled_fraction"].get<double>(), 0.0);
+  std::size_t strip = 0, background = 0, unknown_without = 0;
+  for (int y = 60; y < 140; ++y)
+    for (int x = 320 / 3 - 7; x < 320 / 3 - 1; ++x) {  // the occluded strip left of the rectangle
+      ++strip;
+      // Nearer the background's 6.25 than the rectangle's 14.5 (the run's
+      // left neighbour, itself a little biased towards the edge: 6.56 px
+      // on row 100).
+      background += filled.disparity.at(x, y) < 0.5f * (6.25f + 14.5f) ? 1 : 0;
+      unknown_without += std::isnan(none.disparity.at(x, y)) ? 1 : 0;
+    }
+  EXPECT_GT(static_cast<double>(background) / strip, 0.95);
+  EXPECT_GT(static_cast<double>(unknown_without) / strip, 0.8);
+}
+
 TEST(Stereo, LeftBorderIsMatchedWherePlainSgbmLeavesItUnknown) {
   // OpenCV leaves the first numDisparities columns unknown; brume pads the
   // views, so columns x >= d (whose match lies inside the right view) are

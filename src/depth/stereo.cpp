@@ -351,6 +351,13 @@ struct AutoRange {
 
 AutoRange auto_range(const cv::Mat& L, const cv::Mat& R, const StereoParams& p, int threads) {
   constexpr int kScale = 4;
+  if (L.cols < 32 * kScale || L.rows < 16 * kScale) {  // too small for a coarse pass: a fixed range
+    AutoRange a;
+    a.max_disparity = std::min(L.cols - 1, 64);
+    a.record = {{"method", "none: the view is under 128x64 px"}, {"max_disparity_px", a.max_disparity},
+                {"rule", "min(64, width - 1)"}};
+    return a;
+  }
   cv::Mat l, r;
   cv::resize(L, l, cv::Size(std::max(1, L.cols / kScale), std::max(1, L.rows / kScale)), 0, 0, cv::INTER_AREA);
   cv::resize(R, r, l.size(), 0, 0, cv::INTER_AREA);
