@@ -380,30 +380,14 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
 
 const Format& exr_format() {
   using namespace exr_row;
-  static const Format f{"openexr",
-                        "OpenEXR",
-                        {".exr"},
-                        {"half", "float"},
-                        "float",
-                        "float",
-                        {{"none", 1, 0, false},
-                         {"rle", 1, 0, false},
-                         {"zip", 1, 9, false},
-                         {"zips", 1, 9, false},
-                         {"piz", 1, 0, false},
-                         {"pxr24", 1, 0, true},
-                         {"b44", 1, 0, true},
-                         {"b44a", 1, 0, true},
-                         {"dwaa", 1, 1000, true},
-                         {"dwab", 1, 1000, true}},
-                        {},
-                        true,
-                        sniff,
-                        header,
-                        read,
-                        nullptr,
-                        write,
-                        "zip"};
+  static const Format f{.name = "openexr", .title = "OpenEXR", .extensions = {".exr"}, .bits = {"half", "float"},
+                        .color_bits = "float", .data_bits = "float",
+                        .compressions = {{"none", 1, 0, false}, {"rle", 1, 0, false}, {"zip", 1, 9, false},
+                                         {"zips", 1, 9, false}, {"piz", 1, 0, false}, {"pxr24", 1, 0, true},
+                                         {"b44", 1, 0, true}, {"b44a", 1, 0, true}, {"dwaa", 1, 1000, true},
+                                         {"dwab", 1, 1000, true}},
+                        .holds_data = true, .sniff = sniff, .header = header, .read = read, .write = write,
+                        .auto_is = "zip"};
   return f;
 }
 

@@ -96,7 +96,7 @@ struct Format {
   const char* color_bits;               // --bits auto for colour
   const char* data_bits;                // --bits auto for data maps
   std::vector<CompressionRule> compressions;
-  std::vector<int> channel_counts;      // what a file holds (empty: any count); others are refused
+  std::vector<int> channel_counts = {}; // what a file holds (empty: any count); others are refused
   bool holds_data;                      // stores any float exactly enough for data maps (not Radiance's RGBE)
   // The first bytes (at most 16) are this format's signature.
   bool (*sniff)(const unsigned char* head, std::size_t n);
@@ -108,7 +108,7 @@ struct Format {
   // What the request's values or size hold that the format cannot (its bit
   // depths and channel counts above are checked before it is called): the
   // error the user gets, or empty. Null: the row writes whatever passes them.
-  std::string (*refuse)(const WriteRequest& request);
+  std::string (*refuse)(const WriteRequest& request) = nullptr;
   // Writes `tmp`; false with *why (errno left as the failure set it).
   bool (*write)(const std::string& tmp, const WriteRequest& request, std::string* why);
   const char* auto_is;  // what --compression auto writes, for the help ("zip", "Sub filter, run-length deflate")
@@ -154,6 +154,11 @@ inline unsigned to_count(float v, float max) {
   const float r = __builtin_roundf(v * max);
   return static_cast<unsigned>(r < 0.0f ? 0.0f : r > max ? max : r);
 }
+
+// Samples [at, at + n) of a write's values as an integer or float file
+// stores them, to dst: 8-bit counts (the request's codes where it has them),
+// 16-bit counts in host byte order, or 32-bit floats as they are.
+void store_samples(const WriteRequest& r, std::size_t at, std::size_t n, unsigned char* dst);
 
 // Threads the codecs may use: the IoThreads scope's count, else OpenMP's.
 int io_threads();

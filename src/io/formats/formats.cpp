@@ -68,4 +68,19 @@ void CountValues::convert(const unsigned char* src, float* dst, std::size_t n, s
   }
 }
 
+void store_samples(const WriteRequest& r, std::size_t at, std::size_t n, unsigned char* dst) {
+  if (r.type == Storage::u8 && r.codes) {
+    std::memcpy(dst, r.codes + at, n);
+  } else if (r.type == Storage::u8) {
+    for (std::size_t i = 0; i < n; ++i) dst[i] = static_cast<unsigned char>(to_count(r.values[at + i], 255.0f));
+  } else if (r.type == Storage::u16) {
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto v = static_cast<std::uint16_t>(to_count(r.values[at + i], 65535.0f));
+      std::memcpy(dst + 2 * i, &v, 2);
+    }
+  } else {
+    std::memcpy(dst, r.values + at, n * sizeof(float));
+  }
+}
+
 }  // namespace brume::io

@@ -282,8 +282,10 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string*) { return
 
 const Format& hdr_format() {
   using namespace hdr_row;
-  static const Format f{"hdr", "Radiance HDR", {".hdr"}, {"float"}, "float", "float", {{"rle", 1, 0, false}},
-                        {3}, false, sniff, header, read, refuse, write, "rle"};
+  static const Format f{.name = "hdr", .title = "Radiance HDR", .extensions = {".hdr"}, .bits = {"float"},
+                        .color_bits = "float", .data_bits = "float", .compressions = {{"rle", 1, 0, false}},
+                        .channel_counts = {3}, .holds_data = false, .sniff = sniff, .header = header, .read = read,
+                        .refuse = refuse, .write = write, .auto_is = "rle"};
   return f;
 }
 

@@ -260,12 +260,7 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
                       static_cast<unsigned>(len));
   }
   for (std::size_t y = 0; y < static_cast<std::size_t>(r.height); ++y) {
-    if (r.codes) {
-      std::memcpy(row.data(), r.codes + y * n, n);
-    } else {
-      const float* v = r.values + y * n;
-      for (std::size_t i = 0; i < n; ++i) row[i] = static_cast<unsigned char>(to_count(v[i], 255.0f));
-    }
+    store_samples(r, y * n, n, row.data());
     JSAMPROW p = row.data();
     jpeg_write_scanlines(&z.c, &p, 1);
   }
@@ -279,8 +274,10 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
 
 const Format& jpeg_format() {
   using namespace jpeg_row;
-  static const Format f{"jpeg",  "JPEG", {".jpg", ".jpeg"}, {"8"},  "8",    "8", {{"jpeg", 1, 100, true}},
-                        {1, 3}, false,  sniff,             header, read, refuse, write, "jpeg:98"};
+  static const Format f{.name = "jpeg", .title = "JPEG", .extensions = {".jpg", ".jpeg"}, .bits = {"8"},
+                        .color_bits = "8", .data_bits = "8", .compressions = {{"jpeg", 1, 100, true}},
+                        .channel_counts = {1, 3}, .holds_data = false, .sniff = sniff, .header = header,
+                        .read = read, .refuse = refuse, .write = write, .auto_is = "jpeg:98"};
   return f;
 }
 

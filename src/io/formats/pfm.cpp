@@ -158,8 +158,10 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string*) {
 
 const Format& pfm_format() {
   using namespace pfm_row;
-  static const Format f{"pnm", "PFM", {".pfm"}, {"float"}, "float", "float", {{"none", 1, 0, false}},
-                        {1, 3}, true, sniff, header, read, nullptr, write, "none"};
+  static const Format f{.name = "pnm", .title = "PFM", .extensions = {".pfm"}, .bits = {"float"}, .color_bits = "float",
+                        .data_bits = "float", .compressions = {{"none", 1, 0, false}}, .channel_counts = {1, 3},
+                        .holds_data = true, .sniff = sniff, .header = header, .read = read, .write = write,
+                        .auto_is = "none"};
   return f;
 }
 

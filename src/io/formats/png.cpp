@@ -220,17 +220,7 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
   const std::size_t n = static_cast<std::size_t>(r.width) * static_cast<std::size_t>(r.channels);
   std::vector<unsigned char> row(n * static_cast<std::size_t>(bits / 8));
   for (int y = 0; y < r.height && !e; ++y) {
-    const std::size_t at = static_cast<std::size_t>(y) * n;
-    if (bits == 8 && r.codes) {
-      std::memcpy(row.data(), r.codes + at, n);
-    } else if (bits == 8) {
-      for (std::size_t i = 0; i < n; ++i) row[i] = static_cast<unsigned char>(to_count(r.values[at + i], 255.0f));
-    } else {
-      for (std::size_t i = 0; i < n; ++i) {
-        const auto v = static_cast<std::uint16_t>(to_count(r.values[at + i], 65535.0f));
-        std::memcpy(&row[2 * i], &v, 2);  // host order (SPNG_FMT_PNG)
-      }
-    }
+    store_samples(r, static_cast<std::size_t>(y) * n, n, row.data());  // 16-bit: host order (SPNG_FMT_PNG)
     e = spng_encode_row(c, row.data(), row.size());
     if (e == SPNG_EOI && y == r.height - 1) e = 0;
   }
@@ -249,21 +239,12 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
 
 const Format& png_format() {
   using namespace png_row;
-  static const Format f{"png",
-                        "PNG",
-                        {".png"},
-                        {"8", "16"},
-                        "16",
-                        "16",
-                        {{"none", 1, 0, false}, {"zip", 0, 9, false}, {"rle", 1, 0, false}, {"fast", 1, 0, false}},
-                        {1, 2, 3, 4},
-                        false,
-                        sniff,
-                        header,
-                        read,
-                        nullptr,
-                        write,
-                        "Sub-filtered run-length deflate"};
+  static const Format f{.name = "png", .title = "PNG", .extensions = {".png"}, .bits = {"8", "16"}, .color_bits = "16",
+                        .data_bits = "16",
+                        .compressions = {{"none", 1, 0, false}, {"zip", 0, 9, false}, {"rle", 1, 0, false},
+                                         {"fast", 1, 0, false}},
+                        .channel_counts = {1, 2, 3, 4}, .holds_data = false, .sniff = sniff, .header = header,
+                        .read = read, .write = write, .auto_is = "Sub-filtered run-length deflate"};
   return f;
 }
 

@@ -291,18 +291,7 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
   std::vector<unsigned char> strip(rows * row_bytes);
   for (std::size_t y0 = 0, s = 0; y0 < H; y0 += rows, ++s) {
     const std::size_t count = std::min(rows, H - y0) * n, at = y0 * n;
-    if (r.codes && bits == 8) {
-      std::memcpy(strip.data(), r.codes + at, count);
-    } else if (bits == 8) {
-      for (std::size_t i = 0; i < count; ++i) strip[i] = static_cast<unsigned char>(to_count(r.values[at + i], 255.0f));
-    } else if (bits == 16) {
-      for (std::size_t i = 0; i < count; ++i) {
-        const auto v = static_cast<std::uint16_t>(to_count(r.values[at + i], 65535.0f));
-        std::memcpy(&strip[2 * i], &v, 2);
-      }
-    } else {
-      std::memcpy(strip.data(), r.values + at, count * 4);
-    }
+    store_samples(r, at, count, strip.data());
     if (TIFFWriteEncodedStrip(t, static_cast<std::uint32_t>(s), strip.data(),
                               static_cast<tmsize_t>(count * static_cast<std::size_t>(bits / 8))) < 0)
       return failed("libtiff could not write a strip");
@@ -322,21 +311,12 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
 
 const Format& tiff_format() {
   using namespace tiff_row;
-  static const Format f{"tiff",
-                        "TIFF",
-                        {".tif", ".tiff"},
-                        {"8", "16", "float"},
-                        "16",
-                        "float",
-                        {{"none", 1, 0, false}, {"lzw", 1, 0, false}, {"zip", 1, 9, false}, {"packbits", 1, 0, false}},
-                        {1, 2, 3, 4},
-                        true,
-                        sniff,
-                        header,
-                        read,
-                        nullptr,
-                        write,
-                        "zip:1"};
+  static const Format f{.name = "tiff", .title = "TIFF", .extensions = {".tif", ".tiff"}, .bits = {"8", "16", "float"},
+                        .color_bits = "16", .data_bits = "float",
+                        .compressions = {{"none", 1, 0, false}, {"lzw", 1, 0, false}, {"zip", 1, 9, false},
+                                         {"packbits", 1, 0, false}},
+                        .channel_counts = {1, 2, 3, 4}, .holds_data = true, .sniff = sniff, .header = header,
+                        .read = read, .write = write, .auto_is = "zip:1"};
   return f;
 }
 
