@@ -6,6 +6,7 @@ PKGS=(
   build-essential cmake pkg-config git
   libopenimageio-dev openimageio-tools   # image I/O: PNG, JPEG, TIFF, OpenEXR, PFM, HDR
   libopencv-imgproc-dev                  # connected components, exact EDT (range preparation); benchmark peer
+  libopencv-calib3d-dev                  # StereoSGBM and ORB (brume depth stereo, --stereo-right)
   libeigen3-dev                          # bounded least squares (sky turbidity fit: Levenberg-Marquardt)
   libcli11-dev nlohmann-json3-dev        # command line, parameter records
   libssl-dev                             # SHA-256 of input files in the records

@@ -11,6 +11,7 @@
 #include "brume/camera.hpp"
 #include "brume/depth.hpp"
 #include "brume/image.hpp"
+#include "brume/stereo.hpp"
 
 namespace brume {
 
@@ -23,6 +24,11 @@ struct DepthSource {
   std::string inverse_depth;     // monocular inverse depth: z = 1 / (scale v + shift)
   std::string normalized_depth;  // monocular normalised depth: z = near + v (far - near)
   std::string velodyne;          // KITTI scan (.bin) with --kitti-calib
+  std::string stereo_right;      // right view of a rectified pair: its disparity is computed (brume/stereo.hpp)
+                                 // and converted as --disparity's (calib.txt, or --fx and --baseline)
+  std::string stereo_left;       // the pair's left view: the effects' --image (the default there);
+                                 // depth convert and depth prepare name it here
+  StereoParams stereo;           // the matching's parameters (--max-disparity, --stereo-...)
 
   std::string channel;           // channel name in a multi-channel file (e.g. Z of an EXR)
   std::optional<double> depth_scale;  // metres per count (integer range / z files; required there)
@@ -47,7 +53,7 @@ struct DepthSource {
   int width = 0, height = 0;     // image size for --velodyne when no image is at hand
   std::string like;              // ... or take it from this image
 
-  int sources() const;  // how many of the depth files above are given (load_depth needs exactly one)
+  int sources() const;  // how many of the depth sources above are given (load_depth needs exactly one)
 };
 
 struct LoadedDepth {

@@ -1,5 +1,7 @@
-"""Depth: every source to a range map (``convert``) and range preparation (``prepare``)."""
+"""Depth: every source to a range map (``convert``), range preparation (``prepare``) and the disparity of a
+rectified stereo pair (``stereo``)."""
 from ._brume import depth_convert as convert
 from ._brume import depth_prepare as prepare
+from ._brume import depth_stereo as stereo
 
-__all__ = ["convert", "prepare"]
+__all__ = ["convert", "prepare", "stereo"]

@@ -166,8 +166,9 @@ JobValues keyword_values(const std::vector<ParamSpec>& specs, const py::dict& kw
 // counted as "given" -- a record holds every parameter, so the CLI's rule
 // against flags the run would ignore (visibility with kappa-a, say) judges
 // them against the defaults, as for a library caller. A CLI record's
-// "input", "depth" and "output" blocks describe files and how to read them
-// (the depth source, its scale and unknown value), which the arrays and the
+// "input", "depth", "stereo" and "output" blocks describe files and how to
+// read them (the depth source, its scale and unknown value, the matching of a
+// --stereo-right pair), which the arrays and the
 // Result stand for: their camera keywords (fx, fov-y ...) are read where
 // these declarations have them, the rest skipped. Anything else unknown is
 // refused.
@@ -180,7 +181,7 @@ JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const 
   for (const auto& [block, vals] : j.items()) {
     if (!vals.is_object())
       throw py::value_error(fn + "(): job: block '" + block + "' is not a dict; give a record's \"job\" as it is");
-    const bool files = block == "input" || block == "output" || block == "depth";
+    const bool files = block == "input" || block == "output" || block == "depth" || block == "stereo";
     for (const auto& [name, v] : vals.items()) {
       const ParamSpec* d = nullptr;
       for (const ParamSpec& q : specs)

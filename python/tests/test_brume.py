@@ -97,6 +97,19 @@ def test_depth_convert_equals_cli(data_dir, tmp_path):
     assert 1.3 < np.nanmin(r.z) and np.nanmax(r.z) < 2.3  # Art: 1.41-2.19 m (data/SOURCES.md)
 
 
+def test_depth_stereo_equals_cli(data_dir, tmp_path):
+    eth = data_dir / "eth3d_two_view" / "terrace"
+    if not (eth / "im1.png").exists():
+        pytest.skip(f"{eth / 'im1.png'} is absent")
+    run_cli("depth", "stereo", "--left", eth / "im0.png", "--right", eth / "im1.png", "--calib", eth / "calib.txt",
+            "--out", tmp_path / "d.pfm", "--confidence", tmp_path / "c.pfm")
+    r = brume.depth.stereo(left=eth / "im0.png", right=eth / "im1.png", calib=eth / "calib.txt")
+    same(r.disparity, read_map(tmp_path / "d.pfm"))
+    same(r.confidence, read_map(tmp_path / "c.pfm"))
+    assert r.record["stereo"]["rectification"]["checked"]
+    assert 0.5 < np.isfinite(r.disparity).mean() <= 1.0
+
+
 def test_depth_prepare_equals_cli(demo, tmp_path):
     d = demo["dir"]
     run_cli("depth", "prepare", "--range", d / "range.exr", "--sky-margin", 4, "--out", tmp_path / "p.exr",

@@ -154,6 +154,12 @@ const ParamTable<DepthSource>& depth_param_table() {
         .text("inverse-depth", &DepthSource::inverse_depth, "monocular inverse depth: z = 1/(--inverse-scale v + --inverse-shift)")
         .text("normalized-depth", &DepthSource::normalized_depth, "monocular depth in [0,1]: z = --near + v (--far - --near)")
         .text("velodyne", &DepthSource::velodyne, "KITTI Velodyne scan (.bin) projected with --kitti-calib")
+        .text("stereo-right", &DepthSource::stereo_right,
+              "right view of a rectified pair: disparity matched (SGBM, docs/depth.md) and converted as --disparity's "
+              "(--calib, or --fx --baseline); the left view is --image")
+        .text("stereo-left", &DepthSource::stereo_left,
+              "left view for --stereo-right where no --image is given (depth convert, depth prepare); default --image")
+        .nest(&DepthSource::stereo, stereo_param_table())
         .text("depth-channel", &DepthSource::channel, "channel holding the depth in a multi-channel file (e.g. Z)")
         .alias("range-channel")
         .real("depth-scale", &DepthSource::depth_scale, "m", Range::above(0.0),
@@ -371,7 +377,15 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
     L.record["image"]["nonfinite_replaced"] = bad;
   }
   if (with_depth) {
-    L.depth = load_depth(in.depth, L.rgb.width, L.rgb.height);
+    DepthSource ds = in.depth;
+    if (!ds.stereo_right.empty()) {  // the pair's left view is the image itself
+      if (!ds.stereo_left.empty() && ds.stereo_left != in.image)
+        throw Error("--stereo-left '" + ds.stereo_left + "' differs from --image '" + in.image +
+                    "': the matched depth belongs to the left view, so an effect takes the image as the left view; "
+                    "drop --stereo-left");
+      ds.stereo_left = in.image;
+    }
+    L.depth = load_depth(ds, L.rgb.width, L.rgb.height);
     if (L.depth.range.width != L.rgb.width || L.depth.range.height != L.rgb.height)
       throw Error("depth '" + L.depth.path + "' is " + L.depth.range.size_string() + " but --image '" + in.image +
                   "' is " + L.rgb.size_string() + "; they must be the same size (resample the depth map, or crop both)");

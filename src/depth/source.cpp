@@ -7,12 +7,14 @@
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "brume/record.hpp"
+#include "brume/stereo.hpp"
 
 namespace brume {
 
 int DepthSource::sources() const {
   int n = 0;
-  for (const std::string* f : {&range, &z, &disparity, &depth_buffer, &inverse_depth, &normalized_depth, &velodyne})
+  for (const std::string* f :
+       {&range, &z, &disparity, &depth_buffer, &inverse_depth, &normalized_depth, &velodyne, &stereo_right})
     n += f->empty() ? 0 : 1;
   return n;
 }
@@ -83,13 +85,93 @@ void refuse_negative(const Image& stored, const char* flag, const std::string& p
               "; if the map is signed (OpenGL eye-space z is negative in front of the camera), negate it first.");
 }
 
+// A disparity map in px (the scale already applied) to range, by --calib's
+// or --fx/--baseline's camera: Z = f B / (d + doffs), then along the ray.
+Image disparity_range(const Image& v, const DepthSource& s, const std::string& what, double scale,
+                      nlohmann::json& rec) {
+  double f = s.k.fx, doffs = s.disparity_offset, baseline = s.baseline_m;
+  Intrinsics k;
+  if (!s.calib.empty()) {
+    StereoCalib c = read_stereo_calib(s.calib);
+    if (c.width > 0 && (c.width != v.width || c.height != v.height))
+      throw Error(what + " is " + v.size_string() + " but --calib '" + s.calib + "' says " +
+                  std::to_string(c.width) + "x" + std::to_string(c.height));
+    f = c.f_px, doffs = c.doffs_px, baseline = c.baseline_m;
+    k.fx = k.fy = c.f_px, k.cx = c.cx, k.cy = c.cy;
+    rec["calib"] = s.calib;
+  } else {
+    if (!(f > 0.0) || !(baseline > 0.0))
+      throw Error(what + " without --calib needs --fx (focal length in pixels at the disparity map's size) and "
+                  "--baseline (metres)");
+    k = s.k;
+  }
+  k = resolve(k, v.width, v.height);
+  Image zz = disparity_to_z(v, f, baseline, doffs);
+  rec["formula"] = "Z = f B / (d + doffs), d = disparity_scale * stored";
+  rec["f_px"] = f, rec["baseline_m"] = baseline, rec["doffs_px"] = doffs, rec["disparity_scale"] = scale;
+  rec["intrinsics"] = intrinsics_record(k);
+  return z_to_range(zz, k);
+}
+
+// --stereo-right: the pair matched (brume/stereo.hpp), its disparity
+// converted as --disparity's.
+LoadedDepth stereo_depth(const DepthSource& s, int width, int height) {
+  if (s.stereo_left.empty())
+    throw Error("--stereo-right '" + s.stereo_right + "' needs the pair's left view: an effect takes it from "
+                "--image; depth convert and depth prepare from --stereo-left FILE");
+  if (s.unknown_value)
+    throw Error("--unknown-value does not apply to --stereo-right: the matched disparity marks unknown pixels "
+                "NaN itself; drop --unknown-value");
+  if (s.disparity_scale != 1.0 || s.disparity_offset != 0.0)
+    throw Error("--disparity-scale and --disparity-offset describe a stored disparity file; --stereo-right's "
+                "disparity is computed in pixels (doffs comes from --calib); drop them");
+  LoadedDepth out;
+  nlohmann::json& rec = out.record;
+  nlohmann::json lrec, rrec;
+  const StereoView L = read_stereo_view(s.stereo_left, "--stereo-left", &lrec);
+  const StereoView R = read_stereo_view(s.stereo_right, "--stereo-right", &rrec);
+  if (width > 0 && (L.width != width || L.height != height))
+    throw Error("--stereo-left '" + s.stereo_left + "' is " + std::to_string(L.width) + "x" +
+                std::to_string(L.height) + " but the image is " + std::to_string(width) + "x" +
+                std::to_string(height) + "; the depth must be the image's");
+  if (!s.calib.empty()) {  // before the matching: a calib.txt of another size is refused at once
+    const StereoCalib c = read_stereo_calib(s.calib);
+    if (c.width > 0 && (c.width != L.width || c.height != L.height))
+      throw Error("--stereo-left '" + s.stereo_left + "' is " + std::to_string(L.width) + "x" +
+                  std::to_string(L.height) + " but --calib '" + s.calib + "' says " + std::to_string(c.width) + "x" +
+                  std::to_string(c.height) + "; the calibration must be the pair's (rescale it with the images)");
+  } else if (!(s.k.fx > 0.0) || !(s.baseline_m > 0.0)) {
+    throw Error("--stereo-right without --calib needs --fx (focal length in pixels) and --baseline (metres)");
+  }
+  StereoResult st = compute_stereo(L, R, s.stereo, "--stereo-left '" + s.stereo_left + "'",
+                                   "--stereo-right '" + s.stereo_right + "'");
+  rec = {{"source", "stereo"}, {"left", lrec}, {"right", rrec}, {"stereo", st.record}};
+  out.path = s.stereo_right;
+  out.range = disparity_range(st.disparity, s, "--stereo-left '" + s.stereo_left + "'", 1.0, rec);
+  rec["formula"] = "Z = f B / (d + doffs), d the matched disparity";
+  std::size_t unknown = 0;
+  for (float x : out.range.data) unknown += std::isfinite(x) && x > 0.0f ? 0 : 1;
+  rec["unknown_pixels"] = unknown;
+  return out;
+}
+
 }  // namespace
 
 LoadedDepth load_depth(const DepthSource& s, int width, int height) {
   const int given = s.sources();
   if (given != 1)
-    throw Error(given == 0 ? "no depth given: use one of --range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne"
-                           : "give exactly one depth source (--range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth or --velodyne)");
+    throw Error(given == 0 ? "no depth given: use one of --range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne, --stereo-right"
+                           : "give exactly one depth source (--range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne or --stereo-right)");
+  if (!s.stereo_right.empty()) return stereo_depth(s, width, height);
+  // The matching's parameters mean nothing to the other sources: one set
+  // away from its default is refused rather than ignored.
+  for (const auto& d : stereo_param_table().params())
+    if (stereo_param_table().is_set(s.stereo, d.spec.name, {}))
+      throw Error("--" + d.spec.name + " " + d.spec.format(d.get(s.stereo)) + " is a stereo matching parameter, but "
+                  "no --stereo-right was given; drop --" + d.spec.name + " or match a pair with --stereo-right FILE");
+  if (!s.stereo_left.empty())
+    throw Error("--stereo-left '" + s.stereo_left + "' is the left view of a pair, but no --stereo-right was given; "
+                "add --stereo-right FILE, or drop --stereo-left");
   LoadedDepth out;
   nlohmann::json& rec = out.record;
   FileInfo info;
@@ -171,31 +253,11 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
     out.range = z_to_range(v, k);
   } else if (!s.disparity.empty()) {
     rec["source"] = "disparity";
-    double f = s.k.fx, doffs = s.disparity_offset, baseline = s.baseline_m;
-    Intrinsics k;
-    if (!s.calib.empty()) {
-      StereoCalib c = read_stereo_calib(s.calib);
-      if (c.width > 0 && (c.width != v.width || c.height != v.height))
-        throw Error("--disparity '" + path + "' is " + v.size_string() + " but --calib '" + s.calib + "' says " +
-                    std::to_string(c.width) + "x" + std::to_string(c.height));
-      f = c.f_px, doffs = c.doffs_px, baseline = c.baseline_m;
-      k.fx = k.fy = c.f_px, k.cx = c.cx, k.cy = c.cy;
-      rec["calib"] = s.calib;
-    } else {
-      if (!(f > 0.0) || !(baseline > 0.0))
-        throw Error("--disparity without --calib needs --fx (focal length in pixels at the disparity map's size) and --baseline (metres)");
-      k = s.k;
-    }
-    k = resolve(k, v.width, v.height);
     if (info.integer)  // Middlebury 2005/2006 PNGs: 0 = unknown, d = scale * I + offset
       for (float& x : v.data) x = x == 0.0f ? NAN : static_cast<float>(s.disparity_scale * x);
     else if (s.disparity_scale != 1.0)
       for (float& x : v.data) x = static_cast<float>(s.disparity_scale * x);
-    Image zz = disparity_to_z(v, f, baseline, doffs);
-    rec["formula"] = "Z = f B / (d + doffs), d = disparity_scale * stored";
-    rec["f_px"] = f, rec["baseline_m"] = baseline, rec["doffs_px"] = doffs, rec["disparity_scale"] = s.disparity_scale;
-    rec["intrinsics"] = intrinsics_record(k);
-    out.range = z_to_range(zz, k);
+    out.range = disparity_range(v, s, "--disparity '" + path + "'", s.disparity_scale, rec);
   } else if (!s.depth_buffer.empty()) {
     rec["source"] = "depth buffer";
     unorm(v, info);

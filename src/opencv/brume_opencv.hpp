@@ -1,5 +1,6 @@
-// brume — OpenCV imgproc, included once with the warnings its headers raise under C++20 silenced
-// (target brume_opencv: the library, the study and the benchmarks share it).
+// brume — OpenCV imgproc, and calib3d (StereoSGBM) with features2d (ORB) for the stereo matching,
+// included once with the warnings their headers raise under C++20 silenced (target brume_opencv:
+// the library, the study, the tests and the benchmarks share it).
 #pragma once
 
 // OpenCV 4.x headers mix enum types in arithmetic (deprecated in C++20) and
@@ -11,6 +12,8 @@
 #endif
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/features2d.hpp>
 #if defined(__GNUC__)
 #pragma GCC diagnostic pop
 #endif
