@@ -20,6 +20,7 @@ namespace brume {
   X(blur_command) \
   X(depth_convert_command) \
   X(depth_prepare_command) \
+  X(depth_complete_command) \
   X(insert_command) \
   X(fog_command) \
   X(dof_command) \
@@ -40,7 +41,7 @@ const std::vector<CommandDef>& commands() {
 
 const std::vector<CommandGroup>& command_groups() {
   static const std::vector<CommandGroup> g = {
-      {"depth", "depth maps: convert any depth source to range or planar z, prepare it"},
+      {"depth", "depth maps: convert any depth source to range or planar z, prepare it, complete a sparse one"},
       {"sky", "the Preetham sky: render one, or fit the turbidity of a sky photo (Morales ch. 2)"},
   };
   return g;
