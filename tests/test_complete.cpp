@@ -461,3 +461,46 @@ TEST_F(CompleteCli, BatchScanKitti) {
   EXPECT_EQ(r.status, 1) << r.output;
   EXPECT_NE(r.output.find("below --min-coverage"), std::string::npos) << r.output;
 }
+
+// A record written before completion existed (no "complete" block, no
+// --complete) replays as before: its job reads as auto, which leaves a
+// dense map (ETH3D terrace, half its pixels known) untouched.
+TEST_F(CompleteCli, RecordsWithoutCompletionReplayAsBefore) {
+  BRUME_REQUIRE_DATA("eth3d_two_view/terrace/disp0.pfm");
+  const std::string e = data_path("eth3d_two_view/terrace/");
+  CliRun r = run("haze --image " + e + "im0.png --disparity " + e + "disp0.pfm --calib " + e +
+                 "calib.txt --visibility 25 --out " + p("h.exr") + " --record " + p("h.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  nlohmann::json rec = read_json(p("h.json"));
+  EXPECT_EQ(rec["prepare"]["complete"]["applied"], false);
+  rec["job"].erase("complete");
+  rec["job"]["prepare"].erase("complete");
+  rec["prepare"].erase("complete");
+  std::ofstream(p("old.json")) << rec.dump(2);
+  fs::create_directories(dir / "again");
+  r = run("run " + p("old.json") + " --out-dir " + p("again"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  expect_same_pixels(p("h.exr"), p("again/h.exr"));
+}
+
+// brume depth prepare: with --image a lidar scan is completed, then
+// prepared; without one (--like only) it is refused as before.
+TEST_F(CompleteCli, DepthPrepareCompletesWithAnImage) {
+  BRUME_REQUIRE_DATA(kKitti + "velodyne/000001.bin");
+  const std::string scan =
+      "--velodyne " + kitti("velodyne/000001.bin") + " --kitti-calib " + kitti("calib/000001.txt");
+  CliRun r = run("depth prepare " + scan + " --image " + kitti("image_2/000001.png") + " --out " + p("p.exr") +
+                 " --record " + p("p.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const nlohmann::json rec = read_json(p("p.json"));
+  EXPECT_EQ(rec["complete"]["applied"], true);
+  EXPECT_GT(rec["prepare"]["sky_fraction"].get<double>(), 0.1);  // the sky the completion left unknown
+  const Image prepared = read_scalar(p("p.exr"));
+  for (float v : prepared.data) ASSERT_TRUE(std::isfinite(v) && v > 0.0f);
+  r = run("depth prepare " + scan + " --like " + kitti("image_2/000001.png") + " --out " + p("q.exr"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("below --min-coverage"), std::string::npos) << r.output;
+  r = run("depth prepare " + scan + " --like " + kitti("image_2/000001.png") + " --complete on --out " + p("q.exr"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("give --image FILE"), std::string::npos) << r.output;
+}

@@ -474,9 +474,13 @@ CompletedRange complete_step(ConstImageView measured, ConstImageView rgb, const 
     for (int x = 0; x < measured.width(); ++x) known += known_range(measured.at(x, y)) ? 1 : 0;
   const double fraction = static_cast<double>(known) / static_cast<double>(measured.pixels());
   if (!completes(step, fraction)) return out;
-  if (rgb.empty())
-    throw Error("--complete " + enum_name(complete_mode_names(), step.complete) +
-                ": completing the range needs the colour image that guides it, and none was given");
+  if (rgb.empty()) {
+    // auto without an image (brume depth prepare without --image): as
+    // before completion existed, the preparation refuses the sparse map.
+    if (step.complete == CompleteMode::automatic) return out;
+    throw Error("--complete on: completing the range needs the colour image that guides it, and none was given "
+                "(brume depth prepare: give --image FILE)");
+  }
   // Dense as they are (a copy only of a strided view, e.g. a numpy slice).
   Image range_copy, guide_copy;
   if (!measured.contiguous()) range_copy = copy_of(measured);
