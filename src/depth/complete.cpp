@@ -31,9 +31,11 @@ const ParamTable<CompleteParams>& complete_param_table() {
               "range scale of the refinement's weights, relative to the morphological pilot: keeps a pixel on its "
               "depth layer")
         .real("complete-sky-luminance", &CompleteParams::sky_luminance, "1", Range::closed(0.0, 1.0),
-              "sky rule: unmeasured pixels at least this bright (sRGB luma, times the image's 99th percentile)...")
+              "sky rule: an unmeasured pixel above the scan is sky when at least this bright (sRGB luma, times the "
+              "image's 99th percentile), smooth (--complete-sky-roughness) and connected to the top row")
         .real("complete-sky-roughness", &CompleteParams::sky_roughness, "1", Range::closed(0.0, 1.0),
-              "... and this smooth (5x5 standard deviation of luma), connected to the top row, stay unknown (sky)");
+              "sky rule: the largest 5x5 standard deviation of sRGB luma of a sky pixel (with "
+              "--complete-sky-luminance); sky stays unknown (NaN)");
     return d;
   }();
   return t;
