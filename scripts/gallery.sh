@@ -2,7 +2,7 @@
 # The pictures of docs/gallery.md: each effect on the third-party data in
 # ../shared/data (read in place, never copied). What is committed depends on
 # the data's licence (docs/gallery/LICENSE): pictures derived from CC0 (Poly
-# Haven) and CC BY-NC-SA (ETH3D) data go to $OUT (docs/gallery); pictures
+# Haven) and CC BY-NC-SA (ETH3D, KITTI) data go to $OUT (docs/gallery); pictures
 # derived from research-use data without redistribution terms (Middlebury,
 # GeoPose3K) go to $LOCAL (docs/gallery/local, ignored by git).
 # Usage: bash scripts/gallery.sh   (BRUME, DATA, OUT, LOCAL override the defaults)
@@ -25,6 +25,10 @@ $B fog $(eth playground_1l) --density 0.15 --falloff 0.8 --camera-height 1.5 --l
    --out "$OUT/eth3d-playground-fog.jpg" "${q[@]}"
 # depth of field (Bertalmío et al.) on ETH3D terrace, focused at 2.5 m
 $B dof $(eth terrace) --focus-distance 2.5 --coc-infinity 14 --out "$OUT/eth3d-terrace-dof.jpg" "${q[@]}"
+# haze on KITTI object frame 000001 (CC BY-NC-SA 3.0): its lidar scan completed (--complete auto), visibility 150 m
+K=$D/kitti_object_000001
+$B haze --image "$K/image_2/000001.png" --velodyne "$K/velodyne/000001.bin" --kitti-calib "$K/calib/000001.txt" \
+   --visibility 150 --out "$OUT/kitti-000001-haze.jpg" "${q[@]}"
 # the turbidity fit (Preetham sky) on each Poly Haven sky
 for s in park sky sunrise; do
   $B sky fit --image "$D/sky_hdr_polyhaven/$s.hdr" --sun auto --out "$LOCAL/fit-$s.json" --plot "$OUT/polyhaven-$s-fit.png"

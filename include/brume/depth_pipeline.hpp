@@ -1,4 +1,4 @@
-// brume — `brume depth convert` and `brume depth prepare` as library calls
+// brume — `brume depth convert`, `brume depth prepare` and `brume depth complete` as library calls
 // with declared parameters and re-runnable records (brume/pipeline.hpp).
 #pragma once
 
@@ -22,11 +22,25 @@ nlohmann::json run_depth_convert_job(const DepthConvertJob& job, const RunContex
 struct DepthPrepareJob {
   DepthSource depth;
   PrepareParams prepare;
+  CompleteMode complete = CompleteMode::automatic;  // as an effect's --complete (brume/pipeline.hpp)
+  CompleteParams completion;
+  std::string image;  // the colour image that guides the completion (and sizes a --velodyne scan)
   std::string out;    // prepared range, float file
   std::string masks;  // directory for sky.png, holes.png, margin.png, prepared-preview.png
   std::string record;
 };
 const ParamTable<DepthPrepareJob>& depth_prepare_job_table();
 nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContext& ctx = {});
+
+// A sparse range map and its colour image -> a dense range map (brume/complete.hpp).
+struct DepthCompleteJob {
+  InputFiles input;         // --image and the depth source
+  CompleteParams complete;
+  std::string out;          // completed range, float file (NaN at the sky)
+  std::string confidence;   // per-pixel confidence in [0, 1] (optional)
+  std::string record;
+};
+const ParamTable<DepthCompleteJob>& depth_complete_job_table();
+nlohmann::json run_depth_complete_job(const DepthCompleteJob& job, const ExecOptions& eo = {}, const RunContext& ctx = {});
 
 }  // namespace brume

@@ -27,6 +27,7 @@
 #include <nlohmann/json.hpp>
 
 #include "brume/camera.hpp"
+#include "brume/complete.hpp"
 #include "brume/depth_source.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/exec.hpp"
@@ -96,12 +97,20 @@ struct InputFiles {
 };
 const ParamTable<InputFiles>& input_param_table(bool with_depth);
 
-// Range preparation before an effect (Hansard §4.1).
+// Range preparation before an effect (Hansard §4.1), after the completion
+// of a sparse map (brume/complete.hpp).
 enum class PrepareMode { automatic, off };
 const EnumNames<PrepareMode>& prepare_mode_names();
+// auto: complete a map whose known pixels cover less than --min-coverage
+// (which the preparation would refuse), when the preparation runs; on: always
+// complete; off: never (a sparse map is refused as before).
+enum class CompleteMode { automatic, off, on };
+const EnumNames<CompleteMode>& complete_mode_names();
 struct RangeStep {
   PrepareMode mode = PrepareMode::automatic;  // auto: prepare when the range has unknown pixels
   PrepareParams params;
+  CompleteMode complete = CompleteMode::automatic;
+  CompleteParams completion;
 };
 const ParamTable<RangeStep>& range_step_param_table();
 
@@ -184,6 +193,26 @@ PreparedRange prepare_step(const Image& measured, const RangeStep& step, const s
 // effect's range is the preparation's result or, when not prepared, a copy.
 PreparedRange prepare_step(ConstImageView measured, const RangeStep& step, const std::set<std::string>& given = {},
                            int threads = 0);
+
+// The completion step, before an effect's analysis and preparation: the
+// measured range completed, guided by the colour image `rgb`, when the step
+// says so (RangeStep::complete; `rgb` must then be the range's size). Its
+// record ({"mode", "applied", and complete_record's keys when applied})
+// goes under the preparation's record as "complete". Records written before
+// completion existed have no "complete" block: their jobs read as auto, which
+// completes only maps that were refused then, so they replay as before.
+struct CompletedRange {
+  Image range;            // the completed range when applied, else empty
+  Image confidence;       // its confidence when applied
+  bool applied = false;
+  nlohmann::json record;
+  // The range the effect's analysis and preparation take: the completed one, or the measured one.
+  ConstImageView view(ConstImageView measured) const { return applied ? ConstImageView(range) : measured; }
+};
+CompletedRange complete_step(ConstImageView measured, ConstImageView rgb, const RangeStep& step,
+                             const std::set<std::string>& given = {}, int threads = 0);
+// Whether complete_step completes a measured range whose known fraction is `known_fraction`.
+bool completes(const RangeStep& step, double known_fraction);
 
 // The GPU context a run uses: Exec::gpu if the caller passed one; for
 // Backend::gpu a new context or an error saying why; for Backend::automatic

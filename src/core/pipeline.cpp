@@ -69,6 +69,12 @@ const EnumNames<PrepareMode>& prepare_mode_names() {
   return n;
 }
 
+const EnumNames<CompleteMode>& complete_mode_names() {
+  static const EnumNames<CompleteMode> n = {
+      {CompleteMode::automatic, "auto"}, {CompleteMode::off, "off"}, {CompleteMode::on, "on"}};
+  return n;
+}
+
 const EnumNames<NonFinite>& nonfinite_names() {
   static const EnumNames<NonFinite> n = {{NonFinite::error, "error"}, {NonFinite::zero, "zero"}};
   return n;
@@ -266,7 +272,12 @@ const ParamTable<RangeStep>& range_step_param_table() {
     d.choice("prepare", &RangeStep::mode, prepare_mode_names(),
              "auto: fill holes, identify and matte the sky (Hansard 4.1) when the range has unknown pixels; "
              "off: the effect sees unknown range as it is (haze: R_max; fog: sky, integrated along the ray)")
-        .nest(&RangeStep::params, prepare_param_table());
+        .nest(&RangeStep::params, prepare_param_table())
+        .choice("complete", &RangeStep::complete, complete_mode_names(),
+                "depth completion guided by the image (brume depth complete): auto (complete a map whose known "
+                "pixels cover less than --min-coverage, e.g. a lidar scan, instead of refusing it; only when "
+                "--prepare auto), on (always), off (never)")
+        .nest(&RangeStep::completion, complete_param_table());
     return d;
   }();
   return t;
@@ -407,6 +418,17 @@ std::size_t unknown_range_pixels(const Image& range) {
 
 void check_range_step(const RangeStep& step, const std::set<std::string>& given) {
   prepare_param_table().validate(step.params);
+  complete_param_table().validate(step.completion);
+  const bool never = step.complete == CompleteMode::off ||
+                     (step.complete == CompleteMode::automatic && step.mode == PrepareMode::off);
+  if (never)
+    for (const auto& d : complete_param_table().params())
+      if (complete_param_table().is_set(step.completion, d.spec.name, given))
+        throw Error("--" + d.spec.name + " is a completion parameter, but " +
+                    (step.complete == CompleteMode::off ? std::string("--complete off skips the completion")
+                                                        : std::string("--complete auto completes only when the "
+                                                                      "preparation runs, and --prepare is off")) +
+                    "; drop --" + d.spec.name + " or use --complete on");
   if (step.mode == PrepareMode::off)
     for (const auto& d : prepare_param_table().params())
       if (prepare_param_table().is_set(step.params, d.spec.name, given))
@@ -447,6 +469,46 @@ PreparedRange prepare_step(ConstImageView measured, const RangeStep& step, const
   PreparedRange out;
   out.record = {{"mode", enum_name(prepare_mode_names(), step.mode)}, {"applied", false}};
   out.range = copy_of(measured);
+  return out;
+}
+
+bool completes(const RangeStep& step, double known_fraction) {
+  return step.complete == CompleteMode::on ||
+         (step.complete == CompleteMode::automatic && step.mode == PrepareMode::automatic &&
+          known_fraction < step.params.min_coverage);
+}
+
+CompletedRange complete_step(ConstImageView measured, ConstImageView rgb, const RangeStep& step,
+                             const std::set<std::string>& given, int threads) {
+  check_range_step(step, given);
+  CompletedRange out;
+  out.record = {{"mode", enum_name(complete_mode_names(), step.complete)}, {"applied", false}};
+  if (step.complete == CompleteMode::off || measured.empty()) return out;
+  std::size_t known = 0;
+  for (int y = 0; y < measured.height(); ++y)
+    for (int x = 0; x < measured.width(); ++x) known += known_range(measured.at(x, y)) ? 1 : 0;
+  const double fraction = static_cast<double>(known) / static_cast<double>(measured.pixels());
+  if (!completes(step, fraction)) return out;
+  if (rgb.empty()) {
+    // auto without an image (brume depth prepare without --image): as
+    // before completion existed, the preparation refuses the sparse map.
+    if (step.complete == CompleteMode::automatic) return out;
+    throw Error("--complete on: completing the range needs the colour image that guides it, and none was given "
+                "(brume depth prepare: give --image FILE)");
+  }
+  // Dense as they are (a copy only of a strided view, e.g. a numpy slice).
+  Image range_copy, guide_copy;
+  if (!measured.contiguous()) range_copy = copy_of(measured);
+  if (!rgb.contiguous()) guide_copy = copy_of(rgb);
+  const DenseImageRef range = range_copy.empty() ? DenseImageRef(measured) : DenseImageRef(range_copy);
+  const DenseImageRef guide = guide_copy.empty() ? DenseImageRef(rgb) : DenseImageRef(guide_copy);
+  CompleteResult cr = complete_range(range, guide, step.completion, threads);
+  out.record.update(complete_record(step.completion, cr));
+  out.record["applied"] = true;
+  out.record["measured_known_fraction"] = fraction;
+  out.range = std::move(cr.range);
+  out.confidence = std::move(cr.confidence);
+  out.applied = true;
   return out;
 }
 

@@ -3,11 +3,19 @@
 #pragma once
 
 #include <cctype>
+#include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <string_view>
 
 namespace brume::text {
+
+// v in printf's %.<digits>g, for messages and records ("0.05", "1.2e+03").
+inline std::string g(double v, int digits = 6) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*g", digits, v);
+  return b;
+}
 
 // `s` without leading and trailing white space (the C locale's isspace:
 // space, \t, \n, \v, \f, \r).

@@ -3,6 +3,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -300,6 +301,19 @@ LidarImage project_velodyne(const std::string& bin_path, const KittiCalib& c, in
   const double tz = P[11];
   const double ty = (P[7] - cy * tz) / fy;
   const double tx = (P[3] - s * ty - cx * tz) / fx;
+  // P2 fixes the image size the scan projects to only through the principal
+  // point, near the centre of a KITTI image (609.6, 172.9 of 1242 x 375): one
+  // outside the image's central half means an image of another size (a
+  // resized or another camera's frame), on which every point would land in
+  // the wrong place.
+  if (cx < 0.25 * width || cx > 0.75 * width || cy < 0.25 * height || cy > 0.75 * height) {
+    char pp[96];
+    std::snprintf(pp, sizeof pp, "(%.1f, %.1f)", cx, cy);
+    throw Error("--kitti-calib's principal point " + std::string(pp) + " px (P2) is not near the centre of the " +
+                std::to_string(width) + "x" + std::to_string(height) +
+                " image the scan is projected to: the image and the calibration do not belong together (KITTI's "
+                "image_2 frames are about 1242x375; do not resize the image, or scale P2 with it)");
+  }
   LidarImage out;
   out.range = Image(width, height, 1, kUnknown);
   out.z = Image(width, height, 1, kUnknown);

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "brume/complete.hpp"
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "brume/io.hpp"
@@ -73,6 +74,12 @@ const ParamTable<DepthPrepareJob>& depth_prepare_job_table() {
     ParamTable<DepthPrepareJob> d("output");
     d.nest(&DepthPrepareJob::depth, depth_param_table())
         .nest(&DepthPrepareJob::prepare, prepare_param_table())
+        .choice("complete", &DepthPrepareJob::complete, complete_mode_names(),
+                "depth completion guided by --image (brume depth complete) before the preparation: auto (when "
+                "the known pixels cover less than --min-coverage), on (always), off (never: such maps are refused)")
+        .nest(&DepthPrepareJob::completion, complete_param_table())
+        .text("image", &DepthPrepareJob::image,
+              "colour image that guides the completion (needed when it runs) and sizes a --velodyne scan")
         .text("out", &DepthPrepareJob::out, "prepared range, float file (.exr, .pfm, .tif)")
         .writes_file()
         .text("masks", &DepthPrepareJob::masks, "directory for sky.png, holes.png, margin.png and prepared-preview.png")
@@ -95,11 +102,26 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
     fs::create_directories(job.masks, ec);
     if (!fs::is_directory(job.masks)) throw Error("--masks '" + job.masks + "' cannot be created: " + ec.message());
   }
-  LoadedDepth ld = load_depth(job.depth, 0, 0);
-  PrepareResult pr = prepare_range(ld.range, job.prepare);
+  const RangeStep step{PrepareMode::automatic, job.prepare, job.complete, job.completion};
+  check_range_step(step, ctx.given);
+  Image rgb;
+  nlohmann::json image_record;
+  if (!job.image.empty()) {
+    FileInfo info;
+    rgb = read_color(job.image, Transfer::automatic, &info);
+    image_record = file_record(job.image, info, rgb);
+  }
+  LoadedDepth ld = load_depth(job.depth, rgb.width, rgb.height);
+  if (!rgb.empty() && (ld.range.width != rgb.width || ld.range.height != rgb.height))
+    throw Error("depth '" + ld.path + "' is " + ld.range.size_string() + " but --image '" + job.image + "' is " +
+                rgb.size_string() + "; they must be the same size (resample the depth map, or crop both)");
+  const CompletedRange done = complete_step(ld.range, rgb, step, ctx.given);
+  PrepareResult pr = prepare_range(done.applied ? done.range : ld.range, job.prepare);
   nlohmann::json rec = run_record_header("depth prepare", ctx.argv);
   rec["job"] = depth_prepare_job_table().to_json(job);
   rec["depth"] = ld.record;
+  if (!image_record.is_null()) rec["image"] = image_record;
+  rec["complete"] = done.record;
   rec["prepare"] = prepare_record(job.prepare, pr);
   WriteOptions w = data;
   w.description = rec.dump();
@@ -119,6 +141,91 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
   if (!job.record.empty()) outs.write_text(job.record, rec.dump(2) + "\n", "--record");
   outs.commit();
   return rec;
+}
+
+const ParamTable<DepthCompleteJob>& depth_complete_job_table() {
+  static const ParamTable<DepthCompleteJob> t = [] {
+    ParamTable<DepthCompleteJob> d("output");
+    d.nest(&DepthCompleteJob::input, input_param_table(true))
+        .nest(&DepthCompleteJob::complete, complete_param_table())
+        .text("out", &DepthCompleteJob::out, "completed range in metres along the ray, float file (.exr, .pfm, .tif); "
+                                             "NaN at the sky")
+        .writes_file()
+        .text("confidence", &DepthCompleteJob::confidence, "per-pixel confidence in [0, 1] (1 at measurements)")
+        .writes_file()
+        .text("record", &DepthCompleteJob::record, "write a JSON record of the completion")
+        .writes_file();
+    return d;
+  }();
+  return t;
+}
+
+nlohmann::json run_depth_complete_job(const DepthCompleteJob& job, const ExecOptions& eo, const RunContext& ctx) {
+  depth_complete_job_table().validate(job);
+  const WriteOptions data = metres("a range in metres needs a float file");
+  WriteOptions conf;
+  conf.is_color = false;
+  if (job.out.empty()) throw Error("no output given: use --out FILE");
+  check_writable(job.out, data, "--out");
+  if (!job.confidence.empty()) check_writable(job.confidence, conf, "--confidence");
+  if (!job.record.empty()) check_record_path(job.record);
+  LoadedInputs in = load_inputs(job.input, true);
+  const CompleteResult cr = complete_range(in.depth.range, in.rgb, job.complete, eo.threads);
+  nlohmann::json rec = run_record_header("depth complete", ctx.argv);
+  rec["job"] = depth_complete_job_table().to_json(job);
+  rec["inputs"] = in.record;
+  rec["complete"] = complete_record(job.complete, cr);
+  WriteOptions w = data;
+  w.description = rec.dump();
+  OutputSet outs;
+  outs.write(job.out, cr.range, w, "--out");
+  if (!job.confidence.empty()) outs.write(job.confidence, cr.confidence, conf, "--confidence");
+  if (!job.record.empty()) outs.write_text(job.record, rec.dump(2) + "\n", "--record");
+  outs.commit();
+  return rec;
+}
+
+CommandDef depth_complete_command() {
+  CommandDef c = make_command<DepthCompleteJob>({
+      .name = "depth complete",
+      .cli = "depth complete",
+      .summary = "complete a sparse range map (a lidar scan) guided by its colour image; the sky stays unknown",
+      .table = &depth_complete_job_table(),
+      .exec = true,
+      .record = true,
+      .run = [](const DepthCompleteJob& j, const ExecOptions& eo, const RunContext& ctx) {
+        return run_depth_complete_job(j, eo, ctx);
+      },
+      .report = [](const DepthCompleteJob& job, const nlohmann::json& rec) {
+        const auto& c = rec["complete"];
+        std::fprintf(stderr,
+                     "brume depth complete: %s  measured %.2f %% -> completed %.1f %% (refined %.1f %%, "
+                     "extrapolated %.1f %%), sky %.1f %%, unknown %.2f %%\n",
+                     job.out.c_str(), 100 * c["known_fraction"].get<double>(),
+                     100 * c["completed_fraction"].get<double>(), 100 * c["refined_fraction"].get<double>(),
+                     100 * c["extrapolated_fraction"].get<double>(), 100 * c["sky_fraction"].get<double>(),
+                     100 * c["unknown_fraction"].get<double>());
+      },
+  });
+  // brume.depth.complete(rgb, range): the completion on arrays.
+  static const auto call = array_call_table(complete_param_table(), kArrayExec);
+  c.arrays = make_array_form<CompleteParams>(
+      "depth_complete", "brume.depth.complete",
+      "Depth completion guided by the colour image: a sparse range map (NaN, inf or 0 unknown) to a dense one "
+      "(metres along the ray; NaN at the sky) with a per-pixel confidence. As `brume depth complete`, on arrays.",
+      {{"rgb", 3, false, ArrayArg::As::dense}, {"range", 1, false, ArrayArg::As::dense}}, call,
+      {"range", "confidence", "sky_mask", "record"}, true,
+      [](const std::vector<ArrayIn>& in, ArrayCall<CompleteParams>& k, const Exec& exec, const std::set<std::string>&) {
+        complete_param_table().validate(k.p);
+        CompleteResult cr = complete_range(in[1].dense, in[0].dense, k.p, exec.threads);
+        ArrayResult r;
+        r.record["complete"] = complete_record(k.p, cr);
+        r.images = {{"range", std::move(cr.range)},
+                    {"confidence", std::move(cr.confidence)},
+                    {"sky_mask", std::move(cr.sky_mask)}};
+        return r;
+      });
+  return c;
 }
 
 CommandDef depth_convert_command() {

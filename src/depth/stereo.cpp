@@ -16,6 +16,7 @@
 #include "brume/io.hpp"
 #include "brume/record.hpp"
 #include "brume_opencv.hpp"
+#include "core/text.hpp"
 
 namespace brume {
 
@@ -80,11 +81,6 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-std::string fmt(double v, int prec = 3) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.*g", prec, v);
-  return b;
-}
 
 cv::Mat as_mat(const StereoView& v) {
   return cv::Mat(v.height, v.width, CV_8UC3, const_cast<unsigned char*>(v.rgb.data()));
@@ -411,7 +407,7 @@ StereoResult compute_stereo(const StereoView& left, const StereoView& right, con
   if (p.max_disparity) {
     const double n = *p.max_disparity;
     if (n != std::floor(n) || n < 1 || n > W - 1)
-      throw Error("--max-disparity " + fmt(n, 9) + " is not allowed: it must be a whole number of pixels from 1 to " +
+      throw Error("--max-disparity " + text::g(n, 9) + " is not allowed: it must be a whole number of pixels from 1 to " +
                   std::to_string(W - 1) + " (the view is " + std::to_string(W) +
                   " px wide; a match cannot lie further away); use auto to find it from a coarse pass");
   }
@@ -430,9 +426,9 @@ StereoResult compute_stereo(const StereoView& left, const StereoView& right, con
   if (rc.checked && rc.worst_px > p.rectified_tolerance_px)
     throw Error(left_flag + " and " + right_flag + " are not a rectified pair: the check of the vertical offset "
                 "between the views (dy = a + b x + c y fitted by RANSAC to " + std::to_string(rc.inliers) + " of " +
-                std::to_string(rc.matches) + " matched ORB features) finds " + fmt(rc.worst_px) + " px at the " +
-                rc.worst_corner + " corner (median |dy| " + fmt(rc.median_abs_dy) + " px), more than "
-                "--stereo-rectified-tolerance " + fmt(p.rectified_tolerance_px) + " px. Matching searches along rows "
+                std::to_string(rc.matches) + " matched ORB features) finds " + text::g(rc.worst_px, 3) + " px at the " +
+                rc.worst_corner + " corner (median |dy| " + text::g(rc.median_abs_dy, 3) + " px), more than "
+                "--stereo-rectified-tolerance " + text::g(p.rectified_tolerance_px, 3) + " px. Matching searches along rows "
                 "only: rectify the pair first (OpenCV stereoRectify and remap with the calibration), or check that "
                 "the views are the left and right image of one rectified pair");
 

@@ -105,8 +105,12 @@ AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const Aeri
   // Statistics (R_max, Iinf, the sky mask) from the measured range; the
   // effect runs on the prepared one, whose smooth sky margin only shapes the
   // blur near the horizon (sky pixels themselves stay unchanged).
-  run.analysis = analyse_aerial(rgb, measured_range, p, exec.threads);
-  PreparedRange prep = prepare_step(measured_range.view(), prepare, given, exec.threads);
+  // A sparse map is completed first (guided by rgb; its sky stays unknown), when the step says so.
+  const CompletedRange done = complete_step(measured_range.view(), rgb.view(), prepare, given, exec.threads);
+  const DenseImageRef measured = done.applied ? DenseImageRef(done.range) : measured_range;
+  run.analysis = analyse_aerial(rgb, measured, p, exec.threads);
+  PreparedRange prep = prepare_step(measured.view(), prepare, given, exec.threads);
+  prep.record["complete"] = done.record;
   BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;

@@ -113,7 +113,11 @@ DofRun run_dof(DenseImageRef rgb, DenseImageRef measured_range, const Intrinsics
   if (rgb.width != measured_range.width || rgb.height != measured_range.height)
     throw Error("range map " + measured_range.size_string() + " does not match image " + rgb.size_string() +
                 "; they must be the same size (resample the range map, or crop both)");
-  return run_dof_prepared(rgb, prepare_step(measured_range.view(), prepare, given, exec.threads), k, p, exec, given);
+  // A sparse map is completed first (guided by rgb), when the step says so.
+  const CompletedRange done = complete_step(measured_range.view(), rgb.view(), prepare, given, exec.threads);
+  PreparedRange prep = prepare_step(done.view(measured_range.view()), prepare, given, exec.threads);
+  prep.record["complete"] = done.record;
+  return run_dof_prepared(rgb, prep, k, p, exec, given);
 }
 
 DofRun run_dof_prepared(DenseImageRef rgb, const PreparedRange& prep, const Intrinsics& k, const DofParams& p,

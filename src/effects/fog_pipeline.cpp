@@ -100,12 +100,16 @@ FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSourc
   const Camera camera = heights ? depth_camera(depth, rgb.width, rgb.height, p.camera)
                                 : make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, rgb.width, rgb.height);
   FogRun run;
-  PreparedRange prep = prepare_step(measured_range.view(), prepare, given, exec.threads);
+  // A sparse map is completed first (guided by rgb), when the step says so.
+  const CompletedRange done = complete_step(measured_range.view(), rgb.view(), prepare, given, exec.threads);
+  const DenseImageRef measured = done.applied ? DenseImageRef(done.range) : measured_range;
+  PreparedRange prep = prepare_step(measured.view(), prepare, given, exec.threads);
+  prep.record["complete"] = done.record;
   const bool blend = p.sky_rule == SkyRule::automatic && prep.applied;
   const Image range = effect_range(prep, blend);
   const Image no_weight;
   const Image& weight = blend ? prep.sky_weight : no_weight;
-  run.analysis = analyse_fog(rgb, measured_range, range, camera, p, prepare.params.s_max_factor);
+  run.analysis = analyse_fog(rgb, measured, range, camera, p, prepare.params.s_max_factor);
   BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;
@@ -113,7 +117,8 @@ FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSourc
   // nothing was prepared; a prepared range (holes filled: --prepare auto
   // found some) is the CPU's and goes as range. Unprepared, both carry the
   // same unknown pixels (the clear value, NaN), so the sky is the same.
-  const bool gpu_depth = backend.gpu && window_depth && !window_depth->data.empty() && !prep.applied;
+  const bool gpu_depth = backend.gpu && window_depth && !window_depth->data.empty() && !prep.applied &&
+                        !done.applied;
   if (backend.gpu) {
     std::unique_ptr<GpuFog> gf =
         gpu_depth ? std::make_unique<GpuFog>(*backend.gpu, rgb, *window_depth,

@@ -102,8 +102,12 @@ HazeRun run_haze(ConstImageView rgb, ConstImageView measured_range, const HazePa
   // Image-wide statistics (R_max, the airlight from the sky) come from the
   // measured range; the effect then runs on the prepared one, whose sky lies
   // at S_max > R_max (so it gets the far transmission and sigma_max).
-  HazeAnalysis analysis = analyse_haze(rgb, measured_range, p);
-  const PreparedRange prep = prepare_step(measured_range, prepare, given, exec.threads);
+  // A sparse map is completed first (guided by rgb), when the step says so.
+  const CompletedRange done = complete_step(measured_range, rgb, prepare, given, exec.threads);
+  const ConstImageView measured = done.view(measured_range);
+  HazeAnalysis analysis = analyse_haze(rgb, measured, p);
+  PreparedRange prep = prepare_step(measured, prepare, given, exec.threads);
+  prep.record["complete"] = done.record;
   return haze_on_prepared(rgb, std::move(analysis), prep, p, exec);
 }
 

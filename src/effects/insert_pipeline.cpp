@@ -91,8 +91,12 @@ InsertRun insert_object(const Image& photo, const Image& scene_range, const Imag
   InsertRun run;
   // Statistics (R_max, Iinf, the sky) and the depth test on the MEASURED
   // range; the prepared range only shapes sigma where the object is not visible.
-  run.analysis = analyse_insert(photo, scene_range, object_rgba, object_range, p, exec.threads);
-  PreparedRange prep = prepare_step(scene_range, prepare, given, exec.threads);
+  // A sparse map is completed first (guided by the photo), when the step says so.
+  const CompletedRange done = complete_step(scene_range, photo, prepare, given, exec.threads);
+  const Image& scene = done.applied ? done.range : scene_range;
+  run.analysis = analyse_insert(photo, scene, object_rgba, object_range, p, exec.threads);
+  PreparedRange prep = prepare_step(scene, prepare, given, exec.threads);
+  prep.record["complete"] = done.record;
   Exec cpu = exec;
   cpu.backend = Backend::cpu;  // auto: the CPU (the only backend insert has)
   BackendChoice backend = choose_backend(cpu);

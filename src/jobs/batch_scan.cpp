@@ -99,7 +99,7 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
   } else if (L == "kitti") {
     // KITTI object/raw: image_2/N.png with its Velodyne scan velodyne/N.bin
     // and calib/N.txt (projected through P2 R0_rect Tr_velo_to_cam). A lidar
-    // scan is sparse; the preparation decides whether it can be filled.
+    // scan is sparse: the effects' --complete auto completes it first.
     const fs::path img = dir / "image_2";
     if (!fs::is_directory(img)) throw Error("--scan '" + o.dir + "' --layout kitti: no image_2/ folder");
     std::vector<fs::path> files;

@@ -20,6 +20,7 @@ namespace brume {
   X(blur_command) \
   X(depth_convert_command) \
   X(depth_prepare_command) \
+  X(depth_complete_command) \
   X(depth_stereo_command) \
   X(insert_command) \
   X(fog_command) \
@@ -42,7 +43,7 @@ const std::vector<CommandDef>& commands() {
 
 const std::vector<CommandGroup>& command_groups() {
   static const std::vector<CommandGroup> g = {
-      {"depth", "depth maps: convert any depth source to range or planar z, prepare it, match a stereo pair"},
+      {"depth", "depth maps: convert any depth source to range or planar z, prepare it, complete a sparse one, match a stereo pair"},
       {"sky", "the Preetham sky: render one, or fit the turbidity of a sky photo (Morales ch. 2)"},
       {"lidar", "LiDAR scans: fog one (attenuation and fog returns, Hahner et al. 2021)"},
   };

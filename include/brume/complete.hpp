@@ -1,0 +1,116 @@
+// brume — depth completion: a sparse range map (a projected lidar scan, a
+// stereo map with large holes) and its colour image -> a dense range map of
+// the image's size, a per-pixel confidence, and the sky left unknown.
+//
+// Method (classical, image-guided, on the CPU):
+//
+//  1. Pilot: the morphological pipeline of Ku, Harakeh and Waslander, "In
+//     defense of classical image processing: fast depth completion on the
+//     CPU" (CRV 2018), section III, on the inverted range D' = D_max - R
+//     (so that a dilation keeps the NEAREST value, which covers the
+//     background points a lidar sees past a foreground edge): dilation with
+//     a 5x5 diamond kernel; closing with a 5x5 full kernel; empty pixels
+//     filled by a 7x7 dilation, then by a 31x31 dilation; a 5x5 median and
+//     a 5x5 Gaussian (sigma 0 = OpenCV's 1.1 px) on the filled pixels. The
+//     paper's "extend to the top of the frame" is replaced by step 3's rule.
+//     D_max = 1.05 max R + 1 m. Kernel sizes are the paper's best (its
+//     Table I); they are constants, not parameters.
+//  2. Guided refinement: at every pixel p without a measurement, within
+//     radius r (complete-radius) of measured pixels q,
+//
+//        R(p) = sum_q w_pq R_q / sum_q w_pq,
+//        w_pq = exp(-|p-q|^2 / 2 s_x^2)                       (space)
+//             * exp(-|g_p - g_q|^2 / 2 s_c^2)                 (colour)
+//             * exp(-((R_q - P_p) / (s_r P_p))^2 / 2)          (range),
+//
+//     a joint (cross) bilateral filter of the measurements (Kopf et al.,
+//     "Joint bilateral upsampling", SIGGRAPH 2007; normalised convolution,
+//     Knutsson & Westin 1993), with a third, range term against the pilot
+//     P (a joint trilateral filter): g is the colour image sRGB-encoded in
+//     [0, 1] (where a difference is closer to what is seen), s_x
+//     complete-sigma-space [px], s_c complete-sigma-colour, s_r
+//     complete-sigma-range (relative). The colour term stops the average at
+//     image edges, the range term keeps a pixel with the depth layer the
+//     pilot put it on. Where that layer holds less than 5 % of the space and
+//     colour weight (sum w < 0.05 sum w_space w_colour: the pilot's
+//     nearest-wins dilation crossed an image edge) and that weight is at
+//     least 0.3 (about one measurement of the pixel's colour within 2 px),
+//     the range term is dropped and the measurements of the pixel's colour
+//     decide. Either way R(p) lies in [min, max] of the measurements around
+//     p. Elsewhere the pilot stays. Measured pixels keep their value exactly.
+//  3. Above and beside the scan (no pilot value): SKY or STRUCTURE, per
+//     region, from the image and the scan's extent:
+//       the scan's upper limit: in each column, its topmost measurement
+//         (median over 5 columns); only pixels above it can be sky;
+//       candidate sky: pixels above the limit, with no measurement within 1 px, that are bright
+//         (sRGB luma >= complete-sky-luminance x the image's 99th percentile
+//         luma) and smooth (standard deviation of luma in a 5x5 window <=
+//         complete-sky-roughness), closed with a 5x5 kernel (thin wires and
+//         twigs against the sky stay sky), then cut back to above the limit;
+//       sky: the 8-connected regions of candidates that touch the top row
+//         of the image; they are unknown (NaN) in the output, also where the
+//         pilot's 31x31 fill had reached them (the pilot does not know the
+//         sky);
+//       structure: every other pixel without a value; it takes the value of
+//         the nearest estimate below it in its column (above the scan's
+//         upper limit: Ku's "extend to top"), else above it, with
+//         confidence 0.2 exp(-d / 32 px), d its distance in rows to that
+//         estimate. A column without any estimate stays unknown (the range
+//         preparation fills it as a hole).
+//     A bright, smooth wall that reaches the top of the frame above the scan
+//     is taken for sky: no image rule can tell them apart without depth.
+//  4. Confidence in [0, 1]: 1 at measurements; sum w / (sum w + 0.5) from
+//     the refinement (with the space and colour terms only: how much
+//     measured support the pixel had); 0.3 where only the pilot filled it;
+//     the structure rule's above; 0 at the sky and wherever unknown.
+//
+// Cost (bench/bench_complete.cpp): O(N) for the morphology and the sky rule,
+// O(measurements x (2r+1)^2) for the refinement (a scatter from each
+// measurement, in row bands so that the result does not depend on threads).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include <nlohmann/json.hpp>
+
+#include "brume/image.hpp"
+#include "brume/params.hpp"
+
+namespace brume {
+
+struct CompleteParams {
+  // The refinement's defaults: near the smallest RMSE at KITTI 000001's
+  // held-out points over r 3-8, s_x 1.5-3, s_c 0.05-0.2, s_r 0.04-0.3 (r 6
+  // gains 0.4 % of RMSE for 40 % more time; beyond 6 nothing changes).
+  int radius_px = 5;                // [px] r, refinement window radius, 1..32
+  double sigma_space_px = 2.0;      // [px] s_x, spatial scale of the refinement, > 0
+  double sigma_colour = 0.1;        // [1] s_c, colour scale (sRGB-encoded [0, 1] units), > 0
+  double sigma_range = 0.15;        // [1] s_r, range scale relative to the pilot, > 0
+  double sky_luminance = 0.7;       // [1] sky: luma >= this x the image's 99th percentile, [0, 1]
+  double sky_roughness = 0.03;      // [1] sky: 5x5 standard deviation of luma <= this, >= 0
+};
+const ParamTable<CompleteParams>& complete_param_table();
+
+struct CompleteResult {
+  Image range;       // metres along the ray; NaN at the sky and where no rule gives a value
+  Image confidence;  // [0, 1] per pixel
+  Image sky_mask;    // 1 where the sky rule says sky, else 0
+  double known_fraction = 0.0;      // measured pixels / all
+  double completed_fraction = 0.0;  // finite output pixels / all
+  std::size_t measured = 0, refined = 0, pilot_only = 0, extrapolated = 0, sky = 0, unknown = 0;
+  int scan_top_row = -1;            // topmost row with a measurement
+  double d_max_m = 0.0;             // inversion constant of the pilot
+};
+
+// `range`: 1 channel, metres along the ray, unknown as NaN, +-inf or 0;
+// `guide`: the colour image (3 channels, linear RGB, as read), same size.
+// Throws brume::Error for a size mismatch, a negative range, or no measured
+// pixel at all (e.g. a scan with no point in view). threads: OpenMP threads
+// (0 = all; the result does not depend on it).
+CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const CompleteParams& p = {}, int threads = 0);
+
+// The record of a completion: method, parameters and what was found.
+nlohmann::json complete_record(const CompleteParams& p, const CompleteResult& r);
+
+}  // namespace brume
