@@ -53,7 +53,7 @@ Image colours() {
 const Rgb kAirlight{0.7f, 0.75f, 0.8f};
 
 // The preparation every run makes (deterministic: the same masks and weight).
-PreparedRange prepared(const Image& range) { return prepare_step(range, RangeStep{}); }
+PreparedRange prepared(const Image& range) { return prepare_step(range, RangeStep{}, {}, 0, /*sky_weight=*/true); }
 
 // The execution paths the CPU offers, and the GPU when there is a context.
 std::vector<std::pair<std::string, Exec>> cpu_paths() {
@@ -124,7 +124,7 @@ TEST(SkyUnits, SkyWeightIsHarmonicAcrossTheMargin) {
   // margin, and its discrete Laplacian there below the preparation's
   // tolerance (1e-6, measured on the float output: the residual the record states).
   PrepareParams pp;
-  const PrepareResult pr = prepare_range(horizon_range(), pp);
+  const PrepareResult pr = prepare_range(horizon_range(), pp, 0, /*sky_weight=*/true);
   ASSERT_EQ(pr.margin_pixels, static_cast<std::size_t>(kW) * 8);
   EXPECT_LE(pr.weight_residual, 1e-6);
   for (int y = 0; y < kH; ++y)
@@ -143,7 +143,7 @@ TEST(SkyUnits, SkyWeightIsHarmonicAcrossTheMargin) {
   Image strip = horizon_range();
   for (int y = 4; y < kHorizon; ++y)
     for (int x = 0; x < kW; ++x) strip.at(x, y) = 12.0f;
-  const PrepareResult ps = prepare_range(strip, pp);
+  const PrepareResult ps = prepare_range(strip, pp, 0, /*sky_weight=*/true);
   ASSERT_EQ(ps.margin_pixels, static_cast<std::size_t>(kW) * 4);
   for (int y = 0; y < 4; ++y) EXPECT_NEAR(ps.sky_weight.at(30, y), (4 - y) / 5.0, 1e-6);
   EXPECT_LE(ps.weight_residual, 1e-6);

@@ -104,6 +104,11 @@ struct HazeAnalysis {
 // Validates parameters and inputs (throws brume::Error) and gathers the
 // image-wide statistics. `range` is in metres, 1 channel, same size as rgb.
 HazeAnalysis analyse_haze(ConstImageView rgb, ConstImageView range, const HazeParams& p);
+// The sky lies beyond the scene's range (HazeAnalysis::sky_beyond): --sky-rule
+// auto with --visibility or --sky-distance.
+inline bool haze_sky_beyond(const HazeParams& p) {
+  return p.sky_rule == SkyRule::automatic && (p.sky_distance_m || p.visibility_m);
+}
 
 struct HazeResult {
   Image rgb;           // linear RGB with haze

@@ -178,21 +178,22 @@ std::size_t unknown_range_pixels(const Image& range);
 struct PreparedRange {
   Image range;            // the range the effect runs on (a copy of the measured one when not prepared)
   Image sky_mask;         // when applied: 1 where the preparation identified sky (margin included), else 0
-  Image sky_weight;       // when applied: PrepareResult::sky_weight (1 beyond the margin, harmonic across it)
+  Image sky_weight;       // when applied and asked for: PrepareResult::sky_weight (1 beyond the margin, harmonic across it)
   bool applied = false;
   nlohmann::json record;  // {"mode", "applied", and the preparation's record when applied}
 };
 // Validates every preparation parameter whatever the input, refuses
 // parameters that `--prepare off` would ignore (`given` names the ones set
 // explicitly), and prepares when the mode is auto and the range has unknown
-// pixels, on `threads` OpenMP threads (Exec::threads: 0 = all).
+// pixels, on `threads` OpenMP threads (Exec::threads: 0 = all); sky_weight:
+// the effect blends its sky across the margin (PreparedRange::sky_weight).
 void check_range_step(const RangeStep& step, const std::set<std::string>& given = {});
 PreparedRange prepare_step(const Image& measured, const RangeStep& step, const std::set<std::string>& given = {},
-                           int threads = 0);
+                           int threads = 0, bool sky_weight = false);
 // The same on pixels owned elsewhere (a numpy array): read in place; the
 // effect's range is the preparation's result or, when not prepared, a copy.
 PreparedRange prepare_step(ConstImageView measured, const RangeStep& step, const std::set<std::string>& given = {},
-                           int threads = 0);
+                           int threads = 0, bool sky_weight = false);
 
 // The completion step, before an effect's analysis and preparation: the
 // measured range completed, guided by the colour image `rgb`, when the step

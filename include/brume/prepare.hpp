@@ -48,7 +48,7 @@ struct PrepareResult {
   Image sky_mask;     // 1 where the pixel is sky (including the margin), else 0
   Image hole_mask;    // 1 where a hole was filled, else 0
   Image margin_mask;  // 1 where the margin was solved, else 0
-  Image sky_weight;   // 1 on the sky beyond the margin, harmonic in (0, 1) across the margin, else 0
+  Image sky_weight;   // (when asked for) 1 on the sky beyond the margin, harmonic in (0, 1) across the margin, else 0
   double range_max_m = 0.0;  // R_max: largest known range
   double s_max_m = 0.0;      // S_max assigned to the sky
   double known_fraction = 0.0;
@@ -62,7 +62,9 @@ struct PrepareResult {
 // Throws brume::Error for sparse or empty inputs (message says what to do).
 // threads: the OpenMP threads of its parallel loops (0 = all hardware
 // threads, as Exec::threads; the result does not depend on it). OpenCV's
-// labelling and distance transform run on OpenCV's own pool.
-PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p = {}, int threads = 0);
+// labelling and distance transform run on OpenCV's own pool. sky_weight:
+// also solve PrepareResult::sky_weight (a second solve over the margin, for
+// an effect whose sky lies beyond the scene's range); else it stays empty.
+PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p = {}, int threads = 0, bool sky_weight = false);
 
 }  // namespace brume

@@ -437,12 +437,12 @@ void check_range_step(const RangeStep& step, const std::set<std::string>& given)
 }
 
 PreparedRange prepare_step(const Image& measured, const RangeStep& step, const std::set<std::string>& given,
-                           int threads) {
+                           int threads, bool sky_weight) {
   check_range_step(step, given);
   PreparedRange out;
   out.record = {{"mode", enum_name(prepare_mode_names(), step.mode)}, {"applied", false}};
   if (step.mode == PrepareMode::automatic && unknown_range_pixels(measured) > 0) {
-    PrepareResult pr = prepare_range(measured, step.params, threads);
+    PrepareResult pr = prepare_range(measured, step.params, threads, sky_weight);
     out.record = prepare_record(step.params, pr);
     out.range = std::move(pr.range);
     out.sky_mask = std::move(pr.sky_mask);
@@ -457,7 +457,7 @@ PreparedRange prepare_step(const Image& measured, const RangeStep& step, const s
 }
 
 PreparedRange prepare_step(ConstImageView measured, const RangeStep& step, const std::set<std::string>& given,
-                           int threads) {
+                           int threads, bool sky_weight) {
   check_range_step(step, given);
   std::size_t unknown = 0;
   for (int y = 0; y < measured.height(); ++y)
@@ -465,7 +465,7 @@ PreparedRange prepare_step(ConstImageView measured, const RangeStep& step, const
       const float r = measured.at(x, y);
       unknown += (std::isfinite(r) && r != 0.0f) ? 0 : 1;
     }
-  if (step.mode == PrepareMode::automatic && unknown > 0) return prepare_step(copy_of(measured), step, given, threads);
+  if (step.mode == PrepareMode::automatic && unknown > 0) return prepare_step(copy_of(measured), step, given, threads, sky_weight);
   PreparedRange out;
   out.record = {{"mode", enum_name(prepare_mode_names(), step.mode)}, {"applied", false}};
   out.range = copy_of(measured);

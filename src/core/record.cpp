@@ -41,7 +41,7 @@ nlohmann::json diffusion_record(const DiffusionParams& p, const DiffusionPlan& p
 
 nlohmann::json prepare_record(const PrepareParams& p, const PrepareResult& r) {
   const double n = static_cast<double>(r.range.pixels());
-  return {{"rule", "Hansard 4.1: holes filled by RANSAC from their boundary; unknown components touching the top "
+  nlohmann::json j = {{"rule", "Hansard 4.1: holes filled by RANSAC from their boundary; unknown components touching the top "
                    "(>= sky_min_fraction) or large (>= sky_large_fraction) are sky at S_max; Laplace margin of width mu"},
           {"sky_margin_px", p.sky_margin_px},
           {"sky_min_fraction", p.sky_min_fraction},
@@ -59,10 +59,13 @@ nlohmann::json prepare_record(const PrepareParams& p, const PrepareResult& r) {
           {"sky_fraction", r.sky_pixels / n},
           {"margin_fraction", r.margin_pixels / n},
           {"margin_residual", r.margin_residual},
-          {"solver_iterations", r.solver_iterations},
-          {"sky_weight_rule", "harmonic across the margin: 0 at the scene, 1 at the sky beyond it (same operator)"},
-          {"sky_weight_residual", r.weight_residual},
-          {"sky_weight_iterations", r.weight_iterations}};
+          {"solver_iterations", r.solver_iterations}};
+  if (!r.sky_weight.empty()) {  // solved for an effect whose sky lies beyond the scene
+    j["sky_weight_rule"] = "harmonic across the margin: 0 at the scene, 1 at the sky beyond it (same operator)";
+    j["sky_weight_residual"] = r.weight_residual;
+    j["sky_weight_iterations"] = r.weight_iterations;
+  }
+  return j;
 }
 
 }  // namespace brume

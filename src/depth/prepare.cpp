@@ -284,7 +284,7 @@ double float_residual(const MarginSystem& s, const float* out, int nt) {
 
 }  // namespace
 
-PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int threads) {
+PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int threads, bool sky_weight) {
   validate(p);
   const int nt = threads > 0 ? threads : omp_get_max_threads();
   if (range.empty() || range.width <= 0 || range.height <= 0)
@@ -360,7 +360,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   res.sky_mask = Image(W, H, 1, 0.0f);
   res.hole_mask = Image(W, H, 1, 0.0f);
   res.margin_mask = Image(W, H, 1, 0.0f);
-  res.sky_weight = Image(W, H, 1, 0.0f);
+  if (sky_weight) res.sky_weight = Image(W, H, 1, 0.0f);
   if (known == N) return res;  // nothing to fill
 
   cv::Mat labels, stats, centroids;
@@ -459,7 +459,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
     float* out = res.range.data.data();
     float* skym = res.sky_mask.data.data();
     float* holem = res.hole_mask.data.data();
-    float* skyw = res.sky_weight.data.data();
+    float* skyw = sky_weight ? res.sky_weight.data.data() : nullptr;
 #pragma omp parallel for num_threads(nt) schedule(static)
     for (int y = 0; y < H; ++y) {
       const int* L = labels.ptr<int>(y);
@@ -473,7 +473,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
         } else {
           out[o + x] = smax;
           skym[o + x] = 1.0f;
-          skyw[o + x] = 1.0f;
+          if (skyw) skyw[o + x] = 1.0f;
         }
       }
     }
@@ -613,6 +613,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
 
   // The sky weight: the same operator, 0 on the scene side, 1 on the sky's
   // and above the frame.
+  if (!sky_weight) return res;
   for (std::size_t i = 0; i < n; ++i) sys.b[i] = sky_cnt[i] + top_row[i], sys.diag[i] += top_row[i];
   res.weight_iterations = solve_cg(sys, w, 0.25 * p.residual_tol, nt);
   float* skyw = res.sky_weight.data.data();

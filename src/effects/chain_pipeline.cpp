@@ -81,7 +81,7 @@ HazeDofRun run_haze_dof(const Image& rgb, const Image& measured_range, const Int
   // A sparse map is completed first (guided by rgb), when the step says so.
   const CompletedRange done = complete_step(measured_range, rgb, prepare, gh, exec.threads);
   const Image& measured = done.applied ? done.range : measured_range;
-  PreparedRange prep = prepare_step(measured, prepare, gh, exec.threads);
+  PreparedRange prep = prepare_step(measured, prepare, gh, exec.threads, haze_sky_beyond(haze));
   prep.record["complete"] = done.record;
   run.haze = run_haze_prepared(rgb, measured, prep, haze, ex, gh);
   run.dof = dof_stage([&] { return run_dof_prepared(run.haze.result.rgb, prep, k, dof, ex_dof, gd); });

@@ -103,7 +103,7 @@ FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSourc
   // A sparse map is completed first (guided by rgb), when the step says so.
   const CompletedRange done = complete_step(measured_range.view(), rgb.view(), prepare, given, exec.threads);
   const DenseImageRef measured = done.applied ? DenseImageRef(done.range) : measured_range;
-  PreparedRange prep = prepare_step(measured.view(), prepare, given, exec.threads);
+  PreparedRange prep = prepare_step(measured.view(), prepare, given, exec.threads, p.sky_rule == SkyRule::automatic);
   prep.record["complete"] = done.record;
   const bool blend = p.sky_rule == SkyRule::automatic && prep.applied;
   const Image range = effect_range(prep, blend);

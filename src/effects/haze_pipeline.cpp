@@ -69,6 +69,9 @@ HazeRun haze_on_prepared(ConstImageView rgb, HazeAnalysis analysis, const Prepar
                          const Exec& exec) {
   HazeRun run;
   run.analysis = std::move(analysis);
+  if (run.analysis.sky_beyond && prep.applied && prep.sky_weight.empty())
+    throw Error("internal: the sky lies beyond the medium, but the preparation solved no sky weight "
+                "(prepare_step(..., sky_weight = haze_sky_beyond(p)))");
   BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;
@@ -106,7 +109,7 @@ HazeRun run_haze(ConstImageView rgb, ConstImageView measured_range, const HazePa
   const CompletedRange done = complete_step(measured_range, rgb, prepare, given, exec.threads);
   const ConstImageView measured = done.view(measured_range);
   HazeAnalysis analysis = analyse_haze(rgb, measured, p);
-  PreparedRange prep = prepare_step(measured, prepare, given, exec.threads);
+  PreparedRange prep = prepare_step(measured, prepare, given, exec.threads, analysis.sky_beyond);
   prep.record["complete"] = done.record;
   return haze_on_prepared(rgb, std::move(analysis), prep, p, exec);
 }
