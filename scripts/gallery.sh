@@ -29,6 +29,14 @@ $B dof $(eth terrace) --focus-distance 2.5 --coc-infinity 14 --out "$OUT/eth3d-t
 K=$D/kitti_object_000001
 $B haze --image "$K/image_2/000001.png" --velodyne "$K/velodyne/000001.bin" --kitti-calib "$K/calib/000001.txt" \
    --visibility 150 --out "$OUT/kitti-000001-haze.jpg" "${q[@]}"
+# ... its scan as projected (3.99 % of the pixels, each widened to 3x3 px) and as completed (brume depth complete)
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+kl=(--velodyne "$K/velodyne/000001.bin" --kitti-calib "$K/calib/000001.txt")
+$B depth convert "${kl[@]}" --like "$K/image_2/000001.png" --out "$tmp/scan.pfm" >/dev/null
+$B depth complete "${kl[@]}" --image "$K/image_2/000001.png" --out "$tmp/completed.pfm" >/dev/null
+${PYTHON:-/usr/bin/python3} scripts/range_picture.py "$tmp/scan.pfm" "$OUT/kitti-000001-scan.jpg" --dilate 1
+${PYTHON:-/usr/bin/python3} scripts/range_picture.py "$tmp/completed.pfm" "$OUT/kitti-000001-completed.jpg"
 # the turbidity fit (Preetham sky) on each Poly Haven sky
 for s in park sky sunrise; do
   $B sky fit --image "$D/sky_hdr_polyhaven/$s.hdr" --sun auto --out "$LOCAL/fit-$s.json" --plot "$OUT/polyhaven-$s-fit.png"
