@@ -60,16 +60,14 @@ class HazyFrames(Dataset):
 
     def __init__(self, frames, seed, epoch=0):
         self.frames, self.epoch = frames, epoch
-        # The KITTI scan covers 4 % of the image: min_coverage=0 lets range
-        # preparation fill the rest (a stand-in until depth completion).
+        # The KITTI scan covers 4 % of the image: it is completed, guided by
+        # the image (complete="auto", the default: docs/depth-sources.md).
         self.haze = {"indoor": T.Haze(visibility=T.loguniform(8, 80), lambda_=(1, 6), seed=seed),
-                     "street": T.Haze(visibility=T.loguniform(60, 600), lambda_=(1, 6), seed=seed,
-                                      min_coverage=0.0)}
+                     "street": T.Haze(visibility=T.loguniform(60, 600), lambda_=(1, 6), seed=seed)}
         # (its own seed: two transforms with one seed and one key draw a parameter of the same name alike)
         self.dof = {"indoor": T.DepthOfField(focus_distance=(1.5, 3), f_number=T.choice(1.4, 2, 2.8), p=0.7,
                                              seed=seed + 1),
-                    "street": T.DepthOfField(focus_distance=T.loguniform(5, 60), p=0.7, seed=seed + 1,
-                                             min_coverage=0.0)}
+                    "street": T.DepthOfField(focus_distance=T.loguniform(5, 60), p=0.7, seed=seed + 1)}
 
     def __len__(self):
         return len(self.frames)
