@@ -291,6 +291,9 @@ TEST(LidarFog, BadInputsAreRefused) {
   EXPECT_NE(error_of([] { parse_kitti_bin(std::string(33, '\0'), "--points 'x.bin'"); }).find("16 bytes"),
             std::string::npos);
   EXPECT_EQ(parse_kitti_bin(std::string(32, '\0'), "x").size(), 8u);
+  // An empty scan is zero points (the fuzz reproducer empty_scan_memcpy_null.bin:
+  // it once passed a null pointer to memcpy).
+  EXPECT_TRUE(parse_kitti_bin(std::string(), "x").empty());
   std::vector<float> in = scan(10, 2, 20), out(in.size());
   in[4 * 3 + 1] = NAN;
   EXPECT_NE(error_of([&] { lidar_fog(in.data(), out.data(), 10, with_alpha(0.1)); }).find("point 3"), std::string::npos);

@@ -398,7 +398,7 @@ std::vector<float> parse_kitti_bin(const std::string& bytes, const std::string& 
                 "reflectance); the file is truncated or not a KITTI scan");
   static_assert(sizeof(float) == 4, "float32");
   std::vector<float> v(bytes.size() / 4);
-  std::memcpy(v.data(), bytes.data(), bytes.size());  // little-endian host (x86-64, AArch64)
+  if (!v.empty()) std::memcpy(v.data(), bytes.data(), bytes.size());  // little-endian host (x86-64, AArch64)
   return v;
 }
 
