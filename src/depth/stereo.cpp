@@ -218,8 +218,13 @@ std::array<double, 3> fit_plane(const std::vector<std::array<double, 3>>& pts, c
 // of `b` in Hamming distance. With the popcnt instruction where the CPU has
 // it (GCC/Clang clones; the baseline x86-64 has none): OpenCV's
 // cross-checked BFMatcher took ~100 ms on 1500 x 1500 descriptors here,
-// this ~5 ms.
-__attribute__((target_clones("popcnt", "default"))) void nearest_rows(const std::uint64_t* a, std::size_t na,
+// this ~5 ms. GCC only, as fog_fast.cpp's clones: Clang's sanitizer builds
+// instrument the clones' ifunc resolver, which runs before ThreadSanitizer
+// is set up (the TSan suite's test binary crashed at start-up).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("popcnt", "default")))
+#endif
+void nearest_rows(const std::uint64_t* a, std::size_t na,
                                                                         const std::uint64_t* b, std::size_t nb,
                                                                         int* idx, int* dist) {
   for (std::size_t i = 0; i < na; ++i) {
