@@ -29,6 +29,7 @@
 #include "brume/diffusion.hpp"
 #include "brume/exec.hpp"
 #include "brume/image.hpp"
+#include "brume/lidar_camera.hpp"
 #include "brume/params.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/sky.hpp"
@@ -46,6 +47,12 @@ struct Atmosphere {
 void validate_atmosphere(const Atmosphere& a);
 double rayleigh_beta_per_m(double lambda_nm, double altitude_m);
 double mie_beta_per_m(double lambda_nm, double turbidity, double altitude_m);
+// beta_R + beta_M at the observer [1/m], the same formulas on [380, 2000] nm:
+// beyond the visible for a LiDAR (905, 1550 nm; brume/lidar_camera.hpp).
+// Rayleigh's lambda^-4 holds there; the Mie term's lambda^-2 (Junge nu = 4,
+// K_M constant) is the model's own law extended, not fitted data (docs/lidar.md).
+constexpr double kAerialExtinctionLambdaMaxNm = 2000.0;
+double aerial_extinction_per_m(double lambda_nm, const Atmosphere& a);
 
 // ---- camera spectral sensitivities -------------------------------------------------
 // q_c(lambda) on the 1 nm integration grid 380..780 nm (401 samples), zero
@@ -294,6 +301,7 @@ struct AerialJob {
   RangeStep prepare;
   AerialParams aerial;
   OutputFiles output;  // maps: attenuation, scale-map
+  CameraLidar lidar;   // --lidar IN.bin --lidar-out OUT.bin (brume/lidar_camera.hpp): the medium at 905 nm
   std::string turbidity_from;  // --turbidity-from: T from a `brume sky fit` JSON (brume/sky.hpp); must be reliable
   // --turbidity auto --sky-image FILE: T fitted on a photo of the sky as `brume
   // sky fit` does (fit_sky_image_file), refused when unreliable. The sky's own

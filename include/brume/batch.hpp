@@ -162,6 +162,10 @@ struct ScanOptions {
   std::string dir, layout;
   std::string image_glob, depth_glob, depth_kind = "range";  // pairs
   std::string manifest_dir = ".";  // where the manifest will be (paths are relative to it)
+  // kitti: also a "lidar" column, the frame's velodyne/N.bin, so that every
+  // frame's scan is fogged with its image's medium and written beside it as
+  // <key>.bin (a camera effect's --lidar/--lidar-out, brume/lidar_camera.hpp).
+  bool lidar = false;
 };
 std::vector<nlohmann::json> scan_dataset(const ScanOptions& o);
 // CSV or JSON Lines by the extension, written atomically.

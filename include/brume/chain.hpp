@@ -62,6 +62,7 @@ struct HazeDofJob {
   HazeParams haze;
   DofParams dof;       // flags --dof-..., record block "dof"
   OutputFiles output;  // maps: transmission, scale-map (haze's sigma), dof-scale-map (the DOF's sigma)
+  CameraLidar lidar;   // --lidar IN.bin --lidar-out OUT.bin (brume/lidar_camera.hpp): haze's medium
 };
 const std::vector<MapOutput>& haze_dof_map_outputs();
 const ParamTable<HazeDofJob>& haze_dof_job_table();

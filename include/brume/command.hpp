@@ -158,6 +158,14 @@ struct CommandDef {
   // physical units (haze in normalised kappa without --visibility or
   // --range-max) or models no medium. Empty for commands that model none.
   std::function<std::optional<double>(const nlohmann::json& job, double height_m)> extinction_per_m;
+  // A spectral medium's extinction [1/m] at a wavelength [nm] (aerial's
+  // Rayleigh + Mie at the observer), nullopt where the job cannot give one.
+  // Empty for grey media (extinction_per_m holds at every wavelength).
+  std::function<std::optional<double>(const nlohmann::json& job, double wavelength_nm)> spectral_extinction_per_m;
+  // Whether the job's medium varies with height (fog's height profiles): a
+  // LiDAR then needs the optical depth along each beam, not one extinction.
+  // Empty: never.
+  std::function<bool(const nlohmann::json& job)> layered_medium;
 
   // A declaration by name (not an alias); null when there is none.
   const ParamSpec* spec(std::string_view param) const;

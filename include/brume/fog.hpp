@@ -200,6 +200,7 @@ struct FogJob {
   RangeStep prepare;
   FogParams fog;
   OutputFiles output;  // maps: optical-depth, transmission
+  CameraLidar lidar;   // --lidar IN.bin --lidar-out OUT.bin (brume/lidar_camera.hpp)
 };
 const std::vector<MapOutput>& fog_map_outputs();
 const ParamTable<FogJob>& fog_job_table();

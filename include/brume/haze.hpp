@@ -49,6 +49,7 @@
 #include "brume/diffusion.hpp"
 #include "brume/exec.hpp"
 #include "brume/image.hpp"
+#include "brume/lidar_camera.hpp"
 #include "brume/params.hpp"
 #include "brume/pipeline.hpp"
 
@@ -192,8 +193,13 @@ struct HazeJob {
   RangeStep prepare;
   HazeParams haze;
   OutputFiles output;  // maps: transmission, scale-map
+  CameraLidar lidar;   // --lidar IN.bin --lidar-out OUT.bin (brume/lidar_camera.hpp)
 };
 const std::vector<MapOutput>& haze_map_outputs();
+// The medium's extinction [1/m] where the job is in metres: 3.912/V with a
+// visibility (analyse_haze's, exactly), (kappa_a + kappa_s)/R_max with
+// --range-max; nullopt in normalised units.
+std::optional<double> haze_extinction_per_m(const HazeParams& p);
 const ParamTable<HazeJob>& haze_job_table();
 // The command line's summary line of a haze record (stderr).
 void print_haze_summary(const std::string& out, const nlohmann::json& record);

@@ -127,6 +127,14 @@ struct LidarFogStats {
   nlohmann::json record() const;
 };
 
+// A run's "lidar" record block: alpha_per_m and how it was given, the
+// derived constants, the seed and noise, and the stats (shared by `brume
+// lidar fog` and the camera effects' --lidar, brume/lidar_camera.hpp).
+nlohmann::json lidar_fog_record(const LidarFogParams& p, const LidarFogStats& st);
+
+// An output scan's path: it must end in .bin and its folder be writable.
+void check_kitti_bin_output(const std::string& path, const std::string& flag);
+
 // Fogs n points (x, y, z, i as float32, 16 bytes each) from `in` into `out`
 // (may be the same buffer). Refuses (brume::Error naming `what`) non-finite
 // values, negative intensities and a scan whose intensities × scale mostly

@@ -69,6 +69,9 @@ struct ParamSpec {
   bool output_file = false;          // text: names a file (depth prepare's --masks: a directory) the run
                                      // writes; brume run moves it under --out-dir, brume batch names its
                                      // own outputs after the frame's key
+  std::string output_of;             // output_file written only when the parameter named here (an input
+  std::string output_ext;            // file) is given; brume batch names it <key stem><output_ext> beside
+                                     // the frame's image (a camera effect's --lidar-out of --lidar: ".bin")
   int since_schema = 0;              // the record schema that introduced it (0: always there); a job of an
   nlohmann::json before_schema;      // older record lacks it and ran as this value says (brume run sets it)
 
@@ -226,6 +229,14 @@ class ParamTable {
     params_.back().spec.output_file = true;
     return *this;
   }
+  // The same for an output that exists only with the input `of` (brume
+  // batch names it after the frame's key with the extension `ext`).
+  ParamTable& writes_file_of(const char* of, const char* ext) {
+    params_.back().spec.output_file = true;
+    params_.back().spec.output_of = of;
+    params_.back().spec.output_ext = ext;
+    return *this;
+  }
   // The last declared parameter came with record schema `version` and a new
   // rule; `older` is its value that gives the rule of the records before.
   ParamTable& since(int version, nlohmann::json older) {
@@ -264,10 +275,14 @@ class ParamTable {
   }
 
   // The same with every flag name prefixed ("sky-": --sky-projection), for a
-  // block that appears twice in one command (the photo's and the sky's).
+  // block that appears twice in one command (the photo's and the sky's), or
+  // whose names would collide with the effect's (a camera effect's LiDAR:
+  // --lidar-seed); `skip`: names (unprefixed) left out.
   template <class Q>
-  ParamTable& nest(Q P::*m, const ParamTable<Q>& sub, const std::string& prefix) {
+  ParamTable& nest(Q P::*m, const ParamTable<Q>& sub, const std::string& prefix,
+                   const std::set<std::string>& skip = {}) {
     for (const Param<Q>& q : sub.params()) {
+      if (skip.count(q.spec.name)) continue;
       ParamSpec sp = q.spec;
       sp.name = prefix + sp.name;
       for (std::string& a : sp.aliases) a = prefix + a;

@@ -238,8 +238,15 @@ void check_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl);
 // input's depth in PNG/TIFF (JPEG 8, EXR/PFM/HDR float); maps are data,
 // never sRGB-encoded; the record is embedded as ImageDescription and written
 // beside; everything is renamed into place together or not at all.
+// A file a run writes besides its image, maps and record (a camera effect's
+// foggy LiDAR scan, brume/lidar_camera.hpp): its bytes, renamed into place
+// with the rest. `flag` names it in messages.
+struct CompanionFile {
+  std::string path, bytes, flag;
+};
 void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, const Image& main,
-                   const std::map<std::string, Image>& maps, const FileInfo* input_info, const nlohmann::json& record);
+                   const std::map<std::string, Image>& maps, const FileInfo* input_info, const nlohmann::json& record,
+                   const std::vector<CompanionFile>& companions = {});
 
 // tool, version, schema_version, command, argv, time
 nlohmann::json run_record_header(const std::string& command, const std::vector<std::string>& argv);
@@ -257,6 +264,11 @@ struct RunContext {
   // Top-level blocks added to the record (an object, or null for none), e.g.
   // `brume batch`'s {"batch": {key, seed, sampling, values}}.
   nlohmann::json extra;
+  // Files written with the outputs, all or none (write_outputs' companions):
+  // a camera effect's foggy scan (brume/lidar_camera.hpp). Its input's
+  // {"path", "sha256"} goes in extra's "inputs", which job_record merges
+  // into the record's inputs (so `brume run` checks it).
+  std::vector<CompanionFile> files;
   // Draws a command's figure from its result (sky fit's --plot): the command
   // line's plotter; a library caller without one gets an error naming the flag.
   Image (*plot)(const nlohmann::json& result) = nullptr;
@@ -312,7 +324,7 @@ nlohmann::json run_effect_job(const EffectJob<Job>& e, const Job& job, const Exe
 
   const nlohmann::json rec =
       job_record(e.command, ctx, e.table.to_json(recorded ? *recorded : job), in.record, out.record, eo.timing);
-  write_outputs(job.output, e.maps, out.main, out.maps, &in.image_info, rec);
+  write_outputs(job.output, e.maps, out.main, out.maps, &in.image_info, rec, ctx.files);
   return rec;
 }
 

@@ -181,7 +181,14 @@ JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const 
   for (const auto& [block, vals] : j.items()) {
     if (!vals.is_object())
       throw py::value_error(fn + "(): job: block '" + block + "' is not a dict; give a record's \"job\" as it is");
-    const bool files = block == "input" || block == "output" || block == "depth" || block == "stereo";
+    // A camera effect's LiDAR block names files too; a record that fogged a
+    // scan repeats with brume run (the arrays stand for no scan).
+    if (block == "lidar" && vals.value("lidar", "") != "")
+      throw py::value_error(fn + "(): job: this record also fogged the LiDAR scan '" + vals.value("lidar", "") +
+                            "'; repeat it with `brume run`, or fog the points with brume.lidar.fog(points, alpha=" +
+                            "record['lidar']['alpha_per_m'], ...)");
+    const bool files = block == "input" || block == "output" || block == "depth" || block == "stereo" ||
+                       block == "lidar";
     for (const auto& [name, v] : vals.items()) {
       const ParamSpec* d = nullptr;
       for (const ParamSpec& q : specs)

@@ -602,7 +602,8 @@ void check_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl) {
 }
 
 void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, const Image& main,
-                   const std::map<std::string, Image>& maps, const FileInfo* input_info, const nlohmann::json& record) {
+                   const std::map<std::string, Image>& maps, const FileInfo* input_info, const nlohmann::json& record,
+                   const std::vector<CompanionFile>& companions) {
   WriteOptions wo = main_options(o);
   if (wo.bits == "auto" && input_info && input_info->integer && (input_info->bits == 8 || input_info->bits == 16)) {
     std::string e = fs::path(o.out).extension().string();
@@ -619,6 +620,7 @@ void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, con
     if (it == maps.end()) throw Error("internal: the pipeline made no '" + name + "' map");
     outs.write(path, it->second, map_options(declared(decl, name)), "--" + name);
   }
+  for (const CompanionFile& f : companions) outs.write_text(f.path, f.bytes, f.flag);
   if (!o.record.empty()) outs.write_text(o.record, record.dump(2) + "\n", "--record");
   const auto t1 = std::chrono::steady_clock::now();
   run_phases().write_ms += std::chrono::duration<double, std::milli>(t1 - t0).count();
@@ -648,7 +650,12 @@ nlohmann::json job_record(const std::string& command, const RunContext& ctx, nlo
   rec["job"] = std::move(job);
   rec["inputs"] = std::move(inputs);
   rec.update(run_record);
-  if (ctx.extra.is_object()) rec.update(ctx.extra);
+  if (ctx.extra.is_object()) {
+    // A block's inputs join the run's (a camera effect's LiDAR scan), the rest are top-level blocks.
+    for (const auto& [k, v] : ctx.extra.items())
+      if (k == "inputs" && v.is_object() && rec["inputs"].is_object()) rec["inputs"].update(v);
+      else rec[k] = v;
+  }
   if (print_timing && rec.contains("execution"))
     std::fprintf(stderr, "brume %s: %s: %s\n", command.c_str(), rec["execution"].value("backend", "cpu").c_str(),
                  rec["execution"].value("timing", nlohmann::json::object()).dump().c_str());

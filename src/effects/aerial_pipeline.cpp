@@ -82,6 +82,7 @@ const ParamTable<AerialJob>& aerial_job_table() {
         .nest(&AerialJob::prepare, range_step_param_table())
         .nest(&AerialJob::aerial, aerial_param_table())
         .nest(&AerialJob::output, output_param_table(aerial_map_outputs()))
+        .nest(&AerialJob::lidar, camera_lidar_param_table())
         .text("turbidity-from", &AerialJob::turbidity_from,
               "take --turbidity from a `brume sky fit` JSON (refused when the fit is flagged unreliable)")
         .text("sky-image", &AerialJob::sky_image,
@@ -245,6 +246,21 @@ CommandDef aerial_command() {
                                             {"lambda", "uniform(0, 8)", {}}},
                                            &validate_aerial);
   c.gpu_passes = {"aerial.premultiply", "diffusion.rates", "diffusion.iterate", "aerial.composite"};
+  // The medium at a wavelength (the LiDAR's, brume/lidar_camera.hpp): Rayleigh
+  // + Mie at the observer's altitude, per metre of the range map (s = R x
+  // distance-scale). A re-render or a removal has no one medium for a scan.
+  c.spectral_extinction_per_m = [](const nlohmann::json& job, double lambda_nm) -> std::optional<double> {
+    AerialJob j;
+    aerial_job_table().from_json(j, job, "job");
+    if (j.aerial.remove)
+      throw Error("--lidar with --remove: the image's aerial perspective is taken away, the scan has none to add; "
+                  "drop --lidar (or fog the scan with brume lidar fog)");
+    if (j.aerial.from_turbidity)
+      throw Error("--lidar with --from-turbidity: a re-render changes the medium of a photo that already has one, "
+                  "a scan is clear; render (drop --from-turbidity) to fog the scan with --turbidity");
+    resolve_aerial_turbidity(j, {});  // --turbidity-from or --turbidity auto: T as the run takes it
+    return aerial_extinction_per_m(lambda_nm, j.aerial.atmosphere) * j.aerial.distance_scale;
+  };
   // brume.aerial takes the whole `brume aerial` job but its files: the
   // turbidity from a sky fit's JSON (turbidity_from=) or fitted on a sky photo
   // (turbidity="auto", sky_image=, the sky_* keywords) resolves as the CLI
@@ -256,6 +272,7 @@ CommandDef aerial_command() {
     std::set<std::string> skip;
     for (const auto& d : input_param_table(true).params()) skip.insert(d.spec.name);
     for (const auto& d : output_param_table(aerial_map_outputs()).params()) skip.insert(d.spec.name);
+    for (const auto& d : camera_lidar_param_table().params()) skip.insert(d.spec.name);  // files: brume.lidar.fog
     return array_call_table(aerial_job_table(), kArrayExec, skip);
   }();
   c.arrays = make_array_form<AerialJob>(
@@ -280,6 +297,7 @@ CommandDef aerial_command() {
                            {},
                            {}};
       });
+  add_camera_lidar(c);
   return c;
 }
 

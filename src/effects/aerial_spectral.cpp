@@ -58,8 +58,31 @@ void validate_atmosphere(const Atmosphere& a) {
                 "above Everest); give the observer's altitude in metres");
 }
 
+namespace {
+double rayleigh_beta(double lambda_nm, double altitude_m);
+double mie_beta(double lambda_nm, double turbidity, double altitude_m);
+}  // namespace
+
 double rayleigh_beta_per_m(double lambda_nm, double altitude_m) {
   check_lambda(lambda_nm);
+  return rayleigh_beta(lambda_nm, altitude_m);
+}
+
+double mie_beta_per_m(double lambda_nm, double turbidity, double altitude_m) {
+  check_lambda(lambda_nm);
+  return mie_beta(lambda_nm, turbidity, altitude_m);
+}
+
+double aerial_extinction_per_m(double lambda_nm, const Atmosphere& a) {
+  if (!(lambda_nm >= kAerialLambdaMinNm && lambda_nm <= kAerialExtinctionLambdaMaxNm))
+    throw Error("wavelength " + spectral_num(lambda_nm) +
+                " nm is outside [380, 2000] nm, where the model's extinction is taken (the LiDAR's --lidar-wavelength)");
+  return rayleigh_beta(lambda_nm, a.altitude_m) + mie_beta(lambda_nm, a.turbidity, a.altitude_m);
+}
+
+namespace {
+
+double rayleigh_beta(double lambda_nm, double altitude_m) {
   validate_atmosphere({1.0, altitude_m});
   // Molecular scattering of air (Preetham 1999 / Morales eq. 3.4): n the
   // refractive index, N the molecular density at sea level, p_n the
@@ -72,8 +95,7 @@ double rayleigh_beta_per_m(double lambda_nm, double altitude_m) {
          std::exp(-altitude_m / H_R);
 }
 
-double mie_beta_per_m(double lambda_nm, double turbidity, double altitude_m) {
-  check_lambda(lambda_nm);
+double mie_beta(double lambda_nm, double turbidity, double altitude_m) {
   validate_atmosphere({turbidity, altitude_m});
   // Aerosol (Mie) scattering with Junge exponent nu = 4, so beta_M ~ lambda^-2;
   // the concentration c(T) vanishes at T = 1 (no aerosol) and grows linearly
@@ -83,6 +105,8 @@ double mie_beta_per_m(double lambda_nm, double turbidity, double altitude_m) {
   const double l = lambda_nm * 1e-9;
   return 0.434 * c * M_PI * std::pow(2.0 * M_PI / l, nu - 2.0) * K_M * std::exp(-altitude_m / H_M);
 }
+
+}  // namespace
 
 // ---- camera spectral sensitivities -------------------------------------------------
 

@@ -116,7 +116,8 @@ const ParamTable<HazeDofJob>& haze_dof_job_table() {
         .nest(&HazeDofJob::prepare, range_step_param_table())
         .nest(&HazeDofJob::haze, haze_param_table())
         .nest(&HazeDofJob::dof, dof_param_table(), kDofPrefix)
-        .nest(&HazeDofJob::output, output_param_table(haze_dof_map_outputs()));
+        .nest(&HazeDofJob::output, output_param_table(haze_dof_map_outputs()))
+        .nest(&HazeDofJob::lidar, camera_lidar_param_table());
     return d;
   }();
   return t;
@@ -140,6 +141,7 @@ HazeJob haze_part(const HazeDofJob& job, const std::set<std::string>& given) {
   h.haze = job.haze;
   h.output = job.output;
   h.output.maps.erase("dof-scale-map");
+  h.lidar = job.lidar;
   return h;
 }
 
@@ -171,7 +173,7 @@ nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, co
                 {{"transmission", run.haze.result.transmission},
                  {"scale-map", run.haze.result.scale},
                  {"dof-scale-map", run.dof.result.scale}},
-                &in.image_info, rec);
+                &in.image_info, rec, ctx.files);
   return rec;
 }
 
@@ -214,6 +216,13 @@ CommandDef haze_dof_command() {
     return dof_stage_requested(ctx.given) ? run_haze_dof_job(j, e, ctx) : run_haze_job(haze_part(j, ctx.given), e, ctx);
   };
   c.gpu_passes = {"haze.premultiply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
+  // The chain's medium is its haze stage's.
+  c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {
+    HazeDofJob j;
+    haze_dof_job_table().from_json(j, job, "job");
+    return haze_extinction_per_m(j.haze);
+  };
+  add_camera_lidar(c);
   return c;
 }
 

@@ -83,7 +83,8 @@ const ParamTable<FogJob>& fog_job_table() {
     d.nest(&FogJob::input, input_param_table(true))
         .nest(&FogJob::prepare, range_step_param_table())
         .nest(&FogJob::fog, fog_param_table())
-        .nest(&FogJob::output, output_param_table(fog_map_outputs()));
+        .nest(&FogJob::output, output_param_table(fog_map_outputs()))
+        .nest(&FogJob::lidar, camera_lidar_param_table());
     return d;
   }();
   return t;
@@ -207,6 +208,12 @@ CommandDef fog_command() {
     const FogTable table = j.fog.profile == FogProfile::table ? read_fog_table(j.fog.table_file) : FogTable{};
     return fog_density(j.fog, table, 0.0).at(height_m);
   };
+  c.layered_medium = [](const nlohmann::json& job) {
+    FogJob j;
+    fog_job_table().from_json(j, job, "job");
+    return j.fog.classic == ClassicFog::none && j.fog.profile != FogProfile::constant;
+  };
+  add_camera_lidar(c);
   static const auto call = array_call_table(fog_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
   c.arrays = make_array_form<FogParams>(
       "fog", "",

@@ -114,6 +114,12 @@ AirlightEstimate estimate_airlight(ConstImageView rgb, ConstImageView range, std
   return a;
 }
 
+std::optional<double> haze_extinction_per_m(const HazeParams& p) {
+  if (p.visibility_m) return 3.912 / *p.visibility_m;  // Koschmieder, 2 % contrast: -ln 0.02 / V
+  if (p.range_max_m) return (p.kappa_a + p.kappa_s) / *p.range_max_m;
+  return std::nullopt;
+}
+
 HazeAnalysis analyse_haze(ConstImageView rgb, ConstImageView range, const HazeParams& p) {
   validate_haze(p);
   if (rgb.channels() != 3) throw Error("haze needs an RGB image, got " + std::to_string(rgb.channels()) + " channels");
@@ -156,7 +162,10 @@ HazeAnalysis analyse_haze(ConstImageView rgb, ConstImageView range, const HazePa
     a.kappa_a = p.kappa_a;
     a.kappa_s = p.kappa_s;
   }
-  a.extinction_per_m = (a.kappa_a + a.kappa_s) / a.range_max_m;
+  // In metres, the one definition the LiDAR reads too (3.912/V exactly, not
+  // (kappa_a + kappa_s)/R_max, which can differ in the last bit).
+  const std::optional<double> metres = haze_extinction_per_m(p);
+  a.extinction_per_m = metres ? *metres : (a.kappa_a + a.kappa_s) / a.range_max_m;
   a.sigma_max = sh::brume_sigma_max(static_cast<float>(p.diffusion.sigma0), static_cast<float>(p.lambda),
                                     static_cast<float>(a.kappa_s));
   a.plan = plan_diffusion(p.diffusion, a.sigma_max);

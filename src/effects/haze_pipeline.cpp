@@ -28,7 +28,8 @@ const ParamTable<HazeJob>& haze_job_table() {
     d.nest(&HazeJob::input, input_param_table(true))
         .nest(&HazeJob::prepare, range_step_param_table())
         .nest(&HazeJob::haze, haze_param_table())
-        .nest(&HazeJob::output, output_param_table(haze_map_outputs()));
+        .nest(&HazeJob::output, output_param_table(haze_map_outputs()))
+        .nest(&HazeJob::lidar, camera_lidar_param_table());
     return d;
   }();
   return t;
@@ -184,10 +185,9 @@ CommandDef haze_command() {
   c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {
     HazeJob j;
     haze_job_table().from_json(j, job, "job");
-    if (j.haze.visibility_m) return 3.912 / *j.haze.visibility_m;  // as analyse_haze: -ln 0.02 / V
-    if (j.haze.range_max_m) return (j.haze.kappa_a + j.haze.kappa_s) / *j.haze.range_max_m;
-    return std::nullopt;
+    return haze_extinction_per_m(j.haze);
   };
+  add_camera_lidar(c);
   // brume.haze(rgb, range, ...): the arrays read in place (views).
   static const auto call = array_call_table(haze_param_table(), kArrayPrepare | kArrayExec);
   c.arrays = make_array_form<HazeParams>(

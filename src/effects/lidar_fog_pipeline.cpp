@@ -13,10 +13,8 @@ namespace brume {
 
 namespace fs = std::filesystem;
 
-namespace {
-
 // The medium's constants and the run's figures, for the record.
-nlohmann::json lidar_record(const LidarFogParams& p, const LidarFogStats& st) {
+nlohmann::json lidar_fog_record(const LidarFogParams& p, const LidarFogStats& st) {
   const LidarFogMedium m = lidar_fog_medium(p);
   nlohmann::json j = {{"model", "Hahner et al. ICCV 2021, homogeneous fog (from the paper's equations)"},
                       {"alpha_per_m", m.alpha},
@@ -33,13 +31,11 @@ nlohmann::json lidar_record(const LidarFogParams& p, const LidarFogStats& st) {
   return j;
 }
 
-void check_bin_path(const std::string& path, const std::string& flag) {
+void check_kitti_bin_output(const std::string& path, const std::string& flag) {
   if (fs::path(path).extension() != ".bin")
     throw Error(flag + " '" + path + "': a scan is written as a KITTI .bin (float32 x, y, z, intensity); name it *.bin");
   check_output_dir(path, flag);
 }
-
-}  // namespace
 
 const ParamTable<LidarFogJob>& lidar_fog_job_table() {
   static const ParamTable<LidarFogJob> t = [] {
@@ -63,7 +59,7 @@ nlohmann::json run_lidar_fog_job(const LidarFogJob& job, const RunContext& ctx) 
   validate_lidar_fog(job.fog);
   if (job.points.empty()) throw Error("no scan given: use --points FILE.bin (KITTI velodyne)");
   if (job.out.empty()) throw Error("no output given: use --out FILE.bin");
-  check_bin_path(job.out, "--out");
+  check_kitti_bin_output(job.out, "--out");
   if (!job.record.empty()) check_record_path(job.record);
   if (!job.soft_curve.empty()) check_output_dir(job.soft_curve, "--soft-curve");
 
@@ -74,7 +70,7 @@ nlohmann::json run_lidar_fog_job(const LidarFogJob& job, const RunContext& ctx) 
 
   nlohmann::json inputs = {{"points", {{"path", job.points}, {"sha256", sha256_file(job.points)}, {"points", n}}}};
   const nlohmann::json rec =
-      job_record("lidar fog", ctx, lidar_fog_job_table().to_json(job), inputs, {{"lidar", lidar_record(job.fog, st)}},
+      job_record("lidar fog", ctx, lidar_fog_job_table().to_json(job), inputs, {{"lidar", lidar_fog_record(job.fog, st)}},
                  false);
   OutputSet outs;
   outs.write_text(job.out, kitti_bin_bytes(out.data(), n), "--out");
@@ -140,7 +136,7 @@ CommandDef lidar_fog_command() {
         }
         const LidarFogStats st = lidar_fog(src, out.data.data(), n, k.p, "points");
         ArrayResult r;
-        r.record["lidar"] = lidar_record(k.p, st);
+        r.record["lidar"] = lidar_fog_record(k.p, st);
         r.images["points"] = std::move(out);
         return r;
       });

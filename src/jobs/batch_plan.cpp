@@ -238,7 +238,10 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
             // files always (a missing one is then reported where it was looked
             // for); other text (aerial's --sensitivity 'default' or a CSV, fog's
             // --table) when such a file exists there, else as written.
-            const bool is_file = (sp->block == "input" || sp->block == "depth") && canon != "depth-channel";
+            // An input whose output a declaration names (a camera effect's --lidar) is a file too.
+            const bool is_file = ((sp->block == "input" || sp->block == "depth") && canon != "depth-channel") ||
+                                 std::any_of(e.specs.begin(), e.specs.end(),
+                                             [&](const ParamSpec& s) { return s.output_of == canon; });
             std::error_code fec;
             value = is_file || (!t.empty() && fs::exists(base / t, fec)) ? resolve_path(t) : t;
             sp->check(value);
@@ -291,12 +294,12 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       for (const std::string& map : o.maps) {
         bool declared = false;
         for (const ParamSpec& s : e.specs)
-          if (s.name == map && is_output_file(s) && map != "out" && map != "record")
+          if (s.name == map && is_output_file(s) && s.output_of.empty() && map != "out" && map != "record")
             declared = true;
         if (!declared) {
           std::string all_maps;
           for (const ParamSpec& s : e.specs)
-            if (is_output_file(s) && s.name != "out" && s.name != "record")
+            if (is_output_file(s) && s.output_of.empty() && s.name != "out" && s.name != "record")
               all_maps += (all_maps.empty() ? "" : ", ") + s.name;
           throw Error("--map " + map + ": effect " + e.name + " has no such map; its maps: " + all_maps);
         }
@@ -304,6 +307,14 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
         values.emplace_back(map, p);
         f.outputs.push_back(p);
       }
+      // Outputs that come with an input the row gives (a camera effect's
+      // foggy scan with its --lidar): <name><ext> beside the image.
+      for (const ParamSpec& s : e.specs)
+        if (is_output_file(s) && !s.output_of.empty() && given.count(s.output_of)) {
+          const std::string p = (od / (stem + s.output_ext)).generic_string();
+          values.emplace_back(s.name, p);
+          f.outputs.push_back(p);
+        }
       values.emplace_back("record", rec);
       f.outputs.push_back(rec);
       f.job = e.build(values);

@@ -69,6 +69,8 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
   if (!fs::is_directory(dir, ec)) throw Error("--scan '" + o.dir + "' is not a folder");
   std::vector<nlohmann::json> rows;
   const std::string& L = o.layout;
+  if (o.lidar && L != "kitti")
+    throw Error("--lidar with --scan: only --layout kitti has LiDAR scans (velodyne/N.bin); drop --lidar");
   if (L == "middlebury") {
     // Middlebury 2005/2006 third size (the folders of ../shared/data): the
     // intensity I of disp1.png is the full-size disparity less dmin, so at
@@ -114,6 +116,7 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
                       {"image", rel(p, o.manifest_dir)},
                       {"velodyne", rel(velo, o.manifest_dir)},
                       {"kitti-calib", rel(calib, o.manifest_dir)}});
+      if (o.lidar) rows.back()["lidar"] = rel(velo, o.manifest_dir);
     }
   } else if (L == "cityscapes") {
     // Cityscapes: leftImg8bit/<split>/<city>/<name>_leftImg8bit.png with

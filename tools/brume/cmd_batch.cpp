@@ -57,6 +57,9 @@ Command add_batch(CLI::App& app) {
   sub->add_option("--image-glob", a->scan.image_glob, "pairs: images relative to --scan, e.g. 'rgb/*.png'");
   sub->add_option("--depth-glob", a->scan.depth_glob,
                   "pairs: depth files relative to --scan, paired by what '*' matched, e.g. 'depth/*.exr'");
+  sub->add_flag("--lidar", a->scan.lidar,
+                "with --scan --layout kitti: also a 'lidar' column (velodyne/N.bin): each frame's scan is fogged with "
+                "its image's medium and written beside it as <key>.bin (docs/lidar.md)");
   sub->add_option("--depth-kind", a->scan.depth_kind, "pairs: the depth column (range, z, disparity, ...)")
       ->default_str("range");
   auto eflags = std::make_shared<Flags<ExecOptions>>(sub, exec_param_table());

@@ -1,6 +1,7 @@
 // brume <command> — every command of the list (brume/command.hpp) as a
 // subcommand. Nothing here names a command: the flags come from its job
 // table, the run and the summary line from its definition.
+#include <array>
 #include <memory>
 
 #include "brume_study/sky_plot.hpp"
@@ -48,7 +49,20 @@ std::vector<Command> add_commands(CLI::App& app) {
     std::shared_ptr<Flags<ExecOptions>> eflags;
     if (c.exec) eflags = std::make_shared<Flags<ExecOptions>>(sub, exec_param_table());
     const CommandDef* def = &c;
-    out.push_back({sub, c.cli, [def, flags, eflags](const std::vector<std::string>& argv) {
+    // An image command without the LiDAR block (brume/lidar_camera.hpp) says
+    // why it takes no --lidar, instead of CLI11's "not expected".
+    auto no_lidar = std::make_shared<std::array<std::string, 2>>();
+    if (c.exec && c.record && !c.spec("lidar")) {
+      sub->add_option("--lidar", (*no_lidar)[0])->group("");
+      sub->add_option("--lidar-out", (*no_lidar)[1])->group("");
+    }
+    out.push_back({sub, c.cli, [def, flags, eflags, no_lidar](const std::vector<std::string>& argv) {
+                     if (!(*no_lidar)[0].empty() || !(*no_lidar)[1].empty())
+                       throw Error("--lidar: brume " + def->cli + " does not fog a LiDAR scan: only an effect whose "
+                                   "output is the scene the scan saw, through a medium, has an extinction to fog it "
+                                   "with (" + command_names([](const CommandDef& d) { return d.spec("lidar") != nullptr; }) +
+                                   "); depth of field and blur model no medium, insert adds an object the scan "
+                                   "lacks. Fog the scan with `brume lidar fog --points IN.bin --alpha A` or one of those");
                      RunContext ctx;
                      ctx.argv = argv;
                      ctx.plot = &brume::study::sky_fit_scatter;  // sky fit's --plot

@@ -1,0 +1,55 @@
+// brume — a camera frame and its LiDAR scan fogged by one medium (issue #41,
+// docs/lidar.md "A camera frame and its scan from one medium").
+//
+// Every camera effect that models a medium (haze, haze+dof, fog, aerial)
+// nests one shared block, "lidar", in its job table:
+//   --lidar IN.bin --lidar-out OUT.bin [--lidar-wavelength NM]
+//   [--lidar-tau-h, --lidar-p0, ... --lidar-seed: brume lidar fog's flags
+//    (brume/lidar_fog.hpp) less --visibility/--alpha, prefixed]
+// and add_camera_lidar(c) wraps the command's run, its command-line run,
+// its check and its summary once, for all of them: the scan is fogged with
+// α = the camera's extinction (camera_lidar_medium, from the command's
+// extinction hooks), its record block goes under "lidar", its input under
+// "inputs.lidar", and the foggy scan is written with the image, maps and
+// record, all or none (RunContext::files). `brume run` repeats both outputs.
+#pragma once
+
+#include <set>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "brume/command.hpp"
+#include "brume/lidar_fog.hpp"
+
+namespace brume {
+
+constexpr double kLidarWavelengthNm = 905.0;  // the common automotive LiDAR (Velodyne HDL-64E: 905 nm)
+
+struct CameraLidar {
+  std::string points;                        // --lidar: the frame's scan, KITTI .bin
+  std::string out;                           // --lidar-out: the foggy scan, KITTI .bin
+  double wavelength_nm = kLidarWavelengthNm; // --lidar-wavelength [nm]: a spectral medium's (aerial) extinction there
+  LidarFogParams fog;                        // --lidar-tau-h ... --lidar-seed (α is the camera's)
+};
+// Block "lidar"; brume lidar fog's flags with the prefix "lidar-", without
+// --visibility and --alpha.
+const ParamTable<CameraLidar>& camera_lidar_param_table();
+
+// The LiDAR's extinction from the camera's job: THE one place where the
+// camera's medium becomes the scan's α (the layered model enters here).
+struct CameraLidarMedium {
+  double alpha_per_m = 0.0;
+  std::string rule;  // how α follows from the camera's parameters, for the record
+};
+// Throws brume::Error naming the flags: a job without physical units
+// (haze in normalised kappas), a medium that is no medium (classic fog), a
+// medium that varies with height (not yet: issue #41 item 3), a spectral
+// medium's wavelength outside its model.
+CameraLidarMedium camera_lidar_medium(const CommandDef& c, const nlohmann::json& job, double wavelength_nm);
+
+// Wraps c's run, cli_run, check and report (c's table nests
+// camera_lidar_param_table(); its extinction hooks are set before the call).
+void add_camera_lidar(CommandDef& c);
+
+}  // namespace brume
