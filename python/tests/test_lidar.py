@@ -43,3 +43,28 @@ def test_lidar_fog_errors():
         brume.lidar.fog(pts * 255, alpha=0.1)
     with pytest.raises(ValueError, match="visibility"):
         brume.lidar.fog(pts)
+
+
+def test_camera_record_with_a_scan(demo, tmp_path):
+    """`brume haze --lidar`: the record's alpha is the camera's extinction;
+    brume.lidar.fog with that alpha gives the same scan; haze's job= of such a
+    record is refused (the arrays stand for no scan), of a record without one
+    it still replays."""
+    pts = scan(3000, seed=7)
+    pts.tofile(tmp_path / "in.bin")
+    d = demo["dir"]
+    run_cli("haze", "--image", d / "clean.png", "--range", d / "range.exr", "--visibility", 90,
+            "--lidar", tmp_path / "in.bin", "--lidar-out", tmp_path / "s.bin", "--lidar-seed", 3,
+            "--out", tmp_path / "o.png", "--record", tmp_path / "o.json")
+    import json
+    rec = json.load(open(tmp_path / "o.json"))
+    alpha = rec["lidar"]["alpha_per_m"]
+    assert alpha == rec["haze"]["derived"]["extinction_per_m"] == 3.912 / 90
+    r = brume.lidar.fog(pts, alpha=alpha, seed=3)
+    assert np.array_equal(r.points, np.fromfile(tmp_path / "s.bin", dtype=np.float32).reshape(-1, 4))
+    with pytest.raises(ValueError, match="brume run"):
+        brume.haze(demo["rgb"], demo["range"], job=rec["job"])
+    plain = brume.haze(demo["rgb"], demo["range"], visibility=90.0)
+    assert "lidar" not in plain.record
+    again = brume.haze(demo["rgb"], demo["range"], job=plain.record["job"])
+    assert np.array_equal(again.rgb, plain.rgb)
