@@ -377,6 +377,14 @@ class Transform:
             intr.setdefault("cy", (h - 1) / 2.0)
         rng = _depth_array(depth, (h, w), self.depth_kind, self.depth_unit, intr, depth_arg)
         rgb, kw = img.array, img.kw
+        chain = self._chain() if jobs is None or len(jobs) == 1 else None  # (a record of stages: in turn)
+        if chain is not None:  # the chain's own function: the range prepared once, one record `brume run` takes
+            f = getattr(_brume, chain["function"])
+            if jobs is not None:
+                r = f(rgb, rng, job=jobs[0], **kw)
+            else:
+                r = f(rgb, rng, **kw, **self._chain_keywords(chain, values))
+            return img.back(r.rgb), r.record
         records = []
         for i, s in enumerate(self._stages):
             if jobs is not None:
@@ -387,6 +395,28 @@ class Transform:
             rgb, kw = r.rgb, {}
         record = records[0] if len(records) == 1 else {"stages": records}
         return img.back(rgb), record
+
+    def _chain(self):
+        """A chain's command when it runs on arrays itself (haze+dof:
+        brume.haze_dof), else None (each stage's function in turn)."""
+        if len(self._commands) < 2:
+            return None
+        c = _COMMANDS.get("+".join(self._commands))
+        return c if c is not None and c.get("function") and c["arrays"] == ["rgb", "range"] else None
+
+    def _chain_keywords(self, chain, values):
+        """Each stage's fixed and drawn values as the chain's keywords: a later
+        stage's own parameters with the chain's prefix (dof_f_number), its
+        shared blocks' (the intrinsics) as they are."""
+        kw = {}
+        prefix = chain["stage_prefix"].replace("-", "_")
+        for i, (s, v) in enumerate(zip(self._stages, values)):
+            for name, x in list(s.fixed.items()) + list(v.items()):
+                key = name.replace("-", "_")
+                if i > 0 and prefix + key in chain["keywords"]:
+                    key = prefix + key
+                kw[key] = x
+        return kw
 
     # ---- replay ------------------------------------------------------------------------------
     def replay(self, params):

@@ -328,14 +328,39 @@ def test_dataloader_workers_0_and_2_give_the_same_samples():
 def test_haze_then_dof_equals_the_cli_chain(tmp_path):
     """HazeThenDof's draw run by `brume haze --dof-...` (the chain: the range
     prepared once, the hazy RGB handed to the DOF stage) gives the same bits;
-    the replay of its two-stage record too."""
+    its record is one haze+dof record, which replays and which `brume run`
+    repeats; a two-stage record of the earlier form still replays."""
     rgb, rng = _scene()
-    t = T.HazeThenDof(visibility=(150, 600), dof_focus_distance=(20, 80), seed=1)
+    t = T.HazeThenDof(visibility=(150, 600), dof_focus_distance=(20, 80), dof_f_number=2.8, seed=1)
     out = t(image=rgb, depth=rng, key="k")
     v = out["params"]["values"]
     assert set(v) == {"haze", "dof"} and 20 <= v["dof"]["focus-distance"] < 80
+    rec = out["params"]["record"]
+    assert rec["command"] == "haze+dof" and {"haze", "dof", "prepare"} <= set(rec["job"])
+    dof = rec["job"]["dof"]  # (the chain names its DOF block's values as its flags: dof-f-number)
+    assert dof["dof-f-number"] == 2.8 and dof["dof-focus-distance"] == v["dof"]["focus-distance"]
     np.testing.assert_array_equal(t.replay(json.loads(json.dumps(out["params"])))(image=rgb, depth=rng)["image"],
                                   out["image"])
+    # the record through the CLI: a haze+dof record of the same pixels as files with the record's job blocks
+    brume.write_image(tmp_path / "rgb.pfm", rgb, bits="float")
+    brume.write_image(tmp_path / "range.pfm", rng, bits="float", data=True)
+    run_cli("haze", "--image", tmp_path / "rgb.pfm", "--range", tmp_path / "range.pfm", "--out", tmp_path / "t.pfm",
+            "--bits", "float", "--dof-focus-distance", 10, "--dof-f-number", 2, "--dof-focal-length", 50,
+            "--dof-sensor-width", 36, "--record", tmp_path / "template.json")
+    cli = json.loads((tmp_path / "template.json").read_text())
+    assert cli["command"] == "haze+dof"
+    for block, values in rec["job"].items():
+        cli["job"].setdefault(block, {}).update(values)
+    cli["job"]["output"]["out"] = str(tmp_path / "r.pfm")
+    cli["job"]["output"]["record"] = ""
+    (tmp_path / "rec.json").write_text(json.dumps(cli))
+    run_cli("run", tmp_path / "rec.json")
+    np.testing.assert_array_equal(brume.read_image(tmp_path / "r.pfm").rgb, out["image"])
+    # params saved before HazeThenDof ran the chain's function: {"stages": [haze's record, dof's]}
+    h = brume.haze(rgb, rng, **v["haze"])
+    d = brume.dof(h.rgb, rng, **v["dof"])
+    old = dict(out["params"], record={"stages": [h.record, d.record]})
+    np.testing.assert_array_equal(t.replay(json.loads(json.dumps(old)))(image=rgb, depth=rng)["image"], d.rgb)
     brume.write_image(tmp_path / "rgb.pfm", rgb, bits="float")
     brume.write_image(tmp_path / "range.pfm", rng, bits="float", data=True)
     flags = []
