@@ -187,8 +187,9 @@ JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const 
       throw py::value_error(fn + "(): job: this record also fogged the LiDAR scan '" + vals.value("lidar", "") +
                             "'; repeat it with `brume run`, or fog the points with brume.lidar.fog(points, alpha=" +
                             "record['lidar']['alpha_per_m'], ...)");
-    const bool files = block == "input" || block == "output" || block == "depth" || block == "stereo" ||
-                       block == "lidar";
+    const bool files = block == "input" || block == "output" || block == "depth" || block == "stereo";
+    // The camera's LiDAR block ("lidar.lidar-…"); brume lidar fog's own "lidar" block is its parameters.
+    const auto camera_lidar = [&](const std::string& name) { return block == "lidar" && name.rfind("lidar", 0) == 0; };
     for (const auto& [name, v] : vals.items()) {
       const ParamSpec* d = nullptr;
       for (const ParamSpec& q : specs)
@@ -197,7 +198,7 @@ JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const 
           break;
         }
       if (!d) {
-        if (files) continue;
+        if (files || camera_lidar(name)) continue;
         throw py::value_error(fn + "(): job: '" + block + "." + name + "' is not a parameter of " + fn +
                               "; give the \"job\" of a record of the same command");
       }
