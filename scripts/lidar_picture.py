@@ -33,7 +33,7 @@ def read_bin(path):
     return a.reshape(-1, 4)
 
 
-def fog_mask(clear, foggy):
+def moved_to_fog(clear, foggy):
     if clear.shape != foggy.shape:
         raise SystemExit(f"the scans differ in point count: {len(clear)} and {len(foggy)}")
     return np.any(clear[:, :3] != foggy[:, :3], axis=1)
@@ -55,7 +55,7 @@ def read_calib(path):
 
 def bev(a):
     clear, foggy = read_bin(a.clear), read_bin(a.foggy)
-    fog = fog_mask(clear, foggy)
+    fog = moved_to_fog(clear, foggy)
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -98,7 +98,7 @@ def project(img_path, pts, fog, m, near, far):
 
 def proj(a):
     clear, foggy = read_bin(a.clear), read_bin(a.foggy)
-    fog = fog_mask(clear, foggy)
+    fog = moved_to_fog(clear, foggy)
     m = read_calib(a.calib)
     top = project(a.clear_image, clear, np.zeros(len(clear), bool), m, a.near, a.far)
     bottom = project(a.foggy_image, foggy, fog, m, a.near, a.far)
