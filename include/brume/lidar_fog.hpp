@@ -76,10 +76,11 @@
 // radians), one table per occupied bin at the middle s_c of its beams' s
 // (|s − s_c| ≤ Δ/2; exact for a bin whose beams share one elevation), each
 // built as the homogeneous table (same step, same Simpson cells) to its
-// farthest point, or less: once no later node can exceed the curve's
-// maximum so far (P(R) ≤ C_A·P0·(2/c)·δ_max/S·(L/2)·e^{−2F(R−L)}/(R−L)²,
-// δ_max the largest density along the bin's beams), the cut peak of every
-// farther point is that maximum. The cut tails are searched only at the
+// farthest point (at most kLidarLayeredRangeMax), or less: once no later
+// node can exceed the curve's maximum so far (P(R') ≤ K·e^{−2F(R−L)}/(R−L)²
+// ·min(δ_max·L/2, ½) for R' ≥ R, K = C_A·P0·(2/c)/S, δ_max the largest
+// density along the bin's beams), the cut peak of every farther point is
+// that maximum. The cut tails are searched only at the
 // nodes the points use, and only where the uncut curve still rises within
 // one pulse length. The hard attenuation is each point's own F (no bin).
 // The bin's error (docs/lidar.md): with Λ the density's largest slope
@@ -106,6 +107,7 @@ namespace brume {
 
 constexpr double kSpeedOfLight = 299792458.0;  // [m/s]
 constexpr int kLidarStepsPerPulse = 600;         // table steps per pulse length L = c·τ_H
+constexpr double kLidarLayeredRangeMax = 2000.0;  // [m] the farthest point a height-layered run tabulates
 constexpr double kLidarPaperRatioSr = 65.12460617192603;  // [sr] ln 20/0.046: the paper's β_b = 0.046/MOR as α/β_b
 
 // Where the scan lies in the fog's world (brume/camera.hpp: x east, y up,

@@ -3,6 +3,7 @@
 // fog" the pose, the elevation bins and their error bound).
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -18,6 +19,12 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+std::string metres(double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.6g", v);
+  return b;
+}
+
 // Along one beam from the scan's origin climbing at s = sin θ: the density
 // δ(r) = d.at(r·s) (d relative to the origin's height), the optical depth
 // F(r) from brume's fog integral, and the soft integrand without the
@@ -30,7 +37,9 @@ struct BeamIntegrand {
   std::vector<float> node_f;          // F at r_j
 
   double value(double r, float f) const {
-    return r <= r1 ? 0.0 : overlap(r, r1, r2) * d->at(r * s) * std::exp(-2.0 * static_cast<double>(f)) / (r * r);
+    if (r <= r1) return 0.0;
+    const double t = std::exp(-2.0 * static_cast<double>(f));
+    return t == 0.0 ? 0.0 : overlap(r, r1, r2) * d->at(r * s) * t / (r * r);  // no ∞·0 where the fog is opaque
   }
   double g(double r) const {
     const float rf = static_cast<float>(r), sf = static_cast<float>(s);
@@ -71,9 +80,11 @@ class BeamSoft {
     k_ = m.c_a * p.p0_w * ratio * 2.0 / kSpeedOfLight;
     const std::size_t n = kLidarStepsPerPulse;
     const std::size_t want = static_cast<std::size_t>(std::floor(r_end / h_)) + 3;
-    // P(R') ≤ k·δ_max·(L/2)·e^{−2F(R−L)}/(R−L)² for every R' ≥ R (ξ ≤ 1, the
-    // window's ∫sin² = L/2, F rising, δ_max the largest density on the beam).
-    const double bound_k = k_ * fog_max_density(d, 0.0, s * r_end) * 0.5 * m.pulse_m;
+    // For every R' ≥ R (ξ ≤ 1, sin² ≤ 1, 1/r² ≤ 1/(R−L)², F rising):
+    //   P(R') ≤ k·δ_max·(L/2)·e^{−2F(R−L)}/(R−L)²   (∫ sin² over the window = L/2,
+    //          δ_max the largest density on the beam), and
+    //   P(R') ≤ k·½·e^{−2F(R−L)}/(R−L)²             (∫ δ·e^{−2F} dr = ½ Δe^{−2F}: dF/dr = δ).
+    const double bound_k = std::min(k_ * fog_max_density(d, 0.0, s * r_end) * 0.5 * m.pulse_m, 0.5 * k_);
     constexpr std::size_t kChunk = 512;
     while (c_.size() < want) {
       const std::size_t from = c_.size(), to = std::min(want, from + kChunk);
@@ -174,6 +185,9 @@ Medium layered_medium(const LidarFogParams& p) {
 }  // namespace
 
 SoftCurve layered_soft_curve(const LidarFogParams& p, const LidarFogMedium& m, double range_end_m) {
+  if (!(range_end_m <= kLidarLayeredRangeMax))
+    throw Error("--soft-curve: the scan's farthest point is " + metres(range_end_m) + " m away; a height-layered "
+                "fog's curve is tabulated up to " + metres(kLidarLayeredRangeMax) + " m: drop the farther points");
   const Medium md = layered_medium(p);
   const double end = std::max(range_end_m, p.r2_m + m.pulse_m);
   const BeamSoft b(p, m, md.density, 0.0, end, false);
@@ -223,6 +237,13 @@ LidarFogStats layered_fog(const float* in, float* out, std::size_t n, const Lida
     fog_optical_depths(md.density, rf.data() + a, sf.data() + a, depth.data() + a,
                        std::min<std::size_t>(kBatch, n - a));
   }
+
+  // The tables reach each bin's farthest point (1-cm nodes): a point
+  // farther than any LiDAR's return is refused rather than tabulated.
+  for (std::size_t i = 0; i < n; ++i)
+    if (active[i] && range[i] > kLidarLayeredRangeMax)
+      throw Error(what + ": point " + std::to_string(i) + " is " + metres(range[i]) + " m away; a height-layered fog tabulates the soft return along each beam to its farthest point, up "
+                  "to " + metres(kLidarLayeredRangeMax) + " m (no LiDAR return is farther): drop the point or check the scan's units");
 
   // Bins of width Δ in s over the points that can turn into fog (R0 > R1,
   // intensity > 0); the others are attenuated here.
