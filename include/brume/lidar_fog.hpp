@@ -147,7 +147,7 @@ struct LidarFogParams {
                                        // --ramp-*, --table) and camera 2's pose (--camera-height, --pitch,
                                        // --roll, --yaw, --camera-x/z, --view-matrix); fog.profile is ignored
   LidarPose pose;                      // --kitti-calib or --sensor-height
-  double elevation_step_deg = 0.05;    // [deg] [0.001, 1], the width Δ of the elevation bins (in sin θ)
+  double elevation_step_deg = 0.1;     // [deg] [0.001, 1], the width Δ of the elevation bins (in sin θ)
 };
 const ParamTable<LidarFogParams>& lidar_fog_param_table();
 // Cross-field rules: exactly one of visibility and alpha, or a profile
