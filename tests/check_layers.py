@@ -16,7 +16,7 @@ Checks, on the source tree:
      the build lists (the CMakeLists.txt files that name fog's sources, its
      bench and its fuzz target count as one) and one more -- so that an effect
      costs its own files and one line. The LiDAR fog (include/brume/lidar_fog.hpp,
-     src/effects/lidar_fog*, its bench and fuzz target) is fog's by design and
+     src/effects/lidar_fog*, its bench, fuzz target and pictures) is fog's by design and
      not counted: its height-layered model takes fog's profiles, their flags
      and their optical-depth integral (issue #41), rather than copying them.
 Exit 1 with what is wrong.
@@ -42,7 +42,7 @@ FOG_OWN = re.compile(r"^(include/brume/(gpu_)?fog\.hpp|src/effects/fog[^/]*|src/
                      r"src/gpu/shaders/fog\.frag|src/shared/fog_math\.glsl|bench/bench_fog\.cpp|"
                      r"fuzz/fuzz_fog[^/]*|tests/.*|docs/.*|README\.md|CHANGELOG\.md)$")
 LIDAR_FOG = re.compile(r"^(include/brume/lidar_fog\.hpp|src/effects/lidar_fog[^/]*|bench/bench_lidar_fog\.cpp|"
-                       r"fuzz/fuzz_lidar_fog\.cpp)$")
+                       r"fuzz/fuzz_lidar_fog\.cpp|scripts/lidar_picture\.py)$")
 FOG_SYMBOL = re.compile(r"\b(FogParams|FogJob|GpuFog|run_fog\w*|fog_\w+)\b")
 
 
