@@ -369,11 +369,8 @@ TEST_F(LidarFogCli, RunsAndBrumeRunRepeatsIt) {
   const CliRun again = run("run " + p("first/o.json") + " --out-dir " + p("again"));
   ASSERT_EQ(again.status, 0) << again.output;
   for (const char* f : {"o.bin", "s.csv"}) {
-    std::ifstream a(p(std::string("first/") + f), std::ios::binary), b(p(std::string("again/") + f), std::ios::binary);
-    std::stringstream sa, sb;
-    sa << a.rdbuf();
-    sb << b.rdbuf();
-    EXPECT_TRUE(!sa.str().empty() && sa.str() == sb.str()) << f;
+    const std::string a = file_bytes(p(std::string("first/") + f)), b = file_bytes(p(std::string("again/") + f));
+    EXPECT_TRUE(!a.empty() && a == b) << f;
   }
 }
 

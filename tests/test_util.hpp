@@ -19,6 +19,7 @@
 #include <functional>
 #include <memory>
 #include <random>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -41,6 +42,14 @@ namespace brume::test {
 inline std::string data_path(const std::string& rel) { return std::string(BRUME_DATA_DIR) + "/" + rel; }
 
 inline bool have_data(const std::string& rel) { return std::filesystem::exists(data_path(rel)); }
+
+// A file's bytes ("" when it cannot be read).
+inline std::string file_bytes(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
 
 #define BRUME_REQUIRE_DATA(rel)                                                              \
   do {                                                                                       \

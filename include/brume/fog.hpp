@@ -140,6 +140,13 @@ FogDensity fog_density(const FogParams& p, const FogTable& table, double camera_
 // with ray_y the unit ray's world-up component, or a sky ray (sky = true)
 // integrated to infinity or over sky_distance_m as stated above.
 float fog_optical_depth(const FogDensity& d, float range_m, float ray_y, bool sky, float sky_distance_m);
+// The same for n scene rays at once (sky = false): out[i] along range_m[i]
+// metres of a ray climbing at ray_y[i], the density converted once for the
+// batch (the LiDAR fog's beams and soft-return tables, brume/lidar_fog.hpp).
+void fog_optical_depths(const FogDensity& d, const float* range_m, const float* ray_y, float* out, std::size_t n);
+// The largest density at heights u in [u0, u1] above the reference height
+// (exactly: the ends, the band's centre, the knots inside).
+double fog_max_density(const FogDensity& d, double u0, double u1);
 
 struct FogAnalysis {
   double range_max_m = 0.0, range_min_m = 0.0;

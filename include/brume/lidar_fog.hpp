@@ -56,6 +56,38 @@
 //     (the power quadratically through three nodes, the range linearly).
 //   * Peaks are the tables' node maxima: the range within h/2, the power
 //     within O(h²·P'') of the continuous peak.
+//
+// Height-layered fog (--profile; docs/lidar.md "Height-layered fog"): the
+// medium is a fog profile δ(y) [1/m] of brume's layered fog (brume/fog.hpp:
+// exponential, band, ramp, table, constant, the same FogParams fields), and
+// the scan is placed in the fog's world (y up) by a LidarPose. A beam from
+// the scan's origin at height y_s with world-up component s = sin θ (θ its
+// elevation) meets the density δ(y_s + r·s) at range r, and
+//   F(r) = ∫_0^r δ(y_s + t·s) dt = r · mean δ over [y_s, y_s + r·s]
+// (brume's fog integral: fog_optical_depths, the camera effects' own maths);
+//   i_hard = i·e^{−2F(R0)}                       (αR0 → F(R0))
+//   β_b(r) = δ(y_s + r·s)/S                       (S = --lidar-ratio, the
+//            extinction-to-backscatter ratio; auto ln 20/0.046 = 65.1 sr, the
+//            paper's β_b = 0.046/MOR with MOR = ln 20/δ, now local)
+//   P_soft(R; R0) = C_A·P0·(2/c)·∫_{R−L}^{min(R, R0)} sin²(π(R − r)/L)·g(r) dr,
+//   g(r) = ξ(r)·β_b(r)·e^{−2F(r)}/r²,
+// and the per-point rule above. The density along a beam depends on s and
+// y_s only: beams are binned by s in bins of Δ = --elevation-step (in
+// radians), one table per occupied bin at the middle s_c of its beams' s
+// (|s − s_c| ≤ Δ/2; exact for a bin whose beams share one elevation), each
+// built as the homogeneous table (same step, same Simpson cells) to its
+// farthest point (at most kLidarLayeredRangeMax), or less: once no later
+// node can exceed the curve's maximum so far (P(R') ≤ K·e^{−2F(R−L)}/(R−L)²
+// ·min(δ_max·L/2, ½) for R' ≥ R, K = C_A·P0·(2/c)/S, δ_max the largest
+// density along the bin's beams), the cut peak of every farther point is
+// that maximum. The cut tails are searched only at the
+// nodes the points use, and only where the uncut curve still rises within
+// one pulse length. The hard attenuation is each point's own F (no bin).
+// The bin's error (docs/lidar.md): with Λ the density's largest slope
+// |dδ/dy| over the beams' heights and δ_max its largest value,
+//   |P_peak(s) − P_peak(s_c)| ≤ C_A·P0·(2/c)/S·Λ·(Δ/2)·(L/2)·(1/R1 + δ_max).
+// A constant profile is the homogeneous model with α = --density, bit for
+// bit (the same code).
 #pragma once
 
 #include <cstddef>
@@ -67,12 +99,30 @@
 
 #include <nlohmann/json.hpp>
 
+#include "brume/camera.hpp"
+#include "brume/fog.hpp"
 #include "brume/params.hpp"
 
 namespace brume {
 
 constexpr double kSpeedOfLight = 299792458.0;  // [m/s]
 constexpr int kLidarStepsPerPulse = 600;         // table steps per pulse length L = c·τ_H
+constexpr double kLidarLayeredRangeMax = 2000.0;  // [m] the farthest point a height-layered run tabulates
+constexpr double kLidarPaperRatioSr = 65.12460617192603;  // [sr] ln 20/0.046: the paper's β_b = 0.046/MOR as α/β_b
+
+// Where the scan lies in the fog's world (brume/camera.hpp: x east, y up,
+// z south; heights are y). With a KITTI calibration the scan goes through
+// Tr_velo_to_cam and R0_rect into the rectified camera frame, to camera 2's
+// centre (P2's translation), and through the fog's camera pose
+// (FogParams::camera: --camera-height, --pitch, --roll, as the camera
+// effects take them) into the world, so a camera effect and the LiDAR see
+// the same fog. Without one the scan's z axis is up and its origin is at
+// --sensor-height.
+struct LidarPose {
+  std::string kitti_calib;                // --kitti-calib FILE (P2, R0_rect, Tr_velo_to_cam)
+  std::optional<double> sensor_height_m;  // [m] finite; world height of the scan's origin (no calib)
+};
+const ParamTable<LidarPose>& lidar_pose_param_table();
 
 // The parameters of the LiDAR fog, in physical units (the paper's defaults).
 struct LidarFogParams {
@@ -90,10 +140,32 @@ struct LidarFogParams {
   std::string noise = "on";            // on | off: the soft points' range noise
   double range_noise_m = 0.5;          // [m] >= 0, σ of that noise (brume's choice, docs/lidar.md)
   std::uint64_t seed = 0;              // the noise's seed (same seed, same scan)
+  std::optional<double> lidar_ratio_sr;  // [sr] > 0, S = extinction/backscatter; unset: β_b as above
+  // ---- height-layered fog (unset profile: the homogeneous fog above) ----
+  std::optional<FogProfile> profile;   // --profile exponential|band|ramp|table|constant
+  FogParams fog;                       // the profile's fields (--density, --falloff, --base-height, --band-*,
+                                       // --ramp-*, --table) and camera 2's pose (--camera-height, --pitch,
+                                       // --roll, --yaw, --camera-x/z, --view-matrix); fog.profile is ignored
+  LidarPose pose;                      // --kitti-calib or --sensor-height
+  double elevation_step_deg = 0.1;     // [deg] [0.001, 1], the width Δ of the elevation bins (in sin θ)
 };
 const ParamTable<LidarFogParams>& lidar_fog_param_table();
-// Cross-field rules: exactly one of visibility and alpha; R2 > R1.
+// Cross-field rules: exactly one of visibility and alpha, or a profile
+// without them; R2 > R1; at most one of --beta-b and --lidar-ratio (and no
+// --beta-b with a profile); the profile's fields as brume fog checks them;
+// the pose its profile needs (--kitti-calib with a camera height, or
+// --sensor-height), and nothing the run would ignore.
 void validate_lidar_fog(const LidarFogParams& p);
+
+// The layered LiDAR fog of a camera effect's fog (its profile, density
+// fields and camera pose) with the scan's pose; `base` gives the LiDAR's
+// own parameters (pulse, receiver, noise, seed). A constant profile needs no
+// pose (it is dropped). Classic OpenGL fog has no medium: an Error.
+LidarFogParams lidar_params_from_fog(const FogParams& fog, const LidarPose& pose, LidarFogParams base = {});
+
+// The scan's frame in the fog's world (needs a height-layered p): x_world =
+// rotation·x_scan + translation; reads --kitti-calib. Errors name the flag.
+RigidTransform lidar_world_from_scan(const LidarFogParams& p);
 
 // The constants a run derives from its parameters.
 struct LidarFogMedium {
@@ -104,6 +176,8 @@ struct LidarFogMedium {
   double c_a = 0.0;         // [m³/s] c·l_r·A_r/2
   double pulse_m = 0.0;     // [m] L = c·τ_H
 };
+// Homogeneous fog (or a constant profile, α = its density); a layered p
+// gives α = NaN and MOR = NaN, the other constants as for any fog.
 LidarFogMedium lidar_fog_medium(const LidarFogParams& p);
 
 // The uncut soft-target power P_soft(R) [W] at R_j = j·step_m, j = 0..n-1,
@@ -113,7 +187,8 @@ struct SoftCurve {
   std::vector<double> power_w;
   double peak_w = 0.0, peak_range_m = 0.0;
 };
-// The table from 0 to at least `range_end_m` (and at least R2 + L).
+// The table from 0 to at least `range_end_m` (and at least R2 + L). With a
+// height-layered p: the level beam's (s = 0 from the scan's origin).
 SoftCurve lidar_soft_curve(const LidarFogParams& p, double range_end_m);
 // "range_m,power_w\n" and one row a node (%.9g).
 std::string soft_curve_csv(const SoftCurve& c);
@@ -124,6 +199,11 @@ struct LidarFogStats {
   std::size_t zero_range = 0;        // points at R0 ≤ R1 (no overlap: attenuated only)
   double peak_w = 0.0, peak_range_m = 0.0;  // the uncut soft curve's maximum
   double table_ms = 0.0, points_ms = 0.0;
+  // Height-layered runs: the tables (one an occupied elevation bin), their
+  // nodes, the largest |s − s_c| of a beam from its table's s_c, and the
+  // scan's origin height and density there.
+  std::size_t tables = 0, table_nodes = 0;
+  double bin_offset_max = 0.0, origin_height_m = NAN, origin_density_per_m = NAN;
   nlohmann::json record() const;
 };
 

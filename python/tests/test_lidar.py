@@ -68,3 +68,21 @@ def test_camera_record_with_a_scan(demo, tmp_path):
     assert "lidar" not in plain.record
     again = brume.haze(demo["rgb"], demo["range"], job=plain.record["job"])
     assert np.array_equal(again.rgb, plain.rgb)
+
+
+def test_lidar_fog_layered_keywords(tmp_path):
+    """The height-layered fog's flags are keywords (from the same table):
+    the same scan as `brume lidar fog --profile ...`, bit for bit."""
+    pts = scan()
+    pts.tofile(tmp_path / "in.bin")
+    run_cli("lidar", "fog", "--points", tmp_path / "in.bin", "--profile", "exponential", "--density", 0.08,
+            "--falloff", 0.2, "--sensor-height", 1.7, "--seed", 3, "--out", tmp_path / "out.bin")
+    r = brume.lidar.fog(pts, profile="exponential", density=0.08, falloff=0.2, sensor_height=1.7, seed=3)
+    assert np.array_equal(r.points, np.fromfile(tmp_path / "out.bin", dtype=np.float32).reshape(-1, 4))
+    assert r.record["lidar"]["profile"] == "exponential"
+    assert r.record["lidar"]["alpha_per_m"] is None
+    assert r.record["lidar"]["origin_height_m"] == 1.7
+    with pytest.raises(ValueError, match="--profile exponential and --alpha"):
+        brume.lidar.fog(pts, profile="exponential", sensor_height=1.7, alpha=0.1)
+    with pytest.raises(ValueError, match="--sensor-height"):
+        brume.lidar.fog(pts, profile="exponential")

@@ -288,6 +288,23 @@ float fog_optical_depth(const FogDensity& d, float l, float ray_y, bool sky, flo
   return sky ? sh::brume_fog_sky(f, ray_y, sky_distance) : sh::brume_fog_along(f, l, ray_y);
 }
 
+void fog_optical_depths(const FogDensity& d, const float* range_m, const float* ray_y, float* out, std::size_t n) {
+  const sh::BrumeFog f = to_shared(d);
+  for (std::size_t i = 0; i < n; ++i) out[i] = sh::brume_fog_along(f, range_m[i], ray_y[i]);
+}
+
+double fog_max_density(const FogDensity& d, double u0, double u1) {
+  if (u1 < u0) std::swap(u0, u1);
+  double m = std::max(d.at(u0), d.at(u1));  // exponential: monotone
+  if (d.profile == FogProfile::band) {
+    if (u0 + d.band_offset <= 0.0 && u1 + d.band_offset >= 0.0) m = std::max(m, d.d0);  // monotone on each side
+  } else if (d.profile != FogProfile::exponential) {
+    for (std::size_t i = 0; i < d.knot_u.size(); ++i)
+      if (d.knot_u[i] > u0 && d.knot_u[i] < u1) m = std::max(m, d.knot_density[i]);
+  }
+  return m;
+}
+
 // ---- analysis and apply ------------------------------------------------------------------
 
 namespace {

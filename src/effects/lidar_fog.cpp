@@ -1,4 +1,6 @@
-// brume — the homogeneous LiDAR fog (brume/lidar_fog.hpp has the equations).
+// brume — the LiDAR fog: parameters, the homogeneous model and the entry
+// point (brume/lidar_fog.hpp has the equations; the height-layered model is
+// in lidar_fog_layered.cpp, the tables both use in lidar_fog_tables.hpp).
 #include "brume/lidar_fog.hpp"
 
 #include <algorithm>
@@ -7,15 +9,17 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include "brume/error.hpp"
+#include "effects/lidar_fog_tables.hpp"
 
 namespace brume {
 
-namespace {
+using namespace lidar_detail;
 
-constexpr double kPi = 3.14159265358979323846;
+namespace {
 
 std::string num(double v) {
   char b[64];
@@ -26,88 +30,26 @@ std::string num(double v) {
 // The overlap ξ(r) and the soft integrand's g(r) = ξ(r)·e^{−2αr}/r².
 struct Integrand {
   double r1, r2, alpha;
-  double xi(double r) const { return r <= r1 ? 0.0 : r >= r2 ? 1.0 : (r - r1) / (r2 - r1); }
+  double xi(double r) const { return overlap(r, r1, r2); }
   double g(double r) const { return r <= r1 ? 0.0 : xi(r) * std::exp(-2.0 * alpha * r) / (r * r); }
+  double node(std::size_t, double r) const { return g(r); }
+  double mid(std::size_t, double r) const { return g(r); }
 };
-
-// The cumulative integrals G_f(r_j), f ∈ {1, cos θ, sin θ}, θ = 2πr/L, at
-// r_j = j·h (h = L/n), by composite Simpson on each cell [r_j, r_j+1], a
-// cell holding R1 or R2 split there (ξ's kinks: Simpson is exact to
-// O(h^5·g'''') on each smooth piece).
-struct Cumulative {
-  double h = 0.0;
-  int n = kLidarStepsPerPulse;
-  std::vector<double> g0, gc, gs;  // size = nodes
-  std::vector<double> cos_node, sin_node;  // cos θ, sin θ at node j mod n
-};
-
-Cumulative cumulative(const Integrand& f, double pulse_m, std::size_t nodes) {
-  Cumulative c;
-  c.h = pulse_m / c.n;
-  c.g0.assign(nodes, 0.0);
-  c.gc.assign(nodes, 0.0);
-  c.gs.assign(nodes, 0.0);
-  c.cos_node.resize(c.n);
-  c.sin_node.resize(c.n);
-  std::vector<double> cos_mid(c.n), sin_mid(c.n);
-  for (int j = 0; j < c.n; ++j) {
-    c.cos_node[j] = std::cos(2.0 * kPi * j / c.n);
-    c.sin_node[j] = std::sin(2.0 * kPi * j / c.n);
-    cos_mid[j] = std::cos(2.0 * kPi * (j + 0.5) / c.n);
-    sin_mid[j] = std::sin(2.0 * kPi * (j + 0.5) / c.n);
-  }
-  const double w = 2.0 * kPi / pulse_m;
-  // Simpson on [a, b] of g·{1, cos, sin}.
-  auto simpson = [&](double a, double b, double& s0, double& sc, double& ss) {
-    const double m = 0.5 * (a + b), ga = f.g(a), gm = f.g(m), gb = f.g(b), k = (b - a) / 6.0;
-    s0 += k * (ga + 4 * gm + gb);
-    sc += k * (ga * std::cos(w * a) + 4 * gm * std::cos(w * m) + gb * std::cos(w * b));
-    ss += k * (ga * std::sin(w * a) + 4 * gm * std::sin(w * m) + gb * std::sin(w * b));
-  };
-  double prev_g = f.g(0.0);
-  for (std::size_t j = 0; j + 1 < nodes; ++j) {
-    const double a = j * c.h, b = (j + 1) * c.h;
-    double s0 = 0.0, sc = 0.0, ss = 0.0;
-    const double gb = f.g(b);
-    if (b <= f.r1) {
-      // g = 0 on the whole cell.
-    } else if ((a < f.r1 && f.r1 < b) || (a < f.r2 && f.r2 < b)) {
-      double cuts[4] = {a, 0, 0, 0};
-      int k = 1;
-      if (a < f.r1 && f.r1 < b) cuts[k++] = f.r1;
-      if (a < f.r2 && f.r2 < b) cuts[k++] = f.r2;
-      cuts[k++] = b;
-      for (int q = 0; q + 1 < k; ++q) simpson(cuts[q], cuts[q + 1], s0, sc, ss);
-    } else {
-      // A smooth cell: the node values come from the periodic tables.
-      const double m = 0.5 * (a + b), gm = f.g(m), kk = c.h / 6.0;
-      const std::size_t ja = j % c.n, jb = (j + 1) % c.n;
-      s0 = kk * (prev_g + 4 * gm + gb);
-      sc = kk * (prev_g * c.cos_node[ja] + 4 * gm * cos_mid[ja] + gb * c.cos_node[jb]);
-      ss = kk * (prev_g * c.sin_node[ja] + 4 * gm * sin_mid[ja] + gb * c.sin_node[jb]);
-    }
-    c.g0[j + 1] = c.g0[j] + s0;
-    c.gc[j + 1] = c.gc[j] + sc;
-    c.gs[j + 1] = c.gs[j] + ss;
-    prev_g = gb;
-  }
-  return c;
-}
 
 // The soft model of one run: the uncut curve at the nodes, its peak, and the
 // peak of the curve cut at each node below the uncut peak.
 class SoftModel {
  public:
-  SoftModel(const LidarFogParams& p, const LidarFogMedium& m, double range_end_m) : m_(m) {
+  SoftModel(const LidarFogParams& p, const LidarFogMedium& m, double range_end_m) : c_(m.pulse_m) {
     const Integrand f{p.r1_m, p.r2_m, m.alpha};
     const double h = m.pulse_m / kLidarStepsPerPulse;
     // The uncut maximum lies in [0, R2 + L]; one more pulse of nodes for the cut tails.
     const double end = std::max(range_end_m, p.r2_m + m.pulse_m) + 2 * h;
     nodes_ = static_cast<std::size_t>(std::ceil(end / h)) + 1;
-    c_ = cumulative(f, m.pulse_m, nodes_);
+    c_.extend(f, nodes_);
     k_ = m.c_a * p.p0_w * m.beta_b * 2.0 / kSpeedOfLight;
     uncut_.resize(nodes_);
-    for (std::size_t j = 0; j < nodes_; ++j) uncut_[j] = cut(j, j);
+    for (std::size_t j = 0; j < nodes_; ++j) uncut_[j] = c_.cut(k_, j, j);
     // The uncut peak, searched where it lies.
     const std::size_t search = std::min(nodes_, static_cast<std::size_t>(std::ceil((p.r2_m + m.pulse_m) / h)) + 2);
     peak_node_ = 0;
@@ -129,7 +71,7 @@ class SoftModel {
       std::size_t at = pre;
       if (k * h > p.r1_m)
         for (std::size_t j = k + 1; j < k + n && j < nodes_; ++j) {
-          const double v = cut(j, k);
+          const double v = c_.cut(k_, j, k);
           if (v > best) best = v, at = j;
         }
       near_peak_[k] = best;
@@ -153,56 +95,16 @@ class SoftModel {
       return;
     }
     const std::size_t k = static_cast<std::size_t>(u);
-    const double t = u - k;
-    // The power through nodes k-1, k, k+1 (quadratic: near R1 the peak grows
-    // like (R0 - R1)^2, which linear interpolation missed by 0.2 % at
-    // R0 = R1 + 5 cm); the range linearly between k and k+1.
-    if (k >= 1) {
-      const double a = near_peak_[k - 1], b = near_peak_[k], c = near_peak_[k + 1];
-      power = b + 0.5 * t * (c - a) + 0.5 * t * t * (a - 2 * b + c);
-    } else {
-      power = near_peak_[k] + t * (near_peak_[k + 1] - near_peak_[k]);
-    }
-    range = near_range_[k] + t * (near_range_[k + 1] - near_range_[k]);
+    interpolate_peak(k >= 1, k >= 1 ? near_peak_[k - 1] : 0.0, near_peak_[k], near_peak_[k + 1], near_range_[k],
+                     near_range_[k + 1], u - static_cast<double>(k), power, range);
   }
 
  private:
-  // P_soft(R_j; R0 = r_k) for k ≥ ... : the window [r_{j−n}, r_min(j,k)].
-  double cut(std::size_t j, std::size_t k) const {
-    const std::size_t n = kLidarStepsPerPulse;
-    const std::size_t top = std::min(j, k);
-    const bool low = j >= n;
-    const std::size_t lo = low ? j - n : 0;
-    if (low && lo >= top) return 0.0;
-    const double d0 = c_.g0[top] - (low ? c_.g0[lo] : 0.0);
-    const double dc = c_.gc[top] - (low ? c_.gc[lo] : 0.0);
-    const double ds = c_.gs[top] - (low ? c_.gs[lo] : 0.0);
-    const std::size_t q = j % n;
-    const double v = k_ * 0.5 * (d0 - c_.cos_node[q] * dc - c_.sin_node[q] * ds);
-    return v > 0.0 ? v : 0.0;  // rounding of a window with no fog in it
-  }
-
-  LidarFogMedium m_;
   Cumulative c_;
   double k_ = 0.0, h_ = 0.0;
   std::size_t nodes_ = 0, peak_node_ = 0;
   std::vector<double> uncut_, near_peak_, near_range_;
 };
-
-// Counter-based noise: the i-th point's draws depend on (seed, i) only, so
-// the result does not depend on threads or on which points became fog.
-std::uint64_t splitmix(std::uint64_t x) {
-  x += 0x9e3779b97f4a7c15ull;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-  return x ^ (x >> 31);
-}
-double unit(std::uint64_t x) { return ((x >> 11) + 0.5) * (1.0 / 9007199254740992.0); }  // (0, 1)
-double gaussian(std::uint64_t seed, std::uint64_t index, std::uint64_t draw) {
-  const std::uint64_t base = splitmix(splitmix(seed) ^ (index * 0xd1b54a32d192ed03ull) ^ (draw * 0x8cb92ba72f3d8dd7ull));
-  const double u1 = unit(base), u2 = unit(splitmix(base));
-  return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * kPi * u2);
-}
 
 double range_m(const float* q) {
   const double x = q[0], y = q[1], z = q[2];
@@ -211,15 +113,58 @@ double range_m(const float* q) {
 
 }  // namespace
 
+namespace lidar_detail {
+void throw_overflow(const float* in, long long index, const std::string& what) {
+  const float* q = in + 4 * index;
+  throw Error(what + ": point " + std::to_string(index) + " (intensity " + num(q[3]) + ", range " + num(range_m(q)) +
+              " m) gives a fog return whose intensity overflows float32; its intensity or range is not a LiDAR's: "
+              "drop the point or check the scan");
+}
+}  // namespace lidar_detail
+
+namespace {
+
+// The flags of a height-layered fog: the profile's fields and camera 2's
+// pose, nested from brume fog's table (the same names, units, ranges, help).
+const std::vector<std::string>& fog_fields() {
+  static const std::vector<std::string> v = {"density",   "falloff",     "base-height", "band-center",
+                                             "band-half-width", "ramp-bottom", "ramp-top", "table"};
+  return v;
+}
+const std::vector<std::string>& pose_fields() {
+  static const std::vector<std::string> v = {"yaw", "pitch", "roll", "camera-height", "camera-x", "camera-z",
+                                             "view-matrix"};
+  return v;
+}
+
+}  // namespace
+
+const ParamTable<LidarPose>& lidar_pose_param_table() {
+  static const ParamTable<LidarPose> t = [] {
+    ParamTable<LidarPose> d("lidar");
+    d.text("kitti-calib", &LidarPose::kitti_calib,
+           "KITTI calibration (P2, R0_rect, Tr_velo_to_cam) that places the scan in camera 2's frame, which "
+           "--camera-height, --pitch, --roll place in the fog (as the camera effects take them); for a --profile "
+           "that depends on height")
+        .real("sensor-height", &LidarPose::sensor_height_m, "m", Range::any(),
+              "without --kitti-calib: height of the scan's origin above the ground plane, the scan's z axis up; for "
+              "a --profile that depends on height",
+              "none");
+    return d;
+  }();
+  return t;
+}
+
 const ParamTable<LidarFogParams>& lidar_fog_param_table() {
   static const ParamTable<LidarFogParams> t = [] {
     ParamTable<LidarFogParams> d("lidar");
     d.real("visibility", &LidarFogParams::visibility_m, "m", Range::above(0.0),
-           "meteorological visibility V; alpha = 3.912/V (Koschmieder, as the camera effects); give it or --alpha",
+           "meteorological visibility V of a homogeneous fog; alpha = 3.912/V (Koschmieder, as the camera effects); "
+           "give it, --alpha or --profile",
            "none")
         .infinite()
         .real("alpha", &LidarFogParams::alpha_per_m, "1/m", Range::at_least(0.0),
-              "extinction coefficient alpha of the fog; give it or --visibility", "none")
+              "extinction coefficient alpha of a homogeneous fog; give it, --visibility or --profile", "none")
         .real("tau-h", &LidarFogParams::tau_h_ns, "ns", Range::left_open(0.0, 1000.0), "half-power pulse width tau_H")
         .real("p0", &LidarFogParams::p0_w, "W", Range::above(0.0), "peak power P0 of the pulse")
         .real("a-r", &LidarFogParams::a_r_m2, "m^2", Range::above(0.0), "receiver aperture A_r")
@@ -231,43 +176,208 @@ const ParamTable<LidarFogParams>& lidar_fog_param_table() {
         .real("r2", &LidarFogParams::r2_m, "m", Range::above(0.0),
               "range of full overlap (xi = 1 above; linear from --r1); must exceed --r1")
         .real("beta-b", &LidarFogParams::beta_b, "1/(m sr)", Range::at_least(0.0),
-              "backscatter coefficient of the fog; auto: 0.046/MOR with MOR = ln(20)/alpha (the paper's)")
+              "backscatter coefficient of a homogeneous fog; auto: 0.046/MOR with MOR = ln(20)/alpha (the paper's); "
+              "with --profile use --lidar-ratio")
         .real("intensity-scale", &LidarFogParams::intensity_scale, "1", Range::above(0.0),
               "multiplies the input's intensities into the model's [0, 255] (255: KITTI's reflectance in [0, 1]; "
               "1: a scan already in [0, 255]); a scan mostly above 255 after it is refused")
         .choice("noise", &LidarFogParams::noise, {"on", "off"}, "range noise on the points turned into fog")
         .real("range-noise", &LidarFogParams::range_noise_m, "m", Range::at_least(0.0),
               "standard deviation of that noise (Gaussian, redrawn below --r1)")
-        .count("seed", &LidarFogParams::seed, "1", Range::at_least(0.0), "seed of the noise (same seed, same scan)");
+        .count("seed", &LidarFogParams::seed, "1", Range::at_least(0.0), "seed of the noise (same seed, same scan)")
+        .real("lidar-ratio", &LidarFogParams::lidar_ratio_sr, "sr", Range::above(0.0),
+              "extinction-to-backscatter ratio S of the fog: beta_b = alpha/S, with --profile delta(y)/S (the local "
+              "density's); auto: the paper's 0.046/MOR, S = ln(20)/0.046 = 65.1 sr");
+    ParamSpec prof;
+    prof.name = "profile";
+    prof.kind = ParamKind::choice;
+    for (const auto& [e, name] : fog_profile_names()) prof.choices.emplace_back(name);
+    prof.optional = true;
+    prof.unset_word = "none";
+    prof.help =
+        "height-layered fog along each beam: brume fog's density profile (--density, --falloff, --base-height, "
+        "--band-*, --ramp-*, --table) with the scan's pose (--kitti-calib and --camera-height, or --sensor-height); "
+        "none: a homogeneous fog (--visibility or --alpha)";
+    d.custom(
+        prof,
+        [](const LidarFogParams& p) {
+          return p.profile ? nlohmann::json(enum_name(fog_profile_names(), *p.profile)) : nlohmann::json();
+        },
+        [](LidarFogParams& p, const nlohmann::json& v) {
+          if (v.is_null()) p.profile.reset();
+          else p.profile = parse_enum(fog_profile_names(), v.get<std::string>(), "--profile");
+        });
+    std::set<std::string> skip;
+    for (const auto& q : fog_param_table().params()) skip.insert(q.spec.name);
+    for (const auto& f : fog_fields()) skip.erase(f);
+    for (const auto& f : pose_fields()) skip.erase(f);
+    d.nest_except(&LidarFogParams::fog, fog_param_table(), skip)
+        .nest(&LidarFogParams::pose, lidar_pose_param_table())
+        .real("elevation-step", &LidarFogParams::elevation_step_deg, "deg", Range::closed(0.001, 1.0),
+              "with --profile: width of the elevation bins (in sin(elevation), as radians) that share one soft-return "
+              "table; a beam is at most half of it from its table's (docs/lidar.md: the error bound)");
     return d;
   }();
   return t;
 }
 
 void validate_lidar_fog(const LidarFogParams& p) {
-  lidar_fog_param_table().validate(p);
-  if (p.visibility_m.has_value() == p.alpha_per_m.has_value())
-    throw Error(p.visibility_m ? "--visibility and --alpha both given; give one of them (alpha = 3.912/V)"
-                               : "no fog given: use --visibility V (metres) or --alpha A (1/m)");
+  const ParamTable<LidarFogParams>& t = lidar_fog_param_table();
+  t.validate(p);
   if (!(p.r2_m > p.r1_m))
     throw Error("--r2 " + num(p.r2_m) + " must exceed --r1 " + num(p.r1_m) +
                 " (the overlap rises from 0 at R1 to 1 at R2); give --r2 greater than --r1");
+  if (p.beta_b && p.lidar_ratio_sr)
+    throw Error("--beta-b " + num(*p.beta_b) + " and --lidar-ratio " + num(*p.lidar_ratio_sr) +
+                " both set the fog's backscatter (beta_b = alpha/S); give one of them");
+  auto is_set = [&](const std::string& name) { return t.is_set(p, name, {}); };
+  if (!p.profile) {
+    if (p.visibility_m.has_value() == p.alpha_per_m.has_value())
+      throw Error(p.visibility_m ? "--visibility and --alpha both given; give one of them (alpha = 3.912/V)"
+                                 : "no fog given: use --visibility V (metres) or --alpha A (1/m), or a height-layered "
+                                   "fog with --profile");
+    std::vector<std::string> layered = fog_fields();
+    layered.insert(layered.end(), pose_fields().begin(), pose_fields().end());
+    layered.insert(layered.end(), {"kitti-calib", "sensor-height", "elevation-step"});
+    for (const std::string& f : layered)
+      if (is_set(f))
+        throw Error("--" + f + " describes a height-layered fog, which needs --profile (exponential, band, ramp, "
+                    "table or constant); the fog of --visibility or --alpha is homogeneous: drop --" + f +
+                    " or give --profile");
+    return;
+  }
+  const std::string prof = "--profile " + enum_name(fog_profile_names(), *p.profile);
+  if (p.alpha_per_m || p.visibility_m)
+    throw Error(prof + " and " + (p.alpha_per_m ? "--alpha" : "--visibility") +
+                " both give the fog: --alpha and --visibility are a homogeneous fog's extinction, --profile a "
+                "height-layered one's (its --density, ...); give one of them");
+  if (p.beta_b)
+    throw Error("--beta-b " + num(*p.beta_b) + " is one backscatter coefficient for a homogeneous fog; with " + prof +
+                " the backscatter follows the local density: give --lidar-ratio S instead (beta_b = delta(y)/S; the "
+                "paper's 0.046/MOR is S = 65.1 sr)");
+  FogParams f = p.fog;
+  f.profile = *p.profile;
+  f.classic = ClassicFog::none;
+  validate_fog(f);  // the profile's fields; a pose with --profile constant
+  if (*p.profile == FogProfile::constant) {
+    for (const char* n : {"kitti-calib", "sensor-height", "elevation-step"})
+      if (is_set(n))
+        throw Error(std::string("--") + n + " places the beams in the fog's heights, but " + prof +
+                    " does not depend on height; drop it");
+    return;
+  }
+  const CameraPose& cam = p.fog.camera;
+  if (!p.pose.kitti_calib.empty()) {
+    if (p.pose.sensor_height_m)
+      throw Error("--sensor-height and --kitti-calib both place the scan; with the calibration the LiDAR's height is "
+                  "camera 2's (--camera-height) plus the calibration's offset: give one of them");
+    if (std::isnan(cam.height_m) && cam.view_matrix_file.empty())
+      throw Error(prof + " with --kitti-calib needs camera 2's height above the ground: give --camera-height METRES "
+                  "(and --pitch, --roll, as the camera effects take them), or the whole pose with --view-matrix FILE");
+  } else {
+    for (const std::string& n : pose_fields())
+      if (is_set(n))
+        throw Error("--" + n + " poses camera 2, which only --kitti-calib relates to the scan; without a calibration "
+                    "the scan's z axis is up and --sensor-height places its origin: give --kitti-calib FILE or drop --" +
+                    n);
+    if (!p.pose.sensor_height_m)
+      throw Error(prof + " needs the LiDAR's height in the fog: give --sensor-height METRES (the scan's origin above "
+                  "the ground plane, its z axis up), or --kitti-calib FILE with --camera-height (camera 2's pose, as the "
+                  "camera effects take it)");
+  }
 }
+
+LidarFogParams lidar_params_from_fog(const FogParams& fog, const LidarPose& pose, LidarFogParams base) {
+  if (fog.classic != ClassicFog::none)
+    throw Error("--classic " + enum_name(classic_fog_names(), fog.classic) +
+                " is OpenGL's fog on the range, not a medium a LiDAR can see; use a height profile or --visibility");
+  base.visibility_m.reset();
+  base.alpha_per_m.reset();
+  base.beta_b.reset();
+  base.profile = fog.profile;
+  // Only the profile's fields and the pose travel (the image's airlight,
+  // blur and sky are the camera's).
+  base.fog = FogParams{};
+  const auto& t = fog_param_table();
+  for (const auto& names : {fog_fields(), pose_fields()})
+    for (const std::string& n : names) t.at(n).set(base.fog, t.at(n).get(fog));
+  base.pose = fog.profile == FogProfile::constant ? LidarPose{} : pose;
+  if (fog.profile == FogProfile::constant) base.fog.camera = CameraPose{};
+  return base;
+}
+
+static bool layered(const LidarFogParams& p) { return p.profile && *p.profile != FogProfile::constant; }
 
 LidarFogMedium lidar_fog_medium(const LidarFogParams& p) {
   validate_lidar_fog(p);
   LidarFogMedium m;
-  m.alpha = p.alpha_per_m ? *p.alpha_per_m : (std::isinf(*p.visibility_m) ? 0.0 : 3.912 / *p.visibility_m);
-  m.mor_m = m.alpha > 0 ? std::log(20.0) / m.alpha : INFINITY;
-  m.beta_b = p.beta_b ? *p.beta_b : 0.046 * m.alpha / std::log(20.0);  // 0.046/MOR
+  if (layered(p)) {
+    m.alpha = NAN;
+    m.mor_m = NAN;
+    m.beta_b = NAN;
+  } else {
+    m.alpha = p.profile ? p.fog.density_per_m  // constant: the homogeneous model, α = D0
+                        : p.alpha_per_m ? *p.alpha_per_m : (std::isinf(*p.visibility_m) ? 0.0 : 3.912 / *p.visibility_m);
+    m.mor_m = m.alpha > 0 ? std::log(20.0) / m.alpha : INFINITY;
+    m.beta_b = p.beta_b           ? *p.beta_b
+               : p.lidar_ratio_sr ? m.alpha / *p.lidar_ratio_sr
+                                  : 0.046 * m.alpha / std::log(20.0);  // 0.046/MOR
+  }
   m.beta0 = p.gamma / kPi;
   m.c_a = kSpeedOfLight * p.l_r * p.a_r_m2 / 2.0;
   m.pulse_m = kSpeedOfLight * p.tau_h_ns * 1e-9;
   return m;
 }
 
+RigidTransform lidar_world_from_scan(const LidarFogParams& p) {
+  validate_lidar_fog(p);
+  if (!layered(p))
+    throw Error("the scan's pose is used by a height-layered fog only (--profile other than constant)");
+  RigidTransform t;
+  if (p.pose.kitti_calib.empty()) {
+    // The scan's x forward (north), y left (west), z up: a proper rotation.
+    t.rotation.m[0][0] = 0, t.rotation.m[0][1] = -1, t.rotation.m[0][2] = 0;
+    t.rotation.m[1][0] = 0, t.rotation.m[1][1] = 0, t.rotation.m[1][2] = 1;
+    t.rotation.m[2][0] = -1, t.rotation.m[2][1] = 0, t.rotation.m[2][2] = 0;
+    t.translation = {0.0, *p.pose.sensor_height_m, 0.0};
+    return t;
+  }
+  const KittiCalib c = read_kitti_calib(p.pose.kitti_calib);
+  const std::string what = "--kitti-calib '" + p.pose.kitti_calib + "'";
+  for (const double* v : {c.P2, c.Tr})
+    for (int i = 0; i < 12; ++i)
+      if (!std::isfinite(v[i])) throw Error(what + ": a non-finite number in P2 or Tr_velo_to_cam");
+  for (int i = 0; i < 9; ++i)
+    if (!std::isfinite(c.R0[i])) throw Error(what + ": a non-finite number in R0_rect");
+  Mat3 r0, tr;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) r0.m[i][j] = c.R0[3 * i + j], tr.m[i][j] = c.Tr[4 * i + j];
+  const Mat3 a = r0 * tr;  // velodyne -> rectified camera, a rotation
+  const Mat3 g = a.transposed() * a;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      if (!(std::abs(g.m[i][j] - (i == j ? 1.0 : 0.0)) <= 1e-3))
+        throw Error(what + ": R0_rect times Tr_velo_to_cam's 3x3 part is not a rotation (its columns are not "
+                    "orthonormal within 1e-3); the file is not a KITTI calibration");
+  // Camera 2's centre in rectified camera-0 coordinates: P2 = K [I | t] (as depth's project_velodyne).
+  const double* P = c.P2;
+  const double fx = P[0], sk = P[1], cx = P[2], fy = P[5], cy = P[6], tz = P[11];
+  if (!(fx != 0.0 && fy != 0.0)) throw Error(what + ": P2's focal lengths must not be 0");
+  const double ty = (P[7] - cy * tz) / fy;
+  const double tx = (P[3] - sk * ty - cx * tz) / fx;
+  const Vec3 b = r0 * Vec3{c.Tr[3], c.Tr[7], c.Tr[11]};
+  const Vec3 in_cam2{b.x + tx, b.y + ty, b.z + tz};  // the scan's origin from camera 2's centre
+  const Camera cam = make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, 1, 1, p.fog.camera);
+  cam.require_height("--profile " + enum_name(fog_profile_names(), *p.profile) + " with --kitti-calib");
+  const RigidTransform wc = cam.world_from_camera();
+  t.rotation = wc.rotation * a;
+  t.translation = wc.apply(in_cam2);
+  return t;
+}
+
 SoftCurve lidar_soft_curve(const LidarFogParams& p, double range_end_m) {
   const LidarFogMedium m = lidar_fog_medium(p);
+  if (layered(p)) return layered_soft_curve(p, m, range_end_m);
   const SoftModel s(p, m, range_end_m);
   SoftCurve c;
   c.step_m = s.step();
@@ -290,14 +400,22 @@ std::string soft_curve_csv(const SoftCurve& c) {
 }
 
 nlohmann::json LidarFogStats::record() const {
-  return {{"points", points},
-          {"soft_points", soft},
-          {"soft_fraction", points ? static_cast<double>(soft) / points : 0.0},
-          {"points_within_r1", zero_range},
-          {"soft_peak_w", peak_w},
-          {"soft_peak_range_m", peak_range_m},
-          {"table_ms", table_ms},
-          {"points_ms", points_ms}};
+  nlohmann::json j = {{"points", points},
+                      {"soft_points", soft},
+                      {"soft_fraction", points ? static_cast<double>(soft) / points : 0.0},
+                      {"points_within_r1", zero_range},
+                      {"soft_peak_w", peak_w},
+                      {"soft_peak_range_m", peak_range_m},
+                      {"table_ms", table_ms},
+                      {"points_ms", points_ms}};
+  if (tables > 0 || std::isfinite(origin_height_m)) {
+    j["tables"] = tables;
+    j["table_nodes"] = table_nodes;
+    j["bin_offset_max_sin"] = bin_offset_max;
+    j["origin_height_m"] = origin_height_m;
+    j["origin_density_per_m"] = origin_density_per_m;
+  }
+  return j;
 }
 
 LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarFogParams& p, const std::string& what) {
@@ -319,6 +437,7 @@ LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarF
     throw Error("--intensity-scale " + num(p.intensity_scale) + ": " + num(100.0 * above / n) +
                 " % of the intensities of " + what + " times it exceed 255, the model's scale [0, 255]; KITTI's reflectance is in [0, 1] "
                 "(scale 255); for a scan already in [0, 255] give --intensity-scale 1");
+  if (layered(p)) return layered_fog(in, out, n, p, m, what);
   LidarFogStats st;
   st.points = n;
   if (!(m.alpha > 0.0)) {  // no fog: the scan as it is, bit for bit
@@ -330,9 +449,7 @@ LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarF
   const auto t1 = std::chrono::steady_clock::now();
   st.peak_w = s.peak_w();
   st.peak_range_m = s.peak_range();
-  const double hard_k = m.c_a * p.p0_w * m.beta0;  // P_hard,clear(R0) = hard_k·ξ(R0)/R0²
-  const Integrand f{p.r1_m, p.r2_m, m.alpha};
-  const bool noise = p.noise == "on" && p.range_noise_m > 0.0;
+  const PointRule rule(p, m);
   // Each point on its own (the noise is counter-based), so the loop runs on
   // every core with the same result -- for scans of a million points and
   // more: a KITTI scan (120 k) takes ~2.3 ms on one thread, and on the
@@ -349,39 +466,18 @@ LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarF
     const double x = q[0], y = q[1], z = q[2], inten = q[3];
     const double r0 = std::sqrt(x * x + y * y + z * z);
     const double att = std::exp(-2.0 * m.alpha * r0);
-    const float hard = static_cast<float>(inten * att);
     if (r0 <= p.r1_m || !(inten > 0.0)) {
       near += r0 <= p.r1_m;
-      o[0] = q[0], o[1] = q[1], o[2] = q[2], o[3] = hard;
+      o[0] = q[0], o[1] = q[1], o[2] = q[2], o[3] = static_cast<float>(inten * att);
       continue;
     }
     double peak_w, peak_r;
     s.peak(r0, peak_w, peak_r);
-    const double ratio = peak_w * r0 * r0 / (hard_k * f.xi(r0));
-    // i_soft > i_hard ⟺ ratio > e^{−2αR0} (both are i times a factor, i > 0).
-    if (!(ratio > att)) {
-      o[0] = q[0], o[1] = q[1], o[2] = q[2], o[3] = hard;
-      continue;
-    }
-    double r = peak_r;
-    if (noise) {
-      std::uint64_t draw = 0;
-      do r = peak_r + p.range_noise_m * gaussian(p.seed, i, draw++);
-      while (r < p.r1_m && draw < 64);
-      if (r < p.r1_m) r = peak_r;  // 64 draws below R1: σ ≫ the soft peak's range
-    }
-    const double k = r / r0;
-    o[0] = static_cast<float>(x * k), o[1] = static_cast<float>(y * k), o[2] = static_cast<float>(z * k);
-    o[3] = static_cast<float>(inten * ratio);
-    if (!std::isfinite(o[3])) overflow = std::min(overflow, ii);
-    ++soft;
+    bool over = false;
+    if (rule.place(q, o, i, r0, att, peak_w, peak_r, over)) ++soft;
+    if (over) overflow = std::min(overflow, ii);
   }
-  if (overflow < count) {
-    const float* q = in + 4 * overflow;
-    throw Error(what + ": point " + std::to_string(overflow) + " (intensity " + num(q[3]) + ", range " +
-                num(range_m(q)) + " m) gives a fog return whose intensity overflows float32; its intensity or range "
-                "is not a LiDAR's: drop the point or check the scan");
-  }
+  if (overflow < count) throw_overflow(in, overflow, what);
   const auto t2 = std::chrono::steady_clock::now();
   st.soft = soft;
   st.zero_range = near;

@@ -16,17 +16,38 @@ namespace fs = std::filesystem;
 // The medium's constants and the run's figures, for the record.
 nlohmann::json lidar_fog_record(const LidarFogParams& p, const LidarFogStats& st) {
   const LidarFogMedium m = lidar_fog_medium(p);
-  nlohmann::json j = {{"model", "Hahner et al. ICCV 2021, homogeneous fog (from the paper's equations)"},
-                      {"alpha_per_m", m.alpha},
-                      {"alpha_from", p.alpha_per_m ? "alpha" : "visibility (3.912/V)"},
-                      {"mor_m", std::isfinite(m.mor_m) ? nlohmann::json(m.mor_m) : nlohmann::json(nullptr)},
-                      {"beta_b_per_m_sr", m.beta_b},
-                      {"beta0_per_sr", m.beta0},
-                      {"c_a_m3_per_s", m.c_a},
-                      {"pulse_length_m", m.pulse_m},
-                      {"table_step_m", m.pulse_m / kLidarStepsPerPulse},
-                      {"seed", p.seed},
-                      {"noise", p.noise}};
+  auto finite_or_null = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
+  const bool layered = p.profile && *p.profile != FogProfile::constant;
+  nlohmann::json j = {
+      {"model", layered ? "Hahner et al. ICCV 2021 (from the paper's equations) with brume's height-layered fog "
+                          "along each beam"
+                        : "Hahner et al. ICCV 2021, homogeneous fog (from the paper's equations)"},
+      {"alpha_per_m", finite_or_null(m.alpha)},
+      {"alpha_from", layered      ? "profile (per beam: optical depth along it)"
+                     : p.profile  ? "profile constant (its density)"
+                     : p.alpha_per_m ? "alpha"
+                                     : "visibility (3.912/V)"},
+      {"mor_m", finite_or_null(m.mor_m)},
+      {"beta_b_per_m_sr", finite_or_null(m.beta_b)},
+      {"lidar_ratio_sr", p.lidar_ratio_sr ? *p.lidar_ratio_sr : kLidarPaperRatioSr},
+      {"beta0_per_sr", m.beta0},
+      {"c_a_m3_per_s", m.c_a},
+      {"pulse_length_m", m.pulse_m},
+      {"table_step_m", m.pulse_m / kLidarStepsPerPulse},
+      {"seed", p.seed},
+      {"noise", p.noise}};
+  if (p.profile) j["profile"] = enum_name(fog_profile_names(), *p.profile);
+  if (layered) {
+    const RigidTransform t = lidar_world_from_scan(p);
+    nlohmann::json rot = nlohmann::json::array();
+    for (const auto& row : t.rotation.m) rot.push_back({row[0], row[1], row[2]});
+    j["world_from_scan"] = {{"rotation", rot},
+                            {"translation_m", {t.translation.x, t.translation.y, t.translation.z}},
+                            {"from", p.pose.kitti_calib.empty()
+                                         ? "--sensor-height (the scan's z axis up)"
+                                         : "--kitti-calib (Tr_velo_to_cam, R0_rect, P2) and camera 2's pose"}};
+    j["elevation_step_deg"] = p.elevation_step_deg;
+  }
   j.update(st.record());
   return j;
 }
@@ -47,7 +68,8 @@ const ParamTable<LidarFogJob>& lidar_fog_job_table() {
         .text("record", &LidarFogJob::record, "write a JSON record that `brume run` repeats")
         .writes_file()
         .text("soft-curve", &LidarFogJob::soft_curve,
-              "write the uncut soft-target power P_soft(R) as CSV range_m,power_w (0 to the scan's farthest point)")
+              "write the uncut soft-target power P_soft(R) as CSV range_m,power_w (0 to the scan's farthest point); with "
+              "--profile the level beam's, from the scan's origin")
         .writes_file();
     return d;
   }();
@@ -69,6 +91,10 @@ nlohmann::json run_lidar_fog_job(const LidarFogJob& job, const RunContext& ctx) 
   const LidarFogStats st = lidar_fog(in.data(), out.data(), n, job.fog, "--points '" + job.points + "'");
 
   nlohmann::json inputs = {{"points", {{"path", job.points}, {"sha256", sha256_file(job.points)}, {"points", n}}}};
+  if (job.fog.profile && !job.fog.pose.kitti_calib.empty())
+    inputs["kitti_calib"] = {{"path", job.fog.pose.kitti_calib}, {"sha256", sha256_file(job.fog.pose.kitti_calib)}};
+  if (job.fog.profile == FogProfile::table)
+    inputs["fog_table"] = {{"path", job.fog.fog.table_file}, {"sha256", sha256_file(job.fog.fog.table_file)}};
   const nlohmann::json rec =
       job_record("lidar fog", ctx, lidar_fog_job_table().to_json(job), inputs, {{"lidar", lidar_fog_record(job.fog, st)}},
                  false);
@@ -98,9 +124,15 @@ CommandDef lidar_fog_command() {
       .run = [](const LidarFogJob& j, const ExecOptions&, const RunContext& ctx) { return run_lidar_fog_job(j, ctx); },
       .report = [](const LidarFogJob& j, const nlohmann::json& rec) {
         const auto& l = rec["lidar"];
-        std::fprintf(stderr, "brume lidar fog: %s  alpha %.4g 1/m  %zu of %zu points turned into fog (%.2f %%)\n",
-                     j.out.c_str(), l["alpha_per_m"].get<double>(), l["soft_points"].get<std::size_t>(),
-                     l["points"].get<std::size_t>(), 100 * l["soft_fraction"].get<double>());
+        char medium[96];
+        if (l["alpha_per_m"].is_number())
+          std::snprintf(medium, sizeof medium, "alpha %.4g 1/m", l["alpha_per_m"].get<double>());
+        else
+          std::snprintf(medium, sizeof medium, "profile %s, %zu tables", l["profile"].get<std::string>().c_str(),
+                        l["tables"].get<std::size_t>());
+        std::fprintf(stderr, "brume lidar fog: %s  %s  %zu of %zu points turned into fog (%.2f %%)\n", j.out.c_str(),
+                     medium, l["soft_points"].get<std::size_t>(), l["points"].get<std::size_t>(),
+                     100 * l["soft_fraction"].get<double>());
       },
   });
   // Visibility log-uniform over 50-1000 m: alpha 0.0039-0.078 1/m, which holds
@@ -112,9 +144,15 @@ CommandDef lidar_fog_command() {
   c.sampling = make_sampling<LidarFogParams>(
       lidar_fog_param_table(), {{"visibility", "loguniform(50, 1000)", {"alpha"}}},
       [](const LidarFogParams& p, const std::set<std::string>&) { validate_lidar_fog(p); });
-  c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {
+  c.extinction_per_m = [](const nlohmann::json& job, double height_m) -> std::optional<double> {
     LidarFogJob j;
     lidar_fog_job_table().from_json(j, job, "job");
+    if (j.fog.profile) {  // the profile's density at that height (brume fog's)
+      FogParams f = j.fog.fog;
+      f.profile = *j.fog.profile;
+      const FogTable table = f.profile == FogProfile::table ? read_fog_table(f.table_file) : FogTable{};
+      return fog_density(f, table, 0.0).at(height_m);
+    }
     if (!j.fog.visibility_m && !j.fog.alpha_per_m) return std::nullopt;  // no fog given yet
     return lidar_fog_medium(j.fog).alpha;
   };
@@ -125,7 +163,9 @@ CommandDef lidar_fog_command() {
       "lidar_fog", "brume.lidar.fog",
       "Fog on a LiDAR scan (Hahner et al. 2021, homogeneous): points is an (N, 4) float32 array of x, y, z [m] and "
       "intensity (KITTI reflectance in [0, 1] with the default intensity_scale 255). Returns the foggy (N, 4) points: "
-      "attenuated returns and returns moved to the fog's peak. Exactly one of visibility, alpha. As `brume lidar fog`.",
+      "attenuated returns and returns moved to the fog's peak. Exactly one of visibility, alpha; or a height-layered fog: "
+      "profile with its fields (density, falloff, ...) and the scan's pose (kitti_calib with camera_height, or "
+      "sensor_height). As `brume lidar fog`.",
       {{"points", 1, false, ArrayArg::As::view}}, call, {"points", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<LidarFogParams>& k, const Exec&, const std::set<std::string>&) {
         const ConstImageView& v = in[0].view;
