@@ -126,6 +126,41 @@ TEST_F(LidarCamera, HazeOnTheKittiFrame) {
                          velo, "haze --visibility 80", "--lidar-noise off", "--visibility 80 --noise off");
 }
 
+// Fog with a height profile on the KITTI frame: the scan in the same layered
+// fog (brume lidar fog --profile with the same density fields, calibration and
+// camera pose) to the bit; no one alpha in the record, the profile instead;
+// brume run repeats both. Without --kitti-calib the scan has no pose: refused.
+TEST_F(LidarCamera, LayeredFogOnTheKittiFrame) {
+  if (!have_data(kKittiDir)) GTEST_SKIP() << "no " << data_path(kKittiDir) << " (../shared/data)";
+  const std::string k = data_path(kKittiDir), velo = k + "/velodyne/000001.bin", calib = k + "/calib/000001.txt";
+  const std::string fog = " --profile exponential --density 0.08 --falloff 0.3 --camera-height 1.65 --pitch 1";
+  fs::create_directories(p("first"));
+  const CliRun r = run("fog --image " + k + "/image_2/000001.png --velodyne " + velo + " --kitti-calib " + calib + fog +
+                       " --lidar " + velo + " --lidar-out " + p("first/s.bin") + " --lidar-seed 2 --out " +
+                       p("first/o.png") + " --record " + p("first/o.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const nlohmann::json rec = read_json(p("first/o.json"));
+  EXPECT_TRUE(rec["lidar"]["alpha_per_m"].is_null());
+  EXPECT_EQ(rec["lidar"]["profile"], "exponential");
+  EXPECT_GT(rec["lidar"]["soft_points"].get<int>(), 0);
+  const CliRun l = run("lidar fog --points " + velo + " --kitti-calib " + calib + fog + " --seed 2 --out " + p("l.bin"));
+  ASSERT_EQ(l.status, 0) << l.output;
+  const std::string foggy = bytes_of(p("first/s.bin"));
+  EXPECT_TRUE(foggy == bytes_of(p("l.bin")));
+  const CliRun again = run("run " + p("first/o.json") + " --out-dir " + p("again"));
+  ASSERT_EQ(again.status, 0) << again.output;
+  EXPECT_TRUE(foggy == bytes_of(p("again/s.bin")));
+  expect_same_pixels(p("first/o.png"), p("again/o.png"));
+}
+
+TEST_F(LidarCamera, LayeredFogNeedsTheScansPose) {
+  const CliRun r = run("fog --image " + img + " --range " + range + " --profile exponential --camera-height 1.6 "
+                       "--fov-y 40 --lidar " + scan + " --lidar-out " + p("s.bin") + " --out " + p("o.png"));
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("--kitti-calib"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p("s.bin")) || fs::exists(p("o.png")));
+}
+
 // The other media: fog's constant profile (alpha = its density), the chain
 // (haze's), aerial at 905 nm (Rayleigh + Mie written out here, double).
 TEST_F(LidarCamera, FogChainAndAerialGiveTheirExtinction) {
@@ -209,7 +244,8 @@ TEST(LidarCameraMedium, FromEachCommandsJob) {
   EXPECT_NE(error_of([&] { camera_lidar_medium(*haze, haze->defaults, 905); }).find("metres"), std::string::npos);
   EXPECT_EQ(camera_lidar_medium(*fog, fog->build({{"profile", "constant"}, {"density", 0.01}}), 905).alpha_per_m,
             0.01);
-  EXPECT_NE(error_of([&] { camera_lidar_medium(*fog, fog->defaults, 905); }).find("--profile"), std::string::npos);
+  // a height profile has no one alpha: the model integrates it along each beam
+  EXPECT_TRUE(std::isnan(camera_lidar_medium(*fog, fog->defaults, 905).alpha_per_m));
   // Every command with the lidar block has a medium hook; those without have no block.
   for (const CommandDef& c : commands()) {
     SCOPED_TRACE(c.name);

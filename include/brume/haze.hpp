@@ -52,6 +52,7 @@
 #include "brume/lidar_camera.hpp"
 #include "brume/params.hpp"
 #include "brume/pipeline.hpp"
+#include "brume/sky_rule.hpp"
 
 namespace brume {
 
@@ -60,9 +61,8 @@ Composite parse_composite(const std::string& s);
 std::string to_string(Composite c);
 const EnumNames<Composite>& composite_names();
 
-// Where the sky lies (see above): auto, or Hansard's S_max whatever the units.
-enum class SkyRule { automatic, s_max };
-const EnumNames<SkyRule>& sky_rule_names();
+// Where the sky lies (see above): auto, or Hansard's S_max whatever the units
+// (SkyRule, brume/sky_rule.hpp).
 
 struct HazeParams {
   double kappa_a = 0.0;      // [1] absorption, normalised kappa_a R_max, >= 0

@@ -100,7 +100,7 @@
 #include <nlohmann/json.hpp>
 
 #include "brume/camera.hpp"
-#include "brume/fog.hpp"
+#include "brume/fog_params.hpp"
 #include "brume/params.hpp"
 
 namespace brume {

@@ -288,7 +288,8 @@ class ParamTable {
       for (std::string& a : sp.aliases) a = prefix + a;
       // One block for the prefixed flags in records and --help ("sky-" -> "sky").
       sp.block = prefix.size() > 1 && prefix.back() == '-' ? prefix.substr(0, prefix.size() - 1) : prefix;
-      sp.help = prefix_flag_mentions(sp.help, prefix, [&sub](const std::string& n) { return sub.declares(n); });
+      sp.help = prefix_flag_mentions(sp.help, prefix,
+                                     [&sub, &skip](const std::string& n) { return sub.declares(n) && !skip.count(n); });
       if (find(sp.name)) throw Error("internal: parameter '" + sp.name + "' declared twice in " + block_);
       params_.push_back({std::move(sp), [m, g = q.get](const P& p) { return g(p.*m); },
                          [m, s = q.set](P& p, const nlohmann::json& v) { s(p.*m, v); }});

@@ -9,11 +9,25 @@
 #include <vector>
 
 #include "brume/error.hpp"
+#include "brume/fog.hpp"
 #include "brume/io.hpp"
 
 namespace brume {
 
 namespace fs = std::filesystem;
+
+namespace {
+// brume lidar fog's medium and pose flags: on a camera effect the medium is
+// the camera's (its --visibility, --density, --profile ... and its pose), so
+// they are not the LiDAR block's.
+std::set<std::string> medium_names() {
+  std::set<std::string> s = {"visibility", "alpha", "profile"};
+  for (const auto& d : lidar_fog_param_table().params())
+    if (fog_param_table().declares(d.spec.name) || lidar_pose_param_table().declares(d.spec.name))
+      s.insert(d.spec.name);
+  return s;
+}
+}  // namespace
 
 const ParamTable<CameraLidar>& camera_lidar_param_table() {
   static const ParamTable<CameraLidar> t = [] {
@@ -27,7 +41,7 @@ const ParamTable<CameraLidar>& camera_lidar_param_table() {
         .real("lidar-wavelength", &CameraLidar::wavelength_nm, "nm", Range::closed(380.0, 2000.0),
               "the LiDAR's wavelength, where a spectral medium's extinction is taken (aerial: Rayleigh + Mie); "
               "grey media (haze, fog) are the same at every wavelength and refuse it")
-        .nest(&CameraLidar::fog, lidar_fog_param_table(), "lidar-", {"visibility", "alpha"});
+        .nest(&CameraLidar::fog, lidar_fog_param_table(), "lidar-", medium_names());
     return d;
   }();
   return t;
@@ -60,11 +74,13 @@ std::string lidar_flags(const std::string& text) {
 }
 
 CameraLidarMedium medium_of(const Hooks& h, const nlohmann::json& job, double wavelength_nm) {
-  if (h.layered && h.layered(job))
-    throw Error("--lidar: this " + h.name + " job's medium varies with height (a --profile other than constant); "
-                "the scan's layered fog (the optical depth along each beam, issue #41 item 3) is not in this build "
-                "yet: use --profile constant --density D (alpha = D), or fog the image alone");
   CameraLidarMedium m;
+  if (h.layered && h.layered(job)) {  // no one alpha: brume fog's integral along each beam (lidar_params_from_fog)
+    m.alpha_per_m = NAN;
+    m.rule = "the camera's height profile, integrated along each beam (the scan placed by --kitti-calib and the "
+             "camera's pose)";
+    return m;
+  }
   std::optional<double> a;
   if (h.spectral) {
     a = h.spectral(job, wavelength_nm);
@@ -119,9 +135,29 @@ Checked check_lidar(const Hooks& h, const nlohmann::json& job, const std::set<st
                 " is grey (its extinction is the same at every wavelength), so the wavelength would change "
                 "nothing; drop it");
   r.medium = medium_of(h, job, L.wavelength_nm);
-  r.params = L.fog;
-  r.params.visibility_m.reset();
-  r.params.alpha_per_m = r.medium.alpha_per_m;
+  if (std::isnan(r.medium.alpha_per_m)) {
+    // A height profile: the fog job's profile and pose, the scan placed by
+    // the depth block's --kitti-calib (Tr_velo_to_cam, R0_rect, P2) relative
+    // to camera 2, whose pose the fog already takes.
+    FogJob f;
+    fog_job_table().from_json(f, job, "job");
+    if (f.input.depth.kitti_calib.empty())
+      throw Error("--lidar with --profile " + enum_name(fog_profile_names(), f.fog.profile) +
+                  ": the fog varies with height, so the scan needs its pose in the camera's world; give "
+                  "--kitti-calib FILE (its Tr_velo_to_cam and R0_rect place the scan relative to camera 2, whose "
+                  "--camera-height, --pitch and --roll the fog takes), or use --profile constant --density D");
+    LidarPose pose;
+    pose.kitti_calib = f.input.depth.kitti_calib;
+    try {
+      r.params = lidar_params_from_fog(f.fog, pose, L.fog);
+    } catch (const Error& e) {
+      throw Error(lidar_flags(e.what()));
+    }
+  } else {
+    r.params = L.fog;
+    r.params.visibility_m.reset();
+    r.params.alpha_per_m = r.medium.alpha_per_m;
+  }
   try {
     validate_lidar_fog(r.params);
   } catch (const Error& e) {
@@ -181,10 +217,11 @@ void add_camera_lidar(CommandDef& c) {
     if (inner) inner(job, rec);
     if (!rec.is_object() || !rec.contains("lidar") || !rec["lidar"].contains("soft_points")) return;
     const auto& l = rec["lidar"];
-    std::fprintf(stderr, "  and its scan: %s  alpha %.4g 1/m  %zu of %zu points turned into fog (%.2f %%)\n",
-                 job["lidar"].value("lidar-out", "").c_str(), l["alpha_per_m"].get<double>(),
-                 l["soft_points"].get<std::size_t>(), l["points"].get<std::size_t>(),
-                 100 * l["soft_fraction"].get<double>());
+    const std::string medium = l["alpha_per_m"].is_number() ? "alpha " + num6(l["alpha_per_m"].get<double>()) + " 1/m"
+                                                             : "the profile along each beam";
+    std::fprintf(stderr, "  and its scan: %s  %s  %zu of %zu points turned into fog (%.2f %%)\n",
+                 job["lidar"].value("lidar-out", "").c_str(), medium.c_str(), l["soft_points"].get<std::size_t>(),
+                 l["points"].get<std::size_t>(), 100 * l["soft_fraction"].get<double>());
   };
 }
 
