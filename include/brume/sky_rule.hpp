@@ -2,7 +2,7 @@
 // auto (identified sky at infinity in physical units, or --sky-distance), or
 // Hansard's S_max whatever the units (the rule of records before schema 3).
 // Its own header so that the parameter blocks that hold it (haze, fog, and
-// the LiDAR's fog through fog_params.hpp) include no effect's whole header.
+// the LiDAR's, through the fog's parameter header) include no effect's whole header.
 #pragma once
 
 #include "brume/params.hpp"

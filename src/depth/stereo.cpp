@@ -218,7 +218,7 @@ std::array<double, 3> fit_plane(const std::vector<std::array<double, 3>>& pts, c
 // of `b` in Hamming distance. With the popcnt instruction where the CPU has
 // it (GCC/Clang clones; the baseline x86-64 has none): OpenCV's
 // cross-checked BFMatcher took ~100 ms on 1500 x 1500 descriptors here,
-// this ~5 ms. GCC only, as fog_fast.cpp's clones: Clang's sanitizer builds
+// this ~5 ms. GCC only, as the fog's fast rows' clones: Clang's sanitizer builds
 // instrument the clones' ifunc resolver, which runs before ThreadSanitizer
 // is set up (the TSan suite's test binary crashed at start-up).
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
