@@ -174,10 +174,9 @@ def browser(brume, tmp, screenshot, bench):
         if bench:
             set_values({"visibility": "300", "lambda": "15"})
             times = []
-            for vis in ["310", "320", "330", "340", "350"]:
+            for vis in ["310", "320", "330"]:
                 set_values({"visibility": vis})
                 times.append(d.execute_script("return brume.frameMs()"))
-            it = d.execute_script("return brume.record().haze ? 0 : 0")
             print(json.dumps({"width": w, "height": h, "frame_ms": times,
                               "median_ms": sorted(times)[len(times) // 2],
                               "renderer": d.execute_script("return document.getElementById('time').textContent")}))
@@ -191,25 +190,28 @@ def browser(brume, tmp, screenshot, bench):
                 a = np.frombuffer(f.read(), dtype="<f4" if scale < 0 else ">f4").reshape(hh, ww, 3 if kind == b"PF" else 1)
                 return a[::-1]  # PFM rows bottom-up
 
-        for lam in ["0", "15"]:
-            values = {"visibility": "300", "lambda": lam}
-            set_values(values)
+        def same_as_cpu(effect, flags):
+            """The page's frame (float and 8-bit) against `brume <effect> --backend cpu` with the same flags;
+            returns the CPU's 8-bit image. Bounds: 1e-3 linear RMS, 2/255 in 8 bits (the issue's). The browser's
+            float32 passes follow the CPU's order of operations but not its exp/log/pow (SwiftShader's); the
+            uniforms travel exactly (JSON doubles rounded to float as the native backend rounds them): the
+            frames agree to ~1e-7."""
             f32, u8 = pixels("f32"), pixels("u8")
-            args = [brume, "haze", "--backend", "cpu", "--image", "clean.png", "--range", "range.exr",
-                    "--visibility", "300", "--lambda", lam]
+            args = [brume, effect, "--backend", "cpu", "--image", "clean.png", "--range", "range.exr"] + flags
             subprocess.run(args + ["--out", "cpu.pfm"], cwd=tmp, check=True, stderr=subprocess.DEVNULL)
             subprocess.run(args + ["--out", "cpu.png"], cwd=tmp, check=True, stderr=subprocess.DEVNULL)
             ref = pfm(os.path.join(tmp, "cpu.pfm"))
             ref8 = np.asarray(Image.open(os.path.join(tmp, "cpu.png")).convert("RGB"))
             rms = float(np.sqrt(np.mean((f32.astype(np.float64) - ref) ** 2)))
             rms8 = float(np.sqrt(np.mean((u8.astype(np.float64) - ref8) ** 2)))
-            # 1e-3 linear, 2/255 in 8 bits: the issue's bounds. The browser's
-            # float32 passes follow the CPU's order of operations but not its
-            # exp/log/pow (SwiftShader's), nor its rounding of the uniforms
-            # through JSON (exact: doubles) -- the frames agree to ~1e-6.
-            check(rms <= 1e-3, f"lambda {lam}: WebGL2 float frame = CPU (RMS {rms:.2e} <= 1e-3)")
-            check(rms8 <= 2.0, f"lambda {lam}: WebGL2 8-bit frame = CPU PNG (RMS {rms8:.3f} <= 2 codes)")
-            check(float(np.abs(f32 - ref).max()) < 0.05, f"lambda {lam}: max difference {float(np.abs(f32 - ref).max()):.2e}")
+            worst = float(np.abs(f32 - ref).max())
+            check(rms <= 1e-3, f"{effect} {flags}: WebGL2 float frame = CPU (RMS {rms:.2e} <= 1e-3, max {worst:.1e})")
+            check(rms8 <= 2.0, f"{effect} {flags}: WebGL2 8-bit frame = CPU PNG (RMS {rms8:.3f} <= 2 codes)")
+            return ref8
+
+        for lam in ["0", "15"]:
+            set_values({"visibility": "300", "lambda": lam})
+            ref8 = same_as_cpu("haze", ["--visibility", "300", "--lambda", lam])
 
         # Fog through the same page (its own passes and its range with the sky unknown), at the end.
         fog_cases = [({"camera-height": "1.6", "density": "0.01", "lambda": "0"},
@@ -239,6 +241,11 @@ def browser(brume, tmp, screenshot, bench):
         res = d.execute_async_script("brume.set('albedo', '2').then(() => arguments[0]('drawn'), (e) => arguments[0](String(e)))")
         check("albedo" in res, f"an out-of-range value is refused with the flag's message: {res}")
         set_values({"albedo": "1"})
+        if screenshot:
+            set_values({"visibility": "300", "lambda": "15"})
+            d.execute_script("document.getElementById('wipe').value = 350; document.getElementById('wipe').dispatchEvent(new Event('input'))")
+            d.save_screenshot(screenshot)
+            print("wrote", screenshot)
         p.send_signal(signal.SIGTERM)
         p.wait(5)
         p, url = start_view(brume, ["--effect", "fog", "--image", "clean.png", "--range", "range.exr", "--fov-x", "60",
@@ -247,23 +254,9 @@ def browser(brume, tmp, screenshot, bench):
         d.execute_async_script("window.brume.ready.then(arguments[0], (e) => arguments[0](String(e)))")
         for values, flags in fog_cases:
             set_values(values)
-            f32, u8 = pixels("f32"), pixels("u8")
-            args = [brume, "fog", "--backend", "cpu", "--image", "clean.png", "--range", "range.exr", "--fov-x", "60"]
-            subprocess.run(args + flags + ["--out", "cpu.pfm"], cwd=tmp, check=True, stderr=subprocess.DEVNULL)
-            subprocess.run(args + flags + ["--out", "cpu.png"], cwd=tmp, check=True, stderr=subprocess.DEVNULL)
-            ref = pfm(os.path.join(tmp, "cpu.pfm"))
-            ref8 = np.asarray(Image.open(os.path.join(tmp, "cpu.png")).convert("RGB"))
-            rms = float(np.sqrt(np.mean((f32.astype(np.float64) - ref) ** 2)))
-            rms8 = float(np.sqrt(np.mean((u8.astype(np.float64) - ref8) ** 2)))
-            check(rms <= 1e-3, f"fog {flags}: WebGL2 float frame = CPU (RMS {rms:.2e} <= 1e-3)")
-            check(rms8 <= 2.0, f"fog {flags}: WebGL2 8-bit frame = CPU PNG (RMS {rms8:.3f} <= 2 codes)")
+            same_as_cpu("fog", ["--fov-x", "60"] + flags)
         cmd = shlex.split(d.execute_script("return brume.command()"))
         check(cmd[:2] == ["brume", "fog"] and "--fov-x" in cmd, f"fog's command: {' '.join(cmd)}")
-        if screenshot:
-            set_values({"visibility": "300", "lambda": "15"})
-            d.execute_script("document.getElementById('wipe').value = 350; document.getElementById('wipe').dispatchEvent(new Event('input'))")
-            d.save_screenshot(screenshot)
-            print("wrote", screenshot)
         # (the refused albedo's 400 is the one network error expected)
         logs = [l for l in d.get_log("browser") if l["level"] == "SEVERE" and "status of 400" not in l["message"]]
         check(not logs, f"no browser errors ({logs})")

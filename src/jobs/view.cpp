@@ -431,7 +431,7 @@ json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx)
   (void)ctx;
   throw Error("brume view serves the GPU passes' shaders, which this brume was built without (no EGL/GLES 3 headers "
               "at build time); rebuild with libegl-dev libgles-dev");
-#else
+#endif
   const CommandDef* c = find_command(job.view.effect);
   if (!c || !c->preview)
     throw Error("--effect '" + job.view.effect + "': its preview is not built yet (" +
@@ -510,7 +510,6 @@ json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx)
   if (t6.joinable()) t6.join();
   std::fprintf(stderr, "brume view: stopped (%s)\n", why.c_str());
   return json::object();
-#endif
 }
 
 }  // namespace
@@ -522,6 +521,7 @@ CommandDef view_command() {
       .summary = "a live preview in the browser: the effect's GPU passes in WebGL2, its controls from its table",
       .table = &view_job_table(),
       .run = &run_view_job,
+      .report = [](const ViewJob&, const json&) {},  // its lines are printed as it serves
   });
   return c;
 }

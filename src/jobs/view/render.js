@@ -17,6 +17,7 @@ precision highp sampler2D;
 uniform sampler2D uOut;
 uniform sampler2D uImage;
 uniform sampler2D uRange;
+uniform sampler2D uSky;   // the preparation's sky weight
 uniform int uMode;        // 0 effect, 1 depth
 uniform float uWipe;      // x below which the input is shown
 uniform float uRangeMax;
@@ -35,7 +36,8 @@ void main() {
   vec3 c;
   float r = texelFetch(uRange, p, 0).r;
   if (uMode == 1) {
-    c = r > 0.0 ? turbo(1.0 - sqrt(r / uRangeMax)) : vec3(0.55, 0.75, 1.0);  // sky / unknown: pale blue
+    bool sky = r <= 0.0 || texelFetch(uSky, p, 0).r >= 0.5;
+    c = sky ? vec3(0.55, 0.75, 1.0) : turbo(1.0 - sqrt(r / uRangeMax));  // sky and unknown: pale blue
     c = vec3(pow(c.r, 2.2), pow(c.g, 2.2), pow(c.b, 2.2));
   } else {
     c = float(p.x) < uWipe ? texelFetch(uImage, p, 0).rgb : texelFetch(uOut, p, 0).rgb;
@@ -53,12 +55,13 @@ export class Renderer {
     this.gl = gl;
     this.canvas = canvas;
     this.maxTexture = gl.getParameter(gl.MAX_TEXTURE_SIZE);
-    this.renderer = gl.getParameter(gl.RENDERER);
+    const info = gl.getExtension('WEBGL_debug_renderer_info');  // the real renderer (SwiftShader, a GPU's name)
+    this.renderer = info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
     this.vao = gl.createVertexArray();
     this.programs = {};
     for (const [name, p] of Object.entries(meta.passes))
       this.programs[name] = this.link(name, meta.vertex, p.fragment, p.samplers);
-    this.display = this.link('display', meta.vertex, DISPLAY_FS, ['uOut', 'uImage', 'uRange']);
+    this.display = this.link('display', meta.vertex, DISPLAY_FS, ['uOut', 'uImage', 'uRange', 'uSky']);
     this.targets = {};
     this.fbos = {};
   }
@@ -218,7 +221,7 @@ export class Renderer {
     set1f('uRangeMax', opts.rangeMax || 1);
     set1f('uFocus', opts.focus || 0);
     set1f('uFocusTol', opts.focusTol || 0);
-    [this.result.tex, this.inputs.image, this.inputs.range].forEach((t, i) => {
+    [this.result.tex, this.inputs.image, this.inputs.range, this.inputs.sky].forEach((t, i) => {
       gl.activeTexture(gl.TEXTURE0 + i);
       gl.bindTexture(gl.TEXTURE_2D, t);
     });

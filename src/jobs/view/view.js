@@ -205,7 +205,7 @@ async function main() {
   state.rgba = rgba;
   state.rangeHost = range;
   let rmax = 0;
-  for (const v of range) if (v > rmax) rmax = v;
+  for (let i = 0; i < range.length; ++i) if (range[i] > rmax && sky[i] < 0.5) rmax = range[i];
   state.rangeMax = rmax;
   const blocks = {};
   for (const s of meta.specs) (blocks[s.block] = blocks[s.block] || []).push(s);
