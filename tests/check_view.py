@@ -101,11 +101,19 @@ def http_rules(brume, tmp):
         check(st == 400, "the page cannot name files: 400")
         st, _ = request(url, base + "frame", "POST", {}, b"{" + b" " * (2 << 20) + b"}")
         check(st == 413, f"a body above 1 MiB: 413 (got {st})")
+        # Above the browser's largest texture the page asks for the data at 1/k (each map box-averaged or sampled).
+        for name, ch in [("image", 4), ("range", 1), ("sky", 1)]:
+            st, data = request(url, base + f"{name}.bin?scale=2")
+            check(st == 200 and len(data) == 80 * 56 * ch * 4, f"{name}.bin at 1/2: 80x56x{ch} floats")
+        check(request(url, base + "image.bin?scale=0")[0] == 400, "scale 0: 400")
         p.send_signal(signal.SIGTERM)
         check(p.wait(5) == 0, "SIGTERM: exits 0")
     finally:
         if p.poll() is None:
             p.kill()
+    r = subprocess.run([brume, "view", "--effect", "dof", "--image", "clean.png", "--range", "range.exr"], cwd=tmp,
+                       capture_output=True, text=True, timeout=30)
+    check(r.returncode == 2 and "preview is not built" in r.stderr, f"--effect dof says it has no preview yet: {r.stderr.strip()}")
     # A background job of a shell inherits SIGINT ignored: brume view sets its own handler.
     p, url = start_view(brume, ["--image", "clean.png", "--range", "range.exr"], tmp,
                         preexec=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
