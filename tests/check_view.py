@@ -111,9 +111,9 @@ def http_rules(brume, tmp):
     finally:
         if p.poll() is None:
             p.kill()
-    r = subprocess.run([brume, "view", "--effect", "dof", "--image", "clean.png", "--range", "range.exr"], cwd=tmp,
+    r = subprocess.run([brume, "view", "--effect", "aerial", "--image", "clean.png", "--range", "range.exr"], cwd=tmp,
                        capture_output=True, text=True, timeout=30)
-    check(r.returncode == 2 and "preview is not built" in r.stderr, f"--effect dof says it has no preview yet: {r.stderr.strip()}")
+    check(r.returncode == 2 and "preview is not built" in r.stderr, f"--effect aerial says it has no preview yet: {r.stderr.strip()}")
     # A background job of a shell inherits SIGINT ignored: brume view sets its own handler.
     p, url = start_view(brume, ["--image", "clean.png", "--range", "range.exr"], tmp,
                         preexec=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
@@ -171,6 +171,16 @@ def browser(brume, tmp, screenshot, bench):
             import base64
             a = np.frombuffer(base64.b64decode(r[2]), dtype=np.float32 if fmt == "f32" else np.uint8)
             return a.reshape(r[1], r[0], 3)
+
+        def set_together(values):
+            # Every value before the frame (dof needs the focus and the CoC at once): the last set's promise
+            # resolves with the frame that has them all; the earlier ones may reject (a frame without the rest).
+            res = d.execute_async_script("""
+              const done = arguments[1];
+              const ps = Object.entries(arguments[0]).map(([k, v]) => brume.set(k, v));
+              ps.slice(0, -1).forEach((q) => q.catch(() => {}));
+              ps[ps.length - 1].then((ms) => done(ms), (e) => done('E' + e));""", values)
+            check(not (isinstance(res, str) and res.startswith("E")), f"brume.set {values} together: {res}")
 
         def set_values(values):
             for k, v in values.items():
@@ -265,6 +275,25 @@ def browser(brume, tmp, screenshot, bench):
             same_as_cpu("fog", ["--fov-x", "60"] + flags)
         cmd = shlex.split(d.execute_script("return brume.command()"))
         check(cmd[:2] == ["brume", "fog"] and "--fov-x" in cmd, f"fog's command: {' '.join(cmd)}")
+        # Depth of field: the engine's passes on the scale map the server forms per job.
+        p.send_signal(signal.SIGTERM)
+        p.wait(5)
+        p, url = start_view(brume, ["--effect", "dof", "--image", "clean.png", "--range", "range.exr", "--fov-x", "60",
+                                    "--idle-exit", "5"], tmp)
+        d.get(url)
+        d.execute_async_script("window.brume.ready.then(arguments[0], (e) => arguments[0](String(e)))")
+        for focus in ["8", "30"]:
+            set_together({"focus-distance": focus, "coc-infinity": "6"})
+            same_as_cpu("dof", ["--fov-x", "60", "--focus-distance", focus, "--coc-infinity", "6"])
+        # Click-to-focus: a click on the picture focuses at that pixel's range.
+        res = d.execute_async_script("""
+          const done = arguments[0];
+          document.getElementById('click').value = 'focus';
+          const c = document.getElementById('canvas').getBoundingClientRect();
+          document.getElementById('canvas').dispatchEvent(new MouseEvent('click',
+            {clientX: c.left + c.width * 0.5, clientY: c.top + c.height * 0.85, bubbles: true}));
+          setTimeout(() => done(brume.values()['focus-distance']), 50);""")
+        check(res not in (None, "30") and float(res) > 0, f"click-to-focus sets focus-distance from the range: {res}")
         # (the refused albedo's 400 is the one network error expected)
         logs = [l for l in d.get_log("browser") if l["level"] == "SEVERE" and "status of 400" not in l["message"]]
         check(not logs, f"no browser errors ({logs})")

@@ -242,15 +242,22 @@ TEST(Commands, EveryPreviewPlanDrawsItsOwnLinkedPasses) {
     JobValues v = {{"image", "x.png"}, {"range", "r.exr"}, {"out", "o.png"}, {"fov-x", 60.0}};
     if (c.spec("camera-height")) v.emplace_back("camera-height", 1.6);
     if (c.spec("visibility")) v.emplace_back("visibility", 40.0);
-    const nlohmann::json plan = c.preview(c.build(v), PreviewInputs{rgb, range, prep});
+    if (c.spec("focus-distance")) v.emplace_back("focus-distance", 10.0);
+    if (c.spec("coc-infinity")) v.emplace_back("coc-infinity", 8.0);
+    const nlohmann::json job = c.build(v);
+    const nlohmann::json plan = c.preview(job, PreviewInputs{rgb, range, prep});
     std::set<std::string> textures = {"image", "range", "sky"};
     for (const auto& [name, fmt] : plan.at("targets").items()) textures.insert(name);
     for (const auto& d : plan.value("data", nlohmann::json::array())) {
       textures.insert(d.get<std::string>());
       ASSERT_TRUE(c.preview_data);
-      EXPECT_EQ(c.preview_data(d.get<std::string>(), PreviewInputs{rgb, range, prep}).pixels(), rgb.pixels());
+      EXPECT_EQ(c.preview_data(d.get<std::string>(), job, PreviewInputs{rgb, range, prep}).pixels(), rgb.pixels());
     }
     for (const auto& step : plan.at("steps")) {
+      if (step.contains("copy")) {
+        EXPECT_TRUE(textures.count(step["copy"].at("from").get<std::string>()));
+        continue;
+      }
       const std::string pass = step.at("pass");
       EXPECT_NE(std::find(c.gpu_passes.begin(), c.gpu_passes.end(), pass), c.gpu_passes.end()) << pass;
 #if BRUME_HAVE_GPU
@@ -262,5 +269,5 @@ TEST(Commands, EveryPreviewPlanDrawsItsOwnLinkedPasses) {
     }
     EXPECT_TRUE(textures.count(plan.at("result").get<std::string>()));
   }
-  EXPECT_GE(shown, 2);  // haze and fog
+  EXPECT_GE(shown, 3);  // haze, fog, dof
 }

@@ -140,8 +140,9 @@ struct CommandDef {
   // Empty for commands the preview does not show.
   std::function<nlohmann::json(const nlohmann::json& job, const PreviewInputs& in)> preview;
   // A map a preview plan names in its "data" (fog's range with the sky
-  // unknown again), made once from the inputs; an unknown name throws.
-  std::function<Image(const std::string& name, const PreviewInputs& in)> preview_data;
+  // unknown again; dof's scale map, named by the job it was made for), made
+  // from the job whose plan named it and the inputs; an unknown name throws.
+  std::function<Image(const std::string& name, const nlohmann::json& job, const PreviewInputs& in)> preview_data;
   std::optional<ArrayForm> arrays;          // the command on arrays (the Python module), where it has one
 
   // ---- what is done with a job (the table's JSON) --------------------------------------

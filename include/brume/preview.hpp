@@ -7,7 +7,8 @@
 //   {"targets": {NAME: "RGBA32F" | "RGBA16F" | "RG32F" | "R32F", ...},   image-sized
 //    "steps": [{"pass": PASS, "in": [TEXTURE, ...], "out": [TARGET, ...],
 //               "uniforms": {NAME: [TYPE, value...]},                     TYPE 1f 3f 1i
-//               "iterate": {"count": N, "uniform": "uK", "ping": A, "pong": B, "last": ALIAS}}],
+//               "iterate": {"count": N, "uniform": "uK", "ping": A, "pong": B, "last": ALIAS}}
+//              | {"copy": {"from": TEXTURE, "to": TARGET}}],                 a plain copy (no pass)
 //    "result": TEXTURE}
 // TEXTURE: a target, or "image" (linear RGB, alpha 1), "range" (the prepared
 // range, -1 unknown), "sky" (the preparation's sky weight, 0 without one),

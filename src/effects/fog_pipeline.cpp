@@ -68,7 +68,7 @@ Image effect_range(const PreparedRange& prep, bool blend) {
 
 // The preview's map of the effect's range (brume/preview.hpp): "fog.range.blend"
 // (--sky-rule auto, prepared: sky beyond the margin unknown) or "fog.range.mask".
-Image fog_preview_data(const std::string& name, const PreviewInputs& in) {
+Image fog_preview_data(const std::string& name, const nlohmann::json&, const PreviewInputs& in) {
   if (name != "fog.range.blend" && name != "fog.range.mask") throw Error("no preview map '" + name + "'");
   return effect_range(in.prepared, name == "fog.range.blend");
 }

@@ -26,6 +26,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <map>
 #include <mutex>
 #include <random>
 #include <set>
@@ -229,6 +230,7 @@ struct Server {
   int port = 0;
   std::mutex mu;
   std::unique_ptr<ViewData> data;
+  std::map<std::string, json> data_jobs;  // the job of the plan that named each map (the last few)
   std::atomic<long long> last_request_ms{0};
   std::atomic<int> window_count{0};
   std::atomic<long long> window_start{0};
@@ -312,6 +314,8 @@ struct Server {
     std::lock_guard<std::mutex> lock(mu);
     ViewData& d = at(k);
     json plan = c.preview(job, PreviewInputs{d.rgb, d.measured, d.prep});
+    if (data_jobs.size() > 16) data_jobs.clear();
+    for (const auto& n : plan.value("data", json::array())) data_jobs[n.get<std::string>()] = job;
     std::string line;
     for (const std::string& w : words) line += (line.empty() ? "" : " ") + shell_word(w);
     json record = run_record_header(c.name, words);
@@ -405,8 +409,13 @@ struct Server {
       }
       std::lock_guard<std::mutex> lock(mu);
       ViewData& d = at(k);
+      const auto job = data_jobs.find(name);
+      if (job == data_jobs.end()) {
+        r.status = 404;
+        return;
+      }
       try {
-        const Image m = c.preview_data(name, PreviewInputs{d.rgb, d.measured, d.prep});
+        const Image m = c.preview_data(name, job->second, PreviewInputs{d.rgb, d.measured, d.prep});
         std::vector<float> v(m.data.size());
         for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::isfinite(m.data[i]) && m.data[i] != 0.0f ? m.data[i] : -1.0f;
         r.set_content(floats(v), "application/octet-stream");
@@ -455,7 +464,10 @@ json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx)
   {
     JobValues iv = sv.cli_values;
     iv.emplace_back("out", json("brume-view.png"));
-    c->check(c->build(iv), ctx.given, true);  // the effect's own checks of these flags, before any file is read
+    // Each flag's type and range before any file is read; the command's
+    // cross-field checks (dof's required --focus-distance) wait for the
+    // page's values, and their messages are shown there.
+    c->check(c->build(iv), ctx.given, false);
   }
   ViewJob absolute;
   view_job_table().from_json(absolute, vj, "job");

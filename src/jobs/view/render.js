@@ -127,7 +127,14 @@ export class Renderer {
   }
 
   // A map a plan names in its "data" (one channel, unknown -1), once.
+  // A name "kind:key" replaces the older maps of its kind (dof's scale map per job).
   addInput(name, data) {
+    const kind = name.split(':')[0];
+    for (const old of Object.keys(this.inputs))
+      if (old !== name && old.includes(':') && old.split(':')[0] === kind) {
+        this.gl.deleteTexture(this.inputs[old]);
+        delete this.inputs[old];
+      }
     this.inputs[name] = this.texture('R32F', 'RED', this.w, this.h, data);
   }
 
@@ -184,6 +191,15 @@ export class Renderer {
       gl.drawArrays(gl.TRIANGLES, 0, 3);
     };
     for (const step of plan.steps) {
+      if (step.copy) {  // a plain copy: the diffusion's first texture from an input
+        const from = this.fbo([tex[step.copy.from]]), to = this.fbo([tex[step.copy.to]]);
+        gl.bindFramebuffer(gl.READ_FRAMEBUFFER, from);
+        gl.bindFramebuffer(gl.DRAW_FRAMEBUFFER, to);
+        gl.blitFramebuffer(0, 0, this.w, this.h, 0, 0, this.w, this.h, gl.COLOR_BUFFER_BIT, gl.NEAREST);
+        gl.bindFramebuffer(gl.READ_FRAMEBUFFER, null);
+        gl.bindFramebuffer(gl.DRAW_FRAMEBUFFER, null);
+        continue;
+      }
       if (step.iterate) {
         const it = step.iterate;
         let src = tex[it.ping], dst = tex[it.pong];
