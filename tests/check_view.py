@@ -264,24 +264,24 @@ def browser(brume, tmp, screenshot, bench):
             d.execute_script("document.getElementById('wipe').value = 350; document.getElementById('wipe').dispatchEvent(new Event('input'))")
             d.save_screenshot(screenshot)
             print("wrote", screenshot)
-        p.send_signal(signal.SIGTERM)
-        p.wait(5)
-        p, url = start_view(brume, ["--effect", "fog", "--image", "clean.png", "--range", "range.exr", "--fov-x", "60",
-                                    "--idle-exit", "5"], tmp)
-        d.get(url)
-        d.execute_async_script("window.brume.ready.then(arguments[0], (e) => arguments[0](String(e)))")
+        def serve(effect):
+            """Stops the server and opens the page of a new one for `effect` (with intrinsics: --fov-x 60)."""
+            p.send_signal(signal.SIGTERM)
+            p.wait(5)
+            q, u = start_view(brume, ["--effect", effect, "--image", "clean.png", "--range", "range.exr",
+                                      "--fov-x", "60", "--idle-exit", "5"], tmp)
+            d.get(u)
+            d.execute_async_script("window.brume.ready.then(arguments[0], (e) => arguments[0](String(e)))")
+            return q
+
+        p = serve("fog")
         for values, flags in fog_cases:
             set_values(values)
             same_as_cpu("fog", ["--fov-x", "60"] + flags)
         cmd = shlex.split(d.execute_script("return brume.command()"))
         check(cmd[:2] == ["brume", "fog"] and "--fov-x" in cmd, f"fog's command: {' '.join(cmd)}")
         # Depth of field: the engine's passes on the scale map the server forms per job.
-        p.send_signal(signal.SIGTERM)
-        p.wait(5)
-        p, url = start_view(brume, ["--effect", "dof", "--image", "clean.png", "--range", "range.exr", "--fov-x", "60",
-                                    "--idle-exit", "5"], tmp)
-        d.get(url)
-        d.execute_async_script("window.brume.ready.then(arguments[0], (e) => arguments[0](String(e)))")
+        p = serve("dof")
         for focus in ["8", "30"]:
             set_together({"focus-distance": focus, "coc-infinity": "6"})
             same_as_cpu("dof", ["--fov-x", "60", "--focus-distance", focus, "--coc-infinity", "6"])
