@@ -37,6 +37,14 @@ $B depth convert "${kl[@]}" --like "$K/image_2/000001.png" --out "$tmp/scan.pfm"
 $B depth complete "${kl[@]}" --image "$K/image_2/000001.png" --out "$tmp/completed.pfm" >/dev/null
 ${PYTHON:-/usr/bin/python3} scripts/range_picture.py "$tmp/scan.pfm" "$OUT/kitti-000001-scan.jpg" --dilate 1
 ${PYTHON:-/usr/bin/python3} scripts/range_picture.py "$tmp/completed.pfm" "$OUT/kitti-000001-completed.jpg"
+# LiDAR fog (Hahner et al., docs/lidar.md) on the same frame at visibility 80 m: the camera frame and the scan
+# from one medium; a bird's-eye view of the scan clear and foggy, and both scans projected over their images
+$B haze --image "$K/image_2/000001.png" "${kl[@]}" --visibility 80 --out "$tmp/haze80.png" >/dev/null
+$B lidar fog --points "$K/velodyne/000001.bin" --visibility 80 --out "$tmp/fog80.bin" >/dev/null
+${PYTHON:-/usr/bin/python3} scripts/lidar_picture.py bev "$K/velodyne/000001.bin" "$tmp/fog80.bin" \
+   "$OUT/kitti-000001-lidar-bev.jpg" --title "visibility 80 m" --dpi 80
+${PYTHON:-/usr/bin/python3} scripts/lidar_picture.py proj "$K/velodyne/000001.bin" "$tmp/fog80.bin" \
+   "$K/calib/000001.txt" "$K/image_2/000001.png" "$tmp/haze80.png" "$OUT/kitti-000001-lidar-projected.jpg"
 # the turbidity fit (Preetham sky) on each Poly Haven sky
 for s in park sky sunrise; do
   $B sky fit --image "$D/sky_hdr_polyhaven/$s.hdr" --sun auto --out "$LOCAL/fit-$s.json" --plot "$OUT/polyhaven-$s-fit.png"

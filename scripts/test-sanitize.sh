@@ -99,7 +99,8 @@ fi
 if [ "$run_tsan" = 1 ]; then
   t0=$(date +%s)
   cmake -S . -B build-tsan "${common[@]}" -DBRUME_SANITIZE=thread
-  cmake --build build-tsan -j"$jobs" --target brume_tests
+  # The CLI too: tests of these suites that check a record's replay run it.
+  cmake --build build-tsan -j"$jobs" --target brume_tests brume_cli
   t1=$(date +%s)
   archer=$(ls /usr/lib/llvm-14/lib/libarcher.so)
   # The threaded CPU paths (every OpenMP loop of src/: the fast diffusion in
@@ -107,7 +108,9 @@ if [ "$run_tsan" = 1 ]; then
   # through their own suites, at four threads; the GPU, CLI and real-data
   # tests add no threads of brume's own and are left to the ASan run.
   filter='Diffusion*:GaussianAccuracy*:Haze*:Fog*:Aerial*:Dof*:ChainHazeDof*:Insert*:Sky*:Prepare*'
-  # (SkyCli and Fog.DepthBuffers... run the CLI, which this build does not make.)
+  # (The *Cli* suites and Fog.DepthBuffers... are the CLI's own tests: they
+  # run in the ASan suite; a threaded suite's test that runs the CLI, such as
+  # SkyUnits.OlderRecordsReplayTheOldRule, runs the instrumented one.)
   filter+='-*Gpu*:*GPU*:*Cli*:*Real*:Fog.DepthBuffers*'
   # (The exhaustive fusion bit tests run ~430 small blurs each: minutes under
   # TSan, and no thread pattern that DiffusionFusion.DefaultSchedule... and

@@ -2,7 +2,8 @@
 """Every runnable example of the README and docs/ runs (ctest docs_examples).
 
 Each fenced ```sh or ```bash block of README.md and docs/*.md runs as written,
-with `bash -e`, in one scratch folder that holds:
+with `bash -e`, and each ```python block with the module's interpreter
+(PYTHONPATH=build/python), in one scratch folder that holds:
   demo-out/   the demo scene (`brume demo --out-dir demo-out`),
   build       a link to the build tree (`./build/brume`, build/python),
   docs, examples  links to the repository's (their scripts),
@@ -12,7 +13,7 @@ earlier one of its page wrote. A block passes when it exits 0 and every file
 it names after --out, --out-dir, --record, --json, --plot or --manifest
 exists afterwards. Blocks that start with the line `# illustrative` (set-up
 commands, synopses, files a user would bring) are not run; blocks that
-read ../shared, or use the Python module, are skipped with a message when
+read ../shared, or use the Python module (python blocks, or build/python), are skipped with a message when
 the data is absent or the module not built. `python3` is --python (the
 interpreter the module was built for).
 """
@@ -27,7 +28,7 @@ import sys
 import tempfile
 import time
 
-FENCE = re.compile(r"^```(sh|bash)\n(.*?)^```", re.S | re.M)
+FENCE = re.compile(r"^```(sh|bash|python)\n(.*?)^```", re.S | re.M)
 NAMED = ("--out", "--out-dir", "--record", "--json", "--plot", "--manifest")
 
 
@@ -37,7 +38,7 @@ def blocks(repo):
         text = open(f, encoding="utf-8").read()
         for m in FENCE.finditer(text):
             line = text[: m.start()].count("\n") + 1
-            yield os.path.relpath(f, repo), line, m.group(2)
+            yield os.path.relpath(f, repo), line, m.group(1), m.group(2)
 
 
 def named_outputs(body):
@@ -88,7 +89,8 @@ def main():
         for name, target in (("build", a.build), ("docs", os.path.join(a.repo, "docs")),
                              ("examples", os.path.join(a.repo, "examples"))):
             os.symlink(os.path.abspath(target), os.path.join(work, name))
-        for f, line, body in blocks(a.repo):
+        penv = dict(env, PYTHONPATH=os.path.join(work, "build", "python"))
+        for f, line, lang, body in blocks(a.repo):
             where = f"{f}:{line}"
             if a.only and a.only not in f:
                 continue
@@ -98,12 +100,13 @@ def main():
                 print(f"skip {where}: needs ../shared/data, absent")
                 skipped += 1
                 continue
-            if "build/python" in body and not have_python:
+            if (lang == "python" or "build/python" in body) and not have_python:
                 print(f"skip {where}: needs the Python module (build/python), not built")
                 skipped += 1
                 continue
             t0 = time.monotonic()
-            r = subprocess.run(["bash", "-e", "-o", "pipefail", "-c", body], cwd=work, env=env,
+            cmd = [a.python, "-c", body] if lang == "python" else ["bash", "-e", "-o", "pipefail", "-c", body]
+            r = subprocess.run(cmd, cwd=work, env=penv if lang == "python" else env,
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=900)
             ran += 1
             missing = [p for p in named_outputs(body) if not os.path.exists(os.path.join(work, p))]

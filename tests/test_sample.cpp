@@ -176,7 +176,7 @@ TEST(Sample, BoundsRespected) {
 TEST(Sample, EveryEffectsDefaultsValidate) {
   for (const std::string& e : sample_effects())
     for (int i = 0; i < 300; ++i) EXPECT_NO_THROW(random_params(e, 1, key_of(i), {})) << e << " " << key_of(i);
-  EXPECT_EQ(sample_effects(), (std::vector<std::string>{"haze", "aerial", "fog", "dof"}));
+  EXPECT_EQ(sample_effects(), (std::vector<std::string>{"haze", "aerial", "fog", "dof", "lidar fog"}));
 }
 
 TEST(Sample, SpecsParseWhitespaceAndKinds) {

@@ -48,13 +48,19 @@ struct HazeDofRun {
   nlohmann::json record;  // {"haze", "dof", "prepare", "execution"}; execution.timing {"haze", "dof"}
 };
 
-// In memory. `measured_range`: metres along the ray; `k`: the intrinsics
+// In memory, on views read in place. `measured_range`: metres along the ray; `k`: the intrinsics
 // (resolved) for the DOF stage's planar depth. `given` holds the chain's
 // names (the DOF's with their "dof-" prefix). Errors of the DOF stage name
 // its flags with the prefix (--dof-focus-distance).
-HazeDofRun run_haze_dof(const Image& rgb, const Image& measured_range, const Intrinsics& k, const HazeParams& haze,
+HazeDofRun run_haze_dof(ConstImageView rgb, ConstImageView measured_range, const Intrinsics& k, const HazeParams& haze,
                         const DofParams& dof, const RangeStep& prepare, const Exec& exec = {},
                         const std::set<std::string>& given = {});
+// The Image form (an Image temporary cannot become a view).
+inline HazeDofRun run_haze_dof(const Image& rgb, const Image& measured_range, const Intrinsics& k,
+                               const HazeParams& haze, const DofParams& dof, const RangeStep& prepare,
+                               const Exec& exec = {}, const std::set<std::string>& given = {}) {
+  return run_haze_dof(ConstImageView(rgb), ConstImageView(measured_range), k, haze, dof, prepare, exec, given);
+}
 
 struct HazeDofJob {
   InputFiles input;

@@ -161,7 +161,7 @@ HazeRun run_haze(ConstImageView rgb, ConstImageView measured_range, const HazePa
 // The same on a range the caller prepared (prepare_step of measured_range),
 // e.g. once for a chain of effects (brume/chain.hpp); R_max and the airlight
 // still come from the measured range.
-HazeRun run_haze_prepared(const Image& rgb, const Image& measured_range, const PreparedRange& prepared,
+HazeRun run_haze_prepared(ConstImageView rgb, ConstImageView measured_range, const PreparedRange& prepared,
                           const HazeParams& p, const Exec& exec = {}, const std::set<std::string>& given = {});
 
 // The Image forms of the view functions above (source compatibility: an
@@ -184,6 +184,10 @@ inline ScatterBlur scatter_blur(const Image& rgb, const Image& tau0, const Image
 inline HazeRun run_haze(const Image& rgb, const Image& measured_range, const HazeParams& p, const RangeStep& prepare,
                         const Exec& exec = {}, const std::set<std::string>& given = {}) {
   return run_haze(ConstImageView(rgb), ConstImageView(measured_range), p, prepare, exec, given);
+}
+inline HazeRun run_haze_prepared(const Image& rgb, const Image& measured_range, const PreparedRange& prepared,
+                                 const HazeParams& p, const Exec& exec = {}, const std::set<std::string>& given = {}) {
+  return run_haze_prepared(ConstImageView(rgb), ConstImageView(measured_range), prepared, p, exec, given);
 }
 
 // From files to files (the CLI's `brume haze` and `brume run`):

@@ -14,11 +14,11 @@ metres along each pixel's ray (NaN: unknown). float32 is read in place,
 float64 converted once, uint8/uint16 need ``transfer="srgb"|"linear"``. The
 GIL is released while an effect runs. See docs/python.md.
 """
-from ._brume import (__version__, aerial, blur, dof, fog, haze, max_pixels, random_params, read_image,
+from ._brume import (__version__, aerial, blur, dof, fog, haze, haze_dof, max_pixels, random_params, read_image,
                      set_max_pixels, write_image)
 from ._result import Result
 from . import depth, lidar, sky
 from ._rerun import rerun
 
-__all__ = ["Result", "__version__", "aerial", "blur", "depth", "dof", "fog", "haze", "lidar", "max_pixels", "random_params",
+__all__ = ["Result", "__version__", "aerial", "blur", "depth", "dof", "fog", "haze", "haze_dof", "lidar", "max_pixels", "random_params",
            "read_image", "rerun", "set_max_pixels", "sky", "write_image"]

@@ -23,7 +23,7 @@ def rerun(record, rgb, range, **keywords):
     ``backend=`` ...). The inputs are the arrays given, not the record's files:
     pass the same pixels for the same bits (a CLI record's ``inputs`` name
     and hash its files). Commands: the effects with an array form (haze,
-    aerial, fog, dof).
+    aerial, fog, dof, and the chain haze+dof).
     """
     if not isinstance(record, dict) or record.get("tool") != "brume" or "job" not in record:
         raise ValueError("brume.rerun(): record is not a brume parameter record (a dict with \"tool\": \"brume\" "

@@ -24,7 +24,7 @@ import numpy as np
 
 from . import _brume
 
-__all__ = ["Transform", "loguniform", "uniform", "choice"]
+__all__ = ["PointsTransform", "Transform", "loguniform", "uniform", "choice"]
 
 _SAMPLER = "brume-sample-v1"
 
@@ -377,6 +377,14 @@ class Transform:
             intr.setdefault("cy", (h - 1) / 2.0)
         rng = _depth_array(depth, (h, w), self.depth_kind, self.depth_unit, intr, depth_arg)
         rgb, kw = img.array, img.kw
+        chain = self._chain() if jobs is None or len(jobs) == 1 else None  # (a record of stages: in turn)
+        if chain is not None:  # the chain's own function: the range prepared once, one record `brume run` takes
+            f = getattr(_brume, chain["function"])
+            if jobs is not None:
+                r = f(rgb, rng, job=jobs[0], **kw)
+            else:
+                r = f(rgb, rng, **kw, **self._chain_keywords(chain, values))
+            return img.back(r.rgb), r.record
         records = []
         for i, s in enumerate(self._stages):
             if jobs is not None:
@@ -387,6 +395,28 @@ class Transform:
             rgb, kw = r.rgb, {}
         record = records[0] if len(records) == 1 else {"stages": records}
         return img.back(rgb), record
+
+    def _chain(self):
+        """A chain's command when it runs on arrays itself (haze+dof:
+        brume.haze_dof), else None (each stage's function in turn)."""
+        if len(self._commands) < 2:
+            return None
+        c = _COMMANDS.get("+".join(self._commands))
+        return c if c is not None and c.get("function") and c["arrays"] == ["rgb", "range"] else None
+
+    def _chain_keywords(self, chain, values):
+        """Each stage's fixed and drawn values as the chain's keywords: a later
+        stage's own parameters with the chain's prefix (dof_f_number), its
+        shared blocks' (the intrinsics) as they are."""
+        kw = {}
+        prefix = chain["stage_prefix"].replace("-", "_")
+        for i, (s, v) in enumerate(zip(self._stages, values)):
+            for name, x in list(s.fixed.items()) + list(v.items()):
+                key = name.replace("-", "_")
+                if i > 0 and prefix + key in chain["keywords"]:
+                    key = prefix + key
+                kw[key] = x
+        return kw
 
     # ---- replay ------------------------------------------------------------------------------
     def replay(self, params):
@@ -413,6 +443,82 @@ class Transform:
         return f"{type(self).__name__}(p={self.p}, seed={self.seed}, {json.dumps(specs)})"
 
 
+class PointsTransform:
+    """An effect on a LiDAR scan (LidarFog) as an augmentation transform:
+    t(points=..., key=..., **targets) -> {"points", "params", **targets}.
+    points: an (N, 4) float32 array (or CPU torch tensor) of x, y, z [m] and
+    intensity, as KITTI's .bin holds them; the result comes back in the same
+    type. The noise of the fog returns gets its own seed per draw (from seed
+    and key, recorded with the values), so two keys never share a noise
+    pattern and a replay repeats it."""
+
+    _commands = ()
+
+    def __init__(self, p=1.0, seed=0, **params):
+        where = f"brume.transforms.{type(self).__name__}()"
+        if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
+            raise ValueError(f"p={p!r}: the probability of applying, a number in [0, 1]")
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise ValueError(f"seed={seed!r}: a non-negative integer")
+        self.p, self.seed = float(p), seed
+        self._stage = _Stage(_COMMANDS[self._commands[0]], params, where)
+        self._calls = 0
+
+    _auto_key = Transform._auto_key
+
+    def draw(self, key):
+        """Whether it applies, and the values: the sampler's draw plus the
+        noise's seed, 53 bits of the same hash scheme (name "noise-seed")."""
+        applied = self.p >= 1.0 or _unit(self.seed, key, "p") < self.p
+        if not applied:
+            return False, {}
+        values = self._stage.draw(self.seed, key)
+        values["seed"] = int(_unit(self.seed, key, "noise-seed") * 2.0 ** 53)
+        return True, values
+
+    def __call__(self, points=None, key=None, **targets):
+        if points is None:
+            raise ValueError("points: call t(points=...) with an (N, 4) float32 array of x, y, z, intensity")
+        key = self._auto_key() if key is None else str(key)
+        applied, values = self.draw(key)
+        out, record = self._apply(points, values) if applied else (points, None)
+        params = {"values": values, "applied": applied, "seed": self.seed, "key": key, "record": record}
+        return dict(targets, points=out, params=params)
+
+    def _apply(self, points, values, job=None):
+        torch = _is_torch(points)
+        if torch:
+            if points.device.type != "cpu":
+                raise ValueError(f"points: a torch tensor on {points.device}; call .cpu() first")
+            a = points.detach().numpy()
+        elif isinstance(points, np.ndarray):
+            a = points
+        else:
+            raise ValueError(f"points: expected an (N, 4) numpy array or torch tensor, got {type(points).__name__}")
+        if a.ndim != 2 or a.shape[1] != 4 or a.dtype != np.float32:
+            raise ValueError(f"points: expected an (N, 4) float32 array of x, y, z, intensity, got shape {a.shape} "
+                             f"({a.dtype})")
+        f = self._stage.function
+        r = f(a, job=job) if job is not None else f(a, **self._stage.fixed, **values)
+        return (sys.modules["torch"].from_numpy(r.points) if torch else r.points), r.record
+
+    def replay(self, params):
+        """replay(params)(points=...) repeats the sample bit for bit."""
+        if not isinstance(params, dict) or "record" not in params or "applied" not in params:
+            raise ValueError("params: a transform call's \"params\" dict (with \"record\" and \"applied\")")
+
+        def again(points=None, **targets):
+            if not params["applied"]:
+                return dict(targets, points=points, params=params)
+            out, _ = self._apply(points, None, job=params["record"]["job"])
+            return dict(targets, points=out, params=params)
+
+        return again
+
+    def __repr__(self):
+        return f"{type(self).__name__}(p={self.p}, seed={self.seed}, {json.dumps(self._stage.specs)})"
+
+
 def _class_name(command):
     """Haze, Aerial, Fog, DepthOfField; a chain haze+dof: HazeThenDof."""
     parts = command.split("+")
@@ -424,6 +530,13 @@ def _class_name(command):
 def _make_classes():
     made = {}
     for c in _COMMANDS.values():
+        if c["sampling"] and c["arrays"] == ["points"]:  # a LiDAR effect: LidarFog
+            doc = (f"{c['summary']}.\n\nAs a transform on a scan: every parameter of `brume sample {c['name']}` "
+                   "takes a fixed value, a (lo, hi) tuple (uniform), loguniform(lo, hi) or choice(...); "
+                   "see docs/transforms.md.")
+            made[_class_name(c["name"])] = type(_class_name(c["name"]), (PointsTransform,),
+                                                {"_commands": (c["name"],), "__doc__": doc})
+            continue
         stages = c["name"].split("+")
         ok = all(s in _COMMANDS and _COMMANDS[s]["sampling"] and _COMMANDS[s]["arrays"] == ["rgb", "range"]
                  for s in stages)

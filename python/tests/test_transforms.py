@@ -328,14 +328,39 @@ def test_dataloader_workers_0_and_2_give_the_same_samples():
 def test_haze_then_dof_equals_the_cli_chain(tmp_path):
     """HazeThenDof's draw run by `brume haze --dof-...` (the chain: the range
     prepared once, the hazy RGB handed to the DOF stage) gives the same bits;
-    the replay of its two-stage record too."""
+    its record is one haze+dof record, which replays and which `brume run`
+    repeats; a two-stage record of the earlier form still replays."""
     rgb, rng = _scene()
-    t = T.HazeThenDof(visibility=(150, 600), dof_focus_distance=(20, 80), seed=1)
+    t = T.HazeThenDof(visibility=(150, 600), dof_focus_distance=(20, 80), dof_f_number=2.8, seed=1)
     out = t(image=rgb, depth=rng, key="k")
     v = out["params"]["values"]
     assert set(v) == {"haze", "dof"} and 20 <= v["dof"]["focus-distance"] < 80
+    rec = out["params"]["record"]
+    assert rec["command"] == "haze+dof" and {"haze", "dof", "prepare"} <= set(rec["job"])
+    dof = rec["job"]["dof"]  # (the chain names its DOF block's values as its flags: dof-f-number)
+    assert dof["dof-f-number"] == 2.8 and dof["dof-focus-distance"] == v["dof"]["focus-distance"]
     np.testing.assert_array_equal(t.replay(json.loads(json.dumps(out["params"])))(image=rgb, depth=rng)["image"],
                                   out["image"])
+    # the record through the CLI: a haze+dof record of the same pixels as files with the record's job blocks
+    brume.write_image(tmp_path / "rgb.pfm", rgb, bits="float")
+    brume.write_image(tmp_path / "range.pfm", rng, bits="float", data=True)
+    run_cli("haze", "--image", tmp_path / "rgb.pfm", "--range", tmp_path / "range.pfm", "--out", tmp_path / "t.pfm",
+            "--bits", "float", "--dof-focus-distance", 10, "--dof-f-number", 2, "--dof-focal-length", 50,
+            "--dof-sensor-width", 36, "--record", tmp_path / "template.json")
+    cli = json.loads((tmp_path / "template.json").read_text())
+    assert cli["command"] == "haze+dof"
+    for block, values in rec["job"].items():
+        cli["job"].setdefault(block, {}).update(values)
+    cli["job"]["output"]["out"] = str(tmp_path / "r.pfm")
+    cli["job"]["output"]["record"] = ""
+    (tmp_path / "rec.json").write_text(json.dumps(cli))
+    run_cli("run", tmp_path / "rec.json")
+    np.testing.assert_array_equal(brume.read_image(tmp_path / "r.pfm").rgb, out["image"])
+    # params saved before HazeThenDof ran the chain's function: {"stages": [haze's record, dof's]}
+    h = brume.haze(rgb, rng, **v["haze"])
+    d = brume.dof(h.rgb, rng, **v["dof"])
+    old = dict(out["params"], record={"stages": [h.record, d.record]})
+    np.testing.assert_array_equal(t.replay(json.loads(json.dumps(old)))(image=rgb, depth=rng)["image"], d.rgb)
     brume.write_image(tmp_path / "rgb.pfm", rgb, bits="float")
     brume.write_image(tmp_path / "range.pfm", rng, bits="float", data=True)
     flags = []
@@ -366,3 +391,68 @@ def test_transforms_pickle():
     u = pickle.loads(pickle.dumps(t))
     assert type(u) is T.HazeThenDof
     np.testing.assert_array_equal(u(image=rgb, depth=rng, key="a")["image"], t(image=rgb, depth=rng, key="a")["image"])
+
+
+# ---- LidarFog: the LiDAR effect as a transform on a scan ----------------------------------------------
+def _scan(n=3000, seed=3):
+    g = np.random.default_rng(seed)
+    d = g.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return np.hstack([d * g.uniform(1.5, 80.0, size=(n, 1)), g.uniform(0, 1, size=(n, 1))]).astype(np.float32)
+
+
+def test_lidar_fog_transform_protocol_draws_and_types():
+    """The class comes from the list (the command's sampling and its (N, 4)
+    array form); points in, points out in the same type and shape, other
+    targets untouched; draws are a function of (seed, key), the noise seed
+    included (two keys, two noise patterns); p=0 is the identity."""
+    assert issubclass(T.LidarFog, T.PointsTransform)
+    pts = _scan()
+    t = T.LidarFog(visibility=(30, 60), seed=9)
+    out = t(points=pts, key="0001", labels="kept")
+    assert set(out) == {"points", "params", "labels"} and out["labels"] == "kept"
+    assert out["points"].shape == pts.shape and out["points"].dtype == np.float32
+    v = out["params"]["values"]
+    assert 30 <= v["visibility"] < 60 and isinstance(v["seed"], int)
+    assert out["params"]["record"]["lidar"]["alpha_per_m"] == 3.912 / v["visibility"]
+    assert out["params"]["record"]["lidar"]["soft_points"] > 0
+    same = T.LidarFog(visibility=(30, 60), seed=9)(points=pts, key="0001")
+    np.testing.assert_array_equal(same["points"], out["points"])
+    other = t(points=pts, key="0002")["params"]["values"]
+    assert other["seed"] != v["seed"] and other["visibility"] != v["visibility"]
+    # the noise seed is the draw's: fixing the visibility, two keys still move the fog returns differently
+    a = T.LidarFog(visibility=40, seed=9)(points=pts, key="a")["points"]
+    b = T.LidarFog(visibility=40, seed=9)(points=pts, key="b")["points"]
+    moved = np.any(a[:, :3] != pts[:, :3], axis=1)
+    assert moved.any() and not np.array_equal(a[moved], b[moved])
+    off = T.LidarFog(p=0.0)(points=pts, key="k")
+    assert off["points"] is pts and off["params"]["applied"] is False
+    torch = _torch()
+    tt = t(points=torch.from_numpy(pts), key="0001")["points"]
+    assert isinstance(tt, torch.Tensor) and tt.dtype == torch.float32
+    np.testing.assert_array_equal(tt.numpy(), out["points"])
+
+
+def test_lidar_fog_transform_replay_equals_the_cli(tmp_path):
+    """replay repeats the sample bit for bit (another object, after JSON);
+    `brume lidar fog` with the drawn values writes the same bytes."""
+    pts = _scan()
+    out = T.LidarFog(seed=1, visibility=(30, 50))(points=pts, key="scan/7")
+    params = json.loads(json.dumps(out["params"]))
+    np.testing.assert_array_equal(T.LidarFog().replay(params)(points=pts)["points"], out["points"])
+    pts.tofile(tmp_path / "in.bin")
+    v = params["values"]
+    run_cli("lidar", "fog", "--points", tmp_path / "in.bin", "--visibility", repr(v["visibility"]), "--seed", v["seed"],
+            "--out", tmp_path / "out.bin")
+    np.testing.assert_array_equal(np.fromfile(tmp_path / "out.bin", np.float32).reshape(-1, 4), out["points"])
+
+
+def test_lidar_fog_transform_bad_arguments():
+    with pytest.raises(ValueError, match="visibility"):
+        T.LidarFog(visibility=(0, 50))
+    with pytest.raises(ValueError, match="points"):
+        T.LidarFog()(points=_scan()[:, :3], key="k")
+    with pytest.raises(ValueError, match="points"):
+        T.LidarFog()(key="k")
+    with pytest.raises(TypeError, match="unknown argument"):
+        T.LidarFog(fov_x=50)

@@ -50,9 +50,24 @@ auto dof_stage(F&& f) -> decltype(f()) {
 
 bool cpu_only(DofScheme s) { return s == DofScheme::bertalmio || s == DofScheme::leaky; }
 
+// The chain on arrays (brume.haze_dof): haze's keywords and the DOF's with
+// their prefix (dof_focus_distance), as the record's "haze" and "dof" blocks.
+struct HazeDofParams {
+  HazeParams haze;
+  DofParams dof;
+};
+const ParamTable<HazeDofParams>& haze_dof_param_table() {
+  static const ParamTable<HazeDofParams> t = [] {
+    ParamTable<HazeDofParams> d("haze");
+    d.nest(&HazeDofParams::haze, haze_param_table()).nest(&HazeDofParams::dof, dof_param_table(), kDofPrefix);
+    return d;
+  }();
+  return t;
+}
+
 }  // namespace
 
-HazeDofRun run_haze_dof(const Image& rgb, const Image& measured_range, const Intrinsics& k, const HazeParams& haze,
+HazeDofRun run_haze_dof(ConstImageView rgb, ConstImageView measured_range, const Intrinsics& k, const HazeParams& haze,
                         const DofParams& dof, const RangeStep& prepare, const Exec& exec,
                         const std::set<std::string>& given) {
   const std::set<std::string> gh = haze_given(given), gd = dof_given(given);
@@ -80,7 +95,7 @@ HazeDofRun run_haze_dof(const Image& rgb, const Image& measured_range, const Int
   HazeDofRun run;
   // A sparse map is completed first (guided by rgb), when the step says so.
   const CompletedRange done = complete_step(measured_range, rgb, prepare, gh, exec.threads);
-  const Image& measured = done.applied ? done.range : measured_range;
+  const ConstImageView measured = done.view(measured_range);
   PreparedRange prep = prepare_step(measured, prepare, gh, exec.threads, haze_sky_beyond(haze));
   prep.record["complete"] = done.record;
   run.haze = run_haze_prepared(rgb, measured, prep, haze, ex, gh);
@@ -214,6 +229,29 @@ CommandDef haze_dof_command() {
     return dof_stage_requested(ctx.given) ? run_haze_dof_job(j, e, ctx) : run_haze_job(haze_part(j, ctx.given), e, ctx);
   };
   c.gpu_passes = {"haze.premultiply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
+  // brume.haze_dof(rgb, range, ...): the chain in memory, the range prepared
+  // once, the arrays read in place; its record is the chain's, which `brume
+  // run` repeats (brume.transforms.HazeThenDof runs it).
+  static const auto call =
+      array_call_table(haze_dof_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
+  c.arrays = make_array_form<HazeDofParams>(
+      "haze_dof", "",
+      "Haze and fog with scattering blur, then depth of field through the hazy image (the chain `brume haze "
+      "--dof-...`): the range prepared once, the DOF stage's keywords prefixed dof_ (dof_focus_distance). As "
+      "`brume haze` with --dof-... flags.",
+      rgb_range_args(ArrayArg::As::view), call, {"rgb", "transmission", "scale", "dof_scale", "record"}, true,
+      [](const std::vector<ArrayIn>& in, ArrayCall<HazeDofParams>& k, const Exec& e, const std::set<std::string>& g) {
+        const ConstImageView& rgb = in[0].view;
+        const Intrinsics ki = dof_stage([&] { return dof_intrinsics(k.depth, k.p.dof, rgb.width(), rgb.height()); });
+        HazeDofRun r = run_haze_dof(rgb, in[1].view, ki, k.p.haze, k.p.dof, k.prepare, e, g);
+        return ArrayResult{{{"rgb", std::move(r.dof.result.rgb)},
+                            {"transmission", std::move(r.haze.result.transmission)},
+                            {"scale", std::move(r.haze.result.scale)},
+                            {"dof_scale", std::move(r.dof.result.scale)}},
+                           std::move(r.record),
+                           {},
+                           {}};
+      });
   return c;
 }
 

@@ -149,11 +149,11 @@ HazeRun run_haze(ConstImageView rgb, ConstImageView measured_range, const HazePa
   return haze_on_prepared(rgb, std::move(analysis), prep, p, exec);
 }
 
-HazeRun run_haze_prepared(const Image& rgb, const Image& measured_range, const PreparedRange& prepared,
+HazeRun run_haze_prepared(ConstImageView rgb, ConstImageView measured_range, const PreparedRange& prepared,
                           const HazeParams& p, const Exec& exec, const std::set<std::string>& given) {
   validate_haze(p, given);
   HazeAnalysis analysis = analyse_haze(rgb, measured_range, p);
-  if (prepared.range.width != measured_range.width || prepared.range.height != measured_range.height)
+  if (prepared.range.width != measured_range.width() || prepared.range.height != measured_range.height())
     throw Error("internal: the prepared range is not the measured range's size");
   return haze_on_prepared(rgb, std::move(analysis), prepared, p, exec);
 }
