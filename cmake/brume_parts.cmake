@@ -55,3 +55,23 @@ function(brume_generate_parts gen_dir)
   set(BRUME_PART_SOURCES ${sources} PARENT_SCOPE)
   set(BRUME_SHADERS ${embed} PARENT_SCOPE)
 endfunction()
+
+# brume_embed(HEADER NAMESPACE COMMENT FILES_VAR name=path...): the files as
+# string constants `name` in HEADER (cmake/embed_shaders.cmake), remade when
+# one changes; FILES_VAR gets their paths. The GPU passes' GLSL and brume
+# view's page and modules.
+function(brume_embed header namespace comment files_var)
+  set(files)
+  foreach(pair ${ARGN})
+    string(REPLACE "=" ";" kv "${pair}")
+    list(GET kv 1 path)
+    list(APPEND files ${path})
+  endforeach()
+  string(REPLACE ";" "|" arg "${ARGN}")
+  add_custom_command(OUTPUT ${header}
+    COMMAND ${CMAKE_COMMAND} "-DOUT=${header}" "-DINPUTS=${arg}" "-DNAMESPACE=${namespace}"
+            -P ${PROJECT_SOURCE_DIR}/cmake/embed_shaders.cmake
+    DEPENDS ${files} ${PROJECT_SOURCE_DIR}/cmake/embed_shaders.cmake
+    COMMENT "${comment}" VERBATIM)
+  set(${files_var} ${files} PARENT_SCOPE)
+endfunction()

@@ -4,6 +4,7 @@
 // the media the effects model give their extinction in closed form.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -16,6 +17,9 @@
 #include "brume/rerun.hpp"
 #include "brume/sample.hpp"
 #include "test_util.hpp"
+#if BRUME_HAVE_GPU
+#include "gpu/passes.hpp"
+#endif
 
 namespace fs = std::filesystem;
 using namespace brume;
@@ -216,4 +220,54 @@ TEST(Commands, ExtinctionOfTheModelledMedium) {
   EXPECT_EQ(fog->extinction_per_m(fog->build({{"classic", "linear"}}), 0.0), std::nullopt);
   // Commands that model no medium have none.
   for (const char* n : {"blur", "depth convert", "compare"}) EXPECT_FALSE(find_command(n)->extinction_per_m) << n;
+}
+
+// Every command with a browser preview (brume view, docs/view.md): its plan on
+// a small scene draws only passes of its gpu_passes, every one of them
+// linked (the page compiles their text), from textures the plan declares.
+TEST(Commands, EveryPreviewPlanDrawsItsOwnLinkedPasses) {
+  const int w = 24, h = 16;
+  Image rgb(w, h, 3), range(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c) rgb.data[(y * w + x) * 3 + c] = 0.1f + 0.03f * static_cast<float>(x + c);
+      range.data[y * w + x] = y < 4 ? NAN : 5.0f + static_cast<float>(x + y);  // a sky band
+    }
+  const PreparedRange prep = prepare_step(range, RangeStep{}, {}, 1, true);
+  int shown = 0;
+  for (const CommandDef& c : commands()) {
+    if (!c.preview) continue;
+    SCOPED_TRACE(c.name);
+    ++shown;
+    JobValues v = {{"image", "x.png"}, {"range", "r.exr"}, {"out", "o.png"}, {"fov-x", 60.0}};
+    if (c.spec("camera-height")) v.emplace_back("camera-height", 1.6);
+    if (c.spec("visibility")) v.emplace_back("visibility", 40.0);
+    if (c.spec("focus-distance")) v.emplace_back("focus-distance", 10.0);
+    if (c.spec("coc-infinity")) v.emplace_back("coc-infinity", 8.0);
+    const nlohmann::json job = c.build(v);
+    const nlohmann::json plan = c.preview(job, PreviewInputs{rgb, range, prep});
+    std::set<std::string> textures = {"image", "range", "sky"};
+    for (const auto& [name, fmt] : plan.at("targets").items()) textures.insert(name);
+    for (const auto& d : plan.value("data", nlohmann::json::array())) {
+      textures.insert(d.get<std::string>());
+      ASSERT_TRUE(c.preview_data);
+      EXPECT_EQ(c.preview_data(d.get<std::string>(), job, PreviewInputs{rgb, range, prep}).pixels(), rgb.pixels());
+    }
+    for (const auto& step : plan.at("steps")) {
+      if (step.contains("copy")) {
+        EXPECT_TRUE(textures.count(step["copy"].at("from").get<std::string>()));
+        continue;
+      }
+      const std::string pass = step.at("pass");
+      EXPECT_NE(std::find(c.gpu_passes.begin(), c.gpu_passes.end(), pass), c.gpu_passes.end()) << pass;
+#if BRUME_HAVE_GPU
+      EXPECT_NE(gpu::find_pass(pass), nullptr) << pass;
+#endif
+      for (const auto& t : step.at("in"))
+        EXPECT_TRUE(t == "$src" || textures.count(t.get<std::string>())) << pass << " reads " << t;
+      if (step.contains("iterate")) textures.insert(step["iterate"].at("last").get<std::string>());
+    }
+    EXPECT_TRUE(textures.count(plan.at("result").get<std::string>()));
+  }
+  EXPECT_GE(shown, 3);  // haze, fog, dof
 }

@@ -35,6 +35,7 @@
 #include "brume/image.hpp"
 #include "brume/params.hpp"
 #include "brume/pipeline.hpp"
+#include "brume/preview.hpp"
 
 namespace brume {
 
@@ -134,6 +135,14 @@ struct CommandDef {
   std::string stage_prefix;      // a chain: the later stage's flag prefix ("dof-"), else ""
   std::optional<CommandSampling> sampling;  // `brume sample`, random_params, batch distributions
   std::vector<std::string> gpu_passes;      // its GPU passes (PassSpec names, "haze.premultiply"), in order
+  // Its frame for the browser preview (`brume view`; brume/preview.hpp): the
+  // plan of gpu_passes for a job (the table's JSON, checked) on the inputs.
+  // Empty for commands the preview does not show.
+  std::function<nlohmann::json(const nlohmann::json& job, const PreviewInputs& in)> preview;
+  // A map a preview plan names in its "data" (fog's range with the sky
+  // unknown again; dof's scale map, named by the job it was made for), made
+  // from the job whose plan named it and the inputs; an unknown name throws.
+  std::function<Image(const std::string& name, const nlohmann::json& job, const PreviewInputs& in)> preview_data;
   std::optional<ArrayForm> arrays;          // the command on arrays (the Python module), where it has one
 
   // ---- what is done with a job (the table's JSON) --------------------------------------

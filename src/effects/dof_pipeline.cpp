@@ -164,6 +164,53 @@ DofRun run_dof_prepared(DenseImageRef rgb, const PreparedRange& prep, const Intr
   return run;
 }
 
+// The preview (brume/preview.hpp): the engine's passes on the scale map
+// from the CoC, formed on the host as the GPU path of run_dof_prepared does
+// (a map named by the job: "dof.scale:HASH", made by dof_preview_data).
+struct DofPreviewScale {
+  Image scale;
+  DofAnalysis analysis;
+};
+DofPreviewScale dof_preview_scale(const nlohmann::json& job, const PreviewInputs& in) {
+  DofJob j;
+  dof_job_table().from_json(j, job, "job");
+  check_gpu_scheme(j.dof, Backend::gpu);
+  const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height);
+  DofPreviewScale s;
+  s.scale = dof_scale_map(planar_depth(in.prepared.range, k), j.dof, s.analysis);
+  return s;
+}
+
+std::string dof_scale_name(const nlohmann::json& job) {
+  char b[32];
+  std::snprintf(b, sizeof b, "dof.scale:%016zx", std::hash<std::string>{}(job.dump()));
+  return b;
+}
+
+nlohmann::json dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
+  const DofPreviewScale s = dof_preview_scale(job, in);
+  DofJob j;
+  dof_job_table().from_json(j, job, "job");
+  const DiffusionParams dp = dof_diffusion_params(j.dof);
+  const std::string scale = dof_scale_name(job);
+  nlohmann::json plan;
+  const char* f = dp.precision == Precision::f16 ? "RGBA16F" : "RGBA32F";
+  plan["targets"] = {{"f0", f}, {"f1", f}};
+  plan["data"] = nlohmann::json::array({scale});
+  plan["steps"] = nlohmann::json::array({{{"copy", {{"from", "image"}, {"to", "f0"}}}}});
+  preview_diffusion_steps(plan, dp, s.analysis.plan, scale, "f0", "f1", "blurred");
+  plan["result"] = "blurred";
+  plan["derived"] = {{"sigma_max_px", s.analysis.sigma_max},
+                     {"coc_infinity_px", s.analysis.alpha_px},
+                     {"iterations", s.analysis.plan.iterations}};
+  return plan;
+}
+
+Image dof_preview_data(const std::string& name, const nlohmann::json& job, const PreviewInputs& in) {
+  if (name != dof_scale_name(job)) throw Error("no preview map '" + name + "'");
+  return dof_preview_scale(job, in).scale;
+}
+
 nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& eo, const RunContext& ctx) {
   const EffectJob<DofJob> e{
       "dof", dof_job_table(), dof_map_outputs(), 90,
@@ -218,6 +265,8 @@ CommandDef dof_command() {
                                          {"sensor-width", "36", {"coc-infinity"}}},
                                         &validate_dof);
   c.gpu_passes = {"diffusion.rates", "diffusion.iterate"};
+  c.preview = &dof_preview;
+  c.preview_data = &dof_preview_data;
   static const auto call = array_call_table(dof_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
   c.arrays = make_array_form<DofParams>(
       "dof", "",

@@ -66,6 +66,13 @@ Image effect_range(const PreparedRange& prep, bool blend) {
   return r;
 }
 
+// The preview's map of the effect's range (brume/preview.hpp): "fog.range.blend"
+// (--sky-rule auto, prepared: sky beyond the margin unknown) or "fog.range.mask".
+Image fog_preview_data(const std::string& name, const nlohmann::json&, const PreviewInputs& in) {
+  if (name != "fog.range.blend" && name != "fog.range.mask") throw Error("no preview map '" + name + "'");
+  return effect_range(in.prepared, name == "fog.range.blend");
+}
+
 }  // namespace
 
 const std::vector<MapOutput>& fog_map_outputs() {
@@ -88,6 +95,75 @@ const ParamTable<FogJob>& fog_job_table() {
     return d;
   }();
   return t;
+}
+
+// The preview's frame (brume/preview.hpp): the passes and uniforms of
+// GpuFog::render (src/gpu/fog.cpp) on the effect's range, shader filtering.
+nlohmann::json fog_preview(const nlohmann::json& job, const PreviewInputs& in) {
+  FogJob j;
+  fog_job_table().from_json(j, job, "job");
+  const FogParams& p = j.fog;
+  const int w = in.rgb.width, h = in.rgb.height;
+  const bool heights = p.classic == ClassicFog::none && p.profile != FogProfile::constant;
+  const Camera camera = heights ? depth_camera(j.input.depth, w, h, p.camera)
+                                : make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, w, h);
+  const bool blend = p.sky_rule == SkyRule::automatic && in.prepared.applied;
+  const std::string range_name = blend ? "fog.range.blend" : "fog.range.mask";
+  const Image range = effect_range(in.prepared, blend);
+  const FogAnalysis a = analyse_fog(in.rgb, in.measured, range, camera, p, j.prepare.params.s_max_factor);
+  const FogDensity& d = a.density;
+  constexpr std::size_t kMaxKnots = 32;  // BRUME_FOG_MAX_KNOTS in GLSL
+  if (d.knot_u.size() > kMaxKnots)
+    throw Error("--table has " + std::to_string(d.knot_u.size()) + " rows; the GPU pass holds at most 32");
+  std::vector<float> ku(kMaxKnots, 0.0f), kd(kMaxKnots, 0.0f);
+  for (std::size_t i = 0; i < d.knot_u.size(); ++i) {
+    ku[i] = static_cast<float>(d.knot_u[i]);
+    kd[i] = static_cast<float>(d.knot_density[i]);
+  }
+  const bool blur = p.lambda > 0.0;
+  const bool sky_blend = a.sky_blend && !in.prepared.sky_weight.empty();
+  const Mat3 R = camera.world_from_camera().rotation;
+  const auto f = [](double v) { return static_cast<float>(v); };
+  nlohmann::json plan;
+  const char* fmt = p.diffusion.precision == Precision::f16 ? "RGBA16F" : "RGBA32F";
+  plan["targets"] = {{"f0", fmt}, {"f1", fmt}, {"aux", "RGBA32F"}, {"out", "RGBA32F"}};
+  plan["data"] = nlohmann::json::array({range_name});
+  plan["steps"] = nlohmann::json::array();
+  plan["steps"].push_back(
+      {{"pass", "fog.apply"},
+       {"in", {"image", range_name, "sky"}},
+       {"out", {"f0", "aux"}},
+       {"uniforms",
+        {{"uRayRow", preview_f3(f(R.m[1][0]), f(R.m[1][1]), f(R.m[1][2]))},
+         {"uK", preview_f4(f(camera.k.cx), f(camera.k.cy), f(1.0 / camera.k.fx), f(1.0 / camera.k.fy))},
+         {"uKind", preview_i(d.kind())},
+         {"uExp", preview_f3(f(d.d0), f(d.falloff), f(d.exponent_c))},
+         {"uBand", preview_f2(f(d.band_offset), f(d.band_half_width))},
+         {"uClassic", preview_f2(f(d.fog_start), f(d.fog_end))},
+         {"uKnots", preview_i(static_cast<int>(d.knot_u.size()))},
+         {"uKnotU", {"1fv", ku}},
+         {"uKnotD", {"1fv", kd}},
+         {"uSkyDistance", preview_f(a.sky_at_infinity ? -1.0f : f(a.sky_distance_m))},
+         {"uSkyBlurDistance", preview_f(f(a.sky_distance_m))},
+         {"uSkyBlend", preview_i(sky_blend ? 1 : 0)},
+         {"uAirlight", preview_f3(a.airlight.data())},
+         {"uBlur", preview_i(blur ? 1 : 0)},
+         {"uScale", preview_f4(f(p.diffusion.sigma0), f(p.lambda), f(p.albedo), f(1.0 / a.range_max_m))},
+         {"uSigmaMax", preview_f(f(a.sigma_max))},
+         {"uDepthBuffer", preview_i(0)},
+         {"uDepthLinear", preview_f3(0.0f, 0.0f, 0.0f)}}}});
+  plan["result"] = "f0";
+  if (blur) {
+    preview_diffusion_steps(plan, p.diffusion, a.plan, "aux", "f0", "f1", "blurred");
+    plan["steps"].push_back({{"pass", "haze.composite"},
+                             {"in", {"blurred", "aux"}},
+                             {"out", nlohmann::json::array({"out"})},
+                             {"uniforms", {{"uAirlight", preview_f3(a.airlight.data())}, {"uNaive", preview_i(0)}}}});
+    plan["result"] = "out";
+  }
+  plan["derived"] = fog_record(p, a)["derived"];
+  plan["derived"]["iterations"] = blur ? a.plan.iterations : 0;
+  return plan;
 }
 
 FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSource& depth, const FogParams& p,
@@ -199,6 +275,8 @@ CommandDef fog_command() {
                                          {"albedo", "uniform(0.8, 1)", {"classic"}}},
                                         &validate_fog);
   c.gpu_passes = {"fog.apply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
+  c.preview = &fog_preview;
+  c.preview_data = &fog_preview_data;
   // The height profile's density (a table profile reads its file); classic
   // OpenGL fog is a look, not a medium.
   c.extinction_per_m = [](const nlohmann::json& job, double height_m) -> std::optional<double> {

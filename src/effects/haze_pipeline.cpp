@@ -98,6 +98,41 @@ HazeRun haze_on_prepared(ConstImageView rgb, HazeAnalysis analysis, const Prepar
   return run;
 }
 
+// The preview's frame (brume/preview.hpp): the passes and uniforms of
+// GpuHaze::render (src/gpu/haze.cpp) with the shader's interpolation.
+nlohmann::json haze_preview(const nlohmann::json& job, const PreviewInputs& in) {
+  HazeJob j;
+  haze_job_table().from_json(j, job, "job");
+  const HazeParams& p = j.haze;
+  const HazeAnalysis a = analyse_haze(in.rgb, in.measured, p);
+  const bool naive = p.composite == Composite::naive;
+  const bool blend = a.sky_beyond && !in.prepared.sky_weight.empty();
+  nlohmann::json plan;
+  const char* f = p.diffusion.precision == Precision::f16 ? "RGBA16F" : "RGBA32F";
+  plan["targets"] = {{"f0", f}, {"f1", f}, {"aux", "RG32F"}, {"out", "RGBA32F"}};
+  plan["steps"] = nlohmann::json::array();
+  plan["steps"].push_back({{"pass", "haze.premultiply"},
+                           {"in", {"image", "range", "sky"}},
+                           {"out", {"f0", "aux"}},
+                           {"uniforms",
+                            {{"uInvRangeMax", preview_f(static_cast<float>(1.0 / a.range_max_m))},
+                             {"uKappa", preview_f(static_cast<float>(a.kappa_a + a.kappa_s))},
+                             {"uSigma0", preview_f(static_cast<float>(p.diffusion.sigma0))},
+                             {"uSigmaMax", preview_f(static_cast<float>(a.sigma_max))},
+                             {"uNaive", preview_i(naive ? 1 : 0)},
+                             {"uSkyBlend", preview_i(blend ? 1 : 0)},
+                             {"uSkyTau", preview_f(a.sky_transmission)}}}});
+  preview_diffusion_steps(plan, p.diffusion, a.plan, "aux", "f0", "f1", "blurred");
+  plan["steps"].push_back({{"pass", "haze.composite"},
+                           {"in", {"blurred", "aux"}},
+                           {"out", nlohmann::json::array({"out"})},
+                           {"uniforms", {{"uAirlight", preview_f3(a.airlight.data())}, {"uNaive", preview_i(naive ? 1 : 0)}}}});
+  plan["result"] = "out";
+  plan["derived"] = haze_record(p, a)["derived"];
+  plan["derived"]["iterations"] = a.plan.iterations;
+  return plan;
+}
+
 }  // namespace
 
 HazeRun run_haze(ConstImageView rgb, ConstImageView measured_range, const HazeParams& p, const RangeStep& prepare,
@@ -180,6 +215,7 @@ CommandDef haze_command() {
                                           {"lambda", "uniform(0, 8)", {}}},
                                          &validate_haze);
   c.gpu_passes = {"haze.premultiply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
+  c.preview = &haze_preview;
   // A homogeneous medium: Koschmieder's 3.912 / V with a visibility, else the
   // normalised kappas over a given R_max; without either it has no unit.
   c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {

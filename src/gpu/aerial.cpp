@@ -25,6 +25,7 @@ const gpu::PassSpec kAerialPremultiplyPass{"aerial.premultiply", {"haze_math", "
                                      gpu::shaders::aerial_premultiply_frag};
 const gpu::PassSpec kAerialCompositePass{"aerial.composite", {"haze_math", "aerial_math"},
                                    gpu::shaders::aerial_composite_frag};
+const gpu::PassRegistration kAerialPasses{&kAerialPremultiplyPass, &kAerialCompositePass};
 
 GpuTexture aerial_tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
 

@@ -3,6 +3,7 @@
 #include "gpu/context.hpp"
 
 #include <atomic>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -170,21 +171,9 @@ void GpuContext::Impl::create() {
 
 const gpu::Program& GpuContext::Impl::program(const gpu::PassSpec& spec) {
   if (auto it = programs.find(spec.name); it != programs.end()) return *it->second;
-  std::string fs = "#version 320 es\nprecision highp float;\nprecision highp int;\nprecision highp sampler2D;\n"
-                   "#define BRUME_FN\n#define BRUME_STENCIL_FN\n#define BRUME_IN(T) in T\n#define brume_vec vec4\n#define brume_weight float\n";
-  for (const char* topic : spec.topics) {
-    const Topic* found = nullptr;
-    for (const Topic& t : kTopics)
-      if (std::strcmp(t.name, topic) == 0) found = &t;
-    if (!found)
-      throw Error(std::string("GPU backend: pass '") + spec.name + "' needs unknown shared topic '" + topic +
-                  "' (a brume bug: declare it in its part's brume_part(... TOPICS) in CMakeLists.txt)");
-    fs += found->text;
-    fs += "\n";
-  }
-  fs += spec.body;
+  const std::string fs = gpu::fragment_source(spec);
   gl::Shader vs(GL_VERTEX_SHADER), frag(GL_FRAGMENT_SHADER);
-  compile(vs, shaders::fullscreen_vert, spec.name);
+  compile(vs, gpu::vertex_source(), spec.name);
   compile(frag, fs, spec.name);
   gl::Program p = gl::Program::make();
   glAttachShader(p.id(), vs.id());
@@ -197,6 +186,14 @@ const gpu::Program& GpuContext::Impl::program(const gpu::PassSpec& spec) {
     glGetProgramInfoLog(p.id(), sizeof log, nullptr, log);
     throw Error(std::string("GPU backend: program of pass '") + spec.name + "' failed to link (a brume bug): " + log);
   }
+  // Sampler i takes texture unit i (GLSL ES 3.00 has no layout(binding)).
+  glUseProgram(p.id());
+  const std::vector<std::string> samplers = gpu::sampler_names(spec.body);
+  for (std::size_t i = 0; i < samplers.size(); ++i) {
+    const GLint loc = glGetUniformLocation(p.id(), samplers[i].c_str());
+    if (loc >= 0) glUniform1i(loc, static_cast<GLint>(i));
+  }
+  glUseProgram(0);
   auto prog = std::make_unique<gpu::Program>(std::move(p), spec.name);
   return *programs.emplace(spec.name, std::move(prog)).first->second;
 }
@@ -220,6 +217,62 @@ GpuContext::~GpuContext() = default;
 const GpuInfo& GpuContext::info() const { return impl_->info; }
 
 namespace gpu {
+
+// ---------------------------------------------------------------- pass sources
+
+std::string fragment_source(const PassSpec& spec) {
+  std::string fs = "#version 300 es\nprecision highp float;\nprecision highp int;\nprecision highp sampler2D;\n"
+                   "#define BRUME_FN\n#define BRUME_STENCIL_FN\n#define BRUME_IN(T) in T\n#define brume_vec vec4\n"
+                   "#define brume_weight float\n";
+  for (const char* topic : spec.topics) {
+    const Topic* found = nullptr;
+    for (const Topic& t : kTopics)
+      if (std::strcmp(t.name, topic) == 0) found = &t;
+    if (!found)
+      throw Error(std::string("GPU backend: pass '") + spec.name + "' needs unknown shared topic '" + topic +
+                  "' (a brume bug: declare it in its part's brume_part(... TOPICS) in CMakeLists.txt)");
+    fs += found->text;
+    fs += "\n";
+  }
+  fs += spec.body;
+  return fs;
+}
+
+const char* vertex_source() { return shaders::fullscreen_vert; }
+
+std::vector<std::string> sampler_names(const char* body) {
+  // `uniform [precision] sampler2D NAME;` at the start of a line, in order.
+  std::vector<std::string> names;
+  const std::string b = body;
+  std::size_t pos = 0;
+  while ((pos = b.find("sampler2D ", pos)) != std::string::npos) {
+    const std::size_t line = b.rfind('\n', pos);
+    const std::string head = b.substr(line == std::string::npos ? 0 : line + 1, pos - (line == std::string::npos ? 0 : line + 1));
+    pos += 10;
+    if (head.rfind("uniform ", 0) != 0) continue;  // a function parameter, not a declaration
+    std::size_t e = pos;
+    while (e < b.size() && (std::isalnum(static_cast<unsigned char>(b[e])) || b[e] == '_')) ++e;
+    names.push_back(b.substr(pos, e - pos));
+  }
+  return names;
+}
+
+namespace {
+std::vector<const PassSpec*>& pass_registry() {
+  static std::vector<const PassSpec*> r;
+  return r;
+}
+}  // namespace
+
+PassRegistration::PassRegistration(std::initializer_list<const PassSpec*> specs) {
+  for (const PassSpec* s : specs) pass_registry().push_back(s);
+}
+
+const PassSpec* find_pass(std::string_view name) {
+  for (const PassSpec* s : pass_registry())
+    if (name == s->name) return s;
+  return nullptr;
+}
 
 // ---------------------------------------------------------------- programs
 

@@ -7,9 +7,15 @@
 //
 // Conventions every pass follows: pixel (x, y) of an Image is texel (x, y) of
 // its texture and fragment (x + 0.5, y + 0.5) — rows are never flipped, so no
-// pass needs to know which way is up; samplers are bound with
-// layout(binding = unit) in the shader, so only value uniforms are set from
-// the host, through locations cached when the program is linked.
+// pass needs to know which way is up; a pass's samplers take texture units
+// in the order it declares them (set once with glUniform1i when the program
+// is linked: GLSL ES 3.00 has no layout(binding)), value uniforms through
+// locations cached at link.
+//
+// Every pass is GLSL ES 3.00 (`#version 300 es`: no layout(binding), texture
+// gather, image load/store or compute), so that one source serves this ES 3.2
+// context and WebGL2 in the browser preview (`brume view`, docs/view.md),
+// which takes the same text from fragment_source().
 #pragma once
 
 #include <EGL/egl.h>
@@ -25,23 +31,15 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "brume/gpu_context.hpp"
 #include "gpu/gl.hpp"
+#include "gpu/passes.hpp"
 
 namespace brume {
 namespace gpu {
-
-// A pass's program: a name that identifies it in the cache, the shared topics
-// it needs (by name: "diffusion_math", "haze_math"; see kTopics in
-// context.cpp) and its fragment body. Specs are static constants beside the
-// code that runs the pass.
-struct PassSpec {
-  const char* name;
-  std::initializer_list<const char*> topics;
-  const char* body;
-};
 
 // A linked program and its active uniforms' locations, found once at link.
 class Program {

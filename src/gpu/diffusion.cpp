@@ -21,6 +21,7 @@ namespace {
 
 const gpu::PassSpec kRatesPass{"diffusion.rates", {"diffusion_math"}, gpu::shaders::rates_frag};
 const gpu::PassSpec kDiffusePass{"diffusion.iterate", {"diffusion_math"}, gpu::shaders::diffuse_frag};
+const gpu::PassRegistration kDiffusionPasses{&kRatesPass, &kDiffusePass};
 
 std::string describe(GpuTexture t) {
   return "texture " + std::to_string(t.id) + " (" + std::to_string(t.width) + "x" + std::to_string(t.height) + ")";

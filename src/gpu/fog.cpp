@@ -19,6 +19,7 @@ namespace {
 
 constexpr int kMaxKnots = 32;  // BRUME_FOG_MAX_KNOTS in GLSL
 const gpu::PassSpec kFogPass{"fog.apply", {"haze_math", "fog_math", "depth_math"}, gpu::shaders::fog_frag};
+const gpu::PassRegistration kFogPasses{&kFogPass};
 
 GpuTexture fog_tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
 

@@ -21,6 +21,7 @@ namespace {
 
 const gpu::PassSpec kPremultiplyPass{"haze.premultiply", {"haze_math"}, gpu::shaders::premultiply_frag};
 const gpu::PassSpec kCompositePass{"haze.composite", {"haze_math"}, gpu::shaders::composite_frag};
+const gpu::PassRegistration kHazePasses{&kPremultiplyPass, &kCompositePass};
 
 GpuTexture tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }
 

@@ -20,6 +20,7 @@ namespace brume {
 namespace {
 
 const gpu::PassSpec kSkyPass{"sky.render", {"aerial_math", "sky_math"}, gpu::shaders::sky_render_frag};
+const gpu::PassRegistration kSkyPasses{&kSkyPass};
 
 }  // namespace
 

@@ -28,7 +28,8 @@ namespace brume {
   X(compare_command) \
   X(sky_render_command) \
   X(sky_fit_command) \
-  X(lidar_fog_command)
+  X(lidar_fog_command) \
+  X(view_command)
 
 #define BRUME_DECLARE(f) CommandDef f();
 BRUME_COMMANDS(BRUME_DECLARE)

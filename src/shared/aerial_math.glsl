@@ -1,6 +1,6 @@
 // brume — per-pixel maths of spectral aerial perspective (Morales eq. 3.11-3.13;
 // include/brume/aerial.hpp states the model). Common subset of C++ and GLSL
-// ES 3.20 (float scalars, explicit float literals): the CPU includes it through
+// ES 3.00 (float scalars, explicit float literals): the CPU includes it through
 // prelude_cpp.h, the GPU passes embed it (Topics: aerial_math).
 //
 // Every function works on one channel c of the sensitivity's space; Gamma is

@@ -1,5 +1,5 @@
 // brume — a rasteriser's window depth to distance, in the common subset of
-// C++ and GLSL ES 3.20 (see haze_math.glsl): `brume depth convert
+// C++ and GLSL ES 3.00 (see haze_math.glsl): `brume depth convert
 // --depth-buffer` on the CPU and the fog pass reading a renderer's depth
 // buffer on the GPU (src/gpu/shaders/fog.frag) evaluate this one expression.
 //

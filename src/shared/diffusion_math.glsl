@@ -1,7 +1,7 @@
 // brume — per-pixel maths of the diffusion engine (Hansard §3, eq. 11-18):
 // the rates, the edge rate and the neighbour offsets of the stencil.
 //
-// Written once in the common subset of C++ and GLSL ES 3.20 (float scalars,
+// Written once in the common subset of C++ and GLSL ES 3.00 (float scalars,
 // no pointers, explicit float literals; the one template, the stencil update
 // below, is spelled with macros that are empty in GLSL): the CPU backend
 // includes it through prelude_cpp.h and the GPU backend embeds the same text

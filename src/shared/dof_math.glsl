@@ -1,6 +1,6 @@
 // brume — per-pixel maths of depth of field (Bertalmio et al. eq. 1-2).
 //
-// Written once in the common subset of C++ and GLSL ES 3.20 (float scalars,
+// Written once in the common subset of C++ and GLSL ES 3.00 (float scalars,
 // no pointers, explicit float literals), like haze_math. The GPU passes of
 // depth of field are the engine's own (rates from sigma, diffusion): the
 // scale map is formed on the host, so no pass embeds this topic yet.

@@ -1,5 +1,5 @@
 // brume — per-pixel maths of layered fog (Zhou, Chen, Smith; DESIGN.md),
-// in the common subset of C++ and GLSL ES 3.20 (see haze_math.glsl).
+// in the common subset of C++ and GLSL ES 3.00 (see haze_math.glsl).
 //
 // Heights are camera-relative, u = y - y_c: the ray from the camera to a
 // pixel covers u in [0, dy] with dy = l d_y (l the range, d_y the unit ray's

@@ -1,6 +1,6 @@
 // brume — per-pixel maths of the haze effect (Hansard eq. 1, 4, 7).
 //
-// Written once in the common subset of C++ and GLSL ES 3.20 (float scalars,
+// Written once in the common subset of C++ and GLSL ES 3.00 (float scalars,
 // no pointers, no templates, explicit float literals): the CPU backend
 // includes it through prelude_cpp.h and the GPU backend embeds the same text
 // in the shaders of the passes that declare this topic, so both backends

@@ -1,4 +1,4 @@
-// brume — Preetham sky per-pixel maths (C++ and GLSL ES 3.20 at once).
+// brume — Preetham sky per-pixel maths (C++ and GLSL ES 3.00 at once).
 //
 // Preetham, Shirley, Smits, "A Practical Analytic Model for Daylight",
 // SIGGRAPH 1999, Appendix A.2 (the table below is the paper's, 4 decimals;

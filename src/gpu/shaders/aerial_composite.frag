@@ -2,11 +2,11 @@
 // channel), back to linear sRGB from XYZ, remove's result as it is; sky
 // pixels (uSky, or unknown in uRange) keep the input colour and rho = 1.
 // Topics: haze_math, aerial_math.
-layout(binding = 0) uniform highp sampler2D uF0;
-layout(binding = 1) uniform highp sampler2D uF1;
-layout(binding = 2) uniform highp sampler2D uImage;
-layout(binding = 3) uniform highp sampler2D uRange;
-layout(binding = 4) uniform highp sampler2D uSky;  // .r = 1: unknown in the measured range
+uniform highp sampler2D uF0;
+uniform highp sampler2D uF1;
+uniform highp sampler2D uImage;
+uniform highp sampler2D uRange;
+uniform highp sampler2D uSky;  // .r = 1: unknown in the measured range
 uniform vec3 uA;
 uniform int uMode;
 uniform int uXyz;

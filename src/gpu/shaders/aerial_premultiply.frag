@@ -7,10 +7,10 @@
 // Inputs: uImage (linear sRGB in .rgb), uRange (metres; -1 = unknown, set on
 // upload), uTable / uTableFrom (ln Gamma per channel in .rgb, N x 1).
 // Topics: haze_math, aerial_math.
-layout(binding = 0) uniform highp sampler2D uImage;
-layout(binding = 1) uniform highp sampler2D uRange;
-layout(binding = 2) uniform highp sampler2D uTable;
-layout(binding = 3) uniform highp sampler2D uTableFrom;
+uniform highp sampler2D uImage;
+uniform highp sampler2D uRange;
+uniform highp sampler2D uTable;
+uniform highp sampler2D uTableFrom;
 uniform float uStep, uStepFrom;  // m per table sample
 uniform int uLast, uLastFrom;    // last sample index (>= 1)
 uniform float uDistanceScale;    // s = R x this

@@ -1,8 +1,8 @@
 // Last haze pass (Hansard eq. 4): out = F.rgb + (1 - F.a) B with the blurred
 // transmission F.a (premultiplied), or the naive tau0 E_blurred + (1 - tau0) B.
 // Topics: haze_math.
-layout(binding = 0) uniform highp sampler2D uF;
-layout(binding = 1) uniform highp sampler2D uAux;  // .g = tau0
+uniform highp sampler2D uF;
+uniform highp sampler2D uAux;  // .g = tau0
 uniform vec3 uAirlight;        // linear RGB
 uniform int uNaive;
 layout(location = 0) out vec4 oColor;  // rgb: result, a: blurred transmission

@@ -7,8 +7,8 @@
 // MIRRORED_REPEAT, which is exactly the half-sample mirror boundary) or here
 // in the shader with texelFetch (exact float weights).
 // Topics: diffusion_math.
-layout(binding = 0) uniform highp sampler2D uF;      // F at iteration k
-layout(binding = 1) uniform highp sampler2D uRates;  // .r = rho(x) (gpu_diffusion_rates)
+uniform highp sampler2D uF;      // F at iteration k
+uniform highp sampler2D uRates;  // .r = rho(x) (gpu_diffusion_rates)
 uniform int uK;                 // iteration index k
 uniform int uScheme;            // 0 standard, 1 invariant, 2 invariant-exact
 uniform float uSigma0;

@@ -11,8 +11,8 @@
 // uSkyWeight (with uSkyBlend == 1): the preparation's sky weight; a known
 // pixel of weight > 0 is the horizon margin (brume_fog_pixel).
 // Topics: haze_math, fog_math, depth_math.
-layout(binding = 0) uniform highp sampler2D uImage;
-layout(binding = 1) uniform highp sampler2D uRange;
+uniform highp sampler2D uImage;
+uniform highp sampler2D uRange;
 uniform vec3 uRayRow;          // second row of world_from_cv
 uniform vec4 uK;               // cx, cy, 1/fx, 1/fy
 uniform int uKind;             // BrumeFog.kind
@@ -24,7 +24,7 @@ uniform float uKnotU[BRUME_FOG_MAX_KNOTS];
 uniform float uKnotD[BRUME_FOG_MAX_KNOTS];
 uniform float uSkyDistance;    // m, diverging sky rays (< 0: infinity, F = +inf)
 uniform float uSkyBlurDistance;  // m, the sky's blur distance
-layout(binding = 2) uniform highp sampler2D uSkyWeight;
+uniform highp sampler2D uSkyWeight;
 uniform int uSkyBlend;         // 1: blend the horizon margin by uSkyWeight
 uniform vec3 uAirlight;        // linear RGB
 uniform int uBlur;             // 1: premultiplied output for the diffusion passes

@@ -1,4 +1,4 @@
-#version 320 es
+#version 300 es
 // One triangle covering the viewport; every pass is a fragment shader over it.
 void main() {
   vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));

@@ -4,14 +4,14 @@
 // Inputs: uImage (RGB in .rgb, linear), uRange (metres in .r; -1 = unknown, set
 // on upload because GLSL compilers may fold isnan() away).
 // Topics: haze_math.
-layout(binding = 0) uniform highp sampler2D uImage;
-layout(binding = 1) uniform highp sampler2D uRange;
+uniform highp sampler2D uImage;
+uniform highp sampler2D uRange;
 uniform float uInvRangeMax;   // 1 / R_max
 uniform float uKappa;         // kappa_a' + kappa_s' (normalised)
 uniform float uSigma0;        // px
 uniform float uSigmaMax;      // px
 uniform int uNaive;           // 1: F0 = (E, tau) (the naive composite's blur input)
-layout(binding = 2) uniform highp sampler2D uSkyWeight;  // the preparation's sky weight (.r), with uSkyBlend
+uniform highp sampler2D uSkyWeight;  // the preparation's sky weight (.r), with uSkyBlend
 uniform int uSkyBlend;        // 1: the sky lies beyond the medium (brume_sky_blend with uSkyTau)
 uniform float uSkyTau;        // the sky's own transmission (0: at infinity)
 layout(location = 0) out vec4 oF;

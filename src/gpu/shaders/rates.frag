@@ -5,7 +5,7 @@
 // its own texture. With N = 0 no diffusion pass runs; the rate is 0 rather
 // than a division by zero.
 // Topics: diffusion_math.
-layout(binding = 0) uniform highp sampler2D uSigma;  // .r = sigma(x), px
+uniform highp sampler2D uSigma;  // .r = sigma(x), px
 uniform float uSigma0;      // px
 uniform float uIterations;  // N
 uniform int uScheme;        // 0 standard, 1 invariant, 2 invariant-exact

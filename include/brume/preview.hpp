@@ -1,0 +1,57 @@
+// brume — an effect's frame as data, for the browser preview (`brume view`,
+// docs/view.md): the passes to draw, with their inputs, render targets and
+// uniforms, so that the page runs the native backend's passes (the same
+// GLSL, src/gpu/passes.hpp) in WebGL2 without knowing any effect.
+//
+// A plan is JSON:
+//   {"targets": {NAME: "RGBA32F" | "RGBA16F" | "RG32F" | "R32F", ...},   image-sized
+//    "steps": [{"pass": PASS, "in": [TEXTURE, ...], "out": [TARGET, ...],
+//               "uniforms": {NAME: [TYPE, value...]},                     TYPE 1f 3f 1i
+//               "iterate": {"count": N, "uniform": "uK", "ping": A, "pong": B, "last": ALIAS}}
+//              | {"copy": {"from": TEXTURE, "to": TARGET}}],                 a plain copy (no pass)
+//    "result": TEXTURE}
+// TEXTURE: a target, or "image" (linear RGB, alpha 1), "range" (the prepared
+// range, -1 unknown), "sky" (the preparation's sky weight, 0 without one),
+// one of the plan's "data" (names the command's preview_data makes: a map
+// of one channel, unknown -1, fetched once by the page), or an iterate
+// step's ALIAS. Uniform TYPEs: 1f 2f 3f 4f 1i, and 1fv with an array. An iterate step draws its pass `count` times,
+// reading "$src" (A first) and writing the other, and names the last written
+// ALIAS. Every texture is NEAREST: samples between texels are interpolated
+// in the shader, as `--gpu-filter shader` does natively.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include "brume/diffusion.hpp"
+#include "brume/image.hpp"
+
+namespace brume {
+
+struct PreparedRange;
+
+// What an effect's preview plan is made from: the colour image, the
+// measured range (after completion) and the prepared range, as the
+// command's own run would have them.
+struct PreviewInputs {
+  const Image& rgb;
+  const Image& measured;
+  const PreparedRange& prepared;
+};
+
+// A uniform of a plan step.
+inline nlohmann::json preview_f(double v) { return {"1f", v}; }
+inline nlohmann::json preview_i(int v) { return {"1i", v}; }
+inline nlohmann::json preview_f3(const float* v) { return {"3f", v[0], v[1], v[2]}; }
+inline nlohmann::json preview_f2(float a, float b) { return {"2f", a, b}; }
+inline nlohmann::json preview_f3(float a, float b, float c) { return {"3f", a, b, c}; }
+inline nlohmann::json preview_f4(float a, float b, float c, float d) { return {"4f", a, b, c, d}; }
+
+// The scattering blur's steps (src/gpu/diffusion.cpp with --gpu-filter
+// shader): the rate pass from `sigma` (.r) into target "rates", then the
+// diffusion of `f_ping` (ping-ponging with `f_pong`) whose last texture is
+// named `last`. Appended to plan["steps"].
+void preview_diffusion_steps(nlohmann::json& plan, const DiffusionParams& p, const DiffusionPlan& d,
+                             const std::string& sigma, const std::string& f_ping, const std::string& f_pong,
+                             const std::string& last);
+
+}  // namespace brume

@@ -1,0 +1,541 @@
+// brume — `brume view`: a live preview of an effect in the browser (issue
+// #43, docs/view.md). A local HTTP server (cpp-httplib) serves one page whose
+// ES modules run the command's GPU passes in WebGL2 from the same GLSL the
+// native backend compiles (src/gpu/passes.hpp), on the image and prepared
+// range sent once as float data; each change of a control asks the server
+// for the frame's plan (the command's `preview`, brume/preview.hpp: the
+// analysis the CLI would make, as uniforms), so what the page shows is what
+// `brume <effect>` renders. Nothing here names an effect: the command comes
+// from the list by name, its controls from its table.
+//
+// Security (a server on a user's machine): loopback only unless --listen; a
+// random token as the first path segment, checked first on every request
+// (403); Host and Origin must name the address and port served (403: DNS
+// rebinding); with the token only the page, its modules and the one view's
+// data exist (404 for anything else: no file paths, no listing); bodies,
+// concurrent connections and the request rate are bounded; SIGINT/SIGTERM
+// end it (set explicitly: a shell's background job inherits SIGINT ignored),
+// and so does --idle-exit. It writes nothing.
+#include <httplib.h>
+#include <signal.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <random>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "brume/command.hpp"
+#include "brume/error.hpp"
+#include "brume/params.hpp"
+#include "brume/pipeline.hpp"
+#include "brume/record.hpp"
+#include "jobs/view/view_embedded.hpp"
+#if BRUME_HAVE_GPU
+#include "gpu/passes.hpp"
+#endif
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace brume {
+
+namespace {
+
+struct ViewParams {
+  std::string effect = "haze";
+  int port = 0;
+  std::string listen;
+  double idle_exit_min = 60.0;
+};
+struct ViewJob {
+  InputFiles input;
+  RangeStep prepare;
+  ViewParams view;
+};
+
+// The effects --effect names; a run checks that the command has a preview
+// (CommandDef::preview). A fixed list: the table is made while the list of
+// commands is being built, so it cannot ask that list.
+const std::vector<const char*>& preview_names() {
+  static const std::vector<const char*> n = {"haze", "fog", "aerial", "dof", "haze+dof"};
+  return n;
+}
+
+const ParamTable<ViewParams>& view_param_table() {
+  static const ParamTable<ViewParams> t = [] {
+    ParamTable<ViewParams> d("view");
+    d.choice("effect", &ViewParams::effect, preview_names(), "the effect shown (its controls come from its table)")
+        .integer("port", &ViewParams::port, "1", Range::closed(0, 65535), "TCP port; 0 picks a free one")
+        .text("listen", &ViewParams::listen,
+              "address to bind instead of the loopback (127.0.0.1 and ::1); the token still guards every request")
+        .real("idle-exit", &ViewParams::idle_exit_min, "min", Range::at_least(0.0),
+              "exit after this many minutes without a request; 0: never");
+    return d;
+  }();
+  return t;
+}
+
+const ParamTable<ViewJob>& view_job_table() {
+  static const ParamTable<ViewJob> t = [] {
+    ParamTable<ViewJob> d("view");
+    d.nest(&ViewJob::input, input_param_table(true))
+        .nest(&ViewJob::prepare, range_step_param_table())
+        .nest(&ViewJob::view, view_param_table());
+    return d;
+  }();
+  return t;
+}
+
+// ---------------------------------------------------------------- the view's data
+
+// The blocks the page edits: the effect's own (and its diffusion's), not the
+// files, the depth source, the preparation (the view's own blocks, which its
+// command line fixed) or the outputs.
+bool page_block(const std::string& b) {
+  if (b == "output") return false;
+  for (const Param<ViewJob>& d : view_job_table().params())
+    if (d.spec.block == b) return false;
+  return true;
+}
+
+std::string kind_name(ParamKind k) {
+  switch (k) {
+    case ParamKind::real: return "real";
+    case ParamKind::integer: return "integer";
+    case ParamKind::boolean: return "boolean";
+    case ParamKind::choice: return "choice";
+    case ParamKind::rgb: return "rgb";
+    case ParamKind::text: return "text";
+  }
+  return "text";
+}
+
+json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(); }
+
+// A declaration for the page's controls, with a plausible span for the
+// slider: the command's sampling range where it has one.
+json spec_json(const CommandDef& c, const ParamSpec& s) {
+  json j = {{"name", s.name},       {"block", s.block},   {"kind", kind_name(s.kind)},
+            {"unit", s.unit},       {"help", s.describe()}, {"min", finite_or_null(s.range.min)},
+            {"max", finite_or_null(s.range.max)}, {"min_open", s.range.min_open}, {"max_open", s.range.max_open},
+            {"choices", s.choices}, {"optional", s.optional}, {"unset_word", s.unset_word},
+            {"default", s.format(c.defaults.at(s.block).at(s.name))}};
+  if (c.sampling)
+    for (const SampleDefault& d : c.sampling->defaults)
+      if (d.name == s.name) j["sampling"] = d.spec;
+  return j;
+}
+
+// The inputs at 1/k of their size (a box average of the colour, every
+// k-th range sample), completed and prepared as the command's run would.
+struct ViewData {
+  int k = 1;
+  Image rgb, measured;  // measured: completed, when the step completes
+  CompletedRange done;
+  PreparedRange prep;
+  std::string rgba, range, sky;  // float32 little-endian texture data
+};
+
+Image shrink(const Image& in, int k, bool average) {
+  if (k == 1) return in;
+  const int w = in.width / k, h = in.height / k, c = in.channels;
+  Image out(w, h, c);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int ch = 0; ch < c; ++ch) {
+        if (!average) {
+          out.data[(static_cast<std::size_t>(y) * w + x) * c + ch] =
+              in.data[(static_cast<std::size_t>(y * k + k / 2) * in.width + x * k + k / 2) * c + ch];
+          continue;
+        }
+        double s = 0.0;
+        for (int v = 0; v < k; ++v)
+          for (int u = 0; u < k; ++u) s += in.data[(static_cast<std::size_t>(y * k + v) * in.width + x * k + u) * c + ch];
+        out.data[(static_cast<std::size_t>(y) * w + x) * c + ch] = static_cast<float>(s / (k * k));
+      }
+  return out;
+}
+
+std::string floats(const std::vector<float>& v) {
+  return std::string(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(float));
+}
+
+std::unique_ptr<ViewData> make_data(const LoadedInputs& in, const RangeStep& step, const std::set<std::string>& given,
+                                    int k) {
+  auto d = std::make_unique<ViewData>();
+  d->k = k;
+  d->rgb = shrink(in.rgb, k, true);
+  d->measured = shrink(in.depth.range, k, false);
+  d->done = complete_step(d->measured, d->rgb, step, given, 0);
+  if (d->done.applied) d->measured = d->done.range;
+  d->prep = prepare_step(d->measured, step, given, 0, /*sky_weight=*/true);
+  const std::size_t n = d->rgb.pixels();
+  std::vector<float> rgba(n * 4, 1.0f), range(n), sky(n, 0.0f);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int c = 0; c < 3; ++c) rgba[i * 4 + c] = d->rgb.data[i * 3 + c];
+    const float v = d->prep.range.data[i];
+    range[i] = std::isfinite(v) && v != 0.0f ? v : -1.0f;  // as upload_color_and_range
+    if (!d->prep.sky_weight.empty()) sky[i] = d->prep.sky_weight.data[i];
+  }
+  d->rgba = floats(rgba);
+  d->range = floats(range);
+  d->sky = floats(sky);
+  return d;
+}
+
+// A word for a POSIX shell.
+std::string shell_word(const std::string& s) {
+  const bool plain = !s.empty() && std::all_of(s.begin(), s.end(), [](char ch) {
+    return std::isalnum(static_cast<unsigned char>(ch)) || std::strchr("_./,:+=-@%", ch);
+  });
+  if (plain) return s;
+  std::string q = "'";
+  for (char ch : s) q += ch == '\'' ? std::string("'\\''") : std::string(1, ch);
+  return q + "'";
+}
+
+std::string random_token() {
+  std::random_device rd;  // /dev/urandom on Linux
+  std::string t;
+  for (int i = 0; i < 4; ++i) {
+    char b[9];
+    std::snprintf(b, sizeof b, "%08x", static_cast<unsigned>(rd()));
+    t += b;
+  }
+  return t;
+}
+
+std::atomic<int> g_signal{0};
+extern "C" void on_view_signal(int sig) { g_signal.store(sig); }
+
+struct Server {
+  Server(const CommandDef& cmd, RangeStep s, std::set<std::string> g)
+      : c(cmd), step(std::move(s)), cli_given(std::move(g)), token(random_token()) {}
+  const CommandDef& c;
+  LoadedInputs in;
+  RangeStep step;
+  std::set<std::string> cli_given;
+  JobValues cli_values;  // the command line's input and preparation flags, for the effect's job
+  std::string token, host_ok[4];
+  int port = 0;
+  std::mutex mu;
+  std::unique_ptr<ViewData> data;
+  std::map<std::string, json> data_jobs;  // the job of the plan that named each map (the last few)
+  std::atomic<long long> last_request_ms{0};
+  std::atomic<int> window_count{0};
+  std::atomic<long long> window_start{0};
+
+  static long long now_ms() {
+    return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now().time_since_epoch())
+        .count();
+  }
+
+  ViewData& at(int k) {
+    if (!data || data->k != k) data = make_data(in, step, cli_given, k);
+    return *data;
+  }
+
+  json meta() {
+    json specs = json::array();
+    for (const ParamSpec& s : c.specs)
+      if (page_block(s.block)) specs.push_back(spec_json(c, s));
+    json passes = json::object();
+#if BRUME_HAVE_GPU
+    for (const std::string& name : c.gpu_passes) {
+      const gpu::PassSpec* p = gpu::find_pass(name);
+      if (!p) throw Error("internal: pass '" + name + "' of " + c.name + " is not linked");
+      passes[name] = {{"fragment", gpu::fragment_source(*p)}, {"samplers", gpu::sampler_names(p->body)}};
+    }
+    const std::string vertex = gpu::vertex_source();
+#else
+    const std::string vertex;
+#endif
+    return {{"effect", c.name},
+            {"width", in.rgb.width},
+            {"height", in.rgb.height},
+            {"image", in.record.value("image", json::object()).value("path", json(""))},
+            {"specs", specs},
+            {"passes", passes},
+            {"vertex", vertex},
+            {"version", BRUME_VERSION}};
+  }
+
+  // The frame for the page's values ({name: text as typed}): the job as the
+  // command line would build it, checked, its plan, command line and record.
+  json frame(const json& body) {
+    if (!body.is_object() || !body.contains("values") || !body["values"].is_object())
+      throw Error("the request needs {\"values\": {name: text}}");
+    const int k = body.value("scale", 1);
+    if (k < 1 || k > 64) throw Error("scale " + std::to_string(k) + " must be in [1, 64]");
+    JobValues values = cli_values;
+    std::set<std::string> given = cli_given;
+    std::vector<std::string> words = {"brume"};
+    for (const std::string& w : c.cli_words().empty() ? std::vector<std::string>{c.name} : c.cli_words())
+      words.push_back(w);
+    for (const auto& [name, v] : cli_values) {
+      const ParamSpec* s = c.spec(name);
+      if (s->kind == ParamKind::boolean) {
+        if (v.get<bool>()) words.push_back("--" + name);
+      } else {
+        words.push_back("--" + name);
+        words.push_back(s->format(v));
+      }
+    }
+    for (const auto& [name, text] : body["values"].items()) {
+      const ParamSpec* s = c.spec(name);
+      if (!s || !page_block(s->block)) throw Error("'" + name + "' is not a parameter of " + c.name + " the page sets");
+      if (!text.is_string()) throw Error("--" + name + ": the value must be text as typed");
+      json v = s->parse(text.get<std::string>());
+      s->check(v);
+      values.emplace_back(name, v);
+      given.insert(name);
+      if (s->kind == ParamKind::boolean) {
+        if (v.get<bool>()) words.push_back("--" + name);
+      } else {
+        words.push_back("--" + name);
+        words.push_back(text.get<std::string>());
+      }
+    }
+    values.emplace_back("out", json("brume-view.png"));
+    words.push_back("--out");
+    words.push_back("brume-view.png");
+    const json job = c.build(values);
+    c.check(job, given, true);
+    std::lock_guard<std::mutex> lock(mu);
+    ViewData& d = at(k);
+    json plan = c.preview(job, PreviewInputs{d.rgb, d.measured, d.prep});
+    if (data_jobs.size() > 16) data_jobs.clear();
+    for (const auto& n : plan.value("data", json::array())) data_jobs[n.get<std::string>()] = job;
+    std::string line;
+    for (const std::string& w : words) line += (line.empty() ? "" : " ") + shell_word(w);
+    json record = run_record_header(c.name, words);
+    record["job"] = job;
+    record["inputs"] = in.record;
+    record["preview"] = {{"tool", "brume view"}, {"scale", k}};
+    return {{"plan", plan}, {"command", line}, {"record", record}, {"width", d.rgb.width}, {"height", d.rgb.height}};
+  }
+
+  // Every request: the token first, then Host and Origin, then the rate.
+  httplib::Server::HandlerResponse guard(const httplib::Request& req, httplib::Response& res) {
+    const std::string prefix = "/" + token + "/";
+    if (req.path.size() < prefix.size() || req.path.compare(0, prefix.size(), prefix) != 0) {
+      res.status = 403;
+      res.set_content("forbidden: the URL needs the token brume view printed\n", "text/plain");
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    const std::string host = req.get_header_value("Host");
+    const bool host_ok_ = std::find(std::begin(host_ok), std::end(host_ok), host) != std::end(host_ok) && !host.empty();
+    bool origin_ok = true;
+    if (req.has_header("Origin")) {
+      const std::string o = req.get_header_value("Origin");
+      origin_ok = o.rfind("http://", 0) == 0 &&
+                  std::find(std::begin(host_ok), std::end(host_ok), o.substr(7)) != std::end(host_ok);
+    }
+    if (!host_ok_ || !origin_ok) {
+      res.status = 403;
+      res.set_content("forbidden: Host or Origin is not the address brume view serves\n", "text/plain");
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    // At most 600 requests a minute: the page asks for a frame per change.
+    const long long t = now_ms();
+    if (t - window_start.load() > 60000) {
+      window_start.store(t);
+      window_count.store(0);
+    }
+    if (++window_count > 600) {
+      res.status = 429;
+      res.set_content("too many requests\n", "text/plain");
+      return httplib::Server::HandlerResponse::Handled;
+    }
+    last_request_ms.store(t);
+    res.set_header("Cache-Control", "no-store");
+    res.set_header("X-Content-Type-Options", "nosniff");
+    res.set_header("Referrer-Policy", "no-referrer");
+    res.set_header("X-Frame-Options", "DENY");
+    res.set_header("Content-Security-Policy",
+                   "default-src 'self'; style-src 'self' 'unsafe-inline'; img-src 'self' data:; frame-ancestors 'none'");
+    return httplib::Server::HandlerResponse::Unhandled;
+  }
+
+  void routes(httplib::Server& s) {
+    const std::string p = "/" + token + "/";
+    s.set_pre_routing_handler([this](const httplib::Request& q, httplib::Response& r) { return guard(q, r); });
+    s.set_payload_max_length(1 << 20);
+    s.set_keep_alive_max_count(100);
+    s.new_task_queue = [] { return new httplib::ThreadPool(4); };
+    s.Get(p, [](const httplib::Request&, httplib::Response& r) {
+      r.set_content(view::web::view_html, "text/html; charset=utf-8");
+    });
+    s.Get(p + "view.js", [](const httplib::Request&, httplib::Response& r) {
+      r.set_content(view::web::view_js, "text/javascript; charset=utf-8");
+    });
+    s.Get(p + "render.js", [](const httplib::Request&, httplib::Response& r) {
+      r.set_content(view::web::render_js, "text/javascript; charset=utf-8");
+    });
+    s.Get(p + "meta.json", [this](const httplib::Request&, httplib::Response& r) {
+      r.set_content(meta().dump(), "application/json");
+    });
+    for (const char* what : {"image", "range", "sky"}) {
+      const std::string w = what;
+      s.Get(p + w + ".bin", [this, w](const httplib::Request& q, httplib::Response& r) {
+        int k = 1;
+        if (q.has_param("scale")) k = std::atoi(q.get_param_value("scale").c_str());
+        if (k < 1 || k > 64) {
+          r.status = 400;
+          return;
+        }
+        std::lock_guard<std::mutex> lock(mu);
+        ViewData& d = at(k);
+        r.set_content(w == "image" ? d.rgba : w == "range" ? d.range : d.sky, "application/octet-stream");
+      });
+    }
+    // A map a plan names (CommandDef::preview_data), one channel, unknown -1.
+    s.Get(p + "data.bin", [this](const httplib::Request& q, httplib::Response& r) {
+      const int k = q.has_param("scale") ? std::atoi(q.get_param_value("scale").c_str()) : 1;
+      const std::string name = q.get_param_value("name");
+      if (k < 1 || k > 64 || !c.preview_data) {
+        r.status = 404;
+        return;
+      }
+      std::lock_guard<std::mutex> lock(mu);
+      ViewData& d = at(k);
+      const auto job = data_jobs.find(name);
+      if (job == data_jobs.end()) {
+        r.status = 404;
+        return;
+      }
+      try {
+        const Image m = c.preview_data(name, job->second, PreviewInputs{d.rgb, d.measured, d.prep});
+        std::vector<float> v(m.data.size());
+        for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::isfinite(m.data[i]) && m.data[i] != 0.0f ? m.data[i] : -1.0f;
+        r.set_content(floats(v), "application/octet-stream");
+      } catch (const Error&) {
+        r.status = 404;
+      }
+    });
+    s.Post(p + "frame", [this](const httplib::Request& q, httplib::Response& r) {
+      try {
+        r.set_content(frame(json::parse(q.body)).dump(), "application/json");
+      } catch (const std::exception& e) {
+        r.status = 400;
+        r.set_content(json{{"error", e.what()}}.dump(), "application/json");
+      }
+    });
+  }
+};
+
+json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx) {
+#if !BRUME_HAVE_GPU
+  (void)job;
+  (void)ctx;
+  throw Error("brume view serves the GPU passes' shaders, which this brume was built without (no EGL/GLES 3 headers "
+              "at build time); rebuild with libegl-dev libgles-dev");
+#endif
+  const CommandDef* c = find_command(job.view.effect);
+  if (!c || !c->preview)
+    throw Error("--effect '" + job.view.effect + "': its preview is not built yet (" +
+                command_names([](const CommandDef& d) { return static_cast<bool>(d.preview); }) + " have one)");
+  Server sv(*c, job.prepare, ctx.given);
+  // The command line's input and preparation flags go into the effect's job,
+  // paths made absolute, so that the copied command and the record run from
+  // any directory.
+  json vj = view_job_table().to_json(job);
+  for (const Param<ViewJob>& d : view_job_table().params()) {
+    const ParamSpec& s = d.spec;
+    if (!ctx.given.count(s.name) || s.block == "view") continue;
+    if (!c->spec(s.name)) throw Error("--" + s.name + " is not a flag of " + c->name + ", which the view shows");
+    json& v = vj.at(s.block).at(s.name);
+    std::error_code ec;
+    if (s.kind == ParamKind::text && v.is_string() && !v.get<std::string>().empty() &&
+        fs::exists(v.get<std::string>(), ec))
+      v = fs::absolute(v.get<std::string>()).lexically_normal().string();
+    sv.cli_values.emplace_back(s.name, v);
+  }
+  {
+    JobValues iv = sv.cli_values;
+    iv.emplace_back("out", json("brume-view.png"));
+    // Each flag's type and range before any file is read; the command's
+    // cross-field checks (dof's required --focus-distance) wait for the
+    // page's values, and their messages are shown there.
+    c->check(c->build(iv), ctx.given, false);
+  }
+  ViewJob absolute;
+  view_job_table().from_json(absolute, vj, "job");
+  sv.in = load_inputs(absolute.input, true);  // the record's inputs by absolute path, as the command's
+
+  httplib::Server s4, s6;
+  sv.routes(s4);
+  sv.routes(s6);
+  const bool loopback = job.view.listen.empty();
+  const std::string addr = loopback ? "127.0.0.1" : job.view.listen;
+  sv.port = job.view.port;
+  if (sv.port == 0) {
+    sv.port = s4.bind_to_any_port(addr);
+    if (sv.port <= 0) throw Error("--listen '" + addr + "': cannot bind a port there");
+  } else if (!s4.bind_to_port(addr, sv.port)) {
+    throw Error("--port " + std::to_string(sv.port) + ": cannot bind " + addr + ":" + std::to_string(sv.port) +
+                " (in use?); use --port 0 for a free one");
+  }
+  const std::string ps = std::to_string(sv.port);
+  sv.host_ok[0] = "127.0.0.1:" + ps;
+  sv.host_ok[1] = "[::1]:" + ps;
+  sv.host_ok[2] = "localhost:" + ps;
+  sv.host_ok[3] = (addr.find(':') != std::string::npos ? "[" + addr + "]" : addr) + ":" + ps;
+  const bool v6 = loopback && s6.bind_to_port("::1", sv.port);  // where the host has IPv6 loopback
+
+  // Explicit handlers: a background job of a shell inherits SIGINT ignored.
+  struct sigaction sa {};
+  sa.sa_handler = on_view_signal;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+  signal(SIGPIPE, SIG_IGN);
+
+  sv.last_request_ms.store(Server::now_ms());
+  std::thread t4([&] { s4.listen_after_bind(); });
+  std::thread t6;
+  if (v6) t6 = std::thread([&] { s6.listen_after_bind(); });
+  std::fprintf(stderr, "brume view: %s on http://%s/%s/  (Ctrl-C to stop)\n", c->name.c_str(), sv.host_ok[loopback ? 0 : 3].c_str(),
+               sv.token.c_str());
+  std::fflush(stderr);
+  const double idle_ms = job.view.idle_exit_min * 60000.0;
+  std::string why;
+  while (why.empty()) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    if (int sig = g_signal.load()) why = sig == SIGINT ? "SIGINT" : "SIGTERM";
+    else if (idle_ms > 0 && static_cast<double>(Server::now_ms() - sv.last_request_ms.load()) > idle_ms)
+      why = "idle for " + ParamSpec{}.format(json(job.view.idle_exit_min)) + " min";
+  }
+  s4.stop();
+  s6.stop();
+  t4.join();
+  if (t6.joinable()) t6.join();
+  std::fprintf(stderr, "brume view: stopped (%s)\n", why.c_str());
+  return json::object();
+}
+
+}  // namespace
+
+CommandDef view_command() {
+  CommandDef c = make_command<ViewJob>({
+      .name = "view",
+      .cli = "view",
+      .summary = "a live preview in the browser: the effect's GPU passes in WebGL2, its controls from its table",
+      .table = &view_job_table(),
+      .run = &run_view_job,
+      .report = [](const ViewJob&, const json&) {},  // its lines are printed as it serves
+  });
+  return c;
+}
+
+}  // namespace brume

@@ -1,0 +1,274 @@
+// brume view — runs a frame plan (include/brume/preview.hpp) in WebGL2 with
+// the native backend's passes: the server sends each pass's whole fragment
+// shader (src/gpu/passes.hpp: `#version 300 es`, topics, body) and the plan
+// names the passes, their inputs, targets and uniforms. Every texture is
+// NEAREST (samples between texels are interpolated in the shader, as
+// `--gpu-filter shader`); render targets are float (EXT_color_buffer_float).
+
+const FORMATS = {
+  RGBA32F: ['RGBA32F', 'RGBA'], RGBA16F: ['RGBA16F', 'RGBA'], RG32F: ['RG32F', 'RG'], R32F: ['R32F', 'RED'],
+};
+
+// The display: the effect frame (or the input, left of the wipe) encoded
+// with the sRGB curve as an 8-bit output would be, or the range colour-mapped.
+const DISPLAY_FS = `#version 300 es
+precision highp float;
+precision highp sampler2D;
+uniform sampler2D uOut;
+uniform sampler2D uImage;
+uniform sampler2D uRange;
+uniform sampler2D uSky;   // the preparation's sky weight
+uniform int uMode;        // 0 effect, 1 depth
+uniform float uWipe;      // x below which the input is shown
+uniform float uRangeMax;
+uniform float uFocus;     // > 0: mark the focal plane (range within uFocusTol of uFocus)
+uniform float uFocusTol;
+out vec4 oColor;
+float enc(float v) { v = max(v, 0.0); return v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1.0 / 2.4) - 0.055; }
+vec3 turbo(float t) {  // a short polynomial colour map: near warm, far cool
+  t = clamp(t, 0.0, 1.0);
+  return vec3(clamp(1.5 - abs(4.0 * t - 1.0), 0.0, 1.0), clamp(1.5 - abs(4.0 * t - 2.0), 0.0, 1.0),
+              clamp(1.5 - abs(4.0 * t - 3.0), 0.0, 1.0));
+}
+void main() {
+  ivec2 size = textureSize(uOut, 0);
+  ivec2 p = ivec2(int(gl_FragCoord.x), size.y - 1 - int(gl_FragCoord.y));  // image rows top-down
+  vec3 c;
+  float r = texelFetch(uRange, p, 0).r;
+  if (uMode == 1) {
+    bool sky = r <= 0.0 || texelFetch(uSky, p, 0).r >= 0.5;
+    c = sky ? vec3(0.55, 0.75, 1.0) : turbo(1.0 - sqrt(r / uRangeMax));  // sky and unknown: pale blue
+    c = vec3(pow(c.r, 2.2), pow(c.g, 2.2), pow(c.b, 2.2));
+  } else {
+    c = float(p.x) < uWipe ? texelFetch(uImage, p, 0).rgb : texelFetch(uOut, p, 0).rgb;
+  }
+  if (uFocus > 0.0 && r > 0.0 && abs(r - uFocus) < uFocusTol) c = mix(c, vec3(1.0, 0.0, 1.0), 0.45);
+  oColor = vec4(enc(c.r), enc(c.g), enc(c.b), 1.0);
+}`;
+
+export class Renderer {
+  constructor(canvas, meta) {
+    const gl = canvas.getContext('webgl2', {antialias: false, preserveDrawingBuffer: true, alpha: false});
+    if (!gl) throw new Error('this browser gives no WebGL2 context');
+    if (!gl.getExtension('EXT_color_buffer_float'))
+      throw new Error('this browser cannot render to float textures (no EXT_color_buffer_float)');
+    this.gl = gl;
+    this.canvas = canvas;
+    this.maxTexture = gl.getParameter(gl.MAX_TEXTURE_SIZE);
+    const info = gl.getExtension('WEBGL_debug_renderer_info');  // the real renderer (SwiftShader, a GPU's name)
+    this.renderer = info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
+    this.vao = gl.createVertexArray();
+    this.programs = {};
+    for (const [name, p] of Object.entries(meta.passes))
+      this.programs[name] = this.link(name, meta.vertex, p.fragment, p.samplers);
+    this.display = this.link('display', meta.vertex, DISPLAY_FS, ['uOut', 'uImage', 'uRange', 'uSky']);
+    this.targets = {};
+    this.fbos = {};
+  }
+
+  link(name, vs, fs, samplers) {
+    const gl = this.gl;
+    const prog = gl.createProgram();
+    for (const [type, src] of [[gl.VERTEX_SHADER, vs], [gl.FRAGMENT_SHADER, fs]]) {
+      const s = gl.createShader(type);
+      gl.shaderSource(s, src);
+      gl.compileShader(s);
+      if (!gl.getShaderParameter(s, gl.COMPILE_STATUS))
+        throw new Error(`pass ${name}: shader does not compile: ${gl.getShaderInfoLog(s)}`);
+      gl.attachShader(prog, s);
+    }
+    gl.linkProgram(prog);
+    if (!gl.getProgramParameter(prog, gl.LINK_STATUS))
+      throw new Error(`pass ${name}: program does not link: ${gl.getProgramInfoLog(prog)}`);
+    gl.useProgram(prog);
+    samplers.forEach((s, i) => {  // sampler i on texture unit i, as the native context sets them
+      const loc = gl.getUniformLocation(prog, s);
+      if (loc) gl.uniform1i(loc, i);
+    });
+    const locs = {};
+    const n = gl.getProgramParameter(prog, gl.ACTIVE_UNIFORMS);
+    for (let i = 0; i < n; ++i) {
+      const u = gl.getActiveUniform(prog, i);
+      const base = u.name.replace(/\[0\]$/, '');
+      locs[base] = gl.getUniformLocation(prog, base);
+    }
+    return {prog, locs, name};
+  }
+
+  texture(internal, format, w, h, data) {
+    const gl = this.gl;
+    const t = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, t);
+    gl.texStorage2D(gl.TEXTURE_2D, 1, gl[internal], w, h);
+    if (data) {
+      gl.pixelStorei(gl.UNPACK_ALIGNMENT, 4);
+      gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, w, h, gl[format], gl.FLOAT, data);
+    }
+    for (const [k, v] of [[gl.TEXTURE_MIN_FILTER, gl.NEAREST], [gl.TEXTURE_MAG_FILTER, gl.NEAREST],
+                          [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE], [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE]])
+      gl.texParameteri(gl.TEXTURE_2D, k, v);
+    return t;
+  }
+
+  // The inputs, once: linear RGBA, the prepared range (-1 unknown), the sky weight.
+  upload(w, h, rgba, range, sky) {
+    this.w = w;
+    this.h = h;
+    this.canvas.width = w;
+    this.canvas.height = h;
+    this.inputs = {
+      image: this.texture('RGBA32F', 'RGBA', w, h, rgba),
+      range: this.texture('R32F', 'RED', w, h, range),
+      sky: this.texture('R32F', 'RED', w, h, sky),
+    };
+    this.rangeHost = range;
+    this.targets = {};
+    this.fbos = {};
+  }
+
+  // A map a plan names in its "data" (one channel, unknown -1), once.
+  // A name "kind:key" replaces the older maps of its kind (dof's scale map per job).
+  addInput(name, data) {
+    const kind = name.split(':')[0];
+    for (const old of Object.keys(this.inputs))
+      if (old !== name && old.includes(':') && old.split(':')[0] === kind) {
+        this.gl.deleteTexture(this.inputs[old]);
+        delete this.inputs[old];
+      }
+    this.inputs[name] = this.texture('R32F', 'RED', this.w, this.h, data);
+  }
+
+  target(name, format) {
+    const key = name + ':' + format;
+    if (!this.targets[key]) {
+      const [internal, fmt] = FORMATS[format];
+      this.targets[key] = this.texture(internal, fmt, this.w, this.h, null);
+    }
+    return this.targets[key];
+  }
+
+  fbo(textures) {
+    const gl = this.gl;
+    const key = textures.map((t) => t.key).join('|');
+    if (!this.fbos[key]) {
+      const f = gl.createFramebuffer();
+      gl.bindFramebuffer(gl.FRAMEBUFFER, f);
+      textures.forEach((t, i) => gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0 + i, gl.TEXTURE_2D, t.tex, 0));
+      gl.drawBuffers(textures.map((_, i) => gl.COLOR_ATTACHMENT0 + i));
+      const st = gl.checkFramebufferStatus(gl.FRAMEBUFFER);
+      if (st !== gl.FRAMEBUFFER_COMPLETE) throw new Error('float render target incomplete: 0x' + st.toString(16));
+      this.fbos[key] = f;
+    }
+    return this.fbos[key];
+  }
+
+  // Runs the plan's passes; the result texture is kept for display and pixels().
+  run(plan) {
+    const gl = this.gl;
+    const tex = {};
+    for (const [k, t] of Object.entries(this.inputs)) tex[k] = {tex: t, key: k};
+    for (const [name, fmt] of Object.entries(plan.targets)) tex[name] = {tex: this.target(name, fmt), key: name + ':' + fmt};
+    gl.bindVertexArray(this.vao);
+    gl.viewport(0, 0, this.w, this.h);
+    const draw = (step, extra) => {
+      const p = this.programs[step.pass];
+      if (!p) throw new Error(`the plan names pass ${step.pass}, which the server did not send`);
+      gl.useProgram(p.prog);
+      for (const [u, v] of Object.entries({...step.uniforms, ...extra})) {
+        const loc = p.locs[u];
+        if (loc === undefined) continue;  // a uniform this compiler dropped
+        if (v[0] === '1f') gl.uniform1f(loc, v[1]);
+        else if (v[0] === '1i') gl.uniform1i(loc, v[1]);
+        else if (v[0] === '2f') gl.uniform2f(loc, v[1], v[2]);
+        else if (v[0] === '3f') gl.uniform3f(loc, v[1], v[2], v[3]);
+        else if (v[0] === '4f') gl.uniform4f(loc, v[1], v[2], v[3], v[4]);
+        else if (v[0] === '1fv') gl.uniform1fv(loc, new Float32Array(v[1]));
+      }
+      step.in.forEach((name, i) => {
+        gl.activeTexture(gl.TEXTURE0 + i);
+        gl.bindTexture(gl.TEXTURE_2D, name === '$src' ? this.src.tex : tex[name].tex);
+      });
+      gl.drawArrays(gl.TRIANGLES, 0, 3);
+    };
+    for (const step of plan.steps) {
+      if (step.copy) {  // a plain copy: the diffusion's first texture from an input
+        const from = this.fbo([tex[step.copy.from]]), to = this.fbo([tex[step.copy.to]]);
+        gl.bindFramebuffer(gl.READ_FRAMEBUFFER, from);
+        gl.bindFramebuffer(gl.DRAW_FRAMEBUFFER, to);
+        gl.blitFramebuffer(0, 0, this.w, this.h, 0, 0, this.w, this.h, gl.COLOR_BUFFER_BIT, gl.NEAREST);
+        gl.bindFramebuffer(gl.READ_FRAMEBUFFER, null);
+        gl.bindFramebuffer(gl.DRAW_FRAMEBUFFER, null);
+        continue;
+      }
+      if (step.iterate) {
+        const it = step.iterate;
+        let src = tex[it.ping], dst = tex[it.pong];
+        for (let k = 0; k < it.count; ++k) {
+          gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo([dst]));
+          this.src = src;
+          draw(step, {[it.uniform]: ['1i', k]});
+          [src, dst] = [dst, src];
+        }
+        tex[it.last] = src;
+      } else {
+        gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo(step.out.map((n) => tex[n])));
+        draw(step, {});
+      }
+      for (let i = 0; i < step.in.length; ++i) {
+        gl.activeTexture(gl.TEXTURE0 + i);
+        gl.bindTexture(gl.TEXTURE_2D, null);
+      }
+    }
+    this.result = tex[plan.result];
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+  }
+
+  // Draws the display (effect, wipe, depth view, focal plane) to the canvas.
+  show(opts) {
+    const gl = this.gl;
+    if (!this.result) return;
+    const p = this.display;
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.viewport(0, 0, this.w, this.h);
+    gl.useProgram(p.prog);
+    const set1f = (n, v) => p.locs[n] !== undefined && gl.uniform1f(p.locs[n], v);
+    if (p.locs.uMode !== undefined) gl.uniform1i(p.locs.uMode, opts.depth ? 1 : 0);
+    set1f('uWipe', opts.wipe * this.w);
+    set1f('uRangeMax', opts.rangeMax || 1);
+    set1f('uFocus', opts.focus || 0);
+    set1f('uFocusTol', opts.focusTol || 0);
+    [this.result.tex, this.inputs.image, this.inputs.range, this.inputs.sky].forEach((t, i) => {
+      gl.activeTexture(gl.TEXTURE0 + i);
+      gl.bindTexture(gl.TEXTURE_2D, t);
+    });
+    gl.bindVertexArray(this.vao);
+    gl.drawArrays(gl.TRIANGLES, 0, 3);
+  }
+
+  // Waits for the GPU (a one-pixel read is the portable fence).
+  sync() {
+    const gl = this.gl;
+    const px = new Uint8Array(4);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  }
+
+  // The effect frame at image size, rows top-down: linear RGBA floats.
+  readResult() {
+    const gl = this.gl;
+    gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo([this.result]));
+    gl.readBuffer(gl.COLOR_ATTACHMENT0);
+    const out = new Float32Array(this.w * this.h * 4);
+    gl.readPixels(0, 0, this.w, this.h, gl.RGBA, gl.FLOAT, out);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    return out;
+  }
+}
+
+// The 8-bit code an sRGB output file stores (src/io/srgb.cpp: the curve of
+// max(v, 0), rounded half away from zero, clipped to 255).
+export function srgb8(v) {
+  if (!(v > 0)) return 0;
+  const e = v <= 0.0031308 ? 12.92 * v : 1.055 * Math.pow(v, 1 / 2.4) - 0.055;
+  return Math.min(255, Math.max(0, Math.round(e * 255)));
+}
