@@ -39,8 +39,8 @@ ${PYTHON:-/usr/bin/python3} scripts/range_picture.py "$tmp/scan.pfm" "$OUT/kitti
 ${PYTHON:-/usr/bin/python3} scripts/range_picture.py "$tmp/completed.pfm" "$OUT/kitti-000001-completed.jpg"
 # LiDAR fog (Hahner et al., docs/lidar.md) on the same frame at visibility 80 m: the camera frame and the scan
 # from one medium; a bird's-eye view of the scan clear and foggy, and both scans projected over their images
-$B haze --image "$K/image_2/000001.png" "${kl[@]}" --visibility 80 --out "$tmp/haze80.png" >/dev/null
-$B lidar fog --points "$K/velodyne/000001.bin" --visibility 80 --out "$tmp/fog80.bin" >/dev/null
+$B haze --image "$K/image_2/000001.png" "${kl[@]}" --visibility 80 --out "$tmp/haze80.png" \
+   --lidar "$K/velodyne/000001.bin" --lidar-out "$tmp/fog80.bin" >/dev/null
 ${PYTHON:-/usr/bin/python3} scripts/lidar_picture.py bev "$K/velodyne/000001.bin" "$tmp/fog80.bin" \
    "$OUT/kitti-000001-lidar-bev.jpg" --title "visibility 80 m" --dpi 80
 ${PYTHON:-/usr/bin/python3} scripts/lidar_picture.py proj "$K/velodyne/000001.bin" "$tmp/fog80.bin" \
