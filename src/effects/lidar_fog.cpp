@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "brume/error.hpp"
+#include "brume/fog.hpp"
 #include "effects/lidar_fog_tables.hpp"
 
 namespace brume {

@@ -5,6 +5,7 @@
 
 #include "brume/command.hpp"
 #include "brume/error.hpp"
+#include "brume/fog.hpp"
 #include "brume/io.hpp"
 #include "brume/lidar_fog.hpp"
 #include "brume/record.hpp"

@@ -158,7 +158,10 @@ std::string cell_text(const nlohmann::json& v) {
   if (v.is_string()) return v.get<std::string>();
   if (v.is_array()) {
     std::string s;
-    for (const auto& x : v) s += (s.empty() ? "" : ",") + (x.is_string() ? x.get<std::string>() : x.dump());
+    for (const auto& x : v) {  // (appended in two steps: GCC 12's -Wrestrict misfires on "," + string&&)
+      if (!s.empty()) s += ',';
+      s += x.is_string() ? x.get<std::string>() : x.dump();
+    }
     return s;
   }
   if (v.is_null()) return "auto";

@@ -241,7 +241,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
             // An input whose output a declaration names (a camera effect's --lidar) is a file too.
             const bool is_file = ((sp->block == "input" || sp->block == "depth") && canon != "depth-channel") ||
                                  std::any_of(e.specs.begin(), e.specs.end(),
-                                             [&](const ParamSpec& s) { return s.output_of == canon; });
+                                             [&name = canon](const ParamSpec& s) { return s.output_of == name; });
             std::error_code fec;
             value = is_file || (!t.empty() && fs::exists(base / t, fec)) ? resolve_path(t) : t;
             sp->check(value);
