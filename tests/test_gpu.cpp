@@ -175,6 +175,33 @@ TEST(Gpu, ReRenderWithoutReuploadEqualsAFreshRender) {
   EXPECT_GT(reused.timing().iterations, 0);
 }
 
+TEST(Gpu, AContextMadeAndDestroyedBesideAnotherLeavesItRendering) {
+  // A second context on the same thread and device (a batch's worker
+  // context, an application's second renderer), made and destroyed: EGL
+  // shares one display per device and process, and the second context left
+  // no context current, so the first one failed ("cannot render to the float
+  // texture (framebuffer status 0x0)") until contexts were made current on
+  // use and the display's initialisations counted. Same bits before and after.
+  BRUME_REQUIRE_GPU(ctx);
+  Image rgb(32, 24, 3), range(32, 24, 1);
+  for (int y = 0; y < 24; ++y)
+    for (int x = 0; x < 32; ++x) {
+      for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = ((x / 4 + y / 4 + c) % 2) ? 0.7f : 0.1f;
+      range.at(x, y) = 2.0f + 0.4f * x;
+    }
+  HazeParams p;
+  p.lambda = 6.0;
+  const HazeAnalysis a = analyse_haze(rgb, range, p);
+  const HazeResult before = GpuHaze(*ctx, rgb, range).render(p, a);
+  {
+    GpuContext other;
+    const HazeResult there = GpuHaze(other, rgb, range).render(p, a);
+    EXPECT_EQ(there.rgb.data, before.rgb.data);
+  }
+  const HazeResult after = GpuHaze(*ctx, rgb, range).render(p, a);
+  EXPECT_EQ(after.rgb.data, before.rgb.data);
+}
+
 TEST(Gpu, SoftwareRasteriserIsMarkedSoftware) {
   // --backend auto must not pick llvmpipe (it measured slower than the CPU
   // backend): GpuInfo::software, set at context creation from the EGL device

@@ -56,7 +56,10 @@ class GpuContext {
   GpuContext& operator=(const GpuContext&) = delete;
   const GpuInfo& info() const;
   struct Impl;
-  Impl& impl() { return *impl_; }
+  // The context's state for the passes, made current on the calling thread
+  // first when another context was made current there since (a second
+  // GpuContext created or destroyed on this thread: a batch's, a test's).
+  Impl& impl();
 
  private:
   std::unique_ptr<Impl> impl_;
@@ -145,7 +148,8 @@ class GpuEffect {
   const GpuTiming& timing() const { return timing_; }
 
  protected:
-  GpuEffect(GpuContext& ctx, int width, int height) : ctx_(ctx), w_(width), h_(height) {}
+  // (the context made current on this thread before the derived class uploads)
+  GpuEffect(GpuContext& ctx, int width, int height) : ctx_(ctx), w_(width), h_(height) { (void)ctx.impl(); }
   ~GpuEffect() = default;
   GpuContext& ctx_;
   int w_, h_;

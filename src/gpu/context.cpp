@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <map>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -64,6 +66,36 @@ GpuObjectCounts gpu_live_objects() {
 
 // ---------------------------------------------------------------- context
 
+namespace {
+// EGL hands out one EGLDisplay per device (or platform) and process, and
+// eglTerminate ends it for every context on it (no reference count before
+// EGL_KHR_display_reference): two GpuContexts on one device -- a batch's
+// workers, an application's two renderers -- share it, so the first one
+// destroyed would leave the other unable to render ("cannot render to the
+// float texture (framebuffer status 0x0)"). Initialisations are counted here
+// and the display is terminated when the last context lets it go.
+std::mutex g_displays_mu;
+std::map<EGLDisplay, int> g_displays;
+
+bool acquire_display(EGLDisplay d) {
+  std::lock_guard<std::mutex> lock(g_displays_mu);
+  EGLint major = 0, minor = 0;
+  if (d == EGL_NO_DISPLAY || !eglInitialize(d, &major, &minor)) return false;
+  ++g_displays[d];
+  return true;
+}
+
+void release_display(EGLDisplay d) {
+  std::lock_guard<std::mutex> lock(g_displays_mu);
+  auto it = g_displays.find(d);
+  if (it == g_displays.end()) return;
+  if (--it->second == 0) {
+    g_displays.erase(it);
+    eglTerminate(d);
+  }
+}
+}  // namespace
+
 GpuContext::Impl::~Impl() {
   if (dpy == EGL_NO_DISPLAY) return;
   if (ctx != EGL_NO_CONTEXT) {
@@ -74,13 +106,14 @@ GpuContext::Impl::~Impl() {
     eglMakeCurrent(dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
     eglDestroyContext(dpy, ctx);
   }
-  eglTerminate(dpy);
+  release_display(dpy);
+  // The context that was current before this one, again (it may be gone: then EGL refuses, and none is current).
+  if (prev_ctx != EGL_NO_CONTEXT) eglMakeCurrent(prev_dpy, prev_draw, prev_read, prev_ctx);
 }
 
 // Try one display: initialise, make an ES 3.2 context current without a surface.
 bool GpuContext::Impl::try_display(EGLDisplay d, const char* platform, std::string& why) {
-  EGLint major = 0, minor = 0;
-  if (d == EGL_NO_DISPLAY || !eglInitialize(d, &major, &minor)) {
+  if (!acquire_display(d)) {
     why += std::string(platform) + ": eglInitialize failed; ";
     return false;
   }
@@ -94,13 +127,13 @@ bool GpuContext::Impl::try_display(EGLDisplay d, const char* platform, std::stri
   if (c == EGL_NO_CONTEXT) {
     why += std::string(platform) + ": no OpenGL ES 3.2 context (EGL error 0x" + hex(static_cast<unsigned>(eglGetError())) +
            "); ";
-    eglTerminate(d);
+    release_display(d);
     return false;
   }
   if (!eglMakeCurrent(d, EGL_NO_SURFACE, EGL_NO_SURFACE, c)) {
     why += std::string(platform) + ": cannot make the context current without a surface; ";
     eglDestroyContext(d, c);
-    eglTerminate(d);
+    release_display(d);
     return false;
   }
   dpy = d;
@@ -110,6 +143,10 @@ bool GpuContext::Impl::try_display(EGLDisplay d, const char* platform, std::stri
 }
 
 void GpuContext::Impl::create() {
+  prev_ctx = eglGetCurrentContext();
+  prev_dpy = eglGetCurrentDisplay();
+  prev_draw = eglGetCurrentSurface(EGL_DRAW);
+  prev_read = eglGetCurrentSurface(EGL_READ);
   std::string why;
   const char* client = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
   const std::string ext = client ? client : "";
@@ -215,6 +252,15 @@ GpuContext::GpuContext() : impl_(std::make_unique<Impl>()) {
 }
 GpuContext::~GpuContext() = default;
 const GpuInfo& GpuContext::info() const { return impl_->info; }
+GpuContext::Impl& GpuContext::impl() {
+  Impl& i = *impl_;
+  if (i.ctx != EGL_NO_CONTEXT && eglGetCurrentContext() != i.ctx &&
+      !eglMakeCurrent(i.dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, i.ctx))
+    throw Error("GPU backend: cannot make this GPU context current on the calling thread (EGL error 0x" +
+                hex(static_cast<unsigned>(eglGetError())) +
+                "; a context belongs to one thread at a time): use it on the thread that made it, or --backend cpu");
+  return i;
+}
 
 namespace gpu {
 
@@ -452,14 +498,14 @@ GLenum pixel_format(int channels) { return channels == 1 ? GL_RED : channels == 
 }  // namespace
 
 GpuImage::GpuImage(GpuContext& ctx, int width, int height, int channels, Precision storage) : channels_(channels) {
-  (void)ctx;  // textures belong to the current context; ctx names it for the reader
+  (void)ctx.impl();  // textures belong to the current context: ctx's, made current here
   if (width <= 0 || height <= 0)
     throw Error("GpuImage: size " + std::to_string(width) + "x" + std::to_string(height) + " must be positive");
   tex_ = {gpu::make_texture(float_format(channels, storage), width, height).release(), width, height};
 }
 
 GpuImage::GpuImage(GpuContext& ctx, const Image& img, Precision storage) : channels_(img.channels) {
-  (void)ctx;
+  (void)ctx.impl();
   if (img.width <= 0 || img.height <= 0) throw Error("GpuImage: image " + img.size_string() + " is empty");
   tex_ = {gpu::make_texture(float_format(img.channels, storage), img.width, img.height, pixel_format(img.channels),
                             GL_FLOAT, img.data.data())

@@ -10,6 +10,7 @@ struct GpuContext::Impl {};
 GpuContext::GpuContext() { gpu_unavailable(); }
 GpuContext::~GpuContext() = default;
 const GpuInfo& GpuContext::info() const { gpu_unavailable(); }
+GpuContext::Impl& GpuContext::impl() { gpu_unavailable(); }
 GpuObjectCounts gpu_live_objects() { return {}; }  // nothing can have been made
 std::uint64_t gpu_contexts_made() { return 0; }
 GpuImage::GpuImage(GpuContext&, const Image&, Precision) { gpu_unavailable(); }
