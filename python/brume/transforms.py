@@ -76,6 +76,14 @@ def _spec_text(name, v):
     return str(v)
 
 
+def _check_p_seed(p, seed):
+    """Every transform's p and seed (ValueError naming the argument)."""
+    if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
+        raise ValueError(f"p={p!r}: the probability of applying, a number in [0, 1]")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"seed={seed!r}: a non-negative integer")
+
+
 def _unit(seed, key, name):
     """u in [0, 1) of the library's sampler for (seed, key, name): the scheme
     brume-sample-v1 (brume/sample.hpp), here for the transform's own draws
@@ -268,10 +276,7 @@ class Transform:
     def __init__(self, p=1.0, seed=0, depth_kind="range", depth_unit=None, transfer=None, per_frame=False,
                  fx=None, fy=None, cx=None, cy=None, fov_x=None, fov_y=None, baseline=None, **params):
         where = f"brume.transforms.{type(self).__name__}()"
-        if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
-            raise ValueError(f"p={p!r}: the probability of applying, a number in [0, 1]")
-        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-            raise ValueError(f"seed={seed!r}: a non-negative integer")
+        _check_p_seed(p, seed)
         if depth_kind not in ("range", "z", "disparity", "inverse"):
             raise ValueError(f"depth_kind={depth_kind!r}: 'range' (metres along the ray), 'z' (along the optical "
                              f"axis), 'disparity' (pixels; needs fx, baseline) or 'inverse' (1/z)")
@@ -456,10 +461,7 @@ class PointsTransform:
 
     def __init__(self, p=1.0, seed=0, **params):
         where = f"brume.transforms.{type(self).__name__}()"
-        if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0.0 <= p <= 1.0:
-            raise ValueError(f"p={p!r}: the probability of applying, a number in [0, 1]")
-        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-            raise ValueError(f"seed={seed!r}: a non-negative integer")
+        _check_p_seed(p, seed)
         self.p, self.seed = float(p), seed
         self._stage = _Stage(_COMMANDS[self._commands[0]], params, where)
         self._calls = 0
