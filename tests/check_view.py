@@ -3,7 +3,8 @@
 in headless Chromium (SwiftShader WebGL2) against the CPU backend.
 
   check_view.py --brume build/brume http       token, Host, Origin, 404, bodies, signals
-  check_view.py --brume build/brume browser    the page's frames = brume haze --backend cpu,
+  check_view.py --brume build/brume browser    the page's frames = brume <effect> --backend cpu (haze, fog,
+                                               dof, aerial, haze+dof),
                                                the saved record repeats, the copied command parses
 
 Exit 77 (ctest: skipped) with a message where the browser part's tools are
@@ -99,6 +100,9 @@ def http_rules(brume, tmp):
         check(st == 400 and "visibility" in json.loads(data)["error"], "a value out of range: 400 naming the flag")
         st, data = request(url, base + "frame", "POST", {}, json.dumps({"values": {"image": "/etc/passwd"}}).encode())
         check(st == 400, "the page cannot name files: 400")
+        st, data = request(url, base + "frame", "POST", {}, json.dumps({"values": {"lidar": "/etc/passwd"}}).encode())
+        check(st == 400 and "names a file" in json.loads(data)["error"],
+              "nor through an effect's own file parameter (--lidar): 400 saying why")
         st, _ = request(url, base + "frame", "POST", {}, b"{" + b" " * (2 << 20) + b"}")
         check(st == 413, f"a body above 1 MiB: 413 (got {st})")
         # Above the browser's largest texture the page asks for the data at 1/k (each map box-averaged or sampled).
@@ -111,9 +115,35 @@ def http_rules(brume, tmp):
     finally:
         if p.poll() is None:
             p.kill()
-    r = subprocess.run([brume, "view", "--effect", "aerial", "--image", "clean.png", "--range", "range.exr"], cwd=tmp,
-                       capture_output=True, text=True, timeout=30)
-    check(r.returncode == 2 and "preview is not built" in r.stderr, f"--effect aerial says it has no preview yet: {r.stderr.strip()}")
+    # Aerial's maps: its ln Gamma tables (N x 1, RGBA) and its sky mask, each named by its contents.
+    p, url = start_view(brume, ["--effect", "aerial", "--image", "clean.png", "--range", "range.exr"], tmp)
+    try:
+        _, _, base = split(url)
+        st, meta = request(url, base + "meta.json")
+        names = [s["name"] for s in json.loads(meta)["specs"]]
+        check("turbidity" in names and not any(n.startswith(("sky-", "lidar")) or n == "sensitivity" for n in names),
+              "aerial's controls: no file parameter, no sky-photo or scan settings")
+        frames = []
+        for t in ["3", "8"]:
+            st, data = request(url, base + "frame", "POST", {}, json.dumps({"values": {"turbidity": t}}).encode())
+            check(st == 200, f"aerial frame at turbidity {t}")
+            frames.append(json.loads(data)["plan"]["data"])
+        check(frames[0][2] == frames[1][2] and frames[0][0] != frames[1][0],
+              "another turbidity: a new Gamma table, the same sky mask (the page fetches only what changed)")
+        host, port, _ = split(url)
+        c = http.client.HTTPConnection(host, port, timeout=10)
+        c.request("GET", base + "data.bin?name=" + frames[1][0].replace(":", "%3A"))
+        r = c.getresponse()
+        body = r.read()
+        w_, h_, ch = map(int, r.getheader("X-Brume-Shape").split())
+        check(r.status == 200 and h_ == 1 and ch == 4 and len(body) == w_ * 4 * 4, f"the table map: {w_}x1, RGBA")
+        c.close()
+        check(request(url, base + "data.bin?name=aerial.gamma%3Ax")[0] == 404, "a map no frame named: 404")
+        st, data = request(url, base + "frame", "POST", {}, json.dumps({"values": {"turbidity": "auto"}}).encode())
+        check(st == 400 and "--turbidity T" in json.loads(data)["error"], "turbidity auto (a sky-photo fit): 400 saying why")
+    finally:
+        p.send_signal(signal.SIGTERM)
+        p.wait(5)
     # A background job of a shell inherits SIGINT ignored: brume view sets its own handler.
     p, url = start_view(brume, ["--image", "clean.png", "--range", "range.exr"], tmp,
                         preexec=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
@@ -294,6 +324,29 @@ def browser(brume, tmp, screenshot, bench):
             {clientX: c.left + c.width * 0.5, clientY: c.top + c.height * 0.85, bubbles: true}));
           setTimeout(() => done(brume.values()['focus-distance']), 50);""")
         check(res not in (None, "30") and float(res) > 0, f"click-to-focus sets focus-distance from the range: {res}")
+        # Aerial perspective: its tables and sky mask as maps, both premultiplied targets diffused with one rate map.
+        p = serve("aerial")
+        for values in [{"turbidity": "3", "lambda": "0"}, {"turbidity": "8", "lambda": "6"},
+                       {"turbidity": "3", "from-turbidity": "6", "lambda": "0"}]:
+            set_together(values)
+            same_as_cpu("aerial", ["--fov-x", "60"] + [a for k, v in values.items() for a in ("--" + k, v)])
+        cmd = shlex.split(d.execute_script("return brume.command()"))
+        check(cmd[:2] == ["brume", "aerial"] and "--from-turbidity" in cmd, f"aerial's command: {' '.join(cmd)}")
+        # Haze then depth of field: haze's passes, then the DOF's on the hazy frame (brume haze --dof-...).
+        p = serve("haze+dof")
+        hd = {"visibility": "300", "lambda": "6", "dof-focus-distance": "8", "dof-coc-infinity": "6"}
+        set_together(hd)
+        same_as_cpu("haze", ["--fov-x", "60"] + [a for k, v in hd.items() for a in ("--" + k, v)])
+        cmd = shlex.split(d.execute_script("return brume.command()"))
+        check(cmd[:2] == ["brume", "haze"] and "--dof-focus-distance" in cmd, f"haze+dof's command: {' '.join(cmd)}")
+        rec = d.execute_script("return brume.record()")
+        with open(os.path.join(tmp, "hd-record.json"), "w") as f:
+            json.dump(rec, f)
+        subprocess.run([brume, "run", "hd-record.json", "--out-dir", "hd-rerun"], cwd=tmp, check=True,
+                       stderr=subprocess.DEVNULL)
+        rr = np.asarray(Image.open(os.path.join(tmp, "hd-rerun", "brume-view.png")).convert("RGB"))
+        check(float(np.sqrt(np.mean((pixels("u8").astype(np.float64) - rr) ** 2))) <= 2.0,
+              "haze+dof's saved record repeats the page's frame through brume run")
         # (the refused albedo's 400 is the one network error expected)
         logs = [l for l in d.get_log("browser") if l["level"] == "SEVERE" and "status of 400" not in l["message"]]
         check(not logs, f"no browser errors ({logs})")

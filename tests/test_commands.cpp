@@ -244,6 +244,9 @@ TEST(Commands, EveryPreviewPlanDrawsItsOwnLinkedPasses) {
     if (c.spec("visibility")) v.emplace_back("visibility", 40.0);
     if (c.spec("focus-distance")) v.emplace_back("focus-distance", 10.0);
     if (c.spec("coc-infinity")) v.emplace_back("coc-infinity", 8.0);
+    if (c.spec("dof-focus-distance")) v.emplace_back("dof-focus-distance", 10.0);
+    if (c.spec("dof-coc-infinity")) v.emplace_back("dof-coc-infinity", 8.0);
+    if (c.spec("lambda")) v.emplace_back("lambda", 4.0);  // the blur's steps too
     const nlohmann::json job = c.build(v);
     const nlohmann::json plan = c.preview(job, PreviewInputs{rgb, range, prep});
     std::set<std::string> textures = {"image", "range", "sky"};
@@ -251,7 +254,12 @@ TEST(Commands, EveryPreviewPlanDrawsItsOwnLinkedPasses) {
     for (const auto& d : plan.value("data", nlohmann::json::array())) {
       textures.insert(d.get<std::string>());
       ASSERT_TRUE(c.preview_data);
-      EXPECT_EQ(c.preview_data(d.get<std::string>(), job, PreviewInputs{rgb, range, prep}).pixels(), rgb.pixels());
+      // The map is the one named: its kind, size and values (preview_map_name), or image-sized.
+      const std::string name = d.get<std::string>();
+      const Image m = c.preview_data(name, job, PreviewInputs{rgb, range, prep});
+      EXPECT_TRUE(name == preview_map_name(name.substr(0, name.find(':')), m) || m.pixels() == rgb.pixels()) << name;
+      EXPECT_TRUE(m.channels >= 1 && m.channels <= 4) << name;
+      EXPECT_THROW(c.preview_data(name + "x", job, PreviewInputs{rgb, range, prep}), Error) << name;
     }
     for (const auto& step : plan.at("steps")) {
       if (step.contains("copy")) {
@@ -269,5 +277,5 @@ TEST(Commands, EveryPreviewPlanDrawsItsOwnLinkedPasses) {
     }
     EXPECT_TRUE(textures.count(plan.at("result").get<std::string>()));
   }
-  EXPECT_GE(shown, 3);  // haze, fog, dof
+  EXPECT_EQ(shown, 5);  // haze, fog, aerial, dof, haze+dof: every effect `brume view --effect` names
 }

@@ -260,6 +260,13 @@ AerialAnalysis analyse_aerial(DenseImageRef rgb, DenseImageRef range, const Aeri
 void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, AerialAnalysis& a,
                     int threads = 0);
 
+// A linear sRGB colour (Iinf) in the analysis' working space: XYZ when the
+// sensitivity is XYZ (M diag(Gamma) M^-1), else as it is. The CPU apply, the
+// GPU passes and the preview's uniforms take Iinf from here.
+std::array<float, 3> aerial_working_colour(const AerialAnalysis& a, const std::array<float, 3>& c);
+// The GPU passes' uMode: 0 render, 1 re-render, 2 remove.
+int aerial_mode_index(AerialMode m);
+
 struct AerialResult {
   Image rgb;          // linear RGB
   Image attenuation;  // 3 channels: rho per channel after the blur (Gamma; Gamma2/Gamma1 for a

@@ -140,9 +140,14 @@ struct CommandDef {
   // Empty for commands the preview does not show.
   std::function<nlohmann::json(const nlohmann::json& job, const PreviewInputs& in)> preview;
   // A map a preview plan names in its "data" (fog's range with the sky
-  // unknown again; dof's scale map, named by the job it was made for), made
-  // from the job whose plan named it and the inputs; an unknown name throws.
+  // unknown again; dof's scale map and aerial's ln Gamma tables, named by
+  // their contents), made from the job whose plan named it and the inputs;
+  // an unknown name throws.
   std::function<Image(const std::string& name, const nlohmann::json& job, const PreviewInputs& in)> preview_data;
+  // The blocks or parameters the preview's page leaves out (those of a file
+  // the page cannot name, a LiDAR scan's). Text parameters (files,
+  // databases) are never the page's.
+  std::vector<std::string> preview_fixed;
   std::optional<ArrayForm> arrays;          // the command on arrays (the Python module), where it has one
 
   // ---- what is done with a job (the table's JSON) --------------------------------------

@@ -12,9 +12,10 @@
 //    "result": TEXTURE}
 // TEXTURE: a target, or "image" (linear RGB, alpha 1), "range" (the prepared
 // range, -1 unknown), "sky" (the preparation's sky weight, 0 without one),
-// one of the plan's "data" (names the command's preview_data makes: a map
-// of one channel, unknown -1, fetched once by the page), or an iterate
-// step's ALIAS. Uniform TYPEs: 1f 2f 3f 4f 1i, and 1fv with an array. An iterate step draws its pass `count` times,
+// one of the plan's "data" (names of maps the command's preview_data makes,
+// fetched once by the page: any size, 1, 2, 3 or 4 channels, the values as
+// the passes read them; a name "KIND:KEY" replaces the page's older map of
+// that KIND), or an iterate step's ALIAS. Uniform TYPEs: 1f 2f 3f 4f 1i, and 1fv with an array. An iterate step draws its pass `count` times,
 // reading "$src" (A first) and writing the other, and names the last written
 // ALIAS. Every texture is NEAREST: samples between texels are interpolated
 // in the shader, as `--gpu-filter shader` does natively.
@@ -46,6 +47,14 @@ inline nlohmann::json preview_f2(float a, float b) { return {"2f", a, b}; }
 inline nlohmann::json preview_f3(float a, float b, float c) { return {"3f", a, b, c}; }
 inline nlohmann::json preview_f4(float a, float b, float c, float d) { return {"4f", a, b, c, d}; }
 
+// A map's name for the plan's "data": "KIND:" and a hash of its size and
+// values, so the page fetches it again only when it changes.
+std::string preview_map_name(const std::string& kind, const Image& m);
+
+// The map with unknown values (0, NaN, inf) as -1, as the GPU backend
+// uploads a range (gpu::upload_color_and_range).
+Image preview_unknown_negative(Image m);
+
 // The scattering blur's steps (src/gpu/diffusion.cpp with --gpu-filter
 // shader): the rate pass from `sigma` (.r) into target "rates", then the
 // diffusion of `f_ping` (ping-ponging with `f_pong`) whose last texture is
@@ -53,5 +62,10 @@ inline nlohmann::json preview_f4(float a, float b, float c, float d) { return {"
 void preview_diffusion_steps(nlohmann::json& plan, const DiffusionParams& p, const DiffusionPlan& d,
                              const std::string& sigma, const std::string& f_ping, const std::string& f_pong,
                              const std::string& last);
+// Its two parts: the rate pass into "rates", and the diffusion of one
+// texture with those rates (aerial diffuses two with one rate map).
+void preview_rates_step(nlohmann::json& plan, const DiffusionParams& p, const DiffusionPlan& d, const std::string& sigma);
+void preview_iterate_step(nlohmann::json& plan, const DiffusionParams& p, const DiffusionPlan& d,
+                          const std::string& f_ping, const std::string& f_pong, const std::string& last);
 
 }  // namespace brume

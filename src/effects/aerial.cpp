@@ -456,6 +456,14 @@ std::size_t aerial_row_space(bool xyz, const Frame& fr, int y, float* lg, float*
 
 }  // namespace
 
+std::array<float, 3> aerial_working_colour(const AerialAnalysis& a, const std::array<float, 3>& c) {
+  if (a.sensitivity.space != SensitivitySpace::xyz) return c;
+  return {sh::brume_srgb_to_x(c[0], c[1], c[2]), sh::brume_srgb_to_y(c[0], c[1], c[2]),
+          sh::brume_srgb_to_z(c[0], c[1], c[2])};
+}
+
+int aerial_mode_index(AerialMode m) { return m == AerialMode::render ? 0 : (m == AerialMode::rerender ? 1 : 2); }
+
 AerialResult apply_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, const AerialAnalysis& a,
                           const Exec& exec) {
   AerialResult out;
@@ -483,11 +491,6 @@ std::size_t apply_aerial(DenseImageRef rgb, DenseImageRef range, const AerialPar
                 "each output its own Image (only out = rgb, in place, is allowed)");
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const bool xyz = a.sensitivity.space == SensitivitySpace::xyz;
-  auto to_space = [xyz](const std::array<float, 3>& c) {
-    if (!xyz) return c;
-    return std::array<float, 3>{sh::brume_srgb_to_x(c[0], c[1], c[2]), sh::brume_srgb_to_y(c[0], c[1], c[2]),
-                                sh::brume_srgb_to_z(c[0], c[1], c[2])};
-  };
   Frame fr{};
   fr.rgb = &rgb, fr.range = &range, fr.sky = a.sky.data.empty() ? nullptr : a.sky.data.data();
   fr.gamma = &a.gamma, fr.gamma_from = &a.gamma_from;
@@ -496,7 +499,7 @@ std::size_t apply_aerial(DenseImageRef rgb, DenseImageRef range, const AerialPar
   fr.inv_step_from = a.mode == AerialMode::rerender ? 1.0 / a.gamma_from.step_m : 0.0;
   fr.s0 = static_cast<float>(p.diffusion.sigma0), fr.smax = static_cast<float>(a.sigma_max);
   fr.inv_rmax = static_cast<float>(1.0 / a.range_max_m), fr.floor_g = static_cast<float>(p.gamma_floor);
-  fr.A = to_space(a.airlight), fr.A1 = to_space(a.from_airlight), fr.W = W;
+  fr.A = aerial_working_colour(a, a.airlight), fr.A1 = aerial_working_colour(a, a.from_airlight), fr.W = W;
   const bool blur = a.plan.iterations > 0 && a.mode != AerialMode::remove;
 
   // Outputs only where asked for; the blur needs sigma and F (rho E', rho)

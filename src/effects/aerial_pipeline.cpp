@@ -4,6 +4,8 @@
 // dispatch once on Exec, record.
 #include <cstdio>
 #include <chrono>
+#include <algorithm>
+#include <cmath>
 
 #include "brume/command.hpp"
 #include "brume/aerial.hpp"
@@ -62,6 +64,98 @@ nlohmann::json aerial_record(const AerialParams& p, const AerialAnalysis& a, std
     j["derived"]["floored_pixels"] = floored;
   }
   return j;
+}
+
+// The preview (brume/preview.hpp): GpuAerial::render's passes (src/gpu/aerial.cpp).
+// Its maps: the ln Gamma table(s) (N x 1, read with texelFetch) and the sky
+// mask (1 where the measured range is unknown), named by their contents.
+struct AerialPreview {
+  AerialParams p;
+  AerialAnalysis a;
+  Image table, table_from, sky;
+};
+
+Image log_gamma_map(const AttenuationTable& t) {
+  Image m(static_cast<int>(std::max<std::size_t>(2, t.log_gamma.size())), 1, 3);  // 2 x 1 at least, as the GPU's
+  for (std::size_t i = 0; i < t.log_gamma.size(); ++i)
+    for (int c = 0; c < 3; ++c) m.data[i * 3 + c] = t.log_gamma[i][c];
+  return m;
+}
+
+AerialPreview aerial_preview_analysis(const nlohmann::json& job, const PreviewInputs& in) {
+  AerialJob j;
+  aerial_job_table().from_json(j, job, "job");
+  // (--turbidity auto was refused by the command's check: the page names no sky photo.)
+  AerialPreview v;
+  v.p = j.aerial;
+  v.a = analyse_aerial(in.rgb, in.measured, v.p);
+  v.table = log_gamma_map(v.a.gamma);
+  v.table_from = log_gamma_map(v.a.mode == AerialMode::rerender ? v.a.gamma_from : v.a.gamma);
+  v.sky = v.a.sky.data.empty() ? Image(in.rgb.width, in.rgb.height, 1) : v.a.sky;
+  return v;
+}
+
+nlohmann::json aerial_preview(const nlohmann::json& job, const PreviewInputs& in) {
+  const AerialPreview v = aerial_preview_analysis(job, in);
+  const AerialParams& p = v.p;
+  const AerialAnalysis& a = v.a;
+  const std::string table = preview_map_name("aerial.gamma", v.table),
+                    table_from = preview_map_name("aerial.gamma-from", v.table_from),
+                    sky = preview_map_name("aerial.sky", v.sky);
+  const AttenuationTable& tf = a.mode == AerialMode::rerender ? a.gamma_from : a.gamma;
+  const std::array<float, 3> A = aerial_working_colour(a, a.airlight), A1 = aerial_working_colour(a, a.from_airlight);
+  const bool blur = a.plan.iterations > 0 && a.mode != AerialMode::remove;
+  auto f = [](double x) { return preview_f(static_cast<float>(x)); };
+  nlohmann::json plan;
+  const char* fmt = p.diffusion.precision == Precision::f16 ? "RGBA16F" : "RGBA32F";
+  plan["targets"] = {{"f0", fmt}, {"f0b", fmt}, {"f1", fmt}, {"f1b", fmt}, {"aux", "RG32F"},
+                     {"out", "RGBA32F"}, {"att", "RGBA32F"}};
+  plan["data"] = {table, table_from, sky};
+  plan["steps"] = nlohmann::json::array();
+  plan["steps"].push_back({{"pass", "aerial.premultiply"},
+                           {"in", {"image", "range", table, table_from}},
+                           {"out", {"f0", "f1", "aux"}},
+                           {"uniforms",
+                            {{"uStep", f(a.gamma.step_m)},
+                             {"uLast", preview_i(static_cast<int>(a.gamma.log_gamma.size()) - 1)},
+                             {"uStepFrom", f(tf.step_m)},
+                             {"uLastFrom", preview_i(static_cast<int>(tf.log_gamma.size()) - 1)},
+                             {"uA1", preview_f3(A1.data())},
+                             {"uDistanceScale", f(p.distance_scale)},
+                             {"uFar", f(a.range_max_m * p.distance_scale)},
+                             {"uInvRangeMax", f(1.0 / a.range_max_m)},
+                             {"uSigma0", f(p.diffusion.sigma0)},
+                             {"uSigmaMax", f(a.sigma_max)},
+                             {"uMode", preview_i(aerial_mode_index(a.mode))},
+                             {"uXyz", preview_i(a.sensitivity.space == SensitivitySpace::xyz ? 1 : 0)},
+                             {"uA", preview_f3(A.data())},
+                             {"uFloor", f(p.gamma_floor)}}}});
+  std::string f0 = "f0", f1 = "f1";
+  if (blur) {  // F0 and F1 diffused with the same rates: the CPU's six channels with one sigma map
+    preview_rates_step(plan, p.diffusion, a.plan, "aux");
+    preview_iterate_step(plan, p.diffusion, a.plan, "f0", "f0b", "f0.blurred");
+    preview_iterate_step(plan, p.diffusion, a.plan, "f1", "f1b", "f1.blurred");
+    f0 = "f0.blurred", f1 = "f1.blurred";
+  }
+  plan["steps"].push_back({{"pass", "aerial.composite"},
+                           {"in", {f0, f1, "image", "range", sky}},
+                           {"out", {"out", "att"}},
+                           {"uniforms",
+                            {{"uA", preview_f3(A.data())},
+                             {"uMode", preview_i(aerial_mode_index(a.mode))},
+                             {"uXyz", preview_i(a.sensitivity.space == SensitivitySpace::xyz ? 1 : 0)}}}});
+  plan["result"] = "out";
+  plan["derived"] = aerial_record(p, a, 0)["derived"];
+  plan["derived"].erase("floored_pixels");  // counted by the run, not the preview
+  plan["derived"]["iterations"] = blur ? a.plan.iterations : 0;
+  return plan;
+}
+
+Image aerial_preview_data(const std::string& name, const nlohmann::json& job, const PreviewInputs& in) {
+  AerialPreview v = aerial_preview_analysis(job, in);
+  for (Image* m : {&v.table, &v.table_from, &v.sky})
+    if (name == preview_map_name(name.substr(0, name.find(':')), *m)) return std::move(*m);
+  throw Error("no preview map '" + name + "'");
 }
 
 }  // namespace
@@ -246,6 +340,10 @@ CommandDef aerial_command() {
                                             {"lambda", "uniform(0, 8)", {}}},
                                            &validate_aerial);
   c.gpu_passes = {"aerial.premultiply", "diffusion.rates", "diffusion.iterate", "aerial.composite"};
+  c.preview = &aerial_preview;
+  c.preview_data = &aerial_preview_data;
+  // The sky-photo fit's flags describe a file the page cannot name.
+  c.preview_fixed = {"sky", "sky-image-transfer"};
   // The medium at a wavelength (the LiDAR's, brume/lidar_camera.hpp): Rayleigh
   // + Mie at the observer's altitude, per metre of the range map (s = R x
   // distance-scale). A re-render or a removal has no one medium for a scan.

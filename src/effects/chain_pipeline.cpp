@@ -9,6 +9,7 @@
 #include "brume/chain.hpp"
 #include "brume/error.hpp"
 #include "brume/record.hpp"
+#include "effects/preview_stages.hpp"
 
 namespace brume {
 
@@ -192,6 +193,32 @@ nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, co
   return rec;
 }
 
+namespace {
+
+// The preview (brume/preview.hpp): haze's plan, then the depth-of-field
+// steps on its result, as run_haze_dof hands the hazy image to the DOF stage.
+nlohmann::json haze_dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
+  HazeDofJob j;
+  haze_dof_job_table().from_json(j, job, "job");
+  nlohmann::json plan = haze_preview_plan(j.haze, in);
+  const nlohmann::json dof = dof_stage([&] {
+    const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height);
+    return dof_preview_steps(plan, j.dof, k, in, "out", "dof", "dof.blurred");
+  });
+  plan["result"] = "dof.blurred";
+  plan["derived"]["dof"] = dof;
+  plan["derived"]["iterations"] = plan["derived"]["iterations"].get<int>() + dof["iterations"].get<int>();
+  return plan;
+}
+
+Image haze_dof_preview_data(const std::string& name, const nlohmann::json& job, const PreviewInputs& in) {
+  HazeDofJob j;
+  haze_dof_job_table().from_json(j, job, "job");
+  return dof_preview_map(name, j.dof, dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height), in);
+}
+
+}  // namespace
+
 CommandDef haze_dof_command() {
   CommandDef c = make_command<HazeDofJob>({
       .name = "haze+dof",
@@ -231,6 +258,8 @@ CommandDef haze_dof_command() {
     return dof_stage_requested(ctx.given) ? run_haze_dof_job(j, e, ctx) : run_haze_job(haze_part(j, ctx.given), e, ctx);
   };
   c.gpu_passes = {"haze.premultiply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
+  c.preview = &haze_dof_preview;
+  c.preview_data = &haze_dof_preview_data;
   // brume.haze_dof(rgb, range, ...): the chain in memory, the range prepared
   // once, the arrays read in place; its record is the chain's, which `brume
   // run` repeats (brume.transforms.HazeThenDof runs it).

@@ -12,6 +12,7 @@
 #include "brume/error.hpp"
 #include "brume/gpu_context.hpp"
 #include "brume/record.hpp"
+#include "effects/preview_stages.hpp"
 
 namespace brume {
 
@@ -164,51 +165,58 @@ DofRun run_dof_prepared(DenseImageRef rgb, const PreparedRange& prep, const Intr
   return run;
 }
 
-// The preview (brume/preview.hpp): the engine's passes on the scale map
-// from the CoC, formed on the host as the GPU path of run_dof_prepared does
-// (a map named by the job: "dof.scale:HASH", made by dof_preview_data).
-struct DofPreviewScale {
-  Image scale;
-  DofAnalysis analysis;
-};
-DofPreviewScale dof_preview_scale(const nlohmann::json& job, const PreviewInputs& in) {
-  DofJob j;
-  dof_job_table().from_json(j, job, "job");
-  check_gpu_scheme(j.dof, Backend::gpu);
-  const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height);
-  DofPreviewScale s;
-  s.scale = dof_scale_map(planar_depth(in.prepared.range, k), j.dof, s.analysis);
-  return s;
+
+// The preview (effects/preview_stages.hpp): the engine's passes on the scale
+// map from the CoC, formed on the host as the GPU path of run_dof_prepared
+// does, and named by its contents.
+namespace {
+Image dof_preview_scale(const DofParams& p, const Intrinsics& k, const PreviewInputs& in, DofAnalysis& a) {
+  check_gpu_scheme(p, Backend::gpu);
+  return dof_scale_map(planar_depth(in.prepared.range, k), p, a);
+}
+}  // namespace
+
+nlohmann::json dof_preview_steps(nlohmann::json& plan, const DofParams& p, const Intrinsics& k, const PreviewInputs& in,
+                                 const std::string& input, const std::string& prefix, const std::string& last) {
+  DofAnalysis a;
+  const Image scale = dof_preview_scale(p, k, in, a);
+  const DiffusionParams dp = dof_diffusion_params(p);
+  const std::string name = preview_map_name("dof.scale", scale);
+  const std::string f0 = prefix + "0", f1 = prefix + "1";
+  const char* f = dp.precision == Precision::f16 ? "RGBA16F" : "RGBA32F";
+  plan["targets"][f0] = f;
+  plan["targets"][f1] = f;
+  if (!plan.contains("data")) plan["data"] = nlohmann::json::array();
+  plan["data"].push_back(name);
+  plan["steps"].push_back({{"copy", {{"from", input}, {"to", f0}}}});
+  preview_diffusion_steps(plan, dp, a.plan, name, f0, f1, last);
+  return {{"sigma_max_px", a.sigma_max}, {"coc_infinity_px", a.alpha_px}, {"iterations", a.plan.iterations}};
 }
 
-std::string dof_scale_name(const nlohmann::json& job) {
-  char b[32];
-  std::snprintf(b, sizeof b, "dof.scale:%016zx", std::hash<std::string>{}(job.dump()));
-  return b;
+Image dof_preview_map(const std::string& name, const DofParams& p, const Intrinsics& k, const PreviewInputs& in) {
+  DofAnalysis a;
+  Image scale = dof_preview_scale(p, k, in, a);
+  if (name != preview_map_name("dof.scale", scale)) throw Error("no preview map '" + name + "'");
+  return scale;
 }
+
 
 nlohmann::json dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
-  const DofPreviewScale s = dof_preview_scale(job, in);
   DofJob j;
   dof_job_table().from_json(j, job, "job");
-  const DiffusionParams dp = dof_diffusion_params(j.dof);
-  const std::string scale = dof_scale_name(job);
   nlohmann::json plan;
-  const char* f = dp.precision == Precision::f16 ? "RGBA16F" : "RGBA32F";
-  plan["targets"] = {{"f0", f}, {"f1", f}};
-  plan["data"] = nlohmann::json::array({scale});
-  plan["steps"] = nlohmann::json::array({{{"copy", {{"from", "image"}, {"to", "f0"}}}}});
-  preview_diffusion_steps(plan, dp, s.analysis.plan, scale, "f0", "f1", "blurred");
+  plan["targets"] = nlohmann::json::object();
+  plan["steps"] = nlohmann::json::array();
+  plan["derived"] = dof_preview_steps(plan, j.dof, dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height), in,
+                                      "image", "f", "blurred");
   plan["result"] = "blurred";
-  plan["derived"] = {{"sigma_max_px", s.analysis.sigma_max},
-                     {"coc_infinity_px", s.analysis.alpha_px},
-                     {"iterations", s.analysis.plan.iterations}};
   return plan;
 }
 
 Image dof_preview_data(const std::string& name, const nlohmann::json& job, const PreviewInputs& in) {
-  if (name != dof_scale_name(job)) throw Error("no preview map '" + name + "'");
-  return dof_preview_scale(job, in).scale;
+  DofJob j;
+  dof_job_table().from_json(j, job, "job");
+  return dof_preview_map(name, j.dof, dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height), in);
 }
 
 nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& eo, const RunContext& ctx) {

@@ -70,7 +70,7 @@ Image effect_range(const PreparedRange& prep, bool blend) {
 // (--sky-rule auto, prepared: sky beyond the margin unknown) or "fog.range.mask".
 Image fog_preview_data(const std::string& name, const nlohmann::json&, const PreviewInputs& in) {
   if (name != "fog.range.blend" && name != "fog.range.mask") throw Error("no preview map '" + name + "'");
-  return effect_range(in.prepared, name == "fog.range.blend");
+  return preview_unknown_negative(effect_range(in.prepared, name == "fog.range.blend"));
 }
 
 }  // namespace

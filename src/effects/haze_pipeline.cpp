@@ -11,6 +11,7 @@
 #include "brume/gpu_haze.hpp"
 #include "brume/haze.hpp"
 #include "brume/record.hpp"
+#include "effects/preview_stages.hpp"
 
 namespace brume {
 
@@ -98,12 +99,17 @@ HazeRun haze_on_prepared(ConstImageView rgb, HazeAnalysis analysis, const Prepar
   return run;
 }
 
-// The preview's frame (brume/preview.hpp): the passes and uniforms of
-// GpuHaze::render (src/gpu/haze.cpp) with the shader's interpolation.
 nlohmann::json haze_preview(const nlohmann::json& job, const PreviewInputs& in) {
   HazeJob j;
   haze_job_table().from_json(j, job, "job");
-  const HazeParams& p = j.haze;
+  return haze_preview_plan(j.haze, in);
+}
+
+}  // namespace
+
+// The preview's frame (effects/preview_stages.hpp): the passes and uniforms
+// of GpuHaze::render (src/gpu/haze.cpp) with the shader's interpolation.
+nlohmann::json haze_preview_plan(const HazeParams& p, const PreviewInputs& in) {
   const HazeAnalysis a = analyse_haze(in.rgb, in.measured, p);
   const bool naive = p.composite == Composite::naive;
   const bool blend = a.sky_beyond && !in.prepared.sky_weight.empty();
@@ -132,8 +138,6 @@ nlohmann::json haze_preview(const nlohmann::json& job, const PreviewInputs& in) 
   plan["derived"]["iterations"] = a.plan.iterations;
   return plan;
 }
-
-}  // namespace
 
 HazeRun run_haze(ConstImageView rgb, ConstImageView measured_range, const HazeParams& p, const RangeStep& prepare,
                  const Exec& exec, const std::set<std::string>& given) {

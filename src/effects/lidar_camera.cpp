@@ -209,6 +209,7 @@ void add_camera_lidar(CommandDef& c) {
   const Hooks h = hooks_of(c);
   c.run = with_lidar(h, c.run);
   if (c.cli_run) c.cli_run = with_lidar(h, c.cli_run);
+  c.preview_fixed.push_back("lidar");  // the scan's settings change no pixel of the preview
   c.check = [h, inner = c.check](const nlohmann::json& job, const std::set<std::string>& given, bool full) {
     inner(job, given, full);
     if (full) check_lidar(h, job, given);

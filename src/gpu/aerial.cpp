@@ -16,7 +16,6 @@
 #include "brume/error.hpp"
 #include "gpu/context.hpp"
 #include "gpu/shaders_embedded.hpp"
-#include "shared/prelude_cpp.h"
 
 namespace brume {
 namespace {
@@ -55,7 +54,6 @@ GpuAerial::GpuAerial(GpuContext& ctx, DenseImageRef rgb, const Image& range)
 GpuAerial::~GpuAerial() = default;
 
 AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, GpuFilter filter) {
-  namespace sh = brume::shared;
   GpuContext::Impl& g = ctx_.impl();
   State& s = *s_;
   if (!a.sky.data.empty() && (a.sky.width != w_ || a.sky.height != h_))
@@ -84,13 +82,8 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
   gl::Texture sky_tex = gpu::make_texture(GL_R32F, w_, h_, GL_RED, GL_FLOAT, sky.data());
 
   const bool xyz = a.sensitivity.space == SensitivitySpace::xyz;
-  auto to_space = [xyz](const std::array<float, 3>& c) {
-    if (!xyz) return c;
-    return std::array<float, 3>{sh::brume_srgb_to_x(c[0], c[1], c[2]), sh::brume_srgb_to_y(c[0], c[1], c[2]),
-                                sh::brume_srgb_to_z(c[0], c[1], c[2])};
-  };
-  const std::array<float, 3> A = to_space(a.airlight), A1 = to_space(a.from_airlight);
-  const int mode = a.mode == AerialMode::render ? 0 : (a.mode == AerialMode::rerender ? 1 : 2);
+  const std::array<float, 3> A = aerial_working_colour(a, a.airlight), A1 = aerial_working_colour(a, a.from_airlight);
+  const int mode = aerial_mode_index(a.mode);
   const bool blur = a.plan.iterations > 0 && a.mode != AerialMode::remove;
   timing_.iterations = blur ? a.plan.iterations : 0;
   timing_.gpu_timer = g.info.timer_query;

@@ -98,13 +98,17 @@ const ParamTable<ViewJob>& view_job_table() {
 
 // ---------------------------------------------------------------- the view's data
 
-// The blocks the page edits: the effect's own (and its diffusion's), not the
-// files, the depth source, the preparation (the view's own blocks, which its
-// command line fixed) or the outputs.
-bool page_block(const std::string& b) {
-  if (b == "output") return false;
+// The parameters the page edits: the effect's own (and its diffusion's),
+// not the files, the depth source, the preparation (the view's own blocks,
+// which its command line fixed) or the outputs; no text parameter (a file
+// or a database entry: the page names no file) and none of the blocks or
+// parameters the command keeps from the page (CommandDef::preview_fixed).
+bool page_param(const CommandDef& c, const ParamSpec& s) {
+  if (s.block == "output" || s.kind == ParamKind::text) return false;
+  for (const std::string& b : c.preview_fixed)
+    if (s.block == b || s.name == b) return false;
   for (const Param<ViewJob>& d : view_job_table().params())
-    if (d.spec.block == b) return false;
+    if (d.spec.block == s.block) return false;
   return true;
 }
 
@@ -248,7 +252,7 @@ struct Server {
   json meta() {
     json specs = json::array();
     for (const ParamSpec& s : c.specs)
-      if (page_block(s.block)) specs.push_back(spec_json(c, s));
+      if (page_param(c, s)) specs.push_back(spec_json(c, s));
     json passes = json::object();
 #if BRUME_HAVE_GPU
     for (const std::string& name : c.gpu_passes) {
@@ -293,7 +297,9 @@ struct Server {
     }
     for (const auto& [name, text] : body["values"].items()) {
       const ParamSpec* s = c.spec(name);
-      if (!s || !page_block(s->block)) throw Error("'" + name + "' is not a parameter of " + c.name + " the page sets");
+      if (!s || !page_param(c, *s))
+        throw Error("'" + name + "' is not a parameter of " + c.name + " the page sets" +
+                    (s && s->kind == ParamKind::text ? " (it names a file or an entry, which the page never does)" : ""));
       if (!text.is_string()) throw Error("--" + name + ": the value must be text as typed");
       json v = s->parse(text.get<std::string>());
       s->check(v);
@@ -328,7 +334,12 @@ struct Server {
   // Every request: the token first, then Host and Origin, then the rate.
   httplib::Server::HandlerResponse guard(const httplib::Request& req, httplib::Response& res) {
     const std::string prefix = "/" + token + "/";
-    if (req.path.size() < prefix.size() || req.path.compare(0, prefix.size(), prefix) != 0) {
+    // Compared in time independent of where a guess first differs (every
+    // byte of the token's length is read), so response times reveal nothing.
+    unsigned char diff = req.path.size() < prefix.size() ? 1 : 0;
+    for (std::size_t i = 0; i < prefix.size(); ++i)
+      diff |= static_cast<unsigned char>(prefix[i] ^ (i < req.path.size() ? req.path[i] : '\0'));
+    if (diff != 0) {
       res.status = 403;
       res.set_content("forbidden: the URL needs the token brume view printed\n", "text/plain");
       return httplib::Server::HandlerResponse::Handled;
@@ -372,6 +383,10 @@ struct Server {
     s.set_pre_routing_handler([this](const httplib::Request& q, httplib::Response& r) { return guard(q, r); });
     s.set_payload_max_length(1 << 20);
     s.set_keep_alive_max_count(100);
+    // A worker waits this long on an idle keep-alive connection, and stopping
+    // the server waits for its workers: 1 s (httplib's 5 s made SIGTERM slow
+    // while a browser held a connection open).
+    s.set_keep_alive_timeout(1);
     s.new_task_queue = [] { return new httplib::ThreadPool(4); };
     s.Get(p, [](const httplib::Request&, httplib::Response& r) {
       r.set_content(view::web::view_html, "text/html; charset=utf-8");
@@ -399,7 +414,7 @@ struct Server {
         r.set_content(w == "image" ? d.rgba : w == "range" ? d.range : d.sky, "application/octet-stream");
       });
     }
-    // A map a plan names (CommandDef::preview_data), one channel, unknown -1.
+    // A map a plan names (CommandDef::preview_data), its shape in X-Brume-Shape.
     s.Get(p + "data.bin", [this](const httplib::Request& q, httplib::Response& r) {
       const int k = q.has_param("scale") ? std::atoi(q.get_param_value("scale").c_str()) : 1;
       const std::string name = q.get_param_value("name");
@@ -416,8 +431,12 @@ struct Server {
       }
       try {
         const Image m = c.preview_data(name, job->second, PreviewInputs{d.rgb, d.measured, d.prep});
-        std::vector<float> v(m.data.size());
-        for (std::size_t i = 0; i < v.size(); ++i) v[i] = std::isfinite(m.data[i]) && m.data[i] != 0.0f ? m.data[i] : -1.0f;
+        // Sent as its texture holds it: 3 channels padded to RGBA (alpha 1).
+        const int tc = m.channels == 3 ? 4 : m.channels;
+        std::vector<float> v(m.pixels() * tc, 1.0f);
+        for (std::size_t i = 0; i < m.pixels(); ++i)
+          for (int ch = 0; ch < m.channels; ++ch) v[i * tc + ch] = m.data[i * m.channels + ch];
+        r.set_header("X-Brume-Shape", std::to_string(m.width) + " " + std::to_string(m.height) + " " + std::to_string(tc));
         r.set_content(floats(v), "application/octet-stream");
       } catch (const Error&) {
         r.status = 404;
@@ -507,6 +526,9 @@ json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx)
   if (v6) t6 = std::thread([&] { s6.listen_after_bind(); });
   std::fprintf(stderr, "brume view: %s on http://%s/%s/  (Ctrl-C to stop)\n", c->name.c_str(), sv.host_ok[loopback ? 0 : 3].c_str(),
                sv.token.c_str());
+  if (loopback && !v6)
+    std::fprintf(stderr, "brume view: [::1]:%d not bound (no IPv6 loopback here, or the port is taken there): "
+                 "open the 127.0.0.1 URL, not localhost\n", sv.port);
   std::fflush(stderr);
   const double idle_ms = job.view.idle_exit_min * 60000.0;
   std::string why;

@@ -126,16 +126,17 @@ export class Renderer {
     this.fbos = {};
   }
 
-  // A map a plan names in its "data" (one channel, unknown -1), once.
+  // A map a plan names in its "data" ({width, height, channels 1|2|4, data}), once.
   // A name "kind:key" replaces the older maps of its kind (dof's scale map per job).
-  addInput(name, data) {
+  addInput(name, map) {
     const kind = name.split(':')[0];
     for (const old of Object.keys(this.inputs))
       if (old !== name && old.includes(':') && old.split(':')[0] === kind) {
         this.gl.deleteTexture(this.inputs[old]);
         delete this.inputs[old];
       }
-    this.inputs[name] = this.texture('R32F', 'RED', this.w, this.h, data);
+    const [internal, format] = {1: ['R32F', 'RED'], 2: ['RG32F', 'RG'], 4: ['RGBA32F', 'RGBA']}[map.channels];
+    this.inputs[name] = this.texture(internal, format, map.width, map.height, map.data);
   }
 
   target(name, format) {

@@ -18,10 +18,21 @@ async function fetchJSON(url, body) {
   if (!res.ok) throw new Error(j.error || res.statusText);
   return j;
 }
-async function fetchFloats(name, query = '') {
-  const res = await fetch(`${name}.bin?scale=${state.scale}${query}`);
+async function fetchFloats(name) {
+  const res = await fetch(`${name}.bin?scale=${state.scale}`);
   if (!res.ok) throw new Error(`${name}: ${res.status}`);
   return new Float32Array(await res.arrayBuffer());
+}
+
+// A map a plan names (CommandDef::preview_data): its floats and its shape.
+async function fetchMap(name) {
+  const res = await fetch(`data.bin?scale=${state.scale}&name=${encodeURIComponent(name)}`);
+  if (!res.ok) throw new Error(`map ${name}: ${res.status}`);
+  const [width, height, channels] = (res.headers.get('X-Brume-Shape') || '').split(' ').map(Number);
+  const data = new Float32Array(await res.arrayBuffer());
+  if (!(width > 0 && height > 0 && [1, 2, 4].includes(channels)) || data.length !== width * height * channels)
+    throw new Error(`map ${name}: a malformed answer (shape '${res.headers.get('X-Brume-Shape')}', ${data.length} values)`);
+  return {width, height, channels, data};
 }
 
 // The span a slider covers: the command's sampling range where it has one
@@ -112,7 +123,7 @@ async function pump() {
     try {
       const f = await fetchJSON('frame', {values: state.values, scale: state.scale});
       for (const name of f.plan.data || [])
-        if (!state.r.inputs[name]) state.r.addInput(name, await fetchFloats('data', `&name=${encodeURIComponent(name)}`));
+        if (!state.r.inputs[name]) state.r.addInput(name, await fetchMap(name));
       const t0 = performance.now();
       state.r.run(f.plan);
       state.r.sync();
