@@ -393,6 +393,48 @@ TEST_F(Batch, ResumeAfterSigkillEqualsUninterruptedRun) {
   EXPECT_EQ(skipped, keys.size() - 1);
 }
 
+// --resume across an upgrade: a record written by an earlier brume lacks the
+// blocks and parameters added since (the camera effects' "lidar" block, whose
+// default -- no scan -- is the older behaviour); its frame is the same job and
+// is skipped. A recorded value that differs from the manifest's is not.
+TEST_F(Batch, ResumeSkipsFramesAnEarlierVersionRecordedAndRerunsChangedOnes) {
+  const std::vector<std::string> keys = make_frames(3, 64, 48);
+  const std::string m = csv(keys, kHaze, "haze,300,0.9,2");
+  const std::string common = " --seed 5 --workers 1 --threads 1 --quiet";
+  CliRun r = run("batch --manifest " + m + " --out-dir " + p("out") + common);
+  ASSERT_EQ(r.status, 0) << r.output;
+  std::vector<std::string> records;
+  for (const auto& e : fs::recursive_directory_iterator(p("out")))
+    if (e.path().extension() == ".json") records.push_back(e.path().string());
+  std::sort(records.begin(), records.end());
+  ASSERT_EQ(records.size(), keys.size());
+  auto edit = [](const std::string& path, const std::function<void(nlohmann::json&)>& f) {
+    nlohmann::json j = nlohmann::json::parse(slurp(path));
+    f(j);
+    std::ofstream(path) << j.dump(2);
+  };
+  // As an earlier brume wrote it: no "lidar" block, and no "rho-max" in its diffusion block.
+  edit(records[0], [](nlohmann::json& j) {
+    ASSERT_TRUE(j["job"].contains("lidar"));
+    j["job"].erase("lidar");
+    j["job"]["diffusion"].erase("rho-max");
+  });
+  // A different recorded value: this frame is redone.
+  edit(records[1], [](nlohmann::json& j) { j["job"]["haze"]["albedo"] = 0.5; });
+  r = run("batch --manifest " + m + " --out-dir " + p("out") + common + " --resume");
+  ASSERT_EQ(r.status, 0) << r.output;
+  std::map<std::string, std::string> status;
+  std::ifstream f(p("out/results.jsonl"));
+  for (std::string l; std::getline(f, l);) {
+    const nlohmann::json j = nlohmann::json::parse(l);
+    status[j["outputs"]["record"].get<std::string>()] = j["status"];
+  }
+  EXPECT_EQ(status[records[0]], "skipped") << "a record lacking what a later version added is the same job";
+  EXPECT_EQ(status[records[1]], "ok") << "a record with another value is run again";
+  EXPECT_EQ(status[records[2]], "skipped");
+  EXPECT_EQ(nlohmann::json::parse(slurp(records[1]))["job"]["haze"]["albedo"], 0.9);
+}
+
 // A corrupt frame is reported (key, file, message) and skipped; the others are
 // written; the exit status and the summary say how many failed. A failed
 // frame alone in its folder leaves no folder behind (folders are made when

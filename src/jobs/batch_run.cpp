@@ -29,6 +29,7 @@
 #include "brume/gpu_context.hpp"
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
+#include "brume/rerun.hpp"
 
 namespace fs = std::filesystem;
 
@@ -78,6 +79,21 @@ const CommandDef& def_of(const std::string& name) {
   throw Error("internal: batch effect '" + name + "'");
 }
 
+// The record's job as this brume reads it (record_job: a parameter a later
+// schema introduced with a new rule set to the older rule), with what an
+// older brume did not record -- a block or a parameter added since, whose
+// default is the older behaviour -- at this command's default. So a resume
+// across an upgrade skips a frame whose job is the same, and re-runs one
+// whose recorded values differ.
+nlohmann::json recorded_job_now(const nlohmann::json& rec, const CommandDef& c) {
+  nlohmann::json job = record_job(rec);
+  if (!job.is_object()) return job;
+  for (const auto& [block, vals] : c.defaults.items())
+    for (const auto& [name, v] : vals.items())
+      if (!job.contains(block) || !job[block].is_object() || !job[block].contains(name)) job[block][name] = v;
+  return job;
+}
+
 }  // namespace
 
 bool batch_frame_done(const BatchFrame& f) {
@@ -91,8 +107,12 @@ bool batch_frame_done(const BatchFrame& f) {
   } catch (const std::exception&) {
     return false;
   }
-  if (!rec.is_object() || rec.value("job", nlohmann::json()) != f.job || rec.value("batch", nlohmann::json()) != f.batch)
-    return false;
+  if (!rec.is_object() || rec.value("batch", nlohmann::json()) != f.batch) return false;
+  try {
+    if (recorded_job_now(rec, def_of(f.effect)) != f.job) return false;
+  } catch (const Error&) {
+    return false;  // a record of no schema this brume reads: the frame runs again
+  }
   std::vector<std::pair<std::string, std::string>> inputs;
   collect_inputs(rec.value("inputs", nlohmann::json()), inputs);
   if (inputs.empty()) return false;
