@@ -202,6 +202,31 @@ TEST(Gpu, AContextMadeAndDestroyedBesideAnotherLeavesItRendering) {
   EXPECT_EQ(after.rgb.data, before.rgb.data);
 }
 
+TEST(Gpu, AnObjectIsDeletedAndReadInItsOwnContextWhicheverIsCurrent) {
+  // GL names are per context: two fresh contexts both call their first
+  // texture 1. An image made in one and destroyed while the other was
+  // current deleted the other's texture 1 (and a read under the other read
+  // that one): lifetimes that do not nest (a Python object collected late, a
+  // worker's context made between) broke an unrelated context's image.
+  BRUME_REQUIRE_GPU(ctx);
+  Image a(8, 6, 4), b(8, 6, 4);
+  for (std::size_t i = 0; i < a.data.size(); ++i) {
+    a.data[i] = 0.25f + 0.001f * static_cast<float>(i);
+    b.data[i] = 0.75f - 0.002f * static_cast<float>(i);
+  }
+  GpuContext first;
+  auto in_first = std::make_unique<GpuImage>(first, a);
+  GpuContext second;  // current from here
+  GpuImage in_second(second, b);
+  if (in_first->texture().id != in_second.texture().id)
+    GTEST_SKIP() << "this driver names the two contexts' first textures " << in_first->texture().id << " and "
+                 << in_second.texture().id << ": the collision the test needs does not arise";
+  EXPECT_EQ(in_first->read().data, a.data) << "read while the second context is current";
+  in_first.reset();  // the second context is current
+  EXPECT_EQ(in_second.read().data, b.data) << "the second context's texture survived the first's deletion";
+  EXPECT_EQ(GpuImage(second, a).read().data, a.data) << "and the second context still renders";
+}
+
 TEST(Gpu, SoftwareRasteriserIsMarkedSoftware) {
   // --backend auto must not pick llvmpipe (it measured slower than the CPU
   // backend): GpuInfo::software, set at context creation from the EGL device

@@ -89,7 +89,9 @@ struct GpuTexture {
 // read() returns it as an Image with the same channel count. Channels 1, 2, 4
 // are stored R32F, RG32F, RGBA32F (RGBA16F for 4 channels in f16: every value
 // rounded to binary16 on upload, as the diffusion passes store it).
-// Move-only; deletes its texture when destroyed (on the context's thread).
+// Move-only; read and deleted in the context it was made in, whichever
+// context is current then (that one is current again after), on the
+// context's thread and before the GpuContext goes.
 class GpuImage {
  public:
   GpuImage(GpuContext& ctx, const Image& img, Precision storage = Precision::f32);
@@ -106,6 +108,8 @@ class GpuImage {
  private:
   GpuTexture tex_;
   int channels_ = 0;
+  void* egl_display_ = nullptr;  // the context it was made in, where its texture is deleted
+  void* egl_context_ = nullptr;
 };
 
 // Pass: the per-pixel diffusion rate rho(x) (eq. 13 standard, eq. 18

@@ -501,36 +501,48 @@ GpuImage::GpuImage(GpuContext& ctx, int width, int height, int channels, Precisi
   (void)ctx.impl();  // textures belong to the current context: ctx's, made current here
   if (width <= 0 || height <= 0)
     throw Error("GpuImage: size " + std::to_string(width) + "x" + std::to_string(height) + " must be positive");
-  tex_ = {gpu::make_texture(float_format(channels, storage), width, height).release(), width, height};
+  gl::Texture t = gpu::make_texture(float_format(channels, storage), width, height);
+  egl_display_ = t.owner().dpy;
+  egl_context_ = t.owner().ctx;
+  tex_ = {t.release(), width, height};
 }
 
 GpuImage::GpuImage(GpuContext& ctx, const Image& img, Precision storage) : channels_(img.channels) {
   (void)ctx.impl();
   if (img.width <= 0 || img.height <= 0) throw Error("GpuImage: image " + img.size_string() + " is empty");
-  tex_ = {gpu::make_texture(float_format(img.channels, storage), img.width, img.height, pixel_format(img.channels),
-                            GL_FLOAT, img.data.data())
-              .release(),
-          img.width, img.height};
+  gl::Texture t = gpu::make_texture(float_format(img.channels, storage), img.width, img.height,
+                                    pixel_format(img.channels), GL_FLOAT, img.data.data());
+  egl_display_ = t.owner().dpy;
+  egl_context_ = t.owner().ctx;
+  tex_ = {t.release(), img.width, img.height};
 }
 
-GpuImage::GpuImage(GpuImage&& o) noexcept : tex_(std::exchange(o.tex_, {})), channels_(o.channels_) {}
+GpuImage::GpuImage(GpuImage&& o) noexcept
+    : tex_(std::exchange(o.tex_, {})), channels_(o.channels_), egl_display_(o.egl_display_), egl_context_(o.egl_context_) {}
 
 GpuImage& GpuImage::operator=(GpuImage&& o) noexcept {
   // o takes our texture and deletes it when it goes.
   std::swap(tex_, o.tex_);
   std::swap(channels_, o.channels_);
+  std::swap(egl_display_, o.egl_display_);
+  std::swap(egl_context_, o.egl_context_);
   return *this;
 }
 
 GpuImage::~GpuImage() {
   if (tex_.id) {
-    glDeleteTextures(1, &tex_.id);
+    const gl::AsCurrent in(gl::Owner{egl_display_, egl_context_});
+    if (in.ok()) glDeleteTextures(1, &tex_.id);
     --gl::live(gl::kTexture);
     tex_ = {};
   }
 }
 
 Image GpuImage::read() const {
+  const gl::AsCurrent in(gl::Owner{egl_display_, egl_context_});  // its own context, whichever is current
+  if (!in.ok())
+    throw Error("GpuImage::read: the context it was made in cannot be made current here (destroyed, or current "
+                "on another thread); read it on its own thread while its GpuContext lives");
   const std::vector<float> px = gpu::read_rgba(tex_);
   Image out(tex_.width, tex_.height, channels_);
   for (std::size_t i = 0; i < out.pixels(); ++i)

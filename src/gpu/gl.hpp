@@ -7,10 +7,14 @@
 // process-wide count of live objects (brume::gpu_live_objects()), which the
 // leak tests compare before and after a throwing render.
 //
-// Destructors call GL, so an owner must die on the thread, and while the
-// context, that created it is current (GpuContext's rule for everything).
+// Destructors call GL, so an owner must die on the thread that created it,
+// before its context. An owner remembers the context it was made in and
+// deletes its object there (AsCurrent), whichever context is current when it
+// dies: GL names are per context, and a deletion under another context would
+// delete that context's object of the same name.
 #pragma once
 
+#include <EGL/egl.h>
 #include <GLES3/gl32.h>
 
 #include <atomic>
@@ -36,6 +40,45 @@ inline std::atomic<int>& fail_after() {
   return n;
 }
 
+// The context current on this thread (an object's owner, made in it).
+struct Owner {
+  EGLDisplay dpy = EGL_NO_DISPLAY;
+  EGLContext ctx = EGL_NO_CONTEXT;
+  static Owner current() { return {eglGetCurrentDisplay(), eglGetCurrentContext()}; }
+};
+
+// Makes `o` current for its lifetime where another context is, then makes
+// the caller's current again. ok() is false where `o` cannot be made current
+// (destroyed, or current on another thread): its objects cannot be deleted
+// from here, and nothing else must be deleted in their place.
+class AsCurrent {
+ public:
+  explicit AsCurrent(const Owner& o) {
+    const EGLContext cur = eglGetCurrentContext();
+    if (o.ctx == EGL_NO_CONTEXT || cur == o.ctx) return;
+    prev_ = {eglGetCurrentDisplay(), cur};
+    draw_ = eglGetCurrentSurface(EGL_DRAW);
+    read_ = eglGetCurrentSurface(EGL_READ);
+    dpy_ = o.dpy;
+    switched_ = eglMakeCurrent(o.dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, o.ctx) == EGL_TRUE;
+    ok_ = switched_;
+  }
+  ~AsCurrent() {
+    if (!switched_) return;
+    if (prev_.ctx != EGL_NO_CONTEXT) eglMakeCurrent(prev_.dpy, draw_, read_, prev_.ctx);
+    else eglMakeCurrent(dpy_, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+  }
+  AsCurrent(const AsCurrent&) = delete;
+  AsCurrent& operator=(const AsCurrent&) = delete;
+  bool ok() const { return ok_; }
+
+ private:
+  Owner prev_;
+  EGLSurface draw_ = EGL_NO_SURFACE, read_ = EGL_NO_SURFACE;
+  EGLDisplay dpy_ = EGL_NO_DISPLAY;
+  bool switched_ = false, ok_ = true;
+};
+
 template <Kind K>
 class Object {
  public:
@@ -43,11 +86,12 @@ class Object {
   ~Object() { reset(); }
   Object(const Object&) = delete;
   Object& operator=(const Object&) = delete;
-  Object(Object&& o) noexcept : id_(std::exchange(o.id_, 0)) {}
+  Object(Object&& o) noexcept : id_(std::exchange(o.id_, 0)), owner_(o.owner_) {}
   Object& operator=(Object&& o) noexcept {
     if (this != &o) {
       reset();
       id_ = std::exchange(o.id_, 0);
+      owner_ = o.owner_;
     }
     return *this;
   }
@@ -69,25 +113,32 @@ class Object {
       default: break;
     }
     if (o.id_) ++live(K);
+    o.owner_ = Owner::current();
     return o;
   }
 
   GLuint id() const { return id_; }
   explicit operator bool() const { return id_ != 0; }
+  // The context it was made in.
+  const Owner& owner() const { return owner_; }
   // Hands the object to an owner outside this layer (GpuImage), which must
-  // delete it and decrement live(K) itself: it stays counted as live.
+  // delete it (in owner()'s context) and decrement live(K) itself: it stays
+  // counted as live.
   GLuint release() { return std::exchange(id_, 0); }
 
   void reset() {
     if (!id_) return;
-    switch (K) {
-      case kTexture: glDeleteTextures(1, &id_); break;
-      case kFramebuffer: glDeleteFramebuffers(1, &id_); break;
-      case kProgram: glDeleteProgram(id_); break;
-      case kQuery: glDeleteQueries(1, &id_); break;
-      case kSampler: glDeleteSamplers(1, &id_); break;
-      case kVertexArray: glDeleteVertexArrays(1, &id_); break;
-      default: break;
+    const AsCurrent in(owner_);
+    if (in.ok()) {
+      switch (K) {
+        case kTexture: glDeleteTextures(1, &id_); break;
+        case kFramebuffer: glDeleteFramebuffers(1, &id_); break;
+        case kProgram: glDeleteProgram(id_); break;
+        case kQuery: glDeleteQueries(1, &id_); break;
+        case kSampler: glDeleteSamplers(1, &id_); break;
+        case kVertexArray: glDeleteVertexArrays(1, &id_); break;
+        default: break;
+      }
     }
     --live(K);
     id_ = 0;
@@ -95,6 +146,7 @@ class Object {
 
  private:
   GLuint id_ = 0;
+  Owner owner_;
 };
 
 using Texture = Object<kTexture>;
