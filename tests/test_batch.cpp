@@ -396,9 +396,12 @@ TEST_F(Batch, ResumeAfterSigkillEqualsUninterruptedRun) {
 // --resume across an upgrade: a record written by an earlier brume lacks the
 // blocks and parameters added since (the camera effects' "lidar" block, whose
 // default -- no scan -- is the older behaviour); its frame is the same job and
-// is skipped. A recorded value that differs from the manifest's is not.
+// is skipped, as `brume run` would run that record's job. Run again: a
+// recorded value that differs from the manifest's; a schema-2 record without
+// haze's sky-rule (introduced with a new rule: the older one, s-max, is not
+// today's default); a malformed record (a block that is no object).
 TEST_F(Batch, ResumeSkipsFramesAnEarlierVersionRecordedAndRerunsChangedOnes) {
-  const std::vector<std::string> keys = make_frames(3, 64, 48);
+  const std::vector<std::string> keys = make_frames(4, 64, 48);
   const std::string m = csv(keys, kHaze, "haze,300,0.9,2");
   const std::string common = " --seed 5 --workers 1 --threads 1 --quiet";
   CliRun r = run("batch --manifest " + m + " --out-dir " + p("out") + common);
@@ -413,14 +416,19 @@ TEST_F(Batch, ResumeSkipsFramesAnEarlierVersionRecordedAndRerunsChangedOnes) {
     f(j);
     std::ofstream(path) << j.dump(2);
   };
-  // As an earlier brume wrote it: no "lidar" block, and no "rho-max" in its diffusion block.
+  // As an earlier brume wrote it: no "lidar" block, no "rho-max" in its diffusion block.
   edit(records[0], [](nlohmann::json& j) {
     ASSERT_TRUE(j["job"].contains("lidar"));
     j["job"].erase("lidar");
     j["job"]["diffusion"].erase("rho-max");
   });
-  // A different recorded value: this frame is redone.
   edit(records[1], [](nlohmann::json& j) { j["job"]["haze"]["albedo"] = 0.5; });
+  edit(records[2], [](nlohmann::json& j) {
+    ASSERT_NE(j["job"]["haze"]["sky-rule"], "s-max") << "the case needs today's default to differ from the older rule";
+    j["schema_version"] = 2;
+    j["job"]["haze"].erase("sky-rule");
+  });
+  edit(records[3], [](nlohmann::json& j) { j["job"]["prepare"] = 5; });
   r = run("batch --manifest " + m + " --out-dir " + p("out") + common + " --resume");
   ASSERT_EQ(r.status, 0) << r.output;
   std::map<std::string, std::string> status;
@@ -431,7 +439,8 @@ TEST_F(Batch, ResumeSkipsFramesAnEarlierVersionRecordedAndRerunsChangedOnes) {
   }
   EXPECT_EQ(status[records[0]], "skipped") << "a record lacking what a later version added is the same job";
   EXPECT_EQ(status[records[1]], "ok") << "a record with another value is run again";
-  EXPECT_EQ(status[records[2]], "skipped");
+  EXPECT_EQ(status[records[2]], "ok") << "a schema-2 record ran under sky-rule s-max: run again";
+  EXPECT_EQ(status[records[3]], "ok") << "a malformed record is run again";
   EXPECT_EQ(nlohmann::json::parse(slurp(records[1]))["job"]["haze"]["albedo"], 0.9);
 }
 

@@ -79,18 +79,23 @@ const CommandDef& def_of(const std::string& name) {
   throw Error("internal: batch effect '" + name + "'");
 }
 
-// The record's job as this brume reads it (record_job: a parameter a later
-// schema introduced with a new rule set to the older rule), with what an
-// older brume did not record -- a block or a parameter added since, whose
-// default is the older behaviour -- at this command's default. So a resume
-// across an upgrade skips a frame whose job is the same, and re-runs one
-// whose recorded values differ.
+// The record's job as `brume run` runs it: a parameter a later schema
+// introduced with a new rule at the older rule (record_job), and what an
+// earlier brume did not record -- a block or a parameter added since -- at
+// this command's default, as ParamTable::from_json leaves a key a job lacks
+// (a parameter whose default is not the older behaviour carries
+// ParamTable::since). So a resume across an upgrade skips a frame whose job
+// is the same. (Records cannot tell builds apart: brume's version has been
+// 0.1.0 throughout.)
 nlohmann::json recorded_job_now(const nlohmann::json& rec, const CommandDef& c) {
+  if (rec.value("command", "") != c.name) return nullptr;
   nlohmann::json job = record_job(rec);
   if (!job.is_object()) return job;
-  for (const auto& [block, vals] : c.defaults.items())
-    for (const auto& [name, v] : vals.items())
-      if (!job.contains(block) || !job[block].is_object() || !job[block].contains(name)) job[block][name] = v;
+  for (const ParamSpec& s : c.specs) {
+    auto b = job.find(s.block);
+    if (b != job.end() && !b->is_object()) return nullptr;  // malformed: not the same job
+    if (b == job.end() || !b->contains(s.name)) job[s.block][s.name] = c.defaults.at(s.block).at(s.name);
+  }
   return job;
 }
 
@@ -110,8 +115,8 @@ bool batch_frame_done(const BatchFrame& f) {
   if (!rec.is_object() || rec.value("batch", nlohmann::json()) != f.batch) return false;
   try {
     if (recorded_job_now(rec, def_of(f.effect)) != f.job) return false;
-  } catch (const Error&) {
-    return false;  // a record of no schema this brume reads: the frame runs again
+  } catch (const std::exception&) {
+    return false;  // a record of no schema this brume reads, or malformed: the frame runs again
   }
   std::vector<std::pair<std::string, std::string>> inputs;
   collect_inputs(rec.value("inputs", nlohmann::json()), inputs);

@@ -117,8 +117,8 @@ nlohmann::json job_as_recorded(const CommandDef& c, const nlohmann::json& record
   for (const ParamSpec& s : c.specs) {
     if (s.since_schema <= version) continue;
     auto b = job.find(s.block);
-    if (b == job.end() || !b->is_object() || b->contains(s.name)) continue;
-    (*b)[s.name] = s.before_schema;
+    if (b != job.end() && (!b->is_object() || b->contains(s.name))) continue;
+    job[s.block][s.name] = s.before_schema;  // the block too, where the record has none
   }
   return job;
 }
