@@ -8,6 +8,9 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <regex>
+#include <set>
 #include <sstream>
 
 #include "brume/batch.hpp"
@@ -222,9 +225,33 @@ TEST(Commands, ExtinctionOfTheModelledMedium) {
   for (const char* n : {"blur", "depth convert", "compare"}) EXPECT_FALSE(find_command(n)->extinction_per_m) << n;
 }
 
+#if BRUME_HAVE_GPU
+// The non-sampler uniforms a pass's body declares ("uniform float uA, uB;",
+// "uniform vec3 uK[4];"), for the plan checks below.
+std::set<std::string> declared_uniforms(const char* body) {
+  std::set<std::string> out;
+  const std::regex decl(R"(uniform\s+(?:(?:highp|mediump|lowp)\s+)?(\w+)\s+([^;]+);)");
+  const std::string text = body;
+  for (std::sregex_iterator it(text.begin(), text.end(), decl), end; it != end; ++it) {
+    if ((*it)[1].str().find("sampler") != std::string::npos) continue;
+    std::stringstream names((*it)[2].str());
+    for (std::string n; std::getline(names, n, ',');) {
+      n = std::regex_replace(n, std::regex(R"(\[.*\]|\s)"), "");
+      if (!n.empty()) out.insert(n);
+    }
+  }
+  return out;
+}
+#endif
+
 // Every command with a browser preview (brume view, docs/view.md): its plan on
 // a small scene draws only passes of its gpu_passes, every one of them
-// linked (the page compiles their text), from textures the plan declares.
+// linked (the page compiles their text), from textures the plan declares or
+// maps the frame holds; each step binds as many textures as its pass has
+// samplers and sets every uniform its pass declares (the page skips a name a
+// pass lacks and leaves an unset one 0, so a misspelt or missing uniform
+// would draw quietly wrong). Modes: each command's job, and the variants
+// below (aerial's re-render and removal, no blur).
 TEST(Commands, EveryPreviewPlanDrawsItsOwnLinkedPasses) {
   const int w = 24, h = 16;
   Image rgb(w, h, 3), range(w, h, 1);
@@ -234,48 +261,72 @@ TEST(Commands, EveryPreviewPlanDrawsItsOwnLinkedPasses) {
       range.data[y * w + x] = y < 4 ? NAN : 5.0f + static_cast<float>(x + y);  // a sky band
     }
   const PreparedRange prep = prepare_step(range, RangeStep{}, {}, 1, true);
+  const std::map<std::string, std::vector<JobValues>> variants = {
+      {"aerial", {{{"from-turbidity", 6.0}}, {{"remove", true}, {"lambda", 0.0}}, {{"lambda", 0.0}}}},
+      {"haze", {{{"lambda", 0.0}}}},
+      {"fog", {{{"lambda", 0.0}}}},
+  };
   int shown = 0;
   for (const CommandDef& c : commands()) {
     if (!c.preview) continue;
-    SCOPED_TRACE(c.name);
     ++shown;
-    JobValues v = {{"image", "x.png"}, {"range", "r.exr"}, {"out", "o.png"}, {"fov-x", 60.0}};
-    if (c.spec("camera-height")) v.emplace_back("camera-height", 1.6);
-    if (c.spec("visibility")) v.emplace_back("visibility", 40.0);
-    if (c.spec("focus-distance")) v.emplace_back("focus-distance", 10.0);
-    if (c.spec("coc-infinity")) v.emplace_back("coc-infinity", 8.0);
-    if (c.spec("dof-focus-distance")) v.emplace_back("dof-focus-distance", 10.0);
-    if (c.spec("dof-coc-infinity")) v.emplace_back("dof-coc-infinity", 8.0);
-    if (c.spec("lambda")) v.emplace_back("lambda", 4.0);  // the blur's steps too
-    const nlohmann::json job = c.build(v);
-    const nlohmann::json plan = c.preview(job, PreviewInputs{rgb, range, prep});
-    std::set<std::string> textures = {"image", "range", "sky"};
-    for (const auto& [name, fmt] : plan.at("targets").items()) textures.insert(name);
-    for (const auto& d : plan.value("data", nlohmann::json::array())) {
-      textures.insert(d.get<std::string>());
-      ASSERT_TRUE(c.preview_data);
-      // The map is the one named: its kind, size and values (preview_map_name), or image-sized.
-      const std::string name = d.get<std::string>();
-      const Image m = c.preview_data(name, job, PreviewInputs{rgb, range, prep});
-      EXPECT_TRUE(name == preview_map_name(name.substr(0, name.find(':')), m) || m.pixels() == rgb.pixels()) << name;
-      EXPECT_TRUE(m.channels >= 1 && m.channels <= 4) << name;
-      EXPECT_THROW(c.preview_data(name + "x", job, PreviewInputs{rgb, range, prep}), Error) << name;
-    }
-    for (const auto& step : plan.at("steps")) {
-      if (step.contains("copy")) {
-        EXPECT_TRUE(textures.count(step["copy"].at("from").get<std::string>()));
-        continue;
+    JobValues base = {{"image", "x.png"}, {"range", "r.exr"}, {"out", "o.png"}, {"fov-x", 60.0}};
+    if (c.spec("camera-height")) base.emplace_back("camera-height", 1.6);
+    if (c.spec("visibility")) base.emplace_back("visibility", 40.0);
+    if (c.spec("focus-distance")) base.emplace_back("focus-distance", 10.0);
+    if (c.spec("coc-infinity")) base.emplace_back("coc-infinity", 8.0);
+    if (c.spec("dof-focus-distance")) base.emplace_back("dof-focus-distance", 10.0);
+    if (c.spec("dof-coc-infinity")) base.emplace_back("dof-coc-infinity", 8.0);
+    if (c.spec("lambda")) base.emplace_back("lambda", 4.0);  // the blur's steps too
+    std::vector<JobValues> jobs = {base};
+    if (const auto it = variants.find(c.name); it != variants.end())
+      for (const JobValues& extra : it->second) {
+        JobValues v = base;
+        for (const auto& e : extra) {
+          v.erase(std::remove_if(v.begin(), v.end(), [&](const auto& x) { return x.first == e.first; }), v.end());
+          v.push_back(e);
+        }
+        jobs.push_back(v);
       }
-      const std::string pass = step.at("pass");
-      EXPECT_NE(std::find(c.gpu_passes.begin(), c.gpu_passes.end(), pass), c.gpu_passes.end()) << pass;
+    for (const JobValues& v : jobs) {
+      const nlohmann::json job = c.build(v);
+      SCOPED_TRACE(c.name + " variant " + std::to_string(&v - jobs.data()));
+      const PreviewFrame frame = c.preview(job, PreviewInputs{rgb, range, prep});
+      const nlohmann::json& plan = frame.plan;
+      std::set<std::string> textures = {"image", "range", "sky"};
+      for (const auto& [name, fmt] : plan.at("targets").items()) textures.insert(name);
+      std::set<std::string> data;
+      for (const auto& d : plan.value("data", nlohmann::json::array())) data.insert(d.get<std::string>());
+      EXPECT_EQ(data.size(), frame.maps.size()) << "every map the plan names, and no other";
+      for (const auto& [name, m] : frame.maps) {
+        EXPECT_TRUE(data.count(name)) << name;
+        EXPECT_TRUE(m.channels >= 1 && m.channels <= 4 && m.pixels() > 0) << name;
+        textures.insert(name);
+      }
+      for (const auto& step : plan.at("steps")) {
+        if (step.contains("copy")) {
+          EXPECT_TRUE(textures.count(step["copy"].at("from").get<std::string>()));
+          continue;
+        }
+        const std::string pass = step.at("pass");
+        EXPECT_NE(std::find(c.gpu_passes.begin(), c.gpu_passes.end(), pass), c.gpu_passes.end()) << pass;
+        for (const auto& t : step.at("in"))
+          EXPECT_TRUE(t == "$src" || textures.count(t.get<std::string>())) << pass << " reads " << t;
 #if BRUME_HAVE_GPU
-      EXPECT_NE(gpu::find_pass(pass), nullptr) << pass;
+        const gpu::PassSpec* spec = gpu::find_pass(pass);
+        ASSERT_NE(spec, nullptr) << pass;
+        EXPECT_EQ(step.at("in").size(), gpu::sampler_names(spec->body).size()) << pass << ": one texture per sampler";
+        EXPECT_FALSE(declared_uniforms(spec->body).empty()) << pass << ": every pass has uniforms (the parser read none)";
+        std::set<std::string> set;
+        for (const auto& [u, value] : step.at("uniforms").items()) set.insert(u);
+        if (step.contains("iterate")) set.insert(step["iterate"].at("uniform").get<std::string>());
+        for (const std::string& u : declared_uniforms(spec->body)) EXPECT_TRUE(set.count(u)) << pass << " leaves " << u << " unset";
+        for (const std::string& u : set) EXPECT_TRUE(declared_uniforms(spec->body).count(u)) << pass << " has no " << u;
 #endif
-      for (const auto& t : step.at("in"))
-        EXPECT_TRUE(t == "$src" || textures.count(t.get<std::string>())) << pass << " reads " << t;
-      if (step.contains("iterate")) textures.insert(step["iterate"].at("last").get<std::string>());
+        if (step.contains("iterate")) textures.insert(step["iterate"].at("last").get<std::string>());
+      }
+      EXPECT_TRUE(textures.count(plan.at("result").get<std::string>()));
     }
-    EXPECT_TRUE(textures.count(plan.at("result").get<std::string>()));
   }
   EXPECT_EQ(shown, 5);  // haze, fog, aerial, dof, haze+dof: every effect `brume view --effect` names
 }

@@ -136,14 +136,9 @@ struct CommandDef {
   std::optional<CommandSampling> sampling;  // `brume sample`, random_params, batch distributions
   std::vector<std::string> gpu_passes;      // its GPU passes (PassSpec names, "haze.premultiply"), in order
   // Its frame for the browser preview (`brume view`; brume/preview.hpp): the
-  // plan of gpu_passes for a job (the table's JSON, checked) on the inputs.
-  // Empty for commands the preview does not show.
-  std::function<nlohmann::json(const nlohmann::json& job, const PreviewInputs& in)> preview;
-  // A map a preview plan names in its "data" (fog's range with the sky
-  // unknown again; dof's scale map and aerial's ln Gamma tables, named by
-  // their contents), made from the job whose plan named it and the inputs;
-  // an unknown name throws.
-  std::function<Image(const std::string& name, const nlohmann::json& job, const PreviewInputs& in)> preview_data;
+  // plan of gpu_passes for a job (the table's JSON, checked) on the inputs,
+  // with the maps it names. Empty for commands the preview does not show.
+  std::function<PreviewFrame(const nlohmann::json& job, const PreviewInputs& in)> preview;
   // The blocks or parameters the preview's page leaves out (those of a file
   // the page cannot name, a LiDAR scan's). Text parameters (files,
   // databases) are never the page's.

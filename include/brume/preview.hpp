@@ -12,14 +12,17 @@
 //    "result": TEXTURE}
 // TEXTURE: a target, or "image" (linear RGB, alpha 1), "range" (the prepared
 // range, -1 unknown), "sky" (the preparation's sky weight, 0 without one),
-// one of the plan's "data" (names of maps the command's preview_data makes,
-// fetched once by the page: any size, 1, 2, 3 or 4 channels, the values as
-// the passes read them; a name "KIND:KEY" replaces the page's older map of
-// that KIND), or an iterate step's ALIAS. Uniform TYPEs: 1f 2f 3f 4f 1i, and 1fv with an array. An iterate step draws its pass `count` times,
+// one of the plan's "data" (names of the frame's maps, PreviewFrame::maps,
+// fetched by the page when it has no map of that name: any size, 1, 2, 3 or
+// 4 channels, the values as the passes read them; a name "KIND:KEY" replaces
+// the page's older map of that KIND), or an iterate step's ALIAS. Uniform TYPEs: 1f 2f 3f 4f 1i, and 1fv with an array. An iterate step draws its pass `count` times,
 // reading "$src" (A first) and writing the other, and names the last written
 // ALIAS. Every texture is NEAREST: samples between texels are interpolated
 // in the shader, as `--gpu-filter shader` does natively.
 #pragma once
+
+#include <map>
+#include <string>
 
 #include <nlohmann/json.hpp>
 
@@ -47,9 +50,17 @@ inline nlohmann::json preview_f2(float a, float b) { return {"2f", a, b}; }
 inline nlohmann::json preview_f3(float a, float b, float c) { return {"3f", a, b, c}; }
 inline nlohmann::json preview_f4(float a, float b, float c, float d) { return {"4f", a, b, c, d}; }
 
-// A map's name for the plan's "data": "KIND:" and a hash of its size and
-// values, so the page fetches it again only when it changes.
-std::string preview_map_name(const std::string& kind, const Image& m);
+// A frame: its plan, and the maps the plan names in "data" (made on the
+// host with the plan, as the native path makes them: fog's range with its
+// sky unknown, dof's scale map, aerial's ln Gamma tables and sky mask).
+struct PreviewFrame {
+  nlohmann::json plan;
+  std::map<std::string, Image> maps;
+  // Adds a map, named "KIND:" and a hash of its size and values (so the page
+  // fetches it again only when it changes), to maps and plan["data"];
+  // returns the name.
+  std::string add_map(const std::string& kind, Image m);
+};
 
 // The map with unknown values (0, NaN, inf) as -1, as the GPU backend
 // uploads a range (gpu::upload_color_and_range).

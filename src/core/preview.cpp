@@ -10,11 +10,17 @@
 
 namespace brume {
 
-std::string preview_map_name(const std::string& kind, const Image& m) {
+std::string PreviewFrame::add_map(const std::string& kind, Image m) {
   const std::string_view bytes(reinterpret_cast<const char*>(m.data.data()), m.data.size() * sizeof(float));
   char b[64];
   std::snprintf(b, sizeof b, ":%dx%dx%d-%016zx", m.width, m.height, m.channels, std::hash<std::string_view>{}(bytes));
-  return kind + b;
+  const std::string name = kind + b;
+  if (!maps.count(name)) {
+    if (!plan.contains("data")) plan["data"] = nlohmann::json::array();
+    plan["data"].push_back(name);
+    maps.emplace(name, std::move(m));
+  }
+  return name;
 }
 
 Image preview_unknown_negative(Image m) {

@@ -67,14 +67,9 @@ nlohmann::json aerial_record(const AerialParams& p, const AerialAnalysis& a, std
 }
 
 // The preview (brume/preview.hpp): GpuAerial::render's passes (src/gpu/aerial.cpp).
-// Its maps: the ln Gamma table(s) (N x 1, read with texelFetch) and the sky
-// mask (1 where the measured range is unknown), named by their contents.
-struct AerialPreview {
-  AerialParams p;
-  AerialAnalysis a;
-  Image table, table_from, sky;
-};
-
+// Its maps: the ln Gamma table(s) (N x 1, read with texelFetch; one table in
+// both slots unless re-rendering, as the native path binds them) and the sky
+// mask (1 where the measured range is unknown).
 Image log_gamma_map(const AttenuationTable& t) {
   Image m(static_cast<int>(std::max<std::size_t>(2, t.log_gamma.size())), 1, 3);  // 2 x 1 at least, as the GPU's
   for (std::size_t i = 0; i < t.log_gamma.size(); ++i)
@@ -82,35 +77,26 @@ Image log_gamma_map(const AttenuationTable& t) {
   return m;
 }
 
-AerialPreview aerial_preview_analysis(const nlohmann::json& job, const PreviewInputs& in) {
+PreviewFrame aerial_preview(const nlohmann::json& job, const PreviewInputs& in) {
   AerialJob j;
   aerial_job_table().from_json(j, job, "job");
   // (--turbidity auto was refused by the command's check: the page names no sky photo.)
-  AerialPreview v;
-  v.p = j.aerial;
-  v.a = analyse_aerial(in.rgb, in.measured, v.p);
-  v.table = log_gamma_map(v.a.gamma);
-  v.table_from = log_gamma_map(v.a.mode == AerialMode::rerender ? v.a.gamma_from : v.a.gamma);
-  v.sky = v.a.sky.data.empty() ? Image(in.rgb.width, in.rgb.height, 1) : v.a.sky;
-  return v;
-}
-
-nlohmann::json aerial_preview(const nlohmann::json& job, const PreviewInputs& in) {
-  const AerialPreview v = aerial_preview_analysis(job, in);
-  const AerialParams& p = v.p;
-  const AerialAnalysis& a = v.a;
-  const std::string table = preview_map_name("aerial.gamma", v.table),
-                    table_from = preview_map_name("aerial.gamma-from", v.table_from),
-                    sky = preview_map_name("aerial.sky", v.sky);
-  const AttenuationTable& tf = a.mode == AerialMode::rerender ? a.gamma_from : a.gamma;
+  const AerialParams& p = j.aerial;
+  AerialAnalysis a = analyse_aerial(in.rgb, in.measured, p);
+  const bool rerender = a.mode == AerialMode::rerender;
+  PreviewFrame frame;
+  nlohmann::json& plan = frame.plan;
+  const std::string table = frame.add_map("aerial.gamma", log_gamma_map(a.gamma));
+  const std::string table_from = rerender ? frame.add_map("aerial.gamma-from", log_gamma_map(a.gamma_from)) : table;
+  const std::string sky =
+      frame.add_map("aerial.sky", a.sky.data.empty() ? Image(in.rgb.width, in.rgb.height, 1) : std::move(a.sky));
+  const AttenuationTable& tf = rerender ? a.gamma_from : a.gamma;
   const std::array<float, 3> A = aerial_working_colour(a, a.airlight), A1 = aerial_working_colour(a, a.from_airlight);
   const bool blur = a.plan.iterations > 0 && a.mode != AerialMode::remove;
   auto f = [](double x) { return preview_f(static_cast<float>(x)); };
-  nlohmann::json plan;
   const char* fmt = p.diffusion.precision == Precision::f16 ? "RGBA16F" : "RGBA32F";
   plan["targets"] = {{"f0", fmt}, {"f0b", fmt}, {"f1", fmt}, {"f1b", fmt}, {"aux", "RG32F"},
                      {"out", "RGBA32F"}, {"att", "RGBA32F"}};
-  plan["data"] = {table, table_from, sky};
   plan["steps"] = nlohmann::json::array();
   plan["steps"].push_back({{"pass", "aerial.premultiply"},
                            {"in", {"image", "range", table, table_from}},
@@ -148,14 +134,7 @@ nlohmann::json aerial_preview(const nlohmann::json& job, const PreviewInputs& in
   plan["derived"] = aerial_record(p, a, 0)["derived"];
   plan["derived"].erase("floored_pixels");  // counted by the run, not the preview
   plan["derived"]["iterations"] = blur ? a.plan.iterations : 0;
-  return plan;
-}
-
-Image aerial_preview_data(const std::string& name, const nlohmann::json& job, const PreviewInputs& in) {
-  AerialPreview v = aerial_preview_analysis(job, in);
-  for (Image* m : {&v.table, &v.table_from, &v.sky})
-    if (name == preview_map_name(name.substr(0, name.find(':')), *m)) return std::move(*m);
-  throw Error("no preview map '" + name + "'");
+  return frame;
 }
 
 }  // namespace
@@ -341,7 +320,6 @@ CommandDef aerial_command() {
                                            &validate_aerial);
   c.gpu_passes = {"aerial.premultiply", "diffusion.rates", "diffusion.iterate", "aerial.composite"};
   c.preview = &aerial_preview;
-  c.preview_data = &aerial_preview_data;
   // The sky-photo fit's flags describe a file the page cannot name.
   c.preview_fixed = {"sky", "sky-image-transfer"};
   // The medium at a wavelength (the LiDAR's, brume/lidar_camera.hpp): Rayleigh

@@ -197,24 +197,19 @@ namespace {
 
 // The preview (brume/preview.hpp): haze's plan, then the depth-of-field
 // steps on its result, as run_haze_dof hands the hazy image to the DOF stage.
-nlohmann::json haze_dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
+PreviewFrame haze_dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
   HazeDofJob j;
   haze_dof_job_table().from_json(j, job, "job");
-  nlohmann::json plan = haze_preview_plan(j.haze, in);
+  PreviewFrame frame = haze_preview_frame(j.haze, in);
   const nlohmann::json dof = dof_stage([&] {
     const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height);
-    return dof_preview_steps(plan, j.dof, k, in, "out", "dof", "dof.blurred");
+    return dof_preview_steps(frame, j.dof, k, in, "out", "dof", "dof.blurred");
   });
+  nlohmann::json& plan = frame.plan;
   plan["result"] = "dof.blurred";
   plan["derived"]["dof"] = dof;
   plan["derived"]["iterations"] = plan["derived"]["iterations"].get<int>() + dof["iterations"].get<int>();
-  return plan;
-}
-
-Image haze_dof_preview_data(const std::string& name, const nlohmann::json& job, const PreviewInputs& in) {
-  HazeDofJob j;
-  haze_dof_job_table().from_json(j, job, "job");
-  return dof_preview_map(name, j.dof, dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height), in);
+  return frame;
 }
 
 }  // namespace
@@ -259,7 +254,6 @@ CommandDef haze_dof_command() {
   };
   c.gpu_passes = {"haze.premultiply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
   c.preview = &haze_dof_preview;
-  c.preview_data = &haze_dof_preview_data;
   // brume.haze_dof(rgb, range, ...): the chain in memory, the range prepared
   // once, the arrays read in place; its record is the chain's, which `brume
   // run` repeats (brume.transforms.HazeThenDof runs it).

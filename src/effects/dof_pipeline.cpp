@@ -176,47 +176,32 @@ Image dof_preview_scale(const DofParams& p, const Intrinsics& k, const PreviewIn
 }
 }  // namespace
 
-nlohmann::json dof_preview_steps(nlohmann::json& plan, const DofParams& p, const Intrinsics& k, const PreviewInputs& in,
+nlohmann::json dof_preview_steps(PreviewFrame& frame, const DofParams& p, const Intrinsics& k, const PreviewInputs& in,
                                  const std::string& input, const std::string& prefix, const std::string& last) {
   DofAnalysis a;
-  const Image scale = dof_preview_scale(p, k, in, a);
+  Image scale = dof_preview_scale(p, k, in, a);
   const DiffusionParams dp = dof_diffusion_params(p);
-  const std::string name = preview_map_name("dof.scale", scale);
+  const std::string name = frame.add_map("dof.scale", std::move(scale));
   const std::string f0 = prefix + "0", f1 = prefix + "1";
   const char* f = dp.precision == Precision::f16 ? "RGBA16F" : "RGBA32F";
+  nlohmann::json& plan = frame.plan;
   plan["targets"][f0] = f;
   plan["targets"][f1] = f;
-  if (!plan.contains("data")) plan["data"] = nlohmann::json::array();
-  plan["data"].push_back(name);
   plan["steps"].push_back({{"copy", {{"from", input}, {"to", f0}}}});
   preview_diffusion_steps(plan, dp, a.plan, name, f0, f1, last);
   return {{"sigma_max_px", a.sigma_max}, {"coc_infinity_px", a.alpha_px}, {"iterations", a.plan.iterations}};
 }
 
-Image dof_preview_map(const std::string& name, const DofParams& p, const Intrinsics& k, const PreviewInputs& in) {
-  DofAnalysis a;
-  Image scale = dof_preview_scale(p, k, in, a);
-  if (name != preview_map_name("dof.scale", scale)) throw Error("no preview map '" + name + "'");
-  return scale;
-}
-
-
-nlohmann::json dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
+PreviewFrame dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
   DofJob j;
   dof_job_table().from_json(j, job, "job");
-  nlohmann::json plan;
-  plan["targets"] = nlohmann::json::object();
-  plan["steps"] = nlohmann::json::array();
-  plan["derived"] = dof_preview_steps(plan, j.dof, dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height), in,
-                                      "image", "f", "blurred");
-  plan["result"] = "blurred";
-  return plan;
-}
-
-Image dof_preview_data(const std::string& name, const nlohmann::json& job, const PreviewInputs& in) {
-  DofJob j;
-  dof_job_table().from_json(j, job, "job");
-  return dof_preview_map(name, j.dof, dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height), in);
+  PreviewFrame frame;
+  frame.plan["targets"] = nlohmann::json::object();
+  frame.plan["steps"] = nlohmann::json::array();
+  frame.plan["derived"] = dof_preview_steps(frame, j.dof, dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height),
+                                            in, "image", "f", "blurred");
+  frame.plan["result"] = "blurred";
+  return frame;
 }
 
 nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& eo, const RunContext& ctx) {
@@ -274,7 +259,6 @@ CommandDef dof_command() {
                                         &validate_dof);
   c.gpu_passes = {"diffusion.rates", "diffusion.iterate"};
   c.preview = &dof_preview;
-  c.preview_data = &dof_preview_data;
   static const auto call = array_call_table(dof_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
   c.arrays = make_array_form<DofParams>(
       "dof", "",

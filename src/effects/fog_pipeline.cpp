@@ -66,13 +66,6 @@ Image effect_range(const PreparedRange& prep, bool blend) {
   return r;
 }
 
-// The preview's map of the effect's range (brume/preview.hpp): "fog.range.blend"
-// (--sky-rule auto, prepared: sky beyond the margin unknown) or "fog.range.mask".
-Image fog_preview_data(const std::string& name, const nlohmann::json&, const PreviewInputs& in) {
-  if (name != "fog.range.blend" && name != "fog.range.mask") throw Error("no preview map '" + name + "'");
-  return preview_unknown_negative(effect_range(in.prepared, name == "fog.range.blend"));
-}
-
 }  // namespace
 
 const std::vector<MapOutput>& fog_map_outputs() {
@@ -99,7 +92,7 @@ const ParamTable<FogJob>& fog_job_table() {
 
 // The preview's frame (brume/preview.hpp): the passes and uniforms of
 // GpuFog::render (src/gpu/fog.cpp) on the effect's range, shader filtering.
-nlohmann::json fog_preview(const nlohmann::json& job, const PreviewInputs& in) {
+PreviewFrame fog_preview(const nlohmann::json& job, const PreviewInputs& in) {
   FogJob j;
   fog_job_table().from_json(j, job, "job");
   const FogParams& p = j.fog;
@@ -108,7 +101,6 @@ nlohmann::json fog_preview(const nlohmann::json& job, const PreviewInputs& in) {
   const Camera camera = heights ? depth_camera(j.input.depth, w, h, p.camera)
                                 : make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, w, h);
   const bool blend = p.sky_rule == SkyRule::automatic && in.prepared.applied;
-  const std::string range_name = blend ? "fog.range.blend" : "fog.range.mask";
   const Image range = effect_range(in.prepared, blend);
   const FogAnalysis a = analyse_fog(in.rgb, in.measured, range, camera, p, j.prepare.params.s_max_factor);
   const FogDensity& d = a.density;
@@ -124,10 +116,13 @@ nlohmann::json fog_preview(const nlohmann::json& job, const PreviewInputs& in) {
   const bool sky_blend = a.sky_blend && !in.prepared.sky_weight.empty();
   const Mat3 R = camera.world_from_camera().rotation;
   const auto f = [](double v) { return static_cast<float>(v); };
-  nlohmann::json plan;
+  PreviewFrame frame;
+  nlohmann::json& plan = frame.plan;
+  // The effect's range, its sky unknown again (-1, as the GPU uploads it): with
+  // --sky-rule auto, prepared, the sky beyond the margin; else the sky mask.
+  const std::string range_name = frame.add_map("fog.range", preview_unknown_negative(range));
   const char* fmt = p.diffusion.precision == Precision::f16 ? "RGBA16F" : "RGBA32F";
   plan["targets"] = {{"f0", fmt}, {"f1", fmt}, {"aux", "RGBA32F"}, {"out", "RGBA32F"}};
-  plan["data"] = nlohmann::json::array({range_name});
   plan["steps"] = nlohmann::json::array();
   plan["steps"].push_back(
       {{"pass", "fog.apply"},
@@ -163,7 +158,7 @@ nlohmann::json fog_preview(const nlohmann::json& job, const PreviewInputs& in) {
   }
   plan["derived"] = fog_record(p, a)["derived"];
   plan["derived"]["iterations"] = blur ? a.plan.iterations : 0;
-  return plan;
+  return frame;
 }
 
 FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSource& depth, const FogParams& p,
@@ -276,7 +271,6 @@ CommandDef fog_command() {
                                         &validate_fog);
   c.gpu_passes = {"fog.apply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
   c.preview = &fog_preview;
-  c.preview_data = &fog_preview_data;
   // The height profile's density (a table profile reads its file); classic
   // OpenGL fog is a look, not a medium.
   c.extinction_per_m = [](const nlohmann::json& job, double height_m) -> std::optional<double> {

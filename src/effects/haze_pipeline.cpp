@@ -99,21 +99,22 @@ HazeRun haze_on_prepared(ConstImageView rgb, HazeAnalysis analysis, const Prepar
   return run;
 }
 
-nlohmann::json haze_preview(const nlohmann::json& job, const PreviewInputs& in) {
+PreviewFrame haze_preview(const nlohmann::json& job, const PreviewInputs& in) {
   HazeJob j;
   haze_job_table().from_json(j, job, "job");
-  return haze_preview_plan(j.haze, in);
+  return haze_preview_frame(j.haze, in);
 }
 
 }  // namespace
 
 // The preview's frame (effects/preview_stages.hpp): the passes and uniforms
 // of GpuHaze::render (src/gpu/haze.cpp) with the shader's interpolation.
-nlohmann::json haze_preview_plan(const HazeParams& p, const PreviewInputs& in) {
+PreviewFrame haze_preview_frame(const HazeParams& p, const PreviewInputs& in) {
   const HazeAnalysis a = analyse_haze(in.rgb, in.measured, p);
   const bool naive = p.composite == Composite::naive;
   const bool blend = a.sky_beyond && !in.prepared.sky_weight.empty();
-  nlohmann::json plan;
+  PreviewFrame frame;
+  nlohmann::json& plan = frame.plan;
   const char* f = p.diffusion.precision == Precision::f16 ? "RGBA16F" : "RGBA32F";
   plan["targets"] = {{"f0", f}, {"f1", f}, {"aux", "RG32F"}, {"out", "RGBA32F"}};
   plan["steps"] = nlohmann::json::array();
@@ -136,7 +137,7 @@ nlohmann::json haze_preview_plan(const HazeParams& p, const PreviewInputs& in) {
   plan["result"] = "out";
   plan["derived"] = haze_record(p, a)["derived"];
   plan["derived"]["iterations"] = a.plan.iterations;
-  return plan;
+  return frame;
 }
 
 HazeRun run_haze(ConstImageView rgb, ConstImageView measured_range, const HazeParams& p, const RangeStep& prepare,

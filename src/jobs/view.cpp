@@ -234,7 +234,10 @@ struct Server {
   int port = 0;
   std::mutex mu;
   std::unique_ptr<ViewData> data;
-  std::map<std::string, json> data_jobs;  // the job of the plan that named each map (the last few)
+  // The maps of the last two frames (PreviewFrame::maps): the page fetches a
+  // frame's maps right after its plan; the one before covers a plan that
+  // overtook a fetch.
+  std::map<std::string, Image> maps, maps_before;
   std::atomic<long long> last_request_ms{0};
   std::atomic<int> window_count{0};
   std::atomic<long long> window_start{0};
@@ -319,9 +322,10 @@ struct Server {
     c.check(job, given, true);
     std::lock_guard<std::mutex> lock(mu);
     ViewData& d = at(k);
-    json plan = c.preview(job, PreviewInputs{d.rgb, d.measured, d.prep});
-    if (data_jobs.size() > 16) data_jobs.clear();
-    for (const auto& n : plan.value("data", json::array())) data_jobs[n.get<std::string>()] = job;
+    PreviewFrame f = c.preview(job, PreviewInputs{d.rgb, d.measured, d.prep});
+    json plan = std::move(f.plan);
+    maps_before = std::move(maps);
+    maps = std::move(f.maps);
     std::string line;
     for (const std::string& w : words) line += (line.empty() ? "" : " ") + shell_word(w);
     json record = run_record_header(c.name, words);
@@ -414,33 +418,25 @@ struct Server {
         r.set_content(w == "image" ? d.rgba : w == "range" ? d.range : d.sky, "application/octet-stream");
       });
     }
-    // A map a plan names (CommandDef::preview_data), its shape in X-Brume-Shape.
+    // A map of the last frames (PreviewFrame::maps), its shape in X-Brume-Shape.
     s.Get(p + "data.bin", [this](const httplib::Request& q, httplib::Response& r) {
-      const int k = q.has_param("scale") ? std::atoi(q.get_param_value("scale").c_str()) : 1;
       const std::string name = q.get_param_value("name");
-      if (k < 1 || k > 64 || !c.preview_data) {
-        r.status = 404;
-        return;
-      }
       std::lock_guard<std::mutex> lock(mu);
-      ViewData& d = at(k);
-      const auto job = data_jobs.find(name);
-      if (job == data_jobs.end()) {
+      const Image* found = nullptr;
+      for (const auto* ms : {&maps, &maps_before})
+        if (const auto it = ms->find(name); it != ms->end() && !found) found = &it->second;
+      if (!found) {
         r.status = 404;
         return;
       }
-      try {
-        const Image m = c.preview_data(name, job->second, PreviewInputs{d.rgb, d.measured, d.prep});
-        // Sent as its texture holds it: 3 channels padded to RGBA (alpha 1).
-        const int tc = m.channels == 3 ? 4 : m.channels;
-        std::vector<float> v(m.pixels() * tc, 1.0f);
-        for (std::size_t i = 0; i < m.pixels(); ++i)
-          for (int ch = 0; ch < m.channels; ++ch) v[i * tc + ch] = m.data[i * m.channels + ch];
-        r.set_header("X-Brume-Shape", std::to_string(m.width) + " " + std::to_string(m.height) + " " + std::to_string(tc));
-        r.set_content(floats(v), "application/octet-stream");
-      } catch (const Error&) {
-        r.status = 404;
-      }
+      const Image& m = *found;
+      // Sent as its texture holds it: 3 channels padded to RGBA (alpha 1).
+      const int tc = m.channels == 3 ? 4 : m.channels;
+      std::vector<float> v(m.pixels() * tc, 1.0f);
+      for (std::size_t i = 0; i < m.pixels(); ++i)
+        for (int ch = 0; ch < m.channels; ++ch) v[i * tc + ch] = m.data[i * m.channels + ch];
+      r.set_header("X-Brume-Shape", std::to_string(m.width) + " " + std::to_string(m.height) + " " + std::to_string(tc));
+      r.set_content(floats(v), "application/octet-stream");
     });
     s.Post(p + "frame", [this](const httplib::Request& q, httplib::Response& r) {
       try {

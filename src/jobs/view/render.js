@@ -135,6 +135,9 @@ export class Renderer {
         this.gl.deleteTexture(this.inputs[old]);
         delete this.inputs[old];
       }
+    if (map.width > this.maxTexture || map.height > this.maxTexture)
+      throw new Error(`map ${name} is ${map.width}x${map.height}, above this browser's largest texture ` +
+                      `(${this.maxTexture}): this effect cannot be previewed here`);
     const [internal, format] = {1: ['R32F', 'RED'], 2: ['RG32F', 'RG'], 4: ['RGBA32F', 'RGBA']}[map.channels];
     this.inputs[name] = this.texture(internal, format, map.width, map.height, map.data);
   }

@@ -26,7 +26,7 @@ async function fetchFloats(name) {
 
 // A map a plan names (CommandDef::preview_data): its floats and its shape.
 async function fetchMap(name) {
-  const res = await fetch(`data.bin?scale=${state.scale}&name=${encodeURIComponent(name)}`);
+  const res = await fetch(`data.bin?name=${encodeURIComponent(name)}`);
   if (!res.ok) throw new Error(`map ${name}: ${res.status}`);
   const [width, height, channels] = (res.headers.get('X-Brume-Shape') || '').split(' ').map(Number);
   const data = new Float32Array(await res.arrayBuffer());
