@@ -4,6 +4,7 @@ forms' lidar= (brume.haze, fog, aerial, haze_dof) against the CLI's
 of the record, bad input; the camera transforms' lidar_target (one draw for
 the image and the scan, replay, `brume run`, p=0)."""
 import json
+import subprocess
 
 import numpy as np
 import pytest
@@ -11,7 +12,7 @@ import pytest
 import brume
 import brume.transforms as T
 from brume import _brume
-from conftest import run_cli
+from conftest import cli_path, run_cli
 
 
 def scan(n=4000, seed=5):
@@ -128,6 +129,10 @@ def test_replay_rerun_and_brume_run_of_the_record(demo, tmp_path):
     assert np.array_equal(brume.rerun(r.record, rgb, rng, lidar=pts).lidar, r.lidar)
     with pytest.raises(ValueError, match="lidar="):
         brume.haze(rgb, rng, job=job)
+    # `brume run` of the Python record itself: its inputs were arrays, which it says (exit 2, nothing written)
+    (tmp_path / "py.json").write_text(json.dumps(r.record))
+    p = subprocess.run([cli_path(), "run", str(tmp_path / "py.json")], capture_output=True, text=True)
+    assert p.returncode == 2 and "inputs (lidar, range, rgb) were numpy arrays" in p.stderr
     # the record through the CLI: float files of the same pixels and the scan's .bin
     brume.write_image(tmp_path / "rgb.pfm", rgb, bits="float")
     brume.write_image(tmp_path / "range.pfm", rng, bits="float", data=True)
