@@ -103,7 +103,8 @@ struct ArrayIn {
 };
 struct ArrayResult {
   std::map<std::string, Image> images;  // the Result's arrays by field (empty Image: None)
-  nlohmann::json record;                 // the run's blocks; a "sky_image" block belongs under the record's "inputs"
+  nlohmann::json record;                 // the run's blocks; "inputs" (files it read) and a "sky_image" block go
+                                         // under the record's "inputs"
   nlohmann::json job;                    // the call as recorded (less the execution block)
   nlohmann::json more = nlohmann::json::object();  // the Result's other fields (sky fit's turbidity, fit)
 };

@@ -56,7 +56,8 @@ CameraLidarMedium camera_lidar_medium(const CommandDef& c, const nlohmann::json&
 // points come back as the Result's "lidar" (None without a scan), the
 // record's "lidar" block and job block as the command line's, from the same
 // functions (scan_params, lidar_fog), so they equal --lidar-out bit for bit.
-// A height-layered fog is refused there (the scan's pose is a file).
+// A medium that varies with height (fog's profiles) also takes kitti_calib=
+// (the depth block's --kitti-calib: the scan's pose), recorded with its hash.
 void add_camera_lidar(CommandDef& c);
 
 }  // namespace brume

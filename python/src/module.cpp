@@ -129,6 +129,10 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
     for (std::size_t i = 0; i < a.args.size(); ++i)
       if (in[i].present) rec["inputs"][a.args[i].name] = inputs[i].record;
   }
+  if (out.record.contains("inputs")) {  // the files a run read beside the arrays (a scan's KITTI calibration)
+    for (const auto& [name, v] : out.record["inputs"].items()) rec["inputs"][name] = v;
+    out.record.erase("inputs");
+  }
   if (out.record.contains("sky_image")) {  // aerial's sky photo is an input, as in the CLI's record
     rec["inputs"]["sky_image"] = out.record["sky_image"];
     out.record.erase("sky_image");

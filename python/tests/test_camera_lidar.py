@@ -12,17 +12,7 @@ import pytest
 import brume
 import brume.transforms as T
 from brume import _brume
-from conftest import cli_path, run_cli
-
-
-def scan(n=4000, seed=5):
-    """Points on random beams at 1.5-90 m (the near ones turn into fog at a
-    few hundred metres' visibility), reflectance in [0, 1] as KITTI's."""
-    g = np.random.default_rng(seed)
-    d = g.normal(size=(n, 3))
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    r = g.uniform(1.5, 90.0, size=(n, 1))
-    return np.hstack([d * r, g.uniform(0, 1, size=(n, 1))]).astype(np.float32)
+from conftest import cli_path, run_cli, scan
 
 
 def read_bin(path):
@@ -95,6 +85,56 @@ def test_one_medium_for_the_image_and_the_scan(demo):
     a905 = brume.aerial(demo["rgb"], demo["range"], turbidity=8.0, lidar=pts).record["lidar"]
     a1550 = brume.aerial(demo["rgb"], demo["range"], turbidity=8.0, lidar=pts, lidar_wavelength=1550.0)
     assert a905["wavelength_nm"] == 905.0 and 0 < a1550.record["lidar"]["alpha_per_m"] < a905["alpha_per_m"]
+
+
+# A KITTI-like calibration (made up: a camera 2 6 cm left of a Velodyne 8 cm
+# above it, looking along its x axis; R0_rect the identity).
+CALIB = """P2: 720 0 320 43.2 0 720 240 0.2 0 0 1 0.003
+R0_rect: 1 0 0 0 1 0 0 0 1
+Tr_velo_to_cam: 0 -1 0 0 0 0 -1 -0.08 1 0 0 -0.27
+"""
+
+
+def test_fog_with_a_height_profile_places_the_scan_by_kitti_calib(demo, tmp_path):
+    """brume.fog(..., profile exponential, lidar=, kitti_calib=): the scan
+    through the fog's profile along each beam, placed by the calibration and
+    the camera's pose: equal to `brume fog --kitti-calib ... --lidar` bit for
+    bit; the record's job holds the file as the CLI's does and its inputs
+    hash it; kitti_calib without a scan, or with a medium the same at every
+    height, is refused; a CLI fog record that read a --kitti-calib for its
+    depth (not for a scan) still replays without one."""
+    (tmp_path / "calib.txt").write_text(CALIB)
+    pts = scan()
+    pts.tofile(tmp_path / "in.bin")
+    d = demo["dir"]
+    fog = dict(density=0.05, falloff=0.1, camera_height=1.65, pitch=2.0, fov_y=55.0)
+    run_cli("fog", "--image", d / "clean.png", "--range", d / "range.exr", "--fov-y", 55, "--density", 0.05,
+            "--falloff", 0.1, "--camera-height", 1.65, "--pitch", 2, "--kitti-calib", tmp_path / "calib.txt",
+            "--lidar", tmp_path / "in.bin", "--lidar-out", tmp_path / "s.bin", "--lidar-seed", 2,
+            "--out", tmp_path / "o.png", "--record", tmp_path / "o.json")
+    cli = json.loads((tmp_path / "o.json").read_text())
+    r = brume.fog(demo["rgb"], demo["range"], lidar=pts, kitti_calib=tmp_path / "calib.txt", lidar_seed=2, **fog)
+    assert np.array_equal(r.lidar, read_bin(tmp_path / "s.bin"))
+    timing = lambda b: {k: v for k, v in b.items() if not k.endswith("_ms")}
+    assert timing(r.record["lidar"]) == timing(cli["lidar"])
+    assert r.record["lidar"]["alpha_per_m"] is None and r.record["lidar"]["profile"] == "exponential"
+    assert 0 < r.record["lidar"]["soft_points"] < len(pts)
+    assert r.record["job"]["depth"]["kitti-calib"] == str(tmp_path / "calib.txt")
+    assert r.record["inputs"]["kitti_calib"]["path"] == str(tmp_path / "calib.txt")
+    assert len(r.record["inputs"]["kitti_calib"]["sha256"]) == 64
+    plain = brume.fog(demo["rgb"], demo["range"], **fog)
+    assert np.array_equal(r.rgb, plain.rgb) and "kitti-calib" not in plain.record["job"]["depth"]
+    again = brume.fog(demo["rgb"], demo["range"], job=json.loads(json.dumps(r.record["job"])), lidar=pts)
+    assert np.array_equal(again.lidar, r.lidar)
+    with pytest.raises(ValueError, match="kitti_calib places the LiDAR scan.*no lidar= scan"):
+        brume.fog(demo["rgb"], demo["range"], kitti_calib=tmp_path / "calib.txt", **fog)
+    with pytest.raises(ValueError, match="kitti_calib places the scan in a fog that varies with height"):
+        brume.fog(demo["rgb"], demo["range"], lidar=pts, kitti_calib=tmp_path / "calib.txt", profile="constant",
+                  density=0.05, fov_y=55.0)
+    # a CLI record whose depth block names a calibration (its depth source's) and no scan
+    cli["job"]["lidar"].update({"lidar": "", "lidar-out": ""})
+    same = brume.fog(demo["rgb"], demo["range"], job=cli["job"])
+    assert same.lidar is None and np.array_equal(same.rgb, plain.rgb)
 
 
 def test_kitti_frame_equals_the_cli(data_dir, tmp_path):
@@ -177,7 +217,7 @@ def test_bad_input_names_the_keyword(demo):
         brume.haze(rgb, rng, lidar=pts)  # normalised kappas: no metres for the scan
     with pytest.raises(ValueError, match="lidar-wavelength: the medium of haze is grey"):
         brume.haze(rgb, rng, visibility=300.0, lidar=pts, lidar_wavelength=1550.0)
-    with pytest.raises(ValueError, match="varies with height"):
+    with pytest.raises(ValueError, match="varies with height.*give kitti_calib=FILE"):
         brume.fog(rgb, rng, fov_y=55.0, camera_height=1.6, density=0.03, lidar=pts)  # exponential
     with pytest.raises(ValueError, match="lidar.*intensity-scale 1"):
         brume.haze(rgb, rng, visibility=300.0, lidar=pts * np.float32([1, 1, 1, 255]))

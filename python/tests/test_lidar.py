@@ -5,15 +5,7 @@ import pytest
 
 import brume
 from brume import _brume
-from conftest import run_cli
-
-
-def scan(n=4000, seed=2):
-    g = np.random.default_rng(seed)
-    d = g.normal(size=(n, 3))
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    r = g.uniform(1.5, 90.0, size=(n, 1))
-    return np.hstack([d * r, g.uniform(0, 1, size=(n, 1))]).astype(np.float32)
+from conftest import run_cli, scan
 
 
 def test_lidar_fog_equals_cli_and_reads_in_place(tmp_path):

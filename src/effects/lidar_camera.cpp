@@ -253,22 +253,41 @@ std::string keyword_of(std::string flag) {
 // read in place), the block's settings as keywords, the foggy scan as the
 // Result's "lidar" and the record's "lidar" block, as the command line's
 // --lidar-out and record hold them (the same function fogs both).
+// A medium that varies with height (fog's profiles) also takes kitti_calib=:
+// the depth block's --kitti-calib, which places the scan in the fog's world.
+constexpr const char* kCalib = "kitti-calib";
+ParamSpec calib_spec() {
+  ParamSpec s = depth_param_table().at(kCalib).spec;
+  s.help = "KITTI calibration (calib/N.txt) for lidar= in a fog that varies with height: its Tr_velo_to_cam, "
+           "R0_rect and P2 place the scan relative to camera 2, whose camera_height, pitch and roll the fog takes";
+  return s;
+}
+
 void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, ArrayForm& a) {
   const ParamTable<ArrayLidar>& t = array_lidar_table();
   const std::size_t scan = a.args.size();
   a.args.push_back({"lidar", 1, true, ArrayArg::As::view, true, true});
   for (const Param<ArrayLidar>& d : t.params()) a.specs.push_back(d.spec);
   a.defaults.update(t.to_json(ArrayLidar{}));
+  const bool layered = static_cast<bool>(h.layered);
+  if (layered) {
+    a.specs.push_back(calib_spec());
+    a.defaults[a.specs.back().block][kCalib] = "";
+  }
   a.fields.insert(a.fields.end() - (a.fields.empty() || a.fields.back() != "record" ? 0 : 1), "lidar");
   a.summary += " lidar=points (an (N, 4) float32 scan of x, y, z [m] and intensity, KITTI's layout) is fogged by "
                "the same medium (alpha = the camera's extinction; the lidar_* keywords are brume.lidar.fog's) and "
                "returned as lidar, as --lidar/--lidar-out.";
-  a.build = [inner = a.build, &t](const JobValues& values) {
+  a.build = [inner = a.build, &t, layered](const JobValues& values) {
     JobValues own;
     ArrayLidar l;
     bool settings = false;
+    std::string calib;
     for (const auto& [n, v] : values) {
-      if (const Param<ArrayLidar>* d = t.find(n)) {
+      if (layered && n == kCalib) {
+        calib_spec().check(v);
+        calib = v.get<std::string>();
+      } else if (const Param<ArrayLidar>* d = t.find(n)) {
         d->spec.check(v);
         d->set(l, v);
         settings = true;
@@ -278,6 +297,7 @@ void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, Ar
     }
     nlohmann::json call = inner(own);
     if (settings) call["lidar"] = t.to_json(l)["lidar"];  // only when set: a call without a scan records none
+    if (!calib.empty()) call[calib_spec().block][kCalib] = calib;
     return call;
   };
   a.run = [h, inner = a.run, job_specs, scan, fn = a.public_name, &t](
@@ -290,8 +310,20 @@ void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, Ar
       t.from_json(l, nlohmann::json{{"lidar", own["lidar"]}}, "call");
       own.erase("lidar");
     }
+    // kitti_calib= (a layered medium's): the scan's, not the image's call. A
+    // job's (a CLI record of a --velodyne depth source) is no setting given.
+    const std::string block = calib_spec().block;
+    std::string calib;
+    if (own.contains(block) && own[block].contains(kCalib)) {
+      calib = own[block][kCalib].get<std::string>();
+      own[block].erase(kCalib);
+    }
+    const bool calib_given = given.count(kCalib) > 0;
     const std::vector<ArrayIn> arrays(in.begin(), in.begin() + static_cast<std::ptrdiff_t>(std::min(scan, in.size())));
     if (scan >= in.size() || !in[scan].present) {
+      if (calib_given)
+        throw Error(fn + "(): kitti_calib places the LiDAR scan in the fog's world, but no lidar= scan is given: "
+                         "pass the frame's scan as lidar=points, or drop kitti_calib");
       if (settings) {
         std::string names;
         for (const std::string& n : given)
@@ -306,13 +338,17 @@ void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, Ar
       r.images["lidar"] = Image();  // None
       return r;
     }
-    const nlohmann::json job = job_of_call(own, job_specs);
-    if (h.layered && h.layered(job))
-      throw Error(fn + "(): lidar= with a fog that varies with height: the scan needs its pose in the fog's world "
-                       "(--kitti-calib, a file, on the command line); on arrays use profile='constant' (one "
-                       "extinction), fog the points alone with brume.lidar.fog(points, profile=..., "
-                       "kitti_calib=..., camera_height=...) and the same fields, or run `brume fog --lidar ... "
-                       "--kitti-calib ...`");
+    nlohmann::json job = job_of_call(own, job_specs);
+    const bool varies = h.layered && h.layered(job);
+    if (varies && calib.empty())
+      throw Error(fn + "(): lidar= with a fog that varies with height: the scan needs its pose in the fog's world; "
+                       "give kitti_calib=FILE (KITTI's calib/N.txt: Tr_velo_to_cam and R0_rect place the scan "
+                       "relative to camera 2, whose camera_height, pitch and roll the fog takes), or use "
+                       "profile='constant' with density=D");
+    if (!varies && calib_given)
+      throw Error(fn + "(): kitti_calib places the scan in a fog that varies with height; this medium is the same "
+                       "at every height, so it would change nothing; drop it");
+    if (varies) job[block][kCalib] = calib;
     CameraLidarMedium m;
     LidarFogParams p;
     LidarFogStats st;
@@ -330,6 +366,10 @@ void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, Ar
     ArrayResult r = inner(arrays, own, e, given);
     r.record["lidar"] = scan_record(p, st, m, l.lidar.wavelength_nm);
     r.job["lidar"] = t.to_json(l)["lidar"];
+    if (varies) {  // the file that placed the scan: in the job as the command line's, and an input with its hash
+      r.job[block][kCalib] = calib;
+      r.record["inputs"]["kitti_calib"] = {{"path", calib}, {"sha256", sha256_file(calib)}};
+    }
     r.images["lidar"] = std::move(out);
     return r;
   };
