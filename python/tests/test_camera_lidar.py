@@ -350,3 +350,15 @@ def test_transform_scan_bad_arguments():
         t(image=rgb, depth=rng, points=scan(100).astype(np.float64), key="k")
     with pytest.raises(ValueError, match="points: a clip needs one scan per image"):
         t(images=[rgb, rgb], depths=[rng, rng], points=[scan(100)], key="k")
+
+
+def test_transform_scan_as_a_torch_tensor():
+    """A CPU torch scan comes back as a torch tensor with the numpy call's values."""
+    torch = pytest.importorskip("torch")
+    rgb, rng = _scene()
+    pts = scan(1500)
+    t = T.Haze(visibility=(40, 80), seed=4, lidar_target="points")
+    ref = t(image=rgb, depth=rng, points=pts, key="t")["points"]
+    out = t(image=rgb, depth=rng, points=torch.from_numpy(pts), key="t")["points"]
+    assert isinstance(out, torch.Tensor) and out.dtype == torch.float32
+    assert np.array_equal(out.numpy(), ref)
