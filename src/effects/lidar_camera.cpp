@@ -249,10 +249,6 @@ std::string keyword_of(std::string flag) {
   return flag;
 }
 
-// Adds the scan to an array form: the keyword array lidar= (an (N, 4) scan,
-// read in place), the block's settings as keywords, the foggy scan as the
-// Result's "lidar" and the record's "lidar" block, as the command line's
-// --lidar-out and record hold them (the same function fogs both).
 // A medium that varies with height (fog's profiles) also takes kitti_calib=:
 // the depth block's --kitti-calib, which places the scan in the fog's world.
 constexpr const char* kCalib = "kitti-calib";
@@ -263,6 +259,10 @@ ParamSpec calib_spec() {
   return s;
 }
 
+// Adds the scan to an array form: the keyword array lidar= (an (N, 4) scan,
+// read in place), the block's settings as keywords, the foggy scan as the
+// Result's "lidar" and the record's "lidar" block, as the command line's
+// --lidar-out and record hold them (the same function fogs both).
 void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, ArrayForm& a) {
   const ParamTable<ArrayLidar>& t = array_lidar_table();
   const std::size_t scan = a.args.size();
