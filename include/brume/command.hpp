@@ -75,15 +75,20 @@ template <class P>
 ParamTable<ArrayCall<P>> array_call_table(const ParamTable<P>& own, unsigned blocks,
                                           const std::set<std::string>& skip = {});
 
-// A positional array argument of an array form (brume.haze(rgb, range)):
-// its name, its channels (3: colour, read with the transfer= keyword when
-// integer; 1: a map), whether it may be None, and how the run reads it.
+// An array argument of an array form (brume.haze(rgb, range)): its name,
+// its channels (3: colour, read with the transfer= keyword when integer; 1: a
+// map), whether it may be None, how the run reads it, whether it is a
+// keyword rather than positional (brume.haze(rgb, range, lidar=points): after
+// the positional ones, optional), and whether it is a LiDAR scan: an (N, 4)
+// array of x, y, z, intensity (KITTI's layout), read as an N x 4 map.
 struct ArrayArg {
   enum class As { view, dense, image };  // a strided view in place; dense (in place when C-contiguous); an owned Image
   std::string name;
   int channels = 1;
   bool optional = false;
   As as = As::view;
+  bool keyword = false;
+  bool points = false;
 };
 // One array as the run gets it, filled as its ArrayArg asks: `view` always,
 // `dense` for As::dense, `image` (the call's own copy, free to change) for
@@ -98,7 +103,8 @@ struct ArrayIn {
 };
 struct ArrayResult {
   std::map<std::string, Image> images;  // the Result's arrays by field (empty Image: None)
-  nlohmann::json record;                 // the run's blocks; a "sky_image" block belongs under the record's "inputs"
+  nlohmann::json record;                 // the run's blocks; "inputs" (files it read) and a "sky_image" block go
+                                         // under the record's "inputs"
   nlohmann::json job;                    // the call as recorded (less the execution block)
   nlohmann::json more = nlohmann::json::object();  // the Result's other fields (sky fit's turbidity, fit)
 };

@@ -49,7 +49,15 @@ struct CameraLidarMedium {
 CameraLidarMedium camera_lidar_medium(const CommandDef& c, const nlohmann::json& job, double wavelength_nm);
 
 // Wraps c's run, cli_run, check and report (c's table nests
-// camera_lidar_param_table(); its extinction hooks are set before the call).
+// camera_lidar_param_table(); its extinction hooks are set before the call),
+// and its array form where it has one (set before the call): the keyword
+// array lidar= (an (N, 4) scan, read in place) and the block's settings as
+// keywords (lidar_seed, lidar_wavelength, ...: not its files); the foggy
+// points come back as the Result's "lidar" (None without a scan), the
+// record's "lidar" block and job block as the command line's, from the same
+// functions (scan_params, lidar_fog), so they equal --lidar-out bit for bit.
+// A medium that varies with height (fog's profiles) also takes kitti_calib=
+// (the depth block's --kitti-calib: the scan's pose), recorded with its hash.
 void add_camera_lidar(CommandDef& c);
 
 }  // namespace brume

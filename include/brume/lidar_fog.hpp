@@ -101,6 +101,7 @@
 
 #include "brume/camera.hpp"
 #include "brume/fog_params.hpp"
+#include "brume/image.hpp"
 #include "brume/params.hpp"
 
 namespace brume {
@@ -221,6 +222,12 @@ void check_kitti_bin_output(const std::string& path, const std::string& flag);
 // exceed 255, before writing anything. α = 0 copies the points bit for bit.
 LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarFogParams& p,
                         const std::string& what = "the scan");
+// The same on an array form's scan (an (N, 4) array of x, y, z, intensity,
+// read as an N x 4 map: brume.lidar.fog's points, a camera effect's lidar=),
+// read in place when its rows are dense, gathered once when strided; the
+// foggy points as a new N x 4 Image. Another shape is refused naming `what`.
+Image lidar_fog_array(const ConstImageView& points, const LidarFogParams& p, const std::string& what,
+                      LidarFogStats& stats);
 
 // KITTI velodyne .bin: little-endian float32 x, y, z, reflectance per point.
 // Throws an Error naming `what` when the size is not a multiple of 16 bytes.

@@ -216,10 +216,34 @@ def _depth_array(d, shape, kind, unit, intr, arg):
     return v.astype(np.float32)
 
 
+class _Points:
+    """A LiDAR scan as the library reads it (an (N, 4) float32 numpy array of
+    x, y, z, intensity, read in place), and how to give the foggy one back in
+    the caller's type (numpy, or a CPU torch tensor)."""
+
+    def __init__(self, x, arg):
+        self.torch = _is_torch(x)
+        if self.torch:
+            if x.device.type != "cpu":
+                raise ValueError(f"{arg}: a torch tensor on {x.device}; call .cpu() first")
+            a = x.detach().numpy()
+        elif isinstance(x, np.ndarray):
+            a = x
+        else:
+            raise ValueError(f"{arg}: expected an (N, 4) numpy array or torch tensor, got {type(x).__name__}")
+        if a.ndim != 2 or a.shape[1] != 4 or a.dtype != np.float32:
+            raise ValueError(f"{arg}: expected an (N, 4) float32 array of x, y, z, intensity, got shape {a.shape} "
+                             f"({a.dtype})")
+        self.array = a
+
+    def back(self, points):
+        return sys.modules["torch"].from_numpy(points) if self.torch else points
+
+
 # ---- the transforms ---------------------------------------------------------------------------
 _COMMANDS = {c["name"]: c for c in _brume._commands()}
 _INTRINSICS = ("fx", "fy", "cx", "cy", "fov_x", "fov_y", "baseline")
-_OWN = ("p", "seed", "depth_kind", "depth_unit", "transfer", "per_frame") + _INTRINSICS
+_OWN = ("p", "seed", "depth_kind", "depth_unit", "transfer", "per_frame", "lidar_target") + _INTRINSICS
 
 
 def _canonical(command, name):
@@ -265,18 +289,61 @@ class _Stage:
         return _brume.random_params(self.command["name"], seed, key, **self.specs)
 
 
-class Transform:
+class _Keyed:
+    """What every transform shares: p and seed, the key of a call, whether a
+    draw applies, and the check of a replay's params."""
+
+    def __init__(self, p, seed):
+        _check_p_seed(p, seed)
+        self.p, self.seed = float(p), seed
+        self._calls = 0
+
+    def _auto_key(self):
+        """(call counter, worker id) when no key= is given: a torch DataLoader
+        worker's id, a multiprocessing worker's index, else 0."""
+        worker = 0
+        torch = sys.modules.get("torch")
+        info = torch.utils.data.get_worker_info() if torch is not None and hasattr(torch, "utils") else None
+        if info is not None:
+            worker = info.id
+        elif multiprocessing.current_process()._identity:
+            worker = multiprocessing.current_process()._identity[-1]
+        key = f"call:{worker}:{self._calls}"
+        self._calls += 1
+        return key
+
+    def _applies(self, key):
+        return self.p >= 1.0 or _unit(self.seed, key, "p") < self.p
+
+    def _noise_seed(self, key):
+        """The seed of a scan's fog returns' range noise for `key`: 53 bits of
+        the same hash scheme (name "noise-seed")."""
+        return int(_unit(self.seed, key, "noise-seed") * 2.0 ** 53)
+
+    @staticmethod
+    def _check_params(params):
+        if not isinstance(params, dict) or "record" not in params or "applied" not in params:
+            raise ValueError("params: a transform call's \"params\" dict (with \"record\" and \"applied\")")
+
+
+class Transform(_Keyed):
     """An effect (or a chain of effects) of the library as an augmentation
     transform; the classes below (Haze, Fog, Aerial, DepthOfField,
-    HazeThenDof) are made from the library's list of commands."""
+    HazeThenDof) are made from the library's list of commands.
+
+    lidar_target="points" (the camera effects with a medium: Haze, Fog,
+    Aerial, HazeThenDof) fogs the frame's LiDAR scan, given as that target of
+    the call, with the image's medium from the same draw (brume.haze(...,
+    lidar=points)); without it every target passes through untouched."""
 
     _commands = ()  # the commands run, in order: ("haze",) or ("haze", "dof")
     _prefixes = ()  # each later stage's keyword prefix ("dof_")
 
     def __init__(self, p=1.0, seed=0, depth_kind="range", depth_unit=None, transfer=None, per_frame=False,
-                 fx=None, fy=None, cx=None, cy=None, fov_x=None, fov_y=None, baseline=None, **params):
+                 fx=None, fy=None, cx=None, cy=None, fov_x=None, fov_y=None, baseline=None, lidar_target=None,
+                 **params):
         where = f"brume.transforms.{type(self).__name__}()"
-        _check_p_seed(p, seed)
+        super().__init__(p, seed)
         if depth_kind not in ("range", "z", "disparity", "inverse"):
             raise ValueError(f"depth_kind={depth_kind!r}: 'range' (metres along the ray), 'z' (along the optical "
                              f"axis), 'disparity' (pixels; needs fx, baseline) or 'inverse' (1/z)")
@@ -285,7 +352,7 @@ class Transform:
         if transfer not in (None, "srgb", "linear"):
             raise ValueError(f"transfer={transfer!r}: 'srgb' or 'linear' (default: srgb for integer images, "
                              f"linear for float)")
-        self.p, self.seed, self.depth_kind, self.depth_unit = float(p), seed, depth_kind, depth_unit
+        self.depth_kind, self.depth_unit = depth_kind, depth_unit
         self.transfer, self.per_frame = transfer, bool(per_frame)
         self.intrinsics = {k: v for k, v in dict(fx=fx, fy=fy, cx=cx, cy=cy, fov_x=fov_x, fov_y=fov_y,
                                                  baseline=baseline).items() if v is not None}
@@ -307,29 +374,40 @@ class Transform:
                 if k in self.intrinsics and k in command["keywords"]:
                     kw.setdefault(k, self.intrinsics[k])
             self._stages.append(_Stage(command, kw, where))
-        self._calls = 0
+        if lidar_target is None:
+            for st in self._stages:
+                for name in st.fixed:
+                    if name.startswith("lidar_"):
+                        raise ValueError(f"{name}: a setting of the frame's LiDAR scan, but this transform fogs "
+                                         f"none; give lidar_target= (the call's target holding the scan, e.g. "
+                                         f"'points'), or drop {name}")
+        else:
+            if not isinstance(lidar_target, str) or not lidar_target or lidar_target in ("image", "depth", "key"):
+                raise ValueError(f"lidar_target={lidar_target!r}: the name of the call's target that holds the "
+                                 f"frame's LiDAR scan, e.g. 'points' (not image, depth or key)")
+            medium = self._chain() or self._stages[0].command
+            if "lidar" not in medium.get("keyword_arrays", []):
+                raise ValueError(f"lidar_target={lidar_target!r}: {type(self).__name__} models no medium to fog a "
+                                 f"scan with; the transforms that do: "
+                                 f"{', '.join(sorted(n for n, c in _CLASSES.items() if issubclass(c, Transform) and c._fogs_scans()))}")
+        self.lidar_target = lidar_target
+
+    @classmethod
+    def _fogs_scans(cls):
+        c = _COMMANDS.get("+".join(cls._commands))
+        return c is not None and "lidar" in c.get("keyword_arrays", [])
 
     # ---- keys and draws ------------------------------------------------------------------------
-    def _auto_key(self):
-        """(call counter, worker id) when no key= is given: a torch DataLoader
-        worker's id, a multiprocessing worker's index, else 0."""
-        worker = 0
-        torch = sys.modules.get("torch")
-        info = torch.utils.data.get_worker_info() if torch is not None and hasattr(torch, "utils") else None
-        if info is not None:
-            worker = info.id
-        elif multiprocessing.current_process()._identity:
-            worker = multiprocessing.current_process()._identity[-1]
-        key = f"call:{worker}:{self._calls}"
-        self._calls += 1
-        return key
-
     def draw(self, key):
         """The parameters for `key`: whether it applies, and each stage's
-        values (the library's sampler: a function of (seed, key, name))."""
-        applied = self.p >= 1.0 or _unit(self.seed, key, "p") < self.p
+        values (the library's sampler: a function of (seed, key, name)); with
+        lidar_target, the first stage's also the scan's noise seed
+        ("lidar-seed", unless given fixed)."""
+        applied = self._applies(key)
         values = [s.draw(self.seed, key if i == 0 else f"{key}/{s.command['name']}")
                   for i, s in enumerate(self._stages)] if applied else []
+        if applied and self.lidar_target is not None and "lidar_seed" not in self._stages[0].fixed:
+            values[0]["lidar-seed"] = self._noise_seed(key)
         return applied, values
 
     # ---- the call protocol -----------------------------------------------------------------------
@@ -339,37 +417,66 @@ class Transform:
         if image is None or depth is None:
             raise ValueError("image and depth: call t(image=..., depth=...) or, for a clip, t(images=[...], "
                              "depths=[...])")
+        scan = self._scan(targets, None)
         key = self._auto_key() if key is None else str(key)
         applied, values = self.draw(key)
-        out_image, record = self._apply(image, depth, values, "image", "depth") if applied else (image, None)
+        out_image, record, out_scan = (self._apply(image, depth, values, "image", "depth", scan=scan) if applied
+                                       else (image, None, scan))
         params = self._params(key, applied, values, record)
-        return dict(targets, image=out_image, depth=depth, params=params)
+        out = dict(targets, image=out_image, depth=depth, params=params)
+        if self.lidar_target is not None:
+            out[self.lidar_target] = out_scan
+        return out
+
+    def _scan(self, targets, frames):
+        """The scan target (with lidar_target; a clip's: one scan per frame), or None."""
+        if self.lidar_target is None:
+            return None
+        name = self.lidar_target
+        if name not in targets:
+            raise ValueError(f"{name}: this transform fogs the frame's LiDAR scan given as {name}=... "
+                             f"(lidar_target={name!r}); pass it, or make the transform without lidar_target")
+        scan = targets[name]
+        if frames is not None and (not isinstance(scan, (list, tuple)) or len(scan) != frames):
+            raise ValueError(f"{name}: a clip needs one scan per image ({frames} images), as a list")
+        return scan
 
     def _clip(self, images, depths, key, targets):
         if depths is None or len(depths) != len(images):
             raise ValueError(f"depths: a clip needs one depth per image ({len(images)} images, "
                              f"{'none' if depths is None else len(depths)} depths)")
+        scans = self._scan(targets, len(images))
         key = self._auto_key() if key is None else str(key)
-        out, frames = [], []
+        out, frames, out_scans = [], [], []
         applied, values = self.draw(key)
         for i, (im, d) in enumerate(zip(images, depths)):
             if self.per_frame:
                 applied, values = self.draw(f"{key}/{i}")
-            o, rec = self._apply(im, d, values, f"images[{i}]", f"depths[{i}]") if applied else (im, None)
+            scan = scans[i] if scans is not None else None
+            o, rec, sc = (self._apply(im, d, values, f"images[{i}]", f"depths[{i}]", scan=scan,
+                                      scan_arg=f"{self.lidar_target}[{i}]") if applied else (im, None, scan))
             out.append(o)
+            out_scans.append(sc)
             frames.append(self._params(f"{key}/{i}" if self.per_frame else key, applied, values, rec))
         params = frames[0] if not self.per_frame else {"seed": self.seed, "key": key, "frames": frames}
         if not self.per_frame:
             params = dict(params, records=[f["record"] for f in frames])
             params["record"] = frames[0]["record"]
-        return dict(targets, images=out, depths=list(depths), params=params)
+        result = dict(targets, images=out, depths=list(depths), params=params)
+        if scans is not None:
+            result[self.lidar_target] = out_scans
+        return result
 
     def _params(self, key, applied, values, record):
         vals = values[0] if len(values) == 1 else {s.command["name"]: v for s, v in zip(self._stages, values)}
         return {"values": vals, "applied": applied, "seed": self.seed, "key": key, "record": record}
 
-    def _apply(self, image, depth, values, image_arg, depth_arg, jobs=None):
+    def _apply(self, image, depth, values, image_arg, depth_arg, jobs=None, scan=None, scan_arg=None):
+        """The image (and the scan, when given) through the effect: (image,
+        record, scan), each in the caller's type."""
         img = _Image(image, self.transfer, image_arg)
+        pts = _Points(scan, scan_arg or self.lidar_target) if scan is not None else None
+        lidar = {"lidar": pts.array} if pts is not None else {}
         h, w = img.shape[:2]
         intr = dict(self.intrinsics)
         if self.depth_kind != "range":
@@ -386,20 +493,22 @@ class Transform:
         if chain is not None:  # the chain's own function: the range prepared once, one record `brume run` takes
             f = getattr(_brume, chain["function"])
             if jobs is not None:
-                r = f(rgb, rng, job=jobs[0], **kw)
+                r = f(rgb, rng, job=jobs[0], **kw, **lidar)
             else:
-                r = f(rgb, rng, **kw, **self._chain_keywords(chain, values))
-            return img.back(r.rgb), r.record
-        records = []
-        for i, s in enumerate(self._stages):
+                r = f(rgb, rng, **kw, **self._chain_keywords(chain, values), **lidar)
+            return img.back(r.rgb), r.record, (pts.back(r.lidar) if pts is not None else None)
+        records, foggy = [], None
+        for i, s in enumerate(self._stages):  # (a scan goes with the first stage, the one with the medium)
             if jobs is not None:
-                r = s.function(rgb, rng, job=jobs[i], **kw)
+                r = s.function(rgb, rng, job=jobs[i], **kw, **lidar)
             else:
-                r = s.function(rgb, rng, **kw, **s.fixed, **values[i])
+                r = s.function(rgb, rng, **kw, **s.fixed, **values[i], **lidar)
+            if lidar:
+                foggy = pts.back(r.lidar)
             records.append(r.record)
-            rgb, kw = r.rgb, {}
+            rgb, kw, lidar = r.rgb, {}, {}
         record = records[0] if len(records) == 1 else {"stages": records}
-        return img.back(rgb), record
+        return img.back(rgb), record, foggy
 
     def _chain(self):
         """A chain's command when it runs on arrays itself (haze+dof:
@@ -428,18 +537,24 @@ class Transform:
         """A callable that repeats the sample `params` (a call's "params",
         also after a JSON round trip) bit for bit on the same inputs:
         replay(params)(image=..., depth=...)."""
-        if not isinstance(params, dict) or "record" not in params or "applied" not in params:
-            raise ValueError("params: a transform call's \"params\" dict (with \"record\" and \"applied\")")
+        self._check_params(params)
         record = params["record"]
         parent = self
+        if params["applied"] and "lidar" in record.get("job", {}) and self.lidar_target is None:
+            raise ValueError("params: this sample also fogged a LiDAR scan; replay it with a transform made with "
+                             "lidar_target= (the name of the scan's target, e.g. 'points')")
 
         def again(image=None, depth=None, **targets):
+            scan = parent._scan(targets, None)
+            out = dict(targets, image=image, depth=depth, params=params)
             if not params["applied"]:
-                return dict(targets, image=image, depth=depth, params=params)
+                return out
             recs = record["stages"] if "stages" in record else [record]
             jobs = [r["job"] for r in recs]
-            out, _ = parent._apply(image, depth, None, "image", "depth", jobs=jobs)
-            return dict(targets, image=out, depth=depth, params=params)
+            out["image"], _, foggy = parent._apply(image, depth, None, "image", "depth", jobs=jobs, scan=scan)
+            if parent.lidar_target is not None:
+                out[parent.lidar_target] = foggy
+            return out
 
         return again
 
@@ -448,34 +563,30 @@ class Transform:
         return f"{type(self).__name__}(p={self.p}, seed={self.seed}, {json.dumps(specs)})"
 
 
-class PointsTransform:
+class PointsTransform(_Keyed):
     """An effect on a LiDAR scan (LidarFog) as an augmentation transform:
     t(points=..., key=..., **targets) -> {"points", "params", **targets}.
     points: an (N, 4) float32 array (or CPU torch tensor) of x, y, z [m] and
     intensity, as KITTI's .bin holds them; the result comes back in the same
     type. The noise of the fog returns gets its own seed per draw (from seed
     and key, recorded with the values), so two keys never share a noise
-    pattern and a replay repeats it."""
+    pattern and a replay repeats it. (A scan fogged with its camera image's
+    medium: the camera transforms' lidar_target.)"""
 
     _commands = ()
 
     def __init__(self, p=1.0, seed=0, **params):
         where = f"brume.transforms.{type(self).__name__}()"
-        _check_p_seed(p, seed)
-        self.p, self.seed = float(p), seed
+        super().__init__(p, seed)
         self._stage = _Stage(_COMMANDS[self._commands[0]], params, where)
-        self._calls = 0
-
-    _auto_key = Transform._auto_key
 
     def draw(self, key):
         """Whether it applies, and the values: the sampler's draw plus the
         noise's seed, 53 bits of the same hash scheme (name "noise-seed")."""
-        applied = self.p >= 1.0 or _unit(self.seed, key, "p") < self.p
-        if not applied:
+        if not self._applies(key):
             return False, {}
         values = self._stage.draw(self.seed, key)
-        values["seed"] = int(_unit(self.seed, key, "noise-seed") * 2.0 ** 53)
+        values["seed"] = self._noise_seed(key)
         return True, values
 
     def __call__(self, points=None, key=None, **targets):
@@ -488,26 +599,14 @@ class PointsTransform:
         return dict(targets, points=out, params=params)
 
     def _apply(self, points, values, job=None):
-        torch = _is_torch(points)
-        if torch:
-            if points.device.type != "cpu":
-                raise ValueError(f"points: a torch tensor on {points.device}; call .cpu() first")
-            a = points.detach().numpy()
-        elif isinstance(points, np.ndarray):
-            a = points
-        else:
-            raise ValueError(f"points: expected an (N, 4) numpy array or torch tensor, got {type(points).__name__}")
-        if a.ndim != 2 or a.shape[1] != 4 or a.dtype != np.float32:
-            raise ValueError(f"points: expected an (N, 4) float32 array of x, y, z, intensity, got shape {a.shape} "
-                             f"({a.dtype})")
+        pts = _Points(points, "points")
         f = self._stage.function
-        r = f(a, job=job) if job is not None else f(a, **self._stage.fixed, **values)
-        return (sys.modules["torch"].from_numpy(r.points) if torch else r.points), r.record
+        r = f(pts.array, job=job) if job is not None else f(pts.array, **self._stage.fixed, **values)
+        return pts.back(r.points), r.record
 
     def replay(self, params):
         """replay(params)(points=...) repeats the sample bit for bit."""
-        if not isinstance(params, dict) or "record" not in params or "applied" not in params:
-            raise ValueError("params: a transform call's \"params\" dict (with \"record\" and \"applied\")")
+        self._check_params(params)
 
         def again(points=None, **targets):
             if not params["applied"]:

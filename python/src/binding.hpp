@@ -112,6 +112,8 @@ struct Input {
 
 Transfer parse_transfer_kw(py::handle t, const std::string& where);
 Input read_input(py::handle obj, const std::string& arg, int channels, Transfer transfer, const std::string& fn);
+// A LiDAR scan: an (N, 4) float32 (in place) or float64 (converted once) array of x, y, z, intensity.
+Input read_points(py::handle obj, const std::string& arg, const std::string& fn);
 DenseImageRef as_dense(Input& in, const std::string& arg);
 const Image& as_image(Input& in, const std::string& arg);
 py::array to_numpy(Image&& img);

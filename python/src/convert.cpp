@@ -172,6 +172,28 @@ Input read_input(py::handle obj, const std::string& arg, int channels, Transfer 
   return in;
 }
 
+// A LiDAR scan (brume.lidar.fog's points, a camera effect's lidar=): an
+// (N, 4) array of x, y, z, intensity read as an N x 4 map, float32 in place
+// (rows of 16 bytes or strided), float64 converted once; anything else a
+// ValueError naming the argument, its shape and dtype.
+Input read_points(py::handle obj, const std::string& arg, const std::string& fn) {
+  const std::string expected =
+      "an (N, 4) array of x, y, z [m] and intensity (KITTI's velodyne layout), float32 (read in place) or float64 "
+      "(converted once)";
+  if (!py::isinstance<py::array>(obj))
+    throw py::type_error(fn + "(): " + arg + " must be a numpy.ndarray, " + expected + "; got " + type_name(obj));
+  py::array a = py::reinterpret_borrow<py::array>(obj);
+  const bool floats = a.dtype().is(py::dtype::of<float>()) || a.dtype().is(py::dtype::of<double>());
+  if (a.ndim() != 2 || a.shape(1) != 4 || !floats)
+    throw py::value_error(fn + "(): " + arg + " has shape " + shape_text(a) + " and dtype " +
+                          py::cast<std::string>(py::str(a.dtype())) + ": " +
+                          (floats ? "not (N, 4)" : "not float32 or float64") + "; expected " + expected);
+  Input in = read_input(obj, arg, 1, Transfer::automatic, fn);
+  in.record.erase("transfer");
+  in.record["points"] = a.shape(0);
+  return in;
+}
+
 // Library functions that take a dense image (DenseImageRef: aerial, fog,
 // dof, depth.prepare, sky.fit): a C-contiguous float32 array is read in
 // place, like haze's and blur's views. A strided float32 array (a crop, the

@@ -181,12 +181,12 @@ JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const 
   for (const auto& [block, vals] : j.items()) {
     if (!vals.is_object())
       throw py::value_error(fn + "(): job: block '" + block + "' is not a dict; give a record's \"job\" as it is");
-    // A camera effect's LiDAR block names files too; a record that fogged a
-    // scan repeats with brume run (the arrays stand for no scan).
-    if (block == "lidar" && vals.value("lidar", "") != "")
-      throw py::value_error(fn + "(): job: this record also fogged the LiDAR scan '" + vals.value("lidar", "") +
-                            "'; repeat it with `brume run`, or fog the points with brume.lidar.fog(points, alpha=" +
-                            "record['lidar']['alpha_per_m'], ...)");
+    // A CLI record's camera LiDAR block names files too (--lidar, --lidar-out):
+    // without a scan it fogged none, and its settings are no call's; with one
+    // its settings are taken and the scan comes as the lidar= array (the form
+    // refuses the settings without it). An array form's record holds the
+    // settings alone.
+    if (block == "lidar" && vals.contains("lidar") && vals["lidar"] == "") continue;
     const bool files = block == "input" || block == "output" || block == "depth" || block == "stereo";
     // The camera's LiDAR block ("lidar.lidar-…"); brume lidar fog's own "lidar" block is its parameters.
     const auto camera_lidar = [&](const std::string& name) { return block == "lidar" && name.rfind("lidar", 0) == 0; };

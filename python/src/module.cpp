@@ -63,7 +63,7 @@ namespace {
 std::string positional_stub(const ArrayForm& a) {
   std::string p;
   for (const ArrayArg& g : a.args)
-    p += (p.empty() ? "" : ", ") + g.name + ": npt.NDArray[Any]" + (g.optional ? " | None = None" : "");
+    if (!g.keyword) p += (p.empty() ? "" : ", ") + g.name + ": npt.NDArray[Any]" + (g.optional ? " | None = None" : "");
   return p;
 }
 
@@ -76,6 +76,17 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
   if (colour) {
     tr = parse_transfer_kw(k.contains("transfer") ? py::object(k["transfer"]) : py::object(py::none()), fn + "()");
     if (k.contains("transfer")) PyDict_DelItemString(k.ptr(), "transfer");
+  }
+  // The keyword arrays (lidar=points): taken from the keywords, in the form's order after the positional ones.
+  std::vector<py::object> all = arrays;
+  for (const ArrayArg& g : a.args) {
+    if (!g.keyword) continue;
+    py::object x = py::none();
+    if (k.contains(g.name.c_str())) {
+      x = k[g.name.c_str()];
+      PyDict_DelItemString(k.ptr(), g.name.c_str());
+    }
+    all.push_back(x);
   }
   JobValues values;
   if (a.replays && k.contains("job")) {
@@ -91,11 +102,12 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
   std::vector<ArrayIn> in(a.args.size());
   for (std::size_t i = 0; i < a.args.size(); ++i) {
     const ArrayArg& g = a.args[i];
-    if (arrays[i].is_none() && g.optional) continue;
-    inputs[i] = read_input(arrays[i], g.name, g.channels, g.channels == 3 ? tr : Transfer::automatic, fn);
+    if (all[i].is_none() && g.optional) continue;
+    inputs[i] = g.points ? read_points(all[i], g.name, fn)
+                         : read_input(all[i], g.name, g.channels, g.channels == 3 ? tr : Transfer::automatic, fn);
     in[i].present = true;
-    in[i].integer = py::isinstance<py::array>(arrays[i]) &&
-                    py::reinterpret_borrow<py::array>(arrays[i]).dtype().kind() == 'u';
+    in[i].integer = py::isinstance<py::array>(all[i]) &&
+                    py::reinterpret_borrow<py::array>(all[i]).dtype().kind() == 'u';
     if (g.as == ArrayArg::As::dense) as_dense(inputs[i], g.name);
     if (g.as == ArrayArg::As::image) as_image(inputs[i], g.name);
     in[i].view = inputs[i].view;
@@ -117,6 +129,10 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
     for (std::size_t i = 0; i < a.args.size(); ++i)
       if (in[i].present) rec["inputs"][a.args[i].name] = inputs[i].record;
   }
+  if (out.record.contains("inputs")) {  // the files a run read beside the arrays (a scan's KITTI calibration)
+    for (const auto& [name, v] : out.record["inputs"].items()) rec["inputs"][name] = v;
+    out.record.erase("inputs");
+  }
   if (out.record.contains("sky_image")) {  // aerial's sky photo is an input, as in the CLI's record
     rec["inputs"]["sky_image"] = out.record["sky_image"];
     out.record.erase("sky_image");
@@ -135,19 +151,28 @@ void def_array_command(py::module_& m, const CommandDef& c) {
   if (!a.args.empty() && a.args.front().channels == 3)
     extras.push_back({"transfer", "Literal[\"srgb\", \"linear\"] | None",
                       "uint8/uint16 rgb only: 'srgb' (PNG/JPEG-like) or 'linear'; float arrays are linear"});
+  for (const ArrayArg& g : a.args)
+    if (g.keyword)
+      extras.push_back({g.name, "npt.NDArray[np.float32] | None",
+                        g.points ? "the frame's LiDAR scan: an (N, 4) float32 array of x, y, z [m] and intensity "
+                                   "(KITTI's velodyne layout; read in place, float64 converted once), fogged by the "
+                                   "same medium and returned as the Result's " + g.name
+                                 : "an array"});
   if (a.replays)
     extras.push_back({"job", "dict[str, Any] | None",
                       "a record's \"job\" (Result.record['job'], or a CLI record's): replays that run, bit for bit "
                       "on the CPU, as `brume run` does; other keywords override its values"});
-  const std::string positional = positional_stub(a);
-  FunctionDoc doc = make_doc(a.function, a.public_name, positional.c_str(), a.summary, a.specs, a.defaults,
+  const std::string stub = positional_stub(a);
+  FunctionDoc doc = make_doc(a.function, a.public_name, stub.c_str(), a.summary, a.specs, a.defaults,
                              std::move(extras), a.fields);
   doc.command = c.name;
   doc.replays = a.replays;
   registry().push_back(doc);
   const std::string command = c.name;
   const std::string ds = docstring(doc);
-  switch (a.args.size()) {
+  std::size_t positional = 0;
+  for (const ArrayArg& g : a.args) positional += g.keyword ? 0 : 1;
+  switch (positional) {
     case 0:
       m.def(a.function.c_str(), [&a, command](py::kwargs kw) { return call_array_form(a, command, {}, kw); },
             ds.c_str());
@@ -413,10 +438,11 @@ PYBIND11_MODULE(_brume, m) {
           d["gpu_passes"] = to_py(json(c.gpu_passes));
           d["function"] = c.arrays ? py::object(py::str(c.arrays->function)) : py::object(py::none());
           d["public_name"] = c.arrays ? py::object(py::str(c.arrays->public_name)) : py::object(py::none());
-          py::list args;
+          py::list args, keyword_arrays;
           if (c.arrays)
-            for (const ArrayArg& g : c.arrays->args) args.append(g.name);
+            for (const ArrayArg& g : c.arrays->args) (g.keyword ? keyword_arrays : args).append(g.name);
           d["arrays"] = args;
+          d["keyword_arrays"] = keyword_arrays;
           d["replays"] = c.arrays && c.arrays->replays;
           d["stage_prefix"] = c.stage_prefix;
           py::list keywords;  // the array form's keywords, as Python spells them (lambda_)
@@ -445,7 +471,8 @@ PYBIND11_MODULE(_brume, m) {
       "The library's list of commands: name, cli, summary, record, batch, sample, gpu_passes, stage_prefix (a "
       "chain's later stage's flag prefix), sampling (params: {name: other names}, defaults: {name: spec}; empty "
       "when it is not sampled), and its array form (function, public_name, arrays: the positional array names, "
-      "replays: takes job=, keywords: its Python keywords).");
+      "replays: takes job=, keywords: its Python keywords, keyword_arrays: the arrays it takes as keywords, "
+      "lidar=).");
   m.def(
       "_debug_last_inputs",
       []() {

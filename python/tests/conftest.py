@@ -1,5 +1,6 @@
 """Shared fixtures of the Python tests: the CLI built beside the module, a
-small demo scene, the real data folder, and the GPU gate."""
+small demo scene, a synthetic LiDAR scan, the real data folder, and the GPU
+gate."""
 import os
 import pathlib
 import subprocess
@@ -21,6 +22,18 @@ def run_cli(*args, cwd=None):
     r = subprocess.run([cli_path(), *map(str, args)], capture_output=True, text=True, cwd=cwd)
     assert r.returncode == 0, f"brume {' '.join(map(str, args))} failed ({r.returncode}):\n{r.stderr}"
     return r
+
+
+def scan(n=4000, seed=2):
+    """A synthetic LiDAR scan, (N, 4) float32: points on random beams at
+    1.5-90 m (the far ones turn into fog at a visibility of tens of metres),
+    reflectance in [0, 1] as KITTI's."""
+    import numpy as np
+    g = np.random.default_rng(seed)
+    d = g.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    r = g.uniform(1.5, 90.0, size=(n, 1))
+    return np.hstack([d * r, g.uniform(0, 1, size=(n, 1))]).astype(np.float32)
 
 
 @pytest.fixture(scope="session")

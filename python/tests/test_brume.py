@@ -622,7 +622,7 @@ def test_every_command_of_the_list_reaches_python(demo):
             assert f"'{c['name']}'" in stubs.split("def random_params(")[1].split(")")[0]
     for c in forms:
         stub = stubs.split(f"def {c['function']}(")[1].split(")")[0]
-        assert [a.split(":")[0].strip() for a in stub.split(", ") if "NDArray" in a] == c["arrays"]
+        assert [a.split(":")[0].strip() for a in stub.split(", ") if "NDArray" in a] == c["arrays"] + c["keyword_arrays"]
         public = brume
         for part in c["public_name"].split(".")[1:]:
             public = getattr(public, part)

@@ -5,15 +5,7 @@ import pytest
 
 import brume
 from brume import _brume
-from conftest import run_cli
-
-
-def scan(n=4000, seed=2):
-    g = np.random.default_rng(seed)
-    d = g.normal(size=(n, 3))
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    r = g.uniform(1.5, 90.0, size=(n, 1))
-    return np.hstack([d * r, g.uniform(0, 1, size=(n, 1))]).astype(np.float32)
+from conftest import run_cli, scan
 
 
 def test_lidar_fog_equals_cli_and_reads_in_place(tmp_path):
@@ -48,8 +40,8 @@ def test_lidar_fog_errors():
 def test_camera_record_with_a_scan(demo, tmp_path):
     """`brume haze --lidar`: the record's alpha is the camera's extinction;
     brume.lidar.fog with that alpha gives the same scan; haze's job= of such a
-    record is refused (the arrays stand for no scan), of a record without one
-    it still replays."""
+    record needs the scan as lidar= (refused without it; with it, the same
+    scan), of a record without one it still replays."""
     pts = scan(3000, seed=7)
     pts.tofile(tmp_path / "in.bin")
     d = demo["dir"]
@@ -62,8 +54,9 @@ def test_camera_record_with_a_scan(demo, tmp_path):
     assert alpha == rec["haze"]["derived"]["extinction_per_m"] == 3.912 / 90
     r = brume.lidar.fog(pts, alpha=alpha, seed=3)
     assert np.array_equal(r.points, np.fromfile(tmp_path / "s.bin", dtype=np.float32).reshape(-1, 4))
-    with pytest.raises(ValueError, match="brume run"):
+    with pytest.raises(ValueError, match="no lidar= scan"):
         brume.haze(demo["rgb"], demo["range"], job=rec["job"])
+    assert np.array_equal(brume.haze(demo["rgb"], demo["range"], job=rec["job"], lidar=pts).lidar, r.points)
     plain = brume.haze(demo["rgb"], demo["range"], visibility=90.0)
     assert "lidar" not in plain.record
     again = brume.haze(demo["rgb"], demo["range"], job=plain.record["job"])

@@ -285,7 +285,6 @@ CommandDef fog_command() {
     fog_job_table().from_json(j, job, "job");
     return j.fog.classic == ClassicFog::none && j.fog.profile != FogProfile::constant;
   };
-  add_camera_lidar(c);
   static const auto call = array_call_table(fog_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
   c.arrays = make_array_form<FogParams>(
       "fog", "",
@@ -301,6 +300,7 @@ CommandDef fog_command() {
                            {},
                            {}};
       });
+  add_camera_lidar(c);  // after c.arrays: lidar= joins the array form
   return c;
 }
 

@@ -228,7 +228,6 @@ CommandDef haze_command() {
     haze_job_table().from_json(j, job, "job");
     return haze_extinction_per_m(j.haze);
   };
-  add_camera_lidar(c);
   // brume.haze(rgb, range, ...): the arrays read in place (views).
   static const auto call = array_call_table(haze_param_table(), kArrayPrepare | kArrayExec);
   c.arrays = make_array_form<HazeParams>(
@@ -245,6 +244,7 @@ CommandDef haze_command() {
                            {},
                            {}};
       });
+  add_camera_lidar(c);  // after c.arrays: lidar= joins the array form
   return c;
 }
 

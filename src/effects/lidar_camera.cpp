@@ -3,6 +3,8 @@
 #include "brume/lidar_camera.hpp"
 
 #include <cmath>
+#include <algorithm>
+#include <cstddef>
 #include <cstdio>
 #include <filesystem>
 #include <utility>
@@ -101,6 +103,60 @@ CameraLidarMedium medium_of(const Hooks& h, const nlohmann::json& job, double wa
   return m;
 }
 
+// The model's parameters of a scan fogged by the job's medium (alpha = the
+// camera's extinction, or the camera's height profile along each beam),
+// checked; `given`: the names set explicitly. Shared by the command line's
+// --lidar and the array forms' lidar=.
+LidarFogParams scan_params(const Hooks& h, const nlohmann::json& job, const CameraLidar& L,
+                           const std::set<std::string>& given, CameraLidarMedium& medium) {
+  if (given.count("lidar-wavelength") && !h.spectral)
+    throw Error("--lidar-wavelength: the medium of " + h.name +
+                " is grey (its extinction is the same at every wavelength), so the wavelength would change "
+                "nothing; drop it");
+  medium = medium_of(h, job, L.wavelength_nm);
+  LidarFogParams params;
+  if (std::isnan(medium.alpha_per_m)) {
+    // A height profile: the fog job's profile and pose, the scan placed by
+    // the depth block's --kitti-calib (Tr_velo_to_cam, R0_rect, P2) relative
+    // to camera 2, whose pose the fog already takes.
+    FogJob f;
+    fog_job_table().from_json(f, job, "job");
+    if (f.input.depth.kitti_calib.empty())
+      throw Error("--lidar with --profile " + enum_name(fog_profile_names(), f.fog.profile) +
+                  ": the fog varies with height, so the scan needs its pose in the camera's world; give "
+                  "--kitti-calib FILE (its Tr_velo_to_cam and R0_rect place the scan relative to camera 2, whose "
+                  "--camera-height, --pitch and --roll the fog takes), or use --profile constant --density D");
+    LidarPose pose;
+    pose.kitti_calib = f.input.depth.kitti_calib;
+    try {
+      params = lidar_params_from_fog(f.fog, pose, L.fog);
+    } catch (const Error& e) {
+      throw Error(lidar_flags(e.what()));
+    }
+  } else {
+    params = L.fog;
+    params.visibility_m.reset();
+    params.alpha_per_m = medium.alpha_per_m;
+  }
+  try {
+    validate_lidar_fog(params);
+  } catch (const Error& e) {
+    throw Error(lidar_flags(e.what()));
+  }
+  return params;
+}
+
+// The record's "lidar" block of a fogged scan: brume lidar fog's, with how
+// alpha followed from the camera, the wavelength and the model's parameters.
+nlohmann::json scan_record(const LidarFogParams& p, const LidarFogStats& st, const CameraLidarMedium& m,
+                           double wavelength_nm) {
+  nlohmann::json block = lidar_fog_record(p, st);
+  block["alpha_from"] = m.rule;
+  block["wavelength_nm"] = wavelength_nm;
+  block["parameters"] = lidar_fog_param_table().to_json(p);
+  return block;
+}
+
 // The job's lidar block, checked; `on` false when no scan is asked for.
 struct Checked {
   bool on = false;
@@ -130,39 +186,7 @@ Checked check_lidar(const Hooks& h, const nlohmann::json& job, const std::set<st
   if (fs::path(L.out).extension() != ".bin")
     throw Error("--lidar-out '" + L.out + "': a scan is written as a KITTI .bin (float32 x, y, z, intensity); "
                 "name it *.bin");
-  if (given.count("lidar-wavelength") && !h.spectral)
-    throw Error("--lidar-wavelength: the medium of " + h.name +
-                " is grey (its extinction is the same at every wavelength), so the wavelength would change "
-                "nothing; drop it");
-  r.medium = medium_of(h, job, L.wavelength_nm);
-  if (std::isnan(r.medium.alpha_per_m)) {
-    // A height profile: the fog job's profile and pose, the scan placed by
-    // the depth block's --kitti-calib (Tr_velo_to_cam, R0_rect, P2) relative
-    // to camera 2, whose pose the fog already takes.
-    FogJob f;
-    fog_job_table().from_json(f, job, "job");
-    if (f.input.depth.kitti_calib.empty())
-      throw Error("--lidar with --profile " + enum_name(fog_profile_names(), f.fog.profile) +
-                  ": the fog varies with height, so the scan needs its pose in the camera's world; give "
-                  "--kitti-calib FILE (its Tr_velo_to_cam and R0_rect place the scan relative to camera 2, whose "
-                  "--camera-height, --pitch and --roll the fog takes), or use --profile constant --density D");
-    LidarPose pose;
-    pose.kitti_calib = f.input.depth.kitti_calib;
-    try {
-      r.params = lidar_params_from_fog(f.fog, pose, L.fog);
-    } catch (const Error& e) {
-      throw Error(lidar_flags(e.what()));
-    }
-  } else {
-    r.params = L.fog;
-    r.params.visibility_m.reset();
-    r.params.alpha_per_m = r.medium.alpha_per_m;
-  }
-  try {
-    validate_lidar_fog(r.params);
-  } catch (const Error& e) {
-    throw Error(lidar_flags(e.what()));
-  }
+  r.params = scan_params(h, job, L, given, r.medium);
   return r;
 }
 
@@ -185,17 +209,169 @@ RunFn with_lidar(const Hooks& h, RunFn inner) {
     } catch (const Error& e) {
       throw Error(lidar_flags(e.what()));
     }
-    nlohmann::json block = lidar_fog_record(c.params, st);
-    block["alpha_from"] = c.medium.rule;
-    block["wavelength_nm"] = c.lidar.wavelength_nm;
-    block["parameters"] = lidar_fog_param_table().to_json(c.params);
     RunContext with = ctx;
     if (!with.extra.is_object()) with.extra = nlohmann::json::object();
-    with.extra["lidar"] = std::move(block);
+    with.extra["lidar"] = scan_record(c.params, st, c.medium, c.lidar.wavelength_nm);
     with.extra["inputs"]["lidar"] = {
         {"path", c.lidar.points}, {"sha256", sha256_file(c.lidar.points)}, {"points", n}};
     with.files.push_back({c.lidar.out, kitti_bin_bytes(out.data(), n), "--lidar-out"});
     return inner(job, eo, with);
+  };
+}
+
+// ---- the array forms: brume.haze(rgb, range, lidar=points, lidar_seed=...) ----
+// Their keywords: the block less its files (the array stands for --lidar,
+// the Result's "lidar" for --lidar-out).
+struct ArrayLidar {
+  CameraLidar lidar;
+};
+const ParamTable<ArrayLidar>& array_lidar_table() {
+  static const ParamTable<ArrayLidar> t = [] {
+    ParamTable<ArrayLidar> d("lidar");
+    d.nest_except(&ArrayLidar::lidar, camera_lidar_param_table(), {"lidar", "lidar-out"});
+    return d;
+  }();
+  return t;
+}
+
+// The call's values that the command's job declares (block and name): the
+// job its medium's hooks read.
+nlohmann::json job_of_call(const nlohmann::json& call, const std::vector<ParamSpec>& specs) {
+  nlohmann::json job = nlohmann::json::object();
+  for (const ParamSpec& s : specs)
+    if (call.contains(s.block) && call[s.block].contains(s.name)) job[s.block][s.name] = call[s.block][s.name];
+  return job;
+}
+
+std::string keyword_of(std::string flag) {
+  for (char& ch : flag)
+    if (ch == '-') ch = '_';
+  return flag;
+}
+
+// A medium that varies with height (fog's profiles) also takes kitti_calib=:
+// the depth block's --kitti-calib, which places the scan in the fog's world.
+constexpr const char* kCalib = "kitti-calib";
+ParamSpec calib_spec() {
+  ParamSpec s = depth_param_table().at(kCalib).spec;
+  s.help = "KITTI calibration (calib/N.txt) for lidar= in a fog that varies with height: its Tr_velo_to_cam, "
+           "R0_rect and P2 place the scan relative to camera 2, whose camera_height, pitch and roll the fog takes";
+  return s;
+}
+
+// Adds the scan to an array form: the keyword array lidar= (an (N, 4) scan,
+// read in place), the block's settings as keywords, the foggy scan as the
+// Result's "lidar" and the record's "lidar" block, as the command line's
+// --lidar-out and record hold them (the same function fogs both).
+void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, ArrayForm& a) {
+  const ParamTable<ArrayLidar>& t = array_lidar_table();
+  const std::size_t scan = a.args.size();
+  a.args.push_back({"lidar", 1, true, ArrayArg::As::view, true, true});
+  for (const Param<ArrayLidar>& d : t.params()) a.specs.push_back(d.spec);
+  a.defaults.update(t.to_json(ArrayLidar{}));
+  const bool layered = static_cast<bool>(h.layered);
+  if (layered) {
+    a.specs.push_back(calib_spec());
+    a.defaults[a.specs.back().block][kCalib] = "";
+  }
+  a.fields.insert(a.fields.end() - (a.fields.empty() || a.fields.back() != "record" ? 0 : 1), "lidar");
+  a.summary += " lidar=points (an (N, 4) float32 scan of x, y, z [m] and intensity, KITTI's layout) is fogged by "
+               "the same medium (alpha = the camera's extinction; the lidar_* keywords are brume.lidar.fog's) and "
+               "returned as lidar, as --lidar/--lidar-out.";
+  a.build = [inner = a.build, &t, layered](const JobValues& values) {
+    JobValues own;
+    ArrayLidar l;
+    bool settings = false;
+    std::string calib;
+    for (const auto& [n, v] : values) {
+      if (layered && n == kCalib) {
+        calib_spec().check(v);
+        calib = v.get<std::string>();
+      } else if (const Param<ArrayLidar>* d = t.find(n)) {
+        d->spec.check(v);
+        d->set(l, v);
+        settings = true;
+      } else {
+        own.emplace_back(n, v);
+      }
+    }
+    nlohmann::json call = inner(own);
+    if (settings) call["lidar"] = t.to_json(l)["lidar"];  // only when set: a call without a scan records none
+    if (!calib.empty()) call[calib_spec().block][kCalib] = calib;
+    return call;
+  };
+  a.run = [h, inner = a.run, job_specs, scan, fn = a.public_name, &t](
+              const std::vector<ArrayIn>& in, const nlohmann::json& call, const Exec& e,
+              const std::set<std::string>& given) {
+    nlohmann::json own = call;
+    ArrayLidar l;
+    const bool settings = own.contains("lidar");
+    if (settings) {
+      t.from_json(l, nlohmann::json{{"lidar", own["lidar"]}}, "call");
+      own.erase("lidar");
+    }
+    // kitti_calib= (a layered medium's): the scan's, not the image's call. A
+    // job's (a CLI record of a --velodyne depth source) is no setting given.
+    const std::string block = calib_spec().block;
+    std::string calib;
+    if (own.contains(block) && own[block].contains(kCalib)) {
+      calib = own[block][kCalib].get<std::string>();
+      own[block].erase(kCalib);
+    }
+    const bool calib_given = given.count(kCalib) > 0;
+    const std::vector<ArrayIn> arrays(in.begin(), in.begin() + static_cast<std::ptrdiff_t>(std::min(scan, in.size())));
+    if (scan >= in.size() || !in[scan].present) {
+      if (calib_given)
+        throw Error(fn + "(): kitti_calib places the LiDAR scan in the fog's world, but no lidar= scan is given: "
+                         "pass the frame's scan as lidar=points, or drop kitti_calib");
+      if (settings) {
+        std::string names;
+        for (const std::string& n : given)
+          if (t.declares(n)) names += (names.empty() ? "" : ", ") + keyword_of(n);
+        throw Error(fn + "(): " +
+                    (names.empty() ? std::string("the job's lidar block (a record that fogged a scan)")
+                                   : "keyword " + names) +
+                    " sets the LiDAR scan's fog, but no lidar= scan is given: pass the frame's scan as lidar=points "
+                    "(an (N, 4) float32 array of x, y, z, intensity), or drop it");
+      }
+      ArrayResult r = inner(arrays, own, e, given);
+      r.images["lidar"] = Image();  // None
+      return r;
+    }
+    nlohmann::json job = job_of_call(own, job_specs);
+    const bool varies = h.layered && h.layered(job);
+    if (varies && calib.empty())
+      throw Error(fn + "(): lidar= with a fog that varies with height: the scan needs its pose in the fog's world; "
+                       "give kitti_calib=FILE (KITTI's calib/N.txt: Tr_velo_to_cam and R0_rect place the scan "
+                       "relative to camera 2, whose camera_height, pitch and roll the fog takes), or use "
+                       "profile='constant' with density=D");
+    if (!varies && calib_given)
+      throw Error(fn + "(): kitti_calib places the scan in a fog that varies with height; this medium is the same "
+                       "at every height, so it would change nothing; drop it");
+    if (varies) job[block][kCalib] = calib;
+    CameraLidarMedium m;
+    LidarFogParams p;
+    LidarFogStats st;
+    Image out;
+    try {  // the scan first (milliseconds): its errors before the image's work, as on the command line
+      p = scan_params(h, job, l.lidar, given, m);
+    } catch (const Error& err) {
+      throw Error(fn + "(): lidar=: " + err.what());
+    }
+    try {
+      out = lidar_fog_array(in[scan].view, p, fn + "(): lidar", st);
+    } catch (const Error& err) {
+      throw Error(lidar_flags(err.what()));
+    }
+    ArrayResult r = inner(arrays, own, e, given);
+    r.record["lidar"] = scan_record(p, st, m, l.lidar.wavelength_nm);
+    r.job["lidar"] = t.to_json(l)["lidar"];
+    if (varies) {  // the file that placed the scan: in the job as the command line's, and an input with its hash
+      r.job[block][kCalib] = calib;
+      r.record["inputs"]["kitti_calib"] = {{"path", calib}, {"sha256", sha256_file(calib)}};
+    }
+    r.images["lidar"] = std::move(out);
+    return r;
   };
 }
 
@@ -209,6 +385,7 @@ void add_camera_lidar(CommandDef& c) {
   const Hooks h = hooks_of(c);
   c.run = with_lidar(h, c.run);
   if (c.cli_run) c.cli_run = with_lidar(h, c.cli_run);
+  if (c.arrays) add_array_lidar(h, c.specs, *c.arrays);  // (set before this call)
   c.preview_fixed.push_back("lidar");  // the scan's settings change no pixel of the preview
   c.check = [h, inner = c.check](const nlohmann::json& job, const std::set<std::string>& given, bool full) {
     inner(job, given, full);

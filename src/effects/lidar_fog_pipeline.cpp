@@ -114,6 +114,25 @@ nlohmann::json run_lidar_fog_job(const LidarFogJob& job, const RunContext& ctx) 
   return rec;
 }
 
+Image lidar_fog_array(const ConstImageView& v, const LidarFogParams& p, const std::string& what,
+                      LidarFogStats& stats) {
+  if (v.width() != 4 || v.channels() != 1)
+    throw Error(what + " must be an (N, 4) array of x, y, z, intensity; got " + std::to_string(v.height()) + " x " +
+                std::to_string(v.width()) + (v.channels() > 1 ? " x " + std::to_string(v.channels()) : std::string()));
+  const std::size_t n = static_cast<std::size_t>(v.height());
+  Image out(4, v.height(), 1);
+  const float* src = v.data();
+  std::vector<float> dense;
+  if (!v.contiguous()) {  // a strided array: gathered once
+    dense.resize(n * 4);
+    for (std::size_t i = 0; i < n; ++i)
+      for (int c = 0; c < 4; ++c) dense[4 * i + c] = v.at(c, static_cast<int>(i), 0);
+    src = dense.data();
+  }
+  stats = lidar_fog(src, out.data.data(), n, p, what);
+  return out;
+}
+
 CommandDef lidar_fog_command() {
   CommandDef c = make_command<LidarFogJob>({
       .name = "lidar fog",
@@ -167,24 +186,10 @@ CommandDef lidar_fog_command() {
       "attenuated returns and returns moved to the fog's peak. Exactly one of visibility, alpha; or a height-layered fog: "
       "profile with its fields (density, falloff, ...) and the scan's pose (kitti_calib with camera_height, or "
       "sensor_height). As `brume lidar fog`.",
-      {{"points", 1, false, ArrayArg::As::view}}, call, {"points", "record"}, true,
+      {{"points", 1, false, ArrayArg::As::view, false, true}}, call, {"points", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<LidarFogParams>& k, const Exec&, const std::set<std::string>&) {
-        const ConstImageView& v = in[0].view;
-        if (v.width() != 4 || v.channels() != 1)
-          throw Error("brume.lidar.fog(): points must be an (N, 4) array of x, y, z, intensity; got " +
-                      std::to_string(v.height()) + " x " + std::to_string(v.width()) +
-                      (v.channels() > 1 ? " x " + std::to_string(v.channels()) : std::string()));
-        const std::size_t n = static_cast<std::size_t>(v.height());
-        Image out(4, v.height(), 1);
-        const float* src = v.data();
-        std::vector<float> dense;
-        if (!v.contiguous()) {  // a strided array: gathered once
-          dense.resize(n * 4);
-          for (std::size_t i = 0; i < n; ++i)
-            for (int c = 0; c < 4; ++c) dense[4 * i + c] = v.at(c, static_cast<int>(i), 0);
-          src = dense.data();
-        }
-        const LidarFogStats st = lidar_fog(src, out.data.data(), n, k.p, "points");
+        LidarFogStats st;
+        Image out = lidar_fog_array(in[0].view, k.p, "brume.lidar.fog(): points", st);
         ArrayResult r;
         r.record["lidar"] = lidar_fog_record(k.p, st);
         r.images["points"] = std::move(out);

@@ -143,6 +143,17 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
                      const std::vector<std::string>& argv, Image (*plot)(const nlohmann::json& result)) {
   if (is_sky_fit_json(record)) return rerun(record["record"], exec, out_dir, argv, plot);
   const std::string cmd = record_command(record);
+  // A record of a Python call on arrays ({"source": "numpy"} inputs) names no files to read again.
+  if (record.contains("inputs") && record["inputs"].is_object()) {
+    std::string arrays;
+    for (const auto& [name, in] : record["inputs"].items())
+      if (in.is_object() && text_field(in, "source") == "numpy") arrays += (arrays.empty() ? "" : ", ") + name;
+    if (!arrays.empty())
+      throw Error("this record's inputs (" + arrays + ") were numpy arrays of a Python call, not files: repeat it "
+                  "in Python with brume.rerun(record, rgb, range, ...) on the same arrays (a scan as lidar=), or "
+                  "write the arrays to files and run its job blocks in a record of those files (docs/python.md, "
+                  "\"Repeating a run\")");
+  }
   // Every {"path", "sha256"} input the record names (the density table of fog under "fog").
   for (const char* block : {"inputs", "depth", "fog"})
     if (record.contains(block)) verify_inputs(record[block]);
