@@ -129,10 +129,13 @@ TEST_F(LidarCamera, HazeOnTheKittiFrame) {
 // Fog with a height profile on the KITTI frame: the scan in the same layered
 // fog (brume lidar fog --profile with the same density fields, calibration and
 // camera pose) to the bit; no one alpha in the record, the profile instead;
-// brume run repeats both. Without --kitti-calib the scan has no pose: refused.
+// brume run repeats both, and refuses once the calibration file changed (it
+// places the scan and projects the depth: an input, by SHA-256). Without
+// --kitti-calib the scan has no pose: refused.
 TEST_F(LidarCamera, LayeredFogOnTheKittiFrame) {
   if (!have_data(kKittiDir)) GTEST_SKIP() << "no " << data_path(kKittiDir) << " (../shared/data)";
-  const std::string k = data_path(kKittiDir), velo = k + "/velodyne/000001.bin", calib = k + "/calib/000001.txt";
+  const std::string k = data_path(kKittiDir), velo = k + "/velodyne/000001.bin", calib = p("calib.txt");
+  fs::copy_file(k + "/calib/000001.txt", calib);  // a copy in the test's folder, changed below
   const std::string fog = " --profile exponential --density 0.08 --falloff 0.3 --camera-height 1.65 --pitch 1";
   fs::create_directories(p("first"));
   const CliRun r = run("fog --image " + k + "/image_2/000001.png --velodyne " + velo + " --kitti-calib " + calib + fog +
@@ -151,6 +154,12 @@ TEST_F(LidarCamera, LayeredFogOnTheKittiFrame) {
   ASSERT_EQ(again.status, 0) << again.output;
   EXPECT_TRUE(foggy == bytes_of(p("again/s.bin")));
   expect_same_pixels(p("first/o.png"), p("again/o.png"));
+  EXPECT_EQ(rec["inputs"]["kitti_calib"]["path"], calib);
+  EXPECT_EQ(rec["inputs"]["depth"]["kitti_calib"]["path"], calib);
+  std::ofstream(calib, std::ios::app) << "\n";
+  const CliRun changed = run("run " + p("first/o.json") + " --out-dir " + p("changed"));
+  EXPECT_EQ(changed.status, 2) << changed.output;
+  EXPECT_NE(changed.output.find("calib.txt' has changed"), std::string::npos) << changed.output;
 }
 
 TEST_F(LidarCamera, LayeredFogNeedsTheScansPose) {

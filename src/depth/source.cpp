@@ -98,7 +98,7 @@ Image disparity_range(const Image& v, const DepthSource& s, const std::string& w
                   std::to_string(c.width) + "x" + std::to_string(c.height));
     f = c.f_px, doffs = c.doffs_px, baseline = c.baseline_m;
     k.fx = k.fy = c.f_px, k.cx = c.cx, k.cy = c.cy;
-    rec["calib"] = s.calib;
+    rec["calib"] = {{"path", s.calib}, {"sha256", sha256_file(s.calib)}};  // an input: brume run checks it
   } else {
     if (!(f > 0.0) || !(baseline > 0.0))
       throw Error(what + " without --calib needs --fx (focal length in pixels at the disparity map's size) and "
@@ -194,7 +194,7 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
     rec = {{"source", "velodyne"},
            {"path", s.velodyne},
            {"sha256", sha256_file(s.velodyne)},
-           {"kitti_calib", s.kitti_calib},
+           {"kitti_calib", {{"path", s.kitti_calib}, {"sha256", sha256_file(s.kitti_calib)}}},
            {"projection", "P2 R0_rect Tr_velo_to_cam, nearest point per pixel, pixel centres at integers"},
            {"points", li.points},
            {"points_in_view", li.points_in_view},

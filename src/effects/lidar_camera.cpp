@@ -214,6 +214,10 @@ RunFn with_lidar(const Hooks& h, RunFn inner) {
     with.extra["lidar"] = scan_record(c.params, st, c.medium, c.lidar.wavelength_nm);
     with.extra["inputs"]["lidar"] = {
         {"path", c.lidar.points}, {"sha256", sha256_file(c.lidar.points)}, {"points", n}};
+    if (std::isnan(c.medium.alpha_per_m)) {  // a height profile: the calibration placed the scan (an input too)
+      const std::string calib = job.at("depth").at("kitti-calib").get<std::string>();
+      with.extra["inputs"]["kitti_calib"] = {{"path", calib}, {"sha256", sha256_file(calib)}};
+    }
     with.files.push_back({c.lidar.out, kitti_bin_bytes(out.data(), n), "--lidar-out"});
     return inner(job, eo, with);
   };
