@@ -15,6 +15,7 @@
 
 #include "brume/batch.hpp"
 #include "brume/command.hpp"
+#include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "brume/rerun.hpp"
@@ -223,6 +224,32 @@ TEST(Commands, ExtinctionOfTheModelledMedium) {
   EXPECT_EQ(fog->extinction_per_m(fog->build({{"classic", "linear"}}), 0.0), std::nullopt);
   // Commands that model no medium have none.
   for (const char* n : {"blur", "depth convert", "compare"}) EXPECT_FALSE(find_command(n)->extinction_per_m) << n;
+}
+
+// A preview of an image above the browser's largest texture runs on inputs
+// at 1/k (brume view): intrinsics given in the files' pixels (--fx, --cx,
+// --calib) must give each smaller pixel the ray of the full-size pixel its
+// range was sampled at. Checked through planar depth: at 1/2 and 1/3 it
+// equals the full image's planar depth at pixel (k x' + k/2), computed with
+// the full-size intrinsics.
+TEST(Commands, PreviewIntrinsicsGiveTheSampledPixelsRays) {
+  const int W = 61, H = 41;
+  Image range(W, H, 1);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) range.at(x, y) = 3.0f + 0.05f * static_cast<float>(x) + 0.11f * static_cast<float>(y);
+  const Intrinsics full{70.0, 64.0, 27.3, 22.9};
+  const Image z_full = planar_depth(range, full);
+  for (const int k : {2, 3}) {
+    const int w = W / k, h = H / k;
+    Image small(w, h, 1);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) small.at(x, y) = range.at(k * x + k / 2, k * y + k / 2);
+    const Image z_small = planar_depth(small, preview_intrinsics(full, k));
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x)
+        ASSERT_NEAR(z_small.at(x, y), z_full.at(k * x + k / 2, k * y + k / 2), 2e-6f * z_full.at(k * x + k / 2, k * y + k / 2))
+            << "k " << k << " at " << x << "," << y;  // float32 rounding of the same ray
+  }
 }
 
 #if BRUME_HAVE_GPU

@@ -26,6 +26,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "brume/depth.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/image.hpp"
 
@@ -35,12 +36,26 @@ struct PreparedRange;
 
 // What an effect's preview plan is made from: the colour image, the
 // measured range (after completion) and the prepared range, as the
-// command's own run would have them.
+// command's own run would have them; at 1/scale of the files' size when the
+// browser's largest texture is smaller than the image (the colour
+// box-averaged, the range sampled at each block's pixel (k/2, k/2)).
 struct PreviewInputs {
   const Image& rgb;
   const Image& measured;
   const PreparedRange& prepared;
+  int scale = 1;
+  int full_width = 0, full_height = 0;  // the files' size (0: the inputs')
 };
+
+// The camera intrinsics of the inputs at 1/scale, from those of the files'
+// size (the depth flags' --fx, --cx, --calib are in its pixels): the ray
+// through pixel x' of the smaller image is the ray through the pixel its
+// range was sampled at, x = scale x' + scale/2 (integer division), so
+// fx' = fx / scale and cx' = (cx - scale/2) / scale.
+Intrinsics preview_intrinsics(const Intrinsics& full, int scale);
+// The files' size of the inputs.
+inline int preview_full_width(const PreviewInputs& in) { return in.full_width > 0 ? in.full_width : in.rgb.width; }
+inline int preview_full_height(const PreviewInputs& in) { return in.full_height > 0 ? in.full_height : in.rgb.height; }
 
 // A uniform of a plan step.
 inline nlohmann::json preview_f(double v) { return {"1f", v}; }

@@ -23,6 +23,12 @@ std::string PreviewFrame::add_map(const std::string& kind, Image m) {
   return name;
 }
 
+Intrinsics preview_intrinsics(const Intrinsics& full, int scale) {
+  if (scale == 1) return full;
+  const double k = scale, half = scale / 2;
+  return Intrinsics{full.fx / k, full.fy / k, (full.cx - half) / k, (full.cy - half) / k};
+}
+
 Image preview_unknown_negative(Image m) {
   for (float& v : m.data)
     if (!std::isfinite(v) || v == 0.0f) v = -1.0f;

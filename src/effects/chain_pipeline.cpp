@@ -202,8 +202,8 @@ PreviewFrame haze_dof_preview(const nlohmann::json& job, const PreviewInputs& in
   haze_dof_job_table().from_json(j, job, "job");
   PreviewFrame frame = haze_preview_frame(j.haze, in);
   const nlohmann::json dof = dof_stage([&] {
-    const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height);
-    return dof_preview_steps(frame, j.dof, k, in, "out", "dof", "dof.blurred");
+    const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, preview_full_width(in), preview_full_height(in));
+    return dof_preview_steps(frame, j.dof, preview_intrinsics(k, in.scale), in, "out", "dof", "dof.blurred");
   });
   nlohmann::json& plan = frame.plan;
   plan["result"] = "dof.blurred";

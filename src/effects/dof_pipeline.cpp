@@ -198,8 +198,8 @@ PreviewFrame dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
   PreviewFrame frame;
   frame.plan["targets"] = nlohmann::json::object();
   frame.plan["steps"] = nlohmann::json::array();
-  frame.plan["derived"] = dof_preview_steps(frame, j.dof, dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height),
-                                            in, "image", "f", "blurred");
+  const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, preview_full_width(in), preview_full_height(in));
+  frame.plan["derived"] = dof_preview_steps(frame, j.dof, preview_intrinsics(k, in.scale), in, "image", "f", "blurred");
   frame.plan["result"] = "blurred";
   return frame;
 }

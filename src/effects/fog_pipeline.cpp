@@ -98,8 +98,13 @@ PreviewFrame fog_preview(const nlohmann::json& job, const PreviewInputs& in) {
   const FogParams& p = j.fog;
   const int w = in.rgb.width, h = in.rgb.height;
   const bool heights = p.classic == ClassicFog::none && p.profile != FogProfile::constant;
-  const Camera camera = heights ? depth_camera(j.input.depth, w, h, p.camera)
-                                : make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, w, h);
+  Camera camera = heights ? depth_camera(j.input.depth, preview_full_width(in), preview_full_height(in), p.camera)
+                          : make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, w, h);
+  if (heights) {  // the files' camera for the inputs at 1/scale
+    camera.k = preview_intrinsics(camera.k, in.scale);
+    camera.width = w;
+    camera.height = h;
+  }
   const bool blend = p.sky_rule == SkyRule::automatic && in.prepared.applied;
   const Image range = effect_range(in.prepared, blend);
   const FogAnalysis a = analyse_fog(in.rgb, in.measured, range, camera, p, j.prepare.params.s_max_factor);

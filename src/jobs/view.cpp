@@ -322,7 +322,7 @@ struct Server {
     c.check(job, given, true);
     std::lock_guard<std::mutex> lock(mu);
     ViewData& d = at(k);
-    PreviewFrame f = c.preview(job, PreviewInputs{d.rgb, d.measured, d.prep});
+    PreviewFrame f = c.preview(job, PreviewInputs{d.rgb, d.measured, d.prep, k, in.rgb.width, in.rgb.height});
     json plan = std::move(f.plan);
     maps_before = std::move(maps);
     maps = std::move(f.maps);
