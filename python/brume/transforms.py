@@ -382,9 +382,10 @@ class Transform(_Keyed):
                                          f"none; give lidar_target= (the call's target holding the scan, e.g. "
                                          f"'points'), or drop {name}")
         else:
-            if not isinstance(lidar_target, str) or not lidar_target or lidar_target in ("image", "depth", "key"):
+            reserved = ("image", "depth", "key", "params", "images", "depths")
+            if not isinstance(lidar_target, str) or not lidar_target or lidar_target in reserved:
                 raise ValueError(f"lidar_target={lidar_target!r}: the name of the call's target that holds the "
-                                 f"frame's LiDAR scan, e.g. 'points' (not image, depth or key)")
+                                 f"frame's LiDAR scan, e.g. 'points' (not {', '.join(reserved)}: the call's own)")
             medium = self._chain() or self._stages[0].command
             if "lidar" not in medium.get("keyword_arrays", []):
                 raise ValueError(f"lidar_target={lidar_target!r}: {type(self).__name__} models no medium to fog a "
@@ -551,8 +552,12 @@ class Transform(_Keyed):
                 return out
             recs = record["stages"] if "stages" in record else [record]
             jobs = [r["job"] for r in recs]
-            out["image"], _, foggy = parent._apply(image, depth, None, "image", "depth", jobs=jobs, scan=scan)
-            if parent.lidar_target is not None:
+            # A sample that fogged no scan (drawn without lidar_target) leaves the scan as it is: a replay
+            # repeats the sample, it does not fog what the sample did not.
+            fogged = scan is not None and any("lidar" in j for j in jobs)
+            out["image"], _, foggy = parent._apply(image, depth, None, "image", "depth", jobs=jobs,
+                                                   scan=scan if fogged else None)
+            if fogged:
                 out[parent.lidar_target] = foggy
             return out
 

@@ -111,7 +111,9 @@ struct Input {
 };
 
 Transfer parse_transfer_kw(py::handle t, const std::string& where);
-Input read_input(py::handle obj, const std::string& arg, int channels, Transfer transfer, const std::string& fn);
+// max_rows: the largest first dimension (images: 2^20; a scan's points: a 32-bit count).
+Input read_input(py::handle obj, const std::string& arg, int channels, Transfer transfer, const std::string& fn,
+                 long long max_rows = 1 << 20);
 // A LiDAR scan: an (N, 4) float32 (in place) or float64 (converted once) array of x, y, z, intensity.
 Input read_points(py::handle obj, const std::string& arg, const std::string& fn);
 DenseImageRef as_dense(Input& in, const std::string& arg);

@@ -4,6 +4,7 @@
 #include "binding.hpp"
 
 #include <cmath>
+#include <limits>
 #include <cstring>
 #include <string>
 #include "brume/error.hpp"
@@ -89,7 +90,8 @@ std::string shape_text(const py::array& a) {
 
 // `channels`: 3 for colour (4 accepted, alpha ignored), 1 for a scalar map
 // (H x W or H x W x 1). Integer colour needs `transfer`; integer scalars are refused.
-Input read_input(py::handle obj, const std::string& arg, int channels, Transfer transfer, const std::string& fn) {
+Input read_input(py::handle obj, const std::string& arg, int channels, Transfer transfer, const std::string& fn,
+                 long long max_rows) {
   const bool color = channels == 3;
   const std::string expected =
       color ? "an H x W x 3 (or x 4) array of linear RGB, float32 (read in place) or float64 (converted once), or "
@@ -108,7 +110,7 @@ Input read_input(py::handle obj, const std::string& arg, int channels, Transfer 
                               : (a.ndim() == 2 || (a.ndim() == 3 && a.shape(2) == 1));
   if (!shape_ok) throw bad(color ? "not H x W x 3 or H x W x 4" : "not H x W");
   if (a.shape(0) < 1 || a.shape(1) < 1) throw bad("it is empty");
-  if (a.shape(0) > (1 << 20) || a.shape(1) > (1 << 20)) throw bad("it is too large");
+  if (a.shape(0) > max_rows || a.shape(1) > (1 << 20)) throw bad("it is too large");
   const int h = static_cast<int>(a.shape(0)), w = static_cast<int>(a.shape(1));
   const int nc = a.ndim() == 3 ? static_cast<int>(a.shape(2)) : 1;
   Input in;
@@ -188,7 +190,12 @@ Input read_points(py::handle obj, const std::string& arg, const std::string& fn)
     throw py::value_error(fn + "(): " + arg + " has shape " + shape_text(a) + " and dtype " +
                           py::cast<std::string>(py::str(a.dtype())) + ": " +
                           (floats ? "not (N, 4)" : "not float32 or float64") + "; expected " + expected);
-  Input in = read_input(obj, arg, 1, Transfer::automatic, fn);
+  // A scan is not an image: any number of points a 32-bit count holds (merged
+  // sweeps exceed the images' 2^20 rows); an empty one has nothing to fog.
+  if (a.shape(0) < 1)
+    throw py::value_error(fn + "(): " + arg + " holds no points (shape " + shape_text(a) +
+                          "): a scan needs at least one; skip the call for an empty sweep");
+  Input in = read_input(obj, arg, 1, Transfer::automatic, fn, std::numeric_limits<int>::max());
   in.record.erase("transfer");
   in.record["points"] = a.shape(0);
   return in;

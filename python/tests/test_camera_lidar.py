@@ -362,3 +362,74 @@ def test_transform_scan_as_a_torch_tensor():
     out = t(image=rgb, depth=rng, points=torch.from_numpy(pts), key="t")["points"]
     assert isinstance(out, torch.Tensor) and out.dtype == torch.float32
     assert np.array_equal(out.numpy(), ref)
+
+
+def test_transform_p_between_0_and_1_fogs_both_or_neither():
+    """p=0.5 over twenty keys: where the draw applies, image and scan are
+    both fogged (the scan with the draw's alpha); where it does not, both
+    pass through as the same objects -- never one without the other."""
+    rgb, rng = _scene(24, 32)
+    pts = scan(500)
+    t = T.Haze(p=0.5, visibility=(150, 600), seed=11, lidar_target="points")
+    applied = 0
+    for i in range(20):
+        out = t(image=rgb, depth=rng, points=pts, key=f"k{i}")
+        if out["params"]["applied"]:
+            applied += 1
+            assert out["image"] is not rgb and out["points"] is not pts
+            assert out["params"]["record"]["lidar"]["alpha_per_m"] == 3.912 / out["params"]["values"]["visibility"]
+        else:
+            assert out["image"] is rgb and out["points"] is pts
+    assert 3 <= applied <= 17  # both outcomes occur (binomial(20, 0.5): outside [3, 17] has p < 0.3 %)
+
+
+def test_replay_fogs_no_scan_the_sample_did_not():
+    """params drawn without lidar_target replayed by a transform with one:
+    the image repeats, the scan passes through (the sample fogged none; a
+    pipeline that fogs scans with LidarFog must not get them fogged twice)."""
+    rgb, rng = _scene(24, 32)
+    pts = scan(500)
+    first = T.Haze(visibility=300, seed=2)(image=rgb, depth=rng, key="k")
+    again = T.Haze(visibility=300, seed=2, lidar_target="points").replay(first["params"])(image=rgb, depth=rng,
+                                                                                        points=pts)
+    assert again["points"] is pts
+    assert np.array_equal(again["image"], first["image"])
+
+
+def test_rerun_checks_the_scan_and_the_calibration(demo, tmp_path):
+    """brume.rerun of a CLI record that fogged a scan in a height-profile fog:
+    a scan other than the recorded file's points (another count, or the same
+    count with one value changed) and a calibration file changed since are
+    refused, as `brume run` refuses changed files; the same ones replay."""
+    (tmp_path / "calib.txt").write_text(CALIB)
+    pts = scan()
+    pts.tofile(tmp_path / "in.bin")
+    d = demo["dir"]
+    run_cli("fog", "--image", d / "clean.png", "--range", d / "range.exr", "--fov-y", 55, "--density", 0.05,
+            "--falloff", 0.1, "--camera-height", 1.65, "--kitti-calib", tmp_path / "calib.txt",
+            "--lidar", tmp_path / "in.bin", "--lidar-out", tmp_path / "s.bin", "--out", tmp_path / "o.png",
+            "--record", tmp_path / "o.json")
+    rec = json.loads((tmp_path / "o.json").read_text())
+    same = brume.rerun(rec, demo["rgb"], demo["range"], lidar=pts)
+    assert np.array_equal(same.lidar, read_bin(tmp_path / "s.bin"))
+    with pytest.raises(ValueError, match="holds 99 points, the recorded scan"):
+        brume.rerun(rec, demo["rgb"], demo["range"], lidar=pts[:99])
+    other = pts.copy()
+    other[7, 3] += 0.25
+    with pytest.raises(ValueError, match="is not the recorded scan"):
+        brume.rerun(rec, demo["rgb"], demo["range"], lidar=other)
+    with open(tmp_path / "calib.txt", "a") as f:
+        f.write("\n")
+    with pytest.raises(ValueError, match="calib.txt' has changed"):
+        brume.rerun(rec, demo["rgb"], demo["range"], lidar=pts)
+
+
+def test_scan_sizes_beyond_an_images_rows():
+    """A scan is not an image: more points than the images' 2^20 rows read
+    (merged sweeps), an empty one is refused naming the keyword."""
+    rgb, rng = _scene(8, 8)
+    big = scan((1 << 20) + 5)
+    r = brume.haze(rgb, rng, visibility=300, lidar=big)
+    assert r.lidar.shape == big.shape
+    with pytest.raises(ValueError, match="lidar holds no points"):
+        brume.haze(rgb, rng, visibility=300, lidar=np.zeros((0, 4), np.float32))
