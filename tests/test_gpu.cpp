@@ -152,16 +152,25 @@ TEST(Gpu, EveryEdgeRateMatchesCpuReference) {
     }
 }
 
+namespace {
+// A small scene for the pass-layer tests: a checker with a range ramp.
+void small_scene(int w, int h, Image& rgb, Image& range) {
+  rgb = Image(w, h, 3);
+  range = Image(w, h, 1);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = ((x / 4 + y / 4 + c) % 2) ? 0.8f : 0.2f;
+      range.at(x, y) = 1.0f + 0.5f * y;
+    }
+}
+}  // namespace
+
 TEST(Gpu, ReRenderWithoutReuploadEqualsAFreshRender) {
   // The paper's interactive control: change kappa_s, render again on the same
   // GpuHaze; the result equals a GpuHaze built fresh for the new parameters.
   BRUME_REQUIRE_GPU(ctx);
-  Image rgb(64, 48, 3), range(64, 48, 1);
-  for (int y = 0; y < 48; ++y)
-    for (int x = 0; x < 64; ++x) {
-      for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = ((x / 4 + y / 4 + c) % 2) ? 0.8f : 0.2f;
-      range.at(x, y) = 1.0f + 0.5f * y;
-    }
+  Image rgb, range;
+  small_scene(64, 48, rgb, range);
   GpuHaze reused(*ctx, rgb, range);
   HazeParams p;
   (void)reused.render(p, analyse_haze(rgb, range, p));
@@ -183,12 +192,8 @@ TEST(Gpu, AContextMadeAndDestroyedBesideAnotherLeavesItRendering) {
   // texture (framebuffer status 0x0)") until contexts were made current on
   // use and the display's initialisations counted. Same bits before and after.
   BRUME_REQUIRE_GPU(ctx);
-  Image rgb(32, 24, 3), range(32, 24, 1);
-  for (int y = 0; y < 24; ++y)
-    for (int x = 0; x < 32; ++x) {
-      for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = ((x / 4 + y / 4 + c) % 2) ? 0.7f : 0.1f;
-      range.at(x, y) = 2.0f + 0.4f * x;
-    }
+  Image rgb, range;
+  small_scene(32, 24, rgb, range);
   HazeParams p;
   p.lambda = 6.0;
   const HazeAnalysis a = analyse_haze(rgb, range, p);
@@ -237,19 +242,6 @@ TEST(Gpu, SoftwareRasteriserIsMarkedSoftware) {
     GTEST_SKIP() << "renderer '" << r << "' is not Mesa's software rasteriser";
   EXPECT_TRUE(ctx->info().software) << r;
 }
-
-namespace {
-// A small scene for the pass-layer tests: a checker with a range ramp.
-void small_scene(int w, int h, Image& rgb, Image& range) {
-  rgb = Image(w, h, 3);
-  range = Image(w, h, 1);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = ((x / 4 + y / 4 + c) % 2) ? 0.8f : 0.2f;
-      range.at(x, y) = 1.0f + 0.5f * y;
-    }
-}
-}  // namespace
 
 TEST(Gpu, ThrowMidRenderLeaksNoGlObject) {
   // A render that throws after it has made targets and started a timer query

@@ -108,7 +108,7 @@ GpuContext::Impl::~Impl() {
   }
   release_display(dpy);
   // The context that was current before this one, again (it may be gone: then EGL refuses, and none is current).
-  if (prev_ctx != EGL_NO_CONTEXT) eglMakeCurrent(prev_dpy, prev_draw, prev_read, prev_ctx);
+  if (prev.ctx != EGL_NO_CONTEXT) prev.make();
 }
 
 // Try one display: initialise, make an ES 3.2 context current without a surface.
@@ -143,10 +143,7 @@ bool GpuContext::Impl::try_display(EGLDisplay d, const char* platform, std::stri
 }
 
 void GpuContext::Impl::create() {
-  prev_ctx = eglGetCurrentContext();
-  prev_dpy = eglGetCurrentDisplay();
-  prev_draw = eglGetCurrentSurface(EGL_DRAW);
-  prev_read = eglGetCurrentSurface(EGL_READ);
+  prev = gl::Current::now();
   std::string why;
   const char* client = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
   const std::string ext = client ? client : "";
@@ -254,8 +251,7 @@ GpuContext::~GpuContext() = default;
 const GpuInfo& GpuContext::info() const { return impl_->info; }
 GpuContext::Impl& GpuContext::impl() {
   Impl& i = *impl_;
-  if (i.ctx != EGL_NO_CONTEXT && eglGetCurrentContext() != i.ctx &&
-      !eglMakeCurrent(i.dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, i.ctx))
+  if (i.ctx != EGL_NO_CONTEXT && eglGetCurrentContext() != i.ctx && !gl::Current{i.dpy, i.ctx}.make())
     throw Error("GPU backend: cannot make this GPU context current on the calling thread (EGL error 0x" +
                 hex(static_cast<unsigned>(eglGetError())) +
                 "; a context belongs to one thread at a time): use it on the thread that made it, or --backend cpu");
@@ -531,7 +527,7 @@ GpuImage& GpuImage::operator=(GpuImage&& o) noexcept {
 
 GpuImage::~GpuImage() {
   if (tex_.id) {
-    const gl::AsCurrent in(gl::Owner{egl_display_, egl_context_});
+    const gl::AsCurrent in(gl::Current{egl_display_, egl_context_});
     if (in.ok()) glDeleteTextures(1, &tex_.id);
     --gl::live(gl::kTexture);
     tex_ = {};
@@ -539,7 +535,7 @@ GpuImage::~GpuImage() {
 }
 
 Image GpuImage::read() const {
-  const gl::AsCurrent in(gl::Owner{egl_display_, egl_context_});  // its own context, whichever is current
+  const gl::AsCurrent in(gl::Current{egl_display_, egl_context_});  // its own context, whichever is current
   if (!in.ok())
     throw Error("GpuImage::read: the context it was made in cannot be made current here (destroyed, or current "
                 "on another thread); read it on its own thread while its GpuContext lives");

@@ -97,9 +97,7 @@ struct GpuContext::Impl {
   EGLContext ctx = EGL_NO_CONTEXT;
   // What was current on the creating thread before (another GpuContext's, or
   // an application's): made current again when this one is destroyed.
-  EGLDisplay prev_dpy = EGL_NO_DISPLAY;
-  EGLContext prev_ctx = EGL_NO_CONTEXT;
-  EGLSurface prev_draw = EGL_NO_SURFACE, prev_read = EGL_NO_SURFACE;
+  gl::Current prev;
   GpuInfo info;
   PFNGLGETQUERYOBJECTUI64VEXTPROC get_query_ui64 = nullptr;
   // The GL objects below must go before the context: members are destroyed

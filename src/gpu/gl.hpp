@@ -40,32 +40,35 @@ inline std::atomic<int>& fail_after() {
   return n;
 }
 
-// The context current on this thread (an object's owner, made in it).
-struct Owner {
+// A thread's current context and surfaces (brume's contexts have none),
+// saved to be made current again: the context an object was made in, or the
+// one to return to.
+struct Current {
   EGLDisplay dpy = EGL_NO_DISPLAY;
   EGLContext ctx = EGL_NO_CONTEXT;
-  static Owner current() { return {eglGetCurrentDisplay(), eglGetCurrentContext()}; }
+  EGLSurface draw = EGL_NO_SURFACE, read = EGL_NO_SURFACE;
+  static Current now() {
+    return {eglGetCurrentDisplay(), eglGetCurrentContext(), eglGetCurrentSurface(EGL_DRAW),
+            eglGetCurrentSurface(EGL_READ)};
+  }
+  bool make() const { return eglMakeCurrent(dpy, draw, read, ctx) == EGL_TRUE; }
 };
 
 // Makes `o` current for its lifetime where another context is, then makes
-// the caller's current again. ok() is false where `o` cannot be made current
-// (destroyed, or current on another thread): its objects cannot be deleted
-// from here, and nothing else must be deleted in their place.
+// the caller's current again (or none, where none was). ok() is false where
+// `o` cannot be made current (destroyed, or current on another thread): its
+// objects cannot be deleted from here, and nothing else must be deleted in
+// their place.
 class AsCurrent {
  public:
-  explicit AsCurrent(const Owner& o) {
-    const EGLContext cur = eglGetCurrentContext();
-    if (o.ctx == EGL_NO_CONTEXT || cur == o.ctx) return;
-    prev_ = {eglGetCurrentDisplay(), cur};
-    draw_ = eglGetCurrentSurface(EGL_DRAW);
-    read_ = eglGetCurrentSurface(EGL_READ);
-    dpy_ = o.dpy;
-    switched_ = eglMakeCurrent(o.dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, o.ctx) == EGL_TRUE;
+  explicit AsCurrent(const Current& o) : prev_(Current::now()), dpy_(o.dpy) {
+    if (o.ctx == EGL_NO_CONTEXT || prev_.ctx == o.ctx) return;
+    switched_ = o.make();
     ok_ = switched_;
   }
   ~AsCurrent() {
     if (!switched_) return;
-    if (prev_.ctx != EGL_NO_CONTEXT) eglMakeCurrent(prev_.dpy, draw_, read_, prev_.ctx);
+    if (prev_.ctx != EGL_NO_CONTEXT) prev_.make();
     else eglMakeCurrent(dpy_, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
   }
   AsCurrent(const AsCurrent&) = delete;
@@ -73,9 +76,8 @@ class AsCurrent {
   bool ok() const { return ok_; }
 
  private:
-  Owner prev_;
-  EGLSurface draw_ = EGL_NO_SURFACE, read_ = EGL_NO_SURFACE;
-  EGLDisplay dpy_ = EGL_NO_DISPLAY;
+  Current prev_;
+  EGLDisplay dpy_;
   bool switched_ = false, ok_ = true;
 };
 
@@ -113,14 +115,14 @@ class Object {
       default: break;
     }
     if (o.id_) ++live(K);
-    o.owner_ = Owner::current();
+    o.owner_ = Current::now();
     return o;
   }
 
   GLuint id() const { return id_; }
   explicit operator bool() const { return id_ != 0; }
   // The context it was made in.
-  const Owner& owner() const { return owner_; }
+  const Current& owner() const { return owner_; }
   // Hands the object to an owner outside this layer (GpuImage), which must
   // delete it (in owner()'s context) and decrement live(K) itself: it stays
   // counted as live.
@@ -146,7 +148,7 @@ class Object {
 
  private:
   GLuint id_ = 0;
-  Owner owner_;
+  Current owner_;
 };
 
 using Texture = Object<kTexture>;

@@ -148,19 +148,20 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
     std::string arrays;
     for (const auto& [name, in] : record["inputs"].items())
       if (in.is_object() && text_field(in, "source") == "numpy") arrays += (arrays.empty() ? "" : ", ") + name;
-    // brume.rerun takes the effects whose arrays are rgb and range and that take a job (python/brume/_rerun.py).
-    const CommandDef* c = find_command(cmd);
-    const bool rerun_takes = c && c->arrays && c->arrays->replays && c->arrays->args.size() >= 2 &&
-                             c->arrays->args[0].name == "rgb" && c->arrays->args[1].name == "range";
-    const std::string how = rerun_takes ? "brume.rerun(record, rgb, range, ...) on the same arrays (a scan as lidar=)"
-                            : c && c->arrays && c->arrays->replays
-                                ? c->arrays->public_name + "(..., job=record[\"job\"]) on the same arrays"
-                                : "the same " + (c && c->arrays ? c->arrays->public_name : "brume " + cmd) +
-                                      " call with the record's values";
-    if (!arrays.empty())
+    if (!arrays.empty()) {
+      // The call that repeats it: brume.rerun for the effects on rgb and range that take a job
+      // (python/brume/_rerun.py), job= for other forms that take one, else the same call.
+      const CommandDef* c = find_command(cmd);
+      const ArrayForm* a = c && c->arrays ? &*c->arrays : nullptr;
+      std::string how = "the same " + (a ? a->public_name : "brume " + cmd) + " call with the record's values";
+      if (a && a->replays)
+        how = a->args.size() >= 2 && a->args[0].name == "rgb" && a->args[1].name == "range"
+                  ? "brume.rerun(record, rgb, range, ...) on the same arrays (a scan as lidar=)"
+                  : a->public_name + "(..., job=record[\"job\"]) on the same arrays";
       throw Error("this record's inputs (" + arrays + ") were numpy arrays of a Python call, not files: repeat it "
                   "in Python with " + how + ", or write the arrays to files and run its job blocks in a record of "
                   "those files (docs/python.md, \"Repeating a run\")");
+    }
   }
   // Every {"path", "sha256"} input the record names (the density table of fog under "fog").
   for (const char* block : {"inputs", "depth", "fog"})

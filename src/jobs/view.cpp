@@ -184,15 +184,13 @@ std::unique_ptr<ViewData> make_data(const LoadedInputs& in, const RangeStep& ste
   if (d->done.applied) d->measured = d->done.range;
   d->prep = prepare_step(d->measured, step, given, 0, /*sky_weight=*/true);
   const std::size_t n = d->rgb.pixels();
-  std::vector<float> rgba(n * 4, 1.0f), range(n), sky(n, 0.0f);
+  std::vector<float> rgba(n * 4, 1.0f), sky(n, 0.0f);
   for (std::size_t i = 0; i < n; ++i) {
     for (int c = 0; c < 3; ++c) rgba[i * 4 + c] = d->rgb.data[i * 3 + c];
-    const float v = d->prep.range.data[i];
-    range[i] = std::isfinite(v) && v != 0.0f ? v : -1.0f;  // as upload_color_and_range
     if (!d->prep.sky_weight.empty()) sky[i] = d->prep.sky_weight.data[i];
   }
   d->rgba = floats(rgba);
-  d->range = floats(range);
+  d->range = floats(preview_unknown_negative(d->prep.range).data);  // as upload_color_and_range
   d->sky = floats(sky);
   return d;
 }
