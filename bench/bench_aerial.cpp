@@ -63,7 +63,7 @@ double cpu_ms() {
   return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
 }
 
-// Linear sRGB (D65) <-> CIE XYZ: the library's matrices (src/shared/aerial_math.glsl).
+// Linear sRGB (D65) <-> CIE XYZ: the library's matrices (src/effects/aerial/aerial_math.glsl).
 constexpr float kToXyz[3][3] = {{0.4124f, 0.3576f, 0.1805f}, {0.2126f, 0.7152f, 0.0722f}, {0.0193f, 0.1192f, 0.9505f}};
 constexpr float kToRgb[3][3] = {{3.2406255f, -1.5372080f, -0.4986286f},
                                 {-0.9689307f, 1.8757561f, 0.0415175f},

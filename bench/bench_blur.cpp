@@ -27,7 +27,7 @@
 // host's drift during the run moves both sides of a ratio alike. --size
 // renders the demo scene at another size (e.g. 4000x2800, an image that
 // outgrows a smaller last-level cache); --fusion sets the fused schedule's
-// limits (src/cpu/diffusion_kernels.hpp) for tuning them on a host.
+// limits (src/diffusion/diffusion_kernels.hpp) for tuning them on a host.
 //
 // Without --image the built-in demo scene is rendered at 1600x1120 and used
 // (written to a temporary EXR and read back, so both contenders see the same
@@ -55,7 +55,7 @@
 #include "brume/io.hpp"
 #include "bench_util.hpp"
 #include "brume_opencv.hpp"
-#include "cpu/diffusion_kernels.hpp"  // the fusion limits, for the A/B of the two schedules
+#include "diffusion/diffusion_kernels.hpp"  // the fusion limits, for the A/B of the two schedules
 #include "shared/prelude_cpp.h"       // brume_target_scale (eq. 7)
 
 using namespace brume;

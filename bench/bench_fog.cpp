@@ -30,7 +30,7 @@
 #include "bench_util.hpp"
 #include "brume/demo_scene.hpp"
 #include "brume/fog.hpp"
-#include "effects/fog_fast.hpp"
+#include "effects/fog/fog_fast.hpp"
 
 using namespace brume;
 

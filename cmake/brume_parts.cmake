@@ -1,25 +1,59 @@
-# brume's library as a list of parts, each declared once (issue #37):
+# brume's library as a list of parts, one folder each (issues #37, #49):
 #
-#   brume_part(NAME
-#     SOURCES  files compiled into libbrume
-#     TOPICS   shared GLSL topics (src/shared/NAME.glsl): compiled as C++ by
-#              src/shared/prelude_cpp.h and embedded for the GPU passes that name them
-#     CPU_TOPICS  topics the CPU alone compiles (no pass uses them)
-#     SHADERS  the part's pass shaders (src/gpu/shaders/FILE), embedded)
+#   brume_part(NAME FOLDER)
+#
+# A part is everything in its folder (not its sub-folders; a sub-folder is a
+# part of its own, declared by its own line, as aerial's insert and
+# coefficients are):
+#   *.cpp          compiled into libbrume (a file for the GPU backend guards
+#                  itself with #if BRUME_HAVE_GPU, so both builds take the
+#                  same list);
+#   *.hpp, *.h     the part's private headers;
+#   *.glsl         its shared GLSL topics: compiled as C++ through
+#                  src/shared/prelude_cpp.h and embedded for the GPU passes
+#                  that name them;
+#   *.frag, *.vert its pass shaders, embedded.
+#
+# Why a glob (CONFIGURE_DEPENDS) rather than a list of files: the folder is
+# the declaration, so a file cannot sit in a family's folder without being
+# built as part of it, and the next effect costs its folder and one line.
+# CONFIGURE_DEPENDS re-globs at every build (a few milliseconds), so a new
+# file is picked up without re-running cmake by hand. brume_generate_parts()
+# checks the other way round: every source under src/ lies in a declared
+# part's folder, or in a folder declared outside the library with
+# brume_outside_parts(FOLDER REASON) (the codec module, a header-only
+# interface).
 #
 # From these declarations, in declaration order (a topic may use those
-# declared before it), brume_generate_parts() writes
+# declared before it; within a part, topics in name order),
+# brume_generate_parts() writes
 #   generated/shared/topics_cpp.inc  the prelude's #include of every topic,
 #   generated/gpu/topics.inc         the GPU context's table of topics,
+#   generated/parts.txt              "NAME FOLDER" per line (for the checks in tests/),
 # and the list of GLSL files to embed (BRUME_SHADERS, name=path).
-function(brume_part name)
-  cmake_parse_arguments(A "" "" "SOURCES;TOPICS;CPU_TOPICS;SHADERS" ${ARGN})
-  set_property(GLOBAL APPEND PROPERTY BRUME_PART_SOURCES ${A_SOURCES})
-  set_property(GLOBAL APPEND PROPERTY BRUME_PART_TOPICS ${A_TOPICS})
-  foreach(t ${A_TOPICS} ${A_CPU_TOPICS})
-    set_property(GLOBAL APPEND PROPERTY BRUME_PART_CPU_TOPICS ${t})
-  endforeach()
-  set_property(GLOBAL APPEND PROPERTY BRUME_PART_SHADERS ${A_SHADERS})
+function(brume_part name folder)
+  if(ARGN)
+    message(FATAL_ERROR "brume_part(${name} ${folder}): one folder per part, no other arguments (got ${ARGN})")
+  endif()
+  set(dir ${PROJECT_SOURCE_DIR}/${folder})
+  if(NOT IS_DIRECTORY ${dir})
+    message(FATAL_ERROR "brume_part(${name} ${folder}): no such folder")
+  endif()
+  file(GLOB sources CONFIGURE_DEPENDS RELATIVE ${PROJECT_SOURCE_DIR} ${dir}/*.cpp)
+  file(GLOB topics CONFIGURE_DEPENDS RELATIVE ${PROJECT_SOURCE_DIR} ${dir}/*.glsl)
+  file(GLOB shaders CONFIGURE_DEPENDS RELATIVE ${PROJECT_SOURCE_DIR} ${dir}/*.frag ${dir}/*.vert)
+  list(SORT sources)
+  list(SORT topics)
+  list(SORT shaders)
+  set_property(GLOBAL APPEND PROPERTY BRUME_PARTS "${name}=${folder}")
+  set_property(GLOBAL APPEND PROPERTY BRUME_PART_SOURCES ${sources})
+  set_property(GLOBAL APPEND PROPERTY BRUME_PART_TOPICS ${topics})
+  set_property(GLOBAL APPEND PROPERTY BRUME_PART_SHADERS ${shaders})
+endfunction()
+
+# A folder under src/ whose files are not libbrume's, with the reason.
+function(brume_outside_parts folder reason)
+  set_property(GLOBAL APPEND PROPERTY BRUME_OUTSIDE_PARTS ${folder})
 endfunction()
 
 # Writes `content` to `path` only when it differs (no rebuild otherwise).
@@ -31,26 +65,52 @@ endfunction()
 # The generated lists, and in the caller's scope BRUME_PART_SOURCES (the
 # library's sources) and BRUME_SHADERS (name=path of every GLSL file to embed).
 function(brume_generate_parts gen_dir)
+  get_property(parts GLOBAL PROPERTY BRUME_PARTS)
   get_property(sources GLOBAL PROPERTY BRUME_PART_SOURCES)
   get_property(topics GLOBAL PROPERTY BRUME_PART_TOPICS)
-  get_property(cpu_topics GLOBAL PROPERTY BRUME_PART_CPU_TOPICS)
   get_property(shaders GLOBAL PROPERTY BRUME_PART_SHADERS)
+  get_property(outside GLOBAL PROPERTY BRUME_OUTSIDE_PARTS)
+  # Every source file under src/ belongs to exactly one declared folder.
+  set(folders)
+  set(listing "")
+  foreach(p ${parts})
+    string(REPLACE "=" ";" kv "${p}")
+    list(GET kv 0 n)
+    list(GET kv 1 f)
+    if(f IN_LIST folders)
+      message(FATAL_ERROR "brume: the folder ${f} is declared twice (brume_part ${n})")
+    endif()
+    list(APPEND folders ${f})
+    string(APPEND listing "${n} ${f}\n")
+  endforeach()
+  file(GLOB_RECURSE all CONFIGURE_DEPENDS RELATIVE ${PROJECT_SOURCE_DIR} ${PROJECT_SOURCE_DIR}/src/*.cpp
+       ${PROJECT_SOURCE_DIR}/src/*.hpp ${PROJECT_SOURCE_DIR}/src/*.h ${PROJECT_SOURCE_DIR}/src/*.glsl
+       ${PROJECT_SOURCE_DIR}/src/*.frag ${PROJECT_SOURCE_DIR}/src/*.vert)
+  foreach(f ${all})
+    get_filename_component(d ${f} DIRECTORY)
+    if(NOT d IN_LIST folders AND NOT d IN_LIST outside)
+      message(FATAL_ERROR "brume: ${f} lies in ${d}, which no brume_part() in CMakeLists.txt declares: "
+                          "add `brume_part(NAME ${d})`, or move the file into its family's folder")
+    endif()
+  endforeach()
+  brume_write_if_different("${gen_dir}/parts.txt" "${listing}")
   set(header "// Generated by cmake/brume_parts.cmake from the brume_part() declarations in CMakeLists.txt. Do not edit.\n")
   set(cpp "${header}")
-  foreach(t ${cpu_topics})
-    string(APPEND cpp "#include \"shared/${t}.glsl\"\n")
-  endforeach()
-  brume_write_if_different("${gen_dir}/shared/topics_cpp.inc" "${cpp}")
   set(gpu "${header}")
   set(embed)
   foreach(t ${topics})
-    string(APPEND gpu "{\"${t}\", shaders::${t}_glsl},\n")
-    list(APPEND embed "${t}_glsl=${PROJECT_SOURCE_DIR}/src/shared/${t}.glsl")
+    get_filename_component(n ${t} NAME_WE)
+    string(REGEX REPLACE "^src/" "" inc "${t}")
+    string(APPEND cpp "#include \"${inc}\"\n")
+    string(APPEND gpu "{\"${n}\", shaders::${n}_glsl},\n")
+    list(APPEND embed "${n}_glsl=${PROJECT_SOURCE_DIR}/${t}")
   endforeach()
+  brume_write_if_different("${gen_dir}/shared/topics_cpp.inc" "${cpp}")
   brume_write_if_different("${gen_dir}/gpu/topics.inc" "${gpu}")
   foreach(s ${shaders})
-    string(REPLACE "." "_" n "${s}")
-    list(APPEND embed "${n}=${PROJECT_SOURCE_DIR}/src/gpu/shaders/${s}")
+    get_filename_component(n ${s} NAME)
+    string(REPLACE "." "_" n "${n}")
+    list(APPEND embed "${n}=${PROJECT_SOURCE_DIR}/${s}")
   endforeach()
   set(BRUME_PART_SOURCES ${sources} PARENT_SCOPE)
   set(BRUME_SHADERS ${embed} PARENT_SCOPE)

@@ -29,6 +29,11 @@ runs=(
   "sky fit --image $S/sky.exr --sun-zenith 50 --sun-azimuth 10 --out OUT.json"
   "sample --effect fog --seed 4 --key frame/1"
   "haze --image $S/clean.png --range $S/range.exr --visibility 800 --backend gpu --out OUT.pfm"
+  "fog --image $S/clean.png --range $S/range.exr --density 0.01 --falloff 0.02 --lambda 4 --camera-height 2 --fov-x 60 --backend gpu --out OUT.pfm"
+  "aerial --image $S/clean.png --range $S/range.exr --turbidity 4 --lambda 2 --backend gpu --out OUT.pfm"
+  "dof --image $S/clean.png --range $S/range.exr --focus-distance 50 --coc-infinity 6 --fov-x 60 --backend gpu --out OUT.pfm"
+  "sky render --turbidity 3 --sun-zenith 40 --sun-azimuth 10 --width 64 --height 48 --backend gpu --out OUT.pfm"
+  "blur --image $S/clean.png --sigma 3 --backend gpu --out OUT.pfm"
 )
 i=0
 for r in "${runs[@]}"; do

@@ -4,7 +4,9 @@
   core (src/core: images, params, records, camera, errors, the registry's
         interface brume/command.hpp)  -- includes no effect, not even through
         another header;
-  effects (src/effects, src/gpu/<effect>.cpp, src/depth) -- each its own files;
+  the engines (src/gpu, src/io, src/diffusion, src/depth);
+  effects (src/effects/<family>/: each family's sources, private headers,
+        GPU file, GLSL topic and pass shaders in its folder);
   jobs (src/jobs: the list of commands, run, batch, sample) -- above them.
 
 Checks, on the source tree:
@@ -16,7 +18,7 @@ Checks, on the source tree:
      the build lists (the CMakeLists.txt files that name fog's sources, its
      bench and its fuzz target count as one) and one more -- so that an effect
      costs its own files and one line. The LiDAR fog (include/brume/lidar_fog.hpp,
-     src/effects/lidar_fog*, lidar_camera.cpp (the camera's fog profile for its scan),
+     src/effects/lidar/ (lidar_camera.cpp: the camera's fog profile for its scan),
      its bench, fuzz target and pictures) is fog's by design and
      not counted: its height-layered model takes fog's profiles, their flags
      and their optical-depth integral (issue #41), rather than copying them.
@@ -32,17 +34,16 @@ EFFECT_HEADERS = {
     "brume/haze.hpp", "brume/aerial.hpp", "brume/aerial_coefficients.hpp", "brume/fog.hpp", "brume/dof.hpp",
     "brume/sky.hpp", "brume/insert.hpp", "brume/chain.hpp", "brume/blur.hpp", "brume/gpu.hpp",
     "brume/gpu_haze.hpp", "brume/gpu_aerial.hpp", "brume/gpu_fog.hpp", "brume/gpu_sky.hpp",
-    "effects/fog_fast.hpp",
+    "effects/fog/fog_fast.hpp",
 }
 JOBS_HEADERS = {"brume/batch.hpp", "brume/rerun.hpp"}
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 
-# Fog's own files: its header, maths, pipeline, GPU pass and shader, bench and
-# fuzz target (tests are fog's too).
-FOG_OWN = re.compile(r"^(include/brume/(gpu_)?fog(_params)?\.hpp|src/effects/fog[^/]*|src/gpu/fog\.cpp|"
-                     r"src/gpu/shaders/fog\.frag|src/shared/fog_math\.glsl|bench/bench_fog\.cpp|"
+# Fog's own files: its headers, its folder (maths, pipeline, GPU pass and
+# shader), bench and fuzz target (tests are fog's too).
+FOG_OWN = re.compile(r"^(include/brume/(gpu_)?fog(_params)?\.hpp|src/effects/fog/[^/]*|bench/bench_fog\.cpp|"
                      r"fuzz/fuzz_fog[^/]*|tests/.*|docs/.*|README\.md|CHANGELOG\.md)$")
-LIDAR_FOG = re.compile(r"^(include/brume/lidar_fog\.hpp|src/effects/lidar_(fog|camera)[^/]*|bench/bench_lidar_fog\.cpp|"
+LIDAR_FOG = re.compile(r"^(include/brume/lidar_fog\.hpp|src/effects/lidar/[^/]*|bench/bench_lidar_fog\.cpp|"
                        r"fuzz/fuzz_lidar_fog\.cpp|scripts/lidar_picture\.py)$")
 FOG_SYMBOL = re.compile(r"\b(FogParams|FogJob|GpuFog|run_fog\w*|fog_\w+)\b")
 

@@ -1,5 +1,5 @@
 #!/bin/bash
-# brume — src/cpu/diffusion_fast_f16.cpp compiles its binary16 kernels for
+# brume — src/diffusion/diffusion_fast_f16.cpp compiles its binary16 kernels for
 # AVX2 + F16C (a target pragma after its includes) and is entered only after
 # a run-time CPU check. The inline functions of the headers it includes
 # (mirror, eq11, StoreF32, std::vector's members, ...) are shared with the
@@ -20,7 +20,7 @@ trap 'rm -rf "$tmp"' EXIT
 status=0
 for opt in -O0 -Og; do
   "$cxx" -std=c++20 -fopenmp -fPIC "$opt" -fno-math-errno -Wno-psabi "$@" -I"$src/include" -I"$src/src" \
-    -c "$src/src/cpu/diffusion_fast_f16.cpp" -o "$tmp/f16.o"
+    -c "$src/src/diffusion/diffusion_fast_f16.cpp" -o "$tmp/f16.o"
   weak=$(nm "$tmp/f16.o" | awk '$2 == "W" || $2 == "V" { print $3 }')
   count=0
   bad=0

@@ -84,7 +84,7 @@ def http_rules(brume, tmp):
                      "/x/" + token + "/", "/../" + token + "/"]:
             check(request(url, path)[0] == 403, f"without the token, {path}: 403")
         for path in ["nothing", "../../etc/passwd", "..%2f..%2fetc%2fpasswd", "favicon.ico", "meta.json/",
-                     "shaders/diffuse.frag", "image.bin/../meta.json"]:
+                     "shaders/diffusion_iterate.frag", "image.bin/../meta.json"]:
             check(request(url, base + path)[0] == 404, f"with the token, {path}: 404")
         check(request(url, base, headers={"Host": "evil.example:%d" % port})[0] == 403, "another Host: 403")
         check(request(url, base, headers={"Host": None})[0] == 403, "no Host: 403")

@@ -80,7 +80,7 @@ TEST(Depth, DepthBufferRoundTripsEveryConvention) {
 
 TEST(Depth, DepthBufferImageFormIsTheDoubleFormulaToAFewUlp) {
   // The image conversion (and the GPU fog pass) evaluate 1/z = (1 - d) a + d b
-  // in f32 (src/shared/depth_math.glsl); the double textbook formula for the
+  // in f32 (src/depth/depth_math.glsl); the double textbook formula for the
   // same stored d is the reference. Bound 4e-7 relative (~3 ulp: a and b
   // rounded to f32, two products, a sum and the reciprocal, no cancellation:
   // both terms >= 0), over d in (0, 1) densely and near both planes.

@@ -19,10 +19,10 @@
 #include "brume/blur.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/error.hpp"
-#include "cpu/diffusion_fusion.hpp"
-#include "cpu/diffusion_kernels.hpp"
-#include "cpu/diffusion_rows.hpp"
-#include "cpu/diffusion_setup_math.hpp"
+#include "diffusion/diffusion_fusion.hpp"
+#include "diffusion/diffusion_kernels.hpp"
+#include "diffusion/diffusion_rows.hpp"
+#include "diffusion/diffusion_setup_math.hpp"
 #include "test_util.hpp"
 
 using namespace brume;

@@ -11,7 +11,7 @@
 
 #include "brume/diffusion.hpp"
 #include "brume/error.hpp"
-#include "cpu/diffusion_setup_math.hpp"
+#include "diffusion/diffusion_setup_math.hpp"
 #include "shared/prelude_cpp.h"
 #include "test_util.hpp"
 

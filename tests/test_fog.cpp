@@ -17,7 +17,7 @@
 #include "brume/gpu.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
-#include "effects/fog_fast.hpp"
+#include "effects/fog/fog_fast.hpp"
 #include "test_util.hpp"
 
 using namespace brume;

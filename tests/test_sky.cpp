@@ -137,7 +137,7 @@ TEST(SkyProjection, PixelToDirectionRoundTrips) {
 }
 
 TEST(SkyProjection, SharedFloatMathsAgreeWithDirectionOfPixel) {
-  // The GPU pass's pixel -> direction (src/shared/sky_math.glsl, float) against
+  // The GPU pass's pixel -> direction (src/effects/sky/sky_math.glsl, float) against
   // the double direction_of_pixel: unit vectors within 2e-6 rad (float
   // trigonometry on angles of a few radians; a wrong sign or convention is 1e-1).
   namespace sh = brume::shared;

@@ -23,7 +23,7 @@
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/prepare.hpp"
-#include "effects/fog_fast.hpp"  // detail::apply_fog_rows (not by the unity build's grouping)
+#include "effects/fog/fog_fast.hpp"  // detail::apply_fog_rows (not by the unity build's grouping)
 #include "test_util.hpp"
 
 using namespace brume;

@@ -92,7 +92,7 @@ std::array<double, 3> attenuation_direct(const Atmosphere& a, const SpectralSens
 // relative: |at - double| <= 1e-7 + 1.2e-7 Gamma |ln Gamma| <= 1.5e-7 absolute
 // for Gamma in [0, 1]; measured <= 6.7e-8 on spectral tables (T 1 .. 20, 2 and
 // 100 km, tests/test_aerial_spectral.cpp), below the f32 output's own rounding.
-// The GPU (src/gpu/shaders/aerial_premultiply.frag) runs the same
+// The GPU (src/effects/aerial/aerial_premultiply.frag) runs the same
 // interpolation in highp with GLSL's exp.
 struct AttenuationTable {
   double step_m = 0.0;                               // grid spacing, > 0

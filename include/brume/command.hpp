@@ -10,7 +10,7 @@
 //              ──► the Python module's list of commands, the generated reference
 //
 // Each command's definition lives in its own pipeline file (haze's in
-// src/effects/haze_pipeline.cpp: `CommandDef haze_command()`), built with
+// src/effects/haze/haze_pipeline.cpp: `CommandDef haze_command()`), built with
 // make_command below; the list itself is one line per command in
 // src/jobs/commands.cpp, an explicit list rather than self-registering statics
 // (libbrume.a is static: the linker drops objects nothing references).

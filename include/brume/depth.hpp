@@ -67,7 +67,7 @@ DepthBufferConvention parse_depth_buffer_convention(const std::string& s);
 double depth_buffer_to_z(double d, DepthBufferConvention c, double near_m, double far_m);
 double z_to_depth_buffer(double z, DepthBufferConvention c, double near_m, double far_m);
 // The image conversion evaluates, per pixel in f32, the form the GPU fog
-// pass also evaluates (src/shared/depth_math.glsl): 1/z = (1 - d) a + d b,
+// pass also evaluates (src/depth/depth_math.glsl): 1/z = (1 - d) a + d b,
 // without the textbook forms' cancellation (a few ulp from the double
 // depth_buffer_to_z above for the same stored d).
 Image depth_buffer_to_z(const Image& d, DepthBufferConvention c, double near_m, double far_m);

@@ -17,7 +17,7 @@
 // Channels are independent (no rate depends on F). The fast CPU path keeps
 // F as one four-float vector per pixel and runs other channel counts as
 // groups of four channels (the last padded with zeros): 6 channels cost two
-// 4-channel runs (measured, see by_groups_of_four in src/cpu/diffusion.cpp),
+// 4-channel runs (measured, see by_groups_of_four in src/diffusion/diffusion.cpp),
 // where a kernel generalised to C channels could at best save the padding
 // (a quarter of the work for 6, none for 4 and 8) and would give up the
 // vector-per-pixel layout that the run and f16 schedules are built on. The
@@ -59,7 +59,7 @@ namespace brume {
 enum class Scheme { standard, invariant, invariant_exact };
 enum class Precision { f32, f16 };
 // How eq. 11's edge rate rho(x,u) is formed from the rates at the two ends
-// (src/shared/haze_math.glsl, brume_edge_rate): the paper's mean, or min or
+// (src/effects/haze/haze_math.glsl, brume_edge_rate): the paper's mean, or min or
 // harmonic mean, which stop a blurred background from leaking into the edge
 // of a sharp foreground object (measured by `brume study diffusion`).
 enum class EdgeRate { mean = 0, min = 1, harmonic = 2 };

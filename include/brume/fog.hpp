@@ -15,7 +15,7 @@
 // density has the right sign either way, and its limit as |y_f - y_c| -> 0 is
 // delta(y_c), so a level ray needs no special case. Every profile evaluates
 // the mean in camera-relative heights without forming D(y_f) - D(y_c)
-// (src/shared/fog_math.glsl), stable down to height differences of 1e-6 m.
+// (src/effects/fog/fog_math.glsl), stable down to height differences of 1e-6 m.
 //
 //   exponential  delta = D0 exp(-B (y - Y0))
 //   band         delta = D0 (1 + cos(pi (y - Yc) / Wb)) / 2 for |y - Yc| <= Wb, else 0
@@ -94,7 +94,7 @@ struct FogDensity {
   double fog_start = 0.0, fog_end = 1.0;     // classic linear
   // delta at height u above the camera (for tests and the record).
   double at(double u) const;
-  // The per-pixel code's kind (BrumeFog.kind, src/shared/fog_math.glsl):
+  // The per-pixel code's kind (BrumeFog.kind, src/effects/fog/fog_math.glsl):
   // 0 exponential, 1 band, 2 piecewise linear, 3 classic linear, 4 classic exp2.
   int kind() const;
 };

@@ -2,7 +2,7 @@
 // EGL, textures, and the diffusion engine as passes (Hansard §4.2): one rate
 // pass (sigma -> rho, R32F) and N diffusion passes ping-ponging between two
 // full-resolution RGBA32F (f32) or RGBA16F (f16) textures. The per-pixel
-// maths is src/shared/diffusion_math.glsl, the same text the CPU backend
+// maths is src/diffusion/diffusion_math.glsl, the same text the CPU backend
 // compiles as C++. No effect is named here: each effect's passes have their
 // own header over GpuEffect (brume/gpu_haze.hpp, gpu_aerial.hpp, gpu_fog.hpp,
 // gpu_sky.hpp; brume/gpu.hpp includes them all).

@@ -10,14 +10,14 @@
 namespace brume {
 
 // The layered-fog passes (brume/fog.hpp) over a colour image and a range
-// map (unknown = sky) uploaded once: one fragment pass (shaders/fog.frag:
+// map (unknown = sky) uploaded once: one fragment pass (fog_apply.frag:
 // ray, optical depth, transmission, and the composite or, with lambda > 0,
 // the premultiplied F0 and sigma), then for the blur the rate pass, the
 // diffusion passes and haze's composite pass. Density tables hold at most
 // 32 rows here (uniform arrays); longer ones are refused (use the CPU).
 //
 // Or over a renderer's depth buffer: the pass reads the window depth d in
-// [0, 1] and linearises it itself (src/shared/depth_math.glsl, the CPU
+// [0, 1] and linearises it itself (src/depth/depth_math.glsl, the CPU
 // conversion's expression: 1/z = (1 - d) a + d b, range = z |ray|), the
 // cleared value (and NaN) being sky. Values outside [0, 1] are refused as by
 // `brume depth convert`. `analyse_fog` still needs the range for its

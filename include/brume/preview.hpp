@@ -81,7 +81,7 @@ struct PreviewFrame {
 // uploads a range (gpu::upload_color_and_range).
 Image preview_unknown_negative(Image m);
 
-// The scattering blur's steps (src/gpu/diffusion.cpp with --gpu-filter
+// The scattering blur's steps (src/diffusion/diffusion_gpu.cpp with --gpu-filter
 // shader): the rate pass from `sigma` (.r) into target "rates", then the
 // diffusion of `f_ping` (ping-ponging with `f_pong`) whose last texture is
 // named `last`. Appended to plan["steps"].

@@ -9,9 +9,9 @@
 // with A..E linear in the turbidity T (Preetham A.2; Morales eq. 1.8 for Y),
 // the zenith luminance Y_z [kcd/m^2] = (4.0453T - 4.9710) tan chi - 0.2155T + 2.4192,
 // chi = (4/9 - T/120)(pi - 2 theta_s), and the zenith chromaticity cubic in
-// theta_s and quadratic in T; the tables are in src/shared/sky_math.glsl.
+// theta_s and quadratic in T; the tables are in src/effects/sky/sky_math.glsl.
 // Then X = x Y / y, Z = (1 - x - y) Y / y, and linear sRGB = M^-1 XYZ
-// (IEC 61966-2-1, the matrix the aerial effect uses: src/shared/aerial_math.glsl).
+// (IEC 61966-2-1, the matrix the aerial effect uses: src/effects/aerial/aerial_math.glsl).
 // Rendered values are in kcd/m^2 (Y of linear sRGB = Y of XYZ), times --exposure.
 //
 // Domain: T in [1.7, 20]. Preetham's fit turns negative below T ~ 1.65 --
@@ -72,7 +72,7 @@ constexpr double kSkyTurbidityMax = 20.0;  // the thesis' range
 void check_sky_turbidity(double t, const std::string& flag = "--turbidity");
 
 // ---- the model in double precision (the reference; the renderer uses the
-// ---- float shared maths of src/shared/sky_math.glsl and is tested against it)
+// ---- float shared maths of src/effects/sky/sky_math.glsl and is tested against it)
 struct PerezCoefficients {
   double a = 0, b = 0, c = 0, d = 0, e = 0;
 };

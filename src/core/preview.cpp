@@ -1,5 +1,5 @@
 // brume — the scattering blur's steps of a preview plan (brume/preview.hpp):
-// the uniforms src/gpu/diffusion.cpp sets, with the shader's interpolation;
+// the uniforms src/diffusion/diffusion_gpu.cpp sets, with the shader's interpolation;
 // and the names and values of the plan's maps.
 #include "brume/preview.hpp"
 

@@ -1,5 +1,6 @@
 // brume — the GPU context over headless EGL + OpenGL ES 3.2, the program
 // cache and the texture/target plumbing every pass shares (src/gpu/context.hpp).
+#if BRUME_HAVE_GPU  // a build without EGL/GLES compiles gpu_unavailable.cpp instead
 #include "gpu/context.hpp"
 
 #include <atomic>
@@ -21,7 +22,7 @@ namespace shaders = gpu::shaders;
 
 namespace {
 
-// The shared topic files a pass can declare (src/shared/*.glsl), by name:
+// The shared topic files a pass can declare (the families' *_math.glsl), by name:
 // generated from the brume_part() declarations (CMakeLists.txt).
 struct Topic {
   const char* name;
@@ -547,3 +548,4 @@ Image GpuImage::read() const {
 }
 
 }  // namespace brume
+#endif  // BRUME_HAVE_GPU

@@ -1,8 +1,8 @@
 // brume — the GPU pass layer (private to src/gpu): the context, its program
 // cache, render targets and stage timers. An effect on the GPU is a set of
-// passes: each pass is a fragment shader body (src/gpu/shaders/*.frag) run
+// passes: each pass is a fragment shader body (<family>_<pass>.frag in the family's folder) run
 // over one full-screen triangle, plus the list of shared topic files
-// (src/shared/*.glsl) whose per-pixel maths it calls. Adding an effect means
+// (the families' *_math.glsl) whose per-pixel maths it calls. Adding an effect means
 // writing its passes and their PassSpecs, not copying this plumbing.
 //
 // Conventions every pass follows: pixel (x, y) of an Image is texel (x, y) of

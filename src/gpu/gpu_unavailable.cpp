@@ -1,6 +1,7 @@
 // brume — the GPU context and the diffusion passes in a build without EGL/GLES
 // 3.2: every entry point reports why there is no context, so callers need no
-// #ifdefs (each effect's src/gpu file has its own stubs).
+// #ifdefs (each family's *_gpu.cpp has its own stubs).
+#if !BRUME_HAVE_GPU  // the build with EGL/GLES compiles context.cpp and the passes instead
 #include "brume/error.hpp"
 #include "brume/gpu_context.hpp"
 
@@ -31,3 +32,4 @@ DiffusionPlan diffuse_gpu(GpuContext&, Image&, const Image&, double, const Diffu
 }
 
 }  // namespace brume
+#endif  // !BRUME_HAVE_GPU

@@ -5,7 +5,7 @@
 // process that links it -- 20x the rest of brume's start-up (docs/performance.md:
 // `brume --version` 0.42 s linked, 0.02 s without) and more than a whole
 // diffusion. So libbrume does not link OpenImageIO: the few calls it makes
-// live in a module, brume_codec.so (src/io/codec_oiio.cpp), that brume
+// live in a module, brume_codec.so (src/io/oiio/codec_oiio.cpp), that brume
 // dlopens the first time a file needs it: the files no row of the table of
 // formats takes (src/io/formats/format.hpp). A run whose files the rows
 // take, every run that fails its checks, `--help` and `--version` never

@@ -1,4 +1,5 @@
-// Lets the per-pixel maths in src/shared/*.glsl compile as C++.
+// Lets the per-pixel maths of the families' GLSL topics (src/effects/<family>/*_math.glsl,
+// src/diffusion/, src/depth/) compile as C++.
 // GLSL ES 3.00 has float scalars, exp/sqrt/floor/clamp/mix built in and
 // passes by value; this prelude gives C++ the same vocabulary, so the same
 // source text is compiled by the CPU backend and embedded in the shaders.

@@ -1,0 +1,283 @@
+// brume — the depth-of-field pipeline: what `brume dof` does, as a library
+// call, in the shape every effect follows (brume/pipeline.hpp): prepare the
+// range, turn it into planar depth, form the scale map from the CoC, dispatch
+// once on Exec (the GPU runs the engine's own passes on that map), record.
+#include <cstdio>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include "brume/command.hpp"
+#include "brume/dof.hpp"
+#include "brume/error.hpp"
+#include "brume/gpu_context.hpp"
+#include "brume/record.hpp"
+#include "effects/dof/dof_preview.hpp"
+
+namespace brume {
+
+namespace {
+
+nlohmann::json dof_record(const DofParams& p, const DofAnalysis& a, const Intrinsics& k, const std::string& k_source) {
+  nlohmann::json j;
+  j["parameters"] = dof_param_table().to_json(p);
+  j["units"] = dof_param_table().units();
+  j["diffusion"] = diffusion_record(dof_diffusion_params(p), a.plan);
+  j["diffusion"]["dof_scheme"] = to_string(p.scheme);
+  j["derived"] = {
+      {"coc_infinity_px", a.alpha_px},
+      {"sigma_max_px", a.sigma_max},
+      {"coc_limit_px", p.coc_limit_px},
+      {"capped_pixels", a.capped_pixels},
+      {"unknown_depth_pixels", a.unknown_pixels},
+      {"unknown_depth_rule", "unknown depth is infinitely far: c = alpha"},
+      {"near_field_pixels", a.near_pixels},
+      {"foreground_rule", p.foreground == Foreground::soft
+                              ? "near-field sigma in octave bands [2^j, 2^(j+1)) px, each blurred by a Gaussian of 2^j px, max with "
+                                "sigma (§3.4)"
+                              : "none (the CoC map as is)"},
+      {"z_min_m", a.z_min_m},
+      {"z_max_m", a.z_max_m},
+      {"sigma_law", "sigma = min(sqrt(sigma0^2 + (c/4)^2), coc_limit), c = alpha |Z - Zf| / Z"},
+      {"intrinsics", {{"fx", k.fx}, {"fy", k.fy}, {"cx", k.cx}, {"cy", k.cy}, {"source", k_source}}},
+  };
+  return j;
+}
+
+bool cpu_only(const DofParams& p) { return p.scheme == DofScheme::bertalmio || p.scheme == DofScheme::leaky; }
+
+// The GPU runs the engine's passes (rates from sigma, diffusion): the schemes
+// whose edge weights they form. --backend gpu with another is an error
+// (checked before any work); --backend auto runs those on the CPU.
+void check_gpu_scheme(const DofParams& p, Backend b) {
+  if (b != Backend::gpu) return;
+  if (cpu_only(p))
+    throw Error("--scheme " + to_string(p.scheme) +
+                " runs on the CPU only (a comparison with the paper; the GPU passes form symmetric edge weights): "
+                "use --backend cpu, or --scheme invariant-exact or standard on the GPU");
+}
+
+}  // namespace
+
+bool depth_flags_give_intrinsics(const DepthSource& s) {
+  return s.k.fx > 0.0 || s.k.fy > 0.0 || !std::isnan(s.fov_x_deg) || !std::isnan(s.fov_y_deg) || !s.calib.empty() ||
+         (!s.velodyne.empty() && !s.kitti_calib.empty());
+}
+
+const std::vector<MapOutput>& dof_map_outputs() {
+  static const std::vector<MapOutput> m = {
+      {"scale-map", "write the target scale sigma(x) in pixels (float file)", "sigma is in pixels and exceeds 1"},
+  };
+  return m;
+}
+
+const ParamTable<DofJob>& dof_job_table() {
+  static const ParamTable<DofJob> t = [] {
+    ParamTable<DofJob> d("dof");
+    d.nest(&DofJob::input, input_param_table(true))
+        .nest(&DofJob::prepare, range_step_param_table())
+        .nest(&DofJob::dof, dof_param_table())
+        .nest(&DofJob::output, output_param_table(dof_map_outputs()));
+    return d;
+  }();
+  return t;
+}
+
+Intrinsics dof_intrinsics(const DepthSource& src, const DofParams& p, int width, int height) {
+  const std::optional<double> lens_fx = lens_fx_px(p, width);
+  if (depth_flags_give_intrinsics(src)) {
+    const Intrinsics k = depth_camera(src, width, height).k;
+    if (lens_fx && std::abs(*lens_fx / k.fx - 1.0) > 0.01) {
+      std::ostringstream m;
+      m << "the lens gives fx = focal length x width / sensor width = " << *p.focal_length_mm << " mm x " << width
+        << " px / " << *p.sensor_width_mm << " mm = " << *lens_fx << " px, but the depth's intrinsics give fx = "
+        << k.fx << " px (" << 100.0 * std::abs(*lens_fx / k.fx - 1.0)
+        << " % apart; at most 1 % is allowed): correct --focal-length or --sensor-width, or the intrinsics";
+      throw Error(m.str());
+    }
+    return k;
+  }
+  if (lens_fx) {
+    Intrinsics k;
+    k.fx = k.fy = *lens_fx;  // square pixels, principal point at the centre
+    return resolve(k, width, height);
+  }
+  throw Error("depth of field needs planar depth, so the camera's intrinsics: give --fx (or --fov-x, --calib), or "
+              "the lens (--focal-length and --sensor-width)");
+}
+
+DofRun run_dof(DenseImageRef rgb, DenseImageRef measured_range, const Intrinsics& k, const DofParams& p,
+               const RangeStep& prepare, const Exec& exec, const std::set<std::string>& given) {
+  validate_dof(p, given);
+  check_gpu_scheme(p, exec.gpu ? Backend::gpu : exec.backend);
+  if (rgb.channels != 3) throw Error("depth of field needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
+  if (rgb.width != measured_range.width || rgb.height != measured_range.height)
+    throw Error("range map " + measured_range.size_string() + " does not match image " + rgb.size_string() +
+                "; they must be the same size (resample the range map, or crop both)");
+  // A sparse map is completed first (guided by rgb), when the step says so.
+  const CompletedRange done = complete_step(measured_range.view(), rgb.view(), prepare, given, exec.threads);
+  PreparedRange prep = prepare_step(done.view(measured_range.view()), prepare, given, exec.threads);
+  prep.record["complete"] = done.record;
+  return run_dof_prepared(rgb, prep, k, p, exec, given);
+}
+
+DofRun run_dof_prepared(DenseImageRef rgb, const PreparedRange& prep, const Intrinsics& k, const DofParams& p,
+                        const Exec& exec, const std::set<std::string>& given) {
+  validate_dof(p, given);
+  check_gpu_scheme(p, exec.gpu ? Backend::gpu : exec.backend);
+  Exec ex = exec;
+  if (cpu_only(p) && ex.backend == Backend::automatic) ex.backend = Backend::cpu;
+  if (rgb.channels != 3) throw Error("depth of field needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
+  if (rgb.width != prep.range.width || rgb.height != prep.range.height)
+    throw Error("range map " + prep.range.size_string() + " does not match image " + rgb.size_string() +
+                "; they must be the same size (resample the range map, or crop both)");
+  DofRun run;
+  const Image z = planar_depth(prep.range, k);
+  BackendChoice backend = choose_backend(ex);
+  if (ex.backend != exec.backend)
+    backend.record["note"] = "--scheme " + to_string(p.scheme) + " runs on the CPU only; --backend auto chose the CPU";
+  const auto t0 = std::chrono::steady_clock::now();
+  nlohmann::json timing;
+  if (backend.gpu) {
+    // The engine's GPU passes on the scale map from the CoC (formed on the
+    // host: one pass over W x H, nothing to gain from a GPU pass).
+    run.result.scale = dof_scale_map(z, p, run.analysis, exec);
+    Image f(rgb.width, rgb.height, 4);
+    for (std::size_t i = 0; i < rgb.pixels(); ++i) {
+      for (int c = 0; c < 3; ++c) f.data[i * 4 + c] = rgb.data[i * 3 + c];
+      f.data[i * 4 + 3] = 1.0f;
+    }
+    GpuTiming t;
+    diffuse_gpu(*backend.gpu, f, run.result.scale, run.analysis.sigma_max, dof_diffusion_params(p), exec.gpu_filter,
+                &t);
+    run.result.rgb = Image(rgb.width, rgb.height, 3);
+    for (std::size_t i = 0; i < rgb.pixels(); ++i)
+      for (int c = 0; c < 3; ++c) run.result.rgb.data[i * 3 + c] = f.data[i * 4 + c];
+    timing = gpu_timing_record(t);
+  } else {
+    run.result = apply_dof(rgb, z, p, run.analysis, exec);
+    timing = cpu_timing_record(t0, run.analysis.plan.iterations);
+  }
+  run.record["dof"] = dof_record(p, run.analysis, k, "given by the caller");
+  run.record["prepare"] = prep.record;
+  run.record["execution"] = backend.record;
+  run.record["execution"]["timing"] = timing;
+  return run;
+}
+
+
+// The preview (effects/dof/dof_preview.hpp): the engine's passes on the scale
+// map from the CoC, formed on the host as the GPU path of run_dof_prepared
+// does, and named by its contents.
+namespace {
+Image dof_preview_scale(const DofParams& p, const Intrinsics& k, const PreviewInputs& in, DofAnalysis& a) {
+  check_gpu_scheme(p, Backend::gpu);
+  return dof_scale_map(planar_depth(in.prepared.range, k), p, a);
+}
+}  // namespace
+
+nlohmann::json dof_preview_steps(PreviewFrame& frame, const DofParams& p, const Intrinsics& k, const PreviewInputs& in,
+                                 const std::string& input, const std::string& prefix, const std::string& last) {
+  DofAnalysis a;
+  Image scale = dof_preview_scale(p, k, in, a);
+  const DiffusionParams dp = dof_diffusion_params(p);
+  const std::string name = frame.add_map("dof.scale", std::move(scale));
+  const std::string f0 = prefix + "0", f1 = prefix + "1";
+  const char* f = dp.precision == Precision::f16 ? "RGBA16F" : "RGBA32F";
+  nlohmann::json& plan = frame.plan;
+  plan["targets"][f0] = f;
+  plan["targets"][f1] = f;
+  plan["steps"].push_back({{"copy", {{"from", input}, {"to", f0}}}});
+  preview_diffusion_steps(plan, dp, a.plan, name, f0, f1, last);
+  return {{"sigma_max_px", a.sigma_max}, {"coc_infinity_px", a.alpha_px}, {"iterations", a.plan.iterations}};
+}
+
+PreviewFrame dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
+  DofJob j;
+  dof_job_table().from_json(j, job, "job");
+  PreviewFrame frame;
+  frame.plan["targets"] = nlohmann::json::object();
+  frame.plan["steps"] = nlohmann::json::array();
+  const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, preview_full_width(in), preview_full_height(in));
+  frame.plan["derived"] = dof_preview_steps(frame, j.dof, preview_intrinsics(k, in.scale), in, "image", "f", "blurred");
+  frame.plan["result"] = "blurred";
+  return frame;
+}
+
+nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& eo, const RunContext& ctx) {
+  const EffectJob<DofJob> e{
+      "dof", dof_job_table(), dof_map_outputs(), 90,
+      [&](const DofJob& j, const ExecOptions& x) {
+        validate_dof(j.dof, ctx.given);
+        check_gpu_scheme(j.dof, x.backend);
+      },
+      [&](const DofJob& j, LoadedInputs& in, const Exec& exec) {
+        const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height);
+        DofRun run = run_dof(in.rgb, in.depth.range, k, j.dof, j.prepare, exec, ctx.given);
+        run.record["dof"]["derived"]["intrinsics"]["source"] =
+            depth_flags_give_intrinsics(j.input.depth) ? "depth flags" : "lens (focal length x width / sensor width)";
+        return EffectOutput{std::move(run.result.rgb), {{"scale-map", std::move(run.result.scale)}},
+                            std::move(run.record)};
+      }};
+  return run_effect_job(e, job, eo, ctx);
+}
+
+CommandDef dof_command() {
+  CommandDef c = make_command<DofJob>({
+      .name = "dof",
+      .cli = "dof",
+      .summary = "depth of field by leak-free diffusion (thin-lens CoC, Bertalmio eq. 1-2, 16)",
+      .table = &dof_job_table(),
+      .exec = true,
+      .record = true,
+      .batch = true,
+      .check = [](const DofJob& j, const std::set<std::string>& g) {
+        validate_dof(j.dof, g);
+        check_range_step(j.prepare, g);
+      },
+      .run = &run_dof_job,
+      .report = [](const DofJob& j, const nlohmann::json& rec) {
+        const auto& d = rec["dof"]["derived"];
+        std::fprintf(stderr, "brume dof: %s  CoC at infinity %.3g px  sigma_max %.3g px (%zu capped)  %d iterations (%s, %s)\n",
+                     j.output.out.c_str(), d["coc_infinity_px"].get<double>(), d["sigma_max_px"].get<double>(),
+                     d["capped_pixels"].get<std::size_t>(), rec["dof"]["diffusion"]["iterations"].get<int>(),
+                     rec["dof"]["diffusion"]["dof_scheme"].get<std::string>().c_str(),
+                     rec["execution"]["backend"].get<std::string>().c_str());
+      },
+  });
+  // A 50 mm lens on a 36 mm (full-frame) sensor, the "normal" lens whose
+  // field of view is close to most datasets' cameras (fix --focal-length and
+  // --sensor-width to your camera), at the full stops f/1.4-f/8 (where depth
+  // of field is visible at all), focused log-uniformly from 1 m (close-up) to
+  // 50 m (street scenes; beyond, the scene is all in focus). --coc-infinity
+  // replaces the lens.
+  c.sampling = make_sampling<DofParams>(dof_param_table(),
+                                        {{"focus-distance", "loguniform(1, 50)", {}},
+                                         {"f-number", "choice(1.4, 2, 2.8, 4, 5.6, 8)", {"coc-infinity"}},
+                                         {"focal-length", "50", {"coc-infinity"}},
+                                         {"sensor-width", "36", {"coc-infinity"}}},
+                                        &validate_dof);
+  c.gpu_passes = {"diffusion.rates", "diffusion.iterate"};
+  c.preview = &dof_preview;
+  static const auto call = array_call_table(dof_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
+  c.arrays = make_array_form<DofParams>(
+      "dof", "",
+      "Depth of field by leak-free diffusion (thin-lens circle of confusion). `range` is metres along the ray; "
+      "planar depth comes from the intrinsics or the lens. As `brume dof`.",
+      rgb_range_args(ArrayArg::As::dense), call, {"rgb", "scale", "record"}, true,
+      [](const std::vector<ArrayIn>& in, ArrayCall<DofParams>& k, const Exec& e, const std::set<std::string>& g) {
+        const Intrinsics ki = dof_intrinsics(k.depth, k.p, in[0].dense.width, in[0].dense.height);
+        // run_dof reads a given context as backend gpu (its CPU-only schemes
+        // would be refused), so with auto it makes its own.
+        Exec ex = e;
+        if (ex.backend != Backend::gpu) ex.gpu = nullptr;
+        DofRun r = run_dof(in[0].dense, in[1].dense, ki, k.p, k.prepare, ex, g);
+        return ArrayResult{{{"rgb", std::move(r.result.rgb)}, {"scale", std::move(r.result.scale)}},
+                           std::move(r.record),
+                           {},
+                           {}};
+      });
+  return c;
+}
+
+}  // namespace brume

@@ -1,0 +1,14 @@
+// brume — haze's preview frame, for the previews that join it (brume/preview.hpp):
+// haze+dof's plan is haze's plan, then depth of field's steps on its result
+// (src/effects/dof/chain/chain_pipeline.cpp).
+#pragma once
+
+#include "brume/haze.hpp"
+#include "brume/preview.hpp"
+
+namespace brume {
+
+// Haze's whole frame (GpuHaze::render's passes): result "out".
+PreviewFrame haze_preview_frame(const HazeParams& p, const PreviewInputs& in);
+
+}  // namespace brume
