@@ -66,10 +66,7 @@ enum class EdgeRate { mean = 0, min = 1, harmonic = 2 };
 
 std::string to_string(Scheme s);
 std::string to_string(Precision p);
-Scheme parse_scheme(const std::string& s);        // throws brume::Error
-Precision parse_precision(const std::string& s);  // throws brume::Error
 std::string to_string(EdgeRate e);
-EdgeRate parse_edge_rate(const std::string& s);   // throws brume::Error
 
 struct DiffusionParams {
   Scheme scheme = Scheme::invariant_exact;
