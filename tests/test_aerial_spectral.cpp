@@ -1,6 +1,6 @@
 // The spectral core of aerial perspective (brume/aerial.hpp): the scattering
 // coefficients against the thesis' numbers and their closed-form scalings,
-// the weather classes of Table 3.1 as DESIGN.md corrects it, the built-in CIE
+// the weather classes of Table 3.1 as docs/aerial.md corrects it, the built-in CIE
 // fit against the real CIE table, the sensitivity loaders against the shared
 // camspec data and against files that must be rejected, and Gamma against an
 // independent fine integral and against its own table.
@@ -95,7 +95,7 @@ TEST(AerialCoefficients, AltitudeScalesByScaleHeights) {
 }
 
 TEST(AerialCoefficients, WeatherClassesOfTable31AsCorrected) {
-  // DESIGN.md: Table 3.1's "min/max" columns are beta_M bounds at 550 nm;
+  // docs/aerial.md: Table 3.1's "min/max" columns are beta_M bounds at 550 nm;
   // with beta_M ~ (T - 1) and T = 1.6 <-> 0.0639 /km they imply the turbidity
   // at which each class starts: T = 1 + 0.6 beta / 0.0639. Tolerance 0.5 % of
   // T - 1: the table's 4-digit bounds against our 0.06385 /km at T = 1.6.

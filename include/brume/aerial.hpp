@@ -1,6 +1,6 @@
 // brume — spectral aerial perspective from atmospheric turbidity
 // (Morales, "Rendering aerial perspective in mixed reality from atmospheric
-// turbidity", ch. 3-4; ../shared/DESIGN.md for the corrections).
+// turbidity", ch. 3-4; docs/aerial.md for the model and the correction of Table 3.1).
 //
 // Scattering coefficients (per metre), lambda in 380-780 nm, turbidity T in
 // [1, 20], observer altitude h0 in [-500, 9000] m:

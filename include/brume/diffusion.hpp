@@ -37,7 +37,7 @@
 //  - invariant-exact (default): same N and rates, but the offset h_k is chosen
 //      so that 2 rho (h_k^2 + f(1-f)) = sigma_{k+1}^2 - sigma_k^2, where
 //      f = frac(h_k) and f(1-f) is the variance that linear interpolation
-//      itself adds. Reaches the target variance exactly. (../shared/DESIGN.md)
+//      itself adds. Reaches the target variance exactly (docs/diffusion.md).
 //
 // Boundary rule: half-sample mirror (the image is reflected about its outer
 // pixel edges: ... c b a | a b c ...), which is the zero-flux condition of
@@ -66,10 +66,7 @@ enum class EdgeRate { mean = 0, min = 1, harmonic = 2 };
 
 std::string to_string(Scheme s);
 std::string to_string(Precision p);
-Scheme parse_scheme(const std::string& s);        // throws brume::Error
-Precision parse_precision(const std::string& s);  // throws brume::Error
 std::string to_string(EdgeRate e);
-EdgeRate parse_edge_rate(const std::string& s);   // throws brume::Error
 
 struct DiffusionParams {
   Scheme scheme = Scheme::invariant_exact;

@@ -20,8 +20,7 @@ enum class Backend {
   gpu,        // any OpenGL ES 3.2 context, software rasterisers included (CI runs llvmpipe)
   automatic,  // the GPU only when its renderer is hardware, else the CPU (see GpuInfo::software)
 };
-Backend parse_backend(const std::string& s);  // cpu | gpu | auto; throws brume::Error
-std::string to_string(Backend b);
+std::string to_string(Backend b);  // cpu | gpu | auto
 
 // How samples between texels are interpolated in the GPU diffusion passes.
 enum class GpuFilter {
@@ -29,8 +28,7 @@ enum class GpuFilter {
   hardware,   // texture() with LINEAR + MIRRORED_REPEAT (the half-sample mirror)
   shader,     // texelFetch + mix in the shader (exact float weights)
 };
-GpuFilter parse_gpu_filter(const std::string& s);  // auto | hardware | shader; throws brume::Error
-std::string to_string(GpuFilter f);
+std::string to_string(GpuFilter f);  // auto | hardware | shader
 
 struct Exec {
   int threads = 0;         // 0 = all hardware threads; results never depend on it

@@ -1,6 +1,6 @@
 // brume — layered fog from a depth buffer (Zhou, Chen, Smith, "Scene depth
 // reconstruction on the GPU: a post processing technique for layered fog";
-// maths and the sign and limit corrections in DESIGN.md), with the scattering
+// maths and the sign and limit corrections in docs/fog.md), with the scattering
 // blur of haze driven by the fog actually crossed.
 //
 // A pixel (u, v) with range l [m] along its ray, seen from a camera at height

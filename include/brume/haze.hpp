@@ -57,7 +57,6 @@
 namespace brume {
 
 enum class Composite { premultiplied, naive };
-Composite parse_composite(const std::string& s);
 std::string to_string(Composite c);
 const EnumNames<Composite>& composite_names();
 

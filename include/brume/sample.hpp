@@ -83,9 +83,6 @@ nlohmann::json draw(const Distribution& d, double u);
 // The effects whose parameters can be sampled: haze, fog, aerial, dof.
 const std::vector<std::string>& sample_effects();
 
-// The effect's default plausible distributions, {canonical name: spec text}.
-std::map<std::string, std::string> default_sample_specs(std::string_view effect);
-
 // The specs a draw uses: the effect's defaults, overridden and extended by
 // `specs` (names may use '_' for '-', a trailing '_' as in Python's lambda_,
 // and the flag's aliases; they are resolved to canonical names), each

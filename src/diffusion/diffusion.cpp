@@ -18,9 +18,6 @@ namespace brume {
 std::string to_string(Scheme s) { return enum_name(scheme_names(), s); }
 std::string to_string(Precision p) { return enum_name(precision_names(), p); }
 std::string to_string(EdgeRate e) { return enum_name(edge_rate_names(), e); }
-Scheme parse_scheme(const std::string& s) { return parse_enum(scheme_names(), s, "--scheme"); }
-Precision parse_precision(const std::string& s) { return parse_enum(precision_names(), s, "--precision"); }
-EdgeRate parse_edge_rate(const std::string& s) { return parse_enum(edge_rate_names(), s, "--edge-rate"); }
 
 double effective_rho_max(const DiffusionParams& p) {
   if (p.rho_max) return *p.rho_max;

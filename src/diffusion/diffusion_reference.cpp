@@ -1,7 +1,7 @@
 // brume — scalar double-precision reference of the diffusion schemes.
 //
 // A literal transcription of eq. 11-13 and 17-18 (and the exact-variance
-// offset of DESIGN.md) with no optimisation: one pixel at a time, every
+// offset of docs/diffusion.md) with no optimisation: one pixel at a time, every
 // neighbour index mirrored, every rate and offset computed from its closed
 // form (exp, not the fast path's running product). It is the oracle the fast
 // path and, later, the GPU backend are tested against. f16 mode rounds the

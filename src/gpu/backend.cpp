@@ -7,9 +7,7 @@
 namespace brume {
 
 // Names come from the one name table of each enum (brume/pipeline.hpp).
-Backend parse_backend(const std::string& s) { return parse_enum(backend_names(), s, "--backend"); }
 std::string to_string(Backend b) { return enum_name(backend_names(), b); }
-GpuFilter parse_gpu_filter(const std::string& s) { return parse_enum(gpu_filter_names(), s, "--gpu-filter"); }
 std::string to_string(GpuFilter f) { return enum_name(gpu_filter_names(), f); }
 
 void gpu_unavailable() {

@@ -290,12 +290,6 @@ const std::vector<std::string>& sample_effects() {
   return names;
 }
 
-std::map<std::string, std::string> default_sample_specs(std::string_view effect) {
-  std::map<std::string, std::string> out;
-  for (const SampleDefault& d : sampling_of(effect).s->defaults) out[d.name] = d.spec;
-  return out;
-}
-
 std::map<std::string, std::string> resolve_sample_specs(std::string_view effect,
                                                         const std::map<std::string, std::string>& specs) {
   std::map<std::string, std::string> out;

@@ -1,5 +1,5 @@
 // brume — the spectral core of aerial perspective (Morales 2014, ch. 3;
-// ../shared/DESIGN.md): scattering coefficients, camera sensitivities and the
+// docs/aerial.md): scattering coefficients, camera sensitivities and the
 // camera-weighted attenuation Gamma_c(s) of eq. 3.10, directly and as a table.
 //
 // Integration: Gamma_c(s) = sum_i w_i e^{-beta(l_i) s} q_c(l_i) / sum_i w_i q_c(l_i)

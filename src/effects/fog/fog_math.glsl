@@ -1,4 +1,4 @@
-// brume — per-pixel maths of layered fog (Zhou, Chen, Smith; DESIGN.md),
+// brume — per-pixel maths of layered fog (Zhou, Chen, Smith; docs/fog.md),
 // in the common subset of C++ and GLSL ES 3.00 (see haze_math.glsl).
 //
 // Heights are camera-relative, u = y - y_c: the ray from the camera to a

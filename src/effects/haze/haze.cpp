@@ -19,7 +19,6 @@ const EnumNames<Composite>& composite_names() {
   static const EnumNames<Composite> n = {{Composite::premultiplied, "premultiplied"}, {Composite::naive, "naive"}};
   return n;
 }
-Composite parse_composite(const std::string& s) { return parse_enum(composite_names(), s, "--composite"); }
 std::string to_string(Composite c) { return enum_name(composite_names(), c); }
 const EnumNames<SkyRule>& sky_rule_names() {
   static const EnumNames<SkyRule> n = {{SkyRule::automatic, "auto"}, {SkyRule::s_max, "s-max"}};

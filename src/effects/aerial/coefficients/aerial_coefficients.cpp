@@ -18,7 +18,7 @@ const ParamTable<Atmosphere>& atmosphere_param_table() {
     ParamTable<Atmosphere> d("atmosphere");
     d.real("turbidity", &Atmosphere::turbidity, "1", Range::closed(1.0, 20.0),
            "atmospheric turbidity T: 1 pure air, ~2 clear, ~3-4.5 light haze, ~10 haze, ~19 fog (Morales Table "
-           "3.1 as corrected in DESIGN.md)")
+           "3.1 as corrected in docs/aerial.md)")
         .real("altitude", &Atmosphere::altitude_m, "m", Range::closed(-500.0, 9000.0),
               "observer altitude above sea level (scales beta_R by e^{-h/7994 m}, beta_M by e^{-h/1200 m})");
     return d;
