@@ -6,6 +6,7 @@
 // today's schema holding the job as it ran (an older schema's job completed
 // with the values that give its rules, ParamTable::since).
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
