@@ -8,12 +8,16 @@
 //   files ──► load_inputs (decode, depth → range) ──► prepare_step ──► effect
 //         ──► write_outputs (encoding rules, record, atomic rename)
 //
-// Records (schema_version 3) hold the whole job — every declared parameter
+// Records (schema_version 4) hold the whole job — every declared parameter
 // of every block, under "job" — next to what the run derived and measured,
 // so `brume run record.json` repeats the run. Schema 3 (issue #40) changed the sky under a medium in metres (brume/haze.hpp, "The sky");
-// a parameter that a later schema introduced with a new rule declares the
-// value that reproduces the older rule (ParamSpec::since_schema), and
-// `brume run` gives it to an older record's job that lacks it.
+// schema 4 (issue #49) opens a wave whose parameters with new rules (the
+// renderer's background, the completion method, the slant path, ...) come
+// `since(4, …)`, no schema of their own. A parameter that a later schema introduced
+// with a new rule declares the value that reproduces the older rule
+// (ParamSpec::since_schema), and `brume run` gives it to an older record's
+// job that lacks it; tests/records holds a record of each older schema that
+// must keep repeating bit for bit (tests/test_records.cpp).
 #pragma once
 
 #include <chrono>
@@ -38,7 +42,7 @@
 
 namespace brume {
 
-constexpr int kRecordSchemaVersion = 3;
+constexpr int kRecordSchemaVersion = 4;
 constexpr int kOldestRecordSchemaVersion = 2;  // the oldest `brume run` repeats
 
 // ---- name tables (one per enum: flags, records and messages use them) ----

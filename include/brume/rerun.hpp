@@ -26,7 +26,8 @@ std::string check_record(const nlohmann::json& record);
 // Throws brume::Error as check_record does for a record of no known schema.
 nlohmann::json record_job(const nlohmann::json& record);
 
-// `brume run`: repeat the run a record describes (schema_version 2). Inputs
+// `brume run`: repeat the run a record describes (schema_version
+// kOldestRecordSchemaVersion to kRecordSchemaVersion, brume/pipeline.hpp). Inputs
 // must still have the SHA-256 the record names; with a non-empty out_dir,
 // every output goes into out_dir under its recorded file name. Returns the
 // new record. A `brume sky fit` JSON is repeated too (its record is under

@@ -1,0 +1,55 @@
+"""The stored records of older schemas (tests/records/README.md) replayed by
+brume.rerun on their input files' arrays: a record of an older schema runs
+under the rules it ran under (its job completed as `brume run` completes it),
+bit for bit the output its own build wrote. The records of the commands
+brume.rerun takes (the effects on rgb and a range map); tests/test_records.cpp
+replays every stored record with `brume run`."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import brume
+
+RECORDS = Path(__file__).resolve().parents[2] / "tests" / "records"
+EFFECTS = {"haze", "haze+dof", "fog", "aerial", "dof"}
+
+
+def stored():
+    out = []
+    for d in sorted(RECORDS.glob("schema-*")):
+        for f in sorted(d.glob("*.json")):
+            rec = json.loads(f.read_text())
+            if rec.get("command") in EFFECTS and rec["job"]["depth"].get("range"):
+                out.append(pytest.param(rec, id=f"{d.name}/{f.stem}"))
+    return out
+
+
+def bits(a):
+    return np.ascontiguousarray(a, dtype=np.float32).tobytes()
+
+
+@pytest.mark.parametrize("record", stored())
+def test_stored_record_repeats_on_arrays(record, monkeypatch):
+    monkeypatch.chdir(RECORDS)  # the record's paths are relative to tests/records
+    job = record["job"]
+    rgb = brume.read_image(job["input"]["image"]).rgb
+    rng = brume.read_image(job["depth"]["range"]).rgb[..., 0].copy()
+    keywords = {"threads": 2}
+    scan = job.get("lidar", {}).get("lidar")
+    if scan:
+        keywords["lidar"] = np.fromfile(scan, dtype="<f4").reshape(-1, 4)
+    again = brume.rerun(record, rgb, rng, **keywords)
+    assert bits(again.rgb) == bits(brume.read_image(job["output"]["out"]).rgb)
+    if scan:
+        assert bits(again.lidar) == Path(job["lidar"]["lidar-out"]).read_bytes()
+    # The replay's record: today's schema, the stored job's values, and a
+    # schema-2 job's sky at S_max (sky-rule, since schema 3).
+    today = brume.blur(np.zeros((2, 2, 3), np.float32), sigma=1.5).record["schema_version"]
+    assert again.record["schema_version"] == today > record["schema_version"]
+    for block in ("haze", "fog", "aerial", "dof", "diffusion", "prepare"):
+        for name, value in job.get(block, {}).items():
+            assert again.record["job"][block][name] == value, f"{block}.{name}"
+        if record["schema_version"] < 3 and block in ("haze", "fog") and block in job:
+            assert again.record["job"][block]["sky-rule"] == "s-max"
