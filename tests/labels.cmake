@@ -9,14 +9,15 @@
 #   effect_cli  the CLI suites of single effects, batch and sky
 # and the label derived from the sources:
 #   data        the cases that read the real data (BRUME_DATA_DIR, else
-#               ../shared/data): those whose body uses data_path, have_data
-#               or BRUME_REQUIRE_DATA, directly or through what their file
-#               (or a test header) defines with them (tests/data_tests.py).
+#               ../shared/data): those whose body uses data_dir, data_path,
+#               have_data or BRUME_REQUIRE_DATA, directly or through what
+#               their file (or a test header) defines with them
+#               (tests/data_tests.py).
 #               .ci/run runs them again with BRUME_DATA_DIR at an empty
 #               folder, so that a test that fails without the data fails CI.
 # The other ctest labels: install (install_consumer, tests/CMakeLists.txt),
-# fuzz (the corpus replays, fuzz/CMakeLists.txt), data on docs_examples,
-# gallery_pictures_are_small (tests/CMakeLists.txt) and python_data
+# fuzz (the corpus replays, fuzz/CMakeLists.txt), and data on docs_examples
+# and gallery_pictures_are_small (tests/CMakeLists.txt) and on python
 # (python/CMakeLists.txt). scripts/test-sanitize.sh picks tests by these labels
 # (ctest -LE); `ctest -N -L gpu` lists a label's.
 set(brume_label_rules
