@@ -21,6 +21,7 @@ files: a parse that silently labels nothing is a failure, not a pass.
 
 Usage: data_tests.py gtest [--util HEADER]... --min N FILE...
        data_tests.py pytest --min N FILE...
+       data_tests.py self-test tests/test_util.hpp   (the parser on a sample)
 """
 import argparse
 import re
@@ -171,7 +172,7 @@ def ids(text):
 def gtest_cases(path, helpers):
     """(cases using the data, all cases) of one C++ file."""
     defs, text = macros(strip(open(path, encoding="utf-8").read()))
-    units = []  # (defined names, identifiers used, is this a class's set-up)
+    units = []  # (names defined, identifiers used)
     tests = []  # (Suite.Name, identifiers used)
     for name, body in defs:
         units.append(([name], ids(body)))
@@ -211,7 +212,72 @@ def gtest_cases(path, helpers):
     return [name for name, used in tests if used & data], [name for name, _ in tests]
 
 
+# The self-test (ctest data_label_derivation): each way of reaching the data,
+# and things that only look like it.
+SELF_TEST = r"""
+namespace {
+const char* kPath = "x/y.bin";  // data_path in a comment does not count
+std::string helper_a() { return data_path(kPath); }
+std::string helper_b(int n = 2) { return helper_a() + "z{"; }
+#define NEED_X() \
+  BRUME_REQUIRE_DATA("x")
+const std::string kFile = data_path("q");
+auto lam = [](int) { return have_data("r"); };
+}  // namespace
+class DataFixture : public ScratchDirTest {
+ protected:
+  void SetUp() override { img = data_path("a"); }
+  std::string img;
+};
+class Derived : public DataFixture {};
+class Mixed : public ::testing::Test {
+ protected:
+  std::string art() const { return data_path("art"); }
+  int synthetic() const { return 3; }
+};
+TEST(S, Direct) { BRUME_REQUIRE_DATA("a"); }
+TEST(S, ViaChain) { auto s = helper_b(); }
+TEST(S, ViaMacro) { NEED_X(); }
+TEST(S, ViaConst) { auto s = kFile; }
+TEST(S, ViaLambda) { lam(1); }
+TEST(S, Pure) { const char* s = "data_path(\"x\")"; char c = '{'; int k = 1'000; }
+TEST_F(DataFixture, ViaFixture) {}
+TEST_F(Derived, ViaBase) {}
+TEST_F(Mixed, UsesMember) { art(); }
+TEST_F(Mixed, DoesNot) { synthetic(); }
+TEST(S, RawString) { auto r = R"x(data_path( { )x"; }
+TEST(S, AfterRaw) { middlebury2005("Art"); }
+TEST_P(Param, ViaDir) { auto d = data_dir(); }
+"""
+SELF_TEST_DATA = {"S.Direct", "S.ViaChain", "S.ViaMacro", "S.ViaConst", "S.ViaLambda", "DataFixture.ViaFixture",
+                  "Derived.ViaBase", "Mixed.UsesMember", "S.AfterRaw", "Param.ViaDir"}
+
+
+def self_test(util):
+    import os
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        f = os.path.join(d, "t.cpp")
+        with open(f, "w", encoding="utf-8") as out:
+            out.write(SELF_TEST)
+        sys.argv = [sys.argv[0], "gtest", "--min", "1", "--util", util, f]
+        import contextlib
+        import io
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            rc = main()
+    got = set(buf.getvalue().split())
+    if rc != 0 or got != SELF_TEST_DATA:
+        print(f"data_tests.py self-test: labelled {sorted(got)}, wanted {sorted(SELF_TEST_DATA)}; missing "
+              f"{sorted(SELF_TEST_DATA - got)}, extra {sorted(got - SELF_TEST_DATA)}", file=sys.stderr)
+        return 1
+    print(f"data_tests.py self-test: the {len(SELF_TEST_DATA)} data cases of {len(re.findall(r'^TEST', SELF_TEST, re.M))} found")
+    return 0
+
+
 def main():
+    if sys.argv[1:2] == ["self-test"]:
+        return self_test(sys.argv[2])
     ap = argparse.ArgumentParser()
     ap.add_argument("kind", choices=("gtest", "pytest"))
     ap.add_argument("--util", action="append", default=[],
