@@ -5,14 +5,15 @@
 # Haven) and CC BY-NC-SA (ETH3D, KITTI) data go to $OUT (docs/gallery); pictures
 # derived from research-use data without redistribution terms (Middlebury,
 # GeoPose3K) go to $LOCAL (docs/gallery/local, ignored by git).
-# Usage: bash scripts/gallery.sh   (BRUME, DATA, OUT, LOCAL override the defaults)
+# Usage: bash scripts/gallery.sh   (BRUME, DATA, OUT, LOCAL override the defaults;
+# the data folder is DATA, else BRUME_DATA_DIR, else ../shared/data)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 B=${BRUME:-build/brume}
-D=${DATA:-../shared/data}
+D=${DATA:-${BRUME_DATA_DIR:-../shared/data}}
 OUT=${OUT:-docs/gallery}
 LOCAL=${LOCAL:-docs/gallery/local}
-if [ ! -d "$D" ]; then echo "gallery: no data at $D (../shared/data)" >&2; exit 2; fi
+if [ ! -d "$D" ]; then echo "gallery: no data at $D (DATA, else BRUME_DATA_DIR, else ../shared/data)" >&2; exit 2; fi
 mkdir -p "$OUT" "$LOCAL"
 q=(--compression jpeg:85)  # JPEG at quality 85 keeps each picture well under 200 kB
 E=$D/eth3d_two_view

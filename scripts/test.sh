@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite from a fresh Debian 12 machine: install the
 # dependencies, build, and run every test with ctest. Real-data tests read
-# ../shared/data in place and skip with a message when it is absent.
+# ../shared/data (or the folder named by BRUME_DATA_DIR) in place and skip
+# with a message when it is absent (docs/testing.md, "The real data").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh

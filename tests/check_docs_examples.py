@@ -7,14 +7,16 @@ with `bash -e`, and each ```python block with the module's interpreter
   demo-out/   the demo scene (`brume demo --out-dir demo-out`),
   build       a link to the build tree (`./build/brume`, build/python),
   docs, examples  links to the repository's (their scripts),
-and beside it `../shared`, a link to the shared data. Blocks run in file
+and beside it `../shared/data`, a link to the data folder (the environment
+variable BRUME_DATA_DIR when set, else --data). Blocks run in file
 order, each file's blocks in the same folder, so a block may use what an
 earlier one of its page wrote. A block passes when it exits 0 and every file
 it names after --out, --out-dir, --record, --json, --plot or --manifest
 exists afterwards. Blocks that start with the line `# illustrative` (set-up
 commands, synopses, files a user would bring) are not run; blocks that
 read ../shared, or use the Python module (python blocks, or build/python), are skipped with a message when
-the data is absent or the module not built. `python3` is --python (the
+the data is absent (the folder is missing or empty, or lacks a ../shared/data/... path the block names) or
+the module not built. `python3` is --python (the
 interpreter the module was built for).
 """
 import argparse
@@ -30,6 +32,7 @@ import time
 
 FENCE = re.compile(r"^```(sh|bash|python)\n(.*?)^```", re.S | re.M)
 NAMED = ("--out", "--out-dir", "--record", "--json", "--plot", "--manifest")
+DATA_PATH = re.compile(r"\.\./shared/data/[^\s\"'$;|&),`]+")
 
 
 def blocks(repo):
@@ -63,19 +66,23 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repo", required=True)
     ap.add_argument("--build", required=True, help="the build tree (holds brume and python/)")
-    ap.add_argument("--data", required=True, help="the shared data folder (../shared/data)")
+    ap.add_argument("--data", required=True,
+                    help="the data folder (../shared/data); the environment variable BRUME_DATA_DIR overrides it")
     ap.add_argument("--python", default="/usr/bin/python3", help="the python3 the examples run")
     ap.add_argument("--only", default="", help="run only the blocks of files whose path contains this")
     a = ap.parse_args()
+    a.data = os.environ.get("BRUME_DATA_DIR") or a.data
     a.repo, a.build, a.data = (os.path.abspath(x) for x in (a.repo, a.build, a.data))
     brume = os.path.join(a.build, "brume")
     have_python = os.path.isdir(os.path.join(a.build, "python", "brume"))
-    have_data = os.path.isdir(a.data)
+    have_data = os.path.isdir(a.data) and bool(os.listdir(a.data))
     root = tempfile.mkdtemp(prefix="brume_docs_")
     work = os.path.join(root, "work")
     os.makedirs(work)
     if have_data:
-        os.symlink(os.path.dirname(os.path.abspath(a.data)), os.path.join(root, "shared"))
+        # ../shared/data is the data folder, whatever its own name
+        os.makedirs(os.path.join(root, "shared"))
+        os.symlink(a.data, os.path.join(root, "shared", "data"))
     # `python3` in the examples is the interpreter the module was built for.
     bindir = os.path.join(root, "bin")
     os.makedirs(bindir)
@@ -96,10 +103,15 @@ def main():
                 continue
             if body.lstrip().startswith("# illustrative"):
                 continue
-            if "../shared" in body and not have_data:
-                print(f"skip {where}: needs ../shared/data, absent")
-                skipped += 1
-                continue
+            if "../shared" in body:
+                lacking = [] if have_data else [a.data]
+                lacking += [p for p in DATA_PATH.findall(body) if have_data and not os.path.exists(
+                    os.path.join(a.data, p[len("../shared/data/"):]))]
+                if lacking:
+                    print(f"skip {where}: needs the data folder (BRUME_DATA_DIR, else ../shared/data), "
+                          f"absent or empty or without {lacking[0]}")
+                    skipped += 1
+                    continue
             if (lang == "python" or "build/python" in body) and not have_python:
                 print(f"skip {where}: needs the Python module (build/python), not built")
                 skipped += 1

@@ -80,7 +80,11 @@ def http_rules(brume, tmp):
         token = base.strip("/")
         check(host == "127.0.0.1" and len(token) == 32, f"one loopback URL with a 128-bit token: {url}")
         check(request(url, base)[0] == 200, "the page with the token: 200")
-        for path in ["/", "/favicon.ico", "/index.html", "/meta.json", "/" + token, "/" + token[:-1] + "0/",
+        # A wrong token: the real one with its last hex digit's four bits
+        # flipped (never the real one; a fixed last digit was, one run in 16).
+        wrong = token[:-1] + format(int(token[-1], 16) ^ 0xF, "x")
+        check(wrong != token and len(wrong) == 32, f"a wrong token {wrong} differs from {token}")
+        for path in ["/", "/favicon.ico", "/index.html", "/meta.json", "/" + token, "/" + wrong + "/",
                      "/x/" + token + "/", "/../" + token + "/"]:
             check(request(url, path)[0] == 403, f"without the token, {path}: 403")
         for path in ["nothing", "../../etc/passwd", "..%2f..%2fetc%2fpasswd", "favicon.ico", "meta.json/",

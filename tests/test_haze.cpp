@@ -147,7 +147,8 @@ TEST(Haze, BadInputsAreErrors) {
 
 TEST(Haze, FastPathMatchesReferenceOnRealData) {
   Image rgb, range;
-  if (!load_middlebury("Moebius", rgb, range)) GTEST_SKIP() << "../shared/data/middlebury2005_thirdsize is absent";
+  BRUME_REQUIRE_DATA("middlebury2005_thirdsize/Moebius/view1.png");
+  ASSERT_TRUE(load_middlebury("Moebius", rgb, range));
   HazeParams p;
   p.kappa_s = 1.0;
   p.lambda = 6.0;
@@ -170,7 +171,8 @@ TEST(Haze, RealSceneKeepsNearSharpAndBlursFar) {
   // ordered accordingly. Measured: gradient 0.27 vs 0.10 (2.7x), Laplacian
   // 0.054 vs 0.0074 (7.3x); the bounds leave margin for other platforms' libm.
   Image rgb, range;
-  if (!load_middlebury("Dolls", rgb, range)) GTEST_SKIP() << "../shared/data/middlebury2005_thirdsize is absent";
+  BRUME_REQUIRE_DATA("middlebury2005_thirdsize/Dolls/view1.png");
+  ASSERT_TRUE(load_middlebury("Dolls", rgb, range));
   HazeParams p;
   p.kappa_s = 1.0;
   p.lambda = 2.0;

@@ -118,7 +118,7 @@ TEST_F(LidarCamera, HazeOnASyntheticFrameAndScan) {
 }
 
 TEST_F(LidarCamera, HazeOnTheKittiFrame) {
-  if (!have_data(kKittiDir)) GTEST_SKIP() << "no " << data_path(kKittiDir) << " (../shared/data)";
+  BRUME_REQUIRE_DATA(kKittiDir);
   const std::string k = data_path(kKittiDir);
   const std::string velo = k + "/velodyne/000001.bin";
   camera_and_lidar_agree("--image " + k + "/image_2/000001.png --velodyne " + velo + " --kitti-calib " + k +
@@ -133,7 +133,7 @@ TEST_F(LidarCamera, HazeOnTheKittiFrame) {
 // places the scan and projects the depth: an input, by SHA-256). Without
 // --kitti-calib the scan has no pose: refused.
 TEST_F(LidarCamera, LayeredFogOnTheKittiFrame) {
-  if (!have_data(kKittiDir)) GTEST_SKIP() << "no " << data_path(kKittiDir) << " (../shared/data)";
+  BRUME_REQUIRE_DATA(kKittiDir);
   const std::string k = data_path(kKittiDir), velo = k + "/velodyne/000001.bin", calib = p("calib.txt");
   fs::copy_file(k + "/calib/000001.txt", calib);  // a copy in the test's folder, changed below
   const std::string fog = " --profile exponential --density 0.08 --falloff 0.3 --camera-height 1.65 --pitch 1";
@@ -302,7 +302,7 @@ TEST(LidarCameraScan, KittiLayoutFillsTheLidarColumn) {
   o.layout = "middlebury";
   o.lidar = true;
   EXPECT_NE(error_of([&] { scan_dataset(o); }).find("--layout kitti"), std::string::npos);
-  if (!have_data(kKittiDir)) GTEST_SKIP() << "no " << data_path(kKittiDir) << " (../shared/data)";
+  BRUME_REQUIRE_DATA(kKittiDir);
   o.dir = data_path(kKittiDir);
   o.layout = "kitti";
   const std::vector<nlohmann::json> rows = scan_dataset(o);

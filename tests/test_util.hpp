@@ -39,9 +39,27 @@ inline void PrintTo(Precision p, std::ostream* os) { *os << to_string(p); }
 
 namespace brume::test {
 
-inline std::string data_path(const std::string& rel) { return std::string(BRUME_DATA_DIR) + "/" + rel; }
+// The real third-party data folder: the environment variable BRUME_DATA_DIR
+// when it is set and not empty, else the compiled-in BRUME_DATA_DIR
+// (../shared/data beside the repository). .ci/run points it at an empty folder
+// to run the tests labelled `data` (tests/labels.cmake) without the data.
+inline std::string data_dir() {
+  const char* env = std::getenv("BRUME_DATA_DIR");
+  return env && *env ? std::string(env) : std::string(BRUME_DATA_DIR);
+}
+
+// A file or folder of the data. A test that reads one must use this,
+// have_data or BRUME_REQUIRE_DATA (directly or through a helper of its file):
+// that is how tests/data_tests.py finds it for the label `data`.
+inline std::string data_path(const std::string& rel) { return data_dir() + "/" + rel; }
 
 inline bool have_data(const std::string& rel) { return std::filesystem::exists(data_path(rel)); }
+
+// Why a real-data test skips: what is missing, and where the folder comes from.
+inline std::string data_absent(const std::string& rel) {
+  return "real data '" + data_path(rel) + "' is absent: the data folder (BRUME_DATA_DIR, else ../shared/data " +
+         "beside the repository) does not hold it";
+}
 
 // A file's bytes ("" when it cannot be read).
 inline std::string file_bytes(const std::string& path) {
@@ -51,11 +69,9 @@ inline std::string file_bytes(const std::string& path) {
   return s.str();
 }
 
-#define BRUME_REQUIRE_DATA(rel)                                                              \
-  do {                                                                                       \
-    if (!::brume::test::have_data(rel))                                                      \
-      GTEST_SKIP() << "shared data '" << ::brume::test::data_path(rel)                       \
-                   << "' is absent; this real-data test needs ../shared/data beside the repo"; \
+#define BRUME_REQUIRE_DATA(rel)                                                          \
+  do {                                                                                   \
+    if (!::brume::test::have_data(rel)) GTEST_SKIP() << ::brume::test::data_absent(rel); \
   } while (0)
 
 // The independent mirror and Gaussian references (study/reference), shared

@@ -48,12 +48,33 @@ def demo(tmp_path_factory):
     return {"dir": d, "rgb": rgb, "range": rng}
 
 
+DATA_WHERE = "BRUME_DATA_DIR, else ../shared/data beside the repository"
+
+
+def data_folder():
+    """The real data folder: the environment variable BRUME_DATA_DIR when it
+    is set and not empty, else ../shared/data beside the repository (as the
+    C++ tests' data_path)."""
+    return pathlib.Path(os.environ.get("BRUME_DATA_DIR") or (ROOT.parent / "shared" / "data"))
+
+
 @pytest.fixture(scope="session")
 def data_dir():
-    d = pathlib.Path(os.environ.get("BRUME_DATA_DIR") or (ROOT.parent / "shared" / "data"))
-    if not d.is_dir():
-        pytest.skip(f"real data folder {d} is absent")
+    """The real data folder; the test skips when it is absent or empty. A test
+    that reads the data requests this fixture (that puts its file under the
+    ctest label `data`, python/CMakeLists.txt) and checks what it reads with
+    require_data."""
+    d = data_folder()
+    if not d.is_dir() or not any(d.iterdir()):
+        pytest.skip(f"the real data folder {d} is absent or empty ({DATA_WHERE})")
     return d
+
+
+def require_data(path):
+    """path, a file or folder of the data; the test skips when it is absent."""
+    if not os.path.exists(path):
+        pytest.skip(f"real data {path} is absent: the data folder ({DATA_WHERE}) does not hold it")
+    return path
 
 
 @pytest.fixture(scope="session")

@@ -11,7 +11,7 @@ import pytest
 
 import brume
 from brume import _brume
-from conftest import assert_gil_released, cli_path, run_cli
+from conftest import assert_gil_released, cli_path, require_data, run_cli
 
 
 def read_map(path, **kw):
@@ -86,7 +86,7 @@ def test_blur_equals_cli(demo, tmp_path):
 
 
 def test_depth_convert_equals_cli(data_dir, tmp_path):
-    art = data_dir / "middlebury2005_thirdsize" / "Art"
+    art = require_data(data_dir / "middlebury2005_thirdsize" / "Art")
     flags = dict(fx=1246.667, baseline=0.16, disparity_scale=0.3333333, disparity_offset=66.667)
     for kind in ("range", "z"):
         run_cli("depth", "convert", "--disparity", art / "disp1.png", "--fx", 1246.667, "--baseline", 0.16,
@@ -99,8 +99,7 @@ def test_depth_convert_equals_cli(data_dir, tmp_path):
 
 def test_depth_stereo_equals_cli(data_dir, tmp_path):
     eth = data_dir / "eth3d_two_view" / "terrace"
-    if not (eth / "im1.png").exists():
-        pytest.skip(f"{eth / 'im1.png'} is absent")
+    require_data(eth / "im1.png")
     run_cli("depth", "stereo", "--left", eth / "im0.png", "--right", eth / "im1.png", "--calib", eth / "calib.txt",
             "--out", tmp_path / "d.pfm", "--confidence", tmp_path / "c.pfm")
     r = brume.depth.stereo(left=eth / "im0.png", right=eth / "im1.png", calib=eth / "calib.txt")

@@ -12,7 +12,7 @@ import pytest
 import brume
 import brume.transforms as T
 from brume import _brume
-from conftest import cli_path, run_cli, scan
+from conftest import cli_path, require_data, run_cli, scan
 
 
 def read_bin(path):
@@ -141,8 +141,7 @@ def test_kitti_frame_equals_the_cli(data_dir, tmp_path):
     """KITTI object 000001 (image_2, velodyne, calib): the camera's range
     from the scan, haze at 80 m; Python's scan equals the CLI's --lidar-out."""
     k = data_dir / "kitti_object_000001"
-    if not (k / "velodyne" / "000001.bin").exists():
-        pytest.skip(f"{k} has no velodyne/000001.bin")
+    require_data(k / "velodyne" / "000001.bin")
     img, velo, calib = k / "image_2" / "000001.png", k / "velodyne" / "000001.bin", k / "calib" / "000001.txt"
     run_cli("haze", "--image", img, "--velodyne", velo, "--kitti-calib", calib, "--visibility", 80,
             "--lidar", velo, "--lidar-out", tmp_path / "s.bin", "--out", tmp_path / "o.png")

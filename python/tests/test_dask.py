@@ -8,7 +8,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from conftest import run_cli
+from conftest import require_data, run_cli
 
 distributed = pytest.importorskip("distributed", reason="python3-distributed (Debian) is not installed")
 
@@ -26,9 +26,7 @@ def _records_equal(a_dir, b_dir, rel):
 def test_dask_local_cluster_equals_brume_batch(tmp_path, data_dir):
     import brume
     import brume.dask
-    mb = data_dir / "middlebury2005_thirdsize"
-    if not mb.is_dir():
-        pytest.skip(f"{mb} is absent")
+    mb = require_data(data_dir / "middlebury2005_thirdsize")
     manifest = tmp_path / "m.jsonl"
     run_cli("batch", "--scan", mb, "--layout", "middlebury", "--manifest", manifest)
     rows = [json.loads(l) for l in manifest.read_text().splitlines()][:3]
