@@ -216,7 +216,7 @@ TEST(ViewFront, BoundsHeadsAndBodiesBeforeTheHandler) {
   EXPECT_EQ(ask("GET /tok/ HTTP/1.1\r\nX: " + std::string(9000, 'a')), 431);               // ... before its end
   std::string many = "GET /tok/ HTTP/1.1\r\n";
   for (int i = 0; i < 150; ++i) many += "X-" + std::to_string(i) + ": a\r\n";
-  EXPECT_EQ(ask(many + "\r\n"), 431);  // > 100 header lines
+  EXPECT_EQ(ask(many + "\r\n"), 431);                                             // > 100 header lines
   EXPECT_EQ(ask("POST /tok/ HTTP/1.1\r\nContent-Length: 2000000\r\n\r\n"), 413);  // announced: nothing read
   EXPECT_EQ(ask("GET /tok/ HTTP/1.1\r\nContent-Length: 200000000\r\n\r\n"), 413);
   std::string chunks = "POST /tok/ HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n";
@@ -230,7 +230,8 @@ TEST(ViewFront, BoundsHeadsAndBodiesBeforeTheHandler) {
   EXPECT_EQ(ask("POST /tok/ HTTP/1.1\r\nContent-Length: 3\r\nContent-Length: 4\r\n\r\n"), 400);
   EXPECT_EQ(s.calls.load(), 0);  // none of them reached the handler
   // A chunked body within the bound reaches the handler as sent, framing and all.
-  const std::string ok = "POST /tok/f HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n3;x=1\r\nabc\r\n2\r\nde\r\n0\r\nT: 1\r\n\r\n";
+  const std::string ok =
+      "POST /tok/f HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n3;x=1\r\nabc\r\n2\r\nde\r\n0\r\nT: 1\r\n\r\n";
   EXPECT_EQ(ask(ok), 200);
   EXPECT_EQ(s.last(), ok);
 }

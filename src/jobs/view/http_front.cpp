@@ -79,23 +79,23 @@ enum class Phase { head, body, busy, closing };
 
 struct Conn {
   int fd = -1;
-  std::uint64_t order = 0;   // accept order (ties of t0)
+  std::uint64_t order = 0;  // accept order (ties of t0)
   Phase phase = Phase::head;
-  std::string buf;           // received, not yet handed to a worker
-  long long t0 = 0;          // ms: accepted, or its previous response ended (head); head's end (body)
-  bool kept = false;         // a keep-alive connection between requests
+  std::string buf;    // received, not yet handed to a worker
+  long long t0 = 0;   // ms: accepted, or its previous response ended (head); head's end (body)
+  bool kept = false;  // a keep-alive connection between requests
   int served = 0;
   bool peer_closed = false;
   // head
-  std::size_t scanned = 0;   // lines of the head read so far end here
+  std::size_t scanned = 0;  // lines of the head read so far end here
   std::size_t lines = 0;
   std::size_t head_len = 0;
   // body
   bool chunked = false;
   std::size_t content_length = 0;
-  std::size_t pos = 0;       // chunked: the parse position in buf
+  std::size_t pos = 0;  // chunked: the parse position in buf
   std::size_t chunk_left = 0;
-  int chunk_state = 0;       // 0 size line, 1 data, 2 trailer
+  int chunk_state = 0;  // 0 size line, 1 data, 2 trailer
   std::size_t decoded = 0;
   // closing
   long long linger_until = 0;
@@ -201,7 +201,8 @@ struct HttpFront::Impl {
   void refuse(Conn& c, int status, const char* reason, const std::string& body) {
     std::string r = "HTTP/1.1 " + std::to_string(status) + " " + reason +
                     "\r\nContent-Type: text/plain; charset=utf-8\r\nContent-Length: " + std::to_string(body.size()) +
-                    "\r\nConnection: close\r\nCache-Control: no-store\r\nX-Content-Type-Options: nosniff\r\n\r\n" + body;
+                    "\r\nConnection: close\r\nCache-Control: no-store\r\nX-Content-Type-Options: nosniff\r\n\r\n" +
+                    body;
     (void)::send(c.fd, r.data(), r.size(), MSG_NOSIGNAL | MSG_DONTWAIT);  // small: fits the socket's buffer
     ::shutdown(c.fd, SHUT_WR);
     c.phase = Phase::closing;
@@ -449,8 +450,10 @@ struct HttpFront::Impl {
       if (hex.empty() || hex.size() > 8) return hex.size() > 8 ? too_large() : bad();
       std::size_t n = 0;
       for (char ch : hex) {
-        const int d = ch >= '0' && ch <= '9' ? ch - '0' : ch >= 'a' && ch <= 'f' ? ch - 'a' + 10
-                      : ch >= 'A' && ch <= 'F' ? ch - 'A' + 10 : -1;
+        const int d = ch >= '0' && ch <= '9'   ? ch - '0'
+                      : ch >= 'a' && ch <= 'f' ? ch - 'a' + 10
+                      : ch >= 'A' && ch <= 'F' ? ch - 'A' + 10
+                                               : -1;
         if (d < 0) return bad();
         n = n * 16 + static_cast<std::size_t>(d);
       }
@@ -618,7 +621,8 @@ struct HttpFront::Impl {
       FrontPeer peer;
       sockaddr_storage a{};
       socklen_t len = sizeof a;
-      if (getpeername(j.fd, reinterpret_cast<sockaddr*>(&a), &len) == 0) peer.remote_ip = addr_text(a, peer.remote_port);
+      if (getpeername(j.fd, reinterpret_cast<sockaddr*>(&a), &len) == 0)
+        peer.remote_ip = addr_text(a, peer.remote_port);
       len = sizeof a;
       if (getsockname(j.fd, reinterpret_cast<sockaddr*>(&a), &len) == 0) peer.local_ip = addr_text(a, peer.local_port);
       bool keep = false;

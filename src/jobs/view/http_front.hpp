@@ -39,19 +39,19 @@
 namespace brume::view {
 
 struct FrontLimits {
-  std::size_t max_connections = 512;       // held at once (busy ones included)
-  std::size_t max_head_bytes = 16384;      // request line and headers together
-  std::size_t max_line_bytes = 8192;       // one line of the head (cpp-httplib's own URI bound)
-  std::size_t max_header_lines = 100;      // header lines of one head
-  std::size_t max_body_bytes = 1 << 20;    // a body, decoded (chunked: its data)
-  std::size_t max_framing_bytes = 1 << 18; // chunked framing (size lines, CRLFs, trailers) of one body
-  int head_deadline_ms = 2000;             // a complete head, from the connection's start or its last response
-  int keep_alive_ms = 1000;                // an idle keep-alive connection without a byte of a next request
-  int body_deadline_ms = 10000;            // a complete body, from the head's end
-  int write_stall_ms = 5000;               // a response write making no progress
-  int linger_ms = 1000;                    // after a refusal: read and drop what the peer still sends, then close
+  std::size_t max_connections = 512;        // held at once (busy ones included)
+  std::size_t max_head_bytes = 16384;       // request line and headers together
+  std::size_t max_line_bytes = 8192;        // one line of the head (cpp-httplib's own URI bound)
+  std::size_t max_header_lines = 100;       // header lines of one head
+  std::size_t max_body_bytes = 1 << 20;     // a body, decoded (chunked: its data)
+  std::size_t max_framing_bytes = 1 << 18;  // chunked framing (size lines, CRLFs, trailers) of one body
+  int head_deadline_ms = 2000;              // a complete head, from the connection's start or its last response
+  int keep_alive_ms = 1000;                 // an idle keep-alive connection without a byte of a next request
+  int body_deadline_ms = 10000;             // a complete body, from the head's end
+  int write_stall_ms = 5000;                // a response write making no progress
+  int linger_ms = 1000;                     // after a refusal: read and drop what the peer still sends, then close
   std::size_t linger_bytes = 16 << 20;
-  int max_requests = 100;                  // per connection
+  int max_requests = 100;  // per connection
   int workers = 4;
 };
 
@@ -69,8 +69,8 @@ using FrontWrite = std::function<bool(const char* data, std::size_t size)>;
 // handler writes the whole response and returns whether the connection may
 // stay open. `last`: the connection closes after this response whatever the
 // handler returns (its request cap, or the front is stopping).
-using FrontHandler = std::function<bool(const std::string& request, bool last, const FrontPeer& peer,
-                                        const FrontWrite& write)>;
+using FrontHandler =
+    std::function<bool(const std::string& request, bool last, const FrontPeer& peer, const FrontWrite& write)>;
 
 // Whether a request target may be served (the token); others get 403 with
 // `refusal` as the body, from the front.

@@ -474,8 +474,8 @@ struct Server {
                       "application/json");
       };
       if (const std::size_t bad = first_invalid_utf8(q.body); bad != std::string::npos)
-        return refuse(400, "the frame request is not UTF-8 text (an invalid byte at offset " + std::to_string(bad) +
-                               ")");
+        return refuse(400,
+                      "the frame request is not UTF-8 text (an invalid byte at offset " + std::to_string(bad) + ")");
       const json body = json::parse(q.body, nullptr, /*allow_exceptions=*/false);
       if (body.is_discarded()) return refuse(400, "the frame request is not JSON: {\"values\": {name: text}}");
       try {
