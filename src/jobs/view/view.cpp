@@ -12,12 +12,21 @@
 // random token as the first path segment, checked first on every request
 // (403); Host and Origin must name the address and port served (403: DNS
 // rebinding); with the token only the page, its modules and the one view's
-// data exist (404 for anything else: no file paths, no listing); bodies,
-// concurrent connections and the request rate are bounded; SIGINT/SIGTERM
-// end it (set explicitly: a shell's background job inherits SIGINT ignored),
-// and so does --idle-exit. It writes nothing.
+// data exist (404 for anything else: no file paths, no listing); the
+// request rate is bounded; SIGINT/SIGTERM end it (set explicitly: a shell's
+// background job inherits SIGINT ignored), and so does --idle-exit. It
+// writes nothing.
+//
+// Peers without the token (issue #51): connections are accepted and read by
+// the front (http_front.hpp: heads and bodies within byte bounds and
+// deadlines, idle connections evicted first at the cap, 403 for a target
+// without the token before anything else is read); cpp-httplib parses and
+// routes only complete requests, from memory (RequestStream), and writes
+// the response through the front.
 #include <httplib.h>
 #include <signal.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -39,6 +48,7 @@
 #include "brume/params.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/record.hpp"
+#include "jobs/view/http_front.hpp"
 #include "jobs/view/view_embedded.hpp"
 #if BRUME_HAVE_GPU
 #include "gpu/passes.hpp"
@@ -280,7 +290,9 @@ struct Server {
   json frame(const json& body) {
     if (!body.is_object() || !body.contains("values") || !body["values"].is_object())
       throw Error("the request needs {\"values\": {name: text}}");
-    const int k = body.value("scale", 1);
+    if (body.contains("scale") && !body["scale"].is_number_integer())
+      throw Error("scale must be a whole number in [1, 64]");
+    const int k = body.contains("scale") ? body["scale"].get<int>() : 1;
     if (k < 1 || k > 64) throw Error("scale " + std::to_string(k) + " must be in [1, 64]");
     JobValues values = cli_values;
     std::set<std::string> given = cli_given;
@@ -333,15 +345,22 @@ struct Server {
     return {{"plan", plan}, {"command", line}, {"record", record}, {"width", d.rgb.width}, {"height", d.rgb.height}};
   }
 
-  // Every request: the token first, then Host and Origin, then the rate.
-  httplib::Server::HandlerResponse guard(const httplib::Request& req, httplib::Response& res) {
+  // Whether a path (or a request target) begins with /TOKEN/, compared in
+  // time independent of where a guess first differs (every byte of the
+  // token's length is read), so response times reveal nothing.
+  bool has_token(std::string_view path) const {
     const std::string prefix = "/" + token + "/";
-    // Compared in time independent of where a guess first differs (every
-    // byte of the token's length is read), so response times reveal nothing.
-    unsigned char diff = req.path.size() < prefix.size() ? 1 : 0;
+    unsigned char diff = path.size() < prefix.size() ? 1 : 0;
     for (std::size_t i = 0; i < prefix.size(); ++i)
-      diff |= static_cast<unsigned char>(prefix[i] ^ (i < req.path.size() ? req.path[i] : '\0'));
-    if (diff != 0) {
+      diff |= static_cast<unsigned char>(prefix[i] ^ (i < path.size() ? path[i] : '\0'));
+    return diff == 0;
+  }
+
+  // Every request: the token first, then Host and Origin, then the rate. (The
+  // front has already refused a target without the token; this is the same
+  // rule on the decoded path.)
+  httplib::Server::HandlerResponse guard(const httplib::Request& req, httplib::Response& res) {
+    if (!has_token(req.path)) {
       res.status = 403;
       res.set_content("forbidden: the URL needs the token brume view printed\n", "text/plain");
       return httplib::Server::HandlerResponse::Handled;
@@ -383,13 +402,23 @@ struct Server {
   void routes(httplib::Server& s) {
     const std::string p = "/" + token + "/";
     s.set_pre_routing_handler([this](const httplib::Request& q, httplib::Response& r) { return guard(q, r); });
+    // The front bounds bodies, keep-alive and the requests per connection
+    // (FrontLimits); these only set what cpp-httplib writes in its headers.
     s.set_payload_max_length(1 << 20);
     s.set_keep_alive_max_count(100);
-    // A worker waits this long on an idle keep-alive connection, and stopping
-    // the server waits for its workers: 1 s (httplib's 5 s made SIGTERM slow
-    // while a browser held a connection open).
     s.set_keep_alive_timeout(1);
-    s.new_task_queue = [] { return new httplib::ThreadPool(4); };
+    // No exception's text in a response (cpp-httplib's default puts it in an
+    // EXCEPTION_WHAT header): printed here, a plain 500 there.
+    s.set_exception_handler([](const httplib::Request&, httplib::Response& r, std::exception_ptr ep) {
+      try {
+        if (ep) std::rethrow_exception(ep);
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "brume view: %s\n", e.what());
+      } catch (...) {
+      }
+      r.status = 500;
+      r.set_content("internal error (brume view printed it)\n", "text/plain");
+    });
     s.Get(p, [](const httplib::Request&, httplib::Response& r) {
       r.set_content(view::web::view_html, "text/html; charset=utf-8");
     });
@@ -437,14 +466,78 @@ struct Server {
       r.set_content(floats(v), "application/octet-stream");
     });
     s.Post(p + "frame", [this](const httplib::Request& q, httplib::Response& r) {
+      // brume's own messages go back (they name the flag and the rule); no
+      // other exception's text does (a JSON library's, an allocator's).
+      auto refuse = [&](int status, const std::string& message) {
+        r.status = status;
+        r.set_content(json{{"error", message}}.dump(-1, ' ', false, json::error_handler_t::replace),
+                      "application/json");
+      };
+      if (const std::size_t bad = first_invalid_utf8(q.body); bad != std::string::npos)
+        return refuse(400,
+                      "the frame request is not UTF-8 text (an invalid byte at offset " + std::to_string(bad) + ")");
+      const json body = json::parse(q.body, nullptr, /*allow_exceptions=*/false);
+      if (body.is_discarded()) return refuse(400, "the frame request is not JSON: {\"values\": {name: text}}");
       try {
-        r.set_content(frame(json::parse(q.body)).dump(), "application/json");
+        r.set_content(frame(body).dump(-1, ' ', false, json::error_handler_t::replace), "application/json");
+      } catch (const Error& e) {
+        refuse(400, e.what());
+      } catch (const json::exception&) {
+        refuse(400, "the frame request is malformed: {\"values\": {name: text}, \"scale\": k}");
       } catch (const std::exception& e) {
-        r.status = 400;
-        r.set_content(json{{"error", e.what()}}.dump(), "application/json");
+        std::fprintf(stderr, "brume view: frame: %s\n", e.what());
+        refuse(500, "internal error (brume view printed it)");
       }
     });
   }
+};
+
+// cpp-httplib's request parsing and routing, on a request the front read
+// whole (process_request is its entry point for one request on a stream).
+struct RouteServer : httplib::Server {
+  using httplib::Server::process_request;
+};
+
+// One complete request, from memory; the response goes out through the
+// front's writer.
+class RequestStream final : public httplib::Stream {
+ public:
+  RequestStream(const std::string& in, const view::FrontPeer& peer, const view::FrontWrite& out)
+      : in_(in), peer_(peer), out_(out) {}
+  bool is_readable() const override { return at_ < in_.size(); }
+  bool is_writable() const override { return !failed_; }
+  ssize_t read(char* ptr, size_t size) override {
+    const std::size_t n = std::min(size, in_.size() - at_);
+    std::memcpy(ptr, in_.data() + at_, n);
+    at_ += n;
+    return static_cast<ssize_t>(n);
+  }
+  ssize_t write(const char* ptr, size_t size) override {
+    if (failed_ || !out_(ptr, size)) {
+      failed_ = true;
+      return -1;
+    }
+    return static_cast<ssize_t>(size);
+  }
+  void get_remote_ip_and_port(std::string& ip, int& port) const override {
+    ip = peer_.remote_ip;
+    port = peer_.remote_port;
+  }
+  void get_local_ip_and_port(std::string& ip, int& port) const override {
+    ip = peer_.local_ip;
+    port = peer_.local_port;
+  }
+  // Only compared with FD_SETSIZE by cpp-httplib (its select() guard); the
+  // front does the socket's I/O.
+  socket_t socket() const override { return 0; }
+  bool failed() const { return failed_; }
+
+ private:
+  const std::string& in_;
+  std::size_t at_ = 0;
+  const view::FrontPeer& peer_;
+  const view::FrontWrite& out_;
+  bool failed_ = false;
 };
 
 json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx) {
@@ -486,25 +579,29 @@ json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx)
   view_job_table().from_json(absolute, vj, "job");
   sv.in = load_inputs(absolute.input, true);  // the record's inputs by absolute path, as the command's
 
-  httplib::Server s4, s6;
-  sv.routes(s4);
-  sv.routes(s6);
+  // Bound here, served by the front (http_front.hpp); cpp-httplib parses and
+  // routes the complete requests it hands on.
   const bool loopback = job.view.listen.empty();
   const std::string addr = loopback ? "127.0.0.1" : job.view.listen;
-  sv.port = job.view.port;
-  if (sv.port == 0) {
-    sv.port = s4.bind_to_any_port(addr);
-    if (sv.port <= 0) throw Error("--listen '" + addr + "': cannot bind a port there");
-  } else if (!s4.bind_to_port(addr, sv.port)) {
-    throw Error("--port " + std::to_string(sv.port) + ": cannot bind " + addr + ":" + std::to_string(sv.port) +
-                " (in use?); use --port 0 for a free one");
+  std::string bind_error;
+  const int fd4 = view::listen_socket(addr, job.view.port, bind_error);
+  if (fd4 < 0) {
+    if (job.view.port == 0) throw Error("--listen '" + addr + "': cannot bind a port there (" + bind_error + ")");
+    throw Error("--port " + std::to_string(job.view.port) + ": cannot bind " + addr + ":" +
+                std::to_string(job.view.port) + " (" + bind_error + "); use --port 0 for a free one");
   }
+  sv.port = view::socket_port(fd4);
   const std::string ps = std::to_string(sv.port);
   sv.host_ok[0] = "127.0.0.1:" + ps;
   sv.host_ok[1] = "[::1]:" + ps;
   sv.host_ok[2] = "localhost:" + ps;
   sv.host_ok[3] = (addr.find(':') != std::string::npos ? "[" + addr + "]" : addr) + ":" + ps;
-  const bool v6 = loopback && s6.bind_to_port("::1", sv.port);  // where the host has IPv6 loopback
+  std::vector<int> listeners = {fd4};
+  if (loopback) {  // where the host has IPv6 loopback
+    std::string e6;
+    if (const int fd6 = view::listen_socket("::1", sv.port, e6); fd6 >= 0) listeners.push_back(fd6);
+  }
+  const bool v6 = listeners.size() == 2;
 
   // Explicit handlers: a background job of a shell inherits SIGINT ignored.
   struct sigaction sa {};
@@ -514,10 +611,19 @@ json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx)
   sigaction(SIGTERM, &sa, nullptr);
   signal(SIGPIPE, SIG_IGN);
 
+  RouteServer routes;
+  sv.routes(routes);
+  view::HttpFront front(
+      std::move(listeners), view::FrontLimits{}, [&sv](std::string_view target) { return sv.has_token(target); },
+      "forbidden: the URL needs the token brume view printed\n",
+      [&routes](const std::string& request, bool last, const view::FrontPeer& peer, const view::FrontWrite& write) {
+        RequestStream strm(request, peer, write);
+        bool closed = false;
+        const bool ok = routes.process_request(strm, last, closed, nullptr);
+        return ok && !closed && !strm.failed();
+      });
   sv.last_request_ms.store(Server::now_ms());
-  std::thread t4([&] { s4.listen_after_bind(); });
-  std::thread t6;
-  if (v6) t6 = std::thread([&] { s6.listen_after_bind(); });
+  front.start();
   std::fprintf(stderr, "brume view: %s on http://%s/%s/  (Ctrl-C to stop)\n", c->name.c_str(), sv.host_ok[loopback ? 0 : 3].c_str(),
                sv.token.c_str());
   if (loopback && !v6)
@@ -532,10 +638,7 @@ json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx)
     else if (idle_ms > 0 && static_cast<double>(Server::now_ms() - sv.last_request_ms.load()) > idle_ms)
       why = "idle for " + ParamSpec{}.format(json(job.view.idle_exit_min)) + " min";
   }
-  s4.stop();
-  s6.stop();
-  t4.join();
-  if (t6.joinable()) t6.join();
+  front.stop();
   std::fprintf(stderr, "brume view: stopped (%s)\n", why.c_str());
   return json::object();
 }
