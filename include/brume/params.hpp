@@ -72,8 +72,8 @@ struct ParamSpec {
   std::string output_of;             // output_file written only when the parameter named here (an input
   std::string output_ext;            // file) is given; brume batch names it <key stem><output_ext> beside
                                      // the frame's image (a camera effect's --lidar-out of --lidar: ".bin")
-  int since_schema = 0;              // the record schema that introduced it (0: always there); a job of an
-  nlohmann::json before_schema;      // older record lacks it and ran as this value says (brume run sets it)
+  int since_schema = 0;              // the record schema that introduced it (0: always there); a job that
+  nlohmann::json before_schema;      // lacks it ran as this value says (brume run sets it; record_job)
 
   // Help with unit, range or choices, for --help and docs.
   std::string describe() const;

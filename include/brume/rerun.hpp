@@ -20,9 +20,11 @@ namespace brume {
 // the command ("haze", "sky fit", ...); throws brume::Error as rerun does.
 std::string check_record(const nlohmann::json& record);
 
-// The record's job as `brume run` runs it: a parameter that a later record
-// schema introduced with a new rule (ParamSpec::since_schema), absent from an
-// older record's job, set to the value that gives the rule it ran under.
+// The record's job as `brume run` runs it: a parameter introduced with a new
+// rule (ParamSpec::since_schema), absent from the record's job, set to the
+// value that gives the rule the record ran under — also in a record that
+// states the parameter's schema but was written before the parameter was
+// added (a schema is raised once for a wave of such changes).
 // Throws brume::Error as check_record does for a record of no known schema.
 nlohmann::json record_job(const nlohmann::json& record);
 

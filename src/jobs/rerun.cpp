@@ -106,19 +106,28 @@ std::string record_command(const nlohmann::json& record) {
   return text_field(record, "command");
 }
 
-// The job as this brume runs it: a parameter that a later schema introduced
-// with a new rule, absent from an older record's job, takes the value that
-// gives the rule that record ran under (ParamSpec::since_schema), so that
-// the record repeats as it ran.
+// The job as this brume runs it: a parameter introduced with a new rule
+// (ParamSpec::since_schema), absent from the record's job, takes the value
+// that gives the rule the record ran under, so that the record repeats as it
+// ran. Absent means written before the parameter existed: a record holds
+// every parameter of each block its job has (nulls included). That is so
+// for a record of an older schema, and also for one that states the
+// parameter's own schema but was written before the parameter was added (a
+// schema is raised once for a wave of changes, each of which adds its
+// since() parameters later: a record written in between states the new
+// schema and lacks them). An older schema's record also gets a block its job
+// lacks; a record of the parameter's schema or later that lacks the whole
+// block has no such block (a Python record's job holds only its array form's).
 nlohmann::json job_as_recorded(const CommandDef& c, const nlohmann::json& record) {
   nlohmann::json job = record.at("job");
   const int version = record_version(record);
   if (!job.is_object()) return job;
   for (const ParamSpec& s : c.specs) {
-    if (s.since_schema <= version) continue;
+    if (s.since_schema == 0) continue;
     auto b = job.find(s.block);
     if (b != job.end() && (!b->is_object() || b->contains(s.name))) continue;
-    job[s.block][s.name] = s.before_schema;  // the block too, where the record has none
+    if (b == job.end() && s.since_schema <= version) continue;
+    job[s.block][s.name] = s.before_schema;  // the block too, where an older record has none
   }
   return job;
 }
