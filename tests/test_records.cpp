@@ -5,18 +5,19 @@
 // PFM, scans as .bin, a sky fit's JSON less its record), and a new record of
 // today's schema holding the job as it ran (an older schema's job completed
 // with the values that give its rules, ParamTable::since).
-#include <array>
 #include <cctype>
 #include <cmath>
-#include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <map>
 #include <set>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "brume/io.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/rerun.hpp"
 #include "test_util.hpp"
@@ -109,17 +110,60 @@ nlohmann::json file_names(nlohmann::json job, const std::set<std::string>& outpu
   return job;
 }
 
-// The command-line tool run from `cwd` (run() of test_util.hpp, in a folder).
-CliRun run_in(const fs::path& cwd, const std::string& args) {
-  const std::string cmd = "cd '" + cwd.string() + "' && '" + std::string(BRUME_CLI) + "' " + args + " 2>&1";
-  CliRun r{-1, ""};
-  FILE* f = popen(cmd.c_str(), "r");
-  if (!f) return r;
-  std::array<char, 4096> buf;
-  while (std::fgets(buf.data(), buf.size(), f)) r.output += buf.data();
-  const int st = pclose(f);
-  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-  return r;
+// Every file under inputs/ and schema-N/, relative to kRecords.
+std::set<std::string> listed_files() {
+  std::set<std::string> v;
+  for (const auto& e : fs::recursive_directory_iterator(kRecords)) {
+    const std::string rel = fs::relative(e.path(), kRecords).generic_string();
+    if (e.is_regular_file() && (rel.rfind("inputs/", 0) == 0 || rel.rfind("schema-", 0) == 0)) v.insert(rel);
+  }
+  return v;
+}
+
+TEST(StoredRecords, AreTheFilesTheirBuildsWrote) {
+  // SHA256SUMS lists every input and every stored record and output with the
+  // hash it had when its build wrote it (make_records.sh): a file edited,
+  // added or removed since is a record that no longer shows what its build
+  // did. Exact set, exact hashes.
+  std::ifstream f(kRecords / "SHA256SUMS");
+  ASSERT_TRUE(f) << (kRecords / "SHA256SUMS");
+  std::map<std::string, std::string> sums;
+  for (std::string line; std::getline(f, line);) {
+    if (line.empty()) continue;
+    ASSERT_GT(line.size(), 66u) << line;
+    sums[line.substr(66)] = line.substr(0, 64);
+  }
+  const std::set<std::string> files = listed_files();
+  for (const std::string& name : files) {
+    auto it = sums.find(name);
+    if (it == sums.end()) {
+      ADD_FAILURE() << name << " is not in SHA256SUMS";
+      continue;
+    }
+    EXPECT_EQ(sha256_file((kRecords / name).string()), it->second) << name << " changed since its build wrote it";
+  }
+  for (const auto& [name, sum] : sums) EXPECT_TRUE(files.count(name)) << name << " is in SHA256SUMS but missing";
+}
+
+TEST(StoredRecords, AParameterAbsentFromAJobTakesItsOlderRule) {
+  // A record holds every parameter of each block its job has, so a
+  // since-parameter absent from a block was not there when the record was
+  // written: it takes its older value even in a record that states the
+  // parameter's schema or a later one (a schema is raised once for a wave of
+  // changes; records written in between state it and lack the later
+  // parameters). Here haze's sky-rule, since(3, "s-max"), in a schema-4
+  // record. A record of the parameter's schema or later without the block
+  // gets no block (a Python record holds only its array form's blocks).
+  nlohmann::json rec = read_json((kRecords / "schema-4/haze-visibility.json").string());
+  ASSERT_EQ(rec["schema_version"], 4);
+  ASSERT_EQ(record_job(rec)["haze"]["sky-rule"], rec["job"]["haze"]["sky-rule"]) << "a parameter present is kept";
+  ASSERT_NE(rec["job"]["haze"]["sky-rule"], "s-max");
+  rec["job"]["haze"].erase("sky-rule");
+  EXPECT_EQ(record_job(rec)["haze"]["sky-rule"], "s-max");
+  rec["job"].erase("haze");
+  EXPECT_FALSE(record_job(rec).contains("haze"));
+  rec["schema_version"] = 2;
+  EXPECT_EQ(record_job(rec)["haze"]["sky-rule"], "s-max") << "an older schema's record gets the block";
 }
 
 class StoredRecord : public ScratchDirTest, public ::testing::WithParamInterface<Stored> {};
@@ -145,10 +189,11 @@ TEST_P(StoredRecord, RepeatsBitForBit) {
   ASSERT_EQ(record.value("schema_version", 0), s.schema) << s.file;
   std::set<std::string> outputs;
   outputs_of(record["job"], folder, outputs);
+  ASSERT_GE(outputs.size(), 2u) << s.file << ": a record and at least one output";
   ASSERT_TRUE(outputs.count(s.file)) << s.file << " does not name itself as the run's record or output";
 
   // brume run from tests/records, where the record's relative input paths lead.
-  const CliRun r = run_in(kRecords, "run " + s.file + " --out-dir " + p("again"));
+  const CliRun r = run("run " + s.file + " --out-dir " + p("again"), kRecords.string());
   ASSERT_EQ(r.status, 0) << r.output;
 
   for (const std::string& o : outputs) {

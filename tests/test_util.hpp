@@ -154,8 +154,10 @@ struct CliRun {
   int status;
   std::string output;
 };
-inline CliRun run(const std::string& args) {
-  const std::string cmd = std::string(BRUME_CLI) + " " + args + " 2>&1";
+// With `cwd`, run from that folder.
+inline CliRun run(const std::string& args, const std::string& cwd = "") {
+  const std::string cli = "'" + std::string(BRUME_CLI) + "' " + args + " 2>&1";
+  const std::string cmd = cwd.empty() ? cli : "cd '" + cwd + "' && " + cli;
   FILE* p = popen(cmd.c_str(), "r");
   CliRun r{-1, ""};
   if (!p) return r;
