@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "brume/error.hpp"
+#include "brume/io.hpp"
 #include "core/math_constants.hpp"
 
 namespace brume {
@@ -278,8 +279,8 @@ void validate_view_matrix(const Mat4& m, const std::string& what) {
 
 Mat4 read_view_matrix(const std::string& path) {
   const std::string what = "--view-matrix '" + path + "'";
-  std::ifstream in(path);
-  if (!in) throw Error(what + ": cannot read the file");
+  // A regular file of a few lines (brume/io.hpp; 1 MiB: four rows of four numbers and comments).
+  std::istringstream in(read_input_file(path, "--view-matrix", {1u << 20, "a view matrix is four rows of four numbers"}));
   Mat4 m;
   int rows = 0, line_no = 0;
   std::string line;

@@ -183,7 +183,7 @@ BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, c
     r.status = "ok";
   } catch (const std::exception& e) {
     r.status = "failed";
-    r.error = e.what();
+    r.error = dynamic_cast<const std::bad_alloc*>(&e) ? out_of_memory_message() : e.what();
     // A failed frame leaves no output of its key behind (not even one from an
     // earlier run with other parameters): the folder never holds an output the
     // manifest no longer describes.

@@ -153,8 +153,9 @@ void validate_fog(const FogParams& p, const std::set<std::string>& given) {
 
 FogTable read_fog_table(const std::string& path) {
   const std::string what = "--table '" + path + "'";
-  std::ifstream in(path);
-  if (!in) throw Error(what + ": cannot read the file");
+  // A regular file (brume/io.hpp) of at most 16 MiB: the table's row limit
+  // below is far smaller.
+  std::istringstream in(read_input_file(path, "--table", {16u << 20, "a density table of height,density rows"}));
   FogTable t;
   t.path = path;
   std::string line;

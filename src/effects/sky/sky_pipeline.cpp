@@ -12,6 +12,7 @@
 
 #include "brume/command.hpp"
 #include "brume/error.hpp"
+#include "brume/io.hpp"
 #include "brume/gpu_sky.hpp"
 #include "brume/record.hpp"
 #include "brume/sky.hpp"
@@ -265,17 +266,17 @@ nlohmann::json run_sky_fit_job(const SkyFitJob& job, const RunContext& ctx, SkyP
 }
 
 double turbidity_from_fit_json(const std::string& path, const std::string& flag) {
-  std::ifstream f(path);
-  if (!f) {
-    std::error_code ec;
-    // A missing file is FileNotFound (Python: FileNotFoundError); one that exists but cannot be read is not.
-    if (!std::filesystem::exists(path, ec))
-      throw FileNotFound(flag + " '" + path + "' does not exist; give the JSON written by brume sky fit --out");
-    throw Error(flag + " '" + path + "' cannot be read; give the JSON written by brume sky fit --out");
+  // A regular file (brume/io.hpp; a missing one is FileNotFound, Python's
+  // FileNotFoundError) of at most 16 MiB (a fit's JSON is a few kB).
+  std::string text;
+  try {
+    text = read_input_file(path, flag, {16u << 20, "a sky fit's JSON is a few kB"});
+  } catch (const FileNotFound&) {
+    throw FileNotFound(flag + " '" + path + "' does not exist; give the JSON written by brume sky fit --out");
   }
   nlohmann::json j;
   try {
-    j = nlohmann::json::parse(f);
+    j = nlohmann::json::parse(text);
   } catch (const std::exception& e) {
     throw Error(flag + " '" + path + "' is not JSON (" + e.what() + "); give the JSON written by brume sky fit --out");
   }
