@@ -278,23 +278,13 @@ KittiCalib read_kitti_calib(const std::string& path) {
 
 LidarImage project_velodyne(const std::string& bin_path, const KittiCalib& c, int width, int height) {
   if (width <= 0 || height <= 0) throw Error("the lidar image size is not set; give --width/--height or --like IMAGE");
-  std::ifstream in(bin_path, std::ios::binary);
-  if (!in) throw Error("--velodyne '" + bin_path + "': cannot read the file");
-  in.seekg(0, std::ios::end);
-  const auto bytes = static_cast<std::size_t>(in.tellg());
-  if (bytes % 16 != 0 || bytes == 0)
-    throw Error("--velodyne '" + bin_path + "' is " + std::to_string(bytes) +
-                " bytes; a KITTI scan is float32 (x, y, z, reflectance) per point, a multiple of 16 bytes");
-  // A Velodyne HDL-64E sweep holds ~120 000 points; 10 M is a hundred sweeps,
-  // so more is not one scan (and would cost 160 MB and more before projection).
-  constexpr std::size_t kMaxPoints = 10'000'000;
-  if (bytes / 16 > kMaxPoints)
-    throw Error("--velodyne '" + bin_path + "' holds " + std::to_string(bytes / 16) +
-                " points; one KITTI scan has ~120 000 and brume refuses more than 10 000 000 (is this a "
-                "concatenation of scans, or not a Velodyne .bin?)");
-  std::vector<float> buf(bytes / 4);
-  in.seekg(0);
-  in.read(reinterpret_cast<char*>(buf.data()), static_cast<std::streamsize>(bytes));
+  // The one reader and validation of a scan (src/depth/scan.cpp): a regular
+  // file of whole points, at most 10 M, every value finite.
+  const std::vector<float> buf = read_kitti_bin(bin_path, "--velodyne");
+  if (buf.empty())
+    throw Error("--velodyne '" + bin_path + "' holds no points; a KITTI scan is float32 (x, y, z, reflectance) per "
+                "point, 16 bytes each");
+  validate_scan(buf.data(), buf.size() / 4, "--velodyne '" + bin_path + "'");
   // Camera 2's centre in rectified camera-0 coordinates: P2 = K [I | t], C = -t.
   const double* P = c.P2;
   const double fx = P[0], s = P[1], cx = P[2], fy = P[5], cy = P[6];
@@ -317,7 +307,7 @@ LidarImage project_velodyne(const std::string& bin_path, const KittiCalib& c, in
   LidarImage out;
   out.range = Image(width, height, 1, kUnknown);
   out.z = Image(width, height, 1, kUnknown);
-  out.points = bytes / 16;
+  out.points = buf.size() / 4;
   for (std::size_t i = 0; i < out.points; ++i) {
     const double X[3] = {buf[i * 4], buf[i * 4 + 1], buf[i * 4 + 2]};
     double cam[3], rect[3];

@@ -200,7 +200,7 @@ RunFn with_lidar(const Hooks& h, RunFn inner) {
     const Checked c = check_lidar(h, job, ctx.given);
     if (!c.on) return inner(job, eo, ctx);
     check_kitti_bin_output(c.lidar.out, "--lidar-out");
-    const std::vector<float> in = read_kitti_bin(c.lidar.points, "--lidar");
+    const std::vector<float> in = read_kitti_bin(c.lidar.points, "--lidar", kLidarFogBytesPerPoint);
     const std::size_t n = in.size() / 4;
     std::vector<float> out(in.size());
     LidarFogStats st;

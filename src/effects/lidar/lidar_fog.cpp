@@ -421,19 +421,12 @@ nlohmann::json LidarFogStats::record() const {
 
 LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarFogParams& p, const std::string& what) {
   const LidarFogMedium m = lidar_fog_medium(p);
-  // Every point checked before anything is written.
+  // Every point checked before anything is written: the scan's validation
+  // that every reader of a scan makes (brume/depth.hpp), then the model's scale.
+  validate_scan(in, n, what);
   std::size_t above = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const float* q = in + 4 * i;
-    for (int c = 0; c < 4; ++c)
-      if (!std::isfinite(q[c]))
-        throw Error(what + ": point " + std::to_string(i) + " has a non-finite " + "xyzi"[c] + " (" + num(q[c]) +
-                    "); a scan's coordinates and intensities must be finite numbers: drop such points first");
-    if (q[3] < 0.0f)
-      throw Error(what + ": point " + std::to_string(i) + " has a negative intensity " + num(q[3]) +
-                  "; intensities are reflectances >= 0");
-    if (static_cast<double>(q[3]) * p.intensity_scale > 255.0) ++above;
-  }
+  for (std::size_t i = 0; i < n; ++i)
+    if (static_cast<double>(in[4 * i + 3]) * p.intensity_scale > 255.0) ++above;
   if (n > 0 && 2 * above > n)
     throw Error("--intensity-scale " + num(p.intensity_scale) + ": " + num(100.0 * above / n) +
                 " % of the intensities of " + what + " times it exceed 255, the model's scale [0, 255]; KITTI's reflectance is in [0, 1] "
@@ -487,27 +480,7 @@ LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarF
   return st;
 }
 
-// ---- KITTI .bin ----
-std::vector<float> parse_kitti_bin(const std::string& bytes, const std::string& what) {
-  if (bytes.size() % 16 != 0)
-    throw Error(what + ": " + std::to_string(bytes.size()) +
-                " bytes is not a whole number of points (KITTI .bin: 16 bytes a point, float32 x, y, z, "
-                "reflectance); the file is truncated or not a KITTI scan");
-  static_assert(sizeof(float) == 4, "float32");
-  std::vector<float> v(bytes.size() / 4);
-  if (!v.empty()) std::memcpy(v.data(), bytes.data(), bytes.size());  // little-endian host (x86-64, AArch64)
-  return v;
-}
-
-std::vector<float> read_kitti_bin(const std::string& path, const std::string& flag) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw Error(flag + " '" + path + "': cannot be read (no such file or no permission)");
-  std::ostringstream s;
-  s << f.rdbuf();
-  if (f.bad()) throw Error(flag + " '" + path + "': read failed");
-  return parse_kitti_bin(s.str(), flag + " '" + path + "'");
-}
-
+// ---- KITTI .bin (read by depth: src/depth/scan.cpp) ----
 std::string kitti_bin_bytes(const float* points, std::size_t n) {
   return std::string(reinterpret_cast<const char*>(points), n * 16);
 }

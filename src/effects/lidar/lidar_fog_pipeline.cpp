@@ -86,7 +86,7 @@ nlohmann::json run_lidar_fog_job(const LidarFogJob& job, const RunContext& ctx) 
   if (!job.record.empty()) check_record_path(job.record);
   if (!job.soft_curve.empty()) check_output_dir(job.soft_curve, "--soft-curve");
 
-  const std::vector<float> in = read_kitti_bin(job.points, "--points");
+  const std::vector<float> in = read_kitti_bin(job.points, "--points", kLidarFogBytesPerPoint);
   const std::size_t n = in.size() / 4;
   std::vector<float> out(in.size());
   const LidarFogStats st = lidar_fog(in.data(), out.data(), n, job.fog, "--points '" + job.points + "'");
