@@ -343,27 +343,16 @@ RigidTransform lidar_world_from_scan(const LidarFogParams& p) {
     t.translation = {0.0, *p.pose.sensor_height_m, 0.0};
     return t;
   }
+  // The one reader checks it (brume/depth.hpp): finite numbers, R0_rect and
+  // Tr_velo_to_cam rotations, P2's focal lengths > 0.
   const KittiCalib c = read_kitti_calib(p.pose.kitti_calib);
-  const std::string what = "--kitti-calib '" + p.pose.kitti_calib + "'";
-  for (const double* v : {c.P2, c.Tr})
-    for (int i = 0; i < 12; ++i)
-      if (!std::isfinite(v[i])) throw Error(what + ": a non-finite number in P2 or Tr_velo_to_cam");
-  for (int i = 0; i < 9; ++i)
-    if (!std::isfinite(c.R0[i])) throw Error(what + ": a non-finite number in R0_rect");
   Mat3 r0, tr;
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) r0.m[i][j] = c.R0[3 * i + j], tr.m[i][j] = c.Tr[4 * i + j];
   const Mat3 a = r0 * tr;  // velodyne -> rectified camera, a rotation
-  const Mat3 g = a.transposed() * a;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      if (!(std::abs(g.m[i][j] - (i == j ? 1.0 : 0.0)) <= 1e-3))
-        throw Error(what + ": R0_rect times Tr_velo_to_cam's 3x3 part is not a rotation (its columns are not "
-                    "orthonormal within 1e-3); the file is not a KITTI calibration");
   // Camera 2's centre in rectified camera-0 coordinates: P2 = K [I | t] (as depth's project_velodyne).
   const double* P = c.P2;
   const double fx = P[0], sk = P[1], cx = P[2], fy = P[5], cy = P[6], tz = P[11];
-  if (!(fx != 0.0 && fy != 0.0)) throw Error(what + ": P2's focal lengths must not be 0");
   const double ty = (P[7] - cy * tz) / fy;
   const double tx = (P[3] - sk * ty - cx * tz) / fx;
   const Vec3 b = r0 * Vec3{c.Tr[3], c.Tr[7], c.Tr[11]};
