@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "brume/error.hpp"
+#include "core/text.hpp"
 #include "brume/gpu_context.hpp"
 #include "brume/record.hpp"
 
@@ -75,6 +76,11 @@ BlurRun blur_impl(ConstImageView rgb, Image* owned, std::optional<double> sigma,
       if (std::isfinite(d[i])) m16[0] = std::max(m16[0], d[i]);
     for (float m : m16) smax = std::max(smax, static_cast<double>(m));
   }
+  // The plan's bounds before any work (brume/diffusion.hpp): --sigma's range
+  // alone (10 000 px) let the standard scheme run for hours on a small image.
+  plan_diffusion(dp, smax, rgb.width(), rgb.height(),
+                 scale_map ? "the largest value of --scale-map (" + text::g(smax) + " px): lower the map's scales"
+                           : "--sigma " + text::g(smax) + " px: lower it");
   BackendChoice backend = choose_backend(exec);
   // The engine's working buffer, filled straight from the caller's pixels
   // (the view is read in place): on the CPU in f32, a constant scale or the

@@ -11,6 +11,7 @@
 
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
+#include "core/text.hpp"
 #include "brume/fog.hpp"
 #include "brume/io.hpp"
 #include "effects/fog/fog_fast.hpp"
@@ -420,7 +421,13 @@ FogAnalysis analyse_fog(DenseImageRef rgb, DenseImageRef measured, DenseImageRef
                   "--density or --lambda");
     a.sigma_max = smax;
   }
-  if (p.lambda > 0.0) a.plan = plan_diffusion(p.diffusion, a.sigma_max);
+  // Bounded where it is decided (brume/diffusion.hpp).
+  if (p.lambda > 0.0)
+    a.plan = plan_diffusion(p.diffusion, a.sigma_max, range.width, range.height,
+                            "sigma0 + lambda sqrt(albedo F) l / R_max at the frame's most blurred pixel, with --lambda " +
+                                text::g(p.lambda) + ", --albedo " + text::g(p.albedo) +
+                                ", the fog's optical depth F (--density, --falloff, the profile) and --sigma0 " +
+                                text::g(p.diffusion.sigma0) + " px: lower --lambda or the fog's density");
   return a;
 }
 
