@@ -46,6 +46,7 @@ class SoftModel {
     const double h = m.pulse_m / kLidarStepsPerPulse;
     // The uncut maximum lies in [0, R2 + L]; one more pulse of nodes for the cut tails.
     const double end = std::max(range_end_m, p.r2_m + m.pulse_m) + 2 * h;
+    lidar_table_nodes(end, h, p.tau_h_ns, range_end_m > p.r2_m + m.pulse_m ? "the scan's farthest point" : "--r2 and one pulse");
     nodes_ = static_cast<std::size_t>(std::ceil(end / h)) + 1;
     c_.extend(f, nodes_);
     k_ = m.c_a * p.p0_w * m.beta_b * 2.0 / kSpeedOfLight;
