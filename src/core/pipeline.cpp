@@ -351,6 +351,35 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 }
 }  // namespace
 
+std::size_t check_nonfinite_colour(ConstImageView rgb, NonFinite mode, const std::string& what,
+                                   const std::string& fix) {
+  std::size_t bad = 0;
+  int fx = 0, fy = 0, fc = 0;
+  float fv = 0.0f;
+  const int nc = rgb.channels();
+  for (int y = 0; y < rgb.height(); ++y) {
+    const float* r = rgb.row(y);
+    for (int x = 0; x < rgb.width(); ++x)
+      for (int c = 0; c < nc; ++c) {
+        const float v = r[x * rgb.pixel_stride() + c];
+        if (std::isfinite(v)) continue;
+        if (bad++ == 0) fx = x, fy = y, fc = c, fv = v;
+      }
+  }
+  if (bad > 0 && mode == NonFinite::error)
+    throw Error(what + " has " + std::to_string(bad) + " non-finite value" + (bad == 1 ? "" : "s") +
+                " (NaN or inf); the first is " + (std::isnan(fv) ? "NaN" : fv > 0 ? "+inf" : "-inf") + " at x " +
+                std::to_string(fx) + ", y " + std::to_string(fy) + " (row 0 at the top), channel " +
+                std::to_string(fc) + "; a blur would smear it over its neighbourhood. " + fix +
+                " to replace them by 0");
+  return bad;
+}
+
+void replace_nonfinite(Image& rgb) {
+  for (float& f : rgb.data)
+    if (!std::isfinite(f)) f = 0.0f;
+}
+
 LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
   if (in.image.empty()) throw Error("no colour image given: use --image FILE");
   const auto t0 = std::chrono::steady_clock::now();
@@ -364,27 +393,10 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
   LoadedInputs L;
   L.rgb = read_color(in.image, in.image_transfer, &L.image_info);
   L.record["image"] = file_record(in.image, L.image_info, L.rgb);
-  std::size_t bad = 0, first = 0;
-  for (std::size_t i = 0; i < L.rgb.data.size(); ++i)
-    if (!std::isfinite(L.rgb.data[i])) {
-      if (bad == 0) first = i;
-      ++bad;
-    }
+  const std::size_t bad = check_nonfinite_colour(L.rgb, in.nonfinite, "--image '" + in.image + "'",
+                                                 "Fix the file, or pass --nonfinite zero");
   if (bad > 0) {
-    const int c = L.rgb.channels;
-    const std::size_t px = first / static_cast<std::size_t>(c);
-    const int x = static_cast<int>(px % static_cast<std::size_t>(L.rgb.width));
-    const int y = static_cast<int>(px / static_cast<std::size_t>(L.rgb.width));
-    const float v = L.rgb.data[first];
-    if (in.nonfinite == NonFinite::error)
-      throw Error("--image '" + in.image + "' has " + std::to_string(bad) + " non-finite value" +
-                  (bad == 1 ? "" : "s") + " (NaN or inf); the first is " + (std::isnan(v) ? "NaN" : v > 0 ? "+inf" : "-inf") +
-                  " at x " + std::to_string(x) + ", y " + std::to_string(y) + " (row 0 at the top), channel " +
-                  std::to_string(first % static_cast<std::size_t>(c)) +
-                  "; a blur would smear it over its neighbourhood. Fix the file, or pass --nonfinite zero to "
-                  "replace them by 0");
-    for (float& f : L.rgb.data)
-      if (!std::isfinite(f)) f = 0.0f;
+    replace_nonfinite(L.rgb);
     L.record["image"]["nonfinite_replaced"] = bad;
   }
   if (with_depth) {
