@@ -243,6 +243,10 @@ class OutputSet {
   };
   void add_pending(const std::string& tmp, const std::string& final_path, const std::string& flag);
   std::vector<Pending> pending_;
+  // Folders made for these outputs inside a CreateOutputFolders scope: the
+  // destructor removes those no other set uses when they are empty (a run
+  // that failed leaves no empty folder).
+  std::vector<std::string> folders_;
 };
 
 // Convenience: write one file atomically.
