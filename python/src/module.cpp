@@ -527,6 +527,15 @@ PYBIND11_MODULE(_brume, m) {
       },
       "For the zero-copy test: per input of this thread's last call, the address of the pixels the library "
       "read and whether they were a copy.");
+  m.def(
+      "_sha256_file",
+      [](py::object path) {
+        const std::string p = py::cast<std::string>(py::module_::import("os").attr("fspath")(path));
+        py::gil_scoped_release nogil;
+        return sha256_file(p);
+      },
+      "The SHA-256 of a file as records hold it, read as brume reads inputs (a regular file: a FIFO or a device "
+      "is a ValueError, not a hang).");
   m.def("_in_forked_child", &in_forked_child,
         "Whether this process was forked from one that had loaded brume (its effects then run with one thread "
         "unless threads= says otherwise; see docs/transforms.md).");

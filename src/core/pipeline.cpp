@@ -154,17 +154,26 @@ const ParamTable<DepthSource>& depth_param_table() {
   static const ParamTable<DepthSource> t = [] {
     ParamTable<DepthSource> d("depth");
     d.text("range", &DepthSource::range, "range map: metres from the camera centre along each pixel's ray; NaN, inf, 0 unknown")
+        .reads_file()
         .text("z", &DepthSource::z, "planar depth map in metres (needs --fx.. or --fov-x/--fov-y or --calib)")
+        .reads_file()
         .text("disparity", &DepthSource::disparity, "stereo disparity in px: PFM with --calib calib.txt, or a PNG with --fx --baseline")
+        .reads_file()
         .text("depth-buffer", &DepthSource::depth_buffer, "rasteriser window depth in [0,1] (--near --far --convention, --fov-y..)")
+        .reads_file()
         .text("inverse-depth", &DepthSource::inverse_depth, "monocular inverse depth: z = 1/(--inverse-scale v + --inverse-shift)")
+        .reads_file()
         .text("normalized-depth", &DepthSource::normalized_depth, "monocular depth in [0,1]: z = --near + v (--far - --near)")
+        .reads_file()
         .text("velodyne", &DepthSource::velodyne, "KITTI Velodyne scan (.bin) projected with --kitti-calib")
+        .reads_file()
         .text("stereo-right", &DepthSource::stereo_right,
               "right view of a rectified pair: disparity matched (SGBM, docs/depth.md) and converted as --disparity's "
               "(--calib, or --fx --baseline); the left view is --image")
+        .reads_file()
         .text("stereo-left", &DepthSource::stereo_left,
               "left view for --stereo-right where no --image is given (depth convert, depth prepare); default --image")
+        .reads_file()
         .nest(&DepthSource::stereo, stereo_param_table())
         .text("depth-channel", &DepthSource::channel, "channel holding the depth in a multi-channel file (e.g. Z)")
         .alias("range-channel")
@@ -179,6 +188,7 @@ const ParamTable<DepthSource>& depth_param_table() {
         .real_or_unset("fov-y", &DepthSource::fov_y_deg, "deg", Range::left_open(0.0, 180.0),
                        "vertical field of view, edge to edge", NAN)
         .text("calib", &DepthSource::calib, "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm)")
+        .reads_file()
         .real_or_unset("baseline", &DepthSource::baseline_m, "m", Range::above(0.0),
                        "stereo baseline (without --calib)", NAN)
         .real("disparity-scale", &DepthSource::disparity_scale, "1", Range::any(),
@@ -193,7 +203,9 @@ const ParamTable<DepthSource>& depth_param_table() {
         .real_or_unset("inverse-scale", &DepthSource::inverse_scale, "1/m", Range::any(), "A in z = 1/(A v + B)", NAN)
         .real("inverse-shift", &DepthSource::inverse_shift, "1/m", Range::any(), "B in z = 1/(A v + B)")
         .text("kitti-calib", &DepthSource::kitti_calib, "KITTI calibration file for --velodyne")
+        .reads_file()
         .text("like", &DepthSource::like, "image whose size a --velodyne scan is projected to (when no --image is given)")
+        .reads_file()
         .integer("width", &DepthSource::width, "px", Range::closed(0, 65535), "image width for --velodyne; 0: from --like")
         .integer("height", &DepthSource::height, "px", Range::closed(0, 65535), "image height for --velodyne; 0: from --like");
     return d;
@@ -214,7 +226,8 @@ const ParamTable<CameraPose>& camera_pose_param_table() {
         .real("camera-x", &CameraPose::x_m, "m", Range::any(), "camera centre east of the world origin")
         .real("camera-z", &CameraPose::z_m, "m", Range::any(), "camera centre south of the world origin")
         .text("view-matrix", &CameraPose::view_matrix_file,
-              "the whole pose as a 4x4 OpenGL view matrix file (four rows of four numbers, x_eye = M x_world)");
+              "the whole pose as a 4x4 OpenGL view matrix file (four rows of four numbers, x_eye = M x_world)")
+        .reads_file();
     return d;
   }();
   return t;
@@ -254,6 +267,7 @@ const ParamTable<InputFiles>& input_param_table(bool with_depth) {
   static const auto make = [](bool depth) {
     ParamTable<InputFiles> d("input");
     d.text("image", &InputFiles::image, "input colour image (PNG, JPEG, TIFF, EXR, PFM, HDR)")
+        .reads_file()
         .choice("image-transfer", &InputFiles::image_transfer, transfer_names(),
                 "transfer function of the input: auto (integer files sRGB, float files linear), srgb, linear")
         .choice("nonfinite", &InputFiles::nonfinite, nonfinite_names(),

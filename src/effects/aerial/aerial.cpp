@@ -153,6 +153,7 @@ const ParamTable<AerialParams>& aerial_param_table() {
         .text("sensitivity", &AerialParams::sensitivity,
               "camera spectral sensitivities q_c(lambda): default, a CSV of wavelength_nm,r,g,b, or "
               "DATABASE.txt#CAMERA NAME")
+        .reads_file("default", '#')
         .rgb("airlight", &AerialParams::airlight, "linear RGB", Range::at_least(0.0),
              "horizon colour Iinf; auto: the median sky colour (unknown range >= 0.5 % of the frame), else the "
              "median of the brightest 10 % of the 1 % most distant pixels")

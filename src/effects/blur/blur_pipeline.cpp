@@ -24,6 +24,7 @@ const ParamTable<BlurJob>& blur_job_table() {
         .real("sigma", &BlurJob::sigma, "px", Range::left_open(0.0, 1e4),
               "constant target scale (the result is a Gaussian of sqrt(sigma^2 - sigma0^2))", "none")
         .text("scale-map", &BlurJob::scale_map, "per-pixel target scale in px (1-channel float file)")
+        .reads_file()
         .nest(&BlurJob::diffusion, diffusion_param_table())
         .nest(&BlurJob::output, output_param_table({}));
     return d;

@@ -55,6 +55,7 @@ const ParamTable<FogParams>& fog_param_table() {
         .text("table", &FogParams::table_file,
               "CSV of rows height_m,density_per_m (heights increasing; a header line and # comments allowed): "
               "piecewise linear, end values held")
+        .reads_file()
         .choice("classic", &FogParams::classic, classic_fog_names(),
                 "classic OpenGL fog on the range instead of a height profile: linear (--fog-start, --fog-end) or "
                 "exp2 (--density); classic exp is --profile constant")

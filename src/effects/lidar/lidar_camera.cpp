@@ -37,6 +37,7 @@ const ParamTable<CameraLidar>& camera_lidar_param_table() {
     d.text("lidar", &CameraLidar::points,
            "the frame's LiDAR scan, KITTI velodyne .bin (float32 x, y, z, reflectance): fogged with the camera's "
            "medium (alpha = its extinction) and written to --lidar-out with the image (docs/lidar.md)")
+        .reads_file()
         .text("lidar-out", &CameraLidar::out,
               "the foggy scan, KITTI .bin (same points, same order, same count); needs --lidar")
         .writes_file_of("lidar", ".bin")

@@ -136,9 +136,11 @@ const ParamTable<SkyFitJob>& sky_fit_job_table() {
   static const ParamTable<SkyFitJob> t = [] {
     ParamTable<SkyFitJob> d("sky fit");
     d.text("image", &SkyFitJob::image, "the sky photo (HDR/EXR linear; PNG/JPEG/TIFF sRGB unless --image-transfer)")
+        .reads_file()
         .choice("image-transfer", &SkyFitJob::image_transfer, transfer_names(),
                 "transfer function of an integer image (auto: sRGB for integer files, linear for float)")
         .text("mask", &SkyFitJob::mask, "grey image of the same size: > half scale marks usable sky (default: all)")
+        .reads_file()
         .nest(&SkyFitJob::view, sky_view_param_table())
         .nest(&SkyFitJob::sun, sun_param_table())
         .nest(&SkyFitJob::fit, sky_fit_param_table())
