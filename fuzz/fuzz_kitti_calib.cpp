@@ -1,5 +1,9 @@
 // KITTI object calibration (brume depth convert --kitti-calib), then a
-// projection of a fixed four-point scan through what was read.
+// projection of a fixed four-point scan through what was read. What the
+// reader accepts is usable (issue #51: a singular R0_rect, an all-zero
+// Tr_velo_to_cam, fx = 0 and a repeated P2: were accepted): R0_rect and
+// Tr_velo_to_cam's 3x3 part rotations, P2's focal lengths > 0.
+#include <cmath>
 #include <cstring>
 
 #include "brume/depth.hpp"
@@ -17,6 +21,17 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   brume::fuzz::write_file(path, data, size);
   try {
     const brume::KittiCalib c = brume::read_kitti_calib(path);
+    for (int which = 0; which < 2; ++which) {
+      const double* m = which == 0 ? c.R0 : c.Tr;
+      const int stride = which == 0 ? 3 : 4;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+          double g = 0.0;
+          for (int k = 0; k < 3; ++k) g += m[k * stride + i] * m[k * stride + j];
+          if (!(std::abs(g - (i == j ? 1.0 : 0.0)) <= 1.001e-3)) std::abort();
+        }
+    }
+    if (!(c.P2[0] > 0.0 && c.P2[5] > 0.0)) std::abort();
     const brume::LidarImage li = brume::project_velodyne(bin, c, 32, 24);
     if (li.points_in_view > li.points) std::abort();
   } catch (const brume::Error&) {

@@ -1,5 +1,7 @@
 // KITTI Velodyne scan (.bin: float32 x, y, z, reflectance per point) through
 // the calibration of KITTI object 000000 (training), into a small image.
+#include <cmath>
+
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "fuzz_util.hpp"
@@ -22,6 +24,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     // A quarter-size image (KITTI's is 1242 x 375): points land in and out of view.
     const brume::LidarImage li = brume::project_velodyne(bin, calib, 311, 94);
     if (li.points != size / 16 || li.points_in_view > li.points) std::abort();
+    // Every point was checked (issue #51: NaN points were dropped where lidar
+    // fog refuses them): the map holds finite ranges > 0 or NaN.
+    for (float r : li.range.data)
+      if (!std::isnan(r) && !(std::isfinite(r) && r > 0.0f)) std::abort();
   } catch (const brume::Error&) {
   }
   return 0;

@@ -4,6 +4,7 @@
 // `brume haze` runs and the documented hashes, computed here independently.
 #include <openssl/evp.h>
 #include <signal.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -484,6 +485,66 @@ TEST_F(Batch, CorruptFrameIsReportedAndOthersWritten) {
   EXPECT_EQ(res["a/f0.png"]["inputs"]["image"], p("data/a/f0.png"));
   EXPECT_EQ(res["a/f0.png"]["parameters"]["visibility"], 400.0);
   EXPECT_TRUE(res["a/f0.png"]["seconds"].is_number());
+}
+
+// Issue #51: a FIFO in a manifest hung the batch. An entry that is not a
+// regular file fails its frame, naming it, and the batch goes on (exit 1).
+TEST_F(Batch, FifoInTheManifestFailsItsFrameOnly) {
+  std::vector<std::string> keys = make_frames(2);
+  fs::remove(p("data/b/f1.png"));
+  ASSERT_EQ(::mkfifo(p("data/b/f1.png").c_str(), 0600), 0);
+  const std::string m = csv(keys, "effect,visibility", "haze,400");
+  // Bounded in time: a hang is status 124, not a stuck suite.
+  FILE* f = popen(("timeout 60 " + std::string(BRUME_CLI) + " batch --manifest " + m + " --out-dir " + p("out") +
+                   " --workers 1 2>&1").c_str(), "r");
+  ASSERT_TRUE(f);
+  CliRun r{-1, ""};
+  char buf[4096];
+  while (std::fgets(buf, sizeof buf, f)) r.output += buf;
+  const int st = pclose(f);
+  r.status = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_NE(r.output.find("frame 'b/f1.png'"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("FIFO"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(p("out/a/f0.png")));
+  EXPECT_FALSE(fs::exists(p("out/b")));
+}
+
+// Issue #51: a batch on a full disk left empty s0/ s1/ s2/ folders and a
+// 0-byte journal. Here the disk is "full" for the batch by a file-size limit
+// (writes fail with EFBIG as with ENOSPC): every frame fails, the results
+// manifest cannot be written, and nothing is left behind.
+TEST_F(Batch, FullDiskLeavesNoEmptyFoldersOrJournal) {
+  std::vector<std::string> keys;
+  for (const char* sub : {"s0", "s1", "s2"}) {
+    fs::create_directories(dir / "data" / sub);
+    const Scene s = scene(64, 48, 0, 7);
+    write_image(p(std::string("data/") + sub + "/f.png"), s.rgb, WriteOptions{});
+    WriteOptions f;
+    f.is_color = false;
+    f.float_reason = "metres";
+    write_image(p(std::string("data/") + sub + "/f.exr"), s.range, f);
+    keys.push_back(std::string(sub) + "/f.png");
+  }
+  const std::string m = csv(keys, "effect,visibility", "haze,400");
+  const std::string cmd = "sh -c 'ulimit -f 0; exec " + std::string(BRUME_CLI) + " batch --manifest " + m +
+                          " --out-dir " + p("out") + "' 2>&1";
+  FILE* f = popen(cmd.c_str(), "r");
+  ASSERT_TRUE(f);
+  std::string out;
+  char buf[4096];
+  while (std::fgets(buf, sizeof buf, f)) out += buf;
+  const int st = pclose(f);
+  EXPECT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) == 2) << out;
+  EXPECT_NE(out.find("file-size limit"), std::string::npos) << out;
+  EXPECT_FALSE(fs::exists(p("out"))) << "the batch made --out-dir and left it: "
+                                     << (fs::exists(p("out")) ? files(p("out")).size() : 0) << " files";
+  // An --out-dir that was there stays, without empty folders or a journal.
+  fs::create_directories(p("out"));
+  const int st2 = std::system(cmd.c_str());
+  EXPECT_TRUE(WIFEXITED(st2) && WEXITSTATUS(st2) == 2);
+  EXPECT_TRUE(fs::is_directory(p("out")));
+  EXPECT_TRUE(fs::is_empty(p("out"))) << "left in --out-dir: " << fs::directory_iterator(p("out"))->path();
 }
 
 // Manifest errors are found before anything runs: duplicate keys (named, with

@@ -334,6 +334,7 @@ const ParamTable<AerialJob>& aerial_job_table();
 struct AerialTurbidity {
   nlohmann::json fit_record;
   nlohmann::json image_record;
+  nlohmann::json from_record;  // --turbidity-from's {path, sha256}: an input (brume run checks it)
 };
 AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::string>& given);
 nlohmann::json run_aerial_job(const AerialJob& job, const ExecOptions& exec, const RunContext& ctx = {});

@@ -108,6 +108,7 @@ struct Camera {
   Projection projection = Projection::pinhole;
   Mat3 orientation;                          // world_from_eye (R above); identity = level, looking north
   Vec3 position_m{0.0, NAN, 0.0};            // [m] camera centre in world; y = height (NaN: not known)
+  std::string view_matrix_file;              // the --view-matrix file the pose was read from ("" if none)
 
   // ((u - cx)/fx, (v - cy)/fy, 1) in the cv frame (not unit: z = 1).
   Vec3 pixel_ray_cv(double u, double v) const;

@@ -103,10 +103,22 @@ struct CompleteResult {
   double d_max_m = 0.0;             // inversion constant of the pilot
 };
 
+// The span of measurements a completion takes [m] (issue #51: 3e38 gave inf,
+// 1e-30 nonsense, silently). Below 1 mm the pilot's inversion
+// D' = D_max - R, with D_max = 1.05 R_max + 1 m, keeps less than 1e-4 of R
+// in float (its rounding is ~1.2e-7 m near 1 m); above 1000 km no range map
+// of brume's sources measures (GeoPose3K's farthest mountains are ~100 km,
+// KITTI's scan 120 m), and 1.05 R_max overflows float from 3.2e38 (a fill
+// value such as FLT_MAX). A measurement outside it is refused, naming the
+// pixel: give the file's fill value as --unknown-value, or fix its units.
+constexpr double kCompleteRangeMinM = 1e-3;
+constexpr double kCompleteRangeMaxM = 1e6;
+
 // `range`: 1 channel, metres along the ray, unknown as NaN, +-inf or 0;
 // `guide`: the colour image (3 channels, linear RGB, as read), same size.
-// Throws brume::Error for a size mismatch, a negative range, or no measured
-// pixel at all (e.g. a scan with no point in view). threads: OpenMP threads
+// Throws brume::Error for a size mismatch, a negative range, a measurement
+// outside [kCompleteRangeMinM, kCompleteRangeMaxM], or no measured pixel at
+// all (e.g. a scan with no point in view). threads: OpenMP threads
 // (0 = all; the result does not depend on it).
 CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const CompleteParams& p = {}, int threads = 0);
 

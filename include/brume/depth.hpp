@@ -15,7 +15,10 @@
 #pragma once
 
 #include <cmath>
+#include <cstddef>
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "brume/image.hpp"
 
@@ -90,7 +93,36 @@ struct KittiCalib {
   double R0[9];   // rectifying rotation
   double Tr[12];  // velodyne -> camera 0
 };
+// Reads and checks a KITTI calibration (the one reader, for every command
+// that takes --kitti-calib): each of P2, R0_rect and Tr_velo_to_cam exactly
+// once (a repeated key is refused, not the last one kept), every number
+// finite, R0_rect and Tr_velo_to_cam's 3x3 part rotations (orthonormal
+// within 1e-3, determinant +1), P2's focal lengths > 0. Errors name
+// --kitti-calib and the file.
 KittiCalib read_kitti_calib(const std::string& path);
+
+// ---- LiDAR scans: one reader, one validation, for every command that reads a scan ----
+// A Velodyne HDL-64E sweep holds ~120 000 points; 10 M is a hundred sweeps,
+// so more is not one scan (and 160 MB before any work).
+constexpr std::uint64_t kMaxScanPoints = 10'000'000;
+// The farthest point a scan may hold [m]: no LiDAR return is farther (KITTI's
+// HDL-64E reaches 120 m, survey scanners ~6 km); a value such as 3e38 is a
+// fill value or another unit, and past it a fog's optical depth overflows.
+constexpr double kMaxScanRangeM = 10000.0;
+// KITTI velodyne .bin: little-endian float32 x, y, z, reflectance per point.
+// Throws an Error naming `what` when the size is not a multiple of 16 bytes
+// or holds more than kMaxScanPoints points.
+std::vector<float> parse_kitti_bin(const std::string& bytes, const std::string& what);
+// The file `path` (named in errors as `flag` 'path'): a regular file of
+// whole points, at most kMaxScanPoints, refused before it is read when its
+// run's memory (bytes_per_point, the caller's working set per point: at least
+// the 16 bytes read) exceeds what the process may still use (check_memory).
+std::vector<float> read_kitti_bin(const std::string& path, const std::string& flag, double bytes_per_point = 16.0);
+// Every point's x, y, z and intensity finite, the intensity >= 0, the point
+// within kMaxScanRangeM of the sensor; else an Error naming `what` and the
+// point. Every reader of a scan (file or array) checks it this way.
+void validate_scan(const float* xyzi, std::size_t n, const std::string& what);
+
 struct LidarImage {
   Image range;  // metres from camera 2's centre, NaN where no point lands
   Image z;      // planar depth in camera 2

@@ -48,6 +48,7 @@
 // RGBA16F texture holds (the paper's 16-bit experiment).
 #pragma once
 
+#include <cstdint>
 #include <optional>
 #include <string>
 
@@ -99,8 +100,42 @@ struct DiffusionPlan {
   double sigma_max = 0.0;  // [px] scale the iteration count was planned for
 };
 
-// N for a given largest target scale (eq. 13 / eq. 18).
+// N for a given largest target scale (eq. 13 / eq. 18). Never overflows: a
+// count beyond kMaxDiffusionIterations is an Error (the bounded form below
+// refuses far earlier, naming the flags).
 DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max);
+
+// ---- bounds decided after analysis (issue #51) ----
+// sigma_max depends on the data (haze's sigma0 + lambda sqrt(kappa_s), with
+// kappa_s from the range map's R_max), so no flag's range can bound it; the
+// plan is checked instead, where it is decided: in each effect's analysis,
+// which the CLI, Python, `brume run` and `brume view`'s plan all go through.
+//  - sigma_max at most kMaxSigmaDiagonals times the image's diagonal. The
+//    slowest mode of the half-sample mirror boundary on a side of L pixels,
+//    cos(pi (x + 1/2) / L), is damped by exp(-(pi sigma / L)^2 / 2), below
+//    float's 2^-24 from sigma = 2 L: a pixel's blur past twice the image's
+//    longer side leaves the image's mean, so a larger sigma changes nothing
+//    there. Eight diagonals leave room for the sigma laws whose nearer pixels
+//    get a fraction of sigma_max (haze's R'^{3/2}: a pixel at R' = 1/4 gets
+//    sigma_max / 8). Real runs lie far below (1600 x 1120 demo scene,
+//    diagonal 1953 px): the README's haze (visibility 3 km, lambda 6) and
+//    fog (density 0.01/m, lambda 4) 0.004 diagonals, the sampler's densest
+//    haze (visibility 50 m, lambda 8) 0.04.
+//  - iterations x pixels at most kMaxDiffusionWork: the standard scheme
+//    needs (sigma_max^2 - sigma0^2) / (2 rho_max) iterations (1248 at
+//    sigma 25), the invariant ones ln(sigma_max / sigma0) / rho_max (17), so
+//    only the standard scheme reaches it. 1e11 is ~100 s of the fast path on
+//    one core of the 2-vCPU Xeon (2.2e9 pixel-iterations, sigma 25 on the
+//    1600 x 1120 demo, took 2.3 s of CPU, 2026-12-05); the standard scheme
+//    at sigma 25 on a 24-Mpx frame (6048 x 4032) is 3.0e10.
+// Both are refused, never clamped: the message names the quantity, its
+// value, the bound and `set_by`, the flags that set sigma_max for this run
+// ("--lambda 1e4, --visibility 300 m, ..."), with the scheme's own flags.
+constexpr double kMaxSigmaDiagonals = 8.0;
+constexpr double kMaxDiffusionWork = 1e11;
+constexpr int kMaxDiffusionIterations = 2147483647;
+DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max, std::int64_t width, std::int64_t height,
+                             const std::string& set_by);
 
 // Check a target-scale problem for the GPU backend (which takes exactly 4
 // channels; the CPU takes any count) — sizes, every target scale finite and

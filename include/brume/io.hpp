@@ -93,6 +93,50 @@ std::uint64_t memory_available();
 // Refuse, before it starts, work that needs `bytes` more than memory_available();
 // the error names `what`, both amounts and the fix.
 void check_memory(std::uint64_t bytes, const std::string& what);
+// What to say when std::bad_alloc reaches the top nonetheless (never
+// "internal error"): the memory still available and the fixes.
+std::string out_of_memory_message();
+
+// ---- inputs: regular files within their limits, before anything is read ----
+// Every file brume reads (images and depth maps, scans, calibrations, tables,
+// records, manifests; the files a record's hashes name) is first opened with
+// O_NONBLOCK -- a FIFO cannot hang the open -- and fstat'ed: it must be a
+// regular file. A directory, a device (/dev/zero), a FIFO (/dev/stdin, a
+// shell's <(...)) or a socket is refused by name, because every input is
+// hashed into its run's record, which a stream cannot be. A file larger than
+// its reader's limit is refused before it is read, naming its size, the
+// limit and the limit's reason. A file that does not exist throws
+// FileNotFound; every other refusal brume::Error. Messages name the file as
+// input_name does: `what` (a flag, "--points"; may be empty) and the path.
+struct InputLimit {
+  std::uint64_t max_bytes = UINT64_MAX;
+  std::string reason;  // why a larger file is not one of these ("a calibration is a few lines")
+};
+std::string input_name(const std::string& path, const std::string& what);
+class InputFile {
+ public:
+  InputFile(const std::string& path, const std::string& what, const InputLimit& limit = {});
+  ~InputFile();
+  InputFile(const InputFile&) = delete;
+  InputFile& operator=(const InputFile&) = delete;
+  std::uint64_t size() const { return size_; }  // bytes, as fstat gave them
+  int fd() const { return fd_; }
+  const std::string& name() const { return name_; }
+  // Exactly `bytes` bytes from the current position, or an Error naming the file.
+  void read_all(char* dst, std::uint64_t bytes);
+  // The whole file (after check_memory for it), up to limit.max_bytes.
+  std::string read_text(const InputLimit& limit);
+
+ private:
+  int fd_ = -1;
+  std::uint64_t size_ = 0;
+  std::string name_;
+};
+// The check alone (for readers that open the file themselves: the image
+// codecs, hashing).
+void check_input_file(const std::string& path, const std::string& what, const InputLimit& limit = {});
+// A whole small input (a calibration, a table, a record, a manifest) as text.
+std::string read_input_file(const std::string& path, const std::string& what, const InputLimit& limit);
 
 // Signals and interrupted writes: SIGXFSZ (a file-size limit, `ulimit -f`) is
 // ignored so that a too-large write fails with EFBIG and is reported, and
@@ -199,6 +243,10 @@ class OutputSet {
   };
   void add_pending(const std::string& tmp, const std::string& final_path, const std::string& flag);
   std::vector<Pending> pending_;
+  // Folders made for these outputs inside a CreateOutputFolders scope: the
+  // destructor removes those no other set uses when they are empty (a run
+  // that failed leaves no empty folder).
+  std::vector<std::string> folders_;
 };
 
 // Convenience: write one file atomically.

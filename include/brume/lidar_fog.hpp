@@ -100,6 +100,7 @@
 #include <nlohmann/json.hpp>
 
 #include "brume/camera.hpp"
+#include "brume/depth.hpp"
 #include "brume/fog_params.hpp"
 #include "brume/image.hpp"
 #include "brume/params.hpp"
@@ -229,11 +230,13 @@ LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarF
 Image lidar_fog_array(const ConstImageView& points, const LidarFogParams& p, const std::string& what,
                       LidarFogStats& stats);
 
-// KITTI velodyne .bin: little-endian float32 x, y, z, reflectance per point.
-// Throws an Error naming `what` when the size is not a multiple of 16 bytes.
-std::vector<float> parse_kitti_bin(const std::string& bytes, const std::string& what);
-std::vector<float> read_kitti_bin(const std::string& path, const std::string& flag);
+// A scan's bytes as a KITTI velodyne .bin (the reader, parse_kitti_bin and
+// read_kitti_bin, is depth's: brume/depth.hpp).
 std::string kitti_bin_bytes(const float* points, std::size_t n);
+// The working memory of fogging a scan read from a file, per point: the
+// points read, the foggy points and their bytes for the file (16 each), and
+// the layered fog's per-beam ranges, climbs, optical depths and flags (29).
+constexpr double kLidarFogBytesPerPoint = 80.0;
 
 // ---- the command: brume lidar fog ----
 struct LidarFogJob {

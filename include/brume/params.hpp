@@ -72,6 +72,10 @@ struct ParamSpec {
   std::string output_of;             // output_file written only when the parameter named here (an input
   std::string output_ext;            // file) is given; brume batch names it <key stem><output_ext> beside
                                      // the frame's image (a camera effect's --lidar-out of --lidar: ".bin")
+  bool input_file = false;           // text: names a file the run reads (reads_file): its record holds the file's
+                                     // SHA-256, which brume run checks, and refuses a record without it
+  std::string input_file_none;       // a value of an input_file that names no file ("default" sensitivities)
+  char input_file_cut = 0;           // the file is the value up to this character ('#': DATABASE.txt#CAMERA)
   int since_schema = 0;              // the record schema that introduced it (0: always there); a job that
   nlohmann::json before_schema;      // lacks it ran as this value says (brume run sets it; record_job)
 
@@ -227,6 +231,16 @@ class ParamTable {
   // The last declared (text) parameter names a file the run writes.
   ParamTable& writes_file() {
     params_.back().spec.output_file = true;
+    return *this;
+  }
+  // The last declared (text) parameter names a file the run reads: its
+  // record must hold the file's {path, sha256}, or brume run refuses it
+  // (issue #51). `none`: a value that names no file; `cut`: the file is the
+  // value up to that character.
+  ParamTable& reads_file(const char* none = "", char cut = 0) {
+    params_.back().spec.input_file = true;
+    params_.back().spec.input_file_none = none;
+    params_.back().spec.input_file_cut = cut;
     return *this;
   }
   // The same for an output that exists only with the input `of` (brume

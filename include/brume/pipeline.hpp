@@ -93,6 +93,15 @@ const ParamTable<ExecOptions>& exec_param_table();
 enum class NonFinite { error, zero };
 const EnumNames<NonFinite>& nonfinite_names();
 
+// The one check of a colour input's values, for the CLI's files and
+// Python's arrays alike: the count of NaN and +-inf values; with `error`, an
+// Error naming `what` ("--image 'x.png'", "rgb"), the count, the first value
+// (x, y, channel) and `fix` ("Fix the file, or pass --nonfinite zero").
+// replace_nonfinite makes them 0 (the caller records the count).
+std::size_t check_nonfinite_colour(ConstImageView rgb, NonFinite mode, const std::string& what,
+                                   const std::string& fix);
+void replace_nonfinite(Image& rgb);
+
 struct InputFiles {
   std::string image;                       // colour image
   Transfer image_transfer = Transfer::automatic;

@@ -3,6 +3,7 @@
 // (brume/command.hpp) and its "job" read back through that command's table.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -35,7 +36,15 @@ nlohmann::json record_job(const nlohmann::json& record);
 // new record. A `brume sky fit` JSON is repeated too (its record is under
 // "record"); its --plot is drawn by `plot` (the command line's plotter;
 // a library caller without one gets an error naming --plot).
+// Every file the job reads (a parameter declared reads_file) must have its
+// SHA-256 in the record, or rerun refuses it; with `rehash` it hashes the
+// file now and goes on, telling `warn`.
+struct RerunInputs {
+  bool rehash = false;
+  std::function<void(const std::string&)> warn;
+};
 nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, const std::string& out_dir,
-                     const std::vector<std::string>& argv, Image (*plot)(const nlohmann::json& result) = nullptr);
+                     const std::vector<std::string>& argv, Image (*plot)(const nlohmann::json& result) = nullptr,
+                     const RerunInputs& inputs = {});
 
 }  // namespace brume

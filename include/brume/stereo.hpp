@@ -62,6 +62,14 @@
 
 namespace brume {
 
+// The largest matching a pair may ask for, in disparities x pixels (each
+// cost evaluated in both directions): 4e10, ten times Middlebury 2014 at
+// full size (2880 x 1988 over 640 disparities: 3.7e9); ETH3D's two-view
+// pairs over their whole calib.txt range (713 x 434 x 713) are 2.2e8, a
+// KITTI frame over 256 disparities 1.2e8. Past it, --max-disparity (up to
+// the width) times the pixels ran for hours (issue #51).
+constexpr double kMaxStereoWork = 4e10;
+
 struct StereoParams {
   std::optional<double> max_disparity;  // [px] largest disparity searched, whole, 1..width-1; unset: auto
   std::string mode = "3way";            // 3way (3 directions, parallel) | sgbm (5) | hh (8)
@@ -72,6 +80,7 @@ struct StereoParams {
   double speckle_range_px = 2.0;        // [px] > 0: disparity step inside a speckle
   std::string fill = "occlusions";      // occlusions | none
   double rectified_tolerance_px = 1.0;  // [px] > 0: largest vertical offset between the views
+  bool allow_swapped = false;           // match a pair whose features lie at negative disparity (refused: swapped)
 };
 const ParamTable<StereoParams>& stereo_param_table();
 

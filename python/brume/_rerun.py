@@ -53,11 +53,11 @@ def _check_read_inputs(record, keywords):
     calib = inputs.get("kitti_calib")
     if isinstance(calib, dict) and isinstance(calib.get("path"), str) and isinstance(calib.get("sha256"), str):
         try:
-            with open(calib["path"], "rb") as f:
-                digest = hashlib.sha256(f.read()).hexdigest()
+            digest = _brume._sha256_file(calib["path"])  # a regular file, as brume reads inputs
         except OSError as e:
-            raise ValueError(f"brume.rerun(): the record's input {calib['path']!r} cannot be read ({e.strerror}); "
-                             f"restore the calibration file or run from the directory the record was made in")
+            raise ValueError(f"brume.rerun(): the record's input {calib['path']!r} cannot be read "
+                             f"({e.strerror or e}); restore the calibration file or run from the directory the "
+                             f"record was made in")
         if digest != calib["sha256"]:
             raise ValueError(f"brume.rerun(): the record's input {calib['path']!r} has changed since the record "
                              f"was made (SHA-256 differs); the run would not be the one recorded")

@@ -67,15 +67,34 @@ std::string positional_stub(const ArrayForm& a) {
   return p;
 }
 
+// Whether the form's colour array is checked for NaN and inf, as its
+// command checks --image (its table declares --nonfinite).
+bool takes_nonfinite(const ArrayForm& a, const std::string& command) {
+  const CommandDef* c = find_command(command);
+  return !a.args.empty() && a.args.front().channels == 3 && c && c->spec("nonfinite");
+}
+
 py::object call_array_form(const ArrayForm& a, const std::string& command, const std::vector<py::object>& arrays,
                            py::kwargs kw) {
   const std::string& fn = a.public_name;
   py::dict k = py::dict(kw);
   const bool colour = !a.args.empty() && a.args.front().channels == 3;
   Transfer tr = Transfer::automatic;
+  NonFinite nonfinite = NonFinite::error;
+  // The forms whose command reads its colour with --nonfinite (the effects,
+  // blur, depth complete) take nonfinite= (takes_nonfinite).
+  const bool nf = takes_nonfinite(a, command);
   if (colour) {
     tr = parse_transfer_kw(k.contains("transfer") ? py::object(k["transfer"]) : py::object(py::none()), fn + "()");
     if (k.contains("transfer")) PyDict_DelItemString(k.ptr(), "transfer");
+    // nonfinite=: the CLI's --nonfinite, with its names (brume/pipeline.hpp).
+    if (nf && k.contains("nonfinite")) {
+      py::object v = k["nonfinite"];
+      PyDict_DelItemString(k.ptr(), "nonfinite");
+      if (!py::isinstance<py::str>(v))
+        throw py::type_error(fn + "(): nonfinite takes a str, one of: error, zero; got " + type_name(v));
+      nonfinite = parse_enum(nonfinite_names(), py::cast<std::string>(v), fn + "(): nonfinite");
+    }
   }
   // The keyword arrays (lidar=points): taken from the keywords, in the form's order after the positional ones.
   std::vector<py::object> all = arrays;
@@ -108,6 +127,22 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
     in[i].present = true;
     in[i].integer = py::isinstance<py::array>(all[i]) &&
                     py::reinterpret_borrow<py::array>(all[i]).dtype().kind() == 'u';
+    if (nf && i == 0) {
+      // NaN and inf are refused as the CLI refuses them in a file (one NaN
+      // pixel became 7 186 after a blur); nonfinite='zero' replaces them in
+      // the call's own copy, never in the caller's array.
+      const std::size_t bad = check_nonfinite_colour(inputs[i].view, nonfinite, fn + "(): " + g.name,
+                                                     "Fix the array, or pass nonfinite='zero'");
+      if (bad > 0) {
+        if (inputs[i].owned.empty()) inputs[i].owned = copy_of(inputs[i].view);
+        replace_nonfinite(inputs[i].owned);
+        inputs[i].view = ConstImageView(inputs[i].owned);
+        inputs[i].record["copied"] = true;
+        inputs[i].record["nonfinite_replaced"] = bad;
+        g_last_inputs[g.name] = {reinterpret_cast<std::uintptr_t>(inputs[i].owned.data.data()), true,
+                                 "copied: non-finite values replaced by 0"};
+      }
+    }
     if (g.as == ArrayArg::As::dense) as_dense(inputs[i], g.name);
     if (g.as == ArrayArg::As::image) as_image(inputs[i], g.name);
     in[i].view = inputs[i].view;
@@ -151,6 +186,14 @@ void def_array_command(py::module_& m, const CommandDef& c) {
   if (!a.args.empty() && a.args.front().channels == 3)
     extras.push_back({"transfer", "Literal[\"srgb\", \"linear\"] | None",
                       "uint8/uint16 rgb only: 'srgb' (PNG/JPEG-like) or 'linear'; float arrays are linear"});
+  if (takes_nonfinite(a, c.name)) {
+    std::string lit;
+    for (const auto& [e, n] : nonfinite_names()) lit += (lit.empty() ? "" : ", ") + std::string("\"") + n + "\"";
+    extras.push_back({"nonfinite", "Literal[" + lit + "]",
+                      "NaN or inf in " + a.args.front().name + " (the CLI's --nonfinite): 'error' (default; names the "
+                      "count and the first pixel) or 'zero' (replaced by 0 in the call's own copy, the count "
+                      "recorded as inputs." + a.args.front().name + ".nonfinite_replaced)"});
+  }
   for (const ArrayArg& g : a.args)
     if (g.keyword)
       extras.push_back({g.name, "npt.NDArray[np.float32] | None",
@@ -484,6 +527,15 @@ PYBIND11_MODULE(_brume, m) {
       },
       "For the zero-copy test: per input of this thread's last call, the address of the pixels the library "
       "read and whether they were a copy.");
+  m.def(
+      "_sha256_file",
+      [](py::object path) {
+        const std::string p = py::cast<std::string>(py::module_::import("os").attr("fspath")(path));
+        py::gil_scoped_release nogil;
+        return sha256_file(p);
+      },
+      "The SHA-256 of a file as records hold it, read as brume reads inputs (a regular file: a FIFO or a device "
+      "is a ValueError, not a hang).");
   m.def("_in_forked_child", &in_forked_child,
         "Whether this process was forked from one that had loaded brume (its effects then run with one thread "
         "unless threads= says otherwise; see docs/transforms.md).");

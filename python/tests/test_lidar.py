@@ -31,8 +31,10 @@ def test_lidar_fog_errors():
         brume.lidar.fog(pts[:, :3], alpha=0.1)
     with pytest.raises(ValueError, match="alpha"):
         brume.lidar.fog(pts, alpha=-1.0)
+    in_0_255 = pts.copy()
+    in_0_255[:, 3] *= 255  # intensities already in [0, 255] (the points stay within 10 km: issue #51)
     with pytest.raises(ValueError, match="intensity-scale 1"):
-        brume.lidar.fog(pts * 255, alpha=0.1)
+        brume.lidar.fog(in_0_255, alpha=0.1)
     with pytest.raises(ValueError, match="visibility"):
         brume.lidar.fog(pts)
 

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "brume/error.hpp"
+#include "brume/io.hpp"
 #include "core/math_constants.hpp"
 
 namespace brume {
@@ -278,8 +279,8 @@ void validate_view_matrix(const Mat4& m, const std::string& what) {
 
 Mat4 read_view_matrix(const std::string& path) {
   const std::string what = "--view-matrix '" + path + "'";
-  std::ifstream in(path);
-  if (!in) throw Error(what + ": cannot read the file");
+  // A regular file of a few lines (brume/io.hpp; 1 MiB: four rows of four numbers and comments).
+  std::istringstream in(read_input_file(path, "--view-matrix", {1u << 20, "a view matrix is four rows of four numbers"}));
   Mat4 m;
   int rows = 0, line_no = 0;
   std::string line;
@@ -348,6 +349,7 @@ Camera make_camera(const Intrinsics& k, int width, int height, const CameraPose&
     Camera v = Camera::from_view_matrix(read_view_matrix(p.view_matrix_file), c.k, width, height,
                                         "--view-matrix '" + p.view_matrix_file + "'");
     v.projection = projection;
+    v.view_matrix_file = p.view_matrix_file;  // an input: its record hashes it (camera_record)
     return v;
   }
 
@@ -376,7 +378,7 @@ nlohmann::json camera_record(const Camera& c) {
   // a record should not show.
   a.yaw_deg += 0.0, a.pitch_deg += 0.0, a.roll_deg += 0.0;
   auto finite_or_null = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
-  return {{"projection", to_string(c.projection)},
+  nlohmann::json j = {{"projection", to_string(c.projection)},
           {"width_px", c.width},
           {"height_px", c.height},
           {"fx_px", c.k.fx},
@@ -388,6 +390,10 @@ nlohmann::json camera_record(const Camera& c) {
           {"roll_deg", a.roll_deg},
           {"position_m", {c.position_m.x, finite_or_null(c.position_m.y), c.position_m.z}},
           {"frames", "cv: x right, y down, z forward; world: x east, y up, z south; yaw clockwise from north"}};
+  // The pose's file is an input: brume run checks its hash.
+  if (!c.view_matrix_file.empty())
+    j["view_matrix"] = {{"path", c.view_matrix_file}, {"sha256", sha256_file(c.view_matrix_file)}};
+  return j;
 }
 
 }  // namespace brume

@@ -159,8 +159,11 @@ const ParamTable<CompareJob>& compare_job_table() {
   static const ParamTable<CompareJob> t = [] {
     ParamTable<CompareJob> d("compare");
     d.text("a", &CompareJob::a, "image A (PNG/TIFF/JPEG: sRGB-encoded; EXR/PFM/HDR: linear)")
+        .reads_file()
         .text("b", &CompareJob::b, "image B, the same size as A")
+        .reads_file()
         .text("mask", &CompareJob::mask, "grey image of the same size: non-zero pixels are compared (default: all)")
+        .reads_file()
         .text("json", &CompareJob::json, "write the result, the method and the inputs as JSON");
     return d;
   }();

@@ -154,17 +154,26 @@ const ParamTable<DepthSource>& depth_param_table() {
   static const ParamTable<DepthSource> t = [] {
     ParamTable<DepthSource> d("depth");
     d.text("range", &DepthSource::range, "range map: metres from the camera centre along each pixel's ray; NaN, inf, 0 unknown")
+        .reads_file()
         .text("z", &DepthSource::z, "planar depth map in metres (needs --fx.. or --fov-x/--fov-y or --calib)")
+        .reads_file()
         .text("disparity", &DepthSource::disparity, "stereo disparity in px: PFM with --calib calib.txt, or a PNG with --fx --baseline")
+        .reads_file()
         .text("depth-buffer", &DepthSource::depth_buffer, "rasteriser window depth in [0,1] (--near --far --convention, --fov-y..)")
+        .reads_file()
         .text("inverse-depth", &DepthSource::inverse_depth, "monocular inverse depth: z = 1/(--inverse-scale v + --inverse-shift)")
+        .reads_file()
         .text("normalized-depth", &DepthSource::normalized_depth, "monocular depth in [0,1]: z = --near + v (--far - --near)")
+        .reads_file()
         .text("velodyne", &DepthSource::velodyne, "KITTI Velodyne scan (.bin) projected with --kitti-calib")
+        .reads_file()
         .text("stereo-right", &DepthSource::stereo_right,
               "right view of a rectified pair: disparity matched (SGBM, docs/depth.md) and converted as --disparity's "
               "(--calib, or --fx --baseline); the left view is --image")
+        .reads_file()
         .text("stereo-left", &DepthSource::stereo_left,
               "left view for --stereo-right where no --image is given (depth convert, depth prepare); default --image")
+        .reads_file()
         .nest(&DepthSource::stereo, stereo_param_table())
         .text("depth-channel", &DepthSource::channel, "channel holding the depth in a multi-channel file (e.g. Z)")
         .alias("range-channel")
@@ -179,6 +188,7 @@ const ParamTable<DepthSource>& depth_param_table() {
         .real_or_unset("fov-y", &DepthSource::fov_y_deg, "deg", Range::left_open(0.0, 180.0),
                        "vertical field of view, edge to edge", NAN)
         .text("calib", &DepthSource::calib, "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm)")
+        .reads_file()
         .real_or_unset("baseline", &DepthSource::baseline_m, "m", Range::above(0.0),
                        "stereo baseline (without --calib)", NAN)
         .real("disparity-scale", &DepthSource::disparity_scale, "1", Range::any(),
@@ -193,7 +203,9 @@ const ParamTable<DepthSource>& depth_param_table() {
         .real_or_unset("inverse-scale", &DepthSource::inverse_scale, "1/m", Range::any(), "A in z = 1/(A v + B)", NAN)
         .real("inverse-shift", &DepthSource::inverse_shift, "1/m", Range::any(), "B in z = 1/(A v + B)")
         .text("kitti-calib", &DepthSource::kitti_calib, "KITTI calibration file for --velodyne")
+        .reads_file()
         .text("like", &DepthSource::like, "image whose size a --velodyne scan is projected to (when no --image is given)")
+        .reads_file()
         .integer("width", &DepthSource::width, "px", Range::closed(0, 65535), "image width for --velodyne; 0: from --like")
         .integer("height", &DepthSource::height, "px", Range::closed(0, 65535), "image height for --velodyne; 0: from --like");
     return d;
@@ -214,7 +226,8 @@ const ParamTable<CameraPose>& camera_pose_param_table() {
         .real("camera-x", &CameraPose::x_m, "m", Range::any(), "camera centre east of the world origin")
         .real("camera-z", &CameraPose::z_m, "m", Range::any(), "camera centre south of the world origin")
         .text("view-matrix", &CameraPose::view_matrix_file,
-              "the whole pose as a 4x4 OpenGL view matrix file (four rows of four numbers, x_eye = M x_world)");
+              "the whole pose as a 4x4 OpenGL view matrix file (four rows of four numbers, x_eye = M x_world)")
+        .reads_file();
     return d;
   }();
   return t;
@@ -254,6 +267,7 @@ const ParamTable<InputFiles>& input_param_table(bool with_depth) {
   static const auto make = [](bool depth) {
     ParamTable<InputFiles> d("input");
     d.text("image", &InputFiles::image, "input colour image (PNG, JPEG, TIFF, EXR, PFM, HDR)")
+        .reads_file()
         .choice("image-transfer", &InputFiles::image_transfer, transfer_names(),
                 "transfer function of the input: auto (integer files sRGB, float files linear), srgb, linear")
         .choice("nonfinite", &InputFiles::nonfinite, nonfinite_names(),
@@ -351,6 +365,35 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 }
 }  // namespace
 
+std::size_t check_nonfinite_colour(ConstImageView rgb, NonFinite mode, const std::string& what,
+                                   const std::string& fix) {
+  std::size_t bad = 0;
+  int fx = 0, fy = 0, fc = 0;
+  float fv = 0.0f;
+  const int nc = rgb.channels();
+  for (int y = 0; y < rgb.height(); ++y) {
+    const float* r = rgb.row(y);
+    for (int x = 0; x < rgb.width(); ++x)
+      for (int c = 0; c < nc; ++c) {
+        const float v = r[x * rgb.pixel_stride() + c];
+        if (std::isfinite(v)) continue;
+        if (bad++ == 0) fx = x, fy = y, fc = c, fv = v;
+      }
+  }
+  if (bad > 0 && mode == NonFinite::error)
+    throw Error(what + " has " + std::to_string(bad) + " non-finite value" + (bad == 1 ? "" : "s") +
+                " (NaN or inf); the first is " + (std::isnan(fv) ? "NaN" : fv > 0 ? "+inf" : "-inf") + " at x " +
+                std::to_string(fx) + ", y " + std::to_string(fy) + " (row 0 at the top), channel " +
+                std::to_string(fc) + "; a blur would smear it over its neighbourhood. " + fix +
+                " to replace them by 0");
+  return bad;
+}
+
+void replace_nonfinite(Image& rgb) {
+  for (float& f : rgb.data)
+    if (!std::isfinite(f)) f = 0.0f;
+}
+
 LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
   if (in.image.empty()) throw Error("no colour image given: use --image FILE");
   const auto t0 = std::chrono::steady_clock::now();
@@ -364,27 +407,10 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
   LoadedInputs L;
   L.rgb = read_color(in.image, in.image_transfer, &L.image_info);
   L.record["image"] = file_record(in.image, L.image_info, L.rgb);
-  std::size_t bad = 0, first = 0;
-  for (std::size_t i = 0; i < L.rgb.data.size(); ++i)
-    if (!std::isfinite(L.rgb.data[i])) {
-      if (bad == 0) first = i;
-      ++bad;
-    }
+  const std::size_t bad = check_nonfinite_colour(L.rgb, in.nonfinite, "--image '" + in.image + "'",
+                                                 "Fix the file, or pass --nonfinite zero");
   if (bad > 0) {
-    const int c = L.rgb.channels;
-    const std::size_t px = first / static_cast<std::size_t>(c);
-    const int x = static_cast<int>(px % static_cast<std::size_t>(L.rgb.width));
-    const int y = static_cast<int>(px / static_cast<std::size_t>(L.rgb.width));
-    const float v = L.rgb.data[first];
-    if (in.nonfinite == NonFinite::error)
-      throw Error("--image '" + in.image + "' has " + std::to_string(bad) + " non-finite value" +
-                  (bad == 1 ? "" : "s") + " (NaN or inf); the first is " + (std::isnan(v) ? "NaN" : v > 0 ? "+inf" : "-inf") +
-                  " at x " + std::to_string(x) + ", y " + std::to_string(y) + " (row 0 at the top), channel " +
-                  std::to_string(first % static_cast<std::size_t>(c)) +
-                  "; a blur would smear it over its neighbourhood. Fix the file, or pass --nonfinite zero to "
-                  "replace them by 0");
-    for (float& f : L.rgb.data)
-      if (!std::isfinite(f)) f = 0.0f;
+    replace_nonfinite(L.rgb);
     L.record["image"]["nonfinite_replaced"] = bad;
   }
   if (with_depth) {

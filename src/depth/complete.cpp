@@ -119,6 +119,13 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
       throw Error("complete: the range map has a negative value " + text::g(r) + " m at pixel (" +
                   std::to_string(i % W) + ", " + std::to_string(i / W) + "); known ranges must be > 0");
     if (measured(r)) {
+      if (!(r >= kCompleteRangeMinM && r <= kCompleteRangeMaxM))
+        throw Error("complete: the range map has " + text::g(r) + " m at pixel (" + std::to_string(i % W) + ", " +
+                    std::to_string(i / W) + "); completion takes measurements from " + text::g(kCompleteRangeMinM) +
+                    " m to " + text::g(kCompleteRangeMaxM) + " m (below, float rounding against the pilot's 1 m "
+                    "offset loses them; above, no range map measures, and 3e38 is a fill value). If the file marks "
+                    "unknown pixels with such a value, give it as --unknown-value; else check the map's units "
+                    "(--depth-scale)");
       known[i] = 1;
       ++nk;
       rmax = std::max(rmax, r);

@@ -13,6 +13,7 @@
 
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
+#include "brume/io.hpp"
 #include "core/math_constants.hpp"
 #include "shared/prelude_cpp.h"
 
@@ -30,6 +31,27 @@ std::string depth_num(double v) {
 void require_positive(double v, const std::string& what) {
   if (!(v > 0.0) || !std::isfinite(v))
     throw Error(what + " " + depth_num(v) + " is not allowed: it must be a finite number > 0");
+}
+}  // namespace
+
+namespace {
+// A calibration is a few lines of numbers (KITTI's 1.6 kB, calib.txt's 158
+// bytes); a file of more than 1 MiB is not one.
+const InputLimit kCalibLimit{1u << 20, "a calibration is a few lines of numbers"};
+
+// |M^T M - I| <= 1e-3 element-wise and det M > 0: a rotation, as KITTI's
+// R0_rect and Tr_velo_to_cam are (to ~1e-7).
+bool calib_is_rotation(const double m[3][3]) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      double g = 0.0;
+      for (int k = 0; k < 3; ++k) g += m[k][i] * m[k][j];
+      if (!(std::abs(g - (i == j ? 1.0 : 0.0)) <= 1e-3)) return false;
+    }
+  const double det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+                     m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+                     m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+  return det > 0.0;
 }
 }  // namespace
 
@@ -95,15 +117,20 @@ Image z_to_range(const Image& z, const Intrinsics& k) { return scale_by_ray(z, k
 Image range_to_z(const Image& range, const Intrinsics& k) { return scale_by_ray(range, k, false); }
 
 StereoCalib read_stereo_calib(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw Error("--calib '" + path + "': cannot read the file");
+  std::istringstream in(read_input_file(path, "--calib", kCalibLimit));
   std::map<std::string, std::string> kv;
+  std::map<std::string, int> at;  // the line of each key (from 1): a key given twice is refused
   std::string line;
+  int lineno = 0;
   while (std::getline(in, line)) {
+    ++lineno;
     auto eq = line.find('=');
     if (eq == std::string::npos) continue;
     std::string key = line.substr(0, eq);
     key.erase(std::remove_if(key.begin(), key.end(), ::isspace), key.end());
+    if (!at.emplace(key, lineno).second)
+      throw Error("--calib '" + path + "': '" + key + "=' on line " + std::to_string(lineno) + " repeats line " +
+                  std::to_string(at[key]) + "; a calib.txt gives each key once: remove one of them");
     kv[key] = line.substr(eq + 1);
   }
   for (const char* need : {"cam0", "baseline"})
@@ -120,6 +147,9 @@ StereoCalib read_stereo_calib(const std::string& path) {
   c.f_px = K[0];
   c.cx = K[2];
   c.cy = K[5];
+  // Both focal lengths (the conversion uses f = K[0]; a fy <= 0 says the
+  // matrix is not [f 0 cx; 0 f cy; 0 0 1]).
+  require_positive(K[4], "--calib '" + path + "': focal length fy in cam0");
   auto number = [&](const std::string& key, double def) {
     if (!kv.count(key)) return def;
     try {
@@ -252,49 +282,65 @@ Image normalized_depth_to_z(const Image& v, double n, double f) {
 }
 
 KittiCalib read_kitti_calib(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw Error("--kitti-calib '" + path + "': cannot read the file");
+  const std::string what = "--kitti-calib '" + path + "'";
+  std::istringstream in(read_input_file(path, "--kitti-calib", kCalibLimit));
   KittiCalib c{};
-  bool got_p2 = false, got_r0 = false, got_tr = false;
+  // Where each matrix was given (line numbers from 1): a key given twice is
+  // refused rather than the last one kept silently.
+  std::map<std::string, int> seen;
+  int got_p2 = 0, got_r0 = 0, got_tr = 0;
   std::string line;
+  int lineno = 0;
   while (std::getline(in, line)) {
+    ++lineno;
     std::istringstream s(line);
     std::string key;
     s >> key;
-    auto read = [&](double* dst, int n, bool& flag) {
+    if (key.empty()) continue;
+    // R_rect: and Tr_velo_cam: are the raw recordings' names of the same matrices.
+    const std::string canon = key == "R_rect:" ? "R0_rect:" : key == "Tr_velo_cam:" ? "Tr_velo_to_cam:" : key;
+    if (!seen.emplace(canon, lineno).second)
+      throw Error(what + ": '" + key + "' on line " + std::to_string(lineno) + " repeats " +
+                  (canon == key ? "the key" : "'" + canon + "'") + " of line " + std::to_string(seen[canon]) +
+                  "; a KITTI calibration gives each matrix once: remove one of them");
+    auto read = [&](double* dst, int n, int& flag) {
       for (int i = 0; i < n; ++i)
-        if (!(s >> dst[i])) throw Error("--kitti-calib '" + path + "': '" + key + "' needs " + std::to_string(n) + " numbers");
-      flag = true;
+        if (!(s >> dst[i]) || !std::isfinite(dst[i]))
+          throw Error(what + ": '" + key + "' (line " + std::to_string(lineno) + ") needs " + std::to_string(n) +
+                      " finite numbers");
+      flag = lineno;
     };
-    if (key == "P2:") read(c.P2, 12, got_p2);
-    else if (key == "R0_rect:" || key == "R_rect:") read(c.R0, 9, got_r0);
-    else if (key == "Tr_velo_to_cam:" || key == "Tr_velo_cam:") read(c.Tr, 12, got_tr);
+    if (canon == "P2:") read(c.P2, 12, got_p2);
+    else if (canon == "R0_rect:") read(c.R0, 9, got_r0);
+    else if (canon == "Tr_velo_to_cam:") read(c.Tr, 12, got_tr);
   }
   if (!got_p2 || !got_r0 || !got_tr)
-    throw Error("--kitti-calib '" + path + "' lacks " + std::string(!got_p2 ? "P2: " : "") + (!got_r0 ? "R0_rect: " : "") +
+    throw Error(what + " lacks " + std::string(!got_p2 ? "P2: " : "") + (!got_r0 ? "R0_rect: " : "") +
                 (!got_tr ? "Tr_velo_to_cam: " : "") + "(a KITTI object calib file has all three)");
+  double r0[3][3], tr[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) r0[i][j] = c.R0[3 * i + j], tr[i][j] = c.Tr[4 * i + j];
+  if (!calib_is_rotation(r0))
+    throw Error(what + ": R0_rect (line " + std::to_string(got_r0) + ") is not a rotation (orthonormal within 1e-3, "
+                "determinant +1); the file is not a KITTI calibration, or it is damaged");
+  if (!calib_is_rotation(tr))
+    throw Error(what + ": the 3x3 part of Tr_velo_to_cam (line " + std::to_string(got_tr) + ") is not a rotation "
+                "(orthonormal within 1e-3, determinant +1); the file is not a KITTI calibration, or it is damaged");
+  if (!(c.P2[0] > 0.0 && c.P2[5] > 0.0))
+    throw Error(what + ": P2's focal lengths (fx " + depth_num(c.P2[0]) + ", fy " + depth_num(c.P2[5]) + " px, line " +
+                std::to_string(got_p2) + ") must be > 0; the file is not a KITTI calibration, or it is damaged");
   return c;
 }
 
 LidarImage project_velodyne(const std::string& bin_path, const KittiCalib& c, int width, int height) {
   if (width <= 0 || height <= 0) throw Error("the lidar image size is not set; give --width/--height or --like IMAGE");
-  std::ifstream in(bin_path, std::ios::binary);
-  if (!in) throw Error("--velodyne '" + bin_path + "': cannot read the file");
-  in.seekg(0, std::ios::end);
-  const auto bytes = static_cast<std::size_t>(in.tellg());
-  if (bytes % 16 != 0 || bytes == 0)
-    throw Error("--velodyne '" + bin_path + "' is " + std::to_string(bytes) +
-                " bytes; a KITTI scan is float32 (x, y, z, reflectance) per point, a multiple of 16 bytes");
-  // A Velodyne HDL-64E sweep holds ~120 000 points; 10 M is a hundred sweeps,
-  // so more is not one scan (and would cost 160 MB and more before projection).
-  constexpr std::size_t kMaxPoints = 10'000'000;
-  if (bytes / 16 > kMaxPoints)
-    throw Error("--velodyne '" + bin_path + "' holds " + std::to_string(bytes / 16) +
-                " points; one KITTI scan has ~120 000 and brume refuses more than 10 000 000 (is this a "
-                "concatenation of scans, or not a Velodyne .bin?)");
-  std::vector<float> buf(bytes / 4);
-  in.seekg(0);
-  in.read(reinterpret_cast<char*>(buf.data()), static_cast<std::streamsize>(bytes));
+  // The one reader and validation of a scan (src/depth/scan.cpp): a regular
+  // file of whole points, at most 10 M, every value finite.
+  const std::vector<float> buf = read_kitti_bin(bin_path, "--velodyne");
+  if (buf.empty())
+    throw Error("--velodyne '" + bin_path + "' holds no points; a KITTI scan is float32 (x, y, z, reflectance) per "
+                "point, 16 bytes each");
+  validate_scan(buf.data(), buf.size() / 4, "--velodyne '" + bin_path + "'");
   // Camera 2's centre in rectified camera-0 coordinates: P2 = K [I | t], C = -t.
   const double* P = c.P2;
   const double fx = P[0], s = P[1], cx = P[2], fy = P[5], cy = P[6];
@@ -317,7 +363,7 @@ LidarImage project_velodyne(const std::string& bin_path, const KittiCalib& c, in
   LidarImage out;
   out.range = Image(width, height, 1, kUnknown);
   out.z = Image(width, height, 1, kUnknown);
-  out.points = bytes / 16;
+  out.points = buf.size() / 4;
   for (std::size_t i = 0; i < out.points; ++i) {
     const double X[3] = {buf[i * 4], buf[i * 4 + 1], buf[i * 4 + 2]};
     double cam[3], rect[3];

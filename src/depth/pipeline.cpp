@@ -80,6 +80,7 @@ const ParamTable<DepthPrepareJob>& depth_prepare_job_table() {
         .nest(&DepthPrepareJob::completion, complete_param_table())
         .text("image", &DepthPrepareJob::image,
               "colour image that guides the completion (needed when it runs) and sizes a --velodyne scan")
+        .reads_file()
         .text("out", &DepthPrepareJob::out, "prepared range, float file (.exr, .pfm, .tif)")
         .writes_file()
         .text("masks", &DepthPrepareJob::masks, "directory for sky.png, holes.png, margin.png and prepared-preview.png")

@@ -200,6 +200,8 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
            {"points_in_view", li.points_in_view},
            {"pixels_hit", li.pixels_hit},
            {"coverage", li.coverage}};
+    if (!s.like.empty())  // the image whose size it takes: an input too
+      rec["like"] = {{"path", s.like}, {"sha256", sha256_file(s.like)}};
     return out;
   }
 

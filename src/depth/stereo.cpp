@@ -44,7 +44,10 @@ const ParamTable<StereoParams>& stereo_param_table() {
                 "takes the farther of its two neighbours; none: unmatched pixels stay unknown")
         .real("stereo-rectified-tolerance", &StereoParams::rectified_tolerance_px, "px",
               Range::left_open(0.0, 1000.0),
-              "largest vertical offset between the views (fitted to matched features) anywhere in the image");
+              "largest vertical offset between the views (fitted to matched features) anywhere in the image")
+        .boolean("stereo-allow-swapped", &StereoParams::allow_swapped,
+                 "match a pair whose features lie mostly at negative disparity (x_left < x_right), which is refused "
+                 "by default as a swapped pair");
     return d;
   }();
   return t;
@@ -178,6 +181,9 @@ struct RectifyCheck {
   std::string worst_corner;
   std::size_t matches = 0, inliers = 0;
   double median_abs_dy = 0.0;
+  // The inliers' disparities x_left - x_right beyond +-1 px: a pair in the
+  // right order sees every point at d >= 0, a swapped one at d <= 0.
+  std::size_t positive = 0, negative = 0;
 };
 
 // dy = a + b u + c v with u = x / W, v = y / H (conditioning), least squares over `idx`.
@@ -324,6 +330,11 @@ RectifyCheck check_rectified(const cv::Mat& L, const cv::Mat& R) {
   const auto m = fit_plane(pts, best);
   rc.checked = true;
   rc.inliers = best.size();
+  for (std::size_t i : best) {
+    const double dx = static_cast<double>(pl[i].x) - static_cast<double>(pr[i].x);
+    rc.positive += dx > 1.0;
+    rc.negative += dx < -1.0;
+  }
   std::vector<double> ady;
   for (std::size_t i : best) ady.push_back(std::abs(pts[i][2]));
   std::nth_element(ady.begin(), ady.begin() + ady.size() / 2, ady.end());
@@ -341,6 +352,9 @@ RectifyCheck check_rectified(const cv::Mat& L, const cv::Mat& R) {
   rc.record["dy_px"] = {{"a", m[0]}, {"b_per_width", m[1]}, {"c_per_height", m[2]}};
   rc.record["dy_at_corners_px"] = at;
   rc.record["median_abs_dy_px"] = rc.median_abs_dy;
+  rc.record["disparity_sign"] = {{"positive", rc.positive}, {"negative", rc.negative},
+                                 {"rule", "inliers at x_left - x_right > 1 px and < -1 px; swapped when at least 12 "
+                                          "are negative and more than four times the positive ones"}};
   return rc;
 }
 
@@ -437,6 +451,20 @@ StereoResult compute_stereo(const StereoView& left, const StereoView& right, con
                 "only: rectify the pair first (OpenCV stereoRectify and remap with the calibration), or check that "
                 "the views are the left and right image of one rectified pair");
 
+  // A swapped pair (the right view given as the left): matched along rows
+  // in one direction only, it "filled" over half of ETH3D terrace with
+  // wrong depth, exit 0 (issue #51). The features the check above matched
+  // tell at no cost: in a pair in the right order a point's x_left -
+  // x_right is >= 0, in a swapped one <= 0. Of the inliers beyond 1 px,
+  // ETH3D terrace has 0 negative and 383 positive (swapped: 383 and 0),
+  // playground_1l 7 and 448 (2026-12-05).
+  if (rc.checked && rc.negative >= 12 && rc.negative > 4 * rc.positive && !p.allow_swapped)
+    throw Error(left_flag + " and " + right_flag + " look swapped: of the " + std::to_string(rc.inliers) +
+                " features matched between them, " + std::to_string(rc.negative) + " lie at negative disparity "
+                "(x_left < x_right) and " + std::to_string(rc.positive) + " at positive; in a rectified pair the "
+                "left view sees every point further right. Exchange the two files, or pass --stereo-allow-swapped "
+                "if the pair really is in this order");
+
   int max_d = 0;
   const auto t_auto = std::chrono::steady_clock::now();
   if (p.max_disparity) {
@@ -449,6 +477,17 @@ StereoResult compute_stereo(const StereoView& left, const StereoView& right, con
   }
   const double auto_ms = ms_since(t_auto);
   const int nd = round_up_16(max_d + 1);
+  // The work, bounded where it is decided (issue #51): semi-global matching
+  // costs each disparity of each pixel in both directions, so the disparity
+  // range times the pixels is its measure (brume/stereo.hpp, kMaxStereoWork).
+  const double cells = static_cast<double>(nd) * W * H;
+  if (cells > kMaxStereoWork)
+    throw Error("stereo matching of the " + std::to_string(W) + "x" + std::to_string(H) + " pair over " +
+                std::to_string(nd) + " disparities (" +
+                (p.max_disparity ? "--max-disparity " + std::to_string(max_d) : "the coarse pass's range") +
+                ", rounded up to a multiple of 16) is " + text::g(cells, 3) + " disparity-pixels; brume refuses "
+                "more than " + text::g(kMaxStereoWork, 3) + ": give a smaller --max-disparity, or match a "
+                "downscaled pair");
   // Working memory: OpenCV's cost volume (2 bytes a disparity; hh keeps the
   // whole image's, the others a few rows' of aggregated costs) in each of
   // the two directions, on the padded width.

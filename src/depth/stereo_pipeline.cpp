@@ -15,8 +15,11 @@ const ParamTable<DepthStereoJob>& depth_stereo_job_table() {
   static const ParamTable<DepthStereoJob> t = [] {
     ParamTable<DepthStereoJob> d("output");
     d.text("left", &DepthStereoJob::left, "left view of a rectified pair (the disparity is the left view's)")
+        .reads_file()
         .text("right", &DepthStereoJob::right, "right view of the pair (same size)")
+        .reads_file()
         .text("calib", &DepthStereoJob::calib, "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm)")
+        .reads_file()
         .real_or_unset("fx", &DepthStereoJob::fx_px, "px", Range::above(0.0),
                        "focal length in pixels (without --calib; with --baseline)", 0.0)
         .real_or_unset("baseline", &DepthStereoJob::baseline_m, "m", Range::above(0.0),

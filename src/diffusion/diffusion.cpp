@@ -24,6 +24,14 @@ double effective_rho_max(const DiffusionParams& p) {
   return p.scheme == Scheme::invariant_exact ? 0.2 : 0.25;
 }
 
+namespace {
+// T of eq. 13 (standard) or eq. 18 (invariant), before rounding up.
+double diffusion_iterations_exact(const DiffusionParams& p, double rho_max, double sigma_max) {
+  return p.scheme == Scheme::standard ? (sigma_max * sigma_max - p.sigma0 * p.sigma0) / (2.0 * rho_max)  // eq. 13
+                                      : std::log(sigma_max / p.sigma0) / rho_max;                         // eq. 18
+}
+}  // namespace
+
 DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max) {
   const double rho_max = effective_rho_max(p);
   if (!(p.sigma0 > 0.0) || !std::isfinite(p.sigma0))
@@ -40,13 +48,62 @@ DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max) {
   plan.sigma_max = sigma_max;
   plan.rho_max = rho_max;
   if (sigma_max == p.sigma0) return plan;  // nothing to do: N = 0
-  double t = p.scheme == Scheme::standard
-                 ? (sigma_max * sigma_max - p.sigma0 * p.sigma0) / (2.0 * rho_max)  // eq. 13
-                 : std::log(sigma_max / p.sigma0) / rho_max;                         // eq. 18
   // A relative slack of 1e-12 keeps T = 1248.0000000001 (rounding noise) at 1248.
-  plan.iterations = static_cast<int>(std::ceil(t * (1.0 - 1e-12)));
-  if (plan.iterations < 1) plan.iterations = 1;
+  const double n = std::ceil(diffusion_iterations_exact(p, rho_max, sigma_max) * (1.0 - 1e-12));
+  // Compared in double before the conversion, which would be undefined past
+  // int's range (sigma_max 4e4 px once planned "1 iteration": issue #51).
+  if (!(n <= kMaxDiffusionIterations)) {
+    std::ostringstream m;
+    m << "the " << to_string(p.scheme) << " scheme would need " << n << " iterations to reach sigma_max "
+      << sigma_max << " px, more than " << kMaxDiffusionIterations << "; lower the blur";
+    throw Error(m.str());
+  }
+  plan.iterations = std::max(1, static_cast<int>(n));
   return plan;
+}
+
+DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max, std::int64_t width, std::int64_t height,
+                             const std::string& set_by) {
+  const double rho_max = effective_rho_max(p);
+  if (std::isfinite(sigma_max) && sigma_max > p.sigma0 && width > 0 && height > 0 && rho_max > 0.0 &&
+      rho_max <= 0.25 && p.sigma0 > 0.0 && std::isfinite(p.sigma0)) {
+    const double w = static_cast<double>(width), h = static_cast<double>(height);
+    const double diagonal = std::sqrt(w * w + h * h);
+    const std::string size = std::to_string(width) + " x " + std::to_string(height);
+    if (sigma_max > kMaxSigmaDiagonals * diagonal) {
+      std::ostringstream m;
+      m.precision(4);
+      m << "the blur's largest scale sigma_max = " << sigma_max << " px is " << sigma_max / diagonal
+        << " times the image's diagonal (" << diagonal << " px for " << size << "); brume refuses more than "
+        << kMaxSigmaDiagonals << " diagonals (" << kMaxSigmaDiagonals * diagonal
+        << " px here: past twice the image's longer side a pixel's blur leaves the image's mean, so more changes "
+           "nothing but the work). sigma_max is set by "
+        << set_by;
+      throw Error(m.str());
+    }
+    const double n = std::ceil(diffusion_iterations_exact(p, rho_max, sigma_max) * (1.0 - 1e-12));
+    const double work = n * w * h;
+    if (work > kMaxDiffusionWork) {
+      std::ostringstream m;
+      m.precision(4);
+      m << "the " << to_string(p.scheme) << " scheme needs " << n << " iterations for sigma_max = " << sigma_max
+        << " px (--rho-max " << rho_max << "), which on " << size << " pixels are " << work
+        << " pixel-iterations; brume refuses more than " << kMaxDiffusionWork
+        << " (~100 s of one core).";
+      if (p.scheme == Scheme::standard) {
+        DiffusionParams e = p;
+        e.scheme = Scheme::invariant_exact;
+        e.rho_max.reset();
+        m << " The invariant-exact scheme reaches the same scale in "
+          << std::ceil(diffusion_iterations_exact(e, effective_rho_max(e), sigma_max)) << " iterations: give --scheme "
+          << "invariant-exact (the default), or lower sigma_max, set by " << set_by;
+      } else {
+        m << " Raise --rho-max (at most 0.25), or lower sigma_max, set by " << set_by;
+      }
+      throw Error(m.str());
+    }
+  }
+  return plan_diffusion(p, sigma_max);
 }
 
 namespace {

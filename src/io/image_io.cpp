@@ -5,10 +5,12 @@
 // (or, for read_scalar, the counts), float files their values; read_color
 // then applies the transfer (brume/io.hpp).
 #include <omp.h>
+#include <unistd.h>
 
 #include <openssl/evp.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -49,12 +51,9 @@ void note_writer(const char* row) { t_last_writer = row; }
 }  // namespace io
 
 namespace {
-void check_readable(const std::string& path) {
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw FileNotFound("cannot read '" + path + "': no such file");
-  if (fs::is_directory(path, ec))
-    throw Error("cannot read '" + path + "': it is a directory, not an image file");
-}
+// A regular file (not a directory, device or FIFO: brume/io.hpp), before a
+// codec opens it by name.
+void check_readable(const std::string& path) { check_input_file(path, ""); }
 
 // The file opened by OpenImageIO (its header parsed), or an error naming it.
 // A file with OpenEXR's magic reaches it only after the OpenEXR row, whose
@@ -174,8 +173,7 @@ std::string channel_list(const std::vector<std::string>& names) {
 
 ChannelImage read_unassociated(const std::string& path, const std::string& what) {
   const std::string name = what + " '" + path + "'";
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw FileNotFound("cannot read " + name + ": no such file");
+  check_input_file(path, what);
   io::Decoded d = decode(path, name, Want::with_alpha, 4);  // and the caller's RGBA copy
   return {std::move(d.img), std::move(d.info), d.alpha, d.unassociated};
 }
@@ -240,14 +238,19 @@ Image read_scalar(const std::string& path, const std::string& channel, FileInfo*
 }
 
 std::string sha256_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error("cannot read '" + path + "' to hash it");
+  InputFile in(path, "");  // a regular file: a device or FIFO would never end, or block
   EVP_MD_CTX* ctx = EVP_MD_CTX_new();
   EVP_DigestInit_ex(ctx, EVP_sha256(), nullptr);
   std::vector<char> chunk(1 << 16);
-  while (in) {
-    in.read(chunk.data(), static_cast<std::streamsize>(chunk.size()));
-    if (in.gcount() > 0) EVP_DigestUpdate(ctx, chunk.data(), static_cast<std::size_t>(in.gcount()));
+  for (;;) {
+    const ssize_t n = ::read(in.fd(), chunk.data(), chunk.size());
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      EVP_MD_CTX_free(ctx);
+      throw Error("cannot read '" + path + "' to hash it: " + std::strerror(errno));
+    }
+    if (n == 0) break;
+    EVP_DigestUpdate(ctx, chunk.data(), static_cast<std::size_t>(n));
   }
   unsigned char md[EVP_MAX_MD_SIZE];
   unsigned int len = 0;

@@ -123,4 +123,12 @@ void check_memory(std::uint64_t bytes, const std::string& what) {
                 "or work on a smaller image");
 }
 
+std::string out_of_memory_message() {
+  return "out of memory: an allocation failed although the checks before the work passed (memory is shared with "
+         "other processes); this process may now use " +
+         mib(memory_available()) +
+         " more (the least of MemAvailable, the cgroup limit and ulimit -v): free memory, raise the limit or work on "
+         "a smaller input";
+}
+
 }  // namespace brume

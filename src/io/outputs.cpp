@@ -14,6 +14,9 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <mutex>
+#include <vector>
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
@@ -278,16 +281,72 @@ void check_writable(const std::string& path, const WriteOptions& opts, const std
 }
 
 namespace {
+// The folders OutputSets of this process created inside CreateOutputFolders
+// scopes, each with the count of sets that still use it. When the last one
+// is done with a folder and the folder is empty (its set failed before
+// renaming anything into it), the folder is removed: a batch frame that
+// failed on a full disk left empty s0/ s1/ s2/ (issue #51). Under one lock,
+// so that a frame never removes a folder another frame of the process is
+// about to write into; rmdir leaves a folder that holds anything.
+std::mutex g_folders_mu;
+std::map<std::string, int> g_folder_users;
+
 // The folder of an output, created now inside a CreateOutputFolders scope
 // (check_output_dir accepted it as creatable); elsewhere it exists already.
-void ensure_output_folder(const std::string& path, const std::string& flag) {
+// The folders it made, or that an earlier set made and still uses, are
+// added to `used` (deepest first), each with one more user.
+void ensure_output_folder(const std::string& path, const std::string& flag, std::vector<std::string>& used) {
   if (!t_create_folders) return;
   const fs::path dir = fs::path(path).parent_path();
+  if (dir.empty()) return;
+  std::lock_guard<std::mutex> lock(g_folders_mu);
   std::error_code ec;
-  if (dir.empty() || fs::is_directory(dir, ec)) return;
-  fs::create_directories(dir, ec);
-  if (!fs::is_directory(dir, ec))
-    throw Error(flag + " '" + path + "': directory '" + dir.string() + "' cannot be created: " + ec.message());
+  // The chain up to the first folder that exists.
+  std::vector<fs::path> made;
+  for (fs::path d = dir; !d.empty() && !fs::exists(d, ec); d = d.parent_path()) {
+    made.push_back(d);
+    if (d == d.parent_path()) break;
+  }
+  if (!made.empty()) {
+    fs::create_directories(dir, ec);
+    if (!fs::is_directory(dir, ec))
+      throw Error(flag + " '" + path + "': directory '" + dir.string() + "' cannot be created: " + ec.message());
+  }
+  // The folders made now, then those above them that earlier sets made.
+  fs::path d = dir;
+  for (; !d.empty(); d = d.parent_path()) {
+    const std::string key = d.string();
+    const bool now = std::find(made.begin(), made.end(), d) != made.end();
+    auto it = g_folder_users.find(key);
+    if (!now && it == g_folder_users.end()) break;
+    if (std::find(used.begin(), used.end(), key) == used.end()) {
+      ++g_folder_users[key];
+      used.push_back(key);
+    }
+    if (d == d.parent_path()) break;
+  }
+}
+
+// Inside a CreateOutputFolders scope, the folder of `path` is gone.
+bool folder_was_removed(const std::string& path) {
+  if (!t_create_folders) return false;
+  const fs::path dir = fs::path(path).parent_path();
+  std::error_code ec;
+  return !dir.empty() && !fs::exists(dir, ec);
+}
+
+// One set is done with its folders: each loses a user, and one that no set
+// uses any more is removed when empty (rmdir: a folder with a file stays).
+void release_output_folders(const std::vector<std::string>& used) {
+  if (used.empty()) return;
+  std::lock_guard<std::mutex> lock(g_folders_mu);
+  for (const std::string& key : used) {  // deepest first
+    auto it = g_folder_users.find(key);
+    if (it == g_folder_users.end() || --it->second > 0) continue;
+    g_folder_users.erase(it);
+    std::error_code ec;
+    fs::remove(fs::path(key), ec);  // only when empty
+  }
 }
 }  // namespace
 
@@ -297,6 +356,7 @@ OutputSet::~OutputSet() {
     fs::remove(p.tmp, ec);
     unregister_temp(p.slot);
   }
+  release_output_folders(folders_);
 }
 
 void OutputSet::add_pending(const std::string& tmp, const std::string& final_path, const std::string& flag) {
@@ -354,12 +414,21 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
 
   if (f.refuse)
     if (const std::string why = f.refuse(req); !why.empty()) throw Error(flag + " '" + path + "': " + why);
-  ensure_output_folder(path, flag);
+  ensure_output_folder(path, flag, folders_);
   const std::string tmp = temp_path_for(path);
   add_pending(tmp, path, flag);
   std::string why;
   errno = 0;
-  if (!f.write(tmp, req, &why)) {
+  bool ok = f.write(tmp, req, &why);
+  if (!ok && folder_was_removed(path)) {
+    // Another process's failed frame removed the empty folder between its
+    // creation and this write (a batch's shards share folders): once more.
+    ensure_output_folder(path, flag, folders_);
+    why.clear();
+    errno = 0;
+    ok = f.write(tmp, req, &why);
+  }
+  if (!ok) {
     // errno's reason (or the writer's own when errno says nothing), the
     // directory's if it has gone since the check.
     const int err = errno;
@@ -371,7 +440,7 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
 }
 
 void OutputSet::write_text(const std::string& path, const std::string& text, const std::string& flag) {
-  ensure_output_folder(path, flag);
+  ensure_output_folder(path, flag, folders_);
   fs::path dir = fs::path(path).parent_path();
   if (dir.empty()) dir = ".";
   std::error_code ec;
@@ -379,11 +448,19 @@ void OutputSet::write_text(const std::string& path, const std::string& text, con
     throw Error(flag + " '" + path + "': directory '" + dir.string() + "' does not exist; create it first");
   const std::string tmp = temp_path_for(path);
   add_pending(tmp, path, flag);
-  errno = 0;
-  std::ofstream f(tmp, std::ios::binary);
-  f << text;
-  f.close();
-  if (!f) throw Error(flag + " '" + path + "': write failed: " + write_failure(errno));
+  for (int attempt = 0;; ++attempt) {
+    errno = 0;
+    std::ofstream f(tmp, std::ios::binary);
+    f << text;
+    f.close();
+    if (f) return;
+    const int err = errno;
+    if (attempt == 0 && folder_was_removed(path)) {  // as in write: once more
+      ensure_output_folder(path, flag, folders_);
+      continue;
+    }
+    throw Error(flag + " '" + path + "': write failed: " + write_failure(err));
+  }
 }
 
 void OutputSet::commit() {

@@ -183,7 +183,7 @@ BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, c
     r.status = "ok";
   } catch (const std::exception& e) {
     r.status = "failed";
-    r.error = e.what();
+    r.error = dynamic_cast<const std::bad_alloc*>(&e) ? out_of_memory_message() : e.what();
     // A failed frame leaves no output of its key behind (not even one from an
     // earlier run with other parameters): the folder never holds an output the
     // manifest no longer describes.
@@ -209,6 +209,7 @@ BatchSummary run_batch(const BatchOptions& o) {
   for (const BatchFrame& f : all)
     if (o.shard_count == 1 || shard_of(f.key, o.shard_count) == o.shard_index) frames.push_back(&f);
   std::error_code ec;
+  const bool made_out_dir = !fs::exists(o.out_dir, ec);
   fs::create_directories(o.out_dir, ec);
   if (!fs::is_directory(o.out_dir)) throw Error("--out-dir '" + o.out_dir + "' cannot be created: " + ec.message());
   check_output_dir((fs::path(o.out_dir) / "results.jsonl").string(), "--out-dir");
@@ -240,6 +241,8 @@ BatchSummary run_batch(const BatchOptions& o) {
   if (!journal)
     throw Error("--out-dir '" + o.out_dir + "': cannot create the results journal '" + journal_path +
                 "': " + std::strerror(errno));
+  bool journal_whole = true;  // every line reached the file whole (a full disk: not)
+  std::size_t journal_lines = 0;
   std::atomic<std::size_t> next{0};
   std::mutex mu;
   std::size_t finished = 0, worked = 0;
@@ -298,8 +301,12 @@ BatchSummary run_batch(const BatchOptions& o) {
       std::lock_guard<std::mutex> lock(mu);
       lines[i] = r.line;
       const std::string jl = r.line.dump() + "\n";
-      std::fwrite(jl.data(), 1, jl.size(), journal.get());  // a full disk shows at the manifest's write
-      std::fflush(journal.get());
+      // A full disk shows at the manifest's write; the journal notes whether
+      // its lines reached the file whole.
+      if (std::fwrite(jl.data(), 1, jl.size(), journal.get()) != jl.size() || std::fflush(journal.get()) != 0)
+        journal_whole = false;
+      else
+        ++journal_lines;
       ++finished;
       if (r.status == "ok") ++s.ok, ++worked;
       if (r.status == "skipped") ++s.skipped;
@@ -329,9 +336,20 @@ BatchSummary run_batch(const BatchOptions& o) {
   // --resume writes it, with the frames done before as "skipped").
   std::string text;
   for (const nlohmann::json& l : lines) text += l.dump() + "\n";
-  OutputSet outs;
-  outs.write_text(s.results, text, "--out-dir");
-  outs.commit();
+  try {
+    OutputSet outs;
+    outs.write_text(s.results, text, "--out-dir");
+    outs.commit();
+  } catch (const Error&) {
+    // The manifest could not be written (a full disk): the journal stays as
+    // the record of what was done only when it holds every line whole; an
+    // empty or torn one goes, and so does an --out-dir this run made that
+    // holds nothing (issue #51: a 0-byte journal and empty folders stayed).
+    journal.reset();
+    if (!journal_whole || journal_lines == 0) fs::remove(journal_path, ec);
+    if (made_out_dir) fs::remove(o.out_dir, ec);  // only when empty
+    throw;
+  }
   journal.reset();
   fs::remove(journal_path, ec);
   return s;

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <regex>
+#include <sstream>
 #include <set>
 #include <map>
 
@@ -79,7 +80,7 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
     for (const fs::path& s : subdirs(dir)) {
       if (!fs::exists(s / "view1.png") || !fs::exists(s / "disp1.png") || !fs::exists(s / "dmin.txt")) continue;
       double dmin = 0;
-      std::ifstream f(s / "dmin.txt");
+      std::istringstream f(read_input_file((s / "dmin.txt").string(), "--scan", {4096, "dmin.txt holds one number"}));
       if (!(f >> dmin)) throw Error("--scan: '" + (s / "dmin.txt").string() + "' holds no number (dmin)");
       rows.push_back({{"key", key_of(s / "view1.png", dir)},
                       {"image", rel(s / "view1.png", o.manifest_dir)},
@@ -143,8 +144,8 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
       if (!fs::exists(disp) || !fs::exists(cam)) continue;
       nlohmann::json c;
       try {
-        std::ifstream f(cam);
-        c = nlohmann::json::parse(f);
+        c = nlohmann::json::parse(
+            read_input_file(cam.string(), "--scan", {1u << 20, "a Cityscapes camera JSON is a few hundred bytes"}));
         rows.push_back({{"key", key_of(p, dir)},
                         {"image", rel(p, o.manifest_dir)},
                         {"disparity", rel(disp, o.manifest_dir)},

@@ -38,6 +38,64 @@ void verify_inputs(const nlohmann::json& j) {
   }
 }
 
+// The {path, sha256} pairs anywhere in the record but its job (a
+// sensitivity's {source, sha256} with its file before '#'): path -> hash.
+void collect_hashes(const nlohmann::json& j, std::map<std::string, std::string>& out) {
+  if (j.is_object()) {
+    const auto sha = j.find("sha256");
+    if (sha != j.end() && sha->is_string()) {
+      for (const char* key : {"path", "source"}) {
+        const auto p = j.find(key);
+        if (p == j.end() || !p->is_string()) continue;
+        std::string path = p->get<std::string>();
+        if (std::string(key) == "source") path = path.substr(0, path.rfind('#'));
+        out.emplace(path, sha->get<std::string>());
+      }
+    }
+    for (const auto& [k, v] : j.items()) collect_hashes(v, out);
+  } else if (j.is_array()) {
+    for (const auto& v : j) collect_hashes(v, out);
+  }
+}
+
+// Every file the job reads (the parameters declared reads_file) must have
+// its SHA-256 in the record, matching the file now: a record whose hash was
+// deleted (or whose inputs block was) used to run on whatever the name held,
+// exit 0, no word (issue #51). With `rehash` such a file is hashed now and
+// the run goes on, with a warning.
+void require_input_hashes(const CommandDef& c, const nlohmann::json& job, const nlohmann::json& record,
+                          const RerunInputs& opts) {
+  std::map<std::string, std::string> hashes;
+  for (const auto& [k, v] : record.items())
+    if (k != "job") collect_hashes(v, hashes);
+  for (const ParamSpec& s : c.specs) {
+    if (!s.input_file) continue;
+    const auto b = job.find(s.block);
+    if (b == job.end() || !b->is_object()) continue;
+    const auto v = b->find(s.name);
+    if (v == b->end() || !v->is_string()) continue;
+    std::string path = v->get<std::string>();
+    if (path.empty() || path == s.input_file_none) continue;
+    if (s.input_file_cut) path = path.substr(0, path.rfind(s.input_file_cut));
+    const auto h = hashes.find(path);
+    if (h == hashes.end()) {
+      if (!opts.rehash)
+        throw Error("the record's job reads --" + s.name + " '" + path + "' but the record holds no SHA-256 for it "
+                    "(deleted, or the record was edited), so brume run cannot check that the file is the one the "
+                    "record describes; restore the record, or pass --rehash to run on the file as it is now (the "
+                    "new record hashes it)");
+      const std::string now = sha256_file(path);
+      if (opts.warn)
+        opts.warn("the record holds no SHA-256 for --" + s.name + " '" + path + "'; hashed now (" + now.substr(0, 16) +
+                  "...): the run may not be the recorded one");
+      continue;
+    }
+    if (sha256_file(path) != h->second)
+      throw Error("the record's input '" + path + "' (--" + s.name + ") has changed since the record was made "
+                  "(SHA-256 differs); the run would not be the one recorded");
+  }
+}
+
 // Outputs are the parameters that name files the run writes (the output
 // block's, depth prepare's --masks directory, sky fit's --out and --plot):
 // moved into out_dir under their file names.
@@ -149,8 +207,9 @@ std::string check_record(const nlohmann::json& record) {
 }
 
 nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, const std::string& out_dir,
-                     const std::vector<std::string>& argv, Image (*plot)(const nlohmann::json& result)) {
-  if (is_sky_fit_json(record)) return rerun(record["record"], exec, out_dir, argv, plot);
+                     const std::vector<std::string>& argv, Image (*plot)(const nlohmann::json& result),
+                     const RerunInputs& inputs) {
+  if (is_sky_fit_json(record)) return rerun(record["record"], exec, out_dir, argv, plot, inputs);
   const std::string cmd = record_command(record);
   // A record of a Python call on arrays ({"source": "numpy"} inputs) names no files to read again.
   if (record.contains("inputs") && record["inputs"].is_object()) {
@@ -177,6 +236,7 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
     if (record.contains(block)) verify_inputs(record[block]);
   const CommandDef& c = repeatable(cmd, record);
   nlohmann::json job = job_as_recorded(c, record);
+  require_input_hashes(c, job, record, inputs);
   redirect_outputs(c, job, out_dir);
   RunContext ctx;
   ctx.argv = argv;

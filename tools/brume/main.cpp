@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <new>
 #include <fstream>
 #include <iterator>
 #include <sstream>
@@ -134,6 +135,10 @@ int main(int argc, char** argv) {
       return c.run(args);
     } catch (const brume::Error& e) {
       std::fprintf(stderr, "brume %s: error: %s\n", c.name.c_str(), e.what());
+      return 2;
+    } catch (const std::bad_alloc&) {
+      // Memory is checked before work; another process can still take it.
+      std::fprintf(stderr, "brume %s: error: %s\n", c.name.c_str(), brume::out_of_memory_message().c_str());
       return 2;
     } catch (const std::exception& e) {
       std::fprintf(stderr, "brume %s: internal error: %s\n", c.name.c_str(), brume::printable_text(e.what()).c_str());

@@ -16,6 +16,7 @@
 #include "brume/aerial.hpp"
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
+#include "core/text.hpp"
 #include "shared/prelude_cpp.h"
 
 namespace brume {
@@ -152,6 +153,7 @@ const ParamTable<AerialParams>& aerial_param_table() {
         .text("sensitivity", &AerialParams::sensitivity,
               "camera spectral sensitivities q_c(lambda): default, a CSV of wavelength_nm,r,g,b, or "
               "DATABASE.txt#CAMERA NAME")
+        .reads_file("default", '#')
         .rgb("airlight", &AerialParams::airlight, "linear RGB", Range::at_least(0.0),
              "horizon colour Iinf; auto: the median sky colour (unknown range >= 0.5 % of the frame), else the "
              "median of the brightest 10 % of the 1 % most distant pixels")
@@ -269,7 +271,13 @@ void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& 
   a.kappa_s = a.beta_550_per_m * s_max;
   a.sigma_max = sh::brume_sigma_max(static_cast<float>(p.diffusion.sigma0), static_cast<float>(p.lambda),
                                     static_cast<float>(a.kappa_s));
-  a.plan = plan_diffusion(p.diffusion, a.sigma_max);
+  // Bounded where it is decided (brume/diffusion.hpp).
+  a.plan = plan_diffusion(p.diffusion, a.sigma_max, rgb.width, rgb.height,
+                          "sigma0 + lambda sqrt(kappa_s), kappa_s the optical depth at 550 nm to R_max, with --lambda " +
+                              text::g(p.lambda) + ", --turbidity " + text::g(p.atmosphere.turbidity) + ", R_max " +
+                              text::g(a.range_max_m) + " m (the range map's farthest known pixel), --distance-scale " +
+                              text::g(p.distance_scale) + " and --sigma0 " + text::g(p.diffusion.sigma0) +
+                              " px: lower --lambda");
 
   std::array<float, 3> estimated{};
   std::string estimated_source;

@@ -12,6 +12,7 @@
 #include "brume/sky.hpp"
 #include "brume/error.hpp"
 #include "brume/gpu_aerial.hpp"
+#include "brume/io.hpp"
 #include "brume/record.hpp"
 
 namespace brume {
@@ -158,12 +159,15 @@ const ParamTable<AerialJob>& aerial_job_table() {
         .nest(&AerialJob::lidar, camera_lidar_param_table())
         .text("turbidity-from", &AerialJob::turbidity_from,
               "take --turbidity from a `brume sky fit` JSON (refused when the fit is flagged unreliable)")
+        .reads_file()
         .text("sky-image", &AerialJob::sky_image,
               "--turbidity auto: the sky photo to fit T on, as brume sky fit (refused when unreliable); its flags "
               "carry --sky-")
+        .reads_file()
         .choice("sky-image-transfer", &AerialJob::sky_image_transfer, transfer_names(),
                 "transfer function of an integer --sky-image (auto: sRGB for integer files, linear for float)")
         .text("sky-mask", &AerialJob::sky_mask, "grey image of --sky-image's size: > half scale marks usable sky")
+        .reads_file()
         .nest(&AerialJob::sky_view, sky_view_param_table(), "sky-")
         .nest(&AerialJob::sky_sun, sun_param_table(), "sky-")
         .nest(&AerialJob::sky_fit, sky_fit_param_table(), "sky-");
@@ -254,6 +258,7 @@ AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::str
   }
   if (!job.turbidity_from.empty()) {
     const double t = turbidity_from_fit_json(job.turbidity_from);
+    out.from_record = {{"path", job.turbidity_from}, {"sha256", sha256_file(job.turbidity_from)}};
     // (--turbidity auto with --turbidity-from: the fit in the file is the auto.)
     if (given.count("turbidity") && !std::isnan(turbidity) && turbidity != t)
       throw Error("--turbidity " + std::to_string(job.aerial.atmosphere.turbidity) + " and --turbidity-from '" +
@@ -275,6 +280,7 @@ nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo,
           run.record["turbidity_fit"] = tf.fit_record;
           in.record["sky_image"] = tf.image_record;
         }
+        if (!tf.from_record.is_null()) in.record["turbidity_from"] = tf.from_record;
         return EffectOutput{std::move(run.result.rgb),
                             {{"attenuation", std::move(run.result.attenuation)},
                              {"scale-map", std::move(run.result.scale)}},
@@ -366,6 +372,7 @@ CommandDef aerial_command() {
           r.record["sky_image"] = tf.image_record;  // under "inputs", as in the CLI's record
           k.p.aerial.atmosphere.turbidity = NAN;     // recorded as given (auto), as the CLI does
         }
+        if (!tf.from_record.is_null()) r.record["inputs"]["turbidity_from"] = tf.from_record;
         return ArrayResult{{{"rgb", std::move(r.result.rgb)},
                             {"attenuation", std::move(r.result.attenuation)},
                             {"scale", std::move(r.result.scale)}},

@@ -170,13 +170,8 @@ void check_channels(const SpectralSensitivity& s) {
 }
 
 std::vector<std::string> read_lines(const std::string& path) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec))
-    throw Error("--sensitivity '" + path +
-                "' is not a readable file; give a CSV of wavelength_nm,r,g,b rows, DATABASE.txt#CAMERA NAME, or "
-                "'default'");
-  std::ifstream f(path);
-  if (!f) throw Error("--sensitivity '" + path + "' cannot be opened for reading");
+  // A regular file (brume/io.hpp) of at most 16 MiB (the camspec database is 28 kB).
+  std::istringstream f(read_input_file(path, "--sensitivity", {16u << 20, "a table of camera sensitivities"}));
   std::vector<std::string> lines;
   std::string line;
   while (std::getline(f, line)) {

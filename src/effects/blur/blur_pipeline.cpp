@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "brume/error.hpp"
+#include "core/text.hpp"
 #include "brume/gpu_context.hpp"
 #include "brume/record.hpp"
 
@@ -23,6 +24,7 @@ const ParamTable<BlurJob>& blur_job_table() {
         .real("sigma", &BlurJob::sigma, "px", Range::left_open(0.0, 1e4),
               "constant target scale (the result is a Gaussian of sqrt(sigma^2 - sigma0^2))", "none")
         .text("scale-map", &BlurJob::scale_map, "per-pixel target scale in px (1-channel float file)")
+        .reads_file()
         .nest(&BlurJob::diffusion, diffusion_param_table())
         .nest(&BlurJob::output, output_param_table({}));
     return d;
@@ -75,6 +77,11 @@ BlurRun blur_impl(ConstImageView rgb, Image* owned, std::optional<double> sigma,
       if (std::isfinite(d[i])) m16[0] = std::max(m16[0], d[i]);
     for (float m : m16) smax = std::max(smax, static_cast<double>(m));
   }
+  // The plan's bounds before any work (brume/diffusion.hpp): --sigma's range
+  // alone (10 000 px) let the standard scheme run for hours on a small image.
+  plan_diffusion(dp, smax, rgb.width(), rgb.height(),
+                 scale_map ? "the largest value of --scale-map (" + text::g(smax) + " px): lower the map's scales"
+                           : "--sigma " + text::g(smax) + " px: lower it");
   BackendChoice backend = choose_backend(exec);
   // The engine's working buffer, filled straight from the caller's pixels
   // (the view is read in place): on the CPU in f32, a constant scale or the

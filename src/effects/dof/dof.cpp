@@ -11,6 +11,7 @@
 
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
+#include "core/text.hpp"
 #include "shared/prelude_cpp.h"
 
 namespace brume {
@@ -319,7 +320,12 @@ Image dof_scale_map(const Image& z, const DofParams& p, DofAnalysis& a, const Ex
   float smax = s0;
   for (float v : sigma.data) smax = std::max(smax, v);
   a.sigma_max = smax;
-  a.plan = plan_diffusion(dof_diffusion_params(p), a.sigma_max);
+  // Bounded where it is decided (brume/diffusion.hpp).
+  a.plan = plan_diffusion(dof_diffusion_params(p), a.sigma_max, W, H,
+                          "sqrt(sigma0^2 + (c/4)^2) at the most blurred pixel, c the circle of confusion (CoC at "
+                          "infinity " + text::g(a.alpha_px) + " px: --coc-infinity, or --f-number, --focal-length and "
+                          "--sensor-width; --focus-distance), capped by --coc-limit " + text::g(p.coc_limit_px) +
+                          " px: lower --coc-limit or the CoC");
   return sigma;
 }
 

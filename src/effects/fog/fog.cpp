@@ -11,6 +11,7 @@
 
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
+#include "core/text.hpp"
 #include "brume/fog.hpp"
 #include "brume/io.hpp"
 #include "effects/fog/fog_fast.hpp"
@@ -54,6 +55,7 @@ const ParamTable<FogParams>& fog_param_table() {
         .text("table", &FogParams::table_file,
               "CSV of rows height_m,density_per_m (heights increasing; a header line and # comments allowed): "
               "piecewise linear, end values held")
+        .reads_file()
         .choice("classic", &FogParams::classic, classic_fog_names(),
                 "classic OpenGL fog on the range instead of a height profile: linear (--fog-start, --fog-end) or "
                 "exp2 (--density); classic exp is --profile constant")
@@ -153,8 +155,9 @@ void validate_fog(const FogParams& p, const std::set<std::string>& given) {
 
 FogTable read_fog_table(const std::string& path) {
   const std::string what = "--table '" + path + "'";
-  std::ifstream in(path);
-  if (!in) throw Error(what + ": cannot read the file");
+  // A regular file (brume/io.hpp) of at most 16 MiB: the table's row limit
+  // below is far smaller.
+  std::istringstream in(read_input_file(path, "--table", {16u << 20, "a density table of height,density rows"}));
   FogTable t;
   t.path = path;
   std::string line;
@@ -419,7 +422,13 @@ FogAnalysis analyse_fog(DenseImageRef rgb, DenseImageRef measured, DenseImageRef
                   "--density or --lambda");
     a.sigma_max = smax;
   }
-  if (p.lambda > 0.0) a.plan = plan_diffusion(p.diffusion, a.sigma_max);
+  // Bounded where it is decided (brume/diffusion.hpp).
+  if (p.lambda > 0.0)
+    a.plan = plan_diffusion(p.diffusion, a.sigma_max, range.width, range.height,
+                            "sigma0 + lambda sqrt(albedo F) l / R_max at the frame's most blurred pixel, with --lambda " +
+                                text::g(p.lambda) + ", --albedo " + text::g(p.albedo) +
+                                ", the fog's optical depth F (--density, --falloff, the profile) and --sigma0 " +
+                                text::g(p.diffusion.sigma0) + " px: lower --lambda or the fog's density");
   return a;
 }
 

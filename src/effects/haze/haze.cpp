@@ -10,6 +10,7 @@
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
+#include "core/text.hpp"
 #include "shared/prelude_cpp.h"
 
 namespace brume {
@@ -167,7 +168,17 @@ HazeAnalysis analyse_haze(ConstImageView rgb, ConstImageView range, const HazePa
   a.extinction_per_m = metres ? *metres : (a.kappa_a + a.kappa_s) / a.range_max_m;
   a.sigma_max = sh::brume_sigma_max(static_cast<float>(p.diffusion.sigma0), static_cast<float>(p.lambda),
                                     static_cast<float>(a.kappa_s));
-  a.plan = plan_diffusion(p.diffusion, a.sigma_max);
+  // Bounded here, where sigma_max is decided (brume/diffusion.hpp): the
+  // same check for the CLI, Python, brume run and brume view's plan.
+  const std::string set_by =
+      p.visibility_m
+          ? "sigma0 + lambda sqrt(kappa_s) with --lambda " + text::g(p.lambda) + ", --visibility " +
+                text::g(*p.visibility_m) + " m, --albedo " + text::g(p.albedo) + ", R_max " + text::g(a.range_max_m) +
+                " m (" + (p.range_max_m ? "--range-max" : "the range map's farthest known pixel") + ") and --sigma0 " +
+                text::g(p.diffusion.sigma0) + " px: lower --lambda or raise --visibility"
+          : "sigma0 + lambda sqrt(kappa_s) with --lambda " + text::g(p.lambda) + ", --kappa-s " + text::g(p.kappa_s) +
+                " and --sigma0 " + text::g(p.diffusion.sigma0) + " px: lower --lambda or --kappa-s";
+  a.plan = plan_diffusion(p.diffusion, a.sigma_max, rgb.width(), rgb.height(), set_by);
 
   // The sky (brume/haze.hpp): beyond the medium when it is in metres or the
   // user places it; else (normalised units, or --sky-rule s-max) at S_max.

@@ -37,6 +37,7 @@ const ParamTable<CameraLidar>& camera_lidar_param_table() {
     d.text("lidar", &CameraLidar::points,
            "the frame's LiDAR scan, KITTI velodyne .bin (float32 x, y, z, reflectance): fogged with the camera's "
            "medium (alpha = its extinction) and written to --lidar-out with the image (docs/lidar.md)")
+        .reads_file()
         .text("lidar-out", &CameraLidar::out,
               "the foggy scan, KITTI .bin (same points, same order, same count); needs --lidar")
         .writes_file_of("lidar", ".bin")
@@ -200,7 +201,7 @@ RunFn with_lidar(const Hooks& h, RunFn inner) {
     const Checked c = check_lidar(h, job, ctx.given);
     if (!c.on) return inner(job, eo, ctx);
     check_kitti_bin_output(c.lidar.out, "--lidar-out");
-    const std::vector<float> in = read_kitti_bin(c.lidar.points, "--lidar");
+    const std::vector<float> in = read_kitti_bin(c.lidar.points, "--lidar", kLidarFogBytesPerPoint);
     const std::size_t n = in.size() / 4;
     std::vector<float> out(in.size());
     LidarFogStats st;

@@ -46,6 +46,7 @@ class SoftModel {
     const double h = m.pulse_m / kLidarStepsPerPulse;
     // The uncut maximum lies in [0, R2 + L]; one more pulse of nodes for the cut tails.
     const double end = std::max(range_end_m, p.r2_m + m.pulse_m) + 2 * h;
+    lidar_table_nodes(end, h, p.tau_h_ns, range_end_m > p.r2_m + m.pulse_m ? "the scan's farthest point" : "--r2 and one pulse");
     nodes_ = static_cast<std::size_t>(std::ceil(end / h)) + 1;
     c_.extend(f, nodes_);
     k_ = m.c_a * p.p0_w * m.beta_b * 2.0 / kSpeedOfLight;
@@ -147,6 +148,7 @@ const ParamTable<LidarPose>& lidar_pose_param_table() {
            "KITTI calibration (P2, R0_rect, Tr_velo_to_cam) that places the scan in camera 2's frame, which "
            "--camera-height, --pitch, --roll place in the fog (as the camera effects take them); for a --profile "
            "that depends on height")
+        .reads_file()
         .real("sensor-height", &LidarPose::sensor_height_m, "m", Range::any(),
               "without --kitti-calib: height of the scan's origin above the ground plane, the scan's z axis up; for "
               "a --profile that depends on height",
@@ -343,27 +345,16 @@ RigidTransform lidar_world_from_scan(const LidarFogParams& p) {
     t.translation = {0.0, *p.pose.sensor_height_m, 0.0};
     return t;
   }
+  // The one reader checks it (brume/depth.hpp): finite numbers, R0_rect and
+  // Tr_velo_to_cam rotations, P2's focal lengths > 0.
   const KittiCalib c = read_kitti_calib(p.pose.kitti_calib);
-  const std::string what = "--kitti-calib '" + p.pose.kitti_calib + "'";
-  for (const double* v : {c.P2, c.Tr})
-    for (int i = 0; i < 12; ++i)
-      if (!std::isfinite(v[i])) throw Error(what + ": a non-finite number in P2 or Tr_velo_to_cam");
-  for (int i = 0; i < 9; ++i)
-    if (!std::isfinite(c.R0[i])) throw Error(what + ": a non-finite number in R0_rect");
   Mat3 r0, tr;
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) r0.m[i][j] = c.R0[3 * i + j], tr.m[i][j] = c.Tr[4 * i + j];
   const Mat3 a = r0 * tr;  // velodyne -> rectified camera, a rotation
-  const Mat3 g = a.transposed() * a;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      if (!(std::abs(g.m[i][j] - (i == j ? 1.0 : 0.0)) <= 1e-3))
-        throw Error(what + ": R0_rect times Tr_velo_to_cam's 3x3 part is not a rotation (its columns are not "
-                    "orthonormal within 1e-3); the file is not a KITTI calibration");
   // Camera 2's centre in rectified camera-0 coordinates: P2 = K [I | t] (as depth's project_velodyne).
   const double* P = c.P2;
   const double fx = P[0], sk = P[1], cx = P[2], fy = P[5], cy = P[6], tz = P[11];
-  if (!(fx != 0.0 && fy != 0.0)) throw Error(what + ": P2's focal lengths must not be 0");
   const double ty = (P[7] - cy * tz) / fy;
   const double tx = (P[3] - sk * ty - cx * tz) / fx;
   const Vec3 b = r0 * Vec3{c.Tr[3], c.Tr[7], c.Tr[11]};
@@ -421,19 +412,12 @@ nlohmann::json LidarFogStats::record() const {
 
 LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarFogParams& p, const std::string& what) {
   const LidarFogMedium m = lidar_fog_medium(p);
-  // Every point checked before anything is written.
+  // Every point checked before anything is written: the scan's validation
+  // that every reader of a scan makes (brume/depth.hpp), then the model's scale.
+  validate_scan(in, n, what);
   std::size_t above = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const float* q = in + 4 * i;
-    for (int c = 0; c < 4; ++c)
-      if (!std::isfinite(q[c]))
-        throw Error(what + ": point " + std::to_string(i) + " has a non-finite " + "xyzi"[c] + " (" + num(q[c]) +
-                    "); a scan's coordinates and intensities must be finite numbers: drop such points first");
-    if (q[3] < 0.0f)
-      throw Error(what + ": point " + std::to_string(i) + " has a negative intensity " + num(q[3]) +
-                  "; intensities are reflectances >= 0");
-    if (static_cast<double>(q[3]) * p.intensity_scale > 255.0) ++above;
-  }
+  for (std::size_t i = 0; i < n; ++i)
+    if (static_cast<double>(in[4 * i + 3]) * p.intensity_scale > 255.0) ++above;
   if (n > 0 && 2 * above > n)
     throw Error("--intensity-scale " + num(p.intensity_scale) + ": " + num(100.0 * above / n) +
                 " % of the intensities of " + what + " times it exceed 255, the model's scale [0, 255]; KITTI's reflectance is in [0, 1] "
@@ -487,27 +471,7 @@ LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarF
   return st;
 }
 
-// ---- KITTI .bin ----
-std::vector<float> parse_kitti_bin(const std::string& bytes, const std::string& what) {
-  if (bytes.size() % 16 != 0)
-    throw Error(what + ": " + std::to_string(bytes.size()) +
-                " bytes is not a whole number of points (KITTI .bin: 16 bytes a point, float32 x, y, z, "
-                "reflectance); the file is truncated or not a KITTI scan");
-  static_assert(sizeof(float) == 4, "float32");
-  std::vector<float> v(bytes.size() / 4);
-  if (!v.empty()) std::memcpy(v.data(), bytes.data(), bytes.size());  // little-endian host (x86-64, AArch64)
-  return v;
-}
-
-std::vector<float> read_kitti_bin(const std::string& path, const std::string& flag) {
-  std::ifstream f(path, std::ios::binary);
-  if (!f) throw Error(flag + " '" + path + "': cannot be read (no such file or no permission)");
-  std::ostringstream s;
-  s << f.rdbuf();
-  if (f.bad()) throw Error(flag + " '" + path + "': read failed");
-  return parse_kitti_bin(s.str(), flag + " '" + path + "'");
-}
-
+// ---- KITTI .bin (read by depth: src/depth/scan.cpp) ----
 std::string kitti_bin_bytes(const float* points, std::size_t n) {
   return std::string(reinterpret_cast<const char*>(points), n * 16);
 }

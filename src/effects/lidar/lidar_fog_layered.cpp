@@ -79,6 +79,7 @@ class BeamSoft {
     const double ratio = p.lidar_ratio_sr ? 1.0 / *p.lidar_ratio_sr : 0.046 / std::log(20.0);  // β_b/δ
     k_ = m.c_a * p.p0_w * ratio * 2.0 / kSpeedOfLight;
     const std::size_t n = kLidarStepsPerPulse;
+    lidar_table_nodes(r_end, h_, p.tau_h_ns, "the farthest point of the beams this table serves");
     const std::size_t want = static_cast<std::size_t>(std::floor(r_end / h_)) + 3;
     // For every R' ≥ R (ξ ≤ 1, sin² ≤ 1, 1/r² ≤ 1/(R−L)², F rising):
     //   P(R') ≤ k·δ_max·(L/2)·e^{−2F(R−L)}/(R−L)²   (∫ sin² over the window = L/2,
@@ -287,6 +288,11 @@ LidarFogStats layered_fog(const float* in, float* out, std::size_t n, const Lida
     }
   // The longest tables first, so that the threads end together.
   std::sort(used.begin(), used.end(), [&](std::size_t a, std::size_t b) { return r_end[a] > r_end[b]; });
+
+  // Each table's size before the threads start (an Error cannot leave an
+  // OpenMP region): the longest first.
+  if (!used.empty())
+    lidar_table_nodes(r_end[used.front()], m.pulse_m / kLidarStepsPerPulse, p.tau_h_ns, "the scan's farthest point");
 
   // One table a bin, at the middle of its beams' s; its points on the same thread.
   const PointRule rule(p, m);

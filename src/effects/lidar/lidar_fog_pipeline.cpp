@@ -63,6 +63,7 @@ const ParamTable<LidarFogJob>& lidar_fog_job_table() {
   static const ParamTable<LidarFogJob> t = [] {
     ParamTable<LidarFogJob> d("files");
     d.text("points", &LidarFogJob::points, "the scan: KITTI velodyne .bin (float32 x, y, z, reflectance)")
+        .reads_file()
         .nest(&LidarFogJob::fog, lidar_fog_param_table())
         .text("out", &LidarFogJob::out, "the foggy scan, KITTI .bin (same points, same order, same count)")
         .writes_file()
@@ -86,7 +87,7 @@ nlohmann::json run_lidar_fog_job(const LidarFogJob& job, const RunContext& ctx) 
   if (!job.record.empty()) check_record_path(job.record);
   if (!job.soft_curve.empty()) check_output_dir(job.soft_curve, "--soft-curve");
 
-  const std::vector<float> in = read_kitti_bin(job.points, "--points");
+  const std::vector<float> in = read_kitti_bin(job.points, "--points", kLidarFogBytesPerPoint);
   const std::size_t n = in.size() / 4;
   std::vector<float> out(in.size());
   const LidarFogStats st = lidar_fog(in.data(), out.data(), n, job.fog, "--points '" + job.points + "'");
@@ -94,6 +95,9 @@ nlohmann::json run_lidar_fog_job(const LidarFogJob& job, const RunContext& ctx) 
   nlohmann::json inputs = {{"points", {{"path", job.points}, {"sha256", sha256_file(job.points)}, {"points", n}}}};
   if (job.fog.profile && !job.fog.pose.kitti_calib.empty())
     inputs["kitti_calib"] = {{"path", job.fog.pose.kitti_calib}, {"sha256", sha256_file(job.fog.pose.kitti_calib)}};
+  if (job.fog.profile && !job.fog.fog.camera.view_matrix_file.empty())
+    inputs["view_matrix"] = {{"path", job.fog.fog.camera.view_matrix_file},
+                             {"sha256", sha256_file(job.fog.fog.camera.view_matrix_file)}};
   if (job.fog.profile == FogProfile::table)
     inputs["fog_table"] = {{"path", job.fog.fog.table_file}, {"sha256", sha256_file(job.fog.fog.table_file)}};
   const nlohmann::json rec =

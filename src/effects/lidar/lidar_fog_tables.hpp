@@ -7,13 +7,41 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
+#include <string>
 #include <vector>
+
+#include "brume/error.hpp"
 
 #include "brume/lidar_fog.hpp"
 
 namespace brume::lidar_detail {
 
 constexpr double kPi = 3.14159265358979323846;
+
+// The nodes of a soft-return table from 0 to end_m at steps of h_m = L/600
+// (L = c·τ_H), counted in double before any conversion and bounded (issue
+// #51: neither --tau-h nor a far point may ask for a table without end; a
+// point at 1e6 m once grew --soft-curve without bound, one at 1e8 m ended in
+// std::bad_alloc, one at 1e20 m overflowed the count and wrote "0,0").
+// kMaxLidarTableNodes = 2^22 = 4 194 304 nodes, ~60 bytes each while a table
+// is built (~250 MB): 2 km (kLidarLayeredRangeMax) at 0.5-mm steps, i.e. a
+// 1-ns pulse. The default 20-ns pulse tabulates 1-cm steps: KITTI's farthest
+// point (~80 m) is 8 000 nodes, 2 km 200 000. `to` says what sets end_m.
+constexpr double kMaxLidarTableNodes = 4194304.0;
+inline std::size_t lidar_table_nodes(double end_m, double h_m, double tau_h_ns, const std::string& to) {
+  const double nodes = std::ceil(end_m / h_m) + 3.0;
+  if (!(nodes <= kMaxLidarTableNodes)) {
+    char b[320];
+    std::snprintf(b, sizeof b,
+                  "the soft-return table to %.6g m (%s) at steps of c tau_H / %d = %.3g m (--tau-h %.6g ns) needs "
+                  "%.4g nodes; brume refuses more than %.0f (~250 MB while a table is built): raise --tau-h "
+                  "(LiDAR pulses are 2-20 ns wide; the default is 20)",
+                  end_m, to.c_str(), kLidarStepsPerPulse, h_m, tau_h_ns, nodes, kMaxLidarTableNodes);
+    throw Error(b);
+  }
+  return static_cast<std::size_t>(nodes);
+}
 
 // The transmitter-receiver overlap ξ(r): 0 below R1, 1 above R2, linear between.
 inline double overlap(double r, double r1, double r2) { return r <= r1 ? 0.0 : r >= r2 ? 1.0 : (r - r1) / (r2 - r1); }

@@ -12,6 +12,7 @@
 
 #include "brume/command.hpp"
 #include "brume/error.hpp"
+#include "brume/io.hpp"
 #include "brume/gpu_sky.hpp"
 #include "brume/record.hpp"
 #include "brume/sky.hpp"
@@ -135,9 +136,11 @@ const ParamTable<SkyFitJob>& sky_fit_job_table() {
   static const ParamTable<SkyFitJob> t = [] {
     ParamTable<SkyFitJob> d("sky fit");
     d.text("image", &SkyFitJob::image, "the sky photo (HDR/EXR linear; PNG/JPEG/TIFF sRGB unless --image-transfer)")
+        .reads_file()
         .choice("image-transfer", &SkyFitJob::image_transfer, transfer_names(),
                 "transfer function of an integer image (auto: sRGB for integer files, linear for float)")
         .text("mask", &SkyFitJob::mask, "grey image of the same size: > half scale marks usable sky (default: all)")
+        .reads_file()
         .nest(&SkyFitJob::view, sky_view_param_table())
         .nest(&SkyFitJob::sun, sun_param_table())
         .nest(&SkyFitJob::fit, sky_fit_param_table())
@@ -265,17 +268,17 @@ nlohmann::json run_sky_fit_job(const SkyFitJob& job, const RunContext& ctx, SkyP
 }
 
 double turbidity_from_fit_json(const std::string& path, const std::string& flag) {
-  std::ifstream f(path);
-  if (!f) {
-    std::error_code ec;
-    // A missing file is FileNotFound (Python: FileNotFoundError); one that exists but cannot be read is not.
-    if (!std::filesystem::exists(path, ec))
-      throw FileNotFound(flag + " '" + path + "' does not exist; give the JSON written by brume sky fit --out");
-    throw Error(flag + " '" + path + "' cannot be read; give the JSON written by brume sky fit --out");
+  // A regular file (brume/io.hpp; a missing one is FileNotFound, Python's
+  // FileNotFoundError) of at most 16 MiB (a fit's JSON is a few kB).
+  std::string text;
+  try {
+    text = read_input_file(path, flag, {16u << 20, "a sky fit's JSON is a few kB"});
+  } catch (const FileNotFound&) {
+    throw FileNotFound(flag + " '" + path + "' does not exist; give the JSON written by brume sky fit --out");
   }
   nlohmann::json j;
   try {
-    j = nlohmann::json::parse(f);
+    j = nlohmann::json::parse(text);
   } catch (const std::exception& e) {
     throw Error(flag + " '" + path + "' is not JSON (" + e.what() + "); give the JSON written by brume sky fit --out");
   }

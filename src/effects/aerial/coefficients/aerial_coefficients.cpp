@@ -33,6 +33,7 @@ const ParamTable<CoefficientsJob>& coefficients_job_table() {
         .text("sensitivity", &CoefficientsJob::sensitivity,
               "camera spectral sensitivity: 'default' (CIE 1931 x, y, z, Wyman-Sloan-Shirley fit; columns "
               "gamma_x,gamma_y,gamma_z), a CSV of wavelength_nm,r,g,b rows, or DATABASE.txt#CAMERA NAME (camspec)")
+        .reads_file("default", '#')
         .text("distances", &CoefficientsJob::distances, "distances in metres, comma-separated (each >= 0)")
         .text("out", &CoefficientsJob::out,
               "CSV distance_m,gamma_r,gamma_g,gamma_b (gamma_x,gamma_y,gamma_z for the default sensitivity)")

@@ -39,9 +39,11 @@ const ParamTable<InsertObject>& insert_object_param_table() {
     d.text("object", &InsertObject::object,
            "the virtual object, RGBA, same size and camera as --image: EXR (float) linear premultiplied; PNG/TIFF "
            "(integer) sRGB colour with straight alpha; no alpha channel: alpha 1 where its range is known")
+        .reads_file()
         .text("object-range", &InsertObject::object_range,
               "the object's range map in metres along the ray (as --range); unknown (NaN, inf, 0) where the object "
               "is absent")
+        .reads_file()
         .text("object-range-channel", &InsertObject::object_range_channel,
               "channel of a multi-channel object range file (e.g. Z); empty: the file's only channel")
         .real("object-depth-scale", &InsertObject::object_depth_scale, "m", Range::above(0.0),
