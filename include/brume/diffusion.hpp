@@ -69,6 +69,8 @@ std::string to_string(Scheme s);
 std::string to_string(Precision p);
 std::string to_string(EdgeRate e);
 
+constexpr double kDefaultMaxSigmaDiagonals = 8.0;  // see plan_diffusion
+
 struct DiffusionParams {
   Scheme scheme = Scheme::invariant_exact;
   Precision precision = Precision::f32;
@@ -88,6 +90,11 @@ struct DiffusionParams {
   // rates vary smoothly (min departs at O(eps)). A constant scale gives the
   // same Gaussian in every mode. `mean` reproduces the paper.
   EdgeRate edge_rate = EdgeRate::harmonic;
+  // Refuse sigma_max past this many image diagonals (plan_diffusion below);
+  // 0: no such bound, the rule records before schema 4 ran under (a stored
+  // schema-3 record of a renderer's 1e10 background, read as a range, blurs
+  // its sky at 2300 diagonals and must repeat).
+  double max_sigma_diagonals = kDefaultMaxSigmaDiagonals;
 };
 
 // The rate limit a run will use (resolves an unset rho_max to the scheme default).
@@ -110,7 +117,9 @@ DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max);
 // kappa_s from the range map's R_max), so no flag's range can bound it; the
 // plan is checked instead, where it is decided: in each effect's analysis,
 // which the CLI, Python, `brume run` and `brume view`'s plan all go through.
-//  - sigma_max at most kMaxSigmaDiagonals times the image's diagonal. The
+//  - sigma_max at most DiffusionParams::max_sigma_diagonals (default
+//    kDefaultMaxSigmaDiagonals, --max-sigma-diagonals) times the image's
+//    diagonal. The
 //    slowest mode of the half-sample mirror boundary on a side of L pixels,
 //    cos(pi (x + 1/2) / L), is damped by exp(-(pi sigma / L)^2 / 2), below
 //    float's 2^-24 from sigma = 2 L: a pixel's blur past twice the image's
@@ -131,7 +140,6 @@ DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max);
 // Both are refused, never clamped: the message names the quantity, its
 // value, the bound and `set_by`, the flags that set sigma_max for this run
 // ("--lambda 1e4, --visibility 300 m, ..."), with the scheme's own flags.
-constexpr double kMaxSigmaDiagonals = 8.0;
 constexpr double kMaxDiffusionWork = 1e11;
 constexpr int kMaxDiffusionIterations = 2147483647;
 DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max, std::int64_t width, std::int64_t height,

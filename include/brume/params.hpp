@@ -76,6 +76,8 @@ struct ParamSpec {
                                      // SHA-256, which brume run checks, and refuses a record without it
   std::string input_file_none;       // a value of an input_file that names no file ("default" sensitivities)
   char input_file_cut = 0;           // the file is the value up to this character ('#': DATABASE.txt#CAMERA)
+  int input_hashed_since = 0;        // records of this schema on hold its hash (calibrations 4; --like,
+                                     // --view-matrix, --turbidity-from 5: schema 4 was written without)
   int since_schema = 0;              // the record schema that introduced it (0: always there); a job that
   nlohmann::json before_schema;      // lacks it ran as this value says (brume run sets it; record_job)
 
@@ -237,10 +239,14 @@ class ParamTable {
   // record must hold the file's {path, sha256}, or brume run refuses it
   // (issue #51). `none`: a value that names no file; `cut`: the file is the
   // value up to that character.
-  ParamTable& reads_file(const char* none = "", char cut = 0) {
+  // `hashed_since`: the record schema from which every record holds the
+  // file's hash (0: all of them); an older record without it runs on the file
+  // as it is now, with a warning.
+  ParamTable& reads_file(const char* none = "", char cut = 0, int hashed_since = 0) {
     params_.back().spec.input_file = true;
     params_.back().spec.input_file_none = none;
     params_.back().spec.input_file_cut = cut;
+    params_.back().spec.input_hashed_since = hashed_since;
     return *this;
   }
   // The same for an output that exists only with the input `of` (brume

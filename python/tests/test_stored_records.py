@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 import brume
+from brume._rerun import _REPLAYABLE
 
 RECORDS = Path(__file__).resolve().parents[2] / "tests" / "records"
-EFFECTS = {"haze", "haze+dof", "fog", "aerial", "dof"}
+EFFECTS = set(_REPLAYABLE)  # the commands brume.rerun takes
 
 
 def stored():
@@ -24,6 +25,16 @@ def stored():
             if rec.get("command") in EFFECTS and rec["job"]["depth"].get("range"):
                 out.append(pytest.param(rec, id=f"{d.name}/{f.stem}"))
     return out
+
+
+def test_records_of_every_schema_are_replayed():
+    # A glob that found nothing would pass every parametrized case vacuously:
+    # at least the eight effect records of each of schemas 2, 3 and 4.
+    by_schema = {}
+    for p in stored():
+        by_schema[p.values[0]["schema_version"]] = by_schema.get(p.values[0]["schema_version"], 0) + 1
+    assert set(by_schema) >= {2, 3, 4}, by_schema
+    assert all(n >= 8 for n in by_schema.values()), by_schema
 
 
 def bits(a):
@@ -47,7 +58,7 @@ def test_stored_record_repeats_on_arrays(record, monkeypatch):
     # The replay's record: today's schema, the stored job's values, and a
     # schema-2 job's sky at S_max (sky-rule, since schema 3).
     today = brume.blur(np.zeros((2, 2, 3), np.float32), sigma=1.5).record["schema_version"]
-    assert again.record["schema_version"] == today > record["schema_version"]
+    assert again.record["schema_version"] == today >= record["schema_version"]
     for block in ("haze", "fog", "aerial", "dof", "diffusion", "prepare"):
         for name, value in job.get(block, {}).items():
             assert again.record["job"][block][name] == value, f"{block}.{name}"

@@ -96,7 +96,11 @@ const ParamTable<DiffusionParams>& diffusion_param_table() {
               "invariant-exact, 0.25 for the others")
         .choice("edge-rate", &DiffusionParams::edge_rate, edge_rate_names(),
                 "rate on the edge between a pixel and its neighbour sample: harmonic (default; leak-free), "
-                "mean (the paper's eq. 12), min");
+                "mean (the paper's eq. 12), min")
+        .real("max-sigma-diagonals", &DiffusionParams::max_sigma_diagonals, "1", Range::at_least(0.0),
+              "refuse a blur whose largest scale sigma_max exceeds this many image diagonals (past twice the "
+              "longer side a pixel's blur is the image's mean: more only costs work); 0: no such bound")
+        .since(4, 0.0);
     return d;
   }();
   return t;
@@ -188,7 +192,7 @@ const ParamTable<DepthSource>& depth_param_table() {
         .real_or_unset("fov-y", &DepthSource::fov_y_deg, "deg", Range::left_open(0.0, 180.0),
                        "vertical field of view, edge to edge", NAN)
         .text("calib", &DepthSource::calib, "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm)")
-        .reads_file()
+        .reads_file("", 0, 4)
         .real_or_unset("baseline", &DepthSource::baseline_m, "m", Range::above(0.0),
                        "stereo baseline (without --calib)", NAN)
         .real("disparity-scale", &DepthSource::disparity_scale, "1", Range::any(),
@@ -203,9 +207,9 @@ const ParamTable<DepthSource>& depth_param_table() {
         .real_or_unset("inverse-scale", &DepthSource::inverse_scale, "1/m", Range::any(), "A in z = 1/(A v + B)", NAN)
         .real("inverse-shift", &DepthSource::inverse_shift, "1/m", Range::any(), "B in z = 1/(A v + B)")
         .text("kitti-calib", &DepthSource::kitti_calib, "KITTI calibration file for --velodyne")
-        .reads_file()
+        .reads_file("", 0, 4)
         .text("like", &DepthSource::like, "image whose size a --velodyne scan is projected to (when no --image is given)")
-        .reads_file()
+        .reads_file("", 0, 5)
         .integer("width", &DepthSource::width, "px", Range::closed(0, 65535), "image width for --velodyne; 0: from --like")
         .integer("height", &DepthSource::height, "px", Range::closed(0, 65535), "image height for --velodyne; 0: from --like");
     return d;
@@ -227,7 +231,7 @@ const ParamTable<CameraPose>& camera_pose_param_table() {
         .real("camera-z", &CameraPose::z_m, "m", Range::any(), "camera centre south of the world origin")
         .text("view-matrix", &CameraPose::view_matrix_file,
               "the whole pose as a 4x4 OpenGL view matrix file (four rows of four numbers, x_eye = M x_world)")
-        .reads_file();
+        .reads_file("", 0, 5);
     return d;
   }();
   return t;

@@ -19,7 +19,7 @@ const ParamTable<DepthStereoJob>& depth_stereo_job_table() {
         .text("right", &DepthStereoJob::right, "right view of the pair (same size)")
         .reads_file()
         .text("calib", &DepthStereoJob::calib, "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm)")
-        .reads_file()
+        .reads_file("", 0, 4)
         .real_or_unset("fx", &DepthStereoJob::fx_px, "px", Range::above(0.0),
                        "focal length in pixels (without --calib; with --baseline)", 0.0)
         .real_or_unset("baseline", &DepthStereoJob::baseline_m, "m", Range::above(0.0),

@@ -70,15 +70,16 @@ DiffusionPlan plan_diffusion(const DiffusionParams& p, double sigma_max, std::in
     const double w = static_cast<double>(width), h = static_cast<double>(height);
     const double diagonal = std::sqrt(w * w + h * h);
     const std::string size = std::to_string(width) + " x " + std::to_string(height);
-    if (sigma_max > kMaxSigmaDiagonals * diagonal) {
+    if (p.max_sigma_diagonals > 0.0 && sigma_max > p.max_sigma_diagonals * diagonal) {
       std::ostringstream m;
       m.precision(4);
       m << "the blur's largest scale sigma_max = " << sigma_max << " px is " << sigma_max / diagonal
         << " times the image's diagonal (" << diagonal << " px for " << size << "); brume refuses more than "
-        << kMaxSigmaDiagonals << " diagonals (" << kMaxSigmaDiagonals * diagonal
+        << p.max_sigma_diagonals << " diagonals (" << p.max_sigma_diagonals * diagonal
         << " px here: past twice the image's longer side a pixel's blur leaves the image's mean, so more changes "
            "nothing but the work). sigma_max is set by "
-        << set_by;
+        << set_by << ". If so wide a blur is meant, --max-sigma-diagonals sets the bound (0: none; the haze+dof "
+           "chain's depth of field: --dof-max-sigma-diagonals)";
       throw Error(m.str());
     }
     const double n = std::ceil(diffusion_iterations_exact(p, rho_max, sigma_max) * (1.0 - 1e-12));

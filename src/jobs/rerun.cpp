@@ -63,6 +63,8 @@ void collect_hashes(const nlohmann::json& j, std::map<std::string, std::string>&
 // deleted (or whose inputs block was) used to run on whatever the name held,
 // exit 0, no word (issue #51). With `rehash` such a file is hashed now and
 // the run goes on, with a warning.
+int record_version(const nlohmann::json& record);
+
 void require_input_hashes(const CommandDef& c, const nlohmann::json& job, const nlohmann::json& record,
                           const RerunInputs& opts) {
   std::map<std::string, std::string> hashes;
@@ -79,6 +81,14 @@ void require_input_hashes(const CommandDef& c, const nlohmann::json& job, const 
     if (s.input_file_cut) path = path.substr(0, path.rfind(s.input_file_cut));
     const auto h = hashes.find(path);
     if (h == hashes.end()) {
+      if (record_version(record) < s.input_hashed_since) {
+        // Written before brume hashed this file: not a deleted hash.
+        if (opts.warn)
+          opts.warn("the record (schema " + std::to_string(record_version(record)) + ") was written before brume "
+                    "recorded the SHA-256 of --" + s.name + "; running on '" + path + "' as it is now (the new record "
+                    "hashes it)");
+        continue;
+      }
       if (!opts.rehash)
         throw Error("the record's job reads --" + s.name + " '" + path + "' but the record holds no SHA-256 for it "
                     "(deleted, or the record was edited), so brume run cannot check that the file is the one the "

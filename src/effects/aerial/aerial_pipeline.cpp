@@ -159,7 +159,7 @@ const ParamTable<AerialJob>& aerial_job_table() {
         .nest(&AerialJob::lidar, camera_lidar_param_table())
         .text("turbidity-from", &AerialJob::turbidity_from,
               "take --turbidity from a `brume sky fit` JSON (refused when the fit is flagged unreliable)")
-        .reads_file()
+        .reads_file("", 0, 5)
         .text("sky-image", &AerialJob::sky_image,
               "--turbidity auto: the sky photo to fit T on, as brume sky fit (refused when unreliable); its flags "
               "carry --sky-")

@@ -148,7 +148,7 @@ const ParamTable<LidarPose>& lidar_pose_param_table() {
            "KITTI calibration (P2, R0_rect, Tr_velo_to_cam) that places the scan in camera 2's frame, which "
            "--camera-height, --pitch, --roll place in the fog (as the camera effects take them); for a --profile "
            "that depends on height")
-        .reads_file()
+        .reads_file("", 0, 4)
         .real("sensor-height", &LidarPose::sensor_height_m, "m", Range::any(),
               "without --kitti-calib: height of the scan's origin above the ground plane, the scan's z axis up; for "
               "a --profile that depends on height",
