@@ -119,6 +119,11 @@ def http_rules(brume, tmp):
             st, data = request(url, base + f"{name}.bin?scale=2")
             check(st == 200 and len(data) == 80 * 56 * ch * 4, f"{name}.bin at 1/2: 80x56x{ch} floats")
         check(request(url, base + "image.bin?scale=0")[0] == 400, "scale 0: 400")
+        for bad in ["4294967298", "2x", "-2", "65"]:
+            check(request(url, base + f"image.bin?scale={bad}")[0] == 400, f"image.bin?scale={bad}: 400")
+        for bad in [4294967297, 18446744073709551615, -1, 65, 2.5, "2"]:
+            st, data = request(url, base + "frame", "POST", {}, json.dumps({"values": {}, "scale": bad}).encode())
+            check(st == 400 and "scale" in json.loads(data)["error"], f"a frame at scale {bad!r}: 400 naming scale")
         p.send_signal(signal.SIGTERM)
         check(p.wait(5) == 0, "SIGTERM: exits 0")
     finally:

@@ -3,6 +3,8 @@
 // the handler on complete requests (http_front.hpp says why and what).
 #include "jobs/view/http_front.hpp"
 
+#include "brume/error.hpp"
+
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netdb.h>
@@ -20,6 +22,7 @@
 #include <condition_variable>
 #include <cstring>
 #include <deque>
+#include <limits>
 #include <mutex>
 #include <thread>
 #include <tuple>
@@ -85,7 +88,6 @@ struct Conn {
   long long t0 = 0;   // ms: accepted, or its previous response ended (head); head's end (body)
   bool kept = false;  // a keep-alive connection between requests
   int served = 0;
-  bool peer_closed = false;
   // head
   std::size_t scanned = 0;  // lines of the head read so far end here
   std::size_t lines = 0;
@@ -279,7 +281,7 @@ struct HttpFront::Impl {
     Job j{c.fd, c.buf.substr(0, end), false};
     c.buf.erase(0, end);
     ++c.served;
-    j.last = c.served >= lim.max_requests || c.peer_closed;
+    j.last = c.served >= lim.max_requests;
     c.phase = Phase::busy;
     watch(c.fd, false);
     {
@@ -304,7 +306,9 @@ struct HttpFront::Impl {
           }
           return true;
         }
-        if (l.text.size() > lim.max_line_bytes || l.next > lim.max_head_bytes || ++c.lines > lim.max_header_lines + 1) {
+        // The request line and at most max_header_lines fields; the blank line that ends the head is not one.
+        if (!l.text.empty()) ++c.lines;
+        if (l.text.size() > lim.max_line_bytes || l.next > lim.max_head_bytes || c.lines > lim.max_header_lines + 1) {
           count(&FrontStats::refused_head);
           refuse(c, 431, "Request Header Fields Too Large", "request head too large\n");
           return true;
@@ -361,11 +365,16 @@ struct HttpFront::Impl {
       if (colon == std::string::npos) continue;  // the handler refuses it
       const std::string_view name = l.text.substr(0, colon), value = trim_ows(l.text.substr(colon + 1));
       if (iequals(name, "content-length")) {
+        // Digits only; leading zeros are allowed (RFC 9110: 1*DIGIT). Past 18
+        // significant digits the value saturates: above any body bound, so 413.
         std::size_t v = 0;
-        bool ok = !value.empty() && value.size() <= 18;
+        bool ok = !value.empty();
+        int significant = 0;
         for (char ch : value) {
           ok = ok && ch >= '0' && ch <= '9';
-          v = v * 10 + static_cast<std::size_t>(ch - '0');
+          if (!ok) break;
+          if (significant == 0 && ch == '0') continue;
+          v = ++significant > 18 ? std::numeric_limits<std::size_t>::max() : v * 10 + static_cast<std::size_t>(ch - '0');
         }
         if (!ok || (has_length && v != length)) {
           count(&FrontStats::refused_head);
@@ -652,6 +661,13 @@ HttpFront::HttpFront(std::vector<int> listeners, FrontLimits limits, FrontAdmit 
   impl_->handler = std::move(handler);
   impl_->ep = epoll_create1(EPOLL_CLOEXEC);
   impl_->wake = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+  if (impl_->ep < 0 || impl_->wake < 0) {
+    const std::string why = std::strerror(errno);
+    if (impl_->ep >= 0) ::close(impl_->ep);
+    if (impl_->wake >= 0) ::close(impl_->wake);
+    throw Error("brume view: cannot create the server's event queue (" + why +
+                "); the process may have run out of file descriptors (ulimit -n)");
+  }
 }
 
 HttpFront::~HttpFront() {

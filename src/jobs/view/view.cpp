@@ -61,6 +61,9 @@ namespace brume {
 
 namespace {
 
+// The answer to a request without the token (the front's and the routes' alike).
+const char* const kNoToken = "forbidden: the URL needs the token brume view printed\n";
+
 struct ViewParams {
   std::string effect = "haze";
   int port = 0;
@@ -290,10 +293,13 @@ struct Server {
   json frame(const json& body) {
     if (!body.is_object() || !body.contains("values") || !body["values"].is_object())
       throw Error("the request needs {\"values\": {name: text}}");
-    if (body.contains("scale") && !body["scale"].is_number_integer())
-      throw Error("scale must be a whole number in [1, 64]");
-    const int k = body.contains("scale") ? body["scale"].get<int>() : 1;
-    if (k < 1 || k > 64) throw Error("scale " + std::to_string(k) + " must be in [1, 64]");
+    // Range-checked before it is narrowed (4294967297 once read as 1).
+    const json scale = body.contains("scale") ? body["scale"] : json(1);
+    const bool whole = scale.is_number_integer();
+    if (!whole || (scale.is_number_unsigned() ? scale.get<std::uint64_t>() > 64
+                                              : scale.get<std::int64_t>() < 1 || scale.get<std::int64_t>() > 64))
+      throw Error("scale " + scale.dump() + " must be a whole number in [1, 64]");
+    const int k = scale.get<int>();
     JobValues values = cli_values;
     std::set<std::string> given = cli_given;
     std::vector<std::string> words = {"brume"};
@@ -362,7 +368,7 @@ struct Server {
   httplib::Server::HandlerResponse guard(const httplib::Request& req, httplib::Response& res) {
     if (!has_token(req.path)) {
       res.status = 403;
-      res.set_content("forbidden: the URL needs the token brume view printed\n", "text/plain");
+      res.set_content(kNoToken, "text/plain");
       return httplib::Server::HandlerResponse::Handled;
     }
     const std::string host = req.get_header_value("Host");
@@ -434,8 +440,15 @@ struct Server {
     for (const char* what : {"image", "range", "sky"}) {
       const std::string w = what;
       s.Get(p + w + ".bin", [this, w](const httplib::Request& q, httplib::Response& r) {
+        // Digits only, at most two, before anything is converted ("4294967298" and "2x" are 400).
         int k = 1;
-        if (q.has_param("scale")) k = std::atoi(q.get_param_value("scale").c_str());
+        if (q.has_param("scale")) {
+          const std::string v = q.get_param_value("scale");
+          const bool digits = !v.empty() && v.size() <= 2 && std::all_of(v.begin(), v.end(), [](char ch) {
+            return ch >= '0' && ch <= '9';
+          });
+          k = digits ? std::stoi(v) : 0;
+        }
         if (k < 1 || k > 64) {
           r.status = 400;
           return;
@@ -615,7 +628,7 @@ json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx)
   sv.routes(routes);
   view::HttpFront front(
       std::move(listeners), view::FrontLimits{}, [&sv](std::string_view target) { return sv.has_token(target); },
-      "forbidden: the URL needs the token brume view printed\n",
+      kNoToken,
       [&routes](const std::string& request, bool last, const view::FrontPeer& peer, const view::FrontWrite& write) {
         RequestStream strm(request, peer, write);
         bool closed = false;
