@@ -41,6 +41,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -98,7 +99,9 @@ double median(std::vector<double> v) {
 }
 
 std::string data_dir() {
-  // The shared data beside the repository, found from the working directory.
+  // BRUME_DATA_DIR when set and not empty (as the tests read it), else the
+  // shared data beside the repository, found from the working directory.
+  if (const char* env = std::getenv("BRUME_DATA_DIR"); env && *env) return env;
   for (fs::path p = fs::current_path(); !p.empty(); p = p.parent_path()) {
     if (fs::exists(p / "shared" / "data")) return (p / "shared" / "data").string();
     if (p == p.parent_path()) break;

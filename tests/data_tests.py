@@ -169,6 +169,20 @@ def ids(text):
     return set(IDENT.findall(text))
 
 
+def reaching(units, names):
+    """The names that reach data: `names`, and to a fixpoint every unit
+    (names, identifiers used) whose identifiers include one of them."""
+    names = set(names)
+    changed = True
+    while changed:
+        changed = False
+        for defined, used in units:
+            if used & names and not set(defined) <= names:
+                names |= set(defined)
+                changed = True
+    return names
+
+
 def gtest_cases(path, helpers):
     """(cases using the data, all cases) of one C++ file."""
     defs, text = macros(strip(open(path, encoding="utf-8").read()))
@@ -201,14 +215,7 @@ def gtest_cases(path, helpers):
             units.append((names, whole))
         elif names:
             units.append((names, ids(header) | ids(body)))
-    data = set(helpers)
-    changed = True
-    while changed:
-        changed = False
-        for names, used in units:
-            if used & data and not set(names) <= data:
-                data |= set(names)
-                changed = True
+    data = reaching(units, set(helpers))
     return [name for name, used in tests if used & data], [name for name, _ in tests]
 
 
@@ -295,13 +302,7 @@ def main():
             defs, text = macros(strip(open(util, encoding="utf-8").read()))
             units += [([n], ids(b)) for n, b in defs]
             units += [(names_of(h), ids(h) | ids(b)) for h, b in items(text) if names_of(h)]
-        changed = True
-        while changed:
-            changed = False
-            for names, used in units:
-                if used & helpers and not set(names) <= helpers:
-                    helpers |= set(names)
-                    changed = True
+        helpers = reaching(units, helpers)
         for f in a.files:
             data, every = gtest_cases(f, helpers)
             found += data
