@@ -171,7 +171,14 @@ void check_channels(const SpectralSensitivity& s) {
 
 std::vector<std::string> read_lines(const std::string& path) {
   // A regular file (brume/io.hpp) of at most 16 MiB (the camspec database is 28 kB).
-  std::istringstream f(read_input_file(path, "--sensitivity", {16u << 20, "a table of camera sensitivities"}));
+  std::string text;
+  try {
+    text = read_input_file(path, "--sensitivity", {16u << 20, "a table of camera sensitivities"});
+  } catch (const FileNotFound& e) {
+    throw FileNotFound(std::string(e.what()) + "; give a CSV of wavelength_nm,r,g,b rows, DATABASE.txt#CAMERA NAME, "
+                       "or 'default' (the CIE 1931 observer)");
+  }
+  std::istringstream f(text);
   std::vector<std::string> lines;
   std::string line;
   while (std::getline(f, line)) {
