@@ -14,13 +14,16 @@
 // image centre ((W-1)/2, (H-1)/2).
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "brume/image.hpp"
+#include "brume/params.hpp"
 
 namespace brume {
 

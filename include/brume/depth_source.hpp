@@ -11,6 +11,8 @@
 #include "brume/camera.hpp"
 #include "brume/depth.hpp"
 #include "brume/image.hpp"
+#include "brume/io.hpp"
+#include "brume/params.hpp"
 #include "brume/stereo.hpp"
 
 namespace brume {
@@ -28,9 +30,13 @@ struct DepthSource {
                                  // and converted as --disparity's (calib.txt, or --fx and --baseline)
   std::string stereo_left;       // the pair's left view: the effects' --image (the default there);
                                  // depth convert and depth prepare name it here
+  std::string stereo_right_layer, stereo_left_layer;  // their layers in files with layers (brume/io.hpp)
   StereoParams stereo;           // the matching's parameters (--max-disparity, --stereo-...)
 
   std::string channel;           // channel name in a multi-channel file (e.g. Z of an EXR)
+  // No channel named: a file with layers' one depth pass by name (names), or
+  // as before schema 4 (first): its one channel, or R of equal R, G, B.
+  LayerRule channel_rule = LayerRule::names;
   std::optional<double> depth_scale;  // metres per count (integer range / z files; required there)
   // A stored value that means "no measurement" (GeoPose3K range maps mark the
   // sky with -1): pixels whose stored value equals it exactly become unknown
@@ -58,7 +64,7 @@ struct DepthSource {
 
 struct LoadedDepth {
   Image range;           // metres along the ray, NaN unknown
-  nlohmann::json record; // what was read and how it was converted
+  nlohmann::json record; // what was read and how it was converted; "warnings": what it cannot vouch for
   std::string path;      // the source file
   Image window_depth;    // --depth-buffer: the window depth d in [0, 1] as read (NaN unknown), for a GPU pass
                          // that linearises it itself; empty for other sources
@@ -69,8 +75,9 @@ struct LoadedDepth {
 // unknown). Throws brume::Error naming the flag or file.
 LoadedDepth load_depth(const DepthSource& src, int width = 0, int height = 0);
 
-// Intrinsics from the source's flags (--fx.., --fov-x.., or calib.txt), for a
-// width x height image; throws when none were given.
+// Intrinsics from the source's flags (--fx.., --fov-x.., calib.txt, or the
+// camera in millimetres), for a width x height image; throws when none were
+// given, or when the millimetres disagree with the pixels by more than 1 %.
 Intrinsics depth_intrinsics(const DepthSource& src, int width, int height);
 
 // The camera the depth was seen from, for a width x height image (both > 0):

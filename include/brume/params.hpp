@@ -372,6 +372,7 @@ class ParamTable {
         const Param<P>* d = find(name);
         if (!d || d->spec.block != block)
           throw Error(where + ": '" + block + "." + name + "' is not a parameter of this command");
+        if (given.count(d->spec.name) && d->spec.block != block) continue;  // the current key wins over a former one
         d->spec.check(v);
         d->set(p, v);
         given.insert(name);

@@ -20,6 +20,7 @@
 // must keep repeating bit for bit (tests/test_records.cpp).
 #pragma once
 
+#include <array>
 #include <chrono>
 #include <functional>
 #include <map>
@@ -58,8 +59,8 @@ const ParamTable<DiffusionParams>& diffusion_param_table();  // scheme, precisio
 const ParamTable<PrepareParams>& prepare_param_table();      // all eight preparation parameters
 const ParamTable<DepthSource>& depth_param_table();          // every depth source and convention flag
 // The names of the depth block that name files or say how to read them: all
-// but the intrinsics (fx, fy, cx, cy, fov-x, fov-y, calib), which an array
-// caller still gives for fog's and dof's camera.
+// but the intrinsics (fx, fy, cx, cy, fov-x, fov-y, calib, and the camera in
+// millimetres), which an array caller still gives for fog's and dof's camera.
 const std::set<std::string>& depth_file_params();
 
 // The camera's pose (brume/camera.hpp: conventions fixed once for every
@@ -104,6 +105,8 @@ void replace_nonfinite(Image& rgb);
 
 struct InputFiles {
   std::string image;                       // colour image
+  std::string image_layer;                 // its layer in a file with layers (brume/io.hpp: ColorRead); "": plain
+  LayerRule image_layer_rule = LayerRule::names;  // --image-layer-rule: no layer named, by name or the first channels
   Transfer image_transfer = Transfer::automatic;
   NonFinite nonfinite = NonFinite::error;
   DepthSource depth;                       // needs_depth effects only
@@ -149,6 +152,11 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
 // --masks -- not on --compression, a setting like --bits. brume batch names
 // these files from the frame's key and brume run moves them under --out-dir.
 bool is_output_file(const ParamSpec& s);
+// Whether a parameter of the input and depth blocks names an input file: a
+// text parameter there, but for those that name a channel or a layer inside
+// one (--depth-channel, --image-layer, --stereo-right-layer, ...). brume
+// batch resolves these against the manifest's folder and lists them.
+bool is_input_file(const ParamSpec& s);
 
 // ---- the shared steps -------------------------------------------------------------
 // Keep freed buffers for reuse within this process (glibc): blocks up to 32
@@ -295,7 +303,9 @@ nlohmann::json job_record(const std::string& command, const RunContext& ctx, nlo
 
 // ---- the job of an effect on an RGB-D frame, from files to files --------------------
 // What an effect's run hands its job: the main image, its declared maps and
-// the record's blocks (run_record).
+// the record's blocks (run_record); a medium's effect names the map of the
+// transmission T its colour was composed with (out = ... + (1 - T) B) and
+// its airlight B, for an OpenEXR output's alpha and medium layer.
 struct EffectOutput {
   Image main;
   std::map<std::string, Image> maps;
@@ -337,7 +347,7 @@ nlohmann::json run_effect_job(const EffectJob<Job>& e, const Job& job, const Exe
 
   const nlohmann::json rec =
       job_record(e.command, ctx, e.table.to_json(recorded ? *recorded : job), in.record, out.record, eo.timing);
-  write_outputs(job.output, e.maps, out.main, out.maps, &in.image_info, rec, ctx.files);
+  write_outputs(job.output, e.maps, out.main, out.maps, &in.image_info, rec, ctx.files, &layers);
   return rec;
 }
 

@@ -268,7 +268,7 @@ struct SkyImageFit {
 };
 SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, const std::string& mask,
                                const SkyViewParams& view, const SunParams& sun, const SkyFitOptions& fit,
-                               const std::string& flags = "--");
+                               const std::string& flags = "--", const std::string& layer = "");
 
 // The same fit on pixels in memory (linear RGB; `integer_image`: they came
 // from 8/16-bit values, so saturation is detectable; `mask`: 1 = usable sky,
@@ -283,6 +283,7 @@ SkyImageFit fit_sky_data(DenseImageRef rgb, bool integer_image, const Image* mas
 
 struct SkyFitJob {
   std::string image;                      // --image (hdr, exr, png, jpg, tiff)
+  std::string image_layer;                // --image-layer: its layer in a file with layers (brume/io.hpp)
   Transfer image_transfer = Transfer::automatic;  // --image-transfer
   std::string mask;                       // --mask: > 0.5 (or 128) marks usable sky
   SkyViewParams view;

@@ -174,9 +174,18 @@ const ParamTable<DepthSource>& depth_param_table() {
         .text("stereo-left", &DepthSource::stereo_left,
               "left view for --stereo-right where no --image is given (depth convert, depth prepare); default --image")
         .reads_file()
+        .text("stereo-right-layer", &DepthSource::stereo_right_layer,
+              "the layer of --stereo-right in a file with layers (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR)")
+        .text("stereo-left-layer", &DepthSource::stereo_left_layer,
+              "the layer of --stereo-left in a file with layers (with --image: --image-layer)")
         .nest(&DepthSource::stereo, stereo_param_table())
         .text("depth-channel", &DepthSource::channel, "channel holding the depth in a multi-channel file (e.g. Z)")
         .alias("range-channel")
+        .choice("depth-channel-rule", &DepthSource::channel_rule, layer_rule_names(),
+                "how a depth file with layers is read when no --depth-channel is given: names (its one channel named "
+                "like a depth pass -- Z, depth, *.depth, *.Depth.Z --, never a Mist pass) or first (its one channel, "
+                "or R of equal R, G, B: the rule of records before schema 4)")
+        .since(4, "first")
         .real("depth-scale", &DepthSource::depth_scale, "m", Range::above(0.0),
               "metres per stored unit; required for integer range/z files (0.001 mm, 0.00390625 KITTI)", "none")
         .alias("range-scale")
@@ -268,6 +277,15 @@ const ParamTable<InputFiles>& input_param_table(bool with_depth) {
     ParamTable<InputFiles> d("input");
     d.text("image", &InputFiles::image, "input colour image (PNG, JPEG, TIFF, EXR, PFM, HDR)")
         .reads_file()
+        .text("image-layer", &InputFiles::image_layer,
+              "the layer of a file with layers read as the colour image: NAME.R, NAME.G, NAME.B (and NAME.A) of a "
+              "multilayer OpenEXR, e.g. ViewLayer.Combined (Blender), or a multi-part file's part; empty: the plain "
+              "R, G, B, or the file's only colour layer (a file with several is refused, listing them)")
+        .choice("image-layer-rule", &InputFiles::image_layer_rule, layer_rule_names(),
+                "how --image is read when it has layers and no --image-layer is given: names (its only colour layer, "
+                "else refused with the list) or first (its first three channels in the file's order, the rule of "
+                "records before schema 4)")
+        .since(4, "first")
         .choice("image-transfer", &InputFiles::image_transfer, transfer_names(),
                 "transfer function of the input: auto (integer files sRGB, float files linear), srgb, linear")
         .choice("nonfinite", &InputFiles::nonfinite, nonfinite_names(),
@@ -337,6 +355,13 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
 
 bool is_output_file(const ParamSpec& s) { return s.output_file; }
 
+bool is_input_file(const ParamSpec& s) {
+  if ((s.block != "input" && s.block != "depth") || s.kind != ParamKind::text) return false;
+  const std::string suffix = "-layer";
+  const bool layer = s.name.size() > suffix.size() && s.name.compare(s.name.size() - suffix.size(), suffix.size(), suffix) == 0;
+  return s.name != "depth-channel" && !layer;
+}
+
 std::vector<ArrayArg> rgb_range_args(ArrayArg::As as) {
   return {{"rgb", 3, false, as}, {"range", 1, false, as}};
 }
@@ -405,7 +430,11 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
     }
   } phase{t0};
   LoadedInputs L;
-  L.rgb = read_color(in.image, in.image_transfer, &L.image_info);
+  ColorRead how;
+  how.transfer = in.image_transfer;
+  how.layer = in.image_layer;
+  how.rule = in.image_layer_rule;
+  L.rgb = read_color(in.image, how, &L.image_info, &L.alpha);
   L.record["image"] = file_record(in.image, L.image_info, L.rgb);
   const std::size_t bad = check_nonfinite_colour(L.rgb, in.nonfinite, "--image '" + in.image + "'",
                                                  "Fix the file, or pass --nonfinite zero");
@@ -421,6 +450,10 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
                     "': the matched depth belongs to the left view, so an effect takes the image as the left view; "
                     "drop --stereo-left");
       ds.stereo_left = in.image;
+      if (!ds.stereo_left_layer.empty() && ds.stereo_left_layer != in.image_layer)
+        throw Error("--stereo-left-layer '" + ds.stereo_left_layer + "' differs from --image-layer '" + in.image_layer +
+                    "': the left view is the image itself; drop --stereo-left-layer");
+      ds.stereo_left_layer = in.image_layer;
     }
     L.depth = load_depth(ds, L.rgb.width, L.rgb.height);
     if (L.depth.range.width != L.rgb.width || L.depth.range.height != L.rgb.height)

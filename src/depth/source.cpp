@@ -19,19 +19,29 @@ int DepthSource::sources() const {
   return n;
 }
 
-Intrinsics depth_intrinsics(const DepthSource& s, int width, int height) {
-  if (s.k.fx > 0.0 || s.k.fy > 0.0) return resolve(s.k, width, height);
+namespace {
+// The intrinsics the pixel flags give (--fx.., --fov-x.., calib.txt), if any.
+bool pixel_intrinsics(const DepthSource& s, int width, int height, Intrinsics& k, std::string& from) {
+  if (s.k.fx > 0.0 || s.k.fy > 0.0) {
+    k = resolve(s.k, width, height);
+    from = "--fx";
+    return true;
+  }
   if (!std::isnan(s.fov_x_deg) || !std::isnan(s.fov_y_deg)) {
-    Intrinsics k = intrinsics_from_fov(width, height, s.fov_x_deg, s.fov_y_deg);
+    k = intrinsics_from_fov(width, height, s.fov_x_deg, s.fov_y_deg);
     k.cx = s.k.cx, k.cy = s.k.cy;
-    return resolve(k, width, height);
+    k = resolve(k, width, height);
+    from = std::isnan(s.fov_x_deg) ? "--fov-y" : "--fov-x";
+    return true;
   }
   if (!s.calib.empty()) {
     StereoCalib c = read_stereo_calib(s.calib);
-    Intrinsics k;
+    k = Intrinsics{};
     k.fx = k.fy = c.f_px;
     k.cx = c.cx, k.cy = c.cy;
-    return resolve(k, width, height);
+    k = resolve(k, width, height);
+    from = "--calib";
+    return true;
   }
   throw Error("planar depth needs the camera: give --fx (and --fy, --cx, --cy), or --fov-x/--fov-y, or --calib calib.txt");
 }
@@ -128,8 +138,8 @@ LoadedDepth stereo_depth(const DepthSource& s, int width, int height) {
   LoadedDepth out;
   nlohmann::json& rec = out.record;
   nlohmann::json lrec, rrec;
-  const StereoView L = read_stereo_view(s.stereo_left, "--stereo-left", &lrec);
-  const StereoView R = read_stereo_view(s.stereo_right, "--stereo-right", &rrec);
+  const StereoView L = read_stereo_view(s.stereo_left, "--stereo-left", &lrec, s.stereo_left_layer);
+  const StereoView R = read_stereo_view(s.stereo_right, "--stereo-right", &rrec, s.stereo_right_layer);
   if (width > 0 && (L.width != width || L.height != height))
     throw Error("--stereo-left '" + s.stereo_left + "' is " + std::to_string(L.width) + "x" +
                 std::to_string(L.height) + " but the image is " + std::to_string(width) + "x" +
@@ -172,6 +182,9 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
   if (!s.stereo_left.empty())
     throw Error("--stereo-left '" + s.stereo_left + "' is the left view of a pair, but no --stereo-right was given; "
                 "add --stereo-right FILE, or drop --stereo-left");
+  if (!s.stereo_right_layer.empty() || !s.stereo_left_layer.empty())
+    throw Error(std::string(s.stereo_right_layer.empty() ? "--stereo-left-layer" : "--stereo-right-layer") +
+                " names a layer of a stereo view, but no --stereo-right was given; drop it");
   LoadedDepth out;
   nlohmann::json& rec = out.record;
   FileInfo info;
@@ -209,12 +222,21 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
                           : !s.depth_buffer.empty() ? s.depth_buffer : !s.inverse_depth.empty() ? s.inverse_depth
                           : s.normalized_depth;
   out.path = path;
-  Image v = read_scalar(path, s.channel, &info);
+  const char* flag = !s.range.empty() ? "--range" : !s.z.empty() ? "--z" : !s.disparity.empty() ? "--disparity"
+                   : !s.depth_buffer.empty() ? "--depth-buffer" : !s.inverse_depth.empty() ? "--inverse-depth"
+                   : "--normalized-depth";
+  ScalarRead how;
+  how.channel = s.channel;
+  how.channel_flag = "--depth-channel";
+  how.depth = true;
+  how.rule = s.channel_rule;
+  Image v = read_scalar(path, how, &info);
   if (width > 0 && (v.width != width || v.height != height))
     throw Error("depth '" + path + "' is " + v.size_string() + " but the image is " + std::to_string(width) + "x" +
                 std::to_string(height) + "; they must be the same size (resample the depth, or crop both)");
   rec = file_record(path, info, v);
-  if (!s.channel.empty()) rec["channel"] = s.channel;
+  rec["channel"] = read_channel;
+  rec["channel_rule"] = info.channel_rule;
   if (s.unknown_value) {
     // Before any scaling or conversion, so V is what the file stores (and what
     // a dataset's documentation names), whatever the --depth-scale.
@@ -293,7 +315,12 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
     out.range = z_to_range(normalized_depth_to_z(v, s.near_m, s.far_m), k);
   }
   std::size_t unknown = 0;
-  for (float x : out.range.data) unknown += std::isfinite(x) && x > 0.0f ? 0 : 1;
+  float largest = 0.0f;
+  for (float x : out.range.data) {
+    const bool known = std::isfinite(x) && x > 0.0f;
+    unknown += known ? 0 : 1;
+    if (known && x > largest) largest = x;
+  }
   rec["unknown_pixels"] = unknown;
   return out;
 }

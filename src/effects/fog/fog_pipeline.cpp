@@ -233,7 +233,9 @@ nlohmann::json run_fog_job(const FogJob& job, const ExecOptions& eo, const RunCo
         return EffectOutput{std::move(run.result.rgb),
                             {{"optical-depth", std::move(run.result.optical_depth)},
                              {"transmission", std::move(run.result.transmission)}},
-                            std::move(run.record)};
+                            std::move(run.record),
+                            "transmission",
+                            run.analysis.airlight};
       }};
   return run_effect_job(e, job, eo, ctx);
 }

@@ -173,7 +173,9 @@ nlohmann::json run_haze_job(const HazeJob& job, const ExecOptions& eo, const Run
         return EffectOutput{std::move(run.result.rgb),
                             {{"transmission", std::move(run.result.transmission)},
                              {"scale-map", std::move(run.result.scale)}},
-                            std::move(run.record)};
+                            std::move(run.record),
+                            "transmission",
+                            run.analysis.airlight};
       }};
   return run_effect_job(e, job, eo, ctx);
 }

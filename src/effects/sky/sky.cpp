@@ -7,7 +7,9 @@
 #include <cmath>
 #include <omp.h>
 
+#include "brume/depth_source.hpp"
 #include "brume/error.hpp"
+#include "brume/pipeline.hpp"
 #include "core/math_constants.hpp"
 #include "brume_opencv.hpp"
 #include "shared/prelude_cpp.h"

@@ -40,6 +40,9 @@ const ParamTable<InsertObject>& insert_object_param_table() {
            "the virtual object, RGBA, same size and camera as --image: EXR (float) linear premultiplied; PNG/TIFF "
            "(integer) sRGB colour with straight alpha; no alpha channel: alpha 1 where its range is known")
         .reads_file()
+        .text("object-layer", &InsertObject::object_layer,
+              "the layer of --object in a file with layers (NAME.R, NAME.G, NAME.B, NAME.A of a multilayer OpenEXR, "
+              "e.g. ViewLayer.Combined)")
         .text("object-range", &InsertObject::object_range,
               "the object's range map in metres along the ray (as --range); unknown (NaN, inf, 0) where the object "
               "is absent")
@@ -82,7 +85,7 @@ void validate_insert(const AerialParams& p, const std::set<std::string>& given) 
   validate_aerial(p, given);
 }
 
-Image read_object_rgba(const std::string& path, FileInfo* info) {
+Image read_object_rgba(const std::string& path, FileInfo* info, const std::string& layer) {
   if (path.empty()) throw Error("no object given: use --object FILE (RGBA, same size as --image)");
   // Alpha kept unassociated: OpenImageIO would otherwise premultiply PNG's
   // and TIFF's sRGB-ENCODED values, which is not linear-light coverage.

@@ -125,7 +125,7 @@ nlohmann::json run_insert_job(const InsertJob& job, const ExecOptions& eo, const
       },
       [&](const InsertJob& j, LoadedInputs& in, const Exec& exec) {
         FileInfo oinfo;
-        const Image obj = read_object_rgba(j.object.object, &oinfo);
+        const Image obj = read_object_rgba(j.object.object, &oinfo, j.object.object_layer);
         if (obj.width != in.rgb.width || obj.height != in.rgb.height)
           throw Error("--object '" + j.object.object + "' is " + obj.size_string() + " but --image '" +
                       j.input.image + "' is " + in.rgb.size_string() +

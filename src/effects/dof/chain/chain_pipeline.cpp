@@ -186,11 +186,7 @@ nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, co
 
   const nlohmann::json rec =
       job_record("haze+dof", ctx, haze_dof_job_table().to_json(job), in.record, run.record, eo.timing);
-  write_outputs(job.output, haze_dof_map_outputs(), run.dof.result.rgb,
-                {{"transmission", run.haze.result.transmission},
-                 {"scale-map", run.haze.result.scale},
-                 {"dof-scale-map", run.dof.result.scale}},
-                &in.image_info, rec, ctx.files);
+  write_outputs(job.output, haze_dof_map_outputs(), out.main, out.maps, &in.image_info, rec, ctx.files, &layers);
   return rec;
 }
 
