@@ -17,6 +17,17 @@
 
 namespace brume {
 
+enum class RenderBackground { automatic, off };
+const EnumNames<RenderBackground>& render_background_names();
+// The rule in words (--help, the record, the docs).
+extern const char* const kRenderBackgroundRule;
+// Whether a stored value of a float range or planar-depth file is a renderer's background.
+inline bool is_render_background(float v) { return v >= 1e9f || v == 65504.0f || v == -INFINITY; }
+// The largest distance [m] taken without a warning: beyond it a value is
+// more likely a background or a unit error than a surface (the plausibility
+// rule of the depth layer).
+constexpr double kPlausibleDistanceMax = 1e6;
+
 struct DepthSource {
   // Exactly one source file:
   std::string range;             // metres along the ray
@@ -46,6 +57,13 @@ struct DepthSource {
   // read from an image file (range, z, disparity, depth buffer, inverse and
   // normalised depth); refused with --velodyne, whose scan has no stored grid.
   std::optional<double> unknown_value;
+  // Renderers' "no surface" values in range and planar-depth files (float
+  // files only): stored values >= 1e9 (Cycles writes 1e10), exactly 65504
+  // (Eevee: half float's largest) and +-inf are unknown (sky) -- compared as
+  // stored, before --depth-scale, as --unknown-value is. off: read as
+  // distances (the rule of records before schema 4). Disparity, depth
+  // buffers and normalised or inverse depth have conventions of their own.
+  RenderBackground render_background = RenderBackground::automatic;
   Intrinsics k;                  // --fx --fy --cx --cy
   double fov_x_deg = NAN, fov_y_deg = NAN;
   std::string calib;             // Middlebury 2014 / ETH3D calib.txt

@@ -191,6 +191,11 @@ const ParamTable<DepthSource>& depth_param_table() {
         .alias("range-scale")
         .real("unknown-value", &DepthSource::unknown_value, "file units", Range::any(),
               "stored value marking unknown pixels (sky, no data; GeoPose3K: -1), exact match before any scaling", "none")
+        .choice("renderer-background", &DepthSource::render_background, render_background_names(),
+                "renderers' 'no surface' values in float --range and --z files: auto (stored values >= 1e9 -- Cycles "
+                "writes 1e10 --, exactly 65504 -- Eevee, half float's largest -- and +-inf are unknown, i.e. sky; "
+                "compared as stored, before --depth-scale) or off (read as distances)")
+        .since(4, "off")
         .nest(&DepthSource::k, intrinsics_table())
         .real_or_unset("fov-x", &DepthSource::fov_x_deg, "deg", Range::left_open(0.0, 180.0),
                        "horizontal field of view, edge to edge", NAN)

@@ -11,6 +11,15 @@
 
 namespace brume {
 
+const EnumNames<RenderBackground>& render_background_names() {
+  static const EnumNames<RenderBackground> n = {{RenderBackground::automatic, "auto"}, {RenderBackground::off, "off"}};
+  return n;
+}
+
+const char* const kRenderBackgroundRule =
+    "stored values >= 1e9 (Cycles: 1e10), exactly 65504 (Eevee: half float's largest) and +-inf are unknown "
+    "(sky), compared as stored, before --depth-scale (float range and planar-depth files)";
+
 int DepthSource::sources() const {
   int n = 0;
   for (const std::string* f :
@@ -247,6 +256,20 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
     rec["unknown_value"] = *s.unknown_value;
     rec["unknown_value_pixels"] = marked;
   }
+  const bool distance = !s.range.empty() || !s.z.empty();
+  if (distance && s.render_background == RenderBackground::automatic && !info.integer) {
+    // As stored, before any scaling (like --unknown-value); integer files
+    // hold counts, whose 65504 is a distance.
+    std::size_t marked = 0;
+    for (float& x : v.data)
+      if (is_render_background(x)) x = NAN, ++marked;
+    rec["render_background"] = {{"rule", kRenderBackgroundRule}, {"pixels", marked}};
+  } else if (distance) {
+    rec["render_background"] = {{"rule", s.render_background == RenderBackground::off
+                                              ? "off: every stored value read as a distance"
+                                              : "integer file: its counts are distances"},
+                                {"pixels", 0}};
+  }
 
   auto metres = [&](const char* what) {
     if (info.integer && !s.depth_scale)
@@ -322,6 +345,17 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
     if (known && x > largest) largest = x;
   }
   rec["unknown_pixels"] = unknown;
+  if (largest > kPlausibleDistanceMax) {
+    // One plausibility rule: no scene brume renders reaches 1000 km; such a
+    // value is a background marker or a unit error.
+    const std::string w = std::string(flag) + " '" + path + "': the largest distance is " + fmt(largest) +
+                          " m, beyond " + fmt(kPlausibleDistanceMax) + " m: a renderer's or dataset's \"no surface\" "
+                          "value read as a distance (give it as --unknown-value V" +
+                          (distance && s.render_background == RenderBackground::off ? ", or --renderer-background auto" : "") +
+                          "), or the wrong unit (--depth-scale)";
+    rec["warnings"].push_back(w);
+    std::fprintf(stderr, "brume: warning: %s\n", w.c_str());
+  }
   return out;
 }
 
