@@ -66,6 +66,11 @@ struct DepthSource {
   RenderBackground render_background = RenderBackground::automatic;
   Intrinsics k;                  // --fx --fy --cx --cy
   double fov_x_deg = NAN, fov_y_deg = NAN;
+  // The camera in millimetres (--focal-length, --sensor-width, --sensor-height,
+  // --sensor-fit, --lens-shift; brume/depth.hpp): the intrinsics when no pixel
+  // ones are given; with them, the pixels win and the lens must agree within
+  // 1 % (depth of field's CoC reads its millimetres either way).
+  LensCamera lens;
   std::string calib;             // Middlebury 2014 / ETH3D calib.txt
   double baseline_m = NAN;       // stereo baseline without calib.txt
   double disparity_scale = 1.0;  // d = scale * stored + offset

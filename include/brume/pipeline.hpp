@@ -58,6 +58,10 @@ const EnumNames<GpuFilter>& gpu_filter_names();
 const ParamTable<DiffusionParams>& diffusion_param_table();  // scheme, precision, sigma0, rho-max, edge-rate
 const ParamTable<PrepareParams>& prepare_param_table();      // all eight preparation parameters
 const ParamTable<DepthSource>& depth_param_table();          // every depth source and convention flag
+// The camera in millimetres (brume/depth.hpp: LensCamera), declared once and
+// nested in the depth block (every command that takes intrinsics) and the
+// sky's pinhole view; `block` is the record block it lands in.
+const ParamTable<LensCamera>& lens_param_table(const std::string& block);
 // The names of the depth block that name files or say how to read them: all
 // but the intrinsics (fx, fy, cx, cy, fov-x, fov-y, calib, and the camera in
 // millimetres), which an array caller still gives for fog's and dof's camera.

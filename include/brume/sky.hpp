@@ -106,6 +106,7 @@ struct SkyViewParams {
                                     //       direction (fisheye) or of its centre column (equirect)
   Intrinsics k{0.0, 0.0, NAN, NAN}; // [px] pinhole --fx --fy --cx --cy (0/NaN: unset)
   double fov_x_deg = NAN, fov_y_deg = NAN;  // [deg] pinhole --fov-x --fov-y
+  LensCamera lens;                  // pinhole in millimetres: --focal-length, --sensor-width, ... (brume/depth.hpp)
   CameraPose pose;                  // pinhole --yaw --pitch --roll
 };
 const ParamTable<SkyViewParams>& sky_view_param_table();

@@ -150,6 +150,38 @@ ParamTable<Intrinsics> intrinsics_table() {
 
 }  // namespace
 
+const ParamTable<LensCamera>& lens_param_table(const std::string& block) {
+  static std::map<std::string, ParamTable<LensCamera>> cache;
+  static std::mutex mu;
+  std::lock_guard<std::mutex> lock(mu);
+  auto it = cache.find(block);
+  if (it != cache.end()) return it->second;
+  ParamTable<LensCamera> d(block);
+  // Depth of field's lens was its own until schema 4 (--focal-length and
+  // --sensor-width of `brume dof`, --dof-focal-length and --dof-sensor-width
+  // of the haze+dof chain): the depth block's lens keeps those spellings and
+  // reads those records.
+  const bool depth = block == "depth";
+  d.real("focal-length", &LensCamera::focal_length_mm, "mm", Range::above(0.0),
+         "focal length F of the camera in millimetres, as 3D software states it (with --sensor-width): fx = fy = F s "
+         "/ sensor, s the side the sensor fit spans (docs/renderers.md)", "none");
+  if (depth) d.formerly("dof.focal-length").formerly("dof.dof-focal-length").alias("dof-focal-length");
+  d.real("sensor-width", &LensCamera::sensor_width_mm, "mm", Range::above(0.0),
+         "sensor width; with --sensor-fit auto it spans the image's larger side, with horizontal the image width "
+         "(Blender's Camera > Sensor > Size)", "none");
+  if (depth) d.formerly("dof.sensor-width").formerly("dof.dof-sensor-width").alias("dof-sensor-width");
+  d.real("sensor-height", &LensCamera::sensor_height_mm, "mm", Range::above(0.0),
+            "sensor height, used with --sensor-fit vertical (it spans the image height)", "none")
+      .choice("sensor-fit", &LensCamera::sensor_fit, sensor_fit_names(),
+              "which image side the sensor spans, as Blender's Sensor Fit: auto (the sensor width spans the larger "
+              "side), horizontal (the width spans the image width), vertical (the height spans the image height)")
+      .since(4, "horizontal")
+      .pair("lens-shift", &LensCamera::lens_shift, "1", Range::closed(-10.0, 10.0),
+            "Blender's lens shift X,Y in units of the side the sensor fit spans (auto: the larger side): cx = (W-1)/2 "
+            "- X s, cy = (H-1)/2 + Y s");
+  return cache.emplace(block, std::move(d)).first->second;
+}
+
 const ParamTable<DepthSource>& depth_param_table() {
   static const ParamTable<DepthSource> t = [] {
     ParamTable<DepthSource> d("depth");
@@ -201,6 +233,7 @@ const ParamTable<DepthSource>& depth_param_table() {
                        "horizontal field of view, edge to edge", NAN)
         .real_or_unset("fov-y", &DepthSource::fov_y_deg, "deg", Range::left_open(0.0, 180.0),
                        "vertical field of view, edge to edge", NAN)
+        .nest(&DepthSource::lens, lens_param_table("depth"))
         .text("calib", &DepthSource::calib, "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm)")
         .reads_file()
         .real_or_unset("baseline", &DepthSource::baseline_m, "m", Range::above(0.0),
@@ -373,7 +406,9 @@ std::vector<ArrayArg> rgb_range_args(ArrayArg::As as) {
 
 const std::set<std::string>& depth_file_params() {
   static const std::set<std::string> skip = [] {
-    static const std::set<std::string> keep = {"fx", "fy", "cx", "cy", "fov-x", "fov-y", "calib"};
+    static const std::set<std::string> keep = {"fx",           "fy",           "cx",           "cy",
+                                               "fov-x",        "fov-y",        "calib",        "focal-length",
+                                               "sensor-width", "sensor-height", "sensor-fit", "lens-shift"};
     std::set<std::string> s;
     for (const auto& d : depth_param_table().params())
       if (!keep.count(d.spec.name)) s.insert(d.spec.name);

@@ -52,7 +52,47 @@ bool pixel_intrinsics(const DepthSource& s, int width, int height, Intrinsics& k
     from = "--calib";
     return true;
   }
-  throw Error("planar depth needs the camera: give --fx (and --fy, --cx, --cy), or --fov-x/--fov-y, or --calib calib.txt");
+  return false;
+}
+
+std::string num6(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.6g", v);
+  return b;
+}
+}  // namespace
+
+Intrinsics depth_intrinsics(const DepthSource& s, int width, int height) {
+  Intrinsics k;
+  std::string from;
+  const bool pixels = pixel_intrinsics(s, width, height, k, from);
+  if (!s.lens.given()) {
+    if (pixels) return k;
+    throw Error("planar depth needs the camera: give --fx (and --fy, --cx, --cy), or --fov-x/--fov-y, or --calib "
+                "calib.txt, or the camera in millimetres (--focal-length MM --sensor-width MM, as Blender states it)");
+  }
+  if (!pixels) return lens_intrinsics(s.lens, width, height);
+  // Both: the pixels win (as depth of field's lens beside --fov-x always
+  // did); the millimetres must describe the same camera.
+  if (s.lens.lens_shift[0] != 0.0 || s.lens.lens_shift[1] != 0.0)
+    throw Error("--lens-shift places the principal point of the camera in millimetres, but " + from +
+                " gives the pixel intrinsics, which win: give the principal point as --cx/--cy, or drop " + from +
+                " and let --focal-length and --sensor-width give the camera");
+  if (!s.lens.focal_length_mm)
+    throw Error("--sensor-width/--sensor-height describe the camera in millimetres with --focal-length, which is "
+                "missing (" + from + " gives the pixel intrinsics); add --focal-length MM or drop the sensor flags");
+  const Intrinsics kl = lens_intrinsics(s.lens, width, height);
+  const double apart = std::abs(kl.fx / k.fx - 1.0);
+  if (apart > 0.01) {
+    const LensScale l = lens_scale(s.lens, width, height);
+    throw Error("the lens gives fx = focal length x " + num6(l.side_px) + " px / sensor = " +
+                num6(*s.lens.focal_length_mm) + " mm x " + num6(l.side_px) + " px / " + num6(l.sensor_mm) + " mm = " +
+                num6(kl.fx) + " px (--sensor-fit " + enum_name(sensor_fit_names(), s.lens.sensor_fit) +
+                "), but " + from + " gives fx = " + num6(k.fx) + " px (" + num6(100.0 * apart) +
+                " % apart; at most 1 % is allowed): correct --focal-length or " + l.sensor_flag + " (or --sensor-fit), "
+                "or " + from);
+  }
+  return k;
 }
 
 Camera depth_camera(const DepthSource& s, int width, int height, const CameraPose& pose) {
@@ -243,6 +283,13 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
   if (width > 0 && (v.width != width || v.height != height))
     throw Error("depth '" + path + "' is " + v.size_string() + " but the image is " + std::to_string(width) + "x" +
                 std::to_string(height) + "; they must be the same size (resample the depth, or crop both)");
+  const std::string read_channel = info.channels_read.empty() ? std::string() : info.channels_read.front();
+  if (!s.range.empty() && info.blender && is_depth_pass_name(read_channel))
+    throw Error("--range '" + path + "': its channel " + read_channel + " is Blender's Depth (Z) pass, which is "
+                "planar depth -- the distance along the camera's axis (constant along a level ground row; Cycles and "
+                "Eevee alike), not along each pixel's ray -- so as a range it would be short by 1/cos of each "
+                "ray's angle. Give it as --z '" + path + "' with the camera (--focal-length MM --sensor-width MM, "
+                "as Blender's camera states them, or --fov-x DEG)");
   rec = file_record(path, info, v);
   rec["channel"] = read_channel;
   rec["channel_rule"] = info.channel_rule;
