@@ -31,6 +31,16 @@ enum class Transfer { automatic, srgb, linear };
 Transfer parse_transfer(const std::string& s, const std::string& flag);  // throws brume::Error
 std::string to_string(Transfer t);
 
+// A rectangle of pixels, corners included (OpenEXR's data and display
+// windows: x0, y0 the top-left pixel, x1, y1 the bottom-right one).
+struct PixelWindow {
+  int x0 = 0, y0 = 0, x1 = -1, y1 = -1;
+  int width() const { return x1 - x0 + 1; }
+  int height() const { return y1 - y0 + 1; }
+  bool operator==(const PixelWindow& o) const { return x0 == o.x0 && y0 == o.y0 && x1 == o.x1 && y1 == o.y1; }
+  bool operator!=(const PixelWindow& o) const { return !(*this == o); }
+};
+
 struct FileInfo {
   std::string path;
   std::string format;  // OpenImageIO format name, e.g. "png", "openexr", "pnm"
@@ -39,6 +49,19 @@ struct FileInfo {
   std::vector<std::string> channel_names;  // every channel of the file (of the part read, in a multi-part file)
   Transfer transfer = Transfer::linear;  // transfer function actually applied on read
   std::string description;  // the file's ImageDescription (brume embeds its JSON record there); empty if none
+  // What was read ("files with layers" below): the layer (NAME of NAME.R, NAME.G,
+  // NAME.B; a multi-part file's part; empty for the plain R, G, B or Y), the
+  // channels the values came from in their order, and why those.
+  std::string layer;
+  std::string part;  // a multi-part OpenEXR file's part read (its name), else empty
+  std::vector<std::string> channels_read;
+  std::string channel_rule;
+  bool blender = false;  // the file carries Blender's BlenderMultiChannel attribute (a multilayer render)
+  // OpenEXR: the data window (the pixels the file holds) and the display
+  // window (the image's frame, which brume reads: padded outside the data
+  // window; zero-sized for other formats).
+  PixelWindow data_window, display_window;
+  bool padded = false;
 };
 
 // ---- files with layers (renders: docs/renderers.md) ----------------------------
@@ -274,6 +297,13 @@ struct WriteOptions {
   // each format's default (compression_help()); which names a format takes:
   // compression_names().
   std::string compression = "auto";
+  // OpenEXR only (an output of layers, for a compositor): each channel's
+  // name ("ViewLayer.Combined.R") and storage bits (16 half, 32 float; empty:
+  // all as `bits`), and string attributes to carry (Blender's
+  // BlenderMultiChannel). Empty: R, G, B, A (Y for one channel).
+  std::vector<std::string> channel_names;
+  std::vector<int> channel_bits;
+  std::vector<std::pair<std::string, std::string>> string_attributes;
 };
 
 // The --compression values a file of this extension takes (".png" -> "auto,

@@ -75,6 +75,16 @@ const EnumNames<CompleteMode>& complete_mode_names() {
   return n;
 }
 
+const EnumNames<OutAlpha>& out_alpha_names() {
+  static const EnumNames<OutAlpha> n = {{OutAlpha::automatic, "auto"}, {OutAlpha::off, "off"}};
+  return n;
+}
+
+const EnumNames<LayerRule>& layer_rule_names() {
+  static const EnumNames<LayerRule> n = {{LayerRule::names, "names"}, {LayerRule::first, "first"}};
+  return n;
+}
+
 const EnumNames<NonFinite>& nonfinite_names() {
   static const EnumNames<NonFinite> n = {{NonFinite::error, "error"}, {NonFinite::zero, "zero"}};
   return n;
@@ -368,6 +378,14 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
       .choice("out-transfer", &OutputFiles::transfer, transfer_names(),
               "transfer function of the output: auto (sRGB for 8/16-bit, linear for float), srgb, linear")
       .text("compression", &OutputFiles::compression, compression_help_text())
+      .choice("out-alpha", &OutputFiles::alpha, out_alpha_names(),
+              "an OpenEXR output's alpha: auto (the input's alpha, when it has one, as the medium composes it: "
+              "A' = T A + (1 - T), premultiplied over) or off (R, G, B only)")
+      .since(4, "off")
+      .boolean("keep-layers", &OutputFiles::keep_layers,
+               "OpenEXR output for a compositor: every other channel of the input as stored, the medium as its own "
+               "RGBA layer (<view>.Medium: (1 - T) B, 1 - T) and the maps as layers (<view>.Transmission, "
+               "<view>.BlurScale, ...) beside the colour layer")
       .text("record", &OutputFiles::record, "write a JSON record of every parameter, derived value and input hash")
       .writes_file();
   for (const MapOutput& m : maps) {
@@ -502,6 +520,21 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
     L.record["depth"] = L.depth.record;
   }
   return L;
+}
+
+void check_airlight_sky(const LoadedInputs& in, const std::string& effect) {
+  if (in.alpha.empty() || in.depth.range.empty() || in.alpha.pixels() != in.depth.range.pixels()) return;
+  std::size_t unknown = 0, clear = 0;
+  for (std::size_t i = 0; i < in.alpha.pixels(); ++i)
+    if (!known_range(in.depth.range.data[i])) {
+      ++unknown;
+      clear += in.alpha.data[i] < 0.5f ? 1 : 0;
+    }
+  if (unknown * 200 < in.alpha.pixels() || clear * 2 < unknown) return;
+  throw Error(effect + ": --image '" + in.image_info.path + "' is transparent where it has no depth (alpha < 1/2 on " +
+              std::to_string(clear) + " of its " + std::to_string(unknown) + " sky pixels: a render with a transparent "
+              "film), so its sky's colour, 0 there, cannot give the airlight; give the medium's colour with --airlight "
+              "R,G,B (linear; Blender: the World's colour)");
 }
 
 void check_working_memory(const std::string& effect, const Image& frame, double bytes_per_pixel) {
@@ -696,13 +729,23 @@ WriteOptions main_options(const OutputFiles& o) {
 void check_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl) {
   if (o.out.empty()) throw Error("no output given: use --out FILE");
   check_writable(o.out, main_options(o), "--out");
+  if (o.keep_layers) {
+    std::string e = fs::path(o.out).extension().string();
+    for (char& ch : e) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    if (e != ".exr")
+      throw Error("--keep-layers writes the input's layers beside the result, which only an OpenEXR file holds, but "
+                  "--out '" + o.out + "' is not one: give a .exr output, or drop --keep-layers");
+    if (o.transfer == Transfer::srgb)
+      throw Error("--keep-layers keeps the input's channels as stored (depth, normals, ...), which --out-transfer "
+                  "srgb would encode as colour: drop --out-transfer srgb");
+  }
   for (const auto& [name, path] : o.maps) check_writable(path, map_options(declared(decl, name)), "--" + name);
   if (!o.record.empty()) check_record_path(o.record);
 }
 
 void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, const Image& main,
                    const std::map<std::string, Image>& maps, const FileInfo* input_info, const nlohmann::json& record,
-                   const std::vector<CompanionFile>& companions) {
+                   const std::vector<CompanionFile>& companions, const OutputLayers* layers) {
   WriteOptions wo = main_options(o);
   if (wo.bits == "auto" && input_info && input_info->integer && (input_info->bits == 8 || input_info->bits == 16)) {
     std::string e = fs::path(o.out).extension().string();
@@ -713,7 +756,14 @@ void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, con
   const auto t0 = std::chrono::steady_clock::now();
   if (run_phases().write_begin == std::chrono::steady_clock::time_point{}) run_phases().write_begin = t0;
   OutputSet outs;
-  outs.write(o.out, main, wo, "--out");
+  if (layers && !layers->image.empty()) {
+    wo.channel_names = layers->names;
+    wo.channel_bits = layers->bits;
+    wo.string_attributes = layers->attributes;
+    outs.write(o.out, layers->image, wo, "--out");
+  } else {
+    outs.write(o.out, main, wo, "--out");
+  }
   for (const auto& [name, path] : o.maps) {
     auto it = maps.find(name);
     if (it == maps.end()) throw Error("internal: the pipeline made no '" + name + "' map");

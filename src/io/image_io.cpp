@@ -96,7 +96,7 @@ enum class Want { values, counts, srgb_linear, with_alpha };
 // Every channel of the first subimage as float, by the file's row or else
 // OpenImageIO. `name` names the file in messages; `extra`: the channels of
 // the caller's copy, for the memory check before any allocation.
-io::Decoded decode(const std::string& path, const std::string& name, Want want, int extra) {
+io::Decoded decode(const std::string& path, const std::string& name, Want want, int extra, float pad = 0.0f) {
   const auto check_size = [&](int w, int h, int c) {
     check_declared_size(path, w, h, c);
     const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
@@ -112,6 +112,7 @@ io::Decoded decode(const std::string& path, const std::string& name, Want want, 
     if (want == Want::srgb_linear) req.map = [](float v, int) { return srgb_to_linear(v); };
     req.with_alpha = want == Want::with_alpha;
     req.threads = std::min(io::io_threads(), 64);
+    req.pad = pad;
     if (f->read(req, d)) {
       io::note_reader(f->name);
       d.info.path = path;
@@ -377,6 +378,57 @@ Image read_exr_channels(const std::string& path, const std::vector<std::string>&
 }
 
 Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
+  ColorRead how;
+  how.transfer = transfer;
+  return read_color(path, how, info, nullptr);
+}
+
+Image read_color(const std::string& path, const ColorRead& how, FileInfo* info, Image* alpha) {
+  check_readable(path);
+  const Transfer transfer = how.transfer;
+  if (alpha) *alpha = Image();
+  io::ExrLayout L;
+  const bool exr = layout_of(path, L);
+  if (exr && layered(L) && (how.rule == LayerRule::names || !how.layer.empty())) {
+    const FoundLayer f = choose_layer(path, L, how);
+    std::vector<std::string> names = f.colour;
+    if (!f.alpha.empty()) names.push_back(f.alpha);
+    io::ReadRequest req;
+    req.path = path;
+    req.threads = std::min(io::io_threads(), 64);
+    req.check = [&](int w, int h, int c) {
+      check_declared_size(path, w, h, c);
+      check_memory(static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) * 4 * static_cast<std::uint64_t>(c + 3),
+                   "reading '" + path + "'");
+    };
+    io::Decoded d;
+    io::exr_read_channels(req, f.part, names, 0.0f, d);
+    io::note_reader("openexr");
+    d.info.path = path;
+    d.info.layer = f.name;
+    d.info.channel_rule = how.layer.empty() ? "the file's one colour layer" : "named by " + how.layer_flag;
+    const Transfer t = transfer == Transfer::automatic ? Transfer::linear : transfer;
+    d.info.transfer = t;
+    const Image& s = d.img;
+    const int C = s.channels, grey = static_cast<int>(f.colour.size()) == 1;
+    Image out(s.width, s.height, 3);
+    for (std::size_t i = 0; i < s.pixels(); ++i)
+      for (int k = 0; k < 3; ++k) {
+        const float v = s.data[i * C + (grey ? 0 : k)];
+        out.data[i * 3 + k] = t == Transfer::srgb ? srgb_to_linear(v) : v;
+      }
+    if (alpha && !f.alpha.empty()) {
+      *alpha = Image(s.width, s.height, 1);
+      for (std::size_t i = 0; i < s.pixels(); ++i) alpha->data[i] = s.data[i * C + (C - 1)];
+    }
+    if (info) *info = d.info;
+    return out;
+  }
+  if (!how.layer.empty())
+    throw Error(how.layer_flag + " '" + how.layer + "' names a layer of a file with layers (a multilayer OpenEXR), "
+                "but '" + path + "' has none" +
+                (exr ? " (its channels are " + quoted_list(L.parts.front().channels) + ")" : std::string()) +
+                "; drop " + how.layer_flag);
   // An integer file's automatic transfer is sRGB, which a row decodes during
   // its read.
   io::Decoded d = decode(path, "'" + path + "'", transfer == Transfer::linear ? Want::values : Want::srgb_linear, 3);
@@ -394,6 +446,26 @@ Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
       for (float& v : s.data) v = srgb_to_linear(v);
     }
   }
+  // The alpha channel: the row's, or the last of 2 or 4.
+  int a = d.alpha;
+  if (a < 0 && (s.channels == 2 || s.channels == 4)) a = s.channels - 1;
+  if (a >= s.channels || (s.channels != 2 && s.channels != 4)) a = -1;
+  d.info.channels_read = plain_colour_channels(d.info, s.channels, alpha ? a : -1);
+  d.info.channel_rule = how.rule == LayerRule::first && !plain_channels(d.info.channel_names)
+                            ? "the file's first channels, in its order (layer rule 'first': records before schema 4)"
+                            : "the file's colour channels";
+  if (alpha && a >= 0) {
+    *alpha = Image(s.width, s.height, 1);
+    const double maxval = std::ldexp(1.0, d.info.bits <= 8 ? 8 : 16) - 1.0;
+    for (std::size_t i = 0; i < s.pixels(); ++i) {
+      float v = s.data[i * s.channels + a];
+      // An integer file's alpha is a count over 2^bits - 1, never sRGB: undo the decode given to every channel.
+      if (d.info.integer && t == Transfer::srgb)
+        v = static_cast<float>(std::nearbyint(linear_to_srgb(v) * maxval) / maxval);
+      alpha->data[i] = v;
+    }
+  }
+  if (info) *info = d.info;
   if (s.channels == 3) return std::move(s);
   Image out(s.width, s.height, 3);  // grey: the one channel three times; alpha dropped
   const int c = s.channels;

@@ -277,6 +277,7 @@ nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo,
       "aerial", aerial_job_table(), aerial_map_outputs(), 190,
       [&](const AerialJob& j, const ExecOptions&) { validate_aerial(j.aerial, ctx.given); },
       [&](const AerialJob& j, LoadedInputs& in, const Exec& exec) {
+        if (!j.aerial.airlight) check_airlight_sky(in, "aerial");
         AerialRun run = run_aerial(in.rgb, in.depth.range, j.aerial, j.prepare, exec, ctx.given);
         if (!tf.fit_record.is_null()) {
           run.record["turbidity_fit"] = tf.fit_record;

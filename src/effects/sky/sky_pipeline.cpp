@@ -104,6 +104,8 @@ nlohmann::json run_sky_render_job(const SkyRenderJob& job, const ExecOptions& eo
   resolve_sun(p.sun, nullptr, false, &g);  // every sun error before any output check, as before
   const Exec exec = eo.exec();
   check_outputs(job.output, {});
+  if (job.output.keep_layers)
+    throw Error("--keep-layers keeps the layers of an input image, and brume sky render reads none; drop --keep-layers");
   SkyRenderRun run = run_sky_render(p, exec);
   const nlohmann::json rec =
       job_record("sky render", ctx, sky_render_job_table().to_json(job), nlohmann::json::object(), run.record, eo.timing);

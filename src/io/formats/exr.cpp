@@ -145,12 +145,31 @@ std::vector<std::string> channel_order(const Imf::ChannelList& list, Imf::PixelT
 struct Opened {
   std::unique_ptr<Imf::StdIFStream> stream;  // at the header's end
   Imath::Box2i window;                       // the data window
-  int width = 0, height = 0;
+  Imath::Box2i display;                      // the display window: the image brume reads
+  int width = 0, height = 0;                 // the display window's
   std::vector<std::string> names;  // in OpenImageIO's order
   int bits = 32;
   std::string description;
   bool blender = false;
 };
+
+PixelWindow window_of(const Imath::Box2i& b) { return {b.min.x, b.min.y, b.max.x, b.max.y}; }
+
+// The display window's size, refused when the data window reaches outside it.
+void display_size(const std::string& path, const Imath::Box2i& data, const Imath::Box2i& display, int& w, int& h) {
+  ExrPart p;
+  p.data = window_of(data);
+  p.display = window_of(display);
+  const std::string why = exr_window_problem(p);
+  if (!why.empty()) throw Error("cannot read '" + path + "': " + why);
+  const long long ww = static_cast<long long>(display.max.x) - display.min.x + 1;
+  const long long hh = static_cast<long long>(display.max.y) - display.min.y + 1;
+  if (ww > INT_MAX || hh > INT_MAX)
+    throw Error("cannot read '" + path + "': its display window declares " + std::to_string(ww) + " x " +
+                std::to_string(hh) + " pixels");
+  w = static_cast<int>(ww);
+  h = static_cast<int>(hh);
+}
 
 [[noreturn]] void fail(const std::string& path, const std::exception& e) {
   throw Error("cannot read '" + path + "': " + e.what());
@@ -210,6 +229,8 @@ bool read(const ReadRequest& request, Decoded& out) {
   if (request.with_alpha && C == 1) return false;
   if (request.check) request.check(o.width, o.height, C);
   Image img(o.width, o.height, C);
+  const bool padded = o.window != o.display;
+  if (padded) std::fill(img.data.begin(), img.data.end(), request.pad);
   try {
     o.stream->seekg(0);
     Imf::InputFile in(*o.stream, ensure_pool(request.threads));
@@ -241,6 +262,10 @@ bool read(const ReadRequest& request, Decoded& out) {
   out.info.bits = o.bits;
   out.info.channel_names = std::move(o.names);
   out.info.description = std::move(o.description);
+  out.info.blender = o.blender;
+  out.info.data_window = window_of(o.window);
+  out.info.display_window = window_of(o.display);
+  out.info.padded = padded;
   out.alpha = C == 4 ? 3 : -1;
   out.unassociated = false;  // OpenEXR's colour is premultiplied by alpha, by definition
   return true;
@@ -329,10 +354,18 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
       h.insert("dwaCompressionLevel", Imf::FloatAttribute(h.dwaCompressionLevel()));
     }
     const Imf::PixelType type = r.type == Storage::f16 ? Imf::HALF : Imf::FLOAT;
-    const std::vector<std::string> names = channel_names(r.channels);
-    for (const std::string& n : names) h.channels().insert(n, Imf::Channel(type));
+    // Named channels (an output of layers: io.hpp's WriteOptions), each of
+    // its own type, or OpenImageIO's names, all of the request's type.
+    const std::vector<std::string> names =
+        r.channel_names && !r.channel_names->empty() ? *r.channel_names : channel_names(r.channels);
+    std::vector<Imf::PixelType> types(names.size(), type);
+    if (r.channel_bits && r.channel_bits->size() == names.size())
+      for (std::size_t c = 0; c < names.size(); ++c) types[c] = (*r.channel_bits)[c] == 16 ? Imf::HALF : Imf::FLOAT;
+    for (std::size_t c = 0; c < names.size(); ++c) h.channels().insert(names[c], Imf::Channel(types[c]));
     if (!r.description.empty()) h.insert("comments", Imf::StringAttribute(r.description));
     if (r.srgb) h.insert("oiio:ColorSpace", Imf::StringAttribute("sRGB"));
+    if (r.attributes)
+      for (const auto& [k, v] : *r.attributes) h.insert(k, Imf::StringAttribute(v));
     const int threads = ensure_pool(r.threads);
     file = std::make_unique<FileStream>(tmp);
     out = std::make_unique<Imf::OutputFile>(*file, h, threads);

@@ -185,6 +185,16 @@ nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, co
   run.record["dof"]["derived"]["intrinsics"]["source"] =
       dof_intrinsics_source(job.input.depth, in.rgb.width, in.rgb.height);
 
+  EffectOutput out{std::move(run.dof.result.rgb),
+                   {{"transmission", std::move(run.haze.result.transmission)},
+                    {"scale-map", std::move(run.haze.result.scale)},
+                    {"dof-scale-map", std::move(run.dof.result.scale)}},
+                   nlohmann::json::object(),
+                   "transmission",
+                   run.haze.analysis.airlight};
+  // The alpha the haze stage composes (the lens then blurs the colour, not it).
+  const OutputLayers layers = compose_output_layers(job.output, &in, out);
+  if (!layers.record.is_null()) run.record["output_layers"] = layers.record;
   const nlohmann::json rec =
       job_record("haze+dof", ctx, haze_dof_job_table().to_json(job), in.record, run.record, eo.timing);
   write_outputs(job.output, haze_dof_map_outputs(), out.main, out.maps, &in.image_info, rec, ctx.files, &layers);
