@@ -5,6 +5,11 @@
 #   scripts/compare-builds.sh OLD_BRUME NEW_BRUME [WORK_DIR]
 # Exit 1 at the first difference. Used to hold refactors to bit-identical
 # outputs on the CPU backend (issue #37).
+# COMPARE_RECORDS=superset: a change that adds to the records (a new schema's
+# keys) passes when every value the old record holds is the new one's at the
+# same place, but for schema_version and the places COMPARE_MOVED lists
+# ("OLD=NEW" dotted paths, space-separated: a parameter that moved block);
+# the keys only the new record has are printed once per run.
 set -euo pipefail
 old=$1 new=$2
 work=${3:-$(mktemp -d)}
@@ -56,6 +61,25 @@ def clean(j):
         return [clean(v) for v in j]
     return j
 a, b = (clean(json.loads(open(p).read().replace(n, "X"))) for p, n in ((sys.argv[1], sys.argv[3]), (sys.argv[2], sys.argv[4])))
+import os
+if os.environ.get("COMPARE_RECORDS") == "superset":
+    moved = dict(m.split("=", 1) for m in os.environ.get("COMPARE_MOVED", "").split())
+    def leaves(j, at=""):
+        if isinstance(j, dict):
+            for k, v in j.items():
+                yield from leaves(v, at + "." + k if at else k)
+        else:
+            yield at, j
+    def get(j, path):
+        for k in path.split("."):
+            if not isinstance(j, dict) or k not in j: return KeyError
+            j = j[k]
+        return j
+    bad = [(p, v, get(b, moved.get(p, p))) for p, v in leaves(a) if p.split(".")[-1] != "schema_version" and get(b, moved.get(p, p)) != v]
+    for p, v, w in bad: print("  differs:", p, json.dumps(v)[:200], "|", "(absent)" if w is KeyError else json.dumps(w)[:200])
+    added = sorted(p for p, _ in leaves(b) if get(a, p) is KeyError and p not in moved.values())
+    if added: print("  new keys:", " ".join(added)[:1500])
+    sys.exit(1 if bad else 0)
 if a != b:
     for k in sorted(set(a) | set(b)):
         if a.get(k) != b.get(k): print("  differs:", k, json.dumps(a.get(k))[:300], "|", json.dumps(b.get(k))[:300])

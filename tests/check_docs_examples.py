@@ -7,6 +7,7 @@ with `bash -e`, and each ```python block with the module's interpreter
   demo-out/   the demo scene (`brume demo --out-dir demo-out`),
   build       a link to the build tree (`./build/brume`, build/python),
   docs, examples  links to the repository's (their scripts),
+  renders     a link to tests/renders (the Blender renders docs/renderers.md uses),
 and beside it `../shared/data`, a link to the data folder (the environment
 variable BRUME_DATA_DIR when set, else --data). Blocks run in file
 order, each file's blocks in the same folder, so a block may use what an
@@ -94,7 +95,8 @@ def main():
         subprocess.run([brume, "demo", "--out-dir", "demo-out", "--width", "800", "--height", "560"], cwd=work, env=env, check=True,
                        stdout=subprocess.DEVNULL)
         for name, target in (("build", a.build), ("docs", os.path.join(a.repo, "docs")),
-                             ("examples", os.path.join(a.repo, "examples"))):
+                             ("examples", os.path.join(a.repo, "examples")),
+                             ("renders", os.path.join(a.repo, "tests", "renders"))):
             os.symlink(os.path.abspath(target), os.path.join(work, name))
         penv = dict(env, PYTHONPATH=os.path.join(work, "build", "python"))
         for f, line, lang, body in blocks(a.repo):

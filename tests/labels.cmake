@@ -23,7 +23,7 @@
 set(brume_label_rules
   gpu "Gpu|GPU"
   study "Study"
-  effect_cli "Batch|SkyCli|CliAerial|CliInsert|CliFog|CliDof|CliChain|Sample\\.Cli")
+  effect_cli "Batch|SkyCli|CliAerial|CliInsert|CliFog|CliDof|CliChain|Sample\\.Cli|RendersCli")
 
 # The data cases, as Suite.Name (a TEST_P's ctest names add the instantiation
 # before and the parameter after: Schemes/GaussianAccuracy.X/standard_2).

@@ -60,12 +60,16 @@ TEST(Params, ChainIsDeclaredCompletelyWithPrefixedDofFlags) {
   // Help texts name the flags as this command spells them: the DOF's own
   // mentions gain the prefix, haze's (and unknown words) keep theirs.
   const std::string h = t.at("dof-f-number").spec.help;
-  EXPECT_NE(h.find("--dof-focal-length"), std::string::npos) << h;
-  EXPECT_EQ(h.find(" --focal-length"), std::string::npos) << h;
+  // (the lens is the camera's, shared: its help names --focal-length, no prefix)
+  EXPECT_NE(h.find("--focal-length"), std::string::npos) << h;
+  EXPECT_EQ(h.find("--dof-focal-length"), std::string::npos) << h;
   for (const auto& q : t.params()) {
     if (q.spec.block != "dof") continue;
     for (std::size_t i = q.spec.help.find("--"); i != std::string::npos; i = q.spec.help.find("--", i + 2)) {
-      EXPECT_EQ(q.spec.help.compare(i, 6, "--dof-"), 0) << q.spec.name << ": " << q.spec.help;
+      // The DOF's own flags with the prefix; the camera's (--focal-length, shared) as the chain spells them.
+      const bool camera = q.spec.help.compare(i, 14, "--focal-length") == 0 ||
+                          q.spec.help.compare(i, 14, "--sensor-width") == 0;
+      EXPECT_TRUE(camera || q.spec.help.compare(i, 6, "--dof-") == 0) << q.spec.name << ": " << q.spec.help;
     }
   }
   EXPECT_EQ(prefix_flag_mentions("use --scheme, not --visibility-", "dof-",
@@ -86,8 +90,8 @@ TEST(ChainHazeDof, InMemoryEqualsTheTwoStages) {
   DofParams d;
   d.focus_distance_m = 4.0;
   d.f_number = 1.4;
-  d.focal_length_mm = 50.0;
-  d.sensor_width_mm = 12.0;  // alpha = 2500/(1.4 x 3950) mm x 96/12 = 3.6 px
+  d.lens.focal_length_mm = 50.0;
+  d.lens.sensor_width_mm = 12.0;  // alpha = 2500/(1.4 x 3950) mm x 96/12 = 3.6 px
   Intrinsics k;
   k.fx = k.fy = 50.0 * 96 / 12.0;
   k = resolve(k, 96, 64);
@@ -255,7 +259,8 @@ TEST_F(CliChain, ErrorsNameThePrefixedFlagsAndLeaveNothing) {
       {dof_flags("dof-") + " --dof-f-number 2", "--dof-coc-infinity"},
       {dof_flags("dof-") + " --dof-f-number 0", "--dof-f-number"},
       {dof_flags("dof-") + " --dof-coc-limit 0.5", "--dof-coc-limit"},
-      {" --dof-focus-distance 4 --dof-f-number 2 --dof-focal-length 50 --dof-sensor-width 36", "--dof-focal-length"},
+      // (the lens is the camera's: --dof-focal-length is --focal-length's alias, named so in its errors)
+      {" --dof-focus-distance 4 --dof-f-number 2 --dof-focal-length 50 --dof-sensor-width 36", "--focal-length"},
       {" --dof-focus-distance 4 --dof-coc-infinity 16 --dof-scheme bertalmio --dof-edge-rate min", "--dof-edge-rate"},
       {" --dof-focus-distance 4 --dof-coc-infinity 16 --dof-scheme bertalmio --backend gpu", "--dof-scheme"},
   };

@@ -172,7 +172,7 @@ TEST_F(Cli, TimingPrintsTheWholeRunBreakdown) {
 
 // OpenImageIO lives in brume_codec.so, loaded only when a file needs it
 // (src/io/codec.hpp): PFM, PNG, JPEG, EXR, HDR and TIFF runs work with no
-// module at all, a two-part EXR input names the module's load in --timing, and a module that cannot be loaded is
+// module at all, a mixed-type EXR input names the module's load in --timing, and a module that cannot be loaded is
 // an error naming every path tried, with nothing written.
 TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
   Image rgb(24, 16, 3, 0.5f);
@@ -180,13 +180,14 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
   write_image(p("in.pfm"), rgb, WriteOptions{});  // brume's own PFM writer
   write_image(p("in.jpg"), rgb, WriteOptions{});  // the JPEG row
   {
-    // A two-part EXR, which the OpenEXR row leaves to OpenImageIO.
-    OIIO::ImageSpec specs[2] = {OIIO::ImageSpec(24, 16, 3, OIIO::TypeDesc::HALF),
-                                OIIO::ImageSpec(24, 16, 3, OIIO::TypeDesc::HALF)};
-    auto out = OIIO::ImageOutput::create(p("two.exr"));
-    ASSERT_TRUE(out && out->open(p("two.exr"), 2, specs));
-    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, rgb.data.data()));
-    ASSERT_TRUE(out->open(p("two.exr"), specs[1], OIIO::ImageOutput::AppendSubimage));
+    // An EXR of mixed channel types (R float, G and B half), which the
+    // OpenEXR row leaves to OpenImageIO. (A two-part file no longer is: its
+    // parts are layers, read through OpenEXR's multi-part API, issue #50.)
+    OIIO::ImageSpec spec(24, 16, 3, OIIO::TypeDesc::HALF);
+    spec.channelformats.assign(3, OIIO::TypeDesc::HALF);
+    spec.channelformats[0] = OIIO::TypeDesc::FLOAT;
+    auto out = OIIO::ImageOutput::create(p("mixed.exr"));
+    ASSERT_TRUE(out && out->open(p("mixed.exr"), spec));
     ASSERT_TRUE(out->write_image(OIIO::TypeDesc::FLOAT, rgb.data.data()));
     ASSERT_TRUE(out->close());
   }
@@ -245,10 +246,10 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
     EXPECT_EQ(jpeg_out.output.find("codec module"), std::string::npos) << jpeg_out.output;
     EXPECT_TRUE(fs::exists(p("o.jpg")));
 
-    // A two-part EXR is still OpenImageIO's.
-    const CliRun bad = run("blur --image " + p("two.exr") + " --sigma 3 --out " + p("o9.exr"));
+    // A mixed-type EXR is still OpenImageIO's.
+    const CliRun bad = run("blur --image " + p("mixed.exr") + " --sigma 3 --out " + p("o9.exr"));
     EXPECT_EQ(bad.status, 2) << bad.output;
-    for (const char* want : {"reading '", "two.exr", "brume_codec.so", "/nonexistent/brume_codec.so: no such file",
+    for (const char* want : {"reading '", "mixed.exr", "brume_codec.so", "/nonexistent/brume_codec.so: no such file",
                              "BRUME_CODEC_MODULE"})
       EXPECT_NE(bad.output.find(want), std::string::npos) << want << "\n" << bad.output;
     EXPECT_FALSE(fs::exists(p("o9.exr")));
@@ -256,12 +257,12 @@ TEST_F(Cli, CodecModuleIsLoadedOnlyWhenAFormatNeedsIt) {
   for (const char* lib : {"/lib/x86_64-linux-gnu/libz.so.1", "/usr/lib/x86_64-linux-gnu/libz.so.1"}) {
     if (!fs::exists(lib)) continue;
     EnvGuard other(lib);  // a shared object, but not brume's module
-    const CliRun bad = run("blur --image " + p("two.exr") + " --sigma 3 --out " + p("o9.exr"));
+    const CliRun bad = run("blur --image " + p("mixed.exr") + " --sigma 3 --out " + p("o9.exr"));
     EXPECT_EQ(bad.status, 2) << bad.output;
     EXPECT_NE(bad.output.find("no brume_codec_api in it"), std::string::npos) << bad.output;
     break;
   }
-  const CliRun exr9 = run("blur --image " + p("two.exr") + " --sigma 3 --out " + p("o.exr") + " --timing");
+  const CliRun exr9 = run("blur --image " + p("mixed.exr") + " --sigma 3 --out " + p("o.exr") + " --timing");
   ASSERT_EQ(exr9.status, 0) << exr9.output;
   EXPECT_NE(exr9.output.find("of which loading the OpenImageIO codec module"), std::string::npos) << exr9.output;
   for (auto& e : fs::directory_iterator(dir))

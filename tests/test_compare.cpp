@@ -221,13 +221,13 @@ TEST(Compare, FileErrorsNameTheFiles) {
     }
     EXPECT_FALSE(fs::exists(js));
   };
-  expect_error({a, b, "", js}, {a, b, "8x6", "6x8"});
-  expect_error({a, (dir / "missing.png").string(), "", js}, {"missing.png"});
-  expect_error({a, a, m, js}, {m, "4x4", "8x6"});
-  expect_error({a, "", "", js}, {"--b"});
-  expect_error({a, a, "", (dir / "no" / "r.json").string()}, {"--json", "does not exist"});
+  expect_error({a, b, "", js, "", ""}, {a, b, "8x6", "6x8"});
+  expect_error({a, (dir / "missing.png").string(), "", js, "", ""}, {"missing.png"});
+  expect_error({a, a, m, js, "", ""}, {m, "4x4", "8x6"});
+  expect_error({a, "", "", js, "", ""}, {"--b"});
+  expect_error({a, a, "", (dir / "no" / "r.json").string(), "", ""}, {"--json", "does not exist"});
   // The good case writes the JSON.
-  run_compare_job({a, a, "", js});
+  run_compare_job({a, a, "", js, "", ""});
   EXPECT_TRUE(fs::exists(js));
   fs::remove_all(dir);
 }

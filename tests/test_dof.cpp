@@ -23,8 +23,8 @@ DofParams lens_50mm() {
   DofParams p;
   p.focus_distance_m = 2.0;
   p.f_number = 2.0;
-  p.focal_length_mm = 50.0;
-  p.sensor_width_mm = 36.0;
+  p.lens.focal_length_mm = 50.0;  // the camera's (the depth block's --focal-length, --sensor-width)
+  p.lens.sensor_width_mm = 36.0;
   return p;
 }
 
@@ -84,8 +84,14 @@ TEST(DofCoc, ThinLensAgainstHandArithmetic) {
   // alpha = F^2 / (n (Zf - F)) = 2500 / (2 x 1950) mm = 0.6410256 mm on the
   // sensor; x 1000 px / 36 mm = 17.806268 px.
   const DofParams p = lens_50mm();
-  EXPECT_NEAR(coc_infinity_px(p, 1000), 17.806268, 1e-5);
-  EXPECT_NEAR(*lens_fx_px(p, 1000), 50.0 * 1000 / 36.0, 1e-9);
+  EXPECT_NEAR(coc_infinity_px(p, 1000, 600), 17.806268, 1e-5);
+  EXPECT_NEAR(*lens_fx_px(p, 1000, 600), 50.0 * 1000 / 36.0, 1e-9);
+  // Blender's sensor fit: auto spans the larger side (a portrait image's
+  // height); horizontal the width, as records before schema 4 did.
+  EXPECT_NEAR(coc_infinity_px(p, 600, 1000), 17.806268, 1e-5);
+  DofParams h = p;
+  h.lens.sensor_fit = SensorFit::horizontal;
+  EXPECT_NEAR(coc_infinity_px(h, 600, 1000), 17.806268 * 0.6, 1e-5);
   // Z = 4 m: c = 17.806268 x 2/4 = 8.903134 px, sigma = sqrt(1 + (c/4)^2) = 2.440105.
   // Z = 1 m: c = 17.806268 x 1/1 = 17.806268 px, sigma = 4.562505.
   // Z = 2 m (in focus): sigma = sigma0 = 1; unknown depth: c = alpha, sigma = 4.562505.
@@ -95,7 +101,7 @@ TEST(DofCoc, ThinLensAgainstHandArithmetic) {
   q.foreground = Foreground::sharp;  // the CoC map as is
   DofAnalysis a;
   // The map is for a 4 px wide image; alpha scales with the width, so use 1000 px via --coc-infinity.
-  q.f_number.reset(), q.focal_length_mm.reset(), q.sensor_width_mm.reset();
+  q.f_number.reset(), q.lens = LensCamera{};
   q.coc_infinity_px = 17.806268;
   const Image s = dof_scale_map(z, q, a);
   EXPECT_NEAR(s.data[0], 2.440105, 2e-5);  // float arithmetic, ~1e-7 relative
@@ -371,7 +377,7 @@ TEST(DofRealData, MiddleburyArtInFocusPixelsExact) {
   DofParams p;
   p.coc_infinity_px = 30.0;
   p.focus_distance_m = 2.0;
-  const Intrinsics k = dof_intrinsics(src, p, rgb.width, rgb.height);
+  const Intrinsics k = dof_intrinsics(src, rgb.width, rgb.height);
   // Focus on the plane of the centre pixel: disparities are integers / 3,
   // so every pixel of that disparity has exactly this Z and c = 0.
   const Image zmap = planar_depth(d.range, k);
@@ -420,8 +426,10 @@ TEST(DofErrors, BadParametersAreRefused) {
   p = lens_50mm();
   p.coc_infinity_px = 10.0;
   EXPECT_NE(error_of([&] { validate_dof(p); }).find("--coc-infinity"), std::string::npos);
+  p.f_number.reset();  // the camera's focal length and sensor may stay (they give the intrinsics)
+  EXPECT_NO_THROW(validate_dof(p));
   p = lens_50mm();
-  p.sensor_width_mm.reset();
+  p.lens.sensor_width_mm.reset();
   EXPECT_NE(error_of([&] { validate_dof(p); }).find("--sensor-width"), std::string::npos);
   p = lens_50mm();
   p.coc_limit_px = 0.5;  // below sigma0 = 1
@@ -434,15 +442,16 @@ TEST(DofErrors, BadParametersAreRefused) {
   EXPECT_NE(error_of([&] { validate_dof(p); }).find("--precision f16"), std::string::npos);
   // Intrinsics from the depth flags disagreeing with the lens by more than 1 %.
   DepthSource src;
+  src.lens = lens_50mm().lens;
   src.k.fx = 1400.0;  // the lens gives 50 x 1000 / 36 = 1388.9 px: 0.8 % apart, allowed
-  EXPECT_NO_THROW(dof_intrinsics(src, lens_50mm(), 1000, 600));
+  EXPECT_NO_THROW(dof_intrinsics(src, 1000, 600));
   src.k.fx = 1420.0;  // 2.2 % apart
-  EXPECT_NE(error_of([&] { dof_intrinsics(src, lens_50mm(), 1000, 600); }).find("1 %"), std::string::npos);
+  EXPECT_NE(error_of([&] { dof_intrinsics(src, 1000, 600); }).find("1 %"), std::string::npos);
   // Range without any intrinsics cannot become planar depth.
+  EXPECT_NE(error_of([&] { dof_intrinsics(DepthSource{}, 100, 100); }).find("--fx"), std::string::npos);
   DofParams art;
   art.focus_distance_m = 2.0;
   art.coc_infinity_px = 10.0;
-  EXPECT_NE(error_of([&] { dof_intrinsics(DepthSource{}, art, 100, 100); }).find("--fx"), std::string::npos);
   // The paper's one-sided form is not in the GPU passes.
   art.scheme = DofScheme::bertalmio;
   Exec g;

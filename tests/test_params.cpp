@@ -223,7 +223,7 @@ TEST(Params, OutputFilesAreMarkedBySpecNotByName) {
   std::set<std::string> files, settings;
   for (const auto& d : output_param_table(maps).params()) (is_output_file(d.spec) ? files : settings).insert(d.spec.name);
   EXPECT_EQ(files, (std::set<std::string>{"out", "record", "transmission", "sigma"}));
-  EXPECT_EQ(settings, (std::set<std::string>{"bits", "out-transfer", "compression"}));
+  EXPECT_EQ(settings, (std::set<std::string>{"bits", "out-transfer", "compression", "out-alpha", "keep-layers"}));
   // The depth commands' own output blocks: exactly what the name rule gave
   // before the flag (their text parameters of the output block).
   std::set<std::string> conv, prep;

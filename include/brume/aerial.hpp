@@ -315,6 +315,7 @@ struct AerialJob {
   // flags carry the prefix --sky- so they do not collide with the photo's
   // (--sky-projection, --sky-yaw, --sky-sun-zenith, --sky-date, --sky-samples, ...).
   std::string sky_image;                           // --sky-image
+  std::string sky_image_layer;                     // --sky-image-layer: its layer in a file with layers
   Transfer sky_image_transfer = Transfer::automatic;  // --sky-image-transfer
   std::string sky_mask;                            // --sky-mask
   SkyViewParams sky_view;                          // --sky-projection ...

@@ -5,12 +5,15 @@
 // depth, preparation, haze with its diffusion block, outputs) with the whole
 // depth-of-field block nested under the prefix "dof-" (ParamTable::nest with
 // a prefix, as aerial's --sky-...): --dof-focus-distance, --dof-f-number,
-// --dof-focal-length, --dof-sensor-width, --dof-coc-infinity,
+// --dof-coc-infinity,
 // --dof-coc-limit, --dof-scheme, --dof-foreground and the DOF stage's own
 // diffusion flags (--dof-precision, --dof-sigma0, --dof-rho-max,
 // --dof-edge-rate), and one more map output, --dof-scale-map. The record
 // keeps them in the block "dof" (the batch mode's `dof.scheme`).
 //
+// The lens's focal length and sensor are the camera's, shared: the depth
+// block's --focal-length and --sensor-width (--dof-focal-length and
+// --dof-sensor-width, the chain's flags before schema 4, are their aliases).
 // Shared, given once: the image, the depth source with its camera (the DOF
 // stage's planar depth uses the depth flags' intrinsics, else the lens's,
 // checked to agree within 1 % as in `brume dof`), the preparation (the range

@@ -69,6 +69,7 @@ struct CompareJob {
   std::string b;     // image B, same size
   std::string mask;  // optional grey image, non-zero = compared; same size
   std::string json;  // optional: write the result and the record here
+  std::string a_layer, b_layer;  // A's and B's layers in files with layers (brume/io.hpp); "": plain
 };
 const ParamTable<CompareJob>& compare_job_table();
 

@@ -14,13 +14,16 @@
 // image centre ((W-1)/2, (H-1)/2).
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "brume/image.hpp"
+#include "brume/params.hpp"
 
 namespace brume {
 
@@ -37,6 +40,43 @@ struct Intrinsics {
 // From fields of view in degrees (edge to edge); give one or both (square
 // pixels assumed for the missing one). Throws brume::Error on bad values.
 Intrinsics intrinsics_from_fov(int width, int height, double fov_x_deg, double fov_y_deg);
+
+// ---- the camera in millimetres, as 3D software states it (Blender) ----------------
+// A focal length F and a sensor [mm], the sensor fit and the lens shift, with
+// Blender's meaning (BKE_camera_params_compute_viewplane), square pixels:
+//   fit auto: the sensor WIDTH spans the image's larger side (the height of a
+//     portrait image); horizontal: the width spans the image width; vertical:
+//     the sensor HEIGHT spans the image height;
+//   s = the side the fit spans [px] (auto: max(W, H); horizontal: W;
+//     vertical: H), d = the sensor size on it [mm] (vertical: the height,
+//     else the width);
+//   fx = fy = F s / d  [px];
+//   cx = (W - 1)/2 - shift_x s,  cy = (H - 1)/2 + shift_y s  [px]
+// (the shift moves the frame, in units of s: a positive shift_x sees more to
+// the right, so the principal point moves left; y up in Blender, down in the
+// image). Checked against Blender 3.4's own projection (calc_matrix_camera)
+// of the test renders (tests/renders/, docs/renderers.md).
+enum class SensorFit { automatic, horizontal, vertical };
+const EnumNames<SensorFit>& sensor_fit_names();
+struct LensCamera {
+  std::optional<double> focal_length_mm;   // [mm] F, > 0
+  std::optional<double> sensor_width_mm;   // [mm] > 0 (fits auto, horizontal)
+  std::optional<double> sensor_height_mm;  // [mm] > 0 (fit vertical)
+  SensorFit sensor_fit = SensorFit::automatic;
+  std::array<double, 2> lens_shift{0.0, 0.0};  // [1] Blender's shift_x, shift_y, in units of s
+  bool given() const { return focal_length_mm || sensor_width_mm || sensor_height_mm || lens_shift[0] != 0.0 ||
+                              lens_shift[1] != 0.0; }
+};
+// The side s the fit spans [px] and the sensor size d on it [mm]; throws
+// brume::Error naming the flag that is missing or would be ignored.
+struct LensScale {
+  double side_px = 0.0, sensor_mm = 0.0;
+  const char* sensor_flag = "--sensor-width";
+};
+LensScale lens_scale(const LensCamera& c, int width, int height);
+// Pixels per millimetre on the sensor: s / d.
+// The pixel intrinsics of the camera (above); throws when F or the sensor is missing.
+Intrinsics lens_intrinsics(const LensCamera& c, int width, int height);
 // Validated copy with the principal point filled in for a width x height image.
 Intrinsics resolve(const Intrinsics& k, int width, int height);
 

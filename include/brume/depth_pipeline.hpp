@@ -25,6 +25,7 @@ struct DepthPrepareJob {
   CompleteMode complete = CompleteMode::automatic;  // as an effect's --complete (brume/pipeline.hpp)
   CompleteParams completion;
   std::string image;  // the colour image that guides the completion (and sizes a --velodyne scan)
+  std::string image_layer;  // its layer in a file with layers (brume/io.hpp)
   std::string out;    // prepared range, float file
   std::string masks;  // directory for sky.png, holes.png, margin.png, prepared-preview.png
   std::string record;

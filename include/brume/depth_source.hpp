@@ -11,9 +11,22 @@
 #include "brume/camera.hpp"
 #include "brume/depth.hpp"
 #include "brume/image.hpp"
+#include "brume/io.hpp"
+#include "brume/params.hpp"
 #include "brume/stereo.hpp"
 
 namespace brume {
+
+enum class RenderBackground { automatic, off };
+const EnumNames<RenderBackground>& render_background_names();
+// The rule in words (--help, the record, the docs).
+extern const char* const kRenderBackgroundRule;
+// Whether a stored value of a float range or planar-depth file is a renderer's background.
+inline bool is_render_background(float v) { return v >= 1e9f || v == 65504.0f || v == -INFINITY; }
+// The largest distance [m] taken without a warning: beyond it a value is
+// more likely a background or a unit error than a surface (the plausibility
+// rule of the depth layer).
+constexpr double kPlausibleDistanceMax = 1e6;
 
 struct DepthSource {
   // Exactly one source file:
@@ -28,9 +41,13 @@ struct DepthSource {
                                  // and converted as --disparity's (calib.txt, or --fx and --baseline)
   std::string stereo_left;       // the pair's left view: the effects' --image (the default there);
                                  // depth convert and depth prepare name it here
+  std::string stereo_right_layer, stereo_left_layer;  // their layers in files with layers (brume/io.hpp)
   StereoParams stereo;           // the matching's parameters (--max-disparity, --stereo-...)
 
   std::string channel;           // channel name in a multi-channel file (e.g. Z of an EXR)
+  // No channel named: a file with layers' one depth pass by name (names), or
+  // as before schema 4 (first): its one channel, or R of equal R, G, B.
+  LayerRule channel_rule = LayerRule::names;
   std::optional<double> depth_scale;  // metres per count (integer range / z files; required there)
   // A stored value that means "no measurement" (GeoPose3K range maps mark the
   // sky with -1): pixels whose stored value equals it exactly become unknown
@@ -40,8 +57,20 @@ struct DepthSource {
   // read from an image file (range, z, disparity, depth buffer, inverse and
   // normalised depth); refused with --velodyne, whose scan has no stored grid.
   std::optional<double> unknown_value;
+  // Renderers' "no surface" values in range and planar-depth files (float
+  // files only): stored values >= 1e9 (Cycles writes 1e10), exactly 65504
+  // (Eevee: half float's largest) and +-inf are unknown (sky) -- compared as
+  // stored, before --depth-scale, as --unknown-value is. off: read as
+  // distances (the rule of records before schema 4). Disparity, depth
+  // buffers and normalised or inverse depth have conventions of their own.
+  RenderBackground render_background = RenderBackground::automatic;
   Intrinsics k;                  // --fx --fy --cx --cy
   double fov_x_deg = NAN, fov_y_deg = NAN;
+  // The camera in millimetres (--focal-length, --sensor-width, --sensor-height,
+  // --sensor-fit, --lens-shift; brume/depth.hpp): the intrinsics when no pixel
+  // ones are given; with them, the pixels win and the lens must agree within
+  // 1 % (depth of field's CoC reads its millimetres either way).
+  LensCamera lens;
   std::string calib;             // Middlebury 2014 / ETH3D calib.txt
   double baseline_m = NAN;       // stereo baseline without calib.txt
   double disparity_scale = 1.0;  // d = scale * stored + offset
@@ -58,7 +87,7 @@ struct DepthSource {
 
 struct LoadedDepth {
   Image range;           // metres along the ray, NaN unknown
-  nlohmann::json record; // what was read and how it was converted
+  nlohmann::json record; // what was read and how it was converted; "warnings": what it cannot vouch for
   std::string path;      // the source file
   Image window_depth;    // --depth-buffer: the window depth d in [0, 1] as read (NaN unknown), for a GPU pass
                          // that linearises it itself; empty for other sources
@@ -69,8 +98,9 @@ struct LoadedDepth {
 // unknown). Throws brume::Error naming the flag or file.
 LoadedDepth load_depth(const DepthSource& src, int width = 0, int height = 0);
 
-// Intrinsics from the source's flags (--fx.., --fov-x.., or calib.txt), for a
-// width x height image; throws when none were given.
+// Intrinsics from the source's flags (--fx.., --fov-x.., calib.txt, or the
+// camera in millimetres), for a width x height image; throws when none were
+// given, or when the millimetres disagree with the pixels by more than 1 %.
 Intrinsics depth_intrinsics(const DepthSource& src, int width, int height);
 
 // The camera the depth was seen from, for a width x height image (both > 0):

@@ -7,7 +7,9 @@
 // distance, F the focal length, n the f-number:
 //   c(x)  = alpha |Z - Zf| / Z,   alpha = F^2 / (n (Zf - F))          (eq. 1-2)
 // alpha is the CoC diameter at Z -> infinity, converted to pixels with the
-// sensor width (px per mm = W / sensor width); artists give it directly
+// camera's sensor (px per mm = s / sensor, s the image side the sensor fit
+// spans: brume/depth.hpp's LensCamera, Blender's meaning; records before
+// schema 4: the width, --sensor-fit horizontal); artists give it directly
 // (--coc-infinity PX). A disc of diameter c has per-axis second moment
 // c^2/16, so the Gaussian standing for it has sigma = c/4, and the target
 // scale of the diffusion, on an input of inner scale sigma0, is
@@ -77,31 +79,39 @@ const EnumNames<Foreground>& foreground_names();
 struct DofParams {
   std::optional<double> focus_distance_m;  // [m] Zf, > 0; required
   std::optional<double> f_number;          // [1] n, > 0 (with the lens)
-  std::optional<double> focal_length_mm;   // [mm] F, > 0 (with the lens)
-  std::optional<double> sensor_width_mm;   // [mm] sensor width, > 0 (with the lens)
   std::optional<double> coc_infinity_px;   // [px] alpha, >= 0: instead of the lens
   double coc_limit_px = 64.0;              // [px] cap on the target scale sigma, > 0, >= sigma0
   DofScheme scheme = DofScheme::invariant_exact;
   Foreground foreground = Foreground::soft;
   DiffusionParams diffusion;  // precision, sigma0, rho_max, edge rate; the scheme follows `scheme`
+  // The lens's focal length and sensor [mm]: not this block's parameters but
+  // the camera's (the depth block's --focal-length, --sensor-width,
+  // --sensor-fit: one declaration for every command), copied here by the
+  // pipelines (dof_with_lens) for the CoC in pixels.
+  LensCamera lens;
 };
+// The DOF parameters with the job's camera in millimetres.
+inline DofParams dof_with_lens(DofParams p, const LensCamera& lens) {
+  p.lens = lens;
+  return p;
+}
 
 const ParamTable<DofParams>& dof_param_table();
 
 // Range checks, and the combinations a run would ignore or cannot use: the
-// lens (f-number, focal length, sensor width: all three) or --coc-infinity,
-// not both; a focus distance beyond the focal length; --edge-rate or
+// lens (f-number, and the camera's focal length and sensor) or
+// --coc-infinity (with which --f-number is refused); a focus distance beyond the focal length; --edge-rate or
 // --rho-max with a scheme that does not use them. `given`: names set explicitly.
 void validate_dof(const DofParams& p, const std::set<std::string>& given = {});
 
 // The diffusion parameters a scheme runs the engine with.
 DiffusionParams dof_diffusion_params(const DofParams& p);
 
-// alpha, the CoC diameter at infinity, in pixels, for a W px wide image.
-double coc_infinity_px(const DofParams& p, int width);
+// alpha, the CoC diameter at infinity, in pixels, for a W x H image.
+double coc_infinity_px(const DofParams& p, int width, int height);
 
-// The lens's focal length in pixels (F W / sensor width), when the lens is given.
-std::optional<double> lens_fx_px(const DofParams& p, int width);
+// The lens's focal length in pixels (F s / sensor), when the lens is given.
+std::optional<double> lens_fx_px(const DofParams& p, int width, int height);
 
 // Planar depth Z (m) from a range map (m along the ray) and the intrinsics.
 // Unknown pixels (NaN, inf, 0) stay unknown (NaN).
@@ -154,11 +164,14 @@ struct DofJob {
 const std::vector<MapOutput>& dof_map_outputs();
 const ParamTable<DofJob>& dof_job_table();
 // The intrinsics a job's planar depth uses: the depth flags' (--fx.., --fov-x..,
-// --calib), else the lens's (fx = F W / sensor width, centred); when both are
-// given they must agree within 1 %. Throws when neither is.
-// Whether the depth flags give the camera's intrinsics (else the lens must).
+// --calib), else the camera in millimetres (fx = F s / sensor, lens shift);
+// when both are given they must agree within 1 % (depth_intrinsics). Throws
+// when neither is.
+// Whether the depth flags give the camera's pixel intrinsics (else the lens must).
 bool depth_flags_give_intrinsics(const DepthSource& src);
-Intrinsics dof_intrinsics(const DepthSource& src, const DofParams& p, int width, int height);
+Intrinsics dof_intrinsics(const DepthSource& src, int width, int height);
+// The record's words for where those intrinsics came from.
+std::string dof_intrinsics_source(const DepthSource& src, int width, int height);
 nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

@@ -54,6 +54,7 @@ namespace brume {
 // the ray; an integer file needs --object-depth-scale).
 struct InsertObject {
   std::string object;                        // RGBA image (EXR linear premultiplied; PNG/TIFF sRGB straight alpha)
+  std::string object_layer;                  // its layer in a file with layers (brume/io.hpp): NAME.R, .G, .B, .A
   std::string object_range;                  // its range map [m]
   std::string object_range_channel;          // channel of a multi-channel range file ("" : the only one)
   std::optional<double> object_depth_scale;  // [m] per count of an integer range file
@@ -69,7 +70,7 @@ const ParamTable<InsertObject>& insert_object_param_table();
 //   no alpha channel: alpha 1 (the object is where its range is known); grey
 //     files are expanded to RGB.
 // Throws brume::Error naming the file for alpha outside [0, 1] or non-finite values.
-Image read_object_rgba(const std::string& path, FileInfo* info = nullptr);
+Image read_object_rgba(const std::string& path, FileInfo* info = nullptr, const std::string& layer = "");
 
 // The aerial parameters that apply to an insert: aerial's table without the
 // re-render and remove parameters (--from-turbidity, --from-horizon,

@@ -31,26 +31,116 @@ enum class Transfer { automatic, srgb, linear };
 Transfer parse_transfer(const std::string& s, const std::string& flag);  // throws brume::Error
 std::string to_string(Transfer t);
 
+// A rectangle of pixels, corners included (OpenEXR's data and display
+// windows: x0, y0 the top-left pixel, x1, y1 the bottom-right one).
+struct PixelWindow {
+  int x0 = 0, y0 = 0, x1 = -1, y1 = -1;
+  int width() const { return x1 - x0 + 1; }
+  int height() const { return y1 - y0 + 1; }
+  bool operator==(const PixelWindow& o) const { return x0 == o.x0 && y0 == o.y0 && x1 == o.x1 && y1 == o.y1; }
+  bool operator!=(const PixelWindow& o) const { return !(*this == o); }
+};
+
 struct FileInfo {
   std::string path;
   std::string format;  // OpenImageIO format name, e.g. "png", "openexr", "pnm"
   bool integer = false;  // stored as 8/16/32-bit integers
   int bits = 32;
-  std::vector<std::string> channel_names;
+  std::vector<std::string> channel_names;  // every channel of the file (of the part read, in a multi-part file)
   Transfer transfer = Transfer::linear;  // transfer function actually applied on read
   std::string description;  // the file's ImageDescription (brume embeds its JSON record there); empty if none
+  // What was read ("files with layers" below): the layer (NAME of NAME.R, NAME.G,
+  // NAME.B; a multi-part file's part; empty for the plain R, G, B or Y), the
+  // channels the values came from in their order, and why those.
+  std::string layer;
+  std::string part;  // a multi-part OpenEXR file's part read (its name), else empty
+  std::vector<std::string> channels_read;
+  std::string channel_rule;
+  bool blender = false;  // the file carries Blender's BlenderMultiChannel attribute (a multilayer render)
+  // OpenEXR: the data window (the pixels the file holds) and the display
+  // window (the image's frame, which brume reads: padded outside the data
+  // window; zero-sized for other formats).
+  PixelWindow data_window, display_window;
+  bool padded = false;
 };
 
-// Colour image -> linear float RGB (grey is expanded to RGB, alpha dropped).
+// ---- files with layers (renders: docs/renderers.md) ----------------------------
+// A file's channels are "plain" when they are R, G, B (A), or Y (A), or one
+// channel of any name: a colour read takes R, G, B (Y three times), a scalar
+// read the one channel (or R of an R, G, B whose channels are equal
+// everywhere: grey saved as RGB) -- the rules of every file before layers.
+// Any other set of channels (OpenEXR's layers, named NAME.CHANNEL: Blender's
+// "ViewLayer.Combined.R", "ViewLayer.Depth.Z"; a multi-part file's parts) is
+// read by name:
+//  - colour: the layer NAME (NAME.R, NAME.G, NAME.B and NAME.A when present;
+//    Nuke's NAME.red, ... too; for a multi-part file NAME may be a part's
+//    name, whose R, G, B are read); unnamed, the one candidate layer (a set
+//    of R, G, B under one prefix), refused when there are several, with the
+//    list and the flag that names one;
+//  - depth (ScalarRead::depth): the channel given, else the one channel named
+//    like a depth pass (colour_layers / depth_passes below); Mist passes never.
+// How a file of several channels is read when no layer or channel is named
+// (--image-layer-rule, --depth-channel-rule): by name (the rules above), or
+// the file's first channels in its order, as every read before record schema
+// 4 (a record of schema <= 3 repeats with it: ParamTable::since).
+enum class LayerRule { names, first };
+struct ColorRead {
+  Transfer transfer = Transfer::automatic;
+  std::string layer;                         // NAME, or empty
+  std::string layer_flag = "--image-layer";  // what names the layer, for messages (Python: "layer=")
+  LayerRule rule = LayerRule::names;         // first: R, G, B are the file's first three channels (layer empty)
+};
+// Colour image -> linear float RGB (grey is expanded to RGB). `alpha`, when
+// given, receives the alpha channel read with the colour (1 channel; empty
+// when the file or layer has none): straight values for float files
+// (OpenEXR's alpha, by which its colour is premultiplied), the count over
+// 2^bits - 1 for integer files, never sRGB-decoded.
+Image read_color(const std::string& path, const ColorRead& how, FileInfo* info = nullptr, Image* alpha = nullptr);
 Image read_color(const std::string& path, Transfer transfer = Transfer::automatic,
                  FileInfo* info = nullptr);
 
 // One channel of raw values (no transfer function): integer files give their
 // counts (0..255 or 0..65535), float files their values. `channel` picks a
-// channel by name ("Z", "R", "depth.Z"); empty means the file must have one
-// channel (or several identical ones, like a grey PNG saved as RGB).
+// channel by name ("Z", "R", "depth.Z"; in a multi-part file "PART.NAME" or a
+// name only one part has); empty means the file must have one channel (or
+// several identical ones, like a grey PNG saved as RGB), or, for depth,
+// hold one channel named like a depth pass. Pixels of an OpenEXR display
+// window outside its data window are NaN.
+struct ScalarRead {
+  std::string channel;
+  std::string channel_flag = "--depth-channel";  // names the choice in messages
+  bool depth = false;  // a depth source: a layered file's depth pass is looked for by name
+  LayerRule rule = LayerRule::names;  // first (channel empty): the one channel, or the first of equal R, G, B
+};
+Image read_scalar(const std::string& path, const ScalarRead& how, FileInfo* info = nullptr);
 Image read_scalar(const std::string& path, const std::string& channel = "",
                   FileInfo* info = nullptr);
+
+// Whether a channel's name is a depth pass's: Z, depth (any case), *.depth,
+// or *.Depth.Z (any case of "depth": Blender's "ViewLayer.Depth.Z", Nuke's
+// "depth.Z"); and whether it is a Mist pass's (a component "Mist": 0-1
+// mist, not metres, never taken as depth).
+bool is_depth_pass_name(const std::string& channel);
+bool is_mist_pass_name(const std::string& channel);
+// The candidate colour layers among a part's channel names: each prefix
+// (before the last '.'; "" for plain R, G, B) whose channels hold R, G, B
+// (or red, green, blue), in the channels' order.
+std::vector<std::string> colour_layers(const std::vector<std::string>& channels);
+// Whether a set of channel names is plain (above).
+bool plain_channels(const std::vector<std::string>& channels);
+
+// An OpenEXR file's channels, with their storage bits (16 half, 32 float or
+// uint): of its one part (a multi-part file gives multipart = true and no
+// channels). Not OpenEXR: exr = false.
+struct ExrChannels {
+  bool exr = false, multipart = false, blender = false;
+  std::vector<std::string> names;
+  std::vector<int> bits;
+};
+ExrChannels exr_channels(const std::string& path);
+// Those channels of a single-part OpenEXR file as float, in that order, on
+// its display window (0 outside the data window).
+Image read_exr_channels(const std::string& path, const std::vector<std::string>& names);
 
 // The largest image or depth map a read accepts, in pixels (width × height).
 // A header that declares more is refused before any allocation — a hostile or
@@ -207,6 +297,13 @@ struct WriteOptions {
   // each format's default (compression_help()); which names a format takes:
   // compression_names().
   std::string compression = "auto";
+  // OpenEXR only (an output of layers, for a compositor): each channel's
+  // name ("ViewLayer.Combined.R") and storage bits (16 half, 32 float; empty:
+  // all as `bits`), and string attributes to carry (Blender's
+  // BlenderMultiChannel). Empty: R, G, B, A (Y for one channel).
+  std::vector<std::string> channel_names;
+  std::vector<int> channel_bits;
+  std::vector<std::pair<std::string, std::string>> string_attributes;
 };
 
 // The --compression values a file of this extension takes (".png" -> "auto,

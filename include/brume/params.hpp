@@ -37,8 +37,10 @@
 namespace brume {
 
 using Rgb = std::array<float, 3>;
+using Pair = std::array<double, 2>;
 
-enum class ParamKind { real, integer, boolean, choice, rgb, text };
+// pair: two reals X,Y (a lens shift), each in the range.
+enum class ParamKind { real, integer, boolean, choice, rgb, text, pair };
 
 // Allowed interval of a real or integer parameter (and of each RGB component).
 struct Range {
@@ -80,6 +82,10 @@ struct ParamSpec {
                                      // --view-matrix, --turbidity-from 5: schema 4 was written without)
   int since_schema = 0;              // the record schema that introduced it (0: always there); a job that
   nlohmann::json before_schema;      // lacks it ran as this value says (brume run sets it; record_job)
+  // Where records of earlier schemas kept it ("block.name": depth of
+  // field's "dof.focal-length" before the lens joined the depth block):
+  // from_json reads a value found there as this parameter's.
+  std::vector<std::string> formerly;
 
   // Help with unit, range or choices, for --help and docs.
   std::string describe() const;
@@ -214,6 +220,11 @@ class ParamTable {
                  if (v.is_null()) p.*m = std::nullopt; else p.*m = v.get<Rgb>();
                });
   }
+  ParamTable& pair(const char* name, Pair P::*m, const char* unit, Range r, const char* help) {
+    return add(spec(name, ParamKind::pair, unit, help, r),
+               [m](const P& p) { return nlohmann::json(p.*m); },
+               [m](P& p, const nlohmann::json& v) { p.*m = v.get<Pair>(); });
+  }
   ParamTable& text(const char* name, std::string P::*m, const char* help) {
     return add(spec(name, ParamKind::text, "", help, {}),
                [m](const P& p) { return nlohmann::json(p.*m); },
@@ -264,6 +275,12 @@ class ParamTable {
     params_.back().spec.before_schema = std::move(older);
     return *this;
   }
+  // Records of earlier schemas kept the last declared parameter as
+  // "block.name" (ParamSpec::formerly).
+  ParamTable& formerly(const char* block_dot_name) {
+    params_.back().spec.formerly.emplace_back(block_dot_name);
+    return *this;
+  }
   // Other accepted flag names for the last declared parameter.
   ParamTable& alias(const char* a) {
     params_.back().spec.aliases.emplace_back(a);
@@ -276,6 +293,16 @@ class ParamTable {
       if (find(q.spec.name)) throw Error("internal: parameter '" + q.spec.name + "' declared twice in " + block_);
       params_.push_back({q.spec, [m, g = q.get](const P& p) { return g(p.*m); },
                          [m, s = q.set](P& p, const nlohmann::json& v) { s(p.*m, v); }});
+    }
+    return *this;
+  }
+
+  // Every parameter of another table of the same struct, as declared there
+  // (a table that adds to another: depth of field's sampling adds the lens).
+  ParamTable& extend(const ParamTable<P>& other) {
+    for (const Param<P>& q : other.params()) {
+      if (find(q.spec.name)) throw Error("internal: parameter '" + q.spec.name + "' declared twice in " + block_);
+      params_.push_back(q);
     }
     return *this;
   }
@@ -327,6 +354,14 @@ class ParamTable {
     return false;
   }
 
+  // The parameter an earlier schema's record kept as "block.name", or null.
+  const Param<P>* former(const std::string& key) const {
+    for (const auto& p : params_)
+      for (const auto& f : p.spec.formerly)
+        if (f == key) return &p;
+    return nullptr;
+  }
+
   const Param<P>* find(const std::string& name) const {
     for (const auto& p : params_)
       if (p.spec.name == name) return &p;
@@ -376,8 +411,10 @@ class ParamTable {
       if (!vals.is_object()) throw Error(where + ": block '" + block + "' is not an object");
       for (const auto& [name, v] : vals.items()) {
         const Param<P>* d = find(name);
-        if (!d || d->spec.block != block)
+        if (!d || d->spec.block != block) d = former(block + "." + name);
+        if (!d)
           throw Error(where + ": '" + block + "." + name + "' is not a parameter of this command");
+        if (given.count(d->spec.name) && d->spec.block != block) continue;  // the current key wins over a former one
         d->spec.check(v);
         d->set(p, v);
         given.insert(name);

@@ -20,6 +20,7 @@
 // must keep repeating bit for bit (tests/test_records.cpp).
 #pragma once
 
+#include <array>
 #include <chrono>
 #include <functional>
 #include <map>
@@ -57,9 +58,13 @@ const EnumNames<GpuFilter>& gpu_filter_names();
 const ParamTable<DiffusionParams>& diffusion_param_table();  // scheme, precision, sigma0, rho-max, edge-rate
 const ParamTable<PrepareParams>& prepare_param_table();      // all eight preparation parameters
 const ParamTable<DepthSource>& depth_param_table();          // every depth source and convention flag
+// The camera in millimetres (brume/depth.hpp: LensCamera), declared once and
+// nested in the depth block (every command that takes intrinsics) and the
+// sky's pinhole view; `block` is the record block it lands in.
+const ParamTable<LensCamera>& lens_param_table(const std::string& block);
 // The names of the depth block that name files or say how to read them: all
-// but the intrinsics (fx, fy, cx, cy, fov-x, fov-y, calib), which an array
-// caller still gives for fog's and dof's camera.
+// but the intrinsics (fx, fy, cx, cy, fov-x, fov-y, calib, and the camera in
+// millimetres), which an array caller still gives for fog's and dof's camera.
 const std::set<std::string>& depth_file_params();
 
 // The camera's pose (brume/camera.hpp: conventions fixed once for every
@@ -104,6 +109,8 @@ void replace_nonfinite(Image& rgb);
 
 struct InputFiles {
   std::string image;                       // colour image
+  std::string image_layer;                 // its layer in a file with layers (brume/io.hpp: ColorRead); "": plain
+  LayerRule image_layer_rule = LayerRule::names;  // --image-layer-rule: no layer named, by name or the first channels
   Transfer image_transfer = Transfer::automatic;
   NonFinite nonfinite = NonFinite::error;
   DepthSource depth;                       // needs_depth effects only
@@ -134,11 +141,21 @@ struct MapOutput {
   const char* float_reason;  // non-empty: values leave [0, 1]; integer files are refused
 };
 
+// An OpenEXR output's alpha (docs/renderers.md): auto carries the input's
+// alpha as the medium composes it (A' = T A + (1 - T)); off drops it (the
+// rule of records before schema 4).
+enum class OutAlpha { automatic, off };
+const EnumNames<OutAlpha>& out_alpha_names();
+// --image-layer-rule, --depth-channel-rule (brume/io.hpp: LayerRule): names | first.
+const EnumNames<LayerRule>& layer_rule_names();
+
 struct OutputFiles {
   std::string out;                       // main image
   std::string bits = "auto";             // auto | 8 | 16 | half | float
   Transfer transfer = Transfer::automatic;
   std::string compression = "auto";      // main image's NAME[:LEVEL] (WriteOptions::compression)
+  OutAlpha alpha = OutAlpha::automatic;  // --out-alpha
+  bool keep_layers = false;              // --keep-layers: the input's other channels, the medium and maps as layers
   std::string record;                    // JSON record (optional)
   std::map<std::string, std::string> maps;  // declared map outputs that were asked for
 };
@@ -149,6 +166,11 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
 // --masks -- not on --compression, a setting like --bits. brume batch names
 // these files from the frame's key and brume run moves them under --out-dir.
 bool is_output_file(const ParamSpec& s);
+// Whether a parameter of the input and depth blocks names an input file: a
+// text parameter there, but for those that name a channel or a layer inside
+// one (--depth-channel, --image-layer, --stereo-right-layer, ...). brume
+// batch resolves these against the manifest's folder and lists them.
+bool is_input_file(const ParamSpec& s);
 
 // ---- the shared steps -------------------------------------------------------------
 // Keep freed buffers for reuse within this process (glibc): blocks up to 32
@@ -163,11 +185,18 @@ void keep_freed_heap();
 
 struct LoadedInputs {
   Image rgb;              // linear RGB
+  Image alpha;            // the image's alpha (1 channel, as stored; empty when it has none)
   FileInfo image_info;
   LoadedDepth depth;      // measured range (metres along the ray, NaN unknown) and its record
   nlohmann::json record;  // {"image": file record, "depth": ...}
 };
 LoadedInputs load_inputs(const InputFiles& in, bool with_depth);
+// An effect that estimates its airlight from the sky (haze, fog, aerial with
+// --airlight auto) on a render whose film is transparent: its sky has alpha
+// 0 and colour 0 (premultiplied), not the sky's colour, so the estimate would
+// be black. Refused, naming --airlight, when at least half of the unknown-
+// range pixels (>= 0.5 % of the frame) have alpha below 1/2.
+void check_airlight_sky(const LoadedInputs& in, const std::string& effect);
 
 // Wall time of a run's file work, for --timing's whole-run line: reading and
 // decoding the inputs, depth conversion included (load_inputs), encoding and
@@ -247,6 +276,25 @@ BackendChoice choose_backend(const Exec& exec);
 void check_record_path(const std::string& path);
 // Before any work: every output location writable with its options.
 void check_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl);
+// An OpenEXR output for a compositor (docs/renderers.md), planned before the
+// record is written (the record names its channels):
+//  - the colour layer read (its names: ViewLayer.Combined.R, ...; plain R, G,
+//    B) with, when the input has alpha and --out-alpha auto, the alpha the
+//    medium composes, premultiplied "over": A' = T A + (1 - T) (the colour
+//    already is T C + (1 - T) B); no medium: A as read;
+//  - with --keep-layers: every other channel of the input as stored (its
+//    type kept), the medium as its own RGBA layer (<view>.Medium: (1 - T) B,
+//    1 - T), and each map of the run as a layer (<view>.Transmission,
+//    <view>.BlurScale, ...), <view> the colour layer's prefix (ViewLayer).
+// Not OpenEXR, or nothing to add: `image` empty, the main image is written
+// as it always was.
+struct OutputLayers {
+  Image image;
+  std::vector<std::string> names;
+  std::vector<int> bits;
+  std::vector<std::pair<std::string, std::string>> attributes;
+  nlohmann::json record;  // the record's "output_layers" (null: none)
+};
 // Encoding rules shared by every effect: `bits auto` keeps an 8/16-bit
 // input's depth in PNG/TIFF (JPEG 8, EXR/PFM/HDR float); maps are data,
 // never sRGB-encoded; the record is embedded as ImageDescription and written
@@ -259,7 +307,7 @@ struct CompanionFile {
 };
 void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, const Image& main,
                    const std::map<std::string, Image>& maps, const FileInfo* input_info, const nlohmann::json& record,
-                   const std::vector<CompanionFile>& companions = {});
+                   const std::vector<CompanionFile>& companions = {}, const OutputLayers* layers = nullptr);
 
 // tool, version, schema_version, command, argv, time
 nlohmann::json run_record_header(const std::string& command, const std::vector<std::string>& argv);
@@ -295,12 +343,19 @@ nlohmann::json job_record(const std::string& command, const RunContext& ctx, nlo
 
 // ---- the job of an effect on an RGB-D frame, from files to files --------------------
 // What an effect's run hands its job: the main image, its declared maps and
-// the record's blocks (run_record).
+// the record's blocks (run_record); a medium's effect names the map of the
+// transmission T its colour was composed with (out = ... + (1 - T) B) and
+// its airlight B, for an OpenEXR output's alpha and medium layer.
 struct EffectOutput {
   Image main;
   std::map<std::string, Image> maps;
   nlohmann::json record;
+  std::string medium_map = "";            // "transmission", or empty (no medium: the alpha passes through)
+  std::array<float, 3> medium_airlight{};  // B, linear RGB
 };
+
+// `in` null: a command without an input image (--keep-layers refused).
+OutputLayers compose_output_layers(const OutputFiles& o, const LoadedInputs* in, const EffectOutput& out);
 
 // The steps every such job takes, in this order: every parameter checked (the
 // table's ranges, the effect's `check` -- cross-field rules, backend limits
@@ -334,10 +389,12 @@ nlohmann::json run_effect_job(const EffectJob<Job>& e, const Job& job, const Exe
   LoadedInputs in = load_inputs(job.input, true);
   check_working_memory(e.command, in.rgb, e.bytes_per_pixel);
   EffectOutput out = e.apply(job, in, exec);
+  const OutputLayers layers = compose_output_layers(job.output, &in, out);
+  if (!layers.record.is_null()) out.record["output_layers"] = layers.record;
 
   const nlohmann::json rec =
       job_record(e.command, ctx, e.table.to_json(recorded ? *recorded : job), in.record, out.record, eo.timing);
-  write_outputs(job.output, e.maps, out.main, out.maps, &in.image_info, rec, ctx.files);
+  write_outputs(job.output, e.maps, out.main, out.maps, &in.image_info, rec, ctx.files, &layers);
   return rec;
 }
 

@@ -106,6 +106,7 @@ struct SkyViewParams {
                                     //       direction (fisheye) or of its centre column (equirect)
   Intrinsics k{0.0, 0.0, NAN, NAN}; // [px] pinhole --fx --fy --cx --cy (0/NaN: unset)
   double fov_x_deg = NAN, fov_y_deg = NAN;  // [deg] pinhole --fov-x --fov-y
+  LensCamera lens;                  // pinhole in millimetres: --focal-length, --sensor-width, ... (brume/depth.hpp)
   CameraPose pose;                  // pinhole --yaw --pitch --roll
 };
 const ParamTable<SkyViewParams>& sky_view_param_table();
@@ -268,7 +269,7 @@ struct SkyImageFit {
 };
 SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, const std::string& mask,
                                const SkyViewParams& view, const SunParams& sun, const SkyFitOptions& fit,
-                               const std::string& flags = "--");
+                               const std::string& flags = "--", const std::string& layer = "");
 
 // The same fit on pixels in memory (linear RGB; `integer_image`: they came
 // from 8/16-bit values, so saturation is detectable; `mask`: 1 = usable sky,
@@ -283,6 +284,7 @@ SkyImageFit fit_sky_data(DenseImageRef rgb, bool integer_image, const Image* mas
 
 struct SkyFitJob {
   std::string image;                      // --image (hdr, exr, png, jpg, tiff)
+  std::string image_layer;                // --image-layer: its layer in a file with layers (brume/io.hpp)
   Transfer image_transfer = Transfer::automatic;  // --image-transfer
   std::string mask;                       // --mask: > 0.5 (or 128) marks usable sky
   SkyViewParams view;

@@ -94,7 +94,8 @@ struct StereoView {
 // An image read from `path` for matching: an 8-bit file's counts as stored,
 // a 16-bit file's scaled to 8 bits, a float file (linear) sRGB-encoded and
 // clamped to [0, 1]. `flag` names the option in messages.
-StereoView read_stereo_view(const std::string& path, const std::string& flag, nlohmann::json* file_record = nullptr);
+StereoView read_stereo_view(const std::string& path, const std::string& flag, nlohmann::json* file_record = nullptr,
+                            const std::string& layer = "", const std::string& layer_flag = "");
 
 struct StereoResult {
   Image disparity;   // [px] left view's size, NaN unknown

@@ -14,6 +14,7 @@ namespace brume {
 
 struct DepthStereoJob {
   std::string left, right;   // the rectified pair's views
+  std::string left_layer, right_layer;  // their layers in files with layers (brume/io.hpp)
   std::string calib;         // Middlebury 2014 / ETH3D calib.txt, or:
   double fx_px = 0.0;        // [px] focal length (0: unset) ...
   double baseline_m = NAN;   // [m] ... and baseline (NaN: unset)

@@ -89,6 +89,21 @@ json keyword_value(const ParamSpec& s, py::handle v, const std::string& where) {
       for (auto& e : j) e = e.get<double>();
       return j;
     }
+    case ParamKind::pair: {
+      const char* what = "a sequence of 2 numbers (x, y)";
+      if (py::isinstance<py::str>(v)) throw wrong(what);
+      json j;
+      try {
+        j = from_py(v, where);
+      } catch (const py::type_error&) {
+        throw wrong(what);
+      }
+      if (!j.is_array() || j.size() != 2) throw wrong(what);
+      for (auto& e : j)
+        if (!e.is_number() || e.is_boolean()) throw wrong(what);
+      for (auto& e : j) e = e.get<double>();
+      return j;
+    }
     case ParamKind::text:
       if (py::isinstance<py::str>(v)) return utf8_of(v, where + ": " + kwd);
       if (py::hasattr(v, "__fspath__")) {
@@ -226,6 +241,7 @@ std::string stub_type(const ParamSpec& s) {
     case ParamKind::integer: t = "int"; break;
     case ParamKind::boolean: t = "bool"; break;
     case ParamKind::rgb: t = "tuple[float, float, float] | Sequence[float]"; break;
+    case ParamKind::pair: t = "tuple[float, float] | Sequence[float]"; break;
     case ParamKind::text: t = "str | os.PathLike[str]"; break;
     case ParamKind::choice: {
       t = "Literal[";

@@ -358,15 +358,24 @@ PYBIND11_MODULE(_brume, m) {
   // ---- files ----------------------------------------------------------------------------
   m.def(
       "read_image",
-      [](py::object path_obj, py::object transfer) {
+      [](py::object path_obj, py::object transfer, py::object layer_obj) {
         const std::string path = keyword_value(path_spec(), path_obj, "brume.read_image()");
         Transfer t = Transfer::automatic;
         if (!transfer.is_none()) t = parse_transfer(py::cast<std::string>(transfer), "transfer");
+        ColorRead how;
+        how.transfer = t;
+        how.layer_flag = "layer=";
+        if (!layer_obj.is_none()) {
+          if (!py::isinstance<py::str>(layer_obj))
+            throw py::type_error("brume.read_image(): layer takes a str (a layer's name, e.g. 'ViewLayer.Combined') "
+                                 "or None, got " + type_name(layer_obj));
+          how.layer = py::cast<std::string>(layer_obj);
+        }
         FileInfo info;
         Image img;
         {
           py::gil_scoped_release nogil;
-          img = read_color(path, t, &info);
+          img = read_color(path, how, &info);
         }
         json rec;
         if (!info.description.empty()) {
@@ -374,14 +383,18 @@ PYBIND11_MODULE(_brume, m) {
           if (rec.is_discarded()) rec = nullptr;  // a description that is not brume's JSON
         }
         json file = {{"path", info.path}, {"format", info.format}, {"integer", info.integer}, {"bits", info.bits},
-                     {"transfer", to_string(info.transfer)}, {"channels", info.channel_names}};
+                     {"transfer", to_string(info.transfer)}, {"channels", info.channel_names},
+                     {"layer", info.layer}, {"channels_read", info.channels_read}};
         return make_result({{"rgb", std::move(img)}}, rec, {{"file", to_py(file)}});
       },
-      py::arg("path"), py::arg("transfer") = py::none(),
-      "read_image(path, transfer=None) -> Result\n\nA colour image as linear float32 RGB (H x W x 3) by the CLI's "
-      "rules: integer files (PNG, JPEG, 8/16-bit TIFF) are sRGB and float files (EXR, PFM, HDR) linear unless "
-      "transfer='srgb'|'linear' says otherwise; grey is expanded, alpha dropped. Result: rgb, record (the brume "
-      "record embedded in the file's ImageDescription, or None), file (format, bits, transfer).");
+      py::arg("path"), py::arg("transfer") = py::none(), py::arg("layer") = py::none(),
+      "read_image(path, transfer=None, layer=None) -> Result\n\nA colour image as linear float32 RGB (H x W x 3) by "
+      "the CLI's rules: integer files (PNG, JPEG, 8/16-bit TIFF) are sRGB and float files (EXR, PFM, HDR) linear "
+      "unless transfer='srgb'|'linear' says otherwise; grey is expanded, alpha dropped. layer: the layer of a file "
+      "with layers (a multilayer OpenEXR: 'ViewLayer.Combined' reads ViewLayer.Combined.R, .G, .B), as the CLI's "
+      "--image-layer; None: the plain R, G, B, or the file's only colour layer (several: ValueError listing them). "
+      "Result: rgb, record (the brume record embedded in the file's ImageDescription, or None), file (format, bits, "
+      "transfer, channels, layer and channels_read).");
   m.def(
       "write_image",
       [](py::object path_obj, py::object img_obj, std::string bits, py::object transfer, py::object record,

@@ -160,8 +160,11 @@ const ParamTable<CompareJob>& compare_job_table() {
     ParamTable<CompareJob> d("compare");
     d.text("a", &CompareJob::a, "image A (PNG/TIFF/JPEG: sRGB-encoded; EXR/PFM/HDR: linear)")
         .reads_file()
+        .text("a-layer", &CompareJob::a_layer,
+              "the layer of A in a file with layers (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR)")
         .text("b", &CompareJob::b, "image B, the same size as A")
         .reads_file()
+        .text("b-layer", &CompareJob::b_layer, "the layer of B in a file with layers")
         .text("mask", &CompareJob::mask, "grey image of the same size: non-zero pixels are compared (default: all)")
         .reads_file()
         .text("json", &CompareJob::json, "write the result, the method and the inputs as JSON");
@@ -175,8 +178,11 @@ nlohmann::json run_compare_job(const CompareJob& job, const RunContext& ctx) {
   if (job.a.empty() || job.b.empty()) throw Error("compare needs two images: give --a FILE and --b FILE");
   if (!job.json.empty()) check_json_path(job.json);
   FileInfo ia, ib, im;
-  const Image a = read_color(job.a, Transfer::automatic, &ia);
-  const Image b = read_color(job.b, Transfer::automatic, &ib);
+  ColorRead ha, hb;
+  ha.layer = job.a_layer, ha.layer_flag = "--a-layer";
+  hb.layer = job.b_layer, hb.layer_flag = "--b-layer";
+  const Image a = read_color(job.a, ha, &ia);
+  const Image b = read_color(job.b, hb, &ib);
   if (a.width != b.width || a.height != b.height)
     throw Error("--a '" + job.a + "' is " + a.size_string() + " but --b '" + job.b + "' is " + b.size_string() +
                 "; compare needs two images of the same size (resample or crop one)");

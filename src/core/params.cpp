@@ -132,6 +132,10 @@ std::string ParamSpec::format(const nlohmann::json& v) const {
       const Rgb c = v.get<Rgb>();
       return num(c[0]) + "," + num(c[1]) + "," + num(c[2]);
     }
+    case ParamKind::pair: {
+      const Pair c = v.get<Pair>();
+      return num(c[0]) + "," + num(c[1]);
+    }
     case ParamKind::choice:
     case ParamKind::text: return v.get<std::string>();
   }
@@ -148,6 +152,9 @@ std::string ParamSpec::describe() const {
       break;
     case ParamKind::rgb:
       m << " [" << (unit.empty() ? "" : unit + ", ") << "R,G,B each in " << range.text() << "]";
+      break;
+    case ParamKind::pair:
+      m << " [" << (unit.empty() ? "" : unit + ", ") << "X,Y each in " << range.text() << "]";
       break;
     case ParamKind::choice: {
       m << " [";
@@ -200,6 +207,22 @@ nlohmann::json ParamSpec::parse(const std::string& t) const {
       if (n != 3)
         throw Error(flag + " '" + t + "' must be three comma-separated numbers R,G,B (linear light)" +
                     (optional ? " or " + unset_word : std::string()));
+      return c;
+    }
+    case ParamKind::pair: {
+      Pair c{};
+      std::stringstream ss(t);
+      std::string item;
+      int n = 0;
+      while (std::getline(ss, item, ',')) {
+        double v = 0;
+        if (n < 2 && !parse_number(item, v))
+          throw Error(flag + " '" + t + "': '" + item + "' is not a number; give X,Y, e.g. 0,0.1; " + describe());
+        if (n < 2) c[n] = v;
+        ++n;
+      }
+      if (n != 2 || (!t.empty() && t.back() == ','))
+        throw Error(flag + " '" + t + "' must be two comma-separated numbers X,Y; " + describe());
       return c;
     }
     case ParamKind::text: return t;
@@ -255,6 +278,17 @@ void ParamSpec::check(const nlohmann::json& v) const {
         const double x = c.get<double>();
         if (!std::isfinite(x) || !range.contains(x))
           throw Error(flag + " " + format(v) + ": every component must be finite and in " + range.text() +
+                      (unit.empty() ? "" : " (" + unit + ")") + "; " + help);
+      }
+      return;
+    }
+    case ParamKind::pair: {
+      if (!v.is_array() || v.size() != 2) bad_type("two numbers X,Y");
+      for (const auto& c : v) {
+        if (!c.is_number()) bad_type("two numbers X,Y");
+        const double x = c.get<double>();
+        if (!std::isfinite(x) || !range.contains(x))
+          throw Error(flag + " " + format(v) + ": both numbers must be finite and in " + range.text() +
                       (unit.empty() ? "" : " (" + unit + ")") + "; " + help);
       }
       return;

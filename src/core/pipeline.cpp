@@ -75,6 +75,16 @@ const EnumNames<CompleteMode>& complete_mode_names() {
   return n;
 }
 
+const EnumNames<OutAlpha>& out_alpha_names() {
+  static const EnumNames<OutAlpha> n = {{OutAlpha::automatic, "auto"}, {OutAlpha::off, "off"}};
+  return n;
+}
+
+const EnumNames<LayerRule>& layer_rule_names() {
+  static const EnumNames<LayerRule> n = {{LayerRule::names, "names"}, {LayerRule::first, "first"}};
+  return n;
+}
+
 const EnumNames<NonFinite>& nonfinite_names() {
   static const EnumNames<NonFinite> n = {{NonFinite::error, "error"}, {NonFinite::zero, "zero"}};
   return n;
@@ -154,6 +164,38 @@ ParamTable<Intrinsics> intrinsics_table() {
 
 }  // namespace
 
+const ParamTable<LensCamera>& lens_param_table(const std::string& block) {
+  static std::map<std::string, ParamTable<LensCamera>> cache;
+  static std::mutex mu;
+  std::lock_guard<std::mutex> lock(mu);
+  auto it = cache.find(block);
+  if (it != cache.end()) return it->second;
+  ParamTable<LensCamera> d(block);
+  // Depth of field's lens was its own until schema 4 (--focal-length and
+  // --sensor-width of `brume dof`, --dof-focal-length and --dof-sensor-width
+  // of the haze+dof chain): the depth block's lens keeps those spellings and
+  // reads those records.
+  const bool depth = block == "depth";
+  d.real("focal-length", &LensCamera::focal_length_mm, "mm", Range::above(0.0),
+         "focal length F of the camera in millimetres, as 3D software states it (with --sensor-width): fx = fy = F s "
+         "/ sensor, s the side the sensor fit spans (docs/renderers.md)", "none");
+  if (depth) d.formerly("dof.focal-length").formerly("dof.dof-focal-length").alias("dof-focal-length");
+  d.real("sensor-width", &LensCamera::sensor_width_mm, "mm", Range::above(0.0),
+         "sensor width; with --sensor-fit auto it spans the image's larger side, with horizontal the image width "
+         "(Blender's Camera > Sensor > Size)", "none");
+  if (depth) d.formerly("dof.sensor-width").formerly("dof.dof-sensor-width").alias("dof-sensor-width");
+  d.real("sensor-height", &LensCamera::sensor_height_mm, "mm", Range::above(0.0),
+            "sensor height, used with --sensor-fit vertical (it spans the image height)", "none")
+      .choice("sensor-fit", &LensCamera::sensor_fit, sensor_fit_names(),
+              "which image side the sensor spans, as Blender's Sensor Fit: auto (the sensor width spans the larger "
+              "side), horizontal (the width spans the image width), vertical (the height spans the image height)")
+      .since(4, "horizontal")
+      .pair("lens-shift", &LensCamera::lens_shift, "1", Range::closed(-10.0, 10.0),
+            "Blender's lens shift X,Y in units of the side the sensor fit spans (auto: the larger side): cx = (W-1)/2 "
+            "- X s, cy = (H-1)/2 + Y s");
+  return cache.emplace(block, std::move(d)).first->second;
+}
+
 const ParamTable<DepthSource>& depth_param_table() {
   static const ParamTable<DepthSource> t = [] {
     ParamTable<DepthSource> d("depth");
@@ -178,19 +220,34 @@ const ParamTable<DepthSource>& depth_param_table() {
         .text("stereo-left", &DepthSource::stereo_left,
               "left view for --stereo-right where no --image is given (depth convert, depth prepare); default --image")
         .reads_file()
+        .text("stereo-right-layer", &DepthSource::stereo_right_layer,
+              "the layer of --stereo-right in a file with layers (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR)")
+        .text("stereo-left-layer", &DepthSource::stereo_left_layer,
+              "the layer of --stereo-left in a file with layers (with --image: --image-layer)")
         .nest(&DepthSource::stereo, stereo_param_table())
         .text("depth-channel", &DepthSource::channel, "channel holding the depth in a multi-channel file (e.g. Z)")
         .alias("range-channel")
+        .choice("depth-channel-rule", &DepthSource::channel_rule, layer_rule_names(),
+                "how a depth file with layers is read when no --depth-channel is given: names (its one channel named "
+                "like a depth pass -- Z, depth, *.depth, *.Depth.Z --, never a Mist pass) or first (its one channel, "
+                "or R of equal R, G, B: the rule of records before schema 4)")
+        .since(4, "first")
         .real("depth-scale", &DepthSource::depth_scale, "m", Range::above(0.0),
               "metres per stored unit; required for integer range/z files (0.001 mm, 0.00390625 KITTI)", "none")
         .alias("range-scale")
         .real("unknown-value", &DepthSource::unknown_value, "file units", Range::any(),
               "stored value marking unknown pixels (sky, no data; GeoPose3K: -1), exact match before any scaling", "none")
+        .choice("renderer-background", &DepthSource::render_background, render_background_names(),
+                "renderers' 'no surface' values in float --range and --z files: auto (stored values >= 1e9 -- Cycles "
+                "writes 1e10 --, exactly 65504 -- Eevee, half float's largest -- and +-inf are unknown, i.e. sky; "
+                "compared as stored, before --depth-scale) or off (read as distances)")
+        .since(4, "off")
         .nest(&DepthSource::k, intrinsics_table())
         .real_or_unset("fov-x", &DepthSource::fov_x_deg, "deg", Range::left_open(0.0, 180.0),
                        "horizontal field of view, edge to edge", NAN)
         .real_or_unset("fov-y", &DepthSource::fov_y_deg, "deg", Range::left_open(0.0, 180.0),
                        "vertical field of view, edge to edge", NAN)
+        .nest(&DepthSource::lens, lens_param_table("depth"))
         .text("calib", &DepthSource::calib, "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm)")
         .reads_file("", 0, 4)
         .real_or_unset("baseline", &DepthSource::baseline_m, "m", Range::above(0.0),
@@ -272,6 +329,15 @@ const ParamTable<InputFiles>& input_param_table(bool with_depth) {
     ParamTable<InputFiles> d("input");
     d.text("image", &InputFiles::image, "input colour image (PNG, JPEG, TIFF, EXR, PFM, HDR)")
         .reads_file()
+        .text("image-layer", &InputFiles::image_layer,
+              "the layer of a file with layers read as the colour image: NAME.R, NAME.G, NAME.B (and NAME.A) of a "
+              "multilayer OpenEXR, e.g. ViewLayer.Combined (Blender), or a multi-part file's part; empty: the plain "
+              "R, G, B, or the file's only colour layer (a file with several is refused, listing them)")
+        .choice("image-layer-rule", &InputFiles::image_layer_rule, layer_rule_names(),
+                "how --image is read when it has layers and no --image-layer is given: names (its only colour layer, "
+                "else refused with the list) or first (its first three channels in the file's order, the rule of "
+                "records before schema 4)")
+        .since(4, "first")
         .choice("image-transfer", &InputFiles::image_transfer, transfer_names(),
                 "transfer function of the input: auto (integer files sRGB, float files linear), srgb, linear")
         .choice("nonfinite", &InputFiles::nonfinite, nonfinite_names(),
@@ -316,6 +382,14 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
       .choice("out-transfer", &OutputFiles::transfer, transfer_names(),
               "transfer function of the output: auto (sRGB for 8/16-bit, linear for float), srgb, linear")
       .text("compression", &OutputFiles::compression, compression_help_text())
+      .choice("out-alpha", &OutputFiles::alpha, out_alpha_names(),
+              "an OpenEXR output's alpha: auto (the input's alpha, when it has one, as the medium composes it: "
+              "A' = T A + (1 - T), premultiplied over) or off (R, G, B only)")
+      .since(4, "off")
+      .boolean("keep-layers", &OutputFiles::keep_layers,
+               "OpenEXR output for a compositor: every other channel of the input as stored, the medium as its own "
+               "RGBA layer (<view>.Medium: (1 - T) B, 1 - T) and the maps as layers (<view>.Transmission, "
+               "<view>.BlurScale, ...) beside the colour layer")
       .text("record", &OutputFiles::record, "write a JSON record of every parameter, derived value and input hash")
       .writes_file();
   for (const MapOutput& m : maps) {
@@ -341,13 +415,22 @@ const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& 
 
 bool is_output_file(const ParamSpec& s) { return s.output_file; }
 
+bool is_input_file(const ParamSpec& s) {
+  if ((s.block != "input" && s.block != "depth") || s.kind != ParamKind::text) return false;
+  const std::string suffix = "-layer";
+  const bool layer = s.name.size() > suffix.size() && s.name.compare(s.name.size() - suffix.size(), suffix.size(), suffix) == 0;
+  return s.name != "depth-channel" && !layer;
+}
+
 std::vector<ArrayArg> rgb_range_args(ArrayArg::As as) {
   return {{"rgb", 3, false, as}, {"range", 1, false, as}};
 }
 
 const std::set<std::string>& depth_file_params() {
   static const std::set<std::string> skip = [] {
-    static const std::set<std::string> keep = {"fx", "fy", "cx", "cy", "fov-x", "fov-y", "calib"};
+    static const std::set<std::string> keep = {"fx",           "fy",           "cx",           "cy",
+                                               "fov-x",        "fov-y",        "calib",        "focal-length",
+                                               "sensor-width", "sensor-height", "sensor-fit", "lens-shift"};
     std::set<std::string> s;
     for (const auto& d : depth_param_table().params())
       if (!keep.count(d.spec.name)) s.insert(d.spec.name);
@@ -409,7 +492,11 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
     }
   } phase{t0};
   LoadedInputs L;
-  L.rgb = read_color(in.image, in.image_transfer, &L.image_info);
+  ColorRead how;
+  how.transfer = in.image_transfer;
+  how.layer = in.image_layer;
+  how.rule = in.image_layer_rule;
+  L.rgb = read_color(in.image, how, &L.image_info, &L.alpha);
   L.record["image"] = file_record(in.image, L.image_info, L.rgb);
   const std::size_t bad = check_nonfinite_colour(L.rgb, in.nonfinite, "--image '" + in.image + "'",
                                                  "Fix the file, or pass --nonfinite zero");
@@ -425,6 +512,10 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
                     "': the matched depth belongs to the left view, so an effect takes the image as the left view; "
                     "drop --stereo-left");
       ds.stereo_left = in.image;
+      if (!ds.stereo_left_layer.empty() && ds.stereo_left_layer != in.image_layer)
+        throw Error("--stereo-left-layer '" + ds.stereo_left_layer + "' differs from --image-layer '" + in.image_layer +
+                    "': the left view is the image itself; drop --stereo-left-layer");
+      ds.stereo_left_layer = in.image_layer;
     }
     L.depth = load_depth(ds, L.rgb.width, L.rgb.height);
     if (L.depth.range.width != L.rgb.width || L.depth.range.height != L.rgb.height)
@@ -433,6 +524,21 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
     L.record["depth"] = L.depth.record;
   }
   return L;
+}
+
+void check_airlight_sky(const LoadedInputs& in, const std::string& effect) {
+  if (in.alpha.empty() || in.depth.range.empty() || in.alpha.pixels() != in.depth.range.pixels()) return;
+  std::size_t unknown = 0, clear = 0;
+  for (std::size_t i = 0; i < in.alpha.pixels(); ++i)
+    if (!known_range(in.depth.range.data[i])) {
+      ++unknown;
+      clear += in.alpha.data[i] < 0.5f ? 1 : 0;
+    }
+  if (unknown * 200 < in.alpha.pixels() || clear * 2 < unknown) return;
+  throw Error(effect + ": --image '" + in.image_info.path + "' is transparent where it has no depth (alpha < 1/2 on " +
+              std::to_string(clear) + " of its " + std::to_string(unknown) + " sky pixels: a render with a transparent "
+              "film), so its sky's colour, 0 there, cannot give the airlight; give the medium's colour with --airlight "
+              "R,G,B (linear; Blender: the World's colour)");
 }
 
 void check_working_memory(const std::string& effect, const Image& frame, double bytes_per_pixel) {
@@ -627,13 +733,23 @@ WriteOptions main_options(const OutputFiles& o) {
 void check_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl) {
   if (o.out.empty()) throw Error("no output given: use --out FILE");
   check_writable(o.out, main_options(o), "--out");
+  if (o.keep_layers) {
+    std::string e = fs::path(o.out).extension().string();
+    for (char& ch : e) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    if (e != ".exr")
+      throw Error("--keep-layers writes the input's layers beside the result, which only an OpenEXR file holds, but "
+                  "--out '" + o.out + "' is not one: give a .exr output, or drop --keep-layers");
+    if (o.transfer == Transfer::srgb)
+      throw Error("--keep-layers keeps the input's channels as stored (depth, normals, ...), which --out-transfer "
+                  "srgb would encode as colour: drop --out-transfer srgb");
+  }
   for (const auto& [name, path] : o.maps) check_writable(path, map_options(declared(decl, name)), "--" + name);
   if (!o.record.empty()) check_record_path(o.record);
 }
 
 void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, const Image& main,
                    const std::map<std::string, Image>& maps, const FileInfo* input_info, const nlohmann::json& record,
-                   const std::vector<CompanionFile>& companions) {
+                   const std::vector<CompanionFile>& companions, const OutputLayers* layers) {
   WriteOptions wo = main_options(o);
   if (wo.bits == "auto" && input_info && input_info->integer && (input_info->bits == 8 || input_info->bits == 16)) {
     std::string e = fs::path(o.out).extension().string();
@@ -644,7 +760,14 @@ void write_outputs(const OutputFiles& o, const std::vector<MapOutput>& decl, con
   const auto t0 = std::chrono::steady_clock::now();
   if (run_phases().write_begin == std::chrono::steady_clock::time_point{}) run_phases().write_begin = t0;
   OutputSet outs;
-  outs.write(o.out, main, wo, "--out");
+  if (layers && !layers->image.empty()) {
+    wo.channel_names = layers->names;
+    wo.channel_bits = layers->bits;
+    wo.string_attributes = layers->attributes;
+    outs.write(o.out, layers->image, wo, "--out");
+  } else {
+    outs.write(o.out, main, wo, "--out");
+  }
   for (const auto& [name, path] : o.maps) {
     auto it = maps.find(name);
     if (it == maps.end()) throw Error("internal: the pipeline made no '" + name + "' map");

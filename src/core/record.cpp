@@ -17,15 +17,27 @@ nlohmann::json record_header(const std::string& command, const std::vector<std::
 }
 
 nlohmann::json file_record(const std::string& path, const FileInfo& info, const Image& img) {
-  return {{"path", path},
-          {"sha256", sha256_file(path)},
-          {"format", info.format},
-          {"width", img.width},
-          {"height", img.height},
-          {"stored_bits", info.bits},
-          {"integer", info.integer},
-          {"channels", info.channel_names},
-          {"transfer_applied", to_string(info.transfer)}};
+  nlohmann::json j = {{"path", path},
+                      {"sha256", sha256_file(path)},
+                      {"format", info.format},
+                      {"width", img.width},
+                      {"height", img.height},
+                      {"stored_bits", info.bits},
+                      {"integer", info.integer},
+                      {"channels", info.channel_names},
+                      {"transfer_applied", to_string(info.transfer)},
+                      // What was read: the layer (empty: the plain channels) and its channels, in order.
+                      {"layer", info.layer},
+                      {"channels_read", info.channels_read}};
+  if (!info.part.empty()) j["part"] = info.part;
+  if (info.blender) j["blender_multilayer"] = true;
+  if (info.padded) {
+    const auto box = [](const PixelWindow& w) { return nlohmann::json::array({w.x0, w.y0, w.x1, w.y1}); };
+    j["data_window"] = box(info.data_window);
+    j["display_window"] = box(info.display_window);
+    j["padded"] = "the data window padded to the display window (colour and alpha 0, depth unknown)";
+  }
+  return j;
 }
 
 nlohmann::json diffusion_record(const DiffusionParams& p, const DiffusionPlan& plan) {

@@ -71,6 +71,55 @@ Intrinsics intrinsics_from_fov(int width, int height, double fov_x_deg, double f
   return k;
 }
 
+const EnumNames<SensorFit>& sensor_fit_names() {
+  static const EnumNames<SensorFit> n = {
+      {SensorFit::automatic, "auto"}, {SensorFit::horizontal, "horizontal"}, {SensorFit::vertical, "vertical"}};
+  return n;
+}
+
+LensScale lens_scale(const LensCamera& c, int width, int height) {
+  const bool vertical = c.sensor_fit == SensorFit::vertical ||
+                        (c.sensor_fit == SensorFit::automatic && height > width);
+  LensScale l;
+  l.side_px = vertical ? height : width;
+  if (c.sensor_fit == SensorFit::vertical) {
+    if (c.sensor_width_mm)
+      throw Error("--sensor-width " + depth_num(*c.sensor_width_mm) + " mm is not used with --sensor-fit vertical, "
+                  "where the sensor height spans the image height (Blender's meaning); drop --sensor-width, or use "
+                  "--sensor-fit auto or horizontal");
+    if (!c.sensor_height_mm)
+      throw Error("--sensor-fit vertical needs --sensor-height MM (the sensor's height, which spans the image height)");
+    l.sensor_mm = *c.sensor_height_mm;
+    l.sensor_flag = "--sensor-height";
+  } else {
+    if (c.sensor_height_mm)
+      throw Error("--sensor-height " + depth_num(*c.sensor_height_mm) + " mm is used only with --sensor-fit vertical; "
+                  "with --sensor-fit " + enum_name(sensor_fit_names(), c.sensor_fit) + " the sensor width alone spans " +
+                  (c.sensor_fit == SensorFit::automatic ? "the image's larger side" : "the image width") +
+                  " (Blender's meaning): drop --sensor-height");
+    if (!c.sensor_width_mm)
+      throw Error("the camera in millimetres needs the sensor: --sensor-width MM (Blender: Camera > Sensor > Size; "
+                  "36 for its default full-frame sensor)");
+    l.sensor_mm = *c.sensor_width_mm;
+  }
+  return l;
+}
+
+Intrinsics lens_intrinsics(const LensCamera& c, int width, int height) {
+  if (!c.focal_length_mm)
+    throw Error("the camera in millimetres needs --focal-length MM (with --sensor-width MM" +
+                std::string(c.lens_shift[0] != 0.0 || c.lens_shift[1] != 0.0 ? "; --lens-shift places the principal "
+                                                                                 "point of that camera" : "") + ")");
+  const LensScale l = lens_scale(c, width, height);
+  Intrinsics k;
+  k.fx = k.fy = *c.focal_length_mm * l.side_px / l.sensor_mm;
+  if (c.lens_shift[0] != 0.0 || c.lens_shift[1] != 0.0) {
+    k.cx = (width - 1) / 2.0 - c.lens_shift[0] * l.side_px;
+    k.cy = (height - 1) / 2.0 + c.lens_shift[1] * l.side_px;
+  }
+  return resolve(k, width, height);
+}
+
 Intrinsics resolve(const Intrinsics& k, int width, int height) {
   Intrinsics r = k;
   if (r.fy == 0.0) r.fy = r.fx;

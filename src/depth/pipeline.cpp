@@ -81,6 +81,8 @@ const ParamTable<DepthPrepareJob>& depth_prepare_job_table() {
         .text("image", &DepthPrepareJob::image,
               "colour image that guides the completion (needed when it runs) and sizes a --velodyne scan")
         .reads_file()
+        .text("image-layer", &DepthPrepareJob::image_layer,
+              "the layer of --image in a file with layers (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR)")
         .text("out", &DepthPrepareJob::out, "prepared range, float file (.exr, .pfm, .tif)")
         .writes_file()
         .text("masks", &DepthPrepareJob::masks, "directory for sky.png, holes.png, margin.png and prepared-preview.png")
@@ -109,7 +111,9 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
   nlohmann::json image_record;
   if (!job.image.empty()) {
     FileInfo info;
-    rgb = read_color(job.image, Transfer::automatic, &info);
+    ColorRead how;
+    how.layer = job.image_layer;
+    rgb = read_color(job.image, how, &info);
     image_record = file_record(job.image, info, rgb);
   }
   LoadedDepth ld = load_depth(job.depth, rgb.width, rgb.height);

@@ -11,6 +11,15 @@
 
 namespace brume {
 
+const EnumNames<RenderBackground>& render_background_names() {
+  static const EnumNames<RenderBackground> n = {{RenderBackground::automatic, "auto"}, {RenderBackground::off, "off"}};
+  return n;
+}
+
+const char* const kRenderBackgroundRule =
+    "stored values >= 1e9 (Cycles: 1e10), exactly 65504 (Eevee: half float's largest) and +-inf are unknown "
+    "(sky), compared as stored, before --depth-scale (float range and planar-depth files)";
+
 int DepthSource::sources() const {
   int n = 0;
   for (const std::string* f :
@@ -19,21 +28,71 @@ int DepthSource::sources() const {
   return n;
 }
 
-Intrinsics depth_intrinsics(const DepthSource& s, int width, int height) {
-  if (s.k.fx > 0.0 || s.k.fy > 0.0) return resolve(s.k, width, height);
+namespace {
+// The intrinsics the pixel flags give (--fx.., --fov-x.., calib.txt), if any.
+bool pixel_intrinsics(const DepthSource& s, int width, int height, Intrinsics& k, std::string& from) {
+  if (s.k.fx > 0.0 || s.k.fy > 0.0) {
+    k = resolve(s.k, width, height);
+    from = "--fx";
+    return true;
+  }
   if (!std::isnan(s.fov_x_deg) || !std::isnan(s.fov_y_deg)) {
-    Intrinsics k = intrinsics_from_fov(width, height, s.fov_x_deg, s.fov_y_deg);
+    k = intrinsics_from_fov(width, height, s.fov_x_deg, s.fov_y_deg);
     k.cx = s.k.cx, k.cy = s.k.cy;
-    return resolve(k, width, height);
+    k = resolve(k, width, height);
+    from = std::isnan(s.fov_x_deg) ? "--fov-y" : "--fov-x";
+    return true;
   }
   if (!s.calib.empty()) {
     StereoCalib c = read_stereo_calib(s.calib);
-    Intrinsics k;
+    k = Intrinsics{};
     k.fx = k.fy = c.f_px;
     k.cx = c.cx, k.cy = c.cy;
-    return resolve(k, width, height);
+    k = resolve(k, width, height);
+    from = "--calib";
+    return true;
   }
-  throw Error("planar depth needs the camera: give --fx (and --fy, --cx, --cy), or --fov-x/--fov-y, or --calib calib.txt");
+  return false;
+}
+
+std::string num6(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.6g", v);
+  return b;
+}
+}  // namespace
+
+Intrinsics depth_intrinsics(const DepthSource& s, int width, int height) {
+  Intrinsics k;
+  std::string from;
+  const bool pixels = pixel_intrinsics(s, width, height, k, from);
+  if (!s.lens.given()) {
+    if (pixels) return k;
+    throw Error("planar depth needs the camera: give --fx (and --fy, --cx, --cy), or --fov-x/--fov-y, or --calib "
+                "calib.txt, or the camera in millimetres (--focal-length MM --sensor-width MM, as Blender states it)");
+  }
+  if (!pixels) return lens_intrinsics(s.lens, width, height);
+  // Both: the pixels win (as depth of field's lens beside --fov-x always
+  // did); the millimetres must describe the same camera.
+  if (s.lens.lens_shift[0] != 0.0 || s.lens.lens_shift[1] != 0.0)
+    throw Error("--lens-shift places the principal point of the camera in millimetres, but " + from +
+                " gives the pixel intrinsics, which win: give the principal point as --cx/--cy, or drop " + from +
+                " and let --focal-length and --sensor-width give the camera");
+  if (!s.lens.focal_length_mm)
+    throw Error("--sensor-width/--sensor-height describe the camera in millimetres with --focal-length, which is "
+                "missing (" + from + " gives the pixel intrinsics); add --focal-length MM or drop the sensor flags");
+  const Intrinsics kl = lens_intrinsics(s.lens, width, height);
+  const double apart = std::abs(kl.fx / k.fx - 1.0);
+  if (apart > 0.01) {
+    const LensScale l = lens_scale(s.lens, width, height);
+    throw Error("the lens gives fx = focal length x " + num6(l.side_px) + " px / sensor = " +
+                num6(*s.lens.focal_length_mm) + " mm x " + num6(l.side_px) + " px / " + num6(l.sensor_mm) + " mm = " +
+                num6(kl.fx) + " px (--sensor-fit " + enum_name(sensor_fit_names(), s.lens.sensor_fit) +
+                "), but " + from + " gives fx = " + num6(k.fx) + " px (" + num6(100.0 * apart) +
+                " % apart; at most 1 % is allowed): correct --focal-length or " + l.sensor_flag + " (or --sensor-fit), "
+                "or " + from);
+  }
+  return k;
 }
 
 Camera depth_camera(const DepthSource& s, int width, int height, const CameraPose& pose) {
@@ -128,8 +187,8 @@ LoadedDepth stereo_depth(const DepthSource& s, int width, int height) {
   LoadedDepth out;
   nlohmann::json& rec = out.record;
   nlohmann::json lrec, rrec;
-  const StereoView L = read_stereo_view(s.stereo_left, "--stereo-left", &lrec);
-  const StereoView R = read_stereo_view(s.stereo_right, "--stereo-right", &rrec);
+  const StereoView L = read_stereo_view(s.stereo_left, "--stereo-left", &lrec, s.stereo_left_layer);
+  const StereoView R = read_stereo_view(s.stereo_right, "--stereo-right", &rrec, s.stereo_right_layer);
   if (width > 0 && (L.width != width || L.height != height))
     throw Error("--stereo-left '" + s.stereo_left + "' is " + std::to_string(L.width) + "x" +
                 std::to_string(L.height) + " but the image is " + std::to_string(width) + "x" +
@@ -172,6 +231,9 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
   if (!s.stereo_left.empty())
     throw Error("--stereo-left '" + s.stereo_left + "' is the left view of a pair, but no --stereo-right was given; "
                 "add --stereo-right FILE, or drop --stereo-left");
+  if (!s.stereo_right_layer.empty() || !s.stereo_left_layer.empty())
+    throw Error(std::string(s.stereo_right_layer.empty() ? "--stereo-left-layer" : "--stereo-right-layer") +
+                " names a layer of a stereo view, but no --stereo-right was given; drop it");
   LoadedDepth out;
   nlohmann::json& rec = out.record;
   FileInfo info;
@@ -209,12 +271,28 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
                           : !s.depth_buffer.empty() ? s.depth_buffer : !s.inverse_depth.empty() ? s.inverse_depth
                           : s.normalized_depth;
   out.path = path;
-  Image v = read_scalar(path, s.channel, &info);
+  const char* flag = !s.range.empty() ? "--range" : !s.z.empty() ? "--z" : !s.disparity.empty() ? "--disparity"
+                   : !s.depth_buffer.empty() ? "--depth-buffer" : !s.inverse_depth.empty() ? "--inverse-depth"
+                   : "--normalized-depth";
+  ScalarRead how;
+  how.channel = s.channel;
+  how.channel_flag = "--depth-channel";
+  how.depth = true;
+  how.rule = s.channel_rule;
+  Image v = read_scalar(path, how, &info);
   if (width > 0 && (v.width != width || v.height != height))
     throw Error("depth '" + path + "' is " + v.size_string() + " but the image is " + std::to_string(width) + "x" +
                 std::to_string(height) + "; they must be the same size (resample the depth, or crop both)");
+  const std::string read_channel = info.channels_read.empty() ? std::string() : info.channels_read.front();
+  if (!s.range.empty() && info.blender && is_depth_pass_name(read_channel))
+    throw Error("--range '" + path + "': its channel " + read_channel + " is Blender's Depth (Z) pass, which is "
+                "planar depth -- the distance along the camera's axis (constant along a level ground row; Cycles and "
+                "Eevee alike), not along each pixel's ray -- so as a range it would be short by 1/cos of each "
+                "ray's angle. Give it as --z '" + path + "' with the camera (--focal-length MM --sensor-width MM, "
+                "as Blender's camera states them, or --fov-x DEG)");
   rec = file_record(path, info, v);
-  if (!s.channel.empty()) rec["channel"] = s.channel;
+  rec["channel"] = read_channel;
+  rec["channel_rule"] = info.channel_rule;
   if (s.unknown_value) {
     // Before any scaling or conversion, so V is what the file stores (and what
     // a dataset's documentation names), whatever the --depth-scale.
@@ -224,6 +302,20 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
       if (x == sentinel) x = NAN, ++marked;
     rec["unknown_value"] = *s.unknown_value;
     rec["unknown_value_pixels"] = marked;
+  }
+  const bool distance = !s.range.empty() || !s.z.empty();
+  if (distance && s.render_background == RenderBackground::automatic && !info.integer) {
+    // As stored, before any scaling (like --unknown-value); integer files
+    // hold counts, whose 65504 is a distance.
+    std::size_t marked = 0;
+    for (float& x : v.data)
+      if (is_render_background(x)) x = NAN, ++marked;
+    rec["render_background"] = {{"rule", kRenderBackgroundRule}, {"pixels", marked}};
+  } else if (distance) {
+    rec["render_background"] = {{"rule", s.render_background == RenderBackground::off
+                                              ? "off: every stored value read as a distance"
+                                              : "integer file: its counts are distances"},
+                                {"pixels", 0}};
   }
 
   auto metres = [&](const char* what) {
@@ -293,8 +385,24 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
     out.range = z_to_range(normalized_depth_to_z(v, s.near_m, s.far_m), k);
   }
   std::size_t unknown = 0;
-  for (float x : out.range.data) unknown += std::isfinite(x) && x > 0.0f ? 0 : 1;
+  float largest = 0.0f;
+  for (float x : out.range.data) {
+    const bool known = std::isfinite(x) && x > 0.0f;
+    unknown += known ? 0 : 1;
+    if (known && x > largest) largest = x;
+  }
   rec["unknown_pixels"] = unknown;
+  if (largest > kPlausibleDistanceMax) {
+    // One plausibility rule: no scene brume renders reaches 1000 km; such a
+    // value is a background marker or a unit error.
+    const std::string w = std::string(flag) + " '" + path + "': the largest distance is " + fmt(largest) +
+                          " m, beyond " + fmt(kPlausibleDistanceMax) + " m: a renderer's or dataset's \"no surface\" "
+                          "value read as a distance (give it as --unknown-value V" +
+                          (distance && s.render_background == RenderBackground::off ? ", or --renderer-background auto" : "") +
+                          "), or the wrong unit (--depth-scale)";
+    rec["warnings"].push_back(w);
+    std::fprintf(stderr, "brume: warning: %s\n", w.c_str());
+  }
   return out;
 }
 

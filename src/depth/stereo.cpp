@@ -53,12 +53,17 @@ const ParamTable<StereoParams>& stereo_param_table() {
   return t;
 }
 
-StereoView read_stereo_view(const std::string& path, const std::string& flag, nlohmann::json* file_rec) {
+StereoView read_stereo_view(const std::string& path, const std::string& flag, nlohmann::json* file_rec,
+                            const std::string& layer, const std::string& layer_flag) {
   if (path.empty()) throw Error("no " + flag + " given: name the view's image file");
   FileInfo info;
   Image im;
   try {
-    im = read_color(path, Transfer::linear, &info);  // an integer file's counts / (2^bits - 1), not decoded
+    ColorRead how;
+    how.transfer = Transfer::linear;  // an integer file's counts / (2^bits - 1), not decoded
+    how.layer = layer;
+    how.layer_flag = layer_flag.empty() ? flag + "-layer" : layer_flag;
+    im = read_color(path, how, &info);
   } catch (const Error& e) {
     throw Error(flag + ": " + e.what());
   }

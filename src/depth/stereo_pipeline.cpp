@@ -18,6 +18,9 @@ const ParamTable<DepthStereoJob>& depth_stereo_job_table() {
         .reads_file()
         .text("right", &DepthStereoJob::right, "right view of the pair (same size)")
         .reads_file()
+        .text("left-layer", &DepthStereoJob::left_layer,
+              "the layer of --left in a file with layers (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR)")
+        .text("right-layer", &DepthStereoJob::right_layer, "the layer of --right in a file with layers")
         .text("calib", &DepthStereoJob::calib, "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm)")
         .reads_file("", 0, 4)
         .real_or_unset("fx", &DepthStereoJob::fx_px, "px", Range::above(0.0),
@@ -79,8 +82,8 @@ StereoRun stereo_run(const DepthStereoJob& job) {
   StereoRun r;
   r.record["camera"] = stereo_camera(job);
   nlohmann::json lrec, rrec;
-  const StereoView L = read_stereo_view(job.left, "--left", &lrec);
-  const StereoView R = read_stereo_view(job.right, "--right", &rrec);
+  const StereoView L = read_stereo_view(job.left, "--left", &lrec, job.left_layer);
+  const StereoView R = read_stereo_view(job.right, "--right", &rrec, job.right_layer);
   const nlohmann::json& cam = r.record["camera"];
   if (cam.contains("width") && (cam["width"].get<int>() != L.width || cam["height"].get<int>() != L.height))
     throw Error("--left '" + job.left + "' is " + std::to_string(L.width) + "x" + std::to_string(L.height) +

@@ -22,6 +22,7 @@
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
 #include "io/codec.hpp"
+#include "io/formats/exr.hpp"
 #include "io/formats/format.hpp"
 #include "io/io_internal.hpp"
 #include "io/srgb.hpp"
@@ -95,7 +96,7 @@ enum class Want { values, counts, srgb_linear, with_alpha };
 // Every channel of the first subimage as float, by the file's row or else
 // OpenImageIO. `name` names the file in messages; `extra`: the channels of
 // the caller's copy, for the memory check before any allocation.
-io::Decoded decode(const std::string& path, const std::string& name, Want want, int extra) {
+io::Decoded decode(const std::string& path, const std::string& name, Want want, int extra, float pad = 0.0f) {
   const auto check_size = [&](int w, int h, int c) {
     check_declared_size(path, w, h, c);
     const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
@@ -111,6 +112,7 @@ io::Decoded decode(const std::string& path, const std::string& name, Want want, 
     if (want == Want::srgb_linear) req.map = [](float v, int) { return srgb_to_linear(v); };
     req.with_alpha = want == Want::with_alpha;
     req.threads = std::min(io::io_threads(), 64);
+    req.pad = pad;
     if (f->read(req, d)) {
       io::note_reader(f->name);
       d.info.path = path;
@@ -178,15 +180,261 @@ ChannelImage read_unassociated(const std::string& path, const std::string& what)
   return {std::move(d.img), std::move(d.info), d.alpha, d.unassociated};
 }
 
+// ---- layers --------------------------------------------------------------------------
+namespace {
+
+std::string lower(std::string t) {
+  for (char& c : t) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return t;
+}
+// "ViewLayer.Depth.Z" -> "Z" and "ViewLayer.Depth"; "R" -> "R" and "".
+std::string last_component(const std::string& n) {
+  const auto d = n.rfind('.');
+  return d == std::string::npos ? n : n.substr(d + 1);
+}
+std::string prefix_of(const std::string& n) {
+  const auto d = n.rfind('.');
+  return d == std::string::npos ? std::string() : n.substr(0, d);
+}
+std::string join(const std::string& prefix, const std::string& c) { return prefix.empty() ? c : prefix + "." + c; }
+
+// A colour layer found in a file: the part and the channels to read.
+struct FoundLayer {
+  std::string name;  // what the user names it by (a prefix, or a part's name for its plain R, G, B)
+  int part = 0;
+  std::vector<std::string> colour;  // R, G, B (or one grey channel)
+  std::string alpha;                // empty: none
+};
+
+// The colour layers of every part (colour_layers), with their channels.
+std::vector<FoundLayer> found_layers(const io::ExrLayout& L) {
+  std::vector<FoundLayer> out;
+  for (std::size_t p = 0; p < L.parts.size(); ++p) {
+    const auto& ch = L.parts[p].channels;
+    for (const std::string& prefix : colour_layers(ch)) {
+      FoundLayer f;
+      f.part = static_cast<int>(p);
+      f.name = prefix.empty() && L.multipart ? L.parts[p].name : prefix;
+      const auto has = [&](const char* c) { return std::find(ch.begin(), ch.end(), join(prefix, c)) != ch.end(); };
+      if (has("R")) f.colour = {join(prefix, "R"), join(prefix, "G"), join(prefix, "B")};
+      else f.colour = {join(prefix, "red"), join(prefix, "green"), join(prefix, "blue")};
+      if (has("A")) f.alpha = join(prefix, "A");
+      else if (has("alpha")) f.alpha = join(prefix, "alpha");
+      out.push_back(std::move(f));
+    }
+  }
+  return out;
+}
+
+std::string quoted_list(const std::vector<std::string>& names) {
+  std::string all;
+  for (const std::string& n : names) all += (all.empty() ? "" : ", ") + (n.empty() ? std::string("(unnamed)") : n);
+  return all;
+}
+
+// Every channel of a layout, qualified by its part's name in a multi-part file.
+std::vector<std::string> all_channels(const io::ExrLayout& L) {
+  std::vector<std::string> all;
+  for (const auto& p : L.parts)
+    for (const std::string& c : p.channels)
+      all.push_back(L.multipart && !p.name.empty() && c.rfind(p.name + ".", 0) != 0 ? p.name + "." + c : c);
+  return all;
+}
+
+// The layout of an OpenEXR file, or false for any other file (and for a
+// file OpenEXR's headers cannot be read from: the row's read then says why).
+bool layout_of(const std::string& path, io::ExrLayout& L) {
+  try {
+    return io::exr_layout(path, L);
+  } catch (const Error&) {
+    return false;
+  }
+}
+
+// A file with layers, or a multi-part one: read by name.
+bool layered(const io::ExrLayout& L) { return L.multipart || !plain_channels(L.parts.front().channels); }
+
+FoundLayer choose_layer(const std::string& path, const io::ExrLayout& L, const ColorRead& how) {
+  const std::vector<FoundLayer> found = found_layers(L);
+  std::vector<std::string> names;
+  for (const auto& f : found) names.push_back(f.name);
+  if (!how.layer.empty()) {
+    std::vector<FoundLayer> match;
+    for (const auto& f : found)
+      if (f.name == how.layer) match.push_back(f);
+    if (match.empty()) {
+      // A layer of grey (NAME.Y) named explicitly.
+      for (std::size_t p = 0; p < L.parts.size(); ++p) {
+        const auto& ch = L.parts[p].channels;
+        const bool part_named = L.multipart && L.parts[p].name == how.layer;
+        const std::string prefix = part_named ? "" : how.layer;
+        if (!part_named && std::find(ch.begin(), ch.end(), join(prefix, "Y")) == ch.end()) continue;
+        if (std::find(ch.begin(), ch.end(), join(prefix, "Y")) == ch.end()) continue;
+        FoundLayer f;
+        f.name = how.layer;
+        f.part = static_cast<int>(p);
+        f.colour = {join(prefix, "Y")};
+        if (std::find(ch.begin(), ch.end(), join(prefix, "A")) != ch.end()) f.alpha = join(prefix, "A");
+        match.push_back(f);
+      }
+    }
+    if (match.size() == 1) return match.front();
+    if (match.size() > 1)
+      throw Error(how.layer_flag + " '" + how.layer + "' names " + std::to_string(match.size()) + " layers of '" +
+                  path + "' (in several of its parts); brume cannot tell them apart: extract one first (oiiotool " +
+                  "IN --subimage N -o OUT)");
+    throw Error("'" + path + "' has no colour layer named '" + how.layer + "'" +
+                (names.empty() ? std::string("; it has no colour layer at all (no NAME.R, NAME.G, NAME.B)")
+                               : "; its colour layers are: " + quoted_list(names)) +
+                " (its channels: " + quoted_list(all_channels(L)) + "); give one of them to " + how.layer_flag);
+  }
+  if (found.size() == 1) return found.front();
+  if (found.empty())
+    throw Error("'" + path + "' holds no colour layer (no R, G, B or NAME.R, NAME.G, NAME.B); its channels are: " +
+                quoted_list(all_channels(L)) + ". Give a colour image, or extract three channels as R, G, B first "
+                "(oiiotool IN --ch R=NAME.X,G=NAME.Y,B=NAME.Z -o OUT)");
+  throw Error("'" + path + "' holds " + std::to_string(found.size()) + " colour layers (" + quoted_list(names) +
+              ") and none was named; say which is the image with " + how.layer_flag + " NAME (a render's beauty "
+              "pass: Blender's is ViewLayer.Combined)");
+}
+
+// The plain path's channel names read as colour (and alpha).
+std::vector<std::string> plain_colour_channels(const FileInfo& info, int channels, int alpha) {
+  std::vector<std::string> n = info.channel_names;
+  std::vector<std::string> read;
+  const auto name = [&](int c) { return c < static_cast<int>(n.size()) ? n[static_cast<std::size_t>(c)] : "channel" + std::to_string(c); };
+  if (channels >= 3) read = {name(0), name(1), name(2)};
+  else read = {name(0)};
+  if (alpha >= 0) read.push_back(name(alpha));
+  return read;
+}
+
+}  // namespace
+
+bool is_depth_pass_name(const std::string& c) {
+  if (c == "Z") return true;
+  const std::string last = last_component(c);
+  if (lower(last) == "depth") return true;
+  return last == "Z" && lower(last_component(prefix_of(c))) == "depth";
+}
+
+bool is_mist_pass_name(const std::string& c) {
+  std::string rest = prefix_of(c);
+  while (!rest.empty()) {
+    if (lower(last_component(rest)) == "mist") return true;
+    rest = prefix_of(rest);
+  }
+  return false;
+}
+
+std::vector<std::string> colour_layers(const std::vector<std::string>& channels) {
+  std::vector<std::string> prefixes;
+  for (const std::string& c : channels) {
+    const std::string p = prefix_of(c);
+    if (std::find(prefixes.begin(), prefixes.end(), p) == prefixes.end()) prefixes.push_back(p);
+  }
+  std::vector<std::string> out;
+  for (const std::string& p : prefixes) {
+    const auto has = [&](const char* c) { return std::find(channels.begin(), channels.end(), join(p, c)) != channels.end(); };
+    if ((has("R") && has("G") && has("B")) || (has("red") && has("green") && has("blue"))) out.push_back(p);
+  }
+  return out;
+}
+
+bool plain_channels(const std::vector<std::string>& channels) {
+  if (channels.size() == 1) return true;
+  std::vector<std::string> s = channels;
+  std::sort(s.begin(), s.end());
+  using V = std::vector<std::string>;
+  return s == V{"B", "G", "R"} || s == V{"A", "B", "G", "R"} || s == V{"Y"} || s == V{"A", "Y"};
+}
+
+ExrChannels exr_channels(const std::string& path) {
+  ExrChannels out;
+  io::ExrLayout L;
+  if (!io::exr_layout(path, L)) return out;
+  out.exr = true;
+  out.multipart = L.multipart;
+  out.blender = L.blender;
+  if (!L.multipart) {
+    out.names = L.parts.front().channels;
+    out.bits = L.parts.front().bits;
+  }
+  return out;
+}
+
+Image read_exr_channels(const std::string& path, const std::vector<std::string>& names) {
+  io::ReadRequest req;
+  req.path = path;
+  req.threads = std::min(io::io_threads(), 64);
+  req.check = [&](int w, int h, int c) {
+    check_declared_size(path, w, h, c);
+    check_memory(static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) * 4 * static_cast<std::uint64_t>(c),
+                 "reading '" + path + "'");
+  };
+  io::Decoded d;
+  io::exr_read_channels(req, 0, names, 0.0f, d);
+  return std::move(d.img);
+}
+
 Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
+  ColorRead how;
+  how.transfer = transfer;
+  return read_color(path, how, info, nullptr);
+}
+
+Image read_color(const std::string& path, const ColorRead& how, FileInfo* info, Image* alpha) {
+  check_readable(path);
+  const Transfer transfer = how.transfer;
+  if (alpha) *alpha = Image();
+  io::ExrLayout L;
+  const bool exr = layout_of(path, L);
+  if (exr && layered(L) && (how.rule == LayerRule::names || !how.layer.empty())) {
+    const FoundLayer f = choose_layer(path, L, how);
+    std::vector<std::string> names = f.colour;
+    if (!f.alpha.empty()) names.push_back(f.alpha);
+    io::ReadRequest req;
+    req.path = path;
+    req.threads = std::min(io::io_threads(), 64);
+    req.check = [&](int w, int h, int c) {
+      check_declared_size(path, w, h, c);
+      check_memory(static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) * 4 * static_cast<std::uint64_t>(c + 3),
+                   "reading '" + path + "'");
+    };
+    io::Decoded d;
+    io::exr_read_channels(req, f.part, names, 0.0f, d);
+    io::note_reader("openexr");
+    d.info.path = path;
+    d.info.layer = f.name;
+    d.info.channel_rule = how.layer.empty() ? "the file's one colour layer" : "named by " + how.layer_flag;
+    const Transfer t = transfer == Transfer::automatic ? Transfer::linear : transfer;
+    d.info.transfer = t;
+    const Image& s = d.img;
+    const int C = s.channels, grey = static_cast<int>(f.colour.size()) == 1;
+    Image out(s.width, s.height, 3);
+    for (std::size_t i = 0; i < s.pixels(); ++i)
+      for (int k = 0; k < 3; ++k) {
+        const float v = s.data[i * C + (grey ? 0 : k)];
+        out.data[i * 3 + k] = t == Transfer::srgb ? srgb_to_linear(v) : v;
+      }
+    if (alpha && !f.alpha.empty()) {
+      *alpha = Image(s.width, s.height, 1);
+      for (std::size_t i = 0; i < s.pixels(); ++i) alpha->data[i] = s.data[i * C + (C - 1)];
+    }
+    if (info) *info = d.info;
+    return out;
+  }
+  if (!how.layer.empty())
+    throw Error(how.layer_flag + " '" + how.layer + "' names a layer of a file with layers (a multilayer OpenEXR), "
+                "but '" + path + "' has none" +
+                (exr ? " (its channels are " + quoted_list(L.parts.front().channels) + ")" : std::string()) +
+                "; drop " + how.layer_flag);
   // An integer file's automatic transfer is sRGB, which a row decodes during
   // its read.
-  check_readable(path);
   io::Decoded d = decode(path, "'" + path + "'", transfer == Transfer::linear ? Want::values : Want::srgb_linear, 3);
   Transfer t = transfer;
   if (t == Transfer::automatic) t = d.info.integer ? Transfer::srgb : Transfer::linear;
   d.info.transfer = t;
-  if (info) *info = d.info;
   Image& s = d.img;
   if (t == Transfer::srgb && !(d.mapped && d.info.integer)) {
     // In place (a fresh 960x672 RGB float buffer costs ~15 ms of page faults
@@ -198,6 +446,26 @@ Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
       for (float& v : s.data) v = srgb_to_linear(v);
     }
   }
+  // The alpha channel: the row's, or the last of 2 or 4.
+  int a = d.alpha;
+  if (a < 0 && (s.channels == 2 || s.channels == 4)) a = s.channels - 1;
+  if (a >= s.channels || (s.channels != 2 && s.channels != 4)) a = -1;
+  d.info.channels_read = plain_colour_channels(d.info, s.channels, alpha ? a : -1);
+  d.info.channel_rule = how.rule == LayerRule::first && !plain_channels(d.info.channel_names)
+                            ? "the file's first channels, in its order (layer rule 'first': records before schema 4)"
+                            : "the file's colour channels";
+  if (alpha && a >= 0) {
+    *alpha = Image(s.width, s.height, 1);
+    const double maxval = std::ldexp(1.0, d.info.bits <= 8 ? 8 : 16) - 1.0;
+    for (std::size_t i = 0; i < s.pixels(); ++i) {
+      float v = s.data[i * s.channels + a];
+      // An integer file's alpha is a count over 2^bits - 1, never sRGB: undo the decode given to every channel.
+      if (d.info.integer && t == Transfer::srgb)
+        v = static_cast<float>(std::nearbyint(linear_to_srgb(v) * maxval) / maxval);
+      alpha->data[i] = v;
+    }
+  }
+  if (info) *info = d.info;
   if (s.channels == 3) return std::move(s);
   Image out(s.width, s.height, 3);  // grey: the one channel three times; alpha dropped
   const int c = s.channels;
@@ -207,28 +475,121 @@ Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
 }
 
 Image read_scalar(const std::string& path, const std::string& channel, FileInfo* info) {
+  ScalarRead how;
+  how.channel = channel;
+  how.channel_flag = "--range-channel";
+  return read_scalar(path, how, info);
+}
+
+namespace {
+// A channel of a layered file by name: its part and name in that part.
+bool find_channel(const io::ExrLayout& L, const std::string& want, int& part, std::string& name,
+                  std::vector<std::string>& matches) {
+  for (std::size_t p = 0; p < L.parts.size(); ++p)
+    for (const std::string& c : L.parts[p].channels) {
+      const std::string& pn = L.parts[p].name;
+      if (c == want || (L.multipart && !pn.empty() && pn + "." + c == want)) {
+        if (matches.empty()) part = static_cast<int>(p), name = c;
+        matches.push_back(L.multipart && !pn.empty() ? pn + "." + c : c);
+      }
+    }
+  return matches.size() == 1;
+}
+}  // namespace
+
+Image read_scalar(const std::string& path, const ScalarRead& how, FileInfo* info) {
   check_readable(path);
-  io::Decoded d = decode(path, "'" + path + "'", Want::counts, 3);
+  const std::string& channel = how.channel;
+  io::ExrLayout L;
+  if (layout_of(path, L) && layered(L) && (how.rule == LayerRule::names || !channel.empty())) {
+    int part = 0;
+    std::string name, rule;
+    const std::vector<std::string> all = all_channels(L);
+    if (!channel.empty()) {
+      std::vector<std::string> matches;
+      if (!find_channel(L, channel, part, name, matches)) {
+        if (matches.empty())
+          throw Error("'" + path + "' has no channel named '" + channel + "'; its channels are: " + quoted_list(all));
+        throw Error("'" + path + "' has a channel '" + channel + "' in " + std::to_string(matches.size()) +
+                    " parts; name it with its part: " + quoted_list(matches));
+      }
+      rule = "named by " + how.channel_flag;
+    } else if (!how.depth) {
+      throw Error("'" + path + "' has " + std::to_string(all.size()) + " channels in layers (" + quoted_list(all) +
+                  "), and this map must be one channel; extract the one that holds it first (oiiotool IN --ch NAME "
+                  "-o OUT)");
+    } else {
+      std::vector<std::string> depth, mist;
+      for (const std::string& c : all) {
+        if (is_mist_pass_name(c)) mist.push_back(c);
+        else if (is_depth_pass_name(c)) depth.push_back(c);
+      }
+      if (depth.empty() && !mist.empty())
+        throw Error("'" + path + "' holds no depth pass, only a Mist pass (" + quoted_list(mist) +
+                    "): Blender's Mist is 0 to 1 between the World's mist start and start + depth, not metres, and "
+                    "brume never reads it as depth. Render the Z pass (View Layer Properties > Passes > Data > Z: "
+                    "the channel ViewLayer.Depth.Z) and give the file with --z, or name a channel with " +
+                    how.channel_flag);
+      if (depth.empty())
+        throw Error("'" + path + "' has " + std::to_string(all.size()) + " channels (" + quoted_list(all) +
+                    ") and none is named like a depth pass (Z, depth, *.depth, *.Depth.Z); say which holds the "
+                    "depth with " + how.channel_flag + " NAME");
+      if (depth.size() > 1)
+        throw Error("'" + path + "' holds " + std::to_string(depth.size()) + " channels named like depth passes (" +
+                    quoted_list(depth) + "); say which with " + how.channel_flag + " NAME");
+      std::vector<std::string> matches;
+      find_channel(L, depth.front(), part, name, matches);
+      rule = "the file's one channel named like a depth pass";
+    }
+    io::ReadRequest req;
+    req.path = path;
+    req.threads = std::min(io::io_threads(), 64);
+    req.check = [&](int w, int h, int c) {
+      check_declared_size(path, w, h, c);
+      check_memory(static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) * 4 * static_cast<std::uint64_t>(c + 3),
+                   "reading '" + path + "'");
+    };
+    io::Decoded d;
+    io::exr_read_channels(req, part, {name}, NAN, d);
+    io::note_reader("openexr");
+    d.info.path = path;
+    d.info.transfer = Transfer::linear;
+    d.info.channel_rule = rule;
+    if (info) *info = d.info;
+    return std::move(d.img);
+  }
+  io::Decoded d = decode(path, "'" + path + "'", Want::counts, 3, NAN);
   const Image& s = d.img;
   int pick = 0;
+  const auto& names = d.info.channel_names;
   if (!channel.empty()) {
-    const auto& names = d.info.channel_names;
     const auto it = std::find(names.begin(), names.end(), channel);
     if (it == names.end())
       throw Error("'" + path + "' has no channel named '" + channel + "'; its channels are: " + channel_list(names));
     pick = static_cast<int>(it - names.begin());
+    d.info.channel_rule = "named by " + how.channel_flag;
   } else if (s.channels > 1) {
-    // A grey picture stored as RGB is one channel in disguise; anything else is ambiguous.
+    // A grey picture stored as RGB is one channel in disguise (files of plain
+    // R, G, B (A) only); anything else is ambiguous.
+    const bool plain = how.rule == LayerRule::first ||
+                       (names.size() == static_cast<std::size_t>(s.channels) ? plain_channels(names) : true);
+    const auto differ = [&] {
+      return Error("'" + path + "' has " + std::to_string(s.channels) + " channels (" + channel_list(names) +
+                   ") that differ; say which one holds the values with " + how.channel_flag + " NAME");
+    };
+    if (!plain) throw differ();
     const int nc = std::min(s.channels, 3);
     for (std::size_t i = 0; i < s.pixels(); ++i)
       for (int k = 1; k < nc; ++k) {
         const float a = s.data[i * s.channels], b = s.data[i * s.channels + k];
-        if (!(a == b || (std::isnan(a) && std::isnan(b))))
-          throw Error("'" + path + "' has " + std::to_string(s.channels) + " channels (" +
-                      channel_list(d.info.channel_names) +
-                      ") that differ; say which one holds the values with --range-channel NAME");
+        if (!(a == b || (std::isnan(a) && std::isnan(b)))) throw differ();
       }
+    d.info.channel_rule = "grey stored as RGB: the first channel (all equal)";
+  } else {
+    d.info.channel_rule = "the file's one channel";
   }
+  d.info.channels_read = {pick < static_cast<int>(names.size()) ? names[static_cast<std::size_t>(pick)]
+                                                                : "channel" + std::to_string(pick)};
   d.info.transfer = Transfer::linear;
   if (info) *info = d.info;
   if (s.channels == 1) return std::move(d.img);  // the file's one channel, no copy

@@ -411,6 +411,18 @@ void OutputSet::write(const std::string& path, const Image& img, const WriteOpti
   req.description = opts.description;
   req.compression = parse_compression(f, path, opts.compression, flag);
   req.threads = std::min(io::io_threads(), 64);
+  if (!opts.channel_names.empty()) {
+    if (std::string(f.name) != "openexr")
+      throw Error(flag + " '" + path + "': named channels (layers) are written to OpenEXR files only; give a .exr "
+                  "output");
+    if (opts.channel_names.size() != static_cast<std::size_t>(img.channels) ||
+        (!opts.channel_bits.empty() && opts.channel_bits.size() != opts.channel_names.size()))
+      throw Error("internal: " + std::to_string(opts.channel_names.size()) + " channel names for a " +
+                  std::to_string(img.channels) + "-channel image");
+    req.channel_names = &opts.channel_names;
+    if (!opts.channel_bits.empty()) req.channel_bits = &opts.channel_bits;
+  }
+  if (!opts.string_attributes.empty()) req.attributes = &opts.string_attributes;
 
   if (f.refuse)
     if (const std::string why = f.refuse(req); !why.empty()) throw Error(flag + " '" + path + "': " + why);

@@ -239,7 +239,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
             // for); other text (aerial's --sensitivity 'default' or a CSV, fog's
             // --table) when such a file exists there, else as written.
             // An input whose output a declaration names (a camera effect's --lidar) is a file too.
-            const bool is_file = ((sp->block == "input" || sp->block == "depth") && canon != "depth-channel") ||
+            const bool is_file = is_input_file(*sp) ||
                                  std::any_of(e.specs.begin(), e.specs.end(),
                                              [&name = canon](const ParamSpec& s) { return s.output_of == name; });
             std::error_code fec;

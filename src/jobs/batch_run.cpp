@@ -142,7 +142,7 @@ nlohmann::json result_line(const BatchFrame& f, const BatchFrameResult& r) {
   // The input files: the text parameters of the input and depth blocks that are set.
   nlohmann::json inputs = nlohmann::json::object();
   for (const ParamSpec& s : def_of(f.effect).specs) {
-    if ((s.block != "input" && s.block != "depth") || s.kind != ParamKind::text || s.name == "depth-channel") continue;
+    if (!is_input_file(s)) continue;
     const nlohmann::json& v = f.job[s.block][s.name];
     if (v.is_string() && !v.get<std::string>().empty()) inputs[s.name] = v;
   }

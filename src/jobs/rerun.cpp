@@ -190,6 +190,19 @@ nlohmann::json job_as_recorded(const CommandDef& c, const nlohmann::json& record
   nlohmann::json job = record.at("job");
   const int version = record_version(record);
   if (!job.is_object()) return job;
+  // A parameter that an older schema kept elsewhere ("dof.focal-length", now
+  // the depth block's lens: ParamSpec::formerly) is read, and recorded, where
+  // it is now.
+  for (const ParamSpec& s : c.specs)
+    for (const std::string& f : s.formerly) {
+      const auto dot = f.find('.');
+      auto b = job.find(f.substr(0, dot));
+      if (b == job.end() || !b->is_object() || !b->contains(f.substr(dot + 1))) continue;
+      nlohmann::json v = (*b)[f.substr(dot + 1)];
+      b->erase(f.substr(dot + 1));
+      if (!job.contains(s.block) || !job[s.block].is_object() || !job[s.block].contains(s.name))
+        job[s.block][s.name] = std::move(v);
+    }
   for (const ParamSpec& s : c.specs) {
     if (s.since_schema == 0) continue;
     auto b = job.find(s.block);

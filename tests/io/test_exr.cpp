@@ -123,10 +123,11 @@ TEST(IO, ExrRoundTripsEveryStorageChannelCountAndLosslessCompression) {
           EXPECT_EQ(hd.height, H);
           EXPECT_EQ(hd.channels, c);
         }
-        // The public reader of one channel, by name: the row's or OpenImageIO's.
+        // The public reader of one channel, by name: the row's, or for the
+        // other channel sets (R, G; five channels) OpenEXR's named-channel read.
         FileInfo fi;
         const Image first = read_scalar(p, c == 1 ? "" : "R", &fi);
-        EXPECT_STREQ(io::last_reader(), taken ? "openexr" : "oiio") << tag;
+        EXPECT_STREQ(io::last_reader(), "openexr") << tag;
         std::vector<float> want_first;
         for (std::size_t i = 0; i < want.size(); i += static_cast<std::size_t>(c)) want_first.push_back(want[i]);
         EXPECT_EQ(differ(first.data, want_first), "") << tag;
@@ -355,7 +356,20 @@ TEST(IO, ExrFilesOpenImageIOWritesAreReadAsItReadsThem) {
     const std::string p = (d / s.name).string();
     OIIO::ImageSpec spec;
     std::string format;
-    const std::vector<float> want = oiio_pixels(p, &spec, &format);
+    std::vector<float> want = oiio_pixels(p, &spec, &format);
+    if (s.window) {
+      // brume reads the display window (issue #50): OpenImageIO's data-window
+      // pixels placed in it, 0 elsewhere (OpenEXR's empty pixels).
+      const int C = spec.nchannels, fw = spec.full_width, fh = spec.full_height;
+      std::vector<float> full(static_cast<std::size_t>(fw) * fh * C, 0.0f);
+      for (int y = 0; y < spec.height; ++y)
+        for (int x = 0; x < spec.width; ++x)
+          for (int c = 0; c < C; ++c)
+            full[(static_cast<std::size_t>(y + spec.y - spec.full_y) * fw + (x + spec.x - spec.full_x)) * C + c] =
+                want[(static_cast<std::size_t>(y) * spec.width + x) * C + c];
+      want = full;
+      spec.width = fw, spec.height = fh;
+    }
     for (int threads : {0, 2}) {
       io::Decoded got;
       ASSERT_TRUE(row_read(p, got, threads)) << p;
@@ -369,8 +383,16 @@ TEST(IO, ExrFilesOpenImageIOWritesAreReadAsItReadsThem) {
     FileInfo fi;
     const Image pub = s.channels.size() == 1 ? read_scalar(p, "", &fi) : read_color(p, Transfer::linear, &fi);
     EXPECT_STREQ(io::last_reader(), "openexr") << p;
-    if (s.channels.size() == 1) {
+    if (s.channels.size() == 1 && !s.window) {
       EXPECT_EQ(differ(pub.data, want), "") << p;
+    }
+    if (s.channels.size() == 1 && s.window) {  // read_scalar's empty pixels are unknown
+      std::vector<float> unknown_outside = want;
+      for (int y = 0; y < spec.height; ++y)
+        for (int x = 0; x < spec.width; ++x)
+          if (x < 3 || y < 2 || x >= 3 + s.w || y >= 2 + s.h)
+            unknown_outside[static_cast<std::size_t>(y) * spec.width + x] = NAN;
+      EXPECT_EQ(differ(pub.data, unknown_outside), "") << p;
     }
     EXPECT_EQ(fi.format, "openexr") << p;
     EXPECT_FALSE(fi.integer) << p;
@@ -390,9 +412,23 @@ TEST(IO, ExrFilesOpenImageIOWritesAreReadAsItReadsThem) {
     io::Decoded got;
     EXPECT_FALSE(row_read(p, got)) << p << " was taken by the row";
     FileInfo fi;
+    // Channels beyond the plain sets and parts are read by name through
+    // OpenEXR's multi-part API (issue #50); the plain ones OpenImageIO reads.
+    const bool named = s.name == "rgbz.exr" || s.name == "two_parts.exr";
+    if (s.subimages > 1) {  // "R" is in both parts: refused with the list
+      const std::string e = error_of([&] { (void)read_scalar(p, "R", &fi); });
+      EXPECT_NE(e.find("in 2 parts"), std::string::npos) << e;
+      continue;
+    }
     const Image pub = s.channels.size() == 1 ? read_scalar(p, "", &fi) : read_scalar(p, s.channels[0], &fi);
-    EXPECT_STREQ(io::last_reader(), "oiio") << p;
-    EXPECT_EQ(fi.channel_names, oiio_names(spec)) << p;
+    EXPECT_STREQ(io::last_reader(), named ? "openexr" : "oiio") << p;
+    if (named) {  // the file's own order (OpenEXR sorts by name)
+      std::vector<std::string> a = fi.channel_names, b = oiio_names(spec);
+      std::sort(a.begin(), a.end()), std::sort(b.begin(), b.end());
+      EXPECT_EQ(a, b) << p;
+    } else {
+      EXPECT_EQ(fi.channel_names, oiio_names(spec)) << p;
+    }
     ASSERT_EQ(pub.data.size(), want.size() / static_cast<std::size_t>(spec.nchannels)) << p;
     if (!spec.format.is_floating_point()) continue;  // read_scalar gives an integer file's counts
     std::vector<float> first;

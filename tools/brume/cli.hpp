@@ -70,6 +70,7 @@ class SpecFlags {
       case ParamKind::real: return s.optional ? "NUM|" + s.unset_word : "NUM";
       case ParamKind::integer: return "INT";
       case ParamKind::rgb: return "R,G,B|" + s.unset_word;
+      case ParamKind::pair: return "X,Y";
       case ParamKind::choice: return "NAME";
       case ParamKind::text: return "TEXT";
       default: return "";

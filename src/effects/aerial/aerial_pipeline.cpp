@@ -164,6 +164,8 @@ const ParamTable<AerialJob>& aerial_job_table() {
               "--turbidity auto: the sky photo to fit T on, as brume sky fit (refused when unreliable); its flags "
               "carry --sky-")
         .reads_file()
+        .text("sky-image-layer", &AerialJob::sky_image_layer,
+              "the layer of a --sky-image with layers (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR)")
         .choice("sky-image-transfer", &AerialJob::sky_image_transfer, transfer_names(),
                 "transfer function of an integer --sky-image (auto: sRGB for integer files, linear for float)")
         .text("sky-mask", &AerialJob::sky_mask, "grey image of --sky-image's size: > half scale marks usable sky")
@@ -233,7 +235,7 @@ AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::str
                   "--turbidity is " + std::to_string(turbidity) + "; give --turbidity auto, or drop --sky-image");
     aerial_job_table().validate(job);  // the --sky- flags' ranges, before the fit reads anything
     SkyImageFit f = fit_sky_image_file(job.sky_image, job.sky_image_transfer, job.sky_mask, job.sky_view, job.sky_sun,
-                                       job.sky_fit, "--sky-");
+                                       job.sky_fit, "--sky-", job.sky_image_layer);
     const nlohmann::json& j = f.fit;
     if (!j.value("reliable", false)) {
       std::string why;
@@ -275,6 +277,7 @@ nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo,
       "aerial", aerial_job_table(), aerial_map_outputs(), 190,
       [&](const AerialJob& j, const ExecOptions&) { validate_aerial(j.aerial, ctx.given); },
       [&](const AerialJob& j, LoadedInputs& in, const Exec& exec) {
+        if (!j.aerial.airlight) check_airlight_sky(in, "aerial");
         AerialRun run = run_aerial(in.rgb, in.depth.range, j.aerial, j.prepare, exec, ctx.given);
         if (!tf.fit_record.is_null()) {
           run.record["turbidity_fit"] = tf.fit_record;

@@ -178,9 +178,12 @@ nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& eo, const Run
 
   nlohmann::json inputs = in.record;
   if (!job.scale_map.empty()) inputs["scale_map"] = file_record(job.scale_map, map_info, smap);
+  EffectOutput out{std::move(run.rgb), {}, nlohmann::json::object()};
+  const OutputLayers layers = compose_output_layers(job.output, &in, out);
+  if (!layers.record.is_null()) run.record["output_layers"] = layers.record;
   const nlohmann::json rec =
       job_record("blur", ctx, blur_job_table().to_json(job), std::move(inputs), run.record, eo.timing);
-  write_outputs(job.output, {}, run.rgb, {}, &in.image_info, rec);
+  write_outputs(job.output, {}, out.main, {}, &in.image_info, rec, {}, &layers);
   return rec;
 }
 

@@ -37,11 +37,7 @@ const ParamTable<DofParams>& dof_param_table() {
     d.real("focus-distance", &DofParams::focus_distance_m, "m", Range::above(0.0),
            "focus distance Zf, planar depth of the plane in focus (required)", "none")
         .real("f-number", &DofParams::f_number, "1", Range::above(0.0),
-              "f-number n of the lens (with --focal-length and --sensor-width)", "none")
-        .real("focal-length", &DofParams::focal_length_mm, "mm", Range::above(0.0),
-              "focal length F of the lens (with --f-number and --sensor-width)", "none")
-        .real("sensor-width", &DofParams::sensor_width_mm, "mm", Range::above(0.0),
-              "sensor width; the image width spans it (px per mm = width / sensor width)", "none")
+              "f-number n of the lens (with the camera's --focal-length and --sensor-width)", "none")
         .real("coc-infinity", &DofParams::coc_infinity_px, "px", Range::at_least(0.0),
               "CoC diameter at infinity, alpha in pixels, instead of the lens (for artists)", "none")
         .real("coc-limit", &DofParams::coc_limit_px, "px", Range::above(0.0),
@@ -63,7 +59,6 @@ const ParamTable<DofParams>& dof_param_table() {
 
 namespace {
 
-bool lens_given(const DofParams& p) { return p.f_number || p.focal_length_mm || p.sensor_width_mm; }
 
 }  // namespace
 
@@ -72,24 +67,28 @@ void validate_dof(const DofParams& p, const std::set<std::string>& given) {
   t.validate(p);
   if (!p.focus_distance_m)
     throw Error("--focus-distance is required: the planar depth in metres of the plane in focus");
-  if (p.coc_infinity_px && lens_given(p))
-    throw Error("--coc-infinity gives the CoC at infinity directly; do not also give the lens (--f-number, "
-                "--focal-length, --sensor-width), which would set it too");
+  // The camera's focal length and sensor may be given for the intrinsics
+  // whatever the CoC; the aperture is the CoC's alone.
+  if (p.coc_infinity_px && p.f_number)
+    throw Error("--coc-infinity gives the CoC at infinity directly; do not also give the lens's --f-number, which "
+                "would set it too");
   if (!p.coc_infinity_px) {
-    if (!(p.f_number && p.focal_length_mm && p.sensor_width_mm)) {
+    const bool sensor = p.lens.sensor_fit == SensorFit::vertical ? p.lens.sensor_height_mm.has_value()
+                                                                 : p.lens.sensor_width_mm.has_value();
+    if (!(p.f_number && p.lens.focal_length_mm && sensor)) {
       std::string missing;
       if (!p.f_number) missing += " --f-number";
-      if (!p.focal_length_mm) missing += " --focal-length";
-      if (!p.sensor_width_mm) missing += " --sensor-width";
+      if (!p.lens.focal_length_mm) missing += " --focal-length";
+      if (!sensor) missing += p.lens.sensor_fit == SensorFit::vertical ? " --sensor-height" : " --sensor-width";
       throw Error("the circle of confusion needs the lens (--f-number N --focal-length MM --sensor-width MM; missing:" +
                   missing + ") or --coc-infinity PX");
     }
     const double zf_mm = *p.focus_distance_m * 1000.0;
-    if (!(zf_mm > *p.focal_length_mm)) {
+    if (!(zf_mm > *p.lens.focal_length_mm)) {
       std::ostringstream m;
       m << "--focus-distance " << *p.focus_distance_m << " m is not beyond the focal length --focal-length "
-        << *p.focal_length_mm << " mm; a thin lens focuses only on planes farther than F (alpha = F^2/(n (Zf - F))): "
-        << "give a focus distance > " << *p.focal_length_mm / 1000.0 << " m";
+        << *p.lens.focal_length_mm << " mm; a thin lens focuses only on planes farther than F (alpha = F^2/(n (Zf - F))): "
+        << "give a focus distance > " << *p.lens.focal_length_mm / 1000.0 << " m";
       throw Error(m.str());
     }
   }
@@ -117,16 +116,18 @@ DiffusionParams dof_diffusion_params(const DofParams& p) {
   return d;
 }
 
-std::optional<double> lens_fx_px(const DofParams& p, int width) {
-  if (!(p.focal_length_mm && p.sensor_width_mm)) return std::nullopt;
-  return *p.focal_length_mm * width / *p.sensor_width_mm;
+std::optional<double> lens_fx_px(const DofParams& p, int width, int height) {
+  if (!p.lens.focal_length_mm) return std::nullopt;
+  return lens_intrinsics(p.lens, width, height).fx;
 }
 
-double coc_infinity_px(const DofParams& p, int width) {
+double coc_infinity_px(const DofParams& p, int width, int height) {
   if (p.coc_infinity_px) return *p.coc_infinity_px;
-  const double F = *p.focal_length_mm, n = *p.f_number, zf_mm = *p.focus_distance_m * 1000.0;
+  const double F = *p.lens.focal_length_mm, n = *p.f_number, zf_mm = *p.focus_distance_m * 1000.0;
   const double alpha_mm = F * F / (n * (zf_mm - F));  // eq. 2, on the sensor
-  return alpha_mm * width / *p.sensor_width_mm;
+  // px per mm = s / sensor (s the side the fit spans; before schema 4 the width).
+  const LensScale l = lens_scale(p.lens, width, height);
+  return alpha_mm * l.side_px / l.sensor_mm;
 }
 
 Image planar_depth(const Image& range, const Intrinsics& k) {
@@ -285,7 +286,7 @@ Image dof_scale_map(const Image& z, const DofParams& p, DofAnalysis& a, const Ex
   validate_dof(p);
   if (z.channels != 1) throw Error("the depth map must have one channel");
   const int W = z.width, H = z.height;
-  a.alpha_px = coc_infinity_px(p, W);
+  a.alpha_px = coc_infinity_px(p, W, H);
   const float alpha = static_cast<float>(a.alpha_px), zf = static_cast<float>(*p.focus_distance_m);
   const float s0 = static_cast<float>(p.diffusion.sigma0), limit = static_cast<float>(p.coc_limit_px);
   Image sigma(W, H, 1);

@@ -16,12 +16,15 @@
 
 namespace brume {
 
+const ParamTable<DofParams>& dof_sampling_table();
+
 namespace {
 
 nlohmann::json dof_record(const DofParams& p, const DofAnalysis& a, const Intrinsics& k, const std::string& k_source) {
   nlohmann::json j;
-  j["parameters"] = dof_param_table().to_json(p);
-  j["units"] = dof_param_table().units();
+  // The block's parameters and the camera's lens the CoC used (the depth block's).
+  j["parameters"] = dof_sampling_table().to_json(p);
+  j["units"] = dof_sampling_table().units();
   j["diffusion"] = diffusion_record(dof_diffusion_params(p), a.plan);
   j["diffusion"]["dof_scheme"] = to_string(p.scheme);
   j["derived"] = {
@@ -83,27 +86,21 @@ const ParamTable<DofJob>& dof_job_table() {
   return t;
 }
 
-Intrinsics dof_intrinsics(const DepthSource& src, const DofParams& p, int width, int height) {
-  const std::optional<double> lens_fx = lens_fx_px(p, width);
-  if (depth_flags_give_intrinsics(src)) {
-    const Intrinsics k = depth_camera(src, width, height).k;
-    if (lens_fx && std::abs(*lens_fx / k.fx - 1.0) > 0.01) {
-      std::ostringstream m;
-      m << "the lens gives fx = focal length x width / sensor width = " << *p.focal_length_mm << " mm x " << width
-        << " px / " << *p.sensor_width_mm << " mm = " << *lens_fx << " px, but the depth's intrinsics give fx = "
-        << k.fx << " px (" << 100.0 * std::abs(*lens_fx / k.fx - 1.0)
-        << " % apart; at most 1 % is allowed): correct --focal-length or --sensor-width, or the intrinsics";
-      throw Error(m.str());
-    }
-    return k;
-  }
-  if (lens_fx) {
-    Intrinsics k;
-    k.fx = k.fy = *lens_fx;  // square pixels, principal point at the centre
-    return resolve(k, width, height);
-  }
+Intrinsics dof_intrinsics(const DepthSource& src, int width, int height) {
+  // The depth flags' pixels, or the camera in millimetres; both: checked to
+  // agree within 1 % (depth_intrinsics).
+  if (depth_flags_give_intrinsics(src) || src.lens.focal_length_mm) return depth_camera(src, width, height).k;
   throw Error("depth of field needs planar depth, so the camera's intrinsics: give --fx (or --fov-x, --calib), or "
               "the lens (--focal-length and --sensor-width)");
+}
+
+std::string dof_intrinsics_source(const DepthSource& src, int width, int height) {
+  if (depth_flags_give_intrinsics(src)) return "depth flags";
+  const bool vertical = src.lens.sensor_fit == SensorFit::vertical ||
+                        (src.lens.sensor_fit == SensorFit::automatic && height > width);
+  return vertical ? "lens (focal length x height / sensor " +
+                        std::string(src.lens.sensor_fit == SensorFit::vertical ? "height" : "width") + ")"
+                  : "lens (focal length x width / sensor width)";
 }
 
 DofRun run_dof(DenseImageRef rgb, DenseImageRef measured_range, const Intrinsics& k, const DofParams& p,
@@ -198,8 +195,9 @@ PreviewFrame dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
   PreviewFrame frame;
   frame.plan["targets"] = nlohmann::json::object();
   frame.plan["steps"] = nlohmann::json::array();
-  const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, preview_full_width(in), preview_full_height(in));
-  frame.plan["derived"] = dof_preview_steps(frame, j.dof, preview_intrinsics(k, in.scale), in, "image", "f", "blurred");
+  const Intrinsics k = dof_intrinsics(j.input.depth, preview_full_width(in), preview_full_height(in));
+  frame.plan["derived"] = dof_preview_steps(frame, dof_with_lens(j.dof, j.input.depth.lens),
+                                            preview_intrinsics(k, in.scale), in, "image", "f", "blurred");
   frame.plan["result"] = "blurred";
   return frame;
 }
@@ -208,18 +206,30 @@ nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& eo, const RunCo
   const EffectJob<DofJob> e{
       "dof", dof_job_table(), dof_map_outputs(), 90,
       [&](const DofJob& j, const ExecOptions& x) {
-        validate_dof(j.dof, ctx.given);
+        validate_dof(dof_with_lens(j.dof, j.input.depth.lens), ctx.given);
         check_gpu_scheme(j.dof, x.backend);
       },
       [&](const DofJob& j, LoadedInputs& in, const Exec& exec) {
-        const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height);
-        DofRun run = run_dof(in.rgb, in.depth.range, k, j.dof, j.prepare, exec, ctx.given);
+        const Intrinsics k = dof_intrinsics(j.input.depth, in.rgb.width, in.rgb.height);
+        DofRun run = run_dof(in.rgb, in.depth.range, k, dof_with_lens(j.dof, j.input.depth.lens), j.prepare, exec,
+                             ctx.given);
         run.record["dof"]["derived"]["intrinsics"]["source"] =
-            depth_flags_give_intrinsics(j.input.depth) ? "depth flags" : "lens (focal length x width / sensor width)";
+            dof_intrinsics_source(j.input.depth, in.rgb.width, in.rgb.height);
         return EffectOutput{std::move(run.result.rgb), {{"scale-map", std::move(run.result.scale)}},
                             std::move(run.record)};
       }};
   return run_effect_job(e, job, eo, ctx);
+}
+
+// The parameters `brume sample` draws for depth of field: the block's and
+// the camera's lens (the depth block's declaration, nested: one declaration).
+const ParamTable<DofParams>& dof_sampling_table() {
+  static const ParamTable<DofParams> t = [] {
+    ParamTable<DofParams> d("dof");
+    d.extend(dof_param_table()).nest(&DofParams::lens, lens_param_table("depth"));
+    return d;
+  }();
+  return t;
 }
 
 CommandDef dof_command() {
@@ -232,7 +242,7 @@ CommandDef dof_command() {
       .record = true,
       .batch = true,
       .check = [](const DofJob& j, const std::set<std::string>& g) {
-        validate_dof(j.dof, g);
+        validate_dof(dof_with_lens(j.dof, j.input.depth.lens), g);
         check_range_step(j.prepare, g);
       },
       .run = &run_dof_job,
@@ -251,7 +261,7 @@ CommandDef dof_command() {
   // of field is visible at all), focused log-uniformly from 1 m (close-up) to
   // 50 m (street scenes; beyond, the scene is all in focus). --coc-infinity
   // replaces the lens.
-  c.sampling = make_sampling<DofParams>(dof_param_table(),
+  c.sampling = make_sampling<DofParams>(dof_sampling_table(),
                                         {{"focus-distance", "loguniform(1, 50)", {}},
                                          {"f-number", "choice(1.4, 2, 2.8, 4, 5.6, 8)", {"coc-infinity"}},
                                          {"focal-length", "50", {"coc-infinity"}},
@@ -266,7 +276,8 @@ CommandDef dof_command() {
       "planar depth comes from the intrinsics or the lens. As `brume dof`.",
       rgb_range_args(ArrayArg::As::dense), call, {"rgb", "scale", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<DofParams>& k, const Exec& e, const std::set<std::string>& g) {
-        const Intrinsics ki = dof_intrinsics(k.depth, k.p, in[0].dense.width, in[0].dense.height);
+        const Intrinsics ki = dof_intrinsics(k.depth, in[0].dense.width, in[0].dense.height);
+        k.p.lens = k.depth.lens;
         // run_dof reads a given context as backend gpu (its CPU-only schemes
         // would be refused), so with auto it makes its own.
         Exec ex = e;

@@ -228,12 +228,15 @@ nlohmann::json run_fog_job(const FogJob& job, const ExecOptions& eo, const RunCo
       "fog", fog_job_table(), fog_map_outputs(), 150,
       [&](const FogJob& j, const ExecOptions&) { validate_fog(j.fog, ctx.given); },
       [&](const FogJob& j, LoadedInputs& in, const Exec& exec) {
+        if (!j.fog.airlight) check_airlight_sky(in, "fog");
         FogRun run = run_fog(in.rgb, in.depth.range, j.input.depth, j.fog, j.prepare, exec, ctx.given,
                              &in.depth.window_depth);
         return EffectOutput{std::move(run.result.rgb),
                             {{"optical-depth", std::move(run.result.optical_depth)},
                              {"transmission", std::move(run.result.transmission)}},
-                            std::move(run.record)};
+                            std::move(run.record),
+                            "transmission",
+                            run.analysis.airlight};
       }};
   return run_effect_job(e, job, eo, ctx);
 }

@@ -7,7 +7,9 @@
 #include <cmath>
 #include <omp.h>
 
+#include "brume/depth_source.hpp"
 #include "brume/error.hpp"
+#include "brume/pipeline.hpp"
 #include "core/math_constants.hpp"
 #include "brume_opencv.hpp"
 #include "shared/prelude_cpp.h"
@@ -118,6 +120,7 @@ const ParamTable<SkyViewParams>& sky_view_param_table() {
                        "pinhole horizontal field of view, edge to edge", NAN)
         .real_or_unset("fov-y", &SkyViewParams::fov_y_deg, "deg", Range::left_open(0.0, 180.0),
                        "pinhole vertical field of view, edge to edge", NAN)
+        .nest(&SkyViewParams::lens, lens_param_table("sky-view"))
         // Only the orientation: a sky is at infinity, so the camera's position
         // (height, x, z, a view matrix's translation) would be ignored, and a
         // flag a command would ignore is not offered.
@@ -152,20 +155,26 @@ SkyGeometry sky_geometry(const SkyViewParams& v, int width, int height) {
       throw Error("--azimuth-offset " + sky_num(v.azimuth_offset_deg) +
                   " is not used by --projection pinhole (--yaw gives the compass azimuth of the optical axis); "
                   "use --yaw instead");
-    Intrinsics k = v.k;
-    if (!(k.fx > 0.0 || k.fy > 0.0)) {
-      if (std::isnan(v.fov_x_deg) && std::isnan(v.fov_y_deg))
-        throw Error("--projection pinhole needs the camera: give --fx (and --fy, --cx, --cy) or --fov-x/--fov-y");
-      k = intrinsics_from_fov(width, height, v.fov_x_deg, v.fov_y_deg);
-      k.cx = v.k.cx, k.cy = v.k.cy;
-    }
+    // The depth block's rules (depth_intrinsics): the pixels, else the
+    // camera in millimetres; both must agree within 1 %.
+    DepthSource cam;
+    cam.k = v.k;
+    cam.fov_x_deg = v.fov_x_deg, cam.fov_y_deg = v.fov_y_deg;
+    cam.lens = v.lens;
+    const bool pixels = v.k.fx > 0.0 || v.k.fy > 0.0 || !std::isnan(v.fov_x_deg) || !std::isnan(v.fov_y_deg);
+    if (!pixels && !v.lens.given())
+      throw Error("--projection pinhole needs the camera: give --fx (and --fy, --cx, --cy) or --fov-x/--fov-y, or "
+                  "--focal-length MM --sensor-width MM");
+    Intrinsics k = depth_intrinsics(cam, width, height);
     g.camera = make_camera(k, width, height, v.pose, Projection::pinhole);
   } else {
     const bool pinhole_flag = v.k.fx > 0.0 || v.k.fy > 0.0 || !std::isnan(v.k.cx) || !std::isnan(v.k.cy) ||
-                              !std::isnan(v.fov_x_deg) || !std::isnan(v.fov_y_deg) || v.pose.yaw_deg != 0.0 ||
+                              !std::isnan(v.fov_x_deg) || !std::isnan(v.fov_y_deg) || v.lens.given() ||
+                              v.pose.yaw_deg != 0.0 ||
                               v.pose.pitch_deg != 0.0 || v.pose.roll_deg != 0.0;
     if (pinhole_flag)
-      throw Error("--fx/--fy/--cx/--cy/--fov-x/--fov-y/--yaw/--pitch/--roll describe a pinhole camera, but "
+      throw Error("--fx/--fy/--cx/--cy/--fov-x/--fov-y/--focal-length/--sensor-width/--lens-shift/--yaw/--pitch/--roll "
+                  "describe a pinhole camera, but "
                   "--projection is " + v.projection + "; drop them, or use --azimuth-offset to turn the image");
   }
   return g;

@@ -104,6 +104,8 @@ nlohmann::json run_sky_render_job(const SkyRenderJob& job, const ExecOptions& eo
   resolve_sun(p.sun, nullptr, false, &g);  // every sun error before any output check, as before
   const Exec exec = eo.exec();
   check_outputs(job.output, {});
+  if (job.output.keep_layers)
+    throw Error("--keep-layers keeps the layers of an input image, and brume sky render reads none; drop --keep-layers");
   SkyRenderRun run = run_sky_render(p, exec);
   const nlohmann::json rec =
       job_record("sky render", ctx, sky_render_job_table().to_json(job), nlohmann::json::object(), run.record, eo.timing);
@@ -137,6 +139,9 @@ const ParamTable<SkyFitJob>& sky_fit_job_table() {
     ParamTable<SkyFitJob> d("sky fit");
     d.text("image", &SkyFitJob::image, "the sky photo (HDR/EXR linear; PNG/JPEG/TIFF sRGB unless --image-transfer)")
         .reads_file()
+        .text("image-layer", &SkyFitJob::image_layer,
+              "the layer of a file with layers read as the photo (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR); "
+              "empty: the plain R, G, B, or the file's only colour layer")
         .choice("image-transfer", &SkyFitJob::image_transfer, transfer_names(),
                 "transfer function of an integer image (auto: sRGB for integer files, linear for float)")
         .text("mask", &SkyFitJob::mask, "grey image of the same size: > half scale marks usable sky (default: all)")
@@ -159,7 +164,7 @@ namespace {
 // view, sun and fit blocks (and --image, --mask) in `msg` becomes "--sky-name"
 // (one pass over the text, so --sun-zenith is not prefixed twice).
 std::string prefix_sky_flags(const std::string& msg, const std::string& flags) {
-  std::set<std::string> names = {"image", "mask", "image-transfer"};
+  std::set<std::string> names = {"image", "mask", "image-transfer", "image-layer"};
   for (const auto& p : sky_view_param_table().params()) names.insert(p.spec.name);
   for (const auto& p : sun_param_table().params()) names.insert(p.spec.name);
   for (const auto& p : sky_fit_param_table().params()) names.insert(p.spec.name);
@@ -201,17 +206,21 @@ SkyImageFit fit_sky_data(DenseImageRef rgb, bool integer_image, const Image* mas
 
 SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, const std::string& mask_path,
                                const SkyViewParams& view, const SunParams& sun_params, const SkyFitOptions& fit,
-                               const std::string& flags) {
+                               const std::string& flags, const std::string& layer) {
   if (flags != "--") {
     try {
-      return fit_sky_image_file(image, transfer, mask_path, view, sun_params, fit, "--");
+      return fit_sky_image_file(image, transfer, mask_path, view, sun_params, fit, "--", layer);
     } catch (const Error& e) {
       throw Error(prefix_sky_flags(e.what(), flags));
     }
   }
   const std::string image_flag = flags + "image", mask_flag = flags + "mask";
   FileInfo info;
-  const Image rgb = read_color(image, transfer, &info);
+  ColorRead how;
+  how.transfer = transfer;
+  how.layer = layer;
+  how.layer_flag = "--image-layer";
+  const Image rgb = read_color(image, how, &info);
   const bool integer_image = info.integer;
   (void)sky_geometry(view, rgb.width, rgb.height);  // view errors before mask errors, as before
   Image mask;
@@ -246,7 +255,8 @@ nlohmann::json run_sky_fit_job(const SkyFitJob& job, const RunContext& ctx, SkyP
     if (!plotter) throw Error("--plot: this caller has no plotter (the brume command line draws it)");
     check_writable(job.plot, WriteOptions{}, "--plot");
   }
-  const SkyImageFit f = fit_sky_image_file(job.image, job.image_transfer, job.mask, job.view, job.sun, job.fit);
+  const SkyImageFit f =
+      fit_sky_image_file(job.image, job.image_transfer, job.mask, job.view, job.sun, job.fit, "--", job.image_layer);
   nlohmann::json j = f.fit;
   nlohmann::json rec = run_record_header("sky fit", ctx.argv);
   rec["job"] = sky_fit_job_table().to_json(job);

@@ -33,6 +33,9 @@
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfIO.h>
 #include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfInputPart.h>
+#include <OpenEXR/ImfMultiPartInputFile.h>
+#include <OpenEXR/ImfPartType.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStdIO.h>
 #include <OpenEXR/ImfStringAttribute.h>
@@ -142,11 +145,31 @@ std::vector<std::string> channel_order(const Imf::ChannelList& list, Imf::PixelT
 struct Opened {
   std::unique_ptr<Imf::StdIFStream> stream;  // at the header's end
   Imath::Box2i window;                       // the data window
-  int width = 0, height = 0;
+  Imath::Box2i display;                      // the display window: the image brume reads
+  int width = 0, height = 0;                 // the display window's
   std::vector<std::string> names;  // in OpenImageIO's order
   int bits = 32;
   std::string description;
+  bool blender = false;
 };
+
+PixelWindow window_of(const Imath::Box2i& b) { return {b.min.x, b.min.y, b.max.x, b.max.y}; }
+
+// The display window's size, refused when the data window reaches outside it.
+void display_size(const std::string& path, const Imath::Box2i& data, const Imath::Box2i& display, int& w, int& h) {
+  ExrPart p;
+  p.data = window_of(data);
+  p.display = window_of(display);
+  const std::string why = exr_window_problem(p);
+  if (!why.empty()) throw Error("cannot read '" + path + "': " + why);
+  const long long ww = static_cast<long long>(display.max.x) - display.min.x + 1;
+  const long long hh = static_cast<long long>(display.max.y) - display.min.y + 1;
+  if (ww > INT_MAX || hh > INT_MAX)
+    throw Error("cannot read '" + path + "': its display window declares " + std::to_string(ww) + " x " +
+                std::to_string(hh) + " pixels");
+  w = static_cast<int>(ww);
+  h = static_cast<int>(hh);
+}
 
 [[noreturn]] void fail(const std::string& path, const std::exception& e) {
   throw Error("cannot read '" + path + "': " + e.what());
@@ -180,15 +203,11 @@ bool open_exr(const std::string& path, Opened& o) {
   o.names = channel_order(h.channels(), type);
   if (o.names.empty()) return false;
   o.window = h.dataWindow();
-  const long long w = static_cast<long long>(o.window.max.x) - o.window.min.x + 1;
-  const long long hh = static_cast<long long>(o.window.max.y) - o.window.min.y + 1;
-  if (w > INT_MAX || hh > INT_MAX)
-    throw Error("cannot read '" + path + "': its data window declares " + std::to_string(w) + " x " +
-                std::to_string(hh) + " pixels");
-  o.width = static_cast<int>(w);
-  o.height = static_cast<int>(hh);
+  o.display = h.displayWindow();
+  display_size(path, o.window, o.display, o.width, o.height);
   o.bits = type == Imf::HALF ? 16 : 32;
   if (const auto* c = h.findTypedAttribute<Imf::StringAttribute>("comments")) o.description = c->value();
+  o.blender = h.findTypedAttribute<Imf::StringAttribute>("BlenderMultiChannel") != nullptr;
   return true;
 }
 
@@ -210,17 +229,21 @@ bool read(const ReadRequest& request, Decoded& out) {
   if (request.with_alpha && C == 1) return false;
   if (request.check) request.check(o.width, o.height, C);
   Image img(o.width, o.height, C);
+  const bool padded = o.window != o.display;
+  if (padded) std::fill(img.data.begin(), img.data.end(), request.pad);
   try {
     o.stream->seekg(0);
     Imf::InputFile in(*o.stream, ensure_pool(request.threads));
-    if (in.header().dataWindow() != o.window) throw Iex::InputExc("the file changed while it was read");
+    if (in.header().dataWindow() != o.window || in.header().displayWindow() != o.display)
+      throw Iex::InputExc("the file changed while it was read");
     // OpenEXR addresses a slice by (x, y) in the file's coordinates: the base
-    // is where pixel (0, 0) would be, before the data window's origin.
+    // is where pixel (0, 0) would be, before the display window's origin
+    // (the image is the display window; the data window's rows land inside).
     const std::size_t xs = static_cast<std::size_t>(C) * sizeof(float);
     const std::size_t ys = xs * static_cast<std::size_t>(o.width);
     char* base = reinterpret_cast<char*>(img.data.data()) -
-                 static_cast<std::ptrdiff_t>(o.window.min.x) * static_cast<std::ptrdiff_t>(xs) -
-                 static_cast<std::ptrdiff_t>(o.window.min.y) * static_cast<std::ptrdiff_t>(ys);
+                 static_cast<std::ptrdiff_t>(o.display.min.x) * static_cast<std::ptrdiff_t>(xs) -
+                 static_cast<std::ptrdiff_t>(o.display.min.y) * static_cast<std::ptrdiff_t>(ys);
     Imf::FrameBuffer fb;
     for (int c = 0; c < C; ++c) {
       if (!in.header().channels().findChannel(o.names[static_cast<std::size_t>(c)]))
@@ -239,6 +262,10 @@ bool read(const ReadRequest& request, Decoded& out) {
   out.info.bits = o.bits;
   out.info.channel_names = std::move(o.names);
   out.info.description = std::move(o.description);
+  out.info.blender = o.blender;
+  out.info.data_window = window_of(o.window);
+  out.info.display_window = window_of(o.display);
+  out.info.padded = padded;
   out.alpha = C == 4 ? 3 : -1;
   out.unassociated = false;  // OpenEXR's colour is premultiplied by alpha, by definition
   return true;
@@ -327,10 +354,18 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
       h.insert("dwaCompressionLevel", Imf::FloatAttribute(h.dwaCompressionLevel()));
     }
     const Imf::PixelType type = r.type == Storage::f16 ? Imf::HALF : Imf::FLOAT;
-    const std::vector<std::string> names = channel_names(r.channels);
-    for (const std::string& n : names) h.channels().insert(n, Imf::Channel(type));
+    // Named channels (an output of layers: io.hpp's WriteOptions), each of
+    // its own type, or OpenImageIO's names, all of the request's type.
+    const std::vector<std::string> names =
+        r.channel_names && !r.channel_names->empty() ? *r.channel_names : channel_names(r.channels);
+    std::vector<Imf::PixelType> types(names.size(), type);
+    if (r.channel_bits && r.channel_bits->size() == names.size())
+      for (std::size_t c = 0; c < names.size(); ++c) types[c] = (*r.channel_bits)[c] == 16 ? Imf::HALF : Imf::FLOAT;
+    for (std::size_t c = 0; c < names.size(); ++c) h.channels().insert(names[c], Imf::Channel(types[c]));
     if (!r.description.empty()) h.insert("comments", Imf::StringAttribute(r.description));
     if (r.srgb) h.insert("oiio:ColorSpace", Imf::StringAttribute("sRGB"));
+    if (r.attributes)
+      for (const auto& [k, v] : *r.attributes) h.insert(k, Imf::StringAttribute(v));
     const int threads = ensure_pool(r.threads);
     file = std::make_unique<FileStream>(tmp);
     out = std::make_unique<Imf::OutputFile>(*file, h, threads);
@@ -340,21 +375,23 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
     const std::size_t C = static_cast<std::size_t>(r.channels);
     const std::size_t n = C * static_cast<std::size_t>(r.width) * static_cast<std::size_t>(r.height);
     std::vector<Imath::half> halves;
-    const char* base = reinterpret_cast<const char*>(r.values);
-    std::size_t value_bytes = sizeof(float);
-    if (type == Imf::HALF) {
+    const bool any_half = std::find(types.begin(), types.end(), Imf::HALF) != types.end();
+    if (any_half) {
       halves.resize(n);
       const std::ptrdiff_t rows = r.height, row = static_cast<std::ptrdiff_t>(C) * r.width;
 #pragma omp parallel for num_threads(std::max(1, std::min(r.threads, 64))) schedule(static)
       for (std::ptrdiff_t y = 0; y < rows; ++y)
-        for (std::ptrdiff_t i = y * row; i < (y + 1) * row; ++i) halves[static_cast<std::size_t>(i)] = Imath::half(r.values[i]);
-      base = reinterpret_cast<const char*>(halves.data());
-      value_bytes = sizeof(Imath::half);
+        for (std::ptrdiff_t i = y * row; i < (y + 1) * row; ++i)
+          if (types[static_cast<std::size_t>(i) % C] == Imf::HALF) halves[static_cast<std::size_t>(i)] = Imath::half(r.values[i]);
     }
-    const std::size_t xs = C * value_bytes, ys = xs * static_cast<std::size_t>(r.width);
     Imf::FrameBuffer fb;
-    for (std::size_t c = 0; c < C; ++c)  // (Slice takes char*; the writer only reads)
-      fb.insert(names[c], Imf::Slice(type, const_cast<char*>(base) + c * value_bytes, xs, ys));
+    for (std::size_t c = 0; c < C; ++c) {  // (Slice takes char*; the writer only reads)
+      const bool half = types[c] == Imf::HALF;
+      const std::size_t value_bytes = half ? sizeof(Imath::half) : sizeof(float);
+      const char* base = half ? reinterpret_cast<const char*>(halves.data()) : reinterpret_cast<const char*>(r.values);
+      const std::size_t xs = C * value_bytes, ys = xs * static_cast<std::size_t>(r.width);
+      fb.insert(names[c], Imf::Slice(types[c], const_cast<char*>(base) + c * value_bytes, xs, ys));
+    }
     out->setFrameBuffer(fb);
     out->writePixels(r.height);
     out.reset();  // writes the line offset table
@@ -389,6 +426,127 @@ const Format& exr_format() {
                         .holds_data = true, .sniff = sniff, .header = header, .read = read, .write = write,
                         .auto_is = "zip"};
   return f;
+}
+
+
+std::string exr_window_problem(const ExrPart& p) {
+  const PixelWindow& d = p.data;
+  const PixelWindow& w = p.display;
+  if (d.x0 >= w.x0 && d.y0 >= w.y0 && d.x1 <= w.x1 && d.y1 <= w.y1) return "";
+  auto box = [](const PixelWindow& b) {
+    return "(" + std::to_string(b.x0) + ", " + std::to_string(b.y0) + ")-(" + std::to_string(b.x1) + ", " +
+           std::to_string(b.y1) + ")";
+  };
+  return "its data window " + box(d) + " reaches outside its display window " + box(w) +
+         " (overscan); brume reads the display window, the frame the camera's intrinsics describe, and would "
+         "drop the pixels outside it: crop the file to its display window first (oiiotool IN --cut " +
+         std::to_string(w.width()) + "x" + std::to_string(w.height()) + "+" + std::to_string(w.x0) + "+" +
+         std::to_string(w.y0) + " -o OUT)";
+}
+
+namespace {
+// The preamble's version field, or false for a file without OpenEXR's magic.
+bool exr_version(const std::string& path, int& version) {
+  char b[8];
+  std::ifstream f(path, std::ios::binary);
+  if (!f.read(b, 8) || !Imf::isImfMagic(b)) return false;
+  std::memcpy(&version, b + 4, 4);  // little-endian, as the hosts brume builds for
+  return true;
+}
+}  // namespace
+
+bool exr_layout(const std::string& path, ExrLayout& out) {
+  int version = 0;
+  if (!exr_version(path, version)) return false;
+  check_exr_attributes(path);
+  out = {};
+  out.multipart = Imf::isMultiPart(version);
+  try {
+    Imf::MultiPartInputFile in(path.c_str(), 0);
+    for (int i = 0; i < in.parts(); ++i) {
+      const Imf::Header& h = in.header(i);
+      ExrPart p;
+      if (h.hasName()) p.name = h.name();
+      for (auto it = h.channels().begin(); it != h.channels().end(); ++it) {
+        p.channels.emplace_back(it.name());
+        p.bits.push_back(it.channel().type == Imf::HALF ? 16 : 32);
+      }
+      p.data = {h.dataWindow().min.x, h.dataWindow().min.y, h.dataWindow().max.x, h.dataWindow().max.y};
+      p.display = {h.displayWindow().min.x, h.displayWindow().min.y, h.displayWindow().max.x,
+                   h.displayWindow().max.y};
+      p.deep = h.hasType() && Imf::isDeepData(h.type());
+      if (i == 0) out.blender = h.findTypedAttribute<Imf::StringAttribute>("BlenderMultiChannel") != nullptr;
+      out.parts.push_back(std::move(p));
+    }
+  } catch (const std::exception& e) {
+    throw Error("cannot read '" + path + "': " + e.what());
+  }
+  return true;
+}
+
+void exr_read_channels(const ReadRequest& request, int part, const std::vector<std::string>& names, float pad,
+                       Decoded& out) {
+  const std::string& path = request.path;
+  ExrLayout layout;
+  if (!exr_layout(path, layout)) throw Error("cannot read '" + path + "': not an OpenEXR file");
+  if (part < 0 || part >= static_cast<int>(layout.parts.size()))
+    throw Error("internal: part " + std::to_string(part) + " of '" + path + "'");
+  const ExrPart& p = layout.parts[static_cast<std::size_t>(part)];
+  if (p.deep)
+    throw Error("cannot read '" + path + "'" + (p.name.empty() ? "" : " part '" + p.name + "'") +
+                ": it is a deep image (many samples per pixel); brume reads flat images: flatten it first "
+                "(oiiotool IN --flatten -o OUT)");
+  const std::string why = exr_window_problem(p);
+  if (!why.empty()) throw Error("cannot read '" + path + "': " + why);
+  const int W = p.display.width(), H = p.display.height(), C = static_cast<int>(names.size());
+  if (request.check) request.check(W, H, C);
+  Image img(W, H, C);
+  const bool padded = p.data != p.display;
+  if (padded) std::fill(img.data.begin(), img.data.end(), pad);
+  int bits = 16;
+  std::string description;
+  try {
+    Imf::MultiPartInputFile file(path.c_str(), exr_row::ensure_pool(request.threads));
+    Imf::InputPart in(file, part);
+    const Imf::Header& h = in.header();
+    if (const auto* c = h.findTypedAttribute<Imf::StringAttribute>("comments")) description = c->value();
+    const std::size_t xs = static_cast<std::size_t>(C) * sizeof(float);
+    const std::size_t ys = xs * static_cast<std::size_t>(W);
+    char* base = reinterpret_cast<char*>(img.data.data()) -
+                 static_cast<std::ptrdiff_t>(p.display.x0) * static_cast<std::ptrdiff_t>(xs) -
+                 static_cast<std::ptrdiff_t>(p.display.y0) * static_cast<std::ptrdiff_t>(ys);
+    Imf::FrameBuffer fb;
+    for (int c = 0; c < C; ++c) {
+      const std::string& n = names[static_cast<std::size_t>(c)];
+      const Imf::Channel* ch = h.channels().findChannel(n);
+      if (!ch) throw Iex::InputExc("it has no channel '" + n + "'");
+      if (ch->xSampling != 1 || ch->ySampling != 1)
+        throw Iex::InputExc("channel '" + n + "' is subsampled (" + std::to_string(ch->xSampling) + " x " +
+                            std::to_string(ch->ySampling) + "); brume reads full-resolution channels");
+      if (ch->type != Imf::HALF) bits = 32;
+      fb.insert(n, Imf::Slice(Imf::FLOAT, base + static_cast<std::size_t>(c) * sizeof(float), xs, ys));
+    }
+    in.setFrameBuffer(fb);
+    in.readPixels(p.data.y0, p.data.y1);
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw Error("cannot read '" + path + "': " + e.what());
+  }
+  out.img = std::move(img);
+  out.info.format = "openexr";
+  out.info.integer = false;
+  out.info.bits = bits;
+  out.info.channel_names = p.channels;
+  out.info.part = layout.multipart ? p.name : "";
+  out.info.blender = layout.blender;
+  out.info.data_window = p.data;
+  out.info.display_window = p.display;
+  out.info.padded = padded;
+  out.info.channels_read = names;
+  out.info.description = std::move(description);
+  out.alpha = -1;
+  out.unassociated = false;
 }
 
 }  // namespace brume::io

@@ -65,6 +65,11 @@ struct ReadRequest {
   std::function<float(float, int)> map;
   bool with_alpha = false;  // keep an alpha channel (read_unassociated); else such files go on
   int threads = 1;          // the codec's threads (OpenEXR's pool)
+  // OpenEXR: the value of the pixels of the display window outside the data
+  // window, which the file does not hold (0: transparent black for colour;
+  // NaN: unknown, for depth). A data window reaching outside the display
+  // window is refused.
+  float pad = 0.0f;
 };
 
 // What a reader gives back.
@@ -86,6 +91,11 @@ struct WriteRequest {
   std::string description;              // ImageDescription (brume's record)
   Compression compression;
   int threads = 1;
+  // OpenEXR: the channels' names and storage bits (16 half, 32 float) and
+  // string attributes to carry (WriteOptions); null: the defaults.
+  const std::vector<std::string>* channel_names = nullptr;
+  const std::vector<int>* channel_bits = nullptr;
+  const std::vector<std::pair<std::string, std::string>>* attributes = nullptr;
 };
 
 struct Format {

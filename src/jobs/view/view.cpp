@@ -133,6 +133,7 @@ std::string kind_name(ParamKind k) {
     case ParamKind::choice: return "choice";
     case ParamKind::rgb: return "rgb";
     case ParamKind::text: return "text";
+    case ParamKind::pair: return "pair";
   }
   return "text";
 }

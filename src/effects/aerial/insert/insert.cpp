@@ -40,6 +40,9 @@ const ParamTable<InsertObject>& insert_object_param_table() {
            "the virtual object, RGBA, same size and camera as --image: EXR (float) linear premultiplied; PNG/TIFF "
            "(integer) sRGB colour with straight alpha; no alpha channel: alpha 1 where its range is known")
         .reads_file()
+        .text("object-layer", &InsertObject::object_layer,
+              "the layer of --object in a file with layers (NAME.R, NAME.G, NAME.B, NAME.A of a multilayer OpenEXR, "
+              "e.g. ViewLayer.Combined)")
         .text("object-range", &InsertObject::object_range,
               "the object's range map in metres along the ray (as --range); unknown (NaN, inf, 0) where the object "
               "is absent")
@@ -82,11 +85,30 @@ void validate_insert(const AerialParams& p, const std::set<std::string>& given) 
   validate_aerial(p, given);
 }
 
-Image read_object_rgba(const std::string& path, FileInfo* info) {
+Image read_object_rgba(const std::string& path, FileInfo* info, const std::string& layer) {
   if (path.empty()) throw Error("no object given: use --object FILE (RGBA, same size as --image)");
-  // Alpha kept unassociated: OpenImageIO would otherwise premultiply PNG's
-  // and TIFF's sRGB-ENCODED values, which is not linear-light coverage.
-  ChannelImage ci = read_unassociated(path, "--object");
+  ChannelImage ci;
+  const ExrChannels ec = exr_channels(path);
+  if (!layer.empty() || (ec.exr && (ec.multipart || !plain_channels(ec.names)))) {
+    // A file with layers (a render): the layer's R, G, B and A by name, as
+    // stored (OpenEXR: linear, premultiplied).
+    ColorRead how;
+    how.transfer = Transfer::linear;
+    how.layer = layer;
+    how.layer_flag = "--object-layer";
+    Image a;
+    const Image rgb = read_color(path, how, &ci.info, &a);
+    ci.img = Image(rgb.width, rgb.height, a.empty() ? 3 : 4);
+    for (std::size_t i = 0; i < rgb.pixels(); ++i) {
+      for (int c = 0; c < 3; ++c) ci.img.data[i * ci.img.channels + c] = rgb.data[i * 3 + c];
+      if (!a.empty()) ci.img.data[i * 4 + 3] = a.data[i];
+    }
+    ci.alpha = a.empty() ? -1 : 3;
+  } else {
+    // Alpha kept unassociated: OpenImageIO would otherwise premultiply PNG's
+    // and TIFF's sRGB-ENCODED values, which is not linear-light coverage.
+    ci = read_unassociated(path, "--object");
+  }
   const Image& raw = ci.img;
   const int nc = raw.channels, W = raw.width;
   const bool integer = ci.info.integer;

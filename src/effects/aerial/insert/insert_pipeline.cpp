@@ -125,7 +125,7 @@ nlohmann::json run_insert_job(const InsertJob& job, const ExecOptions& eo, const
       },
       [&](const InsertJob& j, LoadedInputs& in, const Exec& exec) {
         FileInfo oinfo;
-        const Image obj = read_object_rgba(j.object.object, &oinfo);
+        const Image obj = read_object_rgba(j.object.object, &oinfo, j.object.object_layer);
         if (obj.width != in.rgb.width || obj.height != in.rgb.height)
           throw Error("--object '" + j.object.object + "' is " + obj.size_string() + " but --image '" +
                       j.input.image + "' is " + in.rgb.size_string() +
@@ -135,6 +135,7 @@ nlohmann::json run_insert_job(const InsertJob& job, const ExecOptions& eo, const
         os.channel = j.object.object_range_channel;
         os.depth_scale = j.object.object_depth_scale;
         os.unknown_value = j.object.object_unknown_value;
+        os.render_background = j.input.depth.render_background;  // the scene's rule (records before schema 4: off)
         LoadedDepth orange = load_depth(os, in.rgb.width, in.rgb.height);
         if (orange.range.width != in.rgb.width || orange.range.height != in.rgb.height)
           throw Error("--object-range '" + j.object.object_range + "' is " + orange.range.size_string() +

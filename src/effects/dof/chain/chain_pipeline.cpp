@@ -167,7 +167,8 @@ nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, co
   haze_dof_job_table().validate(job);
   const std::set<std::string> gh = haze_given(ctx.given), gd = dof_given(ctx.given);
   validate_haze(job.haze, gh);
-  dof_stage([&] { validate_dof(job.dof, gd); });
+  const DofParams dof = dof_with_lens(job.dof, job.input.depth.lens);
+  dof_stage([&] { validate_dof(dof, gd); });
   check_range_step(job.prepare, gh);
   if (eo.backend == Backend::gpu && cpu_only(job.dof.scheme))
     throw Error("--dof-scheme " + to_string(job.dof.scheme) +
@@ -178,19 +179,25 @@ nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, co
 
   LoadedInputs in = load_inputs(job.input, true);
   check_working_memory("haze+dof", in.rgb, 140);  // haze's measured peak (the larger stage); the chain's own is not measured
-  const Intrinsics k =
-      dof_stage([&] { return dof_intrinsics(job.input.depth, job.dof, in.rgb.width, in.rgb.height); });
-  HazeDofRun run = run_haze_dof(in.rgb, in.depth.range, k, job.haze, job.dof, job.prepare, exec, ctx.given);
+  if (!job.haze.airlight) check_airlight_sky(in, "haze");
+  const Intrinsics k = dof_stage([&] { return dof_intrinsics(job.input.depth, in.rgb.width, in.rgb.height); });
+  HazeDofRun run = run_haze_dof(in.rgb, in.depth.range, k, job.haze, dof, job.prepare, exec, ctx.given);
   run.record["dof"]["derived"]["intrinsics"]["source"] =
-      depth_flags_give_intrinsics(job.input.depth) ? "depth flags" : "lens (focal length x width / sensor width)";
+      dof_intrinsics_source(job.input.depth, in.rgb.width, in.rgb.height);
 
+  EffectOutput out{std::move(run.dof.result.rgb),
+                   {{"transmission", std::move(run.haze.result.transmission)},
+                    {"scale-map", std::move(run.haze.result.scale)},
+                    {"dof-scale-map", std::move(run.dof.result.scale)}},
+                   nlohmann::json::object(),
+                   "transmission",
+                   run.haze.analysis.airlight};
+  // The alpha the haze stage composes (the lens then blurs the colour, not it).
+  const OutputLayers layers = compose_output_layers(job.output, &in, out);
+  if (!layers.record.is_null()) run.record["output_layers"] = layers.record;
   const nlohmann::json rec =
       job_record("haze+dof", ctx, haze_dof_job_table().to_json(job), in.record, run.record, eo.timing);
-  write_outputs(job.output, haze_dof_map_outputs(), run.dof.result.rgb,
-                {{"transmission", run.haze.result.transmission},
-                 {"scale-map", run.haze.result.scale},
-                 {"dof-scale-map", run.dof.result.scale}},
-                &in.image_info, rec, ctx.files);
+  write_outputs(job.output, haze_dof_map_outputs(), out.main, out.maps, &in.image_info, rec, ctx.files, &layers);
   return rec;
 }
 
@@ -203,8 +210,9 @@ PreviewFrame haze_dof_preview(const nlohmann::json& job, const PreviewInputs& in
   haze_dof_job_table().from_json(j, job, "job");
   PreviewFrame frame = haze_preview_frame(j.haze, in);
   const nlohmann::json dof = dof_stage([&] {
-    const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, preview_full_width(in), preview_full_height(in));
-    return dof_preview_steps(frame, j.dof, preview_intrinsics(k, in.scale), in, "out", "dof", "dof.blurred");
+    const Intrinsics k = dof_intrinsics(j.input.depth, preview_full_width(in), preview_full_height(in));
+    return dof_preview_steps(frame, dof_with_lens(j.dof, j.input.depth.lens), preview_intrinsics(k, in.scale), in,
+                             "out", "dof", "dof.blurred");
   });
   nlohmann::json& plan = frame.plan;
   plan["result"] = "dof.blurred";
@@ -229,7 +237,7 @@ CommandDef haze_dof_command() {
         validate_haze(j.haze, gh);
         check_range_step(j.prepare, gh);
         try {
-          validate_dof(j.dof, dof_given(g));
+          validate_dof(dof_with_lens(j.dof, j.input.depth.lens), dof_given(g));
         } catch (const Error& e) {
           throw Error(std::string("depth-of-field stage (dof.*): ") + e.what());
         }
@@ -268,8 +276,8 @@ CommandDef haze_dof_command() {
       rgb_range_args(ArrayArg::As::view), call, {"rgb", "transmission", "scale", "dof_scale", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<HazeDofParams>& k, const Exec& e, const std::set<std::string>& g) {
         const ConstImageView& rgb = in[0].view;
-        const Intrinsics ki = dof_stage([&] { return dof_intrinsics(k.depth, k.p.dof, rgb.width(), rgb.height()); });
-        HazeDofRun r = run_haze_dof(rgb, in[1].view, ki, k.p.haze, k.p.dof, k.prepare, e, g);
+        const Intrinsics ki = dof_stage([&] { return dof_intrinsics(k.depth, rgb.width(), rgb.height()); });
+        HazeDofRun r = run_haze_dof(rgb, in[1].view, ki, k.p.haze, dof_with_lens(k.p.dof, k.depth.lens), k.prepare, e, g);
         return ArrayResult{{{"rgb", std::move(r.dof.result.rgb)},
                             {"transmission", std::move(r.haze.result.transmission)},
                             {"scale", std::move(r.haze.result.scale)},
