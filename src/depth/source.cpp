@@ -1,6 +1,7 @@
 // brume — depth sources (see brume/depth_source.hpp).
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <vector>
 
 #include "brume/depth_source.hpp"
@@ -27,13 +28,10 @@ Intrinsics depth_intrinsics(const DepthSource& s, int width, int height) {
     return resolve(k, width, height);
   }
   if (!s.calib.empty()) {
-    StereoCalib c = read_stereo_calib(s.calib);
-    Intrinsics k;
-    k.fx = k.fy = c.f_px;
-    k.cx = c.cx, k.cy = c.cy;
-    return resolve(k, width, height);
+    return resolve(read_calib_camera(s.calib), width, height);
   }
-  throw Error("planar depth needs the camera: give --fx (and --fy, --cx, --cy), or --fov-x/--fov-y, or --calib calib.txt");
+  throw Error("planar depth needs the camera: give --fx (and --fy, --cx, --cy), or --fov-x/--fov-y, or --calib (a "
+              "calib.txt, or KITTI depth completion's intrinsics/*.txt)");
 }
 
 Camera depth_camera(const DepthSource& s, int width, int height, const CameraPose& pose) {
@@ -157,7 +155,33 @@ LoadedDepth stereo_depth(const DepthSource& s, int width, int height) {
 
 }  // namespace
 
+namespace {
+LoadedDepth load_depth_as_read(const DepthSource& s, int width, int height);
+}
+
+std::optional<Intrinsics> source_camera(const DepthSource& s, int width, int height) {
+  if (width <= 0 || height <= 0) return std::nullopt;
+  if (!s.velodyne.empty()) {
+    if (s.kitti_calib.empty()) return std::nullopt;
+    return depth_camera(s, width, height).k;
+  }
+  if (s.k.fx > 0.0 || s.k.fy > 0.0 || !std::isnan(s.fov_x_deg) || !std::isnan(s.fov_y_deg) || !s.calib.empty())
+    return depth_intrinsics(s, width, height);
+  return std::nullopt;
+}
+
 LoadedDepth load_depth(const DepthSource& s, int width, int height) {
+  LoadedDepth d = load_depth_as_read(s, width, height);
+  d.camera = source_camera(s, d.range.width, d.range.height);
+  // --calib is an input whichever source reads it (--z, --range, a depth
+  // buffer take the camera from it): brume run checks its hash.
+  if (!s.calib.empty() && d.record.is_object() && !d.record.contains("calib"))
+    d.record["calib"] = {{"path", s.calib}, {"sha256", sha256_file(s.calib)}};
+  return d;
+}
+
+namespace {
+LoadedDepth load_depth_as_read(const DepthSource& s, int width, int height) {
   const int given = s.sources();
   if (given != 1)
     throw Error(given == 0 ? "no depth given: use one of --range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne, --stereo-right"
@@ -297,5 +321,6 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
   rec["unknown_pixels"] = unknown;
   return out;
 }
+}  // namespace
 
 }  // namespace brume

@@ -213,7 +213,7 @@ nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& eo, const RunCo
       },
       [&](const DofJob& j, LoadedInputs& in, const Exec& exec) {
         const Intrinsics k = dof_intrinsics(j.input.depth, j.dof, in.rgb.width, in.rgb.height);
-        DofRun run = run_dof(in.rgb, in.depth.range, k, j.dof, j.prepare, exec, ctx.given);
+        DofRun run = run_dof(in.rgb, in.depth.range, k, j.dof, with_camera(j.prepare, in.depth), exec, ctx.given);
         run.record["dof"]["derived"]["intrinsics"]["source"] =
             depth_flags_give_intrinsics(j.input.depth) ? "depth flags" : "lens (focal length x width / sensor width)";
         return EffectOutput{std::move(run.result.rgb), {{"scale-map", std::move(run.result.scale)}},

@@ -180,7 +180,8 @@ nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, co
   check_working_memory("haze+dof", in.rgb, 140);  // haze's measured peak (the larger stage); the chain's own is not measured
   const Intrinsics k =
       dof_stage([&] { return dof_intrinsics(job.input.depth, job.dof, in.rgb.width, in.rgb.height); });
-  HazeDofRun run = run_haze_dof(in.rgb, in.depth.range, k, job.haze, job.dof, job.prepare, exec, ctx.given);
+  HazeDofRun run = run_haze_dof(in.rgb, in.depth.range, k, job.haze, job.dof, with_camera(job.prepare, in.depth), exec,
+                                ctx.given);
   run.record["dof"]["derived"]["intrinsics"]["source"] =
       depth_flags_give_intrinsics(job.input.depth) ? "depth flags" : "lens (focal length x width / sensor width)";
 
