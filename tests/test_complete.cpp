@@ -305,8 +305,10 @@ double share_off(const Image& est, const Image& truth, int y0, int y1, std::size
 // leaves room for what no continuation from below can know: surfaces that
 // are not vertical (the terrace's roof, seen from below, comes nearer
 // towards the top of the frame) and objects that begin above the scan.
-// playground_1l is printed, not checked (its upper part is mostly sky and
-// a tree whose crown lies behind the scan's top returns).
+// playground_1l is printed, not checked: its upper part is mostly wooden
+// canopies overhanging nearer than anything the scan's top rows see (no
+// continuation from below can know them; the fusion with the
+// second view is meant for it).
 TEST(Complete, AboveTheScanStructureContinuesOnEth3d) {
   BRUME_REQUIRE_DATA("eth3d_two_view/terrace/disp0.pfm");
   for (const char* scene : {"terrace", "playground_1l"}) {
