@@ -387,8 +387,10 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
         std::nth_element(w7.begin(), w7.begin() + n7 / 2, w7.begin() + n7);
         lim[x] = w7[n7 / 2];
       }
+      // No measurement within 3 columns (lim = H): no continuation (b = -1,
+      // every row is below it); step 3b's rule fills the column.
       for (int x = 0; x < W; ++x)
-        if (nb[x] == 0) b[x] = lim[x];
+        if (nb[x] == 0) b[x] = lim[x] < H ? lim[x] : -1;
     }
     const float zmax_range = rmax;  // never behind the farthest measurement (the sky lies at or beyond it)
     std::vector<float> cur(W, NAN), nxt(W, NAN);
