@@ -7,17 +7,24 @@
 //
 //   brume_bench_complete [--runs N] [--data DIR]   (DIR: ../shared/data by default)
 //
-// Output: a Markdown table on stdout with the CPU, threads and size.
+// Output: Markdown tables on stdout with the CPU, threads and size: the
+// time of one completion, then KITTI depth completion's four metrics (MAE,
+// RMSE [mm], iMAE, iRMSE [1/km], on planar depth; tests/ip_basic.hpp) at 10 %
+// of the returns held out (ten fixed seeds), brume against IP-Basic's "fast"
+// configuration as reimplemented for the tests (tests/ip_basic.hpp, plain
+// loops), both run here on the same held-out sets (issue 52, item 4).
 #include <omp.h>
 
 #include <time.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <vector>
 #include <cstring>
 #include <functional>
+#include <random>
 #include <string>
 
 #include "brume/complete.hpp"
@@ -26,6 +33,7 @@
 
 #include "bench_util.hpp"
 #include "brume_opencv.hpp"
+#include "ip_basic.hpp"
 
 using namespace brume;
 
@@ -89,18 +97,68 @@ int main(int argc, char** argv) {
   }
   std::printf("CPU: %s; %dx%d, %zu lidar points in view; median (min..max) of %d runs after a warm-up\n\n",
               bench::cpu_name().c_str(), rgb.width, rgb.height, scan.points_in_view, runs);
-  std::printf("| threads | brume complete_range, wall [ms] | its CPU time [ms] | Ku et al. (OpenCV) alone, wall [ms] |\n"
-              "|---|---|---|---|\n");
+  const KittiCalib cal = read_kitti_calib(k + "calib/000001.txt");
+  Intrinsics cam;
+  cam.fx = cal.P2[0], cam.fy = cal.P2[5], cam.cx = cal.P2[2], cam.cy = cal.P2[6];
+  CompleteParams column;
+  column.method = CompleteMethod::column;
+  std::printf("| threads | brume complete_range (planar, the default), wall [ms] | its CPU time [ms] | "
+              "--complete-method column, wall [ms] | Ku et al. (OpenCV) alone, wall [ms] |\n"
+              "|---|---|---|---|---|\n");
   for (int t : {1, 2}) {
     cv::setNumThreads(t);
     omp_set_num_threads(t);
-    const bench::Spread a = bench::time_ms([&] { (void)complete_range(scan.range, rgb, {}, t); }, runs);
-    const bench::Spread b = bench::time_ms([&] { (void)ku(scan.range); }, runs);
-    std::vector<double> cpu;
-    for (int i = 0; i < runs; ++i) cpu.push_back(cpu_ms([&] { (void)complete_range(scan.range, rgb, {}, t); }));
-    const bench::Spread c = bench::spread(cpu);
-    std::printf("| %d | %.1f (%.1f..%.1f) | %.1f (%.1f..%.1f) | %.1f (%.1f..%.1f) |\n", t, a.median, a.lo, a.hi,
-                c.median, c.lo, c.hi, b.median, b.lo, b.hi);
+    // Interleaved: each spread's runs alternate with the others' (a shared
+    // host's load then weighs on all alike).
+    auto wall = [](const std::function<void()>& fn) {
+      const auto t0 = std::chrono::steady_clock::now();
+      fn();
+      return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    };
+    std::vector<double> ta, tc, tb, cpu;
+    for (int i = 0; i < runs + 1; ++i) {
+      const double a1 = wall([&] { (void)complete_range(scan.range, rgb, {}, t, &cam); });
+      const double c1 = wall([&] { (void)complete_range(scan.range, rgb, column, t, &cam); });
+      const double b1 = wall([&] { (void)ku(scan.range); });
+      cpu.push_back(cpu_ms([&] { (void)complete_range(scan.range, rgb, {}, t, &cam); }));
+      if (i == 0) continue;  // the warm-up
+      ta.push_back(a1), tc.push_back(c1), tb.push_back(b1);
+    }
+    cpu.erase(cpu.begin());
+    const bench::Spread a = bench::spread(ta), cc = bench::spread(tc), b = bench::spread(tb), c = bench::spread(cpu);
+    std::printf("| %d | %.1f (%.1f..%.1f) | %.1f (%.1f..%.1f) | %.1f (%.1f..%.1f) | %.1f (%.1f..%.1f) |\n", t,
+                a.median, a.lo, a.hi, c.median, c.lo, c.hi, cc.median, cc.lo, cc.hi, b.median, b.lo, b.hi);
   }
+
+  // KITTI depth completion's metrics at held-out returns, ten seeds.
+  std::vector<std::size_t> known;
+  for (std::size_t i = 0; i < scan.range.pixels(); ++i)
+    if (std::isfinite(scan.range.data[i])) known.push_back(i);
+  std::printf("\nHeld-out returns (10 %% of %zu, seeds 1-10), planar depth; brume (default method) against IP-Basic "
+              "(fast, tests/ip_basic.hpp)\n\n"
+              "| seed | brume MAE [mm] | RMSE [mm] | iMAE [1/km] | iRMSE [1/km] | IP-Basic MAE [mm] | RMSE [mm] | "
+              "iMAE [1/km] | iRMSE [1/km] |\n|---|---|---|---|---|---|---|---|---|\n",
+              known.size());
+  ip_basic::DcMetrics sa, sb;
+  for (int seed = 1; seed <= 10; ++seed) {
+    std::vector<std::size_t> order = known;
+    std::mt19937_64 rng(seed);
+    std::shuffle(order.begin(), order.end(), rng);
+    const std::vector<std::size_t> held(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(order.size() / 10));
+    Image sparse = scan.range;
+    for (std::size_t i : held) sparse.data[i] = NAN;
+    const CompleteResult ours = complete_range(sparse, rgb, {}, 0, &cam);
+    const Image ipb = ip_basic::ku_baseline(sparse);
+    const ip_basic::DcMetrics a = ip_basic::dc_metrics(ours.range, scan.range, held, cam);
+    const ip_basic::DcMetrics b = ip_basic::dc_metrics(ipb, scan.range, held, cam);
+    std::printf("| %d | %.0f | %.0f | %.3f | %.3f | %.0f | %.0f | %.3f | %.3f |\n", seed, a.mae_mm, a.rmse_mm,
+                a.imae_per_km, a.irmse_per_km, b.mae_mm, b.rmse_mm, b.imae_per_km, b.irmse_per_km);
+    for (auto [s, m] : {std::pair{&sa, &a}, std::pair{&sb, &b}}) {
+      s->mae_mm += m->mae_mm / 10, s->rmse_mm += m->rmse_mm / 10;
+      s->imae_per_km += m->imae_per_km / 10, s->irmse_per_km += m->irmse_per_km / 10;
+    }
+  }
+  std::printf("| mean | %.0f | %.0f | %.3f | %.3f | %.0f | %.0f | %.3f | %.3f |\n", sa.mae_mm, sa.rmse_mm,
+              sa.imae_per_km, sa.irmse_per_km, sb.mae_mm, sb.rmse_mm, sb.imae_per_km, sb.irmse_per_km);
   return 0;
 }

@@ -12,6 +12,7 @@
 //  - bad inputs and the command line end to end.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -24,117 +25,21 @@
 
 #include "brume/complete.hpp"
 #include "brume/depth.hpp"
+#include "brume/depth_source.hpp"
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
+#include "ip_basic.hpp"
 #include "test_util.hpp"
 
 namespace fs = std::filesystem;
 using namespace brume;
 using namespace brume::test;
+using brume::ip_basic::ku_baseline;
 
 namespace {
 
 const std::string kKitti = "kitti_object_000001/";
 std::string kitti(const std::string& rel) { return data_path(kKitti + rel); }
-
-// ---- Ku, Harakeh & Waslander 2018 (CRV), section III, written from the paper ----
-// On the inverted depth D' = 100 - D (valid pixels only; 0 = empty), as the
-// paper does: (1) dilate with a 5x5 diamond; (2) close with a 5x5 full kernel;
-// (3) fill empty pixels from a 7x7 full dilation; (4) "extend to top" (left
-// out: the held-out pixels all lie inside the scan); (5) fill empty pixels
-// from a 31x31 full dilation; (6) 5x5 median on the valid pixels; (7) 5x5
-// Gaussian blur on the valid pixels; invert back. Borders: only in-image
-// pixels take part (the paper's OpenCV defaults do the same for dilation).
-using Grid = std::vector<double>;
-
-Grid dilate(const Grid& in, int W, int H, const std::vector<std::pair<int, int>>& offsets) {
-  Grid out(in.size(), 0.0);
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      double m = 0.0;
-      for (auto [dx, dy] : offsets) {
-        const int u = x + dx, v = y + dy;
-        if (u >= 0 && v >= 0 && u < W && v < H) m = std::max(m, in[static_cast<std::size_t>(v) * W + u]);
-      }
-      out[static_cast<std::size_t>(y) * W + x] = m;
-    }
-  return out;
-}
-// A full k x k dilation (erosion with `erode`) as a row pass then a column pass.
-Grid square(const Grid& in, int W, int H, int k, bool erode = false) {
-  const int r = k / 2;
-  Grid a(in.size()), b(in.size());
-  auto pick = [erode](double p, double q) { return erode ? std::min(p, q) : std::max(p, q); };
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      double m = in[static_cast<std::size_t>(y) * W + x];
-      for (int d = -r; d <= r; ++d)
-        if (x + d >= 0 && x + d < W) m = pick(m, in[static_cast<std::size_t>(y) * W + x + d]);
-      a[static_cast<std::size_t>(y) * W + x] = m;
-    }
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      double m = a[static_cast<std::size_t>(y) * W + x];
-      for (int d = -r; d <= r; ++d)
-        if (y + d >= 0 && y + d < H) m = pick(m, a[static_cast<std::size_t>(y + d) * W + x]);
-      b[static_cast<std::size_t>(y) * W + x] = m;
-    }
-  return b;
-}
-
-Image ku_baseline(const Image& sparse) {
-  const int W = sparse.width, H = sparse.height;
-  const double kMax = 100.0;  // the paper's inversion constant (KITTI's ranges stay below it)
-  Grid d(sparse.pixels());
-  for (std::size_t i = 0; i < d.size(); ++i) d[i] = std::isfinite(sparse.data[i]) ? kMax - sparse.data[i] : 0.0;
-  std::vector<std::pair<int, int>> diamond;
-  for (int dy = -2; dy <= 2; ++dy)
-    for (int dx = -2; dx <= 2; ++dx)
-      if (std::abs(dx) + std::abs(dy) <= 2) diamond.emplace_back(dx, dy);
-  d = dilate(d, W, H, diamond);
-  d = square(square(d, W, H, 5), W, H, 5, true);  // closing
-  for (int k : {7, 31}) {
-    const Grid f = square(d, W, H, k);
-    for (std::size_t i = 0; i < d.size(); ++i)
-      if (d[i] < 0.1) d[i] = f[i];
-  }
-  Grid med = d;
-  std::vector<double> win;
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      if (d[i] < 0.1) continue;
-      win.clear();
-      for (int dy = -2; dy <= 2; ++dy)
-        for (int dx = -2; dx <= 2; ++dx) {
-          const int u = std::clamp(x + dx, 0, W - 1), v = std::clamp(y + dy, 0, H - 1);
-          win.push_back(d[static_cast<std::size_t>(v) * W + u]);
-        }
-      std::nth_element(win.begin(), win.begin() + 12, win.end());
-      med[i] = win[12];
-    }
-  // 5x5 Gaussian, sigma 1.1 px (OpenCV's for a 5-tap kernel with sigma 0, the paper's call).
-  double g[5], gs = 0;
-  for (int k = -2; k <= 2; ++k) gs += g[k + 2] = std::exp(-k * k / (2 * 1.1 * 1.1));
-  for (double& v : g) v /= gs;
-  Grid blur = med;
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      if (med[i] < 0.1) continue;
-      double s = 0;
-      for (int dy = -2; dy <= 2; ++dy)
-        for (int dx = -2; dx <= 2; ++dx) {
-          const int u = std::clamp(x + dx, 0, W - 1), v = std::clamp(y + dy, 0, H - 1);
-          s += g[dx + 2] * g[dy + 2] * med[static_cast<std::size_t>(v) * W + u];
-        }
-      blur[i] = s;
-    }
-  Image out(W, H, 1, NAN);
-  for (std::size_t i = 0; i < blur.size(); ++i)
-    if (blur[i] > 0.1) out.data[i] = static_cast<float>(kMax - blur[i]);
-  return out;
-}
 
 struct Errors {
   double mae = 0, rmse = 0;
@@ -343,6 +248,184 @@ TEST(Complete, LibraryErrors) {
             std::string::npos);
 }
 
+// ---- above the scan (issue 52): structure continues what the scan saw ----
+
+// A pixel's range over its planar depth: sqrt(1 + ((x - cx)/fx)^2 + ((y - cy)/fy)^2).
+double stretch(const Intrinsics& k, int x, int y) {
+  const double a = (x - k.cx) / k.fx, b = (y - k.cy) / k.fy;
+  return std::sqrt(1.0 + a * a + b * b);
+}
+
+// ETH3D two-view with a KITTI-like scan simulated from its laser ground
+// truth: 48 full rows (every pixel with a ground-truth value) spread evenly
+// over the lower 60 % of the frame, nothing above (issue 52).
+struct SimulatedScan {
+  Image rgb, truth, sparse;
+  Intrinsics k;
+  int top = 0;  // first row of the lower 60 %
+};
+SimulatedScan eth3d_kitti_like(const std::string& scene) {
+  const std::string rel = "eth3d_two_view/" + scene + "/";
+  SimulatedScan e;
+  DepthSource s;
+  s.disparity = data_path(rel + "disp0.pfm");
+  s.calib = data_path(rel + "calib.txt");
+  LoadedDepth ld = load_depth(s);
+  e.truth = std::move(ld.range);
+  e.k = *ld.camera;
+  e.rgb = read_color(data_path(rel + "im0.png"));
+  const int H = e.truth.height;
+  e.top = static_cast<int>(std::ceil(0.4 * H));
+  e.sparse = Image(e.truth.width, H, 1, NAN);
+  for (int i = 0; i < 48; ++i) {
+    const int y = e.top + static_cast<int>(std::lround(i * (H - 1 - e.top) / 47.0));
+    for (int x = 0; x < e.truth.width; ++x) e.sparse.at(x, y) = e.truth.at(x, y);
+  }
+  return e;
+}
+
+// Share of the ground-truth pixels of rows [y0, y1) off by more than 10 %
+// (a pixel left unknown counts as off).
+double share_off(const Image& est, const Image& truth, int y0, int y1, std::size_t* n_out = nullptr) {
+  std::size_t n = 0, off = 0;
+  for (int y = y0; y < y1; ++y)
+    for (int x = 0; x < truth.width; ++x) {
+      const float t = truth.at(x, y), v = est.at(x, y);
+      if (!std::isfinite(t)) continue;
+      ++n;
+      off += (std::isfinite(v) && std::abs(v - t) <= 0.1f * t) ? 0 : 1;
+    }
+  if (n_out) *n_out = n;
+  return n ? static_cast<double>(off) / static_cast<double>(n) : 0.0;
+}
+
+// ETH3D terrace with the simulated scan: the upper 40 % (no return there)
+// has at most 15 % of its ground-truth pixels off by more than 10 % with the
+// planar method (issue 52's target; 61 % with the column rule). The 15 %
+// leaves room for what no continuation from below can know: surfaces that
+// are not vertical (the terrace's roof, seen from below, comes nearer
+// towards the top of the frame) and objects that begin above the scan.
+// playground_1l is printed, not checked: its upper part is mostly wooden
+// canopies overhanging nearer than anything the scan's top rows see (no
+// continuation from below can know them; the issue's fusion with the
+// second view is meant for it).
+TEST(Complete, AboveTheScanStructureContinuesOnEth3d) {
+  BRUME_REQUIRE_DATA("eth3d_two_view/terrace/disp0.pfm");
+  for (const char* scene : {"terrace", "playground_1l"}) {
+    if (!have_data(std::string("eth3d_two_view/") + scene + "/im0.png")) continue;
+    const SimulatedScan e = eth3d_kitti_like(scene);
+    CompleteParams column, planar;
+    column.method = CompleteMethod::column;
+    planar.method = CompleteMethod::planar;
+    const CompleteResult a = complete_range(e.sparse, e.rgb, column, 0, &e.k);
+    const CompleteResult b = complete_range(e.sparse, e.rgb, planar, 0, &e.k);
+    std::size_t n = 0;
+    const double off_a = share_off(a.range, e.truth, 0, e.top, &n), off_b = share_off(b.range, e.truth, 0, e.top);
+    const double low_a = share_off(a.range, e.truth, e.top, e.truth.height),
+                 low_b = share_off(b.range, e.truth, e.top, e.truth.height);
+    std::printf("%s, upper 40 %% (%zu ground-truth pixels) off by > 10 %%: column %.1f %%, planar %.1f %%; lower "
+                "60 %%: %.1f %%, %.1f %%\n",
+                scene, n, 100 * off_a, 100 * off_b, 100 * low_a, 100 * low_b);
+    if (std::string(scene) == "terrace") EXPECT_LE(off_b, 0.15);
+    // Below the scan's top the methods agree (the planar rule changes only
+    // what lies above each column's topmost return).
+    EXPECT_NEAR(low_b, low_a, 0.005) << scene;
+  }
+}
+
+// KITTI 000001, the trees on the right above the scan (x 850-1240, y
+// 10-170, the pixels above each column's topmost return): the completed
+// planar depth lies within +-25 % of the planar depth of the column's three
+// topmost returns (their median) at >= 85 % of them (issue 52's regression
+// target; 21 % with the column rule, whose values there are the pilot's far
+// fills). 25 %: the trees' crowns are not planes (leaves at 11-25 m, with
+// gaps onto farther trees), so a continuation is right only to that degree;
+// the pixels the sky rule leaves unknown (sky between the crowns) are not
+// counted, and their share is printed.
+TEST(Complete, TreesAboveTheKittiScanContinueTheirReturns) {
+  BRUME_REQUIRE_DATA(kKitti + "velodyne/000001.bin");
+  const KittiFrame f = load_kitti();
+  const KittiCalib cal = read_kitti_calib(kitti("calib/000001.txt"));
+  Intrinsics k;
+  k.fx = cal.P2[0], k.fy = cal.P2[5], k.cx = cal.P2[2], k.cy = cal.P2[6];
+  float rmax = 0.0f;
+  for (float r : f.scan.range.data)
+    if (std::isfinite(r)) rmax = std::max(rmax, r);
+  for (CompleteMethod m : {CompleteMethod::column, CompleteMethod::planar}) {
+    CompleteParams p;
+    p.method = m;
+    const CompleteResult c = complete_range(f.scan.range, f.rgb, p, 0, &k);
+    std::size_t n = 0, ok = 0, sky = 0;
+    for (int x = 850; x <= 1240; ++x) {
+      std::vector<double> z;
+      int top = -1;
+      for (int y = 0; y < f.scan.range.height && z.size() < 3; ++y)
+        if (std::isfinite(f.scan.range.at(x, y))) {
+          if (top < 0) top = y;
+          z.push_back(f.scan.range.at(x, y) / stretch(k, x, y));
+        }
+      if (z.empty()) continue;
+      std::sort(z.begin(), z.end());
+      const double zref = z.size() == 2 ? 0.5 * (z[0] + z[1]) : z[z.size() / 2];
+      for (int y = 10; y <= 170 && y < top; ++y) {
+        if (c.sky_mask.at(x, y) > 0.0f) {
+          ++sky;
+          continue;
+        }
+        ++n;
+        const float r = c.range.at(x, y);
+        ok += std::isfinite(r) && std::abs(r / stretch(k, x, y) - zref) <= 0.25 * zref ? 1 : 0;
+        // Never behind the sky: no continued range beyond the farthest return.
+        if (m == CompleteMethod::planar) ASSERT_LE(r, rmax) << x << "," << y;
+      }
+    }
+    const double share = static_cast<double>(ok) / static_cast<double>(n);
+    std::printf("KITTI trees above the scan, %s: %zu pixels (%zu sky, not counted), %.1f %% within 25 %% of their "
+                "column's top returns\n",
+                enum_name(complete_method_names(), m).c_str(), n, sky, 100 * share);
+    if (m == CompleteMethod::planar) EXPECT_GE(share, 0.85);
+  }
+}
+
+// A vertical wall (planar depth 10 m, seen by a level pinhole camera) with
+// scan rows over its lower half only: above them the planar method gives
+// the wall's range within 1 % (z continued, not the range), where the column
+// rule, repeating the range near the scan's top, is 5.6 % short at the top
+// corners; the confidence falls with the distance from the last return.
+// 1 %: the refined band just above the top returns (step 2) averages the
+// returns' ranges over its window, and at the image's side edges the window
+// is one-sided while the range grows towards the edge (0.8 % at x = 0); the
+// continuation carries that band's value up.
+TEST(Complete, PlanarContinuationOfAVerticalWall) {
+  const int W = 120, H = 80;
+  Intrinsics k;
+  k.fx = k.fy = 100.0, k.cx = 59.5, k.cy = 39.5;
+  Image rgb(W, H, 3), sparse(W, H, 1, NAN);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      // A dark wall with a faint texture above a white road marking (the
+      // image's brightest 3 %): the wall is not bright, so never taken for sky.
+      for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = y >= H - 2 ? 1.0f : 0.04f + 0.01f * ((x / 2 + y / 2) % 2);
+      if (y >= 40 && y % 4 == 0) sparse.at(x, y) = static_cast<float>(10.0 * stretch(k, x, y));
+    }
+  const CompleteResult c = complete_range(sparse, rgb, {}, 0, &k);
+  for (int y = 0; y < 40; ++y)
+    for (int x = 0; x < W; ++x) {
+      const float r = c.range.at(x, y);
+      ASSERT_TRUE(std::isfinite(r)) << x << "," << y;
+      ASSERT_NEAR(r, 10.0 * stretch(k, x, y), 0.01 * r) << x << "," << y;
+    }
+  CompleteParams column;
+  column.method = CompleteMethod::column;
+  const CompleteResult old = complete_range(sparse, rgb, column, 0, &k);
+  EXPECT_LT(old.range.at(0, 0), 0.96 * 10.0 * stretch(k, 0, 0));
+  EXPECT_GT(c.confidence.at(60, 30), c.confidence.at(60, 5));
+  EXPECT_LE(c.confidence.at(60, 30), 0.2f);
+  const nlohmann::json rec = complete_record({}, c);
+  EXPECT_EQ(rec["complete_method"], "planar");
+  EXPECT_GT(rec["continued_fraction"].get<double>(), 0.4);
+}
+
 class CompleteCli : public ScratchDirTest {};
 
 // Bad inputs through the command line: a scan with no point in view, an image
@@ -503,4 +586,82 @@ TEST_F(CompleteCli, DepthPrepareCompletesWithAnImage) {
   r = run("depth prepare " + scan + " --like " + kitti("image_2/000001.png") + " --complete on --out " + p("q.exr"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find("give --image FILE"), std::string::npos) << r.output;
+}
+
+// KITTI depth completion's intrinsics/*.txt (the 3x3 K as 9 numbers) as a
+// --calib: it gives the camera for --z (fx, fy, cx, cy each from its place
+// in K), is refused where a baseline is needed (--disparity), and a file of
+// 8 numbers or a matrix that is not [fx 0 cx; 0 fy cy; 0 0 1] is refused
+// naming the file and what it holds. The conversion checked at every pixel
+// against the ray factor computed here (1e-6 relative: float rounding).
+TEST_F(CompleteCli, KittiIntrinsicsAsCalibration) {
+  auto text = [&](const char* name, const char* body) {
+    std::ofstream(p(name)) << body;
+    return p(name);
+  };
+  const std::string K = text("K.txt", "721.5377 0 609.5593 0 700.25 172.854 0 0 1\n");
+  const Intrinsics k = read_calib_camera(K);
+  EXPECT_EQ(k.fx, 721.5377);
+  EXPECT_EQ(k.fy, 700.25);
+  EXPECT_EQ(k.cx, 609.5593);
+  EXPECT_EQ(k.cy, 172.854);
+  EXPECT_NE(error_of([&] { read_stereo_calib(K); }).find("no stereo baseline"), std::string::npos);
+  EXPECT_NE(error_of([&] { read_calib_camera(text("k8.txt", "1 0 2 0 1 3 0 0\n")); }).find("holds 8 numbers"),
+            std::string::npos);
+  EXPECT_NE(error_of([&] { read_calib_camera(text("kbad.txt", "1 0 2 0 1 3 0 1 1\n")); }).find("not a camera matrix"),
+            std::string::npos);
+  EXPECT_NE(error_of([&] { read_calib_camera(text("kneg.txt", "-1 0 2 0 1 3 0 0 1\n")); }).find("fx"),
+            std::string::npos);
+  // --z with it, through the command line.
+  Image z(40, 30, 1, 12.0f);
+  z.at(3, 4) = NAN;
+  WriteOptions data;
+  data.is_color = false;
+  write_image(p("z.pfm"), z, data);
+  CliRun r = run("depth convert --z " + p("z.pfm") + " --calib " + K + " --out " + p("r.pfm") + " --record " +
+                 p("r.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const Image range = read_scalar(p("r.pfm"));
+  for (int y = 0; y < 30; ++y)
+    for (int x = 0; x < 40; ++x) {
+      if (x == 3 && y == 4) continue;
+      const double a = (x - k.cx) / k.fx, b = (y - k.cy) / k.fy;
+      ASSERT_NEAR(range.at(x, y), 12.0 * std::sqrt(1 + a * a + b * b), 1e-6 * range.at(x, y)) << x << "," << y;
+    }
+  // The record names the file with its hash, so brume run repeats it.
+  r = run("run " + p("r.json") + " --out-dir " + p("again"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  // A disparity with it: refused, naming the file.
+  r = run("depth convert --disparity " + p("z.pfm") + " --calib " + K + " --out " + p("d.pfm"));
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("3x3 camera matrix"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p("d.pfm")));
+}
+
+// --complete-method: an unknown name is refused naming the flag and the
+// choices; column gives the record of the old rule (no continued_fraction)
+// and planar, the default, the new one.
+TEST_F(CompleteCli, CompleteMethodFlag) {
+  Image rgb(48, 32, 3, 0.3f), sparse(48, 32, 1, NAN);
+  for (int y = 16; y < 32; y += 3)
+    for (int x = 0; x < 48; ++x) sparse.at(x, y) = 8.0f;
+  WriteOptions data;
+  data.is_color = false;
+  write_image(p("rgb.png"), rgb, WriteOptions{});
+  write_image(p("sparse.pfm"), sparse, data);
+  const std::string in = "depth complete --image " + p("rgb.png") + " --range " + p("sparse.pfm");
+  CliRun r = run(in + " --complete-method nearest --out " + p("x.pfm"));
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("--complete-method"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("planar"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p("x.pfm")));
+  r = run(in + " --out " + p("a.pfm") + " --record " + p("a.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(read_json(p("a.json"))["job"]["complete"]["complete-method"], "planar");
+  EXPECT_EQ(read_json(p("a.json"))["complete"]["complete_method"], "planar");
+  r = run(in + " --complete-method column --out " + p("b.pfm") + " --record " + p("b.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_FALSE(read_json(p("b.json"))["complete"].contains("complete_method"));
+  r = run("run " + p("a.json") + " --out-dir " + p("again"));
+  ASSERT_EQ(r.status, 0) << r.output;
 }

@@ -59,6 +59,40 @@
 //         preparation fills it as a hole).
 //     A bright, smooth wall that reaches the top of the frame above the scan
 //     is taken for sky: no image rule can tell them apart without depth.
+//  3c. complete-method planar (the default since issue #52; `column` is the
+//     rule of step 3b alone, the only one of records before it): above the
+//     scan, structure CONTINUES what the scan saw instead of taking its
+//     column's nearest estimate (which, above the scan, is the pilot's 31x31
+//     fill: far values). A vertical surface seen by a level camera has a
+//     constant PLANAR depth z along each image column (a point of the plane
+//     a X + c Z = d on the ray of column u has X/Z = (u - cx)/fx, so
+//     Z (a (u - cx)/fx + c) = d whatever the row), so z is continued, not
+//     the range:
+//       seed: each column's planar depth at its topmost measurement, the
+//         median of the planar depths of its three topmost measurements (one
+//         stray return, a wire or a background point seen through leaves,
+//         does not move it);
+//       upward sweep, row by row from the seed: a pixel above its column's
+//         topmost measurement that is neither sky nor measured nor refined
+//         (step 2, i.e. near a measurement) takes the colour-weighted mean of
+//         the planar depths of its three neighbours below (x-1, x, x+1; the
+//         diagonal ones at half weight, each times
+//         exp(-|g_p - g_q|^2 / 2 s_c^2), s_c complete-sigma-colour), so that
+//         depth follows image segments, not only the column; refined pixels
+//         keep their value and pass their planar depth on; sky pixels stop
+//         the sweep (their columns above take their neighbours' depth or
+//         none);
+//       never behind the sky: a continued depth is at most the farthest
+//         measurement (R_max; the preparation puts the sky at or beyond it);
+//       range = z sqrt(1 + ((x - cx)/fx)^2 + ((y - cy)/fy)^2) with the
+//         camera's intrinsics when the source gives them (KITTI: P2;
+//         calib.txt; --fx...), else cx, cy at the image centre and fx = fy =
+//         the image width (a 53 degree field of view; z and range differ by
+//         < 4 % over such a frame);
+//       confidence 0.2 exp(-d / 32 px), d the rows from the column's topmost
+//         measurement.
+//     Pixels it leaves without a value (below the scan, columns without any
+//     measurement) take step 3b's rule.
 //  4. Confidence in [0, 1]: 1 at measurements; sum w / (sum w + 0.5) from
 //     the refinement (with the space and colour terms only: how much
 //     measured support the pixel had); 0.3 where only the pilot filled it;
@@ -74,10 +108,15 @@
 
 #include <nlohmann/json.hpp>
 
+#include "brume/depth.hpp"
 #include "brume/image.hpp"
 #include "brume/params.hpp"
 
 namespace brume {
+
+// How structure above the scan is filled (step 3b or 3c).
+enum class CompleteMethod { column, planar };
+const EnumNames<CompleteMethod>& complete_method_names();
 
 struct CompleteParams {
   // The refinement's defaults: near the smallest RMSE at KITTI 000001's
@@ -89,6 +128,9 @@ struct CompleteParams {
   double sigma_range = 0.15;        // [1] s_r, range scale relative to the pilot, > 0
   double sky_luminance = 0.7;       // [1] sky: luma >= this x the image's 99th percentile, [0, 1]
   double sky_roughness = 0.03;      // [1] sky: 5x5 standard deviation of luma <= this, >= 0
+  // Structure above the scan: planar (3c, issue #52) or column (3b, the rule
+  // of records before it: since(4, "column")).
+  CompleteMethod method = CompleteMethod::planar;
 };
 const ParamTable<CompleteParams>& complete_param_table();
 
@@ -99,6 +141,7 @@ struct CompleteResult {
   double known_fraction = 0.0;      // measured pixels / all
   double completed_fraction = 0.0;  // finite output pixels / all
   std::size_t measured = 0, refined = 0, pilot_only = 0, extrapolated = 0, sky = 0, unknown = 0;
+  std::size_t continued = 0;        // planar: pixels above the scan given a continued planar depth (3c)
   int scan_top_row = -1;            // topmost row with a measurement
   double d_max_m = 0.0;             // inversion constant of the pilot
 };
@@ -120,7 +163,10 @@ constexpr double kCompleteRangeMaxM = 1e6;
 // outside [kCompleteRangeMinM, kCompleteRangeMaxM], or no measured pixel at
 // all (e.g. a scan with no point in view). threads: OpenMP threads
 // (0 = all; the result does not depend on it).
-CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const CompleteParams& p = {}, int threads = 0);
+// camera: the intrinsics of the camera the range map belongs to (for the
+// planar method's range <-> planar depth), or null (see 3c).
+CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const CompleteParams& p = {}, int threads = 0,
+                              const Intrinsics* camera = nullptr);
 
 // The record of a completion: method, parameters and what was found.
 nlohmann::json complete_record(const CompleteParams& p, const CompleteResult& r);

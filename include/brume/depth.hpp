@@ -94,6 +94,11 @@ struct StereoCalib {
 };
 // Middlebury 2014 / ETH3D calib.txt: cam0=[f 0 cx; 0 f cy; 0 0 1], doffs, baseline (mm).
 StereoCalib read_stereo_calib(const std::string& path);
+// The camera of a --calib file: a Middlebury 2014 / ETH3D calib.txt (its
+// cam0), or KITTI depth completion's intrinsics/*.txt: the 3x3 matrix K =
+// [fx 0 cx; 0 fy cy; 0 0 1] as 9 numbers and nothing else (it has no
+// baseline: it converts planar depth, not disparity, which refuses it).
+Intrinsics read_calib_camera(const std::string& path);
 Image disparity_to_z(const Image& disparity, double f_px, double baseline_m, double doffs_px);
 
 // ---- rasteriser depth buffers ------------------------------------------------

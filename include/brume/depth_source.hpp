@@ -4,9 +4,10 @@
 // record of what was done.
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+
+#include <nlohmann/json.hpp>
 
 #include "brume/camera.hpp"
 #include "brume/depth.hpp"
@@ -91,6 +92,9 @@ struct LoadedDepth {
   std::string path;      // the source file
   Image window_depth;    // --depth-buffer: the window depth d in [0, 1] as read (NaN unknown), for a GPU pass
                          // that linearises it itself; empty for other sources
+  // The camera the range map was seen from, where the source gives one
+  // (source_camera): the completion's planar continuation uses it.
+  std::optional<Intrinsics> camera;
 };
 
 // Convert the source to a range map. width/height: the image the depth
@@ -109,5 +113,10 @@ Intrinsics depth_intrinsics(const DepthSource& src, int width, int height);
 // depth_intrinsics. The pose comes from `pose` (default: level, looking north,
 // height unknown); make_camera validates it.
 Camera depth_camera(const DepthSource& src, int width, int height, const CameraPose& pose = {});
+
+// The source's camera intrinsics for a width x height map where its flags
+// give them (--velodyne with --kitti-calib: P2; --fx.., --fov-x.., --calib),
+// else none (a range map alone needs no camera).
+std::optional<Intrinsics> source_camera(const DepthSource& src, int width, int height);
 
 }  // namespace brume

@@ -25,6 +25,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -131,8 +132,16 @@ struct RangeStep {
   PrepareParams params;
   CompleteMode complete = CompleteMode::automatic;
   CompleteParams completion;
+  // Not a parameter: the camera of the range map where its source gives one
+  // (LoadedDepth::camera), for the completion's planar continuation.
+  std::optional<Intrinsics> camera;
 };
 const ParamTable<RangeStep>& range_step_param_table();
+// The step with the camera of the loaded depth (for the planar completion).
+inline RangeStep with_camera(RangeStep step, const LoadedDepth& depth) {
+  step.camera = depth.camera;
+  return step;
+}
 
 // An output map besides the main image, declared by the effect.
 struct MapOutput {

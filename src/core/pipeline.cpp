@@ -248,7 +248,9 @@ const ParamTable<DepthSource>& depth_param_table() {
         .real_or_unset("fov-y", &DepthSource::fov_y_deg, "deg", Range::left_open(0.0, 180.0),
                        "vertical field of view, edge to edge", NAN)
         .nest(&DepthSource::lens, lens_param_table("depth"))
-        .text("calib", &DepthSource::calib, "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm)")
+        .text("calib", &DepthSource::calib,
+              "Middlebury 2014 / ETH3D calib.txt (cam0, doffs, baseline in mm), or KITTI depth completion's "
+              "intrinsics/*.txt (the 3x3 K as 9 numbers: the camera without a baseline, for --z and --range)")
         .reads_file("", 0, 4)
         .real_or_unset("baseline", &DepthSource::baseline_m, "m", Range::above(0.0),
                        "stereo baseline (without --calib)", NAN)
@@ -638,7 +640,7 @@ CompletedRange complete_step(ConstImageView measured, ConstImageView rgb, const 
   if (!rgb.contiguous()) guide_copy = copy_of(rgb);
   const DenseImageRef range = range_copy.empty() ? DenseImageRef(measured) : DenseImageRef(range_copy);
   const DenseImageRef guide = guide_copy.empty() ? DenseImageRef(rgb) : DenseImageRef(guide_copy);
-  CompleteResult cr = complete_range(range, guide, step.completion, threads);
+  CompleteResult cr = complete_range(range, guide, step.completion, threads, step.camera ? &*step.camera : nullptr);
   out.record.update(complete_record(step.completion, cr));
   out.record["applied"] = true;
   out.record["measured_known_fraction"] = fraction;

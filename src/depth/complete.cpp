@@ -18,6 +18,11 @@
 
 namespace brume {
 
+const EnumNames<CompleteMethod>& complete_method_names() {
+  static const EnumNames<CompleteMethod> n = {{CompleteMethod::column, "column"}, {CompleteMethod::planar, "planar"}};
+  return n;
+}
+
 const ParamTable<CompleteParams>& complete_param_table() {
   static const ParamTable<CompleteParams> t = [] {
     ParamTable<CompleteParams> d("complete");
@@ -36,7 +41,12 @@ const ParamTable<CompleteParams>& complete_param_table() {
               "image's 99th percentile), smooth (--complete-sky-roughness) and connected to the top row")
         .real("complete-sky-roughness", &CompleteParams::sky_roughness, "1", Range::closed(0.0, 1.0),
               "sky rule: the largest 5x5 standard deviation of sRGB luma of a sky pixel (with "
-              "--complete-sky-luminance); sky stays unknown (NaN)");
+              "--complete-sky-luminance); sky stays unknown (NaN)")
+        .choice("complete-method", &CompleteParams::method, complete_method_names(),
+                "structure above the scan (not sky, no measurement near): planar continues each column's planar "
+                "depth up from its topmost measurements, along image segments (issue 52); column takes the "
+                "column's nearest estimate, the morphological pilot's wide fill (the rule of records before it)")
+        .since(4, "column");
     return d;
   }();
   return t;
@@ -92,7 +102,8 @@ float srgb_encode(float x) {
 
 }  // namespace
 
-CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const CompleteParams& p, int threads) {
+CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const CompleteParams& p, int threads,
+                              const Intrinsics* camera) {
   complete_param_table().validate(p);
   if (range.empty()) throw Error("complete: the range map is empty (" + range.size_string() + ")");
   if (range.channels != 1)
@@ -325,6 +336,115 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
       }
   }
 
+  auto refined_at = [&](std::size_t i) {
+    return (den(i) > kMinWeight && den(i) >= kLayerShare * support(i)) || support(i) > kFallbackSupport;
+  };
+  // ---- 3c. planar: structure above the scan continues its planar depth ----
+  std::vector<std::uint8_t> continued;
+  if (p.method == CompleteMethod::planar) {
+    continued.assign(N, 0);
+    Intrinsics k;
+    if (camera) {
+      k = resolve(*camera, W, H);
+    } else {
+      k.fx = k.fy = W;
+    }
+    const double cx = std::isfinite(k.cx) ? k.cx : 0.5 * (W - 1), cy = std::isfinite(k.cy) ? k.cy : 0.5 * (H - 1);
+    std::vector<float> fxu(W), fyv(H);
+    for (int x = 0; x < W; ++x) fxu[x] = static_cast<float>((x - cx) / k.fx);
+    for (int y = 0; y < H; ++y) fyv[y] = static_cast<float>((y - cy) / k.fy);
+    // range = z * stretch(x, y)
+    auto stretch = [&](int x, int y) { return std::sqrt(1.0f + fxu[x] * fxu[x] + fyv[y] * fyv[y]); };
+    // Each column's topmost measurements: the continuation starts at the
+    // topmost (b), from the median planar depth of the three topmost.
+    std::vector<int> b(W, H), nb(W, 0);
+    std::vector<std::array<float, 3>> top3(W);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const std::size_t i = static_cast<std::size_t>(y) * W + x;
+        if (!known[i] || nb[x] == 3) continue;
+        if (nb[x] == 0) b[x] = y;
+        top3[x][nb[x]++] = range.data[i] / stretch(x, y);
+      }
+    std::vector<float> seed(W, NAN);
+    for (int x = 0; x < W; ++x) {
+      if (nb[x] == 0) continue;
+      const std::array<float, 3>& v = top3[x];
+      if (nb[x] == 1) seed[x] = v[0];
+      else if (nb[x] == 2) seed[x] = 0.5f * (v[0] + v[1]);
+      else seed[x] = std::max(std::min(v[0], v[1]), std::min(std::max(v[0], v[1]), v[2]));  // median of 3
+    }
+    // A column without a measurement starts at its neighbours' limit (the
+    // median over 7 columns, as the sky rule's), from its own estimate there.
+    {
+      std::vector<int> lim(W, H);
+      for (int x = 0; x < W; ++x) {
+        std::array<int, 7> w7;
+        int n7 = 0;
+        for (int d = -3; d <= 3; ++d)
+          if (x + d >= 0 && x + d < W && nb[x + d] > 0) w7[n7++] = b[x + d];
+        if (n7 == 0) continue;
+        std::nth_element(w7.begin(), w7.begin() + n7 / 2, w7.begin() + n7);
+        lim[x] = w7[n7 / 2];
+      }
+      // No measurement within 3 columns (lim = H): no continuation (b = -1,
+      // every row is below it); step 3b's rule fills the column.
+      for (int x = 0; x < W; ++x)
+        if (nb[x] == 0) b[x] = lim[x] < H ? lim[x] : -1;
+    }
+    const float zmax_range = rmax;  // never behind the farthest measurement (the sky lies at or beyond it)
+    std::vector<float> cur(W, NAN), nxt(W, NAN);
+    for (int y = H - 1; y >= 0; --y) {
+      for (int x = 0; x < W; ++x) {
+        const std::size_t i = static_cast<std::size_t>(y) * W + x;
+        if (y > b[x] || (y == b[x] && !(seed[x] == seed[x]))) {
+          nxt[x] = out[i] == out[i] ? out[i] / stretch(x, y) : NAN;
+          continue;
+        }
+        if (y == b[x]) {
+          nxt[x] = seed[x];
+          continue;
+        }
+        if (res.sky_mask.data[i] > 0.0f) {
+          nxt[x] = NAN;
+          continue;
+        }
+        if (known[i] || (out[i] == out[i] && refined_at(i))) {
+          nxt[x] = out[i] / stretch(x, y);
+          continue;
+        }
+        // The three neighbours below, weighted by colour likeness.
+        const std::size_t below = i + W;
+        const float* gp = &g[3 * i];
+        float sw = 0.0f, swz = 0.0f, ss = 0.0f, ssz = 0.0f;
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int u = x + dx;
+          if (u < 0 || u >= W || !(cur[u] == cur[u])) continue;
+          const float* gq = &g[3 * (below + dx)];
+          const float d0 = gp[0] - gq[0], d1 = gp[1] - gq[1], d2 = gp[2] - gq[2];
+          const float s = dx == 0 ? 1.0f : 0.5f;
+          const float w = s * ex((d0 * d0 + d1 * d1 + d2 * d2) * inv_2sc2);
+          sw += w, swz += w * cur[u], ss += s, ssz += s * cur[u];
+        }
+        if (ss == 0.0f) {
+          nxt[x] = NAN;
+          continue;
+        }
+        // Across an edge on every side the surface above is still unknown:
+        // continue it by position alone.
+        float z = sw > kMinWeight ? swz / sw : ssz / ss;
+        const float st = stretch(x, y);
+        z = std::min(z, zmax_range / st);
+        nxt[x] = z;
+        out[i] = z * st;
+        conf[i] = 0.2f * std::exp(-static_cast<float>(b[x] - y) / 32.0f);
+        continued[i] = 1;
+        ++res.continued;
+      }
+      std::swap(cur, nxt);
+    }
+  }
+
   // ---- 3b. structure: extend each column's nearest estimate (below first) ----
   std::vector<std::uint8_t> estimated(N);
   for (std::size_t i = 0; i < N; ++i) estimated[i] = out[i] == out[i];
@@ -363,9 +483,8 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
     if (known[i]) continue;
     if (res.sky_mask.data[i] > 0.0f) continue;
     if (!(out[i] == out[i])) ++res.unknown;
-    else if (!estimated[i]) ++res.extrapolated;
-    else if ((den(i) > kMinWeight && den(i) >= kLayerShare * support(i)) || support(i) > kFallbackSupport)
-      ++res.refined;
+    else if (!estimated[i] || (!continued.empty() && continued[i])) ++res.extrapolated;
+    else if (refined_at(i)) ++res.refined;
     else ++res.pilot_only;
   }
   res.completed_fraction = static_cast<double>(N - res.sky - res.unknown) / static_cast<double>(N);
@@ -374,6 +493,33 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
 
 nlohmann::json complete_record(const CompleteParams& p, const CompleteResult& r) {
   const double n = static_cast<double>(r.range.pixels());
+  if (p.method == CompleteMethod::planar)
+    return {{"method",
+             "Ku et al. 2018 morphological pilot (diamond 5x5 dilation, 5x5 closing, 7x7 and 31x31 fills, 5x5 median "
+             "and Gaussian, on D_max - R) refined by a joint trilateral filter of the measurements (space, sRGB "
+             "colour, range against the pilot; space and colour alone where the pilot's layer has < 5 % of the "
+             "weight); sky: unmeasured bright smooth regions above the scan's upper limit touching the top row, "
+             "left unknown; structure above each column's topmost measurement continues the median planar depth of "
+             "its three topmost measurements upward, each pixel the colour-weighted mean of its three neighbours "
+             "below, never beyond the farthest measurement (issue 52); other unmeasured pixels extend their "
+             "column's nearest estimate (below first)"},
+            {"complete_method", "planar"},
+            {"radius_px", p.radius_px},
+            {"sigma_space_px", p.sigma_space_px},
+            {"sigma_colour", p.sigma_colour},
+            {"sigma_range", p.sigma_range},
+            {"sky_luminance", p.sky_luminance},
+            {"sky_roughness", p.sky_roughness},
+            {"d_max_m", r.d_max_m},
+            {"known_fraction", r.known_fraction},
+            {"completed_fraction", r.completed_fraction},
+            {"refined_fraction", r.refined / n},
+            {"pilot_only_fraction", r.pilot_only / n},
+            {"extrapolated_fraction", r.extrapolated / n},
+            {"continued_fraction", r.continued / n},
+            {"sky_fraction", r.sky / n},
+            {"unknown_fraction", r.unknown / n},
+            {"scan_top_row", r.scan_top_row}};
   return {{"method",
            "Ku et al. 2018 morphological pilot (diamond 5x5 dilation, 5x5 closing, 7x7 and 31x31 fills, 5x5 median "
            "and Gaussian, on D_max - R) refined by a joint trilateral filter of the measurements (space, sRGB "

@@ -4,11 +4,13 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <limits>
 #include <map>
 #include <sstream>
+#include <string>
 #include <vector>
 
 #include "brume/depth.hpp"
@@ -165,8 +167,72 @@ Image scale_by_ray(const Image& in, const Intrinsics& k0, bool to_range) {
 Image z_to_range(const Image& z, const Intrinsics& k) { return scale_by_ray(z, k, true); }
 Image range_to_z(const Image& range, const Intrinsics& k) { return scale_by_ray(range, k, false); }
 
+namespace {
+// KITTI depth completion's intrinsics/*.txt: 9 numbers, no key. Returns
+// false when the text has any '=' (a calib.txt); throws for a keyless file
+// that is not a camera matrix.
+bool camera_matrix(const std::string& path, const std::string& text, std::array<double, 9>& K) {
+  if (text.find('=') != std::string::npos) return false;
+  std::istringstream in(text);
+  std::vector<double> v;
+  std::string tok;
+  while (in >> tok) {
+    char* end = nullptr;
+    const double x = std::strtod(tok.c_str(), &end);
+    if (end == tok.c_str() || *end != '\0' || !std::isfinite(x))
+      throw Error("--calib '" + path + "': '" + tok +
+                  "' is not a number; --calib takes a Middlebury 2014 / ETH3D "
+                  "calib.txt (cam0=, baseline= lines) or KITTI depth completion's intrinsics/*.txt (9 numbers: "
+                  "fx 0 cx 0 fy cy 0 0 1)");
+    if (v.size() == 9)
+      throw Error("--calib '" + path +
+                  "' holds more than 9 numbers and no '=' line; KITTI depth completion's "
+                  "intrinsics/*.txt holds exactly the 3x3 matrix K (fx 0 cx 0 fy cy 0 0 1), a calib.txt has "
+                  "cam0= and baseline= lines");
+    v.push_back(x);
+  }
+  if (v.size() != 9)
+    throw Error("--calib '" + path + "' holds " + std::to_string(v.size()) +
+                " numbers and no '=' line; KITTI depth "
+                "completion's intrinsics/*.txt holds the 3x3 matrix K as 9 numbers (fx 0 cx 0 fy cy 0 0 1), a "
+                "calib.txt has cam0= and baseline= lines");
+  std::copy(v.begin(), v.end(), K.begin());
+  if (K[1] != 0.0 || K[3] != 0.0 || K[6] != 0.0 || K[7] != 0.0 || K[8] != 1.0)
+    throw Error("--calib '" + path +
+                "': the 9 numbers are not a camera matrix [fx 0 cx; 0 fy cy; 0 0 1] (row by "
+                "row: entries 2, 4, 7 and 8 must be 0 and the last 1); give KITTI depth completion's "
+                "intrinsics/*.txt as it is, or a calib.txt");
+  require_positive(K[0], "--calib '" + path + "': focal length fx (K's first number)");
+  require_positive(K[4], "--calib '" + path + "': focal length fy (K's fifth number)");
+  return true;
+}
+}  // namespace
+
+Intrinsics read_calib_camera(const std::string& path) {
+  const std::string text = read_input_file(path, "--calib", kCalibLimit);
+  std::array<double, 9> K{};
+  Intrinsics k;
+  if (camera_matrix(path, text, K)) {
+    k.fx = K[0], k.fy = K[4], k.cx = K[2], k.cy = K[5];
+    return k;
+  }
+  const StereoCalib c = read_stereo_calib(path);
+  k.fx = k.fy = c.f_px;
+  k.cx = c.cx, k.cy = c.cy;
+  return k;
+}
+
 StereoCalib read_stereo_calib(const std::string& path) {
-  std::istringstream in(read_input_file(path, "--calib", kCalibLimit));
+  const std::string text = read_input_file(path, "--calib", kCalibLimit);
+  {
+    std::array<double, 9> K{};
+    if (camera_matrix(path, text, K))
+      throw Error("--calib '" + path +
+                  "' is a 3x3 camera matrix (KITTI depth completion's intrinsics/*.txt): it "
+                  "gives the camera but no stereo baseline, which a disparity needs; give the pair's calib.txt "
+                  "(Middlebury 2014 / ETH3D), or --fx and --baseline");
+  }
+  std::istringstream in(text);
   std::map<std::string, std::string> kv;
   std::map<std::string, int> at;  // the line of each key (from 1): a key given twice is refused
   std::string line;

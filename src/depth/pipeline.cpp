@@ -105,7 +105,7 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
     fs::create_directories(job.masks, ec);
     if (!fs::is_directory(job.masks)) throw Error("--masks '" + job.masks + "' cannot be created: " + ec.message());
   }
-  const RangeStep step{PrepareMode::automatic, job.prepare, job.complete, job.completion};
+  const RangeStep step{PrepareMode::automatic, job.prepare, job.complete, job.completion, {}};
   check_range_step(step, ctx.given);
   Image rgb;
   nlohmann::json image_record;
@@ -120,7 +120,7 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
   if (!rgb.empty() && (ld.range.width != rgb.width || ld.range.height != rgb.height))
     throw Error("depth '" + ld.path + "' is " + ld.range.size_string() + " but --image '" + job.image + "' is " +
                 rgb.size_string() + "; they must be the same size (resample the depth map, or crop both)");
-  const CompletedRange done = complete_step(ld.range, rgb, step, ctx.given);
+  const CompletedRange done = complete_step(ld.range, rgb, with_camera(step, ld), ctx.given);
   PrepareResult pr = prepare_range(done.applied ? done.range : ld.range, job.prepare);
   nlohmann::json rec = run_record_header("depth prepare", ctx.argv);
   rec["job"] = depth_prepare_job_table().to_json(job);
@@ -175,7 +175,8 @@ nlohmann::json run_depth_complete_job(const DepthCompleteJob& job, const ExecOpt
   if (!job.confidence.empty()) check_writable(job.confidence, conf, "--confidence");
   if (!job.record.empty()) check_record_path(job.record);
   LoadedInputs in = load_inputs(job.input, true);
-  const CompleteResult cr = complete_range(in.depth.range, in.rgb, job.complete, eo.threads);
+  const CompleteResult cr = complete_range(in.depth.range, in.rgb, job.complete, eo.threads,
+                                           in.depth.camera ? &*in.depth.camera : nullptr);
   nlohmann::json rec = run_record_header("depth complete", ctx.argv);
   rec["job"] = depth_complete_job_table().to_json(job);
   rec["inputs"] = in.record;

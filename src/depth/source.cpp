@@ -1,6 +1,7 @@
 // brume — depth sources (see brume/depth_source.hpp).
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <vector>
 
 #include "brume/depth_source.hpp"
@@ -44,11 +45,7 @@ bool pixel_intrinsics(const DepthSource& s, int width, int height, Intrinsics& k
     return true;
   }
   if (!s.calib.empty()) {
-    StereoCalib c = read_stereo_calib(s.calib);
-    k = Intrinsics{};
-    k.fx = k.fy = c.f_px;
-    k.cx = c.cx, k.cy = c.cy;
-    k = resolve(k, width, height);
+    k = resolve(read_calib_camera(s.calib), width, height);
     from = "--calib";
     return true;
   }
@@ -69,7 +66,7 @@ Intrinsics depth_intrinsics(const DepthSource& s, int width, int height) {
   if (!s.lens.given()) {
     if (pixels) return k;
     throw Error("planar depth needs the camera: give --fx (and --fy, --cx, --cy), or --fov-x/--fov-y, or --calib "
-                "calib.txt, or the camera in millimetres (--focal-length MM --sensor-width MM, as Blender states it)");
+                "(a calib.txt, or KITTI depth completion's intrinsics/*.txt), or the camera in millimetres (--focal-length MM --sensor-width MM, as Blender states it)");
   }
   if (!pixels) return lens_intrinsics(s.lens, width, height);
   // Both: the pixels win (as depth of field's lens beside --fov-x always
@@ -216,7 +213,33 @@ LoadedDepth stereo_depth(const DepthSource& s, int width, int height) {
 
 }  // namespace
 
+namespace {
+LoadedDepth load_depth_as_read(const DepthSource& s, int width, int height);
+}
+
+std::optional<Intrinsics> source_camera(const DepthSource& s, int width, int height) {
+  if (width <= 0 || height <= 0) return std::nullopt;
+  if (!s.velodyne.empty()) {
+    if (s.kitti_calib.empty()) return std::nullopt;
+    return depth_camera(s, width, height).k;
+  }
+  if (s.k.fx > 0.0 || s.k.fy > 0.0 || !std::isnan(s.fov_x_deg) || !std::isnan(s.fov_y_deg) || !s.calib.empty())
+    return depth_intrinsics(s, width, height);
+  return std::nullopt;
+}
+
 LoadedDepth load_depth(const DepthSource& s, int width, int height) {
+  LoadedDepth d = load_depth_as_read(s, width, height);
+  d.camera = source_camera(s, d.range.width, d.range.height);
+  // --calib is an input whichever source reads it (--z, --range, a depth
+  // buffer take the camera from it): brume run checks its hash.
+  if (!s.calib.empty() && d.record.is_object() && !d.record.contains("calib"))
+    d.record["calib"] = {{"path", s.calib}, {"sha256", sha256_file(s.calib)}};
+  return d;
+}
+
+namespace {
+LoadedDepth load_depth_as_read(const DepthSource& s, int width, int height) {
   const int given = s.sources();
   if (given != 1)
     throw Error(given == 0 ? "no depth given: use one of --range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne, --stereo-right"
@@ -405,5 +428,6 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
   }
   return out;
 }
+}  // namespace
 
 }  // namespace brume

@@ -274,11 +274,14 @@ nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo,
   AerialJob job = given_job;
   const AerialTurbidity tf = resolve_aerial_turbidity(job, ctx.given);
   const EffectJob<AerialJob> e{
-      "aerial", aerial_job_table(), aerial_map_outputs(), 190,
+      "aerial",
+      aerial_job_table(),
+      aerial_map_outputs(),
+      190,
       [&](const AerialJob& j, const ExecOptions&) { validate_aerial(j.aerial, ctx.given); },
       [&](const AerialJob& j, LoadedInputs& in, const Exec& exec) {
         if (!j.aerial.airlight) check_airlight_sky(in, "aerial");
-        AerialRun run = run_aerial(in.rgb, in.depth.range, j.aerial, j.prepare, exec, ctx.given);
+        AerialRun run = run_aerial(in.rgb, in.depth.range, j.aerial, with_camera(j.prepare, in.depth), exec, ctx.given);
         if (!tf.fit_record.is_null()) {
           run.record["turbidity_fit"] = tf.fit_record;
           in.record["sky_image"] = tf.image_record;

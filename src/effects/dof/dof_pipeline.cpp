@@ -211,8 +211,8 @@ nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& eo, const RunCo
       },
       [&](const DofJob& j, LoadedInputs& in, const Exec& exec) {
         const Intrinsics k = dof_intrinsics(j.input.depth, in.rgb.width, in.rgb.height);
-        DofRun run = run_dof(in.rgb, in.depth.range, k, dof_with_lens(j.dof, j.input.depth.lens), j.prepare, exec,
-                             ctx.given);
+        DofRun run = run_dof(in.rgb, in.depth.range, k, dof_with_lens(j.dof, j.input.depth.lens),
+                             with_camera(j.prepare, in.depth), exec, ctx.given);
         run.record["dof"]["derived"]["intrinsics"]["source"] =
             dof_intrinsics_source(j.input.depth, in.rgb.width, in.rgb.height);
         return EffectOutput{std::move(run.result.rgb), {{"scale-map", std::move(run.result.scale)}},

@@ -225,12 +225,15 @@ FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSourc
 
 nlohmann::json run_fog_job(const FogJob& job, const ExecOptions& eo, const RunContext& ctx) {
   const EffectJob<FogJob> e{
-      "fog", fog_job_table(), fog_map_outputs(), 150,
+      "fog",
+      fog_job_table(),
+      fog_map_outputs(),
+      150,
       [&](const FogJob& j, const ExecOptions&) { validate_fog(j.fog, ctx.given); },
       [&](const FogJob& j, LoadedInputs& in, const Exec& exec) {
         if (!j.fog.airlight) check_airlight_sky(in, "fog");
-        FogRun run = run_fog(in.rgb, in.depth.range, j.input.depth, j.fog, j.prepare, exec, ctx.given,
-                             &in.depth.window_depth);
+        FogRun run = run_fog(in.rgb, in.depth.range, j.input.depth, j.fog, with_camera(j.prepare, in.depth), exec,
+                             ctx.given, &in.depth.window_depth);
         return EffectOutput{std::move(run.result.rgb),
                             {{"optical-depth", std::move(run.result.optical_depth)},
                              {"transmission", std::move(run.result.transmission)}},

@@ -166,11 +166,14 @@ HazeRun run_haze_prepared(ConstImageView rgb, ConstImageView measured_range, con
 
 nlohmann::json run_haze_job(const HazeJob& job, const ExecOptions& eo, const RunContext& ctx) {
   const EffectJob<HazeJob> e{
-      "haze", haze_job_table(), haze_map_outputs(), 140,
+      "haze",
+      haze_job_table(),
+      haze_map_outputs(),
+      140,
       [&](const HazeJob& j, const ExecOptions&) { validate_haze(j.haze, ctx.given); },
       [&](const HazeJob& j, LoadedInputs& in, const Exec& exec) {
         if (!j.haze.airlight) check_airlight_sky(in, "haze");
-        HazeRun run = run_haze(in.rgb, in.depth.range, j.haze, j.prepare, exec, ctx.given);
+        HazeRun run = run_haze(in.rgb, in.depth.range, j.haze, with_camera(j.prepare, in.depth), exec, ctx.given);
         return EffectOutput{std::move(run.result.rgb),
                             {{"transmission", std::move(run.result.transmission)},
                              {"scale-map", std::move(run.result.scale)}},

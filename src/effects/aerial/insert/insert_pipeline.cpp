@@ -141,7 +141,8 @@ nlohmann::json run_insert_job(const InsertJob& job, const ExecOptions& eo, const
           throw Error("--object-range '" + j.object.object_range + "' is " + orange.range.size_string() +
                       " but --image '" + j.input.image + "' is " + in.rgb.size_string() +
                       "; they must be the same size (render the object's range with the photo's camera)");
-        InsertRun run = insert_object(in.rgb, in.depth.range, obj, orange.range, j.aerial, j.prepare, exec, ctx.given);
+        InsertRun run = insert_object(in.rgb, in.depth.range, obj, orange.range, j.aerial,
+                                      with_camera(j.prepare, in.depth), exec, ctx.given);
         in.record["object"] = file_record(j.object.object, oinfo, obj);
         in.record["object"]["convention"] = oinfo.integer
                                                 ? "sRGB-encoded colour, straight alpha: decoded to linear, then premultiplied"

@@ -181,7 +181,8 @@ nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, co
   check_working_memory("haze+dof", in.rgb, 140);  // haze's measured peak (the larger stage); the chain's own is not measured
   if (!job.haze.airlight) check_airlight_sky(in, "haze");
   const Intrinsics k = dof_stage([&] { return dof_intrinsics(job.input.depth, in.rgb.width, in.rgb.height); });
-  HazeDofRun run = run_haze_dof(in.rgb, in.depth.range, k, job.haze, dof, job.prepare, exec, ctx.given);
+  HazeDofRun run = run_haze_dof(in.rgb, in.depth.range, k, job.haze, dof, with_camera(job.prepare, in.depth), exec,
+                                ctx.given);
   run.record["dof"]["derived"]["intrinsics"]["source"] =
       dof_intrinsics_source(job.input.depth, in.rgb.width, in.rgb.height);
 
