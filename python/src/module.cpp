@@ -245,22 +245,61 @@ void def_array_command(py::module_& m, const CommandDef& c) {
 
 // ==== errors as Python exceptions ===========================
 void register_errors() {
+  // Every error the module raises passes here: the library's messages, and
+  // the binding's own TypeError and ValueError, in Python's words
+  // (python_spelling: keywords from the tables, not the CLI's flags).
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const FileNotFound& e) {
-      PyErr_SetString(PyExc_FileNotFoundError, e.what());
+      PyErr_SetString(PyExc_FileNotFoundError, python_spelling(e.what()).c_str());
     } catch (const GpuUnavailable& e) {
-      PyErr_SetString(PyExc_RuntimeError, e.what());
+      PyErr_SetString(PyExc_RuntimeError, python_spelling(e.what()).c_str());
     } catch (const Error& e) {
       std::string m = e.what();
       if (m.find("raise the limit with --max-pixels") != std::string::npos)
         m += " (in Python: brume.set_max_pixels(N))";
-      PyErr_SetString(PyExc_ValueError, m.c_str());
+      PyErr_SetString(PyExc_ValueError, python_spelling(m).c_str());
+    } catch (const py::type_error& e) {
+      PyErr_SetString(PyExc_TypeError, python_spelling(e.what()).c_str());
+    } catch (const py::value_error& e) {
+      PyErr_SetString(PyExc_ValueError, python_spelling(e.what()).c_str());
     } catch (const nlohmann::json::exception& e) {
       PyErr_SetString(PyExc_ValueError, printable_text(e.what()).c_str());
     }
   });
+}
+
+// random_params' ranges as the sampler's spec texts: a spec string, a fixed
+// number or name, or a list/tuple (a choice).
+std::map<std::string, std::string> range_specs(const py::kwargs& ranges) {
+  std::map<std::string, std::string> specs;
+  for (auto item : ranges) {
+    const std::string name = py::str(item.first);
+    py::handle v = item.second;
+    std::string spec;
+    if (py::isinstance<py::str>(v)) {
+      spec = v.cast<std::string>();
+    } else if (py::isinstance<py::bool_>(v)) {
+      spec = v.cast<bool>() ? "true" : "false";
+    } else if (py::isinstance<py::int_>(v) || py::isinstance<py::float_>(v)) {
+      spec = py::str(py::repr(v));
+    } else if (py::isinstance<py::list>(v) || py::isinstance<py::tuple>(v)) {
+      spec = "choice(";
+      bool first = true;
+      for (py::handle e : v) {
+        spec += (first ? "" : ", ") + std::string(py::str(e));
+        first = false;
+      }
+      spec += ")";
+    } else {
+      throw py::type_error("brume.random_params(): " + name + "=" + std::string(py::repr(v)) +
+                           " is neither a spec string ('uniform(a, b)', 'loguniform(a, b)', "
+                           "'choice(x, y)'), a fixed value nor a list of choices");
+    }
+    specs[name] = spec;
+  }
+  return specs;
 }
 
 }  // namespace brume::python

@@ -361,7 +361,7 @@ void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, Ar
     try {  // the scan first (milliseconds): its errors before the image's work, as on the command line
       p = scan_params(h, job, l.lidar, given, m);
     } catch (const Error& err) {
-      throw Error(fn + "(): lidar=: " + err.what());
+      throw Error(fn + "(): lidar: " + err.what());
     }
     try {
       out = lidar_fog_array(in[scan].view, p, fn + "(): lidar", st);
