@@ -70,6 +70,7 @@ struct HazeDofJob {
   RangeStep prepare;
   HazeParams haze;
   DofParams dof;       // flags --dof-..., record block "dof"
+  SceneScale scene;    // --scene-scale: both stages' lengths for a reference frame (brume/pipeline.hpp)
   OutputFiles output;  // maps: transmission, scale-map (haze's sigma), dof-scale-map (the DOF's sigma)
   CameraLidar lidar;   // --lidar IN.bin --lidar-out OUT.bin (brume/lidar_camera.hpp): haze's medium
 };

@@ -41,7 +41,10 @@ namespace brume {
 
 // A default plausible distribution of one sampled parameter (brume/sample.hpp):
 // its canonical name, the spec text, and the parameters whose explicit
-// value drops it (haze's visibility when kappa-s is given).
+// value drops it (haze's visibility when kappa-s is given): "name" drops it
+// whatever the value, "name=v" when name is given as the fixed value v,
+// "name!=v" when it is given as anything else (fog's falloff with a profile
+// other than exponential).
 struct SampleDefault {
   std::string name, spec;
   std::vector<std::string> dropped_by;
@@ -67,9 +70,16 @@ struct ArrayCall {
   P p;
   RangeStep prepare;
   DepthSource depth;  // intrinsics only (fog, dof): fx, fy, cx, cy, fov-x, fov-y, calib
+  SceneScale scene;   // --scene-scale (haze, fog, dof)
   ExecOptions exec;
 };
-enum ArrayBlocks : unsigned { kArrayNone = 0, kArrayPrepare = 1, kArrayIntrinsics = 2, kArrayExec = 4 };
+enum ArrayBlocks : unsigned {
+  kArrayNone = 0,
+  kArrayPrepare = 1,
+  kArrayIntrinsics = 2,
+  kArrayExec = 4,
+  kArrayScene = 8
+};
 // The call's table: `own` (less `skip`) with the blocks asked for.
 template <class P>
 ParamTable<ArrayCall<P>> array_call_table(const ParamTable<P>& own, unsigned blocks,
@@ -119,6 +129,13 @@ struct ArrayForm {
   bool replays = false;            // takes job= (a record's job, as brume run reads it)
   // The default call with `values` set, each checked by its declaration.
   std::function<nlohmann::json(const JobValues& values)> build;
+  // The call's checks that need no pixels, as its run makes them before any
+  // work: every value's range, the combinations the run would refuse or
+  // ignore, and what the call needs besides its keywords (fog's camera
+  // height, depth of field's intrinsics). `given`: the keywords set. The
+  // transforms check every value their distributions can draw with it when
+  // they are made. Throws brume::Error.
+  std::function<void(const nlohmann::json& call, const std::set<std::string>& given)> check;
   // Runs the call on the arrays (one per ArrayArg; `exec` from the call's
   // execution block, with the caller's GPU context); `given`: the keywords
   // set explicitly.
@@ -145,6 +162,14 @@ struct CommandDef {
   // plan of gpu_passes for a job (the table's JSON, checked) on the inputs,
   // with the maps it names. Empty for commands the preview does not show.
   std::function<PreviewFrame(const nlohmann::json& job, const PreviewInputs& in)> preview;
+  // Where the page starts on a scene (brume/preview.hpp): values that
+  // replace the table's defaults where those would show nothing (haze's
+  // visibility at the scene's median range, depth of field's focus at the
+  // image centre's depth, the camera a height profile needs), for a job of
+  // the defaults and the command line's flags (`given`).
+  std::function<std::vector<PreviewStart>(const nlohmann::json& job, const std::set<std::string>& given,
+                                          const PreviewScene& scene)>
+      preview_start;
   // The blocks or parameters the preview's page leaves out (those of a file
   // the page cannot name, a LiDAR scan's). Text parameters (files,
   // databases) are never the page's.
@@ -262,6 +287,7 @@ ParamTable<ArrayCall<P>> array_call_table(const ParamTable<P>& own, unsigned blo
   t.nest_except(&ArrayCall<P>::p, own, skip);
   if (blocks & kArrayPrepare) t.nest(&ArrayCall<P>::prepare, range_step_param_table());
   if (blocks & kArrayIntrinsics) t.nest_except(&ArrayCall<P>::depth, depth_param_table(), depth_file_params());
+  if (blocks & kArrayScene) t.nest(&ArrayCall<P>::scene, scene_scale_param_table());
   if (blocks & kArrayExec) t.nest(&ArrayCall<P>::exec, exec_param_table());
   return t;
 }
@@ -272,12 +298,12 @@ ParamTable<ArrayCall<P>> array_call_table(const ParamTable<P>& own, unsigned blo
 // recorded as auto). `function` is the module's name, `public_name` the one
 // users call ("" : brume.<function>).
 template <class P>
-ArrayForm make_array_form(std::string function, std::string public_name, std::string summary,
-                          std::vector<ArrayArg> args, const ParamTable<ArrayCall<P>>& t,
-                          std::vector<std::string> fields, bool replays,
-                          std::function<ArrayResult(const std::vector<ArrayIn>&, ArrayCall<P>&, const Exec&,
-                                                    const std::set<std::string>&)>
-                              run) {
+ArrayForm make_array_form(
+    std::string function, std::string public_name, std::string summary, std::vector<ArrayArg> args,
+    const ParamTable<ArrayCall<P>>& t, std::vector<std::string> fields, bool replays,
+    std::function<ArrayResult(const std::vector<ArrayIn>&, ArrayCall<P>&, const Exec&, const std::set<std::string>&)>
+        run,
+    std::function<void(const ArrayCall<P>&, const std::set<std::string>&)> check = {}) {
   ArrayForm a;
   a.public_name = public_name.empty() ? "brume." + function : std::move(public_name);
   a.function = std::move(function);
@@ -295,6 +321,13 @@ ArrayForm make_array_form(std::string function, std::string public_name, std::st
       d.set(c, v);
     }
     return t.to_json(c);
+  };
+  a.check = [&t, check](const nlohmann::json& call, const std::set<std::string>& given) {
+    ArrayCall<P> c;
+    t.from_json(c, call, "call");
+    t.validate(c);
+    (void)c.exec.exec();  // --reference with another backend
+    if (check) check(c, given);
   };
   a.run = [&t, run](const std::vector<ArrayIn>& in, const nlohmann::json& call, const Exec& exec,
                     const std::set<std::string>& given) {

@@ -159,6 +159,7 @@ struct DofJob {
   InputFiles input;
   RangeStep prepare;
   DofParams dof;
+  SceneScale scene;    // --scene-scale: the lengths for a reference frame (brume/pipeline.hpp)
   OutputFiles output;  // maps: scale-map
 };
 const std::vector<MapOutput>& dof_map_outputs();

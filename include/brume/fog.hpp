@@ -171,6 +171,7 @@ struct FogJob {
   InputFiles input;
   RangeStep prepare;
   FogParams fog;
+  SceneScale scene;    // --scene-scale: the lengths for a reference frame (brume/pipeline.hpp)
   OutputFiles output;  // maps: optical-depth, transmission
   CameraLidar lidar;   // --lidar IN.bin --lidar-out OUT.bin (brume/lidar_camera.hpp)
 };

@@ -195,6 +195,7 @@ struct HazeJob {
   InputFiles input;
   RangeStep prepare;
   HazeParams haze;
+  SceneScale scene;    // --scene-scale: the lengths for a reference frame (brume/pipeline.hpp)
   OutputFiles output;  // maps: transmission, scale-map
   CameraLidar lidar;   // --lidar IN.bin --lidar-out OUT.bin (brume/lidar_camera.hpp)
 };

@@ -67,6 +67,10 @@ const ParamTable<LensCamera>& lens_param_table(const std::string& block);
 // but the intrinsics (fx, fy, cx, cy, fov-x, fov-y, calib, and the camera in
 // millimetres), which an array caller still gives for fog's and dof's camera.
 const std::set<std::string>& depth_file_params();
+// The depth block's parameters that give the camera's intrinsics as numbers
+// (fx, fy, cx, cy, fov-x, fov-y): an array caller's camera, and the camera
+// controls of brume view's page.
+const std::vector<std::string>& camera_intrinsics_params();
 
 // The camera's pose (brume/camera.hpp: conventions fixed once for every
 // effect): --yaw, --pitch, --roll, --camera-height, --camera-x, --camera-z,
@@ -141,6 +145,61 @@ const ParamTable<RangeStep>& range_step_param_table();
 inline RangeStep with_camera(RangeStep step, const LoadedDepth& depth) {
   step.camera = depth.camera;
   return step;
+}
+
+// ---- --scene-scale: an effect's lengths given for a reference frame, scaled to this one ----
+// A dataset's frames span rooms (Middlebury 2005: median range 1.8 m) and
+// streets (KITTI: 14 m): one distribution of visibilities in metres fogs one
+// and leaves the other clear. With --scene-scale R_ref the effect's lengths
+// (its own list, e.g. haze's --visibility, fog's --density, depth of field's
+// --focus-distance) are read as given for a frame whose median range is
+// R_ref; the run scales them by f = (this frame's median range) / R_ref, a
+// length [m] times f, a coefficient [1/m] over f, so that the optical depth
+// -- and the transmission -- at the frame's median range is the one the
+// values give on the reference frame, whatever the frame's size. The job and
+// its record keep the values as given (what brume sample and random_params
+// draw); the record's "scene_scale" block holds the frame's statistic, f and
+// each value as given and as applied. 15 m suits the samplers' default ranges
+// (chosen for street-level outdoor frames: KITTI 000001's median range is
+// 14.3 m).
+struct SceneScale {
+  std::optional<double> reference_m;  // [m] > 0; unset ("off"): the lengths are metres, as given
+};
+const ParamTable<SceneScale>& scene_scale_param_table();
+// The median of a range map's known values (finite, > 0); NaN when it has none.
+double median_known_range(ConstImageView range);
+// The lengths `names` of p scaled to the frame (see SceneScale); the record
+// block, or null when `s` is off. Throws when the range has no known value.
+template <class P>
+nlohmann::json apply_scene_scale(const ParamTable<P>& t, P& p, const std::vector<std::string>& names,
+                                 const SceneScale& s, ConstImageView measured) {
+  if (!s.reference_m) return nullptr;
+  const double median = median_known_range(measured);
+  if (!(median > 0.0))
+    throw Error("--scene-scale scales the effect's lengths by the frame's median range, but the range map has no "
+                "known value");
+  const double f = median / *s.reference_m;
+  nlohmann::json scaled = nlohmann::json::object();
+  for (const std::string& n : names) {
+    const Param<P>& d = t.at(n);
+    const nlohmann::json v = d.get(p);
+    if (!v.is_number()) continue;  // unset: nothing to scale
+    const double given = v.get<double>();
+    double applied = 0.0;
+    if (d.spec.unit == "m") applied = given * f;
+    else if (d.spec.unit == "1/m") applied = given / f;
+    else
+      throw Error("internal: --scene-scale scales metres and coefficients per metre; --" + n + " is in " + d.spec.unit);
+    d.spec.check(applied);
+    d.set(p, applied);
+    scaled[n] = {{"given", given}, {"applied", applied}};
+  }
+  return {{"reference_median_range_m", *s.reference_m},
+          {"median_range_m", median},
+          {"factor", f},
+          {"statistic", "median of the known values of the measured range (finite, > 0), before completion"},
+          {"rule", "a length [m] times factor, a coefficient [1/m] over it"},
+          {"scaled", scaled}};
 }
 
 // An output map besides the main image, declared by the effect.

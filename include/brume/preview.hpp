@@ -57,6 +57,37 @@ Intrinsics preview_intrinsics(const Intrinsics& full, int scale);
 inline int preview_full_width(const PreviewInputs& in) { return in.full_width > 0 ? in.full_width : in.rgb.width; }
 inline int preview_full_height(const PreviewInputs& in) { return in.full_height > 0 ? in.full_height : in.rgb.height; }
 
+// ---- where the page starts (brume view opens on a picture) ----------------------------
+// What the page knows of the scene before its first frame: statistics of the
+// measured range at the files' size over its known pixels (finite, > 0; the
+// sky and holes excluded).
+struct PreviewScene {
+  double median_range_m = NAN;  // the median known range
+  double centre_range_m = NAN;  // the median known range in the central tenth (each side) of the image, else the median
+  double range_min_m = NAN, range_max_m = NAN;
+  int width = 0, height = 0;  // the files' size
+  bool camera_given = false;  // the command line's depth flags give the intrinsics (--fx.., --fov-x/-y, --calib)
+};
+PreviewScene preview_scene(const Image& measured, bool camera_given);
+// A value the page starts from instead of the table's default, where the
+// default would show nothing on this scene (a command's
+// CommandDef::preview_start): the copied command spells it out, and the
+// page says why.
+struct PreviewStart {
+  std::string name;      // a parameter the page sets (the effect's, or the camera's: fov-x)
+  nlohmann::json value;  // as the table holds it
+  std::string why;       // one line for the page
+};
+// v to two significant digits: a starting value a user reads and edits.
+double preview_round(double v);
+// v as the page's reasons print it (three significant digits).
+std::string preview_text(double v);
+// The camera the page assumes where the command needs one and the command
+// line gave none: a 60 degree horizontal field of view (between the usual
+// datasets': Middlebury ~53, KITTI ~82; the demo's 55 degree vertical is
+// ~73), which the page's camera controls change.
+PreviewStart preview_assumed_camera(const PreviewScene& s);
+
 // A uniform of a plan step.
 inline nlohmann::json preview_f(double v) { return {"1f", v}; }
 inline nlohmann::json preview_i(int v) { return {"1i", v}; }

@@ -98,6 +98,16 @@ std::map<std::string, std::string> resolve_sample_specs(std::string_view effect,
 nlohmann::json random_params(std::string_view effect, std::uint64_t seed, std::string_view key,
                              const std::map<std::string, std::string>& specs);
 
+// Every set of values the specs can draw at the ends of their distributions:
+// the product over the parameters of a fixed value, both bounds of a
+// uniform or log-uniform range, each item of a choice (at most `max` sets;
+// more is an Error naming the product's size). A check that holds at these
+// corners holds for the ranges' monotone rules (a range, an order between two
+// drawn values) wherever the draw falls: the transforms check them all when
+// they are made. Each set as random_params returns one ({name: value}).
+std::vector<nlohmann::json> sample_corners(std::string_view effect, const std::map<std::string, std::string>& specs,
+                                           std::size_t max = 4096);
+
 // How those values were drawn, for the record:
 // {"sampler": "brume-sample-v1", "seed": S, "key": K, "specs": {name: text}}
 // (the resolved specs, defaults included). S is written as a number.

@@ -182,7 +182,9 @@ def _depth_array(d, shape, kind, unit, intr, arg):
     if d.shape != tuple(shape):
         raise ValueError(f"{arg}: shape {d.shape} does not match the image's {tuple(shape)} (H x W); give a depth "
                          f"map of the image's size")
-    if d.dtype.kind in "ui" and kind != "disparity":  # (disparity is in pixels)
+    if d.dtype.kind in "ui" and kind == "disparity":  # a stored disparity (a Middlebury PNG): 0 is unknown
+        d = np.where(d == 0, np.nan, d.astype(np.float64))
+    elif d.dtype.kind in "ui":
         if unit is None:
             raise ValueError(f"depth_unit: {arg} is {d.dtype} (integer); say its unit: depth_unit='m' or 'mm' "
                              f"(a 16-bit PNG in millimetres is depth_unit='mm')")
@@ -199,11 +201,13 @@ def _depth_array(d, shape, kind, unit, intr, arg):
         return v
     if kind in ("range", "z"):
         v = d.astype(np.float64) * scale
-    elif kind == "disparity":  # pixels: z = fx baseline / d
+    elif kind == "disparity":  # pixels: z = fx baseline / (scale d + doffs), as brume.depth.convert
         if intr.get("baseline") is None:
-            raise ValueError("baseline: depth_kind='disparity' needs baseline= (metres between the cameras)")
+            raise ValueError("baseline: depth_kind='disparity' needs baseline= (metres between the cameras), or "
+                             "calib= (a Middlebury 2014 / ETH3D calib.txt)")
         with np.errstate(divide="ignore", invalid="ignore"):
-            v = intr["fx"] * intr["baseline"] / d.astype(np.float64)
+            v = intr["fx"] * intr["baseline"] / (intr.get("disparity_scale", 1.0) * d.astype(np.float64)
+                                                 + intr.get("disparity_offset", 0.0))
     else:  # inverse depth 1/z in 1/unit: z = unit / d metres
         with np.errstate(divide="ignore", invalid="ignore"):
             v = scale / d.astype(np.float64)
@@ -242,8 +246,9 @@ class _Points:
 
 # ---- the transforms ---------------------------------------------------------------------------
 _COMMANDS = {c["name"]: c for c in _brume._commands()}
-_INTRINSICS = ("fx", "fy", "cx", "cy", "fov_x", "fov_y", "baseline")
-_OWN = ("p", "seed", "depth_kind", "depth_unit", "transfer", "per_frame", "lidar_target") + _INTRINSICS
+_INTRINSICS = ("fx", "fy", "cx", "cy", "fov_x", "fov_y", "baseline", "calib")
+_DISPARITY = ("disparity_scale", "disparity_offset")  # (doffs: disparity_offset's other name)
+_OWN = ("p", "seed", "depth_kind", "depth_unit", "transfer", "per_frame", "lidar_target") + _INTRINSICS + _DISPARITY
 
 
 def _canonical(command, name):
@@ -275,11 +280,49 @@ class _Stage:
             else:
                 raise TypeError(f"{where}: unknown argument {name!r}; the parameters are "
                                 f"{', '.join(command['keywords'])} and {', '.join(_OWN)}")
-        # every value each distribution can produce is checked against the table now (ValueError naming it)
+        # every value each distribution can produce is checked against the table now (ValueError naming it),
+        # and every combination of their ends by the run's own checks
+        self._check_draws(where)
+
+    def _check_draws(self, where):
+        """The run's own checks (the same as the command line's: combinations,
+        the camera a height profile or planar depth needs), made now on every
+        set of values the distributions can draw at their ends -- a fixed
+        value, both bounds of each range, each choice -- with the fixed
+        keywords, so that a transform that would fail on some draw fails
+        here, not in a DataLoader worker."""
+        failures, passed = [], False
         try:
-            _brume.random_params(command["name"], 0, "", **self.specs)
+            corners = _brume._sample_corners(self.command["name"], **self.specs)
         except ValueError as e:
             raise ValueError(f"{where}: {e}") from None
+        for values in corners:
+            try:
+                _brume._check_call(self.command["function"], **self.fixed, **values)
+                passed = True
+            except (ValueError, TypeError) as e:
+                failures.append((type(e), str(e), values))
+        if not failures:
+            return
+        # What every draw fails on (the fixed keywords') first; else the first draw that fails.
+        counts = {}
+        for f in failures:
+            counts[f[1]] = counts.get(f[1], 0) + 1
+        kind, message, values = max(failures, key=lambda f: counts[f[1]])
+        message = message.split("(): ", 1)[1] if message.startswith("brume.") and "(): " in message else message
+        drawn = {k: v for k, v in values.items() if k not in self._fixed_specs()}
+        if passed and drawn:  # some draws pass: say which one fails
+            shown = ", ".join(f"{k.replace('-', '_')}={v!r}" for k, v in sorted(drawn.items()))
+            message += f" (when the draw gives {shown})"
+        raise kind(f"{where}: {message}") from None
+
+    def _fixed_specs(self):
+        """The sampled parameters given as one fixed value (not drawn)."""
+        out = set()
+        for name, text in self.specs.items():
+            if "(" not in text:
+                out.add(name)
+        return out
 
     @property
     def function(self):  # looked up on use: a transform pickles (spawned workers) without the module's functions
@@ -340,10 +383,14 @@ class Transform(_Keyed):
     _prefixes = ()  # each later stage's keyword prefix ("dof_")
 
     def __init__(self, p=1.0, seed=0, depth_kind="range", depth_unit=None, transfer=None, per_frame=False,
-                 fx=None, fy=None, cx=None, cy=None, fov_x=None, fov_y=None, baseline=None, lidar_target=None,
-                 **params):
+                 fx=None, fy=None, cx=None, cy=None, fov_x=None, fov_y=None, baseline=None, calib=None,
+                 disparity_scale=None, disparity_offset=None, lidar_target=None, **params):
         where = f"brume.transforms.{type(self).__name__}()"
         super().__init__(p, seed)
+        if "doffs" in params:  # Middlebury's name for the disparity offset
+            if disparity_offset is not None:
+                raise TypeError(f"{where}: disparity_offset and doffs are the same keyword; give one")
+            disparity_offset = params.pop("doffs")
         if depth_kind not in ("range", "z", "disparity", "inverse"):
             raise ValueError(f"depth_kind={depth_kind!r}: 'range' (metres along the ray), 'z' (along the optical "
                              f"axis), 'disparity' (pixels; needs fx, baseline) or 'inverse' (1/z)")
@@ -356,9 +403,42 @@ class Transform(_Keyed):
         self.transfer, self.per_frame = transfer, bool(per_frame)
         self.intrinsics = {k: v for k, v in dict(fx=fx, fy=fy, cx=cx, cy=cy, fov_x=fov_x, fov_y=fov_y,
                                                  baseline=baseline).items() if v is not None}
+        for name, v in (("fx", fx), ("fy", fy), ("fov_x", fov_x), ("fov_y", fov_y), ("baseline", baseline)):
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0):
+                raise ValueError(f"{name}={v!r}: a number > 0")
+        self.disparity = {}
+        for name, v in (("disparity_scale", disparity_scale), ("disparity_offset", disparity_offset)):
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{name}={v!r}: a finite number (disparity = disparity_scale * stored + "
+                                 f"disparity_offset, in pixels)")
+            if depth_kind != "disparity":
+                raise ValueError(f"{name}={v!r}: it converts a disparity; depth_kind={depth_kind!r} takes no "
+                                 f"disparity (give depth_kind='disparity', or drop it)")
+            self.disparity[name] = float(v)
+        self.calib = None
+        if calib is not None:
+            import os
+            given = [k for k in ("fx", "fy", "cx", "cy", "baseline") if k in self.intrinsics]
+            given += ["disparity_offset"] if "disparity_offset" in self.disparity else []
+            if given:
+                raise ValueError(f"calib={calib!r} gives the camera (focal length, principal point, baseline, "
+                                 f"doffs); drop {', '.join(given)}, or drop calib")
+            c = _brume._read_stereo_calib(os.fspath(calib))  # (FileNotFoundError / ValueError naming it)
+            self.calib = os.fspath(calib)
+            self.intrinsics.update({k: v for k, v in dict(fx=c["f_px"], fy=c["f_px"], cx=c["cx"], cy=c["cy"]).items()
+                                    if math.isfinite(v)})
+            if depth_kind == "disparity":
+                self.intrinsics["baseline"] = c["baseline_m"]
+                self.disparity["disparity_offset"] = c["doffs_px"]
         if depth_kind != "range" and "fx" not in self.intrinsics and "fov_x" not in self.intrinsics:
             raise ValueError(f"fx: depth_kind={depth_kind!r} needs the camera's intrinsics (fx [px], or fov_x "
-                             f"[degrees]; fy, cx, cy default to fx and the image centre)")
+                             f"[degrees]; fy, cx, cy default to fx and the image centre; or calib=, a "
+                             f"calib.txt)")
+        if depth_kind == "disparity" and "baseline" not in self.intrinsics:
+            raise ValueError("baseline: depth_kind='disparity' needs baseline= (metres between the cameras), or "
+                             "calib= (a Middlebury 2014 / ETH3D calib.txt)")
         # split the keywords among the stages: a later stage's carry its prefix (dof_f_number)
         per_stage = [dict() for _ in self._commands]
         for name, v in params.items():
@@ -371,7 +451,9 @@ class Transform(_Keyed):
         for c, kw in zip(self._commands, per_stage):
             command = _COMMANDS[c]
             for k in _INTRINSICS:  # the effects that take intrinsics (fog, dof) get the transform's
-                if k in self.intrinsics and k in command["keywords"]:
+                if self.calib is not None and k == "calib" and k in command["keywords"]:
+                    kw.setdefault("calib", self.calib)  # (its file: the record names it, as the CLI's)
+                elif self.calib is None and k in self.intrinsics and k in command["keywords"]:
                     kw.setdefault(k, self.intrinsics[k])
             self._stages.append(_Stage(command, kw, where))
         if lidar_target is None:
@@ -488,7 +570,7 @@ class Transform(_Keyed):
                               else intr["fx"])
             intr.setdefault("cx", (w - 1) / 2.0)
             intr.setdefault("cy", (h - 1) / 2.0)
-        rng = _depth_array(depth, (h, w), self.depth_kind, self.depth_unit, intr, depth_arg)
+        rng = _depth_array(depth, (h, w), self.depth_kind, self.depth_unit, dict(intr, **self.disparity), depth_arg)
         rgb, kw = img.array, img.kw
         chain = self._chain() if jobs is None or len(jobs) == 1 else None  # (a record of stages: in turn)
         if chain is not None:  # the chain's own function: the range prepared once, one record `brume run` takes

@@ -38,6 +38,11 @@ std::string type_name(py::handle o);
 // ---- keywords from the parameter tables (keywords.cpp) -------------------------------------
 // `--f-number` -> f_number; a Python keyword gets a trailing underscore.
 std::string py_name(const std::string& flag);
+// A library message in Python's words: every flag the tables declare as its
+// keyword, the value after it as the keyword's argument ("--camera-height
+// METRES" -> "camera_height=METRES", "--profile exponential" ->
+// "profile='exponential'"). The exception translator applies it to every error.
+std::string python_spelling(const std::string& text);
 // A str as UTF-8 text (check_utf8's message for lone surrogates).
 std::string utf8_of(py::handle v, const std::string& what);
 // The value a keyword holds, as the JSON the table's setter takes (TypeError for a wrong Python type).

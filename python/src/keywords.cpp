@@ -3,6 +3,9 @@
 // back, and the docstrings and type stubs generated from the same tables.
 #include "binding.hpp"
 
+#include <algorithm>
+#include <cctype>
+#include <cstring>
 #include <sstream>
 #include "brume/error.hpp"
 #include "brume/sample.hpp"
@@ -25,6 +28,143 @@ std::string py_name(const std::string& flag) {
   for (char& c : n)
     if (c == '-') c = '_';
   return is_py_keyword(n) ? n + "_" : n;
+}
+
+// ==== messages in Python's words ================================================
+// The library's messages name flags as the command line spells them
+// (--camera-height 1.6, --profile exponential). In Python each becomes its
+// keyword, and a value that follows it becomes the keyword's argument:
+// camera_height=METRES, profile='exponential', lambda_=6, airlight=(0.8,
+// 0.8, 0.9). Which words are flags, and whether the word after one is its
+// value, is decided by the declarations (every command's table and array
+// form, aliases too): a value is a word the declaration's parser takes, a
+// quoted text, or a placeholder in capitals (METRES, FILE, T). Anything
+// else -- a "--" that names no parameter -- is left as it is.
+namespace {
+
+const std::map<std::string, const ParamSpec*>& flag_specs() {
+  static const std::map<std::string, const ParamSpec*> m = [] {
+    std::map<std::string, const ParamSpec*> out;
+    auto add = [&](const std::vector<ParamSpec>& specs) {
+      for (const ParamSpec& s : specs) {
+        out.emplace(s.name, &s);
+        for (const std::string& a : s.aliases) out.emplace(a, &s);
+      }
+    };
+    for (const CommandDef& c : commands()) {
+      add(c.specs);
+      if (c.arrays) add(c.arrays->specs);
+      if (c.sampling) add(c.sampling->specs);
+    }
+    return out;
+  }();
+  return m;
+}
+
+// A placeholder: capitals (METRES, T, R,G,B), a file's with its extension (FILE.csv, OUT.bin).
+bool placeholder(const std::string& w) {
+  if (w.empty() || !std::isupper(static_cast<unsigned char>(w[0]))) return false;
+  std::size_t i = 0;
+  while (i < w.size() && (std::isupper(static_cast<unsigned char>(w[i])) ||
+                          std::isdigit(static_cast<unsigned char>(w[i])) || w[i] == '_' || w[i] == ','))
+    ++i;
+  if (i == w.size()) return true;
+  if (w[i] != '.' || i + 1 == w.size()) return false;
+  return std::all_of(w.begin() + static_cast<std::ptrdiff_t>(i) + 1, w.end(), [](char ch) {
+    return std::islower(static_cast<unsigned char>(ch)) || std::isdigit(static_cast<unsigned char>(ch));
+  });
+}
+
+// The value `word` as Python writes it for `s`, or "" when it is not one.
+std::string python_value(const ParamSpec& s, const std::string& word) {
+  if (word.empty() || s.kind == ParamKind::boolean) return "";
+  if (placeholder(word)) return word;
+  if (word.size() >= 2 && word.front() == '\'' && word.back() == '\'') return word;
+  if (s.kind == ParamKind::text) {  // a file's name (calib.txt, a/b.csv): quoted
+    const std::size_t dot = word.rfind('.');
+    const bool file = dot != std::string::npos && dot > 0 && dot + 1 < word.size() &&
+                      std::all_of(word.begin(), word.end(), [](char ch) {
+                        return std::isalnum(static_cast<unsigned char>(ch)) || std::strchr("_./-", ch);
+                      });
+    return file ? "'" + word + "'" : "";
+  }
+  json v;
+  try {
+    v = s.parse(word);
+  } catch (const std::exception&) {
+    return "";
+  }
+  if (v.is_null() || v.is_string()) return "'" + word + "'";  // a choice's name, the unset word
+  if (v.is_array()) {
+    std::string t;
+    for (std::size_t i = 0; i < word.size(); ++i) t += word[i] == ',' ? std::string(", ") : std::string(1, word[i]);
+    return "(" + t + ")";
+  }
+  return word;
+}
+
+}  // namespace
+
+std::string python_spelling(const std::string& text) {
+  const auto& flags = flag_specs();
+  std::string out;
+  std::size_t i = 0;
+  auto word_char = [](char ch) {
+    return std::islower(static_cast<unsigned char>(ch)) || std::isdigit(static_cast<unsigned char>(ch)) || ch == '-';
+  };
+  while (i < text.size()) {
+    const bool starts = text.compare(i, 2, "--") == 0 && i + 2 < text.size() &&
+                        std::islower(static_cast<unsigned char>(text[i + 2])) &&
+                        (i == 0 || !(std::isalnum(static_cast<unsigned char>(text[i - 1])) || text[i - 1] == '-'));
+    if (!starts) {
+      out += text[i++];
+      continue;
+    }
+    std::size_t j = i + 2;
+    while (j < text.size() && word_char(text[j])) ++j;
+    std::string name = text.substr(i + 2, j - i - 2);
+    // "--sky-*": the flags that begin so.
+    if (!name.empty() && name.back() == '-') {
+      const bool family = std::any_of(flags.begin(), flags.end(),
+                                      [&](const auto& f) { return f.first.rfind(name, 0) == 0; });
+      if (family) {
+        out += py_name(name.substr(0, name.size() - 1)) + "_";
+        i = j;
+        continue;
+      }
+    }
+    while (!name.empty() && name.back() == '-') --j, name.pop_back();
+    const auto f = flags.find(name);
+    if (f == flags.end()) {
+      out += text.substr(i, j - i);
+      i = j;
+      continue;
+    }
+    out += py_name(name);
+    i = j;
+    // The value that follows, if the declaration takes it as one.
+    if (i < text.size() && text[i] == ' ' && i + 1 < text.size()) {
+      std::size_t k = i + 1, end = k;
+      if (text[k] == '\'') {
+        end = text.find('\'', k + 1);
+        end = end == std::string::npos ? k : end + 1;
+      } else {
+        while (end < text.size() && text[end] != ' ') ++end;
+        // trailing punctuation belongs to the sentence
+        while (end > k && std::strchr(",;:)", text[end - 1])) --end;
+        if (end > k + 1 && text[end - 1] == '.' && !placeholder(text.substr(k, end - k))) {
+          const std::string cut = text.substr(k, end - k - 1);
+          if (!python_value(*f->second, cut).empty()) --end;
+        }
+      }
+      const std::string value = python_value(*f->second, text.substr(k, end - k));
+      if (!value.empty()) {
+        out += "=" + value;
+        i = end;
+      }
+    }
+  }
+  return out;
 }
 
 // ==== the generic keyword -> parameter routine =================================
@@ -168,7 +308,7 @@ JobValues keyword_values(const std::vector<ParamSpec>& specs, const py::dict& kw
     try {
       d->check(v);
     } catch (const Error& e) {
-      throw py::value_error(fn + "(): keyword " + py_name(d->name) + ": " + e.what());
+      throw Error(fn + "(): " + e.what());  // (the message names the keyword: python_spelling)
     }
     values.emplace_back(d->name, std::move(v));
     given.insert(d->name);
@@ -220,7 +360,7 @@ JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const 
       try {
         d->check(v);
       } catch (const Error& e) {
-        throw py::value_error(fn + "(): job: " + block + "." + name + ": " + e.what());
+        throw Error(fn + "(): job: " + block + "." + name + ": " + e.what());
       }
       values.emplace_back(d->name, v);
     }

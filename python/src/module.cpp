@@ -46,6 +46,7 @@
 #include "binding.hpp"
 #include "brume/batch.hpp"
 #include "brume/blur.hpp"  // _bench_blur_cpp
+#include "brume/depth.hpp"  // _read_stereo_calib
 #include "brume/error.hpp"
 #include "brume/rerun.hpp"
 #include "brume/sample.hpp"
@@ -245,22 +246,61 @@ void def_array_command(py::module_& m, const CommandDef& c) {
 
 // ==== errors as Python exceptions ===========================
 void register_errors() {
+  // Every error the module raises passes here: the library's messages, and
+  // the binding's own TypeError and ValueError, in Python's words
+  // (python_spelling: keywords from the tables, not the CLI's flags).
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const FileNotFound& e) {
-      PyErr_SetString(PyExc_FileNotFoundError, e.what());
+      PyErr_SetString(PyExc_FileNotFoundError, python_spelling(e.what()).c_str());
     } catch (const GpuUnavailable& e) {
-      PyErr_SetString(PyExc_RuntimeError, e.what());
+      PyErr_SetString(PyExc_RuntimeError, python_spelling(e.what()).c_str());
     } catch (const Error& e) {
       std::string m = e.what();
       if (m.find("raise the limit with --max-pixels") != std::string::npos)
         m += " (in Python: brume.set_max_pixels(N))";
-      PyErr_SetString(PyExc_ValueError, m.c_str());
+      PyErr_SetString(PyExc_ValueError, python_spelling(m).c_str());
+    } catch (const py::type_error& e) {
+      PyErr_SetString(PyExc_TypeError, python_spelling(e.what()).c_str());
+    } catch (const py::value_error& e) {
+      PyErr_SetString(PyExc_ValueError, python_spelling(e.what()).c_str());
     } catch (const nlohmann::json::exception& e) {
       PyErr_SetString(PyExc_ValueError, printable_text(e.what()).c_str());
     }
   });
+}
+
+// random_params' ranges as the sampler's spec texts: a spec string, a fixed
+// number or name, or a list/tuple (a choice).
+std::map<std::string, std::string> range_specs(const py::kwargs& ranges) {
+  std::map<std::string, std::string> specs;
+  for (auto item : ranges) {
+    const std::string name = py::str(item.first);
+    py::handle v = item.second;
+    std::string spec;
+    if (py::isinstance<py::str>(v)) {
+      spec = v.cast<std::string>();
+    } else if (py::isinstance<py::bool_>(v)) {
+      spec = v.cast<bool>() ? "true" : "false";
+    } else if (py::isinstance<py::int_>(v) || py::isinstance<py::float_>(v)) {
+      spec = py::str(py::repr(v));
+    } else if (py::isinstance<py::list>(v) || py::isinstance<py::tuple>(v)) {
+      spec = "choice(";
+      bool first = true;
+      for (py::handle e : v) {
+        spec += (first ? "" : ", ") + std::string(py::str(e));
+        first = false;
+      }
+      spec += ")";
+    } else {
+      throw py::type_error("brume.random_params(): " + name + "=" + std::string(py::repr(v)) +
+                           " is neither a spec string ('uniform(a, b)', 'loguniform(a, b)', "
+                           "'choice(x, y)'), a fixed value nor a list of choices");
+    }
+    specs[name] = spec;
+  }
+  return specs;
 }
 
 }  // namespace brume::python
@@ -286,32 +326,7 @@ PYBIND11_MODULE(_brume, m) {
   m.def(
       "random_params",
       [](const std::string& effect, std::uint64_t seed, const std::string& key, py::kwargs ranges) {
-        std::map<std::string, std::string> specs;
-        for (auto item : ranges) {
-          const std::string name = py::str(item.first);
-          py::handle v = item.second;
-          std::string spec;
-          if (py::isinstance<py::str>(v)) {
-            spec = v.cast<std::string>();
-          } else if (py::isinstance<py::bool_>(v)) {
-            spec = v.cast<bool>() ? "true" : "false";
-          } else if (py::isinstance<py::int_>(v) || py::isinstance<py::float_>(v)) {
-            spec = py::str(py::repr(v));
-          } else if (py::isinstance<py::list>(v) || py::isinstance<py::tuple>(v)) {
-            spec = "choice(";
-            bool first = true;
-            for (py::handle e : v) {
-              spec += (first ? "" : ", ") + std::string(py::str(e));
-              first = false;
-            }
-            spec += ")";
-          } else {
-            throw py::type_error("brume.random_params(): " + name + "=" + std::string(py::repr(v)) +
-                                 " is neither a spec string ('uniform(a, b)', 'loguniform(a, b)', "
-                                 "'choice(x, y)'), a fixed value nor a list of choices");
-          }
-          specs[name] = spec;
-        }
+        const std::map<std::string, std::string> specs = range_specs(ranges);
         json drawn;
         {
           py::gil_scoped_release nogil;
@@ -328,6 +343,53 @@ PYBIND11_MODULE(_brume, m) {
       "a fixed value, or a list of choices. Names are checked against the effect's parameters and every\n"
       "value a spec can produce against their ranges (ValueError). The dict's keys are the parameter\n"
       "names (e.g. 'lambda'), so brume.haze(rgb, range, **params) takes it as it is.");
+
+  // ---- the transforms' checks when they are made (brume/transforms.py) ----------------
+  m.def(
+      "_sample_corners",
+      [](const std::string& effect, py::kwargs ranges) {
+        py::list out;
+        for (const json& set : sample_corners(effect, range_specs(ranges))) out.append(to_py(set));
+        return out;
+      },
+      py::arg("effect"),
+      "Every set of values the ranges can draw at their distributions' ends (both bounds, each choice), as "
+      "random_params returns one (private: brume.transforms checks them all when a transform is made).");
+  m.def(
+      "_check_call",
+      [](const std::string& function, py::kwargs kw) {
+        for (const CommandDef& c : commands()) {
+          if (!c.arrays || c.arrays->function != function) continue;
+          const ArrayForm& a = *c.arrays;
+          std::set<std::string> given;
+          const JobValues values = keyword_values(a.specs, py::dict(kw), a.public_name, given);
+          const json call = a.build(values);
+          if (a.check) a.check(call, given);
+          return;
+        }
+        throw py::value_error("_check_call(): no function " + function);
+      },
+      py::arg("function"),
+      "The checks the array function `function` makes before any pixel (ranges, combinations, the camera), on "
+      "these keywords, without running it (private: brume.transforms).");
+
+  m.def(
+      "_read_stereo_calib",
+      [](py::object path) {
+        const std::string p = keyword_value(path_spec(), path, "calib");
+        StereoCalib c;
+        {
+          py::gil_scoped_release nogil;
+          c = read_stereo_calib(p);
+        }
+        py::dict d;
+        d["f_px"] = c.f_px, d["cx"] = c.cx, d["cy"] = c.cy, d["baseline_m"] = c.baseline_m, d["doffs_px"] = c.doffs_px;
+        d["width"] = c.width, d["height"] = c.height;
+        return d;
+      },
+      py::arg("path"),
+      "A Middlebury 2014 / ETH3D calib.txt as brume.depth.convert(calib=) reads it: f_px, cx, cy, baseline_m, "
+      "doffs_px, width, height (private: brume.transforms' calib=).");
 
   // ---- the process limit of `brume --max-pixels` ---------------------------------------
   // A module-level setting, not a keyword: like the CLI's root option (and

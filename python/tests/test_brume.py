@@ -242,7 +242,7 @@ def test_unknown_keyword_names_the_nearest(demo):
 
 def test_bad_types_and_ranges(demo):
     rgb, rng = demo["rgb"], demo["range"]
-    with pytest.raises(ValueError, match=r"keyword visibility.*--visibility -5.*\(0, inf\)"):
+    with pytest.raises(ValueError, match=r"brume\.haze\(\): visibility=-5 is not allowed.*\(0, inf\)"):
         brume.haze(rgb, rng, visibility=-5)
     with pytest.raises(TypeError, match="keyword visibility takes a number"):
         brume.haze(rgb, rng, visibility="far")
@@ -261,7 +261,7 @@ def test_bad_types_and_ranges(demo):
     # a combination the run would ignore: the library's own message
     with pytest.raises(ValueError, match="albedo"):
         brume.haze(rgb, rng, albedo=0.5)
-    with pytest.raises(ValueError, match="--reference"):
+    with pytest.raises(ValueError, match="reference is the CPU's"):
         brume.haze(rgb, rng, reference=True, backend="gpu")
 
 
@@ -496,9 +496,9 @@ def test_aerial_turbidity_from_sky_fit_equals_cli(demo, tmp_path):
 
 def test_aerial_sky_arguments_are_checked_as_the_cli(demo, tmp_path):
     rgb, rng = demo["rgb"], demo["range"]
-    with pytest.raises(ValueError, match="sky-image"):  # a sky flag without the photo
+    with pytest.raises(ValueError, match="sky_image"):  # a sky flag without the photo
         brume.aerial(rgb, rng, turbidity=3, sky_sun_zenith=40)
-    with pytest.raises(ValueError, match="turbidity auto"):  # a photo with a given T
+    with pytest.raises(ValueError, match="is for turbidity='auto'"):  # a photo with a given T
         brume.aerial(rgb, rng, turbidity=3, sky_image=tmp_path / "none.exr")
     with pytest.raises(FileNotFoundError):
         brume.aerial(rgb, rng, turbidity_from=tmp_path / "missing.json")

@@ -38,8 +38,8 @@ def test_nonfinite_colour_is_refused_as_on_the_cli(demo):
 
 def test_derived_blur_bound_is_the_clis(demo):
     """haze's lambda 1e4 with the standard scheme returned values from -1e6
-    to 5e5 (the iteration count overflowed); now the same Error as the CLI."""
-    with pytest.raises(ValueError, match=r"sigma_max = .* px is .* times the image's diagonal .*--lambda 10000"):
+    to 5e5 (the iteration count overflowed); now the same Error as the CLI, in Python's words."""
+    with pytest.raises(ValueError, match=r"sigma_max = .* px is .* times the image's diagonal .*lambda_=10000"):
         brume.haze(demo["rgb"], demo["range"], visibility=300, lambda_=1e4, scheme="standard")
     with pytest.raises(ValueError, match="sigma_max"):
         brume.fog(demo["rgb"], demo["range"], fov_y=55, camera_height=1.6, lambda_=1e9)

@@ -33,7 +33,7 @@ def test_lidar_fog_errors():
         brume.lidar.fog(pts, alpha=-1.0)
     in_0_255 = pts.copy()
     in_0_255[:, 3] *= 255  # intensities already in [0, 255] (the points stay within 10 km: issue #51)
-    with pytest.raises(ValueError, match="intensity-scale 1"):
+    with pytest.raises(ValueError, match="intensity_scale=1"):
         brume.lidar.fog(in_0_255, alpha=0.1)
     with pytest.raises(ValueError, match="visibility"):
         brume.lidar.fog(pts)
@@ -77,7 +77,7 @@ def test_lidar_fog_layered_keywords(tmp_path):
     assert r.record["lidar"]["profile"] == "exponential"
     assert r.record["lidar"]["alpha_per_m"] is None
     assert r.record["lidar"]["origin_height_m"] == 1.7
-    with pytest.raises(ValueError, match="--profile exponential and --alpha"):
+    with pytest.raises(ValueError, match="profile='exponential' and alpha"):
         brume.lidar.fog(pts, profile="exponential", sensor_height=1.7, alpha=0.1)
-    with pytest.raises(ValueError, match="--sensor-height"):
+    with pytest.raises(ValueError, match="sensor_height"):
         brume.lidar.fog(pts, profile="exponential")

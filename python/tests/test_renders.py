@@ -52,7 +52,7 @@ def test_haze_on_a_render_equals_the_cli_and_beer_lambert(engine, tmp_path):
 
 def test_the_camera_keywords_are_checked_as_the_flags():
     f = RENDERS / "cycles.exr"
-    with pytest.raises(ValueError, match="--sensor-width"):
+    with pytest.raises(ValueError, match="sensor_width=MM"):
         brume.depth.convert(z=f, focal_length=35)
     with pytest.raises(TypeError, match="2 numbers"):
         brume.depth.convert(z=f, focal_length=35, sensor_width=36, lens_shift=0.1)

@@ -2,14 +2,15 @@
 #include "brume/pipeline.hpp"
 #include "brume/command.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
+#include <malloc.h>
 #include <mutex>
 #include <set>
-#include <malloc.h>
 #include <unistd.h>
 
 #include "brume/error.hpp"
@@ -369,6 +370,37 @@ const ParamTable<RangeStep>& range_step_param_table() {
   return t;
 }
 
+const ParamTable<SceneScale>& scene_scale_param_table() {
+  static const ParamTable<SceneScale> t = [] {
+    ParamTable<SceneScale> d("scene");
+    d.real("scene-scale", &SceneScale::reference_m, "m", Range::above(0.0),
+           "the median range R_ref the effect's lengths are given for: the run scales them by this frame's median "
+           "range over R_ref (15 suits the sampled defaults; docs/transforms.md); off: the lengths are metres",
+           "off");
+    return d;
+  }();
+  return t;
+}
+
+double median_known_range(ConstImageView range) {
+  std::vector<float> known;
+  known.reserve(static_cast<std::size_t>(range.width()) * static_cast<std::size_t>(range.height()));
+  for (int y = 0; y < range.height(); ++y)
+    for (int x = 0; x < range.width(); ++x) {
+      const float r = range.at(x, y);
+      if (std::isfinite(r) && r > 0.0f) known.push_back(r);
+    }
+  if (known.empty()) return NAN;
+  const std::size_t mid = known.size() / 2;
+  std::nth_element(known.begin(), known.begin() + static_cast<std::ptrdiff_t>(mid), known.end());
+  double m = known[mid];
+  if (known.size() % 2 == 0) {  // the mean of the two middle values
+    const float below = *std::max_element(known.begin(), known.begin() + static_cast<std::ptrdiff_t>(mid));
+    m = 0.5 * (static_cast<double>(below) + m);
+  }
+  return m;
+}
+
 const ParamTable<OutputFiles>& output_param_table(const std::vector<MapOutput>& maps, bool main_required) {
   // One table per distinct declaration list (effects keep theirs static).
   static std::map<std::string, ParamTable<OutputFiles>> cache;
@@ -428,11 +460,18 @@ std::vector<ArrayArg> rgb_range_args(ArrayArg::As as) {
   return {{"rgb", 3, false, as}, {"range", 1, false, as}};
 }
 
+const std::vector<std::string>& camera_intrinsics_params() {
+  static const std::vector<std::string> n = {"fx", "fy", "cx", "cy", "fov-x", "fov-y"};
+  return n;
+}
+
 const std::set<std::string>& depth_file_params() {
   static const std::set<std::string> skip = [] {
-    static const std::set<std::string> keep = {"fx",           "fy",           "cx",           "cy",
-                                               "fov-x",        "fov-y",        "calib",        "focal-length",
-                                               "sensor-width", "sensor-height", "sensor-fit", "lens-shift"};
+    // The intrinsics as numbers, the calibration file, and the camera in
+    // millimetres (focal length, sensor, fit, lens shift).
+    std::set<std::string> keep(camera_intrinsics_params().begin(), camera_intrinsics_params().end());
+    keep.insert("calib");
+    for (const auto& d : lens_param_table("depth").params()) keep.insert(d.spec.name);
     std::set<std::string> s;
     for (const auto& d : depth_param_table().params())
       if (!keep.count(d.spec.name)) s.insert(d.spec.name);

@@ -3,10 +3,13 @@
 // and the names and values of the plan's maps.
 #include "brume/preview.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <functional>
 #include <string_view>
+#include <vector>
 
 namespace brume {
 
@@ -21,6 +24,52 @@ std::string PreviewFrame::add_map(const std::string& kind, Image m) {
     maps.emplace(name, std::move(m));
   }
   return name;
+}
+
+PreviewScene preview_scene(const Image& measured, bool camera_given) {
+  PreviewScene s;
+  s.width = measured.width;
+  s.height = measured.height;
+  s.camera_given = camera_given;
+  std::vector<float> known, centre;
+  const int x0 = measured.width * 9 / 20, x1 = std::max(x0 + 1, measured.width * 11 / 20);
+  const int y0 = measured.height * 9 / 20, y1 = std::max(y0 + 1, measured.height * 11 / 20);
+  for (int y = 0; y < measured.height; ++y)
+    for (int x = 0; x < measured.width; ++x) {
+      const float r = measured.data[static_cast<std::size_t>(y) * measured.width + x];
+      if (!(std::isfinite(r) && r > 0.0f)) continue;
+      known.push_back(r);
+      if (x >= x0 && x < x1 && y >= y0 && y < y1) centre.push_back(r);
+    }
+  if (known.empty()) return s;
+  auto median = [](std::vector<float>& v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return static_cast<double>(v[v.size() / 2]);
+  };
+  s.range_min_m = *std::min_element(known.begin(), known.end());
+  s.range_max_m = *std::max_element(known.begin(), known.end());
+  s.median_range_m = median(known);
+  s.centre_range_m = centre.empty() ? s.median_range_m : median(centre);
+  return s;
+}
+
+double preview_round(double v) {
+  if (!(std::isfinite(v) && v != 0.0)) return v;
+  char b[32];
+  std::snprintf(b, sizeof b, "%.2g", v);  // the double nearest the two digits: it prints as them
+  return std::strtod(b, nullptr);
+}
+
+std::string preview_text(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, std::abs(v) >= 100.0 ? "%.0f" : "%.3g", v);
+  return b;
+}
+
+PreviewStart preview_assumed_camera(const PreviewScene&) {
+  return {"fov-x", 60.0,
+          "the camera is assumed: 60 degrees horizontal field of view (the command line gave none); set it under "
+          "camera"};
 }
 
 Intrinsics preview_intrinsics(const Intrinsics& full, int scale) {

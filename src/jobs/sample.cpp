@@ -123,8 +123,24 @@ std::map<std::string, Distribution> resolve(const EffectSampling& es, const std:
   std::map<std::string, Distribution> out;
   for (const SampleDefault& d : es.s->defaults) {
     if (user.count(d.name)) continue;
-    const bool dropped = std::any_of(d.dropped_by.begin(), d.dropped_by.end(),
-                                     [&](const std::string& n) { return user.count(n) > 0; });
+    const bool dropped = std::any_of(d.dropped_by.begin(), d.dropped_by.end(), [&](const std::string& rule) {
+      // "name": given at all; "name=v": given as the fixed value v; "name!=v": given as anything but v.
+      const std::size_t eq = rule.find('=');
+      if (eq == std::string::npos) return user.count(rule) > 0;
+      const bool negated = eq > 0 && rule[eq - 1] == '!';
+      const std::string name = rule.substr(0, negated ? eq - 1 : eq), value = rule.substr(eq + 1);
+      const auto it = user.find(name);
+      if (it == user.end()) return false;
+      // The same value however it is written (0, 0.0): compared as the declaration parses it.
+      const ParamSpec& spec = spec_of(es, name);
+      bool same = trim(it->second) == value;
+      try {
+        const Distribution given = parse_distribution(spec, it->second);
+        same = given.kind == Distribution::Kind::fixed && given.values.at(0) == spec.parse(value);
+      } catch (const Error&) {
+      }
+      return same != negated;
+    });
     if (!dropped) out[d.name] = parse_distribution(spec_of(es, d.name), d.spec);
   }
   for (const auto& [canon, text] : user) out[canon] = parse_distribution(spec_of(es, canon), text);
@@ -315,6 +331,38 @@ nlohmann::json random_params(std::string_view effect, std::uint64_t seed, std::s
                 std::to_string(seed) + ") cannot be used together: " + e.what());
   }
   return values;
+}
+
+std::vector<nlohmann::json> sample_corners(std::string_view effect, const std::map<std::string, std::string>& specs,
+                                           std::size_t max) {
+  const EffectSampling& es = sampling_of(effect);
+  std::vector<std::pair<std::string, std::vector<nlohmann::json>>> ends;
+  std::size_t n = 1;
+  for (const auto& [name, d] : resolve(es, specs)) {
+    std::vector<nlohmann::json> v;
+    switch (d.kind) {
+      case Distribution::Kind::fixed: v = {d.values.at(0)}; break;
+      case Distribution::Kind::uniform:
+      case Distribution::Kind::loguniform: v = {d.a, d.b}; break;
+      case Distribution::Kind::choice: v = d.values; break;
+    }
+    n *= v.size();
+    if (n > max)
+      throw Error("sampling " + es.effect + ": the distributions' ends make more than " + std::to_string(max) +
+                  " combinations to check; give fewer choices");
+    ends.emplace_back(name, std::move(v));
+  }
+  std::vector<nlohmann::json> out;
+  for (std::size_t i = 0; i < n; ++i) {
+    nlohmann::json set = nlohmann::json::object();
+    std::size_t rest = i;
+    for (const auto& [name, v] : ends) {
+      set[name] = v[rest % v.size()];
+      rest /= v.size();
+    }
+    out.push_back(std::move(set));
+  }
+  return out;
 }
 
 nlohmann::json sample_provenance(std::string_view effect, std::uint64_t seed, std::string_view key,

@@ -385,6 +385,10 @@ CommandDef aerial_command() {
                            std::move(r.record),
                            {},
                            {}};
+      },
+      [](const ArrayCall<AerialJob>& k, const std::set<std::string>& g) {
+        validate_aerial(k.p.aerial, g);
+        check_range_step(k.p.prepare, g);
       });
   add_camera_lidar(c);
   return c;

@@ -2,9 +2,10 @@
 // call, in the shape every effect follows (brume/pipeline.hpp): prepare the
 // range, turn it into planar depth, form the scale map from the CoC, dispatch
 // once on Exec (the GPU runs the engine's own passes on that map), record.
-#include <cstdio>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 
 #include "brume/command.hpp"
@@ -80,6 +81,7 @@ const ParamTable<DofJob>& dof_job_table() {
     d.nest(&DofJob::input, input_param_table(true))
         .nest(&DofJob::prepare, range_step_param_table())
         .nest(&DofJob::dof, dof_param_table())
+        .nest(&DofJob::scene, scene_scale_param_table())
         .nest(&DofJob::output, output_param_table(dof_map_outputs()));
     return d;
   }();
@@ -101,6 +103,11 @@ std::string dof_intrinsics_source(const DepthSource& src, int width, int height)
   return vertical ? "lens (focal length x height / sensor " +
                         std::string(src.lens.sensor_fit == SensorFit::vertical ? "height" : "width") + ")"
                   : "lens (focal length x width / sensor width)";
+}
+
+void check_dof_camera(const DepthSource& src) {
+  // The intrinsics' agreement with the lens is checked on the image's size; here only that one of them is given.
+  if (!depth_flags_give_intrinsics(src) && !src.lens.focal_length_mm) (void)dof_intrinsics(src, 640, 480);
 }
 
 DofRun run_dof(DenseImageRef rgb, DenseImageRef measured_range, const Intrinsics& k, const DofParams& p,
@@ -189,6 +196,36 @@ nlohmann::json dof_preview_steps(PreviewFrame& frame, const DofParams& p, const 
   return {{"sigma_max_px", a.sigma_max}, {"coc_infinity_px", a.alpha_px}, {"iterations", a.plan.iterations}};
 }
 
+// Where brume view's page starts (brume/preview.hpp): focused at the image
+// centre's depth, with a circle of confusion at infinity of 1 % of the image
+// width where no lens is given (--focus-distance is required, and the CoC or
+// the lens), and the assumed camera where neither the depth flags nor the
+// lens give one.
+std::vector<PreviewStart> dof_preview_start(const DofParams& p, bool camera_given, const PreviewScene& s) {
+  std::vector<PreviewStart> v;
+  const bool lens = p.f_number || p.lens.focal_length_mm || p.lens.sensor_width_mm;
+  if (!camera_given && !p.lens.focal_length_mm) v.push_back(preview_assumed_camera(s));
+  if (!p.focus_distance_m && s.centre_range_m > 0.0) {
+    const double f = preview_round(s.centre_range_m);
+    v.push_back({"focus-distance", f,
+                 "focused at the image centre's depth, " + preview_text(f) +
+                     " m (--focus-distance is required); click the picture to focus elsewhere"});
+  }
+  if (!p.coc_infinity_px && !lens) {
+    const double c = preview_round(std::max(2.0, 0.01 * s.width));
+    v.push_back({"coc-infinity", c,
+                 "a circle of confusion of " + preview_text(c) +
+                     " px at infinity (1 % of the image width; the CoC or the lens is required)"});
+  }
+  return v;
+}
+
+// The parameter of depth of field that --scene-scale scales (brume/pipeline.hpp).
+const std::vector<std::string>& dof_scene_lengths() {
+  static const std::vector<std::string> n = {"focus-distance"};
+  return n;
+}
+
 PreviewFrame dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
   DofJob j;
   dof_job_table().from_json(j, job, "job");
@@ -204,15 +241,22 @@ PreviewFrame dof_preview(const nlohmann::json& job, const PreviewInputs& in) {
 
 nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& eo, const RunContext& ctx) {
   const EffectJob<DofJob> e{
-      "dof", dof_job_table(), dof_map_outputs(), 90,
+      "dof",
+      dof_job_table(),
+      dof_map_outputs(),
+      90,
       [&](const DofJob& j, const ExecOptions& x) {
         validate_dof(dof_with_lens(j.dof, j.input.depth.lens), ctx.given);
         check_gpu_scheme(j.dof, x.backend);
       },
       [&](const DofJob& j, LoadedInputs& in, const Exec& exec) {
+        DofParams p = j.dof;
+        const nlohmann::json scaled = apply_scene_scale(dof_param_table(), p, dof_scene_lengths(), j.scene,
+                                                        in.depth.range);
         const Intrinsics k = dof_intrinsics(j.input.depth, in.rgb.width, in.rgb.height);
-        DofRun run = run_dof(in.rgb, in.depth.range, k, dof_with_lens(j.dof, j.input.depth.lens),
+        DofRun run = run_dof(in.rgb, in.depth.range, k, dof_with_lens(p, j.input.depth.lens),
                              with_camera(j.prepare, in.depth), exec, ctx.given);
+        if (!scaled.is_null()) run.record["scene_scale"] = scaled;
         run.record["dof"]["derived"]["intrinsics"]["source"] =
             dof_intrinsics_source(j.input.depth, in.rgb.width, in.rgb.height);
         return EffectOutput{std::move(run.result.rgb), {{"scale-map", std::move(run.result.scale)}},
@@ -269,24 +313,42 @@ CommandDef dof_command() {
                                         &validate_dof);
   c.gpu_passes = {"diffusion.rates", "diffusion.iterate"};
   c.preview = &dof_preview;
-  static const auto call = array_call_table(dof_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
+  c.preview_start = [](const nlohmann::json& job, const std::set<std::string>&, const PreviewScene& s) {
+    DofJob j;
+    dof_job_table().from_json(j, job, "job");
+    return dof_preview_start(dof_with_lens(j.dof, j.input.depth.lens), s.camera_given, s);
+  };
+  // --scene-scale scales the lengths to the frame when a job runs; the page's values are metres.
+  c.preview_fixed.push_back("scene");
+  static const auto call = array_call_table(dof_param_table(),
+                                            kArrayPrepare | kArrayIntrinsics | kArrayScene | kArrayExec);
   c.arrays = make_array_form<DofParams>(
       "dof", "",
       "Depth of field by leak-free diffusion (thin-lens circle of confusion). `range` is metres along the ray; "
       "planar depth comes from the intrinsics or the lens. As `brume dof`.",
       rgb_range_args(ArrayArg::As::dense), call, {"rgb", "scale", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<DofParams>& k, const Exec& e, const std::set<std::string>& g) {
+        DofParams p = k.p;
+        const nlohmann::json scaled = apply_scene_scale(dof_param_table(), p, dof_scene_lengths(), k.scene,
+                                                        in[1].dense.view());
         const Intrinsics ki = dof_intrinsics(k.depth, in[0].dense.width, in[0].dense.height);
-        k.p.lens = k.depth.lens;
+        p.lens = k.depth.lens;
         // run_dof reads a given context as backend gpu (its CPU-only schemes
         // would be refused), so with auto it makes its own.
         Exec ex = e;
         if (ex.backend != Backend::gpu) ex.gpu = nullptr;
-        DofRun r = run_dof(in[0].dense, in[1].dense, ki, k.p, k.prepare, ex, g);
+        DofRun r = run_dof(in[0].dense, in[1].dense, ki, p, k.prepare, ex, g);
+        if (!scaled.is_null()) r.record["scene_scale"] = scaled;
         return ArrayResult{{{"rgb", std::move(r.result.rgb)}, {"scale", std::move(r.result.scale)}},
                            std::move(r.record),
                            {},
                            {}};
+      },
+      [](const ArrayCall<DofParams>& k, const std::set<std::string>& g) {
+        validate_dof(dof_with_lens(k.p, k.depth.lens), g);
+        check_range_step(k.prepare, g);
+        check_gpu_scheme(k.p, k.exec.backend);
+        check_dof_camera(k.depth);
       });
   return c;
 }

@@ -19,5 +19,14 @@ namespace brume {
 // values (sigma_max_px, coc_infinity_px, iterations).
 nlohmann::json dof_preview_steps(PreviewFrame& frame, const DofParams& p, const Intrinsics& k, const PreviewInputs& in,
                                  const std::string& input, const std::string& prefix, const std::string& last);
+// Throws dof_intrinsics' message when neither the depth flags nor the lens
+// give the camera (a check before any pixel; the size is not known yet).
+void check_dof_camera(const DepthSource& src);
+// Where the preview's page starts on a scene (CommandDef::preview_start);
+// `camera_given`: the depth flags give the intrinsics; `p` carries the depth
+// source's lens (dof_with_lens).
+std::vector<PreviewStart> dof_preview_start(const DofParams& p, bool camera_given, const PreviewScene& s);
+// The parameter of depth of field that --scene-scale scales.
+const std::vector<std::string>& dof_scene_lengths();
 
 }  // namespace brume

@@ -2,10 +2,11 @@
 // in the shape every effect follows (brume/pipeline.hpp): analyse the
 // measured range (R_max, the sky's colour), prepare it, dispatch once on
 // Exec, record.
-#include <optional>
-#include <cstdio>
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <memory>
+#include <optional>
 
 #include "brume/command.hpp"
 #include "brume/error.hpp"
@@ -83,11 +84,62 @@ const ParamTable<FogJob>& fog_job_table() {
     d.nest(&FogJob::input, input_param_table(true))
         .nest(&FogJob::prepare, range_step_param_table())
         .nest(&FogJob::fog, fog_param_table())
+        .nest(&FogJob::scene, scene_scale_param_table())
         .nest(&FogJob::output, output_param_table(fog_map_outputs()))
         .nest(&FogJob::lidar, camera_lidar_param_table());
     return d;
   }();
   return t;
+}
+
+// The parameters of fog that --scene-scale scales (brume/pipeline.hpp): the
+// density along the rays and the classic linear fog's ranges, those the job
+// uses (a default it does not use stays the default, which the checks read
+// as not given). Not the heights (the falloff, the band, the ramp): the
+// camera's height above the ground is metres whatever the frame, so the
+// fog's layer keeps its place around it.
+static std::vector<std::string> fog_scene_lengths(const FogParams& p) {
+  if (p.classic == ClassicFog::linear) return {"fog-start", "fog-end", "sky-distance"};
+  if (p.classic == ClassicFog::none && p.profile == FogProfile::table) return {"sky-distance"};
+  return {"density", "sky-distance"};
+}
+
+// Where brume view's page starts (brume/preview.hpp). A height profile needs
+// the camera's intrinsics and its height: where the command line gave none,
+// the page assumes a 60 degree field of view and 1.6 m (eye height) and says
+// so. The default density (0.02 /m) is kept where it gives an optical depth
+// between 0.05 and 5 at the scene's median range along a level ray from the
+// camera; else (a room, a mountain range) the page starts at the density
+// that leaves a transmission of 1/2 there.
+static std::vector<PreviewStart> fog_preview_start(const nlohmann::json& job, const std::set<std::string>&,
+                                                   const PreviewScene& s) {
+  FogJob j;
+  fog_job_table().from_json(j, job, "job");
+  const FogParams& p = j.fog;
+  std::vector<PreviewStart> v;
+  const bool heights = p.classic == ClassicFog::none && p.profile != FogProfile::constant;
+  double height = p.camera.height_m;
+  if (heights) {
+    if (!s.camera_given) v.push_back(preview_assumed_camera(s));
+    if (std::isnan(height) && p.camera.view_matrix_file.empty()) {
+      height = 1.6;
+      v.push_back({"camera-height", height,
+                   "the camera is assumed 1.6 m above the ground (eye height; the command line gave none): the "
+                   "fog's layer lies on the ground; set it under camera"});
+    }
+  }
+  if (p.classic != ClassicFog::none || p.profile == FogProfile::table || !(s.median_range_m > 0.0)) return v;
+  const double level = p.profile == FogProfile::exponential && std::isfinite(height)
+                           ? std::exp(-p.falloff_per_m * (height - p.base_height_m))
+                           : 1.0;
+  const double tau = p.density_per_m * level * s.median_range_m;
+  if (tau >= 0.05 && tau <= 5.0) return v;
+  const double d = preview_round(std::log(2.0) / (level * s.median_range_m));
+  v.push_back({"density", d,
+               "density " + preview_text(d) + " /m: transmission 1/2 at the scene's median range (" +
+                   preview_text(s.median_range_m) + " m) at the camera's height; the default 0.02 /m gives " +
+                   (tau < 0.05 ? "almost no fog" : "a wall of fog") + " here"});
+  return v;
 }
 
 // The preview's frame (brume/preview.hpp): the passes and uniforms of
@@ -166,6 +218,16 @@ PreviewFrame fog_preview(const nlohmann::json& job, const PreviewInputs& in) {
   return frame;
 }
 
+// What a fog job needs besides its values, checked before any pixel: a
+// height profile needs the camera's intrinsics (the rays' directions) and its
+// height above the ground. The size is nominal: neither check depends on it.
+static void check_fog_camera(const FogParams& p, const DepthSource& depth, const std::set<std::string>& given) {
+  validate_fog(p, given);
+  if (p.classic != ClassicFog::none || p.profile == FogProfile::constant) return;
+  depth_camera(depth, 640, 480, p.camera)
+      .require_height("--profile " + enum_name(fog_profile_names(), p.profile) + " (the fog depends on height)");
+}
+
 FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSource& depth, const FogParams& p,
                const RangeStep& prepare, const Exec& exec, const std::set<std::string>& given,
                const Image* window_depth) {
@@ -232,8 +294,12 @@ nlohmann::json run_fog_job(const FogJob& job, const ExecOptions& eo, const RunCo
       [&](const FogJob& j, const ExecOptions&) { validate_fog(j.fog, ctx.given); },
       [&](const FogJob& j, LoadedInputs& in, const Exec& exec) {
         if (!j.fog.airlight) check_airlight_sky(in, "fog");
-        FogRun run = run_fog(in.rgb, in.depth.range, j.input.depth, j.fog, with_camera(j.prepare, in.depth), exec,
+        FogParams p = j.fog;
+        const nlohmann::json scaled = apply_scene_scale(fog_param_table(), p, fog_scene_lengths(p), j.scene,
+                                                        in.depth.range);
+        FogRun run = run_fog(in.rgb, in.depth.range, j.input.depth, p, with_camera(j.prepare, in.depth), exec,
                              ctx.given, &in.depth.window_depth);
+        if (!scaled.is_null()) run.record["scene_scale"] = scaled;
         return EffectOutput{std::move(run.result.rgb),
                             {{"optical-depth", std::move(run.result.optical_depth)},
                              {"transmission", std::move(run.result.transmission)}},
@@ -271,17 +337,26 @@ CommandDef fog_command() {
   // Ground density D0 0.002-0.08 /m, i.e. a Koschmieder visibility 3.912/D0
   // of 2 km (mist) down to 50 m (thick fog), log-uniform as for haze;
   // falloff B 0.005-0.2 /m, a scale height 1/B of 200 m (a deep hazy
-  // boundary layer) down to 5 m (valley fog lying on the ground); blur gain
-  // and albedo as haze. --profile or --classic make the exponential's
-  // parameters meaningless, so they drop them.
+  // boundary layer) down to 5 m (valley fog lying on the ground); albedo as
+  // haze; blur gain 0.5-8 px: unlike haze's, fog's albedo only shapes the
+  // blur, so a draw of lambda 0 (Zhou's fog without blur) with an albedo would
+  // be refused (validate_fog) -- every combination of the ranges' ends must
+  // run (the transforms check them when made) -- and 0.5 px of gain is a
+  // blur below a pixel. lambda 0, given, drops the albedo. --classic drops
+  // them all; a profile other than the exponential drops the falloff, and the
+  // table profile (whose file gives the densities) the density too: a
+  // constant, band or ramp profile draws its density as the exponential does.
   c.sampling = make_sampling<FogParams>(fog_param_table(),
-                                        {{"density", "loguniform(0.002, 0.08)", {"classic", "profile"}},
-                                         {"falloff", "loguniform(0.005, 0.2)", {"classic", "profile"}},
-                                         {"lambda", "uniform(0, 8)", {"classic"}},
-                                         {"albedo", "uniform(0.8, 1)", {"classic"}}},
+                                        {{"density", "loguniform(0.002, 0.08)", {"classic", "profile=table"}},
+                                         {"falloff", "loguniform(0.005, 0.2)", {"classic", "profile!=exponential"}},
+                                         {"lambda", "uniform(0.5, 8)", {"classic"}},
+                                         {"albedo", "uniform(0.8, 1)", {"classic", "lambda=0"}}},
                                         &validate_fog);
   c.gpu_passes = {"fog.apply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
   c.preview = &fog_preview;
+  c.preview_start = &fog_preview_start;
+  // --scene-scale scales the lengths to the frame when a job runs; the page's values are metres.
+  c.preview_fixed.push_back("scene");
   // The height profile's density (a table profile reads its file); classic
   // OpenGL fog is a look, not a medium.
   c.extinction_per_m = [](const nlohmann::json& job, double height_m) -> std::optional<double> {
@@ -296,20 +371,29 @@ CommandDef fog_command() {
     fog_job_table().from_json(j, job, "job");
     return j.fog.classic == ClassicFog::none && j.fog.profile != FogProfile::constant;
   };
-  static const auto call = array_call_table(fog_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
+  static const auto call = array_call_table(fog_param_table(),
+                                            kArrayPrepare | kArrayIntrinsics | kArrayScene | kArrayExec);
   c.arrays = make_array_form<FogParams>(
       "fog", "",
       "Layered fog from the range and the camera (Zhou, Chen, Smith), with scattering blur for lambda_ > 0. "
       "The intrinsics (fx.. or fov_x/fov_y) and the pose are keywords. As `brume fog`.",
       rgb_range_args(ArrayArg::As::dense), call, {"rgb", "optical_depth", "transmission", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<FogParams>& k, const Exec& e, const std::set<std::string>& g) {
-        FogRun r = run_fog(in[0].dense, in[1].dense, k.depth, k.p, k.prepare, e, g);
+        FogParams p = k.p;
+        const nlohmann::json scaled = apply_scene_scale(fog_param_table(), p, fog_scene_lengths(p), k.scene,
+                                                        in[1].dense.view());
+        FogRun r = run_fog(in[0].dense, in[1].dense, k.depth, p, k.prepare, e, g);
+        if (!scaled.is_null()) r.record["scene_scale"] = scaled;
         return ArrayResult{{{"rgb", std::move(r.result.rgb)},
                             {"optical_depth", std::move(r.result.optical_depth)},
                             {"transmission", std::move(r.result.transmission)}},
                            std::move(r.record),
                            {},
                            {}};
+      },
+      [](const ArrayCall<FogParams>& k, const std::set<std::string>& g) {
+        check_fog_camera(k.p, k.depth, g);
+        check_range_step(k.prepare, g);
       });
   add_camera_lidar(c);  // after c.arrays: lidar= joins the array form
   return c;

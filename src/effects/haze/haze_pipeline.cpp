@@ -2,6 +2,7 @@
 // the shape every effect follows (brume/pipeline.hpp): analyse the measured
 // range, prepare it, dispatch once on Exec, record.
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <optional>
 #include <utility>
@@ -29,6 +30,7 @@ const ParamTable<HazeJob>& haze_job_table() {
     d.nest(&HazeJob::input, input_param_table(true))
         .nest(&HazeJob::prepare, range_step_param_table())
         .nest(&HazeJob::haze, haze_param_table())
+        .nest(&HazeJob::scene, scene_scale_param_table())
         .nest(&HazeJob::output, output_param_table(haze_map_outputs()))
         .nest(&HazeJob::lidar, camera_lidar_param_table());
     return d;
@@ -64,6 +66,31 @@ nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a) {
   return j;
 }
 
+// Where brume view's page starts (brume/preview.hpp): the table's defaults
+// are normalised (kappa-s 0.25 at R_max), which shows almost no haze where
+// the scene's median range is far below its farthest (the demo scene: 8 m
+// against 1.2 km). The page starts at the visibility that leaves a
+// transmission of 0.8 at the median range, V = 3.912 R_med / ln 1.25 (the
+// demo: 150 m; the farther half of the scene then fades from 0.8 to 0).
+std::vector<PreviewStart> haze_preview_start(const HazeParams& p, const std::set<std::string>& given,
+                                             const PreviewScene& s) {
+  std::vector<PreviewStart> v;
+  if (p.visibility_m || given.count("kappa-a") || given.count("kappa-s") || !(s.median_range_m > 0.0)) return v;
+  const double vis = preview_round(3.912 * s.median_range_m / std::log(1.25));
+  v.push_back({"visibility", vis,
+               "visibility " + preview_text(vis) + " m: transmission 0.8 at the scene's median range (" +
+                   preview_text(s.median_range_m) + " m); the default, normalised kappa-s 0.25 at R_max (" +
+                   preview_text(s.range_max_m) + " m), shows little here"});
+  return v;
+}
+
+// The lengths --scene-scale scales (brume/pipeline.hpp): the medium's
+// visibility and the distances that place the scene's end and its sky.
+const std::vector<std::string>& haze_scene_lengths() {
+  static const std::vector<std::string> n = {"visibility", "range-max", "sky-distance"};
+  return n;
+}
+
 namespace {
 
 // The effect on the prepared range, with the analysis of the measured one.
@@ -97,6 +124,13 @@ HazeRun haze_on_prepared(ConstImageView rgb, HazeAnalysis analysis, const Prepar
   run.record["execution"] = backend.record;
   run.record["execution"]["timing"] = timing;
   return run;
+}
+
+std::vector<PreviewStart> haze_preview_start_job(const nlohmann::json& job, const std::set<std::string>& given,
+                                                 const PreviewScene& s) {
+  HazeJob j;
+  haze_job_table().from_json(j, job, "job");
+  return haze_preview_start(j.haze, given, s);
 }
 
 PreviewFrame haze_preview(const nlohmann::json& job, const PreviewInputs& in) {
@@ -173,7 +207,11 @@ nlohmann::json run_haze_job(const HazeJob& job, const ExecOptions& eo, const Run
       [&](const HazeJob& j, const ExecOptions&) { validate_haze(j.haze, ctx.given); },
       [&](const HazeJob& j, LoadedInputs& in, const Exec& exec) {
         if (!j.haze.airlight) check_airlight_sky(in, "haze");
-        HazeRun run = run_haze(in.rgb, in.depth.range, j.haze, with_camera(j.prepare, in.depth), exec, ctx.given);
+        HazeParams p = j.haze;
+        const nlohmann::json scaled = apply_scene_scale(haze_param_table(), p, haze_scene_lengths(), j.scene,
+                                                        in.depth.range);
+        HazeRun run = run_haze(in.rgb, in.depth.range, p, with_camera(j.prepare, in.depth), exec, ctx.given);
+        if (!scaled.is_null()) run.record["scene_scale"] = scaled;
         return EffectOutput{std::move(run.result.rgb),
                             {{"transmission", std::move(run.result.transmission)},
                              {"scale-map", std::move(run.result.scale)}},
@@ -227,6 +265,9 @@ CommandDef haze_command() {
                                          &validate_haze);
   c.gpu_passes = {"haze.premultiply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
   c.preview = &haze_preview;
+  c.preview_start = &haze_preview_start_job;
+  // --scene-scale scales the lengths to the frame when a job runs; the page's values are metres.
+  c.preview_fixed.push_back("scene");
   // A homogeneous medium: Koschmieder's 3.912 / V with a visibility, else the
   // normalised kappas over a given R_max; without either it has no unit.
   c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {
@@ -235,20 +276,28 @@ CommandDef haze_command() {
     return haze_extinction_per_m(j.haze);
   };
   // brume.haze(rgb, range, ...): the arrays read in place (views).
-  static const auto call = array_call_table(haze_param_table(), kArrayPrepare | kArrayExec);
+  static const auto call = array_call_table(haze_param_table(), kArrayPrepare | kArrayScene | kArrayExec);
   c.arrays = make_array_form<HazeParams>(
       "haze", "",
       "Haze and fog with scattering blur (Hansard): Beer-Lambert transmission from the range, premultiplied "
       "compositing with the airlight, depth-dependent blur by inhomogeneous diffusion. As `brume haze`.",
       rgb_range_args(ArrayArg::As::view), call, {"rgb", "transmission", "scale", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<HazeParams>& k, const Exec& e, const std::set<std::string>& g) {
-        HazeRun r = run_haze(in[0].view, in[1].view, k.p, k.prepare, e, g);
+        HazeParams p = k.p;
+        const nlohmann::json scaled = apply_scene_scale(haze_param_table(), p, haze_scene_lengths(), k.scene,
+                                                        in[1].view);
+        HazeRun r = run_haze(in[0].view, in[1].view, p, k.prepare, e, g);
+        if (!scaled.is_null()) r.record["scene_scale"] = scaled;
         return ArrayResult{{{"rgb", std::move(r.result.rgb)},
                             {"transmission", std::move(r.result.transmission)},
                             {"scale", std::move(r.result.scale)}},
                            std::move(r.record),
                            {},
                            {}};
+      },
+      [](const ArrayCall<HazeParams>& k, const std::set<std::string>& g) {
+        validate_haze(k.p, g);
+        check_range_step(k.prepare, g);
       });
   add_camera_lidar(c);  // after c.arrays: lidar= joins the array form
   return c;

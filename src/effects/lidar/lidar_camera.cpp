@@ -110,6 +110,9 @@ CameraLidarMedium medium_of(const Hooks& h, const nlohmann::json& job, double wa
 // --lidar and the array forms' lidar=.
 LidarFogParams scan_params(const Hooks& h, const nlohmann::json& job, const CameraLidar& L,
                            const std::set<std::string>& given, CameraLidarMedium& medium) {
+  if (job.contains("scene") && job["scene"].contains("scene-scale") && !job["scene"]["scene-scale"].is_null())
+    throw Error("--scene-scale scales the image's medium to the frame's median range, but the scan's fog needs the "
+                "medium in metres along its beams: give the lengths in metres (drop --scene-scale) to fog a scan");
   if (given.count("lidar-wavelength") && !h.spectral)
     throw Error("--lidar-wavelength: the medium of " + h.name +
                 " is grey (its extinction is the same at every wavelength), so the wavelength would change "
@@ -305,6 +308,18 @@ void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, Ar
     if (!calib.empty()) call[calib_spec().block][kCalib] = calib;
     return call;
   };
+  // The image's checks on the call without the scan's block (its settings are
+  // checked with the scan, when a call gives one).
+  a.check = [inner = a.check, &t](const nlohmann::json& call, const std::set<std::string>& given) {
+    nlohmann::json own = call;
+    own.erase("lidar");
+    const std::string block = calib_spec().block;
+    if (own.contains(block) && own[block].contains(kCalib)) own[block].erase(kCalib);
+    std::set<std::string> g;
+    for (const std::string& n : given)
+      if (!t.declares(n) && n != kCalib) g.insert(n);
+    if (inner) inner(own, g);
+  };
   a.run = [h, inner = a.run, job_specs, scan, fn = a.public_name, &t](
               const std::vector<ArrayIn>& in, const nlohmann::json& call, const Exec& e,
               const std::set<std::string>& given) {
@@ -361,7 +376,7 @@ void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, Ar
     try {  // the scan first (milliseconds): its errors before the image's work, as on the command line
       p = scan_params(h, job, l.lidar, given, m);
     } catch (const Error& err) {
-      throw Error(fn + "(): lidar=: " + err.what());
+      throw Error(fn + "(): lidar: " + err.what());
     }
     try {
       out = lidar_fog_array(in[scan].view, p, fn + "(): lidar", st);

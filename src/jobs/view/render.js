@@ -10,7 +10,10 @@ const FORMATS = {
 };
 
 // The display: the effect frame (or the input, left of the wipe) encoded
-// with the sRGB curve as an 8-bit output would be, or the range colour-mapped.
+// with the sRGB curve as an 8-bit output would be, or the range colour-mapped
+// as `brume demo`'s range-preview.png is (src/depth/preview.cpp): log range
+// from the nearest known to the farthest, near warm (dark red, orange,
+// yellow) to far cool (cyan, blue); the sky and unknown pixels hatched grey.
 const DISPLAY_FS = `#version 300 es
 precision highp float;
 precision highp sampler2D;
@@ -20,31 +23,46 @@ uniform sampler2D uRange;
 uniform sampler2D uSky;   // the preparation's sky weight
 uniform int uMode;        // 0 effect, 1 depth
 uniform float uWipe;      // x below which the input is shown
+uniform float uRangeMin;  // the known range's span (the legend's ends)
 uniform float uRangeMax;
 uniform float uFocus;     // > 0: mark the focal plane (range within uFocusTol of uFocus)
 uniform float uFocusTol;
 out vec4 oColor;
 float enc(float v) { v = max(v, 0.0); return v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1.0 / 2.4) - 0.055; }
-vec3 turbo(float t) {  // a short polynomial colour map: near warm, far cool
-  t = clamp(t, 0.0, 1.0);
-  return vec3(clamp(1.5 - abs(4.0 * t - 1.0), 0.0, 1.0), clamp(1.5 - abs(4.0 * t - 2.0), 0.0, 1.0),
-              clamp(1.5 - abs(4.0 * t - 3.0), 0.0, 1.0));
+vec3 ramp(float t) {  // sRGB-encoded, as range_preview's five stops
+  vec3 k0 = vec3(0.5, 0.0, 0.05), k1 = vec3(0.95, 0.4, 0.05), k2 = vec3(0.95, 0.9, 0.3), k3 = vec3(0.3, 0.8, 0.9),
+       k4 = vec3(0.1, 0.2, 0.7);
+  float s = clamp(t, 0.0, 1.0) * 4.0;
+  if (s < 1.0) return mix(k0, k1, s);
+  if (s < 2.0) return mix(k1, k2, s - 1.0);
+  if (s < 3.0) return mix(k2, k3, s - 2.0);
+  return mix(k3, k4, s - 3.0);
 }
 void main() {
   ivec2 size = textureSize(uOut, 0);
   ivec2 p = ivec2(int(gl_FragCoord.x), size.y - 1 - int(gl_FragCoord.y));  // image rows top-down
-  vec3 c;
   float r = texelFetch(uRange, p, 0).r;
+  vec3 e;  // sRGB-encoded
   if (uMode == 1) {
     bool sky = r <= 0.0 || texelFetch(uSky, p, 0).r >= 0.5;
-    c = sky ? vec3(0.55, 0.75, 1.0) : turbo(1.0 - sqrt(r / uRangeMax));  // sky and unknown: pale blue
-    c = vec3(pow(c.r, 2.2), pow(c.g, 2.2), pow(c.b, 2.2));
+    float t = uRangeMax > uRangeMin ? log(max(r, uRangeMin) / uRangeMin) / log(uRangeMax / uRangeMin) : 0.0;
+    bool stripe = ((p.x + p.y) / 4) % 2 == 0;
+    e = sky ? (stripe ? vec3(0.42) : vec3(0.58)) : ramp(t);
   } else {
-    c = float(p.x) < uWipe ? texelFetch(uImage, p, 0).rgb : texelFetch(uOut, p, 0).rgb;
+    vec3 c = float(p.x) < uWipe ? texelFetch(uImage, p, 0).rgb : texelFetch(uOut, p, 0).rgb;
+    e = vec3(enc(c.r), enc(c.g), enc(c.b));
   }
-  if (uFocus > 0.0 && r > 0.0 && abs(r - uFocus) < uFocusTol) c = mix(c, vec3(1.0, 0.0, 1.0), 0.45);
-  oColor = vec4(enc(c.r), enc(c.g), enc(c.b), 1.0);
+  if (uFocus > 0.0 && r > 0.0 && abs(r - uFocus) < uFocusTol) e = mix(e, vec3(1.0, 0.0, 1.0), 0.45);
+  oColor = vec4(e, 1.0);
 }`;
+
+// The depth view's colour at t in [0, 1] (0 near), as the display shader's
+// ramp: the legend's gradient.
+export function depthColour(t) {
+  const k = [[0.5, 0.0, 0.05], [0.95, 0.4, 0.05], [0.95, 0.9, 0.3], [0.3, 0.8, 0.9], [0.1, 0.2, 0.7]];
+  const s = Math.min(1, Math.max(0, t)) * 4, j = Math.min(3, Math.floor(s)), u = s - j;
+  return k[j].map((a, c) => Math.round(255 * (a + u * (k[j + 1][c] - a))));
+}
 
 export class Renderer {
   constructor(canvas, meta) {
@@ -62,8 +80,12 @@ export class Renderer {
     for (const [name, p] of Object.entries(meta.passes))
       this.programs[name] = this.link(name, meta.vertex, p.fragment, p.samplers);
     this.display = this.link('display', meta.vertex, DISPLAY_FS, ['uOut', 'uImage', 'uRange', 'uSky']);
-    this.targets = {};
-    this.fbos = {};
+    // The inputs at each scale the page draws (1/k of the files' size: the
+    // texture limit, or a draft while a control moves), with their render
+    // targets and maps: {w, h, inputs, targets, fbos}.
+    this.levels = {};
+    this.level = null;   // the one the last frame was drawn at
+    this.result = null;  // that frame's result texture
   }
 
   link(name, vs, fs, samplers) {
@@ -110,71 +132,93 @@ export class Renderer {
     return t;
   }
 
-  // The inputs, once: linear RGBA, the prepared range (-1 unknown), the sky weight.
-  upload(w, h, rgba, range, sky) {
-    this.w = w;
-    this.h = h;
-    this.canvas.width = w;
-    this.canvas.height = h;
-    this.inputs = {
+  // A scale's inputs, once: linear RGBA, the prepared range (-1 unknown), the sky weight.
+  upload(k, w, h, rgba, range, sky) {
+    this.drop(k);
+    this.levels[k] = {k, w, h, targets: {}, fbos: {}, inputs: {
       image: this.texture('RGBA32F', 'RGBA', w, h, rgba),
       range: this.texture('R32F', 'RED', w, h, range),
       sky: this.texture('R32F', 'RED', w, h, sky),
-    };
-    this.rangeHost = range;
-    this.targets = {};
-    this.fbos = {};
+    }};
   }
 
-  // A map a plan names in its "data" ({width, height, channels 1|2|4, data}), once.
+  // Forgets a scale (or every scale): its textures and framebuffers.
+  drop(k) {
+    const gl = this.gl;
+    for (const key of k === undefined ? Object.keys(this.levels) : [k]) {
+      const L = this.levels[key];
+      if (!L) continue;
+      for (const t of [...Object.values(L.inputs), ...Object.values(L.targets)]) gl.deleteTexture(t);
+      for (const f of Object.values(L.fbos)) gl.deleteFramebuffer(f);
+      if (this.level === L) this.level = null, this.result = null;
+      delete this.levels[key];
+    }
+  }
+
+  // A map a plan names in its "data" ({width, height, channels 1|2|4, data}), once per scale.
   // A name "kind:key" replaces the older maps of its kind (dof's scale map per job).
-  addInput(name, map) {
+  addInput(k, name, map) {
+    const L = this.levels[k];
     const kind = name.split(':')[0];
-    for (const old of Object.keys(this.inputs))
+    for (const old of Object.keys(L.inputs))
       if (old !== name && old.includes(':') && old.split(':')[0] === kind) {
-        this.gl.deleteTexture(this.inputs[old]);
-        delete this.inputs[old];
+        this.gl.deleteTexture(L.inputs[old]);
+        delete L.inputs[old];
       }
     if (map.width > this.maxTexture || map.height > this.maxTexture)
       throw new Error(`map ${name} is ${map.width}x${map.height}, above this browser's largest texture ` +
                       `(${this.maxTexture}): this effect cannot be previewed here`);
     const [internal, format] = {1: ['R32F', 'RED'], 2: ['RG32F', 'RG'], 4: ['RGBA32F', 'RGBA']}[map.channels];
-    this.inputs[name] = this.texture(internal, format, map.width, map.height, map.data);
+    L.inputs[name] = this.texture(internal, format, map.width, map.height, map.data);
   }
 
-  target(name, format) {
+  target(L, name, format) {
     const key = name + ':' + format;
-    if (!this.targets[key]) {
+    if (!L.targets[key]) {
       const [internal, fmt] = FORMATS[format];
-      this.targets[key] = this.texture(internal, fmt, this.w, this.h, null);
+      L.targets[key] = this.texture(internal, fmt, L.w, L.h, null);
     }
-    return this.targets[key];
+    return L.targets[key];
   }
 
-  fbo(textures) {
+  fbo(L, textures) {
     const gl = this.gl;
     const key = textures.map((t) => t.key).join('|');
-    if (!this.fbos[key]) {
+    if (!L.fbos[key]) {
       const f = gl.createFramebuffer();
       gl.bindFramebuffer(gl.FRAMEBUFFER, f);
       textures.forEach((t, i) => gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0 + i, gl.TEXTURE_2D, t.tex, 0));
       gl.drawBuffers(textures.map((_, i) => gl.COLOR_ATTACHMENT0 + i));
       const st = gl.checkFramebufferStatus(gl.FRAMEBUFFER);
       if (st !== gl.FRAMEBUFFER_COMPLETE) throw new Error('float render target incomplete: 0x' + st.toString(16));
-      this.fbos[key] = f;
+      L.fbos[key] = f;
     }
-    return this.fbos[key];
+    return L.fbos[key];
   }
 
-  // Runs the plan's passes; the result texture is kept for display and pixels().
-  run(plan) {
+  // Runs the plan's passes at scale k. Each step is timed to its end (a
+  // one-pixel read after it: the page's frame-time model learns each pass's
+  // cost per megapixel from these). `opts.stop()`: checked between passes
+  // once `opts.sliceMs` have gone by since the last look, after yielding to
+  // the page's events (a full frame that takes seconds in software GL gives
+  // way to a moving control); returns false when it stopped, else the steps'
+  // times [{pass, count, ms}].
+  async run(plan, k, opts = {}) {
     const gl = this.gl;
+    const L = this.levels[k];
     const tex = {};
-    for (const [k, t] of Object.entries(this.inputs)) tex[k] = {tex: t, key: k};
-    for (const [name, fmt] of Object.entries(plan.targets)) tex[name] = {tex: this.target(name, fmt), key: name + ':' + fmt};
-    gl.bindVertexArray(this.vao);
-    gl.viewport(0, 0, this.w, this.h);
-    const draw = (step, extra) => {
+    for (const [name, t] of Object.entries(L.inputs)) tex[name] = {tex: t, key: name};
+    for (const [name, fmt] of Object.entries(plan.targets)) tex[name] = {tex: this.target(L, name, fmt), key: name + ':' + fmt};
+    const timed = [];
+    let mark = performance.now();
+    const pause = async () => {  // lets the page's events in; true: stop
+      if (!opts.stop || performance.now() - mark < (opts.sliceMs || 100)) return false;
+      this.sync();
+      await new Promise((r) => setTimeout(r, 0));
+      mark = performance.now();
+      return opts.stop();
+    };
+    const draw = (step, extra, src) => {
       const p = this.programs[step.pass];
       if (!p) throw new Error(`the plan names pass ${step.pass}, which the server did not send`);
       gl.useProgram(p.prog);
@@ -190,58 +234,77 @@ export class Renderer {
       }
       step.in.forEach((name, i) => {
         gl.activeTexture(gl.TEXTURE0 + i);
-        gl.bindTexture(gl.TEXTURE_2D, name === '$src' ? this.src.tex : tex[name].tex);
+        gl.bindTexture(gl.TEXTURE_2D, name === '$src' ? src.tex : tex[name].tex);
       });
       gl.drawArrays(gl.TRIANGLES, 0, 3);
     };
+    gl.bindVertexArray(this.vao);
+    gl.viewport(0, 0, L.w, L.h);
     for (const step of plan.steps) {
+      const t0 = performance.now();
+      let count = 1;
       if (step.copy) {  // a plain copy: the diffusion's first texture from an input
-        const from = this.fbo([tex[step.copy.from]]), to = this.fbo([tex[step.copy.to]]);
+        const from = this.fbo(L, [tex[step.copy.from]]), to = this.fbo(L, [tex[step.copy.to]]);
         gl.bindFramebuffer(gl.READ_FRAMEBUFFER, from);
         gl.bindFramebuffer(gl.DRAW_FRAMEBUFFER, to);
-        gl.blitFramebuffer(0, 0, this.w, this.h, 0, 0, this.w, this.h, gl.COLOR_BUFFER_BIT, gl.NEAREST);
+        gl.blitFramebuffer(0, 0, L.w, L.h, 0, 0, L.w, L.h, gl.COLOR_BUFFER_BIT, gl.NEAREST);
         gl.bindFramebuffer(gl.READ_FRAMEBUFFER, null);
         gl.bindFramebuffer(gl.DRAW_FRAMEBUFFER, null);
-        continue;
-      }
-      if (step.iterate) {
+      } else if (step.iterate) {
         const it = step.iterate;
+        count = it.count;
         let src = tex[it.ping], dst = tex[it.pong];
-        for (let k = 0; k < it.count; ++k) {
-          gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo([dst]));
-          this.src = src;
-          draw(step, {[it.uniform]: ['1i', k]});
+        for (let i = 0; i < it.count; ++i) {
+          gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo(L, [dst]));
+          draw(step, {[it.uniform]: ['1i', i]}, src);
           [src, dst] = [dst, src];
+          if (await pause()) return false;
+          gl.bindVertexArray(this.vao);
+          gl.viewport(0, 0, L.w, L.h);
         }
         tex[it.last] = src;
       } else {
-        gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo(step.out.map((n) => tex[n])));
+        gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo(L, step.out.map((n) => tex[n])));
         draw(step, {});
       }
-      for (let i = 0; i < step.in.length; ++i) {
+      for (let i = 0; i < (step.in || []).length; ++i) {
         gl.activeTexture(gl.TEXTURE0 + i);
         gl.bindTexture(gl.TEXTURE_2D, null);
       }
+      this.sync();
+      timed.push({pass: step.copy ? 'copy' : step.pass, count, ms: performance.now() - t0});
+      if (await pause()) return false;
+      gl.bindVertexArray(this.vao);
+      gl.viewport(0, 0, L.w, L.h);
     }
+    this.level = L;
     this.result = tex[plan.result];
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    return timed;
   }
 
-  // Draws the display (effect, wipe, depth view, focal plane) to the canvas.
+  // Draws the display (effect, wipe, depth view, focal plane) to the canvas,
+  // at the size of the scale the last frame was drawn at.
   show(opts) {
     const gl = this.gl;
-    if (!this.result) return;
+    const L = this.level;
+    if (!L || !this.result) return;
+    if (this.canvas.width !== L.w || this.canvas.height !== L.h) {
+      this.canvas.width = L.w;
+      this.canvas.height = L.h;
+    }
     const p = this.display;
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
-    gl.viewport(0, 0, this.w, this.h);
+    gl.viewport(0, 0, L.w, L.h);
     gl.useProgram(p.prog);
     const set1f = (n, v) => p.locs[n] !== undefined && gl.uniform1f(p.locs[n], v);
     if (p.locs.uMode !== undefined) gl.uniform1i(p.locs.uMode, opts.depth ? 1 : 0);
-    set1f('uWipe', opts.wipe * this.w);
+    set1f('uWipe', opts.wipe * L.w);
+    set1f('uRangeMin', opts.rangeMin || 1);
     set1f('uRangeMax', opts.rangeMax || 1);
     set1f('uFocus', opts.focus || 0);
     set1f('uFocusTol', opts.focusTol || 0);
-    [this.result.tex, this.inputs.image, this.inputs.range, this.inputs.sky].forEach((t, i) => {
+    [this.result.tex, L.inputs.image, L.inputs.range, L.inputs.sky].forEach((t, i) => {
       gl.activeTexture(gl.TEXTURE0 + i);
       gl.bindTexture(gl.TEXTURE_2D, t);
     });
@@ -257,15 +320,28 @@ export class Renderer {
     gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
   }
 
-  // The effect frame at image size, rows top-down: linear RGBA floats.
+  // The last frame at its scale, rows top-down: linear RGBA floats.
   readResult() {
     const gl = this.gl;
-    gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo([this.result]));
+    const L = this.level;
+    gl.bindFramebuffer(gl.FRAMEBUFFER, this.fbo(L, [this.result]));
     gl.readBuffer(gl.COLOR_ATTACHMENT0);
-    const out = new Float32Array(this.w * this.h * 4);
-    gl.readPixels(0, 0, this.w, this.h, gl.RGBA, gl.FLOAT, out);
+    const out = new Float32Array(L.w * L.h * 4);
+    gl.readPixels(0, 0, L.w, L.h, gl.RGBA, gl.FLOAT, out);
     gl.bindFramebuffer(gl.FRAMEBUFFER, null);
     return out;
+  }
+
+  // The canvas as shown (the display), rows top-down, sRGB bytes RGBA.
+  readDisplay() {
+    const gl = this.gl;
+    const L = this.level;
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    const out = new Uint8Array(L.w * L.h * 4);
+    gl.readPixels(0, 0, L.w, L.h, gl.RGBA, gl.UNSIGNED_BYTE, out);
+    const flipped = new Uint8Array(out.length), row = L.w * 4;
+    for (let y = 0; y < L.h; ++y) flipped.set(out.subarray((L.h - 1 - y) * row, (L.h - y) * row), y * row);
+    return flipped;
   }
 }
 

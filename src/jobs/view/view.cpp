@@ -125,6 +125,17 @@ bool page_param(const CommandDef& c, const ParamSpec& s) {
   return true;
 }
 
+// The depth flags the page sets too: the camera's intrinsics (the field of
+// view, the focal length in pixels, the principal point), which a height
+// profile and planar depth need. Changing one re-reads the inputs when their
+// conversion to range uses it (a z map, a disparity).
+bool camera_param(const CommandDef& c, const ParamSpec& s) {
+  if (s.block != "depth" || s.kind == ParamKind::text || !c.spec(s.name)) return false;
+  for (const std::string& n : camera_intrinsics_params())
+    if (n == s.name) return true;
+  return false;
+}
+
 std::string kind_name(ParamKind k) {
   switch (k) {
     case ParamKind::real: return "real";
@@ -239,13 +250,22 @@ struct Server {
       : c(cmd), step(std::move(s)), cli_given(std::move(g)), token(random_token()) {}
   const CommandDef& c;
   LoadedInputs in;
+  InputFiles files;  // the command line's input and depth flags, paths absolute (what `in` was read from)
   RangeStep step;
   std::set<std::string> cli_given;
   JobValues cli_values;  // the command line's input and preparation flags, for the effect's job
   std::string token, host_ok[4];
   int port = 0;
   std::mutex mu;
-  std::unique_ptr<ViewData> data;
+  // The inputs at each scale the page asked for (1/k: the browser's texture
+  // limit, or a draft while a control moves), the last few kept.
+  std::map<int, std::unique_ptr<ViewData>> data;
+  // The camera values the inputs were read with (the page's camera controls),
+  // and a count the page compares, so that it fetches the data again when a
+  // new camera re-read them (a z map's or a disparity's conversion to range).
+  nlohmann::json loaded_camera = nlohmann::json::object();
+  int data_version = 0;
+  PreviewScene scene;
   // The maps of the last two frames (PreviewFrame::maps): the page fetches a
   // frame's maps right after its plan; the one before covers a plan that
   // overtook a fetch.
@@ -260,14 +280,66 @@ struct Server {
   }
 
   ViewData& at(int k) {
-    if (!data || data->k != k) data = make_data(in, step, cli_given, k);
-    return *data;
+    auto it = data.find(k);
+    if (it != data.end()) return *it->second;
+    while (data.size() >= 4) {  // the largest other scale goes first (the full size and the drafts stay)
+      auto drop = std::prev(data.end());
+      if (drop->first == k) --drop;
+      data.erase(drop);
+    }
+    return *data.emplace(k, make_data(in, step, cli_given, k)).first->second;
+  }
+
+  // The command line's depth flags with the page's camera values: re-reads
+  // the inputs when the conversion to range depends on them (not a range map).
+  void use_camera(const nlohmann::json& camera) {
+    if (camera == loaded_camera) return;
+    loaded_camera = camera;
+    if (!files.depth.range.empty()) return;  // a range map is range whatever the camera
+    InputFiles f = files;
+    for (const auto& [name, v] : camera.items()) depth_param_table().at(name).set(f.depth, v);
+    in = load_inputs(f, true);
+    data.clear();
+    ++data_version;
+  }
+
+  const ParamSpec* page_spec(const std::string& name) const {
+    const ParamSpec* s = c.spec(name);
+    return s && (page_param(c, *s) || camera_param(c, *s)) ? s : nullptr;
+  }
+
+  // The job of the defaults and the command line's flags.
+  json cli_job() const {
+    JobValues iv = cli_values;
+    iv.emplace_back("out", json("brume-view.png"));
+    return c.build(iv);
+  }
+
+  // Whether the page offers the camera's intrinsics: where the inputs'
+  // conversion to range uses them (a z map, a disparity), or the command does
+  // (it takes them as keywords on arrays: fog's height profile, depth of
+  // field's planar depth); not for haze on a range map, which no camera changes.
+  bool camera_matters() const {
+    if (files.depth.range.empty()) return true;
+    if (!c.arrays) return false;
+    return std::any_of(c.arrays->specs.begin(), c.arrays->specs.end(),
+                       [](const ParamSpec& s) { return s.block == "depth" && s.name == "fov-x"; });
   }
 
   json meta() {
     json specs = json::array();
     for (const ParamSpec& s : c.specs)
-      if (page_param(c, s)) specs.push_back(spec_json(c, s));
+      if (page_param(c, s) || (camera_param(c, s) && camera_matters())) specs.push_back(spec_json(c, s));
+    // Where the page starts: the command's values for this scene (shown and
+    // spelled out in the command), each with its reason.
+    json start = json::array();
+    if (c.preview_start)
+      for (const PreviewStart& p : c.preview_start(cli_job(), cli_given, scene)) {
+        const ParamSpec* s = c.spec(p.name);
+        if (!s || !page_spec(p.name))
+          throw Error("internal: the preview starts " + c.name + " at --" + p.name + ", which the page does not set");
+        start.push_back({{"name", p.name}, {"value", s->format(p.value)}, {"why", p.why}});
+      }
     json passes = json::object();
 #if BRUME_HAVE_GPU
     for (const std::string& name : c.gpu_passes) {
@@ -284,13 +356,40 @@ struct Server {
             {"height", in.rgb.height},
             {"image", in.record.value("image", json::object()).value("path", json(""))},
             {"specs", specs},
+            {"start", start},
+            {"scene",
+             {{"median_range_m", finite_or_null(scene.median_range_m)},
+              {"centre_range_m", finite_or_null(scene.centre_range_m)},
+              {"range_min_m", finite_or_null(scene.range_min_m)},
+              {"range_max_m", finite_or_null(scene.range_max_m)},
+              {"camera_given", scene.camera_given}}},
             {"passes", passes},
             {"vertex", vertex},
             {"version", BRUME_VERSION}};
   }
 
+  // The page parameter a refusal's message is about: the first --NAME in it
+  // that the page sets (a cross-field check names the flag it refuses first).
+  json mentioned(const std::string& message) const {
+    for (std::size_t i = message.find("--"); i != std::string::npos; i = message.find("--", i + 2)) {
+      std::size_t j = i + 2;
+      while (j < message.size() && (std::isalnum(static_cast<unsigned char>(message[j])) || message[j] == '-')) ++j;
+      const std::string name = message.substr(i + 2, j - i - 2);
+      if (page_spec(name)) return name;
+    }
+    return nullptr;
+  }
+
   // The frame for the page's values ({name: text as typed}): the job as the
   // command line would build it, checked, its plan, command line and record.
+  // "scale": the inputs at 1/k; "pixel_factor": the preview's pixel lengths
+  // (every px parameter: the blur, sigma0, the CoC) times this, so that a
+  // draft at 1/k blurs at the full frame's physical scale. A refused value
+  // throws Refusal naming it (`param`, when the message is about one).
+  struct Refusal : Error {
+    Refusal(const std::string& m, json p) : Error(m), param(std::move(p)) {}
+    json param;
+  };
   json frame(const json& body) {
     if (!body.is_object() || !body.contains("values") || !body["values"].is_object())
       throw Error("the request needs {\"values\": {name: text}}");
@@ -301,45 +400,86 @@ struct Server {
                                               : scale.get<std::int64_t>() < 1 || scale.get<std::int64_t>() > 64))
       throw Error("scale " + scale.dump() + " must be a whole number in [1, 64]");
     const int k = scale.get<int>();
-    JobValues values = cli_values;
+    double pixel_factor = 1.0;
+    if (body.contains("pixel_factor")) {
+      if (!body["pixel_factor"].is_number() || !(body["pixel_factor"].get<double>() > 0.0) ||
+          !(body["pixel_factor"].get<double>() <= 1.0))
+        throw Error("pixel_factor must be a number in (0, 1]");
+      pixel_factor = body["pixel_factor"].get<double>();
+    }
+    // The command line's values, then the page's (a camera value replaces the command line's).
+    std::vector<std::pair<std::string, std::pair<json, std::string>>> merged;
     std::set<std::string> given = cli_given;
+    for (const auto& [name, v] : cli_values) merged.push_back({name, {v, c.spec(name)->format(v)}});
+    json camera = json::object();
+    for (const auto& [name, text] : body["values"].items()) {
+      const ParamSpec* s = c.spec(name);
+      if (!s || !page_spec(name))
+        throw Error("'" + name + "' is not a parameter of " + c.name + " the page sets" +
+                    (s && s->kind == ParamKind::text ? " (it names a file or an entry, which the page never does)" : ""));
+      if (!text.is_string()) throw Refusal("--" + name + ": the value must be text as typed", name);
+      json v;
+      try {
+        v = s->parse(text.get<std::string>());
+        s->check(v);
+      } catch (const Error& e) {
+        throw Refusal(e.what(), name);
+      }
+      if (camera_param(c, *s)) camera[name] = v;
+      given.insert(name);
+      const auto same = std::find_if(merged.begin(), merged.end(), [&](const auto& m) { return m.first == name; });
+      if (same != merged.end()) same->second = {v, text.get<std::string>()};
+      else merged.push_back({name, {v, text.get<std::string>()}});
+    }
+    JobValues values;
     std::vector<std::string> words = {"brume"};
     for (const std::string& w : c.cli_words().empty() ? std::vector<std::string>{c.name} : c.cli_words())
       words.push_back(w);
-    for (const auto& [name, v] : cli_values) {
-      const ParamSpec* s = c.spec(name);
-      if (s->kind == ParamKind::boolean) {
-        if (v.get<bool>()) words.push_back("--" + name);
+    for (const auto& [name, vt] : merged) {
+      values.emplace_back(name, vt.first);
+      if (c.spec(name)->kind == ParamKind::boolean) {
+        if (vt.first.get<bool>()) words.push_back("--" + name);
       } else {
         words.push_back("--" + name);
-        words.push_back(s->format(v));
-      }
-    }
-    for (const auto& [name, text] : body["values"].items()) {
-      const ParamSpec* s = c.spec(name);
-      if (!s || !page_param(c, *s))
-        throw Error("'" + name + "' is not a parameter of " + c.name + " the page sets" +
-                    (s && s->kind == ParamKind::text ? " (it names a file or an entry, which the page never does)" : ""));
-      if (!text.is_string()) throw Error("--" + name + ": the value must be text as typed");
-      json v = s->parse(text.get<std::string>());
-      s->check(v);
-      values.emplace_back(name, v);
-      given.insert(name);
-      if (s->kind == ParamKind::boolean) {
-        if (v.get<bool>()) words.push_back("--" + name);
-      } else {
-        words.push_back("--" + name);
-        words.push_back(text.get<std::string>());
+        words.push_back(vt.second);
       }
     }
     values.emplace_back("out", json("brume-view.png"));
     words.push_back("--out");
     words.push_back("brume-view.png");
-    const json job = c.build(values);
-    c.check(job, given, true);
+    json job = c.build(values);
+    try {
+      c.check(job, given, true);
+    } catch (const Error& e) {
+      throw Refusal(e.what(), mentioned(e.what()));
+    }
+    // The preview's job: the pixel lengths at the draft's scale (the command and the record keep the values
+    // given). Those the job uses: a length the job would ignore (sigma0 with lambda 0) stays its default, which
+    // the checks read as not given -- each scaled one is kept only where the command's checks still pass.
+    json preview_job = job;
+    if (pixel_factor != 1.0)
+      for (const ParamSpec& s : c.specs) {
+        if (s.unit != "px" || s.block == "depth" || !preview_job.contains(s.block) ||
+            !preview_job[s.block].contains(s.name) || !preview_job[s.block][s.name].is_number())
+          continue;
+        json trial = preview_job;
+        trial[s.block][s.name] = preview_job[s.block][s.name].get<double>() * pixel_factor;
+        try {
+          s.check(trial[s.block][s.name]);
+          c.check(trial, given, true);
+          preview_job = std::move(trial);
+        } catch (const Error&) {  // unused here, or below its lower bound: kept as given
+        }
+      }
     std::lock_guard<std::mutex> lock(mu);
+    use_camera(camera);
     ViewData& d = at(k);
-    PreviewFrame f = c.preview(job, PreviewInputs{d.rgb, d.measured, d.prep, k, in.rgb.width, in.rgb.height});
+    PreviewFrame f;
+    try {
+      f = c.preview(preview_job, PreviewInputs{d.rgb, d.measured, d.prep, k, in.rgb.width, in.rgb.height});
+    } catch (const Error& e) {
+      throw Refusal(e.what(), mentioned(e.what()));
+    }
     json plan = std::move(f.plan);
     maps_before = std::move(maps);
     maps = std::move(f.maps);
@@ -348,8 +488,15 @@ struct Server {
     json record = run_record_header(c.name, words);
     record["job"] = job;
     record["inputs"] = in.record;
-    record["preview"] = {{"tool", "brume view"}, {"scale", k}};
-    return {{"plan", plan}, {"command", line}, {"record", record}, {"width", d.rgb.width}, {"height", d.rgb.height}};
+    record["preview"] = {{"tool", "brume view"}, {"scale", k}, {"pixel_factor", pixel_factor}};
+    return {{"plan", plan},
+            {"command", line},
+            {"record", record},
+            {"width", d.rgb.width},
+            {"height", d.rgb.height},
+            {"scale", k},
+            {"pixel_factor", pixel_factor},
+            {"data_version", data_version}};
   }
 
   // Whether a path (or a request target) begins with /TOKEN/, compared in
@@ -492,8 +639,17 @@ struct Server {
                       "the frame request is not UTF-8 text (an invalid byte at offset " + std::to_string(bad) + ")");
       const json body = json::parse(q.body, nullptr, /*allow_exceptions=*/false);
       if (body.is_discarded()) return refuse(400, "the frame request is not JSON: {\"values\": {name: text}}");
+      // The page asks for a value's refusal as an answer of its own ("refusal": "inline": 200 with
+      // {"refused": {"param", "message"}}), so that a value the table refuses is shown beside its field and no
+      // failed request reaches the browser's console; other clients get the 400.
+      const bool inline_refusal = body.is_object() && body.value("refusal", json("")) == json("inline");
       try {
         r.set_content(frame(body).dump(-1, ' ', false, json::error_handler_t::replace), "application/json");
+      } catch (const Refusal& e) {
+        if (!inline_refusal) return refuse(400, e.what());
+        r.set_content(json{{"refused", {{"param", e.param}, {"message", e.what()}}}}.dump(
+                          -1, ' ', false, json::error_handler_t::replace),
+                      "application/json");
       } catch (const Error& e) {
         refuse(400, e.what());
       } catch (const json::exception&) {
@@ -591,7 +747,17 @@ json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx)
   }
   ViewJob absolute;
   view_job_table().from_json(absolute, vj, "job");
+  sv.files = absolute.input;
   sv.in = load_inputs(absolute.input, true);  // the record's inputs by absolute path, as the command's
+  // The scene the page starts on (brume/preview.hpp): the measured range's
+  // statistics, and whether the command line gave the camera.
+  bool camera_given = true;
+  try {
+    (void)depth_camera(absolute.input.depth, sv.in.rgb.width, sv.in.rgb.height);
+  } catch (const Error&) {
+    camera_given = false;
+  }
+  sv.scene = preview_scene(sv.in.depth.range, camera_given);
 
   // Bound here, served by the front (http_front.hpp); cpp-httplib parses and
   // routes the complete requests it hands on.

@@ -52,6 +52,16 @@ auto dof_stage(F&& f) -> decltype(f()) {
 
 bool cpu_only(DofScheme s) { return s == DofScheme::bertalmio || s == DofScheme::leaky; }
 
+// Both stages' lengths scaled to the frame (--scene-scale): one factor, the
+// DOF's names with the chain's prefix in the record's block.
+nlohmann::json chain_scene_scale(HazeParams& haze, DofParams& dof, const SceneScale& s, ConstImageView measured) {
+  nlohmann::json block = apply_scene_scale(haze_param_table(), haze, haze_scene_lengths(), s, measured);
+  if (block.is_null()) return block;
+  const nlohmann::json d = apply_scene_scale(dof_param_table(), dof, dof_scene_lengths(), s, measured);
+  for (const auto& [n, v] : d["scaled"].items()) block["scaled"][std::string(kDofPrefix) + n] = v;
+  return block;
+}
+
 // The chain on arrays (brume.haze_dof): haze's keywords and the DOF's with
 // their prefix (dof_focus_distance), as the record's "haze" and "dof" blocks.
 struct HazeDofParams {
@@ -133,6 +143,7 @@ const ParamTable<HazeDofJob>& haze_dof_job_table() {
         .nest(&HazeDofJob::prepare, range_step_param_table())
         .nest(&HazeDofJob::haze, haze_param_table())
         .nest(&HazeDofJob::dof, dof_param_table(), kDofPrefix)
+        .nest(&HazeDofJob::scene, scene_scale_param_table())
         .nest(&HazeDofJob::output, output_param_table(haze_dof_map_outputs()))
         .nest(&HazeDofJob::lidar, camera_lidar_param_table());
     return d;
@@ -156,6 +167,7 @@ HazeJob haze_part(const HazeDofJob& job, const std::set<std::string>& given) {
   h.input = job.input;
   h.prepare = job.prepare;
   h.haze = job.haze;
+  h.scene = job.scene;
   h.output = job.output;
   h.output.maps.erase("dof-scale-map");
   h.lidar = job.lidar;
@@ -180,9 +192,13 @@ nlohmann::json run_haze_dof_job(const HazeDofJob& job, const ExecOptions& eo, co
   LoadedInputs in = load_inputs(job.input, true);
   check_working_memory("haze+dof", in.rgb, 140);  // haze's measured peak (the larger stage); the chain's own is not measured
   if (!job.haze.airlight) check_airlight_sky(in, "haze");
+  HazeParams haze = job.haze;
+  DofParams scaled_dof = dof;
+  const nlohmann::json scaled = chain_scene_scale(haze, scaled_dof, job.scene, in.depth.range);
   const Intrinsics k = dof_stage([&] { return dof_intrinsics(job.input.depth, in.rgb.width, in.rgb.height); });
-  HazeDofRun run = run_haze_dof(in.rgb, in.depth.range, k, job.haze, dof, with_camera(job.prepare, in.depth), exec,
+  HazeDofRun run = run_haze_dof(in.rgb, in.depth.range, k, haze, scaled_dof, with_camera(job.prepare, in.depth), exec,
                                 ctx.given);
+  if (!scaled.is_null()) run.record["scene_scale"] = scaled;
   run.record["dof"]["derived"]["intrinsics"]["source"] =
       dof_intrinsics_source(job.input.depth, in.rgb.width, in.rgb.height);
 
@@ -264,11 +280,28 @@ CommandDef haze_dof_command() {
   };
   c.gpu_passes = {"haze.premultiply", "diffusion.rates", "diffusion.iterate", "haze.composite"};
   c.preview = &haze_dof_preview;
+  // Haze's start, then the DOF stage's under its prefix (the camera once).
+  c.preview_start = [](const nlohmann::json& job, const std::set<std::string>& given, const PreviewScene& s) {
+    HazeDofJob j;
+    haze_dof_job_table().from_json(j, job, "job");
+    std::vector<PreviewStart> v = haze_preview_start(j.haze, haze_given(given), s);
+    for (PreviewStart p : dof_preview_start(dof_with_lens(j.dof, j.input.depth.lens), s.camera_given, s)) {
+      if (p.name != "fov-x") {
+        p.why = prefix_flag_mentions(p.why, kDofPrefix,
+                                     [](const std::string& n) { return dof_param_table().declares(n); });
+        p.name = kDofPrefix + p.name;
+      }
+      v.push_back(std::move(p));
+    }
+    return v;
+  };
+  // --scene-scale scales the lengths to the frame when a job runs; the page's values are metres.
+  c.preview_fixed.push_back("scene");
   // brume.haze_dof(rgb, range, ...): the chain in memory, the range prepared
   // once, the arrays read in place; its record is the chain's, which `brume
   // run` repeats (brume.transforms.HazeThenDof runs it).
-  static const auto call =
-      array_call_table(haze_dof_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
+  static const auto call = array_call_table(haze_dof_param_table(),
+                                            kArrayPrepare | kArrayIntrinsics | kArrayScene | kArrayExec);
   c.arrays = make_array_form<HazeDofParams>(
       "haze_dof", "",
       "Haze and fog with scattering blur, then depth of field through the hazy image (the chain `brume haze "
@@ -277,8 +310,12 @@ CommandDef haze_dof_command() {
       rgb_range_args(ArrayArg::As::view), call, {"rgb", "transmission", "scale", "dof_scale", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<HazeDofParams>& k, const Exec& e, const std::set<std::string>& g) {
         const ConstImageView& rgb = in[0].view;
+        HazeParams haze = k.p.haze;
+        DofParams dof = dof_with_lens(k.p.dof, k.depth.lens);
+        const nlohmann::json scaled = chain_scene_scale(haze, dof, k.scene, in[1].view);
         const Intrinsics ki = dof_stage([&] { return dof_intrinsics(k.depth, rgb.width(), rgb.height()); });
-        HazeDofRun r = run_haze_dof(rgb, in[1].view, ki, k.p.haze, dof_with_lens(k.p.dof, k.depth.lens), k.prepare, e, g);
+        HazeDofRun r = run_haze_dof(rgb, in[1].view, ki, haze, dof, k.prepare, e, g);
+        if (!scaled.is_null()) r.record["scene_scale"] = scaled;
         return ArrayResult{{{"rgb", std::move(r.dof.result.rgb)},
                             {"transmission", std::move(r.haze.result.transmission)},
                             {"scale", std::move(r.haze.result.scale)},
@@ -286,6 +323,16 @@ CommandDef haze_dof_command() {
                            std::move(r.record),
                            {},
                            {}};
+      },
+      [](const ArrayCall<HazeDofParams>& k, const std::set<std::string>& g) {
+        validate_haze(k.p.haze, haze_given(g));
+        check_range_step(k.prepare, haze_given(g));
+        dof_stage([&] {
+          validate_dof(dof_with_lens(k.p.dof, k.depth.lens), dof_given(g));
+          check_dof_camera(k.depth);
+        });
+        if (k.exec.backend == Backend::gpu && cpu_only(k.p.dof.scheme))
+          throw Error("--dof-scheme " + to_string(k.p.dof.scheme) + " runs on the CPU only: use backend cpu or auto");
       });
   // The chain's medium is its haze stage's.
   c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {
