@@ -14,7 +14,9 @@ brume=$(realpath "$1")
 what=$2
 only=("${@:3}")
 cd "$(dirname "$0")"
-b() { echo "+ brume $*" >&2; "$brume" "$@"; }
+# Run as "brume" (exec -a): a record's argv[0] is then the command's name,
+# not the path of the build on the machine that wrote it.
+b() { echo "+ brume $*" >&2; (exec -a brume "$brume" "$@"); }
 
 if [ "$what" = inputs ]; then
   mkdir -p inputs
