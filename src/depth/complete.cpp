@@ -493,54 +493,39 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
 
 nlohmann::json complete_record(const CompleteParams& p, const CompleteResult& r) {
   const double n = static_cast<double>(r.range.pixels());
-  if (p.method == CompleteMethod::planar)
-    return {{"method",
-             "Ku et al. 2018 morphological pilot (diamond 5x5 dilation, 5x5 closing, 7x7 and 31x31 fills, 5x5 median "
-             "and Gaussian, on D_max - R) refined by a joint trilateral filter of the measurements (space, sRGB "
-             "colour, range against the pilot; space and colour alone where the pilot's layer has < 5 % of the "
-             "weight); sky: unmeasured bright smooth regions above the scan's upper limit touching the top row, "
-             "left unknown; structure above each column's topmost measurement continues the median planar depth of "
-             "its three topmost measurements upward, each pixel the colour-weighted mean of its three neighbours "
-             "below, never beyond the farthest measurement (issue 52); other unmeasured pixels extend their "
-             "column's nearest estimate (below first)"},
-            {"complete_method", "planar"},
-            {"radius_px", p.radius_px},
-            {"sigma_space_px", p.sigma_space_px},
-            {"sigma_colour", p.sigma_colour},
-            {"sigma_range", p.sigma_range},
-            {"sky_luminance", p.sky_luminance},
-            {"sky_roughness", p.sky_roughness},
-            {"d_max_m", r.d_max_m},
-            {"known_fraction", r.known_fraction},
-            {"completed_fraction", r.completed_fraction},
-            {"refined_fraction", r.refined / n},
-            {"pilot_only_fraction", r.pilot_only / n},
-            {"extrapolated_fraction", r.extrapolated / n},
-            {"continued_fraction", r.continued / n},
-            {"sky_fraction", r.sky / n},
-            {"unknown_fraction", r.unknown / n},
-            {"scan_top_row", r.scan_top_row}};
-  return {{"method",
-           "Ku et al. 2018 morphological pilot (diamond 5x5 dilation, 5x5 closing, 7x7 and 31x31 fills, 5x5 median "
-           "and Gaussian, on D_max - R) refined by a joint trilateral filter of the measurements (space, sRGB "
-           "colour, range against the pilot; space and colour alone where the pilot's layer has < 5 % of the "
-           "weight); sky: unmeasured bright smooth regions above the scan's upper limit touching the top row, left "
-           "unknown; other unmeasured pixels extend their column's nearest estimate (below first)"},
-          {"radius_px", p.radius_px},
-          {"sigma_space_px", p.sigma_space_px},
-          {"sigma_colour", p.sigma_colour},
-          {"sigma_range", p.sigma_range},
-          {"sky_luminance", p.sky_luminance},
-          {"sky_roughness", p.sky_roughness},
-          {"d_max_m", r.d_max_m},
-          {"known_fraction", r.known_fraction},
-          {"completed_fraction", r.completed_fraction},
-          {"refined_fraction", r.refined / n},
-          {"pilot_only_fraction", r.pilot_only / n},
-          {"extrapolated_fraction", r.extrapolated / n},
-          {"sky_fraction", r.sky / n},
-          {"unknown_fraction", r.unknown / n},
-          {"scan_top_row", r.scan_top_row}};
+  const char* pilot =
+      "Ku et al. 2018 morphological pilot (diamond 5x5 dilation, 5x5 closing, 7x7 and 31x31 fills, 5x5 median "
+      "and Gaussian, on D_max - R) refined by a joint trilateral filter of the measurements (space, sRGB "
+      "colour, range against the pilot; space and colour alone where the pilot's layer has < 5 % of the "
+      "weight); sky: unmeasured bright smooth regions above the scan's upper limit touching the top row, left "
+      "unknown; ";
+  nlohmann::json j = {{"method", std::string(pilot) + "other unmeasured pixels extend their column's nearest "
+                                                       "estimate (below first)"},
+                      {"radius_px", p.radius_px},
+                      {"sigma_space_px", p.sigma_space_px},
+                      {"sigma_colour", p.sigma_colour},
+                      {"sigma_range", p.sigma_range},
+                      {"sky_luminance", p.sky_luminance},
+                      {"sky_roughness", p.sky_roughness},
+                      {"d_max_m", r.d_max_m},
+                      {"known_fraction", r.known_fraction},
+                      {"completed_fraction", r.completed_fraction},
+                      {"refined_fraction", r.refined / n},
+                      {"pilot_only_fraction", r.pilot_only / n},
+                      {"extrapolated_fraction", r.extrapolated / n},
+                      {"sky_fraction", r.sky / n},
+                      {"unknown_fraction", r.unknown / n},
+                      {"scan_top_row", r.scan_top_row}};
+  if (p.method == CompleteMethod::planar) {  // (the column method's record is as before issue #52)
+    j["method"] = std::string(pilot) +
+                  "structure above each column's topmost measurement continues the median planar depth of its "
+                  "three topmost measurements upward, each pixel the colour-weighted mean of its three neighbours "
+                  "below, never beyond the farthest measurement (issue 52); other unmeasured pixels extend their "
+                  "column's nearest estimate (below first)";
+    j["complete_method"] = "planar";
+    j["continued_fraction"] = r.continued / n;
+  }
+  return j;
 }
 
 }  // namespace brume

@@ -363,18 +363,29 @@ ExrChannels exr_channels(const std::string& path) {
   return out;
 }
 
-Image read_exr_channels(const std::string& path, const std::vector<std::string>& names) {
+namespace {
+// The named channels of one part of an OpenEXR file, its declared size and
+// the memory checked before anything is allocated (`extra`: the channels of
+// the caller's own copies); a channel the part lacks reads as `missing`.
+io::Decoded decode_exr_channels(const std::string& path, int part, const std::vector<std::string>& names,
+                                float missing, int extra) {
   io::ReadRequest req;
   req.path = path;
   req.threads = std::min(io::io_threads(), 64);
   req.check = [&](int w, int h, int c) {
     check_declared_size(path, w, h, c);
-    check_memory(static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) * 4 * static_cast<std::uint64_t>(c),
+    check_memory(static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) * 4 *
+                     static_cast<std::uint64_t>(c + extra),
                  "reading '" + path + "'");
   };
   io::Decoded d;
-  io::exr_read_channels(req, 0, names, 0.0f, d);
-  return std::move(d.img);
+  io::exr_read_channels(req, part, names, missing, d);
+  return d;
+}
+}  // namespace
+
+Image read_exr_channels(const std::string& path, const std::vector<std::string>& names) {
+  return std::move(decode_exr_channels(path, 0, names, 0.0f, 0).img);
 }
 
 Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
@@ -393,16 +404,7 @@ Image read_color(const std::string& path, const ColorRead& how, FileInfo* info, 
     const FoundLayer f = choose_layer(path, L, how);
     std::vector<std::string> names = f.colour;
     if (!f.alpha.empty()) names.push_back(f.alpha);
-    io::ReadRequest req;
-    req.path = path;
-    req.threads = std::min(io::io_threads(), 64);
-    req.check = [&](int w, int h, int c) {
-      check_declared_size(path, w, h, c);
-      check_memory(static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) * 4 * static_cast<std::uint64_t>(c + 3),
-                   "reading '" + path + "'");
-    };
-    io::Decoded d;
-    io::exr_read_channels(req, f.part, names, 0.0f, d);
+    io::Decoded d = decode_exr_channels(path, f.part, names, 0.0f, 3);
     io::note_reader("openexr");
     d.info.path = path;
     d.info.layer = f.name;
@@ -541,16 +543,7 @@ Image read_scalar(const std::string& path, const ScalarRead& how, FileInfo* info
       find_channel(L, depth.front(), part, name, matches);
       rule = "the file's one channel named like a depth pass";
     }
-    io::ReadRequest req;
-    req.path = path;
-    req.threads = std::min(io::io_threads(), 64);
-    req.check = [&](int w, int h, int c) {
-      check_declared_size(path, w, h, c);
-      check_memory(static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) * 4 * static_cast<std::uint64_t>(c + 3),
-                   "reading '" + path + "'");
-    };
-    io::Decoded d;
-    io::exr_read_channels(req, part, {name}, NAN, d);
+    io::Decoded d = decode_exr_channels(path, part, {name}, NAN, 3);
     io::note_reader("openexr");
     d.info.path = path;
     d.info.transfer = Transfer::linear;
