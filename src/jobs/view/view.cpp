@@ -427,7 +427,7 @@ struct Server {
       }
       if (camera_param(c, *s)) camera[name] = v;
       given.insert(name);
-      const auto same = std::find_if(merged.begin(), merged.end(), [&](const auto& m) { return m.first == name; });
+      const auto same = std::find_if(merged.begin(), merged.end(), [&key = name](const auto& m) { return m.first == key; });
       if (same != merged.end()) same->second = {v, text.get<std::string>()};
       else merged.push_back({name, {v, text.get<std::string>()}});
     }
