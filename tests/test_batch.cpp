@@ -515,6 +515,14 @@ TEST_F(Batch, FifoInTheManifestFailsItsFrameOnly) {
 // (writes fail with EFBIG as with ENOSPC): every frame fails, the results
 // manifest cannot be written, and nothing is left behind.
 TEST_F(Batch, FullDiskLeavesNoEmptyFoldersOrJournal) {
+#if defined(__clang__) && defined(_OPENMP)
+  // LLVM's OpenMP runtime (a clang build: the sanitizer runs) sizes a file in
+  // /dev/shm when it starts, and `ulimit -f 0` makes that fatal ("OMP: Error
+  // #179: Can't set size of SHM", then SIGBUS) before brume runs; a limit
+  // large enough for it lets the journal through, which is another case
+  // (a frame that fails). The GCC build (libgomp) runs this one.
+  GTEST_SKIP() << "ulimit -f 0 stops LLVM's OpenMP runtime at start (clang build); the GCC build runs this case";
+#endif
   std::vector<std::string> keys;
   for (const char* sub : {"s0", "s1", "s2"}) {
     fs::create_directories(dir / "data" / sub);

@@ -148,6 +148,20 @@ inline Image ramp_map(int w, int h, double s0, double smax) {
   return m;
 }
 
+// Built with AddressSanitizer or ThreadSanitizer (scripts/test-sanitize.sh):
+// GCC says so with __SANITIZE_*__, clang with __has_feature.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+inline constexpr bool kSanitizerBuild = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+inline constexpr bool kSanitizerBuild = true;
+#else
+inline constexpr bool kSanitizerBuild = false;
+#endif
+#else
+inline constexpr bool kSanitizerBuild = false;
+#endif
+
 // The command-line tool (BRUME_CLI) run through the shell, stderr folded into
 // the output: its exit status and everything it printed.
 struct CliRun {
