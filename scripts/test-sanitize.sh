@@ -15,7 +15,9 @@
 # file by file), its 342 tests 528-565 s; TSan build 143-146 s (255 s file by
 # file), its suites 35-37 s. Intel Xeon family 6 model 207, 2026-12-04: ASan+UBSan
 # build 235 s, its 381 tests (fuzz corpora included) 247 s; TSan build 113 s,
-# its suites 46 s
+# its suites 46 s; with the derived set (270 cases: the suites of every
+# threaded part), AMD EPYC family 26 (Zen 5), 2026-12-05, two other builds
+# running: TSan build 102 s, its suites 231 s
 # (docs/reliability.md). Options: --asan-only, --tsan-only, and --ci, a
 # shorter form: every test under ASan except those that mostly re-run the CLI
 # or the GPU passes (CI_SKIP_LABELS below; 297 tests on 2026-12-04, plus the fuzz replays),
