@@ -1,6 +1,6 @@
 # brume's library as a list of parts, one folder each (issues #37, #49):
 #
-#   brume_part(NAME FOLDER)
+#   brume_part(NAME FOLDER [TESTS FILE...] [TSAN SUITE...] [THREADS_UNTESTED REASON])
 #
 # A part is everything in its folder (not its sub-folders; a sub-folder is a
 # part of its own, declared by its own line, as aerial's insert and
@@ -13,6 +13,16 @@
 #                  src/shared/prelude_cpp.h and embedded for the GPU passes
 #                  that name them;
 #   *.frag, *.vert its pass shaders, embedded.
+# TESTS names the test files the part owns (under tests/): they are compiled
+# into brume_tests, and their GoogleTest cases get the ctest label
+# part:NAME. Every tests/**/test_*.cpp is owned by exactly one part or
+# named by brume_tests_outside_parts(REASON FILE...) (tests/CMakeLists.txt):
+# a test file nobody declares fails the configure.
+# A part whose files start threads (OpenMP's parallel/for/task, std::thread,
+# std::async) is run under ThreadSanitizer (scripts/test-sanitize.sh) by its
+# TESTS' suites, or by the suites TSAN names when only those reach its
+# threads; THREADS_UNTESTED REASON exempts it, saying why (threads inside an
+# uninstrumented library). A threaded part with neither fails the configure.
 #
 # Why a glob (CONFIGURE_DEPENDS) rather than a list of files: the folder is
 # the declaration, so a file cannot sit in a family's folder without being
@@ -32,8 +42,10 @@
 #   generated/parts.txt              "NAME FOLDER" per line (for the checks in tests/),
 # and the list of GLSL files to embed (BRUME_SHADERS, name=path).
 function(brume_part name folder)
-  if(ARGN)
-    message(FATAL_ERROR "brume_part(${name} ${folder}): one folder per part, no other arguments (got ${ARGN})")
+  cmake_parse_arguments(PARSE_ARGV 2 arg "" "THREADS_UNTESTED" "TESTS;TSAN")
+  if(arg_UNPARSED_ARGUMENTS)
+    message(FATAL_ERROR "brume_part(${name} ${folder}): one folder per part; after it only TESTS, TSAN and "
+                        "THREADS_UNTESTED (got ${arg_UNPARSED_ARGUMENTS})")
   endif()
   set(dir ${PROJECT_SOURCE_DIR}/${folder})
   if(NOT IS_DIRECTORY ${dir})
@@ -45,10 +57,47 @@ function(brume_part name folder)
   list(SORT sources)
   list(SORT topics)
   list(SORT shaders)
+  set(tests)
+  foreach(t ${arg_TESTS})
+    if(NOT EXISTS ${PROJECT_SOURCE_DIR}/tests/${t})
+      message(FATAL_ERROR "brume_part(${name} ${folder}): TESTS ${t}: no such file tests/${t}")
+    endif()
+    list(APPEND tests tests/${t})
+  endforeach()
+  # Does the part start threads? (Its own files, headers included: a header's
+  # OpenMP loop runs in whichever part includes it, and is counted there too.)
+  file(GLOB own CONFIGURE_DEPENDS ${dir}/*.cpp ${dir}/*.hpp ${dir}/*.h)
+  set(threads)
+  foreach(f ${own})
+    file(STRINGS ${f} hits REGEX "#[ \t]*pragma[ \t]+omp[ \t]+(parallel|for|task)|std::(j?thread|async)[^_a-z]")
+    if(hits)
+      file(RELATIVE_PATH rel ${PROJECT_SOURCE_DIR} ${f})
+      list(APPEND threads ${rel})
+    endif()
+  endforeach()
+  if(threads AND NOT tests AND NOT arg_THREADS_UNTESTED)
+    list(GET threads 0 first)
+    message(FATAL_ERROR "brume_part(${name} ${folder}): ${first} starts threads (OpenMP or std::thread), so the "
+                        "part's tests run under ThreadSanitizer: name its test files with TESTS (or, when its "
+                        "threads are a library's that TSan cannot see, say so with THREADS_UNTESTED \"reason\")")
+  endif()
+  if(arg_TSAN AND NOT threads)
+    message(FATAL_ERROR "brume_part(${name} ${folder}): TSAN names suites for the part's threads, and no file of "
+                        "${folder} starts any")
+  endif()
   set_property(GLOBAL APPEND PROPERTY BRUME_PARTS "${name}=${folder}")
   set_property(GLOBAL APPEND PROPERTY BRUME_PART_SOURCES ${sources})
   set_property(GLOBAL APPEND PROPERTY BRUME_PART_TOPICS ${topics})
   set_property(GLOBAL APPEND PROPERTY BRUME_PART_SHADERS ${shaders})
+  set_property(GLOBAL APPEND PROPERTY BRUME_PART_TESTS ${tests})
+  # name|test files|threaded (1/0)|TSan suites (empty: every suite of its tests)
+  string(REPLACE ";" "," tests_csv "${tests}")
+  string(REPLACE ";" "," tsan_csv "${arg_TSAN}")
+  set(threaded 0)
+  if(threads AND NOT arg_THREADS_UNTESTED)
+    set(threaded 1)
+  endif()
+  set_property(GLOBAL APPEND PROPERTY BRUME_PART_TEST_DECLS "${name}|${tests_csv}|${threaded}|${tsan_csv}")
 endfunction()
 
 # A folder under src/ whose files are not libbrume's, with the reason.
@@ -134,4 +183,87 @@ function(brume_embed header namespace comment files_var)
     DEPENDS ${files} ${PROJECT_SOURCE_DIR}/cmake/embed_shaders.cmake
     COMMENT "${comment}" VERBATIM)
   set(${files_var} ${files} PARENT_SCOPE)
+endfunction()
+
+# The tests, from the parts' TESTS (called by tests/CMakeLists.txt with the
+# test files that belong to no part, each list with its reason given there):
+# every tests/**/test_*.cpp owned exactly once. In the caller's scope
+# BRUME_TEST_SOURCES (the files of brume_tests, absolute) and
+# BRUME_TEST_SUITE_PARTS ("Suite=part" for every suite of every part's files,
+# for the part:NAME labels). Writes gen_dir/tsan_filter.txt, the gtest filter
+# of scripts/test-sanitize.sh's ThreadSanitizer run: the suites of every
+# threaded part (or its TSAN suites), less the cases in `tsan_leave_out`
+# (gtest patterns, given with their reasons by the caller).
+function(brume_part_tests gen_dir outside tsan_leave_out)
+  get_property(decls GLOBAL PROPERTY BRUME_PART_TEST_DECLS)
+  set(owned)
+  set(owner_of)
+  set(suite_parts)
+  set(tsan)
+  foreach(d ${decls})
+    string(REPLACE "|" ";" f "${d}")
+    list(GET f 0 name)
+    list(GET f 1 tests)
+    list(GET f 2 threaded)
+    list(GET f 3 tsan_suites)
+    string(REPLACE "," ";" tests "${tests}")
+    string(REPLACE "," ";" tsan_suites "${tsan_suites}")
+    set(part_suites)
+    foreach(t ${tests})
+      list(FIND owned ${t} i)
+      if(i GREATER -1)
+        list(GET owner_of ${i} other)
+        message(FATAL_ERROR "brume: ${t} is in the TESTS of two parts, ${other} and ${name}: a test file has one owner")
+      endif()
+      list(APPEND owned ${t})
+      list(APPEND owner_of ${name})
+      file(STRINGS ${PROJECT_SOURCE_DIR}/${t} lines REGEX "^[ \t]*(TYPED_)?TEST(_F|_P)?[ \t]*\\([ \t]*[A-Za-z_0-9]+")
+      foreach(l ${lines})
+        string(REGEX REPLACE "^[ \t]*(TYPED_)?TEST(_F|_P)?[ \t]*\\([ \t]*([A-Za-z_0-9]+).*" "\\3" suite "${l}")
+        list(APPEND part_suites ${suite})
+      endforeach()
+    endforeach()
+    list(REMOVE_DUPLICATES part_suites)
+    foreach(s ${part_suites})
+      list(APPEND suite_parts "${s}=${name}")
+    endforeach()
+    if(threaded)
+      if(tsan_suites)
+        foreach(s ${tsan_suites})
+          if(NOT s IN_LIST part_suites)
+            message(FATAL_ERROR "brume_part(${name}): TSAN ${s} is no suite of its TESTS (${part_suites})")
+          endif()
+        endforeach()
+        list(APPEND tsan ${tsan_suites})
+      else()
+        list(APPEND tsan ${part_suites})
+      endif()
+    endif()
+  endforeach()
+  foreach(t ${outside})
+    if(t IN_LIST owned)
+      message(FATAL_ERROR "brume: ${t} is owned by a part and also listed outside the parts")
+    endif()
+    list(APPEND owned ${t})
+  endforeach()
+  file(GLOB_RECURSE all CONFIGURE_DEPENDS RELATIVE ${PROJECT_SOURCE_DIR} ${PROJECT_SOURCE_DIR}/tests/test_*.cpp)
+  foreach(t ${all})
+    if(NOT t IN_LIST owned)
+      message(FATAL_ERROR "brume: ${t} belongs to no part: add it to its part's TESTS in CMakeLists.txt "
+                          "(brume_part(NAME FOLDER TESTS ...)), or to the files outside the parts in tests/CMakeLists.txt")
+    endif()
+  endforeach()
+  # gtest matches a parameterised case by its full name, Inst/Suite.Name/param: both forms.
+  list(REMOVE_DUPLICATES tsan)
+  list(SORT tsan)
+  set(positive)
+  foreach(s ${tsan})
+    list(APPEND positive "${s}.*" "*/${s}.*")
+  endforeach()
+  string(REPLACE ";" ":" positive "${positive}")
+  string(REPLACE ";" ":" negative "${tsan_leave_out}")
+  brume_write_if_different("${gen_dir}/tsan_filter.txt" "${positive}-${negative}\n")
+  list(TRANSFORM owned PREPEND ${PROJECT_SOURCE_DIR}/)
+  set(BRUME_TEST_SOURCES ${owned} PARENT_SCOPE)
+  set(BRUME_TEST_SUITE_PARTS ${suite_parts} PARENT_SCOPE)
 endfunction()

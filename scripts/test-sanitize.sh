@@ -8,13 +8,16 @@
 #  2. ThreadSanitizer on the multithreaded CPU paths (OpenMP): clang-14 with
 #     LLVM's libomp and its Archer tool, which tells TSan about OpenMP's own
 #     barriers and tasks (with GCC's libgomp, TSan sees none and reports
-#     false races). A gtest filter picks the tests that run threaded code.
+#     false races). A gtest filter, derived from the parts' declarations,
+#     picks the tests that run threaded code.
 # Cost on 2 cores (a clean clone; .ci/run runs the whole script), unity
 # builds: AMD EPYC (Zen 4), 2026-12-01: ASan+UBSan build 277-295 s (490 s
 # file by file), its 342 tests 528-565 s; TSan build 143-146 s (255 s file by
 # file), its suites 35-37 s. Intel Xeon family 6 model 207, 2026-12-04: ASan+UBSan
 # build 235 s, its 381 tests (fuzz corpora included) 247 s; TSan build 113 s,
-# its suites 46 s
+# its suites 46 s; with the derived set (270 cases: the suites of every
+# threaded part), AMD EPYC family 26 (Zen 5), 2026-12-05, two other builds
+# running: TSan build 102 s, its suites 231 s
 # (docs/reliability.md). Options: --asan-only, --tsan-only, and --ci, a
 # shorter form: every test under ASan except those that mostly re-run the CLI
 # or the GPU passes (CI_SKIP_LABELS below; 297 tests on 2026-12-04, plus the fuzz replays),
@@ -103,25 +106,20 @@ if [ "$run_tsan" = 1 ]; then
   cmake --build build-tsan -j"$jobs" --target brume_tests brume_cli
   t1=$(date +%s)
   archer=$(ls /usr/lib/llvm-14/lib/libarcher.so)
-  # The threaded CPU paths (every OpenMP loop of src/: the fast diffusion in
-  # f32 and f16, haze, fog, aerial, dof, insert, sky, the range preparation)
-  # through their own suites, at four threads; the GPU, CLI and real-data
-  # tests add no threads of brume's own and are left to the ASan run.
-  filter='Diffusion*:GaussianAccuracy*:Haze*:Fog*:Aerial*:Dof*:ChainHazeDof*:Insert*:Sky*:Prepare*'
-  # brume view's HTTP front: its loop thread and workers share the job and
-  # return queues (tests/test_view_front.cpp, with a handler of its own).
-  filter+=':ViewFront*'
-  # (The *Cli* suites and Fog.DepthBuffers... are the CLI's own tests: they
-  # run in the ASan suite; a threaded suite's test that runs the CLI, such as
-  # SkyUnits.OlderRecordsReplayTheOldRule, runs the instrumented one.)
-  filter+='-*Gpu*:*GPU*:*Cli*:*Real*:Fog.DepthBuffers*'
-  # (The exhaustive fusion bit tests run ~430 small blurs each: minutes under
-  # TSan, and no thread pattern that DiffusionFusion.DefaultSchedule... and
-  # the other suites' fused blurs at 4 threads do not already run.)
-  filter+=':DiffusionFusion.*GiveTheBits*'
-  OMP_TOOL_LIBRARIES="$archer" ARCHER_OPTIONS="verbose=0" \
+  # The threaded code, at four threads: the suites of every part whose files
+  # start threads (OpenMP loops, batch's workers, brume view's HTTP front),
+  # as the parts declare them (brume_part(... TESTS/TSAN) in CMakeLists.txt),
+  # less the GPU and CLI cases; the configure writes the filter
+  # (brume_part_tests in cmake/brume_parts.cmake; the cases left out and
+  # why: tests/CMakeLists.txt). The cases that read the real data run
+  # without it (BRUME_DATA_DIR at an empty folder: they skip or run their
+  # synthetic fallback): the same loops on larger inputs took minutes here.
+  filter=$(cat build-tsan/generated/tsan_filter.txt)
+  no_data=$(mktemp -d)
+  BRUME_DATA_DIR=$no_data OMP_TOOL_LIBRARIES="$archer" ARCHER_OPTIONS="verbose=0" \
     TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:ignore_noninstrumented_modules=1" \
     OMP_NUM_THREADS=4 build-tsan/tests/brume_tests --gtest_filter="$filter" --gtest_brief=1
+  rmdir "$no_data"
   t2=$(date +%s)
   echo "test-sanitize: TSan build $((t1 - t0)) s, tests $((t2 - t1)) s"
 fi

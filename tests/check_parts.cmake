@@ -1,9 +1,24 @@
 # brume_part()'s folder rule (cmake/brume_parts.cmake), on scratch trees:
 # a source in a folder no part declares fails the configure with a message
 # naming the file and the line to add; a declared tree generates its lists
-# (topics in declaration order, sub-folders as parts of their own).
+# (topics in declaration order, sub-folders as parts of their own); the
+# parts' tests: a test file no part owns, or owned twice, and a part that
+# starts threads without tests or a stated exemption fail the configure; the
+# ThreadSanitizer filter is the threaded parts' suites.
 #   cmake -DPARTS=cmake/brume_parts.cmake -DWORK=DIR -P check_parts.cmake
 file(REMOVE_RECURSE ${WORK})
+# A scratch project in `d` with these declarations and the trailing lines
+# `tail`, configured: in the caller's caller (scratch, scratch_tests) rc, err
+# (CMake's line wrapping undone) and dir.
+function(configure_scratch d declarations tail)
+  file(WRITE ${d}/CMakeLists.txt "cmake_minimum_required(VERSION 3.20)\nproject(scratch LANGUAGES NONE)\n"
+       "include(${PARTS})\n${declarations}\nbrume_generate_parts(\${CMAKE_BINARY_DIR}/generated)\n${tail}")
+  execute_process(COMMAND ${CMAKE_COMMAND} -S ${d} -B ${d}/build RESULT_VARIABLE rc OUTPUT_VARIABLE out
+                  ERROR_VARIABLE err)
+  string(REGEX REPLACE "[ \n]+" " " err "${err}")  # CMake wraps its messages
+  set(rc ${rc} PARENT_SCOPE)
+  set(err "${err}" PARENT_SCOPE)
+endfunction()
 function(scratch name declarations)
   set(d ${WORK}/${name})
   file(WRITE ${d}/src/core/image.cpp "")
@@ -13,13 +28,9 @@ function(scratch name declarations)
   file(WRITE ${d}/src/effects/mist/drops/drops.cpp "")
   file(WRITE ${d}/src/effects/mist/drops/drops_math.glsl "")
   file(WRITE ${d}/src/tools/codec.cpp "")
-  file(WRITE ${d}/CMakeLists.txt "cmake_minimum_required(VERSION 3.20)\nproject(scratch LANGUAGES NONE)\n"
-       "include(${PARTS})\n${declarations}\nbrume_generate_parts(\${CMAKE_BINARY_DIR}/generated)\n"
-       "file(WRITE \${CMAKE_BINARY_DIR}/sources.txt \"\${BRUME_PART_SOURCES}|\${BRUME_SHADERS}\")\n")
-  execute_process(COMMAND ${CMAKE_COMMAND} -S ${d} -B ${d}/build RESULT_VARIABLE rc OUTPUT_VARIABLE out
-                  ERROR_VARIABLE err)
+  configure_scratch(${d} "${declarations}"
+    "file(WRITE \${CMAKE_BINARY_DIR}/sources.txt \"\${BRUME_PART_SOURCES}|\${BRUME_SHADERS}\")\n")
   set(rc ${rc} PARENT_SCOPE)
-  string(REGEX REPLACE "[ \n]+" " " err "${err}")  # CMake wraps its messages
   set(err "${err}" PARENT_SCOPE)
   set(dir ${d} PARENT_SCOPE)
 endfunction()
@@ -58,4 +69,52 @@ if(NOT sources MATCHES "^src/core/image.cpp;src/effects/mist/mist.cpp;src/effect
    NOT sources MATCHES "mist_apply_frag=[^;]*/src/effects/mist/mist_apply.frag" OR sources MATCHES "codec")
   message(FATAL_ERROR "sources and shaders: ${sources}")
 endif()
-message(STATUS "check_parts: undeclared folders refused, declared ones listed in order")
+
+# The tests: a threaded part (an OpenMP loop in mist.cpp) and its test files.
+function(scratch_tests name declarations)
+  set(d ${WORK}/tests-${name})
+  file(WRITE ${d}/src/core/image.cpp "")
+  file(WRITE ${d}/src/effects/mist/mist.cpp "void f(int n) {\n#pragma omp parallel for\n  for (int i = 0; i < n; ++i) {}\n}\n")
+  file(WRITE ${d}/tests/test_core.cpp "TEST(Image, Sizes) {}\n")
+  file(WRITE ${d}/tests/test_mist.cpp "TEST(Mist, Extinction) {}\nTEST_F(MistCli, Flags) {}\n  TEST_P( MistSweep , Rates) {}\n")
+  configure_scratch(${d} "${declarations}"
+    "brume_part_tests(\${CMAKE_BINARY_DIR}/generated \"\" \"*Cli*\")\nfile(WRITE \${CMAKE_BINARY_DIR}/tests.txt \"\${BRUME_TEST_SOURCES}|\${BRUME_TEST_SUITE_PARTS}\")\n")
+  set(rc ${rc} PARENT_SCOPE)
+  set(err "${err}" PARENT_SCOPE)
+  set(dir ${d} PARENT_SCOPE)
+endfunction()
+set(core "brume_part(core src/core TESTS test_core.cpp)\n")
+scratch_tests(untested "${core}brume_part(mist src/effects/mist)")
+if(rc EQUAL 0 OR NOT err MATCHES "src/effects/mist/mist.cpp starts threads")
+  message(FATAL_ERROR "a threaded part without tests was accepted (rc ${rc}): ${err}")
+endif()
+scratch_tests(unowned "brume_part(core src/core)\nbrume_part(mist src/effects/mist TESTS test_mist.cpp)")
+if(rc EQUAL 0 OR NOT err MATCHES "tests/test_core.cpp belongs to no part")
+  message(FATAL_ERROR "a test file no part owns was accepted (rc ${rc}): ${err}")
+endif()
+scratch_tests(twice "${core}brume_part(mist src/effects/mist TESTS test_mist.cpp test_core.cpp)")
+if(rc EQUAL 0 OR NOT err MATCHES "tests/test_core.cpp is in the TESTS of two parts, core and mist")
+  message(FATAL_ERROR "a test file owned twice was accepted (rc ${rc}): ${err}")
+endif()
+scratch_tests(nosuite "${core}brume_part(mist src/effects/mist TESTS test_mist.cpp TSAN Fog)")
+if(rc EQUAL 0 OR NOT err MATCHES "TSAN Fog is no suite of its TESTS")
+  message(FATAL_ERROR "a TSAN suite the part does not define was accepted (rc ${rc}): ${err}")
+endif()
+scratch_tests(exempt "${core}brume_part(mist src/effects/mist THREADS_UNTESTED \"a library's pool\")")
+if(rc EQUAL 0 OR NOT err MATCHES "tests/test_mist.cpp belongs to no part")
+  message(FATAL_ERROR "an exempt part's unowned test file was accepted (rc ${rc}): ${err}")
+endif()
+scratch_tests(tested "${core}brume_part(mist src/effects/mist TESTS test_mist.cpp)")
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "a declared tree failed: ${err}")
+endif()
+file(READ ${dir}/build/generated/tsan_filter.txt filter)
+if(NOT filter STREQUAL "Mist.*:*/Mist.*:MistCli.*:*/MistCli.*:MistSweep.*:*/MistSweep.*-*Cli*\n")
+  message(FATAL_ERROR "tsan_filter.txt: ${filter}")
+endif()
+file(READ ${dir}/build/tests.txt tests)
+if(NOT tests MATCHES "^[^|]*/tests/test_core.cpp;[^|]*/tests/test_mist.cpp[|]Image=core;Mist=mist;MistCli=mist;MistSweep=mist$")
+  message(FATAL_ERROR "test sources and suites: ${tests}")
+endif()
+message(STATUS "check_parts: undeclared folders refused, declared ones listed in order; test files owned once, "
+               "threaded parts tested, the TSan filter their suites")

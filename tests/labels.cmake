@@ -6,8 +6,16 @@
 # name matches, and none of these labels otherwise:
 #   gpu         the GPU backend's tests and sweeps (llvmpipe in CI)
 #   study       the study's tests
-#   effect_cli  the CLI suites of single effects, batch and sky
-# and the label derived from the sources:
+#   effect_cli  the CLI suites of single effects, batch and sky: by the
+#               naming rule of the tests, a suite or case that runs the CLI
+#               has Cli in its name (CliFog, StereoCli, Sample.CliWrites...),
+#               and the whole of Batch; the core CLI suite Cli itself is not
+#               one (the sanitizer run's --ci form keeps it)
+# and the labels derived from the declarations and the sources:
+#   part:NAME   the cases of the suites that part NAME's test files define
+#               (brume_part(NAME FOLDER TESTS ...) in CMakeLists.txt, passed
+#               in as brume_suite_parts, Suite=part): `ctest -L part:fog`
+#               runs fog's; a suite two parts' files define has both labels
 #   data        the cases that read the real data (BRUME_DATA_DIR, else
 #               ../shared/data): those whose body uses data_dir, data_path,
 #               have_data or BRUME_REQUIRE_DATA, directly or through what
@@ -23,7 +31,7 @@
 set(brume_label_rules
   gpu "Gpu|GPU"
   study "Study"
-  effect_cli "Batch|SkyCli|CliAerial|CliInsert|CliFog|CliDof|CliChain|Sample\\.Cli|RendersCli")
+  effect_cli "^([^.]*/)?Batch\\.|Cli([A-Z_./]|$)")
 
 # The data cases, as Suite.Name (a TEST_P's ctest names add the instantiation
 # before and the parameter after: Schemes/GaussianAccuracy.X/standard_2).
@@ -67,9 +75,18 @@ foreach(brume_test IN LISTS brume_tests_TESTS)
       list(APPEND brume_labels ${brume_label})
     endif()
   endwhile()
+  if(brume_test MATCHES "^Cli\\.")
+    list(REMOVE_ITEM brume_labels effect_cli)  # (the core CLI suite)
+  endif()
   # Suite.Name of Suite.Name, Inst/Suite.Name and Inst/Suite.Name/param
   string(REGEX REPLACE "^[^./]*/" "" brume_case "${brume_test}")
   string(REGEX REPLACE "/.*$" "" brume_case "${brume_case}")
+  string(REGEX REPLACE "[.].*$" "" brume_suite "${brume_case}")
+  foreach(brume_pair IN LISTS brume_suite_parts)
+    if(brume_pair MATCHES "^${brume_suite}=(.*)$")
+      list(APPEND brume_labels "part:${CMAKE_MATCH_1}")
+    endif()
+  endforeach()
   list(FIND brume_data_cases "${brume_case}" brume_index)  # (ctest runs without CMP0057: no IN_LIST)
   if(brume_index GREATER -1)
     list(APPEND brume_labels data)

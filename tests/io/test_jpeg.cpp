@@ -2,6 +2,8 @@
 // brume and through OpenImageIO, to the same decoded pixels, near what was
 // written, with the description; what OpenImageIO writes and the shared
 // photos read to OpenImageIO's values; a damaged file is an error naming it.
+#include <cstddef>  // (jpeglib.h uses size_t and FILE without including their headers)
+#include <cstdio>
 #include <jpeglib.h>
 
 #include "io/formats/format.hpp"
