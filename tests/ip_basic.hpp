@@ -9,6 +9,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
+#include <random>
 #include <utility>
 #include <vector>
 
@@ -146,6 +148,30 @@ inline DcMetrics dc_metrics(const Image& est_range, const Image& truth_range, co
     m.mae_mm = a / n, m.rmse_mm = std::sqrt(a2 / n), m.imae_per_km = ia / n, m.irmse_per_km = std::sqrt(ia2 / n);
   }
   return m;
+}
+
+// The held-out protocol of tests/test_complete.cpp and bench_complete
+// (issue 52, item 3): 10 % of the returns `known` (pixel indices of `full`),
+// drawn by std::shuffle with std::mt19937_64(seed), held out: `held`; those
+// of them that `occluded` (occluded_returns of the full scan) does not mark:
+// `kept`, the truth both methods are scored on; `sparse`: `full` without
+// the held-out returns.
+struct HeldOut {
+  std::vector<std::size_t> held, kept;
+  Image sparse;
+};
+inline HeldOut hold_out(const Image& full, const std::vector<std::size_t>& known,
+                        const std::vector<std::uint8_t>& occluded, int seed) {
+  std::vector<std::size_t> order = known;
+  std::mt19937_64 rng(seed);
+  std::shuffle(order.begin(), order.end(), rng);
+  HeldOut h;
+  h.held.assign(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(order.size() / 10));
+  for (std::size_t i : h.held)
+    if (!occluded[i]) h.kept.push_back(i);
+  h.sparse = full;
+  for (std::size_t i : h.held) h.sparse.data[i] = NAN;
+  return h;
 }
 
 }  // namespace brume::ip_basic

@@ -95,6 +95,9 @@ struct LoadedDepth {
   // The camera the range map was seen from, where the source gives one
   // (source_camera): the completion's planar continuation uses it.
   std::optional<Intrinsics> camera;
+  // A scan projected from a sensor beside the camera (--velodyne): the
+  // completion's occlusion rule applies to it (CompleteParams::offset_scan).
+  bool offset_scan = false;
 };
 
 // Convert the source to a range map. width/height: the image the depth

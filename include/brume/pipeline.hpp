@@ -141,9 +141,11 @@ struct RangeStep {
   std::optional<Intrinsics> camera;
 };
 const ParamTable<RangeStep>& range_step_param_table();
-// The step with the camera of the loaded depth (for the planar completion).
+// The step with the camera of the loaded depth (for the planar completion)
+// and whether it is a scan from beside the camera (for the occlusion rule).
 inline RangeStep with_camera(RangeStep step, const LoadedDepth& depth) {
   step.camera = depth.camera;
+  step.completion.offset_scan = depth.offset_scan;
   return step;
 }
 

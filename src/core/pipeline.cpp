@@ -559,6 +559,7 @@ LoadedInputs load_inputs(const InputFiles& in, bool with_depth) {
       ds.stereo_left_layer = in.image_layer;
     }
     L.depth = load_depth(ds, L.rgb.width, L.rgb.height);
+    L.depth.offset_scan = !ds.velodyne.empty();
     if (L.depth.range.width != L.rgb.width || L.depth.range.height != L.rgb.height)
       throw Error("depth '" + L.depth.path + "' is " + L.depth.range.size_string() + " but --image '" + in.image +
                   "' is " + L.rgb.size_string() + "; they must be the same size (resample the depth map, or crop both)");

@@ -23,6 +23,12 @@ const EnumNames<CompleteMethod>& complete_method_names() {
   return n;
 }
 
+const EnumNames<CompleteOcclusion>& complete_occlusion_names() {
+  static const EnumNames<CompleteOcclusion> n = {
+      {CompleteOcclusion::off, "off"}, {CompleteOcclusion::on, "on"}, {CompleteOcclusion::automatic, "auto"}};
+  return n;
+}
+
 const ParamTable<CompleteParams>& complete_param_table() {
   static const ParamTable<CompleteParams> t = [] {
     ParamTable<CompleteParams> d("complete");
@@ -46,7 +52,14 @@ const ParamTable<CompleteParams>& complete_param_table() {
                 "structure above the scan (not sky, no measurement near): planar continues each column's planar "
                 "depth up from its topmost measurements, along image segments (issue 52); column takes the "
                 "column's nearest estimate, the morphological pilot's wide fill (the rule of records before it)")
-        .since(4, "column");
+        .since(4, "column")
+        .choice("complete-occlusion", &CompleteParams::occlusion, complete_occlusion_names(),
+                "returns the camera cannot see: on drops a return when one within 3 columns, 1 row above to 8 "
+                "below, is nearer by > 10 % and by > 0.03 /m in inverse range (a scanner beside the camera sees "
+                "past foreground edges and through gaps; issue 52), then completes those pixels from the returns "
+                "around them; auto: on for a scan from beside the camera (--velodyne), off for a map seen from "
+                "the camera; off keeps every return (the rule of records before it)")
+        .since(4, "off");
     return d;
   }();
   return t;
@@ -100,7 +113,42 @@ float srgb_encode(float x) {
 }
 
 
+// Step 0's rule (brume/complete.hpp): the window and thresholds.
+constexpr int kOccLeft = 3, kOccRight = 3, kOccUp = 1, kOccDown = 8;
+constexpr float kOccRelative = 0.1f;  // nearer by more than this share of the range
+constexpr float kOccInverse = 0.03f;  // [1/m] and by more than this in inverse range
+
+bool occlusion_applies(const CompleteParams& p) {
+  return p.occlusion == CompleteOcclusion::on || (p.occlusion == CompleteOcclusion::automatic && p.offset_scan);
+}
+
 }  // namespace
+
+std::vector<std::uint8_t> occluded_returns(DenseImageRef range, int threads) {
+  if (range.channels != 1)
+    throw Error("occluded_returns: the range map has " + std::to_string(range.channels) + " channels; it must have one");
+  const int W = range.width, H = range.height;
+  const int nt = threads > 0 ? threads : omp_get_max_threads();
+  std::vector<std::uint8_t> o(range.pixels(), 0);
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const float rp = range.data[static_cast<std::size_t>(y) * W + x];
+      if (!measured(rp)) continue;
+      const float lim = std::min(rp * (1.0f - kOccRelative), 1.0f / (1.0f / rp + kOccInverse));
+      bool occ = false;
+      for (int v = std::max(0, y - kOccUp); v <= std::min(H - 1, y + kOccDown) && !occ; ++v)
+        for (int u = std::max(0, x - kOccLeft); u <= std::min(W - 1, x + kOccRight); ++u) {
+          const float rq = range.data[static_cast<std::size_t>(v) * W + u];
+          if (measured(rq) && rq < lim) {
+            occ = true;
+            break;
+          }
+        }
+      o[static_cast<std::size_t>(y) * W + x] = occ ? 1 : 0;
+    }
+  return o;
+}
 
 CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const CompleteParams& p, int threads,
                               const Intrinsics* camera) {
@@ -120,6 +168,9 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
   const int nt = threads > 0 ? threads : omp_get_max_threads();
 
   CompleteResult res;
+  // ---- 0. returns the camera cannot see (dropped after the checks below) ----
+  std::vector<std::uint8_t> dropped;
+  if (occlusion_applies(p)) dropped = occluded_returns(range, nt);
   // ---- measurements ----
   std::vector<std::uint8_t> known(N, 0);
   std::size_t nk = 0;
@@ -137,6 +188,10 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
                     "offset loses them; above, no range map measures, and 3e38 is a fill value). If the file marks "
                     "unknown pixels with such a value, give it as --unknown-value; else check the map's units "
                     "(--depth-scale)");
+      if (!dropped.empty() && dropped[i]) {
+        ++res.occluded;
+        continue;
+      }
       known[i] = 1;
       ++nk;
       rmax = std::max(rmax, r);
@@ -524,6 +579,16 @@ nlohmann::json complete_record(const CompleteParams& p, const CompleteResult& r)
                   "column's nearest estimate (below first)";
     j["complete_method"] = "planar";
     j["continued_fraction"] = r.continued / n;
+  }
+  if (p.occlusion == CompleteOcclusion::automatic && !occlusion_applies(p))
+    j["complete_occlusion"] = "off (auto: the range map is not a scan from beside the camera)";
+  if (occlusion_applies(p)) {  // (records before it dropped nothing and say nothing)
+    j["method"] = "returns with a nearer return within 3 columns, 1 row above to 8 below (nearer by > 10 % and "
+                  "by > 0.03 /m in inverse range: seen past a foreground edge or through glass) dropped and "
+                  "completed; " +
+                  j["method"].get<std::string>();
+    j["complete_occlusion"] = "on";
+    j["occluded_returns"] = r.occluded;
   }
   return j;
 }

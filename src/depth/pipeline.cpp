@@ -117,6 +117,7 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
     image_record = file_record(job.image, info, rgb);
   }
   LoadedDepth ld = load_depth(job.depth, rgb.width, rgb.height);
+  ld.offset_scan = !job.depth.velodyne.empty();
   if (!rgb.empty() && (ld.range.width != rgb.width || ld.range.height != rgb.height))
     throw Error("depth '" + ld.path + "' is " + ld.range.size_string() + " but --image '" + job.image + "' is " +
                 rgb.size_string() + "; they must be the same size (resample the depth map, or crop both)");
@@ -175,12 +176,14 @@ nlohmann::json run_depth_complete_job(const DepthCompleteJob& job, const ExecOpt
   if (!job.confidence.empty()) check_writable(job.confidence, conf, "--confidence");
   if (!job.record.empty()) check_record_path(job.record);
   LoadedInputs in = load_inputs(job.input, true);
-  const CompleteResult cr = complete_range(in.depth.range, in.rgb, job.complete, eo.threads,
+  CompleteParams cp = job.complete;
+  cp.offset_scan = in.depth.offset_scan;
+  const CompleteResult cr = complete_range(in.depth.range, in.rgb, cp, eo.threads,
                                            in.depth.camera ? &*in.depth.camera : nullptr);
   nlohmann::json rec = run_record_header("depth complete", ctx.argv);
   rec["job"] = depth_complete_job_table().to_json(job);
   rec["inputs"] = in.record;
-  rec["complete"] = complete_record(job.complete, cr);
+  rec["complete"] = complete_record(cp, cr);
   WriteOptions w = data;
   w.description = rec.dump();
   OutputSet outs;
