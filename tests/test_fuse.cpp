@@ -79,6 +79,35 @@ TEST(Fuse, FitRecoversScaleAndOffsetThroughOutliers) {
   EXPECT_NEAR(f.range.at(10, 1), 50.0 / (1.1 * d + 2.0) * std::sqrt(1 + a * a + b * b), 0.01 * f.range.at(10, 1));
 }
 
+// A second view that disagrees with the scan (here: zero disparity
+// everywhere, as a view given twice matches) is not used: the fit would
+// find a = 1 and an offset that turns every pixel into one distance. Fewer
+// than half the pixels both see within 1 px after the fit (here none) ->
+// confidence 0 everywhere, so the fusion takes nothing, and a warning.
+TEST(Fuse, PairThatDisagreesWithTheScanIsNotUsed) {
+  const int W = 64, H = 48;
+  StereoGeometry g;
+  g.f_px = 500.0, g.baseline_m = 0.1;
+  g.k.fx = g.k.fy = 500.0, g.k.cx = W / 2.0, g.k.cy = H / 2.0;
+  StereoResult st;
+  st.disparity = Image(W, H, 1, 0.0f);
+  st.confidence = Image(W, H, 1, 1.0f);
+  Image scan(W, H, 1, NAN);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> d(5.0f, 40.0f);  // the scan's disparities [px], spread evenly
+  for (int y = H / 2; y < H; y += 2)
+    for (int x = 0; x < W; ++x) scan.at(x, y) = 50.0f / d(rng);  // f B = 50 px m
+  const StereoFill f = fit_stereo_to_scan(scan, st, g);
+  EXPECT_FALSE(f.record["used"].get<bool>()) << f.record.dump(2);
+  EXPECT_TRUE(f.record.contains("warning"));
+  CompleteResult done;
+  done.range = Image(W, H, 1, NAN);
+  done.confidence = Image(W, H, 1, 0.0f);
+  done.sky_mask = Image(W, H, 1, 0.0f);
+  const nlohmann::json rec = fuse_stereo(done, scan, f, 5);
+  EXPECT_EQ(rec["stereo_fraction"].get<double>(), 0.0);
+}
+
 // KITTI's object calibration (the real file of 000001): fx from P2, the
 // baseline (P2[0,3] - P3[0,3]) / fx = (44.857 + 339.524) / 721.538 = 0.5327
 // m (KITTI's cameras 2 and 3 are ~0.54 m apart); tolerance 1 mm, the file's

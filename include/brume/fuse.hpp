@@ -25,8 +25,8 @@
 //     a = 1 and b = the median of d_s - d; with fewer than 50 such pixels, or
 //     a scale outside [0.8, 1.25] (a pair and a scan that disagree so much
 //     are not one camera), the fit falls back to the offset alone (a = 1, b
-//     the median), recorded as such. The fit and the residuals before and
-//     after go to the record.
+//     the median), recorded. Under 50 % of them within 1 px after the fit:
+//     the pair is not used (a warning). The fit and residuals: the record.
 //  4. Fusion, after the scan's completion (brume/complete.hpp): where the
 //     scan supports a pixel (a measurement within the refinement's window,
 //     complete-radius: measured and refined pixels) the scan's value stays.

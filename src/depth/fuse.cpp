@@ -145,7 +145,20 @@ StereoFill fit_stereo_to_scan(DenseImageRef scan, const StereoResult& st, const 
                                   text::g(kFuseMinConfidence, 3)},
                 {"residuals_before", residuals(pairs, 1.0, 0.0)},
                 {"residuals_after", residuals(pairs, a, b)},
-                {"valid_fraction", static_cast<double>(valid) / std::max<std::size_t>(1, out.range.pixels())}};
+                {"valid_fraction", static_cast<double>(valid) / std::max<std::size_t>(1, out.range.pixels())},
+                {"used", true}};
+  // A pair that does not agree with the scan where both see (fewer than
+  // half the pixels within 1 px after the fit: another scene, a view given
+  // twice, a calibration of another pair) would fill with nonsense: unused.
+  const double within = out.record["residuals_after"]["within_1px_fraction"].get<double>();
+  if (pairs.size() >= kMinPairs && within < 0.5) {
+    std::fill(out.confidence.data.begin(), out.confidence.data.end(), 0.0f);
+    out.record["used"] = false;
+    out.record["warning"] = "the second view disagrees with the scan where both see (" + text::g(100 * within, 3) +
+                            " % of " + std::to_string(pairs.size()) + " pixels within 1 px of disparity after the "
+                            "fit, at least 50 % needed): it is not used; check that the views and the scan belong "
+                            "together and the calibration is theirs";
+  }
   return out;
 }
 

@@ -299,6 +299,11 @@ LoadedDepth fused_depth(const DepthSource& s, int width, int height) {
   }
   StereoResult st = compute_stereo(L, R, sp, "--image '" + s.stereo_left + "'", "--stereo-right '" + s.stereo_right + "'");
   StereoFill fill = fit_stereo_to_scan(out.range, st, g);
+  if (fill.record.contains("warning")) {
+    const std::string w = "--stereo-right '" + s.stereo_right + "': " + fill.record["warning"].get<std::string>();
+    out.record["warnings"].push_back(w);
+    std::fprintf(stderr, "brume: warning: %s\n", w.c_str());
+  }
   out.record["stereo"] = {{"left", lrec},      {"right", rrec},   {"geometry", g.record},
                           {"search", search}, {"matching", st.record}, {"fit", fill.record}};
   out.fusion = std::make_shared<const StereoFill>(std::move(fill));
