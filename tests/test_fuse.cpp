@@ -177,9 +177,9 @@ FusedRun fused_eth3d(const std::string& scene, const std::string& scratch) {
 //  - lower 60 %: at most the scan-only share + 0.02 (issue 52's target;
 //    measured 0.05 % and 0.04 %, the scan wins there);
 //  - upper 40 %, playground_1l: at most half the scan-only share (the
-//    issue's target; measured 17.3 % against 78.5 %: its canopies overhang
+//    issue's target; measured 15.3 % against 78.5 %: its canopies overhang
 //    nearer than the scan's top, which no continuation knows);
-//  - upper 40 %, terrace: NOT the issue's half (measured 0.72 % against
+//  - upper 40 %, terrace: NOT the issue's half (measured 0.64 % against
 //    1.08 %, the target is 0.54 %): the planar continuation is already right
 //    there but for ~640 pixels beside the pillar, where the matcher's own
 //    errors (foreground fattening, 4.3 % of the upper 40 % when taken alone)

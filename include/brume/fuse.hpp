@@ -43,13 +43,13 @@
 //         strong (confidence >= 0.9: the views agree within 0.1 px and the
 //         5x5 disparities within ~0.3 px) and outside the left border band
 //         (x below twice the range searched: the right view may not see it,
-//         and the horizontal paths carry the padded border's costs inward).
-//     Measured on ETH3D with a KITTI-like scan (docs/depth-sources.md): the
-//     continuation above the scan is right where surfaces continue (terrace:
-//     1.1 % of the upper 40 % off by > 10 %, the matcher alone 4.3 %, mostly
-//     foreground fattening beside a pillar) and wrong where they do not
-//     (playground_1l's canopies: 79 %, the matcher alone 4.7 %); the rule
-//     keeps the first and takes the pair in the second.
+//         and the horizontal paths carry the padded border's costs inward),
+//         or, a second pass, where >= 13 of its 5x5 neighbours were replaced.
+//     Why (ETH3D with a KITTI-like scan, docs/depth-sources.md): the planar
+//     continuation is right where surfaces continue (terrace: 1.1 % off by
+//     > 10 % above the scan, the matcher alone 4.3 %: fattening beside a
+//     pillar), wrong where they do not (playground_1l's canopies: 79 %, the
+//     matcher 4.7 %): the rule keeps the first, takes the pair in the second.
 //     Pixels the pair does not match keep the completion's value (or stay
 //     unknown / sky).
 #pragma once

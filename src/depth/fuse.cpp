@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "brume/depth.hpp"
@@ -175,7 +176,10 @@ nlohmann::json fuse_stereo(CompleteResult& done, DenseImageRef scan, const Stere
       sat[(y + 1) * (W + 1) + x + 1] = (known_range(scan.at(x, y)) ? 1 : 0) + sat[y * (W + 1) + x + 1] +
                                        sat[(y + 1) * (W + 1) + x] - sat[y * (W + 1) + x];
   std::size_t taken = 0, over_sky = 0, over_unknown = 0, over_estimate = 0, scan_supported = 0, agreed = 0,
-              kept = 0;
+              kept = 0, by_region = 0;
+  // Per pixel: an estimate the pair replaced, or one it disagreed with but left.
+  constexpr std::uint8_t kOverEstimate = 1, kKept = 2;
+  std::vector<std::uint8_t> state(static_cast<std::size_t>(W) * H, 0);
   for (int y = 0; y < H; ++y) {
     const int y0 = std::max(0, y - radius), y1 = std::min(H, y + radius + 1);
     for (int x = 0; x < W; ++x) {
@@ -200,9 +204,11 @@ nlohmann::json fuse_stereo(CompleteResult& done, DenseImageRef scan, const Stere
         }
         if (c < kFuseOverrideConfidence || x < fill.border_px) {
           ++kept;
+          state[static_cast<std::size_t>(y) * W + x] = kKept;
           continue;
         }
         ++over_estimate;
+        state[static_cast<std::size_t>(y) * W + x] = kOverEstimate;
       } else if (sky > 0.0f) {
         ++over_sky, sky = 0.0f;
       } else {
@@ -213,6 +219,21 @@ nlohmann::json fuse_stereo(CompleteResult& done, DenseImageRef scan, const Stere
       conf = c;
     }
   }
+  // A disagreeing estimate left by the pixel rule inside a region the pair
+  // replaced (at least 13 of its 5x5 neighbourhood replaced: a weaker match
+  // amid strong ones, e.g. the streaks of a canopy) takes the pair's value.
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      if (state[static_cast<std::size_t>(y) * W + x] != kKept) continue;
+      int n = 0;
+      for (int yy = std::max(0, y - 2); yy <= std::min(H - 1, y + 2); ++yy)
+        for (int xx = std::max(0, x - 2); xx <= std::min(W - 1, x + 2); ++xx)
+          n += state[static_cast<std::size_t>(yy) * W + xx] == kOverEstimate ? 1 : 0;
+      if (n < 13) continue;
+      done.range.at(x, y) = fill.range.at(x, y);
+      done.confidence.at(x, y) = fill.confidence.at(x, y);
+      ++by_region, ++taken, ++over_estimate, --kept;
+    }
   std::size_t finite = 0;
   for (float v : done.range.data) finite += std::isfinite(v) ? 1 : 0;
   const double px = static_cast<double>(std::max<std::size_t>(1, done.range.pixels()));
@@ -223,7 +244,9 @@ nlohmann::json fuse_stereo(CompleteResult& done, DenseImageRef scan, const Stere
                        text::g(100 * kFuseAgree, 3) + " % of it (the estimate stays, its confidence the larger), "
                        "and replaces one it disagrees with only at confidence >= " +
                        text::g(kFuseOverrideConfidence, 3) + " outside the left border band (x < " +
-                       std::to_string(fill.border_px) + " px, twice the range searched)"},
+                       std::to_string(fill.border_px) + " px, twice the range searched), or where at least 13 of "
+                       "its 5x5 neighbours were so replaced"},
+          {"stereo_by_region_fraction", by_region / px},
           {"scan_supported_fraction", scan_supported / px},
           {"stereo_fraction", taken / px},
           {"stereo_over_estimate_fraction", over_estimate / px},
