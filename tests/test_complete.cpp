@@ -28,6 +28,7 @@
 #include "brume/depth_source.hpp"
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
+#include "eth3d_scan.hpp"
 #include "ip_basic.hpp"
 #include "test_util.hpp"
 
@@ -320,47 +321,11 @@ double stretch(const Intrinsics& k, int x, int y) {
   return std::sqrt(1.0 + a * a + b * b);
 }
 
-// ETH3D two-view with a KITTI-like scan simulated from its laser ground
-// truth: 48 full rows (every pixel with a ground-truth value) spread evenly
-// over the lower 60 % of the frame, nothing above (issue 52).
-struct SimulatedScan {
-  Image rgb, truth, sparse;
-  Intrinsics k;
-  int top = 0;  // first row of the lower 60 %
-};
+// The scan of tests/eth3d_scan.hpp for an ETH3D two-view scene of the data.
+using eth3d::SimulatedScan;
+using eth3d::share_off;
 SimulatedScan eth3d_kitti_like(const std::string& scene) {
-  const std::string rel = "eth3d_two_view/" + scene + "/";
-  SimulatedScan e;
-  DepthSource s;
-  s.disparity = data_path(rel + "disp0.pfm");
-  s.calib = data_path(rel + "calib.txt");
-  LoadedDepth ld = load_depth(s);
-  e.truth = std::move(ld.range);
-  e.k = *ld.camera;
-  e.rgb = read_color(data_path(rel + "im0.png"));
-  const int H = e.truth.height;
-  e.top = static_cast<int>(std::ceil(0.4 * H));
-  e.sparse = Image(e.truth.width, H, 1, NAN);
-  for (int i = 0; i < 48; ++i) {
-    const int y = e.top + static_cast<int>(std::lround(i * (H - 1 - e.top) / 47.0));
-    for (int x = 0; x < e.truth.width; ++x) e.sparse.at(x, y) = e.truth.at(x, y);
-  }
-  return e;
-}
-
-// Share of the ground-truth pixels of rows [y0, y1) off by more than 10 %
-// (a pixel left unknown counts as off).
-double share_off(const Image& est, const Image& truth, int y0, int y1, std::size_t* n_out = nullptr) {
-  std::size_t n = 0, off = 0;
-  for (int y = y0; y < y1; ++y)
-    for (int x = 0; x < truth.width; ++x) {
-      const float t = truth.at(x, y), v = est.at(x, y);
-      if (!std::isfinite(t)) continue;
-      ++n;
-      off += (std::isfinite(v) && std::abs(v - t) <= 0.1f * t) ? 0 : 1;
-    }
-  if (n_out) *n_out = n;
-  return n ? static_cast<double>(off) / static_cast<double>(n) : 0.0;
+  return eth3d::kitti_like_scan(data_path("eth3d_two_view/" + scene + "/"));
 }
 
 // ETH3D terrace with the simulated scan: the upper 40 % (no return there)

@@ -137,13 +137,16 @@ struct KittiCalib {
   double P2[12];  // 3x4 projection of camera 2 (rectified)
   double R0[9];   // rectifying rotation
   double Tr[12];  // velodyne -> camera 0
+  double P3[12];  // 3x4 projection of camera 3 (the right colour camera), when the file has it
+  bool has_p3 = false;
 };
 // Reads and checks a KITTI calibration (the one reader, for every command
 // that takes --kitti-calib): each of P2, R0_rect and Tr_velo_to_cam exactly
 // once (a repeated key is refused, not the last one kept), every number
 // finite, R0_rect and Tr_velo_to_cam's 3x3 part rotations (orthonormal
-// within 1e-3, determinant +1), P2's focal lengths > 0. Errors name
-// --kitti-calib and the file.
+// within 1e-3, determinant +1), P2's focal lengths > 0; P3, when present
+// (the object benchmark's files have it: the stereo baseline), read the same
+// way. Errors name --kitti-calib and the file.
 KittiCalib read_kitti_calib(const std::string& path);
 
 // ---- LiDAR scans: one reader, one validation, for every command that reads a scan ----

@@ -4,6 +4,7 @@
 // record of what was done.
 #pragma once
 
+#include <memory>
 #include <optional>
 #include <string>
 
@@ -11,6 +12,7 @@
 
 #include "brume/camera.hpp"
 #include "brume/depth.hpp"
+#include "brume/fuse.hpp"
 #include "brume/image.hpp"
 #include "brume/io.hpp"
 #include "brume/params.hpp"
@@ -39,7 +41,9 @@ struct DepthSource {
   std::string normalized_depth;  // monocular normalised depth: z = near + v (far - near)
   std::string velodyne;          // KITTI scan (.bin) with --kitti-calib
   std::string stereo_right;      // right view of a rectified pair: its disparity is computed (brume/stereo.hpp)
-                                 // and converted as --disparity's (calib.txt, or --fx and --baseline)
+                                 // and converted as --disparity's (calib.txt, or --fx and --baseline);
+                                 // beside a sparse source (the one other source given), fused with it by
+                                 // the completion (brume/fuse.hpp)
   std::string stereo_left;       // the pair's left view: the effects' --image (the default there);
                                  // depth convert and depth prepare name it here
   std::string stereo_right_layer, stereo_left_layer;  // their layers in files with layers (brume/io.hpp)
@@ -83,7 +87,10 @@ struct DepthSource {
   int width = 0, height = 0;     // image size for --velodyne when no image is at hand
   std::string like;              // ... or take it from this image
 
-  int sources() const;  // how many of the depth sources above are given (load_depth needs exactly one)
+  int sources() const;  // how many of the depth sources above are given (load_depth needs exactly one,
+                        // or one and --stereo-right: fused())
+  // A sparse source and --stereo-right: the completion fuses them (brume/fuse.hpp).
+  bool fused() const { return !stereo_right.empty() && sources() == 2; }
 };
 
 struct LoadedDepth {
@@ -98,6 +105,10 @@ struct LoadedDepth {
   // A scan projected from a sensor beside the camera (--velodyne): the
   // completion's occlusion rule applies to it (CompleteParams::offset_scan).
   bool offset_scan = false;
+  // A sparse source with --stereo-right (DepthSource::fused): the pair's
+  // range fitted to the scan, for the completion to fill what the scan
+  // misses; `range` is the scan's alone.
+  std::shared_ptr<const StereoFill> fusion;
 };
 
 // Convert the source to a range map. width/height: the image the depth
@@ -116,6 +127,18 @@ Intrinsics depth_intrinsics(const DepthSource& src, int width, int height);
 // depth_intrinsics. The pose comes from `pose` (default: level, looking north,
 // height unknown); make_camera validates it.
 Camera depth_camera(const DepthSource& src, int width, int height, const CameraPose& pose = {});
+
+// Refuses a fused source (a sparse one and --stereo-right) for `what`, a
+// command without a completion (depth convert): the fusion is the
+// completion's.
+void refuse_fusion(const DepthSource& src, const std::string& what);
+
+// The geometry of the rectified pair of --stereo-right beside a sparse
+// source, for a width x height pair (brume/fuse.hpp, step 1): --calib's
+// calib.txt, --kitti-calib's P2 and P3 (with --velodyne), or --fx and
+// --baseline; throws naming the flags when none is given or the file does
+// not fit the pair.
+StereoGeometry stereo_geometry(const DepthSource& src, int width, int height);
 
 // The source's camera intrinsics for a width x height map where its flags
 // give them (--velodyne with --kitti-calib: P2; --fx.., --fov-x.., --calib),

@@ -139,12 +139,17 @@ struct RangeStep {
   // Not a parameter: the camera of the range map where its source gives one
   // (LoadedDepth::camera), for the completion's planar continuation.
   std::optional<Intrinsics> camera;
+  // Not a parameter either: a stereo view fitted to the scan
+  // (LoadedDepth::fusion), which the completion fuses (brume/fuse.hpp).
+  std::shared_ptr<const StereoFill> stereo;
 };
 const ParamTable<RangeStep>& range_step_param_table();
 // The step with the camera of the loaded depth (for the planar completion)
-// and whether it is a scan from beside the camera (for the occlusion rule).
+// and its stereo view to fuse, if any, and whether it is a scan from beside
+// the camera (for the occlusion rule).
 inline RangeStep with_camera(RangeStep step, const LoadedDepth& depth) {
   step.camera = depth.camera;
+  step.stereo = depth.fusion;
   step.completion.offset_scan = depth.offset_scan;
   return step;
 }

@@ -661,18 +661,22 @@ CompletedRange complete_step(ConstImageView measured, ConstImageView rgb, const 
   check_range_step(step, given);
   CompletedRange out;
   out.record = {{"mode", enum_name(complete_mode_names(), step.complete)}, {"applied", false}};
+  if (step.stereo && step.complete == CompleteMode::off)
+    throw Error("--stereo-right beside a sparse depth source is fused with it by the completion, which --complete off "
+                "skips; use --complete auto (or on), or drop one of the two sources");
   if (step.complete == CompleteMode::off || measured.empty()) return out;
   std::size_t known = 0;
   for (int y = 0; y < measured.height(); ++y)
     for (int x = 0; x < measured.width(); ++x) known += known_range(measured.at(x, y)) ? 1 : 0;
   const double fraction = static_cast<double>(known) / static_cast<double>(measured.pixels());
-  if (!completes(step, fraction)) return out;
+  // A stereo view to fuse: completed whatever the coverage (the fusion is the completion's).
+  if (!step.stereo && !completes(step, fraction)) return out;
   if (rgb.empty()) {
     // auto without an image (brume depth prepare without --image): as
     // before completion existed, the preparation refuses the sparse map.
-    if (step.complete == CompleteMode::automatic) return out;
-    throw Error("--complete on: completing the range needs the colour image that guides it, and none was given "
-                "(brume depth prepare: give --image FILE)");
+    if (step.complete == CompleteMode::automatic && !step.stereo) return out;
+    throw Error("--complete " + enum_name(complete_mode_names(), step.complete) + ": completing the range needs the "
+                "colour image that guides it, and none was given (brume depth prepare: give --image FILE)");
   }
   // Dense as they are (a copy only of a strided view, e.g. a numpy slice).
   Image range_copy, guide_copy;
@@ -681,7 +685,10 @@ CompletedRange complete_step(ConstImageView measured, ConstImageView rgb, const 
   const DenseImageRef range = range_copy.empty() ? DenseImageRef(measured) : DenseImageRef(range_copy);
   const DenseImageRef guide = guide_copy.empty() ? DenseImageRef(rgb) : DenseImageRef(guide_copy);
   CompleteResult cr = complete_range(range, guide, step.completion, threads, step.camera ? &*step.camera : nullptr);
+  nlohmann::json fusion;
+  if (step.stereo) fusion = fuse_stereo(cr, range, *step.stereo, step.completion.radius_px);
   out.record.update(complete_record(step.completion, cr));
+  if (step.stereo) out.record["stereo_fusion"] = fusion, out.record["stereo_fusion"]["fit"] = step.stereo->record;
   out.record["applied"] = true;
   out.record["measured_known_fraction"] = fraction;
   out.range = std::move(cr.range);

@@ -403,7 +403,7 @@ KittiCalib read_kitti_calib(const std::string& path) {
   // Where each matrix was given (line numbers from 1): a key given twice is
   // refused rather than the last one kept silently.
   std::map<std::string, int> seen;
-  int got_p2 = 0, got_r0 = 0, got_tr = 0;
+  int got_p2 = 0, got_r0 = 0, got_tr = 0, got_p3 = 0;
   std::string line;
   int lineno = 0;
   while (std::getline(in, line)) {
@@ -428,7 +428,9 @@ KittiCalib read_kitti_calib(const std::string& path) {
     if (canon == "P2:") read(c.P2, 12, got_p2);
     else if (canon == "R0_rect:") read(c.R0, 9, got_r0);
     else if (canon == "Tr_velo_to_cam:") read(c.Tr, 12, got_tr);
+    else if (canon == "P3:") read(c.P3, 12, got_p3);
   }
+  c.has_p3 = got_p3 > 0;
   if (!got_p2 || !got_r0 || !got_tr)
     throw Error(what + " lacks " + std::string(!got_p2 ? "P2: " : "") + (!got_r0 ? "R0_rect: " : "") +
                 (!got_tr ? "Tr_velo_to_cam: " : "") + "(a KITTI object calib file has all three)");

@@ -47,6 +47,7 @@ nlohmann::json run_depth_convert_job(const DepthConvertJob& job, const RunContex
   if (job.out.empty()) throw Error("no output given: use --out FILE");
   check_writable(job.out, data, "--out");
   if (!job.record.empty()) check_record_path(job.record);
+  refuse_fusion(job.depth, "depth convert");
   LoadedDepth ld = load_depth(job.depth);
   Image result = ld.range;
   nlohmann::json rec = run_record_header("depth convert", ctx.argv);
@@ -105,7 +106,7 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
     fs::create_directories(job.masks, ec);
     if (!fs::is_directory(job.masks)) throw Error("--masks '" + job.masks + "' cannot be created: " + ec.message());
   }
-  const RangeStep step{PrepareMode::automatic, job.prepare, job.complete, job.completion, {}};
+  const RangeStep step{PrepareMode::automatic, job.prepare, job.complete, job.completion, {}, {}};
   check_range_step(step, ctx.given);
   Image rgb;
   nlohmann::json image_record;
@@ -116,7 +117,9 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
     rgb = read_color(job.image, how, &info);
     image_record = file_record(job.image, info, rgb);
   }
-  LoadedDepth ld = load_depth(job.depth, rgb.width, rgb.height);
+  DepthSource source = job.depth;  // a pair fused with a scan: its left view is --image unless named
+  if (source.fused() && source.stereo_left.empty()) source.stereo_left = job.image, source.stereo_left_layer = job.image_layer;
+  LoadedDepth ld = load_depth(source, rgb.width, rgb.height);
   ld.offset_scan = !job.depth.velodyne.empty();
   if (!rgb.empty() && (ld.range.width != rgb.width || ld.range.height != rgb.height))
     throw Error("depth '" + ld.path + "' is " + ld.range.size_string() + " but --image '" + job.image + "' is " +
@@ -178,12 +181,15 @@ nlohmann::json run_depth_complete_job(const DepthCompleteJob& job, const ExecOpt
   LoadedInputs in = load_inputs(job.input, true);
   CompleteParams cp = job.complete;
   cp.offset_scan = in.depth.offset_scan;
-  const CompleteResult cr = complete_range(in.depth.range, in.rgb, cp, eo.threads,
-                                           in.depth.camera ? &*in.depth.camera : nullptr);
+  CompleteResult cr = complete_range(in.depth.range, in.rgb, cp, eo.threads,
+                                     in.depth.camera ? &*in.depth.camera : nullptr);
+  nlohmann::json fusion;
+  if (in.depth.fusion) fusion = fuse_stereo(cr, in.depth.range, *in.depth.fusion, cp.radius_px);
   nlohmann::json rec = run_record_header("depth complete", ctx.argv);
   rec["job"] = depth_complete_job_table().to_json(job);
   rec["inputs"] = in.record;
   rec["complete"] = complete_record(cp, cr);
+  if (in.depth.fusion) rec["complete"]["stereo_fusion"] = fusion, rec["complete"]["stereo_fusion"]["fit"] = in.depth.fusion->record;
   WriteOptions w = data;
   w.description = rec.dump();
   OutputSet outs;
@@ -214,6 +220,13 @@ CommandDef depth_complete_command() {
                      100 * c["completed_fraction"].get<double>(), 100 * c["refined_fraction"].get<double>(),
                      100 * c["extrapolated_fraction"].get<double>(), 100 * c["sky_fraction"].get<double>(),
                      100 * c["unknown_fraction"].get<double>());
+        if (c.contains("stereo_fusion"))
+          std::fprintf(stderr, "brume depth complete: the second view: %.1f %% of the pixels from the pair (fit d_s = "
+                       "%.4f d %+.3f px over %zu pixels both see)\n",
+                       100 * c["stereo_fusion"]["stereo_fraction"].get<double>(),
+                       c["stereo_fusion"]["fit"]["scale"].get<double>(),
+                       c["stereo_fusion"]["fit"]["offset_px"].get<double>(),
+                       c["stereo_fusion"]["fit"]["pixels_both_see"].get<std::size_t>());
       },
   });
   // brume.depth.complete(rgb, range): the completion on arrays.
@@ -271,6 +284,7 @@ CommandDef depth_convert_command() {
       [](const std::vector<ArrayIn>&, ArrayCall<DepthConvertJob>& k, const Exec&, const std::set<std::string>&) {
         ArrayResult r;
         depth_convert_job_table().validate(k.p);
+        refuse_fusion(k.p.depth, "brume.depth.convert");
         LoadedDepth ld = load_depth(k.p.depth);
         Image result = std::move(ld.range);
         r.record["depth"] = ld.record;

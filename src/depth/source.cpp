@@ -1,6 +1,7 @@
 // brume — depth sources (see brume/depth_source.hpp).
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -213,9 +214,102 @@ LoadedDepth stereo_depth(const DepthSource& s, int width, int height) {
 
 }  // namespace
 
+void refuse_fusion(const DepthSource& s, const std::string& what) {
+  if (!s.fused()) return;
+  throw Error(what + " converts one depth source, but --stereo-right '" + s.stereo_right + "' is given beside " +
+              "another: the pair is fused with a sparse source by the completion; run brume depth complete (or an "
+              "effect with --complete), or drop one of the two");
+}
+
+StereoGeometry stereo_geometry(const DepthSource& s, int width, int height) {
+  StereoGeometry g;
+  const std::string pair = std::to_string(width) + "x" + std::to_string(height);
+  if (!s.calib.empty()) {
+    const StereoCalib c = read_stereo_calib(s.calib);
+    if (c.width > 0 && (c.width != width || c.height != height))
+      throw Error("--calib '" + s.calib + "' says " + std::to_string(c.width) + "x" + std::to_string(c.height) +
+                  " but the pair (--image, --stereo-right) is " + pair +
+                  "; the calibration must be the pair's (rescale it with the images, or give the pair it belongs to)");
+    g.f_px = c.f_px, g.baseline_m = c.baseline_m, g.doffs_px = c.doffs_px;
+    g.k.fx = g.k.fy = c.f_px, g.k.cx = c.cx, g.k.cy = c.cy;
+    g.record = {{"from", "--calib"}, {"path", s.calib}, {"sha256", sha256_file(s.calib)}};
+  } else if (!s.kitti_calib.empty()) {
+    const KittiCalib c = read_kitti_calib(s.kitti_calib);
+    if (!c.has_p3)
+      throw Error("--stereo-right with --kitti-calib '" + s.kitti_calib + "': the file has no P3 (the right colour "
+                  "camera's projection), which gives the pair's baseline; use the object benchmark's calib file (it "
+                  "has P0-P3), or give --fx (px) and --baseline (m)");
+    // P2 = K [I | t2], P3 = K [I | t3] (rectified): P[0,3] = fx tx, so B = (P2[0,3] - P3[0,3]) / fx.
+    g.f_px = c.P2[0], g.baseline_m = (c.P2[3] - c.P3[3]) / c.P2[0], g.doffs_px = c.P3[2] - c.P2[2];
+    if (!(g.baseline_m > 0.0))
+      throw Error("--kitti-calib '" + s.kitti_calib + "': P2 and P3 give a baseline of " + fmt(g.baseline_m) +
+                  " m ((P2[0,3] - P3[0,3]) / fx); camera 3 must lie to the right of camera 2 (> 0): the file's P2 and "
+                  "P3 are exchanged or damaged");
+    g.k.fx = c.P2[0], g.k.fy = c.P2[5], g.k.cx = c.P2[2], g.k.cy = c.P2[6];
+    g.record = {{"from", "--kitti-calib: f = P2[0,0], B = (P2[0,3] - P3[0,3]) / f, doffs = P3[0,2] - P2[0,2]"},
+                {"path", s.kitti_calib}, {"sha256", sha256_file(s.kitti_calib)}};
+  } else if (s.k.fx > 0.0 && s.baseline_m > 0.0) {
+    g.f_px = s.k.fx, g.baseline_m = s.baseline_m, g.doffs_px = 0.0;
+    g.k = s.k;
+    g.record = {{"from", "--fx, --baseline"}};
+  } else {
+    throw Error("--stereo-right beside a sparse source needs the pair's calibration to turn its disparity into "
+                "metres: --calib calib.txt (Middlebury 2014 / ETH3D), --kitti-calib with P2 and P3 (KITTI), or --fx "
+                "(px) and --baseline (m)");
+  }
+  g.k = resolve(g.k, width, height);
+  g.record["f_px"] = g.f_px, g.record["baseline_m"] = g.baseline_m, g.record["doffs_px"] = g.doffs_px;
+  return g;
+}
+
 namespace {
 LoadedDepth load_depth_as_read(const DepthSource& s, int width, int height);
+
+// A sparse source beside --stereo-right (brume/fuse.hpp): the scan read as
+// alone, the pair matched over the range the scan bounds, its disparity
+// fitted to the scan.
+LoadedDepth fused_depth(const DepthSource& s, int width, int height) {
+  if (s.stereo_left.empty())
+    throw Error("--stereo-right '" + s.stereo_right + "' needs the pair's left view: give --image FILE (the left view; "
+                "depth prepare also takes --stereo-left FILE)");
+  DepthSource scan = s;
+  scan.stereo_right.clear(), scan.stereo_left.clear();
+  scan.stereo_right_layer.clear(), scan.stereo_left_layer.clear();
+  scan.stereo = StereoParams{};
+  LoadedDepth out = load_depth_as_read(scan, width, height);
+  const int W = out.range.width, H = out.range.height;
+  nlohmann::json lrec, rrec;
+  const StereoView L = read_stereo_view(s.stereo_left, "--stereo-left", &lrec, s.stereo_left_layer);
+  const StereoView R = read_stereo_view(s.stereo_right, "--stereo-right", &rrec, s.stereo_right_layer);
+  for (const StereoView* v : {&L, &R})
+    if (v->width != W || v->height != H)
+      throw Error((v == &L ? "--image '" + s.stereo_left : "--stereo-right '" + s.stereo_right) + "' is " +
+                  std::to_string(v->width) + "x" + std::to_string(v->height) + " but the depth '" + out.path +
+                  "' is " + out.range.size_string() + "; the pair and the scan must be the same size (resample the "
+                  "views with their calibration, or project the scan at the pair's size)");
+  const StereoGeometry g = stereo_geometry(s, W, H);
+  StereoParams sp = s.stereo;
+  nlohmann::json search;
+  if (sp.max_disparity) {
+    search = {{"rule", "--max-disparity as given"}, {"max_disparity_px", *sp.max_disparity}};
+  } else if (const int bound = stereo_search_bound(out.range, g, W, sp.block, &search); bound > 0) {
+    sp.max_disparity = bound;
+  } else {
+    search = {{"rule", "auto (the scan gives no positive disparity)"}};
+  }
+  StereoResult st = compute_stereo(L, R, sp, "--image '" + s.stereo_left + "'", "--stereo-right '" + s.stereo_right + "'");
+  StereoFill fill = fit_stereo_to_scan(out.range, st, g);
+  if (fill.record.contains("warning")) {
+    const std::string w = "--stereo-right '" + s.stereo_right + "': " + fill.record["warning"].get<std::string>();
+    out.record["warnings"].push_back(w);
+    std::fprintf(stderr, "brume: warning: %s\n", w.c_str());
+  }
+  out.record["stereo"] = {{"left", lrec},      {"right", rrec},   {"geometry", g.record},
+                          {"search", search}, {"matching", st.record}, {"fit", fill.record}};
+  out.fusion = std::make_shared<const StereoFill>(std::move(fill));
+  return out;
 }
+}  // namespace
 
 std::optional<Intrinsics> source_camera(const DepthSource& s, int width, int height) {
   if (width <= 0 || height <= 0) return std::nullopt;
@@ -241,9 +335,10 @@ LoadedDepth load_depth(const DepthSource& s, int width, int height) {
 namespace {
 LoadedDepth load_depth_as_read(const DepthSource& s, int width, int height) {
   const int given = s.sources();
+  if (s.fused()) return fused_depth(s, width, height);
   if (given != 1)
     throw Error(given == 0 ? "no depth given: use one of --range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne, --stereo-right"
-                           : "give exactly one depth source (--range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne or --stereo-right)");
+                           : "give exactly one depth source (--range, --z, --disparity, --depth-buffer, --inverse-depth, --normalized-depth, --velodyne or --stereo-right), or one of them and --stereo-right, which the completion fuses");
   if (!s.stereo_right.empty()) return stereo_depth(s, width, height);
   // The matching's parameters mean nothing to the other sources: one set
   // away from its default is refused rather than ignored.

@@ -748,6 +748,10 @@ json run_view_job(const ViewJob& job, const ExecOptions&, const RunContext& ctx)
   ViewJob absolute;
   view_job_table().from_json(absolute, vj, "job");
   sv.files = absolute.input;
+  if (absolute.input.depth.fused())  // the preview's drafts are shrunk frames; the fusion is full-size
+    throw Error("--stereo-right beside another depth source is fused by the completion, which the "
+                "preview does not run; fuse first (brume depth complete ... --stereo-right R --out fused.exr) and "
+                "view --range fused.exr, or drop one of the two sources");
   sv.in = load_inputs(absolute.input, true);  // the record's inputs by absolute path, as the command's
   // The scene the page starts on (brume/preview.hpp): the measured range's
   // statistics, and whether the command line gave the camera.
