@@ -669,6 +669,14 @@ def browser(brume, tmp, screenshot, bench):
             p.wait(5)
             # The page still holds its keep-alive connections: the server waits at most 1 s for them.
             check(time.monotonic() - t0 < 2.5, f"SIGTERM with the page open: stopped in {time.monotonic() - t0:.1f} s")
+            if effect == "fog":  # (the haze page, which has albedo, is still open)
+                # The page of the stopped server says so, in words, when it next asks for a frame.
+                res = d.execute_async_script("brume.set('albedo', '0.5').then(() => arguments[0]('drawn'), "
+                                             "(e) => arguments[0](String(e)))")
+                said = d.execute_script("return document.getElementById('lacks').textContent")
+                check("has stopped" in res and "brume view again" in res and "has stopped" in said,
+                      f"a page whose server stopped says so: {res} / {said}")
+                gather(stopped=page[0])  # (the browser logs that request's failure itself)
             q, u = start_view(brume, ["--effect", effect, "--image", "clean.png", "--range", "range.exr",
                                       "--fov-x", "60", "--idle-exit", "5"], tmp)
             return stop_and_open(q, u)

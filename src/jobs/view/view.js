@@ -38,22 +38,34 @@ const state = {
   lastPlanScale: 1, history: [], dataVersion: 0, lastEdited: null,
 };
 
+// fetch() of the page's own server. A request that never got an answer
+// (the server stopped, or the network between) rejects with the browser's
+// bare "Failed to fetch": say which server and what to do instead.
+async function serverFetch(url, init) {
+  try {
+    return await fetch(url, init);
+  } catch (e) {
+    throw new Error(`the brume view server at ${location.host} does not answer (${e.message}): ` +
+                    'it has stopped (or cannot be reached); start brume view again and open the address it prints');
+  }
+}
+
 async function fetchJSON(url, body) {
-  const res = await fetch(url, body === undefined ? {} : {method: 'POST', body: JSON.stringify(body),
+  const res = await serverFetch(url, body === undefined ? {} : {method: 'POST', body: JSON.stringify(body),
                                                         headers: {'Content-Type': 'application/json'}});
   const j = await res.json();
   if (!res.ok) throw new Error(j.error || res.statusText);
   return j;
 }
 async function fetchFloats(name, k) {
-  const res = await fetch(`${name}.bin?scale=${k}`);
+  const res = await serverFetch(`${name}.bin?scale=${k}`);
   if (!res.ok) throw new Error(`${name}: ${res.status}`);
   return new Float32Array(await res.arrayBuffer());
 }
 
 // A map a plan names (CommandDef::preview_data): its floats and its shape.
 async function fetchMap(name) {
-  const res = await fetch(`data.bin?name=${encodeURIComponent(name)}`);
+  const res = await serverFetch(`data.bin?name=${encodeURIComponent(name)}`);
   if (!res.ok) throw new Error(`map ${name}: ${res.status}`);
   const [width, height, channels] = (res.headers.get('X-Brume-Shape') || '').split(' ').map(Number);
   const data = new Float32Array(await res.arrayBuffer());
