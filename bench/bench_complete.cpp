@@ -31,6 +31,7 @@
 #include "brume/complete.hpp"
 #include "brume/depth.hpp"
 #include "brume/io.hpp"
+#include "brume/pipeline.hpp"
 
 #include "bench_util.hpp"
 #include "brume_opencv.hpp"
@@ -86,6 +87,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  keep_freed_heap();  // as the CLI and brume batch run (brume/pipeline.hpp): freed buffers are reused
   const std::string k = data + "/kitti_object_000001/";
   Image rgb;
   LidarImage scan;
