@@ -42,25 +42,6 @@ namespace {
 const std::string kKitti = "kitti_object_000001/";
 std::string kitti(const std::string& rel) { return data_path(kKitti + rel); }
 
-struct Errors {
-  double mae = 0, rmse = 0;
-  std::size_t n = 0, missing = 0;
-};
-Errors errors_at(const Image& est, const Image& truth, const std::vector<std::size_t>& at) {
-  Errors e;
-  double s = 0, s2 = 0;
-  for (std::size_t i : at) {
-    if (!std::isfinite(est.data[i])) {
-      ++e.missing;
-      continue;
-    }
-    const double d = static_cast<double>(est.data[i]) - truth.data[i];
-    s += std::abs(d), s2 += d * d, ++e.n;
-  }
-  e.mae = e.n ? s / e.n : 0, e.rmse = e.n ? std::sqrt(s2 / e.n) : 0;
-  return e;
-}
-
 struct KittiFrame {
   Image rgb;
   LidarImage scan;
