@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "brume/command.hpp"
 #include "brume/dof.hpp"
 #include "brume/haze.hpp"
 #include "brume/sample.hpp"
@@ -176,7 +177,14 @@ TEST(Sample, BoundsRespected) {
 TEST(Sample, EveryEffectsDefaultsValidate) {
   for (const std::string& e : sample_effects())
     for (int i = 0; i < 300; ++i) EXPECT_NO_THROW(random_params(e, 1, key_of(i), {})) << e << " " << key_of(i);
-  EXPECT_EQ(sample_effects(), (std::vector<std::string>{"haze", "aerial", "fog", "dof", "lidar fog"}));
+  // The sampled effects are the commands that declare a sampling block, in
+  // the list's order; the camera effects and the scan's fog among them.
+  std::vector<std::string> declared;
+  for (const CommandDef& c : commands())
+    if (c.sampling) declared.push_back(c.name);
+  EXPECT_EQ(sample_effects(), declared);
+  for (const char* e : {"haze", "aerial", "fog", "dof", "lidar fog"})
+    EXPECT_NE(std::find(declared.begin(), declared.end(), e), declared.end()) << e << " lost its sampling block";
 }
 
 TEST(Sample, SpecsParseWhitespaceAndKinds) {

@@ -14,6 +14,10 @@ metres along each pixel's ray (NaN: unknown). float32 is read in place,
 float64 converted once, uint8/uint16 need ``transfer="srgb"|"linear"``. The
 GIL is released while an effect runs. See docs/python.md.
 """
+# The commands' functions are re-exported by name (here and in depth.py,
+# lidar.py, sky.py) so that editors and type checkers see them; the list of
+# commands (src/jobs/commands.cpp) is the source: each command's public name
+# must resolve here, or test_every_command_of_the_list_reaches_python fails.
 from ._brume import (__version__, aerial, blur, dof, fog, haze, haze_dof, max_pixels, random_params, read_image,
                      set_max_pixels, write_image)
 from ._result import Result

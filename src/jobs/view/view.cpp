@@ -79,6 +79,9 @@ struct ViewJob {
 // The effects --effect names; a run checks that the command has a preview
 // (CommandDef::preview). A fixed list: the table is made while the list of
 // commands is being built, so it cannot ask that list.
+// The commands with a preview (CommandDef::preview), by hand: the view is a
+// command of the list itself, and its table would read the list while the
+// list is built. Commands.TheViewOffersEveryPreview fails when it is stale.
 const std::vector<const char*>& preview_names() {
   static const std::vector<const char*> n = {"haze", "fog", "aerial", "dof", "haze+dof"};
   return n;
