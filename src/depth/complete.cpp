@@ -14,6 +14,7 @@
 #include "brume/error.hpp"
 
 #include "brume_opencv.hpp"
+#include "core/srgb_curve.hpp"
 #include "core/text.hpp"
 
 namespace brume {
@@ -104,7 +105,7 @@ float srgb_encode(float x) {
     std::array<float, 4097> a{};
     for (int i = 0; i <= 4096; ++i) {
       const double v = i / 4096.0;
-      a[i] = static_cast<float>(v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1.0 / 2.4) - 0.055);
+      a[i] = static_cast<float>(detail::srgb_encode_curve(v));
     }
     return a;
   }();

@@ -8,17 +8,14 @@
 #include <vector>
 
 #include "brume/io.hpp"
+#include "core/srgb_curve.hpp"
 #include "io/formats/format.hpp"
 
 namespace brume {
 
-float srgb_to_linear(float v) {
-  return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
-}
+float srgb_to_linear(float v) { return detail::srgb_decode_curve(v); }
 
-float linear_to_srgb(float v) {
-  return v <= 0.0031308f ? v * 12.92f : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
-}
+float linear_to_srgb(float v) { return detail::srgb_encode_curve(v); }
 
 namespace {
 

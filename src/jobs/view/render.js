@@ -14,6 +14,14 @@ const FORMATS = {
 // as `brume demo`'s range-preview.png is (src/depth/preview.cpp): log range
 // from the nearest known to the farthest, near warm (dark red, orange,
 // yellow) to far cool (cyan, blue); the sky and unknown pixels hatched grey.
+// The sRGB curve (IEC 61966-2-1), once: the display shader's enc() is
+// written from the same constants as srgb8's JS curve.
+const SRGB = {linearBelow: 0.0031308, slope: 12.92, scale: 1.055, gamma: 2.4, offset: 0.055};
+const glslFloat = (x) => (Number.isInteger(x) ? x.toFixed(1) : String(x));
+function srgbEncode(v) {
+  return v <= SRGB.linearBelow ? SRGB.slope * v : SRGB.scale * Math.pow(v, 1 / SRGB.gamma) - SRGB.offset;
+}
+
 const DISPLAY_FS = `#version 300 es
 precision highp float;
 precision highp sampler2D;
@@ -28,7 +36,11 @@ uniform float uRangeMax;
 uniform float uFocus;     // > 0: mark the focal plane (range within uFocusTol of uFocus)
 uniform float uFocusTol;
 out vec4 oColor;
-float enc(float v) { v = max(v, 0.0); return v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1.0 / 2.4) - 0.055; }
+float enc(float v) {
+  v = max(v, 0.0);
+  return v <= ${glslFloat(SRGB.linearBelow)} ? ${glslFloat(SRGB.slope)} * v
+       : ${glslFloat(SRGB.scale)} * pow(v, 1.0 / ${glslFloat(SRGB.gamma)}) - ${glslFloat(SRGB.offset)};
+}
 vec3 ramp(float t) {  // sRGB-encoded, as range_preview's five stops
   vec3 k0 = vec3(0.5, 0.0, 0.05), k1 = vec3(0.95, 0.4, 0.05), k2 = vec3(0.95, 0.9, 0.3), k3 = vec3(0.3, 0.8, 0.9),
        k4 = vec3(0.1, 0.2, 0.7);
@@ -349,6 +361,5 @@ export class Renderer {
 // max(v, 0), rounded half away from zero, clipped to 255).
 export function srgb8(v) {
   if (!(v > 0)) return 0;
-  const e = v <= 0.0031308 ? 12.92 * v : 1.055 * Math.pow(v, 1 / 2.4) - 0.055;
-  return Math.min(255, Math.max(0, Math.round(e * 255)));
+  return Math.min(255, Math.max(0, Math.round(srgbEncode(v) * 255)));
 }
