@@ -12,13 +12,6 @@ namespace brume {
 
 namespace {
 
-std::string num(double v) {
-  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
-  std::ostringstream o;
-  o << v;
-  return o.str();
-}
-
 // strtod over the whole text ("1e-3", "inf", "nan"), nothing left over.
 using text::parse_number;
 
@@ -118,23 +111,23 @@ bool Range::contains(double v) const {
 }
 
 std::string Range::text() const {
-  return std::string(min_open || std::isinf(min) ? "(" : "[") + num(min) + ", " + num(max) +
+  return std::string(min_open || std::isinf(min) ? "(" : "[") + text::g(min) + ", " + text::g(max) +
          (max_open || std::isinf(max) ? ")" : "]");
 }
 
 std::string ParamSpec::format(const nlohmann::json& v) const {
   if (v.is_null()) return unset_word;
   switch (kind) {
-    case ParamKind::real: return num(v.get<double>());
+    case ParamKind::real: return text::g(v.get<double>());
     case ParamKind::integer: return v.dump();
     case ParamKind::boolean: return v.get<bool>() ? "true" : "false";
     case ParamKind::rgb: {
       const Rgb c = v.get<Rgb>();
-      return num(c[0]) + "," + num(c[1]) + "," + num(c[2]);
+      return text::g(c[0]) + "," + text::g(c[1]) + "," + text::g(c[2]);
     }
     case ParamKind::pair: {
       const Pair c = v.get<Pair>();
-      return num(c[0]) + "," + num(c[1]);
+      return text::g(c[0]) + "," + text::g(c[1]);
     }
     case ParamKind::choice:
     case ParamKind::text: return v.get<std::string>();
@@ -244,10 +237,10 @@ void ParamSpec::check(const nlohmann::json& v) const {
       if (!v.is_number()) bad_type("a number");
       const double x = v.get<double>();
       if (!std::isfinite(x) && !(allow_inf && x > 0 && std::isinf(x)))
-        throw Error(flag + " " + num(x) + " is not allowed: it must be a finite number in " + range.text() +
+        throw Error(flag + " " + text::g(x) + " is not allowed: it must be a finite number in " + range.text() +
                     (unit.empty() ? "" : " (" + unit + ")") + "; " + help);
       if (!range.contains(x))
-        throw Error(flag + " " + num(x) + " is not allowed: it must be in " + range.text() +
+        throw Error(flag + " " + text::g(x) + " is not allowed: it must be in " + range.text() +
                     (unit.empty() ? "" : " (" + unit + ")") + "; " + help);
       return;
     }

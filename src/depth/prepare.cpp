@@ -78,6 +78,7 @@
 #include <vector>
 
 #include "brume/error.hpp"
+#include "core/text.hpp"
 
 #include "brume_opencv.hpp"
 
@@ -88,12 +89,6 @@ constexpr double kTukey = 4.685;            // 95% efficiency at the normal
 constexpr double kMadToSigma = 1.482602218;  // 1 / Phi^-1(3/4)
 
 inline bool is_unknown(float r) { return !std::isfinite(r) || r == 0.0f; }
-
-std::string prepare_fmt(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.6g", v);
-  return buf;
-}
 
 // Every parameter through its declaration (brume/pipeline.hpp): messages name
 // the flag (--sky-margin), the value, the allowed range and the meaning.
@@ -329,7 +324,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   if (negatives) {
     const int fx = static_cast<int>(first_neg % W), fy = static_cast<int>(first_neg / W);
     throw Error("prepare: the range map has " + std::to_string(negatives) + " negative value(s), the first " +
-                prepare_fmt(in[first_neg]) + " m at pixel (" + std::to_string(fx) + ", " + std::to_string(fy) +
+                text::g(in[first_neg]) + " m at pixel (" + std::to_string(fx) + ", " + std::to_string(fy) +
                 "); range must be > 0 where known, with NaN, inf or 0 marking unknown pixels. Fix the conversion "
                 "that produced the map (e.g. a disparity offset or sign), set invalid pixels to NaN, or, if the file "
                 "marks unknown pixels with a negative value such as -1, give it as --unknown-value -1.");
@@ -341,7 +336,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
     char pct[32];
     std::snprintf(pct, sizeof pct, "%.2f%%", 100.0 * res.known_fraction);
     m << "prepare: the range map (" << range.size_string() << ") has known values at only " << known << " of " << N
-      << " pixels, i.e. it covers " << pct << " of the pixels, below --min-coverage " << prepare_fmt(p.min_coverage) << " (" << prepare_fmt(100.0 * p.min_coverage)
+      << " pixels, i.e. it covers " << pct << " of the pixels, below --min-coverage " << text::g(p.min_coverage) << " (" << text::g(100.0 * p.min_coverage)
       << "%). This looks like a sparse map (e.g. a projected lidar scan); prepare fills holes and sky in dense "
          "maps only and would invent most of this one. Densify/complete the depth first (depth completion, "
          "stereo, a mesh render), or run the effect with --prepare off.";
@@ -351,7 +346,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   float smax = static_cast<float>(p.s_max_factor * static_cast<double>(rmax));
   if (!(smax > rmax)) smax = std::nextafter(rmax, std::numeric_limits<float>::infinity());
   if (!std::isfinite(smax))
-    throw Error("prepare: S_max = --s-max-factor * R_max = " + prepare_fmt(p.s_max_factor) + " * " + prepare_fmt(rmax) +
+    throw Error("prepare: S_max = --s-max-factor * R_max = " + text::g(p.s_max_factor) + " * " + text::g(rmax) +
                 " m overflows float; the map's largest range is implausible (check its units) or --s-max-factor is "
                 "too large (lower it).");
   res.s_max_m = smax;

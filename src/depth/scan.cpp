@@ -16,15 +16,11 @@
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "brume/io.hpp"
+#include "core/text.hpp"
 
 namespace brume {
 
 namespace {
-std::string scan_num(double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.6g", v);
-  return b;
-}
 std::string scan_count_text(std::uint64_t n) {
   std::string s = std::to_string(n), out;
   for (std::size_t i = 0; i < s.size(); ++i) {
@@ -77,15 +73,15 @@ void validate_scan(const float* xyzi, std::size_t n, const std::string& what) {
     const float* q = xyzi + 4 * i;
     for (int c = 0; c < 4; ++c)
       if (!std::isfinite(q[c]))
-        throw Error(what + ": point " + std::to_string(i) + " has a non-finite " + "xyzi"[c] + " (" + scan_num(q[c]) +
+        throw Error(what + ": point " + std::to_string(i) + " has a non-finite " + "xyzi"[c] + " (" + text::g(q[c]) +
                     "); a scan's coordinates and intensities must be finite numbers: drop such points first");
     if (q[3] < 0.0f)
-      throw Error(what + ": point " + std::to_string(i) + " has a negative intensity " + scan_num(q[3]) +
+      throw Error(what + ": point " + std::to_string(i) + " has a negative intensity " + text::g(q[3]) +
                   "; intensities are reflectances >= 0");
     const double x = q[0], y = q[1], z = q[2], r = std::sqrt(x * x + y * y + z * z);
     if (r > kMaxScanRangeM)
-      throw Error(what + ": point " + std::to_string(i) + " lies " + scan_num(r) + " m from the sensor; brume takes "
-                  "points up to " + scan_num(kMaxScanRangeM) + " m (no LiDAR return is farther: KITTI's HDL-64E reaches "
+      throw Error(what + ": point " + std::to_string(i) + " lies " + text::g(r) + " m from the sensor; brume takes "
+                  "points up to " + text::g(kMaxScanRangeM) + " m (no LiDAR return is farther: KITTI's HDL-64E reaches "
                   "120 m, survey scanners 6 km): drop the point, or check the scan's units");
   }
 }

@@ -10,6 +10,7 @@
 #include "brume/io.hpp"
 #include "brume/record.hpp"
 #include "brume/stereo.hpp"
+#include "core/text.hpp"
 
 namespace brume {
 
@@ -53,11 +54,6 @@ bool pixel_intrinsics(const DepthSource& s, int width, int height, Intrinsics& k
   return false;
 }
 
-std::string num6(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.6g", v);
-  return b;
-}
 }  // namespace
 
 Intrinsics depth_intrinsics(const DepthSource& s, int width, int height) {
@@ -83,10 +79,10 @@ Intrinsics depth_intrinsics(const DepthSource& s, int width, int height) {
   const double apart = std::abs(kl.fx / k.fx - 1.0);
   if (apart > 0.01) {
     const LensScale l = lens_scale(s.lens, width, height);
-    throw Error("the lens gives fx = focal length x " + num6(l.side_px) + " px / sensor = " +
-                num6(*s.lens.focal_length_mm) + " mm x " + num6(l.side_px) + " px / " + num6(l.sensor_mm) + " mm = " +
-                num6(kl.fx) + " px (--sensor-fit " + enum_name(sensor_fit_names(), s.lens.sensor_fit) +
-                "), but " + from + " gives fx = " + num6(k.fx) + " px (" + num6(100.0 * apart) +
+    throw Error("the lens gives fx = focal length x " + text::g(l.side_px) + " px / sensor = " +
+                text::g(*s.lens.focal_length_mm) + " mm x " + text::g(l.side_px) + " px / " + text::g(l.sensor_mm) + " mm = " +
+                text::g(kl.fx) + " px (--sensor-fit " + enum_name(sensor_fit_names(), s.lens.sensor_fit) +
+                "), but " + from + " gives fx = " + text::g(k.fx) + " px (" + text::g(100.0 * apart) +
                 " % apart; at most 1 % is allowed): correct --focal-length or " + l.sensor_flag + " (or --sensor-fit), "
                 "or " + from);
   }
@@ -118,12 +114,6 @@ void unorm(Image& im, const FileInfo& info) {
   for (float& v : im.data) v = static_cast<float>(v / maxval);
 }
 
-std::string fmt(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.9g", v);
-  return buf;
-}
-
 // A range or planar depth is a distance: a negative stored value is either a
 // no-data sentinel (GeoPose3K marks the sky with -1) or a signed convention
 // (OpenGL eye-space z), and guessing which would be wrong half the time.
@@ -135,10 +125,10 @@ void refuse_negative(const Image& stored, const char* flag, const std::string& p
   if (!negatives) return;
   const float v = stored.data[first];
   throw Error(std::string(flag) + " '" + path + "' stores " + std::to_string(negatives) + " negative value(s), the first " +
-              fmt(v) + " at pixel (" + std::to_string(first % stored.width) + ", " + std::to_string(first / stored.width) +
-              "); distances must be > 0 where known (NaN, inf or 0 mark unknown pixels). If " + fmt(v) +
-              " marks the sky or missing data (GeoPose3K uses -1), pass --unknown-value " + fmt(v) +
-              (s.unknown_value ? " (the --unknown-value " + fmt(*s.unknown_value) + " given matches other values, not this one)" : "") +
+              text::g(v, 9) + " at pixel (" + std::to_string(first % stored.width) + ", " + std::to_string(first / stored.width) +
+              "); distances must be > 0 where known (NaN, inf or 0 mark unknown pixels). If " + text::g(v, 9) +
+              " marks the sky or missing data (GeoPose3K uses -1), pass --unknown-value " + text::g(v, 9) +
+              (s.unknown_value ? " (the --unknown-value " + text::g(*s.unknown_value, 9) + " given matches other values, not this one)" : "") +
               "; if the map is signed (OpenGL eye-space z is negative in front of the camera), negate it first.");
 }
 
@@ -242,7 +232,7 @@ StereoGeometry stereo_geometry(const DepthSource& s, int width, int height) {
     // P2 = K [I | t2], P3 = K [I | t3] (rectified): P[0,3] = fx tx, so B = (P2[0,3] - P3[0,3]) / fx.
     g.f_px = c.P2[0], g.baseline_m = (c.P2[3] - c.P3[3]) / c.P2[0], g.doffs_px = c.P3[2] - c.P2[2];
     if (!(g.baseline_m > 0.0))
-      throw Error("--kitti-calib '" + s.kitti_calib + "': P2 and P3 give a baseline of " + fmt(g.baseline_m) +
+      throw Error("--kitti-calib '" + s.kitti_calib + "': P2 and P3 give a baseline of " + text::g(g.baseline_m, 9) +
                   " m ((P2[0,3] - P3[0,3]) / fx); camera 3 must lie to the right of camera 2 (> 0): the file's P2 and "
                   "P3 are exchanged or damaged");
     g.k.fx = c.P2[0], g.k.fy = c.P2[5], g.k.cx = c.P2[2], g.k.cy = c.P2[6];
@@ -358,7 +348,7 @@ LoadedDepth load_depth_as_read(const DepthSource& s, int width, int height) {
 
   if (!s.velodyne.empty()) {
     if (s.unknown_value)
-      throw Error("--unknown-value " + fmt(*s.unknown_value) + " does not apply to --velodyne '" + s.velodyne +
+      throw Error("--unknown-value " + text::g(*s.unknown_value, 9) + " does not apply to --velodyne '" + s.velodyne +
                   "': a lidar scan stores points, not a grid with a no-data value (pixels no point hits are "
                   "unknown already); drop --unknown-value");
     if (width <= 0 && !s.like.empty()) {
@@ -513,8 +503,8 @@ LoadedDepth load_depth_as_read(const DepthSource& s, int width, int height) {
   if (largest > kPlausibleDistanceMax) {
     // One plausibility rule: no scene brume renders reaches 1000 km; such a
     // value is a background marker or a unit error.
-    const std::string w = std::string(flag) + " '" + path + "': the largest distance is " + fmt(largest) +
-                          " m, beyond " + fmt(kPlausibleDistanceMax) + " m: a renderer's or dataset's \"no surface\" "
+    const std::string w = std::string(flag) + " '" + path + "': the largest distance is " + text::g(largest, 9) +
+                          " m, beyond " + text::g(kPlausibleDistanceMax, 9) + " m: a renderer's or dataset's \"no surface\" "
                           "value read as a distance (give it as --unknown-value V" +
                           (distance && s.render_background == RenderBackground::off ? ", or --renderer-background auto" : "") +
                           "), or the wrong unit (--depth-scale)";

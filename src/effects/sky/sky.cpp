@@ -10,6 +10,7 @@
 #include "brume/depth_source.hpp"
 #include "brume/error.hpp"
 #include "brume/pipeline.hpp"
+#include "core/text.hpp"
 #include "core/math_constants.hpp"
 #include "brume_opencv.hpp"
 #include "shared/prelude_cpp.h"
@@ -21,11 +22,6 @@ namespace sh = brume::shared;
 namespace {
 
 
-std::string sky_num(double v) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.6g", v);
-  return b;
-}
 
 double sky_wrap360(double a) {
   double r = std::fmod(a, 360.0);
@@ -37,7 +33,7 @@ double sky_wrap360(double a) {
 
 void check_sky_turbidity(double t, const std::string& flag) {
   if (!(t >= kSkyTurbidityMin && t <= kSkyTurbidityMax))
-    throw Error(flag + " " + sky_num(t) +
+    throw Error(flag + " " + text::g(t) +
                 " is outside the sky model's [1.7, 20]: Preetham's fit turns negative below T = 1.65 "
                 "(the gradation term 1 + A e^B of the luminance changes sign) and 20 is the top of the "
                 "thesis' range; use a turbidity in [1.7, 20]");
@@ -142,17 +138,17 @@ SkyGeometry sky_geometry(const SkyViewParams& v, int width, int height) {
   else
     throw Error("--projection '" + v.projection + "' is not a sky projection; use fisheye, equirectangular or pinhole");
   if (!std::isfinite(v.azimuth_offset_deg))
-    throw Error("--azimuth-offset " + sky_num(v.azimuth_offset_deg) + " is not finite; give degrees");
+    throw Error("--azimuth-offset " + text::g(v.azimuth_offset_deg) + " is not finite; give degrees");
   g.azimuth_offset_deg = v.azimuth_offset_deg;
   g.cx = (width - 1) / 2.0, g.cy = (height - 1) / 2.0;
   g.radius_px = std::isnan(v.fisheye_radius_px) ? std::min(width, height) / 2.0 : v.fisheye_radius_px;
   if (!(g.radius_px > 0.0))
-    throw Error("--fisheye-radius " + sky_num(g.radius_px) + " is not allowed; use a radius > 0 px");
+    throw Error("--fisheye-radius " + text::g(g.radius_px) + " is not allowed; use a radius > 0 px");
   if (g.projection != Projection::fisheye && !std::isnan(v.fisheye_radius_px))
     throw Error("--fisheye-radius is for --projection fisheye, not " + v.projection + "; drop it");
   if (g.projection == Projection::pinhole) {
     if (v.azimuth_offset_deg != 0.0)
-      throw Error("--azimuth-offset " + sky_num(v.azimuth_offset_deg) +
+      throw Error("--azimuth-offset " + text::g(v.azimuth_offset_deg) +
                   " is not used by --projection pinhole (--yaw gives the compass azimuth of the optical axis); "
                   "use --yaw instead");
     // The depth block's rules (depth_intrinsics): the pixels, else the
@@ -234,7 +230,7 @@ std::optional<std::array<double, 2>> pixel_of_direction(const SkyGeometry& g, co
 Image render_sky(const SkyRenderParams& p, const SkyDirection& sun, const SkyGeometry& g, const Exec& exec) {
   check_sky_turbidity(p.turbidity);
   if (!(sun.zenith_deg >= 0.0 && sun.zenith_deg < 90.0))
-    throw Error("the sun's zenith angle " + sky_num(sun.zenith_deg) +
+    throw Error("the sun's zenith angle " + text::g(sun.zenith_deg) +
                 " deg is not above the horizon; the Preetham model has no twilight: use a sun zenith in [0, 90)");
   Image out(g.width, g.height, 3, NAN);
   const float t = static_cast<float>(p.turbidity);
@@ -481,7 +477,7 @@ SunFound resolve_sun(const SunParams& p, const DenseImageRef* rgb, bool integer_
                 ", or --sun auto (brume sky fit)");
   }
   if (!(f.direction.zenith_deg < 90.0))
-    throw Error("the sun (" + f.source + ") is at zenith angle " + sky_num(f.direction.zenith_deg) +
+    throw Error("the sun (" + f.source + ") is at zenith angle " + text::g(f.direction.zenith_deg) +
                 " deg, not above the horizon; the Preetham model has no twilight: use a daytime sky (sun zenith < 90)");
   return f;
 }

@@ -10,6 +10,7 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
+#include "core/text.hpp"
 
 namespace brume {
 
@@ -63,11 +64,6 @@ std::vector<double> parse_distances(const std::string& text) {
 }
 
 namespace {
-std::string g(double v) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.12g", v);
-  return buf;
-}
 }  // namespace
 
 std::string attenuation_csv(const Atmosphere& a, const SpectralSensitivity& q, const std::vector<double>& distances_m) {
@@ -75,7 +71,7 @@ std::string attenuation_csv(const Atmosphere& a, const SpectralSensitivity& q, c
                                                    : "distance_m,gamma_r,gamma_g,gamma_b\n";
   for (double d : distances_m) {
     const auto gm = attenuation_direct(a, q, d);
-    s += g(d) + "," + g(gm[0]) + "," + g(gm[1]) + "," + g(gm[2]) + "\n";
+    s += text::g(d, 12) + "," + text::g(gm[0], 12) + "," + text::g(gm[1], 12) + "," + text::g(gm[2], 12) + "\n";
   }
   return s;
 }
@@ -85,8 +81,8 @@ std::string spectrum_csv(const Atmosphere& a) {
   std::string s = "wavelength_nm,beta_rayleigh_per_m,beta_mie_per_m\n";
   for (int i = 0; i < kSensitivitySamples; ++i) {
     const double l = kAerialLambdaMinNm + i;
-    s += g(l) + "," + g(rayleigh_beta_per_m(l, a.altitude_m)) + "," +
-         g(mie_beta_per_m(l, a.turbidity, a.altitude_m)) + "\n";
+    s += text::g(l, 12) + "," + text::g(rayleigh_beta_per_m(l, a.altitude_m), 12) + "," +
+         text::g(mie_beta_per_m(l, a.turbidity, a.altitude_m), 12) + "\n";
   }
   return s;
 }
