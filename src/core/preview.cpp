@@ -2,6 +2,7 @@
 // the uniforms src/diffusion/diffusion_gpu.cpp sets, with the shader's interpolation;
 // and the names and values of the plan's maps.
 #include "brume/preview.hpp"
+#include "core/text.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -55,9 +56,7 @@ PreviewScene preview_scene(const Image& measured, bool camera_given) {
 
 double preview_round(double v) {
   if (!(std::isfinite(v) && v != 0.0)) return v;
-  char b[32];
-  std::snprintf(b, sizeof b, "%.2g", v);  // the double nearest the two digits: it prints as them
-  return std::strtod(b, nullptr);
+  return std::strtod(text::g(v, 2).c_str(), nullptr);  // the double nearest the two digits: it prints as them
 }
 
 std::string preview_text(double v) {

@@ -13,6 +13,7 @@
 #include "brume/batch.hpp"
 #include "brume/error.hpp"
 #include "brume/io.hpp"
+#include "core/text.hpp"
 
 namespace fs = std::filesystem;
 
@@ -227,9 +228,7 @@ void write_manifest(const std::string& path, const std::vector<nlohmann::json>& 
           if (x.is_string()) {
             v = x.get<std::string>();
           } else if (x.is_number_float()) {
-            char b[40];
-            std::snprintf(b, sizeof b, "%.17g", x.get<double>());
-            v = b;
+            v = text::g(x.get<double>(), 17);
           } else {
             v = x.dump();
           }
