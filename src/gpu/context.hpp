@@ -27,6 +27,7 @@
 
 #include <array>
 #include <chrono>
+#include <functional>
 #include <initializer_list>
 #include <map>
 #include <memory>
@@ -161,6 +162,15 @@ struct ScatterTargets {
   void ensure(int width, int height, Precision p, GLenum aux_format);
 };
 void scatter_rates(GpuContext& ctx, ScatterTargets& s, const DiffusionParams& d, const DiffusionPlan& plan);
+// The effect's first pass, drawn into s.first (haze's premultiply, fog's
+// pass): the colour on texture unit 0, the range on 1, the sky weight on 2
+// where `sky_blend` and one was uploaded (uSkyBlend says which); `uniforms`
+// sets the pass's own. With `rates`, the rate pass follows (scatter_rates).
+// Timed into timing.premultiply_ms; `what` names the pass in GL errors.
+void scatter_first_pass(GpuContext& ctx, ScatterTargets& s, const PassSpec& pass, const char* what,
+                        const ColorAndRange& in, const gl::Texture& sky_weight, bool sky_blend,
+                        const std::function<void(const Program&)>& uniforms, const DiffusionParams& d,
+                        const DiffusionPlan& plan, bool rates, GpuTiming& timing);
 // The diffusion and the composite, timed into timing.diffuse_ms and composite_ms.
 void scatter_diffuse_composite(GpuContext& ctx, ScatterTargets& s, const DiffusionParams& d, const DiffusionPlan& plan,
                                GpuFilter filter, const std::array<float, 3>& airlight, bool naive, GpuTiming& timing);

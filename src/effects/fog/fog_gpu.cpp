@@ -87,50 +87,38 @@ FogResult GpuFog::render(const FogParams& p, const FogAnalysis& a, GpuFilter fil
   timing_.iterations = blur ? a.plan.iterations : 0;
   timing_.gpu_timer = g.info.timer_query;
 
-  gpu::StageTimer t1(g, &timing_.gpu_timer);
-  const gpu::Program& pr = g.program(kFogPass);
-  g.begin(s.t.first);
-  glUseProgram(pr.id());
-  glActiveTexture(GL_TEXTURE0);
-  glBindTexture(GL_TEXTURE_2D, s.in.image.id());
-  glActiveTexture(GL_TEXTURE1);
-  glBindTexture(GL_TEXTURE_2D, s.in.range.id());
-  const Mat3 R = a.camera.world_from_camera().rotation;
-  glUniform3f(pr.loc("uRayRow"), static_cast<float>(R.m[1][0]), static_cast<float>(R.m[1][1]),
-              static_cast<float>(R.m[1][2]));
-  glUniform4f(pr.loc("uK"), static_cast<float>(a.camera.k.cx), static_cast<float>(a.camera.k.cy),
-              static_cast<float>(1.0 / a.camera.k.fx), static_cast<float>(1.0 / a.camera.k.fy));
-  glUniform1i(pr.loc("uKind"), d.kind());
-  glUniform3f(pr.loc("uExp"), static_cast<float>(d.d0), static_cast<float>(d.falloff), static_cast<float>(d.exponent_c));
-  glUniform2f(pr.loc("uBand"), static_cast<float>(d.band_offset), static_cast<float>(d.band_half_width));
-  glUniform2f(pr.loc("uClassic"), static_cast<float>(d.fog_start), static_cast<float>(d.fog_end));
-  std::vector<float> ku(kMaxKnots, 0.0f), kd(kMaxKnots, 0.0f);
-  for (std::size_t i = 0; i < d.knot_u.size(); ++i) {
-    ku[i] = static_cast<float>(d.knot_u[i]);
-    kd[i] = static_cast<float>(d.knot_density[i]);
-  }
-  glUniform1i(pr.loc("uKnots"), static_cast<int>(d.knot_u.size()));
-  glUniform1fv(pr.loc("uKnotU"), kMaxKnots, ku.data());
-  glUniform1fv(pr.loc("uKnotD"), kMaxKnots, kd.data());
-  glUniform1f(pr.loc("uSkyDistance"), a.sky_at_infinity ? -1.0f : static_cast<float>(a.sky_distance_m));
-  glUniform1f(pr.loc("uSkyBlurDistance"), static_cast<float>(a.sky_distance_m));
-  const bool blend = a.sky_blend && s.sky_weight.id() != 0;
-  glActiveTexture(GL_TEXTURE2);
-  glBindTexture(GL_TEXTURE_2D, blend ? s.sky_weight.id() : 0);
-  glUniform1i(pr.loc("uSkyBlend"), blend ? 1 : 0);
-  glUniform3f(pr.loc("uAirlight"), a.airlight[0], a.airlight[1], a.airlight[2]);
-  glUniform1i(pr.loc("uBlur"), blur ? 1 : 0);
-  glUniform4f(pr.loc("uScale"), static_cast<float>(p.diffusion.sigma0), static_cast<float>(p.lambda),
-              static_cast<float>(p.albedo), static_cast<float>(1.0 / a.range_max_m));
-  glUniform1f(pr.loc("uSigmaMax"), static_cast<float>(a.sigma_max));
-  glUniform1i(pr.loc("uDepthBuffer"), s.depth_buffer ? 1 : 0);
-  glUniform3f(pr.loc("uDepthLinear"), static_cast<float>(s.lin.a), static_cast<float>(s.lin.b), s.lin.clear);
-  GpuContext::Impl::draw();
-  glActiveTexture(GL_TEXTURE2);
-  glBindTexture(GL_TEXTURE_2D, 0);
-  gpu::check_gl("fog");
-  if (blur) gpu::scatter_rates(ctx_, s.t, p.diffusion, a.plan);
-  timing_.premultiply_ms = t1.stop();
+  gpu::scatter_first_pass(
+      ctx_, s.t, kFogPass, "fog", s.in, s.sky_weight, a.sky_blend,
+      [&](const gpu::Program& pr) {
+        const Mat3 R = a.camera.world_from_camera().rotation;
+        glUniform3f(pr.loc("uRayRow"), static_cast<float>(R.m[1][0]), static_cast<float>(R.m[1][1]),
+                    static_cast<float>(R.m[1][2]));
+        glUniform4f(pr.loc("uK"), static_cast<float>(a.camera.k.cx), static_cast<float>(a.camera.k.cy),
+                    static_cast<float>(1.0 / a.camera.k.fx), static_cast<float>(1.0 / a.camera.k.fy));
+        glUniform1i(pr.loc("uKind"), d.kind());
+        glUniform3f(pr.loc("uExp"), static_cast<float>(d.d0), static_cast<float>(d.falloff),
+                    static_cast<float>(d.exponent_c));
+        glUniform2f(pr.loc("uBand"), static_cast<float>(d.band_offset), static_cast<float>(d.band_half_width));
+        glUniform2f(pr.loc("uClassic"), static_cast<float>(d.fog_start), static_cast<float>(d.fog_end));
+        std::vector<float> ku(kMaxKnots, 0.0f), kd(kMaxKnots, 0.0f);
+        for (std::size_t i = 0; i < d.knot_u.size(); ++i) {
+          ku[i] = static_cast<float>(d.knot_u[i]);
+          kd[i] = static_cast<float>(d.knot_density[i]);
+        }
+        glUniform1i(pr.loc("uKnots"), static_cast<int>(d.knot_u.size()));
+        glUniform1fv(pr.loc("uKnotU"), kMaxKnots, ku.data());
+        glUniform1fv(pr.loc("uKnotD"), kMaxKnots, kd.data());
+        glUniform1f(pr.loc("uSkyDistance"), a.sky_at_infinity ? -1.0f : static_cast<float>(a.sky_distance_m));
+        glUniform1f(pr.loc("uSkyBlurDistance"), static_cast<float>(a.sky_distance_m));
+        glUniform3f(pr.loc("uAirlight"), a.airlight[0], a.airlight[1], a.airlight[2]);
+        glUniform1i(pr.loc("uBlur"), blur ? 1 : 0);
+        glUniform4f(pr.loc("uScale"), static_cast<float>(p.diffusion.sigma0), static_cast<float>(p.lambda),
+                    static_cast<float>(p.albedo), static_cast<float>(1.0 / a.range_max_m));
+        glUniform1f(pr.loc("uSigmaMax"), static_cast<float>(a.sigma_max));
+        glUniform1i(pr.loc("uDepthBuffer"), s.depth_buffer ? 1 : 0);
+        glUniform3f(pr.loc("uDepthLinear"), static_cast<float>(s.lin.a), static_cast<float>(s.lin.b), s.lin.clear);
+      },
+      p.diffusion, a.plan, blur, timing_);
 
   const gl::Texture* result = &s.t.f[0];
   if (blur) {

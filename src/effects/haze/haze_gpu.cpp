@@ -48,6 +48,32 @@ void scatter_rates(GpuContext& ctx, ScatterTargets& s, const DiffusionParams& d,
   gpu_diffusion_rates(ctx, tex(s.aux, s.w, s.h), tex(s.rates, s.w, s.h), d, plan);
 }
 
+void scatter_first_pass(GpuContext& ctx, ScatterTargets& s, const PassSpec& pass, const char* what,
+                        const ColorAndRange& in, const gl::Texture& sky_weight, bool sky_blend,
+                        const std::function<void(const Program&)>& uniforms, const DiffusionParams& d,
+                        const DiffusionPlan& plan, bool rates, GpuTiming& timing) {
+  GpuContext::Impl& g = ctx.impl();
+  StageTimer t1(g, &timing.gpu_timer);
+  const Program& pr = g.program(pass);
+  g.begin(s.first);
+  glUseProgram(pr.id());
+  glActiveTexture(GL_TEXTURE0);
+  glBindTexture(GL_TEXTURE_2D, in.image.id());
+  glActiveTexture(GL_TEXTURE1);
+  glBindTexture(GL_TEXTURE_2D, in.range.id());
+  const bool blend = sky_blend && sky_weight.id() != 0;
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, blend ? sky_weight.id() : 0);
+  glUniform1i(pr.loc("uSkyBlend"), blend ? 1 : 0);
+  uniforms(pr);
+  GpuContext::Impl::draw();
+  glActiveTexture(GL_TEXTURE2);
+  glBindTexture(GL_TEXTURE_2D, 0);
+  check_gl(what);
+  if (rates) scatter_rates(ctx, s, d, plan);
+  timing.premultiply_ms = t1.stop();
+}
+
 void scatter_diffuse_composite(GpuContext& ctx, ScatterTargets& s, const DiffusionParams& d, const DiffusionPlan& plan,
                                GpuFilter filter, const std::array<float, 3>& airlight, bool naive, GpuTiming& timing) {
   GpuContext::Impl& g = ctx.impl();
@@ -97,30 +123,17 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
   timing_.iterations = a.plan.iterations;
   timing_.gpu_timer = g.info.timer_query;
 
-  gpu::StageTimer t1(g, &timing_.gpu_timer);
-  const gpu::Program& pr = g.program(kPremultiplyPass);
-  g.begin(s.t.first);
-  glUseProgram(pr.id());
-  glActiveTexture(GL_TEXTURE0);
-  glBindTexture(GL_TEXTURE_2D, s.in.image.id());
-  glActiveTexture(GL_TEXTURE1);
-  glBindTexture(GL_TEXTURE_2D, s.in.range.id());
-  glUniform1f(pr.loc("uInvRangeMax"), static_cast<float>(1.0 / a.range_max_m));
-  glUniform1f(pr.loc("uKappa"), static_cast<float>(a.kappa_a + a.kappa_s));
-  glUniform1f(pr.loc("uSigma0"), static_cast<float>(p.diffusion.sigma0));
-  glUniform1f(pr.loc("uSigmaMax"), static_cast<float>(a.sigma_max));
-  glUniform1i(pr.loc("uNaive"), naive ? 1 : 0);
-  const bool blend = a.sky_beyond && s.sky_weight.id() != 0;
-  glActiveTexture(GL_TEXTURE2);
-  glBindTexture(GL_TEXTURE_2D, blend ? s.sky_weight.id() : 0);
-  glUniform1i(pr.loc("uSkyBlend"), blend ? 1 : 0);
-  glUniform1f(pr.loc("uSkyTau"), a.sky_transmission);
-  GpuContext::Impl::draw();
-  glActiveTexture(GL_TEXTURE2);
-  glBindTexture(GL_TEXTURE_2D, 0);
-  gpu::check_gl("premultiply");
-  gpu::scatter_rates(ctx_, s.t, p.diffusion, a.plan);
-  timing_.premultiply_ms = t1.stop();
+  gpu::scatter_first_pass(
+      ctx_, s.t, kPremultiplyPass, "premultiply", s.in, s.sky_weight, a.sky_beyond,
+      [&](const gpu::Program& pr) {
+        glUniform1f(pr.loc("uInvRangeMax"), static_cast<float>(1.0 / a.range_max_m));
+        glUniform1f(pr.loc("uKappa"), static_cast<float>(a.kappa_a + a.kappa_s));
+        glUniform1f(pr.loc("uSigma0"), static_cast<float>(p.diffusion.sigma0));
+        glUniform1f(pr.loc("uSigmaMax"), static_cast<float>(a.sigma_max));
+        glUniform1i(pr.loc("uNaive"), naive ? 1 : 0);
+        glUniform1f(pr.loc("uSkyTau"), a.sky_transmission);
+      },
+      p.diffusion, a.plan, true, timing_);
   gpu::scatter_diffuse_composite(ctx_, s.t, p.diffusion, a.plan, filter, a.airlight, naive, timing_);
 
   const auto t4 = gpu::Clock::now();
