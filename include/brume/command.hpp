@@ -206,6 +206,12 @@ struct CommandDef {
   // LiDAR then needs the optical depth along each beam, not one extinction.
   // Empty: never.
   std::function<bool(const nlohmann::json& job)> layered_medium;
+  // Steps that complete the definition from its other fields (a camera
+  // effect's LiDAR scan wraps its run, check, summary and array form, and
+  // reads its medium's hooks): the list of commands runs them, in order,
+  // once the definition function has returned, so that the function may
+  // add them before or after the fields they read (brume/lidar_camera.hpp).
+  std::vector<std::function<void(CommandDef& c)>> finish;
 
   // A declaration by name (not an alias); null when there is none.
   const ParamSpec* spec(std::string_view param) const;

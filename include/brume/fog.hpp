@@ -107,7 +107,7 @@ FogDensity fog_density(const FogParams& p, const FogTable& table, double camera_
 float fog_optical_depth(const FogDensity& d, float range_m, float ray_y, bool sky, float sky_distance_m);
 // The same for n scene rays at once (sky = false): out[i] along range_m[i]
 // metres of a ray climbing at ray_y[i], the density converted once for the
-// batch (the LiDAR fog's beams and soft-return tables, brume/lidar_fog.hpp).
+// batch (the LiDAR fog's beams and soft-return tables, src/effects/lidar/).
 void fog_optical_depths(const FogDensity& d, const float* range_m, const float* ray_y, float* out, std::size_t n);
 // The largest density at heights u in [u0, u1] above the reference height
 // (exactly: the ends, the band's centre, the knots inside).

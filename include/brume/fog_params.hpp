@@ -1,7 +1,7 @@
 // brume — the parameters of layered fog (the maths: brume/fog.hpp), in a
-// header of their own: the LiDAR's fog (brume/lidar_fog.hpp) holds them, and
-// the camera effects' jobs hold the LiDAR's block, so fog.hpp -> haze.hpp ->
-// lidar_camera.hpp -> lidar_fog.hpp must not need fog.hpp again.
+// header of their own: the LiDAR's fog holds them (its height-layered model
+// takes fog's profiles), and its public header should not need the whole of
+// fog.hpp (which pulls in haze.hpp and the pipeline).
 #pragma once
 
 #include <optional>

@@ -4,12 +4,13 @@
 // Every camera effect that models a medium (haze, haze+dof, fog, aerial)
 // nests one shared block, "lidar", in its job table:
 //   --lidar IN.bin --lidar-out OUT.bin [--lidar-wavelength NM]
-//   [--lidar-tau-h, --lidar-p0, ... --lidar-seed: brume lidar fog's flags
-//    (brume/lidar_fog.hpp) less --visibility/--alpha, prefixed]
+//   [--lidar-tau-h, --lidar-p0, ... --lidar-seed: the scan's medium's own
+//    settings (brume lidar fog's flags less --visibility/--alpha), prefixed]
 // and add_camera_lidar(c) wraps the command's run, its command-line run,
-// its check and its summary once, for all of them: the scan is fogged with
-// α = the camera's extinction (camera_lidar_medium, from the command's
-// extinction hooks), its record block goes under "lidar", its input under
+// its check and its summary once, for all of them: the scan is fogged
+// through the medium interface (brume/medium.hpp) by the camera's medium
+// (camera_lidar_medium, from the command's extinction hooks), the medium
+// writes its record block under "lidar", the input goes under
 // "inputs.lidar", and the foggy scan is written with the image, maps and
 // record, all or none (RunContext::files). `brume run` repeats both outputs.
 #pragma once
@@ -20,7 +21,6 @@
 #include <nlohmann/json.hpp>
 
 #include "brume/command.hpp"
-#include "brume/lidar_fog.hpp"
 
 namespace brume {
 
@@ -30,10 +30,11 @@ struct CameraLidar {
   std::string points;                        // --lidar: the frame's scan, KITTI .bin
   std::string out;                           // --lidar-out: the foggy scan, KITTI .bin
   double wavelength_nm = kLidarWavelengthNm; // --lidar-wavelength [nm]: a spectral medium's (aerial) extinction there
-  LidarFogParams fog;                        // --lidar-tau-h ... --lidar-seed (α is the camera's)
+  nlohmann::json medium;                     // --lidar-tau-h ... --lidar-seed: the scan's medium's own settings
+                                             // as its table's JSON (unset names: their defaults; α is the camera's)
 };
-// Block "lidar"; brume lidar fog's flags with the prefix "lidar-", without
-// --visibility and --alpha.
+// Block "lidar"; the scan medium's flags (brume lidar fog's) with the prefix
+// "lidar-", without --visibility and --alpha.
 const ParamTable<CameraLidar>& camera_lidar_param_table();
 
 // The LiDAR's extinction from the camera's job: THE one place where the
@@ -48,14 +49,16 @@ struct CameraLidarMedium {
 // medium's wavelength outside its model.
 CameraLidarMedium camera_lidar_medium(const CommandDef& c, const nlohmann::json& job, double wavelength_nm);
 
-// Wraps c's run, cli_run, check and report (c's table nests
-// camera_lidar_param_table(); its extinction hooks are set before the call),
-// and its array form where it has one (set before the call): the keyword
+// Adds the step (CommandDef::finish) that wraps c's run, cli_run, check and
+// report (c's table nests camera_lidar_param_table(); its extinction hooks
+// are read when the step runs, so the call may come before or after them),
+// and its array form where it has one: the keyword
 // array lidar= (an (N, 4) scan, read in place) and the block's settings as
 // keywords (lidar_seed, lidar_wavelength, ...: not its files); the foggy
 // points come back as the Result's "lidar" (None without a scan), the
 // record's "lidar" block and job block as the command line's, from the same
-// functions (scan_params, lidar_fog), so they equal --lidar-out bit for bit.
+// functions (the scan's parameters, brume/medium.hpp's scan_through_media), so they
+// equal --lidar-out bit for bit.
 // A medium that varies with height (fog's profiles) also takes kitti_calib=
 // (the depth block's --kitti-calib: the scan's pose), recorded with its hash.
 void add_camera_lidar(CommandDef& c);

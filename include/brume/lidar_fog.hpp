@@ -92,6 +92,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <set>
 #include <string>
@@ -103,6 +104,7 @@
 #include "brume/depth.hpp"
 #include "brume/fog_params.hpp"
 #include "brume/image.hpp"
+#include "brume/medium.hpp"
 #include "brume/params.hpp"
 
 namespace brume {
@@ -229,6 +231,15 @@ LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarF
 // foggy points as a new N x 4 Image. Another shape is refused naming `what`.
 Image lidar_fog_array(const ConstImageView& points, const LidarFogParams& p, const std::string& what,
                       LidarFogStats& stats);
+
+// The LiDAR fog as a medium (brume/medium.hpp), from validated parameters:
+// its extinction (α, or NaN and the profile along each beam with the scan's
+// pose: the medium's frame is the scan's), its soft returns as echoes (the
+// points its own model moves: a soft return that loses to the target
+// through this medium alone is not offered), a scan it is alone in fogged
+// by lidar_fog (bit for bit), and its record block: lidar_fog_record of
+// that run with the model's parameters under "parameters".
+std::unique_ptr<Medium> lidar_fog_as_medium(const LidarFogParams& p);
 
 // A scan's bytes as a KITTI velodyne .bin (the reader, parse_kitti_bin and
 // read_kitti_bin, is depth's: brume/depth.hpp).

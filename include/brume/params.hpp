@@ -328,20 +328,32 @@ class ParamTable {
   template <class Q>
   ParamTable& nest(Q P::*m, const ParamTable<Q>& sub, const std::string& prefix,
                    const std::set<std::string>& skip = {}) {
-    for (const Param<Q>& q : sub.params()) {
-      if (skip.count(q.spec.name)) continue;
-      ParamSpec sp = q.spec;
-      sp.name = prefix + sp.name;
-      for (std::string& a : sp.aliases) a = prefix + a;
-      // One block for the prefixed flags in records and --help ("sky-" -> "sky").
-      sp.block = prefix.size() > 1 && prefix.back() == '-' ? prefix.substr(0, prefix.size() - 1) : prefix;
-      sp.help = prefix_flag_mentions(sp.help, prefix,
-                                     [&sub, &skip](const std::string& n) { return sub.declares(n) && !skip.count(n); });
-      if (find(sp.name)) throw Error("internal: parameter '" + sp.name + "' declared twice in " + block_);
-      params_.push_back({std::move(sp), [m, g = q.get](const P& p) { return g(p.*m); },
-                         [m, s = q.set](P& p, const nlohmann::json& v) { s(p.*m, v); }});
-    }
-    return *this;
+    return nest_prefixed(sub, prefix, skip, [m](const Param<Q>& q) {
+      return Param<P>{{},
+                      [m, g = q.get](const P& p) { return g(p.*m); },
+                      [m, s = q.set](P& p, const nlohmann::json& v) { s(p.*m, v); }};
+    });
+  }
+  // The same for a block that the struct holds as the sub-table's JSON
+  // ({"name": value}, unprefixed names; a name not there has Q's default),
+  // so that the struct's header need not name Q: a camera effect's scan
+  // medium settings (brume/lidar_camera.hpp). Each value is stored as Q's
+  // field writes it back, so the records equal a typed block's.
+  template <class Q>
+  ParamTable& nest_json(nlohmann::json P::*m, const ParamTable<Q>& sub, const std::string& prefix,
+                        const std::set<std::string>& skip = {}) {
+    return nest_prefixed(sub, prefix, skip, [m](const Param<Q>& q) {
+      return Param<P>{{},
+                      [m, n = q.spec.name, g = q.get](const P& p) {
+                        const auto it = (p.*m).find(n);
+                        return it != (p.*m).end() ? *it : g(Q{});
+                      },
+                      [m, n = q.spec.name, g = q.get, s = q.set](P& p, const nlohmann::json& v) {
+                        Q typed;
+                        s(typed, v);
+                        (p.*m)[n] = g(typed);
+                      }};
+    });
   }
 
   // Whether NAME is one of this table's flags or their aliases.
@@ -424,6 +436,27 @@ class ParamTable {
   }
 
  private:
+  // The prefixed nests: each of sub's parameters (less `skip`) renamed
+  // "PREFIXNAME" in block PREFIX (less its '-'), reached through `access`.
+  template <class Q, class Access>
+  ParamTable& nest_prefixed(const ParamTable<Q>& sub, const std::string& prefix, const std::set<std::string>& skip,
+                            const Access& access) {
+    for (const Param<Q>& q : sub.params()) {
+      if (skip.count(q.spec.name)) continue;
+      ParamSpec sp = q.spec;
+      sp.name = prefix + sp.name;
+      for (std::string& a : sp.aliases) a = prefix + a;
+      // One block for the prefixed flags in records and --help ("sky-" -> "sky").
+      sp.block = prefix.size() > 1 && prefix.back() == '-' ? prefix.substr(0, prefix.size() - 1) : prefix;
+      sp.help = prefix_flag_mentions(sp.help, prefix,
+                                     [&sub, &skip](const std::string& n) { return sub.declares(n) && !skip.count(n); });
+      if (find(sp.name)) throw Error("internal: parameter '" + sp.name + "' declared twice in " + block_);
+      Param<P> d = access(q);
+      d.spec = std::move(sp);
+      params_.push_back(std::move(d));
+    }
+    return *this;
+  }
   ParamSpec spec(const char* name, ParamKind k, const char* unit, const char* help, Range r) const {
     ParamSpec s;
     s.name = name;

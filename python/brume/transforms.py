@@ -651,7 +651,7 @@ class Transform(_Keyed):
 
 
 class PointsTransform(_Keyed):
-    """An effect on a LiDAR scan (LidarFog) as an augmentation transform:
+    """An effect on a LiDAR scan (the LiDAR fog's) as an augmentation transform:
     t(points=..., key=..., **targets) -> {"points", "params", **targets}.
     points: an (N, 4) float32 array (or CPU torch tensor) of x, y, z [m] and
     intensity, as KITTI's .bin holds them; the result comes back in the same
@@ -718,7 +718,7 @@ def _class_name(command):
 def _make_classes():
     made = {}
     for c in _COMMANDS.values():
-        if c["sampling"] and c["arrays"] == ["points"]:  # a LiDAR effect: LidarFog
+        if c["sampling"] and c["arrays"] == ["points"]:  # a LiDAR effect (the LiDAR fog)
             doc = (f"{c['summary']}.\n\nAs a transform on a scan: every parameter of `brume sample {c['name']}` "
                    "takes a fixed value, a (lo, hi) tuple (uniform), loguniform(lo, hi) or choice(...); "
                    "see docs/transforms.md.")

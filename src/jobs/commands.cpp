@@ -35,8 +35,18 @@ namespace brume {
 BRUME_COMMANDS(BRUME_DECLARE)
 #undef BRUME_DECLARE
 
+namespace {
+// A definition with its finishing steps run (CommandDef::finish).
+CommandDef finished(CommandDef c) {
+  std::vector<std::function<void(CommandDef&)>> steps;
+  steps.swap(c.finish);
+  for (const auto& step : steps) step(c);
+  return c;
+}
+}  // namespace
+
 const std::vector<CommandDef>& commands() {
-#define BRUME_LIST(f) f(),
+#define BRUME_LIST(f) finished(f()),
   static const std::vector<CommandDef> all = {BRUME_COMMANDS(BRUME_LIST)};
 #undef BRUME_LIST
   return all;

@@ -13,6 +13,8 @@
 #include "brume/error.hpp"
 #include "brume/fog.hpp"
 #include "brume/io.hpp"
+#include "brume/lidar_fog.hpp"
+#include "brume/medium.hpp"
 
 namespace brume {
 
@@ -44,7 +46,7 @@ const ParamTable<CameraLidar>& camera_lidar_param_table() {
         .real("lidar-wavelength", &CameraLidar::wavelength_nm, "nm", Range::closed(380.0, 2000.0),
               "the LiDAR's wavelength, where a spectral medium's extinction is taken (aerial: Rayleigh + Mie); "
               "grey media (haze, fog) are the same at every wavelength and refuse it")
-        .nest(&CameraLidar::fog, lidar_fog_param_table(), "lidar-", medium_names());
+        .nest_json(&CameraLidar::medium, lidar_fog_param_table(), "lidar-", medium_names());
     return d;
   }();
   return t;
@@ -118,6 +120,10 @@ LidarFogParams scan_params(const Hooks& h, const nlohmann::json& job, const Came
                 " is grey (its extinction is the same at every wavelength), so the wavelength would change "
                 "nothing; drop it");
   medium = medium_of(h, job, L.wavelength_nm);
+  // The block's own settings (pulse, receiver, noise, seed), as the LiDAR fog's.
+  LidarFogParams settings;
+  if (L.medium.is_object())
+    for (const auto& [n, v] : L.medium.items()) lidar_fog_param_table().at(n).set(settings, v);
   LidarFogParams params;
   if (std::isnan(medium.alpha_per_m)) {
     // A height profile: the fog job's profile and pose, the scan placed by
@@ -133,12 +139,12 @@ LidarFogParams scan_params(const Hooks& h, const nlohmann::json& job, const Came
     LidarPose pose;
     pose.kitti_calib = f.input.depth.kitti_calib;
     try {
-      params = lidar_params_from_fog(f.fog, pose, L.fog);
+      params = lidar_params_from_fog(f.fog, pose, settings);
     } catch (const Error& e) {
       throw Error(lidar_flags(e.what()));
     }
   } else {
-    params = L.fog;
+    params = settings;
     params.visibility_m.reset();
     params.alpha_per_m = medium.alpha_per_m;
   }
@@ -150,14 +156,13 @@ LidarFogParams scan_params(const Hooks& h, const nlohmann::json& job, const Came
   return params;
 }
 
-// The record's "lidar" block of a fogged scan: brume lidar fog's, with how
-// alpha followed from the camera, the wavelength and the model's parameters.
-nlohmann::json scan_record(const LidarFogParams& p, const LidarFogStats& st, const CameraLidarMedium& m,
-                           double wavelength_nm) {
-  nlohmann::json block = lidar_fog_record(p, st);
+// The record's "lidar" block of a fogged scan: the medium's own (brume lidar
+// fog's, with its parameters), with how alpha followed from the camera and
+// the wavelength.
+nlohmann::json scan_record(const Medium& medium, const ScanRun& run, const CameraLidarMedium& m, double wavelength_nm) {
+  nlohmann::json block = medium.scan_record(run);
   block["alpha_from"] = m.rule;
   block["wavelength_nm"] = wavelength_nm;
-  block["parameters"] = lidar_fog_param_table().to_json(p);
   return block;
 }
 
@@ -207,15 +212,16 @@ RunFn with_lidar(const Hooks& h, RunFn inner) {
     const std::vector<float> in = read_kitti_bin(c.lidar.points, "--lidar", kLidarFogBytesPerPoint);
     const std::size_t n = in.size() / 4;
     std::vector<float> out(in.size());
-    LidarFogStats st;
+    const std::unique_ptr<Medium> medium = lidar_fog_as_medium(c.params);
+    ScanRun run;
     try {
-      st = lidar_fog(in.data(), out.data(), n, c.params, "--lidar '" + c.lidar.points + "'");
+      run = scan_through_media({medium.get()}, in.data(), out.data(), n, "--lidar '" + c.lidar.points + "'");
     } catch (const Error& e) {
       throw Error(lidar_flags(e.what()));
     }
     RunContext with = ctx;
     if (!with.extra.is_object()) with.extra = nlohmann::json::object();
-    with.extra["lidar"] = scan_record(c.params, st, c.medium, c.lidar.wavelength_nm);
+    with.extra["lidar"] = scan_record(*medium, run, c.medium, c.lidar.wavelength_nm);
     with.extra["inputs"]["lidar"] = {
         {"path", c.lidar.points}, {"sha256", sha256_file(c.lidar.points)}, {"points", n}};
     if (std::isnan(c.medium.alpha_per_m)) {  // a height profile: the calibration placed the scan (an input too)
@@ -370,21 +376,25 @@ void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, Ar
                        "at every height, so it would change nothing; drop it");
     if (varies) job[block][kCalib] = calib;
     CameraLidarMedium m;
-    LidarFogParams p;
-    LidarFogStats st;
+    std::unique_ptr<Medium> medium;
+    ScanRun run;
     Image out;
     try {  // the scan first (milliseconds): its errors before the image's work, as on the command line
-      p = scan_params(h, job, l.lidar, given, m);
+      medium = lidar_fog_as_medium(scan_params(h, job, l.lidar, given, m));
     } catch (const Error& err) {
       throw Error(fn + "(): lidar: " + err.what());
     }
     try {
-      out = lidar_fog_array(in[scan].view, p, fn + "(): lidar", st);
+      std::vector<float> dense;
+      const float* points = scan_points(in[scan].view, fn + "(): lidar", dense);
+      out = Image(4, in[scan].view.height(), 1);
+      run = scan_through_media({medium.get()}, points, out.data.data(),
+                               static_cast<std::size_t>(in[scan].view.height()), fn + "(): lidar");
     } catch (const Error& err) {
       throw Error(lidar_flags(err.what()));
     }
     ArrayResult r = inner(arrays, own, e, given);
-    r.record["lidar"] = scan_record(p, st, m, l.lidar.wavelength_nm);
+    r.record["lidar"] = scan_record(*medium, run, m, l.lidar.wavelength_nm);
     r.job["lidar"] = t.to_json(l)["lidar"];
     if (varies) {  // the file that placed the scan: in the job as the command line's, and an input with its hash
       r.job[block][kCalib] = calib;
@@ -401,11 +411,14 @@ CameraLidarMedium camera_lidar_medium(const CommandDef& c, const nlohmann::json&
   return medium_of(hooks_of(c), job, wavelength_nm);
 }
 
-void add_camera_lidar(CommandDef& c) {
+namespace {
+// The wrapping, once the definition is complete (its hooks, run, check,
+// summary and array form set, in whatever order its function set them).
+void join_scan(CommandDef& c) {
   const Hooks h = hooks_of(c);
   c.run = with_lidar(h, c.run);
   if (c.cli_run) c.cli_run = with_lidar(h, c.cli_run);
-  if (c.arrays) add_array_lidar(h, c.specs, *c.arrays);  // (set before this call)
+  if (c.arrays) add_array_lidar(h, c.specs, *c.arrays);
   c.preview_fixed.push_back("lidar");  // the scan's settings change no pixel of the preview
   c.check = [h, inner = c.check](const nlohmann::json& job, const std::set<std::string>& given, bool full) {
     inner(job, given, full);
@@ -422,5 +435,9 @@ void add_camera_lidar(CommandDef& c) {
                  l["points"].get<std::size_t>(), 100 * l["soft_fraction"].get<double>());
   };
 }
+
+}  // namespace
+
+void add_camera_lidar(CommandDef& c) { c.finish.push_back(&join_scan); }
 
 }  // namespace brume

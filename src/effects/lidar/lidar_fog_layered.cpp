@@ -162,14 +162,10 @@ class BeamSoft {
   std::vector<std::uint32_t> at_, memo_at_;
 };
 
-// The density relative to the scan's origin, and that origin's place.
-struct Medium {
-  RigidTransform world_from_scan;
-  FogTable table;
-  FogDensity density;
-};
-Medium layered_medium(const LidarFogParams& p) {
-  Medium md;
+}  // namespace
+
+LayeredMedium layered_medium(const LidarFogParams& p) {
+  LayeredMedium md;
   md.world_from_scan = lidar_world_from_scan(p);
   FogParams f = p.fog;
   f.profile = *p.profile;
@@ -183,13 +179,11 @@ Medium layered_medium(const LidarFogParams& p) {
   return md;
 }
 
-}  // namespace
-
 SoftCurve layered_soft_curve(const LidarFogParams& p, const LidarFogMedium& m, double range_end_m) {
   if (!(range_end_m <= kLidarLayeredRangeMax))
     throw Error("--soft-curve: the scan's farthest point is " + metres(range_end_m) + " m away; a height-layered "
                 "fog's curve is tabulated up to " + metres(kLidarLayeredRangeMax) + " m: drop the farther points");
-  const Medium md = layered_medium(p);
+  const LayeredMedium md = layered_medium(p);
   const double end = std::max(range_end_m, p.r2_m + m.pulse_m);
   const BeamSoft b(p, m, md.density, 0.0, end, false);
   SoftCurve c;
@@ -207,7 +201,7 @@ LidarFogStats layered_fog(const float* in, float* out, std::size_t n, const Lida
   const auto t0 = Clock::now();
   LidarFogStats st;
   st.points = n;
-  const Medium md = layered_medium(p);
+  const LayeredMedium md = layered_medium(p);
   const Mat3& rot = md.world_from_scan.rotation;
   st.origin_height_m = md.world_from_scan.translation.y;
   st.origin_density_per_m = md.density.at(0.0);

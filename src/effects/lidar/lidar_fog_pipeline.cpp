@@ -118,22 +118,11 @@ nlohmann::json run_lidar_fog_job(const LidarFogJob& job, const RunContext& ctx) 
   return rec;
 }
 
-Image lidar_fog_array(const ConstImageView& v, const LidarFogParams& p, const std::string& what,
-                      LidarFogStats& stats) {
-  if (v.width() != 4 || v.channels() != 1)
-    throw Error(what + " must be an (N, 4) array of x, y, z, intensity; got " + std::to_string(v.height()) + " x " +
-                std::to_string(v.width()) + (v.channels() > 1 ? " x " + std::to_string(v.channels()) : std::string()));
-  const std::size_t n = static_cast<std::size_t>(v.height());
-  Image out(4, v.height(), 1);
-  const float* src = v.data();
+Image lidar_fog_array(const ConstImageView& v, const LidarFogParams& p, const std::string& what, LidarFogStats& stats) {
   std::vector<float> dense;
-  if (!v.contiguous()) {  // a strided array: gathered once
-    dense.resize(n * 4);
-    for (std::size_t i = 0; i < n; ++i)
-      for (int c = 0; c < 4; ++c) dense[4 * i + c] = v.at(c, static_cast<int>(i), 0);
-    src = dense.data();
-  }
-  stats = lidar_fog(src, out.data.data(), n, p, what);
+  const float* src = scan_points(v, what, dense);
+  Image out(4, v.height(), 1);
+  stats = lidar_fog(src, out.data.data(), static_cast<std::size_t>(v.height()), p, what);
   return out;
 }
 

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "brume/error.hpp"
-
+#include "brume/fog.hpp"
 #include "brume/lidar_fog.hpp"
 
 namespace brume::lidar_detail {
@@ -246,6 +246,15 @@ struct PointRule {
     return true;
   }
 };
+
+// A height-layered p's density relative to the scan's origin, and that
+// origin's place (reads --kitti-calib and a --table file once).
+struct LayeredMedium {
+  RigidTransform world_from_scan;
+  FogTable table;
+  FogDensity density;
+};
+LayeredMedium layered_medium(const LidarFogParams& p);
 
 // The height-layered run (lidar_fog_layered.cpp); p has a profile other
 // than constant and has been validated, the points checked.
