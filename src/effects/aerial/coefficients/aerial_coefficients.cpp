@@ -10,6 +10,7 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
+#include "effects/aerial/coefficients/coefficients_job.hpp"
 
 namespace brume {
 
