@@ -1,6 +1,6 @@
 # brume's library as a list of parts, one folder each (issues #37, #49):
 #
-#   brume_part(NAME FOLDER [TESTS FILE...] [TSAN SUITE...] [THREADS_UNTESTED REASON])
+#   brume_part(NAME FOLDER [HEADERS FILE...] [TESTS FILE...] [TSAN SUITE...] [THREADS_UNTESTED REASON])
 #
 # A part is everything in its folder (not its sub-folders; a sub-folder is a
 # part of its own, declared by its own line, as aerial's insert and
@@ -13,6 +13,10 @@
 #                  src/shared/prelude_cpp.h and embedded for the GPU passes
 #                  that name them;
 #   *.frag, *.vert its pass shaders, embedded.
+# HEADERS names the public headers the part owns (under include/brume/):
+# every include/brume/*.hpp is owned by exactly one part, or the configure
+# fails; tests/check_layers.py reads them (generated/part_headers.txt) to
+# find which layer each header lies in.
 # TESTS names the test files the part owns (under tests/): they are compiled
 # into brume_tests, and their GoogleTest cases get the ctest label
 # part:NAME. Every tests/**/test_*.cpp is owned by exactly one part or
@@ -40,13 +44,21 @@
 #   generated/shared/topics_cpp.inc  the prelude's #include of every topic,
 #   generated/gpu/topics.inc         the GPU context's table of topics,
 #   generated/parts.txt              "NAME FOLDER" per line (for the checks in tests/),
+#   generated/part_headers.txt       "NAME HEADER..." per line: each part's public headers (brume/x.hpp)
 # and the list of GLSL files to embed (BRUME_SHADERS, name=path).
 function(brume_part name folder)
-  cmake_parse_arguments(PARSE_ARGV 2 arg "" "THREADS_UNTESTED" "TESTS;TSAN")
+  cmake_parse_arguments(PARSE_ARGV 2 arg "" "THREADS_UNTESTED" "HEADERS;TESTS;TSAN")
   if(arg_UNPARSED_ARGUMENTS)
-    message(FATAL_ERROR "brume_part(${name} ${folder}): one folder per part; after it only TESTS, TSAN and "
-                        "THREADS_UNTESTED (got ${arg_UNPARSED_ARGUMENTS})")
+    message(FATAL_ERROR "brume_part(${name} ${folder}): one folder per part; after it only HEADERS, TESTS, TSAN "
+                        "and THREADS_UNTESTED (got ${arg_UNPARSED_ARGUMENTS})")
   endif()
+  set(headers)
+  foreach(h ${arg_HEADERS})
+    if(NOT EXISTS ${PROJECT_SOURCE_DIR}/include/brume/${h})
+      message(FATAL_ERROR "brume_part(${name} ${folder}): HEADERS ${h}: no such file include/brume/${h}")
+    endif()
+    list(APPEND headers brume/${h})
+  endforeach()
   set(dir ${PROJECT_SOURCE_DIR}/${folder})
   if(NOT IS_DIRECTORY ${dir})
     message(FATAL_ERROR "brume_part(${name} ${folder}): no such folder")
@@ -86,6 +98,8 @@ function(brume_part name folder)
                         "${folder} starts any")
   endif()
   set_property(GLOBAL APPEND PROPERTY BRUME_PARTS "${name}=${folder}")
+  string(REPLACE ";" "," headers_csv "${headers}")
+  set_property(GLOBAL APPEND PROPERTY BRUME_PART_HEADERS "${name}=${headers_csv}")
   set_property(GLOBAL APPEND PROPERTY BRUME_PART_SOURCES ${sources})
   set_property(GLOBAL APPEND PROPERTY BRUME_PART_TOPICS ${topics})
   set_property(GLOBAL APPEND PROPERTY BRUME_PART_SHADERS ${shaders})
@@ -104,6 +118,31 @@ endfunction()
 function(brume_outside_parts folder reason)
   set_property(GLOBAL APPEND PROPERTY BRUME_OUTSIDE_PARTS ${folder})
 endfunction()
+
+# `item` (named `shown` in messages) owned by `part`, in the caller's lists
+# `owned` and `owner_of`; owned already by another part: the configure fails,
+# naming both and the declaration (`keyword`: HEADERS, TESTS).
+macro(brume_own item shown keyword what part)
+  list(FIND owned ${item} _brume_i)
+  if(_brume_i GREATER -1)
+    list(GET owner_of ${_brume_i} _brume_other)
+    message(FATAL_ERROR "brume: ${shown} is in the ${keyword} of two parts, ${_brume_other} and ${part}: ${what} has "
+                        "one owner")
+  endif()
+  list(APPEND owned ${item})
+  list(APPEND owner_of ${part})
+endmacro()
+
+# Every item of the caller's list `items` is in its list `owned`, or the
+# configure fails naming it (`prefix` before it) and the declaration to add.
+macro(brume_require_owned items prefix keyword otherwise)
+  foreach(_brume_x ${${items}})
+    if(NOT _brume_x IN_LIST owned)
+      message(FATAL_ERROR "brume: ${prefix}${_brume_x} belongs to no part: add it to its part's ${keyword} in "
+                          "CMakeLists.txt (brume_part(NAME FOLDER ${keyword} ...))${otherwise}")
+    endif()
+  endforeach()
+endmacro()
 
 # Writes `content` to `path` only when it differs (no rebuild otherwise).
 function(brume_write_if_different path content)
@@ -143,6 +182,30 @@ function(brume_generate_parts gen_dir)
     endif()
   endforeach()
   brume_write_if_different("${gen_dir}/parts.txt" "${listing}")
+  # Every public header is one part's.
+  get_property(part_headers GLOBAL PROPERTY BRUME_PART_HEADERS)
+  set(owned)
+  set(owner_of)
+  set(listing "")
+  foreach(p ${part_headers})
+    string(REPLACE "=" ";" kv "${p}")
+    list(GET kv 0 n)
+    set(hs)
+    list(LENGTH kv len)
+    if(len GREATER 1)
+      list(GET kv 1 hs)
+      string(REPLACE "," ";" hs "${hs}")
+    endif()
+    foreach(h ${hs})
+      brume_own(${h} include/${h} HEADERS "a header" ${n})
+    endforeach()
+    string(REPLACE ";" " " hs "${hs}")
+    string(STRIP "${n} ${hs}" line)
+    string(APPEND listing "${line}\n")
+  endforeach()
+  file(GLOB public CONFIGURE_DEPENDS RELATIVE ${PROJECT_SOURCE_DIR}/include ${PROJECT_SOURCE_DIR}/include/brume/*.hpp)
+  brume_require_owned(public "include/" HEADERS "")
+  brume_write_if_different("${gen_dir}/part_headers.txt" "${listing}")
   set(header "// Generated by cmake/brume_parts.cmake from the brume_part() declarations in CMakeLists.txt. Do not edit.\n")
   set(cpp "${header}")
   set(gpu "${header}")
@@ -210,13 +273,7 @@ function(brume_part_tests gen_dir outside tsan_leave_out)
     string(REPLACE "," ";" tsan_suites "${tsan_suites}")
     set(part_suites)
     foreach(t ${tests})
-      list(FIND owned ${t} i)
-      if(i GREATER -1)
-        list(GET owner_of ${i} other)
-        message(FATAL_ERROR "brume: ${t} is in the TESTS of two parts, ${other} and ${name}: a test file has one owner")
-      endif()
-      list(APPEND owned ${t})
-      list(APPEND owner_of ${name})
+      brume_own(${t} ${t} TESTS "a test file" ${name})
       file(STRINGS ${PROJECT_SOURCE_DIR}/${t} lines REGEX "^[ \t]*(TYPED_)?TEST(_F|_P)?[ \t]*\\([ \t]*[A-Za-z_0-9]+")
       foreach(l ${lines})
         string(REGEX REPLACE "^[ \t]*(TYPED_)?TEST(_F|_P)?[ \t]*\\([ \t]*([A-Za-z_0-9]+).*" "\\3" suite "${l}")
@@ -247,12 +304,7 @@ function(brume_part_tests gen_dir outside tsan_leave_out)
     list(APPEND owned ${t})
   endforeach()
   file(GLOB_RECURSE all CONFIGURE_DEPENDS RELATIVE ${PROJECT_SOURCE_DIR} ${PROJECT_SOURCE_DIR}/tests/test_*.cpp)
-  foreach(t ${all})
-    if(NOT t IN_LIST owned)
-      message(FATAL_ERROR "brume: ${t} belongs to no part: add it to its part's TESTS in CMakeLists.txt "
-                          "(brume_part(NAME FOLDER TESTS ...)), or to the files outside the parts in tests/CMakeLists.txt")
-    endif()
-  endforeach()
+  brume_require_owned(all "" TESTS ", or to the files outside the parts in tests/CMakeLists.txt")
   # gtest matches a parameterised case by its full name, Inst/Suite.Name/param: both forms.
   list(REMOVE_DUPLICATES tsan)
   list(SORT tsan)

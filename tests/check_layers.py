@@ -1,20 +1,33 @@
 #!/usr/bin/env python3
 """brume's layers, read bottom-up (docs/architecture.md; issues #37, #53):
 
-  core (src/core: images, params, records, camera, errors, the registry's
-        interface brume/command.hpp)  -- includes no effect, not even through
-        another header;
-  the engines (src/gpu, src/io, src/diffusion, src/depth) and the media
-        (src/media: brume/medium.hpp, the interface the camera effects and
-        the LiDAR scan share) -- the media include no effect either;
-  effects (src/effects/<family>/: each family's sources, private headers,
-        GPU file, GLSL topic and pass shaders in its folder);
-  jobs (src/jobs: the list of commands, run, batch, sample) -- above them.
+  core      src/core: images, params, the camera, errors;
+  engines   src/shared, src/gpu, src/io (and its formats), src/diffusion, and
+            src/media (brume/medium.hpp: the interface the camera effects and
+            the LiDAR scan share);
+  depth     src/depth: sources, conversion, preparation, completion, stereo, fusion;
+  pipeline  src/pipeline: the steps every command shares (load, complete,
+            prepare, backend, outputs), records, the registry's interface
+            (brume/command.hpp), the preview's frames, image comparison;
+  commands  src/effects/<family>/ (each family's sources, private headers, GPU
+            file, GLSL topic and pass shaders), src/depth/commands (depth's
+            own commands);
+  jobs      src/jobs: the list of commands, run, batch, sample, view.
+
+Which header is whose comes from the parts' declarations (CMakeLists.txt,
+cmake/brume_parts.cmake): a part's private headers are the *.hpp/*.h of its
+folder, its public headers those its HEADERS name (generated/part_headers.txt:
+every include/brume/*.hpp has one owner, or the configure fails); LAYERS below
+maps each part's folder to its layer (a part in no layer fails here).
 
 Checks, on the source tree:
-  1. the include closure of every file of src/core and src/media names no
-     effect header and no jobs header (brume/gpu.hpp, the umbrella, counts as
-     every effect's);
+  1. every part's files and public headers reach -- through any include --
+     no header of a part of a higher layer (so no file of src/core reaches a
+     depth, pipeline, effect or jobs header), but for the includes
+     REACHES_UP names with their reasons (core's may reach the engines only;
+     a stale entry fails); the umbrella brume/gpu.hpp is the jobs' (it
+     includes every effect's passes); a public header (include/brume/)
+     reaches no private one (src/: not installed);
   2. batch*, sample* and rerun* live in src/jobs, not in src/core;
   3. fog's symbols (FogParams, run_fog..., GpuFog, fog_...) appear in at most
      three files outside fog's own files and the tests, the build lists (the
@@ -34,23 +47,40 @@ Checks, on the source tree:
      effect reaches a scan's medium through brume/medium.hpp only.
 Exit 1 with what is wrong.
 
-  check_layers.py SOURCE_DIR
+  check_layers.py SOURCE_DIR GENERATED_DIR   (GENERATED_DIR: the build's generated/)
 """
 import os
 import re
 import sys
 
-EFFECT_HEADERS = {
-    "brume/haze.hpp", "brume/aerial.hpp", "brume/aerial_coefficients.hpp", "brume/fog.hpp", "brume/dof.hpp",
-    "brume/sky.hpp", "brume/insert.hpp", "brume/chain.hpp", "brume/blur.hpp", "brume/gpu.hpp",
-    "brume/gpu_haze.hpp", "brume/gpu_aerial.hpp", "brume/gpu_fog.hpp", "brume/gpu_sky.hpp",
-    "effects/fog/fog_fast.hpp", "brume/lidar_fog.hpp", "brume/lidar_camera.hpp",
+# Bottom-up; a part's folder lies in the layer of its longest matching prefix.
+LAYERS = [
+    ("core", ("src/core",)),
+    ("engines", ("src/shared", "src/gpu", "src/io", "src/diffusion", "src/media")),
+    ("depth", ("src/depth",)),
+    ("pipeline", ("src/pipeline",)),
+    ("commands", ("src/effects", "src/depth/commands")),
+    ("jobs", ("src/jobs",)),
+]
+# The includes that still reach a layer above, each with its reason: the name
+# tables and record blocks of the engines' and depth's own types are declared
+# in the pipeline layer's headers (brume/pipeline.hpp, brume/record.hpp).
+# Keyed by the file and its direct include; an entry that no longer reaches a
+# layer above fails the check (remove it), and core's may reach the engines
+# only, never depth or above.
+REACHES_UP = {
+    ("src/core/camera.cpp", "brume/io.hpp"):
+        "a --view-matrix file read (read_input_file) and hashed for the record (sha256_file) through io",
+    ("src/gpu/backend.cpp", "brume/pipeline.hpp"): "backend_names and gpu_filter_names, declared there",
+    ("src/io/image_io.cpp", "brume/pipeline.hpp"): "transfer_names, declared there",
+    ("src/io/codec.cpp", "brume/pipeline.hpp"): "run_phases(): loading the codec is timed in the run's read",
+    ("src/diffusion/diffusion.cpp", "brume/pipeline.hpp"): "scheme_names, precision_names, edge_rate_names",
+    ("src/depth/prepare.cpp", "brume/pipeline.hpp"): "prepare_param_table, declared there",
+    ("src/depth/source.cpp", "brume/record.hpp"): "file_record: the depth file's record block",
+    ("src/depth/stereo.cpp", "brume/record.hpp"): "file_record: the right view's record block",
 }
-JOBS_HEADERS = {"brume/batch.hpp", "brume/rerun.hpp"}
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 
-# Fog's own files: its headers, its folder (maths, pipeline, GPU pass and
-# shader), bench and fuzz target (tests are fog's too).
 FOG_OWN = re.compile(r"^(include/brume/(gpu_)?fog(_params)?\.hpp|src/effects/fog/[^/]*|bench/bench_fog\.cpp|"
                      r"fuzz/fuzz_fog[^/]*|tests/.*|docs/.*|README\.md|CHANGELOG\.md)$")
 # Until the height profiles move to src/media (issue #53 item 1, left): the
@@ -115,7 +145,7 @@ def closure(root, path):
         with open(f, encoding="utf-8", errors="replace") as fh:
             for inc in INCLUDE.findall(fh.read()):
                 p = resolve(root, inc, f)
-                if p and p not in seen:
+                if p and p not in seen and p != path:
                     seen.add(p)
                     via[p] = f
                     stack.append(p)
@@ -130,25 +160,82 @@ def chain(root, via, p):
     return " <- ".join(out)
 
 
+def layer_of(folder):
+    best = None
+    for rank, (name, prefixes) in enumerate(LAYERS):
+        for pre in prefixes:
+            if (folder == pre or folder.startswith(pre + "/")) and (best is None or len(pre) > best[2]):
+                best = (rank, name, len(pre))
+    return best
+
+
+def read_parts(root, gen):
+    """[(name, folder, layer rank, layer name, [public header paths])] from the configure's lists."""
+    with open(os.path.join(gen, "parts.txt"), encoding="utf-8") as fh:
+        folders = [line.split() for line in fh if line.strip()]
+    headers = {}
+    with open(os.path.join(gen, "part_headers.txt"), encoding="utf-8") as fh:
+        for line in fh:
+            words = line.split()
+            if words:
+                headers[words[0]] = [os.path.join(root, "include", h) for h in words[1:]]
+    parts, errors = [], []
+    for name, folder in folders:
+        layer = layer_of(folder)
+        if layer is None:
+            errors.append(f"part {name} ({folder}) lies in no layer: add its folder to LAYERS in tests/check_layers.py "
+                          "and to docs/architecture.md's diagram")
+            continue
+        parts.append((name, folder, layer[0], layer[1], headers.get(name, [])))
+    return parts, errors
+
+
 def main():
     root = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else ".")
-    errors = []
-    forbidden = {os.path.normpath(os.path.join(root, "include" if h.startswith("brume/") else "src", h))
-                 for h in EFFECT_HEADERS | JOBS_HEADERS}
+    gen = os.path.abspath(sys.argv[2] if len(sys.argv) > 2 else os.path.join(root, "build", "generated"))
+    parts, errors = read_parts(root, gen)
+    # Every header's part and layer: a part's public headers and its folder's own.
+    owner = {}
+    files_of = {}
+    for name, folder, rank, layer, public in parts:
+        d = os.path.join(root, folder)
+        own = sorted(os.path.join(d, f) for f in os.listdir(d) if os.path.isfile(os.path.join(d, f)))
+        for h in public + [f for f in own if f.endswith((".hpp", ".h"))]:
+            owner[os.path.normpath(h)] = (name, rank, layer)
+        files_of[name] = public + [f for f in own if f.endswith((".cpp", ".hpp", ".h"))]
+    inc = os.path.join(root, "include", "brume")
+    for h in sorted(os.listdir(inc)):
+        if os.path.normpath(os.path.join(inc, h)) not in owner:
+            errors.append(f"include/brume/{h} is no part's: name it in its part's HEADERS (CMakeLists.txt) and "
+                          "configure again")
+    used = set()
+    for name, folder, rank, layer, public in parts:
+        for path in files_of[name]:
+            rel = os.path.relpath(path, root)
+            seen, via = closure(root, path)
+            if rel.startswith("include" + os.sep):
+                for p in sorted(seen):
+                    if not p.startswith(os.path.join(root, "include") + os.sep):
+                        errors.append(f"{rel} reaches a private header, which is not installed: {chain(root, via, p)}")
+            for p in sorted(seen):
+                o = owner.get(p)
+                if not o or o[1] <= rank:
+                    continue
+                hop = p
+                while via[hop] != path:
+                    hop = via[hop]
+                key = (rel, os.path.relpath(hop, os.path.join(root, "include")))
+                if key in REACHES_UP and (layer != "core" or o[2] == "engines"):
+                    used.add(key)
+                    continue
+                errors.append(f"{rel} ({layer}) reaches a header of {o[0]} ({o[2]}, a layer above): "
+                              f"{chain(root, via, p)}")
+    for key in sorted(set(REACHES_UP) - used):
+        errors.append(f"{key[0]} no longer reaches a layer above through {key[1]}: remove it from REACHES_UP")
     core = os.path.join(root, "src", "core")
     for name in sorted(os.listdir(core)):
         if re.match(r"(batch|sample|rerun)", name):
             errors.append(f"src/core/{name}: the jobs (batch, sample, rerun) live in src/jobs")
-    for layer in ("core", "media"):
-        folder = os.path.join(root, "src", layer)
-        files = [os.path.join(folder, n) for n in sorted(os.listdir(folder))]
-        if layer == "media":
-            files.append(os.path.join(root, "include", "brume", "medium.hpp"))
-        for path in files:
-            seen, via = closure(root, path)
-            for p in sorted(seen & forbidden):
-                errors.append(f"{os.path.relpath(path, root)} includes an effect or jobs header: "
-                              f"{chain(root, via, p)}")
     # Fog's symbols outside its own files.
     users, build_lists = [], []
     for d in ("include", "src", "tools", "python", "bench", "fuzz", "study", "scripts", "cmake"):
@@ -197,8 +284,8 @@ def main():
                       "camera effect reaches a scan's medium through brume/medium.hpp): " + ", ".join(lidar_users))
     for e in errors:
         print("check_layers: " + e)
-    print(f"check_layers: {len(errors)} problem(s); fog's symbols outside its files: {', '.join(users) or 'none'}; "
-          f"the LiDAR fog's {len(lidar_names)} names checked")
+    print(f"check_layers: {len(parts)} parts in {len(LAYERS)} layers, {len(owner)} headers; {len(errors)} problem(s); "
+          f"fog's symbols outside its files: {', '.join(users) or 'none'}; the LiDAR fog's {len(lidar_names)} names checked")
     return 1 if errors else 0
 
 

@@ -2,9 +2,10 @@
 # a source in a folder no part declares fails the configure with a message
 # naming the file and the line to add; a declared tree generates its lists
 # (topics in declaration order, sub-folders as parts of their own); the
-# parts' tests: a test file no part owns, or owned twice, and a part that
-# starts threads without tests or a stated exemption fail the configure; the
-# ThreadSanitizer filter is the threaded parts' suites.
+# parts' public headers and tests: a header or test file no part owns, or
+# owned twice, and a part that starts threads without tests or a stated
+# exemption fail the configure; the ThreadSanitizer filter is the threaded
+# parts' suites.
 #   cmake -DPARTS=cmake/brume_parts.cmake -DWORK=DIR -P check_parts.cmake
 file(REMOVE_RECURSE ${WORK})
 # A scratch project in `d` with these declarations and the trailing lines
@@ -70,6 +71,33 @@ if(NOT sources MATCHES "^src/core/image.cpp;src/effects/mist/mist.cpp;src/effect
   message(FATAL_ERROR "sources and shaders: ${sources}")
 endif()
 
+# The public headers: each one part's (HEADERS), listed in part_headers.txt.
+# A scratch tree with two public headers and these declarations, configured:
+# it fails with a message matching `expect`, or succeeds when `expect` is "".
+function(headers_case name declarations expect)
+  set(d ${WORK}/headers-${name})
+  file(WRITE ${d}/src/core/image.cpp "")
+  file(WRITE ${d}/src/effects/mist/mist.cpp "")
+  file(WRITE ${d}/include/brume/image.hpp "")
+  file(WRITE ${d}/include/brume/mist.hpp "")
+  configure_scratch(${d} "${declarations}" "")
+  if(expect AND (rc EQUAL 0 OR NOT err MATCHES "${expect}"))
+    message(FATAL_ERROR "headers ${name}: accepted, or not refused with '${expect}' (rc ${rc}): ${err}")
+  elseif(NOT expect AND NOT rc EQUAL 0)
+    message(FATAL_ERROR "headers ${name}: a declared tree failed: ${err}")
+  endif()
+  set(d ${d} PARENT_SCOPE)
+endfunction()
+headers_case(unowned "brume_part(core src/core HEADERS image.hpp)\nbrume_part(mist src/effects/mist)"
+             "include/brume/mist.hpp belongs to no part")
+headers_case(twice "brume_part(core src/core HEADERS image.hpp mist.hpp)\nbrume_part(mist src/effects/mist HEADERS mist.hpp)"
+             "include/brume/mist.hpp is in the HEADERS of two parts, core and mist")
+headers_case(owned "brume_part(core src/core HEADERS image.hpp)\nbrume_part(mist src/effects/mist HEADERS mist.hpp)" "")
+file(READ ${d}/build/generated/part_headers.txt headers)
+if(NOT headers STREQUAL "core brume/image.hpp\nmist brume/mist.hpp\n")
+  message(FATAL_ERROR "part_headers.txt: ${headers}")
+endif()
+
 # The tests: a threaded part (an OpenMP loop in mist.cpp) and its test files.
 function(scratch_tests name declarations)
   set(d ${WORK}/tests-${name})
@@ -116,5 +144,5 @@ file(READ ${dir}/build/tests.txt tests)
 if(NOT tests MATCHES "^[^|]*/tests/test_core.cpp;[^|]*/tests/test_mist.cpp[|]Image=core;Mist=mist;MistCli=mist;MistSweep=mist$")
   message(FATAL_ERROR "test sources and suites: ${tests}")
 endif()
-message(STATUS "check_parts: undeclared folders refused, declared ones listed in order; test files owned once, "
-               "threaded parts tested, the TSan filter their suites")
+message(STATUS "check_parts: undeclared folders refused, declared ones listed in order; public headers and test "
+               "files owned once, threaded parts tested, the TSan filter their suites")

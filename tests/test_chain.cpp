@@ -10,6 +10,7 @@
 
 #include "brume/chain.hpp"
 #include "brume/io.hpp"
+#include "effects/dof/chain/chain_job.hpp"
 #include "test_util.hpp"
 
 using namespace brume;

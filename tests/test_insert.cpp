@@ -10,6 +10,7 @@
 #include "brume/aerial.hpp"
 #include "brume/error.hpp"
 #include "brume/insert.hpp"
+#include "effects/aerial/insert/insert_job.hpp"
 #include "test_util.hpp"
 
 using namespace brume;

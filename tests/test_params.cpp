@@ -19,6 +19,15 @@
 #include "brume/insert.hpp"
 #include "brume/sky.hpp"
 #include "brume/pipeline.hpp"
+#include "effects/aerial/aerial_job.hpp"
+#include "effects/aerial/coefficients/coefficients_job.hpp"
+#include "effects/aerial/insert/insert_job.hpp"
+#include "effects/blur/blur_job.hpp"
+#include "effects/dof/chain/chain_job.hpp"
+#include "effects/dof/dof_job.hpp"
+#include "effects/fog/fog_job.hpp"
+#include "effects/haze/haze_job.hpp"
+#include "effects/sky/sky_job.hpp"
 
 using namespace brume;
 

@@ -29,9 +29,8 @@
 #include "brume/diffusion.hpp"
 #include "brume/exec.hpp"
 #include "brume/image.hpp"
-#include "brume/lidar_camera.hpp"
 #include "brume/params.hpp"
-#include "brume/pipeline.hpp"
+#include "brume/range_step.hpp"
 #include "brume/sky.hpp"
 
 namespace brume {
@@ -302,42 +301,5 @@ struct AerialRun {
 };
 AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const AerialParams& p, const RangeStep& prepare,
                      const Exec& exec = {}, const std::set<std::string>& given = {});
-
-struct AerialJob {
-  InputFiles input;
-  RangeStep prepare;
-  AerialParams aerial;
-  OutputFiles output;  // maps: attenuation, scale-map
-  CameraLidar lidar;   // --lidar IN.bin --lidar-out OUT.bin (brume/lidar_camera.hpp): the medium at 905 nm
-  std::string turbidity_from;  // --turbidity-from: T from a `brume sky fit` JSON (brume/sky.hpp); must be reliable
-  // --turbidity auto --sky-image FILE: T fitted on a photo of the sky as `brume
-  // sky fit` does (fit_sky_image_file), refused when unreliable. The sky's own
-  // flags carry the prefix --sky- so they do not collide with the photo's
-  // (--sky-projection, --sky-yaw, --sky-sun-zenith, --sky-date, --sky-samples, ...).
-  std::string sky_image;                           // --sky-image
-  std::string sky_image_layer;                     // --sky-image-layer: its layer in a file with layers
-  Transfer sky_image_transfer = Transfer::automatic;  // --sky-image-transfer
-  std::string sky_mask;                            // --sky-mask
-  SkyViewParams sky_view;                          // --sky-projection ...
-  SunParams sky_sun;                               // --sky-sun ...
-  SkyFitOptions sky_fit;                           // --sky-samples ...
-};
-const std::vector<MapOutput>& aerial_map_outputs();
-const ParamTable<AerialJob>& aerial_job_table();
-// The turbidity of a job whose T comes from elsewhere, resolved into
-// job.aerial.atmosphere.turbidity as `brume aerial` does before it reads the
-// photo: --turbidity-from (a `brume sky fit` JSON) or --turbidity auto
-// --sky-image (the same fit as `brume sky fit` on that file, seeded, so the
-// same T every run). Refuses an unreliable fit, both sources at once, a
-// disagreeing --turbidity and --sky-* flags without --sky-image (`given`:
-// the parameter names set). fit_record is the record's "turbidity_fit" and
-// image_record its inputs' "sky_image" (both null unless --sky-image).
-struct AerialTurbidity {
-  nlohmann::json fit_record;
-  nlohmann::json image_record;
-  nlohmann::json from_record;  // --turbidity-from's {path, sha256}: an input (brume run checks it)
-};
-AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::string>& given);
-nlohmann::json run_aerial_job(const AerialJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

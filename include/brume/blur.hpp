@@ -1,6 +1,7 @@
 // brume — the diffusion engine as a command: a Gaussian (constant target
 // scale) or a space-variant blur (a scale map) of a colour image, in the
-// pipeline shape of every effect (brume/pipeline.hpp).
+// pipeline shape of every effect (brume/pipeline.hpp; the job from files to
+// files is the library's, src/effects/blur/blur_job.hpp).
 //
 // With a constant --sigma S the result is a Gaussian of sqrt(S^2 - sigma0^2)
 // per axis (diffusion cannot sharpen: S < sigma0 is an error, never a clamp).
@@ -9,20 +10,12 @@
 #include <optional>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
 #include "brume/diffusion.hpp"
 #include "brume/image.hpp"
-#include "brume/pipeline.hpp"
 
 namespace brume {
-
-struct BlurJob {
-  InputFiles input;              // image only
-  std::optional<double> sigma;   // [px] constant target scale, >= sigma0; or:
-  std::string scale_map;         // per-pixel target scale in px (1-channel float file)
-  DiffusionParams diffusion;
-  OutputFiles output;
-};
-const ParamTable<BlurJob>& blur_job_table();
 
 // In memory (the Python module's brume.blur): `rgb` is any view of linear RGB
 // pixels (a numpy array, an RGBA buffer's RGB) read in place -- the only copy
@@ -42,6 +35,5 @@ BlurRun run_blur(ConstImageView rgb, std::optional<double> sigma, const Image* s
 // hands over the decoded file). The same pixels as the view form.
 BlurRun run_blur(Image&& rgb, std::optional<double> sigma, const Image* scale_map, const DiffusionParams& dp,
                  const Exec& exec = {});
-nlohmann::json run_blur_job(const BlurJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

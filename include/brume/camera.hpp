@@ -50,9 +50,20 @@
 
 #include <nlohmann/json.hpp>
 
-#include "brume/depth.hpp"
-
 namespace brume {
+
+// A pinhole camera's intrinsics in pixels (the pixel convention of brume/depth.hpp).
+struct Intrinsics {
+  double fx = 0.0, fy = 0.0;  // [px] focal lengths, > 0
+  double cx = NAN, cy = NAN;  // [px] principal point; NaN = the image centre
+};
+
+// From fields of view in degrees (edge to edge); give one or both (square
+// pixels assumed for the missing one). Throws brume::Error on bad values.
+Intrinsics intrinsics_from_fov(int width, int height, double fov_x_deg, double fov_y_deg);
+
+// Validated copy with the principal point filled in for a width x height image.
+Intrinsics resolve(const Intrinsics& k, int width, int height);
 
 struct Vec3 {
   double x = 0.0, y = 0.0, z = 0.0;

@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "brume/camera.hpp"  // Intrinsics
 #include "brume/image.hpp"
 #include "brume/params.hpp"
 
@@ -31,15 +32,6 @@ namespace brume {
 // known when it is finite and not zero; NaN, +-inf and 0 mark it unknown
 // (a lidar hole, sky, no return).
 inline bool known_range(float r) { return std::isfinite(r) && r != 0.0f; }
-
-struct Intrinsics {
-  double fx = 0.0, fy = 0.0;  // [px] focal lengths, > 0
-  double cx = NAN, cy = NAN;  // [px] principal point; NaN = the image centre
-};
-
-// From fields of view in degrees (edge to edge); give one or both (square
-// pixels assumed for the missing one). Throws brume::Error on bad values.
-Intrinsics intrinsics_from_fov(int width, int height, double fov_x_deg, double fov_y_deg);
 
 // ---- the camera in millimetres, as 3D software states it (Blender) ----------------
 // A focal length F and a sensor [mm], the sensor fit and the lens shift, with
@@ -77,8 +69,6 @@ LensScale lens_scale(const LensCamera& c, int width, int height);
 // Pixels per millimetre on the sensor: s / d.
 // The pixel intrinsics of the camera (above); throws when F or the sensor is missing.
 Intrinsics lens_intrinsics(const LensCamera& c, int width, int height);
-// Validated copy with the principal point filled in for a width x height image.
-Intrinsics resolve(const Intrinsics& k, int width, int height);
 
 Image z_to_range(const Image& z, const Intrinsics& k);
 Image range_to_z(const Image& range, const Intrinsics& k);

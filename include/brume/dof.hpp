@@ -65,7 +65,8 @@
 #include "brume/exec.hpp"
 #include "brume/image.hpp"
 #include "brume/params.hpp"
-#include "brume/pipeline.hpp"
+#include "brume/depth_source.hpp"
+#include "brume/range_step.hpp"
 
 namespace brume {
 
@@ -155,15 +156,6 @@ DofRun run_dof(DenseImageRef rgb, DenseImageRef measured_range, const Intrinsics
 DofRun run_dof_prepared(DenseImageRef rgb, const PreparedRange& prepared, const Intrinsics& k, const DofParams& p,
                         const Exec& exec = {}, const std::set<std::string>& given = {});
 
-struct DofJob {
-  InputFiles input;
-  RangeStep prepare;
-  DofParams dof;
-  SceneScale scene;    // --scene-scale: the lengths for a reference frame (brume/pipeline.hpp)
-  OutputFiles output;  // maps: scale-map
-};
-const std::vector<MapOutput>& dof_map_outputs();
-const ParamTable<DofJob>& dof_job_table();
 // The intrinsics a job's planar depth uses: the depth flags' (--fx.., --fov-x..,
 // --calib), else the camera in millimetres (fx = F s / sensor, lens shift);
 // when both are given they must agree within 1 % (depth_intrinsics). Throws
@@ -173,6 +165,5 @@ bool depth_flags_give_intrinsics(const DepthSource& src);
 Intrinsics dof_intrinsics(const DepthSource& src, int width, int height);
 // The record's words for where those intrinsics came from.
 std::string dof_intrinsics_source(const DepthSource& src, int width, int height);
-nlohmann::json run_dof_job(const DofJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

@@ -68,7 +68,8 @@
 #include "brume/haze.hpp"
 #include "brume/image.hpp"
 #include "brume/params.hpp"
-#include "brume/pipeline.hpp"
+#include "brume/depth_source.hpp"
+#include "brume/range_step.hpp"
 
 namespace brume {
 
@@ -166,17 +167,5 @@ struct FogRun {
 FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSource& depth, const FogParams& p,
                const RangeStep& prepare, const Exec& exec = {}, const std::set<std::string>& given = {},
                const Image* window_depth = nullptr);
-
-struct FogJob {
-  InputFiles input;
-  RangeStep prepare;
-  FogParams fog;
-  SceneScale scene;    // --scene-scale: the lengths for a reference frame (brume/pipeline.hpp)
-  OutputFiles output;  // maps: optical-depth, transmission
-  CameraLidar lidar;   // --lidar IN.bin --lidar-out OUT.bin (brume/lidar_camera.hpp)
-};
-const std::vector<MapOutput>& fog_map_outputs();
-const ParamTable<FogJob>& fog_job_table();
-nlohmann::json run_fog_job(const FogJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

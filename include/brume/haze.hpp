@@ -49,9 +49,8 @@
 #include "brume/diffusion.hpp"
 #include "brume/exec.hpp"
 #include "brume/image.hpp"
-#include "brume/lidar_camera.hpp"
 #include "brume/params.hpp"
-#include "brume/pipeline.hpp"
+#include "brume/range_step.hpp"
 #include "brume/sky_rule.hpp"
 
 namespace brume {
@@ -190,26 +189,11 @@ inline HazeRun run_haze_prepared(const Image& rgb, const Image& measured_range, 
   return run_haze_prepared(ConstImageView(rgb), ConstImageView(measured_range), prepared, p, exec, given);
 }
 
-// From files to files (the CLI's `brume haze` and `brume run`):
-struct HazeJob {
-  InputFiles input;
-  RangeStep prepare;
-  HazeParams haze;
-  SceneScale scene;    // --scene-scale: the lengths for a reference frame (brume/pipeline.hpp)
-  OutputFiles output;  // maps: transmission, scale-map
-  CameraLidar lidar;   // --lidar IN.bin --lidar-out OUT.bin (brume/lidar_camera.hpp)
-};
-const std::vector<MapOutput>& haze_map_outputs();
 // The medium's extinction [1/m] where the job is in metres: 3.912/V with a
 // visibility (analyse_haze's, exactly), (kappa_a + kappa_s)/R_max with
 // --range-max; nullopt in normalised units.
 std::optional<double> haze_extinction_per_m(const HazeParams& p);
-const ParamTable<HazeJob>& haze_job_table();
-// The command line's summary line of a haze record (stderr).
-void print_haze_summary(const std::string& out, const nlohmann::json& record);
 // The record's "haze" block: parameters, units, diffusion plan, derived values.
 nlohmann::json haze_record(const HazeParams& p, const HazeAnalysis& a);
-// Returns the record it wrote (also embedded in the outputs).
-nlohmann::json run_haze_job(const HazeJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

@@ -46,7 +46,7 @@
 #include "brume/image.hpp"
 #include "brume/io.hpp"
 #include "brume/params.hpp"
-#include "brume/pipeline.hpp"
+#include "brume/range_step.hpp"
 
 namespace brume {
 
@@ -116,16 +116,5 @@ struct InsertRun {
 InsertRun insert_object(const Image& photo, const Image& scene_range, const Image& object_rgba,
                         const Image& object_range, const AerialParams& p, const RangeStep& prepare = {},
                         const Exec& exec = {}, const std::set<std::string>& given = {});
-
-struct InsertJob {
-  InputFiles input;     // the photo and its depth (any depth source)
-  InsertObject object;  // the object and its range
-  RangeStep prepare;
-  AerialParams aerial;  // insert_aerial_param_table()'s subset
-  OutputFiles output;   // maps: coverage, scale-map
-};
-const std::vector<MapOutput>& insert_map_outputs();
-const ParamTable<InsertJob>& insert_job_table();
-nlohmann::json run_insert_job(const InsertJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

@@ -61,8 +61,8 @@
 #include "brume/depth.hpp"
 #include "brume/exec.hpp"
 #include "brume/image.hpp"
+#include "brume/io.hpp"
 #include "brume/params.hpp"
-#include "brume/pipeline.hpp"
 
 namespace brume {
 
@@ -205,13 +205,6 @@ struct SkyRenderRun {
 };
 SkyRenderRun run_sky_render(const SkyRenderParams& p, const Exec& exec = {});
 
-struct SkyRenderJob {
-  SkyRenderParams sky;
-  OutputFiles output;
-};
-const ParamTable<SkyRenderJob>& sky_render_job_table();
-nlohmann::json run_sky_render_job(const SkyRenderJob& job, const ExecOptions& exec, const RunContext& ctx = {});
-
 // ---- brume sky fit ------------------------------------------------------------------
 struct SkyFitOptions {
   int samples = 100;               // [1] --samples [10, 100000]
@@ -281,23 +274,6 @@ class SkyFitError : public Error {
 };
 SkyImageFit fit_sky_data(DenseImageRef rgb, bool integer_image, const Image* mask, const SkyViewParams& view,
                          const SunParams& sun, const SkyFitOptions& fit);
-
-struct SkyFitJob {
-  std::string image;                      // --image (hdr, exr, png, jpg, tiff)
-  std::string image_layer;                // --image-layer: its layer in a file with layers (brume/io.hpp)
-  Transfer image_transfer = Transfer::automatic;  // --image-transfer
-  std::string mask;                       // --mask: > 0.5 (or 128) marks usable sky
-  SkyViewParams view;
-  SunParams sun;
-  SkyFitOptions fit;
-  std::string out;                        // --out fit.json
-  std::string plot;                       // --plot scatter.png
-};
-const ParamTable<SkyFitJob>& sky_fit_job_table();
-// Runs the fit; writes --out (and --plot, drawn by `plot` when given: the
-// library has no plotter) together, atomically. Returns the JSON written.
-using SkyPlotter = Image (*)(const nlohmann::json& fit);
-nlohmann::json run_sky_fit_job(const SkyFitJob& job, const RunContext& ctx = {}, SkyPlotter plot = nullptr);
 
 // Turbidity from a `brume sky fit` JSON (for `brume aerial --turbidity-from`):
 // throws naming `flag` when the file is unreadable, has no number, or the fit

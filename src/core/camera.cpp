@@ -10,6 +10,7 @@
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "core/math_constants.hpp"
+#include "core/text.hpp"
 
 namespace brume {
 
@@ -129,6 +130,36 @@ Mat4 RigidTransform::matrix() const {
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) r.m[i][j] = rotation.m[i][j];
   r.m[0][3] = translation.x, r.m[1][3] = translation.y, r.m[2][3] = translation.z;
+  return r;
+}
+
+// ---- intrinsics -------------------------------------------------------------------
+
+Intrinsics intrinsics_from_fov(int width, int height, double fov_x_deg, double fov_y_deg) {
+  auto check = [](double f, const char* flag) {
+    if (!std::isnan(f) && !(f > 0.0 && f < 180.0))
+      throw Error(std::string(flag) + " " + text::g(f) + " degrees is not a field of view; use (0, 180)");
+  };
+  check(fov_x_deg, "--fov-x");
+  check(fov_y_deg, "--fov-y");
+  if (std::isnan(fov_x_deg) && std::isnan(fov_y_deg)) throw Error("give --fov-x or --fov-y (degrees) or --fx/--fy (pixels)");
+  Intrinsics k;
+  if (!std::isnan(fov_x_deg)) k.fx = 0.5 * width / std::tan(0.5 * fov_x_deg * kPi / 180.0);
+  if (!std::isnan(fov_y_deg)) k.fy = 0.5 * height / std::tan(0.5 * fov_y_deg * kPi / 180.0);
+  if (k.fx == 0.0) k.fx = k.fy;
+  if (k.fy == 0.0) k.fy = k.fx;
+  return k;
+}
+
+Intrinsics resolve(const Intrinsics& k, int width, int height) {
+  Intrinsics r = k;
+  if (r.fy == 0.0) r.fy = r.fx;
+  if (r.fx == 0.0) r.fx = r.fy;
+  text::require_positive(r.fx, "--fx");
+  text::require_positive(r.fy, "--fy");
+  if (std::isnan(r.cx)) r.cx = (width - 1) / 2.0;
+  if (std::isnan(r.cy)) r.cy = (height - 1) / 2.0;
+  if (!std::isfinite(r.cx) || !std::isfinite(r.cy)) throw Error("--cx/--cy must be finite pixel coordinates");
   return r;
 }
 

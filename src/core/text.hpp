@@ -3,10 +3,13 @@
 #pragma once
 
 #include <cctype>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <string_view>
+
+#include "brume/error.hpp"
 
 namespace brume::text {
 
@@ -40,6 +43,12 @@ inline bool parse_number(const std::string& t, double& v) {
   char* end = nullptr;
   v = std::strtod(t.c_str(), &end);
   return end == t.c_str() + t.size();
+}
+
+// Throws "<what> <v> is not allowed: it must be a finite number > 0" unless v
+// is finite and > 0 (v in %g, as std::ostream writes a double).
+inline void require_positive(double v, const std::string& what) {
+  if (!(v > 0.0) || !std::isfinite(v)) throw Error(what + " " + g(v) + " is not allowed: it must be a finite number > 0");
 }
 
 }  // namespace brume::text

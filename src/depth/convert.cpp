@@ -17,6 +17,7 @@
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "core/math_constants.hpp"
+#include "core/text.hpp"
 #include "shared/prelude_cpp.h"
 
 namespace brume {
@@ -28,11 +29,6 @@ std::string depth_num(double v) {
   std::ostringstream s;
   s << v;
   return s.str();
-}
-
-void require_positive(double v, const std::string& what) {
-  if (!(v > 0.0) || !std::isfinite(v))
-    throw Error(what + " " + depth_num(v) + " is not allowed: it must be a finite number > 0");
 }
 }  // namespace
 
@@ -56,22 +52,6 @@ bool calib_is_rotation(const double m[3][3]) {
   return det > 0.0;
 }
 }  // namespace
-
-Intrinsics intrinsics_from_fov(int width, int height, double fov_x_deg, double fov_y_deg) {
-  auto check = [](double f, const char* flag) {
-    if (!std::isnan(f) && !(f > 0.0 && f < 180.0))
-      throw Error(std::string(flag) + " " + depth_num(f) + " degrees is not a field of view; use (0, 180)");
-  };
-  check(fov_x_deg, "--fov-x");
-  check(fov_y_deg, "--fov-y");
-  if (std::isnan(fov_x_deg) && std::isnan(fov_y_deg)) throw Error("give --fov-x or --fov-y (degrees) or --fx/--fy (pixels)");
-  Intrinsics k;
-  if (!std::isnan(fov_x_deg)) k.fx = 0.5 * width / std::tan(0.5 * fov_x_deg * kPi / 180.0);
-  if (!std::isnan(fov_y_deg)) k.fy = 0.5 * height / std::tan(0.5 * fov_y_deg * kPi / 180.0);
-  if (k.fx == 0.0) k.fx = k.fy;
-  if (k.fy == 0.0) k.fy = k.fx;
-  return k;
-}
 
 const EnumNames<SensorFit>& sensor_fit_names() {
   static const EnumNames<SensorFit> n = {
@@ -120,18 +100,6 @@ Intrinsics lens_intrinsics(const LensCamera& c, int width, int height) {
     k.cy = (height - 1) / 2.0 + c.lens_shift[1] * l.side_px;
   }
   return resolve(k, width, height);
-}
-
-Intrinsics resolve(const Intrinsics& k, int width, int height) {
-  Intrinsics r = k;
-  if (r.fy == 0.0) r.fy = r.fx;
-  if (r.fx == 0.0) r.fx = r.fy;
-  require_positive(r.fx, "--fx");
-  require_positive(r.fy, "--fy");
-  if (std::isnan(r.cx)) r.cx = (width - 1) / 2.0;
-  if (std::isnan(r.cy)) r.cy = (height - 1) / 2.0;
-  if (!std::isfinite(r.cx) || !std::isfinite(r.cy)) throw Error("--cx/--cy must be finite pixel coordinates");
-  return r;
 }
 
 namespace {
@@ -202,8 +170,8 @@ bool camera_matrix(const std::string& path, const std::string& text, std::array<
                 "': the 9 numbers are not a camera matrix [fx 0 cx; 0 fy cy; 0 0 1] (row by "
                 "row: entries 2, 4, 7 and 8 must be 0 and the last 1); give KITTI depth completion's "
                 "intrinsics/*.txt as it is, or a calib.txt");
-  require_positive(K[0], "--calib '" + path + "': focal length fx (K's first number)");
-  require_positive(K[4], "--calib '" + path + "': focal length fy (K's fifth number)");
+  text::require_positive(K[0], "--calib '" + path + "': focal length fx (K's first number)");
+  text::require_positive(K[4], "--calib '" + path + "': focal length fy (K's fifth number)");
   return true;
 }
 }  // namespace
@@ -264,7 +232,7 @@ StereoCalib read_stereo_calib(const std::string& path) {
   c.cy = K[5];
   // Both focal lengths (the conversion uses f = K[0]; a fy <= 0 says the
   // matrix is not [f 0 cx; 0 f cy; 0 0 1]).
-  require_positive(K[4], "--calib '" + path + "': focal length fy in cam0");
+  text::require_positive(K[4], "--calib '" + path + "': focal length fy in cam0");
   auto number = [&](const std::string& key, double def) {
     if (!kv.count(key)) return def;
     try {
@@ -287,14 +255,14 @@ StereoCalib read_stereo_calib(const std::string& path) {
   };
   c.width = size("width");
   c.height = size("height");
-  require_positive(c.f_px, "--calib '" + path + "': focal length f in cam0");
-  require_positive(c.baseline_m, "--calib '" + path + "': baseline");
+  text::require_positive(c.f_px, "--calib '" + path + "': focal length f in cam0");
+  text::require_positive(c.baseline_m, "--calib '" + path + "': baseline");
   return c;
 }
 
 Image disparity_to_z(const Image& d, double f_px, double baseline_m, double doffs_px) {
-  require_positive(f_px, "focal length (--fx) in pixels");
-  require_positive(baseline_m, "--baseline in metres");
+  text::require_positive(f_px, "focal length (--fx) in pixels");
+  text::require_positive(baseline_m, "--baseline in metres");
   if (!std::isfinite(doffs_px)) throw Error("--disparity-offset must be finite");
   Image z(d.width, d.height, 1);
   for (std::size_t i = 0; i < d.data.size(); ++i) {
@@ -344,7 +312,7 @@ double z_to_depth_buffer(double z, DepthBufferConvention c, double n, double f) 
 }
 
 DepthBufferLinear depth_buffer_linear(DepthBufferConvention c, double n, double f) {
-  require_positive(n, "--near (metres)");
+  text::require_positive(n, "--near (metres)");
   if (!(f > n)) throw Error("--far " + depth_num(f) + " must be greater than --near " + depth_num(n) + " (use inf for an infinite far plane)");
   const double inv_n = 1.0 / n, inv_f = std::isinf(f) ? 0.0 : 1.0 / f;
   DepthBufferLinear l;

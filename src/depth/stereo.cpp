@@ -17,6 +17,7 @@
 #include "brume/record.hpp"
 #include "brume_opencv.hpp"
 #include "core/text.hpp"
+#include "core/timing.hpp"
 
 namespace brume {
 
@@ -84,11 +85,6 @@ StereoView read_stereo_view(const std::string& path, const std::string& flag, nl
 }
 
 namespace {
-
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
 
 cv::Mat as_mat(const StereoView& v) {
   return cv::Mat(v.height, v.width, CV_8UC3, const_cast<unsigned char*>(v.rgb.data()));

@@ -16,6 +16,7 @@
 #include "brume/aerial.hpp"
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
+#include "brume/pipeline.hpp"  // the shared parameter blocks
 #include "core/text.hpp"
 #include "shared/prelude_cpp.h"
 

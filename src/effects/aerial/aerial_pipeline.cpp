@@ -14,6 +14,7 @@
 #include "brume/gpu_aerial.hpp"
 #include "brume/io.hpp"
 #include "brume/record.hpp"
+#include "effects/aerial/aerial_job.hpp"
 
 namespace brume {
 

@@ -12,6 +12,7 @@
 #include "core/text.hpp"
 #include "brume/gpu_context.hpp"
 #include "brume/record.hpp"
+#include "effects/blur/blur_job.hpp"
 
 namespace brume {
 

@@ -11,6 +11,7 @@
 
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
+#include "brume/pipeline.hpp"  // the shared parameter blocks
 #include "core/text.hpp"
 #include "shared/prelude_cpp.h"
 

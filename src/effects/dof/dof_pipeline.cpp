@@ -13,6 +13,7 @@
 #include "brume/error.hpp"
 #include "brume/gpu_context.hpp"
 #include "brume/record.hpp"
+#include "effects/dof/dof_job.hpp"
 #include "effects/dof/dof_preview.hpp"
 
 namespace brume {

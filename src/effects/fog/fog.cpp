@@ -14,6 +14,7 @@
 #include "core/text.hpp"
 #include "brume/fog.hpp"
 #include "brume/io.hpp"
+#include "brume/pipeline.hpp"  // the shared parameter blocks
 #include "effects/fog/fog_fast.hpp"
 #include "shared/prelude_cpp.h"
 

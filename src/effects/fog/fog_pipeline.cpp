@@ -13,6 +13,7 @@
 #include "brume/fog.hpp"
 #include "brume/gpu_fog.hpp"
 #include "brume/record.hpp"
+#include "effects/fog/fog_job.hpp"
 
 namespace brume {
 

@@ -10,6 +10,7 @@
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
+#include "brume/pipeline.hpp"  // the shared parameter blocks
 #include "core/text.hpp"
 #include "shared/prelude_cpp.h"
 

@@ -12,6 +12,7 @@
 #include "brume/gpu_haze.hpp"
 #include "brume/haze.hpp"
 #include "brume/record.hpp"
+#include "effects/haze/haze_job.hpp"
 #include "effects/haze/haze_preview.hpp"
 
 namespace brume {

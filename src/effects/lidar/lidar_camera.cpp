@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "brume/error.hpp"
-#include "brume/fog.hpp"
+#include "effects/fog/fog_job.hpp"
 #include "brume/io.hpp"
 #include "brume/lidar_fog.hpp"
 #include "brume/medium.hpp"

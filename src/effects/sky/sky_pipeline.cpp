@@ -16,6 +16,7 @@
 #include "brume/gpu_sky.hpp"
 #include "brume/record.hpp"
 #include "brume/sky.hpp"
+#include "effects/sky/sky_job.hpp"
 
 namespace brume {
 

@@ -11,6 +11,7 @@
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "core/text.hpp"
+#include "effects/aerial/coefficients/coefficients_job.hpp"
 
 namespace brume {
 

@@ -14,6 +14,7 @@
 #include "brume/error.hpp"
 #include "brume/insert.hpp"
 #include "brume/io.hpp"
+#include "brume/pipeline.hpp"  // the shared parameter blocks
 #include "shared/prelude_cpp.h"
 
 namespace brume {

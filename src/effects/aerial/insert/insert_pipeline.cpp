@@ -10,6 +10,7 @@
 #include "brume/error.hpp"
 #include "brume/insert.hpp"
 #include "brume/record.hpp"
+#include "effects/aerial/insert/insert_job.hpp"
 
 namespace brume {
 

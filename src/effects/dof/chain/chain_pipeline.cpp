@@ -9,6 +9,7 @@
 #include "brume/chain.hpp"
 #include "brume/error.hpp"
 #include "brume/record.hpp"
+#include "effects/dof/chain/chain_job.hpp"
 #include "effects/dof/dof_preview.hpp"
 #include "effects/haze/haze_preview.hpp"
 

@@ -16,6 +16,7 @@
 #include "brume/error.hpp"
 #include "brume/gpu_context.hpp"
 #include "brume/record.hpp"
+#include "core/timing.hpp"
 
 namespace fs = std::filesystem;
 
@@ -486,12 +487,6 @@ RunPhases& run_phases() {
   thread_local RunPhases p;
   return p;
 }
-
-namespace {
-double ms_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-}  // namespace
 
 std::size_t check_nonfinite_colour(ConstImageView rgb, NonFinite mode, const std::string& what,
                                    const std::string& fix) {
