@@ -45,6 +45,8 @@ Checks, on the source tree:
      the tests -- except one line of the list of commands
      (src/jobs/commands.cpp) and one build line (CMakeLists.txt): a camera
      effect reaches a scan's medium through brume/medium.hpp only.
+  5. brume/gpu.hpp, the umbrella kept by hand, includes every public
+     brume/gpu_*.hpp.
 Exit 1 with what is wrong.
 
   check_layers.py SOURCE_DIR GENERATED_DIR   (GENERATED_DIR: the build's generated/)
@@ -208,6 +210,14 @@ def main():
         if os.path.normpath(os.path.join(inc, h)) not in owner:
             errors.append(f"include/brume/{h} is no part's: name it in its part's HEADERS (CMakeLists.txt) and "
                           "configure again")
+    # 5. The umbrella brume/gpu.hpp, a list by hand (a header cannot glob):
+    # it includes every public GPU header (gpu_<family>.hpp, gpu_context.hpp).
+    with open(os.path.join(inc, "gpu.hpp"), encoding="utf-8") as fh:
+        umbrella = set(INCLUDE.findall(fh.read()))
+    for h in sorted(os.listdir(inc)):
+        if re.match(r"gpu_\w+\.hpp$", h) and f"brume/{h}" not in umbrella:
+            errors.append(f"include/brume/gpu.hpp, the umbrella of every effect's GPU passes, does not include "
+                          f"brume/{h}: add it")
     used = set()
     for name, folder, rank, layer, public in parts:
         for path in files_of[name]:
