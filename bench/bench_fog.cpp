@@ -46,7 +46,7 @@ int main(int argc, char** argv) {
   const int W = 1600, H = 1120;
   const DemoScene s = render_demo_scene(W, H);
   FogParams p;
-  p.profile = FogProfile::exponential;
+  p.profile = HeightProfile::exponential;
   p.density_per_m = 0.03, p.falloff_per_m = 0.06, p.base_height_m = 0.0;
   p.camera.height_m = 1.6, p.camera.pitch_deg = -5.0;
   p.airlight = Rgb{0.7f, 0.72f, 0.75f};

@@ -76,7 +76,7 @@ int main(int argc, char** argv) {
   // Target: >= 2 M points/s on 2 cores (the KITTI scan in <= 60 ms).
   const std::string dir = std::string(BRUME_DATA_DIR) + "/kitti_object_000001";
   LidarFogParams l;
-  l.profile = FogProfile::exponential;
+  l.profile = HeightProfile::exponential;
   l.fog.density_per_m = 0.08;
   l.fog.falloff_per_m = 0.05;
   const bool have = std::filesystem::exists(dir + "/velodyne/000001.bin");

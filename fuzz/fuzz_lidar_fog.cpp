@@ -28,7 +28,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     // The same scan in height-layered fog (an exponential ground fog, the
     // scan's z up at 1.7 m): the elevation bins and their tables.
     brume::LidarFogParams l;
-    l.profile = brume::FogProfile::exponential;
+    l.profile = brume::HeightProfile::exponential;
     l.fog.density_per_m = 0.1;
     l.fog.falloff_per_m = 0.3;
     l.pose.sensor_height_m = 1.7;

@@ -4,7 +4,8 @@
   core      src/core: images, params, the camera, errors;
   engines   src/shared, src/gpu, src/io (and its formats), src/diffusion, and
             src/media (brume/medium.hpp: the interface the camera effects and
-            the LiDAR scan share);
+            the LiDAR scan share; brume/height_profile.hpp, the height profiles
+            both take);
   depth     src/depth: sources, conversion, preparation, completion, stereo, fusion;
   pipeline  src/pipeline: the steps every command shares (load, complete,
             prepare, backend, outputs), records, the registry's interface
@@ -33,11 +34,9 @@ Checks, on the source tree:
      three files outside fog's own files and the tests, the build lists (the
      CMakeLists.txt files that name fog's sources, its bench and its fuzz
      target) counting as one -- so that an effect costs its own files and
-     one line. The media (src/media) are a part of their own and counted
-     like any other. Not yet counted (issue #53 item 1, left): the LiDAR
-     fog's height-layered model still borrows fog's profiles, their flags
-     and their optical-depth integral (FOG_BORROW: those files, those
-     symbols only) until the profiles move to src/media;
+     one line. The media (src/media, brume/medium.hpp,
+     brume/height_profile.hpp) are a part of their own and counted like any
+     other; the LiDAR fog takes the height profiles from them, not from fog;
   4. the LiDAR fog's types and functions (every name its public header
      include/brume/lidar_fog.hpp declares) appear in no C++, CMake or Python
      file outside its family's folder (src/effects/lidar/), that header, its
@@ -85,15 +84,6 @@ INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 
 FOG_OWN = re.compile(r"^(include/brume/(gpu_)?fog(_params)?\.hpp|src/effects/fog/[^/]*|bench/bench_fog\.cpp|"
                      r"fuzz/fuzz_fog[^/]*|tests/.*|docs/.*|README\.md|CHANGELOG\.md)$")
-# Until the height profiles move to src/media (issue #53 item 1, left): the
-# LiDAR fog's files that take fog's profiles, and the only symbols they take.
-FOG_BORROW = re.compile(r"^(include/brume/lidar_fog\.hpp|src/effects/lidar/[^/]*)$")
-FOG_BORROWED = {"FogParams", "FogProfile", "FogTable", "FogDensity", "FogJob", "ClassicFog", "fog_param_table",
-                "fog_profile_names", "classic_fog_names", "fog_job_table", "fog_density", "fog_optical_depths",
-                "fog_max_density", "read_fog_table", "validate_fog", "fog_optical_depth",
-                "fog_params",   # its header's name, brume/fog_params.hpp
-                "fog_fields",   # the LiDAR fog's list of the profile's flags it takes (lidar_fog.cpp)
-                "fog_table"}    # --profile table's file (fuzz_fog_table's reader, as LiDAR fog reads it)
 # The LiDAR fog's own files, and where else its names may stand.
 LIDAR_OWN = re.compile(r"^(include/brume/lidar_fog\.hpp|src/effects/lidar/[^/]*|python/brume/lidar\.py|"
                        r"bench/bench_lidar_fog\.cpp|bench/CMakeLists\.txt|fuzz/fuzz_lidar_fog[^/]*|"
@@ -258,8 +248,6 @@ def main():
                     continue
                 with open(p, encoding="utf-8", errors="replace") as fh:
                     found = set(FOG_SYMBOL.findall(fh.read()))
-                if FOG_BORROW.match(rel):
-                    found -= FOG_BORROWED
                 if found:
                     users.append(f"{rel} ({sorted(found)[0]})")
     for dirpath, _, files in os.walk(root):

@@ -34,7 +34,7 @@ Intrinsics fog_k(double f = 60.0) {
 
 FogParams exp_params(double height, double pitch = 0.0) {
   FogParams p;
-  p.profile = FogProfile::exponential;
+  p.profile = HeightProfile::exponential;
   p.density_per_m = 0.02;
   p.falloff_per_m = 0.05;
   p.base_height_m = 3.0;
@@ -222,16 +222,16 @@ TEST(Fog, LevelRayLimitIsStableForEveryProfile) {
   // antiderivatives. The camera sits inside the band and inside the ramp.
   std::vector<FogParams> ps(5);
   ps[0] = exp_params(120.0);
-  ps[1].profile = FogProfile::band, ps[1].band_center_m = 100.0, ps[1].band_half_width_m = 40.0;
-  ps[2].profile = FogProfile::ramp, ps[2].ramp_bottom_m = 50.0, ps[2].ramp_top_m = 200.0;
-  ps[3].profile = FogProfile::constant;
+  ps[1].profile = HeightProfile::band, ps[1].band_center_m = 100.0, ps[1].band_half_width_m = 40.0;
+  ps[2].profile = HeightProfile::ramp, ps[2].ramp_bottom_m = 50.0, ps[2].ramp_top_m = 200.0;
+  ps[3].profile = HeightProfile::constant;
   ps[4] = ps[2];  // a table written as the ramp
-  FogTable t;
+  DensityTable t;
   t.height_m = {50.0, 200.0};
   t.density_per_m = {0.02, 0.0};
   for (std::size_t i = 0; i < ps.size(); ++i) {
     SCOPED_TRACE("profile " + std::to_string(i));
-    const FogDensity d = fog_density(ps[i], i == 4 ? t : FogTable{}, 120.0);
+    const FogDensity d = fog_density(ps[i], i == 4 ? t : DensityTable{}, 120.0);
     const double dc = d.at(0.0);
     ASSERT_GT(dc, 0.0);
     const float l = 1000.0f;
@@ -254,16 +254,16 @@ TEST(Fog, EveryProfileAgreesWithQuadratureLookingUpAndDown) {
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> yc(-20.0, 220.0), l(1.0, 2000.0), dyu(-1.0, 1.0);
   FogParams band, ramp, table;
-  band.profile = FogProfile::band, band.band_center_m = 100.0, band.band_half_width_m = 40.0;
-  ramp.profile = FogProfile::ramp, ramp.ramp_bottom_m = 50.0, ramp.ramp_top_m = 200.0;
-  table.profile = FogProfile::table;
-  FogTable t;
+  band.profile = HeightProfile::band, band.band_center_m = 100.0, band.band_half_width_m = 40.0;
+  ramp.profile = HeightProfile::ramp, ramp.ramp_bottom_m = 50.0, ramp.ramp_top_m = 200.0;
+  table.profile = HeightProfile::table;
+  DensityTable t;
   t.height_m = {0.0, 30.0, 31.0, 150.0};
   t.density_per_m = {0.05, 0.01, 0.03, 0.0};
   for (int i = 0; i < 300; ++i) {
     const double y = yc(rng), len = l(rng), u = dyu(rng);
     for (const FogParams* p : {&band, &ramp, &table}) {
-      const FogDensity d = fog_density(*p, p == &table ? t : FogTable{}, y);
+      const FogDensity d = fog_density(*p, p == &table ? t : DensityTable{}, y);
       const double ref = len * mean_quadrature(d, len * u);
       const float F = fog_optical_depth(d, static_cast<float>(len), static_cast<float>(u), false, 1.0f);
       ASSERT_GE(F, 0.0f);
@@ -282,12 +282,12 @@ TEST(Fog, SkyIntegratesToInfinityWhereTheFogVanishes) {
   EXPECT_NEAR(fog_optical_depth(d, 0.0f, 0.25f, true, 500.0f), dc / (0.05 * 0.25), 1e-5 * dc / 0.0125);
   EXPECT_NEAR(fog_optical_depth(d, 0.0f, -0.25f, true, 500.0f), exp_reference(p, 10.0, 500.0, -0.25), 1e-4);
   FogParams b;
-  b.profile = FogProfile::band, b.band_center_m = 100.0, b.band_half_width_m = 40.0, b.density_per_m = 0.01;
+  b.profile = HeightProfile::band, b.band_center_m = 100.0, b.band_half_width_m = 40.0, b.density_per_m = 0.01;
   const FogDensity db = fog_density(b, {}, 10.0);  // camera below the band
   EXPECT_NEAR(fog_optical_depth(db, 0.0f, 0.5f, true, 500.0f), 0.01 * 40.0 / 0.5, 1e-5);
   EXPECT_EQ(fog_optical_depth(db, 0.0f, -0.5f, true, 500.0f), 0.0f);  // nothing below the camera
   FogParams c;
-  c.profile = FogProfile::constant, c.density_per_m = 0.001;
+  c.profile = HeightProfile::constant, c.density_per_m = 0.001;
   EXPECT_NEAR(fog_optical_depth(fog_density(c, {}, 0.0), 0.0f, 0.5f, true, 700.0f), 0.7, 1e-6);
 }
 
@@ -296,7 +296,7 @@ TEST(Fog, ConstantDensityEqualsHazeWithTheSameExtinction) {
   // kappa' R' with kappa' = beta R_max and no blur. 2e-6: two float roundings.
   const Scene s = scene(64, 48, 0);
   FogParams f;
-  f.profile = FogProfile::constant;
+  f.profile = HeightProfile::constant;
   f.density_per_m = 0.0015;
   f.airlight = Rgb{0.6f, 0.65f, 0.7f};
   const Camera c = make_camera(fog_k(), 64, 48);
@@ -330,7 +330,7 @@ TEST(Fog, TableSamplingTheExponentialConverges) {
       }
     }
     FogParams t = e;
-    t.profile = FogProfile::table, t.table_file = path;
+    t.profile = HeightProfile::table, t.table_file = path;
     t.density_per_m = FogParams{}.density_per_m, t.falloff_per_m = FogParams{}.falloff_per_m;
     t.base_height_m = 0.0;
     const Applied o = apply(flat_rgb(41, 31), range, t, c);
@@ -367,7 +367,7 @@ TEST(Fog, CameraInsideABandOrBelowARampIsANormalCase) {
   // Inside the band a level ray sees delta(y_c) over its whole length;
   // below the ramp a level ray sees D0. Closed forms, float precision.
   FogParams b;
-  b.profile = FogProfile::band, b.band_center_m = 5.0, b.band_half_width_m = 20.0, b.density_per_m = 0.01;
+  b.profile = HeightProfile::band, b.band_center_m = 5.0, b.band_half_width_m = 20.0, b.density_per_m = 0.01;
   b.camera.height_m = 2.0;
   const double db = 0.005 * (1.0 + std::cos(M_PI * -3.0 / 20.0));
   const Camera c = make_camera(fog_k(), 41, 31, b.camera);
@@ -375,7 +375,7 @@ TEST(Fog, CameraInsideABandOrBelowARampIsANormalCase) {
   const Applied o = apply(flat_rgb(41, 31), range, b, c);
   EXPECT_NEAR(o.r.optical_depth.at(20, 15), 250.0 * db, 1e-5);
   FogParams r;
-  r.profile = FogProfile::ramp, r.ramp_bottom_m = 30.0, r.ramp_top_m = 60.0, r.density_per_m = 0.004;
+  r.profile = HeightProfile::ramp, r.ramp_bottom_m = 30.0, r.ramp_top_m = 60.0, r.density_per_m = 0.004;
   r.camera.height_m = 2.0;
   const Applied q = apply(flat_rgb(41, 31), range, r, make_camera(fog_k(), 41, 31, r.camera));
   EXPECT_NEAR(q.r.optical_depth.at(20, 15), 1.0, 1e-5);
@@ -388,7 +388,7 @@ TEST(Fog, BlurredTransmissionReachesOneWhereNoFogIsCrossed) {
   // take no flux); the top rows (300 m away, climbing through the band) are
   // fogged and blurred.
   FogParams p;
-  p.profile = FogProfile::band, p.band_center_m = 30.0, p.band_half_width_m = 10.0, p.density_per_m = 0.02;
+  p.profile = HeightProfile::band, p.band_center_m = 30.0, p.band_half_width_m = 10.0, p.density_per_m = 0.02;
   p.camera.height_m = 2.0;
   p.lambda = 4.0;
   p.airlight = Rgb{0.8f, 0.8f, 0.8f};
@@ -444,17 +444,17 @@ TEST(Fog, BadInputsGiveClearErrors) {
   };
   EXPECT_NE(msg("density", "-0.1").find("--density"), std::string::npos);
   EXPECT_NE(msg("falloff", "-1").find("--falloff"), std::string::npos);
-  p.profile = FogProfile::ramp, p.ramp_bottom_m = 10.0, p.ramp_top_m = 5.0;
+  p.profile = HeightProfile::ramp, p.ramp_bottom_m = 10.0, p.ramp_top_m = 5.0;
   EXPECT_NE(error_of([&] { validate_fog(p); }).find("--ramp-top"), std::string::npos);
   p = {};
-  p.profile = FogProfile::band;
+  p.profile = HeightProfile::band;
   EXPECT_NE(error_of([&] { validate_fog(p, {"falloff"}); }).find("--falloff"), std::string::npos);
   p = {};
   EXPECT_NE(error_of([&] { validate_fog(p, {"albedo"}); }).find("--lambda"), std::string::npos);
   p.classic = ClassicFog::linear;
   EXPECT_NE(error_of([&] { validate_fog(p, {"profile"}); }).find("--classic"), std::string::npos);
   p = {};
-  p.profile = FogProfile::table;
+  p.profile = HeightProfile::table;
   EXPECT_NE(error_of([&] { validate_fog(p); }).find("--table"), std::string::npos);
 
   const fs::path dir = fs::temp_directory_path() / ("brume_fog_bad_" + std::to_string(::getpid()));
@@ -462,7 +462,7 @@ TEST(Fog, BadInputsGiveClearErrors) {
   auto table_error = [&](const std::string& body) {
     const std::string path = (dir / "t.csv").string();
     std::ofstream(path) << body;
-    return error_of([&] { read_fog_table(path); });
+    return error_of([&] { read_density_table(path); });
   };
   EXPECT_NE(table_error("0,0.1\n10,0.2\n5,0.1\n").find("strictly increasing"), std::string::npos);
   EXPECT_NE(table_error("0,0.1\n0,0.2\n").find("strictly increasing"), std::string::npos);
@@ -501,8 +501,8 @@ TEST(Fog, GpuMatchesCpu) {
   std::vector<FogParams> ps(6);
   ps[0] = exp_params(10.0, -5.0);
   ps[1] = ps[0], ps[1].lambda = 6.0;
-  ps[2].profile = FogProfile::band, ps[2].band_center_m = 12.0, ps[2].band_half_width_m = 8.0;
-  ps[3].profile = FogProfile::ramp, ps[3].ramp_bottom_m = 2.0, ps[3].ramp_top_m = 30.0;
+  ps[2].profile = HeightProfile::band, ps[2].band_center_m = 12.0, ps[2].band_half_width_m = 8.0;
+  ps[3].profile = HeightProfile::ramp, ps[3].ramp_bottom_m = 2.0, ps[3].ramp_top_m = 30.0;
   ps[4].classic = ClassicFog::exp2, ps[4].density_per_m = 0.004;
   ps[5] = ps[2], ps[5].lambda = 3.0, ps[5].albedo = 0.8;
   for (std::size_t i = 0; i < ps.size(); ++i) {

@@ -20,6 +20,8 @@
 
 #include "brume/command.hpp"
 #include "brume/error.hpp"
+#include "brume/fog_params.hpp"
+#include "brume/height_profile.hpp"
 #include "brume/lidar_fog.hpp"
 #include "test_util.hpp"
 
@@ -37,7 +39,7 @@ const double kPaperRatio = 0.046 / std::log(20.0);  // β_b/α of the paper's 0.
 // An exponential ground fog seen from a LiDAR at `ys` metres (no calibration).
 LidarFogParams exponential(double d0, double b, double y0, double ys) {
   LidarFogParams p;
-  p.profile = FogProfile::exponential;
+  p.profile = HeightProfile::exponential;
   p.fog.density_per_m = d0;
   p.fog.falloff_per_m = b;
   p.fog.base_height_m = y0;
@@ -245,7 +247,7 @@ TEST(LidarFogLayered, ConstantProfileIsTheHomogeneousModelBitForBit) {
     for (bool ratio : {false, true}) {
       SCOPED_TRACE(d0);
       LidarFogParams c;
-      c.profile = FogProfile::constant;
+      c.profile = HeightProfile::constant;
       c.fog.density_per_m = d0;
       c.seed = 11;
       LidarFogParams h;
@@ -347,7 +349,7 @@ TEST(LidarFogLayered, KittiCalibrationAndCameraPosePlaceTheBeams) {
   BRUME_REQUIRE_DATA(kCalib);
   const double d0 = 0.05, b = 0.3, y0 = 0.0, h = 1.65, pitch = 2.0, roll = -1.5;
   LidarFogParams p;
-  p.profile = FogProfile::exponential;
+  p.profile = HeightProfile::exponential;
   p.fog.density_per_m = d0;
   p.fog.falloff_per_m = b;
   p.fog.camera.height_m = h;
@@ -406,8 +408,8 @@ TEST(LidarFogLayered, SoftReturnsMatchTheSoftTargetEquationWithTheLocalDensity) 
   for (double th : {0.0, 0.3, -0.12}) cases.push_back({"exponential", exponential(0.08, 0.4, 0.0, ys),
                                                        exponential_profile(0.08, 0.4, 0.0, ys), th});
   LidarFogParams band = exponential(0.0, 0.0, 0.0, ys);
-  band.profile = FogProfile::band;
-  band.fog = FogParams{};
+  band.profile = HeightProfile::band;
+  band.fog = HeightMedium{};
   band.fog.density_per_m = 0.15;
   band.fog.band_center_m = 2.5;  // the beam starts inside the band and leaves it 9.3 m out
   band.fog.band_half_width_m = 2.0;
@@ -550,14 +552,14 @@ TEST(LidarFogLayered, BadInputsAreRefusedNamingTheFlags) {
   p.fog.band_center_m = 3.0;  // a band's field with an exponential profile (brume fog's rule)
   says(p, "--band-center");
   p = good;
-  p.profile = FogProfile::constant;
-  p.fog.falloff_per_m = FogParams{}.falloff_per_m;
+  p.profile = HeightProfile::constant;
+  p.fog.falloff_per_m = HeightMedium{}.falloff_per_m;
   says(p, "--sensor-height");  // a constant profile does not depend on height
   LidarFogParams h;
   h.alpha_per_m = 0.1;
   h.fog.falloff_per_m = 0.2;
   says(h, "--profile");  // a profile's field without a profile
-  h.fog = FogParams{};
+  h.fog = HeightMedium{};
   h.beta_b = 0.001;
   h.lidar_ratio_sr = 30;
   says(h, "--beta-b 0.001 and --lidar-ratio 30");
@@ -575,26 +577,28 @@ TEST(LidarFogLayered, BadInputsAreRefusedNamingTheFlags) {
             std::string::npos);
   EXPECT_EQ(out[0], -7.0f);  // nothing written
   p = good;
-  p.profile = FogProfile::table;
-  p.fog = FogParams{};
+  p.profile = HeightProfile::table;
+  p.fog = HeightMedium{};
   p.fog.table_file = "/nonexistent/fog.csv";
   EXPECT_NE(error_of([&] { lidar_fog(pts.data(), out.data(), 2, p); }).find("--table"), std::string::npos);
   // A point farther than any LiDAR's return.
   pts[4] = 5e6f;
   EXPECT_NE(error_of([&] { lidar_fog(pts.data(), out.data(), 2, good); }).find("point 1"), std::string::npos);
-  // Classic OpenGL fog is no medium.
-  FogParams classic;
-  classic.classic = ClassicFog::exp2;
-  EXPECT_NE(error_of([&] { lidar_params_from_fog(classic, {}); }).find("--classic"), std::string::npos);
+  // Classic OpenGL fog is no medium: fog's command hands a scan no height medium.
+  const CommandDef* fog = find_command("fog");
+  ASSERT_TRUE(fog && fog->height_medium);
+  EXPECT_EQ(fog->height_medium(fog->build({{"classic", "exp2"}})), nullptr);
+  EXPECT_EQ(fog->height_medium(fog->build({{"profile", "constant"}})), nullptr);
+  EXPECT_NE(fog->height_medium(fog->build({{"profile", "band"}})), nullptr);
 }
 
-// A camera effect's fog becomes the LiDAR's through lidar_params_from_fog:
-// the profile, its fields and the camera pose travel, nothing of the image
-// (airlight, blur); with a constant profile the pose is dropped; the
+// A camera effect's fog becomes the LiDAR's through lidar_params_from_profile:
+// the profile, its fields and the camera pose travel (a HeightMedium: nothing
+// of the image, airlight or blur); with a constant profile the pose is dropped; the
 // extinction the list of commands reports at a height is the fog's.
 TEST(LidarFogLayered, ACameraFogBecomesTheLidarsFog) {
   FogParams f;
-  f.profile = FogProfile::ramp;
+  f.profile = HeightProfile::ramp;
   f.density_per_m = 0.09;
   f.ramp_bottom_m = 1.0;
   f.ramp_top_m = 12.0;
@@ -605,22 +609,20 @@ TEST(LidarFogLayered, ACameraFogBecomesTheLidarsFog) {
   LidarFogParams base;
   base.seed = 4;
   base.visibility_m = 100.0;
-  const LidarFogParams p = lidar_params_from_fog(f, LidarPose{"calib.txt", std::nullopt}, base);
-  EXPECT_EQ(p.profile, FogProfile::ramp);
+  const LidarFogParams p = lidar_params_from_profile(f, LidarPose{"calib.txt", std::nullopt}, base);
+  EXPECT_EQ(p.profile, HeightProfile::ramp);
   EXPECT_FALSE(p.visibility_m);
   EXPECT_EQ(p.seed, 4u);
   EXPECT_EQ(p.fog.density_per_m, 0.09);
   EXPECT_EQ(p.fog.ramp_top_m, 12.0);
   EXPECT_EQ(p.fog.camera.height_m, 1.65);
   EXPECT_EQ(p.fog.camera.pitch_deg, 1.0);
-  EXPECT_EQ(p.fog.lambda, 0.0);
-  EXPECT_FALSE(p.fog.airlight);
   EXPECT_EQ(p.pose.kitti_calib, "calib.txt");
   EXPECT_NO_THROW(validate_lidar_fog(p));
   f = FogParams{};  // a camera's constant fog (brume fog refuses a pose and the ramp's fields with it)
-  f.profile = FogProfile::constant;
+  f.profile = HeightProfile::constant;
   f.density_per_m = 0.09;
-  const LidarFogParams c = lidar_params_from_fog(f, LidarPose{"calib.txt", std::nullopt}, base);
+  const LidarFogParams c = lidar_params_from_profile(f, LidarPose{"calib.txt", std::nullopt}, base);
   EXPECT_TRUE(c.pose.kitti_calib.empty());
   EXPECT_NO_THROW(validate_lidar_fog(c));
   EXPECT_EQ(lidar_fog_medium(c).alpha, 0.09);

@@ -38,7 +38,7 @@ std::vector<LidarFogParams> fogs() {
   homogeneous.alpha_per_m = 0.06;
   homogeneous.seed = 7;
   LidarFogParams layered;
-  layered.profile = FogProfile::exponential;
+  layered.profile = HeightProfile::exponential;
   layered.fog.density_per_m = 0.08;
   layered.fog.falloff_per_m = 0.2;
   layered.pose.sensor_height_m = 1.7;

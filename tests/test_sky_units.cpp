@@ -257,7 +257,7 @@ void check_fog_constant(const FogParams& p, double tau_sky, const Exec& e) {
 
 FogParams fog_constant() {
   FogParams p;
-  p.profile = FogProfile::constant;
+  p.profile = HeightProfile::constant;
   p.density_per_m = 0.05;
   p.airlight = kAirlight;
   return p;

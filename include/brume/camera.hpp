@@ -180,6 +180,15 @@ struct CameraPose {
 // image. Intrinsics are resolved (NaN cx/cy = the image centre). fisheye and
 // equirectangular are refused: they map sky images, through SkyGeometry
 // (brume/sky.hpp), not through a Camera.
+template <class P>
+class ParamTable;  // brume/params.hpp
+// The camera's pose as parameters (conventions fixed once for every effect):
+// --yaw, --pitch, --roll, --camera-height, --camera-x, --camera-z,
+// --view-matrix. For the effects and media that need world heights or
+// directions (height profiles, sky); an effect that does not use the pose
+// does not bind it.
+const ParamTable<CameraPose>& camera_pose_param_table();
+
 Camera make_camera(const Intrinsics& k, int width, int height, const CameraPose& pose = {},
                    Projection projection = Projection::pinhole);
 

@@ -23,6 +23,7 @@
 
 #include <functional>
 #include <map>
+#include <memory>
 #include <optional>
 #include <set>
 #include <string>
@@ -38,6 +39,8 @@
 #include "brume/preview.hpp"
 
 namespace brume {
+
+struct HeightMedium;  // brume/height_profile.hpp: the media layer
 
 // A default plausible distribution of one sampled parameter (brume/sample.hpp):
 // its canonical name, the spec text, and the parameters whose explicit
@@ -202,10 +205,12 @@ struct CommandDef {
   // Rayleigh + Mie at the observer), nullopt where the job cannot give one.
   // Empty for grey media (extinction_per_m holds at every wavelength).
   std::function<std::optional<double>(const nlohmann::json& job, double wavelength_nm)> spectral_extinction_per_m;
-  // Whether the job's medium varies with height (fog's height profiles): a
-  // LiDAR then needs the optical depth along each beam, not one extinction.
-  // Empty: never.
-  std::function<bool(const nlohmann::json& job)> layered_medium;
+  // The job's medium where it varies with height (fog's height profiles):
+  // the profile and the camera pose that places it in the world
+  // (brume/height_profile.hpp), which a LiDAR integrates along each beam
+  // rather than taking one extinction; null where the job's medium is the
+  // same at every height or is no medium. Empty: never.
+  std::function<std::shared_ptr<const HeightMedium>(const nlohmann::json& job)> height_medium;
   // Steps that complete the definition from its other fields (a camera
   // effect's LiDAR scan wraps its run, check, summary and array form, and
   // reads its medium's hooks): the list of commands runs them, in order,

@@ -15,7 +15,8 @@
 // density has the right sign either way, and its limit as |y_f - y_c| -> 0 is
 // delta(y_c), so a level ray needs no special case. Every profile evaluates
 // the mean in camera-relative heights without forming D(y_f) - D(y_c)
-// (src/effects/fog/fog_math.glsl), stable down to height differences of 1e-6 m.
+// (brume/height_profile.hpp, src/media/height_profile.glsl), stable down to
+// height differences of 1e-6 m.
 //
 //   exponential  delta = D0 exp(-B (y - Y0))
 //   band         delta = D0 (1 + cos(pi (y - Yc) / Wb)) / 2 for |y - Yc| <= Wb, else 0
@@ -73,46 +74,22 @@
 
 namespace brume {
 
-// A density table (--profile table): heights strictly increasing, densities
-// finite and >= 0. Errors name the file, the line and the fix.
-struct FogTable {
-  std::vector<double> height_m, density_per_m;
-  std::string path, sha256;
-};
-FogTable read_fog_table(const std::string& path);
-
-// The density as the per-pixel code sees it, relative to the camera height
-// (heights u = y - y_c), so that no pixel forms a difference of large heights.
-struct FogDensity {
-  FogProfile profile = FogProfile::constant;
+// The frame's fog as the per-pixel code sees it: its height profile
+// relative to the camera height (brume/height_profile.hpp) and classic fog.
+struct FogDensity : HeightDensity {
   ClassicFog classic = ClassicFog::none;
-  double d0 = 0.0;             // [1/m]
-  double falloff = 0.0;        // [1/m] exponential B
-  double exponent_c = 0.0;     // exponential: -B (y_c - Y0), delta(y_c) = D0 exp(exponent_c)
-  double band_offset = 0.0;    // band: y_c - Yc
-  double band_half_width = 1.0;
-  std::vector<double> knot_u, knot_density;  // ramp, constant, table: piecewise linear in u = y - y_c
   double fog_start = 0.0, fog_end = 1.0;     // classic linear
-  // delta at height u above the camera (for tests and the record).
-  double at(double u) const;
-  // The per-pixel code's kind (BrumeFog.kind, src/effects/fog/fog_math.glsl):
+  // The per-pixel code's kind (BrumeProfile.kind, src/effects/fog/fog_math.glsl):
   // 0 exponential, 1 band, 2 piecewise linear, 3 classic linear, 4 classic exp2.
   int kind() const;
 };
 // Needs cam.height_known() for the height profiles.
-FogDensity fog_density(const FogParams& p, const FogTable& table, double camera_height_m);
+FogDensity fog_density(const FogParams& p, const DensityTable& table, double camera_height_m);
 
 // Optical depth along one ray (CPU, float, the per-pixel path): range_m > 0
 // with ray_y the unit ray's world-up component, or a sky ray (sky = true)
 // integrated to infinity or over sky_distance_m as stated above.
 float fog_optical_depth(const FogDensity& d, float range_m, float ray_y, bool sky, float sky_distance_m);
-// The same for n scene rays at once (sky = false): out[i] along range_m[i]
-// metres of a ray climbing at ray_y[i], the density converted once for the
-// batch (the LiDAR fog's beams and soft-return tables, src/effects/lidar/).
-void fog_optical_depths(const FogDensity& d, const float* range_m, const float* ray_y, float* out, std::size_t n);
-// The largest density at heights u in [u0, u1] above the reference height
-// (exactly: the ends, the band's centre, the knots inside).
-double fog_max_density(const FogDensity& d, double u0, double u1);
 
 struct FogAnalysis {
   double range_max_m = 0.0, range_min_m = 0.0;
@@ -123,7 +100,7 @@ struct FogAnalysis {
   bool sky_blend = false;            // blend across the horizon margin with the sky weight (else margin = sky)
   Camera camera;                     // intrinsics and pose (height unknown for constant/classic)
   bool camera_used = false;
-  FogTable table;                    // profile table only
+  DensityTable table;                // profile table only
   FogDensity density;
   double sigma_max = 0.0;            // [px] largest target scale over the frame (lambda > 0)
   std::array<float, 3> airlight{};

@@ -58,13 +58,14 @@
 //     within O(h²·P'') of the continuous peak.
 //
 // Height-layered fog (--profile; docs/lidar.md "Height-layered fog"): the
-// medium is a fog profile δ(y) [1/m] of brume's layered fog (brume/fog.hpp:
-// exponential, band, ramp, table, constant, the same FogParams fields), and
+// medium is a height profile δ(y) [1/m] of the media layer
+// (brume/height_profile.hpp: exponential, band, ramp, table, constant, the
+// flags and HeightMedium fields that brume fog takes too), and
 // the scan is placed in the fog's world (y up) by a LidarPose. A beam from
 // the scan's origin at height y_s with world-up component s = sin θ (θ its
 // elevation) meets the density δ(y_s + r·s) at range r, and
 //   F(r) = ∫_0^r δ(y_s + t·s) dt = r · mean δ over [y_s, y_s + r·s]
-// (brume's fog integral: fog_optical_depths, the camera effects' own maths);
+// (the media layer's integral, height_optical_depths: the camera effects' own maths);
 //   i_hard = i·e^{−2F(R0)}                       (αR0 → F(R0))
 //   β_b(r) = δ(y_s + r·s)/S                       (S = --lidar-ratio, the
 //            extinction-to-backscatter ratio; auto ln 20/0.046 = 65.1 sr, the
@@ -102,7 +103,7 @@
 
 #include "brume/camera.hpp"
 #include "brume/depth.hpp"
-#include "brume/fog_params.hpp"
+#include "brume/height_profile.hpp"
 #include "brume/image.hpp"
 #include "brume/medium.hpp"
 #include "brume/params.hpp"
@@ -118,7 +119,7 @@ constexpr double kLidarPaperRatioSr = 65.12460617192603;  // [sr] ln 20/0.046: t
 // z south; heights are y). With a KITTI calibration the scan goes through
 // Tr_velo_to_cam and R0_rect into the rectified camera frame, to camera 2's
 // centre (P2's translation), and through the fog's camera pose
-// (FogParams::camera: --camera-height, --pitch, --roll, as the camera
+// (HeightMedium::camera: --camera-height, --pitch, --roll, as the camera
 // effects take them) into the world, so a camera effect and the LiDAR see
 // the same fog. Without one the scan's z axis is up and its origin is at
 // --sensor-height.
@@ -146,8 +147,8 @@ struct LidarFogParams {
   std::uint64_t seed = 0;              // the noise's seed (same seed, same scan)
   std::optional<double> lidar_ratio_sr;  // [sr] > 0, S = extinction/backscatter; unset: β_b as above
   // ---- height-layered fog (unset profile: the homogeneous fog above) ----
-  std::optional<FogProfile> profile;   // --profile exponential|band|ramp|table|constant
-  FogParams fog;                       // the profile's fields (--density, --falloff, --base-height, --band-*,
+  std::optional<HeightProfile> profile;  // --profile exponential|band|ramp|table|constant
+  HeightMedium fog;                    // the profile's fields (--density, --falloff, --base-height, --band-*,
                                        // --ramp-*, --table) and camera 2's pose (--camera-height, --pitch,
                                        // --roll, --yaw, --camera-x/z, --view-matrix); fog.profile is ignored
   LidarPose pose;                      // --kitti-calib or --sensor-height
@@ -156,16 +157,17 @@ struct LidarFogParams {
 const ParamTable<LidarFogParams>& lidar_fog_param_table();
 // Cross-field rules: exactly one of visibility and alpha, or a profile
 // without them; R2 > R1; at most one of --beta-b and --lidar-ratio (and no
-// --beta-b with a profile); the profile's fields as brume fog checks them;
+// --beta-b with a profile); the profile's fields (validate_height_medium);
 // the pose its profile needs (--kitti-calib with a camera height, or
 // --sensor-height), and nothing the run would ignore.
 void validate_lidar_fog(const LidarFogParams& p);
 
-// The layered LiDAR fog of a camera effect's fog (its profile, density
-// fields and camera pose) with the scan's pose; `base` gives the LiDAR's
-// own parameters (pulse, receiver, noise, seed). A constant profile needs no
-// pose (it is dropped). Classic OpenGL fog has no medium: an Error.
-LidarFogParams lidar_params_from_fog(const FogParams& fog, const LidarPose& pose, LidarFogParams base = {});
+// The layered LiDAR fog of a camera effect's height medium (its profile,
+// density fields and camera pose: CommandDef::height_medium) with the scan's
+// pose; `base` gives the LiDAR's own parameters (pulse, receiver, noise,
+// seed). A constant profile needs no pose (it is dropped).
+LidarFogParams lidar_params_from_profile(const HeightMedium& medium, const LidarPose& pose,
+                                         LidarFogParams base = {});
 
 // The scan's frame in the fog's world (needs a height-layered p): x_world =
 // rotation·x_scan + translation; reads --kitti-calib. Errors name the flag.

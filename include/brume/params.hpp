@@ -27,6 +27,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -303,6 +304,21 @@ class ParamTable {
     for (const Param<P>& q : other.params()) {
       if (find(q.spec.name)) throw Error("internal: parameter '" + q.spec.name + "' declared twice in " + block_);
       params_.push_back(q);
+    }
+    return *this;
+  }
+
+  // Every parameter of a base class's table, as declared there (P derives
+  // from Q: a struct that extends a shared block, as layered fog's parameters
+  // extend the height profile's), less `skip`.
+  template <class Q>
+  ParamTable& extend_base(const ParamTable<Q>& base, const std::set<std::string>& skip = {}) {
+    static_assert(std::is_base_of_v<Q, P>, "extend_base: P must derive from Q");
+    for (const Param<Q>& q : base.params()) {
+      if (skip.count(q.spec.name)) continue;
+      if (find(q.spec.name)) throw Error("internal: parameter '" + q.spec.name + "' declared twice in " + block_);
+      params_.push_back({q.spec, [g = q.get](const P& p) { return g(p); },
+                         [s = q.set](P& p, const nlohmann::json& v) { s(p, v); }});
     }
     return *this;
   }

@@ -73,11 +73,7 @@ const std::set<std::string>& depth_file_params();
 // controls of brume view's page.
 const std::vector<std::string>& camera_intrinsics_params();
 
-// The camera's pose (brume/camera.hpp: conventions fixed once for every
-// effect): --yaw, --pitch, --roll, --camera-height, --camera-x, --camera-z,
-// --view-matrix. For the effects that need world heights or directions
-// (layered fog, sky); an effect that does not use the pose does not bind it.
-const ParamTable<CameraPose>& camera_pose_param_table();
+// The camera's pose's table, camera_pose_param_table(): brume/camera.hpp.
 
 // Execution: how, not what (results do not depend on it, except the GPU's
 // float rounding); recorded, but not part of a job.

@@ -278,26 +278,6 @@ const ParamTable<DepthSource>& depth_param_table() {
   return t;
 }
 
-const ParamTable<CameraPose>& camera_pose_param_table() {
-  static const ParamTable<CameraPose> t = [] {
-    ParamTable<CameraPose> d("camera");
-    d.real("yaw", &CameraPose::yaw_deg, "deg", Range::any(),
-           "compass azimuth of the optical axis, clockwise from north seen from above (taken modulo 360)")
-        .real("pitch", &CameraPose::pitch_deg, "deg", Range::closed(-90.0, 90.0), "elevation of the optical axis, > 0 looking up")
-        .real("roll", &CameraPose::roll_deg, "deg", Range::left_open(-180.0, 180.0),
-              "rotation about the optical axis, > 0 turns the image content clockwise")
-        .real_or_unset("camera-height", &CameraPose::height_m, "m", Range::any(),
-                       "height of the camera centre above the ground plane (world y)", NAN, "unknown")
-        .real("camera-x", &CameraPose::x_m, "m", Range::any(), "camera centre east of the world origin")
-        .real("camera-z", &CameraPose::z_m, "m", Range::any(), "camera centre south of the world origin")
-        .text("view-matrix", &CameraPose::view_matrix_file,
-              "the whole pose as a 4x4 OpenGL view matrix file (four rows of four numbers, x_eye = M x_world)")
-        .reads_file("", 0, 5);
-    return d;
-  }();
-  return t;
-}
-
 Exec ExecOptions::exec() const {
   Exec e;
   e.threads = threads;

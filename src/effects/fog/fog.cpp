@@ -1,7 +1,8 @@
 // brume — layered fog (Zhou, Chen, Smith); the equations, units and the sky
 // rule are stated in include/brume/fog.hpp, the per-pixel maths in
-// src/effects/fog/fog_math.glsl. This file holds the declaration, the density
-// table, the analysis step (image-wide statistics, once) and the pure apply.
+// src/effects/fog/fog_math.glsl (the height profile's: brume/height_profile.hpp).
+// This file holds the declaration, the analysis step (image-wide statistics,
+// once) and the pure apply.
 #include <omp.h>
 
 #include <algorithm>
@@ -16,19 +17,12 @@
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"  // the shared parameter blocks
 #include "effects/fog/fog_fast.hpp"
+#include "media/height_profile_shared.hpp"
 #include "shared/prelude_cpp.h"
 
 namespace brume {
 namespace sh = brume::shared;
 
-const EnumNames<FogProfile>& fog_profile_names() {
-  static const EnumNames<FogProfile> n = {{FogProfile::exponential, "exponential"},
-                                          {FogProfile::band, "band"},
-                                          {FogProfile::ramp, "ramp"},
-                                          {FogProfile::constant, "constant"},
-                                          {FogProfile::table, "table"}};
-  return n;
-}
 const EnumNames<ClassicFog>& classic_fog_names() {
   static const EnumNames<ClassicFog> n = {
       {ClassicFog::none, "none"}, {ClassicFog::linear, "linear"}, {ClassicFog::exp2, "exp2"}};
@@ -38,25 +32,7 @@ const EnumNames<ClassicFog>& classic_fog_names() {
 const ParamTable<FogParams>& fog_param_table() {
   static const ParamTable<FogParams> t = [] {
     ParamTable<FogParams> d("fog");
-    d.choice("profile", &FogParams::profile, fog_profile_names(),
-             "height density: exponential D0 exp(-B (y - Y0)), band (Zhou's sinusoidal band), ramp (D0 below "
-             "--ramp-bottom, linear to 0 at --ramp-top), constant D0, table (--table CSV, piecewise linear)")
-        .real("density", &FogParams::density_per_m, "1/m", Range::at_least(0.0),
-              "D0: extinction coefficient (exponential: at --base-height; band: at its centre; ramp: below its bottom)")
-        .real("falloff", &FogParams::falloff_per_m, "1/m", Range::at_least(0.0),
-              "B: exponential decrease of the density with height (0: constant)")
-        .real("base-height", &FogParams::base_height_m, "m", Range::any(),
-              "Y0: height where the exponential density equals --density")
-        .real("band-center", &FogParams::band_center_m, "m", Range::any(), "Yc: height of the band's densest level")
-        .real("band-half-width", &FogParams::band_half_width_m, "m", Range::above(0.0),
-              "Wb: the band's density falls to 0 at Yc +- Wb")
-        .real("ramp-bottom", &FogParams::ramp_bottom_m, "m", Range::any(), "height below which the ramp density is D0")
-        .real("ramp-top", &FogParams::ramp_top_m, "m", Range::any(),
-              "height above which the ramp density is 0 (must exceed --ramp-bottom)")
-        .text("table", &FogParams::table_file,
-              "CSV of rows height_m,density_per_m (heights increasing; a header line and # comments allowed): "
-              "piecewise linear, end values held")
-        .reads_file()
+    d.extend_base(height_profile_param_table())
         .choice("classic", &FogParams::classic, classic_fog_names(),
                 "classic OpenGL fog on the range instead of a height profile: linear (--fog-start, --fog-end) or "
                 "exp2 (--density); classic exp is --profile constant")
@@ -80,7 +56,7 @@ const ParamTable<FogParams>& fog_param_table() {
         .real("albedo", &FogParams::albedo, "1", Range::closed(0.0, 1.0),
               "single-scattering albedo: the part of the optical depth F that scatters (blur only)")
         .nest(&FogParams::diffusion, diffusion_param_table())
-        .nest(&FogParams::camera, camera_pose_param_table());
+        .nest<CameraPose>(&FogParams::camera, camera_pose_param_table());
     return d;
   }();
   return t;
@@ -95,7 +71,7 @@ std::string fog_num(double v) {
 }
 
 bool needs_heights(const FogParams& p) {
-  return p.classic == ClassicFog::none && p.profile != FogProfile::constant;
+  return p.classic == ClassicFog::none && p.profile != HeightProfile::constant;
 }
 
 }  // namespace
@@ -108,7 +84,6 @@ void validate_fog(const FogParams& p, const std::set<std::string>& given) {
     for (const char* n : names)
       if (set(n)) throw Error(std::string("--") + n + " " + why);
   };
-  const std::string prof = "--profile " + enum_name(fog_profile_names(), p.profile);
   if (p.classic != ClassicFog::none) {
     const std::string cl = "--classic " + enum_name(classic_fog_names(), p.classic);
     if (given.count("profile"))
@@ -127,19 +102,7 @@ void validate_fog(const FogParams& p, const std::set<std::string>& given) {
     }
   } else {
     refuse({"fog-start", "fog-end"}, "is only used by --classic linear");
-    if (p.profile != FogProfile::exponential)
-      refuse({"falloff", "base-height"}, "is only used by --profile exponential, not " + prof);
-    if (p.profile != FogProfile::band)
-      refuse({"band-center", "band-half-width"}, "is only used by --profile band, not " + prof);
-    if (p.profile != FogProfile::ramp) refuse({"ramp-bottom", "ramp-top"}, "is only used by --profile ramp, not " + prof);
-    if (p.profile != FogProfile::table) refuse({"table"}, "is only used by --profile table, not " + prof);
-    if (p.profile == FogProfile::table) {
-      refuse({"density"}, "is not used by --profile table (the table gives the densities)");
-      if (p.table_file.empty()) throw Error("--profile table needs --table FILE.csv (rows height_m,density_per_m)");
-    }
-    if (p.profile == FogProfile::ramp && !(p.ramp_top_m > p.ramp_bottom_m))
-      throw Error("--ramp-top " + fog_num(p.ramp_top_m) + " must exceed --ramp-bottom " + fog_num(p.ramp_bottom_m) +
-                  " m (the density falls from --density at the bottom to 0 at the top)");
+    validate_height_profile(p, given);
   }
   if (p.lambda == 0.0)
     refuse({"albedo", "scheme", "precision", "sigma0", "rho-max", "edge-rate"},
@@ -152,136 +115,37 @@ void validate_fog(const FogParams& p, const std::set<std::string>& given) {
                " does not depend on height; drop it");
 }
 
-// ---- the density table ----------------------------------------------------------------
-
-FogTable read_fog_table(const std::string& path) {
-  const std::string what = "--table '" + path + "'";
-  // A regular file (brume/io.hpp) of at most 16 MiB: the table's row limit
-  // below is far smaller.
-  std::istringstream in(read_input_file(path, "--table", {16u << 20, "a density table of height,density rows"}));
-  FogTable t;
-  t.path = path;
-  std::string line;
-  int line_no = 0;
-  bool header_allowed = true;
-  while (std::getline(in, line)) {
-    ++line_no;
-    line = line.substr(0, line.find('#'));
-    std::replace(line.begin(), line.end(), ',', ' ');
-    std::istringstream s(line);
-    std::vector<std::string> tok;
-    for (std::string w; s >> w;) tok.push_back(w);
-    if (tok.empty()) continue;
-    double v[2] = {};
-    bool numeric = tok.size() == 2;
-    for (std::size_t i = 0; numeric && i < 2; ++i) {
-      char* end = nullptr;
-      v[i] = std::strtod(tok[i].c_str(), &end);
-      numeric = end != tok[i].c_str() && *end == '\0';
-    }
-    if (!numeric && header_allowed) {  // one header line ("height_m,density_per_m") before the data
-      header_allowed = false;
-      continue;
-    }
-    const std::string at = what + ", line " + std::to_string(line_no);
-    if (!numeric)
-      throw Error(at + ": '" + line + "' is not two numbers; each row is height_m,density_per_m");
-    header_allowed = false;
-    if (!std::isfinite(v[0]) || !std::isfinite(v[1]))
-      throw Error(at + ": height " + fog_num(v[0]) + " m, density " + fog_num(v[1]) + " /m: both must be finite numbers");
-    if (v[1] < 0.0) throw Error(at + ": density " + fog_num(v[1]) + " /m is negative; densities must be >= 0");
-    if (!t.height_m.empty() && !(v[0] > t.height_m.back()))
-      throw Error(at + ": height " + fog_num(v[0]) + " m does not exceed the previous row's " + fog_num(t.height_m.back()) +
-                  " m; heights must be strictly increasing (sort the table, remove repeated heights)");
-    t.height_m.push_back(v[0]);
-    t.density_per_m.push_back(v[1]);
-  }
-  if (t.height_m.empty()) throw Error(what + " has no rows; give rows height_m,density_per_m");
-  t.sha256 = sha256_file(path);
-  return t;
-}
-
 // ---- the density relative to the camera ---------------------------------------------
 
-FogDensity fog_density(const FogParams& p, const FogTable& table, double yc) {
+FogDensity fog_density(const FogParams& p, const DensityTable& table, double yc) {
   FogDensity d;
   d.classic = p.classic;
-  d.profile = p.profile;
-  d.d0 = p.density_per_m;
   d.fog_start = p.fog_start_m;
   d.fog_end = p.fog_end_m;
-  if (p.classic != ClassicFog::none) return d;
-  switch (p.profile) {
-    case FogProfile::exponential:
-      d.falloff = p.falloff_per_m;
-      d.exponent_c = -p.falloff_per_m * (yc - p.base_height_m);
-      break;
-    case FogProfile::band:
-      d.band_offset = yc - p.band_center_m;
-      d.band_half_width = p.band_half_width_m;
-      break;
-    case FogProfile::ramp:
-      d.knot_u = {p.ramp_bottom_m - yc, p.ramp_top_m - yc};
-      d.knot_density = {p.density_per_m, 0.0};
-      break;
-    case FogProfile::constant:
-      d.knot_u = {0.0};
-      d.knot_density = {p.density_per_m};
-      break;
-    case FogProfile::table:
-      for (std::size_t i = 0; i < table.height_m.size(); ++i) {
-        d.knot_u.push_back(table.height_m[i] - yc);
-        d.knot_density.push_back(table.density_per_m[i]);
-      }
-      break;
+  if (p.classic == ClassicFog::none) {
+    static_cast<HeightDensity&>(d) = height_density(p, table, yc);
+    return d;
   }
+  d.profile = p.profile;
+  d.d0 = p.density_per_m;
   return d;
-}
-
-double FogDensity::at(double u) const {
-  switch (profile) {
-    case FogProfile::exponential: return d0 * std::exp(exponent_c - falloff * u);
-    case FogProfile::band: {
-      const double s = u + band_offset;
-      return std::abs(s) <= band_half_width ? 0.5 * d0 * (1.0 + std::cos(M_PI * s / band_half_width)) : 0.0;
-    }
-    default: break;
-  }
-  if (u <= knot_u.front()) return knot_density.front();
-  if (u >= knot_u.back()) return knot_density.back();
-  const std::size_t j = std::upper_bound(knot_u.begin(), knot_u.end(), u) - knot_u.begin();
-  const double t = (u - knot_u[j - 1]) / (knot_u[j] - knot_u[j - 1]);
-  return knot_density[j - 1] + t * (knot_density[j] - knot_density[j - 1]);
 }
 
 int FogDensity::kind() const {
   if (classic == ClassicFog::linear) return 3;
   if (classic == ClassicFog::exp2) return 4;
-  if (profile == FogProfile::exponential) return 0;
-  return profile == FogProfile::band ? 1 : 2;
+  return HeightDensity::kind();
 }
 
 namespace {
 
-// The frame's density in the shared form (fog_math.glsl), once per image.
+// The frame's fog in the shared form (fog_math.glsl), once per image.
 sh::BrumeFog to_shared(const FogDensity& d) {
   sh::BrumeFog f{};
-  f.kind = d.kind();
-  f.d0 = static_cast<float>(d.d0);
-  f.falloff = static_cast<float>(d.falloff);
-  f.exponent_c = static_cast<float>(d.exponent_c);
-  f.band_offset = static_cast<float>(d.band_offset);
-  f.band_half_width = static_cast<float>(d.band_half_width);
+  f.profile = shared_profile(d);
+  f.profile.kind = d.kind();
   f.fog_start = static_cast<float>(d.fog_start);
   f.fog_end = static_cast<float>(d.fog_end);
-  if (d.knot_u.size() > BRUME_FOG_MAX_KNOTS)
-    throw Error("the density table has " + std::to_string(d.knot_u.size()) + " rows; at most " +
-                std::to_string(BRUME_FOG_MAX_KNOTS) + " are allowed (resample it)");
-  f.n = static_cast<int>(d.knot_u.size());
-  for (int i = 0; i < f.n; ++i) {
-    f.ku[i] = static_cast<float>(d.knot_u[i]);
-    f.kd[i] = static_cast<float>(d.knot_density[i]);
-  }
   return f;
 }
 
@@ -290,23 +154,6 @@ sh::BrumeFog to_shared(const FogDensity& d) {
 float fog_optical_depth(const FogDensity& d, float l, float ray_y, bool sky, float sky_distance) {
   const sh::BrumeFog f = to_shared(d);
   return sky ? sh::brume_fog_sky(f, ray_y, sky_distance) : sh::brume_fog_along(f, l, ray_y);
-}
-
-void fog_optical_depths(const FogDensity& d, const float* range_m, const float* ray_y, float* out, std::size_t n) {
-  const sh::BrumeFog f = to_shared(d);
-  for (std::size_t i = 0; i < n; ++i) out[i] = sh::brume_fog_along(f, range_m[i], ray_y[i]);
-}
-
-double fog_max_density(const FogDensity& d, double u0, double u1) {
-  if (u1 < u0) std::swap(u0, u1);
-  double m = std::max(d.at(u0), d.at(u1));  // exponential: monotone
-  if (d.profile == FogProfile::band) {
-    if (u0 + d.band_offset <= 0.0 && u1 + d.band_offset >= 0.0) m = std::max(m, d.d0);  // monotone on each side
-  } else if (d.profile != FogProfile::exponential) {
-    for (std::size_t i = 0; i < d.knot_u.size(); ++i)
-      if (d.knot_u[i] > u0 && d.knot_u[i] < u1) m = std::max(m, d.knot_density[i]);
-  }
-  return m;
 }
 
 // ---- analysis and apply ------------------------------------------------------------------
@@ -383,11 +230,11 @@ FogAnalysis analyse_fog(DenseImageRef rgb, DenseImageRef measured, DenseImageRef
 
   double yc = NAN;
   if (a.camera_used) {
-    camera.require_height("--profile " + enum_name(fog_profile_names(), p.profile) +
+    camera.require_height("--profile " + enum_name(height_profile_names(), p.profile) +
                           " (the fog depends on height)");
     yc = camera.position_m.y;
   }
-  if (p.classic == ClassicFog::none && p.profile == FogProfile::table) a.table = read_fog_table(p.table_file);
+  if (p.classic == ClassicFog::none && p.profile == HeightProfile::table) a.table = read_density_table(p.table_file);
   a.density = fog_density(p, a.table, std::isfinite(yc) ? yc : 0.0);
 
   if (p.airlight) {
@@ -474,13 +321,13 @@ void apply_fog_rows(DenseImageRef rgb, DenseImageRef range, const FogParams& p, 
   // as vector code (fog_fast.cpp: the same f32 maths with a polynomial e^x,
   // F within ~3e-7 relative of this loop); every other case, and an input
   // that is also the output, takes the per-pixel loop below.
-  if (vector_rows && !blur && heights && fog.kind == 0 && fog.d0 > 0.0f && out.rgb.data.data() != rgb.data.data()) {
+  if (vector_rows && !blur && heights && fog.profile.kind == 0 && fog.profile.d0 > 0.0f && out.rgb.data.data() != rgb.data.data()) {
     detail::FogExpFrame fr;
     fr.rgb = rgb.data.data(), fr.range = range.data.data(), fr.out_rgb = out.rgb.data.data();
     fr.optical_depth = out.optical_depth.data.data(), fr.transmission = out.transmission.data.data();
     fr.width = W;
     fr.r0 = ray.r0, fr.r1 = ray.r1, fr.r2 = ray.r2, fr.cx = ray.cx, fr.cy = ray.cy, fr.ifx = ray.ifx, fr.ify = ray.ify;
-    fr.d0 = fog.d0, fr.falloff = fog.falloff, fr.exponent_c = fog.exponent_c, fr.sky_distance = sky_l;
+    fr.d0 = fog.profile.d0, fr.falloff = fog.profile.falloff, fr.exponent_c = fog.profile.exponent_c, fr.sky_distance = sky_l;
     fr.sky_infinite = a.sky_at_infinity;
     for (int c = 0; c < 3; ++c) fr.airlight[c] = a.airlight[c];
 #pragma omp parallel for num_threads(nt) schedule(static)

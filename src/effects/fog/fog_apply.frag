@@ -10,18 +10,18 @@
 // expression (depth_math.glsl), the cleared value uDepthLinear.z being sky.
 // uSkyWeight (with uSkyBlend == 1): the preparation's sky weight; a known
 // pixel of weight > 0 is the horizon margin (brume_fog_pixel).
-// Topics: haze_math, fog_math, depth_math.
+// Topics: haze_math, height_profile, fog_math, depth_math.
 uniform highp sampler2D uImage;
 uniform highp sampler2D uRange;
 uniform vec3 uRayRow;          // second row of world_from_cv
 uniform vec4 uK;               // cx, cy, 1/fx, 1/fy
-uniform int uKind;             // BrumeFog.kind
+uniform int uKind;             // BrumeProfile.kind (fog: 3, 4 classic)
 uniform vec3 uExp;             // d0, falloff, exponent_c
 uniform vec2 uBand;            // offset, half-width
 uniform vec2 uClassic;         // fog start, end
 uniform int uKnots;
-uniform float uKnotU[BRUME_FOG_MAX_KNOTS];
-uniform float uKnotD[BRUME_FOG_MAX_KNOTS];
+uniform float uKnotU[BRUME_PROFILE_MAX_KNOTS];
+uniform float uKnotD[BRUME_PROFILE_MAX_KNOTS];
 uniform float uSkyDistance;    // m, diverging sky rays (< 0: infinity, F = +inf)
 uniform float uSkyBlurDistance;  // m, the sky's blur distance
 uniform highp sampler2D uSkyWeight;
@@ -46,18 +46,18 @@ void main() {
   }
   bool sky = !(r > 0.0);
   BrumeFog fog;
-  fog.kind = uKind;
-  fog.d0 = uExp.x;
-  fog.falloff = uExp.y;
-  fog.exponent_c = uExp.z;
-  fog.band_offset = uBand.x;
-  fog.band_half_width = uBand.y;
+  fog.profile.kind = uKind;
+  fog.profile.d0 = uExp.x;
+  fog.profile.falloff = uExp.y;
+  fog.profile.exponent_c = uExp.z;
+  fog.profile.band_offset = uBand.x;
+  fog.profile.band_half_width = uBand.y;
   fog.fog_start = uClassic.x;
   fog.fog_end = uClassic.y;
-  fog.n = uKnots;
-  for (int i = 0; i < BRUME_FOG_MAX_KNOTS; ++i) {
-    fog.ku[i] = uKnotU[i];
-    fog.kd[i] = uKnotD[i];
+  fog.profile.n = uKnots;
+  for (int i = 0; i < BRUME_PROFILE_MAX_KNOTS; ++i) {
+    fog.profile.ku[i] = uKnotU[i];
+    fog.profile.kd[i] = uKnotD[i];
   }
   float ry = brume_fog_ray_y(uRayRow.x, uRayRow.y, uRayRow.z, uK.x, uK.y, uK.z, uK.w, float(p.x), float(p.y));
   float w = uSkyBlend == 1 ? texelFetch(uSkyWeight, p, 0).r : 0.0;

@@ -17,8 +17,8 @@
 namespace brume {
 namespace {
 
-constexpr int kMaxKnots = 32;  // BRUME_FOG_MAX_KNOTS in GLSL
-const gpu::PassSpec kFogPass{"fog.apply", {"haze_math", "fog_math", "depth_math"}, gpu::shaders::fog_apply_frag};
+constexpr int kMaxKnots = 32;  // BRUME_PROFILE_MAX_KNOTS in GLSL
+const gpu::PassSpec kFogPass{"fog.apply", {"haze_math", "height_profile", "fog_math", "depth_math"}, gpu::shaders::fog_apply_frag};
 const gpu::PassRegistration kFogPasses{&kFogPass};
 
 GpuTexture fog_tex(const gl::Texture& t, int w, int h) { return {t.id(), w, h}; }

@@ -101,7 +101,7 @@ const ParamTable<FogJob>& fog_job_table() {
 // fog's layer keeps its place around it.
 static std::vector<std::string> fog_scene_lengths(const FogParams& p) {
   if (p.classic == ClassicFog::linear) return {"fog-start", "fog-end", "sky-distance"};
-  if (p.classic == ClassicFog::none && p.profile == FogProfile::table) return {"sky-distance"};
+  if (p.classic == ClassicFog::none && p.profile == HeightProfile::table) return {"sky-distance"};
   return {"density", "sky-distance"};
 }
 
@@ -118,7 +118,7 @@ static std::vector<PreviewStart> fog_preview_start(const nlohmann::json& job, co
   fog_job_table().from_json(j, job, "job");
   const FogParams& p = j.fog;
   std::vector<PreviewStart> v;
-  const bool heights = p.classic == ClassicFog::none && p.profile != FogProfile::constant;
+  const bool heights = p.classic == ClassicFog::none && p.profile != HeightProfile::constant;
   double height = p.camera.height_m;
   if (heights) {
     if (!s.camera_given) v.push_back(preview_assumed_camera(s));
@@ -129,8 +129,8 @@ static std::vector<PreviewStart> fog_preview_start(const nlohmann::json& job, co
                    "fog's layer lies on the ground; set it under camera"});
     }
   }
-  if (p.classic != ClassicFog::none || p.profile == FogProfile::table || !(s.median_range_m > 0.0)) return v;
-  const double level = p.profile == FogProfile::exponential && std::isfinite(height)
+  if (p.classic != ClassicFog::none || p.profile == HeightProfile::table || !(s.median_range_m > 0.0)) return v;
+  const double level = p.profile == HeightProfile::exponential && std::isfinite(height)
                            ? std::exp(-p.falloff_per_m * (height - p.base_height_m))
                            : 1.0;
   const double tau = p.density_per_m * level * s.median_range_m;
@@ -150,7 +150,7 @@ PreviewFrame fog_preview(const nlohmann::json& job, const PreviewInputs& in) {
   fog_job_table().from_json(j, job, "job");
   const FogParams& p = j.fog;
   const int w = in.rgb.width, h = in.rgb.height;
-  const bool heights = p.classic == ClassicFog::none && p.profile != FogProfile::constant;
+  const bool heights = p.classic == ClassicFog::none && p.profile != HeightProfile::constant;
   Camera camera = heights ? depth_camera(j.input.depth, preview_full_width(in), preview_full_height(in), p.camera)
                           : make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, w, h);
   if (heights) {  // the files' camera for the inputs at 1/scale
@@ -162,7 +162,7 @@ PreviewFrame fog_preview(const nlohmann::json& job, const PreviewInputs& in) {
   const Image range = effect_range(in.prepared, blend);
   const FogAnalysis a = analyse_fog(in.rgb, in.measured, range, camera, p, j.prepare.params.s_max_factor);
   const FogDensity& d = a.density;
-  constexpr std::size_t kMaxKnots = 32;  // BRUME_FOG_MAX_KNOTS in GLSL
+  constexpr std::size_t kMaxKnots = 32;  // BRUME_PROFILE_MAX_KNOTS in GLSL
   if (d.knot_u.size() > kMaxKnots)
     throw Error("--table has " + std::to_string(d.knot_u.size()) + " rows; the GPU pass holds at most 32");
   std::vector<float> ku(kMaxKnots, 0.0f), kd(kMaxKnots, 0.0f);
@@ -224,9 +224,9 @@ PreviewFrame fog_preview(const nlohmann::json& job, const PreviewInputs& in) {
 // height above the ground. The size is nominal: neither check depends on it.
 static void check_fog_camera(const FogParams& p, const DepthSource& depth, const std::set<std::string>& given) {
   validate_fog(p, given);
-  if (p.classic != ClassicFog::none || p.profile == FogProfile::constant) return;
+  if (p.classic != ClassicFog::none || p.profile == HeightProfile::constant) return;
   depth_camera(depth, 640, 480, p.camera)
-      .require_height("--profile " + enum_name(fog_profile_names(), p.profile) + " (the fog depends on height)");
+      .require_height("--profile " + enum_name(height_profile_names(), p.profile) + " (the fog depends on height)");
 }
 
 FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSource& depth, const FogParams& p,
@@ -236,7 +236,7 @@ FogRun run_fog(DenseImageRef rgb, DenseImageRef measured_range, const DepthSourc
   check_range_step(prepare, given);
   // The pose matters only for the height profiles; classic and constant fog
   // need no intrinsics (a range map alone is enough).
-  const bool heights = p.classic == ClassicFog::none && p.profile != FogProfile::constant;
+  const bool heights = p.classic == ClassicFog::none && p.profile != HeightProfile::constant;
   const Camera camera = heights ? depth_camera(depth, rgb.width, rgb.height, p.camera)
                                 : make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, rgb.width, rgb.height);
   FogRun run;
@@ -364,13 +364,15 @@ CommandDef fog_command() {
     FogJob j;
     fog_job_table().from_json(j, job, "job");
     if (j.fog.classic != ClassicFog::none) return std::nullopt;
-    const FogTable table = j.fog.profile == FogProfile::table ? read_fog_table(j.fog.table_file) : FogTable{};
+    const DensityTable table =
+        j.fog.profile == HeightProfile::table ? read_density_table(j.fog.table_file) : DensityTable{};
     return fog_density(j.fog, table, 0.0).at(height_m);
   };
-  c.layered_medium = [](const nlohmann::json& job) {
+  c.height_medium = [](const nlohmann::json& job) -> std::shared_ptr<const HeightMedium> {
     FogJob j;
     fog_job_table().from_json(j, job, "job");
-    return j.fog.classic == ClassicFog::none && j.fog.profile != FogProfile::constant;
+    if (j.fog.classic != ClassicFog::none || j.fog.profile == HeightProfile::constant) return nullptr;
+    return std::make_shared<const HeightMedium>(j.fog);  // the profile and the pose, not the fog's look
   };
   static const auto call = array_call_table(fog_param_table(),
                                             kArrayPrepare | kArrayIntrinsics | kArrayScene | kArrayExec);
@@ -396,7 +398,7 @@ CommandDef fog_command() {
         check_fog_camera(k.p, k.depth, g);
         check_range_step(k.prepare, g);
       });
-  add_camera_lidar(c);  // after c.arrays: lidar= joins the array form
+  add_camera_lidar(c);
   return c;
 }
 

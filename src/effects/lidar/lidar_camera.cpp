@@ -7,11 +7,12 @@
 #include <cstddef>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <utility>
 #include <vector>
 
 #include "brume/error.hpp"
-#include "effects/fog/fog_job.hpp"
+#include "brume/height_profile.hpp"
 #include "brume/io.hpp"
 #include "brume/lidar_fog.hpp"
 #include "brume/medium.hpp"
@@ -27,7 +28,7 @@ namespace {
 std::set<std::string> medium_names() {
   std::set<std::string> s = {"visibility", "alpha", "profile"};
   for (const auto& d : lidar_fog_param_table().params())
-    if (fog_param_table().declares(d.spec.name) || lidar_pose_param_table().declares(d.spec.name))
+    if (height_medium_param_table().declares(d.spec.name) || lidar_pose_param_table().declares(d.spec.name))
       s.insert(d.spec.name);
   return s;
 }
@@ -54,15 +55,23 @@ const ParamTable<CameraLidar>& camera_lidar_param_table() {
 
 namespace {
 
+// The depth block's --kitti-calib: it places a scan in a medium that varies with height.
+constexpr const char* kCalib = "kitti-calib";
+
 // What the wrapper keeps of a command: its name and its medium's hooks.
 struct Hooks {
   std::string name;
   std::function<std::optional<double>(const nlohmann::json&, double)> extinction;
   std::function<std::optional<double>(const nlohmann::json&, double)> spectral;
-  std::function<bool(const nlohmann::json&)> layered;
+  std::function<std::shared_ptr<const HeightMedium>(const nlohmann::json&)> height;
 };
 Hooks hooks_of(const CommandDef& c) {
-  return {c.cli.empty() ? c.name : c.cli, c.extinction_per_m, c.spectral_extinction_per_m, c.layered_medium};
+  return {c.cli.empty() ? c.name : c.cli, c.extinction_per_m, c.spectral_extinction_per_m, c.height_medium};
+}
+
+// The job's medium where it varies with height, else null.
+std::shared_ptr<const HeightMedium> height_medium_of(const Hooks& h, const nlohmann::json& job) {
+  return h.height ? h.height(job) : nullptr;
 }
 
 std::string num6(double v) {
@@ -80,7 +89,7 @@ std::string lidar_flags(const std::string& text) {
 
 CameraLidarMedium medium_of(const Hooks& h, const nlohmann::json& job, double wavelength_nm) {
   CameraLidarMedium m;
-  if (h.layered && h.layered(job)) {  // no one alpha: brume fog's integral along each beam (lidar_params_from_fog)
+  if (height_medium_of(h, job)) {  // no one alpha: the profile's integral along each beam (lidar_params_from_profile)
     m.alpha_per_m = NAN;
     m.rule = "the camera's height profile, integrated along each beam (the scan placed by --kitti-calib and the "
              "camera's pose)";
@@ -126,20 +135,21 @@ LidarFogParams scan_params(const Hooks& h, const nlohmann::json& job, const Came
     for (const auto& [n, v] : L.medium.items()) lidar_fog_param_table().at(n).set(settings, v);
   LidarFogParams params;
   if (std::isnan(medium.alpha_per_m)) {
-    // A height profile: the fog job's profile and pose, the scan placed by
-    // the depth block's --kitti-calib (Tr_velo_to_cam, R0_rect, P2) relative
-    // to camera 2, whose pose the fog already takes.
-    FogJob f;
-    fog_job_table().from_json(f, job, "job");
-    if (f.input.depth.kitti_calib.empty())
-      throw Error("--lidar with --profile " + enum_name(fog_profile_names(), f.fog.profile) +
+    // A height profile: the job's profile and camera pose (its command's
+    // height_medium), the scan placed by the depth block's --kitti-calib
+    // (Tr_velo_to_cam, R0_rect, P2) relative to camera 2, whose pose the
+    // profile already takes.
+    const std::shared_ptr<const HeightMedium> hm = height_medium_of(h, job);
+    const std::string calib = job.contains("depth") ? job["depth"].value(kCalib, std::string()) : std::string();
+    if (calib.empty())
+      throw Error("--lidar with --profile " + enum_name(height_profile_names(), hm->profile) +
                   ": the fog varies with height, so the scan needs its pose in the camera's world; give "
                   "--kitti-calib FILE (its Tr_velo_to_cam and R0_rect place the scan relative to camera 2, whose "
                   "--camera-height, --pitch and --roll the fog takes), or use --profile constant --density D");
     LidarPose pose;
-    pose.kitti_calib = f.input.depth.kitti_calib;
+    pose.kitti_calib = calib;
     try {
-      params = lidar_params_from_fog(f.fog, pose, settings);
+      params = lidar_params_from_profile(*hm, pose, settings);
     } catch (const Error& e) {
       throw Error(lidar_flags(e.what()));
     }
@@ -264,8 +274,7 @@ std::string keyword_of(std::string flag) {
 }
 
 // A medium that varies with height (fog's profiles) also takes kitti_calib=:
-// the depth block's --kitti-calib, which places the scan in the fog's world.
-constexpr const char* kCalib = "kitti-calib";
+// the depth block's --kitti-calib (kCalib), which places the scan in the fog's world.
 ParamSpec calib_spec() {
   ParamSpec s = depth_param_table().at(kCalib).spec;
   s.help = "KITTI calibration (calib/N.txt) for lidar= in a fog that varies with height: its Tr_velo_to_cam, "
@@ -283,7 +292,7 @@ void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, Ar
   a.args.push_back({"lidar", 1, true, ArrayArg::As::view, true, true});
   for (const Param<ArrayLidar>& d : t.params()) a.specs.push_back(d.spec);
   a.defaults.update(t.to_json(ArrayLidar{}));
-  const bool layered = static_cast<bool>(h.layered);
+  const bool layered = static_cast<bool>(h.height);
   if (layered) {
     a.specs.push_back(calib_spec());
     a.defaults[a.specs.back().block][kCalib] = "";
@@ -365,7 +374,7 @@ void add_array_lidar(const Hooks& h, const std::vector<ParamSpec>& job_specs, Ar
       return r;
     }
     nlohmann::json job = job_of_call(own, job_specs);
-    const bool varies = h.layered && h.layered(job);
+    const bool varies = height_medium_of(h, job) != nullptr;
     if (varies && calib.empty())
       throw Error(fn + "(): lidar= with a fog that varies with height: the scan needs its pose in the fog's world; "
                        "give kitti_calib=FILE (KITTI's calib/N.txt: Tr_velo_to_cam and R0_rect place the scan "

@@ -13,7 +13,7 @@
 #include <sstream>
 
 #include "brume/error.hpp"
-#include "brume/fog.hpp"
+#include "brume/height_profile.hpp"
 #include "effects/lidar/lidar_fog_tables.hpp"
 
 namespace brume {
@@ -127,8 +127,9 @@ void throw_overflow(const float* in, long long index, const std::string& what) {
 namespace {
 
 // The flags of a height-layered fog: the profile's fields and camera 2's
-// pose, nested from brume fog's table (the same names, units, ranges, help).
-const std::vector<std::string>& fog_fields() {
+// pose, nested from the height medium's table (brume/height_profile.hpp:
+// the camera effects' names, units, ranges, help).
+const std::vector<std::string>& profile_fields() {
   static const std::vector<std::string> v = {"density",   "falloff",     "base-height", "band-center",
                                              "band-half-width", "ramp-bottom", "ramp-top", "table"};
   return v;
@@ -194,7 +195,7 @@ const ParamTable<LidarFogParams>& lidar_fog_param_table() {
     ParamSpec prof;
     prof.name = "profile";
     prof.kind = ParamKind::choice;
-    for (const auto& [e, name] : fog_profile_names()) prof.choices.emplace_back(name);
+    for (const auto& [e, name] : height_profile_names()) prof.choices.emplace_back(name);
     prof.optional = true;
     prof.unset_word = "none";
     prof.help =
@@ -204,17 +205,13 @@ const ParamTable<LidarFogParams>& lidar_fog_param_table() {
     d.custom(
         prof,
         [](const LidarFogParams& p) {
-          return p.profile ? nlohmann::json(enum_name(fog_profile_names(), *p.profile)) : nlohmann::json();
+          return p.profile ? nlohmann::json(enum_name(height_profile_names(), *p.profile)) : nlohmann::json();
         },
         [](LidarFogParams& p, const nlohmann::json& v) {
           if (v.is_null()) p.profile.reset();
-          else p.profile = parse_enum(fog_profile_names(), v.get<std::string>(), "--profile");
+          else p.profile = parse_enum(height_profile_names(), v.get<std::string>(), "--profile");
         });
-    std::set<std::string> skip;
-    for (const auto& q : fog_param_table().params()) skip.insert(q.spec.name);
-    for (const auto& f : fog_fields()) skip.erase(f);
-    for (const auto& f : pose_fields()) skip.erase(f);
-    d.nest_except(&LidarFogParams::fog, fog_param_table(), skip)
+    d.nest_except(&LidarFogParams::fog, height_medium_param_table(), {"profile"})
         .nest(&LidarFogParams::pose, lidar_pose_param_table())
         .real("elevation-step", &LidarFogParams::elevation_step_deg, "deg", Range::closed(0.001, 1.0),
               "with --profile: width of the elevation bins (in sin(elevation), as radians) that share one soft-return "
@@ -239,7 +236,7 @@ void validate_lidar_fog(const LidarFogParams& p) {
       throw Error(p.visibility_m ? "--visibility and --alpha both given; give one of them (alpha = 3.912/V)"
                                  : "no fog given: use --visibility V (metres) or --alpha A (1/m), or a height-layered "
                                    "fog with --profile");
-    std::vector<std::string> layered = fog_fields();
+    std::vector<std::string> layered = profile_fields();
     layered.insert(layered.end(), pose_fields().begin(), pose_fields().end());
     layered.insert(layered.end(), {"kitti-calib", "sensor-height", "elevation-step"});
     for (const std::string& f : layered)
@@ -249,7 +246,7 @@ void validate_lidar_fog(const LidarFogParams& p) {
                     " or give --profile");
     return;
   }
-  const std::string prof = "--profile " + enum_name(fog_profile_names(), *p.profile);
+  const std::string prof = "--profile " + enum_name(height_profile_names(), *p.profile);
   if (p.alpha_per_m || p.visibility_m)
     throw Error(prof + " and " + (p.alpha_per_m ? "--alpha" : "--visibility") +
                 " both give the fog: --alpha and --visibility are a homogeneous fog's extinction, --profile a "
@@ -258,11 +255,10 @@ void validate_lidar_fog(const LidarFogParams& p) {
     throw Error("--beta-b " + num(*p.beta_b) + " is one backscatter coefficient for a homogeneous fog; with " + prof +
                 " the backscatter follows the local density: give --lidar-ratio S instead (beta_b = delta(y)/S; the "
                 "paper's 0.046/MOR is S = 65.1 sr)");
-  FogParams f = p.fog;
+  HeightMedium f = p.fog;
   f.profile = *p.profile;
-  f.classic = ClassicFog::none;
-  validate_fog(f);  // the profile's fields; a pose with --profile constant
-  if (*p.profile == FogProfile::constant) {
+  validate_height_medium(f);  // the profile's fields; a pose with --profile constant
+  if (*p.profile == HeightProfile::constant) {
     for (const char* n : {"kitti-calib", "sensor-height", "elevation-step"})
       if (is_set(n))
         throw Error(std::string("--") + n + " places the beams in the fog's heights, but " + prof +
@@ -290,26 +286,18 @@ void validate_lidar_fog(const LidarFogParams& p) {
   }
 }
 
-LidarFogParams lidar_params_from_fog(const FogParams& fog, const LidarPose& pose, LidarFogParams base) {
-  if (fog.classic != ClassicFog::none)
-    throw Error("--classic " + enum_name(classic_fog_names(), fog.classic) +
-                " is OpenGL's fog on the range, not a medium a LiDAR can see; use a height profile or --visibility");
+LidarFogParams lidar_params_from_profile(const HeightMedium& medium, const LidarPose& pose, LidarFogParams base) {
   base.visibility_m.reset();
   base.alpha_per_m.reset();
   base.beta_b.reset();
-  base.profile = fog.profile;
-  // Only the profile's fields and the pose travel (the image's airlight,
-  // blur and sky are the camera's).
-  base.fog = FogParams{};
-  const auto& t = fog_param_table();
-  for (const auto& names : {fog_fields(), pose_fields()})
-    for (const std::string& n : names) t.at(n).set(base.fog, t.at(n).get(fog));
-  base.pose = fog.profile == FogProfile::constant ? LidarPose{} : pose;
-  if (fog.profile == FogProfile::constant) base.fog.camera = CameraPose{};
+  base.profile = medium.profile;
+  base.fog = medium;
+  base.pose = medium.profile == HeightProfile::constant ? LidarPose{} : pose;
+  if (medium.profile == HeightProfile::constant) base.fog.camera = CameraPose{};
   return base;
 }
 
-static bool layered(const LidarFogParams& p) { return p.profile && *p.profile != FogProfile::constant; }
+static bool layered(const LidarFogParams& p) { return p.profile && *p.profile != HeightProfile::constant; }
 
 LidarFogMedium lidar_fog_medium(const LidarFogParams& p) {
   validate_lidar_fog(p);
@@ -360,7 +348,7 @@ RigidTransform lidar_world_from_scan(const LidarFogParams& p) {
   const Vec3 b = r0 * Vec3{c.Tr[3], c.Tr[7], c.Tr[11]};
   const Vec3 in_cam2{b.x + tx, b.y + ty, b.z + tz};  // the scan's origin from camera 2's centre
   const Camera cam = make_camera(Intrinsics{1.0, 1.0, NAN, NAN}, 1, 1, p.fog.camera);
-  cam.require_height("--profile " + enum_name(fog_profile_names(), *p.profile) + " with --kitti-calib");
+  cam.require_height("--profile " + enum_name(height_profile_names(), *p.profile) + " with --kitti-calib");
   const RigidTransform wc = cam.world_from_camera();
   t.rotation = wc.rotation * a;
   t.translation = wc.apply(in_cam2);

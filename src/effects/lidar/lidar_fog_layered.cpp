@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "brume/error.hpp"
-#include "brume/fog.hpp"
+#include "brume/height_profile.hpp"
 #include "brume/lidar_fog.hpp"
 #include "effects/lidar/lidar_fog_tables.hpp"
 
@@ -32,7 +32,7 @@ std::string metres(double v) {
 // are computed in batches (prepare), one conversion of the density each.
 struct BeamIntegrand {
   double r1 = 0.0, r2 = 0.0, s = 0.0, h = 0.0;
-  const FogDensity* d = nullptr;
+  const HeightDensity* d = nullptr;
   std::vector<double> node_g, mid_g;  // g at r_j = j·h and at (j + ½)·h
   std::vector<float> node_f;          // F at r_j
 
@@ -44,7 +44,7 @@ struct BeamIntegrand {
   double g(double r) const {
     const float rf = static_cast<float>(r), sf = static_cast<float>(s);
     float f = 0.0f;
-    fog_optical_depths(*d, &rf, &sf, &f, 1);
+    height_optical_depths(*d, &rf, &sf, &f, 1);
     return value(r, f);
   }
   double node(std::size_t j, double) const { return node_g[j]; }
@@ -57,7 +57,7 @@ struct BeamIntegrand {
     std::vector<float> r(nn + nm), y(nn + nm, static_cast<float>(s)), f(nn + nm);
     for (std::size_t k = 0; k < nn; ++k) r[k] = static_cast<float>(static_cast<double>(n0 + k) * h);
     for (std::size_t k = 0; k < nm; ++k) r[nn + k] = static_cast<float>((static_cast<double>(m0 + k) + 0.5) * h);
-    fog_optical_depths(*d, r.data(), y.data(), f.data(), nn + nm);
+    height_optical_depths(*d, r.data(), y.data(), f.data(), nn + nm);
     for (std::size_t k = 0; k < nn; ++k) {
       node_f.push_back(f[k]);
       node_g.push_back(value(static_cast<double>(n0 + k) * h, f[k]));
@@ -72,7 +72,7 @@ class BeamSoft {
  public:
   // The table to r_end (the farthest point) or, with `stop`, to where no
   // later node can exceed the curve's maximum so far.
-  BeamSoft(const LidarFogParams& p, const LidarFogMedium& m, const FogDensity& d, double s, double r_end, bool stop)
+  BeamSoft(const LidarFogParams& p, const LidarFogMedium& m, const HeightDensity& d, double s, double r_end, bool stop)
       : c_(m.pulse_m), r1_(p.r1_m) {
     h_ = c_.h;
     f_.r1 = p.r1_m, f_.r2 = p.r2_m, f_.s = s, f_.h = h_, f_.d = &d;
@@ -85,7 +85,7 @@ class BeamSoft {
     //   P(R') ≤ k·δ_max·(L/2)·e^{−2F(R−L)}/(R−L)²   (∫ sin² over the window = L/2,
     //          δ_max the largest density on the beam), and
     //   P(R') ≤ k·½·e^{−2F(R−L)}/(R−L)²             (∫ δ·e^{−2F} dr = ½ Δe^{−2F}: dF/dr = δ).
-    const double bound_k = std::min(k_ * fog_max_density(d, 0.0, s * r_end) * 0.5 * m.pulse_m, 0.5 * k_);
+    const double bound_k = std::min(k_ * height_density_max(d, 0.0, s * r_end) * 0.5 * m.pulse_m, 0.5 * k_);
     constexpr std::size_t kChunk = 512;
     while (c_.size() < want) {
       const std::size_t from = c_.size(), to = std::min(want, from + kChunk);
@@ -167,15 +167,14 @@ class BeamSoft {
 LayeredMedium layered_medium(const LidarFogParams& p) {
   LayeredMedium md;
   md.world_from_scan = lidar_world_from_scan(p);
-  FogParams f = p.fog;
+  HeightMedium f = p.fog;
   f.profile = *p.profile;
-  f.classic = ClassicFog::none;
-  if (f.profile == FogProfile::table) md.table = read_fog_table(f.table_file);
-  md.density = fog_density(f, md.table, md.world_from_scan.translation.y);
+  if (f.profile == HeightProfile::table) md.table = read_density_table(f.table_file);
+  md.density = height_density(f, md.table, md.world_from_scan.translation.y);
   // One evaluation outside the threads: a table of too many rows is refused here.
   const float r = 1.0f, y = 0.0f;
   float out = 0.0f;
-  fog_optical_depths(md.density, &r, &y, &out, 1);
+  height_optical_depths(md.density, &r, &y, &out, 1);
   return md;
 }
 
@@ -229,7 +228,7 @@ LidarFogStats layered_fog(const float* in, float* out, std::size_t n, const Lida
 #pragma omp parallel for schedule(static) if (n >= 65536)
   for (long long b = 0; b < (count + kBatch - 1) / kBatch; ++b) {
     const std::size_t a = static_cast<std::size_t>(b * kBatch);
-    fog_optical_depths(md.density, rf.data() + a, sf.data() + a, depth.data() + a,
+    height_optical_depths(md.density, rf.data() + a, sf.data() + a, depth.data() + a,
                        std::min<std::size_t>(kBatch, n - a));
   }
 

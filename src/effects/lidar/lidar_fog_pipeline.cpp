@@ -5,7 +5,7 @@
 
 #include "brume/command.hpp"
 #include "brume/error.hpp"
-#include "brume/fog.hpp"
+#include "brume/height_profile.hpp"
 #include "brume/io.hpp"
 #include "brume/lidar_fog.hpp"
 #include "brume/record.hpp"
@@ -18,7 +18,7 @@ namespace fs = std::filesystem;
 nlohmann::json lidar_fog_record(const LidarFogParams& p, const LidarFogStats& st) {
   const LidarFogMedium m = lidar_fog_medium(p);
   auto finite_or_null = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
-  const bool layered = p.profile && *p.profile != FogProfile::constant;
+  const bool layered = p.profile && *p.profile != HeightProfile::constant;
   nlohmann::json j = {
       {"model", layered ? "Hahner et al. ICCV 2021 (from the paper's equations) with brume's height-layered fog "
                           "along each beam"
@@ -37,7 +37,7 @@ nlohmann::json lidar_fog_record(const LidarFogParams& p, const LidarFogStats& st
       {"table_step_m", m.pulse_m / kLidarStepsPerPulse},
       {"seed", p.seed},
       {"noise", p.noise}};
-  if (p.profile) j["profile"] = enum_name(fog_profile_names(), *p.profile);
+  if (p.profile) j["profile"] = enum_name(height_profile_names(), *p.profile);
   if (layered) {
     const RigidTransform t = lidar_world_from_scan(p);
     nlohmann::json rot = nlohmann::json::array();
@@ -98,8 +98,8 @@ nlohmann::json run_lidar_fog_job(const LidarFogJob& job, const RunContext& ctx) 
   if (job.fog.profile && !job.fog.fog.camera.view_matrix_file.empty())
     inputs["view_matrix"] = {{"path", job.fog.fog.camera.view_matrix_file},
                              {"sha256", sha256_file(job.fog.fog.camera.view_matrix_file)}};
-  if (job.fog.profile == FogProfile::table)
-    inputs["fog_table"] = {{"path", job.fog.fog.table_file}, {"sha256", sha256_file(job.fog.fog.table_file)}};
+  if (job.fog.profile == HeightProfile::table)
+    inputs[kDensityTableInput] = {{"path", job.fog.fog.table_file}, {"sha256", sha256_file(job.fog.fog.table_file)}};
   const nlohmann::json rec =
       job_record("lidar fog", ctx, lidar_fog_job_table().to_json(job), inputs, {{"lidar", lidar_fog_record(job.fog, st)}},
                  false);
@@ -161,10 +161,10 @@ CommandDef lidar_fog_command() {
     LidarFogJob j;
     lidar_fog_job_table().from_json(j, job, "job");
     if (j.fog.profile) {  // the profile's density at that height (brume fog's)
-      FogParams f = j.fog.fog;
+      HeightMedium f = j.fog.fog;
       f.profile = *j.fog.profile;
-      const FogTable table = f.profile == FogProfile::table ? read_fog_table(f.table_file) : FogTable{};
-      return fog_density(f, table, 0.0).at(height_m);
+      const DensityTable table = f.profile == HeightProfile::table ? read_density_table(f.table_file) : DensityTable{};
+      return height_density(f, table, 0.0).at(height_m);
     }
     if (!j.fog.visibility_m && !j.fog.alpha_per_m) return std::nullopt;  // no fog given yet
     return lidar_fog_medium(j.fog).alpha;

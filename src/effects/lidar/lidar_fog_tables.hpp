@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "brume/error.hpp"
-#include "brume/fog.hpp"
+#include "brume/height_profile.hpp"
 #include "brume/lidar_fog.hpp"
 
 namespace brume::lidar_detail {
@@ -251,8 +251,8 @@ struct PointRule {
 // origin's place (reads --kitti-calib and a --table file once).
 struct LayeredMedium {
   RigidTransform world_from_scan;
-  FogTable table;
-  FogDensity density;
+  DensityTable table;
+  HeightDensity density;
 };
 LayeredMedium layered_medium(const LidarFogParams& p);
 

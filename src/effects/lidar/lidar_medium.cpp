@@ -30,10 +30,10 @@ class LidarFog final : public Medium {
     const double norm = std::sqrt(w.x * w.x + w.y * w.y + w.z * w.z);
     lidar_detail::LayeredMedium md = *layered_;
     // A ray that does not start at the scan's origin starts at another height.
-    if (o.y != 0.0) md.density = fog_density(layered_fog_params(), md.table, md.world_from_scan.translation.y + o.y);
+    if (o.y != 0.0) md.density = height_density(layered_profile(), md.table, md.world_from_scan.translation.y + o.y);
     const float r = static_cast<float>(range_m), s = static_cast<float>(norm > 0.0 ? w.y / norm : 0.0);
     float f = 0.0f;
-    fog_optical_depths(md.density, &r, &s, &f, 1);
+    height_optical_depths(md.density, &r, &s, &f, 1);
     return f;
   }
 
@@ -52,7 +52,7 @@ class LidarFog final : public Medium {
       rf[i] = static_cast<float>(std::sqrt(x * x + y * y + z * z));
       sf[i] = static_cast<float>(norm > 0.0 ? w.y / norm : 0.0);
     }
-    fog_optical_depths(layered_->density, rf.data(), sf.data(), f.data(), n);
+    height_optical_depths(layered_->density, rf.data(), sf.data(), f.data(), n);
     for (std::size_t i = 0; i < n; ++i) tau[i] = f[i];
   }
 
@@ -78,10 +78,9 @@ class LidarFog final : public Medium {
   }
 
  private:
-  FogParams layered_fog_params() const {
-    FogParams f = p_.fog;
+  HeightMedium layered_profile() const {
+    HeightMedium f = p_.fog;
     f.profile = *p_.profile;
-    f.classic = ClassicFog::none;
     return f;
   }
 
