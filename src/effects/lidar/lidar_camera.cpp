@@ -16,6 +16,7 @@
 #include "brume/io.hpp"
 #include "brume/lidar_fog.hpp"
 #include "brume/medium.hpp"
+#include "core/text.hpp"
 
 namespace brume {
 
@@ -74,12 +75,6 @@ std::shared_ptr<const HeightMedium> height_medium_of(const Hooks& h, const nlohm
   return h.height ? h.height(job) : nullptr;
 }
 
-std::string num6(double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.6g", v);
-  return b;
-}
-
 // brume lidar fog's messages name its flags (--r2); here they are --lidar-r2.
 std::string lidar_flags(const std::string& text) {
   return prefix_flag_mentions(text, "lidar-",
@@ -98,7 +93,7 @@ CameraLidarMedium medium_of(const Hooks& h, const nlohmann::json& job, double wa
   std::optional<double> a;
   if (h.spectral) {
     a = h.spectral(job, wavelength_nm);
-    m.rule = "the camera's spectral extinction at the LiDAR's wavelength " + num6(wavelength_nm) + " nm";
+    m.rule = "the camera's spectral extinction at the LiDAR's wavelength " + text::g(wavelength_nm) + " nm";
   } else if (h.extinction) {
     a = h.extinction(job, 0.0);
     m.rule = "the camera's extinction (a grey medium: the same at every wavelength)";
@@ -110,7 +105,7 @@ CameraLidarMedium medium_of(const Hooks& h, const nlohmann::json& job, double wa
                 " job has no physical extinction: give --visibility V in metres (haze; or --range-max R with "
                 "--kappa-a/--kappa-s), a fog height profile rather than --classic, or drop --lidar");
   if (!std::isfinite(*a) || *a < 0.0)
-    throw Error("--lidar: the camera's extinction " + num6(*a) + " 1/m is not a finite value >= 0");
+    throw Error("--lidar: the camera's extinction " + text::g(*a) + " 1/m is not a finite value >= 0");
   m.alpha_per_m = *a;
   return m;
 }
@@ -437,7 +432,7 @@ void join_scan(CommandDef& c) {
     if (inner) inner(job, rec);
     if (!rec.is_object() || !rec.contains("lidar") || !rec["lidar"].contains("soft_points")) return;
     const auto& l = rec["lidar"];
-    const std::string medium = l["alpha_per_m"].is_number() ? "alpha " + num6(l["alpha_per_m"].get<double>()) + " 1/m"
+    const std::string medium = l["alpha_per_m"].is_number() ? "alpha " + text::g(l["alpha_per_m"].get<double>()) + " 1/m"
                                                              : "the profile along each beam";
     std::fprintf(stderr, "  and its scan: %s  %s  %zu of %zu points turned into fog (%.2f %%)\n",
                  job["lidar"].value("lidar-out", "").c_str(), medium.c_str(), l["soft_points"].get<std::size_t>(),

@@ -14,6 +14,7 @@
 
 #include "brume/error.hpp"
 #include "brume/height_profile.hpp"
+#include "core/text.hpp"
 #include "effects/lidar/lidar_fog_tables.hpp"
 
 namespace brume {
@@ -21,12 +22,6 @@ namespace brume {
 using namespace lidar_detail;
 
 namespace {
-
-std::string num(double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.6g", v);
-  return b;
-}
 
 // The overlap ξ(r) and the soft integrand's g(r) = ξ(r)·e^{−2αr}/r².
 struct Integrand {
@@ -118,7 +113,7 @@ double range_m(const float* q) {
 namespace lidar_detail {
 void throw_overflow(const float* in, long long index, const std::string& what) {
   const float* q = in + 4 * index;
-  throw Error(what + ": point " + std::to_string(index) + " (intensity " + num(q[3]) + ", range " + num(range_m(q)) +
+  throw Error(what + ": point " + std::to_string(index) + " (intensity " + text::g(q[3]) + ", range " + text::g(range_m(q)) +
               " m) gives a fog return whose intensity overflows float32; its intensity or range is not a LiDAR's: "
               "drop the point or check the scan");
 }
@@ -225,10 +220,10 @@ void validate_lidar_fog(const LidarFogParams& p) {
   const ParamTable<LidarFogParams>& t = lidar_fog_param_table();
   t.validate(p);
   if (!(p.r2_m > p.r1_m))
-    throw Error("--r2 " + num(p.r2_m) + " must exceed --r1 " + num(p.r1_m) +
+    throw Error("--r2 " + text::g(p.r2_m) + " must exceed --r1 " + text::g(p.r1_m) +
                 " (the overlap rises from 0 at R1 to 1 at R2); give --r2 greater than --r1");
   if (p.beta_b && p.lidar_ratio_sr)
-    throw Error("--beta-b " + num(*p.beta_b) + " and --lidar-ratio " + num(*p.lidar_ratio_sr) +
+    throw Error("--beta-b " + text::g(*p.beta_b) + " and --lidar-ratio " + text::g(*p.lidar_ratio_sr) +
                 " both set the fog's backscatter (beta_b = alpha/S); give one of them");
   auto is_set = [&](const std::string& name) { return t.is_set(p, name, {}); };
   if (!p.profile) {
@@ -252,7 +247,7 @@ void validate_lidar_fog(const LidarFogParams& p) {
                 " both give the fog: --alpha and --visibility are a homogeneous fog's extinction, --profile a "
                 "height-layered one's (its --density, ...); give one of them");
   if (p.beta_b)
-    throw Error("--beta-b " + num(*p.beta_b) + " is one backscatter coefficient for a homogeneous fog; with " + prof +
+    throw Error("--beta-b " + text::g(*p.beta_b) + " is one backscatter coefficient for a homogeneous fog; with " + prof +
                 " the backscatter follows the local density: give --lidar-ratio S instead (beta_b = delta(y)/S; the "
                 "paper's 0.046/MOR is S = 65.1 sr)");
   HeightMedium f = p.fog;
@@ -407,7 +402,7 @@ LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarF
   for (std::size_t i = 0; i < n; ++i)
     if (static_cast<double>(in[4 * i + 3]) * p.intensity_scale > 255.0) ++above;
   if (n > 0 && 2 * above > n)
-    throw Error("--intensity-scale " + num(p.intensity_scale) + ": " + num(100.0 * above / n) +
+    throw Error("--intensity-scale " + text::g(p.intensity_scale) + ": " + text::g(100.0 * above / n) +
                 " % of the intensities of " + what + " times it exceed 255, the model's scale [0, 255]; KITTI's reflectance is in [0, 1] "
                 "(scale 255); for a scan already in [0, 255] give --intensity-scale 1");
   if (layered(p)) return layered_fog(in, out, n, p, m, what);

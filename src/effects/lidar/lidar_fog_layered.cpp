@@ -11,6 +11,7 @@
 #include "brume/error.hpp"
 #include "brume/height_profile.hpp"
 #include "brume/lidar_fog.hpp"
+#include "core/text.hpp"
 #include "effects/lidar/lidar_fog_tables.hpp"
 
 namespace brume::lidar_detail {
@@ -18,12 +19,6 @@ namespace brume::lidar_detail {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-std::string metres(double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.6g", v);
-  return b;
-}
 
 // Along one beam from the scan's origin climbing at s = sin θ: the density
 // δ(r) = d.at(r·s) (d relative to the origin's height), the optical depth
@@ -180,8 +175,8 @@ LayeredMedium layered_medium(const LidarFogParams& p) {
 
 SoftCurve layered_soft_curve(const LidarFogParams& p, const LidarFogMedium& m, double range_end_m) {
   if (!(range_end_m <= kLidarLayeredRangeMax))
-    throw Error("--soft-curve: the scan's farthest point is " + metres(range_end_m) + " m away; a height-layered "
-                "fog's curve is tabulated up to " + metres(kLidarLayeredRangeMax) + " m: drop the farther points");
+    throw Error("--soft-curve: the scan's farthest point is " + text::g(range_end_m) + " m away; a height-layered "
+                "fog's curve is tabulated up to " + text::g(kLidarLayeredRangeMax) + " m: drop the farther points");
   const LayeredMedium md = layered_medium(p);
   const double end = std::max(range_end_m, p.r2_m + m.pulse_m);
   const BeamSoft b(p, m, md.density, 0.0, end, false);
@@ -236,8 +231,8 @@ LidarFogStats layered_fog(const float* in, float* out, std::size_t n, const Lida
   // farther than any LiDAR's return is refused rather than tabulated.
   for (std::size_t i = 0; i < n; ++i)
     if (active[i] && range[i] > kLidarLayeredRangeMax)
-      throw Error(what + ": point " + std::to_string(i) + " is " + metres(range[i]) + " m away; a height-layered fog tabulates the soft return along each beam to its farthest point, up "
-                  "to " + metres(kLidarLayeredRangeMax) + " m (no LiDAR return is farther): drop the point or check the scan's units");
+      throw Error(what + ": point " + std::to_string(i) + " is " + text::g(range[i]) + " m away; a height-layered fog tabulates the soft return along each beam to its farthest point, up "
+                  "to " + text::g(kLidarLayeredRangeMax) + " m (no LiDAR return is farther): drop the point or check the scan's units");
 
   // Bins of width Δ in s over the points that can turn into fog (R0 > R1,
   // intensity > 0); the others are attenuated here.
