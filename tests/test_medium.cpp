@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <string>
 #include <vector>
 
 #include "brume/error.hpp"
@@ -80,6 +81,31 @@ TEST(Medium, ImageThroughAnAnalyticAndAParticleMedium) {
   Image sky = range;
   sky.at(2, 2) = NAN;
   EXPECT_EQ(image_through_media({&haze}, rgb, sky, cam, airlight).at(2, 2, 0), 0.0f);
+}
+
+// A particle that claims to cover more than its pixel is a broken medium:
+// refused, naming the pixel and the value, never clamped.
+TEST(Medium, ACoverageOutsideZeroOneIsRefused) {
+  class Broken final : public Medium {
+   public:
+    double extinction_per_m() const override { return 0.0; }
+    double sampled_range_m() const override { return 10.0; }
+    void particles(const MediumRay&, double, double, std::vector<Particle>& out) const override {
+      out.push_back({5.0, 0.0, 1.5, {1.0f, 1.0f, 1.0f}});
+    }
+    nlohmann::json scan_record(const ScanRun&) const override { return nlohmann::json::object(); }
+  };
+  Camera cam;
+  cam.k = {2.0, 2.0, 1.0, 1.0};
+  cam.width = cam.height = 2;
+  const Broken b;
+  try {
+    image_through_media({&b}, Image(2, 2, 3, 0.0f), Image(2, 2, 1, 20.0f), cam, {1.0f, 1.0f, 1.0f});
+    FAIL() << "a coverage of 1.5 was taken";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("covers 1.5 of it"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("pixel (0, 0)"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Medium, ScanArraysOfAnotherShapeAreRefused) {

@@ -7,6 +7,7 @@
 #include <cstring>
 
 #include "brume/error.hpp"
+#include "core/text.hpp"
 
 namespace brume {
 
@@ -61,11 +62,9 @@ ScanRun scan_through_media(const std::vector<const Medium*>& media, const float*
   }
   // Extinctions add along every beam.
   std::vector<double> tau(n, 0.0), own(n);
-  std::vector<std::vector<double>> per(media.size());
-  for (std::size_t m = 0; m < media.size(); ++m) {
-    media[m]->scan_optical_depths(in, n, own.data());
+  for (const Medium* m : media) {
+    m->scan_optical_depths(in, n, own.data());
     for (std::size_t i = 0; i < n; ++i) tau[i] += own[i];
-    per[m] = own;
   }
   // The union of the media's echoes, each attenuated by the other media to its range.
   std::vector<double> best(n, -1.0), best_range(n, 0.0);
@@ -81,7 +80,7 @@ ScanRun scan_through_media(const std::vector<const Medium*>& media, const float*
         if (k != m) others += media[k]->optical_depth(b, e.range_m);
       const double v = e.intensity * std::exp(-2.0 * others);
       if (!std::isfinite(v))
-        throw Error(what + ": point " + std::to_string(e.point) + " gets an echo of intensity " + std::to_string(v) +
+        throw Error(what + ": point " + std::to_string(e.point) + " gets an echo of intensity " + text::g(v) +
                     " from a medium; an echo must be finite");
       if (v > best[e.point]) best[e.point] = v, best_range[e.point] = e.range_m;
     }
@@ -152,7 +151,11 @@ Image image_through_media(const std::vector<const Medium*>& media, DenseImageRef
         };
         for (const Particle& p : met) {
           segment(p.range_m);
-          const double a = std::clamp(p.coverage, 0.0, 1.0);
+          const double a = p.coverage;
+          if (!(a >= 0.0 && a <= 1.0))
+            throw Error("image_through_media: a particle at " + text::g(p.range_m) + " m on pixel (" +
+                        std::to_string(x) + ", " + std::to_string(y) + ") covers " + text::g(a) +
+                        " of it; a medium's particle covers a fraction in [0, 1]");
           for (int k = 0; k < 3; ++k) c[k] = (1.0 - a) * c[k] + a * p.radiance[k];
         }
         segment(0.0);
