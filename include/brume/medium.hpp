@@ -27,6 +27,8 @@
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -57,18 +59,61 @@ struct Particle {
 
 // One point's return from a medium's particles (or its volume: the LiDAR
 // fog's soft return): the point index in the scan, the return's range and
-// intensity through this medium alone.
+// intensity through this medium alone. `intensity` is on the target's scale:
+// the intensity the point's target would have for the same received power
+// (so its power is intensity/R0², R0 the target's range), which is what the
+// strongest-return rule compares. `reported`: the intensity the point carries
+// when this echo wins, where the medium reports another than `intensity`
+// (rain: a drop's apparent reflectance at its own range); NaN: `intensity`.
 struct ScanEcho {
   std::size_t point = 0;
   double range_m = 0.0;
   double intensity = 0.0;
+  double reported = std::numeric_limits<double>::quiet_NaN();
 };
 
 // What fogging a scan did.
 struct ScanRun {
   std::size_t points = 0;
   std::size_t echoes = 0;  // points that became a medium's return (moved along their beam)
+  std::size_t lost = 0;    // points no return of which was detected (only with a ScanDetection)
 };
+
+// The labels of a scan's points (one uint8 per input point).
+enum class ScanLabel : std::uint8_t { kept = 0, moved = 1, lost = 2 };
+
+// The sensor's detection (issue #56): a point is lost when the media weaken
+// its return below the noise floor. A return of mean power P (intensity/R²,
+// the scan's intensity scale per m²) is detected with the probability
+// p(P) = e^{−F/P} (fully developed speckle: exponential power, threshold F).
+// A point of the scan was detected in clear air, and its clear mean power is
+// taken as x = max(i/R², F) (its intensity says less than the floor where it
+// is quantised to 0: KITTI's 8.5 % of reflectance-0 points); through the
+// media (two-way transmittance T) it is detected again with the conditional
+// probability p(x·T)/p(x) = e^{−(F/x)(1/T − 1)}, which is 1 at T = 1 and
+// falls continuously as T does (≥ 1 − 2τ for a point at the floor): no
+// point is lost at a vanishing rate. Echoes below F are never detected.
+struct ScanDetection {
+  double floor_per_m2 = 0.0;  // [intensity/m²] > 0, F
+  std::uint64_t seed = 0;     // the speckle draws' seed (one uniform per point)
+};
+
+// A counter-based hash (issue #56): 64 bits from a seed and counters (a
+// frame, a cell, a drop, a lane, a point), the same on every platform,
+// thread and order of calls, so that a particle medium's particles depend on
+// their counters only. Each word goes through the SplitMix64 finaliser
+// (Steele, Lea & Flood, OOPSLA 2014: a bijection of 64 bits with full
+// avalanche) and is folded into the state, which is mixed again.
+inline std::uint64_t hash_mix(std::uint64_t z) {
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+inline std::uint64_t hash_fold(std::uint64_t state, std::uint64_t word) {
+  return hash_mix(state ^ hash_mix(word + 0x9e3779b97f4a7c15ull));
+}
+// A uniform draw in [0, 1) from a hash: its top 53 bits.
+inline double hash_unit(std::uint64_t h) { return static_cast<double>(h >> 11) * 0x1.0p-53; }
 
 class Medium {
  public:
@@ -108,8 +153,16 @@ class Medium {
 // of its target's return i·e^{−2τ(R0)} and the media's echoes (moved along its
 // beam to the echo's range). Refuses (brume::Error naming `what`) an echo
 // whose intensity is not finite.
+// With `detection` (a sensor's noise floor, above), echoes below the floor
+// are not offered, a point whose target wins is kept with the conditional
+// probability of ScanDetection (its speckle draw hashed from the seed and
+// the point's index), else it takes the strongest echo or is lost; `out`
+// then receives the points that return, in input order (ScanRun::points −
+// ScanRun::lost of them). `labels` (n bytes, may be null): each input
+// point's ScanLabel.
 ScanRun scan_through_media(const std::vector<const Medium*>& media, const float* in, float* out, std::size_t n,
-                           const std::string& what = "the scan");
+                           const std::string& what = "the scan", const ScanDetection* detection = nullptr,
+                           std::uint8_t* labels = nullptr);
 
 // An array form's scan (an (N, 4) array of x, y, z, intensity, read as an
 // N x 4 map): its points, in place when its rows are dense, else gathered

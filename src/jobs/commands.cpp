@@ -29,6 +29,7 @@ namespace brume {
   X(sky_render_command) \
   X(sky_fit_command) \
   X(lidar_fog_command) \
+  X(lidar_rain_command) \
   X(view_command)
 
 #define BRUME_DECLARE(f) CommandDef f();
@@ -56,7 +57,7 @@ const std::vector<CommandGroup>& command_groups() {
   static const std::vector<CommandGroup> g = {
       {"depth", "depth maps: convert any depth source to range or planar z, prepare it, complete a sparse one, match a stereo pair"},
       {"sky", "the Preetham sky: render one, or fit the turbidity of a sky photo (Morales ch. 2)"},
-      {"lidar", "LiDAR scans: fog one (attenuation and fog returns, Hahner et al. 2021)"},
+      {"lidar", "LiDAR scans: fog one (attenuation and fog returns, Hahner et al. 2021) or rain on one (drop echoes, lost points)"},
   };
   return g;
 }

@@ -52,14 +52,19 @@ void Medium::scan_echoes(const float* points, std::size_t n, std::vector<ScanEch
 bool Medium::scan_alone(const float*, float*, std::size_t, const std::string&) const { return false; }
 
 ScanRun scan_through_media(const std::vector<const Medium*>& media, const float* in, float* out, std::size_t n,
-                           const std::string& what) {
+                           const std::string& what, const ScanDetection* detection, std::uint8_t* labels) {
   ScanRun run;
   run.points = n;
-  if (media.size() == 1 && media[0]->scan_alone(in, out, n, what)) {
+  if (!detection && media.size() == 1 && media[0]->scan_alone(in, out, n, what)) {
     // Its own model counts its own returns: a moved point is one that changed place.
-    for (std::size_t i = 0; i < n; ++i) run.echoes += std::memcmp(in + 4 * i, out + 4 * i, 3 * sizeof(float)) != 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const bool moved = std::memcmp(in + 4 * i, out + 4 * i, 3 * sizeof(float)) != 0;
+      run.echoes += moved;
+      if (labels) labels[i] = static_cast<std::uint8_t>(moved ? ScanLabel::moved : ScanLabel::kept);
+    }
     return run;
   }
+  const double floor = detection ? detection->floor_per_m2 : 0.0;
   // Extinctions add along every beam.
   std::vector<double> tau(n, 0.0), own(n);
   for (const Medium* m : media) {
@@ -67,7 +72,7 @@ ScanRun scan_through_media(const std::vector<const Medium*>& media, const float*
     for (std::size_t i = 0; i < n; ++i) tau[i] += own[i];
   }
   // The union of the media's echoes, each attenuated by the other media to its range.
-  std::vector<double> best(n, -1.0), best_range(n, 0.0);
+  std::vector<double> best(n, -1.0), best_range(n, 0.0), best_reported(n, 0.0);
   std::vector<ScanEcho> echoes;
   for (std::size_t m = 0; m < media.size(); ++m) {
     echoes.clear();
@@ -78,23 +83,44 @@ ScanRun scan_through_media(const std::vector<const Medium*>& media, const float*
       double others = 0.0;
       for (std::size_t k = 0; k < media.size(); ++k)
         if (k != m) others += media[k]->optical_depth(b, e.range_m);
-      const double v = e.intensity * std::exp(-2.0 * others);
+      const double t = std::exp(-2.0 * others);
+      const double v = e.intensity * t;
       if (!std::isfinite(v))
         throw Error(what + ": point " + std::to_string(e.point) + " gets an echo of intensity " + text::g(v) +
                     " from a medium; an echo must be finite");
-      if (v > best[e.point]) best[e.point] = v, best_range[e.point] = e.range_m;
+      if (detection && v < floor * r0 * r0) continue;  // below the floor: never detected
+      if (v > best[e.point])
+        best[e.point] = v, best_range[e.point] = e.range_m,
+        best_reported[e.point] = std::isnan(e.reported) ? v : e.reported * t;
     }
   }
+  std::size_t k = 0;  // the next output slot (in input order; k <= i, so in place is safe)
   for (std::size_t i = 0; i < n; ++i) {
     const float* q = in + 4 * i;
-    float* o = out + 4 * i;
-    const double hard = q[3] * std::exp(-2.0 * tau[i]);
     double r0 = 0.0;
     beam_of(q, r0);
-    if (best[i] > hard && r0 > 0.0) {  // ties: the target
-      const double k = best_range[i] / r0;
-      o[0] = static_cast<float>(q[0] * k), o[1] = static_cast<float>(q[1] * k), o[2] = static_cast<float>(q[2] * k);
-      o[3] = static_cast<float>(best[i]);
+    const double trans = std::exp(-2.0 * tau[i]);
+    const double hard = q[3] * trans;
+    // The target's clear power on its own scale: at least the floor where it was detected.
+    const double clear = detection ? std::max<double>(q[3], floor * r0 * r0) : q[3];
+    ScanLabel label = ScanLabel::kept;
+    if (best[i] > clear * trans && r0 > 0.0) {  // ties: the target
+      label = ScanLabel::moved;
+    } else if (detection && trans < 1.0 && clear > 0.0) {
+      const double keep = std::exp(-(floor * r0 * r0 / clear) * (1.0 / trans - 1.0));
+      const double u = hash_unit(hash_fold(hash_fold(detection->seed, 0x5ca7ull), i));
+      if (!(u < keep)) label = best[i] >= 0.0 && r0 > 0.0 ? ScanLabel::moved : ScanLabel::lost;
+    }
+    if (labels) labels[i] = static_cast<std::uint8_t>(label);
+    if (label == ScanLabel::lost) {
+      ++run.lost;
+      continue;
+    }
+    float* o = out + 4 * k++;
+    if (label == ScanLabel::moved) {
+      const double s = best_range[i] / r0;
+      o[0] = static_cast<float>(q[0] * s), o[1] = static_cast<float>(q[1] * s), o[2] = static_cast<float>(q[2] * s);
+      o[3] = static_cast<float>(best_reported[i]);
       ++run.echoes;
     } else {
       o[0] = q[0], o[1] = q[1], o[2] = q[2], o[3] = static_cast<float>(hard);

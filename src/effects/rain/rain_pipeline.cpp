@@ -1,0 +1,103 @@
+// brume — `brume lidar rain`: a KITTI .bin scan in, the points that return
+// through the rain out, with their labels and the run's record
+// (brume/rain.hpp; docs/rain.md).
+#include <cstdio>
+#include <filesystem>
+
+#include "brume/command.hpp"
+#include "brume/depth.hpp"
+#include "brume/error.hpp"
+#include "brume/io.hpp"
+#include "brume/rain.hpp"
+#include "brume/record.hpp"
+
+namespace brume {
+
+namespace fs = std::filesystem;
+
+const ParamTable<LidarRainJob>& lidar_rain_job_table() {
+  static const ParamTable<LidarRainJob> t = [] {
+    ParamTable<LidarRainJob> d("files");
+    d.text("points", &LidarRainJob::points, "the scan: KITTI velodyne .bin (float32 x, y, z, reflectance)")
+        .reads_file()
+        .nest(&LidarRainJob::rain, lidar_rain_param_table())
+        .text("out", &LidarRainJob::out,
+              "the rainy scan, KITTI .bin: the points that return, in input order (kept ones attenuated, others "
+              "moved to a drop); lost points are left out")
+        .writes_file()
+        .text("labels", &LidarRainJob::labels,
+              "write one byte per input point: 0 kept, 1 moved to a drop, 2 lost")
+        .writes_file()
+        .text("record", &LidarRainJob::record, "write a JSON record that `brume run` repeats")
+        .writes_file();
+    return d;
+  }();
+  return t;
+}
+
+namespace {
+
+void check_bin_output(const std::string& path, const std::string& flag) {
+  if (fs::path(path).extension() != ".bin")
+    throw Error(flag + " '" + path + "': a scan is written as a KITTI .bin (float32 x, y, z, intensity); name it *.bin");
+  check_output_dir(path, flag);
+}
+
+nlohmann::json run_lidar_rain_job(const LidarRainJob& job, const RunContext& ctx) {
+  lidar_rain_job_table().validate(job);
+  validate_lidar_rain(job.rain);
+  if (job.points.empty()) throw Error("no scan given: use --points FILE.bin (KITTI velodyne)");
+  if (job.out.empty()) throw Error("no output given: use --out FILE.bin");
+  check_bin_output(job.out, "--out");
+  if (!job.labels.empty()) check_output_dir(job.labels, "--labels");
+  if (!job.record.empty()) check_record_path(job.record);
+
+  const std::vector<float> in = read_kitti_bin(job.points, "--points");
+  const std::size_t n = in.size() / 4;
+  std::vector<float> out(in.size());
+  std::string labels(n, '\0');
+  const LidarRainStats st = lidar_rain(in.data(), out.data(), n, job.rain,
+                                       reinterpret_cast<std::uint8_t*>(labels.data()), "--points '" + job.points + "'");
+  const std::size_t returned = n - st.run.lost;
+
+  const nlohmann::json inputs = {
+      {"points", {{"path", job.points}, {"sha256", sha256_file(job.points)}, {"points", n}}}};
+  const nlohmann::json rec = job_record("lidar rain", ctx, lidar_rain_job_table().to_json(job), inputs,
+                                        {{"rain", lidar_rain_record(job.rain, st)}}, false);
+  OutputSet outs;
+  outs.write_text(job.out, std::string(reinterpret_cast<const char*>(out.data()), returned * 16), "--out");
+  if (!job.labels.empty()) outs.write_text(job.labels, labels, "--labels");
+  if (!job.record.empty()) outs.write_text(job.record, rec.dump(2) + "\n", "--record");
+  outs.commit();
+  return rec;
+}
+
+}  // namespace
+
+CommandDef lidar_rain_command() {
+  return make_command<LidarRainJob>({
+      .name = "lidar rain",
+      .cli = "lidar rain",
+      .summary = "rain on a LiDAR scan (KITTI .bin): attenuated returns, drop echoes, lost points (Marshall-Palmer "
+                 "drops, Kilic et al. 2021)",
+      .table = &lidar_rain_job_table(),
+      .record = true,
+      .check = [](const LidarRainJob& j, const std::set<std::string>&) { validate_lidar_rain(j.rain); },
+      .run = [](const LidarRainJob& j, const ExecOptions&, const RunContext& ctx) { return run_lidar_rain_job(j, ctx); },
+      .report =
+          [](const LidarRainJob& j, const nlohmann::json& rec) {
+            const auto& r = rec["rain"];
+            const auto n = r["points"].get<std::size_t>();
+            const auto pct = [n](std::size_t k) { return n ? 100.0 * static_cast<double>(k) / n : 0.0; };
+            const auto kept = r["kept"].get<std::size_t>(), moved = r["moved_to_drops"].get<std::size_t>(),
+                       lost = r["lost"].get<std::size_t>();
+            std::fprintf(stderr,
+                         "brume lidar rain: %s  %.4g mm/h, extinction %.4g 1/m  of %zu points: %zu kept (%.2f %%), "
+                         "%zu moved to drops (%.2f %%), %zu lost (%.2f %%)\n",
+                         j.out.c_str(), r["rate_mm_h"].get<double>(), r["extinction_per_m"].get<double>(), n, kept,
+                         pct(kept), moved, pct(moved), lost, pct(lost));
+          },
+  });
+}
+
+}  // namespace brume
