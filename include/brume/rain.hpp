@@ -75,6 +75,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -128,16 +129,54 @@ class RainField {
   // first, appended to `out`. With d_floor_mm <= D_min: every drop of the
   // cell (the unthinned sampler).
   void cell_drops(const RainCell& cell, double d_floor_mm, std::vector<RainDrop>& out) const;
+  // The same drops as f(centre, s), s the drop's cumulative measure (the sum
+  // of unit exponentials above), whose diameter is diameter_mm(s): a caller
+  // that tests the position first takes the logarithm only for the drops it keeps.
+  template <class F>
+  void for_each_drop(const RainCell& cell, double d_floor_mm, F&& f) const {
+    for_each_drop_within(cell, measure_above(d_floor_mm), f);
+  }
+  double diameter_mm(double s) const;
+  // M(max(D, D_min)): a cell's mean count of drops of at least D (0 above
+  // D_max or without rain); a drop's diameter is at least D iff its s <= M(D).
+  double measure_above(double d_mm) const;
+  // The drops of the cell whose s <= m, largest first, as f(centre, s).
+  template <class F>
+  void for_each_drop_within(const RainCell& cell, double m, F&& f) const;
   // The cells a cone about the ray (apex at its origin, radius t·half_width
   // at range t) meets over [t0, t1]: a 3-D DDA along the axis (Amanatides &
   // Woo 1987), each visited cell widened by the cone's radius at the far end
-  // of its segment; sorted, each once.
+  // of its segment; each once, in the order the DDA meets them.
   static void cone_cells(const MediumRay& ray, double t0, double t1, double half_width, std::vector<RainCell>& out);
 
  private:
-  double rate_, d_min_, d_max_, lambda_ = 0.0, n_ = 0.0, tail_ = 0.0;
+  double rate_, d_min_, d_max_, lambda_ = 0.0, n_ = 0.0, tail_ = 0.0, scale_ = 0.0;
   std::uint64_t key_;
 };
+
+template <class F>
+void RainField::for_each_drop_within(const RainCell& cell, double m, F&& f) const {
+  if (!(m > 0.0)) return;
+  const double c = kRainCellM;
+  const std::uint64_t h = hash_fold(hash_fold(hash_fold(key_, static_cast<std::uint64_t>(cell.ix)),
+                                              static_cast<std::uint64_t>(cell.iy)),
+                                    static_cast<std::uint64_t>(cell.iz));
+  double s = 0.0;  // E_1 + … + E_k
+  for (std::uint64_t k = 0;; ++k) {
+    const std::uint64_t hk = hash_fold(h, k);
+    const double u = hash_unit(hash_mix(hk));
+    // A unit exponential E = −ln(1 − u). The first draw of a cell that
+    // expects few drops is compared without the logarithm: E > m ⟺
+    // u > 1 − e^{−m} = m·(1 − m/2·(1 − m/3)) to 1e−17 relative for m < 1e−4.
+    if (k == 0 && m < 1e-4 && u > m * (1.0 - m / 2.0 * (1.0 - m / 3.0))) break;
+    s += -std::log1p(-u);
+    if (s > m) break;
+    f(Vec3{(static_cast<double>(cell.ix) + hash_unit(hash_fold(hk, 1))) * c,
+           (static_cast<double>(cell.iy) + hash_unit(hash_fold(hk, 2))) * c,
+           (static_cast<double>(cell.iz) + hash_unit(hash_fold(hk, 3))) * c},
+      s);
+  }
+}
 
 // The parameters of rain on a LiDAR scan, in physical units.
 struct LidarRainParams {
