@@ -12,6 +12,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <random>
 #include <set>
 
@@ -369,6 +370,53 @@ TEST(LidarRain, LossFollowsTheDetectionRuleAndVanishesWithTheRate) {
   const double trans = std::exp(-2.0 * rain_extinction_per_m(100.0) * r);
   const double mean = n * (1.0 - std::exp(-(p.noise_floor * r * r / 0.5) * (1.0 / trans - 1.0)));
   EXPECT_NEAR(static_cast<double>(st.run.lost), mean, 4.0 * std::sqrt(mean) + 1.0);
+}
+
+// The medium composed by hand through the media layer (what a camera
+// effect's scan will do) gives lidar_rain's points and labels, bit for bit;
+// its record block counts them.
+TEST(LidarRain, AsAMediumItComposesAsLidarRainRuns) {
+  LidarRainParams p = rain(25.0);
+  p.seed = 2;
+  const std::size_t n = 3000;
+  const std::vector<float> in = scan(n, 1.5, 60.0, 0.05, 4);
+  std::vector<float> a(in.size()), b(in.size());
+  std::vector<std::uint8_t> la(n), lb(n);
+  const LidarRainStats st = lidar_rain(in.data(), a.data(), n, p, la.data());
+  const std::unique_ptr<Medium> m = lidar_rain_as_medium(p);
+  EXPECT_EQ(m->extinction_per_m(), rain_extinction_per_m(25.0));
+  EXPECT_EQ(m->sampled_range_m(), 0.0);  // echoes only: σ over the whole beam
+  const ScanDetection det{p.noise_floor, p.seed};
+  const ScanRun run = scan_through_media({m.get()}, in.data(), b.data(), n, "scan", &det, lb.data());
+  EXPECT_EQ(run.lost, st.run.lost);
+  EXPECT_EQ(run.echoes, st.run.echoes);
+  EXPECT_GT(run.echoes, 0u);
+  EXPECT_EQ(la, lb);
+  EXPECT_EQ(std::memcmp(a.data(), b.data(), 16 * (n - run.lost)), 0);
+  const nlohmann::json block = m->scan_record(run);
+  EXPECT_EQ(block["moved_to_drops"], run.echoes);
+  EXPECT_EQ(block["lost"], run.lost);
+  EXPECT_EQ(block["kept"], n - run.echoes - run.lost);
+  // A ray's particles (the interface's per-ray form) hold the drop a moved point went to.
+  std::size_t checked = 0, k = 0;
+  for (std::size_t i = 0; i < n && checked < 20; ++i) {
+    if (la[i] == 2) continue;
+    const float* o = a.data() + 4 * k++;
+    if (la[i] != 1) continue;
+    const float* q = in.data() + 4 * i;
+    const double r = std::sqrt(double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2]);
+    std::vector<Particle> met;
+    m->particles({{0, 0, 0}, {q[0] / r, q[1] / r, q[2] / r}}, r, q[3], met);
+    const double ro = std::sqrt(double(o[0]) * o[0] + double(o[1]) * o[1] + double(o[2]) * o[2]);
+    bool found = false;
+    for (const Particle& pt : met) found = found || std::abs(pt.range_m - ro) < 1e-5 * ro;
+    EXPECT_TRUE(found) << "point " << i;
+    ++checked;
+  }
+  EXPECT_EQ(checked, 20u);
+  // Without a detection the composition is the one before it: no point lost.
+  const ScanRun plain = scan_through_media({m.get()}, in.data(), b.data(), n);
+  EXPECT_EQ(plain.lost, 0u);
 }
 
 TEST(LidarRain, BadInputsAreRefused) {

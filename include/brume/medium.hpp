@@ -153,7 +153,8 @@ class Medium {
 // of its target's return i·e^{−2τ(R0)} and the media's echoes (moved along its
 // beam to the echo's range). Refuses (brume::Error naming `what`) an echo
 // whose intensity is not finite.
-// With `detection` (a sensor's noise floor, above), echoes below the floor
+// With `detection` (a sensor's noise floor, above; a lone medium's own model,
+// scan_alone, is then not used), echoes below the floor
 // are not offered, a point whose target wins is kept with the conditional
 // probability of ScanDetection (its speckle draw hashed from the seed and
 // the point's index), else it takes the strongest echo or is lost; `out`

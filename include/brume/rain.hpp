@@ -205,7 +205,8 @@ struct LidarRainStats {
 // negative or non-finite value is refused naming `what` and the point.
 LidarRainStats lidar_rain(const float* in, float* out, std::size_t n, const LidarRainParams& p,
                           std::uint8_t* labels = nullptr, const std::string& what = "the scan");
-// The rain as a medium (brume/medium.hpp) for compositions.
+// The rain as a medium (brume/medium.hpp) for compositions (validated
+// parameters; one thread at a time: it keeps a cache of the cells' drops).
 std::unique_ptr<Medium> lidar_rain_as_medium(const LidarRainParams& p);
 // The record's block: the model, its constants with their sources, the run's counts.
 nlohmann::json lidar_rain_record(const LidarRainParams& p, const LidarRainStats& st);
