@@ -21,6 +21,7 @@
 // job would.
 #pragma once
 
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <memory>
@@ -120,6 +121,9 @@ struct ArrayResult {
                                          // under the record's "inputs"
   nlohmann::json job;                    // the call as recorded (less the execution block)
   nlohmann::json more = nlohmann::json::object();  // the Result's other fields (sky fit's turbidity, fit)
+  // Its 1-D uint8 arrays by field (a scan's point labels). Last: the effects
+  // build a Result positionally ({images, record, job, more}).
+  std::map<std::string, std::vector<std::uint8_t>> bytes = {};
 };
 struct ArrayForm {
   std::string function;            // the module's name (haze, depth_convert)

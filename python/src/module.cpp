@@ -176,6 +176,8 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
   rec.update(out.record);
   std::map<std::string, py::object> more;
   for (const auto& [name, v] : out.more.items()) more[name] = to_py(v);
+  for (const auto& [name, v] : out.bytes)
+    more[name] = py::array_t<std::uint8_t>(static_cast<py::ssize_t>(v.size()), v.data());
   return make_result(std::move(out.images), rec, more);
 }
 

@@ -81,3 +81,30 @@ def test_lidar_fog_layered_keywords(tmp_path):
         brume.lidar.fog(pts, profile="exponential", sensor_height=1.7, alpha=0.1)
     with pytest.raises(ValueError, match="sensor_height"):
         brume.lidar.fog(pts, profile="exponential")
+
+
+def test_lidar_rain_equals_cli_bit_for_bit(tmp_path):
+    """brume.lidar.rain: the points and labels `brume lidar rain` writes on the
+    same scan, bit for bit; rate 0 gives the scan back; its errors name the keyword."""
+    pts = scan()
+    pts[::5, 3] = 0.0  # reflectance-0 points, as KITTI's 8.5 %
+    pts.tofile(tmp_path / "in.bin")
+    run_cli("lidar", "rain", "--points", tmp_path / "in.bin", "--rate", 100, "--seed", 4,
+            "--out", tmp_path / "out.bin", "--labels", tmp_path / "labels.u8")
+    r = brume.lidar.rain(pts, rate=100.0, seed=4)
+    assert r.points.dtype == np.float32 and r.labels.dtype == np.uint8 and r.labels.shape == (len(pts),)
+    assert np.array_equal(r.points, np.fromfile(tmp_path / "out.bin", dtype=np.float32).reshape(-1, 4))
+    assert np.array_equal(r.labels, np.fromfile(tmp_path / "labels.u8", dtype=np.uint8))
+    counts = np.bincount(r.labels, minlength=3)
+    assert counts[1] == r.record["rain"]["moved_to_drops"] > 0
+    assert counts[2] == r.record["rain"]["lost"] and len(r.points) == counts[0] + counts[1]
+    assert r.record["command"] == "lidar rain"
+    assert r.record["inputs"]["points"]["copied"] is False
+    clear = brume.lidar.rain(pts, rate=0.0)
+    assert np.array_equal(clear.points, pts) and not clear.labels.any()
+    with pytest.raises(ValueError, match="rate"):
+        brume.lidar.rain(pts)
+    with pytest.raises(ValueError, match="rate"):
+        brume.lidar.rain(pts, rate=-1.0)
+    with pytest.raises(ValueError, match=r"\(N, 4\)"):
+        brume.lidar.rain(pts[:, :3], rate=5.0)

@@ -1,6 +1,7 @@
 // brume — `brume lidar rain`: a KITTI .bin scan in, the points that return
 // through the rain out, with their labels and the run's record
 // (brume/rain.hpp; docs/rain.md).
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 
@@ -75,7 +76,7 @@ nlohmann::json run_lidar_rain_job(const LidarRainJob& job, const RunContext& ctx
 }  // namespace
 
 CommandDef lidar_rain_command() {
-  return make_command<LidarRainJob>({
+  CommandDef c = make_command<LidarRainJob>({
       .name = "lidar rain",
       .cli = "lidar rain",
       .summary = "rain on a LiDAR scan (KITTI .bin): attenuated returns, drop echoes, lost points (Marshall-Palmer "
@@ -98,6 +99,36 @@ CommandDef lidar_rain_command() {
                          pct(kept), moved, pct(moved), lost, pct(lost));
           },
   });
+  // brume.lidar.rain(points): an (N, 4) float32 array (x, y, z, intensity),
+  // read in place when C-contiguous; the points that return as a new (K, 4)
+  // array and the labels as N bytes.
+  static const auto call = array_call_table(lidar_rain_param_table(), kArrayNone);
+  c.arrays = make_array_form<LidarRainParams>(
+      "lidar_rain", "brume.lidar.rain",
+      "Rain on a LiDAR scan (Marshall-Palmer drops; drop echoes in each beam's cone, Kilic et al. 2021): points is an "
+      "(N, 4) float32 array of x, y, z [m] and intensity (KITTI's reflectance in [0, 1]). Returns points, the (K, 4) "
+      "points that return in input order (None when none does), and labels, one uint8 per input point: 0 kept "
+      "(attenuated), 1 moved to a drop, 2 lost. rate in mm/h is required. As `brume lidar rain`.",
+      {{"points", 1, false, ArrayArg::As::view, false, true}}, call, {"points", "labels", "record"}, true,
+      [](const std::vector<ArrayIn>& in, ArrayCall<LidarRainParams>& k, const Exec&, const std::set<std::string>&) {
+        const std::string what = "brume.lidar.rain(): points";
+        std::vector<float> dense;
+        const float* src = scan_points(in[0].view, what, dense);
+        const std::size_t n = static_cast<std::size_t>(in[0].view.height());
+        std::vector<float> out(4 * n);
+        ArrayResult r;
+        std::vector<std::uint8_t>& labels = r.bytes["labels"];
+        labels.resize(n);
+        const LidarRainStats st = lidar_rain(src, out.data(), n, k.p, labels.data(), what);
+        const std::size_t kept = n - st.run.lost;
+        Image pts(4, static_cast<int>(kept), 1);
+        std::copy(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(4 * kept), pts.data.begin());
+        r.record["rain"] = lidar_rain_record(k.p, st);
+        r.images["points"] = std::move(pts);
+        return r;
+      },
+      [](const ArrayCall<LidarRainParams>& k, const std::set<std::string>&) { validate_lidar_rain(k.p); });
+  return c;
 }
 
 }  // namespace brume
