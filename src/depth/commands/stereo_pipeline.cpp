@@ -127,7 +127,7 @@ CommandDef depth_stereo_command() {
       .cli = "depth stereo",
       .summary = "disparity of a rectified stereo pair (semi-global matching, left-right checked), in pixels",
       .table = &depth_stereo_job_table(),
-      .record = true,
+      .writes_record = true,
       .run = [](const DepthStereoJob& j, const ExecOptions&, const RunContext& ctx) {
         return run_depth_stereo_job(j, ctx);
       },
