@@ -1,6 +1,6 @@
-// brume — depth conversion and preparation as pipelines (brume/depth_pipeline.hpp).
+// brume — depth conversion, preparation and completion as pipelines (depth_jobs.hpp).
 #include "brume/command.hpp"
-#include "brume/depth_pipeline.hpp"
+#include "depth/commands/depth_jobs.hpp"
 
 #include <cstdio>
 #include <filesystem>

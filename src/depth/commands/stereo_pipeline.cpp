@@ -1,5 +1,5 @@
-// brume — `brume depth stereo` (brume/stereo_pipeline.hpp).
-#include "brume/stereo_pipeline.hpp"
+// brume — `brume depth stereo` (stereo_job.hpp).
+#include "depth/commands/stereo_job.hpp"
 
 #include <cstdio>
 

@@ -9,6 +9,7 @@
 #include "brume/io.hpp"
 #include "brume/lidar_fog.hpp"
 #include "brume/record.hpp"
+#include "effects/lidar/lidar_fog_job.hpp"
 
 namespace brume {
 
