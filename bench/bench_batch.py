@@ -73,7 +73,7 @@ def main():
     tmp = pathlib.Path(tempfile.mkdtemp(prefix="brume_bench_batch_"))
     try:
         # The manifest: scan the folder, then give each scene several keys.
-        subprocess.run([str(cli), "batch", "--scan", str(data), "--layout", "middlebury",
+        subprocess.run([str(cli), "batch", "--dataset", str(data), "--layout", "middlebury",
                         "--manifest", str(tmp / "scan.jsonl")], check=True, capture_output=True)
         base = [json.loads(l) for l in (tmp / "scan.jsonl").read_text().splitlines()]
         rows = []

@@ -72,11 +72,7 @@ LAYERS = [
 REACHES_UP = {
     ("src/core/camera.cpp", "brume/io.hpp"):
         "a --view-matrix file read (read_input_file) and hashed for the record (sha256_file) through io",
-    ("src/gpu/backend.cpp", "brume/pipeline.hpp"): "backend_names and gpu_filter_names, declared there",
-    ("src/io/image_io.cpp", "brume/pipeline.hpp"): "transfer_names, declared there",
     ("src/io/codec.cpp", "brume/pipeline.hpp"): "run_phases(): loading the codec is timed in the run's read",
-    ("src/diffusion/diffusion.cpp", "brume/pipeline.hpp"): "scheme_names, precision_names, edge_rate_names",
-    ("src/depth/prepare.cpp", "brume/pipeline.hpp"): "prepare_param_table, declared there",
     ("src/depth/source.cpp", "brume/record.hpp"): "file_record: the depth file's record block",
     ("src/depth/stereo.cpp", "brume/record.hpp"): "file_record: the right view's record block",
 }

@@ -614,15 +614,15 @@ TEST_F(Batch, ChainWithPrefixedParameters) {
   expect_same_pixels(p("out/a/f0.exr"), p("single.exr"));
 }
 
-// --scan on ../shared/data: the rows each layout must give, with the
+// --dataset on ../shared/data: the rows each layout must give, with the
 // datasets' conventions as depth flags; the Middlebury manifest then runs.
 TEST_F(Batch, ScanSharedData) {
   BRUME_REQUIRE_DATA("middlebury2005_thirdsize");
-  ScanOptions s;
+  DatasetOptions s;
   s.dir = data_path("middlebury2005_thirdsize");
   s.layout = "middlebury";
   s.manifest_dir = dir.string();
-  std::vector<nlohmann::json> rows = scan_dataset(s);
+  std::vector<nlohmann::json> rows = dataset_manifest(s);
   ASSERT_EQ(rows.size(), 6u);
   std::vector<std::string> ks;
   for (const auto& r : rows) ks.push_back(r["key"]);
@@ -636,7 +636,7 @@ TEST_F(Batch, ScanSharedData) {
   EXPECT_TRUE(fs::exists(dir / rows[0]["disparity"].get<std::string>()));
 
   // Through the CLI into a CSV, then run: Art equals `brume haze` on the same flags.
-  CliRun r = run("batch --scan " + data_path("middlebury2005_thirdsize") + " --layout middlebury --manifest " +
+  CliRun r = run("batch --dataset " + data_path("middlebury2005_thirdsize") + " --layout middlebury --manifest " +
                  p("mb.csv") + " --out-dir " + p("out") + " --effect haze --param visibility=5 --quiet");
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(files(p("out")).size(), 12u);
@@ -652,7 +652,7 @@ TEST_F(Batch, ScanSharedData) {
   if (have_data("eth3d_two_view")) {
     s.dir = data_path("eth3d_two_view");
     s.layout = "eth3d";
-    rows = scan_dataset(s);
+    rows = dataset_manifest(s);
     ASSERT_EQ(rows.size(), 2u);
     EXPECT_EQ(rows[0]["key"], "playground_1l/im0.png");
     EXPECT_EQ(rows[1]["key"], "terrace/im0.png");
@@ -661,7 +661,7 @@ TEST_F(Batch, ScanSharedData) {
   if (have_data("kitti_object_000001")) {
     s.dir = data_path("kitti_object_000001");
     s.layout = "kitti";
-    rows = scan_dataset(s);
+    rows = dataset_manifest(s);
     ASSERT_EQ(rows.size(), 1u);
     EXPECT_EQ(rows[0]["key"], "image_2/000001.png");
     EXPECT_TRUE(fs::exists(dir / rows[0]["velodyne"].get<std::string>()));
@@ -688,22 +688,22 @@ TEST_F(Batch, ScanSharedData) {
 // relative to the manifest's folder, keys relative to the scanned folder.
 TEST_F(Batch, ScanPairs) {
   make_frames(3);
-  ScanOptions s;
+  DatasetOptions s;
   s.dir = p("data");
   s.layout = "pairs";
   s.image_glob = "*/*.png";
   s.depth_glob = "*/*.exr";
   s.manifest_dir = dir.string();
-  const std::vector<nlohmann::json> rows = scan_dataset(s);
+  const std::vector<nlohmann::json> rows = dataset_manifest(s);
   ASSERT_EQ(rows.size(), 3u);
   EXPECT_EQ(rows[0], (nlohmann::json{{"key", "a/f0.png"}, {"image", "data/a/f0.png"}, {"range", "data/a/f0.exr"}}));
   EXPECT_EQ(rows[1]["key"], "a/f2.png");
   EXPECT_EQ(rows[2]["range"], "data/b/f1.exr");
   s.depth_glob = "*/f*.exr";  // two '*': both captures must agree
   s.image_glob = "*/f*.png";
-  EXPECT_EQ(scan_dataset(s).size(), 3u);
+  EXPECT_EQ(dataset_manifest(s).size(), 3u);
   s.depth_kind = "depth";
-  EXPECT_NE(error_of([&] { scan_dataset(s); }).find("--depth-kind 'depth' is not allowed"), std::string::npos);
+  EXPECT_NE(error_of([&] { dataset_manifest(s); }).find("--depth-kind 'depth' is not allowed"), std::string::npos);
 }
 
 // --layout cityscapes on a folder of Cityscapes' shape (no Cityscapes data in
@@ -725,11 +725,11 @@ TEST_F(Batch, ScanCityscapes) {
   write_image((city / "disparity/train/aachen" / (n + "_disparity.png")).string(), disp, w);
   std::ofstream((city / "camera/train/aachen" / (n + "_camera.json")).string())
       << R"({"extrinsic": {"baseline": 0.209313, "pitch": 0.038}, "intrinsic": {"fx": 2262.52, "fy": 2265.3017905988554, "u0": 3.0, "v0": 2.0}})";
-  ScanOptions s;
+  DatasetOptions s;
   s.dir = city.string();
   s.layout = "cityscapes";
   s.manifest_dir = dir.string();
-  const std::vector<nlohmann::json> rows = scan_dataset(s);
+  const std::vector<nlohmann::json> rows = dataset_manifest(s);
   ASSERT_EQ(rows.size(), 1u);
   EXPECT_EQ(rows[0]["key"], "leftImg8bit/train/aachen/" + n + "_leftImg8bit.png");
   EXPECT_EQ(rows[0]["fx"].get<double>(), 2262.52);

@@ -103,7 +103,7 @@ TEST(Commands, EveryCommandIsOnTheCommandLine) {
         shown = at + f.size() < own.output.size() && std::string(" ,=").find(own.output[at + f.size()]) != std::string::npos;
       EXPECT_TRUE(shown) << s.name;
     }
-    EXPECT_EQ(own.output.find("--threads") != std::string::npos, c.exec);
+    EXPECT_EQ(own.output.find("--threads") != std::string::npos, c.takes_exec_flags);
   }
   // A command without a subcommand of its own is reached through one that has
   // every one of its flags (plain haze through haze+dof's `brume haze`).
@@ -125,7 +125,7 @@ TEST(Commands, EveryRecordCommandIsAcceptedByRun) {
     SCOPED_TRACE(c.name);
     const nlohmann::json rec = {
         {"tool", "brume"}, {"schema_version", kRecordSchemaVersion}, {"command", c.name}, {"job", c.defaults}};
-    if (c.record) {
+    if (c.writes_record) {
       EXPECT_EQ(check_record(rec), c.name);
       // A key the command does not declare is refused by its table.
       nlohmann::json bad = rec;
@@ -135,7 +135,7 @@ TEST(Commands, EveryRecordCommandIsAcceptedByRun) {
       const std::string e = error_of([&] { check_record(rec); });
       EXPECT_NE(e.find("cannot be repeated by brume run"), std::string::npos) << e;
       for (const CommandDef& d : commands())
-        if (d.record) {
+        if (d.writes_record) {
           EXPECT_NE(e.find(d.name), std::string::npos) << e;
         }
     }
@@ -166,7 +166,7 @@ TEST_F(CommandsInFiles, ManifestRowsAndTheSamplerTakeEveryOne) {
       EXPECT_EQ(r.status, 0) << r.output;
       EXPECT_EQ(nlohmann::json::parse(r.output.substr(r.output.find('{')))["params"], v);
     }
-    if (!c.batch) continue;
+    if (!c.batchable) continue;
     batchable.push_back(c.name);
     nlohmann::json row = {{"key", c.name + "/f.pfm"}, {"image", (dir / "a.pfm").string()},
                           {"range", (dir / "a.range.pfm").string()}, {"effect", c.name}};

@@ -540,8 +540,9 @@ TEST_F(CompleteCli, HazeOnALidarScan) {
   EXPECT_NE(r.output.find("--complete-radius is a completion parameter"), std::string::npos) << r.output;
 }
 
-// brume batch --scan DIR --layout kitti end to end, on a KITTI-layout folder
-// of links to the shared frame.
+// brume batch --dataset DIR --layout kitti end to end, on a KITTI-layout folder
+// of links to the shared frame; given as --scan, the flag's former name, which
+// stays accepted.
 TEST_F(CompleteCli, BatchScanKitti) {
   BRUME_REQUIRE_DATA(kKitti + "velodyne/000001.bin");
   for (const char* sub : {"image_2/000001.png", "velodyne/000001.bin", "calib/000001.txt"}) {

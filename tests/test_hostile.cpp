@@ -438,7 +438,7 @@ TEST_F(Hostile, RecordsOfRunsOnFilesRepeat) {
     return false;
   };
   for (const CommandDef& c : commands()) {
-    if (!c.record) continue;
+    if (!c.writes_record) continue;
     for (const ParamSpec& s : c.specs) {
       if (s.kind != ParamKind::text || s.output_file || s.input_file) continue;
       EXPECT_TRUE(names_no_file(s.name)) << c.name << " --" << s.name

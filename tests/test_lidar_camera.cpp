@@ -298,19 +298,19 @@ TEST_F(LidarCamera, BatchWritesTheScanBesideTheImage) {
 }
 
 TEST(LidarCameraScan, KittiLayoutFillsTheLidarColumn) {
-  ScanOptions o;
+  DatasetOptions o;
   o.dir = ".";
   o.layout = "middlebury";
   o.lidar = true;
-  EXPECT_NE(error_of([&] { scan_dataset(o); }).find("--layout kitti"), std::string::npos);
+  EXPECT_NE(error_of([&] { dataset_manifest(o); }).find("--layout kitti"), std::string::npos);
   BRUME_REQUIRE_DATA(kKittiDir);
   o.dir = data_path(kKittiDir);
   o.layout = "kitti";
-  const std::vector<nlohmann::json> rows = scan_dataset(o);
+  const std::vector<nlohmann::json> rows = dataset_manifest(o);
   ASSERT_FALSE(rows.empty());
   for (const auto& row : rows) EXPECT_EQ(row["lidar"], row["velodyne"]);
   o.lidar = false;
-  EXPECT_FALSE(scan_dataset(o).front().contains("lidar"));
+  EXPECT_FALSE(dataset_manifest(o).front().contains("lidar"));
 }
 
 }  // namespace lidar_camera_tests

@@ -11,7 +11,7 @@
 #include "brume/blur.hpp"
 #include "brume/chain.hpp"
 #include "brume/compare.hpp"
-#include "brume/depth_pipeline.hpp"
+#include "depth/commands/depth_jobs.hpp"
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/fog.hpp"

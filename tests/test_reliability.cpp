@@ -448,6 +448,6 @@ TEST_F(Reliability, TextThatIsNotUtf8IsRefusedByName) {
   // A scanned file name: the manifest is not written.
   const std::string scan_msg =
       error_of([&] { write_manifest(p("scan.csv"), {nlohmann::json{{"key", "a"}, {"image", "d/im\xFF.png"}}}); });
-  EXPECT_NE(scan_msg.find("--scan: the 'image' file 'd/im\\xFF.png' is not valid UTF-8"), std::string::npos) << scan_msg;
+  EXPECT_NE(scan_msg.find("--dataset: the 'image' file 'd/im\\xFF.png' is not valid UTF-8"), std::string::npos) << scan_msg;
   EXPECT_FALSE(fs::exists(p("scan.csv")));
 }

@@ -14,7 +14,7 @@
 #include <string>
 
 #include "brume/stereo.hpp"
-#include "brume/stereo_pipeline.hpp"
+#include "depth/commands/stereo_job.hpp"
 #include "brume_opencv.hpp"
 #include "test_util.hpp"
 

@@ -147,7 +147,7 @@ BatchSummary run_batch(const BatchOptions& o);
 // records equal an uninterrupted run's apart from time and timings.
 std::vector<std::string> batch_record_argv(const BatchOptions& o);
 
-// `brume batch --scan DIR --layout L`: a manifest of the dataset in DIR.
+// `brume batch --dataset DIR --layout L`: a manifest of the dataset in DIR.
 // Layouts: middlebury (2005/2006 folders Scene/view1.png, disp1.png,
 // dmin.txt at third size), eth3d (Scene/im0.png, disp0.pfm, calib.txt),
 // kitti (image_2/N.png, velodyne/N.bin, calib/N.txt), cityscapes
@@ -158,7 +158,7 @@ std::vector<std::string> batch_record_argv(const BatchOptions& o);
 // Paths are written relative to the manifest's folder; keys are the image
 // path relative to DIR. Rows are sorted by key. Returns the rows as JSON
 // objects (column: value); write_manifest writes them.
-struct ScanOptions {
+struct DatasetOptions {
   std::string dir, layout;
   std::string image_glob, depth_glob, depth_kind = "range";  // pairs
   std::string manifest_dir = ".";  // where the manifest will be (paths are relative to it)
@@ -167,7 +167,7 @@ struct ScanOptions {
   // <key>.bin (a camera effect's --lidar/--lidar-out, brume/lidar_camera.hpp).
   bool lidar = false;
 };
-std::vector<nlohmann::json> scan_dataset(const ScanOptions& o);
+std::vector<nlohmann::json> dataset_manifest(const DatasetOptions& o);
 // CSV or JSON Lines by the extension, written atomically.
 void write_manifest(const std::string& path, const std::vector<nlohmann::json>& rows);
 

@@ -159,9 +159,9 @@ struct CommandDef {
   std::string summary;   // one line for --help and the reference
   std::vector<ParamSpec> specs;  // the job table's declarations, nested blocks included, in order
   nlohmann::json defaults;       // the default job as the table's JSON
-  bool exec = false;             // takes the execution flags (--threads, --backend, ...)
-  bool record = false;           // writes a parameter record that `brume run` repeats
-  bool batch = false;            // a `brume batch` manifest row can name it
+  bool takes_exec_flags = false;  // takes the execution flags (--threads, --backend, ...)
+  bool writes_record = false;     // writes a parameter record that `brume run` repeats
+  bool batchable = false;         // a `brume batch` manifest row can name it
   std::string stage_prefix;      // a chain: the later stage's flag prefix ("dof-"), else ""
   std::optional<CommandSampling> sampling;  // `brume sample`, random_params, batch distributions
   std::vector<std::string> gpu_passes;      // its GPU passes (PassSpec names, "haze.premultiply"), in order
@@ -248,7 +248,7 @@ template <class Job>
 struct CommandParts {
   std::string name = {}, cli = {}, summary = {};
   const ParamTable<Job>* table = nullptr;
-  bool exec = false, record = false, batch = false;
+  bool takes_exec_flags = false, writes_record = false, batchable = false;
   std::function<void(const Job&, const std::set<std::string>& given)> check = {};  // beyond the table's range checks
   std::function<nlohmann::json(const Job&, const ExecOptions&, const RunContext&)> run = {};
   std::function<void(const Job&, const nlohmann::json& result)> report = {};
@@ -263,9 +263,9 @@ CommandDef make_command(CommandParts<Job> parts) {
   c.summary = parts.summary;
   for (const Param<Job>& d : t.params()) c.specs.push_back(d.spec);
   c.defaults = t.to_json(Job{});
-  c.exec = parts.exec;
-  c.record = parts.record;
-  c.batch = parts.batch;
+  c.takes_exec_flags = parts.takes_exec_flags;
+  c.writes_record = parts.writes_record;
+  c.batchable = parts.batchable;
   c.build = [&t](const JobValues& values) {
     Job j;
     for (const auto& [n, v] : values) {

@@ -54,6 +54,7 @@
 
 #include "brume/exec.hpp"
 #include "brume/image.hpp"
+#include "brume/params.hpp"
 
 namespace brume {
 
@@ -96,6 +97,13 @@ struct DiffusionParams {
   // its sky at 2300 diagonals and must repeat).
   double max_sigma_diagonals = kDefaultMaxSigmaDiagonals;
 };
+// The names of the scheme, precision and edge-rate choices (flags, records,
+// messages) and the block that declares every DiffusionParams field: scheme,
+// precision, sigma0, rho-max, edge-rate, max-sigma-diagonals.
+const EnumNames<Scheme>& scheme_names();
+const EnumNames<Precision>& precision_names();
+const EnumNames<EdgeRate>& edge_rate_names();
+const ParamTable<DiffusionParams>& diffusion_param_table();
 
 // The rate limit a run will use (resolves an unset rho_max to the scheme default).
 double effective_rho_max(const DiffusionParams& p);

@@ -6,6 +6,8 @@
 
 #include <string>
 
+#include "brume/params.hpp"
+
 namespace brume {
 
 class GpuContext;
@@ -21,6 +23,7 @@ enum class Backend {
   automatic,  // the GPU only when its renderer is hardware, else the CPU (see GpuInfo::software)
 };
 std::string to_string(Backend b);  // cpu | gpu | auto
+const EnumNames<Backend>& backend_names();
 
 // How samples between texels are interpolated in the GPU diffusion passes.
 enum class GpuFilter {
@@ -29,6 +32,7 @@ enum class GpuFilter {
   shader,     // texelFetch + mix in the shader (exact float weights)
 };
 std::string to_string(GpuFilter f);  // auto | hardware | shader
+const EnumNames<GpuFilter>& gpu_filter_names();
 
 struct Exec {
   int threads = 0;         // 0 = all hardware threads; results never depend on it

@@ -24,10 +24,12 @@
 #include <vector>
 
 #include "brume/image.hpp"
+#include "brume/params.hpp"
 
 namespace brume {
 
 enum class Transfer { automatic, srgb, linear };
+const EnumNames<Transfer>& transfer_names();  // auto | srgb | linear
 Transfer parse_transfer(const std::string& s, const std::string& flag);  // throws brume::Error
 std::string to_string(Transfer t);
 

@@ -251,12 +251,4 @@ std::string kitti_bin_bytes(const float* points, std::size_t n);
 // the layered fog's per-beam ranges, climbs, optical depths and flags (29).
 constexpr double kLidarFogBytesPerPoint = 80.0;
 
-// ---- the command: brume lidar fog ----
-struct LidarFogJob {
-  std::string points;  // input .bin
-  LidarFogParams fog;
-  std::string out, record, soft_curve;
-};
-const ParamTable<LidarFogJob>& lidar_fog_job_table();
-
 }  // namespace brume

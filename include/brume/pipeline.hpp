@@ -48,17 +48,12 @@ namespace brume {
 constexpr int kRecordSchemaVersion = 4;
 constexpr int kOldestRecordSchemaVersion = 2;  // the oldest `brume run` repeats
 
-// ---- name tables (one per enum: flags, records and messages use them) ----
-const EnumNames<Scheme>& scheme_names();
-const EnumNames<Precision>& precision_names();
-const EnumNames<EdgeRate>& edge_rate_names();
-const EnumNames<Transfer>& transfer_names();
-const EnumNames<Backend>& backend_names();
-const EnumNames<GpuFilter>& gpu_filter_names();
-
 // ---- shared parameter blocks --------------------------------------------------
-const ParamTable<DiffusionParams>& diffusion_param_table();  // scheme, precision, sigma0, rho-max, edge-rate
-const ParamTable<PrepareParams>& prepare_param_table();      // all eight preparation parameters
+// (The engines' blocks and name tables are declared with their enums:
+// diffusion_param_table and the scheme, precision and edge-rate names in
+// brume/diffusion.hpp, prepare_param_table in brume/prepare.hpp,
+// transfer_names in brume/io.hpp, backend_names and gpu_filter_names in
+// brume/exec.hpp.)
 const ParamTable<DepthSource>& depth_param_table();          // every depth source and convention flag
 // The camera in millimetres (brume/depth.hpp: LensCamera), declared once and
 // nested in the depth block (every command that takes intrinsics) and the

@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "brume/image.hpp"
+#include "brume/params.hpp"
 
 namespace brume {
 
@@ -42,6 +43,8 @@ struct PrepareParams {
   int ransac_iterations = 64;        // candidate values tried per hole
   std::uint64_t seed = 1;            // RANSAC seed (results are deterministic)
 };
+// The block that declares all eight preparation parameters (--sky-margin, ...).
+const ParamTable<PrepareParams>& prepare_param_table();
 
 struct PrepareResult {
   Image range;        // prepared range in metres, every value finite and > 0

@@ -552,8 +552,8 @@ PYBIND11_MODULE(_brume, m) {
           d["name"] = c.name;
           d["cli"] = c.cli;
           d["summary"] = c.summary;
-          d["record"] = c.record;
-          d["batch"] = c.batch;
+          d["writes_record"] = c.writes_record;
+          d["batchable"] = c.batchable;
           d["sample"] = c.sampling.has_value();
           d["gpu_passes"] = to_py(json(c.gpu_passes));
           d["function"] = c.arrays ? py::object(py::str(c.arrays->function)) : py::object(py::none());

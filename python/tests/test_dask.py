@@ -28,7 +28,7 @@ def test_dask_local_cluster_equals_brume_batch(tmp_path, data_dir):
     import brume.dask
     mb = require_data(data_dir / "middlebury2005_thirdsize")
     manifest = tmp_path / "m.jsonl"
-    run_cli("batch", "--scan", mb, "--layout", "middlebury", "--manifest", manifest)
+    run_cli("batch", "--dataset", mb, "--layout", "middlebury", "--manifest", manifest)
     rows = [json.loads(l) for l in manifest.read_text().splitlines()][:3]
     for r in rows:
         r.update({"effect": "haze", "visibility": "loguniform(2, 20)", "lambda": "uniform(2, 6)"})

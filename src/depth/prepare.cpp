@@ -62,7 +62,6 @@
 //
 // Cost (bench/bench_prepare.cpp, 1600x1120, 2 threads): labelling, EDT and the
 // per-pixel passes are O(N), ~30 ms; CG on the 67k margin pixels ~25 ms.
-#include "brume/pipeline.hpp"
 #include "brume/prepare.hpp"
 
 #include <omp.h>
@@ -83,6 +82,32 @@
 #include "brume_opencv.hpp"
 
 namespace brume {
+
+const ParamTable<PrepareParams>& prepare_param_table() {
+  static const ParamTable<PrepareParams> t = [] {
+    ParamTable<PrepareParams> d("prepare");
+    d.real("sky-margin", &PrepareParams::sky_margin_px, "px", Range::at_least(0.0),
+           "width mu of the matted horizon between scene and sky; 0 disables the margin")
+        .real("s-max-factor", &PrepareParams::s_max_factor, "1", Range::left_open(1.0, 1e6),
+              "sky range S_max = factor * R_max; must exceed 1 so the sky lies beyond the scene")
+        .real("min-coverage", &PrepareParams::min_coverage, "1", Range::closed(0.0, 1.0),
+              "refuse maps whose known pixels cover less than this fraction (a projected lidar scan)")
+        .real("sky-min-fraction", &PrepareParams::sky_min_fraction, "1", Range::closed(0.0, 1.0),
+              "area fraction a top-touching unknown region needs to count as sky")
+        .real("sky-large-fraction", &PrepareParams::sky_large_fraction, "1", Range::closed(0.0, 1.0),
+              "area fraction an unknown region anywhere needs to count as sky")
+        .real("residual-tol", &PrepareParams::residual_tol, "1", Range::closed(1e-6, 0.1),
+              "the margin solve stops at max |discrete Laplacian| <= tol * S_max (below 1e-6 a float32 "
+              "output cannot hold it)")
+        .integer("ransac-iterations", &PrepareParams::ransac_iterations, "1", Range::closed(1, 1e6),
+                 "candidate fill values tried per hole")
+        .count("seed", &PrepareParams::seed, "1", Range::at_least(0.0),
+               "seed of the hole-filling RANSAC (results are deterministic for a seed)");
+    return d;
+  }();
+  return t;
+}
+
 namespace {
 
 constexpr double kTukey = 4.685;            // 95% efficiency at the normal

@@ -9,10 +9,50 @@
 
 #include "brume/diffusion.hpp"
 #include "brume/error.hpp"
-#include "brume/pipeline.hpp"
 #include "diffusion/diffusion_kernels.hpp"
 
 namespace brume {
+
+// ---- the engine's names and its parameter block (brume/diffusion.hpp) ----
+const EnumNames<Scheme>& scheme_names() {
+  static const EnumNames<Scheme> n = {
+      {Scheme::standard, "standard"}, {Scheme::invariant, "invariant"}, {Scheme::invariant_exact, "invariant-exact"}};
+  return n;
+}
+const EnumNames<Precision>& precision_names() {
+  static const EnumNames<Precision> n = {{Precision::f32, "f32"}, {Precision::f16, "f16"}};
+  return n;
+}
+const EnumNames<EdgeRate>& edge_rate_names() {
+  static const EnumNames<EdgeRate> n = {{EdgeRate::harmonic, "harmonic"}, {EdgeRate::mean, "mean"}, {EdgeRate::min, "min"}};
+  return n;
+}
+
+const ParamTable<DiffusionParams>& diffusion_param_table() {
+  static const ParamTable<DiffusionParams> t = [] {
+    ParamTable<DiffusionParams> d("diffusion");
+    d.choice("scheme", &DiffusionParams::scheme, scheme_names(),
+             "diffusion scheme: standard (explicit Euler, eq. 11-13), invariant (eq. 17-18 as published), "
+             "invariant-exact (offsets that reach the target variance exactly)")
+        .choice("precision", &DiffusionParams::precision, precision_names(),
+                "storage between iterations: f32, or f16 rounded like an RGBA16F texture")
+        .real("sigma0", &DiffusionParams::sigma0, "px", Range::left_open(0.0, 1000.0),
+              "inner scale of the input image (its own blur)")
+        .real("rho-max", &DiffusionParams::rho_max, "1", Range::left_open(0.0, 0.25),
+              "largest diffusion rate per iteration (0.25 is the 2-D stability limit); auto: 0.2 for "
+              "invariant-exact, 0.25 for the others")
+        .choice("edge-rate", &DiffusionParams::edge_rate, edge_rate_names(),
+                "rate on the edge between a pixel and its neighbour sample: harmonic (default; leak-free), "
+                "mean (the paper's eq. 12), min")
+        .real("max-sigma-diagonals", &DiffusionParams::max_sigma_diagonals, "1", Range::at_least(0.0),
+              "refuse a blur whose largest scale sigma_max exceeds this many image diagonals (past twice the "
+              "longer side a pixel's blur is the image's mean: more only costs work); 0: no such bound")
+        .since(4, 0.0);
+    return d;
+  }();
+  return t;
+}
+
 
 // Names come from the one name table of each enum (brume/pipeline.hpp).
 std::string to_string(Scheme s) { return enum_name(scheme_names(), s); }

@@ -2,9 +2,19 @@
 #include "brume/error.hpp"
 #include "brume/exec.hpp"
 #include "brume/gpu_context.hpp"
-#include "brume/pipeline.hpp"
 
 namespace brume {
+
+const EnumNames<Backend>& backend_names() {
+  static const EnumNames<Backend> n = {{Backend::cpu, "cpu"}, {Backend::gpu, "gpu"}, {Backend::automatic, "auto"}};
+  return n;
+}
+const EnumNames<GpuFilter>& gpu_filter_names() {
+  static const EnumNames<GpuFilter> n = {
+      {GpuFilter::automatic, "auto"}, {GpuFilter::hardware, "hardware"}, {GpuFilter::shader, "shader"}};
+  return n;
+}
+
 
 // Names come from the one name table of each enum (brume/pipeline.hpp).
 std::string to_string(Backend b) { return enum_name(backend_names(), b); }

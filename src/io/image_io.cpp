@@ -20,7 +20,6 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
-#include "brume/pipeline.hpp"
 #include "io/codec.hpp"
 #include "io/formats/exr.hpp"
 #include "io/formats/format.hpp"
@@ -28,6 +27,12 @@
 #include "io/srgb.hpp"
 
 namespace brume {
+
+const EnumNames<Transfer>& transfer_names() {
+  static const EnumNames<Transfer> n = {{Transfer::automatic, "auto"}, {Transfer::srgb, "srgb"}, {Transfer::linear, "linear"}};
+  return n;
+}
+
 namespace fs = std::filesystem;
 
 Transfer parse_transfer(const std::string& s, const std::string& flag) { return parse_enum(transfer_names(), s, flag); }

@@ -42,15 +42,15 @@ using detail::cell_where;
 
 // The commands a row can name: the batchable ones of the list of commands
 // (brume/command.hpp), each with its job table, build, check and run.
-bool batchable(const CommandDef& c) { return c.batch; }
+bool is_batchable(const CommandDef& c) { return c.batchable; }
 
 const CommandDef& effect_named(const std::string& name, const std::string& where) {
   std::string n = lower(trim(name));
   n.erase(std::remove_if(n.begin(), n.end(), [](char c) { return std::isspace(static_cast<unsigned char>(c)); }),
           n.end());
-  if (const CommandDef* c = find_command(n); c && c->batch) return *c;
+  if (const CommandDef* c = find_command(n); c && c->batchable) return *c;
   throw Error(where + ": effect '" + name + "' is not available in brume batch; use one of: " +
-              command_names(batchable) + " (chains: '+'-joined stages, the later stages' parameters prefixed with their name: dof.focus-distance)");
+              command_names(is_batchable) + " (chains: '+'-joined stages, the later stages' parameters prefixed with their name: dof.focus-distance)");
 }
 
 // ---- names -----------------------------------------------------------------------------
@@ -93,7 +93,7 @@ const std::vector<std::string>& batch_effects() {
   static const std::vector<std::string> v = [] {
     std::vector<std::string> n;
     for (const CommandDef& c : commands())
-      if (c.batch) n.push_back(c.name);
+      if (c.batchable) n.push_back(c.name);
     return n;
   }();
   return v;
@@ -166,7 +166,7 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
       }
       if (trim(effect).empty())
         throw Error(cell_where(m, r, "") + ": no effect; add an 'effect' column or give --effect (" +
-                    command_names(batchable) + ")");
+                    command_names(is_batchable) + ")");
       const CommandDef& e = effect_named(effect, cell_where(m, r, "effect"));
       // --param NAME=SPEC fills the columns a row does not have.
       std::vector<std::pair<std::string, nlohmann::json>> all = cells;

@@ -75,7 +75,7 @@ void remove_stale_temporaries(const BatchFrame& f) {
 }
 
 const CommandDef& def_of(const std::string& name) {
-  if (const CommandDef* c = find_command(name); c && c->batch) return *c;
+  if (const CommandDef* c = find_command(name); c && c->batchable) return *c;
   throw Error("internal: batch effect '" + name + "'");
 }
 

@@ -132,9 +132,9 @@ nlohmann::json job_as_recorded(const CommandDef& c, const nlohmann::json& record
 // judged against the defaults, as for a library caller.
 const CommandDef& repeatable(const std::string& cmd, const nlohmann::json& record) {
   const CommandDef* c = find_command(cmd);
-  if (!c || !c->record)
+  if (!c || !c->writes_record)
     throw Error("the record's command '" + cmd + "' cannot be repeated by brume run (" +
-                command_names([](const CommandDef& d) { return d.record; }) + " can)");
+                command_names([](const CommandDef& d) { return d.writes_record; }) + " can)");
   c->check(job_as_recorded(*c, record), {}, false);
   return *c;
 }

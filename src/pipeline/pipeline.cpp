@@ -40,32 +40,6 @@ void keep_freed_heap() {
 }
 
 // ---- name tables ------------------------------------------------------------------
-const EnumNames<Scheme>& scheme_names() {
-  static const EnumNames<Scheme> n = {
-      {Scheme::standard, "standard"}, {Scheme::invariant, "invariant"}, {Scheme::invariant_exact, "invariant-exact"}};
-  return n;
-}
-const EnumNames<Precision>& precision_names() {
-  static const EnumNames<Precision> n = {{Precision::f32, "f32"}, {Precision::f16, "f16"}};
-  return n;
-}
-const EnumNames<EdgeRate>& edge_rate_names() {
-  static const EnumNames<EdgeRate> n = {{EdgeRate::harmonic, "harmonic"}, {EdgeRate::mean, "mean"}, {EdgeRate::min, "min"}};
-  return n;
-}
-const EnumNames<Transfer>& transfer_names() {
-  static const EnumNames<Transfer> n = {{Transfer::automatic, "auto"}, {Transfer::srgb, "srgb"}, {Transfer::linear, "linear"}};
-  return n;
-}
-const EnumNames<Backend>& backend_names() {
-  static const EnumNames<Backend> n = {{Backend::cpu, "cpu"}, {Backend::gpu, "gpu"}, {Backend::automatic, "auto"}};
-  return n;
-}
-const EnumNames<GpuFilter>& gpu_filter_names() {
-  static const EnumNames<GpuFilter> n = {
-      {GpuFilter::automatic, "auto"}, {GpuFilter::hardware, "hardware"}, {GpuFilter::shader, "shader"}};
-  return n;
-}
 const EnumNames<PrepareMode>& prepare_mode_names() {
   static const EnumNames<PrepareMode> n = {{PrepareMode::automatic, "auto"}, {PrepareMode::off, "off"}};
   return n;
@@ -93,56 +67,6 @@ const EnumNames<NonFinite>& nonfinite_names() {
 }
 
 // ---- shared blocks -----------------------------------------------------------------
-const ParamTable<DiffusionParams>& diffusion_param_table() {
-  static const ParamTable<DiffusionParams> t = [] {
-    ParamTable<DiffusionParams> d("diffusion");
-    d.choice("scheme", &DiffusionParams::scheme, scheme_names(),
-             "diffusion scheme: standard (explicit Euler, eq. 11-13), invariant (eq. 17-18 as published), "
-             "invariant-exact (offsets that reach the target variance exactly)")
-        .choice("precision", &DiffusionParams::precision, precision_names(),
-                "storage between iterations: f32, or f16 rounded like an RGBA16F texture")
-        .real("sigma0", &DiffusionParams::sigma0, "px", Range::left_open(0.0, 1000.0),
-              "inner scale of the input image (its own blur)")
-        .real("rho-max", &DiffusionParams::rho_max, "1", Range::left_open(0.0, 0.25),
-              "largest diffusion rate per iteration (0.25 is the 2-D stability limit); auto: 0.2 for "
-              "invariant-exact, 0.25 for the others")
-        .choice("edge-rate", &DiffusionParams::edge_rate, edge_rate_names(),
-                "rate on the edge between a pixel and its neighbour sample: harmonic (default; leak-free), "
-                "mean (the paper's eq. 12), min")
-        .real("max-sigma-diagonals", &DiffusionParams::max_sigma_diagonals, "1", Range::at_least(0.0),
-              "refuse a blur whose largest scale sigma_max exceeds this many image diagonals (past twice the "
-              "longer side a pixel's blur is the image's mean: more only costs work); 0: no such bound")
-        .since(4, 0.0);
-    return d;
-  }();
-  return t;
-}
-
-const ParamTable<PrepareParams>& prepare_param_table() {
-  static const ParamTable<PrepareParams> t = [] {
-    ParamTable<PrepareParams> d("prepare");
-    d.real("sky-margin", &PrepareParams::sky_margin_px, "px", Range::at_least(0.0),
-           "width mu of the matted horizon between scene and sky; 0 disables the margin")
-        .real("s-max-factor", &PrepareParams::s_max_factor, "1", Range::left_open(1.0, 1e6),
-              "sky range S_max = factor * R_max; must exceed 1 so the sky lies beyond the scene")
-        .real("min-coverage", &PrepareParams::min_coverage, "1", Range::closed(0.0, 1.0),
-              "refuse maps whose known pixels cover less than this fraction (a projected lidar scan)")
-        .real("sky-min-fraction", &PrepareParams::sky_min_fraction, "1", Range::closed(0.0, 1.0),
-              "area fraction a top-touching unknown region needs to count as sky")
-        .real("sky-large-fraction", &PrepareParams::sky_large_fraction, "1", Range::closed(0.0, 1.0),
-              "area fraction an unknown region anywhere needs to count as sky")
-        .real("residual-tol", &PrepareParams::residual_tol, "1", Range::closed(1e-6, 0.1),
-              "the margin solve stops at max |discrete Laplacian| <= tol * S_max (below 1e-6 a float32 "
-              "output cannot hold it)")
-        .integer("ransac-iterations", &PrepareParams::ransac_iterations, "1", Range::closed(1, 1e6),
-                 "candidate fill values tried per hole")
-        .count("seed", &PrepareParams::seed, "1", Range::at_least(0.0),
-               "seed of the hole-filling RANSAC (results are deterministic for a seed)");
-    return d;
-  }();
-  return t;
-}
-
 namespace {
 // The --compression help, from the table of formats (built once: the specs
 // hold C strings).

@@ -17,13 +17,13 @@ namespace brume::cli {
 Command add_batch(CLI::App& app) {
   CLI::App* sub = app.add_subcommand(
       "batch", "run a manifest of frames (CSV or JSON Lines) in one process: sampled parameters, workers, resume, "
-               "shards; or --scan a dataset folder into a manifest");
+               "shards; or a dataset's folder into a manifest (--dataset)");
   struct Args {
     BatchOptions o;
     std::string shard = "1/1";
     std::vector<std::string> params;
     bool quiet = false;
-    ScanOptions scan;
+    DatasetOptions dataset;
   };
   auto a = std::make_shared<Args>();
   std::string effects;
@@ -31,7 +31,7 @@ Command add_batch(CLI::App& app) {
   sub->add_option("--manifest", a->o.manifest,
                   "the manifest: .csv (header row) or .jsonl; one frame per row: key, image, depth flags without "
                   "dashes, effect, parameters (fixed or uniform(a, b), loguniform(a, b), choice(x, y, ...)). With "
-                  "--scan: the manifest to write")
+                  "--dataset: the manifest to write")
       ->required();
   sub->add_option("--out-dir", a->o.out_dir, "outputs, records and results.jsonl go here, named after the keys");
   sub->add_option("--workers", a->o.workers, "frames in flight (0 = one per core)")->default_str("0");
@@ -52,15 +52,17 @@ Command add_batch(CLI::App& app) {
   sub->add_option("--map", a->o.maps, "also write this map of the effect for every frame (e.g. transmission), as "
                                       "<key>.<map>.exr; repeatable");
   sub->add_flag("--quiet", a->quiet, "no progress lines (failures and the summary are still printed)");
-  sub->add_option("--scan", a->scan.dir, "write --manifest from this dataset folder instead (with --out-dir: then run it)");
-  sub->add_option("--layout", a->scan.layout, "the --scan folder's layout: middlebury, eth3d, kitti, cityscapes, pairs");
-  sub->add_option("--image-glob", a->scan.image_glob, "pairs: images relative to --scan, e.g. 'rgb/*.png'");
-  sub->add_option("--depth-glob", a->scan.depth_glob,
-                  "pairs: depth files relative to --scan, paired by what '*' matched, e.g. 'depth/*.exr'");
-  sub->add_flag("--lidar", a->scan.lidar,
-                "with --scan --layout kitti: also a 'lidar' column (velodyne/N.bin): each frame's scan is fogged with "
+  sub->add_option("--dataset,--scan", a->dataset.dir,
+                  "write --manifest from this dataset folder instead (with --out-dir: then run it); --scan is its "
+                  "former name");
+  sub->add_option("--layout", a->dataset.layout, "the --dataset folder's layout: middlebury, eth3d, kitti, cityscapes, pairs");
+  sub->add_option("--image-glob", a->dataset.image_glob, "pairs: images relative to --dataset, e.g. 'rgb/*.png'");
+  sub->add_option("--depth-glob", a->dataset.depth_glob,
+                  "pairs: depth files relative to --dataset, paired by what '*' matched, e.g. 'depth/*.exr'");
+  sub->add_flag("--lidar", a->dataset.lidar,
+                "with --dataset --layout kitti: also a 'lidar' column (velodyne/N.bin): each frame's scan is fogged with "
                 "its image's medium and written beside it as <key>.bin (docs/lidar.md)");
-  sub->add_option("--depth-kind", a->scan.depth_kind, "pairs: the depth column (range, z, disparity, ...)")
+  sub->add_option("--depth-kind", a->dataset.depth_kind, "pairs: the depth column (range, z, disparity, ...)")
       ->default_str("range");
   auto eflags = std::make_shared<Flags<ExecOptions>>(sub, exec_param_table());
   return {sub, "batch", [a, eflags](const std::vector<std::string>&) {
@@ -83,17 +85,17 @@ Command add_batch(CLI::App& app) {
                 throw Error("--param '" + p + "' is not NAME=SPEC (e.g. visibility=loguniform(50, 5000))");
               o.params.emplace_back(p.substr(0, eq), p.substr(eq + 1));
             }
-            if (!a->scan.dir.empty()) {
-              ScanOptions s = a->scan;
-              if (s.layout.empty()) throw Error("--scan needs --layout middlebury|eth3d|kitti|cityscapes|pairs");
+            if (!a->dataset.dir.empty()) {
+              DatasetOptions s = a->dataset;
+              if (s.layout.empty()) throw Error("--dataset needs --layout middlebury|eth3d|kitti|cityscapes|pairs");
               s.manifest_dir = std::filesystem::path(o.manifest).parent_path().string();
-              const auto rows = scan_dataset(s);
+              const auto rows = dataset_manifest(s);
               write_manifest(o.manifest, rows);
               std::fprintf(stderr, "brume batch: %zu frames of '%s' (%s) written to %s\n", rows.size(), s.dir.c_str(),
                            s.layout.c_str(), o.manifest.c_str());
               if (o.out_dir.empty()) return 0;
-            } else if (!a->scan.layout.empty()) {
-              throw Error("--layout is for --scan DIR; give the folder to scan");
+            } else if (!a->dataset.layout.empty()) {
+              throw Error("--layout is for --dataset DIR; give the dataset's folder");
             }
             if (o.out_dir.empty()) throw Error("--out-dir is required: the folder the outputs and records go to");
             const BatchSummary s = run_batch(o);

@@ -47,12 +47,12 @@ std::vector<Command> add_commands(CLI::App& app) {
     CLI::App* sub = subcommand_at(app, c.cli_words(), c.summary);
     auto flags = std::make_shared<SpecFlags>(sub, c.specs, c.defaults);
     std::shared_ptr<Flags<ExecOptions>> eflags;
-    if (c.exec) eflags = std::make_shared<Flags<ExecOptions>>(sub, exec_param_table());
+    if (c.takes_exec_flags) eflags = std::make_shared<Flags<ExecOptions>>(sub, exec_param_table());
     const CommandDef* def = &c;
     // An image command without the LiDAR block (brume/lidar_camera.hpp) says
     // why it takes no --lidar, instead of CLI11's "not expected".
     auto no_lidar = std::make_shared<std::array<std::string, 2>>();
-    if (c.exec && c.record && !c.spec("lidar")) {
+    if (c.takes_exec_flags && c.writes_record && !c.spec("lidar")) {
       sub->add_option("--lidar", (*no_lidar)[0])->group("");
       sub->add_option("--lidar-out", (*no_lidar)[1])->group("");
     }

@@ -13,7 +13,7 @@ namespace brume::cli {
 Command add_run(CLI::App& app) {
   CLI::App* sub = app.add_subcommand(
       "run", "repeat the run a parameter record describes (the --record FILE.json of " +
-                 command_names([](const CommandDef& c) { return c.record; }) + "; a sky fit's JSON)");
+                 command_names([](const CommandDef& c) { return c.writes_record; }) + "; a sky fit's JSON)");
   auto path = std::make_shared<std::string>();
   auto out_dir = std::make_shared<std::string>();
   sub->add_option("record", *path, "the JSON record (or a record embedded in nothing else: the file itself)")->required();

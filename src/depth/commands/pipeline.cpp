@@ -1,6 +1,6 @@
-// brume — depth conversion and preparation as pipelines (brume/depth_pipeline.hpp).
+// brume — depth conversion, preparation and completion as pipelines (depth_jobs.hpp).
 #include "brume/command.hpp"
-#include "brume/depth_pipeline.hpp"
+#include "depth/commands/depth_jobs.hpp"
 
 #include <cstdio>
 #include <filesystem>
@@ -206,8 +206,8 @@ CommandDef depth_complete_command() {
       .cli = "depth complete",
       .summary = "complete a sparse range map (a lidar scan) guided by its colour image; the sky stays unknown",
       .table = &depth_complete_job_table(),
-      .exec = true,
-      .record = true,
+      .takes_exec_flags = true,
+      .writes_record = true,
       .run = [](const DepthCompleteJob& j, const ExecOptions& eo, const RunContext& ctx) {
         return run_depth_complete_job(j, eo, ctx);
       },
@@ -256,7 +256,7 @@ CommandDef depth_convert_command() {
       .cli = "depth convert",
       .summary = "convert a depth source to a range (or z) map in metres",
       .table = &depth_convert_job_table(),
-      .record = true,
+      .writes_record = true,
       .run = [](const DepthConvertJob& j, const ExecOptions&, const RunContext& ctx) {
         return run_depth_convert_job(j, ctx);
       },
@@ -308,7 +308,7 @@ CommandDef depth_prepare_command() {
       .cli = "depth prepare",
       .summary = "fill holes, identify the sky and matte the horizon (Hansard 4.1)",
       .table = &depth_prepare_job_table(),
-      .record = true,
+      .writes_record = true,
       .run = [](const DepthPrepareJob& j, const ExecOptions&, const RunContext& ctx) {
         return run_depth_prepare_job(j, ctx);
       },

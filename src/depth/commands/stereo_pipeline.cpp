@@ -1,5 +1,5 @@
-// brume — `brume depth stereo` (brume/stereo_pipeline.hpp).
-#include "brume/stereo_pipeline.hpp"
+// brume — `brume depth stereo` (stereo_job.hpp).
+#include "depth/commands/stereo_job.hpp"
 
 #include <cstdio>
 
@@ -127,7 +127,7 @@ CommandDef depth_stereo_command() {
       .cli = "depth stereo",
       .summary = "disparity of a rectified stereo pair (semi-global matching, left-right checked), in pixels",
       .table = &depth_stereo_job_table(),
-      .record = true,
+      .writes_record = true,
       .run = [](const DepthStereoJob& j, const ExecOptions&, const RunContext& ctx) {
         return run_depth_stereo_job(j, ctx);
       },

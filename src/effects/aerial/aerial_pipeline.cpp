@@ -304,9 +304,9 @@ CommandDef aerial_command() {
       .cli = "aerial",
       .summary = "spectral aerial perspective from turbidity: render, re-render, remove (Morales eq. 3.11-3.13)",
       .table = &aerial_job_table(),
-      .exec = true,
-      .record = true,
-      .batch = true,
+      .takes_exec_flags = true,
+      .writes_record = true,
+      .batchable = true,
       .check = [](const AerialJob& j, const std::set<std::string>& g) {
         validate_aerial(j.aerial, g);
         check_range_step(j.prepare, g);

@@ -194,8 +194,8 @@ CommandDef blur_command() {
       .cli = "blur",
       .summary = "the diffusion engine alone: Gaussian or space-variant blur",
       .table = &blur_job_table(),
-      .exec = true,
-      .record = true,
+      .takes_exec_flags = true,
+      .writes_record = true,
       .run = &run_blur_job,
       .report = [](const BlurJob& j, const nlohmann::json& rec) {
         std::fprintf(stderr, "brume blur: %s  sigma_max %.3g px  %d iterations (%s, %s)\n", j.output.out.c_str(),

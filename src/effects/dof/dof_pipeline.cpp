@@ -283,9 +283,9 @@ CommandDef dof_command() {
       .cli = "dof",
       .summary = "depth of field by leak-free diffusion (thin-lens CoC, Bertalmio eq. 1-2, 16)",
       .table = &dof_job_table(),
-      .exec = true,
-      .record = true,
-      .batch = true,
+      .takes_exec_flags = true,
+      .writes_record = true,
+      .batchable = true,
       .check = [](const DofJob& j, const std::set<std::string>& g) {
         validate_dof(dof_with_lens(j.dof, j.input.depth.lens), g);
         check_range_step(j.prepare, g);

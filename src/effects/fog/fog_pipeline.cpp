@@ -318,9 +318,9 @@ CommandDef fog_command() {
       .summary = "layered fog: height densities integrated along each pixel's ray (Zhou, Chen, Smith), optional "
                  "scattering blur",
       .table = &fog_job_table(),
-      .exec = true,
-      .record = true,
-      .batch = true,
+      .takes_exec_flags = true,
+      .writes_record = true,
+      .batchable = true,
       .check = [](const FogJob& j, const std::set<std::string>& g) {
         validate_fog(j.fog, g);
         check_range_step(j.prepare, g);

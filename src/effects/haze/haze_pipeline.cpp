@@ -238,9 +238,9 @@ CommandDef haze_command() {
       .cli = "",  // `brume haze` is haze+dof's subcommand: plain haze without a --dof-... flag
       .summary = "haze and fog with scattering blur (Hansard eq. 1-7)",
       .table = &haze_job_table(),
-      .exec = true,
-      .record = true,
-      .batch = true,
+      .takes_exec_flags = true,
+      .writes_record = true,
+      .batchable = true,
       .check = [](const HazeJob& j, const std::set<std::string>& g) {
         validate_haze(j.haze, g);
         check_range_step(j.prepare, g);

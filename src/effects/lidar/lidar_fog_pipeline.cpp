@@ -9,6 +9,7 @@
 #include "brume/io.hpp"
 #include "brume/lidar_fog.hpp"
 #include "brume/record.hpp"
+#include "effects/lidar/lidar_fog_job.hpp"
 
 namespace brume {
 
@@ -132,7 +133,7 @@ CommandDef lidar_fog_command() {
       .cli = "lidar fog",
       .summary = "fog a LiDAR scan (KITTI .bin): attenuated returns and fog returns (Hahner et al. 2021)",
       .table = &lidar_fog_job_table(),
-      .record = true,
+      .writes_record = true,
       .check = [](const LidarFogJob& j, const std::set<std::string>&) { validate_lidar_fog(j.fog); },
       .run = [](const LidarFogJob& j, const ExecOptions&, const RunContext& ctx) { return run_lidar_fog_job(j, ctx); },
       .report = [](const LidarFogJob& j, const nlohmann::json& rec) {

@@ -82,7 +82,7 @@ CommandDef lidar_rain_command() {
       .summary = "rain on a LiDAR scan (KITTI .bin): attenuated returns, drop echoes, lost points (Marshall-Palmer "
                  "drops, Kilic et al. 2021)",
       .table = &lidar_rain_job_table(),
-      .record = true,
+      .writes_record = true,
       .check = [](const LidarRainJob& j, const std::set<std::string>&) { validate_lidar_rain(j.rain); },
       .run = [](const LidarRainJob& j, const ExecOptions&, const RunContext& ctx) { return run_lidar_rain_job(j, ctx); },
       .report =

@@ -321,8 +321,8 @@ CommandDef sky_render_command() {
       .cli = "sky render",
       .summary = "render a Preetham sky (linear sRGB, kcd/m^2) for a turbidity and a sun",
       .table = &sky_render_job_table(),
-      .exec = true,
-      .record = true,
+      .takes_exec_flags = true,
+      .writes_record = true,
       .run = &run_sky_render_job,
       .report = [](const SkyRenderJob& j, const nlohmann::json& rec) {
         const auto& s = rec["sky"]["sun"];
@@ -354,7 +354,7 @@ CommandDef sky_fit_command() {
       .cli = "sky fit",
       .summary = "estimate the turbidity of a sky photo (RANSAC + Levenberg-Marquardt), JSON out",
       .table = &sky_fit_job_table(),
-      .record = true,
+      .writes_record = true,
       .run = [](const SkyFitJob& j, const ExecOptions&, const RunContext& ctx) { return run_sky_fit_job(j, ctx); },
       .report = [](const SkyFitJob&, const nlohmann::json& j) {
         // The result is this command's product: stdout.

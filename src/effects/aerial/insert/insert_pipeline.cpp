@@ -162,8 +162,8 @@ CommandDef insert_command() {
       .cli = "insert",
       .summary = "insert a virtual object (RGBA + range) into a photo with aerial perspective at its own range",
       .table = &insert_job_table(),
-      .exec = true,
-      .record = true,
+      .takes_exec_flags = true,
+      .writes_record = true,
       .run = &run_insert_job,
       .report = [](const InsertJob& j, const nlohmann::json& rec) {
         const auto& d = rec["insert"]["derived"];

@@ -247,9 +247,9 @@ CommandDef haze_dof_command() {
       .cli = "haze",
       .summary = "haze and fog with scattering blur (Hansard eq. 1-7); any --dof-... flag adds depth of field after it",
       .table = &haze_dof_job_table(),
-      .exec = true,
-      .record = true,
-      .batch = true,
+      .takes_exec_flags = true,
+      .writes_record = true,
+      .batchable = true,
       .check = [](const HazeDofJob& j, const std::set<std::string>& g) {
         const std::set<std::string> gh = haze_given(g);
         validate_haze(j.haze, gh);

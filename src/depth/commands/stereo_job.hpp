@@ -1,7 +1,8 @@
-// brume — `brume depth stereo` as a library call with declared parameters
-// and a re-runnable record (brume/pipeline.hpp): a rectified pair to a
-// disparity map in pixels (brume/stereo.hpp), in the convention --disparity
-// reads.
+// brume — `brume depth stereo` as a job from files to files with declared
+// parameters and a re-runnable record (brume/pipeline.hpp): a rectified pair
+// to a disparity map in pixels (brume/stereo.hpp), in the convention
+// --disparity reads. Private to the library (not installed): a program runs
+// it through the list of commands (find_command("depth stereo")->run).
 #pragma once
 
 #include <cmath>

@@ -1,5 +1,7 @@
-// brume — `brume depth convert`, `brume depth prepare` and `brume depth complete` as library calls
-// with declared parameters and re-runnable records (brume/pipeline.hpp).
+// brume — `brume depth convert`, `brume depth prepare` and `brume depth complete` as jobs from files
+// to files with declared parameters and re-runnable records (brume/pipeline.hpp): the commands' half
+// of depth, private to the library (not installed); a program runs a job through the list of
+// commands (brume/command.hpp: find_command("depth prepare")->run).
 #pragma once
 
 #include <string>

@@ -1,4 +1,4 @@
-// brume — `brume batch --scan DIR --layout L`: a manifest from a dataset's
+// brume — `brume batch --dataset DIR --layout L`: a manifest from a dataset's
 // folder layout, with each dataset's depth convention written out as the
 // depth flags (never guessed at run time).
 #include <algorithm>
@@ -65,14 +65,14 @@ std::vector<std::pair<std::string, std::string>> glob(const fs::path& dir, const
 
 }  // namespace
 
-std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
+std::vector<nlohmann::json> dataset_manifest(const DatasetOptions& o) {
   const fs::path dir(o.dir);
   std::error_code ec;
-  if (!fs::is_directory(dir, ec)) throw Error("--scan '" + o.dir + "' is not a folder");
+  if (!fs::is_directory(dir, ec)) throw Error("--dataset '" + o.dir + "' is not a folder");
   std::vector<nlohmann::json> rows;
   const std::string& L = o.layout;
   if (o.lidar && L != "kitti")
-    throw Error("--lidar with --scan: only --layout kitti has LiDAR scans (velodyne/N.bin); drop --lidar");
+    throw Error("--lidar with --dataset: only --layout kitti has LiDAR scans (velodyne/N.bin); drop --lidar");
   if (L == "middlebury") {
     // Middlebury 2005/2006 third size (the folders of ../shared/data): the
     // intensity I of disp1.png is the full-size disparity less dmin, so at
@@ -81,8 +81,8 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
     for (const fs::path& s : subdirs(dir)) {
       if (!fs::exists(s / "view1.png") || !fs::exists(s / "disp1.png") || !fs::exists(s / "dmin.txt")) continue;
       double dmin = 0;
-      std::istringstream f(read_input_file((s / "dmin.txt").string(), "--scan", {4096, "dmin.txt holds one number"}));
-      if (!(f >> dmin)) throw Error("--scan: '" + (s / "dmin.txt").string() + "' holds no number (dmin)");
+      std::istringstream f(read_input_file((s / "dmin.txt").string(), "--dataset", {4096, "dmin.txt holds one number"}));
+      if (!(f >> dmin)) throw Error("--dataset: '" + (s / "dmin.txt").string() + "' holds no number (dmin)");
       rows.push_back({{"key", key_of(s / "view1.png", dir)},
                       {"image", rel(s / "view1.png", o.manifest_dir)},
                       {"disparity", rel(s / "disp1.png", o.manifest_dir)},
@@ -105,7 +105,7 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
     // and calib/N.txt (projected through P2 R0_rect Tr_velo_to_cam). A lidar
     // scan is sparse: the effects' --complete auto completes it first.
     const fs::path img = dir / "image_2";
-    if (!fs::is_directory(img)) throw Error("--scan '" + o.dir + "' --layout kitti: no image_2/ folder");
+    if (!fs::is_directory(img)) throw Error("--dataset '" + o.dir + "' --layout kitti: no image_2/ folder");
     std::vector<fs::path> files;
     for (const auto& e : fs::directory_iterator(img))
       if (e.is_regular_file() && e.path().extension() == ".png") files.push_back(e.path());
@@ -128,7 +128,7 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
     // --disparity-offset -1/256: p = 0 is unknown as every integer 0 is, and
     // p = 1 (d = 0, infinitely far) is unknown as d <= 0 is.
     const fs::path img = dir / "leftImg8bit";
-    if (!fs::is_directory(img)) throw Error("--scan '" + o.dir + "' --layout cityscapes: no leftImg8bit/ folder");
+    if (!fs::is_directory(img)) throw Error("--dataset '" + o.dir + "' --layout cityscapes: no leftImg8bit/ folder");
     const std::string suffix = "_leftImg8bit.png";
     std::vector<fs::path> files;
     for (const auto& e : fs::recursive_directory_iterator(img)) {
@@ -146,7 +146,7 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
       nlohmann::json c;
       try {
         c = nlohmann::json::parse(
-            read_input_file(cam.string(), "--scan", {1u << 20, "a Cityscapes camera JSON is a few hundred bytes"}));
+            read_input_file(cam.string(), "--dataset", {1u << 20, "a Cityscapes camera JSON is a few hundred bytes"}));
         rows.push_back({{"key", key_of(p, dir)},
                         {"image", rel(p, o.manifest_dir)},
                         {"disparity", rel(disp, o.manifest_dir)},
@@ -158,13 +158,13 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
                         {"cy", c.at("intrinsic").at("v0").get<double>()},
                         {"baseline", c.at("extrinsic").at("baseline").get<double>()}});
       } catch (const nlohmann::json::exception& e) {
-        throw Error("--scan: camera file '" + cam.string() +
+        throw Error("--dataset: camera file '" + cam.string() +
                     "' is not a Cityscapes camera JSON (intrinsic.fx, fy, u0, v0; extrinsic.baseline): " + e.what());
       }
     }
   } else if (L == "pairs") {
     if (o.image_glob.empty() || o.depth_glob.empty())
-      throw Error("--layout pairs needs --image-glob and --depth-glob (relative to --scan, '*' within one folder "
+      throw Error("--layout pairs needs --image-glob and --depth-glob (relative to --dataset, '*' within one folder "
                   "level), e.g. --image-glob 'rgb/*.png' --depth-glob 'depth/*.exr'");
     const std::set<std::string> kinds = {"range", "z", "disparity", "depth-buffer", "inverse-depth", "normalized-depth"};
     if (!kinds.count(o.depth_kind))
@@ -180,7 +180,7 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
     for (const auto& [r, cap] : glob(dir, o.image_glob)) {
       const auto it = depth.find(cap);
       if (it == depth.end()) {
-        std::fprintf(stderr, "brume batch --scan: '%s' has no depth file matching '%s'; left out\n", r.c_str(),
+        std::fprintf(stderr, "brume batch --dataset: '%s' has no depth file matching '%s'; left out\n", r.c_str(),
                      o.depth_glob.c_str());
         continue;
       }
@@ -189,7 +189,7 @@ std::vector<nlohmann::json> scan_dataset(const ScanOptions& o) {
   } else {
     throw Error("--layout '" + L + "' is not allowed; use middlebury, eth3d, kitti, cityscapes or pairs");
   }
-  if (rows.empty()) throw Error("--scan '" + o.dir + "' --layout " + L + ": no frames found");
+  if (rows.empty()) throw Error("--dataset '" + o.dir + "' --layout " + L + ": no frames found");
   return rows;
 }
 
@@ -200,7 +200,7 @@ void write_manifest(const std::string& path, const std::vector<nlohmann::json>& 
   // manifest or, later, a record: refuse it by name rather than replace it.
   for (const auto& r : rows)
     for (const auto& [k, v] : r.items())
-      if (v.is_string()) check_utf8(v.get_ref<const std::string&>(), "--scan: the '" + k + "' file");
+      if (v.is_string()) check_utf8(v.get_ref<const std::string&>(), "--dataset: the '" + k + "' file");
   std::string text;
   if (ext == ".jsonl" || ext == ".ndjson" || ext == ".json") {
     for (const auto& r : rows) text += r.dump() + "\n";
@@ -238,7 +238,7 @@ void write_manifest(const std::string& path, const std::vector<nlohmann::json>& 
       text += "\n";
     }
   } else {
-    throw Error("--manifest '" + path + "': a scanned manifest is written as .csv or .jsonl");
+    throw Error("--manifest '" + path + "': a dataset's manifest is written as .csv or .jsonl");
   }
   OutputSet outs;
   outs.write_text(path, text, "--manifest");
