@@ -1,7 +1,7 @@
 // brume — fast CPU schedule of the diffusion schemes: which row kernel runs
 // on which rows, in which iteration, on which thread, and the buffers they
-// use. The kernels (one row of eq. 11 at three vector widths) are
-// diffusion_fast_kernels.cpp; the temporal blocking diffusion_fusion.hpp.
+// use. The kernels (one row of eq. 11, written once with Highway for every
+// SIMD target, beside the reference rows) are diffusion_fast_kernels.cpp; the temporal blocking diffusion_fusion.hpp.
 //
 // Same algorithm as diffusion_reference.cpp, scheduled for speed. Input is
 // the per-pixel rate map (the sigma front end computes it, brume_standard_rate
@@ -167,8 +167,9 @@ void release_workspace() {
 // 18 (brume_invariant_rate's operations with its log), and a space-variant
 // map's growth e^rho and variance ratio (brume_step_variance_ratio's;
 // setup_math::growth_and_ratio8). The
-// last < 8 values go through the same vector code, padded. Compiled at the
-// three widths of the row kernels (same operations, same bits).
+// last < 8 values go through the same vector code, padded. Compiled for the
+// baseline, AVX2 and AVX-512F, picked by diffusion_simd_level (same
+// operations, same bits; not yet on Highway: issue #55).
 namespace setup {
 using setup_math::v8f;
 // Whole vectors by fixed-size copies (one vector load or store); only the
