@@ -43,11 +43,6 @@
 #include "diffusion/diffusion_fusion.hpp"
 #include "diffusion/diffusion_rows.hpp"
 #include "diffusion/diffusion_setup_math.hpp"
-#include "diffusion/half.hpp"
-
-#if defined(__x86_64__)
-#include <immintrin.h>
-#endif
 
 namespace brume::cpu {
 
@@ -69,29 +64,6 @@ FusionLimits diffusion_fusion_limits() {
 void set_diffusion_fusion(const FusionLimits* limits) {
   std::lock_guard<std::mutex> lock(g_fusion_mutex);
   g_fusion = limits ? *limits : kFusionDefaults;
-}
-
-#if defined(__x86_64__)
-__attribute__((target("f16c,avx"))) static void round_to_half_f16c(float* v, std::size_t n) {
-  std::size_t i = 0;
-  for (; i + 8 <= n; i += 8) {
-    __m256 x = _mm256_loadu_ps(v + i);
-    __m128i h = _mm256_cvtps_ph(x, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
-    _mm256_storeu_ps(v + i, _mm256_cvtph_ps(h));
-  }
-  for (; i < n; ++i) v[i] = static_cast<float>(static_cast<half_t>(v[i]));
-}
-#endif
-
-void round_to_half(float* v, std::size_t n) {
-#if defined(__x86_64__)
-  static const bool has_f16c = cpu_has_f16c() && __builtin_cpu_supports("avx");
-  if (has_f16c) {
-    round_to_half_f16c(v, n);
-    return;
-  }
-#endif
-  for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<float>(static_cast<half_t>(v[i]));
 }
 
 // A buffer of at least `bytes`, uninitialised, with the huge-page hint

@@ -1,5 +1,6 @@
-// brume — binary16 storage for the constant-scale diffusion path, written
-// once with Highway (core/simd.hpp) and compiled for every target; it stores
+// brume — binary16 storage for the constant-scale diffusion path, and
+// round_to_half, written once with Highway (core/simd.hpp) and compiled for
+// every target; it stores
 // binary16 only on the targets that convert float <-> binary16 in hardware
 // with IEEE round-to-nearest-even (x86-64's F16C, part of Highway's AVX2
 // and AVX-512 targets). On the others uniform_iterations_f16 returns false
@@ -38,6 +39,7 @@
 
 #include "diffusion/diffusion_fusion.hpp"
 #include "diffusion/diffusion_rows.hpp"
+#include "diffusion/half.hpp"
 #endif
 
 #undef HWY_TARGET_INCLUDE
@@ -118,6 +120,20 @@ void row_interior_f16(const std::uint16_t* s, const std::uint16_t* u0, const std
 
 }  // namespace
 
+// round_to_half on this target: eight values a vector where the target
+// converts in hardware, else (and for the last < 8) the compiler's
+// conversion through half_t (IEEE round to nearest even either way).
+void RoundToHalf(float* v, std::size_t n) {
+  std::size_t i = 0;
+#ifdef BRUME_HWY_F16C
+  const hn::CappedTag<float, 8> d;
+  const hn::Rebind<hwy::float16_t, decltype(d)> dh;
+  for (; i + hn::Lanes(d) <= n; i += hn::Lanes(d))
+    hn::StoreU(hn::PromoteTo(d, hn::DemoteTo(dh, hn::LoadU(d, v + i))), d, v + i);
+#endif
+  for (; i < n; ++i) v[i] = static_cast<float>(static_cast<half_t>(v[i]));
+}
+
 // This target's binary16 iterations (exported below); false where it has no
 // hardware conversion.
 bool UniformIterationsF16(float* f, int W, int H, const std::vector<UniformStep>* steps,
@@ -158,6 +174,9 @@ HWY_AFTER_NAMESPACE();
 #if HWY_ONCE
 namespace brume::cpu {
 HWY_EXPORT(UniformIterationsF16);
+HWY_EXPORT(RoundToHalf);
+
+void round_to_half(float* v, std::size_t n) { HWY_DYNAMIC_DISPATCH(RoundToHalf)(v, n); }
 
 bool uniform_iterations_f16(float* f, int W, int H, const std::vector<UniformStep>& steps,
                             const std::vector<FusedGroup>& groups, int threads, std::uint16_t* a, std::uint16_t* b,
