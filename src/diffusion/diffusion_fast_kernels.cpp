@@ -51,6 +51,7 @@
 #include <vector>
 
 #include "diffusion/diffusion_rows.hpp"
+#include "diffusion/diffusion_setup_rows.hpp"
 
 namespace brume::cpu {
 namespace {
@@ -372,6 +373,10 @@ void standard_row_generic(BRUME_STANDARD_ROW_ARGS) { BRUME_STANDARD_ROW_CALL; }
   general_row_body<C>(in, orow, rho, s0, k, growth, vr, exact, edge_mode, W, H, y, t, upd, end)
 void general_row_generic(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(4, run_generic, run_end_generic); }
 void general_rgb_row_generic(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(3, run_rgb_generic, run_end_generic); }
+void rates_generic(const float* s, float* rho, std::size_t n, float s0, float Nf) {
+  setup::rates_body(s, rho, n, s0, Nf);
+}
+void growth_generic(const float* rho, float* g, float* vr, std::size_t n) { setup::growth_body(rho, g, vr, n); }
 
 }  // namespace
 }  // namespace brume::cpu
@@ -570,11 +575,15 @@ int RunEndOf(const int* __restrict n, int x, int W) {
 void StandardRow(BRUME_STANDARD_ROW_ARGS) { BRUME_STANDARD_ROW_CALL; }
 void GeneralRow(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(4, Run<4>, RunEndOf); }
 void GeneralRgbRow(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(3, Run<3>, RunEndOf); }
+// The set-up's eight-float vector code (GCC's vector extension), compiled
+// for this target.
+void Rates(const float* s, float* rho, std::size_t n, float s0, float Nf) { setup::rates_body(s, rho, n, s0, Nf); }
+void Growth(const float* rho, float* g, float* vr, std::size_t n) { setup::growth_body(rho, g, vr, n); }
 
 }  // namespace
 
 // This target's rows (exported below).
-RowKernels Kernels() { return {UniformRow, GeneralRow, StandardRow, GeneralRgbRow}; }
+RowKernels Kernels() { return {UniformRow, GeneralRow, StandardRow, GeneralRgbRow, Rates, Growth}; }
 
 }  // namespace HWY_NAMESPACE
 }  // namespace brume::cpu
@@ -594,6 +603,10 @@ int simd_available() {
 }
 }  // namespace
 
+// The reference rows and set-up (level 0).
+const RowKernels kReference{uniform_row_generic,     general_row_generic, standard_row_generic,
+                            general_rgb_row_generic, rates_generic,       growth_generic};
+
 RowKernels row_kernels() {
   // Level 0 (set_diffusion_simd_limit(0)): the reference rows. Otherwise the
   // best target the CPU runs, without the 512-bit ones at level 1. The
@@ -601,11 +614,10 @@ RowKernels row_kernels() {
   // (UniformRow); the space-variant rows gain from 512 bits (160 against
   // 175 ms on a Zen 3-era EPYC): their per-pixel offsets and weights are
   // arithmetic-bound.
-  if (g_simd_limit.load(std::memory_order_relaxed) == 0)
-    return {uniform_row_generic, general_row_generic, standard_row_generic, general_rgb_row_generic};
+  if (g_simd_limit.load(std::memory_order_relaxed) == 0) return kReference;
   std::int64_t t = hwy::SupportedTargets() & HWY_TARGETS;
   if (diffusion_simd_level() < 2) t &= ~static_cast<std::int64_t>(HWY_AVX3 | HWY_AVX3_DL);
-  if (t == 0) return {uniform_row_generic, general_row_generic, standard_row_generic, general_rgb_row_generic};
+  if (t == 0) return kReference;
   hwy::ChosenTarget chosen;  // the table entry of the best of t (the lowest bit)
   chosen.Update(t & -t);
   return HWY_DISPATCH_TABLE(Kernels)[chosen.GetIndex()]();

@@ -252,12 +252,19 @@ using GeneralRow = void (*)(const RowSource<float>& in, float* orow, const float
 using StandardRow = void (*)(const float* __restrict s, const float* __restrict up, const float* __restrict dn,
                              const float* __restrict wr, const float* __restrict wd_up, const float* __restrict wd,
                              float* __restrict o, int W);
+// The invariant schemes' per-pixel set-up (diffusion_setup_rows.hpp): n
+// rates ln(s / s0) / N of the target scales s, and n rates' growth e^rho and
+// variance ratio.
+using RatesFn = void (*)(const float* s, float* rho, std::size_t n, float s0, float Nf);
+using GrowthFn = void (*)(const float* rho, float* g, float* vr, std::size_t n);
 // The widths of every row kernel, picked once per call.
 struct RowKernels {
   UniformRow uniform;
   GeneralRow general;
   StandardRow standard;
   GeneralRow general_rgb;  // the space-variant row on RGB rows (three values a pixel)
+  RatesFn rates;
+  GrowthFn growth;
 };
 // The widths diffusion_simd_level() allows.
 RowKernels row_kernels();
