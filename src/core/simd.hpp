@@ -13,8 +13,9 @@
 // contraction is allowed where these files are compiled, -ffp-contract=off,
 // so FMA never changes a result), AVX3 (AVX-512 F/VL/DQ/BW). SSSE3 is left
 // out: it would add a fifth compilation of every kernel (build time, which
-// CI counts) for CPUs of 2006-2008, which run the fallback instead. On aarch64,
-// NEON (and SVE where the compiler has it).
+// CI counts) for CPUs of 2006-2008, which run the fallback instead. On
+// aarch64 Highway would compile NEON (and SVE where the compiler has it):
+// not yet built or tested there (issue #55, item 2).
 #pragma once
 
 #include <cstdint>

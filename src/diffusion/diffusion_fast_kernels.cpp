@@ -1,9 +1,9 @@
 // brume — the row kernels of the fast CPU diffusion path: one row of one
 // iteration of eq. 11 (with eq. 12's edge weights), written once with
-// Highway and compiled for every SIMD target (core/simd.hpp: EMU128, SSE4,
-// AVX2, AVX-512 on x86-64; NEON on aarch64), beside the plain C++ reference
-// rows every target is tested against; and the pick of the rows
-// (row_kernels). The schedule that runs them over rows, iterations and
+// Highway and compiled for every SIMD target (core/simd.hpp: the baseline
+// fallback, SSE4, AVX2, AVX-512 on x86-64; NEON on aarch64, untested yet),
+// beside the plain C++ reference rows every target is tested against; and
+// the pick of the rows (row_kernels). The schedule that runs them over rows, iterations and
 // threads is diffusion_fast.cpp; the per-pixel formulas they share with it
 // and with the binary16 rows are diffusion_rows.hpp.
 //
