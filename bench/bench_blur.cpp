@@ -14,7 +14,7 @@
 //
 //   brume_bench_blur [--image FILE] [--runs N] [--threads N] [--quick]
 //   brume_bench_blur --ab [--rounds R] [--size WxH] [--image FILE] [--threads N]
-//                    [--fusion HALO_ROWS,RING_BYTES,BAND_HALOS]
+//                    [--fusion HALO_ROWS,RING_BYTES,BAND_HALOS] [--simd avx2]
 //
 // --ab (issue #16): the interleaved A/B harness. In one process, each round
 // runs every contender once, in its own shuffled order, after a pause:
@@ -27,7 +27,11 @@
 // host's drift during the run moves both sides of a ratio alike. --size
 // renders the demo scene at another size (e.g. 4000x2800, an image that
 // outgrows a smaller last-level cache); --fusion sets the fused schedule's
-// limits (src/diffusion/diffusion_kernels.hpp) for tuning them on a host.
+// limits (src/diffusion/diffusion_kernels.hpp) for tuning them on a host;
+// --simd avx2 runs the vector kernels at most at AVX2 on an AVX-512 host
+// (the row kernels' cap, cpu::set_diffusion_simd_limit(1), and Highway's
+// target forced to AVX2, simd::force_target), to time an AVX2-only CPU's
+// code on it.
 //
 // Without --image the built-in demo scene is rendered at 1600x1120 and used
 // (written to a temporary EXR and read back, so both contenders see the same
@@ -55,6 +59,7 @@
 #include "brume/io.hpp"
 #include "bench_util.hpp"
 #include "brume_opencv.hpp"
+#include "core/simd.hpp"
 #include "diffusion/diffusion_kernels.hpp"  // the fusion limits, for the A/B of the two schedules
 #include "shared/prelude_cpp.h"       // brume_target_scale (eq. 7)
 
@@ -228,10 +233,16 @@ int main(int argc, char** argv) {
     else if (a == "--runs" && i + 1 < argc) runs = std::atoi(argv[++i]);
     else if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
     else if (a == "--quick") quick = true;
+    else if (a == "--simd" && i + 1 < argc && std::string(argv[i + 1]) == "avx2") {
+      ++i;
+      cpu::set_diffusion_simd_limit(1);
+      for (std::int64_t t : simd::targets())
+        if (simd::target_name(t) == "AVX2") simd::force_target(t);
+    }
     else {
       std::fprintf(stderr,
                    "usage: %s [--image FILE] [--runs N] [--threads N] [--quick]\n"
-                   "       %s --ab [--rounds R] [--size WxH] [--image FILE] [--threads N]\n",
+                   "       %s --ab [--rounds R] [--size WxH] [--image FILE] [--threads N] [--simd avx2]\n",
                    argv[0], argv[0]);
       return 2;
     }

@@ -26,6 +26,7 @@ PKGS=(
   python3-torch python3-torchvision      # brume.transforms' torch tensors and DataLoader tests, examples/train_loader.py
   clang-14 libclang-rt-14-dev            # sanitizer builds and libFuzzer (scripts/test-sanitize.sh, fuzz/)
   libomp-14-dev                          # LLVM OpenMP + Archer, so that ThreadSanitizer sees OpenMP's synchronisation
+  libhwy-dev                             # SIMD kernels written once, dispatched per CPU (Highway, src/core/simd.hpp)
   libcpp-httplib-dev                     # brume view's request parsing and routes, behind its own front (0.7 MB)
   chromium chromium-driver python3-selenium python3-pil  # brume view's page tested in headless Chromium (SwiftShader WebGL2; ~380 MB)
 )

@@ -19,6 +19,7 @@
 #include "brume/blur.hpp"
 #include "brume/diffusion.hpp"
 #include "brume/error.hpp"
+#include "core/simd.hpp"
 #include "diffusion/diffusion_fusion.hpp"
 #include "diffusion/diffusion_kernels.hpp"
 #include "diffusion/diffusion_rows.hpp"
@@ -426,10 +427,40 @@ void expect_fast_near_reference(const Image& f, const Image& map, double sigma, 
   EXPECT_LE(d.rms, 2e-6) << what << ": " << d;
 }
 
-// Caps the fast path's vector width for the scope (cpu::set_diffusion_simd_limit).
-struct SimdLimit {
-  explicit SimdLimit(int level) { cpu::set_diffusion_simd_limit(level); }
-  ~SimdLimit() { cpu::set_diffusion_simd_limit(-1); }
+// The fast path's row kernels to compare: the reference rows (plain C++,
+// cpu::set_diffusion_simd_limit(0)) and each SIMD target Highway compiled
+// that this CPU runs (simd::targets(), best first: AVX3, AVX2, SSE4 and the
+// baseline fallback on an AVX-512 x86-64), each forced in turn
+// (simd::force_target). A target forced below AVX2 also keeps the f16
+// constant-scale path in float storage rounded to binary16 after every
+// iteration (as the reference level does): the bits the binary16 storage of
+// AVX2 and AVX-512 must match.
+struct Kernels {
+  std::string name;
+  int limit;              // set_diffusion_simd_limit
+  std::int64_t target;    // force_target (0: the CPU's own)
+};
+std::vector<Kernels> every_kernel() {
+  std::vector<Kernels> k{{"reference", 0, 0}};
+  for (std::int64_t t : simd::targets()) k.push_back({simd::target_name(t), -1, t});
+  return k;
+}
+// The reference rows and the best target.
+std::vector<Kernels> reference_and_best() {
+  std::vector<Kernels> k = every_kernel();
+  k.resize(std::min<std::size_t>(k.size(), 2));
+  return k;
+}
+// Runs the scope with `k`'s rows.
+struct UseKernels {
+  explicit UseKernels(const Kernels& k) {
+    cpu::set_diffusion_simd_limit(k.limit);
+    simd::force_target(k.target);
+  }
+  ~UseKernels() {
+    cpu::set_diffusion_simd_limit(-1);
+    simd::force_target(0);
+  }
 };
 
 }  // namespace
@@ -443,7 +474,6 @@ TEST(DiffusionFastPath, ConstantScaleWithoutAMapGivesTheMapsBits) {
   // threads, every vector width, sigma = sigma0 (no iteration) and scales
   // whose offsets outgrow the image; and the same plan. Bad scales are
   // refused with the map path's rule.
-  const int widest = cpu::diffusion_simd_level();
   for (const int C : {1, 3, 4, 6}) {
     Image base(37, 29, C);
     for (std::size_t i = 0; i < base.data.size(); ++i)
@@ -454,16 +484,16 @@ TEST(DiffusionFastPath, ConstantScaleWithoutAMapGivesTheMapsBits) {
           if (s == Scheme::standard && sigma > 12.0) continue;  // thousands of unit steps: covered at 12
           const DiffusionParams dp = params(s, pr);
           for (int threads : {1, 3})
-            for (int level = 0; level <= widest; level += std::max(1, widest)) {
-              SimdLimit cap(level);
+            for (const Kernels& k : reference_and_best()) {
+              UseKernels use(k);
               Exec ex;
               ex.threads = threads;
               Image want = base, got = base;
               const DiffusionPlan pw = diffuse(want, Image(37, 29, 1, static_cast<float>(sigma)), sigma, dp, ex);
               const DiffusionPlan pg = diffuse(got, sigma, dp, ex);
               EXPECT_EQ(got.data, want.data) << C << " channels, " << to_string(s) << ", " << to_string(pr)
-                                             << ", sigma " << sigma << ", " << threads << " threads, level "
-                                             << level;
+                                             << ", sigma " << sigma << ", " << threads << " threads, "
+                                             << k.name;
               EXPECT_EQ(pg.iterations, pw.iterations);
               EXPECT_EQ(pg.sigma_max, pw.sigma_max);
             }
@@ -500,16 +530,19 @@ TEST(DiffusionFastPath, ConstantScaleWithoutAMapGivesTheMapsBits) {
 }
 
 TEST(DiffusionSimd, EveryVectorWidthGivesTheSameBits) {
-  // The 128-bit, AVX2 and AVX-512 row kernels evaluate the same elementwise
-  // operations in the same order (no contraction), so they must agree bit for
-  // bit: every scheme, edge rate and precision, constant and space-variant
-  // maps, a width that is no multiple of the vector (tails), and the
-  // conductance path. Width 0 also runs f16 on a constant map in float
-  // storage rounded to binary16 each iteration, which the binary16 (F16C)
-  // storage of the wider levels must match bit for bit.
-  const int widest = cpu::diffusion_simd_level();
-  if (widest < 2) std::printf("[ INFO ] this CPU has no AVX-512F: comparing widths 0..%d only\n", widest);
-  if (widest < 1) GTEST_SKIP() << "this CPU has neither AVX2 nor AVX-512F: one vector width only";
+  // Every SIMD target's row kernels evaluate the reference rows' elementwise
+  // operations in the same order (no contraction), so they must agree with
+  // them bit for bit (tolerance: exact equality of the floats): every
+  // scheme, edge rate and precision, constant and space-variant maps, a
+  // width that is no multiple of any vector (tails), and the conductance
+  // path. The reference (and a target below AVX2) runs f16 on a constant map
+  // in float storage rounded to binary16 each iteration, which the binary16
+  // (F16C) storage of AVX2 and AVX-512 must match bit for bit.
+  const std::vector<Kernels> kernels = every_kernel();
+  std::string names;
+  for (const Kernels& k : kernels) names += " " + k.name;
+  std::printf("[ INFO ] row kernels compared:%s\n", names.c_str());
+  if (kernels.size() < 2) GTEST_SKIP() << "no SIMD target runs on this CPU";
   const int W = 103, H = 67;
   const Image f = texture(W, H);
   const Image maps[] = {constant_map(f, 9.0), ramp_map(W, H, 1.0, 9.0), dome_map(W, H, 1.0, 9.0)};
@@ -520,15 +553,15 @@ TEST(DiffusionSimd, EveryVectorWidthGivesTheSameBits) {
           DiffusionParams dp = params(s, p);
           dp.edge_rate = e;
           std::vector<Image> out;
-          for (int level = 0; level <= widest; ++level) {
-            SimdLimit cap(level);
+          for (const Kernels& k : kernels) {
+            UseKernels use(k);
             Image g = f;
             diffuse(g, maps[m], 9.0, dp);
             out.push_back(std::move(g));
           }
-          for (int level = 1; level <= widest; ++level)
-            EXPECT_EQ(out[0].data, out[static_cast<std::size_t>(level)].data)
-                << to_string(s) << " " << to_string(e) << " " << to_string(p) << " map " << m << " width level " << level;
+          for (std::size_t i = 1; i < kernels.size(); ++i)
+            EXPECT_EQ(out[0].data, out[i].data)
+                << to_string(s) << " " << to_string(e) << " " << to_string(p) << " map " << m << " " << kernels[i].name;
         }
   // Conductance (depth of field) with weights that vary per edge.
   Image wx(W, H, 1), wy(W, H, 1);
@@ -538,14 +571,14 @@ TEST(DiffusionSimd, EveryVectorWidthGivesTheSameBits) {
       wy.at(x, y) = 0.25f * static_cast<float>((x * 13 + y * 29) % 19) / 18.0f;
     }
   std::vector<Image> out;
-  for (int level = 0; level <= widest; ++level) {
-    SimdLimit cap(level);
+  for (const Kernels& k : kernels) {
+    UseKernels use(k);
     Image g = f;
     diffuse_conductance(g, wx, wy, 40);
     out.push_back(std::move(g));
   }
-  for (int level = 1; level <= widest; ++level)
-    EXPECT_EQ(out[0].data, out[static_cast<std::size_t>(level)].data) << "conductance, width level " << level;
+  for (std::size_t i = 1; i < kernels.size(); ++i)
+    EXPECT_EQ(out[0].data, out[i].data) << "conductance, " << kernels[i].name;
 }
 
 // The fast path's e^x and ln x (diffusion_setup_math.hpp) against the
@@ -641,7 +674,7 @@ TEST(DiffusionSimd, OneIterationIsThePerPixelFormula) {
   // run kernels). The multi-iteration
   // tests compare widths and schedules with each other; this one pins them
   // to the formula.
-  const int widest = cpu::diffusion_simd_level();
+  const std::vector<Kernels> kernels = every_kernel();
   for (const auto& [W, H] : {std::pair{23, 19}, std::pair{9, 7}, std::pair{80, 37}})
     for (double s0 : {2.5, 6.0, 13.0, 20.0, 60.0})
       for (bool per_row : {false, true}) {
@@ -661,15 +694,14 @@ TEST(DiffusionSimd, OneIterationIsThePerPixelFormula) {
                 cpu::update_pixel<false>(f.data.data(), want.data.data(), rho.data.data(), 0.0f, W, H, x, y, h,
                                          static_cast<int>(e));
               }
-            for (int level = 0; level <= widest; ++level) {
-              SimdLimit cap(level);
+            for (const Kernels& k : kernels) {
+              UseKernels use(k);
               DiffusionParams dp = params(s, Precision::f32, s0);
               dp.edge_rate = e;
               Image g = f;
               diffuse_rates(g, rho, 1, dp);
               EXPECT_EQ(g.data, want.data) << W << "x" << H << " sigma0 " << s0 << " " << to_string(s) << " "
-                                           << to_string(e) << " width level " << level
-                                           << (per_row ? " per-row map" : "");
+                                           << to_string(e) << " " << k.name << (per_row ? " per-row map" : "");
             }
           }
       }
@@ -748,16 +780,15 @@ struct FusionScope {
 
 // Diffusing f with `map` under each of `limits` at 1, 2, 3 and 7 threads
 // gives the bits of one pass per iteration: both invariant schemes, the
-// given edge rates, f32 and f16, the narrowest and the widest vectors.
+// given edge rates, f32 and f16, the reference rows and the best SIMD target.
 void expect_fusion_keeps_bits(const Image& f, const Image& map, double smax, const std::vector<EdgeRate>& edges,
                               const std::vector<cpu::FusionLimits>& limits, const std::string& what) {
   const cpu::FusionLimits none{0, 0, 0};
-  const int widest = cpu::diffusion_simd_level();
   for (Scheme s : {Scheme::invariant, Scheme::invariant_exact})
     for (EdgeRate e : edges)
       for (Precision p : {Precision::f32, Precision::f16})
-        for (int level : {0, widest}) {
-          SimdLimit cap(level);
+        for (const Kernels& k : reference_and_best()) {
+          UseKernels use(k);
           DiffusionParams dp = params(s, p);
           dp.edge_rate = e;
           Image want = f;
@@ -774,7 +805,7 @@ void expect_fusion_keeps_bits(const Image& f, const Image& map, double smax, con
               diffuse(got, map, smax, dp, ex);
               EXPECT_EQ(got.data, want.data)
                   << what << " " << f.width << "x" << f.height << " " << to_string(s) << " " << to_string(e) << " "
-                  << to_string(p) << " width level " << level << " halo limit " << lim.halo_rows << " threads "
+                  << to_string(p) << " " << k.name << " halo limit " << lim.halo_rows << " threads "
                   << threads;
             }
         }
@@ -887,7 +918,7 @@ TEST(DiffusionChannels, RgbRowsGiveTheRgbaBits) {
   const Case cases[] = {{103, 67, 9.0, 0, {1, 3}}, {103, 67, 9.0, 1, {1, 3}}, {61, 53, 12.0, 2, {1, 3}},
                         {9, 7, 30.0, 1, {1, 2}},   {29, 260, 14.0, 1, {1, 2, 3, 7}}};
   const cpu::FusionLimits none{0, 0, 0};
-  const int widest = cpu::diffusion_simd_level();
+  const std::vector<Kernels> kernels = every_kernel();
   for (const Case& c : cases) {
     const Image rgba0 = texture(c.w, c.h), rgb0 = rgb_of(rgba0);
     const Image map = c.map == 0   ? ramp_map(c.w, c.h, 1.0, c.smax)
@@ -895,11 +926,11 @@ TEST(DiffusionChannels, RgbRowsGiveTheRgbaBits) {
                                    : noise_map(c.w, c.h, c.smax);
     for (Scheme s : {Scheme::invariant, Scheme::invariant_exact})
       for (EdgeRate e : {EdgeRate::mean, EdgeRate::min, EdgeRate::harmonic})
-        for (int level = 0; level <= widest; ++level)
+        for (const Kernels& k : kernels)
           for (int threads : c.threads)
             for (bool fused : {true, false}) {
               if (!fused && c.h < 100) continue;
-              SimdLimit cap(level);
+              UseKernels use(k);
               FusionScope scope(fused ? nullptr : &none);
               DiffusionParams dp = params(s);
               dp.edge_rate = e;
@@ -910,7 +941,7 @@ TEST(DiffusionChannels, RgbRowsGiveTheRgbaBits) {
               diffuse(rgb, map, c.smax, dp, ex);
               EXPECT_EQ(rgb.data, rgb_of(rgba).data)
                   << c.w << "x" << c.h << " map " << c.map << " " << to_string(s) << " " << to_string(e)
-                  << " width level " << level << " threads " << threads << (fused ? " fused" : " one pass each");
+                  << " " << k.name << " threads " << threads << (fused ? " fused" : " one pass each");
               EXPECT_NE(rgb.data, rgb0.data);  // it did blur
             }
   }

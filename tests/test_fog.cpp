@@ -17,6 +17,7 @@
 #include "brume/gpu.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
+#include "core/simd.hpp"
 #include "effects/fog/fog_fast.hpp"
 #include "test_util.hpp"
 
@@ -139,7 +140,8 @@ TEST(Fog, VectorRowsMatchThePerPixelLoopAndTheClosedForm) {
   //    1e-4: exponents of ~90 e-folds carry 90 x 6e-8 each in f32 (the
   //    per-pixel loop's too: the formulation's conditioning, not the rows');
   //  - transmission and colour against the double composite: 2e-6 absolute
-  //    (from 1.8 km: 5e-5, f F times the relative error of F).
+  //    (from 1.8 km: 5e-5, f F times the relative error of F);
+  //  - every SIMD target against the default one: exact.
   const int W = 203, H = 57;
   for (double height : {10.0, 1800.0})
     for (double pitch : {-20.0, 0.0, 25.0}) {
@@ -165,6 +167,19 @@ TEST(Fog, VectorRowsMatchThePerPixelLoopAndTheClosedForm) {
       FogResult vec, loop;
       apply_fog(rgb, range, p, a, vec);
       detail::apply_fog_rows(rgb, range, p, a, loop, Exec{}, false);
+      // Every SIMD target the CPU runs (forced in turn: the baseline
+      // fallback, SSE4, AVX2, AVX-512 on such a host) compiles the same row
+      // and gives the same bits (exact equality: the same operations in the
+      // same order, no contraction).
+      for (std::int64_t t : simd::targets()) {
+        simd::force_target(t);
+        FogResult got;
+        apply_fog(rgb, range, p, a, got);
+        simd::force_target(0);
+        EXPECT_EQ(got.optical_depth.data, vec.optical_depth.data) << simd::target_name(t);
+        EXPECT_EQ(got.transmission.data, vec.transmission.data) << simd::target_name(t);
+        EXPECT_EQ(got.rgb.data, vec.rgb.data) << simd::target_name(t);
+      }
       const double B = p.falloff_per_m, dc = p.density_per_m * std::exp(-B * (height - p.base_height_m));
       double worst_loop = 0.0, worst_ref = 0.0, worst_f = 0.0, worst_c = 0.0, loop_ref = 0.0;
       for (int v = 0; v < H; ++v)

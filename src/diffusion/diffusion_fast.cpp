@@ -1,7 +1,7 @@
 // brume — fast CPU schedule of the diffusion schemes: which row kernel runs
 // on which rows, in which iteration, on which thread, and the buffers they
-// use. The kernels (one row of eq. 11 at three vector widths) are
-// diffusion_fast_kernels.cpp; the temporal blocking diffusion_fusion.hpp.
+// use. The kernels (one row of eq. 11, written once with Highway for every
+// SIMD target, beside the reference rows) are diffusion_fast_kernels.cpp; the temporal blocking diffusion_fusion.hpp.
 //
 // Same algorithm as diffusion_reference.cpp, scheduled for speed. Input is
 // the per-pixel rate map (the sigma front end computes it, brume_standard_rate
@@ -24,7 +24,8 @@
 //    F16C the iterations run on binary16 storage (diffusion_fast_f16.cpp);
 //  - a space-variant scale takes, per pixel, the growth e^rho of the running
 //    product sigma_k and the exact scheme's variance ratio, formed once
-//    (setup, vectorised at the row kernels' widths); its iterations are
+//    (set-up, diffusion_setup_rows.hpp, compiled with the rows for every
+//    SIMD target); its iterations are
 //    blocked too, each with a radius bounded over the whole map;
 //  - every buffer (rate map, growth, edge weights, rings, partner image)
 //    comes from a Workspace reused across iterations and calls, the process
@@ -42,12 +43,6 @@
 #include "core/huge_pages.hpp"
 #include "diffusion/diffusion_fusion.hpp"
 #include "diffusion/diffusion_rows.hpp"
-#include "diffusion/diffusion_setup_math.hpp"
-#include "diffusion/half.hpp"
-
-#if defined(__x86_64__)
-#include <immintrin.h>
-#endif
 
 namespace brume::cpu {
 
@@ -69,29 +64,6 @@ FusionLimits diffusion_fusion_limits() {
 void set_diffusion_fusion(const FusionLimits* limits) {
   std::lock_guard<std::mutex> lock(g_fusion_mutex);
   g_fusion = limits ? *limits : kFusionDefaults;
-}
-
-#if defined(__x86_64__)
-__attribute__((target("f16c,avx"))) static void round_to_half_f16c(float* v, std::size_t n) {
-  std::size_t i = 0;
-  for (; i + 8 <= n; i += 8) {
-    __m256 x = _mm256_loadu_ps(v + i);
-    __m128i h = _mm256_cvtps_ph(x, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
-    _mm256_storeu_ps(v + i, _mm256_cvtph_ps(h));
-  }
-  for (; i < n; ++i) v[i] = static_cast<float>(static_cast<half_t>(v[i]));
-}
-#endif
-
-void round_to_half(float* v, std::size_t n) {
-#if defined(__x86_64__)
-  static const bool has_f16c = cpu_has_f16c() && __builtin_cpu_supports("avx");
-  if (has_f16c) {
-    round_to_half_f16c(v, n);
-    return;
-  }
-#endif
-  for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<float>(static_cast<half_t>(v[i]));
 }
 
 // A buffer of at least `bytes`, uninitialised, with the huge-page hint
@@ -162,89 +134,6 @@ void release_workspace() {
   drop = std::move(g_pool);
 }
 
-// The per-pixel set-up of the invariant schemes, vectorised (eight floats a
-// step; diffusion_setup_math.hpp): the rates ln(sigma / sigma0) / N of eq.
-// 18 (brume_invariant_rate's operations with its log), and a space-variant
-// map's growth e^rho and variance ratio (brume_step_variance_ratio's;
-// setup_math::growth_and_ratio8). The
-// last < 8 values go through the same vector code, padded. Compiled at the
-// three widths of the row kernels (same operations, same bits).
-namespace setup {
-using setup_math::v8f;
-// Whole vectors by fixed-size copies (one vector load or store); only the
-// last < 8 values go through a padded copy (a variable-length copy into a
-// vector on the stack defeats store-to-load forwarding: 4.9 ns a value
-// instead of 1.2 when every vector went that way).
-__attribute__((always_inline)) inline v8f load8(const float* p, std::size_t m, float pad) {
-  v8f v;
-  if (m == 8) {
-    std::memcpy(&v, p, sizeof v);
-    return v;
-  }
-  float t[8];
-  for (std::size_t j = 0; j < 8; ++j) t[j] = j < m ? p[j] : pad;
-  std::memcpy(&v, t, sizeof v);
-  return v;
-}
-__attribute__((always_inline)) inline void store8(float* p, v8f v, std::size_t m) {
-  if (m == 8) {
-    std::memcpy(p, &v, sizeof v);
-    return;
-  }
-  float t[8];
-  std::memcpy(t, &v, sizeof v);
-  for (std::size_t j = 0; j < m; ++j) p[j] = t[j];
-}
-__attribute__((always_inline)) inline void rates_body(const float* s, float* rho, std::size_t n, float s0, float Nf) {
-  for (std::size_t i = 0; i < n; i += 8) {
-    const std::size_t m = std::min<std::size_t>(8, n - i);
-    store8(rho + i, setup_math::logf8(load8(s + i, m, s0) / s0) / Nf, m);
-  }
-}
-__attribute__((always_inline)) inline void growth_body(const float* rho, float* g, float* vr, std::size_t n) {
-  for (std::size_t i = 0; i < n; i += 8) {
-    const std::size_t m = std::min<std::size_t>(8, n - i);
-    v8f gv, rv;
-    setup_math::growth_and_ratio8(load8(rho + i, m, 0.0f), gv, rv);
-    store8(g + i, gv, m);
-    store8(vr + i, rv, m);
-  }
-}
-using RatesFn = void (*)(const float*, float*, std::size_t, float, float);
-using GrowthFn = void (*)(const float*, float*, float*, std::size_t);
-void rates_generic(const float* s, float* rho, std::size_t n, float s0, float Nf) { rates_body(s, rho, n, s0, Nf); }
-void growth_generic(const float* rho, float* g, float* vr, std::size_t n) { growth_body(rho, g, vr, n); }
-#if defined(__x86_64__)
-__attribute__((target("avx2"))) void rates_avx2(const float* s, float* rho, std::size_t n, float s0, float Nf) {
-  rates_body(s, rho, n, s0, Nf);
-}
-__attribute__((target("avx2"))) void growth_avx2(const float* rho, float* g, float* vr, std::size_t n) {
-  growth_body(rho, g, vr, n);
-}
-__attribute__((target("avx512f"))) void rates_avx512(const float* s, float* rho, std::size_t n, float s0, float Nf) {
-  rates_body(s, rho, n, s0, Nf);
-}
-__attribute__((target("avx512f"))) void growth_avx512(const float* rho, float* g, float* vr, std::size_t n) {
-  growth_body(rho, g, vr, n);
-}
-#endif
-// The width of both, picked as row_kernels picks the rows'.
-struct Kernels {
-  RatesFn rates;
-  GrowthFn growth;
-};
-Kernels kernels() {
-#if defined(__x86_64__)
-  switch (diffusion_simd_level()) {
-    case 2: return {rates_avx512, growth_avx512};
-    case 1: return {rates_avx2, growth_avx2};
-    default: break;
-  }
-#endif
-  return {rates_generic, growth_generic};
-}
-}  // namespace setup
-
 const float* rates_from_scale(const Image& sigma, const DiffusionParams& p, int iterations, int threads,
                               Workspace& ws) {
   const float s0 = static_cast<float>(p.sigma0), Nf = static_cast<float>(iterations);
@@ -256,7 +145,7 @@ const float* rates_from_scale(const Image& sigma, const DiffusionParams& p, int 
     for (std::ptrdiff_t i = 0; i < n; ++i) rho[i] = sh::brume_standard_rate(sigma.data[i], s0, Nf);
     return rho;
   }
-  const setup::RatesFn rates = setup::kernels().rates;
+  const RatesFn rates = row_kernels().rates;
   const int W = sigma.width, H = sigma.height;
   const std::size_t Ws = static_cast<std::size_t>(W);
 #pragma omp parallel for num_threads(thread_count(threads)) schedule(static)
@@ -433,7 +322,7 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
   const float* rho = rates;
   float* growth = ws.get(Workspace::growth, np);
   float* vratio = ws.get(Workspace::vratio, np);
-  const setup::GrowthFn growth_rows = setup::kernels().growth;
+  const GrowthFn growth_rows = row_kernels().growth;
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int y = 0; y < H; ++y) growth_rows(rho + y * Ws, growth + y * Ws, vratio + y * Ws, Ws);
   std::vector<RowScratch> scratch(static_cast<std::size_t>(nt), RowScratch(W));
@@ -461,7 +350,7 @@ float rate_from_scale(float sigma, const DiffusionParams& p, int iterations) {
   if (p.scheme == Scheme::standard) return sh::brume_standard_rate(sigma, s0, Nf);
   // rates_from_scale's kernel on one value (padded lanes), so the same bits.
   float rho = 0.0f;
-  setup::kernels().rates(&sigma, &rho, 1, s0, Nf);
+  row_kernels().rates(&sigma, &rho, 1, s0, Nf);
   return rho;
 }
 

@@ -140,13 +140,15 @@ void diffuse_conductance_reference(Image& f, const std::vector<double>& wx, cons
 void diffuse_conductance_fast(Image& f, const float* wx, const float* wy, int iterations, bool f16, int threads,
                               Workspace& ws);
 
-// Vector width of the fast path's row kernels: 0 = 128-bit vectors (any
-// CPU), 1 = AVX2, 2 = AVX-512F. Every width evaluates the same elementwise
-// operations in the same order, so all give the same bits; the default is
-// the widest the CPU has. set_diffusion_simd_limit caps it (-1: no cap), so
-// that tests can compare the widths on one host; level 0 also keeps the f16
-// constant-scale path in float storage (round_to_half after every
-// iteration) instead of binary16 storage, the bits the latter must match.
+// Vector level of the fast path: 0 = no AVX2 (the set-up at 128 bits, the
+// f16 constant-scale path in float storage, round_to_half after every
+// iteration), 1 = AVX2 (Highway's AVX2 target: with FMA and F16C), 2 =
+// AVX-512 (Highway's AVX3); the default is the best the CPU has, as Highway
+// sees it (simd::force_target narrows that). set_diffusion_simd_limit caps
+// it (-1: no cap); a cap of 0 also runs the reference rows (plain C++, no
+// Highway) instead of a SIMD target's, a cap of 1 the best target below
+// AVX-512 (row_kernels). Every level and target evaluates the same
+// elementwise operations in the same order, so all give the same bits.
 int diffusion_simd_level();
 void set_diffusion_simd_limit(int level);
 

@@ -196,8 +196,9 @@ inline UniformStep uniform_step(float sigma_k, float rho, bool exact, int edge_m
 // kept as binary16 bits between iterations, halving the memory traffic, with
 // the same arithmetic and rounding as the float path + round_to_half, and the
 // same schedule (steps and fused groups: diffusion_fusion.hpp, computed by
-// the caller so that this -mavx2 file compiles none of the planning).
-// Returns false (and does nothing) where F16C is missing. a: a buffer of
+// the caller so that the per-target file compiles none of the planning).
+// Returns false (and does nothing) where the chosen SIMD target has no
+// hardware binary16 conversion (F16C: Highway's AVX2 and AVX-512 targets). a: a buffer of
 // W x H x 4 binary16 values, b: another where fusion_needs_partner(...)
 // (else null), ring: fusion_scratch_values(...) values (the workspace's),
 // contents ignored.
@@ -209,11 +210,12 @@ bool uniform_iterations_f16(float* f, int W, int H, const std::vector<UniformSte
                             const std::vector<FusedGroup>& groups, int threads, std::uint16_t* a, std::uint16_t* b,
                             std::uint16_t* ring);
 
-// The row kernels of the float path (diffusion_fast_kernels.cpp), each at
-// three vector widths -- 128-bit (any CPU), AVX2, AVX-512F -- that evaluate
-// the same operations in the same order (the same bits). The schedule
-// (diffusion_fast.cpp) picks the widths once per call (row_kernels) and
-// calls them through these pointers, a row at a time.
+// The row kernels of the float path (diffusion_fast_kernels.cpp): the
+// reference rows (plain C++) and one Highway body compiled for every SIMD
+// target (core/simd.hpp), all evaluating the same operations in the same
+// order (the same bits). The schedule (diffusion_fast.cpp) picks the rows
+// once per call (row_kernels) and calls them through these pointers, a row
+// at a time.
 //
 // The interior of a constant-scale row, every pixel with the offset
 // h = n + fr and the eq. 12 weight w: the values [begin, end) of row o from
@@ -250,12 +252,19 @@ using GeneralRow = void (*)(const RowSource<float>& in, float* orow, const float
 using StandardRow = void (*)(const float* __restrict s, const float* __restrict up, const float* __restrict dn,
                              const float* __restrict wr, const float* __restrict wd_up, const float* __restrict wd,
                              float* __restrict o, int W);
+// The invariant schemes' per-pixel set-up (diffusion_setup_rows.hpp): n
+// rates ln(s / s0) / N of the target scales s, and n rates' growth e^rho and
+// variance ratio.
+using RatesFn = void (*)(const float* s, float* rho, std::size_t n, float s0, float Nf);
+using GrowthFn = void (*)(const float* rho, float* g, float* vr, std::size_t n);
 // The widths of every row kernel, picked once per call.
 struct RowKernels {
   UniformRow uniform;
   GeneralRow general;
   StandardRow standard;
   GeneralRow general_rgb;  // the space-variant row on RGB rows (three values a pixel)
+  RatesFn rates;
+  GrowthFn growth;
 };
 // The widths diffusion_simd_level() allows.
 RowKernels row_kernels();

@@ -15,19 +15,34 @@
 //
 // Schedule: per pixel one sqrt, two divisions (the ray, F = N / D) and two
 // polynomial exps, where the per-pixel loop spent a sqrt, two divisions
-// and three libm expf calls. The row is compiled twice, for AVX2 (8 lanes)
-// and the x86-64 baseline (SSE2, 4 lanes), the CPU choosing at load time
-// (target_clones); AVX2 without FMA: no contraction (the project builds
-// strict ISO), so both clones give the same bits. bench/bench_fog.cpp times
-// it against the per-pixel loop, interleaved.
-#include "effects/fog/fog_fast.hpp"
+// and three libm expf calls. The row is one loop of scalar C++ that the
+// compiler vectorises (`omp simd`), compiled by Highway's foreach_target.h
+// for every target of core/simd.hpp (the baseline: SSE2, 4 lanes; SSE4;
+// AVX2, 8 lanes; AVX-512, 16) and chosen at run time by
+// HWY_DYNAMIC_DISPATCH: the same source, one compilation per instruction
+// set. With -ffp-contract=off on this file (CMakeLists.txt: the AVX2 and
+// AVX-512 targets have FMA) and no reassociation, every target gives the
+// same bits (test: FogVectorRows.EveryTargetGivesTheSameBits).
+// bench/bench_fog.cpp times it against the per-pixel loop, interleaved.
+#include "core/simd.hpp"  // first: the targets
 
+#ifndef BRUME_FOG_FAST_SHARED
+#define BRUME_FOG_FAST_SHARED
 #include <cmath>
 #include <limits>
 
 #include "brume/aerial.hpp"
+#include "effects/fog/fog_fast.hpp"
+#endif
 
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "effects/fog/fog_fast.cpp"
+#include <hwy/foreach_target.h>  // IWYU pragma: keep
+#include <hwy/highway.h>
+
+HWY_BEFORE_NAMESPACE();
 namespace brume::detail {
+namespace HWY_NAMESPACE {
 
 namespace {
 
@@ -42,10 +57,8 @@ inline float exp_any(float x) {
 
 }  // namespace
 
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-__attribute__((target_clones("avx2", "default")))
-#endif
-void fog_exponential_row(const FogExpFrame& fr, int v) {
+// This target's row (exported below).
+void FogExponentialRow(const FogExpFrame& fr, int v) {
   const int W = fr.width;
   const std::size_t row = static_cast<std::size_t>(v) * static_cast<std::size_t>(W);
   const float* __restrict in = fr.rgb + 3 * row;
@@ -114,4 +127,14 @@ void fog_exponential_row(const FogExpFrame& fr, int v) {
   }
 }
 
+}  // namespace HWY_NAMESPACE
 }  // namespace brume::detail
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace brume::detail {
+HWY_EXPORT(FogExponentialRow);
+
+void fog_exponential_row(const FogExpFrame& fr, int v) { HWY_DYNAMIC_DISPATCH(FogExponentialRow)(fr, v); }
+}  // namespace brume::detail
+#endif  // HWY_ONCE
