@@ -17,6 +17,7 @@
 #include <nlohmann/json.hpp>
 
 #include "brume/io.hpp"
+#include "brume/pipeline.hpp"  // kRecordSchemaVersion
 #include "test_util.hpp"
 
 using namespace brume;
