@@ -18,7 +18,7 @@
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "brume/lidar_camera.hpp"
-#include "brume/lidar_fog.hpp"  // kitti_bin_bytes: lidar_camera.hpp no longer includes it
+#include "brume/depth.hpp"  // kitti_bin_bytes
 #include "test_util.hpp"
 
 namespace fs = std::filesystem;

@@ -156,6 +156,12 @@ std::vector<float> parse_kitti_bin(const std::string& bytes, const std::string& 
 // run's memory (bytes_per_point, the caller's working set per point: at least
 // the 16 bytes read) exceeds what the process may still use (check_memory).
 std::vector<float> read_kitti_bin(const std::string& path, const std::string& flag, double bytes_per_point = 16.0);
+// n points' bytes as a KITTI velodyne .bin (the inverse of parse_kitti_bin;
+// brume's supported hosts are little-endian, as the format).
+std::string kitti_bin_bytes(const float* points, std::size_t n);
+// An output scan's path (named in errors as `flag`): it must end in .bin and
+// its folder be writable.
+void check_kitti_bin_output(const std::string& path, const std::string& flag);
 // Every point's x, y, z and intensity finite, the intensity >= 0, the point
 // within kMaxScanRangeM of the sensor; else an Error naming `what` and the
 // point. Every reader of a scan (file or array) checks it this way.

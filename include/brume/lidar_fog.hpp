@@ -218,9 +218,6 @@ struct LidarFogStats {
 // lidar fog` and the camera effects' --lidar, brume/lidar_camera.hpp).
 nlohmann::json lidar_fog_record(const LidarFogParams& p, const LidarFogStats& st);
 
-// An output scan's path: it must end in .bin and its folder be writable.
-void check_kitti_bin_output(const std::string& path, const std::string& flag);
-
 // Fogs n points (x, y, z, i as float32, 16 bytes each) from `in` into `out`
 // (may be the same buffer). Refuses (brume::Error naming `what`) non-finite
 // values, negative intensities and a scan whose intensities × scale mostly
@@ -243,9 +240,6 @@ Image lidar_fog_array(const ConstImageView& points, const LidarFogParams& p, con
 // that run with the model's parameters under "parameters".
 std::unique_ptr<Medium> lidar_fog_as_medium(const LidarFogParams& p);
 
-// A scan's bytes as a KITTI velodyne .bin (the reader, parse_kitti_bin and
-// read_kitti_bin, is depth's: brume/depth.hpp).
-std::string kitti_bin_bytes(const float* points, std::size_t n);
 // The working memory of fogging a scan read from a file, per point: the
 // points read, the foggy points and their bytes for the file (16 each), and
 // the layered fog's per-beam ranges, climbs, optical depths and flags (29).

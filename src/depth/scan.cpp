@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -44,6 +45,16 @@ std::vector<float> parse_kitti_bin(const std::string& bytes, const std::string& 
   std::vector<float> v(bytes.size() / 4);
   if (!v.empty()) std::memcpy(v.data(), bytes.data(), bytes.size());  // little-endian host (x86-64, AArch64)
   return v;
+}
+
+std::string kitti_bin_bytes(const float* points, std::size_t n) {
+  return std::string(reinterpret_cast<const char*>(points), n * 16);
+}
+
+void check_kitti_bin_output(const std::string& path, const std::string& flag) {
+  if (std::filesystem::path(path).extension() != ".bin")
+    throw Error(flag + " '" + path + "': a scan is written as a KITTI .bin (float32 x, y, z, intensity); name it *.bin");
+  check_output_dir(path, flag);
 }
 
 std::vector<float> read_kitti_bin(const std::string& path, const std::string& flag, double bytes_per_point) {

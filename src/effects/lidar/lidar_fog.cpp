@@ -455,8 +455,4 @@ LidarFogStats lidar_fog(const float* in, float* out, std::size_t n, const LidarF
 }
 
 // ---- KITTI .bin (read by depth: src/depth/scan.cpp) ----
-std::string kitti_bin_bytes(const float* points, std::size_t n) {
-  return std::string(reinterpret_cast<const char*>(points), n * 16);
-}
-
 }  // namespace brume

@@ -54,12 +54,6 @@ nlohmann::json lidar_fog_record(const LidarFogParams& p, const LidarFogStats& st
   return j;
 }
 
-void check_kitti_bin_output(const std::string& path, const std::string& flag) {
-  if (fs::path(path).extension() != ".bin")
-    throw Error(flag + " '" + path + "': a scan is written as a KITTI .bin (float32 x, y, z, intensity); name it *.bin");
-  check_output_dir(path, flag);
-}
-
 const ParamTable<LidarFogJob>& lidar_fog_job_table() {
   static const ParamTable<LidarFogJob> t = [] {
     ParamTable<LidarFogJob> d("files");

@@ -38,18 +38,12 @@ const ParamTable<LidarRainJob>& lidar_rain_job_table() {
 
 namespace {
 
-void check_bin_output(const std::string& path, const std::string& flag) {
-  if (fs::path(path).extension() != ".bin")
-    throw Error(flag + " '" + path + "': a scan is written as a KITTI .bin (float32 x, y, z, intensity); name it *.bin");
-  check_output_dir(path, flag);
-}
-
 nlohmann::json run_lidar_rain_job(const LidarRainJob& job, const RunContext& ctx) {
   lidar_rain_job_table().validate(job);
   validate_lidar_rain(job.rain);
   if (job.points.empty()) throw Error("no scan given: use --points FILE.bin (KITTI velodyne)");
   if (job.out.empty()) throw Error("no output given: use --out FILE.bin");
-  check_bin_output(job.out, "--out");
+  check_kitti_bin_output(job.out, "--out");
   if (!job.labels.empty()) check_output_dir(job.labels, "--labels");
   if (!job.record.empty()) check_record_path(job.record);
 
@@ -66,7 +60,7 @@ nlohmann::json run_lidar_rain_job(const LidarRainJob& job, const RunContext& ctx
   const nlohmann::json rec = job_record("lidar rain", ctx, lidar_rain_job_table().to_json(job), inputs,
                                         {{"rain", lidar_rain_record(job.rain, st)}}, false);
   OutputSet outs;
-  outs.write_text(job.out, std::string(reinterpret_cast<const char*>(out.data()), returned * 16), "--out");
+  outs.write_text(job.out, kitti_bin_bytes(out.data(), returned), "--out");
   if (!job.labels.empty()) outs.write_text(job.labels, labels, "--labels");
   if (!job.record.empty()) outs.write_text(job.record, rec.dump(2) + "\n", "--record");
   outs.commit();
