@@ -16,6 +16,7 @@
 
 #include "brume/aerial.hpp"
 #include "brume/error.hpp"
+#include "flat_sensitivity.hpp"
 #include "test_util.hpp"
 
 using namespace brume;
@@ -29,13 +30,6 @@ const char* kCanonCsv = "spectral/Canon_5DMarkII_camspec.csv";
 const char* kDatabase = "spectral/camspec_database.txt";
 
 
-SpectralSensitivity flat_sensitivity() {
-  SpectralSensitivity s;
-  s.source = "flat";
-  s.space = SensitivitySpace::camera_rgb;
-  s.q.assign(kSensitivitySamples, {1.0, 1.0, 1.0});
-  return s;
-}
 
 // Independent of the library's quadrature: composite Simpson over 380-780 nm
 // with a 0.05 nm step (8000 intervals; its h^4 error is ~1e-16 here).

@@ -4,13 +4,17 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "brume/aerial.hpp"
+#include "brume/camera.hpp"
 #include "brume/io.hpp"
 #include "test_util.hpp"
 
@@ -36,6 +40,23 @@ class CliAerial : public ScratchDirTest {
     WriteOptions data;
     data.is_color = false;
     write_image(range, r, data);
+  }
+  struct Case {
+    std::string args, must_contain;
+  };
+  // Each case exits 2 naming what it must, and leaves only the inputs
+  // (img.exr, range.exr and a small.exr a case may read).
+  template <std::size_t N>
+  void expect_refused(const Case (&cases)[N]) {
+    for (const Case& c : cases) {
+      CliRun r = run(c.args);
+      EXPECT_EQ(r.status, 2) << c.args << "\n" << r.output;
+      EXPECT_NE(r.output.find(c.must_contain), std::string::npos) << c.args << "\n" << r.output;
+      for (auto& e : fs::directory_iterator(dir)) {
+        const std::string n = e.path().filename().string();
+        EXPECT_TRUE(n == "img.exr" || n == "range.exr" || n == "small.exr") << c.args << " left " << n;
+      }
+    }
   }
   bool only_inputs_left() const {
     for (auto& e : fs::directory_iterator(dir)) {
@@ -80,9 +101,6 @@ TEST_F(CliAerial, ErrorPathsAreClearAndLeaveNothing) {
   data.is_color = false;
   write_image(p("small.exr"), small, data);
   const std::string io = " --image " + img + " --range " + range + " --out " + p("o.exr") + " --record " + p("r.json");
-  struct Case {
-    std::string args, must_contain;
-  };
   const Case cases[] = {
       {"aerial" + io + " --turbidity 25", "--turbidity"},
       {"aerial" + io + " --turbidity 0.5", "--turbidity"},
@@ -94,15 +112,7 @@ TEST_F(CliAerial, ErrorPathsAreClearAndLeaveNothing) {
       {"aerial" + io + " --gamma-floor 1", "--gamma-floor"},
       {"aerial --image " + img + " --range " + p("small.exr") + " --out " + p("o.exr"), "20x10"},
   };
-  for (const Case& c : cases) {
-    CliRun r = run(c.args);
-    EXPECT_EQ(r.status, 2) << c.args << "\n" << r.output;
-    EXPECT_NE(r.output.find(c.must_contain), std::string::npos) << c.args << "\n" << r.output;
-    for (auto& e : fs::directory_iterator(dir)) {
-      const std::string n = e.path().filename().string();
-      EXPECT_TRUE(n == "img.exr" || n == "range.exr" || n == "small.exr") << c.args << " left " << n;
-    }
-  }
+  expect_refused(cases);
 }
 
 TEST_F(CliAerial, RunRepeatsARecordBitForBit) {
@@ -129,4 +139,121 @@ TEST_F(CliAerial, RunRepeatsARecordBitForBit) {
   nlohmann::json r1 = read_json(p("first/a.json")), r2 = read_json(p("again/a.json"));
   r1["job"]["output"] = r2["job"]["output"] = nullptr;
   EXPECT_EQ(r1["job"], r2["job"]);
+}
+
+// --path slant from the command line (issue #59): the record says where the
+// targets' altitudes came from, `brume run` repeats it bit for bit (from the
+// pose and from a --target-altitude file), and what it cannot do is refused
+// with nothing written.
+TEST_F(CliAerial, SlantPathRecordsRepeatsAndRefuses) {
+  fs::create_directories(p("first"));
+  Image alt(48, 32, 1, 1650.0f);
+  WriteOptions data;
+  data.is_color = false;
+  write_image(p("first/alt.exr"), alt, data);
+  const std::string base = "aerial --image " + img + " --range " + range + " --altitude 1500 --turbidity 5";
+  CliRun a = run(base + " --path slant --fov-x 40 --pitch 12 --roll 3 --out " + p("first/a.exr") + " --attenuation " +
+                 p("first/g.exr") + " --record " + p("first/a.json"));
+  ASSERT_EQ(a.status, 0) << a.output;
+  EXPECT_NE(a.output.find("(slant path)"), std::string::npos) << a.output;
+  CliRun b = run(base + " --path slant --target-altitude " + p("first/alt.exr") + " --remove --out " + p("first/b.exr") +
+                 " --record " + p("first/b.json"));
+  ASSERT_EQ(b.status, 0) << b.output;
+  const nlohmann::json ja = read_json(p("first/a.json")), jb = read_json(p("first/b.json"));
+  EXPECT_EQ(ja["job"]["aerial"]["path"], "slant");
+  EXPECT_EQ(ja["job"]["camera"]["pitch"], 12.0);
+  EXPECT_GT(ja["aerial"]["derived"]["slant_path"]["dh_max_m"].get<double>(), 100.0);
+  EXPECT_NE(jb["aerial"]["derived"]["slant_path"]["target_altitude"].get<std::string>().find("alt.exr"),
+            std::string::npos);
+  EXPECT_NEAR(jb["aerial"]["derived"]["slant_path"]["dh_min_m"].get<double>(), 150.0, 1e-9);
+  for (const char* rec : {"a.json", "b.json"}) {
+    CliRun r = run("run " + p(std::string("first/") + rec) + " --out-dir " + p("again"));
+    ASSERT_EQ(r.status, 0) << rec << "\n" << r.output;
+  }
+  for (const char* f : {"a.exr", "g.exr", "b.exr"}) expect_same_pixels(p(std::string("first/") + f), p(std::string("again/") + f));
+  // A level render differs from the slant one (targets 150 m above: thinner air).
+  CliRun l = run(base + " --remove --out " + p("first/l.exr"));
+  ASSERT_EQ(l.status, 0) << l.output;
+  EXPECT_NE(file_bytes(p("first/l.exr")), file_bytes(p("first/b.exr")));
+
+  fs::remove_all(p("first"));
+  fs::remove_all(p("again"));
+  Image small(20, 10, 1, 900.0f);
+  write_image(p("small.exr"), small, data);
+  const std::string io = " --image " + img + " --range " + range + " --out " + p("o.exr") + " --record " + p("r.json");
+  const Case cases[] = {
+      {"aerial" + io + " --path slant", "--target-altitude FILE"},
+      {"aerial" + io + " --path slant --fov-x 40 --backend gpu", "--backend cpu"},
+      {"aerial" + io + " --fov-x 40 --pitch 3", "--path slant"},
+      {"aerial" + io + " --target-altitude " + p("small.exr"), "--path slant"},
+      {"aerial" + io + " --path slant --target-altitude " + p("small.exr"), "20x10"},
+      {"aerial" + io + " --path slant --target-altitude " + p("small.exr") + " --pitch 2", "drop one of them"},
+      {"aerial" + io + " --path slant --fov-x 40 --pitch -80 --altitude 0", "below the model's -500 m"},
+  };
+  expect_refused(cases);
+}
+
+// Removal that goes below zero is counted exactly on the output, warned
+// about in the terminal and in the record, and shown on the summary line.
+TEST_F(CliAerial, NegativePixelsAreCountedAndSaid) {
+  CliRun r = run("aerial --image " + img + " --range " + range + " --turbidity 12 --remove --airlight 0.9,0.9,0.9 --out " +
+                 p("o.exr") + " --record " + p("r.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const Image o = read_color(p("o.exr")), rg = read_scalar(range);
+  std::size_t neg = 0, ground = 0;
+  float least = 0.0f;
+  for (std::size_t i = 0; i < o.pixels(); ++i) {
+    if (!std::isfinite(rg.data[i])) continue;  // the sky rows
+    ++ground;
+    const float m = std::min({o.data[3 * i], o.data[3 * i + 1], o.data[3 * i + 2]});
+    neg += m < 0.0f;
+    least = std::min(least, m);
+  }
+  ASSERT_GT(neg, 0u);  // the dark squares far away: darker than the air alone
+  const nlohmann::json d = read_json(p("r.json"))["aerial"]["derived"]["negative_pixels"];
+  EXPECT_EQ(d["count"].get<std::size_t>(), neg);
+  EXPECT_EQ(d["of_ground_pixels"].get<std::size_t>(), ground);
+  EXPECT_EQ(d["least_value"].get<float>(), least);
+  EXPECT_EQ(read_json(p("r.json"))["aerial"]["warnings"].size(), 1u);
+  EXPECT_NE(r.output.find("warning:"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("below zero"), std::string::npos) << r.output;
+  // A render of a non-negative image has none, and says nothing.
+  CliRun q = run("aerial --image " + img + " --range " + range + " --out " + p("q.exr") + " --record " + p("q.json"));
+  ASSERT_EQ(q.status, 0) << q.output;
+  EXPECT_EQ(read_json(p("q.json"))["aerial"]["derived"]["negative_pixels"]["count"], 0);
+  EXPECT_EQ(q.output.find("warning"), std::string::npos) << q.output;
+}
+
+// The GeoPose3K Matterhorn photo from the camera's solved pose (issue #59):
+// the attenuation on land beyond 10 km equals the slant closed form at each
+// pixel (Gamma per XYZ channel from the spectral integral at the equivalent
+// distances of its ray, the table's 1e-6 and f32: 2e-6).
+TEST_F(CliAerial, MatterhornSlantAttenuationIsTheClosedForm) {
+  BRUME_REQUIRE_DATA("geopose3k_matterhorn/distance.pfm");
+  const std::string m = data_path("geopose3k_matterhorn/");
+  CliRun r = run("aerial --image " + m + "photo.jpg --range " + m + "distance.pfm --unknown-value -1 --remove "
+                 "--altitude 2910 --fov-x 42.5 --pitch 0.7 --path slant --turbidity 1 --airlight 0.12,0.45,0.85 "
+                 "--out " + p("o.exr") + " --attenuation " + p("g.exr") + " --record " + p("r.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const Image g = read_color(p("g.exr")), d = read_scalar(m + "distance.pfm");
+  CameraPose pose;
+  pose.pitch_deg = 0.7;
+  const Camera cam = make_camera(camera_from_fov(g.width, g.height, 42.5).k, g.width, g.height, pose);
+  const SpectralSensitivity q = load_sensitivity("default");
+  double worst = 0.0;
+  int n = 0;
+  for (int y = 0; y < g.height; y += 5)
+    for (int x = 0; x < g.width; x += 5) {
+      const double s = d.at(x, y);
+      if (!(s > 10000.0)) continue;
+      const SlantDistances sd = slant_distances(s, s * cam.world_ray(x, y).y);
+      const auto want = attenuation_slant_direct({1.0, 2910.0}, q, sd.rayleigh_m, sd.mie_m);
+      for (int c = 0; c < 3; ++c) worst = std::max(worst, std::abs(g.at(x, y, c) - want[c]));
+      ++n;
+    }
+  EXPECT_GT(n, 500);
+  EXPECT_LE(worst, 2e-6);
+  const nlohmann::json j = read_json(p("r.json"))["aerial"]["derived"];
+  EXPECT_NEAR(j["slant_path"]["dh_max_m"].get<double>(), 1568.0, 30.0);  // the summit, 4,478 m
+  EXPECT_LT(j["negative_pixels"]["fraction"].get<double>(), 0.40);
 }

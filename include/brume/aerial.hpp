@@ -175,6 +175,71 @@ inline constexpr int kAttenuationSamples = 4096;  // the effects' table size
 AttenuationTable attenuation_table(const Atmosphere& a, const SpectralSensitivity& q, double s_max_m,
                                    int samples = kAttenuationSamples, int threads = 0);
 
+// ---- the slant path (issue #59; docs/aerial.md, "Paths that climb") -------------------
+// The coefficients above hold at the observer's altitude h0; the air thins
+// with height as e^{-h/H} (H_R = 7994 m, H_M = 1200 m: the same scale heights).
+// Along a straight path of length s from h0 to a target at h1 = h0 + dh (flat
+// Earth), the optical depth of either kind is its coefficient at h0 times an
+// equivalent level distance:
+//   tau = beta(h0) int_0^s e^{-(dh t/s)/H} dt = beta(h0) s g(dh/H),
+//   g(x) = (1 - e^{-x})/x = -expm1(-x)/x,  g(0) = 1,
+// exact for the exponential atmosphere over a flat Earth (expm1 keeps it exact
+// near level: g(1e-12) is 1 - 5e-13, not the 1 +- 1e-4 of 1 - e^{-x} in
+// double). Gamma_c is then the spectral integral of
+// e^{-beta_R(l) s_R - beta_M(l) s_M}, s_R = s g(dh/H_R), s_M = s g(dh/H_M):
+// a function of two distances, tabulated on a 2-D grid (SlantAttenuationTable).
+// --path level (every record before it) takes dh = 0: s_R = s_M = s.
+// Validity: the flat Earth drops below a straight path by s^2/(2 R_E), 71 m at
+// 30 km, where the Mie density along a level path would be off by e^{71/1200}
+// = 6 % at its end (2 % of its optical depth): paths longer than 30 km and
+// targets below -500 m are refused.
+constexpr double kRayleighScaleHeightM = 7994.0, kMieScaleHeightM = 1200.0;
+constexpr double kSlantPathMaxM = 30000.0, kSlantTargetMinAltitudeM = -500.0;
+enum class AerialPath { level, slant };
+const EnumNames<AerialPath>& aerial_path_names();
+// g(x) = -expm1(-x)/x, 1 at x = 0.
+double slant_factor(double x);
+struct SlantDistances {
+  double rayleigh_m = 0.0, mie_m = 0.0;  // s g(dh/H_R), s g(dh/H_M)
+};
+SlantDistances slant_distances(double s_m, double dh_m);
+// The spectral integral at two equivalent distances (the slant path's peer of
+// attenuation_direct, which it equals at s_R = s_M = s).
+std::array<double, 3> attenuation_slant_direct(const Atmosphere& a, const SpectralSensitivity& q, double s_rayleigh_m,
+                                               double s_mie_m);
+// ln Gamma_c on the grid (i step_r_m, j step_m_m), i < nr, j < nm, stored
+// row-major [j nr + i] in f32, interpolated bilinearly in ln Gamma (exact for
+// one wavelength, where ln Gamma is linear in both distances); positions
+// beyond the grid take its edge (the grid spans every known pixel's
+// distances; only the prepared sky beyond R_max reaches past it, and the sky
+// is left unchanged). Error against attenuation_slant_direct: docs/aerial.md
+// and tests/test_aerial_slant.cpp.
+struct SlantAttenuationTable {
+  double step_r_m = 0.0, step_m_m = 0.0;
+  int nr = 0, nm = 0;
+  std::vector<std::array<float, 3>> log_gamma;
+  std::array<float, 3> log_at(float tr, float tm) const {
+    tr = std::min(std::max(tr, 0.0f), static_cast<float>(nr - 1));  // NaN -> 0 (max(NaN, 0) is 0)
+    tm = std::min(std::max(tm, 0.0f), static_cast<float>(nm - 1));
+    const int i = std::min(static_cast<int>(tr), nr - 2), j = std::min(static_cast<int>(tm), nm - 2);
+    const float fr = tr - static_cast<float>(i), fm = tm - static_cast<float>(j);
+    const std::size_t k = static_cast<std::size_t>(j) * nr + i;
+    const std::array<float, 3>&a = log_gamma[k], &b = log_gamma[k + 1], &c = log_gamma[k + nr],
+                                  &d = log_gamma[k + nr + 1];
+    std::array<float, 3> x{};
+    for (int ch = 0; ch < 3; ++ch) {
+      const float lo = a[ch] + fr * (b[ch] - a[ch]), hi = c[ch] + fr * (d[ch] - c[ch]);
+      x[ch] = lo + fm * (hi - lo);
+    }
+    return x;
+  }
+};
+inline constexpr int kSlantSamples = 256;  // per axis
+// sr_max, sm_max > 0 and finite [m]; nr, nm >= 2. threads as attenuation_table.
+SlantAttenuationTable slant_attenuation_table(const Atmosphere& a, const SpectralSensitivity& q, double sr_max_m,
+                                              double sm_max_m, int nr = kSlantSamples, int nm = kSlantSamples,
+                                              int threads = 0);
+
 // ==== brume aerial: render, re-render, remove (Morales eq. 3.11-3.13) =================
 // With s = R distance_scale the physical distance of a pixel and Gamma_c(s)
 // its table look-up (per channel c of the sensitivity's space):
@@ -215,12 +280,25 @@ struct AerialParams {
   double gamma_floor = 1e-3;             // [1] smallest Gamma divided by (remove, Gamma1), (0, 1)
   double lambda = 0.0;                   // [px] blur gain, >= 0 (0: the thesis, no blur)
   DiffusionParams diffusion;             // sigma0, scheme, precision, rho-max, edge-rate
+  AerialPath path = AerialPath::level;   // --path: level (h0's coefficients all along) or slant
+  CameraPose camera;                     // --pitch, --roll (--yaw, --view-matrix: its rotation): the rays'
+                                         // elevations for --path slant; the position is not declared
 };
 const ParamTable<AerialParams>& aerial_param_table();
 
 // Range checks, and combinations a run would ignore or cannot do (remove
 // with --from-turbidity or --lambda; --from-horizon without --from-turbidity).
 void validate_aerial(const AerialParams& p, const std::set<std::string>& given = {});
+
+// What --path slant needs besides the parameters: each pixel's target
+// altitude, either from the camera (its intrinsics and pose: h1 = h0 + s
+// sin(elevation of the pixel's ray)) or per pixel (metres above sea level, 1
+// channel, the image's size; e.g. from a DEM). One of the two.
+struct AerialGeometry {
+  std::optional<Camera> camera;
+  DenseImageRef target_altitude;  // empty: from the camera
+  std::string target_altitude_name = "--target-altitude";  // named in errors
+};
 
 enum class AerialMode { render, rerender, remove };
 std::string to_string(AerialMode m);
@@ -241,6 +319,12 @@ struct AerialAnalysis {
   double kappa_s = 0.0;                     // kappa_s' = beta_550 R_max distance_scale
   double sigma_max = 0.0;                   // [px]
   DiffusionPlan plan;
+  // --path slant: per pixel dh = s slope + offset [m] (2 channels: slope =
+  // sin(elevation) from the camera, or 0 with offset = h1 - h0 from
+  // --target-altitude), the tables over (s_R, s_M), and what the record says.
+  Image slant_dh;
+  SlantAttenuationTable slant_gamma, slant_gamma_from;
+  nlohmann::json slant_record;
 };
 // Validates parameters and inputs (throws brume::Error), loads the
 // sensitivity, tabulates Gamma, estimates Iinf. `range` is the MEASURED
@@ -257,7 +341,9 @@ AerialAnalysis analyse_aerial(DenseImageRef rgb, DenseImageRef range, const Aeri
 // mask). Every field of `a` is overwritten; the result equals the returning
 // form's, bit for bit. If it throws, `a` is left valid but unspecified.
 void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, AerialAnalysis& a,
-                    int threads = 0);
+                    int threads = 0, const AerialGeometry* geometry = nullptr);
+// --path slant: the geometry is required (throws naming --path, the
+// intrinsics, the pose and --target-altitude otherwise); --path level ignores it.
 
 // A linear sRGB colour (Iinf) in the analysis' working space: XYZ when the
 // sensitivity is XYZ (M diag(Gamma) M^-1), else as it is. The CPU apply, the
@@ -300,6 +386,7 @@ struct AerialRun {
   nlohmann::json record;  // {"aerial": ..., "prepare": ..., "execution": ...}
 };
 AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const AerialParams& p, const RangeStep& prepare,
-                     const Exec& exec = {}, const std::set<std::string>& given = {});
+                     const Exec& exec = {}, const std::set<std::string>& given = {},
+                     const AerialGeometry* geometry = nullptr);
 
 }  // namespace brume

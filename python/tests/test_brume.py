@@ -50,6 +50,21 @@ def test_aerial_equals_cli(demo, tmp_path):
     same(r.attenuation, brume.read_image(tmp_path / "a.exr").rgb)
 
 
+def test_aerial_slant_path_equals_cli(demo, tmp_path):
+    # issue #59: the slant path from the pose (fov_y=, pitch=, roll=) is the CLI's, bit for bit
+    d = demo["dir"]
+    run_cli("aerial", "--image", d / "clean.png", "--range", d / "range.exr", "--turbidity", 6, "--altitude", 800,
+            "--path", "slant", "--fov-y", 55, "--pitch", -5, "--roll", 2, "--out", tmp_path / "o.exr",
+            "--bits", "float", "--attenuation", tmp_path / "a.exr")
+    r = brume.aerial(demo["rgb"], demo["range"], turbidity=6, altitude=800, path="slant", fov_y=55, pitch=-5, roll=2)
+    same(r.rgb, brume.read_image(tmp_path / "o.exr").rgb)
+    same(r.attenuation, brume.read_image(tmp_path / "a.exr").rgb)
+    assert r.record["aerial"]["derived"]["slant_path"]["dh_min_m"] < 0  # the path falls towards the ground
+    with pytest.raises(ValueError, match="pitch orients.*path=.slant.") as e:
+        brume.aerial(demo["rgb"], demo["range"], pitch=3)
+    assert "--" not in str(e.value)
+
+
 def test_fog_equals_cli(demo, tmp_path):
     d = demo["dir"]
     args = dict(fov_y=55, camera_height=1.6, pitch=-5, profile="band", density=0.03, band_center=25,
@@ -458,6 +473,17 @@ def _without_timing(fit):
     return {k: v for k, v in fit.items() if k != "fit_ms"}
 
 
+def _same_job_blocks(py, cli):
+    """The Python record's job blocks equal the CLI's; its depth block holds
+    only the array form's keywords (the intrinsics, for path='slant'), each
+    with the CLI's value."""
+    for block in py:
+        if block == "depth":
+            assert {k: cli[block][k] for k in py[block]} == py[block]
+        else:
+            assert py[block] == cli[block], block
+
+
 def test_aerial_turbidity_from_sky_fit_equals_cli(demo, tmp_path):
     """turbidity_from= (a `brume sky fit` JSON) and turbidity='auto' with
     sky_image= (the fit run on the photo) give the CLI's pixels bit for bit,
@@ -475,8 +501,7 @@ def test_aerial_turbidity_from_sky_fit_equals_cli(demo, tmp_path):
     r = brume.aerial(demo["rgb"], demo["range"], turbidity_from=fit, lambda_=3)
     same(r.rgb, cli.rgb)
     assert r.record["aerial"] == cli.record["aerial"]
-    for block in r.record["job"]:
-        assert r.record["job"][block] == cli.record["job"][block], block
+    _same_job_blocks(r.record["job"], cli.record["job"])
     assert abs(r.record["job"]["aerial"]["turbidity"] - 5) < 0.05
 
     run_cli("aerial", *common, "--turbidity", "auto", "--sky-image", sky, "--sky-sun-zenith", 40,
@@ -488,8 +513,7 @@ def test_aerial_turbidity_from_sky_fit_equals_cli(demo, tmp_path):
     assert _without_timing(r.record["turbidity_fit"]) == _without_timing(cli.record["turbidity_fit"])
     assert r.record["inputs"]["sky_image"] == cli.record["inputs"]["sky_image"]
     assert r.record["aerial"] == cli.record["aerial"]
-    for block in r.record["job"]:
-        assert r.record["job"][block] == cli.record["job"][block], block
+    _same_job_blocks(r.record["job"], cli.record["job"])
     assert r.record["job"]["aerial"]["turbidity"] == "auto" or r.record["job"]["aerial"]["turbidity"] is None
     assert abs(r.record["turbidity_fit"]["turbidity"] - 5) < 0.05
 

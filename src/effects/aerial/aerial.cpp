@@ -173,7 +173,16 @@ const ParamTable<AerialParams>& aerial_param_table() {
         .real("lambda", &AerialParams::lambda, "px", Range::at_least(0.0),
               "scattering blur gain: sigma_max = sigma0 + lambda sqrt(kappa_s'), kappa_s' = beta(550 nm) R_max; "
               "0: no blur (the thesis)")
-        .nest(&AerialParams::diffusion, diffusion_param_table());
+        .nest(&AerialParams::diffusion, diffusion_param_table())
+        .choice("path", &AerialParams::path, aerial_path_names(),
+                "the light's path to each pixel: level (the coefficients at --altitude all along: the thesis, right "
+                "for level paths) or slant (the air thins with height along each pixel's ray, e^{-dh/7994 m} for "
+                "Rayleigh and e^{-dh/1200 m} for Mie, flat Earth, paths <= 30 km; the target's altitude from the "
+                "intrinsics and --pitch/--roll, or from --target-altitude)")
+        .since(4, "level")
+        // The pose's orientation only: the observer's height is --altitude
+        // (above sea level), not a height above fog's ground plane.
+        .nest_except(&AerialParams::camera, camera_pose_param_table(), {"camera-height", "camera-x", "camera-z"});
     return d;
   }();
   return t;
@@ -193,6 +202,14 @@ void validate_aerial(const AerialParams& p, const std::set<std::string>& given) 
                 "of them (to re-render, drop --remove)");
   if (p.from_airlight && !p.from_turbidity)
     throw Error("--from-horizon is the photo's horizon for a re-render; it needs --from-turbidity T1");
+  // By value, not by `given`: a record names every parameter.
+  const CameraPose& c = p.camera;
+  const char* oriented = c.pitch_deg != 0.0 ? "pitch" : c.roll_deg != 0.0 ? "roll" : c.yaw_deg != 0.0 ? "yaw"
+                         : !c.view_matrix_file.empty() ? "view-matrix" : nullptr;
+  if (p.path == AerialPath::level && oriented)
+    throw Error(std::string("--") + oriented + " orients the camera for --path slant (the rays' elevations); "
+                "--path level takes the coefficients at --altitude along every ray and would ignore it: give --path "
+                "slant, or drop --" + oriented);
   if (p.remove && (p.lambda > 0.0 || t.is_set(p, "lambda", given)))
     throw Error("--lambda " + std::to_string(p.lambda) +
                 " with --remove: the scattering blur cannot be undone; drop --lambda (remove uses Gamma only)");
@@ -204,7 +221,106 @@ AerialAnalysis analyse_aerial(DenseImageRef rgb, DenseImageRef range, const Aeri
   return a;
 }
 
-void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, AerialAnalysis& a, int threads) {
+namespace {
+
+// --path slant: each pixel's dh = s slope + offset (AerialAnalysis::slant_dh),
+// checked where the range is known (h1 >= -500 m, s <= 30 km), and the two
+// tables over the equivalent distances every pixel reaches.
+void analyse_slant(DenseImageRef range, const AerialParams& p, const AerialGeometry* geo, AerialAnalysis& a, int nt) {
+  const bool from_file = geo && !geo->target_altitude.empty();
+  if (!geo || (!from_file && !geo->camera))
+    throw Error("--path slant needs each pixel's target altitude: give the camera's intrinsics (--fx.., --fov-x or "
+                "--focal-length with --sensor-width) and its pose (--pitch, --roll), or --target-altitude FILE "
+                "(metres above sea level per pixel)");
+  const int W = range.width, H = range.height;
+  if (from_file && (geo->target_altitude.width != W || geo->target_altitude.height != H ||
+                    geo->target_altitude.channels != 1))
+    throw Error(geo->target_altitude_name + " is " + geo->target_altitude.size_string() + "; it must have one channel "
+                "and the image's size " + range.size_string() + " (metres above sea level per pixel)");
+  const double h0 = p.atmosphere.altitude_m, scale = p.distance_scale, far_m = a.range_max_m * p.distance_scale;
+  a.slant_dh = Image(W, H, 2);
+  double sr_max = 0.0, sm_max = 0.0, dh_lo = INFINITY, dh_hi = -INFINITY;
+  std::ptrdiff_t bad = -1;  // the first known pixel that breaks a limit
+  int why = 0;              // 1: beyond 30 km, 2: below -500 m, 3: no finite target altitude
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 16) reduction(max : sr_max, sm_max, dh_hi) \
+    reduction(min : dh_lo)
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * W + x;
+      double slope = 0.0, offset = 0.0;
+      if (from_file) {
+        offset = static_cast<double>(geo->target_altitude.data[i]) - h0;
+      } else {
+        slope = geo->camera->world_ray(x, y).y;
+      }
+      const float r = range.data[i];
+      const bool known = known_range(r) && r >= 0.0f;
+      if (!known && !std::isfinite(offset)) offset = 0.0;  // the sky of a DEM: not a target
+      a.slant_dh.data[2 * i] = static_cast<float>(slope);
+      a.slant_dh.data[2 * i + 1] = static_cast<float>(offset);
+      const double s = known ? static_cast<double>(r) * scale : far_m;
+      // The apply recomputes dh from the stored floats: the checks and the
+      // grid's extent use the same values.
+      const double dh = s * static_cast<double>(static_cast<float>(slope)) + static_cast<double>(static_cast<float>(offset));
+      int w = 0;
+      if (known && s > kSlantPathMaxM) w = 1;
+      else if (known && !std::isfinite(dh)) w = 3;
+      else if (known && h0 + dh < kSlantTargetMinAltitudeM) w = 2;
+      if (w) {
+#pragma omp critical(brume_aerial_slant_bad)
+        if (bad < 0 || static_cast<std::ptrdiff_t>(i) < bad) bad = static_cast<std::ptrdiff_t>(i), why = w;
+        continue;
+      }
+      const SlantDistances d = slant_distances(s, std::isfinite(dh) ? dh : 0.0);
+      sr_max = std::max(sr_max, d.rayleigh_m), sm_max = std::max(sm_max, d.mie_m);
+      if (known) dh_lo = std::min(dh_lo, dh), dh_hi = std::max(dh_hi, dh);
+    }
+  if (bad >= 0) {
+    const std::size_t i = static_cast<std::size_t>(bad);
+    const int x = static_cast<int>(i % W), y = static_cast<int>(i / W);
+    const double s = static_cast<double>(range.data[i]) * scale;
+    const std::string px = "pixel (" + std::to_string(x) + ", " + std::to_string(y) + ")";
+    if (why == 1)
+      throw Error("--path slant: " + px + " is " + text::g(s) + " m away; the flat-Earth closed form holds to " +
+                  text::g(kSlantPathMaxM) + " m (beyond, the Earth's curvature lifts the path by more than 71 m): "
+                  "use --path level for this image, or crop it to nearer land");
+    const double dh = s * a.slant_dh.data[2 * i] + a.slant_dh.data[2 * i + 1];
+    if (why == 3)
+      throw Error(geo->target_altitude_name + " has no finite altitude at " + px + ", where the range is known (" +
+                  text::g(s) + " m); give every target pixel its altitude in metres above sea level");
+    throw Error("--path slant: " + px + " at " + text::g(s) + " m lies at " + text::g(h0 + dh) +
+                " m above sea level" + (from_file ? " (" + geo->target_altitude_name + ")" :
+                " (--altitude " + text::g(h0) + " m, its ray's elevation from --pitch/--roll and the intrinsics)") +
+                ", below the model's " + text::g(kSlantTargetMinAltitudeM) + " m; check " +
+                (from_file ? geo->target_altitude_name + "'s units (metres above sea level)" :
+                 "--altitude, --pitch and the intrinsics (a ray pointing too far down)"));
+  }
+  const double guard = 1e-3;  // [m] a grid for a scene of zero depth still has a cell
+  a.slant_gamma = slant_attenuation_table(p.atmosphere, a.sensitivity, std::max(sr_max, guard), std::max(sm_max, guard),
+                                          kSlantSamples, kSlantSamples, nt);
+  if (p.from_turbidity) {
+    Atmosphere from = p.atmosphere;
+    from.turbidity = *p.from_turbidity;
+    a.slant_gamma_from = slant_attenuation_table(from, a.sensitivity, std::max(sr_max, guard),
+                                                 std::max(sm_max, guard), kSlantSamples, kSlantSamples, nt);
+  }
+  a.slant_record = {
+      {"target_altitude", from_file ? "per pixel from " + geo->target_altitude_name
+                                    : std::string("h0 + s sin(elevation of the pixel's ray): the intrinsics and the pose")},
+      {"dh_min_m", std::isfinite(dh_lo) ? nlohmann::json(dh_lo) : nlohmann::json()},
+      {"dh_max_m", std::isfinite(dh_hi) ? nlohmann::json(dh_hi) : nlohmann::json()},
+      {"scale_heights_m", {{"rayleigh", kRayleighScaleHeightM}, {"mie", kMieScaleHeightM}}},
+      {"optical_depth", "beta(h0) s (1 - e^{-dh/H})/dh*H, flat Earth (docs/aerial.md)"},
+      {"gamma_table", {{"nodes", {kSlantSamples, kSlantSamples}},
+                       {"rayleigh_distance_max_m", std::max(sr_max, guard)},
+                       {"mie_distance_max_m", std::max(sm_max, guard)},
+                       {"interpolation", "bilinear in ln Gamma; beyond the grid its edge"}}}};
+}
+
+}  // namespace
+
+void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& p, AerialAnalysis& a, int threads,
+                    const AerialGeometry* geo) {
   const int nt = threads > 0 ? threads : omp_get_max_threads();
   validate_aerial(p);
   if (rgb.channels != 3)
@@ -265,6 +381,7 @@ void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& 
     from.turbidity = *p.from_turbidity;
     a.gamma_from = attenuation_table(from, a.sensitivity, s_max, kAttenuationSamples, nt);
   }
+  if (p.path == AerialPath::slant) analyse_slant(range, p, geo, a, nt);
 
   // kappa_s' for haze's sigma law: the optical depth at the far end at 550 nm.
   a.beta_550_per_m = rayleigh_beta_per_m(550.0, p.atmosphere.altitude_m) +
@@ -349,6 +466,10 @@ struct Frame {
   float s0, smax, inv_rmax, floor_g;
   std::array<float, 3> A, A1;  // Iinf (Iinf2), Iinf1 in the sensitivity's space
   int W;
+  // --path slant (null: level): dh per pixel and the tables over (s_R, s_M).
+  const float* slant_dh;
+  const SlantAttenuationTable *slant, *slant_from;
+  double inv_step_r, inv_step_m;
 };
 
 // Where one row writes: out_rgb (fused) or f (the blur's six channels), and
@@ -388,6 +509,21 @@ template <AerialMode M, bool Xyz>
     skyrow[x] = (fr.sky && fr.sky[row0 + x] > 0.0f) || !known;
     // Unknown here (preparation off) is sky at the far end, as haze does.
     const double s = known ? static_cast<double>(r) * fr.distance_scale : fr.far_m;
+    if (fr.slant_dh) {
+      // The slant path: dh from the analysis' slope and offset (as it checked
+      // them), the equivalent distances in double, the grid's cells in f32.
+      const float* g = fr.slant_dh + 2 * (row0 + x);
+      const double dh = s * static_cast<double>(g[0]) + static_cast<double>(g[1]);
+      const SlantDistances d = slant_distances(s, std::isfinite(dh) ? dh : 0.0);
+      const float tr = static_cast<float>(d.rayleigh_m * fr.inv_step_r), tm = static_cast<float>(d.mie_m * fr.inv_step_m);
+      const std::array<float, 3> l = fr.slant->log_at(tr, tm);
+      lg[3 * x] = l[0], lg[3 * x + 1] = l[1], lg[3 * x + 2] = l[2];
+      if constexpr (M == AerialMode::rerender) {
+        const std::array<float, 3> l1 = fr.slant_from->log_at(tr, tm);
+        lg1[3 * x] = l1[0], lg1[3 * x + 1] = l1[1], lg1[3 * x + 2] = l1[2];
+      }
+      continue;
+    }
     const std::array<float, 3> l = fr.gamma->log_at(AttenuationTable::cell(s, fr.inv_step));
     lg[3 * x] = l[0], lg[3 * x + 1] = l[1], lg[3 * x + 2] = l[2];
     if constexpr (M == AerialMode::rerender) {
@@ -509,6 +645,16 @@ std::size_t apply_aerial(DenseImageRef rgb, DenseImageRef range, const AerialPar
   fr.s0 = static_cast<float>(p.diffusion.sigma0), fr.smax = static_cast<float>(a.sigma_max);
   fr.inv_rmax = static_cast<float>(1.0 / a.range_max_m), fr.floor_g = static_cast<float>(p.gamma_floor);
   fr.A = aerial_working_colour(a, a.airlight), fr.A1 = aerial_working_colour(a, a.from_airlight), fr.W = W;
+  fr.slant_dh = nullptr, fr.slant = &a.slant_gamma, fr.slant_from = &a.slant_gamma_from;
+  fr.inv_step_r = fr.inv_step_m = 0.0;
+  if (p.path == AerialPath::slant) {
+    if (a.slant_dh.width != W || a.slant_dh.height != H || a.slant_gamma.log_gamma.empty() ||
+        (a.mode == AerialMode::rerender && a.slant_gamma_from.log_gamma.empty()))
+      throw Error("aerial: --path slant, but the analysis holds no slant tables for this image (analyse it with "
+                  "--path slant and the geometry)");
+    fr.slant_dh = a.slant_dh.data.data();
+    fr.inv_step_r = 1.0 / a.slant_gamma.step_r_m, fr.inv_step_m = 1.0 / a.slant_gamma.step_m_m;
+  }
   const bool blur = a.plan.iterations > 0 && a.mode != AerialMode::remove;
 
   // Outputs only where asked for; the blur needs sigma and F (rho E', rho)

@@ -16,6 +16,7 @@ struct AerialJob {
   AerialParams aerial;
   OutputFiles output;  // maps: attenuation, scale-map
   CameraLidar lidar;   // --lidar IN.bin --lidar-out OUT.bin (brume/lidar_camera.hpp): the medium at 905 nm
+  std::string target_altitude;  // --target-altitude: metres above sea level per pixel (--path slant)
   std::string turbidity_from;  // --turbidity-from: T from a `brume sky fit` JSON (brume/sky.hpp); must be reliable
   // --turbidity auto --sky-image FILE: T fitted on a photo of the sky as `brume
   // sky fit` does (fit_sky_image_file), refused when unreliable. The sky's own
@@ -45,6 +46,10 @@ struct AerialTurbidity {
   nlohmann::json from_record;  // --turbidity-from's {path, sha256}: an input (brume run checks it)
 };
 AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::string>& given);
+// --path slant's geometry for a job: --target-altitude read into `store`
+// (checked against the image's size), else the camera of the depth source's
+// intrinsics and the pose. Level: no geometry (empty).
+AerialGeometry aerial_geometry(const AerialJob& job, const DepthSource& depth, int width, int height, Image& store);
 nlohmann::json run_aerial_job(const AerialJob& job, const ExecOptions& exec, const RunContext& ctx = {});
 
 }  // namespace brume

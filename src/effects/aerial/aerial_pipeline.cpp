@@ -15,6 +15,7 @@
 #include "brume/io.hpp"
 #include "brume/record.hpp"
 #include "effects/aerial/aerial_job.hpp"
+#include "core/text.hpp"
 
 namespace brume {
 
@@ -55,6 +56,7 @@ nlohmann::json aerial_record(const AerialParams& p, const AerialAnalysis& a, std
       {"kappa_s_normalised", a.kappa_s},
       {"sigma_max_px", a.sigma_max},
   };
+  if (p.path == AerialPath::slant) j["derived"]["slant_path"] = a.slant_record;
   if (a.mode == AerialMode::rerender) {
     j["derived"]["from_gamma_at"] = g1;
     j["derived"]["from_airlight_linear_rgb"] = a.from_airlight;
@@ -84,6 +86,9 @@ PreviewFrame aerial_preview(const nlohmann::json& job, const PreviewInputs& in) 
   aerial_job_table().from_json(j, job, "job");
   // (--turbidity auto was refused by the command's check: the page names no sky photo.)
   const AerialParams& p = j.aerial;
+  if (p.path == AerialPath::slant)
+    throw Error("the preview draws the level path (its passes bind a 1-D attenuation table); --path slant runs in "
+                "brume aerial on the CPU: preview with --path level");
   AerialAnalysis a = analyse_aerial(in.rgb, in.measured, p);
   const bool rerender = a.mode == AerialMode::rerender;
   PreviewFrame frame;
@@ -158,6 +163,11 @@ const ParamTable<AerialJob>& aerial_job_table() {
         .nest(&AerialJob::aerial, aerial_param_table())
         .nest(&AerialJob::output, output_param_table(aerial_map_outputs()))
         .nest(&AerialJob::lidar, camera_lidar_param_table())
+        .text("target-altitude", &AerialJob::target_altitude,
+              "--path slant: each pixel's altitude in metres above sea level (e.g. rendered from a DEM; one channel, "
+              "the image's size; integer files as stored counts), instead of --altitude + range x sin(elevation) "
+              "from the intrinsics and --pitch/--roll")
+        .reads_file()
         .text("turbidity-from", &AerialJob::turbidity_from,
               "take --turbidity from a `brume sky fit` JSON (refused when the fit is flagged unreliable)")
         .reads_file("", 0, 5)
@@ -179,8 +189,39 @@ const ParamTable<AerialJob>& aerial_job_table() {
   return t;
 }
 
+AerialGeometry aerial_geometry(const AerialJob& job, const DepthSource& depth, int width, int height, Image& store) {
+  AerialGeometry g;
+  if (job.aerial.path != AerialPath::slant) {
+    if (!job.target_altitude.empty())
+      throw Error("--target-altitude '" + job.target_altitude + "' gives the targets' altitudes for --path slant; "
+                  "give --path slant, or drop --target-altitude");
+    return g;
+  }
+  if (!job.target_altitude.empty()) {
+    const CameraPose none;
+    if (job.aerial.camera.pitch_deg != none.pitch_deg || job.aerial.camera.roll_deg != none.roll_deg ||
+        !job.aerial.camera.view_matrix_file.empty())
+      throw Error("--target-altitude '" + job.target_altitude + "' gives every pixel's altitude; the pose (--pitch, "
+                  "--roll, --view-matrix) would give it a second time: drop one of them");
+    store = read_scalar(job.target_altitude);
+    g.target_altitude = store;
+    g.target_altitude_name = "--target-altitude '" + job.target_altitude + "'";
+    return g;
+  }
+  try {
+    g.camera = depth_camera(depth, width, height, job.aerial.camera);
+  } catch (const Error& e) {
+    std::string why = e.what();
+    const std::string lead = "planar depth needs the camera: ";  // depth_intrinsics' words for --z
+    if (why.rfind(lead, 0) == 0) why = why.substr(lead.size());
+    throw Error("--path slant takes each pixel's target altitude from its ray's elevation, which needs the camera's "
+                "intrinsics: " + why + "; or give --target-altitude FILE (metres above sea level per pixel)");
+  }
+  return g;
+}
+
 AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const AerialParams& p, const RangeStep& prepare,
-                     const Exec& exec, const std::set<std::string>& given) {
+                     const Exec& exec, const std::set<std::string>& given, const AerialGeometry* geometry) {
   validate_aerial(p, given);
   AerialRun run;
   // Statistics (R_max, Iinf, the sky mask) from the measured range; the
@@ -189,10 +230,21 @@ AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const Aeri
   // A sparse map is completed first (guided by rgb; its sky stays unknown), when the step says so.
   const CompletedRange done = complete_step(measured_range.view(), rgb.view(), prepare, given, exec.threads);
   const DenseImageRef measured = done.applied ? DenseImageRef(done.range) : measured_range;
-  run.analysis = analyse_aerial(rgb, measured, p, exec.threads);
+  analyse_aerial(rgb, measured, p, run.analysis, exec.threads, geometry);
   PreparedRange prep = prepare_step(measured.view(), prepare, given, exec.threads);
   prep.record["complete"] = done.record;
-  BackendChoice backend = choose_backend(exec);
+  // The slant path's per-pixel closed form and 2-D table are the CPU's (the
+  // GPU passes and the preview bind the level path's 1-D table).
+  Exec where = exec;
+  const bool slant_on_cpu = p.path == AerialPath::slant && exec.backend != Backend::cpu;
+  if (slant_on_cpu) {
+    if (exec.backend == Backend::gpu)
+      throw Error("--path slant runs on the CPU (its 2-D attenuation table is not in the GPU passes yet); give "
+                  "--backend cpu or auto, or --path level on the GPU");
+    where.backend = Backend::cpu;
+  }
+  BackendChoice backend = choose_backend(where);
+  if (slant_on_cpu) backend.record["backend_requested"] = "auto (--path slant: the CPU)";
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;
   if (backend.gpu) {
@@ -200,10 +252,54 @@ AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const Aeri
     run.result = ga.render(p, run.analysis, exec.gpu_filter);
     timing = gpu_timing_record(ga.timing());
   } else {
-    run.result = apply_aerial(rgb, prep.range, p, run.analysis, exec);
+    run.result = apply_aerial(rgb, prep.range, p, run.analysis, where);
     timing = cpu_timing_record(t0, run.analysis.plan.iterations);
   }
   run.record["aerial"] = aerial_record(p, run.analysis, run.result.floored_pixels);
+  // Below zero (issue #59): removal on a photograph whose far land is darker
+  // than the model's air allows (tone mapping, a wrong airlight or T) gives
+  // negative radiance. Counted on the output whatever a writer later does
+  // with it (an integer file stores 0), and said.
+  {
+    const Image& o = run.result.rgb;
+    const std::size_t n = o.pixels();
+    std::size_t negative = 0, ground = 0;
+    std::array<std::size_t, 3> per{};
+    float least = 0.0f;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!run.analysis.sky.data.empty() && run.analysis.sky.data[i] > 0.0f) continue;
+      ++ground;
+      bool neg = false;
+      for (int c = 0; c < 3; ++c) {
+        const float v = o.data[3 * i + c];
+        if (v < 0.0f) ++per[c], neg = true, least = std::min(least, v);
+      }
+      negative += neg;
+    }
+    const double share = ground ? static_cast<double>(negative) / static_cast<double>(ground) : 0.0;
+    run.record["aerial"]["derived"]["negative_pixels"] = {
+        {"count", negative},
+        {"of_ground_pixels", ground},
+        {"fraction", share},
+        {"per_channel", per},
+        {"least_value", least},
+        {"rule", "pixels outside the sky with a channel below 0 in the output (linear); an integer file stores them "
+                 "as 0, a float file keeps them"}};
+    if (negative) {
+      const std::string w = text::g(100.0 * share, 3) + " % of the ground pixels (" + std::to_string(negative) +
+                            ") came out below zero in a channel (least " + text::g(least, 3) + ")" +
+                            (run.analysis.mode == AerialMode::remove
+                                 ? ": the photo's land is darker than the model's air allows at --turbidity " +
+                                       text::g(p.atmosphere.turbidity) + " with airlight " +
+                                       text::g(run.analysis.airlight[0], 3) + "," + text::g(run.analysis.airlight[1], 3) +
+                                       "," + text::g(run.analysis.airlight[2], 3) +
+                                       " (a tone-mapped photo, a lower turbidity, the horizon's airlight, the "
+                                       "observer's --altitude; docs/aerial.md)"
+                                 : ": the input has negative values");
+      run.record["aerial"]["warnings"].push_back(w);
+      std::fprintf(stderr, "brume aerial: warning: %s\n", w.c_str());
+    }
+  }
   run.record["prepare"] = prep.record;
   run.record["execution"] = backend.record;
   run.record["execution"]["timing"] = timing;
@@ -282,7 +378,12 @@ nlohmann::json run_aerial_job(const AerialJob& given_job, const ExecOptions& eo,
       [&](const AerialJob& j, const ExecOptions&) { validate_aerial(j.aerial, ctx.given); },
       [&](const AerialJob& j, LoadedInputs& in, const Exec& exec) {
         if (!j.aerial.airlight) check_airlight_sky(in, "aerial");
-        AerialRun run = run_aerial(in.rgb, in.depth.range, j.aerial, with_camera(j.prepare, in.depth), exec, ctx.given);
+        Image altitude;
+        const AerialGeometry geo = aerial_geometry(j, j.input.depth, in.rgb.width, in.rgb.height, altitude);
+        AerialRun run = run_aerial(in.rgb, in.depth.range, j.aerial, with_camera(j.prepare, in.depth), exec, ctx.given,
+                                   &geo);
+        if (!j.target_altitude.empty())
+          in.record["target_altitude"] = {{"path", j.target_altitude}, {"sha256", sha256_file(j.target_altitude)}};
         if (!tf.fit_record.is_null()) {
           run.record["turbidity_fit"] = tf.fit_record;
           in.record["sky_image"] = tf.image_record;
@@ -315,10 +416,15 @@ CommandDef aerial_command() {
       .report = [](const AerialJob& j, const nlohmann::json& rec) {
         const auto& d = rec["aerial"]["derived"];
         const auto& g = d["gamma_at"]["1000_m"];
-        std::fprintf(stderr, "brume aerial: %s  %s  R_max %.4g m  Gamma(1 km) %.4f %.4f %.4f  sigma_max %.3g px (%s)\n",
-                     j.output.out.c_str(), d["mode"].get<std::string>().c_str(), d["range_max_m"].get<double>(),
+        std::string below;  // records before the count have none
+        if (d.contains("negative_pixels") && d["negative_pixels"]["count"].get<std::size_t>() > 0)
+          below = "  below zero " + text::g(100.0 * d["negative_pixels"]["fraction"].get<double>(), 3) +
+                  " % (least " + text::g(d["negative_pixels"]["least_value"].get<double>(), 3) + ")";
+        std::fprintf(stderr, "brume aerial: %s  %s%s  R_max %.4g m  Gamma(1 km) %.4f %.4f %.4f  sigma_max %.3g px%s (%s)\n",
+                     j.output.out.c_str(), d["mode"].get<std::string>().c_str(),
+                     j.aerial.path == AerialPath::slant ? " (slant path)" : "", d["range_max_m"].get<double>(),
                      g[0].get<double>(), g[1].get<double>(), g[2].get<double>(), d["sigma_max_px"].get<double>(),
-                     rec["execution"]["backend"].get<std::string>().c_str());
+                     below.c_str(), rec["execution"]["backend"].get<std::string>().c_str());
       },
   });
   // Turbidity 2-10 (Morales Table 3.1, corrected: clear air from about 2.7,
@@ -347,6 +453,9 @@ CommandDef aerial_command() {
     if (j.aerial.from_turbidity)
       throw Error("--lidar with --from-turbidity: a re-render changes the medium of a photo that already has one, "
                   "a scan is clear; render (drop --from-turbidity) to fog the scan with --turbidity");
+    if (j.aerial.path == AerialPath::slant)
+      throw Error("--lidar with --path slant: the scan is fogged with the coefficients at --altitude along level "
+                  "beams (one extinction per metre); give --path level to fog the scan, or run brume lidar fog on it");
     resolve_aerial_turbidity(j, {});  // --turbidity-from or --turbidity auto: T as the run takes it
     return aerial_extinction_per_m(lambda_nm, j.aerial.atmosphere) * j.aerial.distance_scale;
   };
@@ -362,7 +471,7 @@ CommandDef aerial_command() {
     for (const auto& d : input_param_table(true).params()) skip.insert(d.spec.name);
     for (const auto& d : output_param_table(aerial_map_outputs()).params()) skip.insert(d.spec.name);
     for (const auto& d : camera_lidar_param_table().params()) skip.insert(d.spec.name);  // files: brume.lidar.fog
-    return array_call_table(aerial_job_table(), kArrayExec, skip);
+    return array_call_table(aerial_job_table(), kArrayExec | kArrayIntrinsics, skip);
   }();
   c.arrays = make_array_form<AerialJob>(
       "aerial", "",
@@ -373,7 +482,12 @@ CommandDef aerial_command() {
       rgb_range_args(ArrayArg::As::dense), call, {"rgb", "attenuation", "scale", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<AerialJob>& k, const Exec& e, const std::set<std::string>& g) {
         const AerialTurbidity tf = resolve_aerial_turbidity(k.p, g);
-        AerialRun r = run_aerial(in[0].dense, in[1].dense, k.p.aerial, k.p.prepare, e, g);
+        Image altitude;
+        const AerialGeometry geo = aerial_geometry(k.p, k.depth, in[0].dense.width, in[0].dense.height, altitude);
+        AerialRun r = run_aerial(in[0].dense, in[1].dense, k.p.aerial, k.p.prepare, e, g, &geo);
+        if (!k.p.target_altitude.empty())
+          r.record["inputs"]["target_altitude"] = {{"path", k.p.target_altitude},
+                                                   {"sha256", sha256_file(k.p.target_altitude)}};
         if (!tf.fit_record.is_null()) {
           r.record["turbidity_fit"] = tf.fit_record;
           r.record["sky_image"] = tf.image_record;  // under "inputs", as in the CLI's record

@@ -68,7 +68,7 @@ const ParamTable<AerialParams>& insert_aerial_param_table() {
     for (const Param<AerialParams>& q : aerial_param_table().params()) {
       if (q.spec.block != "aerial") continue;
       if (q.spec.name == "from-turbidity" || q.spec.name == "from-airlight" || q.spec.name == "remove" ||
-          q.spec.name == "gamma-floor")
+          q.spec.name == "gamma-floor" || q.spec.name == "path")  // the object's path: level (issue #59 left it)
         continue;
       d.custom(q.spec, q.get, q.set);
     }
