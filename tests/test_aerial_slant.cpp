@@ -234,3 +234,43 @@ TEST(AerialSlant, RefusesWhatItCannotVouchFor) {
   EXPECT_NE(e.find("--pitch"), std::string::npos) << e;
   EXPECT_NE(e.find("--path slant"), std::string::npos) << e;
 }
+
+// --airlight horizon (issue #59 item 2) on a synthetic photo whose sky is a
+// deep blue overhead and pale at the horizon: the colour just above the
+// farthest skyline, not the sky's median; land the range map calls sky (a
+// skyline two rows off) and a black stitch border are left out.
+TEST(AerialHorizon, TakesTheSkyJustAboveTheFarSkyline) {
+  const int W = 80, H = 60;
+  Image rgb(W, H, 3), range(W, H, 1);
+  const std::array<float, 3> zenith{0.02f, 0.15f, 0.6f}, horizon{0.12f, 0.45f, 0.85f}, rock{0.05f, 0.05f, 0.06f};
+  for (int x = 0; x < W; ++x) {
+    const bool far = x >= 40;                 // the right half: land at 12 km, its skyline at row 30
+    const int sky_end = far ? 30 : 22;        // the left: 900 m, higher in the frame
+    const int photo_land = far ? 25 : 22;     // the photo's rock starts 5 rows above the map's skyline (far half)
+    for (int y = 0; y < H; ++y) {
+      const std::size_t i = static_cast<std::size_t>(y) * W + x;
+      range.data[i] = y < sky_end ? NAN : (far ? 12000.0f : 900.0f);
+      std::array<float, 3> c = y >= photo_land ? rock : (y >= sky_end - 9 ? horizon : zenith);
+      if (x >= 76) c = {0.0f, 0.0f, 0.0f};  // a stitch border: black, unknown range
+      for (int k = 0; k < 3; ++k) rgb.data[3 * i + k] = c[k];
+    }
+  }
+  nlohmann::json where;
+  const std::array<float, 3> a = horizon_airlight(rgb, range, where);
+  EXPECT_EQ(a, horizon);
+  EXPECT_GT(where["pixels"].get<int>(), 16);
+  EXPECT_EQ(where["rejected_darker_than_the_sky_above"].get<int>(), 2 * 36);  // rock rows 25-26 of 36 columns
+  EXPECT_EQ(where["skyline_range_min_m"], 12000.0f);
+  // The whole-sky median (auto) is the zenith's colour: far from it.
+  AerialParams p;
+  const AerialAnalysis med = analyse_aerial(rgb, range, p, 1);
+  EXPECT_EQ(med.airlight, zenith);
+  p.airlight_rule = "horizon";
+  const AerialAnalysis hz = analyse_aerial(rgb, range, p, 1);
+  EXPECT_EQ(hz.airlight, horizon);
+  EXPECT_NE(hz.airlight_source.find("horizon"), std::string::npos);
+  // No sky above the land: refused, with the fix.
+  Image full(W, H, 1, 500.0f);
+  const std::string e = error_of([&] { horizon_airlight(rgb, full, where); });
+  EXPECT_NE(e.find("--airlight R,G,B"), std::string::npos) << e;
+}

@@ -189,6 +189,7 @@ TEST_F(CliAerial, SlantPathRecordsRepeatsAndRefuses) {
       {"aerial" + io + " --path slant --target-altitude " + p("small.exr"), "20x10"},
       {"aerial" + io + " --path slant --target-altitude " + p("small.exr") + " --pitch 2", "drop one of them"},
       {"aerial" + io + " --path slant --fov-x 40 --pitch -80 --altitude 0", "below the model's -500 m"},
+      {"aerial" + io + " --airlight sunset", "horizon"},
   };
   expect_refused(cases);
 }
@@ -224,15 +225,15 @@ TEST_F(CliAerial, NegativePixelsAreCountedAndSaid) {
   EXPECT_EQ(q.output.find("warning"), std::string::npos) << q.output;
 }
 
-// The GeoPose3K Matterhorn photo from the camera's solved pose (issue #59):
-// the attenuation on land beyond 10 km equals the slant closed form at each
+// The GeoPose3K Matterhorn photo from the camera's solved pose (issue #59),
+// with the horizon's airlight: the attenuation on land beyond 10 km equals the slant closed form at each
 // pixel (Gamma per XYZ channel from the spectral integral at the equivalent
 // distances of its ray, the table's 1e-6 and f32: 2e-6).
 TEST_F(CliAerial, MatterhornSlantAttenuationIsTheClosedForm) {
   BRUME_REQUIRE_DATA("geopose3k_matterhorn/distance.pfm");
   const std::string m = data_path("geopose3k_matterhorn/");
   CliRun r = run("aerial --image " + m + "photo.jpg --range " + m + "distance.pfm --unknown-value -1 --remove "
-                 "--altitude 2910 --fov-x 42.5 --pitch 0.7 --path slant --turbidity 1 --airlight 0.12,0.45,0.85 "
+                 "--altitude 2910 --fov-x 42.5 --pitch 0.7 --path slant --turbidity 1 --airlight horizon "
                  "--out " + p("o.exr") + " --attenuation " + p("g.exr") + " --record " + p("r.json"));
   ASSERT_EQ(r.status, 0) << r.output;
   const Image g = read_color(p("g.exr")), d = read_scalar(m + "distance.pfm");
@@ -256,4 +257,8 @@ TEST_F(CliAerial, MatterhornSlantAttenuationIsTheClosedForm) {
   const nlohmann::json j = read_json(p("r.json"))["aerial"]["derived"];
   EXPECT_NEAR(j["slant_path"]["dh_max_m"].get<double>(), 1568.0, 30.0);  // the summit, 4,478 m
   EXPECT_LT(j["negative_pixels"]["fraction"].get<double>(), 0.40);
+  // The horizon's airlight: within 10 % of the sky just above the far ridges
+  // in G and B (about 0.45, 0.85 linear, measured on the photo for issue #59).
+  EXPECT_NEAR(j["airlight_linear_rgb"][1].get<double>(), 0.45, 0.045);
+  EXPECT_NEAR(j["airlight_linear_rgb"][2].get<double>(), 0.85, 0.085);
 }

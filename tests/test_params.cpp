@@ -28,8 +28,10 @@
 #include "effects/fog/fog_job.hpp"
 #include "effects/haze/haze_job.hpp"
 #include "effects/sky/sky_job.hpp"
+#include "test_util.hpp"
 
 using namespace brume;
+using brume::test::error_of;
 
 namespace {
 
@@ -242,4 +244,30 @@ TEST(Params, OutputFilesAreMarkedBySpecNotByName) {
     if (is_output_file(d.spec)) prep.insert(d.spec.name);
   EXPECT_EQ(conv, (std::set<std::string>{"out", "record"}));
   EXPECT_EQ(prep, (std::set<std::string>{"out", "masks", "record"}));
+}
+
+// A colour that may be a named rule instead (aerial's --airlight horizon): the
+// word parses, checks, formats and round-trips through the record as itself,
+// a colour as a colour, and any other word is refused naming the words.
+TEST(Params, AColourOrAWord) {
+  const auto& t = aerial_param_table();
+  const ParamSpec& s = t.at("airlight").spec;
+  EXPECT_EQ(s.parse("horizon"), "horizon");
+  EXPECT_EQ(s.parse("0.5,0.6,0.7"), nlohmann::json({0.5f, 0.6f, 0.7f}));
+  EXPECT_TRUE(s.parse("auto").is_null());
+  EXPECT_EQ(s.format("horizon"), "horizon");
+  EXPECT_NO_THROW(s.check("horizon"));
+  const std::string e = error_of([&] { s.check("sunset"); });
+  EXPECT_NE(e.find("--airlight 'sunset'"), std::string::npos) << e;
+  EXPECT_NE(e.find("horizon"), std::string::npos) << e;
+  EXPECT_NE(error_of([&] { s.parse("sunset"); }).find("horizon"), std::string::npos);
+  AerialParams p;
+  t.from_json(p, {{"aerial", {{"airlight", "horizon"}}}}, "test");
+  EXPECT_EQ(p.airlight_rule, "horizon");
+  EXPECT_FALSE(p.airlight);
+  EXPECT_EQ(t.to_json(p)["aerial"]["airlight"], "horizon");
+  t.from_json(p, {{"aerial", {{"airlight", {0.1, 0.2, 0.3}}}}}, "test");
+  EXPECT_EQ(p.airlight_rule, "");
+  ASSERT_TRUE(p.airlight);
+  EXPECT_EQ(t.to_json(p)["aerial"]["airlight"], nlohmann::json({0.1f, 0.2f, 0.3f}));
 }

@@ -273,6 +273,8 @@ struct AerialParams {
   Atmosphere atmosphere;                 // --turbidity [1, 20], --altitude [m] [-500, 9000]
   std::string sensitivity = "default";   // --sensitivity default | FILE.csv | DATABASE#CAMERA
   std::optional<Rgb> airlight;           // Iinf, linear RGB, >= 0; unset: estimated (analyse_aerial)
+  std::string airlight_rule;             // "horizon" (--airlight horizon): estimated just above the far
+                                         // skyline; "" with airlight unset: the sky's median (auto)
   double distance_scale = 1.0;           // [1] s = R distance_scale (models, miniatures), > 0
   std::optional<double> from_turbidity;  // [1] T1 of the photo for a re-render, [1, 20]; unset: render
   std::optional<Rgb> from_airlight;      // Iinf1, linear RGB, > 0; unset: the same as airlight
@@ -313,6 +315,7 @@ struct AerialAnalysis {
   AttenuationTable gamma_from;              // at T1 (re-render only)
   std::array<float, 3> airlight{};          // Iinf (Iinf2 of a re-render), linear RGB
   std::string airlight_source;
+  nlohmann::json airlight_where;            // --airlight horizon: the pixels it took (null otherwise)
   std::array<float, 3> from_airlight{};     // Iinf1 (re-render only), linear RGB
   std::string from_airlight_source;
   double beta_550_per_m = 0.0;              // (beta_R + beta_M)(550 nm, T, h0)
@@ -326,6 +329,17 @@ struct AerialAnalysis {
   SlantAttenuationTable slant_gamma, slant_gamma_from;
   nlohmann::json slant_record;
 };
+// --airlight horizon (issue #59): Iinf from the sky just above the far
+// skyline, where a photo's horizon colour is: per column the topmost known
+// pixel is the skyline; the columns whose skyline is among the farthest
+// quarter (by its range) give their sky pixels 3 to 8 rows above it (a DEM's
+// skyline is often a few pixels off the photo's), less those darker than the
+// sky 9 to 28 rows above the skyline in that column (land the DEM calls sky)
+// and near-black ones (a panorama's stitch borders); the per-channel median of
+// the rest. At least 16 such pixels, else refused (give --airlight R,G,B).
+// `where` gets the columns, rows, pixels and skyline range it used.
+std::array<float, 3> horizon_airlight(DenseImageRef rgb, DenseImageRef range, nlohmann::json& where);
+
 // Validates parameters and inputs (throws brume::Error), loads the
 // sensitivity, tabulates Gamma, estimates Iinf. `range` is the MEASURED
 // range in metres (1 channel, rgb's size). Iinf auto: the per-channel median

@@ -67,6 +67,8 @@ struct ParamSpec {
   std::vector<std::string> choices;  // choice: the names, in declaration order
   bool optional = false;             // may be unset (no 0 sentinels)
   std::string unset_word = "auto";   // what the user writes for "unset"
+  std::vector<std::string> words;    // rgb: names accepted instead of R,G,B, stored as the name
+                                     // (aerial's --airlight horizon: a rule that estimates the colour)
   std::string block;                 // the declaring block: "haze", "diffusion", "prepare", ...
   bool allow_inf = false;            // real: +inf is a meaningful value (an infinite far plane)
   bool output_file = false;          // text: names a file (depth prepare's --masks: a directory) the run
@@ -219,6 +221,25 @@ class ParamTable {
     return add(std::move(s), [m](const P& p) { return (p.*m) ? nlohmann::json(*(p.*m)) : nlohmann::json(); },
                [m](P& p, const nlohmann::json& v) {
                  if (v.is_null()) p.*m = std::nullopt; else p.*m = v.get<Rgb>();
+               });
+  }
+  // An rgb that may instead be one of `words` (a named rule for the colour),
+  // kept in `word` ("" when the value is a colour or unset).
+  ParamTable& rgb_or_word(const char* name, std::optional<Rgb> P::*m, std::string P::*word,
+                          std::vector<std::string> words, const char* unit, Range r, const char* help,
+                          const char* unset_word = "auto") {
+    ParamSpec s = spec(name, ParamKind::rgb, unit, help, r);
+    s.optional = true;
+    s.unset_word = unset_word;
+    s.words = std::move(words);
+    return add(std::move(s),
+               [m, word](const P& p) {
+                 if (!(p.*word).empty()) return nlohmann::json(p.*word);
+                 return (p.*m) ? nlohmann::json(*(p.*m)) : nlohmann::json();
+               },
+               [m, word](P& p, const nlohmann::json& v) {
+                 p.*word = v.is_string() ? v.get<std::string>() : std::string();
+                 if (v.is_null() || v.is_string()) p.*m = std::nullopt; else p.*m = v.get<Rgb>();
                });
   }
   ParamTable& pair(const char* name, Pair P::*m, const char* unit, Range r, const char* help) {

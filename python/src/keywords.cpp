@@ -216,7 +216,13 @@ json keyword_value(const ParamSpec& s, py::handle v, const std::string& where) {
       if (!py::isinstance<py::str>(v)) throw wrong("a str");
       return py::cast<std::string>(v);
     case ParamKind::rgb: {
-      if (py::isinstance<py::str>(v)) throw wrong("a sequence of 3 numbers (linear R, G, B)");
+      if (py::isinstance<py::str>(v)) {
+        const std::string w = utf8_of(v, where + ": " + kwd);
+        for (const std::string& name : s.words)
+          if (w == name) return w;
+        throw wrong(s.words.empty() ? "a sequence of 3 numbers (linear R, G, B)"
+                                    : ("a sequence of 3 numbers (linear R, G, B) or '" + s.words[0] + "'").c_str());
+      }
       json j;
       try {
         j = from_py(v, where);
@@ -380,7 +386,10 @@ std::string stub_type(const ParamSpec& s) {
     case ParamKind::real: t = "float"; break;
     case ParamKind::integer: t = "int"; break;
     case ParamKind::boolean: t = "bool"; break;
-    case ParamKind::rgb: t = "tuple[float, float, float] | Sequence[float]"; break;
+    case ParamKind::rgb:
+      t = "tuple[float, float, float] | Sequence[float]";
+      for (const std::string& w : s.words) t += " | Literal[\"" + w + "\"]";
+      break;
     case ParamKind::pair: t = "tuple[float, float] | Sequence[float]"; break;
     case ParamKind::text: t = "str | os.PathLike[str]"; break;
     case ParamKind::choice: {

@@ -60,6 +60,15 @@ def test_aerial_slant_path_equals_cli(demo, tmp_path):
     same(r.rgb, brume.read_image(tmp_path / "o.exr").rgb)
     same(r.attenuation, brume.read_image(tmp_path / "a.exr").rgb)
     assert r.record["aerial"]["derived"]["slant_path"]["dh_min_m"] < 0  # the path falls towards the ground
+    # --airlight horizon: a word where a colour goes, as on the command line
+    run_cli("aerial", "--image", d / "clean.png", "--range", d / "range.exr", "--airlight", "horizon", "--remove",
+            "--out", tmp_path / "h.exr", "--bits", "float")
+    h = brume.aerial(demo["rgb"], demo["range"], airlight="horizon", remove=True)
+    same(h.rgb, brume.read_image(tmp_path / "h.exr").rgb)
+    assert h.record["job"]["aerial"]["airlight"] == "horizon"
+    assert h.record["aerial"]["derived"]["airlight_where"]["pixels"] >= 16
+    with pytest.raises(TypeError, match="'horizon'"):
+        brume.aerial(demo["rgb"], demo["range"], airlight="sunset")
     with pytest.raises(ValueError, match="pitch orients.*path=.slant.") as e:
         brume.aerial(demo["rgb"], demo["range"], pitch=3)
     assert "--" not in str(e.value)

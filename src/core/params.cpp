@@ -117,6 +117,7 @@ std::string Range::text() const {
 
 std::string ParamSpec::format(const nlohmann::json& v) const {
   if (v.is_null()) return unset_word;
+  if (kind == ParamKind::rgb && v.is_string()) return v.get<std::string>();  // one of `words`
   switch (kind) {
     case ParamKind::real: return text::g(v.get<double>());
     case ParamKind::integer: return v.dump();
@@ -144,7 +145,9 @@ std::string ParamSpec::describe() const {
       m << " [" << (unit.empty() ? "" : unit + ", ") << range.text() << "]";
       break;
     case ParamKind::rgb:
-      m << " [" << (unit.empty() ? "" : unit + ", ") << "R,G,B each in " << range.text() << "]";
+      m << " [" << (unit.empty() ? "" : unit + ", ") << "R,G,B each in " << range.text();
+      for (const std::string& w : words) m << " | " << w;
+      m << "]";
       break;
     case ParamKind::pair:
       m << " [" << (unit.empty() ? "" : unit + ", ") << "X,Y each in " << range.text() << "]";
@@ -185,6 +188,11 @@ nlohmann::json ParamSpec::parse(const std::string& t) const {
       throw Error(flag + " '" + t + "' is not true or false");
     case ParamKind::choice: return t;  // checked against the name table by check()
     case ParamKind::rgb: {
+      std::string word_list;  // ", horizon": the names it also takes
+      for (const std::string& w : words) {
+        if (t == w) return t;
+        word_list += ", " + w;
+      }
       Rgb c{};
       std::stringstream ss(t);
       std::string item;
@@ -193,12 +201,12 @@ nlohmann::json ParamSpec::parse(const std::string& t) const {
         double v = 0;
         if (n < 3 && !parse_number(item, v))
           throw Error(flag + " '" + t + "': '" + item + "' is not a number; give R,G,B in linear light, e.g. "
-                      "0.8,0.82,0.85" + (optional ? ", or " + unset_word : std::string()));
+                      "0.8,0.82,0.85" + word_list + (optional ? ", or " + unset_word : std::string()));
         if (n < 3) c[n] = static_cast<float>(v);
         ++n;
       }
       if (n != 3)
-        throw Error(flag + " '" + t + "' must be three comma-separated numbers R,G,B (linear light)" +
+        throw Error(flag + " '" + t + "' must be three comma-separated numbers R,G,B (linear light)" + word_list +
                     (optional ? " or " + unset_word : std::string()));
       return c;
     }
@@ -265,6 +273,14 @@ void ParamSpec::check(const nlohmann::json& v) const {
       throw Error(flag + " '" + s + "' is not allowed; use one of: " + all);
     }
     case ParamKind::rgb: {
+      if (v.is_string() && !words.empty()) {
+        for (const std::string& w : words)
+          if (v.get<std::string>() == w) return;
+        std::string all;
+        for (const std::string& w : words) all += ", " + w;
+        throw Error(flag + " '" + v.get<std::string>() + "' is not allowed; give R,G,B (three numbers, linear light)" +
+                    all + (optional ? " or " + unset_word : std::string()));
+      }
       if (!v.is_array() || v.size() != 3) bad_type("three numbers R,G,B");
       for (const auto& c : v) {
         if (!c.is_number()) bad_type("three numbers R,G,B");

@@ -155,9 +155,11 @@ const ParamTable<AerialParams>& aerial_param_table() {
               "camera spectral sensitivities q_c(lambda): default, a CSV of wavelength_nm,r,g,b, or "
               "DATABASE.txt#CAMERA NAME")
         .reads_file("default", '#')
-        .rgb("airlight", &AerialParams::airlight, "linear RGB", Range::at_least(0.0),
-             "horizon colour Iinf; auto: the median sky colour (unknown range >= 0.5 % of the frame), else the "
-             "median of the brightest 10 % of the 1 % most distant pixels")
+        .rgb_or_word("airlight", &AerialParams::airlight, &AerialParams::airlight_rule, {"horizon"}, "linear RGB",
+                     Range::at_least(0.0),
+                     "horizon colour Iinf; auto: the median sky colour (unknown range >= 0.5 % of the frame), else "
+                     "the median of the brightest 10 % of the 1 % most distant pixels; horizon: the median of the sky "
+                     "just above the farthest skyline (a photo's horizon, docs/aerial.md)")
         .alias("horizon")
         .alias("fog-color")
         .real("distance-scale", &AerialParams::distance_scale, "1", Range::above(0.0),
@@ -219,6 +221,69 @@ AerialAnalysis analyse_aerial(DenseImageRef rgb, DenseImageRef range, const Aeri
   AerialAnalysis a;
   analyse_aerial(rgb, range, p, a, threads);
   return a;
+}
+
+std::array<float, 3> horizon_airlight(DenseImageRef rgb, DenseImageRef range, nlohmann::json& where) {
+  const int W = range.width, H = range.height;
+  constexpr int kGap = 3, kBand = 6, kAbove = 20;  // rows: skipped, taken, compared against above them
+  // The skyline: per column, the topmost known pixel with sky right above it.
+  std::vector<int> top(static_cast<std::size_t>(W), -1);
+  std::vector<float> far;
+  for (int x = 0; x < W; ++x) {
+    int y = 0;
+    while (y < H && !known_range(range.data[static_cast<std::size_t>(y) * W + x])) ++y;
+    if (y < H && y >= kGap + kBand) {
+      top[static_cast<std::size_t>(x)] = y;
+      far.push_back(range.data[static_cast<std::size_t>(y) * W + x]);
+    }
+  }
+  if (far.empty())
+    throw Error("--airlight horizon: no column has sky above its land (at least " + std::to_string(kGap + kBand) +
+                " rows of unknown range above the topmost known pixel); give --airlight R,G,B");
+  // The farthest quarter of the skyline.
+  std::vector<float> sorted = far;
+  const std::size_t q = sorted.size() * 3 / 4;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(q), sorted.end());
+  const float r_far = sorted[q];
+  auto lum = [&](std::size_t i) { return aerial_luminance(&rgb.data[3 * i]); };
+  auto sky_at = [&](int x, int y) { return !known_range(range.data[static_cast<std::size_t>(y) * W + x]); };
+  std::vector<std::size_t> kept;
+  std::size_t columns = 0, dark = 0, black = 0;
+  std::vector<float> up;
+  for (int x = 0; x < W; ++x) {
+    const int y0 = top[static_cast<std::size_t>(x)];
+    if (y0 < 0 || range.data[static_cast<std::size_t>(y0) * W + x] < r_far) continue;
+    ++columns;
+    up.clear();  // the sky higher up in this column
+    for (int y = std::max(0, y0 - kGap - kBand - kAbove); y < y0 - kGap - kBand; ++y)
+      if (sky_at(x, y)) up.push_back(lum(static_cast<std::size_t>(y) * W + x));
+    float l_up = -INFINITY;
+    if (!up.empty()) {
+      std::nth_element(up.begin(), up.begin() + static_cast<std::ptrdiff_t>(up.size() / 2), up.end());
+      l_up = up[up.size() / 2];
+    }
+    for (int y = y0 - kGap - kBand; y < y0 - kGap; ++y) {
+      const std::size_t i = static_cast<std::size_t>(y) * W + x;
+      if (!sky_at(x, y)) continue;
+      const float* c = &rgb.data[3 * i];
+      if (std::max({c[0], c[1], c[2]}) < 0.02f) { ++black; continue; }  // a stitch border, not sky
+      if (lum(i) < l_up) { ++dark; continue; }                           // land the skyline missed
+      kept.push_back(i);
+    }
+  }
+  if (kept.size() < 16)
+    throw Error("--airlight horizon: only " + std::to_string(kept.size()) + " sky pixels above the farthest skyline (" +
+                std::to_string(columns) + " columns with land beyond " + text::g(r_far) + " m; " +
+                std::to_string(dark) + " darker than the sky above them, " + std::to_string(black) +
+                " near black) are usable; at least 16 are needed: give --airlight R,G,B");
+  const std::array<float, 3> m = channel_median(rgb, kept);
+  where = {{"pixels", kept.size()},
+           {"columns", columns},
+           {"skyline_range_min_m", r_far},
+           {"rows_above_skyline", {kGap, kGap + kBand - 1}},
+           {"rejected_darker_than_the_sky_above", dark},
+           {"rejected_near_black", black}};
+  return m;
 }
 
 namespace {
@@ -400,7 +465,10 @@ void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& 
   std::array<float, 3> estimated{};
   std::string estimated_source;
   if (!p.airlight || (a.mode == AerialMode::rerender && !p.from_airlight)) {
-    if (a.unknown_pixels >= std::max<std::size_t>(1, rgb.pixels() / 200)) {
+    if (p.airlight_rule == "horizon") {
+      estimated = horizon_airlight(rgb, range, a.airlight_where);
+      estimated_source = "per-channel median of the sky just above the farthest skyline (--airlight horizon)";
+    } else if (a.unknown_pixels >= std::max<std::size_t>(1, rgb.pixels() / 200)) {
       estimated = sky_median(rgb, a.sky.data.data(), a.unknown_pixels, sky_lo, sky_hi, nt);
       estimated_source = "per-channel median of the unknown-range (sky) pixels";
     } else {

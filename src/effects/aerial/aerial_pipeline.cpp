@@ -57,6 +57,7 @@ nlohmann::json aerial_record(const AerialParams& p, const AerialAnalysis& a, std
       {"sigma_max_px", a.sigma_max},
   };
   if (p.path == AerialPath::slant) j["derived"]["slant_path"] = a.slant_record;
+  if (!a.airlight_where.is_null()) j["derived"]["airlight_where"] = a.airlight_where;
   if (a.mode == AerialMode::rerender) {
     j["derived"]["from_gamma_at"] = g1;
     j["derived"]["from_airlight_linear_rgb"] = a.from_airlight;

@@ -160,7 +160,7 @@ json spec_json(const CommandDef& c, const ParamSpec& s) {
   json j = {{"name", s.name},       {"block", s.block},   {"kind", kind_name(s.kind)},
             {"unit", s.unit},       {"help", s.describe()}, {"min", finite_or_null(s.range.min)},
             {"max", finite_or_null(s.range.max)}, {"min_open", s.range.min_open}, {"max_open", s.range.max_open},
-            {"choices", s.choices}, {"optional", s.optional}, {"unset_word", s.unset_word},
+            {"choices", s.choices}, {"optional", s.optional}, {"unset_word", s.unset_word}, {"words", s.words},
             {"default", s.format(c.defaults.at(s.block).at(s.name))}};
   if (c.sampling)
     for (const SampleDefault& d : c.sampling->defaults)

@@ -114,7 +114,7 @@ function fieldProblem(s, text) {
   if (s.optional && text === s.unset_word) return null;
   if (s.kind === 'real' && !(NUMBER.test(text) || text === 'inf')) return `needs a number${unset}`;
   if (s.kind === 'integer' && !/^[+-]?\d+$/.test(text)) return `needs a whole number${unset}`;
-  if (s.kind === 'rgb') {
+  if (s.kind === 'rgb' && !(s.words || []).includes(text)) {
     const parts = text.split(',');
     if (parts.length !== 3 || !parts.every((p) => NUMBER.test(p.trim()))) return `needs R,G,B: three numbers${unset}`;
   }
