@@ -20,7 +20,7 @@ builds, the order of the builds alternating from round to round:
 
 and reports, per case, each build's whole-run wall time (median, min..max),
 the median of the per-round ratios new/old, the medians of `--timing`'s
-read and write phases, and each process's CPU time (user + system, every
+read, write and effect phases, and each process's CPU time (user + system, every
 thread; from getrusage), which a loaded host disturbs less than the wall
 time.
 
@@ -59,7 +59,7 @@ from benchlib import cpu_model
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 HAZE = ["--visibility", "3000", "--albedo", "0.9", "--lambda", "6"]
-PHASES = re.compile(r"whole run .*read ([0-9.]+) ms .*write ([0-9.]+) ms")
+PHASES = re.compile(r"whole run .*read ([0-9.]+) ms .*effect ([0-9.]+) ms, write ([0-9.]+) ms")
 
 
 def run(cmd):
@@ -76,8 +76,9 @@ def run(cmd):
 
 
 def phases(text):
+    """--timing's read, write and effect phases, in ms."""
     m = PHASES.search(text)
-    return (float(m.group(1)), float(m.group(2))) if m else (float("nan"), float("nan"))
+    return (float(m.group(1)), float(m.group(3)), float(m.group(2))) if m else (float("nan"),) * 3
 
 
 def oiio_phases(text):
@@ -153,13 +154,14 @@ def main():
                 _, args, out, extra = cases[c]
                 for b, exe in order:
                     dt, cpu, text = run([exe, *args, "--out", t / f"{b}-{out}", *extra, "--timing"])
-                    res[(c, b)].append((dt, *phases(text), cpu))
+                    rd, wr, ef = phases(text)
+                    res[(c, b)].append((dt, rd, wr, cpu, ef))
             if a.peer:
                 for i in range(2):  # brume and oiiotool, alternating which goes first
                     if (r + i) % 2 == 0:
                         _, _, text = run([a.new, "blur", "--image", t / "e.exr", "--sigma", "3", "--out",
                                        t / "b.exr", "--timing"])
-                        peer["brume_exr"].append(phases(text))
+                        peer["brume_exr"].append(phases(text)[:2])
                     else:
                         _, _, text = run(["oiiotool", "--threads", a.threads, "--runstats", t / "e.exr",
                                        "--compression", "zip", "-o", t / "p.exr"])
@@ -172,8 +174,8 @@ def main():
         if builds:
             print(f"old: {a.old}\nnew: {a.new}")
             print("| run | old ms | new ms | ratio (median of rounds) | ratio range | read old -> new | write old -> new "
-                  "| CPU ms old -> new | CPU ratio |")
-            print("| --- | ---: | ---: | ---: | --- | --- | --- | --- | ---: |")
+                  "| CPU ms old -> new | CPU ratio | effect old -> new |")
+            print("| --- | ---: | ---: | ---: | --- | --- | --- | --- | ---: | --- |")
             for c in chosen:
                 o, n = res[(c, "old")], res[(c, "new")]
                 ratios = [y[0] / x[0] for x, y in zip(o, n)]
@@ -183,12 +185,13 @@ def main():
                       f" | {med([x[1] for x in o]):.1f} -> {med([x[1] for x in n]):.1f}"
                       f" | {med([x[2] for x in o]):.1f} -> {med([x[2] for x in n]):.1f}"
                       f" | {med([x[3] for x in o]):.0f} -> {med([x[3] for x in n]):.0f}"
-                      f" | {med([y[3] / x[3] for x, y in zip(o, n)]):.2f} |")
+                      f" | {med([y[3] / x[3] for x, y in zip(o, n)]):.2f}"
+                      f" | {med([x[4] for x in o]):.0f} -> {med([x[4] for x in n]):.0f} |")
             o, n = startup["old"], startup["new"]
             print(f"| `brume --version` (start-up) | {med([x[0] for x in o]):.0f} | {med([x[0] for x in n]):.0f}"
                   f" | {med([y[0] / x[0] for x, y in zip(o, n)]):.2f} | | | "
                   f"| {med([x[1] for x in o]):.0f} -> {med([x[1] for x in n]):.0f}"
-                  f" | {med([y[1] / x[1] for x, y in zip(o, n)]):.2f} |")
+                  f" | {med([y[1] / x[1] for x, y in zip(o, n)]):.2f} | |")
         if a.peer:
             print(f"OpenEXR phases, brume (all cores) against oiiotool --threads {a.threads}, zip, medians in ms:")
             print("| file | brume read | oiiotool -i | ratio | brume write | oiiotool -o | ratio |")
