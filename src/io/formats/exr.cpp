@@ -314,14 +314,17 @@ bool read_core(const std::string& path, const Opened& o, int threads, Image& img
 #pragma omp parallel num_threads(n)
   {
     exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
-    bool made = false;
+    bool made = false, routines = false;  // this thread's pipeline: initialised; its unpacking chosen
 #pragma omp for schedule(dynamic, 1)
     for (int32_t k = 0; k < chunks; ++k) {
       exr_result_t rv;
       bool bad = false;
       exr_chunk_info_t info{};
       rv = exr_read_scanline_chunk_info(ctx, 0, dw.min.y + k * lines, &info);
-      if (rv == EXR_ERR_SUCCESS) rv = made ? exr_decoding_update(ctx, 0, &info, &dec) : exr_decoding_initialize(ctx, 0, &info, &dec);
+      if (rv == EXR_ERR_SUCCESS) {
+        rv = made ? exr_decoding_update(ctx, 0, &info, &dec) : exr_decoding_initialize(ctx, 0, &info, &dec);
+        made = made || rv == EXR_ERR_SUCCESS;
+      }
       if (rv == EXR_ERR_SUCCESS) {
         for (int16_t i = 0; i < dec.channel_count; ++i) {
           exr_coding_channel_info_t& ch = dec.channels[i];
@@ -336,9 +339,11 @@ bool read_core(const std::string& path, const Opened& o, int threads, Image& img
           ch.user_data_type = EXR_PIXEL_FLOAT;
           ch.user_bytes_per_element = sizeof(float);
         }
-        if (!bad && !made) rv = exr_decoding_choose_default_routines(ctx, 0, &dec);
-        made = true;
-        if (!bad && rv == EXR_ERR_SUCCESS) rv = exr_decoding_run(ctx, 0, &dec);
+        if (!bad && !routines) {
+          rv = exr_decoding_choose_default_routines(ctx, 0, &dec);
+          routines = rv == EXR_ERR_SUCCESS;
+        }
+        if (!bad && routines) rv = exr_decoding_run(ctx, 0, &dec);
       }
       if (bad || rv != EXR_ERR_SUCCESS) {
 #pragma omp critical(brume_exr_core)
