@@ -1,0 +1,166 @@
+// brume — `brume rain`: an RGB-D frame in, the rainy image out (the streaks of the drop field and
+// the analytic rain, composed with haze's medium in haze's composite), with the run's record
+// (brume/rain.hpp; docs/rain.md, "The camera").
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include "brume/command.hpp"
+#include "brume/depth_source.hpp"
+#include "brume/dof.hpp"
+#include "brume/error.hpp"
+#include "brume/haze.hpp"
+#include "brume/pipeline.hpp"
+#include "brume/rain.hpp"
+#include "brume/record.hpp"
+#include "shared/prelude_cpp.h"
+
+namespace brume {
+
+namespace sh = brume::shared;
+
+namespace {
+
+struct CameraRainJob {
+  InputFiles input;
+  RangeStep prepare;
+  CameraRainParams rain;
+  OutputFiles output;
+};
+
+const std::vector<MapOutput>& camera_rain_map_outputs() {
+  static const std::vector<MapOutput> m = {
+      {"transmission", "write the analytic media's transmission (haze and the rain not drawn), 1 channel", ""},
+  };
+  return m;
+}
+
+const ParamTable<CameraRainJob>& camera_rain_job_table() {
+  static const ParamTable<CameraRainJob> t = [] {
+    ParamTable<CameraRainJob> d("rain");
+    d.nest(&CameraRainJob::input, input_param_table(true))
+        .nest(&CameraRainJob::prepare, range_step_param_table())
+        .nest(&CameraRainJob::rain, camera_rain_param_table())
+        .nest(&CameraRainJob::output, output_param_table(camera_rain_map_outputs()));
+    return d;
+  }();
+  return t;
+}
+
+// The thin lens's circle of confusion at infinity [px] (dof's), 0 for a pinhole.
+double rain_coc_px(const CameraRainJob& j, int width, int height) {
+  if (!j.rain.f_number) return 0.0;
+  DofParams dp;
+  dp.lens = j.input.depth.lens;
+  dp.f_number = j.rain.f_number;
+  dp.focus_distance_m = j.rain.focus_distance_m;
+  validate_dof(dp);
+  return coc_infinity_px(dp, width, height);
+}
+
+void check_camera_rain_job(const CameraRainJob& j) {
+  validate_camera_rain(j.rain);
+  if (j.rain.f_number && !j.input.depth.lens.focal_length_mm)
+    throw Error("--f-number blurs the streaks by the thin lens, which needs the camera in millimetres: give "
+                "--focal-length MM and --sensor-width MM, or drop --f-number (a pinhole)");
+}
+
+nlohmann::json run_camera_rain_job(const CameraRainJob& job, const ExecOptions& eo, const RunContext& ctx) {
+  const EffectJob<CameraRainJob> e{
+      "rain",
+      camera_rain_job_table(),
+      camera_rain_map_outputs(),
+      160,
+      [&](const CameraRainJob& j, const ExecOptions&) { check_camera_rain_job(j); },
+      [&](const CameraRainJob& j, LoadedInputs& in, const Exec& exec) {
+        if (!j.rain.airlight) check_airlight_sky(in, "rain");
+        const int W = in.rgb.width, H = in.rgb.height;
+        const Camera cam = depth_camera(j.input.depth, W, H);
+        const double coc = rain_coc_px(j, W, H);
+        const RangeStep step = with_camera(j.prepare, in.depth);
+        const CompletedRange done = complete_step(in.depth.range, in.rgb, step, ctx.given, exec.threads);
+        const ConstImageView measured = done.view(in.depth.range);
+        // Haze's analysis: its airlight, and with --visibility its medium (sky beyond it, blur).
+        HazeParams hp;
+        hp.visibility_m = j.rain.visibility_m;
+        hp.airlight = j.rain.airlight;
+        if (!hp.visibility_m) hp.kappa_s = 0.0;
+        const HazeAnalysis ha = analyse_haze(in.rgb, measured, hp);
+        PreparedRange prep = prepare_step(measured, step, ctx.given, exec.threads, true);
+        prep.record["complete"] = done.record;
+
+        CameraRainScene scene;
+        scene.rgb = in.rgb;
+        scene.range = prep.range;
+        if (!prep.sky_weight.empty()) scene.sky_weight = prep.sky_weight;
+        scene.k = cam.k;
+        scene.coc_infinity_px = coc;
+        scene.airlight = ha.airlight;
+        scene.haze_sigma_per_m = hp.visibility_m ? ha.extinction_per_m : 0.0;
+        if (hp.visibility_m) {
+          // Haze's composite (Hansard eq. 2-4) on the joint transmission, with haze's blur scale.
+          scene.composite = [&](const Image& tau0) {
+            Image scale(W, H, 1);
+            const float s0 = static_cast<float>(hp.diffusion.sigma0), smax = static_cast<float>(ha.sigma_max);
+            const float inv = static_cast<float>(1.0 / ha.range_max_m);
+            for (int y = 0; y < H; ++y)
+              for (int x = 0; x < W; ++x) {
+                const float r = prep.range.at(x, y);
+                const float rn = std::isfinite(r) && r > 0.0f ? r * inv : 1.0f;
+                scale.data[static_cast<std::size_t>(y) * W + x] = sh::brume_target_scale(rn, s0, smax);
+              }
+            return scatter_blur(in.rgb, tau0, scale, ha.sigma_max, hp.diffusion, hp.composite, ha.airlight, exec).rgb;
+          };
+        }
+        const auto t0 = std::chrono::steady_clock::now();
+        CameraRainStats st;
+        Image tmap;
+        Image out = render_camera_rain(scene, j.rain, exec, &st, &tmap);
+        nlohmann::json rec;
+        rec["rain"] = camera_rain_record(j.rain, st);
+        rec["rain"]["camera"] = camera_record(cam);
+        rec["rain"]["coc_infinity_px"] = coc;
+        rec["rain"]["airlight_linear_rgb"] = ha.airlight;
+        rec["rain"]["airlight_source"] = ha.airlight_source;
+        rec["rain"]["sky_rule"] =
+            "the sky lies beyond the unbounded media: transmission 0 (the airlight) when there is rain or haze, "
+            "blended across the horizon margin by the preparation's sky weight";
+        if (hp.visibility_m) rec["haze"] = haze_record(hp, ha);
+        rec["prepare"] = prep.record;
+        rec["execution"]["backend"] = "cpu";
+        rec["execution"]["timing"] = cpu_timing_record(t0, 0);
+        return EffectOutput{std::move(out), {{"transmission", std::move(tmap)}}, std::move(rec), "", {}};
+      }};
+  return run_effect_job(e, job, eo, ctx);
+}
+
+}  // namespace
+
+CommandDef rain_command() {
+  return make_command<CameraRainJob>({
+      .name = "rain",
+      .cli = "rain",
+      .summary = "rain on an RGB-D image: streaks of the drop field depth-tested against the scene (Garg & Nayar), "
+                 "the rest as extinction in haze's composite",
+      .table = &camera_rain_job_table(),
+      .takes_exec_flags = true,
+      .writes_record = true,
+      .check = [](const CameraRainJob& j, const std::set<std::string>& g) {
+        check_camera_rain_job(j);
+        check_range_step(j.prepare, g);
+      },
+      .run = &run_camera_rain_job,
+      .report =
+          [](const CameraRainJob& j, const nlohmann::json& rec) {
+            const auto& r = rec["rain"];
+            std::fprintf(stderr,
+                         "brume rain: %s  %.4g mm/h, T %.4g s: %zu drops drawn (mean streak %.3g px), extinction "
+                         "%.4g 1/m beyond %.4g m\n",
+                         j.output.out.c_str(), r["rate_mm_h"].get<double>(), r["exposure_s"].get<double>(),
+                         r["drops_drawn"].get<std::size_t>(), r["mean_streak_px"].get<double>(),
+                         r["extinction_per_m"].get<double>(), r["z_split_m"].get<double>());
+          },
+  });
+}
+
+}  // namespace brume
