@@ -303,6 +303,22 @@ TEST_F(CameraRainCli, RunsAndBrumeRunRepeatsIt) {
   const Image z = read_color(p("zero.exr"));
   ASSERT_EQ(z.data.size(), s.rgb.data.size());
   for (std::size_t i = 0; i < z.data.size(); ++i) ASSERT_NEAR(z.data[i], s.rgb.data[i], 1e-6f) << i;
+  // --mask: black on the left half keeps the image there.
+  Image mask(96, 64, 1, 1.0f);
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 48; ++x) mask.at(x, y) = 0.0f;
+  write_image(p("mask.exr"), mask, WriteOptions{});
+  const CliRun masked = run("rain" + in + "--rate 100 --mask " + p("mask.exr") + " --out " + p("masked.exr"));
+  ASSERT_EQ(masked.status, 0) << masked.output;
+  const Image m = read_color(p("masked.exr"));
+  double changed = 0.0;
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 96; ++x)
+      for (int c = 0; c < 3; ++c) {
+        if (x < 48) ASSERT_EQ(m.at(x, y, c), s.rgb.at(x, y, c)) << x << "," << y;
+        else changed += std::abs(m.at(x, y, c) - s.rgb.at(x, y, c));
+      }
+  EXPECT_GT(changed, 0.0);
   const CliRun bad = run("rain" + in + "--rate 25 --wind 3 --out " + p("bad.exr"));
   EXPECT_NE(bad.status, 0);
   EXPECT_NE(bad.output.find("--wind"), std::string::npos) << bad.output;

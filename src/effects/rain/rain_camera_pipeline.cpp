@@ -1,6 +1,7 @@
 // brume — `brume rain`: an RGB-D frame in, the rainy image out (the streaks of the drop field and
 // the analytic rain, composed with haze's medium in haze's composite), with the run's record
 // (brume/rain.hpp; docs/rain.md, "The camera").
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -10,6 +11,7 @@
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
+#include "brume/io.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/rain.hpp"
 #include "brume/record.hpp"
@@ -25,6 +27,7 @@ struct CameraRainJob {
   InputFiles input;
   RangeStep prepare;
   CameraRainParams rain;
+  std::string mask;
   OutputFiles output;
 };
 
@@ -41,6 +44,11 @@ const ParamTable<CameraRainJob>& camera_rain_job_table() {
     d.nest(&CameraRainJob::input, input_param_table(true))
         .nest(&CameraRainJob::prepare, range_step_param_table())
         .nest(&CameraRainJob::rain, camera_rain_param_table())
+        .text("mask", &CameraRainJob::mask,
+              "grey image of the image's size: the rain applies where it is white, the image is kept where it is "
+              "black, mixed in between (its value over the file's full scale; e.g. a car's hood or a tunnel); "
+              "default: everywhere")
+        .reads_file()
         .nest(&CameraRainJob::output, output_param_table(camera_rain_map_outputs()));
     return d;
   }();
@@ -116,6 +124,21 @@ nlohmann::json run_camera_rain_job(const CameraRainJob& job, const ExecOptions& 
         CameraRainStats st;
         Image tmap;
         Image out = render_camera_rain(scene, j.rain, exec, &st, &tmap);
+        if (!j.mask.empty()) {
+          FileInfo minfo;
+          const Image mask = read_scalar(j.mask, "", &minfo);
+          if (mask.width != W || mask.height != H)
+            throw Error("--mask '" + j.mask + "' is " + mask.size_string() + " but --image is " + in.rgb.size_string() +
+                        "; give a mask of the image's size");
+          const float full = minfo.integer ? (minfo.bits > 8 ? 65535.0f : 255.0f) : 1.0f;
+          for (std::size_t i = 0; i < mask.data.size(); ++i) {
+            const float v = mask.data[i] / full;
+            if (!(v == v)) throw Error("--mask '" + j.mask + "' holds NaN; give a grey image with values in [0, 1]");
+            const float m = std::min(1.0f, std::max(0.0f, v));
+            for (int c = 0; c < 3; ++c) out.data[i * 3 + c] = m * out.data[i * 3 + c] + (1.0f - m) * in.rgb.data[i * 3 + c];
+          }
+          in.record["mask"] = file_record(j.mask, minfo, mask);
+        }
         nlohmann::json rec;
         rec["rain"] = camera_rain_record(j.rain, st);
         rec["rain"]["camera"] = camera_record(cam);
