@@ -113,6 +113,11 @@ TEST(CameraRain, StreakLengthIsFallTimesExposureOverDepth) {
   CameraRainParams p = params(25.0, T, 11);
   p.z_near_m = 4.0, p.z_split_m = 4.125, p.epsilon = 0.0, p.drop_min_mm = 1.0;
   const Image out = render_camera_rain(scene_of(fl, false, {0, 0, 0}), p, two_threads());
+  // Each thread owns a band of rows and the drops keep one order: the image is the same on one thread.
+  Exec one;
+  one.threads = 1;
+  const Image single = render_camera_rain(scene_of(fl, false, {0, 0, 0}), p, one);
+  ASSERT_EQ(std::memcmp(out.data.data(), single.data.data(), out.data.size() * sizeof(float)), 0);
   // The drops, written again: cv = (−y, −z, x) of the field's (x forward, y left, z up).
   const RainField field(25.0, p.drop_min_mm, p.drop_max_mm, p.seed);
   struct D {
