@@ -343,7 +343,7 @@ class CameraRainOptics {
  private:
   CameraRainParams p_;
   double fx_, alpha_, zf_, sigma_cam_, dz_;
-  std::vector<double> dt_, g_;
+  std::vector<double> dt_, g_, sd_;  // D_t, G and σ_d at the nodes
 };
 nlohmann::json camera_rain_record(const CameraRainParams& p, const CameraRainStats& st);
 

@@ -133,6 +133,7 @@ CameraRainOptics::CameraRainOptics(const CameraRainParams& p, const Intrinsics& 
   dz_ = p.z_split_m / n;
   dt_.assign(n + 1, kCamInf);
   g_.assign(n + 1, 0.0);
+  sd_.assign(n + 1, 0.0);
   double run = p.drop_min_mm;  // D_t made non-decreasing in z
   for (int i = 1; i <= n; ++i) {
     const double z = i * dz_;
@@ -155,8 +156,8 @@ CameraRainOptics::CameraRainOptics(const CameraRainParams& p, const Intrinsics& 
   for (int i = 1; i <= n; ++i) {
     const double a = std::max((i - 1) * dz_, p.z_near_m), b = i * dz_;
     const double len = std::max(0.0, b - a);
-    const double sd = std::isinf(dt_[i]) ? 0.0 : kCamPi / 4.0 * 1e-6 * rain_d2_between(rate, dt_[i], p.drop_max_mm);
-    g_[i] = g_[i - 1] + sd * len;
+    sd_[i] = std::isinf(dt_[i]) ? 0.0 : kCamPi / 4.0 * 1e-6 * rain_d2_between(rate, dt_[i], p.drop_max_mm);
+    g_[i] = g_[i - 1] + sd_[i] * len;
   }
 }
 
@@ -180,10 +181,7 @@ double CameraRainOptics::tau(double r, double cos_theta) const {
   if (z > 0.0) {
     const int i = std::min(kRainThinningSteps, std::max(1, static_cast<int>(std::ceil(z / dz_))));
     const double a = std::max((i - 1) * dz_, p_.z_near_m);
-    const double sd = std::isinf(dt_[i]) ? 0.0
-                                         : kCamPi / 4.0 * 1e-6 *
-                                               rain_d2_between(p_.rate_mm_h.value_or(0.0), dt_[i], p_.drop_max_mm);
-    g = g_[i - 1] + sd * std::max(0.0, z - a);
+    g = g_[i - 1] + sd_[i] * std::max(0.0, z - a);
   }
   return std::max(0.0, sigma_cam_ * r - g / cos_theta);
 }
@@ -430,11 +428,12 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
         at(t, u, v, r);
         // The coverage over the exposure is the time average of the drop's image area there.
         const double a_sample = k.area * r / (pz * pz * pz) / n;
+        const double inv_soft = 1.0 / (kRainDepthSoftness * r);
         const auto put = [&](int x, int y, double w) {
           if (x < 0 || x >= W || y < y_lo || y >= y_hi || !(w > 0.0)) return;
           const float rs = s.range.at(x, y);
           double vis = 1.0;
-          if (cam_known(rs)) vis = std::min(1.0, std::max(0.0, (rs - r) / (kRainDepthSoftness * r)));
+          if (cam_known(rs)) vis = std::min(1.0, std::max(0.0, (rs - r) * inv_soft));
           double a = w * a_sample * vis;
           if (!(a > 0.0)) return;
           if (a > 1.0) a = 1.0, ++clamped[static_cast<std::size_t>(tid)];
