@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <vector>
 
 #include "brume/error.hpp"
@@ -324,6 +325,30 @@ TEST_F(CameraRainCli, RunsAndBrumeRunRepeatsIt) {
         else changed += std::abs(m.at(x, y, c) - s.rgb.at(x, y, c));
       }
   EXPECT_GT(changed, 0.0);
+  // --lidar: the scan through the same rain, as brume lidar rain writes it.
+  std::vector<float> pts;
+  for (int i = 0; i < 2000; ++i) {
+    const double a = 0.003 * i, r = 3.0 + 0.02 * i;
+    pts.insert(pts.end(), {static_cast<float>(r * std::cos(a)), static_cast<float>(r * std::sin(a)), -1.0f,
+                           static_cast<float>((i % 7) / 7.0)});
+  }
+  {
+    std::ofstream f(p("scan.bin"), std::ios::binary);
+    f.write(reinterpret_cast<const char*>(pts.data()), static_cast<std::streamsize>(pts.size() * 4));
+  }
+  fs::create_directories(p("l"));
+  const CliRun both = run("rain" + in + "--rate 50 --rain-seed 9 --lidar " + p("scan.bin") + " --lidar-out " +
+                          p("l/o.bin") + " --out " + p("l/o.exr") + " --record " + p("l/o.json"));
+  ASSERT_EQ(both.status, 0) << both.output;
+  const CliRun alone = run("lidar rain --points " + p("scan.bin") + " --rate 50 --seed 9 --out " + p("alone.bin"));
+  ASSERT_EQ(alone.status, 0) << alone.output;
+  EXPECT_EQ(file_bytes(p("l/o.bin")), file_bytes(p("alone.bin")));
+  const CliRun again2 = run("run " + p("l/o.json") + " --out-dir " + p("l2"));
+  ASSERT_EQ(again2.status, 0) << again2.output;
+  EXPECT_EQ(file_bytes(p("l/o.bin")), file_bytes(p("l2/o.bin")));
+  const CliRun half = run("rain" + in + "--rate 25 --lidar " + p("scan.bin") + " --out " + p("half.exr"));
+  EXPECT_NE(half.status, 0);
+  EXPECT_NE(half.output.find("--lidar-out"), std::string::npos) << half.output;
   const CliRun bad = run("rain" + in + "--rate 25 --wind 3 --out " + p("bad.exr"));
   EXPECT_NE(bad.status, 0);
   EXPECT_NE(bad.output.find("--wind"), std::string::npos) << bad.output;

@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "brume/command.hpp"
+#include "brume/depth.hpp"
 #include "brume/depth_source.hpp"
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
@@ -29,6 +30,7 @@ struct CameraRainJob {
   CameraRainParams rain;
   std::string mask;
   OutputFiles output;
+  std::string lidar, lidar_out;  // --lidar IN.bin --lidar-out OUT.bin: the scan through the same rain
 };
 
 const std::vector<MapOutput>& camera_rain_map_outputs() {
@@ -49,7 +51,13 @@ const ParamTable<CameraRainJob>& camera_rain_job_table() {
               "black, mixed in between (its value over the file's full scale; e.g. a car's hood or a tunnel); "
               "default: everywhere")
         .reads_file()
-        .nest(&CameraRainJob::output, output_param_table(camera_rain_map_outputs()));
+        .nest(&CameraRainJob::output, output_param_table(camera_rain_map_outputs()))
+        .text("lidar", &CameraRainJob::lidar,
+              "a KITTI velodyne .bin to rain on with the same --rate, --rain-seed, --drop-min and --drop-max (brume "
+              "lidar rain's model and its defaults), written to --lidar-out with the image")
+        .reads_file()
+        .text("lidar-out", &CameraRainJob::lidar_out, "the rainy scan of --lidar (KITTI .bin: the points that return)")
+        .writes_file();
     return d;
   }();
   return t;
@@ -66,14 +74,46 @@ double rain_coc_px(const CameraRainJob& j, int width, int height) {
   return coc_infinity_px(dp, width, height);
 }
 
+// The scan's rain: brume lidar rain's parameters with the camera's rate, seed and drop sizes.
+LidarRainParams camera_rain_lidar_params(const CameraRainJob& j) {
+  LidarRainParams lp;
+  lp.rate_mm_h = j.rain.rate_mm_h;
+  lp.seed = j.rain.seed;
+  lp.drop_min_mm = j.rain.drop_min_mm;
+  lp.drop_max_mm = j.rain.drop_max_mm;
+  return lp;
+}
+
 void check_camera_rain_job(const CameraRainJob& j) {
   validate_camera_rain(j.rain);
+  if (j.lidar.empty() != j.lidar_out.empty())
+    throw Error(j.lidar.empty() ? "--lidar-out names the rainy scan of --lidar IN.bin: give --lidar too, or drop "
+                                  "--lidar-out"
+                                : "--lidar rains on a scan: give --lidar-out OUT.bin for it, or drop --lidar");
+  if (!j.lidar.empty()) {
+    validate_lidar_rain(camera_rain_lidar_params(j));
+    check_kitti_bin_output(j.lidar_out, "--lidar-out");
+  }
   if (j.rain.f_number && !j.input.depth.lens.focal_length_mm)
     throw Error("--f-number blurs the streaks by the thin lens, which needs the camera in millimetres: give "
                 "--focal-length MM and --sensor-width MM, or drop --f-number (a pinhole)");
 }
 
-nlohmann::json run_camera_rain_job(const CameraRainJob& job, const ExecOptions& eo, const RunContext& ctx) {
+nlohmann::json run_camera_rain_job(const CameraRainJob& job, const ExecOptions& eo, const RunContext& given_ctx) {
+  RunContext ctx = given_ctx;
+  if (!job.lidar.empty()) {
+    // The scan does not depend on the image: rained on first, written with the image's outputs.
+    check_camera_rain_job(job);
+    const LidarRainParams lp = camera_rain_lidar_params(job);
+    const std::vector<float> in = read_kitti_bin(job.lidar, "--lidar");
+    const std::size_t n = in.size() / 4;
+    std::vector<float> out(in.size());
+    const LidarRainStats st = lidar_rain(in.data(), out.data(), n, lp, nullptr, "--lidar '" + job.lidar + "'");
+    ctx.files.push_back({job.lidar_out, kitti_bin_bytes(out.data(), n - st.run.lost), "--lidar-out"});
+    if (!ctx.extra.is_object()) ctx.extra = nlohmann::json::object();
+    ctx.extra["inputs"]["lidar"] = {{"path", job.lidar}, {"sha256", sha256_file(job.lidar)}, {"points", n}};
+    ctx.extra["lidar_rain"] = lidar_rain_record(lp, st);
+  }
   const EffectJob<CameraRainJob> e{
       "rain",
       camera_rain_job_table(),
