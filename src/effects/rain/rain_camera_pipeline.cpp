@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 
 #include "brume/command.hpp"
 #include "brume/depth.hpp"
@@ -57,7 +58,7 @@ const ParamTable<CameraRainJob>& camera_rain_job_table() {
               "lidar rain's model and its defaults), written to --lidar-out with the image")
         .reads_file()
         .text("lidar-out", &CameraRainJob::lidar_out, "the rainy scan of --lidar (KITTI .bin: the points that return)")
-        .writes_file();
+        .writes_file_of("lidar", "bin");
     return d;
   }();
   return t;
@@ -200,7 +201,7 @@ nlohmann::json run_camera_rain_job(const CameraRainJob& job, const ExecOptions& 
 }  // namespace
 
 CommandDef rain_command() {
-  return make_command<CameraRainJob>({
+  CommandDef c = make_command<CameraRainJob>({
       .name = "rain",
       .cli = "rain",
       .summary = "rain on an RGB-D image: streaks of the drop field depth-tested against the scene (Garg & Nayar), "
@@ -224,6 +225,15 @@ CommandDef rain_command() {
                          r["extinction_per_m"].get<double>(), r["z_split_m"].get<double>());
           },
   });
+  // The extinction a LiDAR beam sees in this job's media (brume/lidar_camera.hpp's hook): the rain's
+  // with the narrow beam's Q = 2 (what --lidar's scan is attenuated by), plus haze's 3.912/V.
+  c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {
+    CameraRainJob j;
+    camera_rain_job_table().from_json(j, job, "job");
+    if (!j.rain.rate_mm_h) return std::nullopt;
+    return rain_extinction_per_m(*j.rain.rate_mm_h, kLidarRainQ) + (j.rain.visibility_m ? 3.912 / *j.rain.visibility_m : 0.0);
+  };
+  return c;
 }
 
 }  // namespace brume
