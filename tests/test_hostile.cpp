@@ -430,9 +430,10 @@ TEST_F(Hostile, RecordsOfRunsOnFilesRepeat) {
   // Every text parameter of every command that names an input is declared so.
   // (Text that names no file: a channel's name, a layer's name in a file
   // with layers -- image-layer, a-layer, object-layer --, a compression, a
-  // date; a nested block's flag keeps its name after a prefix, "sky-date".)
+  // date, a vector's components -- rain's wind X,Y,Z --; a nested block's flag keeps its name
+  // after a prefix, "sky-date".)
   auto names_no_file = [](const std::string& n) {
-    for (const std::string x : {"depth-channel", "object-range-channel", "compression", "date", "layer"})
+    for (const std::string x : {"depth-channel", "object-range-channel", "compression", "date", "layer", "wind"})
       if (n == x || (n.size() > x.size() && n.compare(n.size() - x.size() - 1, std::string::npos, "-" + x) == 0))
         return true;
     return false;

@@ -78,6 +78,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -86,6 +87,8 @@
 #include <nlohmann/json.hpp>
 
 #include "brume/camera.hpp"
+#include "brume/exec.hpp"
+#include "brume/image.hpp"
 #include "brume/medium.hpp"
 #include "brume/params.hpp"
 
@@ -218,5 +221,130 @@ struct LidarRainJob {
   std::string out, labels, record;
 };
 const ParamTable<LidarRainJob>& lidar_rain_job_table();
+
+// ---- rain on a camera's image (issue #56, the camera part) -----------------------------------
+// `brume rain`; docs/rain.md, "The camera". The same drop field (RainField: its cells, its hash,
+// drawn largest first) seen by a pinhole camera (brume/camera.hpp's intrinsics), over an exposure
+// T [s]:
+//
+// The field's frame is the vehicle's (the LiDAR's axes: x forward, y left, z up) with its origin
+// at the camera, the camera level and looking along +x: a point (x, y, z) of the field is at
+// (−y, −z, x) in the camera's cv frame (x right, y down, z forward). A drop of the field, at its
+// hashed centre at mid-exposure, moves in closed form by
+//   u = (0, 0, −v(D)) + wind − (s, 0, 0)  [m/s, vehicle frame]
+// (Atlas's fall speed, the wind, and the ego speed s along +x), over t in [−T/2, T/2].
+//
+// Its streak (Garg & Nayar 2004/2007, "Vision and rain"): the segment its image sweeps, of
+// length f·|u⊥|·T/z px on the axis (for a fall alone f·v·T/(z·p), p the pixel pitch, f/p = fx);
+// its time-averaged coverage integrates over the image to the time average of the drop's image
+// area
+//   m = (π/4)·D²·fx·fy·r/z³  [px²]  (D in m, r its range, z its depth: the solid angle πD²/(4r²)
+//                                    over the pixel's, cos³θ/(fx·fy))
+// whatever T (the dwell time on a pixel, footprint/speed, is what spreads it: α ∝ 1/L): the path
+// is sampled uniformly in time, each sample carrying m at its position over the sample count, and
+// each sample spread across a kernel of the drop's width f·D/z and the thin lens's
+// blur b(z) (brume/dof.hpp's circle of confusion, from --f-number, --focus-distance and the
+// camera's --focal-length/--sensor-width; a disc of diameter c has σ = c/4): wider, lower, the
+// same m. Each pixel it covers mixes
+//   I ← (1 − α)·I + α·E′,  E′ = T_f·E + (1 − T_f)·A,
+// E the drop's radiance (what it refracts: 0.94 of the image averaged over a window of half the
+// image's height about the drop, plus 0.06 reflected, taken as the whole image's mean), T_f the
+// analytic media's transmittance in front of it, A the airlight; drops are composited far to near.
+// A drop is hidden where the scene's range at the pixel is nearer: its weight there is
+// clamp((r_scene − r_drop)/(δ·r_drop), 0, 1), δ = kRainDepthSoftness (soft where drop and surface
+// meet, anti-aliased at depth edges by the splat's sub-pixel weights).
+//
+// Thinning: a drop of diameter D at depth z is drawn when D >= D_t(z), the smallest diameter
+// whose on-axis estimate of the change it makes to a pixel,
+//   p(D, z) = (π/4)(fx·D/z)² / (max(1, w)·max(1, fx·v(D)·T/z)),  w = √((fx·D/z)² + b(z)²),
+// reaches ε (--epsilon; for an image in [0, 1] a change of at most ε·|E − I|), made non-decreasing
+// in z (tabulated on kRainThinningSteps depths); drops nearer than z_near or beyond z_split (planar
+// depth at mid-exposure) are not drawn.
+//
+// Extinction counted once: the camera's σ_cam = (Q_eff/2)·σ_lidar (rain_extinction_per_m's
+// ∫D²N, bit for bit). A drawn drop occludes its geometric cross-section (Q = 1): in expectation
+// the drawn drops' optical depth per metre at depth z is
+//   σ_d(z) = (π/4)·1e−6·∫_{D_t(z)}^{D_max} D²N(D) dD,
+// and the rest is analytic: along a pixel's ray (cos θ = z/r) to range r,
+//   τ_rain(r) = σ_cam·r − G(min(r·cos θ, z_split))/cos θ,  G(z) = ∫_0^z σ_d,
+// so that drawn and analytic transmittance make e^{−σ_cam·r} in expectation (a Poisson field:
+// E[Π(1 − α_i)] = e^{−E Σα_i}). Beyond z_split that is σ_cam alone. With --visibility V the
+// haze's σ = 3.912/V joins in haze's composite (brume/haze.hpp: its airlight, sky rule and
+// scattering blur, on τ_haze + τ_rain); without it rain is the only medium (no blur).
+constexpr double kRainDepthSoftness = 0.01;   // [1] δ above
+constexpr int kRainThinningSteps = 2048;      // depths of the D_t(z) and G(z) tables
+// Q_eff's default: the least-squares fit in ln V of Koschmieder's 3.912/σ_cam to the
+// international visibility code's rain rows (2.5, 12.5, 25, 100 mm/h: 5.9, 2.8, 1.9, 0.77 km),
+// docs/rain.md.
+constexpr double kCameraRainQEff = 1.64;
+
+// σ_cam [1/m] = (q_eff/2)·rain_extinction_per_m(R) (the LiDAR's Q = 2 σ, scaled).
+double camera_rain_extinction_per_m(double rate_mm_h, double q_eff = kCameraRainQEff);
+// ∫_a^b D²N(D) dD [mm² m⁻³] (0 at R = 0 or b <= a).
+double rain_d2_between(double rate_mm_h, double a_mm, double b_mm);
+
+struct CameraRainParams {
+  std::optional<double> rate_mm_h;         // [mm/h] in [0, 500], required
+  double exposure_s = 1.0 / 60.0;          // [s] in (0, 10], T
+  std::uint64_t seed = 0;                  // --rain-seed: the drop field's seed
+  std::string wind = "0,0,0";              // [m/s] X,Y,Z in the vehicle frame (x forward, y left, z up)
+  double ego_speed_m_s = 0.0;              // [m/s] the camera's speed along its forward axis
+  std::optional<double> f_number;          // [1] the lens (with --focal-length, --sensor-width); unset: pinhole
+  std::optional<double> focus_distance_m;  // [m] the plane in focus (with --f-number)
+  double q_eff = kCameraRainQEff;          // [1] in [1, 2]
+  double z_split_m = 20.0;                 // [m] drops drawn up to this planar depth
+  double z_near_m = 0.2;                   // [m] and from this one
+  double epsilon = 0.002;                  // [1] thinning threshold ε
+  double drop_min_mm = 0.11, drop_max_mm = 8.0;  // [mm] D_min, D_max
+  std::optional<double> visibility_m;      // [m] haze's Koschmieder visibility; unset: rain alone
+  std::optional<Rgb> airlight;             // linear RGB; unset: haze's estimate
+};
+const ParamTable<CameraRainParams>& camera_rain_param_table();
+void validate_camera_rain(const CameraRainParams& p);
+// --wind parsed (X,Y,Z, finite); throws naming --wind.
+Vec3 camera_rain_wind(const CameraRainParams& p);
+
+// What the renderer takes besides the parameters.
+struct CameraRainScene {
+  ConstImageView rgb;          // linear RGB
+  ConstImageView range;        // [m] along the ray, dense (prepared); NaN, inf, 0: unknown (the sky)
+  ConstImageView sky_weight;   // the preparation's sky weight, or empty
+  Intrinsics k;                // resolved
+  double coc_infinity_px = 0;  // α of the thin lens (0: pinhole)
+  std::array<float, 3> airlight{};
+  double haze_sigma_per_m = 0;  // haze's σ (0: none)
+  // For tests: without the analytic media, and a fixed drop radiance.
+  bool analytic = true;
+  std::optional<std::array<float, 3>> drop_radiance;
+  // The scene through the analytic media from their transmission τ0 (haze's composite with its
+  // scattering blur); unset: T·C + (1 − T)·A per pixel.
+  std::function<Image(const Image& tau0)> composite;
+};
+struct CameraRainStats {
+  double sigma_cam = 0.0, sigma_lidar = 0.0;
+  std::size_t cells = 0, drops_seen = 0, drops_drawn = 0, alpha_clamped = 0;
+  double mean_streak_px = 0.0;
+};
+// The streaks and the analytic rain (and haze's σ, without its blur: the pipeline blurs) over
+// the image composed: returns the rainy image; `transmission`: the analytic media's (may be null).
+Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, const Exec& exec,
+                         CameraRainStats* stats = nullptr, Image* transmission = nullptr);
+// The thinning table and the analytic optical depth of a ray (exposed for tests): D_t [mm] at
+// planar depth z, and τ_rain to range r along a ray whose cos θ = z/r is `cos_theta`.
+class CameraRainOptics {
+ public:
+  CameraRainOptics(const CameraRainParams& p, const Intrinsics& k, double coc_infinity_px);
+  double threshold_mm(double z) const;
+  double tau(double r, double cos_theta) const;
+  double sigma_cam() const { return sigma_cam_; }
+  // p(D, z) of the thinning rule.
+  double estimate(double d_mm, double z) const;
+
+ private:
+  CameraRainParams p_;
+  double fx_, alpha_, zf_, sigma_cam_, dz_;
+  std::vector<double> dt_, g_, sd_;  // D_t, G and σ_d at the nodes
+};
+nlohmann::json camera_rain_record(const CameraRainParams& p, const CameraRainStats& st);
 
 }  // namespace brume

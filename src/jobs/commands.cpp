@@ -25,6 +25,7 @@ namespace brume {
   X(insert_command) \
   X(fog_command) \
   X(dof_command) \
+  X(rain_command) \
   X(compare_command) \
   X(sky_render_command) \
   X(sky_fit_command) \

@@ -1,0 +1,239 @@
+// brume — `brume rain`: an RGB-D frame in, the rainy image out (the streaks of the drop field and
+// the analytic rain, composed with haze's medium in haze's composite), with the run's record
+// (brume/rain.hpp; docs/rain.md, "The camera").
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <optional>
+
+#include "brume/command.hpp"
+#include "brume/depth.hpp"
+#include "brume/depth_source.hpp"
+#include "brume/dof.hpp"
+#include "brume/error.hpp"
+#include "brume/haze.hpp"
+#include "brume/io.hpp"
+#include "brume/pipeline.hpp"
+#include "brume/rain.hpp"
+#include "brume/record.hpp"
+#include "shared/prelude_cpp.h"
+
+namespace brume {
+
+namespace sh = brume::shared;
+
+namespace {
+
+struct CameraRainJob {
+  InputFiles input;
+  RangeStep prepare;
+  CameraRainParams rain;
+  std::string mask;
+  OutputFiles output;
+  std::string lidar, lidar_out;  // --lidar IN.bin --lidar-out OUT.bin: the scan through the same rain
+};
+
+const std::vector<MapOutput>& camera_rain_map_outputs() {
+  static const std::vector<MapOutput> m = {
+      {"transmission", "write the analytic media's transmission (haze and the rain not drawn), 1 channel", ""},
+  };
+  return m;
+}
+
+const ParamTable<CameraRainJob>& camera_rain_job_table() {
+  static const ParamTable<CameraRainJob> t = [] {
+    ParamTable<CameraRainJob> d("rain");
+    d.nest(&CameraRainJob::input, input_param_table(true))
+        .nest(&CameraRainJob::prepare, range_step_param_table())
+        .nest(&CameraRainJob::rain, camera_rain_param_table())
+        .text("mask", &CameraRainJob::mask,
+              "grey image of the image's size: the rain applies where it is white, the image is kept where it is "
+              "black, mixed in between (its value over the file's full scale; e.g. a car's hood or a tunnel); "
+              "default: everywhere")
+        .reads_file()
+        .nest(&CameraRainJob::output, output_param_table(camera_rain_map_outputs()))
+        .text("lidar", &CameraRainJob::lidar,
+              "a KITTI velodyne .bin to rain on with the same --rate, --rain-seed, --drop-min and --drop-max (brume "
+              "lidar rain's model and its defaults), written to --lidar-out with the image")
+        .reads_file()
+        .text("lidar-out", &CameraRainJob::lidar_out, "the rainy scan of --lidar (KITTI .bin: the points that return)")
+        .writes_file_of("lidar", "bin");
+    return d;
+  }();
+  return t;
+}
+
+// The thin lens's circle of confusion at infinity [px] (dof's), 0 for a pinhole.
+double rain_coc_px(const CameraRainJob& j, int width, int height) {
+  if (!j.rain.f_number) return 0.0;
+  DofParams dp;
+  dp.lens = j.input.depth.lens;
+  dp.f_number = j.rain.f_number;
+  dp.focus_distance_m = j.rain.focus_distance_m;
+  validate_dof(dp);
+  return coc_infinity_px(dp, width, height);
+}
+
+// The scan's rain: brume lidar rain's parameters with the camera's rate, seed and drop sizes.
+LidarRainParams camera_rain_lidar_params(const CameraRainJob& j) {
+  LidarRainParams lp;
+  lp.rate_mm_h = j.rain.rate_mm_h;
+  lp.seed = j.rain.seed;
+  lp.drop_min_mm = j.rain.drop_min_mm;
+  lp.drop_max_mm = j.rain.drop_max_mm;
+  return lp;
+}
+
+void check_camera_rain_job(const CameraRainJob& j) {
+  validate_camera_rain(j.rain);
+  if (j.lidar.empty() != j.lidar_out.empty())
+    throw Error(j.lidar.empty() ? "--lidar-out names the rainy scan of --lidar IN.bin: give --lidar too, or drop "
+                                  "--lidar-out"
+                                : "--lidar rains on a scan: give --lidar-out OUT.bin for it, or drop --lidar");
+  if (!j.lidar.empty()) {
+    validate_lidar_rain(camera_rain_lidar_params(j));
+    check_kitti_bin_output(j.lidar_out, "--lidar-out");
+  }
+  if (j.rain.f_number && !j.input.depth.lens.focal_length_mm)
+    throw Error("--f-number blurs the streaks by the thin lens, which needs the camera in millimetres: give "
+                "--focal-length MM and --sensor-width MM, or drop --f-number (a pinhole)");
+}
+
+nlohmann::json run_camera_rain_job(const CameraRainJob& job, const ExecOptions& eo, const RunContext& given_ctx) {
+  RunContext ctx = given_ctx;
+  if (!job.lidar.empty()) {
+    // The scan does not depend on the image: rained on first, written with the image's outputs.
+    check_camera_rain_job(job);
+    const LidarRainParams lp = camera_rain_lidar_params(job);
+    const std::vector<float> in = read_kitti_bin(job.lidar, "--lidar");
+    const std::size_t n = in.size() / 4;
+    std::vector<float> out(in.size());
+    const LidarRainStats st = lidar_rain(in.data(), out.data(), n, lp, nullptr, "--lidar '" + job.lidar + "'");
+    ctx.files.push_back({job.lidar_out, kitti_bin_bytes(out.data(), n - st.run.lost), "--lidar-out"});
+    if (!ctx.extra.is_object()) ctx.extra = nlohmann::json::object();
+    ctx.extra["inputs"]["lidar"] = {{"path", job.lidar}, {"sha256", sha256_file(job.lidar)}, {"points", n}};
+    ctx.extra["lidar_rain"] = lidar_rain_record(lp, st);
+  }
+  const EffectJob<CameraRainJob> e{
+      "rain",
+      camera_rain_job_table(),
+      camera_rain_map_outputs(),
+      160,
+      [&](const CameraRainJob& j, const ExecOptions&) { check_camera_rain_job(j); },
+      [&](const CameraRainJob& j, LoadedInputs& in, const Exec& exec) {
+        if (!j.rain.airlight) check_airlight_sky(in, "rain");
+        const int W = in.rgb.width, H = in.rgb.height;
+        const Camera cam = depth_camera(j.input.depth, W, H);
+        const double coc = rain_coc_px(j, W, H);
+        const RangeStep step = with_camera(j.prepare, in.depth);
+        const CompletedRange done = complete_step(in.depth.range, in.rgb, step, ctx.given, exec.threads);
+        const ConstImageView measured = done.view(in.depth.range);
+        // Haze's analysis: its airlight, and with --visibility its medium (sky beyond it, blur).
+        HazeParams hp;
+        hp.visibility_m = j.rain.visibility_m;
+        hp.airlight = j.rain.airlight;
+        if (!hp.visibility_m) hp.kappa_s = 0.0;
+        const HazeAnalysis ha = analyse_haze(in.rgb, measured, hp);
+        PreparedRange prep = prepare_step(measured, step, ctx.given, exec.threads, true);
+        prep.record["complete"] = done.record;
+
+        CameraRainScene scene;
+        scene.rgb = in.rgb;
+        scene.range = prep.range;
+        if (!prep.sky_weight.empty()) scene.sky_weight = prep.sky_weight;
+        scene.k = cam.k;
+        scene.coc_infinity_px = coc;
+        scene.airlight = ha.airlight;
+        scene.haze_sigma_per_m = hp.visibility_m ? ha.extinction_per_m : 0.0;
+        if (hp.visibility_m) {
+          // Haze's composite (Hansard eq. 2-4) on the joint transmission, with haze's blur scale.
+          scene.composite = [&](const Image& tau0) {
+            Image scale(W, H, 1);
+            const float s0 = static_cast<float>(hp.diffusion.sigma0), smax = static_cast<float>(ha.sigma_max);
+            const float inv = static_cast<float>(1.0 / ha.range_max_m);
+            for (int y = 0; y < H; ++y)
+              for (int x = 0; x < W; ++x) {
+                const float r = prep.range.at(x, y);
+                const float rn = std::isfinite(r) && r > 0.0f ? r * inv : 1.0f;
+                scale.data[static_cast<std::size_t>(y) * W + x] = sh::brume_target_scale(rn, s0, smax);
+              }
+            return scatter_blur(in.rgb, tau0, scale, ha.sigma_max, hp.diffusion, hp.composite, ha.airlight, exec).rgb;
+          };
+        }
+        const auto t0 = std::chrono::steady_clock::now();
+        CameraRainStats st;
+        Image tmap;
+        Image out = render_camera_rain(scene, j.rain, exec, &st, &tmap);
+        if (!j.mask.empty()) {
+          FileInfo minfo;
+          const Image mask = read_scalar(j.mask, "", &minfo);
+          if (mask.width != W || mask.height != H)
+            throw Error("--mask '" + j.mask + "' is " + mask.size_string() + " but --image is " + in.rgb.size_string() +
+                        "; give a mask of the image's size");
+          const float full = minfo.integer ? (minfo.bits > 8 ? 65535.0f : 255.0f) : 1.0f;
+          for (std::size_t i = 0; i < mask.data.size(); ++i) {
+            const float v = mask.data[i] / full;
+            if (!(v == v)) throw Error("--mask '" + j.mask + "' holds NaN; give a grey image with values in [0, 1]");
+            const float m = std::min(1.0f, std::max(0.0f, v));
+            for (int c = 0; c < 3; ++c) out.data[i * 3 + c] = m * out.data[i * 3 + c] + (1.0f - m) * in.rgb.data[i * 3 + c];
+          }
+          in.record["mask"] = file_record(j.mask, minfo, mask);
+        }
+        nlohmann::json rec;
+        rec["rain"] = camera_rain_record(j.rain, st);
+        rec["rain"]["camera"] = camera_record(cam);
+        rec["rain"]["coc_infinity_px"] = coc;
+        rec["rain"]["airlight_linear_rgb"] = ha.airlight;
+        rec["rain"]["airlight_source"] = ha.airlight_source;
+        rec["rain"]["sky_rule"] =
+            "the sky lies beyond the unbounded media: transmission 0 (the airlight) when there is rain or haze, "
+            "blended across the horizon margin by the preparation's sky weight";
+        if (hp.visibility_m) rec["haze"] = haze_record(hp, ha);
+        rec["prepare"] = prep.record;
+        rec["execution"]["backend"] = "cpu";
+        rec["execution"]["timing"] = cpu_timing_record(t0, 0);
+        return EffectOutput{std::move(out), {{"transmission", std::move(tmap)}}, std::move(rec), "", {}};
+      }};
+  return run_effect_job(e, job, eo, ctx);
+}
+
+}  // namespace
+
+CommandDef rain_command() {
+  CommandDef c = make_command<CameraRainJob>({
+      .name = "rain",
+      .cli = "rain",
+      .summary = "rain on an RGB-D image: streaks of the drop field depth-tested against the scene (Garg & Nayar), "
+                 "the rest as extinction in haze's composite",
+      .table = &camera_rain_job_table(),
+      .takes_exec_flags = true,
+      .writes_record = true,
+      .check = [](const CameraRainJob& j, const std::set<std::string>& g) {
+        check_camera_rain_job(j);
+        check_range_step(j.prepare, g);
+      },
+      .run = &run_camera_rain_job,
+      .report =
+          [](const CameraRainJob& j, const nlohmann::json& rec) {
+            const auto& r = rec["rain"];
+            std::fprintf(stderr,
+                         "brume rain: %s  %.4g mm/h, T %.4g s: %zu drops drawn (mean streak %.3g px), extinction "
+                         "%.4g 1/m beyond %.4g m\n",
+                         j.output.out.c_str(), r["rate_mm_h"].get<double>(), r["exposure_s"].get<double>(),
+                         r["drops_drawn"].get<std::size_t>(), r["mean_streak_px"].get<double>(),
+                         r["extinction_per_m"].get<double>(), r["z_split_m"].get<double>());
+          },
+  });
+  // The extinction a LiDAR beam sees in this job's media (brume/lidar_camera.hpp's hook): the rain's
+  // with the narrow beam's Q = 2 (what --lidar's scan is attenuated by), plus haze's 3.912/V.
+  c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {
+    CameraRainJob j;
+    camera_rain_job_table().from_json(j, job, "job");
+    if (!j.rain.rate_mm_h) return std::nullopt;
+    return rain_extinction_per_m(*j.rain.rate_mm_h, kLidarRainQ) + (j.rain.visibility_m ? 3.912 / *j.rain.visibility_m : 0.0);
+  };
+  return c;
+}
+
+}  // namespace brume
