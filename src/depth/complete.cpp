@@ -14,6 +14,7 @@
 #include "brume/error.hpp"
 
 #include "brume_opencv.hpp"
+#include "core/schedule.hpp"
 #include "core/srgb_curve.hpp"
 #include "core/text.hpp"
 
@@ -131,7 +132,7 @@ std::vector<std::uint8_t> occluded_returns(DenseImageRef range, int threads) {
   const int W = range.width, H = range.height;
   const int nt = threads > 0 ? threads : omp_get_max_threads();
   std::vector<std::uint8_t> o(range.pixels(), 0);
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const float rp = range.data[static_cast<std::size_t>(y) * W + x];
@@ -239,7 +240,7 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
   // ---- the guide: sRGB-encoded colour and its luma ----
   std::vector<float> g(3 * N);
   std::vector<float> luma(N);
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kPixelChunk)
   for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(N); ++i) {
     for (int c = 0; c < 3; ++c) g[3 * i + c] = srgb_encode(guide.data[3 * i + c]);
     luma[i] = 0.2126f * g[3 * i] + 0.7152f * g[3 * i + 1] + 0.0722f * g[3 * i + 2];

@@ -80,6 +80,7 @@
 #include "core/text.hpp"
 
 #include "brume_opencv.hpp"
+#include "core/schedule.hpp"
 
 namespace brume {
 
@@ -213,7 +214,7 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target, int n
   };
   // r = b - A u, p = r; returns max |r| and r.r.
   auto restart = [&] {
-#pragma omp parallel for num_threads(nt) schedule(static) if (par)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1) if (par)
     for (std::size_t k = 0; k < nblk; ++k) {
       double m = 0.0, rr = 0.0;
       const std::size_t e = std::min(n, (k + 1) * kBlock);
@@ -237,7 +238,7 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target, int n
     if (rmax <= target) break;
     while (rmax > target && iters < cap) {
       // q = A p, p.q
-#pragma omp parallel for num_threads(nt) schedule(static) if (par)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1) if (par)
       for (std::size_t k = 0; k < nblk; ++k) {
         double a = 0.0;
         const std::size_t e = std::min(n, (k + 1) * kBlock);
@@ -254,7 +255,7 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target, int n
       if (!(pq > 0.0)) break;
       const double alpha = rr / pq;
       // u += alpha p, r -= alpha q, r.r, max |r|
-#pragma omp parallel for num_threads(nt) schedule(static) if (par)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1) if (par)
       for (std::size_t k = 0; k < nblk; ++k) {
         // Two interleaved accumulators (even/odd i) for the sum and the max:
         // shorter dependency chains, fixed order. (No `omp simd` here: clang
@@ -276,7 +277,7 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target, int n
       const double beta = rr_new / rr;
       rr = rr_new;
       // p = r + beta p
-#pragma omp parallel for num_threads(nt) schedule(static) if (par)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kBlock) if (par)
       for (std::size_t i = 0; i < n; ++i) p[i] = r[i] + beta * p[i];
       ++iters;
     }
@@ -290,7 +291,7 @@ int solve_cg(const MarginSystem& s, std::vector<double>& u, double target, int n
 // max |b - A v| over the margin, v the float values written to `out`.
 double float_residual(const MarginSystem& s, const float* out, int nt) {
   double worst = 0.0;
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(max : worst)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kPixelChunk) reduction(max : worst)
   for (std::size_t i = 0; i < s.n; ++i) {
     double a = s.b[i] - s.diag[i] * static_cast<double>(out[s.pix[i]]);
     for (int k = 0; k < 4; ++k) {
@@ -327,7 +328,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   cv::Mat unknown(H, W, CV_8U);
   std::size_t known = 0, negatives = 0, first_neg = N;
   float rmax = 0.0f;
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : known, negatives) reduction(min : first_neg) \
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk) reduction(+ : known, negatives) reduction(min : first_neg) \
     reduction(max : rmax)
   for (int y = 0; y < H; ++y) {
     unsigned char* u = unknown.ptr<unsigned char>(y);
@@ -480,7 +481,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
     float* skym = res.sky_mask.data.data();
     float* holem = res.hole_mask.data.data();
     float* skyw = sky_weight ? res.sky_weight.data.data() : nullptr;
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
     for (int y = 0; y < H; ++y) {
       const int* L = labels.ptr<int>(y);
       const std::size_t o = static_cast<std::size_t>(y) * W;
@@ -509,7 +510,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   const int x1 = std::min(W - 1, sky_right + 1), y1 = std::min(H - 1, sky_bottom + 1);
   const int cw = x1 - x0 + 1, ch = y1 - y0 + 1;
   cv::Mat skycrop(ch, cw, CV_8U), dist;
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < ch; ++y) {
     const float* s = res.sky_mask.row(y + y0) + x0;
     unsigned char* d = skycrop.ptr<unsigned char>(y);
@@ -528,7 +529,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
     return d < mu_lo || static_cast<double>(std::llround(double(d) * d)) <= mu2;
   };
   std::vector<std::size_t> row_count(ch + 1, 0);
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < ch; ++y) {
     const float* d = dist.ptr<float>(y);
     std::size_t c = 0;
@@ -544,7 +545,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   sys.n = n;
   sys.pix.resize(n);
   std::vector<float> mdist(n);
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < ch; ++y) {
     const float* d = dist.ptr<float>(y);
     int* L = labels.ptr<int>(y + y0) + x0;
@@ -572,7 +573,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
     const float* out = res.range.data.data();
     const float* skym = res.sky_mask.data.data();
     float* mm = res.margin_mask.data.data();
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kPixelChunk)
     for (std::size_t i = 0; i < n; ++i) {
       const std::size_t pi = sys.pix[i];
       mm[pi] = 1.0f;

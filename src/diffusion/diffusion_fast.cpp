@@ -41,6 +41,7 @@
 #include <vector>
 
 #include "core/huge_pages.hpp"
+#include "core/schedule.hpp"
 #include "diffusion/diffusion_fusion.hpp"
 #include "diffusion/diffusion_rows.hpp"
 
@@ -141,14 +142,14 @@ const float* rates_from_scale(const Image& sigma, const DiffusionParams& p, int 
   const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(sigma.data.size());
   float* rho = ws.get(Workspace::rates, sigma.data.size());
   if (standard) {
-#pragma omp parallel for num_threads(thread_count(threads)) schedule(static)
+#pragma omp parallel for num_threads(thread_count(threads)) schedule(dynamic, kPixelChunk)
     for (std::ptrdiff_t i = 0; i < n; ++i) rho[i] = sh::brume_standard_rate(sigma.data[i], s0, Nf);
     return rho;
   }
   const RatesFn rates = row_kernels().rates;
   const int W = sigma.width, H = sigma.height;
   const std::size_t Ws = static_cast<std::size_t>(W);
-#pragma omp parallel for num_threads(thread_count(threads)) schedule(static)
+#pragma omp parallel for num_threads(thread_count(threads)) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y) rates(sigma.data.data() + y * Ws, rho + y * Ws, Ws, s0, Nf);
   return rho;
 }
@@ -162,7 +163,7 @@ void copy_back(Image& f, const float* src, int nt) {
   const int H = f.height;
   const std::size_t Ws4 = static_cast<std::size_t>(f.width) * static_cast<std::size_t>(f.channels);
   float* out = f.data.data();
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y) std::memcpy(out + y * Ws4, src + y * Ws4, Ws4 * sizeof(float));
 }
 // The partner image of the fused schedule, where some group of it runs
@@ -296,7 +297,7 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
     // Edge weights of eq. 12, fixed for all iterations: the conductance path.
     float* wr = ws.get(Workspace::edge_x, np);
     float* wd = ws.get(Workspace::edge_y, np);
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x) {
         const std::size_t i = y * Ws + x;
@@ -323,7 +324,7 @@ void diffuse_fast(Image& f, const float* rates, int iterations, const DiffusionP
   float* growth = ws.get(Workspace::growth, np);
   float* vratio = ws.get(Workspace::vratio, np);
   const GrowthFn growth_rows = row_kernels().growth;
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y) growth_rows(rho + y * Ws, growth + y * Ws, vratio + y * Ws, Ws);
   std::vector<RowScratch> scratch(static_cast<std::size_t>(nt), RowScratch(W));
   // Temporal blocking as on the constant path (diffusion_fusion.hpp), with

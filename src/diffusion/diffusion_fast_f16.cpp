@@ -37,6 +37,7 @@
 #include <cstring>
 #include <vector>
 
+#include "core/schedule.hpp"
 #include "diffusion/diffusion_fusion.hpp"
 #include "diffusion/diffusion_rows.hpp"
 #include "diffusion/half.hpp"
@@ -142,7 +143,7 @@ bool UniformIterationsF16(float* f, int W, int H, const std::vector<UniformStep>
 #ifdef BRUME_HWY_F16C
   const std::size_t Ws = static_cast<std::size_t>(W);
   // F arrives rounded to binary16 already, so this conversion is exact.
-#pragma omp parallel for num_threads(threads) schedule(static)
+#pragma omp parallel for num_threads(threads) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y)
     for (std::size_t i = y * Ws * 4; i < (y + 1) * Ws * 4; i += 4) StoreF16::store(a + i, StoreF32::load(f + i));
   // One row of one iteration, as diffusion_fast.cpp's float row: the vector
@@ -157,7 +158,7 @@ bool UniformIterationsF16(float* f, int W, int H, const std::vector<UniformStep>
     for (int x = xb; x < W; ++x) uniform_border_pixel<StoreF16>(s, u0, u1, d0, d1, o, W, x, n, st.fr, st.w);
   };
   const std::uint16_t* res = uniform_iterations_fused(a, b, W, H, *steps, *groups, threads, ring, row);
-#pragma omp parallel for num_threads(threads) schedule(static)
+#pragma omp parallel for num_threads(threads) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y)
     for (std::size_t i = y * Ws * 4; i < (y + 1) * Ws * 4; i += 4) StoreF32::store(f + i, StoreF16::load(res + i));
   return true;

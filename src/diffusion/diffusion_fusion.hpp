@@ -49,6 +49,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/schedule.hpp"
 #include "diffusion/diffusion_kernels.hpp"
 #include "diffusion/diffusion_rows.hpp"
 
@@ -263,7 +264,7 @@ T* iterations_fused(T* img, T* partner, int W, int H, const Radii& radii, const 
     const bool in_place = plan.in_place[gi];
     if (!in_place && fg.m == 1) {
       const RowSource<T> in{cur, rs, 0};
-#pragma omp parallel for num_threads(threads) schedule(static)
+#pragma omp parallel for num_threads(threads) schedule(dynamic, kRowChunk)
       for (int y = 0; y < H; ++y) row(fg.k0, y, in, other + y * rs);
       std::swap(cur, other);
       continue;

@@ -12,6 +12,7 @@
 #include "brume/dof.hpp"
 #include "brume/error.hpp"
 #include "brume/pipeline.hpp"  // the shared parameter blocks
+#include "core/schedule.hpp"
 #include "core/text.hpp"
 #include "shared/prelude_cpp.h"
 
@@ -159,7 +160,7 @@ void gaussian_blur(Image& img, double s, int nt) {
 #pragma omp parallel num_threads(nt)
   {
     std::vector<float> row(static_cast<std::size_t>(W + 2 * r));
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, kRowChunk)
     for (int y = 0; y < H; ++y) {
       for (int x = -r; x < W + r; ++x) row[x + r] = img.at(mirror(x, W), y);
       float* o = &tmp.at(0, y);
@@ -169,7 +170,7 @@ void gaussian_blur(Image& img, double s, int nt) {
         o[x] = acc;
       }
     }
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, kRowChunk)
     for (int y = 0; y < H; ++y) {
       float* o = &img.at(0, y);
       std::fill(o, o + W, 0.0f);
@@ -206,7 +207,7 @@ void near_field_raise(const Image& z, float zf, float s0, float limit, Image& si
   const long np = static_cast<long>(z.pixels());
   std::vector<signed char> band(z.pixels(), -1);
   int top_band = -1;
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(max : top_band)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kPixelChunk) reduction(max : top_band)
   for (long i = 0; i < np; ++i) {
     const float zi = z.data[static_cast<std::size_t>(i)], si = sigma.data[static_cast<std::size_t>(i)];
     if (std::isfinite(zi) && zi < zf && si > s0) {
@@ -242,7 +243,7 @@ void near_field_raise(const Image& z, float zf, float s0, float limit, Image& si
     const int w = (W + k - 1) / k, h = (H + k - 1) / k;
     Image small(w, h, 1);
     int members = 0;
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : members)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk) reduction(+ : members)
     for (int y = 0; y < h; ++y)
       for (int x = 0; x < w; ++x) {
         double acc = 0.0;
@@ -262,7 +263,7 @@ void near_field_raise(const Image& z, float zf, float s0, float limit, Image& si
     gaussian_blur(small, std::sqrt(s_small * s_small - 0.25), nt);
     bands.push_back({std::move(small), axis(W, k, w), axis(H, k, h)});
   }
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y) {
     float* v = &sigma.at(0, y);
     for (const Coarse& c : bands) {
@@ -291,11 +292,19 @@ Image dof_scale_map(const Image& z, const DofParams& p, DofAnalysis& a, const Ex
   const float alpha = static_cast<float>(a.alpha_px), zf = static_cast<float>(*p.focus_distance_m);
   const float s0 = static_cast<float>(p.diffusion.sigma0), limit = static_cast<float>(p.coc_limit_px);
   Image sigma(W, H, 1);
-  const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
+  // The map's ~17 parallel regions are light (1-3 ms each at 1024x768), and
+  // each ends when every thread has arrived: on a loaded host the second
+  // thread's wait for a core cost more than it shares (1024x768, AMD EPYC
+  // family 26, 2 vCPU, load average 6.5, 2026-12-06: 39-44 ms on one
+  // thread, 155-264 ms on two; on a quiet host two threads took 21.6 ms,
+  // 2026-12-01). brume_bench_dof ROUNDS map.
+  // One thread below kDofMapParallelPixels (4 Mpx), whatever the call's count.
+  constexpr std::size_t kDofMapParallelPixels = std::size_t{1} << 22;
+  const int nt = z.pixels() < kDofMapParallelPixels ? 1 : exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const long np = static_cast<long>(z.pixels());
   long unknown = 0, near = 0, capped = 0;
   double zmin = INFINITY, zmax = 0.0;
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : unknown, near, capped) \
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kPixelChunk) reduction(+ : unknown, near, capped) \
     reduction(min : zmin) reduction(max : zmax)
   for (long i = 0; i < np; ++i) {
     const float zi = z.data[static_cast<std::size_t>(i)];

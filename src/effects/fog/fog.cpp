@@ -12,10 +12,11 @@
 
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
-#include "core/text.hpp"
 #include "brume/fog.hpp"
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"  // the shared parameter blocks
+#include "core/schedule.hpp"
+#include "core/text.hpp"
 #include "effects/fog/fog_fast.hpp"
 #include "media/height_profile_shared.hpp"
 #include "shared/prelude_cpp.h"
@@ -330,7 +331,7 @@ void apply_fog_rows(DenseImageRef rgb, DenseImageRef range, const FogParams& p, 
     fr.d0 = fog.profile.d0, fr.falloff = fog.profile.falloff, fr.exponent_c = fog.profile.exponent_c, fr.sky_distance = sky_l;
     fr.sky_infinite = a.sky_at_infinity;
     for (int c = 0; c < 3; ++c) fr.airlight[c] = a.airlight[c];
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
     for (int v = 0; v < H; ++v) {
       detail::fog_exponential_row(fr, v);
       if (!blend) continue;
@@ -349,7 +350,7 @@ void apply_fog_rows(DenseImageRef rgb, DenseImageRef range, const FogParams& p, 
     }
     return;
   }
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int v = 0; v < H; ++v)
     for (int u = 0; u < W; ++u) {
       const std::size_t i = static_cast<std::size_t>(v) * W + u;

@@ -11,6 +11,7 @@
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
 #include "brume/pipeline.hpp"  // the shared parameter blocks
+#include "core/schedule.hpp"
 #include "core/text.hpp"
 #include "shared/prelude_cpp.h"
 
@@ -219,7 +220,7 @@ ScatterBlur scatter_blur(ConstImageView rgb, const Image& tau0, const Image& sig
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const bool naive = composite == Composite::naive;
   Image f(W, H, 4);
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * W + x;
@@ -235,7 +236,7 @@ ScatterBlur scatter_blur(ConstImageView rgb, const Image& tau0, const Image& sig
   ScatterBlur out;
   out.rgb = Image(W, H, 3);
   out.transmission = Image(W, H, 1);
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * W + x;
@@ -265,7 +266,7 @@ HazeResult apply_haze(ConstImageView rgb, ConstImageView range, const HazeParams
   HazeResult out;
   Image tau0(W, H, 1);
   out.scale = Image(W, H, 1);
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * W + x;

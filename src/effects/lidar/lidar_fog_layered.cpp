@@ -200,56 +200,63 @@ LidarFogStats layered_fog(const float* in, float* out, std::size_t n, const Lida
   st.origin_height_m = md.world_from_scan.translation.y;
   st.origin_density_per_m = md.density.at(0.0);
   const long long count = static_cast<long long>(n);
+  constexpr std::size_t kBatch = 4096;
 
   // Each beam: its range, its world-up component s and the optical depth F
-  // to its point (brume's fog integral, the point's own s: no bin).
+  // to its point (brume's fog integral, the point's own s: no bin), in
+  // batches of kBatch points (fixed, so that a point's F never depends on the
+  // threads); with them the least s of the points that can turn into fog
+  // (R0 > R1, intensity > 0), the first point too far to tabulate and the
+  // count within R1 (reductions whose result does not depend on the order).
+  // Batches handed out one at a time (a thread that lost its core to another
+  // process holds the other up by one batch, not by half the scan); one
+  // thread below kLidarLayeredParallelPoints (lidar_fog_tables.hpp).
   std::vector<double> range(n), climb(n);
   std::vector<float> rf(n), sf(n), depth(n);
   std::vector<char> active(n);  // can turn into fog: R0 > R1 and intensity > 0
-#pragma omp parallel for schedule(static) if (n >= 65536)
-  for (long long ii = 0; ii < count; ++ii) {
-    const std::size_t i = static_cast<std::size_t>(ii);
-    const float* q = in + 4 * i;
-    const double x = q[0], y = q[1], z = q[2];
-    const Vec3 w = rot * Vec3{x, y, z};
-    const double norm = std::sqrt(w.x * w.x + w.y * w.y + w.z * w.z);
-    range[i] = std::sqrt(x * x + y * y + z * z);
-    climb[i] = norm > 0.0 ? w.y / norm : 0.0;
-    active[i] = range[i] > p.r1_m && q[3] > 0.0f;
-    rf[i] = static_cast<float>(range[i]);
-    sf[i] = static_cast<float>(climb[i]);
-  }
-  constexpr long long kBatch = 4096;
-#pragma omp parallel for schedule(static) if (n >= 65536)
-  for (long long b = 0; b < (count + kBatch - 1) / kBatch; ++b) {
-    const std::size_t a = static_cast<std::size_t>(b * kBatch);
-    height_optical_depths(md.density, rf.data() + a, sf.data() + a, depth.data() + a,
-                       std::min<std::size_t>(kBatch, n - a));
+  const long long batches = (count + kBatch - 1) / kBatch;
+  double s_min = INFINITY;
+  std::size_t near = 0;
+  long long far = count;  // the first point that can turn into fog beyond kLidarLayeredRangeMax
+#pragma omp parallel for schedule(dynamic, 1) reduction(min : s_min, far) reduction(+ : near) \
+    if (n >= kLidarLayeredParallelPoints)
+  for (long long b = 0; b < batches; ++b) {
+    const std::size_t a = static_cast<std::size_t>(b) * kBatch, an = std::min<std::size_t>(kBatch, n - a);
+    for (std::size_t i = a; i < a + an; ++i) {
+      const float* q = in + 4 * i;
+      const double x = q[0], y = q[1], z = q[2];
+      const Vec3 w = rot * Vec3{x, y, z};
+      const double norm = std::sqrt(w.x * w.x + w.y * w.y + w.z * w.z);
+      range[i] = std::sqrt(x * x + y * y + z * z);
+      climb[i] = norm > 0.0 ? w.y / norm : 0.0;
+      active[i] = range[i] > p.r1_m && q[3] > 0.0f;
+      rf[i] = static_cast<float>(range[i]);
+      sf[i] = static_cast<float>(climb[i]);
+      if (active[i]) {
+        s_min = std::min(s_min, climb[i]);
+        if (range[i] > kLidarLayeredRangeMax) far = std::min(far, static_cast<long long>(i));
+      } else {
+        near += range[i] <= p.r1_m;
+      }
+    }
+    height_optical_depths(md.density, rf.data() + a, sf.data() + a, depth.data() + a, an);
   }
 
   // The tables reach each bin's farthest point (1-cm nodes): a point
   // farther than any LiDAR's return is refused rather than tabulated.
-  for (std::size_t i = 0; i < n; ++i)
-    if (active[i] && range[i] > kLidarLayeredRangeMax)
-      throw Error(what + ": point " + std::to_string(i) + " is " + text::g(range[i]) + " m away; a height-layered fog tabulates the soft return along each beam to its farthest point, up "
-                  "to " + text::g(kLidarLayeredRangeMax) + " m (no LiDAR return is farther): drop the point or check the scan's units");
-
-  // Bins of width Δ in s over the points that can turn into fog (R0 > R1,
-  // intensity > 0); the others are attenuated here.
-  const double delta = p.elevation_step_deg * kPi / 180.0;
-  double s_min = INFINITY;
-  std::size_t near = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const float* q = in + 4 * i;
-    if (active[i]) {
-      s_min = std::min(s_min, climb[i]);
-      continue;
-    }
-    near += range[i] <= p.r1_m;
-    float* o = out + 4 * i;
-    o[0] = q[0], o[1] = q[1], o[2] = q[2], o[3] = static_cast<float>(q[3] * std::exp(-2.0 * static_cast<double>(depth[i])));
+  if (far < count) {
+    const std::size_t i = static_cast<std::size_t>(far);
+    throw Error(what + ": point " + std::to_string(i) + " is " + text::g(range[i]) +
+                " m away; a height-layered fog tabulates the soft return along each beam to its farthest point, up "
+                "to " +
+                text::g(kLidarLayeredRangeMax) +
+                " m (no LiDAR return is farther): drop the point or check the scan's units");
   }
   st.zero_range = near;
+
+  // Bins of width Δ in s over the points that can turn into fog; the others
+  // are attenuated beside the tables (below).
+  const double delta = p.elevation_step_deg * kPi / 180.0;
   const std::size_t bins = std::isfinite(s_min) ? static_cast<std::size_t>(std::floor(2.0 / delta)) + 2 : 0;
   std::vector<std::size_t> start(bins + 1, 0);
   auto bin_of = [&](std::size_t i) {
@@ -289,9 +296,23 @@ LidarFogStats layered_fog(const float* in, float* out, std::size_t n, const Lida
   long long overflow = count;
   const long long used_n = static_cast<long long>(used.size());
   std::vector<double> max_w(used.size()), max_r(used.size());
+  // The work items: the tables, longest first, then the points that cannot
+  // turn into fog, attenuated in batches (small items last, so that the
+  // threads end together); one at a time.
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : soft, nodes, table_ms) reduction(min : overflow) \
-    if (used_n > 1)
-  for (long long u = 0; u < used_n; ++u) {
+    if (used_n > 1 || n >= kLidarLayeredParallelPoints)
+  for (long long u = 0; u < used_n + batches; ++u) {
+    if (u >= used_n) {
+      const std::size_t a = static_cast<std::size_t>(u - used_n) * kBatch, an = std::min<std::size_t>(kBatch, n - a);
+      for (std::size_t i = a; i < a + an; ++i) {
+        if (active[i]) continue;
+        const float* q = in + 4 * i;
+        float* o = out + 4 * i;
+        o[0] = q[0], o[1] = q[1], o[2] = q[2],
+        o[3] = static_cast<float>(q[3] * std::exp(-2.0 * static_cast<double>(depth[i])));
+      }
+      continue;
+    }
     const std::size_t b = used[static_cast<std::size_t>(u)];
     const auto a = Clock::now();
     BeamSoft beam(p, m, md.density, 0.5 * (s_lo[b] + s_hi[b]), r_end[b], true);

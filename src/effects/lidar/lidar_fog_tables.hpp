@@ -19,6 +19,23 @@ namespace brume::lidar_detail {
 
 constexpr double kPi = 3.14159265358979323846;
 
+// Below these many points a scan's per-point loops run on one thread: a
+// parallel region ends when every thread has arrived, and on a loaded host
+// (here the builds of other sessions, each session its own scheduler group)
+// the second thread can wait a time slice or more for a core. Measured with
+// `brume_bench_lidar_fog 11 sizes` (synthetic scans, AMD EPYC family 26, 2
+// vCPU, load average 6.3, 2026-12-06), the points' loops forced onto both
+// threads against one: the homogeneous fog's 2^16 points took 3.1 ms on one
+// thread and 15.8 ms on two, 2^18 points 15.5 and 26.3 ms, 2^20 89 and 103
+// ms. The homogeneous loop costs ~35 ns a point on one thread of a quieter
+// host (1.2 M points: 44 ms on one thread, 24 ms on two, Intel Xeon at load
+// ~2, 2026-12-05), so from 2^20 points a wait of ~10 ms for a core costs at
+// most a quarter of what two threads gain; the layered fog's beams (range,
+// s and the optical depth: ~4 times a homogeneous point, measured in the
+// same run) reach that work at 2^18 points.
+constexpr std::size_t kLidarParallelPoints = std::size_t{1} << 20;
+constexpr std::size_t kLidarLayeredParallelPoints = std::size_t{1} << 18;
+
 // The nodes of a soft-return table from 0 to end_m at steps of h_m = L/600
 // (L = c·τ_H), counted in double before any conversion and bounded (issue
 // #51: neither --tau-h nor a far point may ask for a table without end; a

@@ -55,6 +55,7 @@
 #include <mutex>
 
 #include "brume/error.hpp"
+#include "core/schedule.hpp"
 #include "io/formats/format.hpp"
 
 namespace brume::io {
@@ -526,7 +527,7 @@ bool write(const std::string& tmp, const WriteRequest& r, std::string* why) {
     if (any_half) {
       halves.resize(n);
       const std::ptrdiff_t rows = r.height, row = static_cast<std::ptrdiff_t>(C) * r.width;
-#pragma omp parallel for num_threads(std::max(1, std::min(r.threads, 64))) schedule(static)
+#pragma omp parallel for num_threads(std::max(1, std::min(r.threads, 64))) schedule(dynamic, kRowChunk)
       for (std::ptrdiff_t y = 0; y < rows; ++y)
         for (std::ptrdiff_t i = y * row; i < (y + 1) * row; ++i)
           if (types[static_cast<std::size_t>(i) % C] == Imf::HALF) halves[static_cast<std::size_t>(i)] = Imath::half(r.values[i]);

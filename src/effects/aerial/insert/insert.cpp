@@ -15,6 +15,7 @@
 #include "brume/insert.hpp"
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"  // the shared parameter blocks
+#include "core/schedule.hpp"
 #include "shared/prelude_cpp.h"
 
 namespace brume {
@@ -239,7 +240,7 @@ InsertResult apply_insert(const Image& photo, const Image& effect_range, const I
   out.coverage = Image(W, H, 1, 0.0f);
   out.scale = Image(W, H, 1);
   Image f(W, H, 7, 0.0f);  // (Gamma alpha E, Gamma alpha, alpha); 0 where the object is not visible
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * W + x;
@@ -260,7 +261,7 @@ InsertResult apply_insert(const Image& photo, const Image& effect_range, const I
 
   if (blur) diffuse(f, out.scale, aa.sigma_max, p.diffusion, exec);
 
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * W + x;
