@@ -1,7 +1,33 @@
 #!/usr/bin/env bash
 # The single source of brume's dependencies: every Debian 12 package the build,
 # the demo, the tests and the benchmarks need. Idempotent; needs root (or sudo).
+#   install-deps.sh            the packages below (x86-64 or any host)
+#   install-deps.sh --aarch64  only those of the aarch64 check of the diffusion
+#                              engine (scripts/test-aarch64.sh), not for everyone:
+#                              it adds arm64 to dpkg's architectures (every later
+#                              apt-get update then reads arm64's lists too) for
+#                              arm64 builds of Highway, GoogleTest and libgomp,
+#                              and brings a cross compiler and qemu (72 MB to
+#                              download, 352 MB installed); the README's build needs none of it.
 set -euo pipefail
+SUDO=""
+[ "$(id -u)" -eq 0 ] || SUDO="sudo"
+export DEBIAN_FRONTEND=noninteractive
+update=0
+if [ "${1:-}" = "--aarch64" ]; then
+  PKGS=(
+    g++-aarch64-linux-gnu qemu-user      # the cross compiler; qemu-aarch64 runs the tests
+    libhwy-dev:arm64 libgtest-dev:arm64  # Highway and GoogleTest built for arm64 (multiarch)
+    libgomp1:arm64                       # OpenMP's runtime beside the multiarch libc (cmake/aarch64-linux-gnu.cmake)
+  )
+  if ! dpkg --print-foreign-architectures | grep -qx arm64; then
+    $SUDO dpkg --add-architecture arm64
+    update=1
+  fi
+elif [ $# -gt 0 ]; then
+  echo "install-deps: unknown option '$1' (none, or --aarch64)" >&2
+  exit 2
+else
 PKGS=(
   build-essential cmake pkg-config git
   libopenimageio-dev openimageio-tools   # image I/O: PNG, JPEG, TIFF, OpenEXR, PFM, HDR
@@ -30,17 +56,15 @@ PKGS=(
   libcpp-httplib-dev                     # brume view's request parsing and routes, behind its own front (0.7 MB)
   chromium chromium-driver python3-selenium python3-pil  # brume view's page tested in headless Chromium (SwiftShader WebGL2; ~380 MB)
 )
+fi
 missing=()
 for p in "${PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
-if [ ${#missing[@]} -eq 0 ]; then
+if [ ${#missing[@]} -eq 0 ] && [ $update -eq 0 ]; then
   echo "install-deps: all ${#PKGS[@]} packages present"
   exit 0
 fi
-SUDO=""
-[ "$(id -u)" -eq 0 ] || SUDO="sudo"
 echo "install-deps: installing ${missing[*]}"
-export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -q
 $SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"

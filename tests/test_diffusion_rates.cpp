@@ -13,7 +13,7 @@
 #include "brume/error.hpp"
 #include "diffusion/diffusion_setup_math.hpp"
 #include "shared/prelude_cpp.h"
-#include "test_util.hpp"
+#include "engine_util.hpp"
 
 using namespace brume;
 using namespace brume::test;

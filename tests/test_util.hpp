@@ -1,5 +1,6 @@
-// brume tests — shared helpers: data location, an independent Gaussian
-// reference, and comparison statistics.
+// brume tests — shared helpers: data location, the command-line tool, scratch
+// folders, the GPU context; and (engine_util.hpp) an independent Gaussian
+// reference and comparison statistics.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -29,13 +30,7 @@
 #include "brume/gpu.hpp"
 #include "brume/image.hpp"
 #include "brume/io.hpp"
-#include "brume_reference.hpp"
-
-namespace brume {
-// Readable parameter names in test output (found by argument-dependent lookup).
-inline void PrintTo(Scheme s, std::ostream* os) { *os << to_string(s); }
-inline void PrintTo(Precision p, std::ostream* os) { *os << to_string(p); }
-}  // namespace brume
+#include "engine_util.hpp"
 
 namespace brume::test {
 
@@ -74,40 +69,6 @@ inline std::string file_bytes(const std::string& path) {
     if (!::brume::test::have_data(rel)) GTEST_SKIP() << ::brume::test::data_absent(rel); \
   } while (0)
 
-// The independent mirror and Gaussian references (study/reference), shared
-// with `brume study`.
-using reference::gaussian_reference;
-using reference::reflect;
-
-struct Diff {
-  double max_abs = 0.0, rms = 0.0, psnr = 0.0;
-  int worst_x = -1, worst_y = -1;
-};
-
-// Compare channels [0, nc) of a and b over the interior (border pixels excluded).
-inline Diff compare(const Image& a, const Image& b, int border = 0, int nc = -1) {
-  Diff d;
-  if (nc < 0) nc = a.channels;
-  double ss = 0.0;
-  std::size_t n = 0;
-  for (int y = border; y < a.height - border; ++y)
-    for (int x = border; x < a.width - border; ++x)
-      for (int c = 0; c < nc; ++c) {
-        double e = std::abs(static_cast<double>(a.at(x, y, c)) - b.at(x, y, c));
-        if (!(e <= d.max_abs)) d.max_abs = e, d.worst_x = x, d.worst_y = y;
-        ss += e * e;
-        ++n;
-      }
-  d.rms = n ? std::sqrt(ss / n) : 0.0;
-  d.psnr = d.rms > 0 ? -20.0 * std::log10(d.rms) : 999.0;
-  return d;
-}
-
-inline std::ostream& operator<<(std::ostream& o, const Diff& d) {
-  return o << "max " << d.max_abs << " at (" << d.worst_x << ", " << d.worst_y << "), rms " << d.rms << ", psnr "
-           << d.psnr << " dB";
-}
-
 // RGB -> RGBA with alpha 1 (the diffusion engine works on four channels).
 inline Image to_rgba(const Image& rgb) {
   Image f(rgb.width, rgb.height, 4, 1.0f);
@@ -134,19 +95,6 @@ inline DepthSource middlebury2005(const std::string& scene) {
 
 // A real [0,1] test image: Middlebury 2005 "Art", linear light, 463x370.
 inline const char* kArt = "middlebury2005_thirdsize/Art/view1.png";
-
-// A space-variant scale map: a horizontal ramp from sigma0 to smax with a
-// step in the middle rows (a depth edge).
-inline Image ramp_map(int w, int h, double s0, double smax) {
-  Image m(w, h, 1);
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x) {
-      double t = static_cast<double>(x) / (w - 1);
-      if (y > h / 3 && y < 2 * h / 3) t = x < w / 2 ? 0.1 : 0.9;
-      m.at(x, y) = static_cast<float>(s0 + t * (smax - s0));
-    }
-  return m;
-}
 
 // Built with AddressSanitizer or ThreadSanitizer (scripts/test-sanitize.sh):
 // GCC says so with __SANITIZE_*__, clang with __has_feature.
@@ -268,18 +216,6 @@ inline Scene scene(int w, int h, int sky_rows, unsigned seed = 7) {
 inline nlohmann::json read_json(const std::string& path) {
   std::ifstream f(path);
   return nlohmann::json::parse(f);
-}
-
-// The message of the brume::Error f must throw (for checking that it names
-// the problem); a test failure, and "", when it throws none.
-inline std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "no brume::Error thrown";
-  return "";
 }
 
 // Two image files hold the same pixels to the last bit (read as linear colour).

@@ -31,7 +31,7 @@
 // Every target evaluates the same elementwise operations in the same order
 // as the reference rows (ISO C++ and Highway's Mul, Add, Sub, Div: no
 // reassociation, no contraction -- -ffp-contract=off on this file in
-// CMakeLists.txt, as the AVX2 and AVX-512 targets enable FMA), so all give
+// cmake/brume_engine.cmake, as the AVX2 and AVX-512 targets enable FMA), so all give
 // the same bits (test: DiffusionSimd).
 //
 // Layout (Highway's): the part before HWY_BEFORE_NAMESPACE is compiled once
@@ -408,7 +408,7 @@ HWY_INLINE V AsPrelude(V a, V b) {
 #ifdef BRUME_HWY_X86_MINMAX
   return kMax ? hn::Max(b, a) : hn::Min(b, a);
 #else
-  return kMax ? hn::IfThenElse(a < b, b, a) : hn::IfThenElse(b < a, b, a);
+  return kMax ? hn::IfThenElse(hn::Lt(a, b), b, a) : hn::IfThenElse(hn::Lt(b, a), b, a);
 #endif
 }
 // Masked tails (the last pixels of a run in the vector loop, under a lane
@@ -421,15 +421,20 @@ HWY_INLINE V AsPrelude(V a, V b) {
 
 // brume_diffusion_update's expression (diffusion_math.glsl), term by term
 // in its order: the shared template, instantiated outside the target, cannot
-// take this target's vectors.
+// take this target's vectors. Highway's named operations throughout, not
+// C++ operators, which SVE's sizeless vectors do not have (GCC 12):
+// fc + wl (l - fc) + wr (r - fc) + wu (u - fc) + wd (d - fc).
 template <class V>
 HWY_INLINE V Stencil(V fc, V l, V r, V u, V d, V wl, V wr, V wu, V wd) {
-  return fc + wl * (l - fc) + wr * (r - fc) + wu * (u - fc) + wd * (d - fc);
+  const V a = hn::Add(fc, hn::Mul(wl, hn::Sub(l, fc)));
+  const V b = hn::Add(a, hn::Mul(wr, hn::Sub(r, fc)));
+  const V c = hn::Add(b, hn::Mul(wu, hn::Sub(u, fc)));
+  return hn::Add(c, hn::Mul(wd, hn::Sub(d, fc)));
 }
 // r0 + f (r1 - r0): mix, sub then mul then add.
 template <class V>
 HWY_INLINE V Lerp(V r0, V r1, V f) {
-  return r0 + f * (r1 - r0);
+  return hn::Add(r0, hn::Mul(f, hn::Sub(r1, r0)));
 }
 
 // uniform_row_body with vectors of at most eight floats (the lanes are
@@ -458,13 +463,14 @@ void UniformRow(BRUME_UNIFORM_ROW_ARGS) {
 template <int kMode, class D, class V = hn::Vec<D>>
 HWY_INLINE V Tap(D d, V r0, V r1, V f) {
   if constexpr (kMode == 0) return Lerp(r0, r1, f);
-  return hn::IfThenElse(f > hn::Zero(d), AsPrelude<false>(r0, r1), r0);
+  return hn::IfThenElse(hn::Gt(f, hn::Zero(d)), AsPrelude<false>(r0, r1), r0);
 }
 template <int kMode, class D, class V = hn::Vec<D>>
 HWY_INLINE V Edge(D d, V rc, V rn) {
   if constexpr (kMode == 1) return AsPrelude<false>(rc, rn);
-  if constexpr (kMode == 2) return hn::Set(d, 2.0f) * rc * rn / AsPrelude<true>(rc + rn, hn::Set(d, 1.0e-30f));
-  return hn::Set(d, 0.5f) * (rc + rn);
+  if constexpr (kMode == 2)  // 2 rc rn / max(rc + rn, 1e-30)
+    return hn::Div(hn::Mul(hn::Mul(hn::Set(d, 2.0f), rc), rn), AsPrelude<true>(hn::Add(rc, rn), hn::Set(d, 1.0e-30f)));
+  return hn::Mul(hn::Set(d, 0.5f), hn::Add(rc, rn));
 }
 // One direction's eq. 12 weights of Lanes(d) pixels: centre rates rc, the
 // rates of the tap's two texels (contiguous across the run), fractions f.
@@ -495,20 +501,27 @@ void RunMode(const RunArgs& a, const RateRows& q, int xa, int xb, int n) {
   for (int j = 0; j < C; ++j)
     for (int l = 0; l < N; ++l) idx[j][l] = (j * N + l) / C;
   const hn::RebindToSigned<decltype(d)> di;
+#if HWY_HAVE_SCALABLE
+  // SVE's vectors are sizeless, never an array's elements: vector j's
+  // indices are loaded where they are used.
+  auto lanes_of = [&](int j) { return hn::IndicesFromVec(d, hn::Load(di, idx[j])); };
+#else
   using Idx = decltype(hn::IndicesFromVec(d, hn::Load(di, idx[0])));
   Idx lanes[C];
   for (int j = 0; j < C; ++j) lanes[j] = hn::IndicesFromVec(d, hn::Load(di, idx[j]));
+  auto lanes_of = [&](int j) { return lanes[j]; };
+#endif
   // Vector j of the pixels from x: values vm of it (all: full vectors).
   auto update = [&](int x, int j, auto fN, auto wlN, auto wrN, auto wuN, auto wdN, auto load, auto store) {
     const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(x) * C + static_cast<std::ptrdiff_t>(j) * N;
-    const auto f = hn::TableLookupLanes(fN, lanes[j]);
+    const auto f = hn::TableLookupLanes(fN, lanes_of(j));
     const auto fc = load(a.s + i);
     const auto l = Lerp(load(a.s + i - nC), load(a.s + i - nC - C), f);
     const auto r = Lerp(load(a.s + i + nC), load(a.s + i + nC + C), f);
     const auto u = Lerp(load(a.u0 + i), load(a.u1 + i), f);
     const auto dd = Lerp(load(a.d0 + i), load(a.d1 + i), f);
-    store(Stencil(fc, l, r, u, dd, hn::TableLookupLanes(wlN, lanes[j]), hn::TableLookupLanes(wrN, lanes[j]),
-                  hn::TableLookupLanes(wuN, lanes[j]), hn::TableLookupLanes(wdN, lanes[j])),
+    store(Stencil(fc, l, r, u, dd, hn::TableLookupLanes(wlN, lanes_of(j)), hn::TableLookupLanes(wrN, lanes_of(j)),
+                  hn::TableLookupLanes(wuN, lanes_of(j)), hn::TableLookupLanes(wdN, lanes_of(j))),
           a.o + i);
   };
   int x = xa;
@@ -565,7 +578,7 @@ int RunEndOf(const int* __restrict n, int x, int W) {
   const auto v = hn::Set(d, n[x]);
   int e = x + 1;
   for (; e + N <= W; e += N) {
-    const intptr_t first = hn::FindFirstTrue(d, hn::LoadU(d, n + e) != v);
+    const intptr_t first = hn::FindFirstTrue(d, hn::Ne(hn::LoadU(d, n + e), v));
     if (first >= 0) return e + static_cast<int>(first);
   }
   while (e < W && n[e] == n[x]) ++e;

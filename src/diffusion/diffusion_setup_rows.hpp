@@ -1,7 +1,7 @@
 // brume — the per-pixel set-up of the fast path's invariant schemes
 // (internal), written once and compiled for every SIMD target by
 // diffusion_fast_kernels.cpp, whose options it needs (-fno-math-errno,
-// -ffp-contract=off: CMakeLists.txt).
+// -ffp-contract=off: cmake/brume_engine.cmake).
 #pragma once
 
 #include <algorithm>
