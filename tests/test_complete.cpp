@@ -114,7 +114,9 @@ TEST(Complete, HeldOutReturnsAgainstIpBasicTenSeeds) {
     for (int m = 0; m < 2; ++m)
       for (int s = 0; s < 2; ++s) {
         const ip_basic::DcMetrics d = ip_basic::dc_metrics(m ? ipb : ours, full, s ? h.held : h.kept, cam);
-        if (m == 1) EXPECT_EQ(d.missing, 0u);
+        if (m == 1) {
+          EXPECT_EQ(d.missing, 0u);
+        }
         if (m == 0 && s == 1) missing += d.missing, held_n += h.held.size();
         mean[m][s].mae_mm += d.mae_mm / 10, mean[m][s].rmse_mm += d.rmse_mm / 10;
         mean[m][s].imae_per_km += d.imae_per_km / 10, mean[m][s].irmse_per_km += d.irmse_per_km / 10;
@@ -336,7 +338,9 @@ TEST(Complete, AboveTheScanStructureContinuesOnEth3d) {
     std::printf("%s, upper 40 %% (%zu ground-truth pixels) off by > 10 %%: column %.1f %%, planar %.1f %%; lower "
                 "60 %%: %.1f %%, %.1f %%\n",
                 scene, n, 100 * off_a, 100 * off_b, 100 * low_a, 100 * low_b);
-    if (std::string(scene) == "terrace") EXPECT_LE(off_b, 0.15);
+    if (std::string(scene) == "terrace") {
+      EXPECT_LE(off_b, 0.15);
+    }
     // Below the scan's top the methods agree (the planar rule changes only
     // what lies above each column's topmost return).
     EXPECT_NEAR(low_b, low_a, 0.005) << scene;
@@ -386,14 +390,18 @@ TEST(Complete, TreesAboveTheKittiScanContinueTheirReturns) {
         const float r = c.range.at(x, y);
         ok += std::isfinite(r) && std::abs(r / stretch(k, x, y) - zref) <= 0.25 * zref ? 1 : 0;
         // Never behind the sky: no continued range beyond the farthest return.
-        if (m == CompleteMethod::planar) ASSERT_LE(r, rmax) << x << "," << y;
+        if (m == CompleteMethod::planar) {
+          ASSERT_LE(r, rmax) << x << "," << y;
+        }
       }
     }
     const double share = static_cast<double>(ok) / static_cast<double>(n);
     std::printf("KITTI trees above the scan, %s: %zu pixels (%zu sky, not counted), %.1f %% within 25 %% of their "
                 "column's top returns\n",
                 enum_name(complete_method_names(), m).c_str(), n, sky, 100 * share);
-    if (m == CompleteMethod::planar) EXPECT_GE(share, 0.85);
+    if (m == CompleteMethod::planar) {
+      EXPECT_GE(share, 0.85);
+    }
   }
 }
 
