@@ -72,8 +72,8 @@ TEST(RainPhysics, TerminalVelocityIsAtlas1973) {
   EXPECT_NEAR(atlas_terminal_velocity_m_per_s(d0), 0.0, 1e-12);
   EXPECT_LT(atlas_terminal_velocity_m_per_s(0.1), 0.0);
   LidarRainParams p;
-  p.rate_mm_h = 5.0;
-  p.drop_min_mm = 0.1;
+  p.drops.rate_mm_h = 5.0;
+  p.drops.drop_min_mm = 0.1;
   EXPECT_NE(error_of([&] { validate_lidar_rain(p); }).find("--drop-min"), std::string::npos);
 }
 
@@ -244,7 +244,7 @@ std::vector<float> scan(std::size_t n, double lo, double hi, double reflectance,
 
 LidarRainParams rain(double rate) {
   LidarRainParams p;
-  p.rate_mm_h = rate;
+  p.drops.rate_mm_h = rate;
   return p;
 }
 
@@ -267,7 +267,7 @@ struct Strongest {
   double power = -1.0, range = 0.0, reported = 0.0;
 };
 Strongest strongest_drop(const RainField& field, const MediumRay& b, double r, const LidarRainParams& p) {
-  const double theta = p.divergence_mrad * 1e-3, sigma = rain_extinction_per_m(*p.rate_mm_h);
+  const double theta = p.divergence_mrad * 1e-3, sigma = rain_extinction_per_m(*p.drops.rate_mm_h);
   Strongest s;
   std::vector<RainDrop> drops;
   for (const auto& c : brute_cells(b, p.blind_range_m, std::min(r, 40.0))) {
@@ -301,7 +301,7 @@ TEST(LidarRain, EchoesAreTheStrongestDropOfTheBeamsCone) {
   std::vector<float> out(in.size());
   std::vector<std::uint8_t> labels(n);
   const LidarRainStats st = lidar_rain(in.data(), out.data(), n, p, labels.data());
-  const RainField field(100.0, p.drop_min_mm, p.drop_max_mm, p.seed);
+  const RainField field(100.0, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);
   const double sigma = rain_extinction_per_m(100.0);
   std::size_t k = 0, moved = 0, beaten = 0;
   for (std::size_t i = 0; i < n; ++i) {
@@ -425,9 +425,9 @@ TEST(LidarRain, BadInputsAreRefused) {
   EXPECT_NE(error_of([&] { lidar_rain_param_table().set_text(p, "rate", "-1"); }).find("--rate"), std::string::npos);
   EXPECT_NE(error_of([&] { lidar_rain_param_table().set_text(p, "divergence", "0"); }).find("--divergence"),
             std::string::npos);
-  p.rate_mm_h = 5.0;
-  p.drop_max_mm = 0.1;
-  p.drop_min_mm = 0.2;
+  p.drops.rate_mm_h = 5.0;
+  p.drops.drop_max_mm = 0.1;
+  p.drops.drop_min_mm = 0.2;
   EXPECT_NE(error_of([&] { validate_lidar_rain(p); }).find("--drop-max"), std::string::npos);
   std::vector<float> in = scan(10, 2.0, 20.0, 0.3, 1), out(40);
   in[4 * 3 + 3] = -0.5f;

@@ -27,7 +27,7 @@ constexpr double kPi = 3.14159265358979323846;
 
 CameraRainParams params(double rate, double exposure_s, std::uint64_t seed) {
   CameraRainParams p;
-  p.rate_mm_h = rate;
+  p.drops.rate_mm_h = rate;
   p.exposure_s = exposure_s;
   p.seed = seed;
   return p;
@@ -112,7 +112,7 @@ TEST(CameraRain, StreakLengthIsFallTimesExposureOverDepth) {
   const double f = 1000.0, T = 1.0 / 60;
   const Flat fl = flat(W, H, f, 1.0f, 1000.0);
   CameraRainParams p = params(25.0, T, 11);
-  p.z_near_m = 4.0, p.z_split_m = 4.125, p.epsilon = 0.0, p.drop_min_mm = 1.0;
+  p.z_near_m = 4.0, p.z_split_m = 4.125, p.epsilon = 0.0, p.drops.drop_min_mm = 1.0;
   const Image out = render_camera_rain(scene_of(fl, false, {0, 0, 0}), p, two_threads());
   // Each thread owns a band of rows and the drops keep one order: the image is the same on one thread.
   Exec one;
@@ -120,7 +120,7 @@ TEST(CameraRain, StreakLengthIsFallTimesExposureOverDepth) {
   const Image single = render_camera_rain(scene_of(fl, false, {0, 0, 0}), p, one);
   ASSERT_EQ(std::memcmp(out.data.data(), single.data.data(), out.data.size() * sizeof(float)), 0);
   // The drops, written again: cv = (−y, −z, x) of the field's (x forward, y left, z up).
-  const RainField field(25.0, p.drop_min_mm, p.drop_max_mm, p.seed);
+  const RainField field(25.0, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);
   struct D {
     double u, v, len, mass;
   };
@@ -173,7 +173,7 @@ TEST(CameraRain, EnergyIsIndependentOfExposure) {
   for (std::uint64_t seed = 1; seed <= 8; ++seed)
     for (int k = 0; k < 5; ++k) {
       CameraRainParams p = params(25.0, ts[k], seed);
-      p.z_near_m = 2.0, p.z_split_m = 10.0, p.epsilon = 0.0, p.drop_min_mm = 0.5;
+      p.z_near_m = 2.0, p.z_split_m = 10.0, p.epsilon = 0.0, p.drops.drop_min_mm = 0.5;
       const Image out = render_camera_rain(scene_of(fl, false, {1, 1, 1}), p, two_threads());
       double s = 0.0;
       for (int i = 0; i < W * H; ++i) s += out.data[3 * static_cast<std::size_t>(i)];
@@ -194,7 +194,7 @@ TEST(CameraRain, FluctuationGoesAsTheInverseRootOfExposure) {
   for (std::uint64_t seed = 1; seed <= 8; ++seed)
     for (int k = 0; k < 5; ++k) {
       CameraRainParams p = params(25.0, ts[k], seed);
-      p.z_near_m = 1.0, p.z_split_m = 4.0, p.epsilon = 0.0, p.drop_min_mm = 0.5, p.wind = "0,20,0";
+      p.z_near_m = 1.0, p.z_split_m = 4.0, p.epsilon = 0.0, p.drops.drop_min_mm = 0.5, p.wind = "0,20,0";
       const Image out = render_camera_rain(scene_of(fl, false, {1, 1, 1}), p, two_threads());
       double s = 0.0, ss = 0.0;
       for (int i = 0; i < W * H; ++i) {
@@ -223,7 +223,7 @@ TEST(CameraRain, AWallHidesTheDropsBehindIt) {
     }
   const Flat far = flat(W, H, 300.0, 1.0f, 1000.0);
   CameraRainParams p = params(100.0, 1.0 / 60, 5);
-  p.epsilon = 0.0, p.drop_min_mm = 0.3, p.z_split_m = 8.0;
+  p.epsilon = 0.0, p.drops.drop_min_mm = 0.3, p.z_split_m = 8.0;
   const Image with = render_camera_rain(scene_of(wall, false, {0, 0, 0}), p, two_threads());
   const Image open = render_camera_rain(scene_of(far, false, {0, 0, 0}), p, two_threads());
   p.z_split_m = 2.0;
@@ -268,7 +268,7 @@ TEST(CameraRain, DrawnAndAnalyticTransmittanceIsBeerLambert) {
 TEST(CameraRain, BadParametersAreRefused) {
   CameraRainParams p;
   EXPECT_NE(error_of([&] { validate_camera_rain(p); }).find("--rate"), std::string::npos);
-  p.rate_mm_h = 5.0;
+  p.drops.rate_mm_h = 5.0;
   p.wind = "1,2";
   EXPECT_NE(error_of([&] { validate_camera_rain(p); }).find("--wind"), std::string::npos);
   p.wind = "1,x,3";

@@ -181,19 +181,28 @@ void RainField::for_each_drop_within(const RainCell& cell, double m, F&& f) cons
   }
 }
 
+// The drops every rain draws (the LiDAR's and the camera's): declared once,
+// nested in both commands' tables (block "rain").
+struct RainDrops {
+  std::optional<double> rate_mm_h;  // [mm/h] in [0, 500], R (required)
+  double drop_min_mm = 0.11;        // [mm] >= atlas_zero_speed_mm(), D_min
+  double drop_max_mm = 8.0;         // [mm] > D_min, D_max
+};
+const ParamTable<RainDrops>& rain_drops_param_table();
+// The table's ranges and the cross-field rules (--rate given, D_max > D_min).
+void validate_rain_drops(const RainDrops& d);
+
 // The parameters of rain on a LiDAR scan, in physical units.
 struct LidarRainParams {
-  std::optional<double> rate_mm_h;   // [mm/h] in [0, 500], R (required)
+  RainDrops drops;                   // --rate, --drop-min, --drop-max
   double divergence_mrad = 2.0;      // [mrad] in (0, 50], the beam's full divergence θ
   double drop_reflectance = 0.35;    // [1] in [0, 1], ρ_d = 2π/S with S = 18 sr (docs/rain.md)
   double noise_floor = 5e-6;         // [1/m²] > 0, F on the scan's intensity scale per m²
   double blind_range_m = 1.0;        // [m] >= 0, r_min: no drop echo nearer
-  double drop_min_mm = 0.11;         // [mm] >= atlas_zero_speed_mm(), D_min
-  double drop_max_mm = 8.0;          // [mm] > D_min, D_max
   std::uint64_t seed = 0;            // the drop field's and the speckle's seed
 };
 const ParamTable<LidarRainParams>& lidar_rain_param_table();
-// The table's ranges and the cross-field rules (--rate given, D_max > D_min).
+// The table's ranges and the drops' rules (validate_rain_drops).
 void validate_lidar_rain(const LidarRainParams& p);
 
 // What a scan's rain did.
@@ -284,7 +293,7 @@ double camera_rain_extinction_per_m(double rate_mm_h, double q_eff = kCameraRain
 double rain_d2_between(double rate_mm_h, double a_mm, double b_mm);
 
 struct CameraRainParams {
-  std::optional<double> rate_mm_h;         // [mm/h] in [0, 500], required
+  RainDrops drops;                         // --rate, --drop-min, --drop-max
   double exposure_s = 1.0 / 60.0;          // [s] in (0, 10], T
   std::uint64_t seed = 0;                  // --rain-seed: the drop field's seed
   std::string wind = "0,0,0";              // [m/s] X,Y,Z in the vehicle frame (x forward, y left, z up)
@@ -295,7 +304,6 @@ struct CameraRainParams {
   double z_split_m = 20.0;                 // [m] drops drawn up to this planar depth
   double z_near_m = 0.2;                   // [m] and from this one
   double epsilon = 0.002;                  // [1] thinning threshold ε
-  double drop_min_mm = 0.11, drop_max_mm = 8.0;  // [mm] D_min, D_max
   std::optional<double> visibility_m;      // [m] haze's Koschmieder visibility; unset: rain alone
   std::optional<Rgb> airlight;             // linear RGB; unset: haze's estimate
 };

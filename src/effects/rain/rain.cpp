@@ -148,13 +148,34 @@ void RainField::cone_cells(const MediumRay& ray, double t0, double t1, double ha
 
 // ---- the parameters ----------------------------------------------------------------------
 
+const ParamTable<RainDrops>& rain_drops_param_table() {
+  static const ParamTable<RainDrops> t = [] {
+    ParamTable<RainDrops> d("rain");
+    d.real("rate", &RainDrops::rate_mm_h, "mm/h", Range::closed(0.0, 500.0),
+           "rain rate R (Marshall-Palmer drop sizes: N0 = 8000 m^-3 mm^-1, Lambda = 4.1 R^-0.21 mm^-1; one drop "
+           "field for the camera and the LiDAR); 0: no rain, the input back as the other media leave it",
+           "none")
+        .real("drop-min", &RainDrops::drop_min_mm, "mm", Range::at_least(atlas_zero_speed_mm()),
+              "smallest drawn drop D_min; Atlas's fall speed is negative below 0.1087 mm")
+        .real("drop-max", &RainDrops::drop_max_mm, "mm", Range::left_open(0.0, 10.0),
+              "largest drawn drop D_max (larger drops break up); must exceed --drop-min");
+    return d;
+  }();
+  return t;
+}
+
+void validate_rain_drops(const RainDrops& d) {
+  rain_drops_param_table().validate(d);
+  if (!d.rate_mm_h) throw Error("no rain rate given: use --rate R (mm/h, in [0, 500])");
+  if (!(d.drop_max_mm > d.drop_min_mm))
+    throw Error("--drop-max " + text::g(d.drop_max_mm) + " must exceed --drop-min " + text::g(d.drop_min_mm) +
+                " (the drawn drops' diameters lie between them); give a larger --drop-max");
+}
+
 const ParamTable<LidarRainParams>& lidar_rain_param_table() {
   static const ParamTable<LidarRainParams> t = [] {
     ParamTable<LidarRainParams> d("rain");
-    d.real("rate", &LidarRainParams::rate_mm_h, "mm/h", Range::closed(0.0, 500.0),
-           "rain rate R (Marshall-Palmer drop sizes: N0 = 8000 m^-3 mm^-1, Lambda = 4.1 R^-0.21 mm^-1); 0 gives the "
-           "scan back unchanged",
-           "none")
+    d.nest(&LidarRainParams::drops, rain_drops_param_table())
         .real("divergence", &LidarRainParams::divergence_mrad, "mrad", Range::left_open(0.0, 50.0),
               "full divergence theta of the LiDAR's beam: a drop meets a beam when its centre lies in the cone")
         .real("drop-reflectance", &LidarRainParams::drop_reflectance, "1", Range::closed(0.0, 1.0),
@@ -165,10 +186,6 @@ const ParamTable<LidarRainParams>& lidar_rain_param_table() {
               "KITTI 000001's weakest non-zero return (7.7e-6)")
         .real("blind-range", &LidarRainParams::blind_range_m, "m", Range::at_least(0.0),
               "r_min: the sensor reports no return nearer (no drop echo there)")
-        .real("drop-min", &LidarRainParams::drop_min_mm, "mm", Range::at_least(atlas_zero_speed_mm()),
-              "smallest drawn drop D_min; Atlas's fall speed is negative below 0.1087 mm")
-        .real("drop-max", &LidarRainParams::drop_max_mm, "mm", Range::left_open(0.0, 10.0),
-              "largest drawn drop D_max (larger drops break up); must exceed --drop-min")
         .count("seed", &LidarRainParams::seed, "1", Range::at_least(0.0),
                "seed of the drop field and of the detection draws (same seed, same scan)");
     return d;
@@ -178,10 +195,7 @@ const ParamTable<LidarRainParams>& lidar_rain_param_table() {
 
 void validate_lidar_rain(const LidarRainParams& p) {
   lidar_rain_param_table().validate(p);
-  if (!p.rate_mm_h) throw Error("no rain rate given: use --rate R (mm/h, in [0, 500])");
-  if (!(p.drop_max_mm > p.drop_min_mm))
-    throw Error("--drop-max " + text::g(p.drop_max_mm) + " must exceed --drop-min " + text::g(p.drop_min_mm) +
-                " (the drawn drops' diameters lie between them); give a larger --drop-max");
+  validate_rain_drops(p.drops);
 }
 
 // ---- rain on a LiDAR scan ------------------------------------------------------------------
@@ -192,13 +206,13 @@ class LidarRain final : public Medium {
  public:
   explicit LidarRain(const LidarRainParams& p)
       : p_(p),
-        sigma_(rain_extinction_per_m(*p.rate_mm_h, kLidarRainQ)),
-        field_(*p.rate_mm_h, p.drop_min_mm, p.drop_max_mm, p.seed),
+        sigma_(rain_extinction_per_m(*p.drops.rate_mm_h, kLidarRainQ)),
+        field_(*p.drops.rate_mm_h, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed),
         theta_(p.divergence_mrad * 1e-3) {
     // D_t(r) = θ·r²·√(F/ρ_d) [m]: the smallest drop whose echo can reach F at r.
     if (field_.drops_per_m3() > 0.0 && p.drop_reflectance > 0.0) {
       k_ = theta_ * std::sqrt(p.noise_floor / p.drop_reflectance);
-      reach_ = std::sqrt(p.drop_max_mm * 1e-3 / k_);
+      reach_ = std::sqrt(p.drops.drop_max_mm * 1e-3 / k_);
     }
   }
 
@@ -335,7 +349,7 @@ LidarRainStats lidar_rain(const float* in, float* out, std::size_t n, const Lida
 }
 
 nlohmann::json lidar_rain_record(const LidarRainParams& p, const LidarRainStats& st) {
-  const double r = p.rate_mm_h.value_or(0.0);
+  const double r = p.drops.rate_mm_h.value_or(0.0);
   const std::size_t moved = st.run.echoes, lost = st.run.lost;
   return {{"model",
            "Marshall-Palmer 1948 drop sizes, Atlas et al. 1973 fall speed; per beam the drops in its cone echo "
@@ -347,15 +361,15 @@ nlohmann::json lidar_rain_record(const LidarRainParams& p, const LidarRainStats&
           {"extinction_per_m", rain_extinction_per_m(r, kLidarRainQ)},
           {"extinction_q", kLidarRainQ},
           {"extinction_q_from", "a narrow beam loses the drops' forward diffraction lobe: Q = 2 (extinction paradox)"},
-          {"drops_per_m3", rain_drops_per_m3(r, p.drop_min_mm, p.drop_max_mm)},
+          {"drops_per_m3", rain_drops_per_m3(r, p.drops.drop_min_mm, p.drops.drop_max_mm)},
           {"divergence_mrad", p.divergence_mrad},
           {"drop_reflectance", p.drop_reflectance},
           {"drop_reflectance_from",
            "2 pi/S, S the lidar ratio of liquid water drops (about 18 sr; Pinnick et al. 1983); docs/rain.md"},
           {"noise_floor_per_m2", p.noise_floor},
           {"blind_range_m", p.blind_range_m},
-          {"drop_min_mm", p.drop_min_mm},
-          {"drop_max_mm", p.drop_max_mm},
+          {"drop_min_mm", p.drops.drop_min_mm},
+          {"drop_max_mm", p.drops.drop_max_mm},
           {"cell_m", kRainCellM},
           {"seed", p.seed},
           {"frame", 0},

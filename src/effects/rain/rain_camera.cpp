@@ -41,10 +41,7 @@ const ParamTable<CameraRainParams>& camera_rain_param_table() {
   static const ParamTable<CameraRainParams> t = [] {
     using P = CameraRainParams;
     ParamTable<P> d("rain");
-    d.real("rate", &P::rate_mm_h, "mm/h", Range::closed(0.0, 500.0),
-           "rain rate R (Marshall-Palmer drop sizes, the drop field of `brume lidar rain`); 0 leaves the image as "
-           "the other media make it",
-           "none")
+    d.nest(&P::drops, rain_drops_param_table())
         .real("exposure-time", &P::exposure_s, "s", Range::left_open(0.0, 10.0),
               "exposure T: a drop's streak is its image's path over T")
         .count("rain-seed", &P::seed, "1", Range::at_least(0.0), "seed of the drop field (same seed, same drops)")
@@ -68,10 +65,6 @@ const ParamTable<CameraRainParams>& camera_rain_param_table() {
         .real("epsilon", &P::epsilon, "1", Range::closed(0.0, 1.0),
               "thinning: a drop whose estimated coverage of a pixel is below epsilon is not drawn (its extinction "
               "is analytic); 0 draws every drop")
-        .real("drop-min", &P::drop_min_mm, "mm", Range::at_least(atlas_zero_speed_mm()),
-              "smallest drawn drop D_min; Atlas's fall speed is negative below 0.1087 mm")
-        .real("drop-max", &P::drop_max_mm, "mm", Range::left_open(0.0, 10.0),
-              "largest drawn drop D_max (larger drops break up); must exceed --drop-min")
         .real("visibility", &P::visibility_m, "m", Range::above(0.0),
               "haze's meteorological visibility (extinction 3.912/V, Koschmieder) composed with the rain in haze's "
               "composite; none: rain is the only medium",
@@ -107,10 +100,7 @@ Vec3 camera_rain_wind(const CameraRainParams& p) {
 
 void validate_camera_rain(const CameraRainParams& p) {
   camera_rain_param_table().validate(p);
-  if (!p.rate_mm_h) throw Error("no rain rate given: use --rate R (mm/h, in [0, 500])");
-  if (!(p.drop_max_mm > p.drop_min_mm))
-    throw Error("--drop-max " + text::g(p.drop_max_mm) + " must exceed --drop-min " + text::g(p.drop_min_mm) +
-                " (the drawn drops' diameters lie between them); give a larger --drop-max");
+  validate_rain_drops(p.drops);
   if (!(p.z_split_m > p.z_near_m))
     throw Error("--z-split " + text::g(p.z_split_m) + " m must exceed --z-near " + text::g(p.z_near_m) +
                 " m (drops are drawn between them); give a larger --z-split");
@@ -127,22 +117,22 @@ CameraRainOptics::CameraRainOptics(const CameraRainParams& p, const Intrinsics& 
       fx_(k.fx),
       alpha_(coc_infinity_px),
       zf_(p.focus_distance_m.value_or(0.0)),
-      sigma_cam_(camera_rain_extinction_per_m(p.rate_mm_h.value_or(0.0), p.q_eff)) {
+      sigma_cam_(camera_rain_extinction_per_m(p.drops.rate_mm_h.value_or(0.0), p.q_eff)) {
   const int n = kRainThinningSteps;
-  const double rate = p.rate_mm_h.value_or(0.0);
+  const double rate = p.drops.rate_mm_h.value_or(0.0);
   dz_ = p.z_split_m / n;
   dt_.assign(n + 1, kCamInf);
   g_.assign(n + 1, 0.0);
   sd_.assign(n + 1, 0.0);
-  double run = p.drop_min_mm;  // D_t made non-decreasing in z
+  double run = p.drops.drop_min_mm;  // D_t made non-decreasing in z
   for (int i = 1; i <= n; ++i) {
     const double z = i * dz_;
     if (rate == 0.0 || z < p.z_near_m) continue;
     double dt = kCamInf;
-    if (p.epsilon <= 0.0 || estimate(p.drop_min_mm, z) >= p.epsilon) {
-      dt = p.drop_min_mm;
-    } else if (estimate(p.drop_max_mm, z) >= p.epsilon) {
-      double lo = p.drop_min_mm, hi = p.drop_max_mm;  // estimate(lo) < ε <= estimate(hi)
+    if (p.epsilon <= 0.0 || estimate(p.drops.drop_min_mm, z) >= p.epsilon) {
+      dt = p.drops.drop_min_mm;
+    } else if (estimate(p.drops.drop_max_mm, z) >= p.epsilon) {
+      double lo = p.drops.drop_min_mm, hi = p.drops.drop_max_mm;  // estimate(lo) < ε <= estimate(hi)
       for (int it = 0; it < 60; ++it) {
         const double mid = 0.5 * (lo + hi);
         (estimate(mid, z) >= p.epsilon ? hi : lo) = mid;
@@ -156,7 +146,7 @@ CameraRainOptics::CameraRainOptics(const CameraRainParams& p, const Intrinsics& 
   for (int i = 1; i <= n; ++i) {
     const double a = std::max((i - 1) * dz_, p.z_near_m), b = i * dz_;
     const double len = std::max(0.0, b - a);
-    sd_[i] = std::isinf(dt_[i]) ? 0.0 : kCamPi / 4.0 * 1e-6 * rain_d2_between(rate, dt_[i], p.drop_max_mm);
+    sd_[i] = std::isinf(dt_[i]) ? 0.0 : kCamPi / 4.0 * 1e-6 * rain_d2_between(rate, dt_[i], p.drops.drop_max_mm);
     g_[i] = g_[i - 1] + sd_[i] * len;
   }
 }
@@ -241,7 +231,7 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
   if (!s.sky_weight.empty() && (s.sky_weight.width() != W || s.sky_weight.height() != H))
     throw Error("internal: the sky weight is " + s.sky_weight.size_string() + ", the image " + s.rgb.size_string());
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
-  const double rate = *p.rate_mm_h, T = p.exposure_s;
+  const double rate = *p.drops.rate_mm_h, T = p.exposure_s;
   const double fx = s.k.fx, fy = s.k.fy, cx = s.k.cx, cy = s.k.cy;
   const CameraRainOptics optics(p, s.k, s.coc_infinity_px);
   CameraRainStats st;
@@ -290,10 +280,10 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
   if (transmission) *transmission = tau0;
 
   // 2. The drops of the field in the frustum, z_near <= z < z_split at mid-exposure.
-  const RainField field(rate, p.drop_min_mm, p.drop_max_mm, p.seed);
+  const RainField field(rate, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);
   const Vec3 wind = camera_rain_wind(p);
   const double s_ego = p.ego_speed_m_s;
-  const double v_max = atlas_terminal_velocity_m_per_s(p.drop_max_mm);
+  const double v_max = atlas_terminal_velocity_m_per_s(p.drops.drop_max_mm);
   const double speed_max = std::sqrt(wind.x * wind.x + wind.y * wind.y + wind.z * wind.z) + std::abs(s_ego) + v_max;
   const double margin_m = speed_max * T / 2.0 + 0.01;
   const double xa = (-0.5 - cx) / fx, xb = (W - 0.5 - cx) / fx, ya = (-0.5 - cy) / fy, yb = (H - 0.5 - cy) / fy;
@@ -319,7 +309,7 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
     if (!(m > 0.0)) continue;
     // The slab's lateral extent: the frustum widened by the drops' motion and their kernel.
     const double kpx = 3.0 * std::sqrt(std::pow(blur_px(z0) / 4.0, 2) + std::pow(blur_px(z1) / 4.0, 2) +
-                                       std::pow(fx * p.drop_max_mm * 1e-3 / z0 / 4.0, 2)) +
+                                       std::pow(fx * p.drops.drop_max_mm * 1e-3 / z0 / 4.0, 2)) +
                        2.0;
     const double grow = margin_m + kpx * z1 / std::min(fx, fy);
     const double xlo = std::min(xa * z0, xa * z1) - grow, xhi = std::max(xb * z0, xb * z1) + grow;
@@ -483,7 +473,7 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
 }
 
 nlohmann::json camera_rain_record(const CameraRainParams& p, const CameraRainStats& st) {
-  const double r = p.rate_mm_h.value_or(0.0);
+  const double r = p.drops.rate_mm_h.value_or(0.0);
   const Vec3 w = camera_rain_wind(p);
   return {{"model",
            "Marshall-Palmer 1948 drop sizes, Atlas et al. 1973 fall speed; the drop field of `brume lidar rain` "
@@ -503,9 +493,9 @@ nlohmann::json camera_rain_record(const CameraRainParams& p, const CameraRainSta
           {"seed", p.seed},
           {"frame", 0},
           {"cell_m", kRainCellM},
-          {"drop_min_mm", p.drop_min_mm},
-          {"drop_max_mm", p.drop_max_mm},
-          {"drops_per_m3", rain_drops_per_m3(r, p.drop_min_mm, p.drop_max_mm)},
+          {"drop_min_mm", p.drops.drop_min_mm},
+          {"drop_max_mm", p.drops.drop_max_mm},
+          {"drops_per_m3", rain_drops_per_m3(r, p.drops.drop_min_mm, p.drops.drop_max_mm)},
           {"z_near_m", p.z_near_m},
           {"z_split_m", p.z_split_m},
           {"epsilon", p.epsilon},

@@ -78,10 +78,8 @@ double rain_coc_px(const CameraRainJob& j, int width, int height) {
 // The scan's rain: brume lidar rain's parameters with the camera's rate, seed and drop sizes.
 LidarRainParams camera_rain_lidar_params(const CameraRainJob& j) {
   LidarRainParams lp;
-  lp.rate_mm_h = j.rain.rate_mm_h;
+  lp.drops = j.rain.drops;
   lp.seed = j.rain.seed;
-  lp.drop_min_mm = j.rain.drop_min_mm;
-  lp.drop_max_mm = j.rain.drop_max_mm;
   return lp;
 }
 
@@ -230,8 +228,8 @@ CommandDef rain_command() {
   c.extinction_per_m = [](const nlohmann::json& job, double) -> std::optional<double> {
     CameraRainJob j;
     camera_rain_job_table().from_json(j, job, "job");
-    if (!j.rain.rate_mm_h) return std::nullopt;
-    return rain_extinction_per_m(*j.rain.rate_mm_h, kLidarRainQ) + (j.rain.visibility_m ? 3.912 / *j.rain.visibility_m : 0.0);
+    if (!j.rain.drops.rate_mm_h) return std::nullopt;
+    return rain_extinction_per_m(*j.rain.drops.rate_mm_h, kLidarRainQ) + (j.rain.visibility_m ? 3.912 / *j.rain.visibility_m : 0.0);
   };
   return c;
 }
