@@ -296,7 +296,10 @@ AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const Aeri
                                        "," + text::g(run.analysis.airlight[2], 3) +
                                        " (a tone-mapped photo, a lower turbidity, the horizon's airlight, the "
                                        "observer's --altitude; docs/aerial.md)"
-                                 : ": the input has negative values");
+                                 : run.analysis.mode == AerialMode::rerender
+                                       ? ": a re-render to clearer air subtracts more airlight than the photo's land "
+                                         "holds (a lower --from-turbidity, or the photo's own --from-horizon)"
+                                       : ": the input image has negative values");
       run.record["aerial"]["warnings"].push_back(w);
       std::fprintf(stderr, "brume aerial: warning: %s\n", w.c_str());
     }
