@@ -233,9 +233,23 @@ TEST_F(CliAerial, MatterhornSlantAttenuationIsTheClosedForm) {
   BRUME_REQUIRE_DATA("geopose3k_matterhorn/distance.pfm");
   const std::string m = data_path("geopose3k_matterhorn/");
   CliRun r = run("aerial --image " + m + "photo.jpg --range " + m + "distance.pfm --unknown-value -1 --remove "
-                 "--altitude 2910 --fov-x 42.5 --pitch 0.7 --path slant --turbidity 1 --airlight horizon "
+                 "--altitude 2910 --fov-x 42.5 --pitch 0.7 --path slant --turbidity contrast --airlight horizon "
                  "--out " + p("o.exr") + " --attenuation " + p("g.exr") + " --record " + p("r.json"));
   ASSERT_EQ(r.status, 0) << r.output;
+  // --turbidity contrast on this photo: the terrain's contrast does not fall
+  // with distance (meadows near, rock and snow far; docs/aerial.md), so the
+  // fit sits on T = 1 and says so; the attenuation below is at the fitted T.
+  const nlohmann::json rec = read_json(p("r.json"));
+  const nlohmann::json& fit = rec["turbidity_fit"];
+  const double t_fit = fit["turbidity"].get<double>();
+  EXPECT_EQ(rec["job"]["aerial"]["turbidity"], "contrast");
+  EXPECT_EQ(rec["aerial"]["parameters"]["turbidity"].get<double>(), t_fit);
+  EXPECT_TRUE(fit["at_lower_bound"].get<bool>()) << fit.dump();
+  EXPECT_NE(r.output.find("sits on its lower bound T = 1"), std::string::npos) << r.output;
+  EXPECT_GT(fit["bins"].size(), 20u);
+  CliRun again = run("run " + p("r.json") + " --out-dir " + p("again"));
+  ASSERT_EQ(again.status, 0) << again.output;
+  expect_same_pixels(p("o.exr"), p("again/o.exr"));
   const Image g = read_color(p("g.exr")), d = read_scalar(m + "distance.pfm");
   CameraPose pose;
   pose.pitch_deg = 0.7;
@@ -248,13 +262,13 @@ TEST_F(CliAerial, MatterhornSlantAttenuationIsTheClosedForm) {
       const double s = d.at(x, y);
       if (!(s > 10000.0)) continue;
       const SlantDistances sd = slant_distances(s, s * cam.world_ray(x, y).y);
-      const auto want = attenuation_slant_direct({1.0, 2910.0}, q, sd.rayleigh_m, sd.mie_m);
+      const auto want = attenuation_slant_direct({t_fit, 2910.0}, q, sd.rayleigh_m, sd.mie_m);
       for (int c = 0; c < 3; ++c) worst = std::max(worst, std::abs(g.at(x, y, c) - want[c]));
       ++n;
     }
   EXPECT_GT(n, 500);
   EXPECT_LE(worst, 2e-6);
-  const nlohmann::json j = read_json(p("r.json"))["aerial"]["derived"];
+  const nlohmann::json& j = rec["aerial"]["derived"];
   EXPECT_NEAR(j["slant_path"]["dh_max_m"].get<double>(), 1568.0, 30.0);  // the summit, 4,478 m
   EXPECT_LT(j["negative_pixels"]["fraction"].get<double>(), 0.40);
   // The horizon's airlight: within 10 % of the sky just above the far ridges

@@ -271,6 +271,9 @@ SlantAttenuationTable slant_attenuation_table(const Atmosphere& a, const Spectra
 // contribute F at the far end, so the edge of distant land fades smoothly.
 struct AerialParams {
   Atmosphere atmosphere;                 // --turbidity [1, 20], --altitude [m] [-500, 9000]
+  std::string turbidity_rule;            // "contrast" (--turbidity contrast): atmosphere.turbidity is fitted on
+                                         // the image by run_aerial (fit_turbidity_contrast), NaN until then;
+                                         // "": T as given
   std::string sensitivity = "default";   // --sensitivity default | FILE.csv | DATABASE#CAMERA
   std::optional<Rgb> airlight;           // Iinf, linear RGB, >= 0; unset: estimated (analyse_aerial)
   std::string airlight_rule;             // "horizon" (--airlight horizon): estimated just above the far
@@ -339,6 +342,39 @@ struct AerialAnalysis {
 // the rest. At least 16 such pixels, else refused (give --airlight R,G,B).
 // `where` gets the columns, rows, pixels and skyline range it used.
 std::array<float, 3> horizon_airlight(DenseImageRef rgb, DenseImageRef range, nlohmann::json& where);
+
+// --turbidity contrast (issue #59): the turbidity a photograph shows, from
+// how its terrain's contrast falls with distance. With I = J Gamma + Iinf (1 -
+// Gamma), the difference of two neighbouring pixels on one surface (ranges
+// within kContrastSameSurface) is Gamma times the clean scene's difference:
+// the airlight cancels. Per distance bin (log-spaced, ratio kContrastBinRatio,
+// at least kContrastMinPairs pairs), the mean |difference| per channel c of
+// the working space (XYZ or the camera's RGB, as Gamma) gives y_c = ln of it;
+// the model is y_c = a_c + ln Gamma_c(bin; T) with a_c free per channel (the
+// scene's own contrast, assumed the same at every distance: the fit's one
+// assumption, said in docs/aerial.md), and T minimises the squared misfit on
+// [1, 20] (a 0.25 grid, then golden-section search to 1e-5). Pairs with a
+// channel <= 0 (crushed shadows, stitch borders) or within 0.1 % of a
+// channel's clipped plateau (its brightest value held by >= 0.1 % of the
+// pixels: snow at the encoding's maximum) are left out, counted; so are bins
+// whose contrast in a channel is below kContrastFloor of that channel's
+// highest bin (the noise floor of an 8-bit photo, ~1/255). Needs
+// kContrastMinBins bins spanning kContrastMinSpan in distance, else refused.
+// --path slant: each bin's mean equivalent distances (slant_distances of each
+// pair's range and target altitude). The record gives every bin, the
+// jackknife spread over bins and whether T sits on a bound (then `warning`).
+constexpr double kContrastSameSurface = 0.01, kContrastBinRatio = 1.189207115002721;  // 2^(1/4)
+constexpr float kContrastClippedFraction = 0.999f;
+constexpr double kContrastMinPairs = 200.0, kContrastMinSpan = 2.0, kContrastFloor = 0.05;
+constexpr int kContrastMinBins = 4;
+struct TurbidityContrastFit {
+  double turbidity = 0.0;
+  bool at_lower_bound = false, at_upper_bound = false;
+  std::string warning;     // non-empty on a bound
+  nlohmann::json record;   // the record's "turbidity_fit"
+};
+TurbidityContrastFit fit_turbidity_contrast(DenseImageRef rgb, DenseImageRef range, const AerialParams& p,
+                                            const AerialGeometry* geometry = nullptr, int threads = 0);
 
 // Validates parameters and inputs (throws brume::Error), loads the
 // sensitivity, tabulates Gamma, estimates Iinf. `range` is the MEASURED

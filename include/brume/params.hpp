@@ -67,8 +67,9 @@ struct ParamSpec {
   std::vector<std::string> choices;  // choice: the names, in declaration order
   bool optional = false;             // may be unset (no 0 sentinels)
   std::string unset_word = "auto";   // what the user writes for "unset"
-  std::vector<std::string> words;    // rgb: names accepted instead of R,G,B, stored as the name
-                                     // (aerial's --airlight horizon: a rule that estimates the colour)
+  std::vector<std::string> words;    // rgb, real: names accepted instead of the value, stored as the name
+                                     // (aerial's --airlight horizon: a rule that estimates the colour;
+                                     // --turbidity contrast: a rule that fits the value on the image)
   std::string block;                 // the declaring block: "haze", "diffusion", "prepare", ...
   bool allow_inf = false;            // real: +inf is a meaningful value (an infinite far plane)
   bool output_file = false;          // text: names a file (depth prepare's --masks: a directory) the run
@@ -180,6 +181,30 @@ class ParamTable {
                  return (nan ? std::isnan(v) : v == sentinel) ? nlohmann::json() : nlohmann::json(v);
                },
                [m, sentinel](P& p, const nlohmann::json& v) { p.*m = v.is_null() ? sentinel : v.get<double>(); });
+  }
+  // A real_or_unset that may instead be one of `words` (a named rule that
+  // finds the value): the number in a nested struct (`outer`.*m), the word
+  // beside it in P ("" when the value is a number or unset; the number is
+  // then the sentinel).
+  template <class Q>
+  ParamTable& real_or_word(const char* name, Q P::*outer, double Q::*m, std::string P::*word,
+                           std::vector<std::string> words, const char* unit, Range r, const char* help,
+                           double sentinel, const char* unset_word = "auto") {
+    ParamSpec s = spec(name, ParamKind::real, unit, help, r);
+    s.optional = true;
+    s.unset_word = unset_word;
+    s.words = std::move(words);
+    const bool nan = std::isnan(sentinel);
+    return add(std::move(s),
+               [outer, m, word, sentinel, nan](const P& p) {
+                 if (!(p.*word).empty()) return nlohmann::json(p.*word);
+                 const double v = (p.*outer).*m;
+                 return (nan ? std::isnan(v) : v == sentinel) ? nlohmann::json() : nlohmann::json(v);
+               },
+               [outer, m, word, sentinel](P& p, const nlohmann::json& v) {
+                 p.*word = v.is_string() ? v.get<std::string>() : std::string();
+                 (p.*outer).*m = v.is_number() ? v.get<double>() : sentinel;
+               });
   }
   ParamTable& integer(const char* name, int P::*m, const char* unit, Range r, const char* help) {
     return add(spec(name, ParamKind::integer, unit, help, r),

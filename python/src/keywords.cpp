@@ -199,6 +199,12 @@ json keyword_value(const ParamSpec& s, py::handle v, const std::string& where) {
   const bool is_bool = py::isinstance<py::bool_>(v) || py::isinstance(v, py::module_::import("numpy").attr("bool_"));
   switch (s.kind) {
     case ParamKind::real: {
+      if (py::isinstance<py::str>(v) && !s.words.empty()) {
+        const std::string w = utf8_of(v, where + ": " + kwd);
+        for (const std::string& name : s.words)
+          if (w == name) return w;
+        throw wrong(("a number or '" + s.words[0] + "'").c_str());
+      }
       if (is_bool || !(PyLong_Check(v.ptr()) || PyFloat_Check(v.ptr()) ||
                        py::isinstance(v, py::module_::import("numpy").attr("number"))))
         throw wrong(s.optional ? ("a number or None/'" + s.unset_word + "'").c_str() : "a number");
@@ -383,7 +389,10 @@ std::vector<FunctionDoc>& registry() {
 std::string stub_type(const ParamSpec& s) {
   std::string t;
   switch (s.kind) {
-    case ParamKind::real: t = "float"; break;
+    case ParamKind::real:
+      t = "float";
+      for (const std::string& w : s.words) t += " | Literal[\"" + w + "\"]";
+      break;
     case ParamKind::integer: t = "int"; break;
     case ParamKind::boolean: t = "bool"; break;
     case ParamKind::rgb:

@@ -117,7 +117,7 @@ std::string Range::text() const {
 
 std::string ParamSpec::format(const nlohmann::json& v) const {
   if (v.is_null()) return unset_word;
-  if (kind == ParamKind::rgb && v.is_string()) return v.get<std::string>();  // one of `words`
+  if ((kind == ParamKind::rgb || kind == ParamKind::real) && v.is_string()) return v.get<std::string>();  // a word
   switch (kind) {
     case ParamKind::real: return text::g(v.get<double>());
     case ParamKind::integer: return v.dump();
@@ -142,7 +142,9 @@ std::string ParamSpec::describe() const {
   switch (kind) {
     case ParamKind::real:
     case ParamKind::integer:
-      m << " [" << (unit.empty() ? "" : unit + ", ") << range.text() << "]";
+      m << " [" << (unit.empty() ? "" : unit + ", ") << range.text();
+      for (const std::string& w : words) m << " | " << w;
+      m << "]";
       break;
     case ParamKind::rgb:
       m << " [" << (unit.empty() ? "" : unit + ", ") << "R,G,B each in " << range.text();
@@ -169,6 +171,8 @@ nlohmann::json ParamSpec::parse(const std::string& t) const {
   if (optional && t == unset_word) return nullptr;
   switch (kind) {
     case ParamKind::real: {
+      for (const std::string& w : words)
+        if (t == w) return t;
       double v = 0;
       if (!parse_number(t, v))
         throw Error(flag + " '" + t + "' is not a number" + (optional ? " (or " + unset_word + ")" : "") + "; " +
@@ -242,6 +246,14 @@ void ParamSpec::check(const nlohmann::json& v) const {
   };
   switch (kind) {
     case ParamKind::real: {
+      if (v.is_string() && !words.empty()) {
+        for (const std::string& w : words)
+          if (v.get<std::string>() == w) return;
+        std::string all;
+        for (const std::string& w : words) all += ", " + w;
+        throw Error(flag + " '" + v.get<std::string>() + "' is not allowed; give a number in " + range.text() + all +
+                    (optional ? " or " + unset_word : std::string()));
+      }
       if (!v.is_number()) bad_type("a number");
       const double x = v.get<double>();
       if (!std::isfinite(x) && !(allow_inf && x > 0 && std::isinf(x)))

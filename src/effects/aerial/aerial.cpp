@@ -27,14 +27,11 @@ namespace {
 
 const ParamTable<Atmosphere>& aerial_atmosphere_table() {
   static const ParamTable<Atmosphere> t = [] {
-    ParamTable<Atmosphere> d("aerial");  // the aerial block's own fields, not a block of their own
-    // auto (NaN in the struct): fitted on --sky-image by `brume aerial` (run_aerial_job) before anything runs.
-    d.real_or_unset("turbidity", &Atmosphere::turbidity, "1", Range::closed(1.0, 20.0),
-                    "atmospheric turbidity T (1: pure air; by Table 3.1 corrected: clear from about 2.7, light haze "
-                    "4.5, haze 9.8, fog 19.3); auto: fitted on --sky-image",
-                    NAN)
-        .real("altitude", &Atmosphere::altitude_m, "m", Range::closed(-500.0, 9000.0),
-              "observer altitude h0 above sea level (scales beta_R by e^{-h0/7994 m}, beta_M by e^{-h0/1200 m})");
+    // The aerial block's own fields, not a block of their own; the turbidity
+    // is declared by aerial_param_table, beside its rule (--turbidity contrast).
+    ParamTable<Atmosphere> d("aerial");
+    d.real("altitude", &Atmosphere::altitude_m, "m", Range::closed(-500.0, 9000.0),
+           "observer altitude h0 above sea level (scales beta_R by e^{-h0/7994 m}, beta_M by e^{-h0/1200 m})");
     return d;
   }();
   return t;
@@ -150,7 +147,15 @@ std::string to_string(AerialMode m) {
 const ParamTable<AerialParams>& aerial_param_table() {
   static const ParamTable<AerialParams> t = [] {
     ParamTable<AerialParams> d("aerial");
-    d.nest(&AerialParams::atmosphere, aerial_atmosphere_table())
+    // auto (NaN in the struct): fitted on --sky-image by `brume aerial` (run_aerial_job) before anything runs;
+    // contrast (turbidity_rule, NaN in the struct): fitted on the image by run_aerial.
+    d.real_or_word("turbidity", &AerialParams::atmosphere, &Atmosphere::turbidity, &AerialParams::turbidity_rule,
+                   {"contrast"}, "1", Range::closed(1.0, 20.0),
+                   "atmospheric turbidity T (1: pure air; by Table 3.1 corrected: clear from about 2.7, light haze "
+                   "4.5, haze 9.8, fog 19.3); auto: fitted on --sky-image; contrast (--remove): fitted on the image "
+                   "from how its terrain's contrast falls with distance",
+                   NAN)
+        .nest(&AerialParams::atmosphere, aerial_atmosphere_table())
         .text("sensitivity", &AerialParams::sensitivity,
               "camera spectral sensitivities q_c(lambda): default, a CSV of wavelength_nm,r,g,b, or "
               "DATABASE.txt#CAMERA NAME")
@@ -193,10 +198,24 @@ const ParamTable<AerialParams>& aerial_param_table() {
 void validate_aerial(const AerialParams& p, const std::set<std::string>& given) {
   const auto& t = aerial_param_table();
   t.validate(p);
-  if (std::isnan(p.atmosphere.turbidity))
-    throw Error("--turbidity auto fits T on a photo of the sky: give --sky-image FILE (and its --sky- flags), or "
-                "--turbidity T");
-  validate_atmosphere(p.atmosphere);
+  if (p.turbidity_rule == "contrast") {
+    // The turbidity the photo shows: only a removal has a photo to measure.
+    if (!p.remove)
+      throw Error(std::string("--turbidity contrast fits the turbidity a photo shows, which only --remove takes "
+                              "as --turbidity; ") +
+                  (p.from_turbidity ? "a re-render's photo turbidity is --from-turbidity: fit it with `brume aerial "
+                                      "--remove --turbidity contrast --record R.json` and give the recorded T"
+                                    : "a render adds haze to a clean image: give --turbidity T") +
+                  ", or add --remove");
+    Atmosphere a = p.atmosphere;
+    a.turbidity = 1.0;  // the altitude's check; T is fitted later
+    validate_atmosphere(a);
+  } else {
+    if (std::isnan(p.atmosphere.turbidity))
+      throw Error("--turbidity auto fits T on a photo of the sky: give --sky-image FILE (and its --sky- flags), or "
+                  "--turbidity T");
+    validate_atmosphere(p.atmosphere);
+  }
   if (p.sensitivity.empty())
     throw Error("--sensitivity is empty; give default, a CSV file or DATABASE.txt#CAMERA NAME");
   if (p.remove && p.from_turbidity)
@@ -388,6 +407,10 @@ void analyse_aerial(DenseImageRef rgb, DenseImageRef range, const AerialParams& 
                     const AerialGeometry* geo) {
   const int nt = threads > 0 ? threads : omp_get_max_threads();
   validate_aerial(p);
+  if (!p.turbidity_rule.empty())
+    throw Error("--turbidity " + p.turbidity_rule + " is fitted before the analysis: run_aerial (brume "
+                "aerial, brume.aerial) does it; a library caller fits it with fit_turbidity_contrast and gives the "
+                "fitted T");
   if (rgb.channels != 3)
     throw Error("aerial needs an RGB image, got " + std::to_string(rgb.channels) + " channels");
   if (range.channels != 1) throw Error("the range map must have one channel");

@@ -87,6 +87,9 @@ PreviewFrame aerial_preview(const nlohmann::json& job, const PreviewInputs& in) 
   aerial_job_table().from_json(j, job, "job");
   // (--turbidity auto was refused by the command's check: the page names no sky photo.)
   const AerialParams& p = j.aerial;
+  if (!p.turbidity_rule.empty())
+    throw Error("the preview takes the turbidity as a number; --turbidity " + p.turbidity_rule +
+                " is fitted by brume aerial (its record's turbidity_fit gives T): preview with --turbidity T");
   if (p.path == AerialPath::slant)
     throw Error("the preview draws the level path (its passes bind a 1-D attenuation table); --path slant runs in "
                 "brume aerial on the CPU: preview with --path level");
@@ -221,16 +224,12 @@ AerialGeometry aerial_geometry(const AerialJob& job, const DepthSource& depth, i
   return g;
 }
 
-AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const AerialParams& p, const RangeStep& prepare,
-                     const Exec& exec, const std::set<std::string>& given, const AerialGeometry* geometry) {
-  validate_aerial(p, given);
+namespace {
+
+AerialRun run_aerial_at(DenseImageRef rgb, DenseImageRef measured, const AerialParams& p, const RangeStep& prepare,
+                        const CompletedRange& done, const Exec& exec, const std::set<std::string>& given,
+                        const AerialGeometry* geometry) {
   AerialRun run;
-  // Statistics (R_max, Iinf, the sky mask) from the measured range; the
-  // effect runs on the prepared one, whose smooth sky margin only shapes the
-  // blur near the horizon (sky pixels themselves stay unchanged).
-  // A sparse map is completed first (guided by rgb; its sky stays unknown), when the step says so.
-  const CompletedRange done = complete_step(measured_range.view(), rgb.view(), prepare, given, exec.threads);
-  const DenseImageRef measured = done.applied ? DenseImageRef(done.range) : measured_range;
   analyse_aerial(rgb, measured, p, run.analysis, exec.threads, geometry);
   PreparedRange prep = prepare_step(measured.view(), prepare, given, exec.threads);
   prep.record["complete"] = done.record;
@@ -310,6 +309,41 @@ AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const Aeri
   return run;
 }
 
+}  // namespace
+
+AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const AerialParams& p, const RangeStep& prepare,
+                     const Exec& exec, const std::set<std::string>& given, const AerialGeometry* geometry) {
+  validate_aerial(p, given);
+  AerialRun run;
+  // Statistics (R_max, Iinf, the sky mask) from the measured range; the
+  // effect runs on the prepared one, whose smooth sky margin only shapes the
+  // blur near the horizon (sky pixels themselves stay unchanged).
+  // A sparse map is completed first (guided by rgb; its sky stays unknown), when the step says so.
+  const CompletedRange done = complete_step(measured_range.view(), rgb.view(), prepare, given, exec.threads);
+  const DenseImageRef measured = done.applied ? DenseImageRef(done.range) : measured_range;
+  // --turbidity contrast: T fitted on this photo first; everything after runs
+  // at the fitted T (the aerial block's parameters record the T used, the job
+  // keeps "contrast" so that `brume run` refits).
+  AerialParams fitted;
+  std::optional<TurbidityContrastFit> contrast;
+  if (p.turbidity_rule == "contrast") {
+    contrast = fit_turbidity_contrast(rgb, measured, p, geometry, exec.threads);
+    fitted = p;
+    fitted.atmosphere.turbidity = contrast->turbidity;
+    fitted.turbidity_rule.clear();
+  }
+  const AerialParams& p_used = contrast ? fitted : p;
+  run = run_aerial_at(rgb, measured, p_used, prepare, done, exec, given, geometry);
+  if (contrast) {
+    run.record["turbidity_fit"] = contrast->record;
+    if (!contrast->warning.empty()) {
+      run.record["aerial"]["warnings"].push_back(contrast->warning);
+      std::fprintf(stderr, "brume aerial: warning: %s\n", contrast->warning.c_str());
+    }
+  }
+  return run;
+}
+
 AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::string>& given) {
   // --turbidity-from: the sky fit's T replaces --turbidity, and the record
   // holds the resolved value (so `brume run` finds the two consistent).
@@ -331,6 +365,10 @@ AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::str
     if (!job.turbidity_from.empty())
       throw Error("--sky-image '" + job.sky_image + "' and --turbidity-from '" + job.turbidity_from +
                   "' both give the turbidity; use one of them");
+    if (!job.aerial.turbidity_rule.empty())
+      throw Error("--sky-image '" + job.sky_image + "' is for --turbidity auto (T fitted on the sky photo), but "
+                  "--turbidity is " + job.aerial.turbidity_rule + " (T fitted on the image's terrain); "
+                  "give one of them");
     if (!std::isnan(turbidity))
       throw Error("--sky-image '" + job.sky_image + "' is for --turbidity auto (T fitted on the sky photo), but "
                   "--turbidity is " + std::to_string(turbidity) + "; give --turbidity auto, or drop --sky-image");
@@ -360,6 +398,9 @@ AerialTurbidity resolve_aerial_turbidity(AerialJob& job, const std::set<std::str
     if (!f.mask_record.is_null()) sky_fit_record["mask"] = f.mask_record;
   }
   if (!job.turbidity_from.empty()) {
+    if (!job.aerial.turbidity_rule.empty())
+      throw Error("--turbidity-from '" + job.turbidity_from + "' gives the turbidity and --turbidity " +
+                  job.aerial.turbidity_rule + " fits it on the image; give one of them");
     const double t = turbidity_from_fit_json(job.turbidity_from);
     out.from_record = {{"path", job.turbidity_from}, {"sha256", sha256_file(job.turbidity_from)}};
     // (--turbidity auto with --turbidity-from: the fit in the file is the auto.)

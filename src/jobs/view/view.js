@@ -112,7 +112,7 @@ function fieldProblem(s, text) {
   const unset = s.optional ? ` (or ${s.unset_word})` : '';
   if (text === '') return `give a value${unset}`;
   if (s.optional && text === s.unset_word) return null;
-  if (s.kind === 'real' && !(NUMBER.test(text) || text === 'inf')) return `needs a number${unset}`;
+  if (s.kind === 'real' && !(NUMBER.test(text) || text === 'inf' || (s.words || []).includes(text))) return `needs a number${unset}`;
   if (s.kind === 'integer' && !/^[+-]?\d+$/.test(text)) return `needs a whole number${unset}`;
   if (s.kind === 'rgb' && !(s.words || []).includes(text)) {
     const parts = text.split(',');
