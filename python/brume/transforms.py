@@ -489,7 +489,8 @@ class Transform(_Keyed):
         applied = self._applies(key)
         values = [s.draw(self.seed, key if i == 0 else f"{key}/{s.command['name']}")
                   for i, s in enumerate(self._stages)] if applied else []
-        if applied and self.lidar_target is not None and "lidar_seed" not in self._stages[0].fixed:
+        if (applied and self.lidar_target is not None and "lidar_seed" not in self._stages[0].fixed
+                and "lidar_seed" in self._stages[0].command["keywords"]):  # (rain's scan takes the rain's seed)
             values[0]["lidar-seed"] = self._noise_seed(key)
         return applied, values
 
