@@ -113,6 +113,10 @@ def test_rain_transform(demo):
     assert other["rain-seed"] != v["rain-seed"]
     params = json.loads(json.dumps(out["params"]))
     same(T.Rain(seed=99, fov_y=55).replay(params)(image=rgb, depth=rng)["image"], out["image"])
+    # a fixed seed draws the same drops for every key; T.seed() (the default) one per key
+    fixed = T.Rain(seed=5, fov_y=55, rain_seed=4)
+    assert fixed(image=rgb, depth=rng, key="a")["params"]["values"]["rain-seed"] == 4
+    assert T.Rain(seed=5, fov_y=55, rain_seed=T.seed())(image=rgb, depth=rng, key="demo/0")["params"]["values"] == v
     # a fixed rate and a range of exposures
     t2 = T.Rain(seed=1, fov_y=55, rate=10, exposure_time=(0.004, 0.03))
     v2 = t2(image=rgb, depth=rng, key="k")["params"]["values"]

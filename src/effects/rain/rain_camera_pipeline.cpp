@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <optional>
 
 #include "brume/command.hpp"
@@ -22,6 +23,7 @@
 namespace brume {
 
 namespace sh = brume::shared;
+namespace fs = std::filesystem;
 
 namespace {
 
@@ -99,7 +101,10 @@ void check_camera_rain_job(const CameraRainJob& j) {
                                 : "--lidar rains on a scan: give --lidar-out OUT.bin for it, or drop --lidar");
   if (!j.lidar.empty()) {
     validate_lidar_rain(camera_rain_lidar_params(j.rain));
-    check_kitti_bin_output(j.lidar_out, "--lidar-out");
+    // (its folder is checked when the job runs: brume batch plans before it makes the frames' folders)
+    if (fs::path(j.lidar_out).extension() != ".bin")
+      throw Error("--lidar-out '" + j.lidar_out + "': a scan is written as a KITTI .bin (float32 x, y, z, "
+                  "intensity); name it *.bin");
   }
 }
 
@@ -175,6 +180,7 @@ nlohmann::json run_camera_rain_job(const CameraRainJob& job, const ExecOptions& 
   if (!job.lidar.empty()) {
     // The scan does not depend on the image: rained on first, written with the image's outputs.
     check_camera_rain_job(job);
+    check_kitti_bin_output(job.lidar_out, "--lidar-out");
     const LidarRainParams lp = camera_rain_lidar_params(job.rain);
     const std::vector<float> in = read_kitti_bin(job.lidar, "--lidar");
     const std::size_t n = in.size() / 4;
