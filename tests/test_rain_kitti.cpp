@@ -1,8 +1,8 @@
 // Rain on KITTI 000001's scan (issue #56's target): the fractions of points lost and moved to a
 // drop, per 10 m range bin, against an independent Monte Carlo of the model written here from
 // docs/rain.md's equations (not brume's drop field, cells, cone enumeration nor thinning), fed
-// the record's θ, ρ_d, floor, D_min, D_max, r_min, σ and Λ; 10 seeds; within 4 standard errors
-// per bin and a χ² over the bins. Skips with a message without the data.
+// the record's θ, ρ_d, floor, D_min, D_max, r_min, σ and Λ; 10 seeds (2 under a sanitizer); within
+// 4 standard errors per bin and a χ² over the bins. Skips with a message without the data.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -106,7 +106,9 @@ TEST(LidarRainKitti, BinFractionsAgreeWithAMonteCarloOfTheModel) {
   for (std::size_t i = 0; i < all.size() / 4; i += kStride)
     pts.insert(pts.end(), all.begin() + 4 * i, all.begin() + 4 * i + 4);
   const std::size_t n = pts.size() / 4;
-  constexpr int kSeeds = 10;
+  // 10 seeds; 2 in a sanitizer build (the same code paths for ASan to check, at a fifth of the cost:
+  // the standard errors below follow the count, the statistics are the uninstrumented run's).
+  constexpr int kSeeds = kSanitizerBuild ? 2 : 10;
   constexpr std::size_t kBins = 8;  // 10 m bins; the last holds everything beyond 70 m
   const auto bin_of = [&](std::size_t i) {
     const double r = std::sqrt(double(pts[4 * i]) * pts[4 * i] + double(pts[4 * i + 1]) * pts[4 * i + 1] +
@@ -215,9 +217,9 @@ TEST(LidarRainKitti, BinFractionsAgreeWithAMonteCarloOfTheModel) {
     const double q999 = k * std::pow(1.0 - 2.0 / (9.0 * k) + zq * std::sqrt(2.0 / (9.0 * k)), 3);
     EXPECT_LT(chi2, q999) << (f == 0 ? "moved" : "lost") << ": chi2 " << chi2 << " over " << k << " groups";
     std::printf("chi2 %.2f over %.0f groups (0.999: %.2f)\n", chi2, k, q999);
-    EXPECT_GE(g.size(), f == 0 ? 5u : 1u);  // the test has bins to compare
+    EXPECT_GE(g.size(), f == 0 ? 4u : 1u);  // the test has bins to compare
   }
-  EXPECT_GT(total_moved, 1000.0);
+  EXPECT_GT(total_moved, 100.0 * kSeeds);
 }
 
 }  // namespace rain_kitti_tests
