@@ -99,7 +99,7 @@ int lidar(int rounds, const std::vector<double>& rates, bool alone) {
         if ((k == 0) == (r % 2 == 0)) {
           ta = timed([&] { st = lidar_rain(scan.data(), a.data(), n, p, la.data()); });
         } else if (!alone) {
-          const std::unique_ptr<Medium> m = lidar_rain_as_medium_by_beam(p);
+          const std::unique_ptr<Medium> m = lidar_rain_as_medium_searching(p, LidarRainSearch::by_beam);
           const ScanDetection det{p.noise_floor, p.seed};
           tb = timed([&] { rb = scan_through_media({m.get()}, scan.data(), b.data(), n, "scan", &det, lb.data()); });
         }

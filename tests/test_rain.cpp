@@ -343,7 +343,8 @@ TEST(LidarRain, EchoesAreTheStrongestDropOfTheBeamsCone) {
 void same_echoes_cell_and_beam(const std::vector<float>& pts, const LidarRainParams& p, const char* what) {
   SCOPED_TRACE(what);
   const std::size_t n = pts.size() / 4;
-  const std::unique_ptr<Medium> cell = lidar_rain_as_medium(p), beam = lidar_rain_as_medium_by_beam(p);
+  const std::unique_ptr<Medium> cell = lidar_rain_as_medium_searching(p, LidarRainSearch::by_cell),
+                                beam = lidar_rain_as_medium_searching(p, LidarRainSearch::by_beam);
   std::vector<ScanEcho> a, b;
   cell->scan_echoes(pts.data(), n, a);
   beam->scan_echoes(pts.data(), n, b);
@@ -375,9 +376,9 @@ TEST(LidarRain, CellMajorPassRepeatsTheBeamByBeamSearchBitForBit) {
     p.divergence_mrad = div, p.blind_range_m = blind, p.seed = seed;
     return p;
   };
-  // Sizes keep the beam-by-beam search (its cost grows with the cone's cells) near 0.1 s.
-  cases.push_back({"random, defaults, 25 mm/h", scan(600, 0.5, 60.0, 0.1, 21), with(25.0, 2.0, 1.0, 0)});
-  cases.push_back({"random, 100 mm/h, seed 9", scan(600, 1.5, 40.0, 0.0, 22), with(100.0, 2.0, 1.0, 9)});
+  // Small scans: the cell-major pass sweeps whole bricks (0.5 m) about each sparse beam.
+  cases.push_back({"random, defaults, 25 mm/h", scan(400, 0.5, 40.0, 0.1, 21), with(25.0, 2.0, 1.0, 0)});
+  cases.push_back({"random, 100 mm/h, seed 9", scan(400, 1.5, 15.0, 0.0, 22), with(100.0, 2.0, 1.0, 9)});
   cases.push_back({"random, 20 mrad, no blind zone", scan(150, 0.2, 15.0, 0.2, 23), with(100.0, 20.0, 0.0, 3)});
   cases.push_back({"random, 50 mrad, 5 mm/h", scan(100, 0.2, 8.0, 0.0, 24), with(5.0, 50.0, 0.3, 4)});
   {

@@ -239,9 +239,9 @@ struct CellPassScratch {
 
 class LidarRain final : public Medium {
  public:
-  explicit LidarRain(const LidarRainParams& p, bool by_beam = false)
+  explicit LidarRain(const LidarRainParams& p, LidarRainSearch search = LidarRainSearch::chosen)
       : p_(p),
-        by_beam_(by_beam),
+        search_(search),
         sigma_(rain_extinction_per_m(*p.drops.rate_mm_h, kLidarRainQ)),
         field_(*p.drops.rate_mm_h, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed),
         theta_(p.divergence_mrad * 1e-3),
@@ -260,13 +260,16 @@ class LidarRain final : public Medium {
   }
 
   // The strongest drop echo above the floor per beam (the others never win):
-  // the scan's drops drawn once, cell by cell, each tested against the beams
-  // whose cones can hold it (scan_echoes_by_cell); a beam whose answer it
-  // cannot vouch for bit for bit is redone by visit(), beam by beam.
+  // for a scan of kLidarRainByCellBeams beams or more, the scan's drops drawn
+  // once, cell by cell, each tested against the beams whose cones can hold it
+  // (scan_echoes_by_cell; a beam whose answer it cannot vouch for bit for bit
+  // is redone by visit() alone); for fewer, beam by beam (the same echoes).
   void scan_echoes(const float* points, std::size_t n, std::vector<ScanEcho>& out) const override {
     if (reach_ <= 0.0) return;
-    if (by_beam_) scan_echoes_by_beam(points, n, out);
-    else scan_echoes_by_cell(points, n, out);
+    const bool by_cell = search_ == LidarRainSearch::by_cell ||
+                         (search_ == LidarRainSearch::chosen && n >= kLidarRainByCellBeams);
+    if (by_cell) scan_echoes_by_cell(points, n, out);
+    else scan_echoes_by_beam(points, n, out);
   }
 
   // The same answer beam by beam (visit() over each beam's cone cells): the
@@ -383,7 +386,7 @@ class LidarRain final : public Medium {
   static std::size_t slot_of(const RainCell& c) { return rain_cell_hash(c) & (kSlots - 1); }
 
   LidarRainParams p_;
-  bool by_beam_;
+  LidarRainSearch search_;
   double sigma_;
   RainField field_;
   double theta_, cos_half_, k_ = 0.0, reach_ = 0.0;
@@ -512,10 +515,9 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
   constexpr int B = 4;  // cells per brick edge
   const double bm = B * c;
   const double r_far = 1.01 * reach_ * std::sqrt(1.0 + hw * hw) * (1.0 + 1e-9) + 1e-9;
-  const std::int64_t nb = static_cast<std::int64_t>(std::ceil(r_far / bm)) + 1;  // bricks [-nb, nb) per axis
-  const std::int64_t side = 2 * nb;
+  const std::int64_t nb = static_cast<std::int64_t>(std::ceil(r_far / bm)) + 1;  // bricks within [-nb, nb) per axis
+  std::int64_t blo[3] = {nb, nb, nb}, bhi[3] = {-nb, -nb, -nb}, bn[3] = {0, 0, 0};  // the grid: the sweeps' box
   std::vector<float>& brick_T = S.brick_T;
-  brick_T.assign(static_cast<std::size_t>(side * side * side), -1.0f);
   std::vector<std::int64_t>& bricks = S.bricks;
   bricks.clear();
   {
@@ -529,29 +531,40 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
       for (int a = 0; a < 3; ++a) g.lo[a] = std::min(g.lo[a], u[a]), g.hi[a] = std::max(g.hi[a], u[a]);
       g.T = std::max(g.T, std::min(b.r, 1.01 * reach_));  // no drop beyond 1.01 r_reach reaches the floor
     }
-    for (const CellPassGroup& g : groups) {
-      if (g.T < 0.0) continue;
-      double lo[3], hi[3];
-      for (int a = 0; a < 3; ++a) lo[a] = g.lo[a] - psi - 1e-9, hi[a] = g.hi[a] + psi + 1e-9;
-      // A drop in a cone lies at |p| in [r_min, T·√(1 + (θ/2)²)].
-      const double r_end = g.T * std::sqrt(1.0 + hw * hw) * (1.0 + 1e-9) + 1e-9;
-      const float T = static_cast<float>(g.T * (1.0 + 1e-6));
-      for (double ra = r_min; ra < r_end; ra += bm) {
-        const double rb = std::min(r_end, ra + bm);
-        std::int64_t b0[3], b1[3];
-        for (int a = 0; a < 3; ++a) {
-          const double x0 = std::min(ra * lo[a], rb * lo[a]), x1 = std::max(ra * hi[a], rb * hi[a]);
-          b0[a] = std::max(-nb, static_cast<std::int64_t>(std::floor(x0 / bm)));
-          b1[a] = std::min(nb - 1, static_cast<std::int64_t>(std::floor(x1 / bm)));
+    // Sweep every group (pass 0: the grid's box; pass 1: mark its bricks).
+    for (int pass = 0; pass < 2; ++pass) {
+      if (pass == 1) {
+        for (int a = 0; a < 3; ++a) bn[a] = std::max<std::int64_t>(0, bhi[a] - blo[a] + 1);
+        brick_T.assign(static_cast<std::size_t>(bn[0] * bn[1] * bn[2]), -1.0f);
+      }
+      for (const CellPassGroup& g : groups) {
+        if (g.T < 0.0) continue;
+        double lo[3], hi[3];
+        for (int a = 0; a < 3; ++a) lo[a] = g.lo[a] - psi - 1e-9, hi[a] = g.hi[a] + psi + 1e-9;
+        // A drop in a cone lies at |p| in [r_min, T·√(1 + (θ/2)²)].
+        const double r_end = g.T * std::sqrt(1.0 + hw * hw) * (1.0 + 1e-9) + 1e-9;
+        const float T = static_cast<float>(g.T * (1.0 + 1e-6));
+        for (double ra = r_min; ra < r_end; ra += bm) {
+          const double rb = std::min(r_end, ra + bm);
+          std::int64_t b0[3], b1[3];
+          for (int a = 0; a < 3; ++a) {
+            const double x0 = std::min(ra * lo[a], rb * lo[a]), x1 = std::max(ra * hi[a], rb * hi[a]);
+            b0[a] = std::max(-nb, static_cast<std::int64_t>(std::floor(x0 / bm)));
+            b1[a] = std::min(nb - 1, static_cast<std::int64_t>(std::floor(x1 / bm)));
+          }
+          if (pass == 0) {
+            for (int a = 0; a < 3; ++a) blo[a] = std::min(blo[a], b0[a]), bhi[a] = std::max(bhi[a], b1[a]);
+            continue;
+          }
+          for (std::int64_t x = b0[0]; x <= b1[0]; ++x)
+            for (std::int64_t y = b0[1]; y <= b1[1]; ++y)
+              for (std::int64_t z = b0[2]; z <= b1[2]; ++z) {
+                const std::int64_t id = ((x - blo[0]) * bn[1] + (y - blo[1])) * bn[2] + (z - blo[2]);
+                float& t = brick_T[static_cast<std::size_t>(id)];
+                if (t < 0.0f) bricks.push_back(id);
+                t = std::max(t, T);
+              }
         }
-        for (std::int64_t x = b0[0]; x <= b1[0]; ++x)
-          for (std::int64_t y = b0[1]; y <= b1[1]; ++y)
-            for (std::int64_t z = b0[2]; z <= b1[2]; ++z) {
-              const std::int64_t id = ((x + nb) * side + (y + nb)) * side + (z + nb);
-              float& t = brick_T[static_cast<std::size_t>(id)];
-              if (t < 0.0f) bricks.push_back(id);
-              t = std::max(t, T);
-            }
       }
     }
   }
@@ -573,7 +586,7 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
   for (const std::int64_t id : bricks) {
     const double T = brick_T[static_cast<std::size_t>(id)];
     const double T2 = T * T * (1.0 + hw * hw) * (1.0 + 1e-9) + 1e-9;
-    const std::int64_t bz = id % side - nb, by = (id / side) % side - nb, bx = id / (side * side) - nb;
+    const std::int64_t bz = id % bn[2] + blo[2], by = (id / bn[2]) % bn[1] + blo[1], bx = id / (bn[1] * bn[2]) + blo[0];
     for (std::int64_t ix = bx * B; ix < bx * B + B; ++ix) {
       const double lx = static_cast<double>(ix) * c, gx = std::max({lx, 0.0, -(lx + c)});
       for (std::int64_t iy = by * B; iy < by * B + B; ++iy) {
@@ -653,9 +666,9 @@ std::unique_ptr<Medium> lidar_rain_as_medium(const LidarRainParams& p) {
   return std::make_unique<LidarRain>(p);
 }
 
-std::unique_ptr<Medium> lidar_rain_as_medium_by_beam(const LidarRainParams& p) {
+std::unique_ptr<Medium> lidar_rain_as_medium_searching(const LidarRainParams& p, LidarRainSearch search) {
   validate_lidar_rain(p);
-  return std::make_unique<LidarRain>(p, true);
+  return std::make_unique<LidarRain>(p, search);
 }
 
 LidarRainStats lidar_rain(const float* in, float* out, std::size_t n, const LidarRainParams& p, std::uint8_t* labels,
