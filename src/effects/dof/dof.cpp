@@ -295,22 +295,23 @@ void near_field_raise(const Image& z, float zf, float s0, float limit, Image& si
         out[i] = in ? sg[i] : s0;
         members += in;
       }
-    } else
+    } else {
 #pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk) reduction(+ : members)
-    for (int y = 0; y < h; ++y)
-      for (int x = 0; x < w; ++x) {
-        double acc = 0.0;
-        int n = 0;
-        for (int yy = y * k; yy < std::min(H, (y + 1) * k); ++yy)
-          for (int xx = x * k; xx < std::min(W, (x + 1) * k); ++xx) {
-            const std::size_t i = static_cast<std::size_t>(yy) * W + xx;
-            const bool in = band[i] == j;
-            acc += in ? sigma.data[i] : s0;
-            members += in;
-            ++n;
-          }
-        small.at(x, y) = static_cast<float>(acc / n);
-      }
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+          double acc = 0.0;
+          int n = 0;
+          for (int yy = y * k; yy < std::min(H, (y + 1) * k); ++yy)
+            for (int xx = x * k; xx < std::min(W, (x + 1) * k); ++xx) {
+              const std::size_t i = static_cast<std::size_t>(yy) * W + xx;
+              const bool in = band[i] == j;
+              acc += in ? sigma.data[i] : s0;
+              members += in;
+              ++n;
+            }
+          small.at(x, y) = static_cast<float>(acc / n);
+        }
+    }
     if (members == 0) continue;
     const double s_small = std::max(1.0, static_cast<double>(s_band) / k);
     gaussian_blur(small, std::sqrt(s_small * s_small - 0.25), nt);
