@@ -240,7 +240,7 @@ TEST(WetCamera, DemoSceneFitsLeknerDorfAndFilmZeroIsIdentity) {
   // The demo scene (camera 1.6 m up, 5 deg down, 55 deg vertical field of view): ground pixels
   // whose mirrored ray leaves through the top fit wet = K dry + R_F(theta) L_c with one K within
   // 5 % of Lekner & Dorf (independent integral), residual <= 4 % of the mean; off the ground unchanged.
-  const int W = 320, H = 180;
+  const int W = 256, H = 144;
   const DemoScene d = render_demo_scene(W, H);
   CameraPose p;
   p.height_m = 1.6;

@@ -174,6 +174,27 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
   const float kf = static_cast<float>(o.k_eff);
   std::size_t n_ground = 0, n_hits = 0, n_sky = 0, n_left = 0;
   const int max_steps = 4 * (W + H);
+  // Min-range pyramids over blocks of 8 and 32 px (the sky: inf): a step whose segment's image
+  // (the projection of a 3-D segment is a 2-D segment) meets only blocks whose nearest range lies
+  // beyond the segment's farthest point (dist is convex along the ray: an endpoint) cannot
+  // cross the range map, so the march takes it whole: the same hits as 1 px steps, far fewer
+  // steps where the ray runs in front of everything.
+  struct Pyramid {
+    int s = 0, bw = 0, bh = 0;
+    std::vector<double> m;
+  };
+  std::array<Pyramid, 2> pyr;
+  for (int l = 0; l < 2; ++l) {
+    Pyramid& p = pyr[l];
+    p.s = l == 0 ? 32 : 8;
+    p.bw = (W + p.s - 1) / p.s, p.bh = (H + p.s - 1) / p.s;
+    p.m.assign(static_cast<std::size_t>(p.bw) * p.bh, INFINITY);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        double& b = p.m[static_cast<std::size_t>(y / p.s) * p.bw + x / p.s];
+        b = std::min(b, range_at(x, y));
+      }
+  }
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 4) reduction(+ : n_ground, n_hits, n_sky, n_left)
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
@@ -218,6 +239,30 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
           end = infinity;
           break;
         }
+        // A whole block's step where the pyramid clears it.
+        bool skipped = false;
+        for (const Pyramid& p : pyr) {
+          const double t1 = t + p.s / std::max(speed, 1e-12);
+          const double Z1 = pz + t1 * Dz;
+          if (!(Z1 > 1e-6)) continue;
+          const double u0 = cx + fx * X / Z, v0 = cy + fy * Y / Z;
+          const double u1 = cx + fx * (px + t1 * Dx) / Z1, v1 = cy + fy * (py + t1 * Dy) / Z1;
+          if (!(u1 >= -0.5 && u1 < W - 0.5 && v1 >= -0.5 && v1 < H - 0.5)) continue;
+          const int bx0 = std::max(0, static_cast<int>(std::floor(std::min(u0, u1) - 1.0)) / p.s);
+          const int bx1 = std::min(p.bw - 1, static_cast<int>(std::ceil(std::max(u0, u1) + 1.0)) / p.s);
+          const int by0 = std::max(0, static_cast<int>(std::floor(std::min(v0, v1) - 1.0)) / p.s);
+          const int by1 = std::min(p.bh - 1, static_cast<int>(std::ceil(std::max(v0, v1) + 1.0)) / p.s);
+          double near = INFINITY;
+          for (int by = by0; by <= by1; ++by)
+            for (int bx = bx0; bx <= bx1; ++bx) near = std::min(near, p.m[static_cast<std::size_t>(by) * p.bw + bx]);
+          if (std::max(dist(t), dist(t1)) <= near * (1.0 + kWetHitMargin)) {
+            t = t1;
+            front = true;
+            skipped = true;
+            break;
+          }
+        }
+        if (skipped) continue;
         tprev = t;
         t += kWetMarchStepPx / std::max(speed, 1e-12);
         int iu = 0, iv = 0;
@@ -282,7 +327,7 @@ const ParamTable<WetScan>& wet_scan_param_table() {
         .real("noise-floor", &WetScan::noise_floor, "1/m^2", Range::above(0.0),
               "noise floor F: the weakest mean return power (intensity/range^2) the sensor detects (as brume lidar "
               "rain's)")
-        .count("seed", &WetScan::seed, "1", Range::at_least(0.0), "seed of the detection draws (same seed, same scan)");
+        .count("scan-seed", &WetScan::seed, "1", Range::at_least(0.0), "seed of the detection draws (same seed, same scan)");
     return d;
   }();
   return t;
