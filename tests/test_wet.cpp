@@ -103,7 +103,7 @@ TEST(WetOptics, LeknerDorfFromIndependentIntegral) {
     EXPECT_EQ(o.k_eff, o.k);
   }
   // The camera and the LiDAR use one transfer: diffuse in and out is K.
-  EXPECT_EQ(film_transfer(1.0 - re, 1.0 - re, 1.333, 0.12), WetOptics(film(2.0)).k);
+  EXPECT_EQ(film_transfer(1.0 - re, 1.0 - re, 1.333, 0.12, water_diffuse_internal_reflectance(1.333)), WetOptics(film(2.0)).k);
   // Wetted fraction: linear up to the roughness depth, 0 for no film.
   EXPECT_EQ(wetted_fraction(0.25, 1.0), 0.25);
   EXPECT_EQ(wetted_fraction(3.0, 1.0), 1.0);

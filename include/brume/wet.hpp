@@ -77,8 +77,9 @@ double fresnel_reflectance(double cos_theta, double n);
 double water_diffuse_external_reflectance(double n);
 // r_i = 1 − (1 − r_e)/n².
 double water_diffuse_internal_reflectance(double n);
-// The film's transfer Q(t_in, t_out) for a ground of albedo a (above).
-double film_transfer(double t_in, double t_out, double n, double albedo);
+// The film's transfer Q(t_in, t_out) for a ground of albedo a (above), r_i the water's
+// diffuse internal reflectance (water_diffuse_internal_reflectance(n), computed once by the caller).
+double film_transfer(double t_in, double t_out, double n, double albedo, double r_i);
 
 // The film, in physical units (block "wet").
 struct WetFilm {
