@@ -246,7 +246,7 @@ const ParamTable<LidarWetJob>& lidar_wet_job_table() {
 }
 
 CommandDef wet_command() {
-  return make_command<CameraWetJob>({
+  CommandDef c = make_command<CameraWetJob>({
       .name = "wet",
       .cli = "wet",
       .summary = "wet ground on an RGB-D image: darker ground (Lekner & Dorf) and the scene's mirror image in the film "
@@ -271,6 +271,10 @@ CommandDef wet_command() {
                          r["mirror_left_frame"].get<std::size_t>());
           },
   });
+  // The extinction a LiDAR beam sees in this job's media (brume/lidar_camera.hpp's hook): none, the
+  // film lies on the ground, not in the air.
+  c.extinction_per_m = [](const nlohmann::json&, double) -> std::optional<double> { return 0.0; };
+  return c;
 }
 
 CommandDef lidar_wet_command() {
