@@ -13,6 +13,7 @@
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
+#include "brume/medium.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/record.hpp"
 #include "brume/wet.hpp"
@@ -278,7 +279,7 @@ CommandDef wet_command() {
 }
 
 CommandDef lidar_wet_command() {
-  return make_command<LidarWetJob>({
+  CommandDef c = make_command<LidarWetJob>({
       .name = "lidar wet",
       .cli = "lidar wet",
       .summary = "wet ground under a LiDAR scan (KITTI .bin): ground returns through the water film at their "
@@ -295,6 +296,35 @@ CommandDef lidar_wet_command() {
                          r["ground"].get<std::size_t>(), r["lost"].get<std::size_t>());
           },
   });
+  // brume.lidar.wet(points): an (N, 4) float32 array (x, y, z, intensity), read in place when
+  // C-contiguous; the points that return as a new (K, 4) array and the labels as N bytes.
+  static const auto call = array_call_table(lidar_wet_param_table(), kArrayNone);
+  c.arrays = make_array_form<LidarWetParams>(
+      "lidar_wet", "brume.lidar.wet",
+      "Wet ground under a LiDAR scan (one water film: Fresnel at each ground point's incidence, Lekner & Dorf's "
+      "internal reflection): points is an (N, 4) float32 array of x, y, z [m] (sensor frame, z up) and intensity. "
+      "Returns points, the (K, 4) points that return in input order (None when none does), and labels, one uint8 per "
+      "input point: 0 off the ground (unchanged), 1 wet ground, 2 lost. film in mm is required. As `brume lidar wet`.",
+      {{"points", 1, false, ArrayArg::As::view, false, true}}, call, {"points", "labels", "record"}, true,
+      [](const std::vector<ArrayIn>& in, ArrayCall<LidarWetParams>& k, const Exec&, const std::set<std::string>&) {
+        const std::string what = "brume.lidar.wet(): points";
+        std::vector<float> dense;
+        const float* src = scan_points(in[0].view, what, dense);
+        const std::size_t n = static_cast<std::size_t>(in[0].view.height());
+        std::vector<float> out(4 * n);
+        ArrayResult r;
+        std::vector<std::uint8_t>& labels = r.bytes["labels"];
+        labels.resize(n);
+        const LidarWetStats st = lidar_wet(src, out.data(), n, k.p, labels.data(), what);
+        const std::size_t kept = n - st.lost;
+        Image pts(4, static_cast<int>(kept), 1);
+        std::copy(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(4 * kept), pts.data.begin());
+        r.record["wet"] = lidar_wet_record(k.p, st);
+        r.images["points"] = std::move(pts);
+        return r;
+      },
+      [](const ArrayCall<LidarWetParams>& k, const std::set<std::string>&) { validate_lidar_wet(k.p); });
+  return c;
 }
 
 }  // namespace brume
