@@ -13,7 +13,6 @@
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
-#include "brume/medium.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/record.hpp"
 #include "brume/wet.hpp"
@@ -307,20 +306,13 @@ CommandDef lidar_wet_command() {
       "input point: 0 off the ground (unchanged), 1 wet ground, 2 lost. film in mm is required. As `brume lidar wet`.",
       {{"points", 1, false, ArrayArg::As::view, false, true}}, call, {"points", "labels", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<LidarWetParams>& k, const Exec&, const std::set<std::string>&) {
-        const std::string what = "brume.lidar.wet(): points";
-        std::vector<float> dense;
-        const float* src = scan_points(in[0].view, what, dense);
-        const std::size_t n = static_cast<std::size_t>(in[0].view.height());
-        std::vector<float> out(4 * n);
-        ArrayResult r;
-        std::vector<std::uint8_t>& labels = r.bytes["labels"];
-        labels.resize(n);
-        const LidarWetStats st = lidar_wet(src, out.data(), n, k.p, labels.data(), what);
-        const std::size_t kept = n - st.lost;
-        Image pts(4, static_cast<int>(kept), 1);
-        std::copy(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(4 * kept), pts.data.begin());
+        LidarWetStats st;
+        ArrayResult r = scan_array_result(in[0].view, "brume.lidar.wet(): points",
+                                          [&](const float* src, float* out, std::size_t n, std::uint8_t* labels) {
+                                            st = lidar_wet(src, out, n, k.p, labels, "brume.lidar.wet(): points");
+                                            return st.lost;
+                                          });
         r.record["wet"] = lidar_wet_record(k.p, st);
-        r.images["points"] = std::move(pts);
         return r;
       },
       [](const ArrayCall<LidarWetParams>& k, const std::set<std::string>&) { validate_lidar_wet(k.p); });
