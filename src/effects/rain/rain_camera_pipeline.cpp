@@ -291,16 +291,14 @@ CommandDef rain_command() {
         if (in.size() > 2 && in[2].present) {  // the scan first (as the CLI: its errors before the image's work)
           const std::string what = "brume.rain(): lidar";
           const LidarRainParams lp = camera_rain_lidar_params(k.p);
-          std::vector<float> dense;
-          const float* src = scan_points(in[2].view, what, dense);
-          const std::size_t n = static_cast<std::size_t>(in[2].view.height());
-          std::vector<float> out(4 * n);
-          std::vector<std::uint8_t>& labels = r.bytes["lidar_labels"];
-          labels.resize(n);
-          const LidarRainStats st = lidar_rain(src, out.data(), n, lp, labels.data(), what);
-          Image pts(4, static_cast<int>(n - st.run.lost), 1);
-          std::copy(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(pts.data.size()), pts.data.begin());
-          r.images["lidar"] = std::move(pts);
+          LidarRainStats st;
+          ArrayResult scan = scan_array_result(in[2].view, what,
+                                               [&](const float* src, float* out, std::size_t n, std::uint8_t* labels) {
+                                                 st = lidar_rain(src, out, n, lp, labels, what);
+                                                 return st.run.lost;
+                                               });
+          r.images["lidar"] = std::move(scan.images["points"]);
+          r.bytes["lidar_labels"] = std::move(scan.bytes["labels"]);
           r.record["lidar_rain"] = lidar_rain_record(lp, st);
         } else {
           r.images["lidar"] = Image();  // None
