@@ -37,20 +37,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-std::vector<float> synthetic(std::size_t n) {
-  std::mt19937 g(1);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
-  std::vector<float> v(4 * n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const double az = 6.283185307179586 * u(g), el = (u(g) - 0.8) * 0.45, r = 3.0 + 77.0 * u(g) * u(g);
-    v[4 * i] = static_cast<float>(r * std::cos(el) * std::cos(az));
-    v[4 * i + 1] = static_cast<float>(r * std::cos(el) * std::sin(az));
-    v[4 * i + 2] = static_cast<float>(r * std::sin(el));
-    v[4 * i + 3] = static_cast<float>(u(g));
-  }
-  return v;
-}
-
 // `copies` copies of a scan, each point of each copy after the first moved
 // by up to 1 cm on each axis.
 std::vector<float> replicated(const std::vector<float>& scan, int copies) {
@@ -107,7 +93,7 @@ int main(int argc, char** argv) {
   const std::string dir = std::string(BRUME_DATA_DIR) + "/kitti_object_000001";
   const bool have = std::filesystem::exists(dir + "/velodyne/000001.bin");
   if (!have) std::printf("  (%s is absent: synthetic scans of its size instead)\n", dir.c_str());
-  const std::vector<float> scan = have ? read_kitti_bin(dir + "/velodyne/000001.bin", "--points") : synthetic(120268);
+  const std::vector<float> scan = have ? read_kitti_bin(dir + "/velodyne/000001.bin", "--points") : bench::synthetic_scan(120268);
   const char* kitti = have ? "KITTI 000001" : "synthetic, KITTI's size";
   if (only == "sizes") {  // where one thread ends: synthetic scans from 2^16 to 2^21 points
     LidarFogParams p, l;
@@ -117,7 +103,7 @@ int main(int argc, char** argv) {
     l.fog.falloff_per_m = 0.05;
     l.pose.sensor_height_m = 1.73;
     for (int e = 16; e <= 21; ++e) {
-      const std::vector<float> v = synthetic(std::size_t{1} << e);
+      const std::vector<float> v = bench::synthetic_scan(std::size_t{1} << e);
       char name[64];
       std::snprintf(name, sizeof name, "homogeneous, 2^%d", e);
       report(name, v, p, rounds);
@@ -132,7 +118,7 @@ int main(int argc, char** argv) {
     LidarFogParams p;
     p.visibility_m = 50.0;
     report(kitti, scan, p, rounds);
-    const std::vector<float> big = synthetic(1202680);
+    const std::vector<float> big = bench::synthetic_scan(1202680);
     report("synthetic, 1.2 M points", big, p, rounds);
     p.visibility_m = 20.0;
     report("synthetic, 1.2 M, V = 20 m", big, p, rounds);

@@ -5,8 +5,11 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstddef>
 #include <fstream>
 #include <functional>
+#include <random>
 #include <string>
 #include <utility>
 #include <vector>
@@ -52,6 +55,23 @@ inline std::string cpu_name() {
   }
   if (!family.empty() && !model.empty()) name += " (family " + family + ", model " + model + ")";
   return name;
+}
+
+// A LiDAR-like scan of n points (x, y, z, intensity; float32 each): uniform
+// azimuth, elevations in [-0.36, 0.09] rad, ranges 3..80 m (denser near),
+// intensities uniform in [0, 1); the same for the same n.
+inline std::vector<float> synthetic_scan(std::size_t n) {
+  std::mt19937 g(1);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<float> v(4 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double az = 6.283185307179586 * u(g), el = (u(g) - 0.8) * 0.45, r = 3.0 + 77.0 * u(g) * u(g);
+    v[4 * i] = static_cast<float>(r * std::cos(el) * std::cos(az));
+    v[4 * i + 1] = static_cast<float>(r * std::cos(el) * std::sin(az));
+    v[4 * i + 2] = static_cast<float>(r * std::sin(el));
+    v[4 * i + 3] = static_cast<float>(u(g));
+  }
+  return v;
 }
 
 }  // namespace brume::bench

@@ -46,6 +46,19 @@ ${PYTHON:-/usr/bin/python3} scripts/lidar_picture.py bev "$K/velodyne/000001.bin
    "$OUT/kitti-000001-lidar-bev.jpg" --title "visibility 80 m" --dpi 80
 ${PYTHON:-/usr/bin/python3} scripts/lidar_picture.py proj "$K/velodyne/000001.bin" "$tmp/fog80.bin" \
    "$K/calib/000001.txt" "$K/image_2/000001.png" "$tmp/haze80.png" "$OUT/kitti-000001-lidar-projected.jpg"
+# rain (docs/rain.md) on the same frame at 5, 25 and 100 mm/h: the drop field's streaks depth-tested against the
+# completed scan, the rest of the rain as extinction; seed 1, 1/60 s, a pinhole
+for r in 5 25 100; do
+  $B rain --image "$K/image_2/000001.png" "${kl[@]}" --rate "$r" --rain-seed 1 \
+     --out "$OUT/kitti-000001-rain$r.jpg" "${q[@]}" >/dev/null
+done
+# wet ground (docs/wet-ground.md) on the same frame: a 1 mm film on the road (KITTI's camera 1.65 m up), its
+# mirror image marched through the completed range; and on the demo scene (brume demo; 1.6 m up, 5 deg down)
+$B wet --image "$K/image_2/000001.png" "${kl[@]}" --camera-height 1.65 --film 1 \
+   --out "$OUT/kitti-000001-wet.jpg" "${q[@]}" >/dev/null
+$B demo --out-dir "$tmp/demo" --width 640 --height 448 >/dev/null
+$B wet --image "$tmp/demo/clean.png" --range "$tmp/demo/range.exr" --fov-y 55 --camera-height 1.6 --pitch -5 \
+   --film 1.5 --out "$OUT/demo-wet.jpg" "${q[@]}" >/dev/null
 # the turbidity fit (Preetham sky) on each Poly Haven sky
 for s in park sky sunrise; do
   $B sky fit --image "$D/sky_hdr_polyhaven/$s.hdr" --sun auto --out "$LOCAL/fit-$s.json" --plot "$OUT/polyhaven-$s-fit.png"

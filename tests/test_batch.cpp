@@ -752,3 +752,42 @@ TEST_F(Batch, ScanCityscapes) {
   EXPECT_NEAR(range.at(3, 2), z, 1e-6 * z);
   EXPECT_TRUE(std::isnan(range.at(0, 0)));
 }
+
+// Rain in a batch (issue #56): each frame draws its own drop field (rain-seed=seed(): the
+// sampler's top 53 bits for the frame's key), a lidar column rains on the frame's scan, written
+// beside the image as <key stem>.bin (brume lidar rain's bytes with the drawn seed), and `brume
+// run` of a frame's record repeats its image and its scan bit for bit.
+TEST_F(Batch, RainFramesDrawTheirDropsAndRepeatWithTheirScans) {
+  const std::vector<std::string> keys = make_frames(2);
+  std::vector<float> pts;
+  for (int i = 0; i < 300; ++i) {
+    const double a = 0.01 * i, r = 2.0 + 0.05 * i;
+    pts.insert(pts.end(), {static_cast<float>(r * std::cos(a)), static_cast<float>(r * std::sin(a)), -1.0f,
+                           static_cast<float>((i % 5) / 5.0)});
+  }
+  std::ofstream(p("data/s.bin"), std::ios::binary)
+      .write(reinterpret_cast<const char*>(pts.data()), static_cast<std::streamsize>(pts.size() * 4));
+  const std::string m = csv(keys, "effect,fx,lidar", "rain,60,s.bin");
+  CliRun r = run("batch --manifest " + m + " --out-dir " + p("out") + " --seed 5 --quiet --param rate=50" +
+                 " --param 'rain-seed=seed()'");
+  ASSERT_EQ(r.status, 0) << r.output;
+  std::set<std::uint64_t> seeds;
+  for (const std::string& k : keys) {
+    const std::string stem = k.substr(0, k.size() - 4);
+    const nlohmann::json rec = nlohmann::json::parse(slurp(p("out/" + stem + ".json")));
+    const auto seed = rec["job"]["rain"]["rain-seed"].get<std::uint64_t>();
+    EXPECT_EQ(seed, static_cast<std::uint64_t>(sample_unit(5, k, "rain-seed") * 0x1p53)) << k;
+    EXPECT_EQ(rec["batch"]["sampling"]["specs"]["rain-seed"], "seed()");
+    seeds.insert(seed);
+    r = run("lidar rain --points " + p("data/s.bin") + " --rate 50 --seed " + std::to_string(seed) + " --out " +
+            p("alone.bin"));
+    ASSERT_EQ(r.status, 0) << r.output;
+    const std::string scan = slurp(p("out/" + stem + ".bin"));
+    EXPECT_TRUE(!scan.empty() && scan == slurp(p("alone.bin"))) << k;
+  }
+  EXPECT_EQ(seeds.size(), keys.size());  // no two frames share their drops
+  r = run("run " + p("out/a/f0.json") + " --out-dir " + p("again"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  expect_same_pixels(p("out/a/f0.png"), p("again/f0.png"));
+  EXPECT_EQ(slurp(p("out/a/f0.bin")), slurp(p("again/f0.bin")));
+}

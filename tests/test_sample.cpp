@@ -14,6 +14,7 @@
 #include "brume/command.hpp"
 #include "brume/dof.hpp"
 #include "brume/haze.hpp"
+#include "brume/rain.hpp"
 #include "brume/sample.hpp"
 #include "test_util.hpp"
 
@@ -335,4 +336,30 @@ TEST(Sample, Cli) {
   r = run("sample --effect haze --seed 7 --key k --param visibility");
   EXPECT_EQ(r.status, 2) << r.output;
   EXPECT_NE(r.output.find("NAME=SPEC"), std::string::npos) << r.output;
+}
+
+// seed(): a whole-number parameter per key, the hash's top 53 bits (k of u = k·2^-53, exactly);
+// refused for any other kind and with arguments; its ends checked by the declaration (0, 2^53 - 1).
+TEST(Sample, SeedDrawsTheHashsTop53Bits) {
+  const ParamSpec& seed = camera_rain_param_table().at("rain-seed").spec;
+  const Distribution d = parse_distribution(seed, " seed ( ) ");
+  EXPECT_EQ(d.kind, Distribution::Kind::seed);
+  EXPECT_EQ(d.text(), "seed()");
+  EXPECT_EQ(draw(d, 0.0), 0u);
+  EXPECT_EQ(draw(d, 0x1p-53 * 12345), 12345u);
+  EXPECT_EQ(draw(d, 1.0 - 0x1p-53), (std::uint64_t{1} << 53) - 1);
+  const nlohmann::json v = random_params("rain", 7, "Art/view1.png", {});
+  EXPECT_EQ(v["rain-seed"].get<std::uint64_t>(),
+            static_cast<std::uint64_t>(sample_unit(7, "Art/view1.png", "rain-seed") * 0x1p53));
+  EXPECT_NE(v["rain-seed"], random_params("rain", 7, "Art/view2.png", {})["rain-seed"]);
+  const std::vector<nlohmann::json> ends = sample_corners("rain", {{"rate", "5"}}, 16);
+  ASSERT_EQ(ends.size(), 2u);
+  EXPECT_EQ(ends[0]["rain-seed"], 0u);
+  EXPECT_EQ(ends[1]["rain-seed"], (std::uint64_t{1} << 53) - 1);
+  auto err = [](const ParamSpec& s, const std::string& t) { return error_of([&] { parse_distribution(s, t); }); };
+  std::string m = err(haze_param_table().at("visibility").spec, "seed()");
+  EXPECT_NE(m.find("--visibility"), std::string::npos) << m;
+  EXPECT_NE(m.find("whole number"), std::string::npos) << m;
+  m = err(seed, "seed(3)");
+  EXPECT_NE(m.find("no arguments"), std::string::npos) << m;
 }

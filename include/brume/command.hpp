@@ -125,6 +125,12 @@ struct ArrayResult {
   // build a Result positionally ({images, record, job, more}).
   std::map<std::string, std::vector<std::uint8_t>> bytes = {};
 };
+// A scan's array form (brume.lidar.wet; rain's may follow): `points` an (N, 4) float32 view (read in
+// place when dense, brume/medium.hpp's scan_points, refused naming `what` otherwise); `run`(src, out, n,
+// labels) writes the points that return into out, in input order, one label per input point, and
+// answers how many were lost; the Result's "points" ((K, 4)) and "labels" (N bytes).
+ArrayResult scan_array_result(const ConstImageView& points, const std::string& what,
+                              const std::function<std::size_t(const float*, float*, std::size_t, std::uint8_t*)>& run);
 struct ArrayForm {
   std::string function;            // the module's name (haze, depth_convert)
   std::string public_name;         // as users call it (brume.haze, brume.depth.convert)

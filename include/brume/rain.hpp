@@ -151,6 +151,19 @@ class RainField {
   // Woo 1987), each visited cell widened by the cone's radius at the far end
   // of its segment; each once, in the order the DDA meets them.
   static void cone_cells(const MediumRay& ray, double t0, double t1, double half_width, std::vector<RainCell>& out);
+  // The hash of a cell's draws, in two folds for callers that walk a column
+  // of cells (ix, iy fixed): cell_hash(column_hash(ix, iy), iz).
+  std::uint64_t column_hash(std::int64_t ix, std::int64_t iy) const {
+    return hash_fold(hash_fold(key_, static_cast<std::uint64_t>(ix)), static_cast<std::uint64_t>(iy));
+  }
+  static std::uint64_t cell_hash(std::uint64_t column, std::int64_t iz) {
+    return hash_fold(column, static_cast<std::uint64_t>(iz));
+  }
+  // The cell's first uniform draw u: it holds a drop within measure m iff −ln(1 − u) <= m.
+  static double first_unit(std::uint64_t cell_hash) { return hash_unit(hash_mix(hash_fold(cell_hash, 0))); }
+  // for_each_drop_within with the cell's hash given (cell_hash of its column's).
+  template <class F>
+  void for_each_drop_hashed(const RainCell& cell, std::uint64_t h, double m, F&& f) const;
 
  private:
   double rate_, d_min_, d_max_, lambda_ = 0.0, n_ = 0.0, tail_ = 0.0, scale_ = 0.0;
@@ -160,10 +173,13 @@ class RainField {
 template <class F>
 void RainField::for_each_drop_within(const RainCell& cell, double m, F&& f) const {
   if (!(m > 0.0)) return;
+  for_each_drop_hashed(cell, cell_hash(column_hash(cell.ix, cell.iy), cell.iz), m, f);
+}
+
+template <class F>
+void RainField::for_each_drop_hashed(const RainCell& cell, std::uint64_t h, double m, F&& f) const {
+  if (!(m > 0.0)) return;
   const double c = kRainCellM;
-  const std::uint64_t h = hash_fold(hash_fold(hash_fold(key_, static_cast<std::uint64_t>(cell.ix)),
-                                              static_cast<std::uint64_t>(cell.iy)),
-                                    static_cast<std::uint64_t>(cell.iz));
   double s = 0.0;  // E_1 + … + E_k
   for (std::uint64_t k = 0;; ++k) {
     const std::uint64_t hk = hash_fold(h, k);
@@ -208,7 +224,7 @@ void validate_lidar_rain(const LidarRainParams& p);
 // What a scan's rain did.
 struct LidarRainStats {
   ScanRun run;
-  std::size_t drops_drawn = 0;  // drops the thinned sampler drew over all beams
+  std::size_t drops_drawn = 0;  // drops the thinned sampler drew: each cell's once (and again for a beam redone alone)
 };
 
 // Rain on n points (x, y, z [m] in the sensor frame, intensity >= 0; float32

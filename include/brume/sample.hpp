@@ -63,7 +63,9 @@ std::uint64_t sha256_prefix64(std::string_view msg);
 
 // One parameter's distribution, parsed from what a user wrote.
 struct Distribution {
-  enum class Kind { fixed, uniform, loguniform, choice };
+  // seed: an integer parameter's per-key seed, floor(u·2^53) (the 53 bits of the key's hash): a
+  // drop field, a noise pattern that no two frames share.
+  enum class Kind { fixed, uniform, loguniform, choice, seed };
   Kind kind = Kind::fixed;
   double a = 0.0, b = 0.0;               // uniform, loguniform: the bounds
   std::vector<nlohmann::json> values;    // fixed: one value; choice: the items (parsed by the parameter's kind)
@@ -72,7 +74,8 @@ struct Distribution {
 
 // Parses `text` for the parameter `spec`, whitespace tolerant: a fixed value
 // (as the CLI flag takes it: "0.9", "auto", "naive", "0.8,0.8,0.9"),
-// uniform(a, b), loguniform(a, b) with a > 0, choice(x, y, ...). Every value
+// uniform(a, b), loguniform(a, b) with a > 0, choice(x, y, ...), seed()
+// (a whole-number parameter only: values in [0, 2^53)). Every value
 // the distribution can produce is range-checked by spec.check. Throws
 // brume::Error naming the parameter, the text and what is allowed.
 Distribution parse_distribution(const ParamSpec& spec, std::string_view text);

@@ -24,7 +24,7 @@ import numpy as np
 
 from . import _brume
 
-__all__ = ["PointsTransform", "Transform", "loguniform", "uniform", "choice"]
+__all__ = ["PointsTransform", "Transform", "loguniform", "uniform", "choice", "seed"]
 
 _SAMPLER = "brume-sample-v1"
 
@@ -55,6 +55,12 @@ def choice(*items):
     if not items:
         raise ValueError("brume.transforms.choice(): give at least one item")
     return _Spec("choice(" + ", ".join(str(i) for i in items) + ")")
+
+
+def seed():
+    """A whole-number parameter drawn per key (a drop field's seed): the top 53
+    bits of the sampler's hash, so that no two keys share it."""
+    return _Spec("seed()")
 
 
 def _spec_text(name, v):
@@ -489,7 +495,8 @@ class Transform(_Keyed):
         applied = self._applies(key)
         values = [s.draw(self.seed, key if i == 0 else f"{key}/{s.command['name']}")
                   for i, s in enumerate(self._stages)] if applied else []
-        if applied and self.lidar_target is not None and "lidar_seed" not in self._stages[0].fixed:
+        if (applied and self.lidar_target is not None and "lidar_seed" not in self._stages[0].fixed
+                and "lidar_seed" in self._stages[0].command["keywords"]):  # (rain's scan takes the rain's seed)
             values[0]["lidar-seed"] = self._noise_seed(key)
         return applied, values
 

@@ -180,50 +180,52 @@ void run_rgb_generic(const RunArgs& a, const RateRows& q, int edge_mode, int xa,
 // group's levels need no sigma of their own. The
 // exact scheme's offset needs the variance ratio vr; the published one is
 // sigma_k itself.
-// The product is taken sixteen pixels per vector (GCC's vector extension,
-// inlined into each target's row: a zmm register on AVX-512, two ymm on
-// AVX2, four xmm on the 128-bit targets and the reference row), four
-// vectors at once, kept in registers through the k multiplies; written as k
-// passes over the chunk, as before, each pass loaded and stored it again
-// (GCC does not interchange the loops), and one vector at a time waits on
-// each multiply's latency.
+// The product is taken by `product` (sigma_products: the reference's
+// sixteen pixels per GCC vector; each target's SigmaProducts: its own
+// vectors), into an L1-sized chunk, then the chunk's offsets.
 typedef float v16f __attribute__((vector_size(64)));
-template <bool kExact>
+// s[0 .. c) = s0 g[0 .. c)^k, each lane's k multiplies in order (the
+// reference: sixteen pixels per vector, four vectors at once, kept in
+// registers through the k multiplies).
+__attribute__((always_inline)) inline void sigma_products(float* __restrict s, const float* __restrict g, int c,
+                                                          float s0, int k) {
+  const v16f s0v = v16f{} + s0;  // s0 in every lane (0 + s0 is s0)
+  int b = 0;
+  for (; b + 64 <= c; b += 64) {  // four independent chains hide the multiply's latency
+    v16f g0, g1, g2, g3;
+    std::memcpy(&g0, g + b, sizeof g0);
+    std::memcpy(&g1, g + b + 16, sizeof g1);
+    std::memcpy(&g2, g + b + 32, sizeof g2);
+    std::memcpy(&g3, g + b + 48, sizeof g3);
+    v16f p0 = s0v, p1 = s0v, p2 = s0v, p3 = s0v;
+    for (int i = 0; i < k; ++i) p0 = p0 * g0, p1 = p1 * g1, p2 = p2 * g2, p3 = p3 * g3;
+    std::memcpy(s + b, &p0, sizeof p0);
+    std::memcpy(s + b + 16, &p1, sizeof p1);
+    std::memcpy(s + b + 32, &p2, sizeof p2);
+    std::memcpy(s + b + 48, &p3, sizeof p3);
+  }
+  for (; b + 16 <= c; b += 16) {
+    v16f g0;
+    std::memcpy(&g0, g + b, sizeof g0);
+    v16f p0 = s0v;
+    for (int i = 0; i < k; ++i) p0 = p0 * g0;
+    std::memcpy(s + b, &p0, sizeof p0);
+  }
+  for (; b < c; ++b) {
+    float sb = s0;
+    for (int i = 0; i < k; ++i) sb = sb * g[b];
+    s[b] = sb;
+  }
+}
+template <bool kExact, class Product>
 __attribute__((always_inline)) inline void row_offsets(float* __restrict h, int* __restrict n, float* __restrict fr,
                                                        float s0, int k, const float* __restrict growth,
-                                                       const float* __restrict vr, int W) {
+                                                       const float* __restrict vr, int W, Product&& product) {
   constexpr int kChunk = 256;
-  float s[kChunk];
+  alignas(64) float s[kChunk];
   for (int x0 = 0; x0 < W; x0 += kChunk) {
     const int c = std::min(kChunk, W - x0);
-    const float* __restrict g = growth + x0;
-    const v16f s0v = v16f{} + s0;  // s0 in every lane (0 + s0 is s0)
-    int b = 0;
-    for (; b + 64 <= c; b += 64) {  // four independent chains hide the multiply's latency
-      v16f g0, g1, g2, g3;
-      std::memcpy(&g0, g + b, sizeof g0);
-      std::memcpy(&g1, g + b + 16, sizeof g1);
-      std::memcpy(&g2, g + b + 32, sizeof g2);
-      std::memcpy(&g3, g + b + 48, sizeof g3);
-      v16f p0 = s0v, p1 = s0v, p2 = s0v, p3 = s0v;
-      for (int i = 0; i < k; ++i) p0 = p0 * g0, p1 = p1 * g1, p2 = p2 * g2, p3 = p3 * g3;
-      std::memcpy(s + b, &p0, sizeof p0);
-      std::memcpy(s + b + 16, &p1, sizeof p1);
-      std::memcpy(s + b + 32, &p2, sizeof p2);
-      std::memcpy(s + b + 48, &p3, sizeof p3);
-    }
-    for (; b + 16 <= c; b += 16) {
-      v16f g0;
-      std::memcpy(&g0, g + b, sizeof g0);
-      v16f p0 = s0v;
-      for (int i = 0; i < k; ++i) p0 = p0 * g0;
-      std::memcpy(s + b, &p0, sizeof p0);
-    }
-    for (; b < c; ++b) {
-      float sb = s0;
-      for (int i = 0; i < k; ++i) sb = sb * g[b];
-      s[b] = sb;
-    }
+    product(s, growth + x0, c, s0, k);
     for (int x = 0; x < c; ++x) {
       const float hx = kExact ? sh::brume_offset_for_moment(s[x] * s[x] * vr[x0 + x]) : s[x];
       h[x0 + x] = hx;
@@ -264,16 +266,17 @@ using RunEnd = int (*)(const int* __restrict, int, int);
 // F's rows come through a RowSource (the whole image, or a fused group's
 // ring) and row y of the result goes to orow.
 // C: values a pixel, 4 (RGBA) or 3 (RGB rows, with the RGB run kernels).
-template <int C>
+template <int C, class Product>
 __attribute__((always_inline)) inline void general_row_body(const RowSource<float>& in, float* orow, const float* rho,
                                                             float s0, int k, const float* growth, const float* vr,
                                                             bool exact, int edge_mode, int W, int H, int y,
-                                                            RowScratch& t, RunKernel run, RunEnd run_end) {
+                                                            RowScratch& t, RunKernel run, RunEnd run_end,
+                                                            Product&& product) {
   float* h = t.h.data();
   if (exact)
-    row_offsets<true>(h, t.n.data(), t.fr.data(), s0, k, growth, vr, W);
+    row_offsets<true>(h, t.n.data(), t.fr.data(), s0, k, growth, vr, W, product);
   else
-    row_offsets<false>(h, t.n.data(), t.fr.data(), s0, k, growth, vr, W);
+    row_offsets<false>(h, t.n.data(), t.fr.data(), s0, k, growth, vr, W, product);
   const std::size_t Ws = static_cast<std::size_t>(W);
   for (int x = 0; x < W;) {
     const int n = t.n[x];
@@ -369,10 +372,14 @@ void standard_row_generic(BRUME_STANDARD_ROW_ARGS) { BRUME_STANDARD_ROW_CALL; }
 #define BRUME_GENERAL_ROW_ARGS                                                                              \
   const RowSource<float> &in, float *orow, const float *rho, float s0, int k, const float *growth,            \
       const float *vr, bool exact, int edge_mode, int W, int H, int y, RowScratch &t
-#define BRUME_GENERAL_ROW_CALL(C, upd, end) \
-  general_row_body<C>(in, orow, rho, s0, k, growth, vr, exact, edge_mode, W, H, y, t, upd, end)
-void general_row_generic(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(4, run_generic, run_end_generic); }
-void general_rgb_row_generic(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(3, run_rgb_generic, run_end_generic); }
+#define BRUME_GENERAL_ROW_CALL(C, upd, end, prod) \
+  general_row_body<C>(in, orow, rho, s0, k, growth, vr, exact, edge_mode, W, H, y, t, upd, end, prod)
+void general_row_generic(BRUME_GENERAL_ROW_ARGS) {
+  BRUME_GENERAL_ROW_CALL(4, run_generic, run_end_generic, sigma_products);
+}
+void general_rgb_row_generic(BRUME_GENERAL_ROW_ARGS) {
+  BRUME_GENERAL_ROW_CALL(3, run_rgb_generic, run_end_generic, sigma_products);
+}
 void rates_generic(const float* s, float* rho, std::size_t n, float s0, float Nf) {
   setup::rates_body(s, rho, n, s0, Nf);
 }
@@ -511,28 +518,35 @@ void RunMode(const RunArgs& a, const RateRows& q, int xa, int xb, int n) {
   for (int j = 0; j < C; ++j) lanes[j] = hn::IndicesFromVec(d, hn::Load(di, idx[j]));
   auto lanes_of = [&](int j) { return lanes[j]; };
 #endif
+  // The rows in locals: read through `a` and `q`, every pointer was loaded
+  // again after each store (the compiler cannot tell that a store to the
+  // output row leaves them unchanged), 18 extra loads per vector of pixels.
+  const float *const fs = a.s, *const fu0 = a.u0, *const fu1 = a.u1, *const fd0 = a.d0, *const fd1 = a.d1;
+  float* const fo = a.o;
+  const float* const fra = a.fr;
+  const float *const qc = q.c, *const qu0 = q.u0, *const qu1 = q.u1, *const qd0 = q.d0, *const qd1 = q.d1;
   // Vector j of the pixels from x: values vm of it (all: full vectors).
   auto update = [&](int x, int j, auto fN, auto wlN, auto wrN, auto wuN, auto wdN, auto load, auto store) {
     const std::ptrdiff_t i = static_cast<std::ptrdiff_t>(x) * C + static_cast<std::ptrdiff_t>(j) * N;
     const auto f = hn::TableLookupLanes(fN, lanes_of(j));
-    const auto fc = load(a.s + i);
-    const auto l = Lerp(load(a.s + i - nC), load(a.s + i - nC - C), f);
-    const auto r = Lerp(load(a.s + i + nC), load(a.s + i + nC + C), f);
-    const auto u = Lerp(load(a.u0 + i), load(a.u1 + i), f);
-    const auto dd = Lerp(load(a.d0 + i), load(a.d1 + i), f);
+    const auto fc = load(fs + i);
+    const auto l = Lerp(load(fs + i - nC), load(fs + i - nC - C), f);
+    const auto r = Lerp(load(fs + i + nC), load(fs + i + nC + C), f);
+    const auto u = Lerp(load(fu0 + i), load(fu1 + i), f);
+    const auto dd = Lerp(load(fd0 + i), load(fd1 + i), f);
     store(Stencil(fc, l, r, u, dd, hn::TableLookupLanes(wlN, lanes_of(j)), hn::TableLookupLanes(wrN, lanes_of(j)),
                   hn::TableLookupLanes(wuN, lanes_of(j)), hn::TableLookupLanes(wdN, lanes_of(j))),
-          a.o + i);
+          fo + i);
   };
   int x = xa;
   for (; x + N <= xb; x += N) {
     auto load = [&](const float* p) { return hn::LoadU(d, p); };
     auto store = [&](hn::Vec<decltype(d)> v, float* p) { hn::StoreU(v, d, p); };
-    const auto fN = load(a.fr + x), rc = load(q.c + x);
-    const auto wlN = Weight<kMode>(d, rc, load(q.c + x - n), load(q.c + x - n - 1), fN);
-    const auto wrN = Weight<kMode>(d, rc, load(q.c + x + n), load(q.c + x + n + 1), fN);
-    const auto wuN = Weight<kMode>(d, rc, load(q.u0 + x), load(q.u1 + x), fN);
-    const auto wdN = Weight<kMode>(d, rc, load(q.d0 + x), load(q.d1 + x), fN);
+    const auto fN = load(fra + x), rc = load(qc + x);
+    const auto wlN = Weight<kMode>(d, rc, load(qc + x - n), load(qc + x - n - 1), fN);
+    const auto wrN = Weight<kMode>(d, rc, load(qc + x + n), load(qc + x + n + 1), fN);
+    const auto wuN = Weight<kMode>(d, rc, load(qu0 + x), load(qu1 + x), fN);
+    const auto wdN = Weight<kMode>(d, rc, load(qd0 + x), load(qd1 + x), fN);
     for (int j = 0; j < C; ++j) update(x, j, fN, wlN, wrN, wuN, wdN, load, store);
   }
   if (x >= xb) return;
@@ -540,11 +554,11 @@ void RunMode(const RunArgs& a, const RateRows& q, int xa, int xb, int n) {
   const int m = xb - x;  // pixels
   const auto pm = hn::FirstN(d, static_cast<std::size_t>(m));
   auto pload = [&](const float* p) { return hn::MaskedLoad(pm, d, p); };
-  const auto fN = pload(a.fr + x), rc = pload(q.c + x);
-  const auto wlN = Weight<kMode>(d, rc, pload(q.c + x - n), pload(q.c + x - n - 1), fN);
-  const auto wrN = Weight<kMode>(d, rc, pload(q.c + x + n), pload(q.c + x + n + 1), fN);
-  const auto wuN = Weight<kMode>(d, rc, pload(q.u0 + x), pload(q.u1 + x), fN);
-  const auto wdN = Weight<kMode>(d, rc, pload(q.d0 + x), pload(q.d1 + x), fN);
+  const auto fN = pload(fra + x), rc = pload(qc + x);
+  const auto wlN = Weight<kMode>(d, rc, pload(qc + x - n), pload(qc + x - n - 1), fN);
+  const auto wrN = Weight<kMode>(d, rc, pload(qc + x + n), pload(qc + x + n + 1), fN);
+  const auto wuN = Weight<kMode>(d, rc, pload(qu0 + x), pload(qu1 + x), fN);
+  const auto wdN = Weight<kMode>(d, rc, pload(qd0 + x), pload(qd1 + x), fN);
   for (int j = 0; j < C; ++j) {
     const int values = C * m - N * j;  // of this vector
     if (values <= 0) break;
@@ -586,8 +600,40 @@ int RunEndOf(const int* __restrict n, int x, int W) {
 }
 
 void StandardRow(BRUME_STANDARD_ROW_ARGS) { BRUME_STANDARD_ROW_CALL; }
-void GeneralRow(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(4, Run<4>, RunEndOf); }
-void GeneralRgbRow(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(3, Run<3>, RunEndOf); }
+// sigma_products on this target's vectors: each lane's k multiplies in the
+// same order, so the same bits. Four chains at once hide the multiply's
+// latency. (The reference's sixteen-float GCC vectors, inlined here, were
+// split by GCC for AVX2 into halves passed through the stack and general
+// registers: 72 % of the AVX2 row's own time, measured.)
+HWY_INLINE void SigmaProducts(float* HWY_RESTRICT s, const float* HWY_RESTRICT g, int c, float s0, int k) {
+  const hn::ScalableTag<float> d;
+  const int N = static_cast<int>(hn::Lanes(d));
+  const auto s0v = hn::Set(d, s0);
+  int b = 0;
+  for (; b + 4 * N <= c; b += 4 * N) {
+    const auto g0 = hn::LoadU(d, g + b), g1 = hn::LoadU(d, g + b + N), g2 = hn::LoadU(d, g + b + 2 * N),
+               g3 = hn::LoadU(d, g + b + 3 * N);
+    auto p0 = s0v, p1 = s0v, p2 = s0v, p3 = s0v;
+    for (int i = 0; i < k; ++i) p0 = hn::Mul(p0, g0), p1 = hn::Mul(p1, g1), p2 = hn::Mul(p2, g2), p3 = hn::Mul(p3, g3);
+    hn::StoreU(p0, d, s + b);
+    hn::StoreU(p1, d, s + b + N);
+    hn::StoreU(p2, d, s + b + 2 * N);
+    hn::StoreU(p3, d, s + b + 3 * N);
+  }
+  for (; b + N <= c; b += N) {
+    const auto g0 = hn::LoadU(d, g + b);
+    auto p0 = s0v;
+    for (int i = 0; i < k; ++i) p0 = hn::Mul(p0, g0);
+    hn::StoreU(p0, d, s + b);
+  }
+  for (; b < c; ++b) {
+    float sb = s0;
+    for (int i = 0; i < k; ++i) sb = sb * g[b];
+    s[b] = sb;
+  }
+}
+void GeneralRow(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(4, Run<4>, RunEndOf, SigmaProducts); }
+void GeneralRgbRow(BRUME_GENERAL_ROW_ARGS) { BRUME_GENERAL_ROW_CALL(3, Run<3>, RunEndOf, SigmaProducts); }
 // The set-up's eight-float vector code (GCC's vector extension), compiled
 // for this target.
 void Rates(const float* s, float* rho, std::size_t n, float s0, float Nf) { setup::rates_body(s, rho, n, s0, Nf); }

@@ -42,9 +42,12 @@ std::size_t edit_distance(const std::string& a, const std::string& b) {
   return prev[b.size()];
 }
 
+// seed() draws in [0, 2^53).
+constexpr std::uint64_t kSeedDrawEnd = std::uint64_t{1} << 53;
+
 const char* kAllowed =
-    "a fixed value as the flag takes it (0.9, auto, a name), uniform(a, b), loguniform(a, b) with 0 < a, or "
-    "choice(x, y, ...)";
+    "a fixed value as the flag takes it (0.9, auto, a name), uniform(a, b), loguniform(a, b) with 0 < a, "
+    "choice(x, y, ...), or seed() (a whole number per key)";
 
 // An effect's sampling, from its entry in the list of commands
 // (CommandDef::sampling; the default ranges and their reasons are in each
@@ -196,6 +199,7 @@ std::string Distribution::text() const {
       }
       return kind == Kind::choice ? "choice(" + s + ")" : s;
     }
+    case Kind::seed: return "seed()";
   }
   return "";
 }
@@ -230,7 +234,7 @@ Distribution parse_distribution(const ParamSpec& spec, std::string_view text_in)
   std::string fn = open == std::string::npos ? "" : lower(trim(std::string_view(text).substr(0, open)));
   // A call is one of the three distributions; any other word( is refused as a misspelt one, except for a text
   // parameter (a file name may hold parentheses).
-  const bool known = fn == "uniform" || fn == "loguniform" || fn == "choice";
+  const bool known = fn == "uniform" || fn == "loguniform" || fn == "choice" || fn == "seed";
   const bool wordy = !fn.empty() && spec.kind != ParamKind::text &&
                      std::all_of(fn.begin(), fn.end(), [](char c) { return std::isalpha(static_cast<unsigned char>(c)); });
   if (open == std::string::npos || !(known || wordy)) {
@@ -239,11 +243,21 @@ Distribution parse_distribution(const ParamSpec& spec, std::string_view text_in)
     return d;
   }
   if (text.back() != ')') return fail("missing the closing ')'; " + std::string(kAllowed));
-  if (fn != "uniform" && fn != "loguniform" && fn != "choice")
+  if (fn != "uniform" && fn != "loguniform" && fn != "choice" && fn != "seed")
     return fail("'" + fn + "' is not a distribution; use " + kAllowed);
   const std::string inner = text.substr(open + 1, text.size() - open - 2);
   if (inner.find_first_of("()") != std::string::npos) return fail("nested parentheses are not allowed");
   const std::vector<std::string> args = split_args(inner);
+
+  if (fn == "seed") {
+    if (spec.kind != ParamKind::integer)
+      return fail("seed() draws a whole number per key, and " + flag + " is not one; use " + kAllowed);
+    if (!(args.size() == 1 && args[0].empty())) return fail("seed() takes no arguments: write seed()");
+    checked(nlohmann::json(std::uint64_t{0}), "its lowest value 0");
+    checked(nlohmann::json(kSeedDrawEnd - 1), "its highest value 2^53 - 1");
+    d.kind = Distribution::Kind::seed;
+    return d;
+  }
 
   if (fn == "choice") {
     if (spec.kind == ParamKind::rgb)
@@ -293,6 +307,9 @@ nlohmann::json draw(const Distribution& d, double u) {
       const std::size_t i = std::min(n - 1, static_cast<std::size_t>(u * static_cast<double>(n)));
       return d.values[i];
     }
+    case Distribution::Kind::seed:
+      // u = k·2^-53 exactly (sample_unit): k, the hash's top 53 bits.
+      return std::min(static_cast<std::uint64_t>(u * 0x1p53), kSeedDrawEnd - 1);
   }
   return nullptr;
 }
@@ -345,6 +362,7 @@ std::vector<nlohmann::json> sample_corners(std::string_view effect, const std::m
       case Distribution::Kind::uniform:
       case Distribution::Kind::loguniform: v = {d.a, d.b}; break;
       case Distribution::Kind::choice: v = d.values; break;
+      case Distribution::Kind::seed: v = {std::uint64_t{0}, kSeedDrawEnd - 1}; break;
     }
     n *= v.size();
     if (n > max)

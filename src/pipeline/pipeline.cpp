@@ -15,6 +15,7 @@
 
 #include "brume/error.hpp"
 #include "brume/gpu_context.hpp"
+#include "brume/medium.hpp"
 #include "brume/record.hpp"
 #include "core/timing.hpp"
 
@@ -767,6 +768,22 @@ nlohmann::json run_record_header(const std::string& command, const std::vector<s
   nlohmann::json j = record_header(command, argv);
   j["schema_version"] = kRecordSchemaVersion;
   return j;
+}
+
+ArrayResult scan_array_result(const ConstImageView& points, const std::string& what,
+                              const std::function<std::size_t(const float*, float*, std::size_t, std::uint8_t*)>& run) {
+  std::vector<float> dense;
+  const float* src = scan_points(points, what, dense);
+  const std::size_t n = static_cast<std::size_t>(points.height());
+  std::vector<float> out(4 * n);
+  ArrayResult r;
+  std::vector<std::uint8_t>& labels = r.bytes["labels"];
+  labels.resize(n);
+  const std::size_t kept = n - run(src, out.data(), n, labels.data());
+  Image pts(4, static_cast<int>(kept), 1);
+  std::copy(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(4 * kept), pts.data.begin());
+  r.images["points"] = std::move(pts);
+  return r;
 }
 
 }  // namespace brume

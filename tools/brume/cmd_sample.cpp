@@ -29,7 +29,8 @@ Command add_sample(CLI::App& app) {
   sub->add_option("--seed", a->seed, "the dataset's seed (a non-negative integer)")->required();
   sub->add_option("--key", a->key, "the frame's key (the manifest's key, e.g. Art/view1.png)")->required();
   sub->add_option("--param", a->params,
-                  "NAME=SPEC, repeatable: a fixed value, uniform(a, b), loguniform(a, b) or choice(x, y, ...); "
+                  "NAME=SPEC, repeatable: a fixed value, uniform(a, b), loguniform(a, b), choice(x, y, ...) or seed() (a "
+                  "whole number per key); "
                   "overrides or extends the effect's default ranges (shown under sampling.specs)");
   sub->add_option("--count", a->count,
                   "draw for keys KEY#0 ... KEY#(N-1) instead, one JSON object per line (a quick look at the spread)")

@@ -2,6 +2,8 @@
 // particle medium (brume/rain.hpp states the equations; docs/rain.md).
 #include "brume/rain.hpp"
 
+#include "effects/rain/rain_internal.hpp"
+
 #include <algorithm>
 #include <array>
 #include <climits>
@@ -202,13 +204,48 @@ void validate_lidar_rain(const LidarRainParams& p) {
 
 namespace {
 
+// The cell-major pass's beams and scratch (LidarRain::scan_echoes_by_cell).
+struct CellPassBeam {  // what a drop's test reads
+  Vec3 dir;
+  double r, t1;
+};
+struct CellPassEntry {  // a beam in a bin: its test's inputs inline (one read per bin)
+  CellPassBeam beam;
+  std::uint32_t k;  // its index in the pass's beams
+};
+struct CellPassBest {
+  double power = -1.0, t = 0.0, reported = 0.0;
+  bool redo = false;
+};
+struct CellPassSpan {
+  int d0, d1, e0, e1;  // bins [d0, d1] (mod nD) × [e0, e1]
+};
+struct CellPassGroup {
+  double lo[3] = {2, 2, 2}, hi[3] = {-2, -2, -2}, T = -1.0;
+};
+struct CellPassScratch {
+  std::vector<CellPassBeam> all, beams;
+  std::vector<CellPassEntry> in_bin;
+  std::vector<std::size_t> point_of, point;
+  std::vector<std::uint32_t> key, at, start, fill, order;
+  std::vector<std::uint64_t> held;
+  std::vector<CellPassBest> best;
+  std::vector<CellPassSpan> spans;
+  std::vector<float> brick_T;
+  std::vector<std::int64_t> bricks;
+  std::vector<CellPassGroup> groups;
+  std::vector<double> u_max;
+};
+
 class LidarRain final : public Medium {
  public:
-  explicit LidarRain(const LidarRainParams& p)
+  explicit LidarRain(const LidarRainParams& p, LidarRainSearch search = LidarRainSearch::chosen)
       : p_(p),
+        search_(search),
         sigma_(rain_extinction_per_m(*p.drops.rate_mm_h, kLidarRainQ)),
         field_(*p.drops.rate_mm_h, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed),
-        theta_(p.divergence_mrad * 1e-3) {
+        theta_(p.divergence_mrad * 1e-3),
+        cos_half_(1.0 / std::sqrt(1.0 + theta_ / 2.0 * (theta_ / 2.0))) {
     // D_t(r) = θ·r²·√(F/ρ_d) [m]: the smallest drop whose echo can reach F at r.
     if (field_.drops_per_m3() > 0.0 && p.drop_reflectance > 0.0) {
       k_ = theta_ * std::sqrt(p.noise_floor / p.drop_reflectance);
@@ -222,18 +259,29 @@ class LidarRain final : public Medium {
     visit(ray, range_m, [&](double t, double power, double) { out.push_back({t, power * range_m * range_m, 0.0, {}}); });
   }
 
-  // The strongest drop echo above the floor per beam (the others never win).
+  // The strongest drop echo above the floor per beam (the others never win):
+  // for a scan of kLidarRainByCellBeams beams or more, the scan's drops drawn
+  // once, cell by cell, each tested against the beams whose cones can hold it
+  // (scan_echoes_by_cell; a beam whose answer it cannot vouch for bit for bit
+  // is redone by visit() alone); for fewer, beam by beam (the same echoes).
   void scan_echoes(const float* points, std::size_t n, std::vector<ScanEcho>& out) const override {
+    if (reach_ <= 0.0) return;
+    const bool by_cell = search_ == LidarRainSearch::by_cell ||
+                         (search_ == LidarRainSearch::chosen && n >= kLidarRainByCellBeams);
+    if (by_cell) scan_echoes_by_cell(points, n, out);
+    else scan_echoes_by_beam(points, n, out);
+  }
+
+  // The same answer beam by beam (visit() over each beam's cone cells): the
+  // reference the cell-major pass must repeat bit for bit.
+  void scan_echoes_by_beam(const float* points, std::size_t n, std::vector<ScanEcho>& out) const {
     if (reach_ <= 0.0) return;
     for (std::size_t i = 0; i < n; ++i) {
       const double x = points[4 * i], y = points[4 * i + 1], z = points[4 * i + 2];
       const double r = std::sqrt(x * x + y * y + z * z);
       if (!(r > p_.blind_range_m)) continue;
-      const MediumRay b{{0.0, 0.0, 0.0}, {x / r, y / r, z / r}};
       double best = -1.0, best_t = 0.0, best_rep = 0.0;
-      visit(b, r, [&](double t, double power, double reported) {
-        if (power > best) best = power, best_t = t, best_rep = reported;
-      });
+      beam_best(x, y, z, r, best, best_t, best_rep);
       if (best >= 0.0) out.push_back({i, best_t, best * r * r, best_rep});
     }
   }
@@ -246,6 +294,46 @@ class LidarRain final : public Medium {
   LidarRain(const LidarRain&) = delete;
 
  private:
+  // The cell's nearest range from o along any direction in a cone: its distance × cos(θ/2), at least r_min.
+  double near_range(const RainCell& cell, const double o[3]) const {
+    const double c = kRainCellM;
+    const std::int64_t ci[3] = {cell.ix, cell.iy, cell.iz};
+    double dist2 = 0.0;
+    for (int a = 0; a < 3; ++a) {
+      const double lo = static_cast<double>(ci[a]) * c, hi = lo + c;
+      const double g = std::max({lo - o[a], 0.0, o[a] - hi});
+      dist2 += g * g;
+    }
+    return std::max(p_.blind_range_m, std::sqrt(dist2) * cos_half_);
+  }
+
+  // A drop's echo on the beam from o along dir to range_m: false outside the
+  // cone over [r_min, range_m) or below the floor; else its range t, power P_d
+  // and apparent reflectance ρ_d·e^{−2σt}·a.
+  bool echo(const Vec3& at, double s, const double o[3], const Vec3& dir, double range_m, double& t, double& power,
+            double& reported) const {
+    const double hw = theta_ / 2.0;
+    const double px = at.x - o[0], py = at.y - o[1], pz = at.z - o[2];
+    t = px * dir.x + py * dir.y + pz * dir.z;
+    if (!(t >= p_.blind_range_m && t < range_m)) return false;
+    const double perp2 = std::max(0.0, px * px + py * py + pz * pz - t * t);
+    if (perp2 > t * hw * t * hw) return false;
+    const double frac = std::min(1.0, std::pow(field_.diameter_mm(s) * 1e-3 / (theta_ * t), 2));
+    reported = p_.drop_reflectance * std::exp(-2.0 * sigma_ * t) * frac;
+    power = reported / (t * t);
+    return power >= p_.noise_floor;
+  }
+
+  // The strongest of visit()'s echoes on the beam to (x, y, z) at range r (ties: the first met).
+  void beam_best(double x, double y, double z, double r, double& best, double& best_t, double& best_rep) const {
+    const MediumRay b{{0.0, 0.0, 0.0}, {x / r, y / r, z / r}};
+    visit(b, r, [&](double t, double power, double reported) {
+      if (power > best) best = power, best_t = t, best_rep = reported;
+    });
+  }
+
+  void scan_echoes_by_cell(const float* points, std::size_t n, std::vector<ScanEcho>& out) const;
+
   // Calls f(t, P_d, ρ_d·e^{−2σt}·a) for every drop in the beam's cone over
   // [r_min, range) whose echo power P_d reaches the floor.
   template <class F>
@@ -253,35 +341,19 @@ class LidarRain final : public Medium {
     if (reach_ <= 0.0) return;
     const double t1 = std::min(range_m, reach_), hw = theta_ / 2.0;
     RainField::cone_cells(ray, p_.blind_range_m, t1, hw, cells_);
-    const double cos_half = 1.0 / std::sqrt(1.0 + hw * hw);
-    const double c = kRainCellM;
     const double o[3] = {ray.origin.x, ray.origin.y, ray.origin.z};
     for (const RainCell& cell : cells_) {
-      // The cell's nearest range along any direction in a cone: its distance × cos(θ/2).
-      const std::int64_t ci[3] = {cell.ix, cell.iy, cell.iz};
-      double dist2 = 0.0;
-      for (int a = 0; a < 3; ++a) {
-        const double lo = static_cast<double>(ci[a]) * c, hi = lo + c;
-        const double g = std::max({lo - o[a], 0.0, o[a] - hi});
-        dist2 += g * g;
-      }
-      const double r_near = std::max(p_.blind_range_m, std::sqrt(dist2) * cos_half);
+      const double r_near = near_range(cell, o);
       if (r_near >= t1) continue;
       const double dfl = k_ * r_near * r_near * 1e3;
+      if (cache_.empty()) cache_.resize(kSlots);  // only visit() uses it
       Slot& slot = cache_[slot_of(cell)];
       const bool same = slot.cell == cell && slot.dfl == dfl;  // a scan's beams: the same cell, the same floor
       const double m = same ? slot.m : field_.measure_above(dfl);
       if (!(m > 0.0)) continue;
       const auto test = [&](const Vec3& at, double s) {
-        const double px = at.x - o[0], py = at.y - o[1], pz = at.z - o[2];
-        const double t = px * ray.dir.x + py * ray.dir.y + pz * ray.dir.z;
-        if (!(t >= p_.blind_range_m && t < range_m)) return;
-        const double perp2 = std::max(0.0, px * px + py * py + pz * pz - t * t);
-        if (perp2 > t * hw * t * hw) return;
-        const double frac = std::min(1.0, std::pow(field_.diameter_mm(s) * 1e-3 / (theta_ * t), 2));
-        const double reported = p_.drop_reflectance * std::exp(-2.0 * sigma_ * t) * frac;
-        const double power = reported / (t * t);
-        if (power >= p_.noise_floor) f(t, power, reported);
+        double t, power, reported;
+        if (echo(at, s, o, ray.dir, range_m, t, power, reported)) f(t, power, reported);
       };
       // Neighbouring beams cross the same cells: a cell's drops are kept in
       // a direct-mapped cache, drawn to some measure m_s; a request of m <= m_s
@@ -314,19 +386,289 @@ class LidarRain final : public Medium {
   static std::size_t slot_of(const RainCell& c) { return rain_cell_hash(c) & (kSlots - 1); }
 
   LidarRainParams p_;
+  LidarRainSearch search_;
   double sigma_;
   RainField field_;
-  double theta_, k_ = 0.0, reach_ = 0.0;
+  double theta_, cos_half_, k_ = 0.0, reach_ = 0.0;
   mutable std::vector<RainCell> cells_;
-  mutable std::vector<Slot> cache_ = std::vector<Slot>(kSlots);
+  mutable std::vector<Slot> cache_;
   mutable std::size_t drawn_ = 0;
 };
+
+// A direction's azimuth as a "diamond angle" in [0, 4): monotone in the
+// azimuth φ, |dD/dφ| <= 1, without a trigonometric call (0 on the z axis).
+double diamond_angle(double x, double y) {
+  if (x == 0.0 && y == 0.0) return 0.0;
+  if (y >= 0.0) return x >= 0.0 ? y / (x + y) : 1.0 - x / (y - x);
+  return x < 0.0 ? 2.0 - y / (-x - y) : 3.0 + x / (x - y);
+}
+
+// The scan's drop echoes cell by cell (what scan_echoes_by_beam finds beam by
+// beam, bit for bit):
+//  1. the beams are binned by direction (diamond angle, sin elevation), each
+//     in every bin its cone (half-angle atan(θ/2), rounded up) can reach;
+//  2. coarse groups of beams mark the bricks (B³ cells) their cones cross,
+//     out to min(range, 1.01·r_reach), with the farthest range of the group;
+//  3. each cell of a marked brick is drawn once, to the measure visit() draws
+//     it to (its nearest range: the same for every beam from the origin); a
+//     cell whose first draw already exceeds an upper bound of that measure
+//     (tabulated by distance) holds no such drop and costs three hashes;
+//  4. each drop is tested, by visit()'s own arithmetic (echo()), against the
+//     beams of its direction's bin; it counts for a beam when visit() would
+//     have met its cell there (nearest range below min(range, r_reach)).
+// visit() meets a cell when the DDA's widened boxes hold it: a drop at least
+// 1 nm inside the cone and strictly inside its cell is in them whatever the
+// rounding. A beam with a drop nearer the cone's edge, past r_reach, or on its
+// cell's upper face, or with two strongest echoes of equal power (visit()'s
+// order decides), is redone by visit() alone.
+void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vector<ScanEcho>& out) const {
+  const double hw = theta_ / 2.0, c = kRainCellM, r_min = p_.blind_range_m;
+  const double o0[3] = {0.0, 0.0, 0.0};
+  const double psi = std::atan(hw) * (1.0 + 1e-6) + 1e-9;  // the cone's half-angle, rounded up
+  const double sin_psi = std::sin(psi);
+  // Scratch reused from call to call (a scan's worth of arrays: no page faults after the first).
+  thread_local CellPassScratch S;
+  std::vector<CellPassBeam>& all = S.all;
+  std::vector<std::size_t>& point_of = S.point_of;
+  all.clear(), point_of.clear();
+  double e_lo = 2.0, e_hi = -2.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = points[4 * i], y = points[4 * i + 1], z = points[4 * i + 2];
+    const double r = std::sqrt(x * x + y * y + z * z);
+    if (!(r > r_min)) continue;
+    const CellPassBeam b{{x / r, y / r, z / r}, r, std::min(r, reach_)};
+    if (!(b.t1 > r_min)) continue;  // visit() meets no cell
+    e_lo = std::min(e_lo, b.dir.z), e_hi = std::max(e_hi, b.dir.z);
+    all.push_back(b), point_of.push_back(i);
+  }
+  if (all.empty()) return;
+  // 1. The bins: w in both coordinates, at least 2ψ, at most 4 M bins.
+  e_lo = std::max(-1.0, e_lo - psi - 1e-9), e_hi = std::min(1.0, e_hi + psi + 1e-9);
+  double w = std::max(2.0 * psi, 5e-4);
+  while ((4.0 / w) * ((e_hi - e_lo) / w + 1.0) > 4e6) w *= 2.0;
+  const int nD = std::max(1, static_cast<int>(std::ceil(4.0 / w)));
+  const double wD = 4.0 / nD, inv_wD = nD / 4.0, inv_w = 1.0 / w;
+  const int nE = std::max(1, static_cast<int>(std::ceil((e_hi - e_lo) * inv_w)));
+  const std::size_t bins = static_cast<std::size_t>(nD) * nE;
+  const auto e_bin = [&](double e) { return std::min(nE - 1, std::max(0, static_cast<int>(std::floor((e - e_lo) * inv_w)))); };
+  const auto d_bin = [&](const Vec3& d) { return std::min(nD - 1, static_cast<int>(diamond_angle(d.x, d.y) * inv_wD)); };
+  // The beams in the order of their bins (neighbouring drops read neighbouring beams).
+  std::vector<CellPassBeam>& beams = S.beams;
+  std::vector<std::size_t>& point = S.point;
+  beams.resize(all.size()), point.resize(all.size());
+  {
+    std::vector<std::uint32_t>&key = S.key, &at = S.at;
+    key.resize(all.size()), at.assign(bins + 1, 0u);
+    for (std::size_t k = 0; k < all.size(); ++k) {
+      key[k] = static_cast<std::uint32_t>(static_cast<std::size_t>(e_bin(all[k].dir.z)) * nD + d_bin(all[k].dir));
+      ++at[key[k] + 1];
+    }
+    for (std::size_t b = 1; b <= bins; ++b) at[b] += at[b - 1];
+    for (std::size_t k = 0; k < all.size(); ++k) {
+      const std::uint32_t j = at[key[k]]++;
+      beams[j] = all[k], point[j] = point_of[k];
+    }
+  }
+  std::vector<CellPassBest>& best = S.best;
+  best.assign(beams.size(), CellPassBest{});
+  std::vector<CellPassSpan>& spans = S.spans;
+  spans.resize(beams.size());
+  std::vector<std::uint32_t>& start = S.start;
+  start.assign(bins + 1, 0u);
+  for (std::size_t k = 0; k < beams.size(); ++k) {
+    const Vec3& d = beams[k].dir;
+    CellPassSpan& sp = spans[k];
+    sp.e0 = e_bin(d.z - psi - 1e-9), sp.e1 = e_bin(d.z + psi + 1e-9);
+    // A cone about a direction at elevation el spans asin(sin ψ/cos el) of azimuth.
+    const double cos_el = std::sqrt(d.x * d.x + d.y * d.y);
+    const double D = diamond_angle(d.x, d.y);
+    double dphi = 4.0;
+    if (cos_el > 1.01 * sin_psi + 1e-9) dphi = std::asin(std::min(1.0, sin_psi / cos_el * (1.0 + 1e-6))) * (1.0 + 1e-6) + 1e-9;
+    if (2.0 * dphi + 2.0 * wD >= 4.0) {
+      sp.d0 = 0, sp.d1 = nD - 1;
+    } else {
+      sp.d0 = static_cast<int>(std::floor((D - dphi) * inv_wD)), sp.d1 = static_cast<int>(std::floor((D + dphi) * inv_wD));
+    }
+    for (int e = sp.e0; e <= sp.e1; ++e)
+      for (int j = sp.d0; j <= sp.d1; ++j) ++start[static_cast<std::size_t>(e) * nD + ((j % nD) + nD) % nD + 1];
+  }
+  // Which bins hold a beam, a bit each (in cache where the index is not: most drops meet no beam).
+  std::vector<std::uint64_t>& held = S.held;
+  held.assign(bins / 64 + 1, 0u);
+  for (std::size_t b = 0; b < bins; ++b)
+    if (start[b + 1]) held[b / 64] |= std::uint64_t(1) << (b % 64);
+  for (std::size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
+  std::vector<CellPassEntry>& in_bin = S.in_bin;
+  in_bin.resize(start.back());
+  {
+    std::vector<std::uint32_t>& fill = S.fill;
+    fill.assign(start.begin(), start.end() - 1);
+    for (std::size_t k = 0; k < beams.size(); ++k) {
+      const CellPassSpan& sp = spans[k];
+      for (int e = sp.e0; e <= sp.e1; ++e)
+        for (int j = sp.d0; j <= sp.d1; ++j)
+          in_bin[fill[static_cast<std::size_t>(e) * nD + ((j % nD) + nD) % nD]++] = {beams[k], static_cast<std::uint32_t>(k)};
+    }
+  }
+  // 2. The bricks the cones cross: groups of G×G bins, each group's direction
+  // box (its beams' unit vectors, widened by ψ) swept over its ranges.
+  constexpr int B = 4;  // cells per brick edge
+  const double bm = B * c;
+  const double r_far = 1.01 * reach_ * std::sqrt(1.0 + hw * hw) * (1.0 + 1e-9) + 1e-9;
+  const std::int64_t nb = static_cast<std::int64_t>(std::ceil(r_far / bm)) + 1;  // bricks within [-nb, nb) per axis
+  std::int64_t blo[3] = {nb, nb, nb}, bhi[3] = {-nb, -nb, -nb}, bn[3] = {0, 0, 0};  // the grid: the sweeps' box
+  std::vector<float>& brick_T = S.brick_T;
+  std::vector<std::int64_t>& bricks = S.bricks;
+  bricks.clear();
+  {
+    constexpr int G = 4;
+    const int gD = (nD + G - 1) / G, gE = (nE + G - 1) / G;
+    std::vector<CellPassGroup>& groups = S.groups;
+    groups.assign(static_cast<std::size_t>(gD) * gE, CellPassGroup{});
+    for (const CellPassBeam& b : beams) {
+      CellPassGroup& g = groups[static_cast<std::size_t>(e_bin(b.dir.z) / G) * gD + d_bin(b.dir) / G];
+      const double u[3] = {b.dir.x, b.dir.y, b.dir.z};
+      for (int a = 0; a < 3; ++a) g.lo[a] = std::min(g.lo[a], u[a]), g.hi[a] = std::max(g.hi[a], u[a]);
+      g.T = std::max(g.T, std::min(b.r, 1.01 * reach_));  // no drop beyond 1.01 r_reach reaches the floor
+    }
+    // Sweep every group (pass 0: the grid's box; pass 1: mark its bricks).
+    for (int pass = 0; pass < 2; ++pass) {
+      if (pass == 1) {
+        for (int a = 0; a < 3; ++a) bn[a] = std::max<std::int64_t>(0, bhi[a] - blo[a] + 1);
+        brick_T.assign(static_cast<std::size_t>(bn[0] * bn[1] * bn[2]), -1.0f);
+      }
+      for (const CellPassGroup& g : groups) {
+        if (g.T < 0.0) continue;
+        double lo[3], hi[3];
+        for (int a = 0; a < 3; ++a) lo[a] = g.lo[a] - psi - 1e-9, hi[a] = g.hi[a] + psi + 1e-9;
+        // A drop in a cone lies at |p| in [r_min, T·√(1 + (θ/2)²)].
+        const double r_end = g.T * std::sqrt(1.0 + hw * hw) * (1.0 + 1e-9) + 1e-9;
+        const float T = static_cast<float>(g.T * (1.0 + 1e-6));
+        for (double ra = r_min; ra < r_end; ra += bm) {
+          const double rb = std::min(r_end, ra + bm);
+          std::int64_t b0[3], b1[3];
+          for (int a = 0; a < 3; ++a) {
+            const double x0 = std::min(ra * lo[a], rb * lo[a]), x1 = std::max(ra * hi[a], rb * hi[a]);
+            b0[a] = std::max(-nb, static_cast<std::int64_t>(std::floor(x0 / bm)));
+            b1[a] = std::min(nb - 1, static_cast<std::int64_t>(std::floor(x1 / bm)));
+          }
+          if (pass == 0) {
+            for (int a = 0; a < 3; ++a) blo[a] = std::min(blo[a], b0[a]), bhi[a] = std::max(bhi[a], b1[a]);
+            continue;
+          }
+          for (std::int64_t x = b0[0]; x <= b1[0]; ++x)
+            for (std::int64_t y = b0[1]; y <= b1[1]; ++y)
+              for (std::int64_t z = b0[2]; z <= b1[2]; ++z) {
+                const std::int64_t id = ((x - blo[0]) * bn[1] + (y - blo[1])) * bn[2] + (z - blo[2]);
+                float& t = brick_T[static_cast<std::size_t>(id)];
+                if (t < 0.0f) bricks.push_back(id);
+                t = std::max(t, T);
+              }
+        }
+      }
+    }
+  }
+  // 3. An upper bound of a cell's measure by its squared distance: visit()
+  // draws to M(k·r_near²), r_near >= √dist2·cos(θ/2); the cell holds no drop
+  // when its first draw u > 1 − e^{−M} (with a margin).
+  const double q_max = r_far * r_far;
+  const int nq = 4096;
+  const double inv_dq = nq / q_max;
+  std::vector<double>& u_max = S.u_max;
+  u_max.resize(nq + 1);
+  for (int j = 0; j <= nq; ++j) {
+    const double r_lo = std::max(r_min, std::sqrt(j / inv_dq) * cos_half_ * (1.0 - 1e-12));
+    const double m_up = field_.measure_above(k_ * r_lo * r_lo * 1e3 * (1.0 - 1e-12));
+    u_max[j] = m_up > 0.0 ? -std::expm1(-m_up * (1.0 + 1e-6)) + 1e-12 : 0.0;
+  }
+  // 4. The cells' drops against the beams of their bins.
+  std::size_t drawn = 0;
+  for (const std::int64_t id : bricks) {
+    const double T = brick_T[static_cast<std::size_t>(id)];
+    const double T2 = T * T * (1.0 + hw * hw) * (1.0 + 1e-9) + 1e-9;
+    const std::int64_t bz = id % bn[2] + blo[2], by = (id / bn[2]) % bn[1] + blo[1], bx = id / (bn[1] * bn[2]) + blo[0];
+    for (std::int64_t ix = bx * B; ix < bx * B + B; ++ix) {
+      const double lx = static_cast<double>(ix) * c, gx = std::max({lx, 0.0, -(lx + c)});
+      for (std::int64_t iy = by * B; iy < by * B + B; ++iy) {
+        const double ly = static_cast<double>(iy) * c, gy = std::max({ly, 0.0, -(ly + c)});
+        const double gxy = gx * gx + gy * gy;
+        if (gxy >= T2) continue;
+        const std::uint64_t col = field_.column_hash(ix, iy);
+        for (std::int64_t iz = bz * B; iz < bz * B + B; ++iz) {
+          const double lz = static_cast<double>(iz) * c, gz = std::max({lz, 0.0, -(lz + c)});
+          const double dist2 = gxy + gz * gz;
+          if (dist2 >= T2) continue;
+          const std::uint64_t h = RainField::cell_hash(col, iz);
+          const double u0 = RainField::first_unit(h);
+          const std::size_t j = static_cast<std::size_t>(dist2 * inv_dq);
+          if (j > static_cast<std::size_t>(nq) || u0 > u_max[j]) continue;
+          const RainCell cell{ix, iy, iz};
+          const double r_near = near_range(cell, o0);
+          if (!(r_near < T)) continue;
+          const double m = field_.measure_above(k_ * r_near * r_near * 1e3);
+          if (!(m > 0.0)) continue;
+          const double cell_hi[3] = {lx + c, ly + c, lz + c};
+          field_.for_each_drop_hashed(cell, h, m, [&](const Vec3& at, double s) {
+            ++drawn;
+            const double q2 = at.x * at.x + at.y * at.y + at.z * at.z;
+            const double e = at.z / std::sqrt(q2);
+            if (!(e >= e_lo && e <= e_hi)) return;
+            const int je = std::min(nE - 1, static_cast<int>((e - e_lo) * inv_w));
+            int jd = static_cast<int>(diamond_angle(at.x, at.y) * inv_wD);
+            if (jd >= nD) jd -= nD;
+            const std::size_t bin = static_cast<std::size_t>(je) * nD + jd;
+            if (!(held[bin / 64] >> (bin % 64) & 1u)) return;
+            for (std::uint32_t q = start[bin]; q < start[bin + 1]; ++q) {
+              const CellPassBeam& b = in_bin[q].beam;
+              double t, power, reported;
+              if (!echo(at, s, o0, b.dir, b.r, t, power, reported)) continue;
+              if (!(r_near < b.t1)) continue;  // visit() skips the cell on this beam
+              CellPassBest& o = best[in_bin[q].k];
+              // Robustly in visit()'s cells: 1 nm inside the cone, before t1, inside the cell.
+              const double perp2 = std::max(0.0, q2 - t * t);
+              const double in = t * hw * (1.0 - 1e-12) - 1e-9;
+              if (!(in > 0.0 && perp2 + 1e-14 * (q2 + 1.0) <= in * in && t <= b.t1 * (1.0 - 1e-9) &&
+                    at.x < cell_hi[0] && at.y < cell_hi[1] && at.z < cell_hi[2]))
+                o.redo = true;
+              if (power > o.power) {
+                o.power = power, o.t = t, o.reported = reported;
+              } else if (power == o.power) {
+                o.redo = true;  // visit()'s order would choose
+              }
+            }
+          });
+        }
+      }
+    }
+  }
+  drawn_ += drawn;
+  // In the points' order; the beams the pass cannot vouch for, beam by beam.
+  std::vector<std::uint32_t>& order = S.order;
+  order.resize(beams.size());
+  for (std::size_t k = 0; k < beams.size(); ++k) order[k] = static_cast<std::uint32_t>(k);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return point[a] < point[b]; });
+  for (const std::uint32_t k : order) {
+    CellPassBest& o = best[k];
+    const CellPassBeam& b = beams[k];
+    if (o.redo) {
+      o.power = -1.0;
+      const float* q = points + 4 * point[k];
+      beam_best(q[0], q[1], q[2], b.r, o.power, o.t, o.reported);
+    }
+    if (o.power >= 0.0) out.push_back({point[k], o.t, o.power * b.r * b.r, o.reported});
+  }
+}
 
 }  // namespace
 
 std::unique_ptr<Medium> lidar_rain_as_medium(const LidarRainParams& p) {
   validate_lidar_rain(p);
   return std::make_unique<LidarRain>(p);
+}
+
+std::unique_ptr<Medium> lidar_rain_as_medium_searching(const LidarRainParams& p, LidarRainSearch search) {
+  validate_lidar_rain(p);
+  return std::make_unique<LidarRain>(p, search);
 }
 
 LidarRainStats lidar_rain(const float* in, float* out, std::size_t n, const LidarRainParams& p, std::uint8_t* labels,

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <sstream>
 #include <vector>
@@ -189,6 +190,7 @@ struct RainStreak {
   float e[3];        // E′, linear RGB
   double t0, t1;     // [s] the part of the exposure it is drawn over (z >= z_near/2)
   int v_lo, v_hi;    // rows it can touch
+  int u_lo, u_hi;    // and columns
   std::size_t order; // enumeration index (ties)
 };
 
@@ -357,6 +359,8 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
           if (umax + kr < -0.5 || umin - kr > W - 0.5 || vmax + kr < -0.5 || vmin - kr > H - 0.5) return;
           k.v_lo = static_cast<int>(std::max(0.0, std::floor(vmin - kr)));
           k.v_hi = static_cast<int>(std::min(H - 1.0, std::ceil(vmax + kr)));
+          k.u_lo = static_cast<int>(std::max(0.0, std::floor(umin - kr)));
+          k.u_hi = static_cast<int>(std::min(W - 1.0, std::ceil(umax + kr)));
           // E: what the drop refracts (the image about it) and reflects (the image's mean),
           // seen through the analytic media in front of it.
           const double um = fx * k.c[0] / z + cx, vm = fy * k.c[1] / z + cy;
@@ -388,16 +392,33 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
   });
   st.drops_drawn = drops.size();
 
-  // 3. The streaks, composited far to near: each thread owns a band of rows.
+  // 3. The streaks, composited far to near, tile by tile: a tile's pixels stay in cache while
+  // the drops that can touch it (listed in the drops' order) are splatted, each pixel taking the
+  // same updates in the same order as a single pass over the drops would give it (the same image
+  // on any number of threads). A drop's rows and columns (v_lo..v_hi, u_lo..u_hi) bound every
+  // pixel its samples touch; its tiles are taken one pixel wider.
+  constexpr int kTileW = 128, kTileH = 32;
+  const int tiles_x = (W + kTileW - 1) / kTileW, tiles_y = (H + kTileH - 1) / kTileH;
+  std::vector<std::vector<std::uint32_t>> in_tile(static_cast<std::size_t>(tiles_x) * tiles_y);
+  for (std::size_t d = 0; d < drops.size(); ++d) {
+    const RainStreak& k = drops[d];
+    const int ty0 = std::max(0, k.v_lo - 1) / kTileH, ty1 = std::min(H - 1, k.v_hi + 1) / kTileH;
+    const int tx0 = std::max(0, k.u_lo - 1) / kTileW, tx1 = std::min(W - 1, k.u_hi + 1) / kTileW;
+    for (int ty = ty0; ty <= ty1; ++ty)
+      for (int tx = tx0; tx <= tx1; ++tx)
+        in_tile[static_cast<std::size_t>(ty) * tiles_x + tx].push_back(static_cast<std::uint32_t>(d));
+  }
   std::vector<std::size_t> clamped(static_cast<std::size_t>(nt), 0);
 #pragma omp parallel num_threads(nt)
   {
-    const int tid = omp_get_thread_num(), nth = omp_get_num_threads();
-    const int y_lo = static_cast<int>(static_cast<long>(H) * tid / nth),
-              y_hi = static_cast<int>(static_cast<long>(H) * (tid + 1) / nth);
+    const int tid = omp_get_thread_num();
     std::vector<double> wx, wy;
-    for (const RainStreak& k : drops) {
-      if (k.v_hi < y_lo || k.v_lo >= y_hi) continue;
+#pragma omp for schedule(dynamic, 1)
+    for (int tile = 0; tile < tiles_x * tiles_y; ++tile) {
+    const int y_lo = tile / tiles_x * kTileH, y_hi = std::min(H, y_lo + kTileH);
+    const int x_lo = tile % tiles_x * kTileW, x_hi = std::min(W, x_lo + kTileW);
+    for (const std::uint32_t d : in_tile[static_cast<std::size_t>(tile)]) {
+      const RainStreak& k = drops[d];
       double pz = 0.0;
       const auto at = [&](double t, double& u, double& v, double& r) {
         const double px = k.c[0] + k.u[0] * t, py = k.c[1] + k.u[1] * t;
@@ -420,7 +441,7 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
         const double a_sample = k.area * r / (pz * pz * pz) / n;
         const double inv_soft = 1.0 / (kRainDepthSoftness * r);
         const auto put = [&](int x, int y, double w) {
-          if (x < 0 || x >= W || y < y_lo || y >= y_hi || !(w > 0.0)) return;
+          if (x < x_lo || x >= x_hi || y < y_lo || y >= y_hi || !(w > 0.0)) return;
           const float rs = s.range.at(x, y);
           double vis = 1.0;
           if (cam_known(rs)) vis = std::min(1.0, std::max(0.0, (rs - r) * inv_soft));
@@ -433,6 +454,7 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
         if (!gauss) {
           const double fu = std::floor(u), fv = std::floor(v);
           const int x0 = static_cast<int>(fu), y0 = static_cast<int>(fv);
+          if (x0 + 1 < x_lo || x0 >= x_hi || y0 + 1 < y_lo || y0 >= y_hi) continue;  // no tap in the tile
           const double ax = u - fu, ay = v - fv;
           put(x0, y0, (1 - ax) * (1 - ay));
           put(x0 + 1, y0, ax * (1 - ay));
@@ -440,7 +462,7 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
           put(x0 + 1, y0 + 1, ax * ay);
         } else {
           const int xc = static_cast<int>(std::lround(u)), yc = static_cast<int>(std::lround(v));
-          if (yc + rad < y_lo || yc - rad >= y_hi || xc + rad < 0 || xc - rad >= W) continue;
+          if (yc + rad < y_lo || yc - rad >= y_hi || xc + rad < x_lo || xc - rad >= x_hi) continue;
           wx.assign(2 * rad + 1, 0.0), wy.assign(2 * rad + 1, 0.0);
           double sx = 0.0, sy = 0.0;
           const double inv = 1.0 / (2.0 * k.sigma_px * k.sigma_px);
@@ -455,6 +477,7 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
           }
         }
       }
+    }
     }
   }
   for (std::size_t i = 0; i < clamped.size(); ++i) st.alpha_clamped += clamped[i];

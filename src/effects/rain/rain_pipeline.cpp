@@ -106,19 +106,13 @@ CommandDef lidar_rain_command() {
       {{"points", 1, false, ArrayArg::As::view, false, true}}, call, {"points", "labels", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<LidarRainParams>& k, const Exec&, const std::set<std::string>&) {
         const std::string what = "brume.lidar.rain(): points";
-        std::vector<float> dense;
-        const float* src = scan_points(in[0].view, what, dense);
-        const std::size_t n = static_cast<std::size_t>(in[0].view.height());
-        std::vector<float> out(4 * n);
-        ArrayResult r;
-        std::vector<std::uint8_t>& labels = r.bytes["labels"];
-        labels.resize(n);
-        const LidarRainStats st = lidar_rain(src, out.data(), n, k.p, labels.data(), what);
-        const std::size_t kept = n - st.run.lost;
-        Image pts(4, static_cast<int>(kept), 1);
-        std::copy(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(4 * kept), pts.data.begin());
+        LidarRainStats st;
+        ArrayResult r = scan_array_result(in[0].view, what,
+                                          [&](const float* src, float* out, std::size_t n, std::uint8_t* labels) {
+                                            st = lidar_rain(src, out, n, k.p, labels, what);
+                                            return st.run.lost;
+                                          });
         r.record["rain"] = lidar_rain_record(k.p, st);
-        r.images["points"] = std::move(pts);
         return r;
       },
       [](const ArrayCall<LidarRainParams>& k, const std::set<std::string>&) { validate_lidar_rain(k.p); });

@@ -1,0 +1,193 @@
+// brume benchmark — rain (issue #56's speed targets), on one thread:
+//   lidar:  lidar_rain on KITTI object 000001's scan (~120 k points, read from
+//           ../shared/data; a synthetic scan of its size when absent), reading
+//           and writing left out, against the same build's beam-by-beam search
+//           (each beam's cone cells enumerated and their drops tested: the
+//           algorithm before the cell-major pass, src/effects/rain/rain_internal.hpp),
+//           interleaved (each round runs both, in alternating order, so that a
+//           busy host slows both alike); the outputs and labels of the two are
+//           compared byte for byte in every round. Target: <= 20 ms a scan on one core.
+//   camera: render_camera_rain at 1242x375 (the demo scene's range and colour
+//           at KITTI's size, KITTI's focal length 721.5 px), 25 mm/h, 1/60 s, on
+//           2 threads, against the same call at rate 0 (the no-op: the analytic
+//           pass and composite alone), interleaved. Target: <= 100 ms beyond the no-op.
+// Each figure: median [min..max] over the rounds, wall time and the calling
+// thread's CPU time; the CPU (family, model), the SIMD level Highway picks (the
+// rain code itself is scalar, built for the x86-64 baseline) and the load
+// average at the start and the end are printed.
+//
+// Usage: brume_bench_rain [ROUNDS] [lidar|lidar-alone|camera] [RATE ...]
+// (lidar-alone: the cell-major pass only, for profiling)
+#include <omp.h>
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "bench_util.hpp"
+#include "brume/demo_scene.hpp"
+#include "brume/depth.hpp"
+#include "brume/rain.hpp"
+#include "core/simd.hpp"
+#include "effects/rain/rain_internal.hpp"
+
+using namespace brume;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double thread_ms() {
+  timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+std::string load() {
+  std::ifstream f("/proc/loadavg");
+  std::string a, b, c;
+  f >> a >> b >> c;
+  return a + " " + b + " " + c;
+}
+
+struct Timing {
+  double wall, cpu;
+};
+
+template <class F>
+Timing timed(F&& f) {
+  const double c0 = thread_ms();
+  const auto a = Clock::now();
+  f();
+  return {std::chrono::duration<double, std::milli>(Clock::now() - a).count(), thread_ms() - c0};
+}
+
+void print_spread(const char* what, const std::vector<double>& v) {
+  const bench::Spread s = bench::spread(v);
+  std::printf(" %s %.1f [%.1f..%.1f]", what, s.median, s.lo, s.hi);
+}
+
+int lidar(int rounds, const std::vector<double>& rates, bool alone) {
+  const std::string file = std::string(BRUME_DATA_DIR) + "/kitti_object_000001/velodyne/000001.bin";
+  const bool have = std::filesystem::exists(file);
+  if (!have) std::printf("  (%s is absent: a synthetic scan of its size instead)\n", file.c_str());
+  const std::vector<float> scan = have ? read_kitti_bin(file, "--points") : bench::synthetic_scan(120268);
+  const std::size_t n = scan.size() / 4;
+  std::printf(" lidar rain, %s (%zu points), one thread, ms (wall; thread CPU):\n", have ? "KITTI 000001" : "synthetic",
+              n);
+  int bad = 0;
+  for (const double rate : rates) {
+    LidarRainParams p;
+    p.drops.rate_mm_h = rate;
+    std::vector<float> a(scan.size()), b(scan.size());
+    std::vector<std::uint8_t> la(n), lb(n);
+    std::vector<double> wa, ca, wb, cb, ratio;
+    LidarRainStats st;
+    for (int r = 0; r < rounds; ++r) {
+      Timing ta{}, tb{};
+      ScanRun rb;
+      for (int k = 0; k < 2; ++k) {
+        if ((k == 0) == (r % 2 == 0)) {
+          ta = timed([&] { st = lidar_rain(scan.data(), a.data(), n, p, la.data()); });
+        } else if (!alone) {
+          const std::unique_ptr<Medium> m = lidar_rain_as_medium_searching(p, LidarRainSearch::by_beam);
+          const ScanDetection det{p.noise_floor, p.seed};
+          tb = timed([&] { rb = scan_through_media({m.get()}, scan.data(), b.data(), n, "scan", &det, lb.data()); });
+        }
+      }
+      if (alone) {
+        wa.push_back(ta.wall), ca.push_back(ta.cpu);
+        continue;
+      }
+      const bool same = rb.lost == st.run.lost && la == lb &&
+                        std::memcmp(a.data(), b.data(), 16 * (n - st.run.lost)) == 0;
+      if (!same) ++bad, std::printf("  ** %g mm/h, round %d: the cell-major output differs from the beam-by-beam one\n", rate, r);
+      wa.push_back(ta.wall), ca.push_back(ta.cpu), wb.push_back(tb.wall), cb.push_back(tb.cpu);
+      ratio.push_back(tb.cpu / ta.cpu);
+    }
+    std::printf("  %5g mm/h: cell-major", rate);
+    print_spread("wall", wa);
+    print_spread("cpu", ca);
+    if (alone) {
+      std::printf(" (%zu moved, %zu lost, %zu drops drawn)\n", st.run.echoes, st.run.lost, st.drops_drawn);
+      continue;
+    }
+    std::printf(" | beam by beam");
+    print_spread("wall", wb);
+    print_spread("cpu", cb);
+    const bench::Spread q = bench::spread(ratio);
+    std::printf(" | %.0fx [%.0f..%.0f] (cpu); %zu moved, %zu lost, %zu drops drawn; outputs %s\n", q.median, q.lo, q.hi,
+                st.run.echoes, st.run.lost, st.drops_drawn, bad ? "DIFFER" : "identical");
+  }
+  return bad;
+}
+
+int camera(int rounds, const std::vector<double>& rates) {
+  const int W = 1242, H = 375;
+  const DemoScene d = render_demo_scene(W, H);
+  CameraRainScene sc;
+  sc.rgb = d.rgb;
+  sc.range = d.range;
+  sc.k.fx = sc.k.fy = 721.5377;  // KITTI 000001's camera 2 (calib P2)
+  sc.k = resolve(sc.k, W, H);
+  sc.airlight = {0.7f, 0.72f, 0.75f};
+  Exec ex;
+  ex.threads = 2;
+  std::printf(" camera rain, the demo scene at %dx%d (fx %.1f px), 1/60 s, 2 threads, ms (wall; calling thread's CPU):\n",
+              W, H, sc.k.fx);
+  for (const double rate : rates) {
+    CameraRainParams p, none;
+    p.drops.rate_mm_h = rate;
+    none.drops.rate_mm_h = 0.0;
+    std::vector<double> wa, ca, wb, cb, extra;
+    CameraRainStats st;
+    Image out;
+    for (int r = 0; r <= rounds; ++r) {  // round 0 warms up
+      Timing ta{}, tb{};
+      for (int k = 0; k < 2; ++k) {
+        if ((k == 0) == (r % 2 == 0)) ta = timed([&] { out = render_camera_rain(sc, p, ex, &st); });
+        else tb = timed([&] { out = render_camera_rain(sc, none, ex); });
+      }
+      if (r == 0) continue;
+      wa.push_back(ta.wall), ca.push_back(ta.cpu), wb.push_back(tb.wall), cb.push_back(tb.cpu);
+      extra.push_back(ta.wall - tb.wall);
+    }
+    std::printf("  %5g mm/h: rain wall", rate);
+    print_spread("", wa);
+    std::printf(" | rate 0 wall");
+    print_spread("", wb);
+    std::printf(" | rain beyond it");
+    print_spread("", extra);
+    std::printf(" (%zu cells, %zu drops seen, %zu drawn)\n", st.cells, st.drops_seen, st.drops_drawn);
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int rounds = argc > 1 ? std::max(1, std::atoi(argv[1])) : 5;
+  const std::string only = argc > 2 ? argv[2] : "";
+  std::vector<double> rates;
+  for (int i = 3; i < argc; ++i) rates.push_back(std::atof(argv[i]));
+  if (rates.empty()) rates = {5.0, 25.0, 100.0};
+  const std::vector<std::int64_t> t = simd::targets();
+  std::printf("brume rain benchmark: %s, Highway target %s (rain: scalar, x86-64 baseline), %d interleaved rounds; "
+              "load average %s\n",
+              bench::cpu_name().c_str(), t.empty() ? "none" : simd::target_name(t.front()).c_str(), rounds,
+              load().c_str());
+  int bad = 0;
+  if (only.empty() || only == "lidar" || only == "lidar-alone") bad += lidar(rounds, rates, only == "lidar-alone");
+  if (only.empty() || only == "camera") bad += camera(rounds, only.empty() ? std::vector<double>{25.0} : rates);
+  std::printf(" load average at the end %s\n", load().c_str());
+  return bad ? 1 : 0;
+}

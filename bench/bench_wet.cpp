@@ -1,0 +1,102 @@
+// brume benchmark — wet ground (brume/wet.hpp, issue #57): the camera's pass (render_wet: the
+// ground test, the darkening and the mirror march) on the demo scene at KITTI's size
+// (1242x375; camera 1.6 m up, 5 deg down, 55 deg vertical field of view), on one thread and
+// on two, interleaved (each round runs both, in alternating order, so that a busy host slows
+// both alike); the ratio is one thread's time over two threads'. And the LiDAR's pass
+// (lidar_wet, one thread) on KITTI 000001's scan (../shared/data; a synthetic ground of its
+// size when absent).
+// Targets: issue #57, the camera <= 30 ms at 1242x375 on 2 cores; the LiDAR <= 5 ms per 120 k points.
+//
+// Usage: brume_bench_wet [ROUNDS]
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "bench_util.hpp"
+#include "brume/demo_scene.hpp"
+#include "brume/depth.hpp"
+#include "brume/wet.hpp"
+
+using namespace brume;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+std::string load() {
+  std::ifstream f("/proc/loadavg");
+  std::string a, b, c;
+  f >> a >> b >> c;
+  return a + " " + b + " " + c;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int rounds = argc > 1 ? std::max(1, std::atoi(argv[1])) : 15;
+  std::printf("brume wet benchmark: %s, %d interleaved rounds (median [min..max]); load average %s\n",
+              bench::cpu_name().c_str(), rounds, load().c_str());
+  const int W = 1242, H = 375;
+  const DemoScene d = render_demo_scene(W, H);
+  CameraPose pose;
+  pose.height_m = 1.6;
+  pose.pitch_deg = -5.0;
+  WetScene s;
+  s.rgb = d.rgb;
+  s.range = d.range;
+  s.camera = make_camera(intrinsics_from_fov(W, H, NAN, d.fov_y_deg), W, H, pose);
+  s.ground_tolerance_m = 0.02;
+  s.sky = {0.5f, 0.6f, 0.8f};
+  WetFilm w;
+  w.film_mm = 1.5;
+  std::vector<double> t[2], ratio;
+  WetStats st;
+  for (int r = 0; r <= rounds; ++r) {  // round 0 warms up
+    double ms[2];
+    for (int k = 0; k < 2; ++k) {
+      const int i = (r % 2) ? 1 - k : k;
+      Exec e;
+      e.threads = i + 1;
+      const auto a = Clock::now();
+      const Image out = render_wet(s, w, e, &st);
+      ms[i] = std::chrono::duration<double, std::milli>(Clock::now() - a).count();
+    }
+    if (r == 0) continue;
+    t[0].push_back(ms[0]), t[1].push_back(ms[1]), ratio.push_back(ms[0] / ms[1]);
+  }
+  const bench::Spread a = bench::spread(t[0]), b = bench::spread(t[1]), q = bench::spread(ratio);
+  std::printf("  camera, demo 1242x375 (%zu ground px: %zu hits, %zu sky, %zu leave)  1 thread %7.2f ms [%.2f..%.2f]  "
+              "2 threads %7.2f ms [%.2f..%.2f]  1/2: %.2fx [%.2f..%.2f]\n",
+              st.ground, st.hits, st.sky_pixels, st.left_frame, a.median, a.lo, a.hi, b.median, b.lo, b.hi, q.median,
+              q.lo, q.hi);
+
+  const std::string bin = std::string(BRUME_DATA_DIR) + "/kitti_object_000001/velodyne/000001.bin";
+  std::vector<float> scan;
+  if (std::filesystem::exists(bin)) {
+    scan = read_kitti_bin(bin, "--points");
+  } else {
+    std::printf("  (%s is absent: a synthetic ground of its size)\n", bin.c_str());
+    for (int i = 0; i < 120268; ++i) {
+      const double r = 3.0 + 0.0005 * i, az = 0.01 * i;
+      scan.insert(scan.end(), {static_cast<float>(r * std::cos(az)), static_cast<float>(r * std::sin(az)), -1.73f, 0.3f});
+    }
+  }
+  const std::size_t n = scan.size() / 4;
+  std::vector<float> out(scan.size());
+  std::vector<std::uint8_t> labels(n);
+  LidarWetParams p;
+  p.film = w;
+  LidarWetStats ls;
+  const bench::Spread l = bench::time_ms([&] { ls = lidar_wet(scan.data(), out.data(), n, p, labels.data()); }, rounds);
+  std::printf("  lidar, %zu points (%zu ground, %zu lost), 1 thread: %7.2f ms [%.2f..%.2f]\n", n, ls.ground, ls.lost,
+              l.median, l.lo, l.hi);
+  std::printf(" load average at the end %s\n", load().c_str());
+  return 0;
+}

@@ -1,0 +1,23 @@
+// brume — rain's internal entry points for tests and benchmarks (not installed).
+#pragma once
+
+#include <cstddef>
+#include <memory>
+
+#include "brume/rain.hpp"
+
+namespace brume {
+
+// How a scan's drop echoes are searched (the same echoes, bit for bit):
+//   by_beam: each beam's cone cells enumerated (RainField::cone_cells) and
+//            their drops tested, about 20 µs a beam at 2 mrad;
+//   by_cell: each cell the cones can cross drawn once, its drops tested
+//            against the beams binned by direction: a cost that grows with
+//            the volume the cones sweep, ~0.3 s for a KITTI scan;
+//   chosen:  by_cell for scans of kLidarRainByCellBeams points or more, else by_beam
+//            (lidar_rain, lidar_rain_as_medium).
+enum class LidarRainSearch { chosen, by_beam, by_cell };
+constexpr std::size_t kLidarRainByCellBeams = 16384;
+std::unique_ptr<Medium> lidar_rain_as_medium_searching(const LidarRainParams& p, LidarRainSearch search);
+
+}  // namespace brume

@@ -1,0 +1,416 @@
+// brume — wet ground (issue #57): the film's optics (Fresnel, Lekner & Dorf's
+// darkening, the wetted fraction), the camera's wet ground with its mirror
+// image, and the LiDAR's ground returns through the same film
+// (brume/wet.hpp; docs/wet-ground.md).
+#include "brume/wet.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <vector>
+
+#include "brume/error.hpp"
+#include "brume/medium.hpp"
+#include "core/text.hpp"
+
+namespace brume {
+
+// ---- the film's optics ---------------------------------------------------------------------
+
+Fresnel fresnel_air_to(double cos_theta, double n) {
+  const double ci = std::min(1.0, std::max(0.0, cos_theta));
+  const double s2 = std::max(0.0, 1.0 - ci * ci);
+  const double ct = std::sqrt(std::max(0.0, 1.0 - s2 / (n * n)));  // n >= 1: never total reflection
+  Fresnel f;
+  const double ds = ci + n * ct, dp = n * ci + ct;
+  const double rs = (ci - n * ct) / ds, rp = (n * ci - ct) / dp;
+  f.rs = rs * rs;
+  f.rp = rp * rp;
+  // The transmittances from the transmitted amplitudes (t_s = 2 cos θ/ds, t_p = 2 cos θ/dp) and
+  // the flux ratio n cos θ_t/cos θ: computed apart from R, so that R + T = 1 tests both.
+  f.ts = 4.0 * n * ci * ct / (ds * ds);
+  f.tp = 4.0 * n * ci * ct / (dp * dp);
+  return f;
+}
+
+double fresnel_reflectance(double cos_theta, double n) { return fresnel_air_to(cos_theta, n).r(); }
+
+namespace {
+
+// Gauss–Legendre nodes and weights on [0, 1] (Newton on P_m; Abramowitz & Stegun 25.4.29).
+struct GaussLegendre {
+  std::vector<double> x, w;
+  explicit GaussLegendre(int m) {
+    for (int i = 1; i <= m; ++i) {
+      double z = std::cos(M_PI * (i - 0.25) / (m + 0.5)), dp = 0.0;
+      for (int it = 0; it < 100; ++it) {
+        double p0 = 1.0, p1 = z;
+        for (int k = 2; k <= m; ++k) {
+          const double p2 = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k;
+          p0 = p1, p1 = p2;
+        }
+        dp = m * (z * p1 - p0) / (z * z - 1.0);
+        const double dz = p1 / dp;
+        z -= dz;
+        if (std::fabs(dz) < 1e-16) break;
+      }
+      x.push_back(0.5 * (1.0 - z));
+      w.push_back(1.0 / ((1.0 - z * z) * dp * dp));  // 2/((1 − z²)P′²) halved for [0, 1]
+    }
+  }
+};
+
+}  // namespace
+
+double water_diffuse_external_reflectance(double n) {
+  // r_e = ∫_0^1 R_F(μ)·2μ dμ (μ = cos θ): smooth in μ for n > 1; 8 panels of 16 nodes reach 1e−15.
+  static const GaussLegendre gl(16);
+  constexpr int kPanels = 8;
+  double s = 0.0;
+  for (int p = 0; p < kPanels; ++p)
+    for (std::size_t i = 0; i < gl.x.size(); ++i) {
+      const double mu = (p + gl.x[i]) / kPanels;
+      s += gl.w[i] / kPanels * fresnel_reflectance(mu, n) * 2.0 * mu;
+    }
+  return s;
+}
+
+double water_diffuse_internal_reflectance(double n) {
+  return 1.0 - (1.0 - water_diffuse_external_reflectance(n)) / (n * n);
+}
+
+double film_transfer(double t_in, double t_out, double n, double albedo, double r_i) {
+  return t_in * t_out / (n * n * (1.0 - albedo * r_i));
+}
+
+double wetted_fraction(double film_mm, double roughness_mm) { return std::min(1.0, film_mm / roughness_mm); }
+
+const ParamTable<WetFilm>& wet_film_param_table() {
+  static const ParamTable<WetFilm> t = [] {
+    ParamTable<WetFilm> d("wet");
+    d.real("film", &WetFilm::film_mm, "mm", Range::closed(0.0, 100.0),
+           "thickness h of the water film on the ground (one film for the camera and the LiDAR); 0: dry, the input "
+           "back bit for bit",
+           "none")
+        .real("ground-albedo", &WetFilm::ground_albedo, "1", Range::left_open(0.0, 1.0),
+              "the dry ground's diffuse albedo a in Lekner & Dorf's darkening (default: dense asphalt, 0.12)")
+        .real("roughness", &WetFilm::roughness_mm, "mm", Range::left_open(0.0, 20.0),
+              "the ground's roughness depth d (mean texture depth; asphalt 0.5-1.5 mm): the wetted fraction is "
+              "min(film/roughness, 1)")
+        .real("water-index", &WetFilm::water_index, "1", Range::closed(1.2, 1.5),
+              "refractive index n of the water relative to air (Fresnel's R_F, Lekner & Dorf's r_e and r_i)");
+    return d;
+  }();
+  return t;
+}
+
+void validate_wet_film(const WetFilm& w) {
+  wet_film_param_table().validate(w);
+  if (!w.film_mm) throw Error("no film thickness given: use --film MM (the water film on the ground, in [0, 100] mm)");
+}
+
+WetOptics::WetOptics(const WetFilm& w)
+    : n(w.water_index), a(w.ground_albedo), f(w.film_mm ? wetted_fraction(*w.film_mm, w.roughness_mm) : 0.0) {
+  r_e = water_diffuse_external_reflectance(n);
+  r_i = 1.0 - (1.0 - r_e) / (n * n);
+  k = film_transfer(1.0 - r_e, 1.0 - r_e, n, a, r_i);
+  k_eff = 1.0 - f * (1.0 - k);
+}
+
+double WetOptics::mirror(double cos_theta) const { return f * fresnel_reflectance(cos_theta, n); }
+
+double WetOptics::lidar(double cos_theta) const {
+  const double t = 1.0 - fresnel_reflectance(cos_theta, n);
+  return 1.0 - f * (1.0 - film_transfer(t, t, n, a, r_i));
+}
+
+nlohmann::json wet_optics_record(const WetFilm& w, const WetOptics& o) {
+  return {{"film_mm", w.film_mm ? nlohmann::json(*w.film_mm) : nlohmann::json(nullptr)},
+          {"ground_albedo", w.ground_albedo},
+          {"roughness_mm", w.roughness_mm},
+          {"water_index", w.water_index},
+          {"wetted_fraction", o.f},
+          {"wetted_fraction_rule", "f = min(film/roughness, 1): asperity heights uniform over the roughness depth"},
+          {"r_e", o.r_e},
+          {"r_e_rule", "R_F (unpolarised Fresnel, air to water) averaged over a Lambertian hemisphere of incidence"},
+          {"r_i", o.r_i},
+          {"r_i_rule", "1 - (1 - r_e)/n^2 (Lekner & Dorf 1988)"},
+          {"k_lekner_dorf", o.k},
+          {"k_eff", o.k_eff},
+          {"reflectance_normal", fresnel_reflectance(1.0, o.n)},
+          {"model",
+           "wet = K_eff dry + f R_F(theta) L_mirror on the ground; K = (1 - r_e)(1 - r_i)/(1 - a r_i); K_eff = 1 - f (1 "
+           "- K); LiDAR: Q_eff(theta) = 1 - f (1 - (1 - R_F)^2/(n^2 (1 - a r_i)))"}};
+}
+
+// ---- the camera ----------------------------------------------------------------------------
+
+Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats* stats, Image* ground_out) {
+  const int W = s.rgb.width(), H = s.rgb.height();
+  if (s.range.width() != W || s.range.height() != H)
+    throw Error("the range is " + std::to_string(s.range.width()) + "x" + std::to_string(s.range.height()) +
+                " but the image is " + std::to_string(W) + "x" + std::to_string(H) + "; give a range of the image's size");
+  const bool masked = s.mask.width() > 0;
+  if (masked && (s.mask.width() != W || s.mask.height() != H))
+    throw Error("the ground mask is " + std::to_string(s.mask.width()) + "x" + std::to_string(s.mask.height()) +
+                " but the image is " + std::to_string(W) + "x" + std::to_string(H) + "; give a mask of the image's size");
+  if (!masked) s.camera.require_height("wet ground (the ground plane; or give a ground mask)");
+  const WetOptics o(w);
+  Image out = s.rgb.to_image();
+  Image ground(W, H, 1);
+  WetStats st;
+  const Camera& cam = s.camera;
+  const Mat3 R = cam.world_from_camera().rotation;           // world_from_cv
+  const double nx = R.m[1][0], ny = R.m[1][1], nz = R.m[1][2];  // the plane's normal (world +y) in cv
+  const double h = cam.position_m.y;
+  const double fx = cam.k.fx, fy = cam.k.fy, cx = cam.k.cx, cy = cam.k.cy;
+  const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
+  // The planar depth z = range/|ray| of each pixel (inf: the sky): a point of planar depth Z
+  // on a pixel's ray is behind the pixel's surface when Z > z.
+  std::vector<float> zmap(static_cast<std::size_t>(W) * H);
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const float r = s.range.at(x, y);
+      const double rx = (x - cx) / fx, ry = (y - cy) / fy;
+      zmap[static_cast<std::size_t>(y) * W + x] =
+          std::isfinite(r) && r > 0.0f ? static_cast<float>(r / std::sqrt(rx * rx + ry * ry + 1.0)) : INFINITY;
+    }
+  // Min-depth pyramids over blocks of 8 and 32 px: a step whose image (the projection of a 3-D
+  // segment is a 2-D segment) meets only blocks whose nearest depth lies beyond the segment's
+  // farthest point (Z is linear along the ray: an endpoint) cannot cross the depth map, so the
+  // march takes it whole.
+  struct Pyramid {
+    int s = 0, bw = 0, bh = 0;
+    std::vector<float> m;
+  };
+  std::array<Pyramid, 2> pyr;
+  for (int l = 0; l < 2; ++l) {
+    Pyramid& p = pyr[l];
+    p.s = l == 0 ? 32 : 8;
+    p.bw = (W + p.s - 1) / p.s, p.bh = (H + p.s - 1) / p.s;
+    p.m.assign(static_cast<std::size_t>(p.bw) * p.bh, INFINITY);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        float& b = p.m[static_cast<std::size_t>(y / p.s) * p.bw + x / p.s];
+        b = std::min(b, zmap[static_cast<std::size_t>(y) * W + x]);
+      }
+  }
+  const float front_k = static_cast<float>(1.0 + kWetHitMargin), thick_k = static_cast<float>(1.0 + kWetHitMargin + kWetThickness);
+  const float kf = static_cast<float>(o.k_eff);
+  std::size_t n_ground = 0, n_hits = 0, n_sky = 0, n_left = 0;
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 4) reduction(+ : n_ground, n_hits, n_sky, n_left)
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const float z0 = zmap[static_cast<std::size_t>(y) * W + x];
+      if (!std::isfinite(z0)) continue;
+      const double rx = (x - cx) / fx, ry = (y - cy) / fy, inv = 1.0 / std::sqrt(rx * rx + ry * ry + 1.0);
+      const double dx = rx * inv, dy = ry * inv, dz = inv;  // the unit ray (cv)
+      const double dn = dx * nx + dy * ny + dz * nz;        // < 0: the ray goes down
+      if (!(dn < 0.0)) continue;                            // a ray that cannot meet the ground from above
+      const double r0 = z0 / inv;
+      if (masked ? !(s.mask.at(x, y) > 0.5f) : !(std::fabs(h + r0 * dn) <= s.ground_tolerance_m)) continue;
+      ++n_ground;
+      ground.at(x, y) = 1.0f;
+      // The mirrored ray X(t) = P + t·D from the ground point. Its image is a line, and with
+      // w = 1/Z along it (Z = P_z + t·D_z) u = u∞ + w·c_u, v = v∞ + w·c_v exactly (u∞, v∞ the
+      // vanishing point of D): the march steps w, one pixel of the line's major axis a step.
+      const double Px = r0 * dx, Py = r0 * dy, Pz = r0 * dz;
+      const double Dx = dx - 2.0 * dn * nx, Dy = dy - 2.0 * dn * ny;
+      double Dz = dz - 2.0 * dn * nz;
+      if (std::fabs(Dz) < 1e-9) Dz = Dz < 0.0 ? -1e-9 : 1e-9;  // parallel to the image: a far vanishing point
+      const double bu = fx * Dx + cx * Dz, bv = fy * Dy + cy * Dz;
+      const double uinf = bu / Dz, vinf = bv / Dz;
+      const double cu = fx * Px + cx * Pz - bu * Pz / Dz, cv = fy * Py + cy * Pz - bv * Pz / Dz;
+      const double major = std::max(std::fabs(cu), std::fabs(cv));
+      const double w0 = 1.0 / Pz;
+      // w falls towards 0 (the vanishing point) when D_z > 0, rises (towards the image plane) else.
+      const double dw = (Dz > 0.0 ? -1.0 : 1.0) * kWetMarchStepPx / std::max(major, 1e-30);
+      const auto inside = [&](double u, double v) { return u >= -0.5 && u < W - 0.5 && v >= -0.5 && v < H - 0.5; };
+      const auto zat = [&](double u, double v) {
+        return zmap[static_cast<std::size_t>(std::lround(v)) * W + static_cast<std::size_t>(std::lround(u))];
+      };
+      std::array<float, 3> L = s.sky;
+      enum { leaves, hit, infinity } end = leaves;
+      double hu = 0.0, hv = 0.0;
+      double wc = w0;
+      bool front = true;  // the ray's last point lay in front of the depth map
+      int fine_left = 0;  // single-pixel steps before the pyramid is asked again
+      const int max_steps = 4 * (W + H);
+      for (int step = 0; step < max_steps; ++step) {
+        if (Dz > 0.0 && wc * major < 0.5) {  // within half a pixel of its vanishing point
+          end = infinity;
+          break;
+        }
+        // A whole block's step where the pyramid clears it; where it does not, the next 8 steps
+        // are single pixels without asking it again (asking before every pixel cost more than
+        // the pixels: 2.3 M block steps and 6.6 M pixel steps on the demo at 1242x375).
+        bool skipped = false;
+        for (const Pyramid& p : pyr) {
+          if (fine_left > 0) break;
+          const double w1 = wc + p.s * dw;
+          if (!(w1 > 0.0)) continue;
+          const double u0 = uinf + wc * cu, v0 = vinf + wc * cv, u1 = uinf + w1 * cu, v1 = vinf + w1 * cv;
+          if (!inside(u1, v1)) continue;
+          const int bx0 = std::max(0, static_cast<int>(std::min(u0, u1) - 1.0) / p.s);
+          const int bx1 = std::min(p.bw - 1, static_cast<int>(std::max(u0, u1) + 2.0) / p.s);
+          const int by0 = std::max(0, static_cast<int>(std::min(v0, v1) - 1.0) / p.s);
+          const int by1 = std::min(p.bh - 1, static_cast<int>(std::max(v0, v1) + 2.0) / p.s);
+          float near = INFINITY;
+          for (int by = by0; by <= by1; ++by)
+            for (int bx = bx0; bx <= bx1; ++bx) near = std::min(near, p.m[static_cast<std::size_t>(by) * p.bw + bx]);
+          if (1.0 / std::min(wc, w1) <= near * front_k) {
+            wc = w1, front = true, skipped = true;
+            break;
+          }
+        }
+        if (skipped) continue;
+        fine_left = fine_left > 0 ? fine_left - 1 : pyr[1].s - 1;
+        const double wprev = wc;
+        wc += dw;
+        const double u = uinf + wc * cu, v = vinf + wc * cv;
+        if (!(wc > 0.0) || !inside(u, v)) break;  // leaves the frame (or the ray turns behind the camera)
+        const bool behind = 1.0 / wc > zat(u, v) * front_k;
+        if (behind && front) {
+          double lo = wprev, hi = wc;  // bisection to the crossing: within 1/64 of a step
+          for (int b = 0; b < 6; ++b) {
+            const double mid = 0.5 * (lo + hi);
+            const double mu = uinf + mid * cu, mv = vinf + mid * cv;
+            if (inside(mu, mv) && 1.0 / mid > zat(mu, mv) * front_k) hi = mid; else lo = mid;
+          }
+          hu = uinf + hi * cu, hv = vinf + hi * cv;
+          if (!inside(hu, hv)) hu = u, hv = v;
+          // Within the surfaces' thickness behind the pixel's depth: a hit; further behind, the
+          // ray passed behind an occluder (as the camera sees it) and goes on.
+          if (1.0 / hi <= zat(hu, hv) * thick_k) {
+            end = hit;
+            break;
+          }
+        }
+        front = !behind;
+        if (step + 1 == max_steps) end = infinity;
+      }
+      if (end == infinity) {
+        // The vanishing point's pixel: the sky there (or a surface the ray would meet at infinity).
+        if (Dz > 0.0 && inside(uinf, vinf)) {
+          hu = uinf, hv = vinf;
+          end = hit;
+          ++n_sky;
+        } else {
+          end = leaves;
+        }
+      } else if (end == hit) {
+        ++n_hits;
+      }
+      if (end == hit) {
+        const int iu = static_cast<int>(std::lround(hu)), iv = static_cast<int>(std::lround(hv));
+        for (int c = 0; c < 3; ++c) L[c] = s.rgb.at(iu, iv, c);
+      } else {
+        ++n_left;
+      }
+      const float m = static_cast<float>(o.mirror(-dn));
+      for (int c = 0; c < 3; ++c) out.at(x, y, c) = kf * s.rgb.at(x, y, c) + m * L[c];
+    }
+  st.ground = n_ground, st.hits = n_hits, st.sky_pixels = n_sky, st.left_frame = n_left;
+  if (o.f == 0.0) out = s.rgb.to_image();  // a dry film: the input, bit for bit
+  if (stats) *stats = st;
+  if (ground_out) *ground_out = std::move(ground);
+  return out;
+}
+
+// ---- the LiDAR -----------------------------------------------------------------------------
+
+const ParamTable<WetScan>& wet_scan_param_table() {
+  static const ParamTable<WetScan> t = [] {
+    ParamTable<WetScan> d("scan");
+    d.real("lidar-height", &WetScan::lidar_height_m, "m", Range::above(0.0),
+           "height of the LiDAR above the ground plane (level sensor; KITTI's Velodyne: 1.73 m)")
+        .real("scan-ground-tolerance", &WetScan::scan_tolerance_m, "m", Range::above(0.0),
+              "a point within this of the plane z = -lidar-height is ground")
+        .real("noise-floor", &WetScan::noise_floor, "1/m^2", Range::above(0.0),
+              "noise floor F: the weakest mean return power (intensity/range^2) the sensor detects (as brume lidar "
+              "rain's)")
+        .count("scan-seed", &WetScan::seed, "1", Range::at_least(0.0), "seed of the detection draws (same seed, same scan)");
+    return d;
+  }();
+  return t;
+}
+
+const ParamTable<LidarWetParams>& lidar_wet_param_table() {
+  static const ParamTable<LidarWetParams> t = [] {
+    ParamTable<LidarWetParams> d("wet");
+    d.nest(&LidarWetParams::film, wet_film_param_table()).nest(&LidarWetParams::scan, wet_scan_param_table());
+    return d;
+  }();
+  return t;
+}
+
+void validate_lidar_wet(const LidarWetParams& p) {
+  lidar_wet_param_table().validate(p);
+  validate_wet_film(p.film);
+}
+
+LidarWetStats lidar_wet(const float* in, float* out, std::size_t n, const LidarWetParams& p, std::uint8_t* labels,
+                        const std::string& what) {
+  validate_lidar_wet(p);
+  const WetOptics o(p.film);
+  const double H = p.scan.lidar_height_m, tol = p.scan.scan_tolerance_m, F = p.scan.noise_floor;
+  LidarWetStats st;
+  st.points = n;
+  for (std::size_t i = 0; i < n; ++i) {
+    const float* q = in + 4 * i;
+    for (int c = 0; c < 4; ++c)
+      if (!std::isfinite(q[c]) || (c == 3 && q[c] < 0.0f))
+        throw Error(what + ": point " + std::to_string(i) + " has " + (c == 3 ? "intensity " : "coordinate ") +
+                    text::g(q[c]) + "; a scan's coordinates must be finite and its intensities finite and >= 0");
+  }
+  std::size_t k = 0;  // the next output slot (k <= i: in place is safe)
+  for (std::size_t i = 0; i < n; ++i) {
+    const float* q = in + 4 * i;
+    const double r = std::sqrt(double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2]);
+    const bool on_ground = r > 0.0 && std::fabs(q[2] + H) <= tol;
+    std::uint8_t label = on_ground ? 1 : 0;
+    float intensity = q[3];
+    if (on_ground && o.f > 0.0) {
+      const double qe = o.lidar(-q[2] / r);
+      intensity = static_cast<float>(q[3] * qe);
+      if (qe < 1.0) {
+        const double x = std::max<double>(q[3], F * r * r);  // the clear power on the scan's scale, >= F r²
+        const double keep = std::exp(-(F * r * r / x) * (1.0 / qe - 1.0));
+        const double u = hash_unit(hash_fold(hash_fold(p.scan.seed, 0x3e7ull), i));
+        if (!(u < keep)) label = 2;
+      }
+    }
+    if (label == 1) ++st.ground;
+    if (labels) labels[i] = label;
+    if (label == 2) {
+      ++st.lost, ++st.ground;
+      continue;
+    }
+    float* d = out + 4 * k++;
+    d[0] = q[0], d[1] = q[1], d[2] = q[2], d[3] = intensity;
+  }
+  return st;
+}
+
+nlohmann::json lidar_wet_record(const LidarWetParams& p, const LidarWetStats& st) {
+  const WetOptics o(p.film);
+  nlohmann::json j = wet_optics_record(p.film, o);
+  j["lidar_height_m"] = p.scan.lidar_height_m;
+  j["scan_ground_tolerance_m"] = p.scan.scan_tolerance_m;
+  j["noise_floor_per_m2"] = p.scan.noise_floor;
+  j["seed"] = p.scan.seed;
+  j["ground_rule"] = "|z + lidar_height| <= scan_ground_tolerance (sensor frame: z up); cos theta = -z/r";
+  j["loss_rule"] =
+      "a ground point the film weakens (Q_eff < 1) is kept with probability exp(-(F/x)(1/Q_eff - 1)), x = "
+      "max(i/r^2, F) (brume/medium.hpp's detection rule)";
+  j["points"] = st.points;
+  j["ground"] = st.ground;
+  j["lost"] = st.lost;
+  j["labels"] = "0 off the ground (unchanged), 1 wet ground (kept), 2 lost";
+  return j;
+}
+
+}  // namespace brume
