@@ -243,7 +243,7 @@ TEST_F(CliAerial, MatterhornSlantAttenuationIsTheClosedForm) {
   const nlohmann::json& fit = rec["turbidity_fit"];
   const double t_fit = fit["turbidity"].get<double>();
   EXPECT_EQ(rec["job"]["aerial"]["turbidity"], "contrast");
-  EXPECT_EQ(rec["aerial"]["parameters"]["turbidity"].get<double>(), t_fit);
+  EXPECT_EQ(rec["aerial"]["parameters"]["aerial"]["turbidity"].get<double>(), t_fit);
   EXPECT_TRUE(fit["at_lower_bound"].get<bool>()) << fit.dump();
   EXPECT_NE(r.output.find("sits on its lower bound T = 1"), std::string::npos) << r.output;
   EXPECT_GT(fit["bins"].size(), 20u);

@@ -1,4 +1,5 @@
 // brume — the steps every effect's pipeline shares (see brume/pipeline.hpp).
+#include "pipeline/scan_job.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/command.hpp"
 
@@ -784,6 +785,34 @@ ArrayResult scan_array_result(const ConstImageView& points, const std::string& w
   std::copy(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(4 * kept), pts.data.begin());
   r.images["points"] = std::move(pts);
   return r;
+}
+
+nlohmann::json run_scan_file_job(
+    const std::string& command, const RunContext& ctx, const nlohmann::json& job, const ScanFiles& files,
+    const std::function<std::size_t(const float*, float*, std::size_t, std::uint8_t*, const std::string&,
+                                    nlohmann::json& blocks)>& run) {
+  if (files.points.empty()) throw Error("no scan given: use --points FILE.bin (KITTI velodyne)");
+  if (files.out.empty()) throw Error("no output given: use --out FILE.bin");
+  check_kitti_bin_output(files.out, "--out");
+  if (!files.labels.empty()) check_output_dir(files.labels, "--labels");
+  if (!files.record.empty()) check_record_path(files.record);
+
+  const std::vector<float> in = read_kitti_bin(files.points, "--points");
+  const std::size_t n = in.size() / 4;
+  std::vector<float> out(in.size());
+  std::string labels(n, '\0');
+  nlohmann::json blocks = nlohmann::json::object();
+  const std::size_t lost = run(in.data(), out.data(), n, reinterpret_cast<std::uint8_t*>(labels.data()),
+                               "--points '" + files.points + "'", blocks);
+  const nlohmann::json inputs = {
+      {"points", {{"path", files.points}, {"sha256", sha256_file(files.points)}, {"points", n}}}};
+  const nlohmann::json rec = job_record(command, ctx, job, inputs, blocks, false);
+  OutputSet outs;
+  outs.write_text(files.out, kitti_bin_bytes(out.data(), n - lost), "--out");
+  if (!files.labels.empty()) outs.write_text(files.labels, labels, "--labels");
+  if (!files.record.empty()) outs.write_text(files.record, rec.dump(2) + "\n", "--record");
+  outs.commit();
+  return rec;
 }
 
 }  // namespace brume

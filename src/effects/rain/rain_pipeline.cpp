@@ -11,6 +11,7 @@
 #include "brume/io.hpp"
 #include "brume/rain.hpp"
 #include "brume/record.hpp"
+#include "pipeline/scan_job.hpp"
 
 namespace brume {
 
@@ -41,30 +42,14 @@ namespace {
 nlohmann::json run_lidar_rain_job(const LidarRainJob& job, const RunContext& ctx) {
   lidar_rain_job_table().validate(job);
   validate_lidar_rain(job.rain);
-  if (job.points.empty()) throw Error("no scan given: use --points FILE.bin (KITTI velodyne)");
-  if (job.out.empty()) throw Error("no output given: use --out FILE.bin");
-  check_kitti_bin_output(job.out, "--out");
-  if (!job.labels.empty()) check_output_dir(job.labels, "--labels");
-  if (!job.record.empty()) check_record_path(job.record);
-
-  const std::vector<float> in = read_kitti_bin(job.points, "--points");
-  const std::size_t n = in.size() / 4;
-  std::vector<float> out(in.size());
-  std::string labels(n, '\0');
-  const LidarRainStats st = lidar_rain(in.data(), out.data(), n, job.rain,
-                                       reinterpret_cast<std::uint8_t*>(labels.data()), "--points '" + job.points + "'");
-  const std::size_t returned = n - st.run.lost;
-
-  const nlohmann::json inputs = {
-      {"points", {{"path", job.points}, {"sha256", sha256_file(job.points)}, {"points", n}}}};
-  const nlohmann::json rec = job_record("lidar rain", ctx, lidar_rain_job_table().to_json(job), inputs,
-                                        {{"rain", lidar_rain_record(job.rain, st)}}, false);
-  OutputSet outs;
-  outs.write_text(job.out, kitti_bin_bytes(out.data(), returned), "--out");
-  if (!job.labels.empty()) outs.write_text(job.labels, labels, "--labels");
-  if (!job.record.empty()) outs.write_text(job.record, rec.dump(2) + "\n", "--record");
-  outs.commit();
-  return rec;
+  return run_scan_file_job("lidar rain", ctx, lidar_rain_job_table().to_json(job),
+                           {job.points, job.out, job.labels, job.record},
+                           [&](const float* in, float* out, std::size_t n, std::uint8_t* labels, const std::string& what,
+                               nlohmann::json& blocks) {
+                             const LidarRainStats st = lidar_rain(in, out, n, job.rain, labels, what);
+                             blocks["rain"] = lidar_rain_record(job.rain, st);
+                             return st.run.lost;
+                           });
 }
 
 }  // namespace

@@ -16,6 +16,7 @@
 #include "brume/pipeline.hpp"
 #include "brume/record.hpp"
 #include "brume/wet.hpp"
+#include "pipeline/scan_job.hpp"
 
 namespace brume {
 
@@ -200,28 +201,14 @@ nlohmann::json run_camera_wet_job(const CameraWetJob& job, const ExecOptions& eo
 nlohmann::json run_lidar_wet_job(const LidarWetJob& job, const RunContext& ctx) {
   lidar_wet_job_table().validate(job);
   validate_lidar_wet(job.wet);
-  if (job.points.empty()) throw Error("no scan given: use --points FILE.bin (KITTI velodyne)");
-  if (job.out.empty()) throw Error("no output given: use --out FILE.bin");
-  check_kitti_bin_output(job.out, "--out");
-  if (!job.labels.empty()) check_output_dir(job.labels, "--labels");
-  if (!job.record.empty()) check_record_path(job.record);
-
-  const std::vector<float> in = read_kitti_bin(job.points, "--points");
-  const std::size_t n = in.size() / 4;
-  std::vector<float> out(in.size());
-  std::string labels(n, '\0');
-  const LidarWetStats st = lidar_wet(in.data(), out.data(), n, job.wet, reinterpret_cast<std::uint8_t*>(labels.data()),
-                                     "--points '" + job.points + "'");
-  const nlohmann::json inputs = {
-      {"points", {{"path", job.points}, {"sha256", sha256_file(job.points)}, {"points", n}}}};
-  const nlohmann::json rec = job_record("lidar wet", ctx, lidar_wet_job_table().to_json(job), inputs,
-                                        {{"wet", lidar_wet_record(job.wet, st)}}, false);
-  OutputSet outs;
-  outs.write_text(job.out, kitti_bin_bytes(out.data(), n - st.lost), "--out");
-  if (!job.labels.empty()) outs.write_text(job.labels, labels, "--labels");
-  if (!job.record.empty()) outs.write_text(job.record, rec.dump(2) + "\n", "--record");
-  outs.commit();
-  return rec;
+  return run_scan_file_job("lidar wet", ctx, lidar_wet_job_table().to_json(job),
+                           {job.points, job.out, job.labels, job.record},
+                           [&](const float* in, float* out, std::size_t n, std::uint8_t* labels, const std::string& what,
+                               nlohmann::json& blocks) {
+                             const LidarWetStats st = lidar_wet(in, out, n, job.wet, labels, what);
+                             blocks["wet"] = lidar_wet_record(job.wet, st);
+                             return st.lost;
+                           });
 }
 
 }  // namespace
