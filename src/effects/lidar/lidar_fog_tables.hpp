@@ -14,10 +14,13 @@
 #include "brume/error.hpp"
 #include "brume/height_profile.hpp"
 #include "brume/lidar_fog.hpp"
+#include "core/math_constants.hpp"
 
 namespace brume::lidar_detail {
 
-constexpr double kPi = 3.14159265358979323846;
+// kPi: brume's one definition (core/math_constants.hpp): lidar_fog.cpp's
+// `using namespace lidar_detail` would make a second one ambiguous wherever a
+// unity build puts another effect after it.
 
 // Below these many points a scan's per-point loops run on one thread: a
 // parallel region ends when every thread has arrived, and on a loaded host

@@ -12,12 +12,12 @@
 #include <limits>
 
 #include "brume/error.hpp"
+#include "core/math_constants.hpp"  // kPi: one definition (unity builds)
 #include "core/text.hpp"
 
 namespace brume {
 
 namespace {
-constexpr double kPi = 3.14159265358979323846;
 // A cell's index in a table: Teschner et al. 2003's spatial hash (three
 // large primes, xor), cheap where the drop field's hash need not be.
 std::size_t rain_cell_hash(const RainCell& c) {
