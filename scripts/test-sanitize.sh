@@ -33,8 +33,9 @@ skip_labels='^install$'
 # --ci leaves out too: the GPU tests and sweeps (llvmpipe under an instrumented
 # host: ~160 s), the study, and the CLI suites of single effects, batch and
 # sky, whose parsers and files the fuzz corpora, Cli.* and Reliability.* also
-# reach under ASan.
-CI_SKIP_LABELS='^(install|gpu|study|effect_cli)$'
+# reach under ASan; and the camera rain's two statistical cases (label
+# statistics: 65 s of test time, the same splat the other CameraRain cases run).
+CI_SKIP_LABELS='^(install|gpu|study|effect_cli|statistics)$'
 case "${1:-}" in
   --asan-only) run_tsan=0 ;;
   --tsan-only) run_asan=0 ;;

@@ -11,6 +11,11 @@
 #               has Cli in its name (CliFog, StereoCli, Sample.CliWrites...),
 #               and the whole of Batch; the core CLI suite Cli itself is not
 #               one (the sanitizer run's --ci form keeps it)
+#   statistics  the camera rain's two statistical cases (8 seeds x 5
+#               exposures of the splat the other CameraRain cases run under
+#               the sanitizers too: 65 s of the ASan run's test time,
+#               measured 2026-12-06 on a Zen 5); the --ci form leaves them
+#               to the uninstrumented suite, as the TSan run does
 # and the labels derived from the declarations and the sources:
 #   part:NAME   the cases of the suites that part NAME's test files define
 #               (brume_part(NAME FOLDER TESTS ...) in CMakeLists.txt, passed
@@ -31,7 +36,8 @@
 set(brume_label_rules
   gpu "Gpu|GPU"
   study "Study"
-  effect_cli "^([^.]*/)?Batch\\.|Cli([A-Z_./]|$)")
+  effect_cli "^([^.]*/)?Batch\\.|Cli([A-Z_./]|$)"
+  statistics "^CameraRain\\.(EnergyIsIndependentOfExposure|FluctuationGoesAsTheInverseRootOfExposure)$")
 
 # The data cases, as Suite.Name (a TEST_P's ctest names add the instantiation
 # before and the parameter after: Schemes/GaussianAccuracy.X/standard_2).
