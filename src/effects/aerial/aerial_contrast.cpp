@@ -223,8 +223,9 @@ TurbidityContrastFit fit_turbidity_contrast(DenseImageRef rgb, DenseImageRef ran
 
   // ln Gamma per bin on a grid of T, then the best grid node refined by
   // golden-section search between its neighbours.
-  Atmosphere atm = p.atmosphere;
+  // ln Gamma per bin at T (each call its own atmosphere: the grid's nodes run in parallel).
   auto ln_gamma_at = [&](double T) {
+    Atmosphere atm = p.atmosphere;
     atm.turbidity = T;
     std::vector<std::array<double, 3>> g(static_cast<std::size_t>(n));
     for (int b = 0; b < n; ++b) {
@@ -239,17 +240,7 @@ TurbidityContrastFit fit_turbidity_contrast(DenseImageRef rgb, DenseImageRef ran
   const int ng = static_cast<int>(std::lround((t_hi - t_lo) / grid)) + 1;
   std::vector<std::vector<std::array<double, 3>>> table(static_cast<std::size_t>(ng));
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 1)
-  for (int k = 0; k < ng; ++k) {
-    Atmosphere local = atm;
-    local.turbidity = t_lo + grid * k;
-    std::vector<std::array<double, 3>> g(static_cast<std::size_t>(n));
-    for (int b = 0; b < n; ++b) {
-      const auto& u = used[static_cast<std::size_t>(b)];
-      const std::array<double, 3> v = attenuation_slant_direct(local, q, u.s_rayleigh, u.s_mie);
-      for (int c = 0; c < 3; ++c) g[static_cast<std::size_t>(b)][c] = std::log(v[c]);
-    }
-    table[static_cast<std::size_t>(k)] = std::move(g);
-  }
+  for (int k = 0; k < ng; ++k) table[static_cast<std::size_t>(k)] = ln_gamma_at(t_lo + grid * k);
   // The best grid node for a subset of bins, refined by a parabola through it
   // and its neighbours (the jackknife's cheap fit; the full fit refines exactly).
   auto grid_fit = [&](const std::vector<char>& use) {
@@ -269,8 +260,7 @@ TurbidityContrastFit fit_turbidity_contrast(DenseImageRef rgb, DenseImageRef ran
     }
     return std::pair<int, double>(best, t);
   };
-  const auto [best, t_parabola] = grid_fit(all);
-  (void)t_parabola;
+  const int best = grid_fit(all).first;
   double a = std::max(t_lo, t_lo + grid * (best - 1)), b = std::min(t_hi, t_lo + grid * (best + 1));
   const double phi = 0.5 * (std::sqrt(5.0) - 1.0);
   double x1 = b - phi * (b - a), x2 = a + phi * (b - a);
