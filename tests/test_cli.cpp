@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 
 #include <array>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <cstdio>
@@ -382,6 +383,11 @@ TEST_F(Cli, BackendFlags) {
   EXPECT_NE(bad.status, 0);
   EXPECT_NE(bad.output.find("--backend"), std::string::npos) << bad.output;
   EXPECT_FALSE(fs::exists(p("b.png")));
+  // A command with no GPU pass refuses the GPU before it reads anything.
+  CliRun rain = run("rain --image " + img + " --range " + range + " --rate 10 --backend gpu --out " + p("r.png"));
+  EXPECT_NE(rain.status, 0);
+  EXPECT_NE(rain.output.find("rain runs on the CPU only"), std::string::npos) << rain.output;
+  EXPECT_FALSE(fs::exists(p("r.png")));
   CliRun both = run("blur --image " + img + " --sigma 3 --backend gpu --reference --out " + p("b.png"));
   EXPECT_NE(both.status, 0);
   EXPECT_NE(both.output.find("--reference"), std::string::npos) << both.output;
@@ -483,6 +489,53 @@ TEST_F(Cli, RunRepeatsARecordBitForBit) {
   EXPECT_NE(changed.status, 0);
   EXPECT_NE(changed.output.find("has changed"), std::string::npos) << changed.output;
   EXPECT_FALSE(fs::exists(p("third/h.png")));
+}
+
+TEST_F(Cli, ImageTransferGammaAndTableAreRecordedAndRepeat) {
+  // --image-transfer gamma:G / table:FILE reach the read (the output differs
+  // from the sRGB read's), the record keeps the text and the table's hash,
+  // brume run repeats both bit for bit, and a changed table is refused.
+  const std::string table = p("response.txt");
+  {
+    std::ofstream t(table);
+    for (int i = 0; i < 256; ++i) t << std::pow(i / 255.0, 2.4) << (i % 16 == 15 ? "\n" : " ");
+  }
+  const std::string common = "haze --image " + img + " --range " + range + " --visibility 30 --airlight 0.7,0.72,0.75";
+  fs::create_directories(p("first"));
+  for (const std::string& form : {std::string("srgb"), std::string("gamma:2.2"), "table:" + table}) {
+    const std::string stem = form == "srgb" ? "s" : form[0] == 'g' ? "g" : "t";
+    CliRun r = run(common + " --image-transfer " + form + " --out " + p("first/" + stem + ".exr") + " --record " +
+                   p("first/" + stem + ".json"));
+    ASSERT_EQ(r.status, 0) << form << "\n" << r.output;
+  }
+  const Image s = read_color(p("first/s.exr")), g = read_color(p("first/g.exr")), t = read_color(p("first/t.exr"));
+  EXPECT_NE(s.data, g.data);
+  EXPECT_NE(g.data, t.data);
+  std::ifstream gj(p("first/g.json")), tj(p("first/t.json"));
+  const nlohmann::json gr = nlohmann::json::parse(gj), tr = nlohmann::json::parse(tj);
+  EXPECT_EQ(gr["job"]["input"]["image-transfer"], "gamma:2.2");
+  EXPECT_EQ(gr["inputs"]["image"]["transfer_applied"], "gamma:2.2");
+  EXPECT_EQ(tr["job"]["input"]["image-transfer"], "table:" + table);
+  EXPECT_EQ(tr["inputs"]["image"]["transfer_table"]["entries"], 256);
+  EXPECT_EQ(tr["inputs"]["image"]["transfer_table"]["sha256"], sha256_file(table));
+  for (const char* stem : {"g", "t"}) {
+    CliRun r = run(std::string("run ") + p(std::string("first/") + stem + ".json") + " --out-dir " + p("again"));
+    ASSERT_EQ(r.status, 0) << stem << "\n" << r.output;
+    const Image a = read_color(p(std::string("first/") + stem + ".exr")),
+                b = read_color(p(std::string("again/") + stem + ".exr"));
+    EXPECT_EQ(a.data, b.data) << stem;
+  }
+  std::ofstream(table, std::ios::app) << "1\n";
+  CliRun changed = run("run " + p("first/t.json") + " --out-dir " + p("third"));
+  EXPECT_NE(changed.status, 0);
+  EXPECT_NE(changed.output.find("response.txt"), std::string::npos) << changed.output;
+  EXPECT_FALSE(fs::exists(p("third/t.exr")));
+  // A bad value names the flag and what is allowed; nothing is written.
+  CliRun bad = run(common + " --image-transfer gamma:0 --out " + p("bad.exr"));
+  EXPECT_NE(bad.status, 0);
+  EXPECT_NE(bad.output.find("--image-transfer 'gamma:0'"), std::string::npos) << bad.output;
+  EXPECT_NE(bad.output.find("table:FILE"), std::string::npos) << bad.output;
+  EXPECT_FALSE(fs::exists(p("bad.exr")));
 }
 
 TEST_F(Cli, StudyDiffusionQuickWritesItsTables) {

@@ -82,6 +82,33 @@ TEST(Commands, ListIsWellFormed) {
   EXPECT_EQ(find_command("no such command"), nullptr);
 }
 
+// A command with no GPU pass refuses --backend gpu (it ran on the CPU
+// without a word: rain and wet, issue #56); one with passes takes it (the
+// context is another matter); cpu and auto pass everywhere.
+TEST(Commands, OnlyCommandsWithGpuPassesTakeTheGpu) {
+  int cpu_only = 0;
+  for (const CommandDef& c : commands()) {
+    SCOPED_TRACE(c.name);
+    EXPECT_NO_THROW(refuse_gpu_without_passes(c, Backend::cpu, "--backend"));
+    EXPECT_NO_THROW(refuse_gpu_without_passes(c, Backend::automatic, "--backend"));
+    if (!c.gpu_passes.empty()) {
+      EXPECT_NO_THROW(refuse_gpu_without_passes(c, Backend::gpu, "--backend"));
+      continue;
+    }
+    ++cpu_only;
+    try {
+      refuse_gpu_without_passes(c, Backend::gpu, "backend=");
+      ADD_FAILURE() << "took the GPU";
+    } catch (const Error& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find(c.name + " runs on the CPU only"), std::string::npos) << m;
+      EXPECT_NE(m.find("use backend= cpu or auto"), std::string::npos) << m;
+      EXPECT_NE(m.find("haze"), std::string::npos) << m;  // the list of those that have passes
+    }
+  }
+  EXPECT_GE(cpu_only, 3);  // rain, wet and insert at least
+}
+
 // Every command with a subcommand is listed by its parent's --help, and its
 // own --help shows every flag of its table (and the execution flags when it
 // takes them).

@@ -246,6 +246,11 @@ const std::vector<CommandGroup>& command_groups();
 const CommandDef* find_command(std::string_view name);
 // The names of the commands for which `pred` holds, ", "-joined (messages).
 std::string command_names(const std::function<bool(const CommandDef&)>& pred);
+// A command that declares no GPU pass runs on the CPU: asked for the GPU
+// (`flag`: "--backend", Python's "backend="), it refuses rather than run
+// on the CPU without a word. Every caller of CommandDef::run and of an
+// ArrayForm checks this first (the CLI, brume run, batch, Python).
+void refuse_gpu_without_passes(const CommandDef& c, Backend requested, const std::string& flag);
 
 // ---- building a definition from a typed job -------------------------------------------
 // What a command's own file gives: its table, its typed run and (optional)

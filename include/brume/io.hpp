@@ -28,10 +28,66 @@
 
 namespace brume {
 
-enum class Transfer { automatic, srgb, linear };
+// gamma and table carry a parameter (TransferFunction); transfer_names()
+// holds the words only, which --out-transfer takes.
+enum class Transfer { automatic, srgb, linear, gamma, table };
 const EnumNames<Transfer>& transfer_names();  // auto | srgb | linear
 Transfer parse_transfer(const std::string& s, const std::string& flag);  // throws brume::Error
 std::string to_string(Transfer t);
+
+// How an input image's stored values v become linear light, as
+// --image-transfer names it: a word of transfer_names(), or
+//   gamma:G     linear = v^G (0 < G <= 10; a negative float value keeps its
+//               sign: -(-v)^G), e.g. gamma:2.2 for a photo saved with a plain
+//               1/2.2 power; gamma:1 is linear (and is recorded so);
+//   table:FILE  a camera's measured response: FILE holds N >= 2 linear values
+//               (text: numbers separated by spaces, commas or new lines, '#'
+//               comments), non-decreasing, at v = i / (N - 1); linear
+//               between them (N = 256 maps each 8-bit code to its entry
+//               exactly). Float values outside [0, 1] are refused (a table
+//               says nothing there).
+// v is an integer file's count over 2^bits - 1, a float file's value. The
+// curve applies to the colour channels, never to alpha.
+struct TransferFunction {
+  Transfer kind = Transfer::automatic;
+  double gamma = 1.0;
+  std::vector<double> table;  // table: the linear values at v = i / (N - 1)
+  std::string table_path;     // table: FILE as given
+  std::string table_sha256;   // table: FILE's SHA-256 when it was read
+  TransferFunction() = default;
+  TransferFunction(Transfer k) : kind(k) {}  // NOLINT(google-explicit-constructor): a word is a transfer
+  bool operator==(Transfer k) const { return kind == k; }
+  bool operator!=(Transfer k) const { return kind != k; }
+  // linear light of v (gamma and table; the words are applied by the reader)
+  double apply(double v) const;
+};
+// Parses a word, gamma:G or table:FILE (reading FILE); throws brume::Error
+// naming `flag`, the value, what is allowed and the fix.
+TransferFunction parse_transfer_function(const std::string& text, const std::string& flag);
+// The text --image-transfer takes: "auto", "srgb", "linear", "gamma:2.2", "table:FILE".
+std::string to_string(const TransferFunction& t);
+// Declares the TransferFunction member `m` as the text parameter `name` of
+// `d` (the CLI's --NAME, a record's value, a Python keyword): its value is
+// to_string's text, parsed (a table read) when the job is built.
+template <class P>
+ParamTable<P>& transfer_param(ParamTable<P>& d, const char* name, TransferFunction P::*m, const char* help) {
+  ParamSpec s;
+  s.name = name;
+  s.kind = ParamKind::text;
+  s.help = help;
+  s.input_file = true;  // table:FILE: hashed with the image (file_record), checked by brume run
+  s.input_file_prefix = "table:";
+  return d.custom(
+      std::move(s), [m](const P& p) { return nlohmann::json(to_string(p.*m)); },
+      [m, flag = "--" + std::string(name)](P& p, const nlohmann::json& v) {
+        p.*m = parse_transfer_function(v.get<std::string>(), flag);
+      });
+}
+// The help of such a parameter (what the words and forms mean).
+#define BRUME_TRANSFER_HELP                                                                                          \
+  "auto (integer files sRGB, float files linear), srgb, linear, gamma:G (linear = v^G, 0 < G <= 10, e.g. gamma:2.2 " \
+  "for a plain 1/2.2 encoding) or table:FILE (a camera's measured response: N >= 2 non-decreasing linear values at " \
+  "equally spaced codes from 0 to 1, linear between; docs/conventions.md)"
 
 // A rectangle of pixels, corners included (OpenEXR's data and display
 // windows: x0, y0 the top-left pixel, x1, y1 the bottom-right one).
@@ -49,7 +105,7 @@ struct FileInfo {
   bool integer = false;  // stored as 8/16/32-bit integers
   int bits = 32;
   std::vector<std::string> channel_names;  // every channel of the file (of the part read, in a multi-part file)
-  Transfer transfer = Transfer::linear;  // transfer function actually applied on read
+  TransferFunction transfer = Transfer::linear;  // transfer function actually applied on read
   std::string description;  // the file's ImageDescription (brume embeds its JSON record there); empty if none
   // What was read ("files with layers" below): the layer (NAME of NAME.R, NAME.G,
   // NAME.B; a multi-part file's part; empty for the plain R, G, B or Y), the
@@ -87,7 +143,7 @@ struct FileInfo {
 // 4 (a record of schema <= 3 repeats with it: ParamTable::since).
 enum class LayerRule { names, first };
 struct ColorRead {
-  Transfer transfer = Transfer::automatic;
+  TransferFunction transfer = Transfer::automatic;
   std::string layer;                         // NAME, or empty
   std::string layer_flag = "--image-layer";  // what names the layer, for messages (Python: "layer=")
   LayerRule rule = LayerRule::names;         // first: R, G, B are the file's first three channels (layer empty)

@@ -82,6 +82,8 @@ struct ParamSpec {
                                      // SHA-256, which brume run checks, and refuses a record without it
   std::string input_file_none;       // a value of an input_file that names no file ("default" sensitivities)
   char input_file_cut = 0;           // the file is the value up to this character ('#': DATABASE.txt#CAMERA)
+  std::string input_file_prefix;     // a value names a file only after this prefix (--image-transfer's
+                                     // "table:" of table:FILE); values without it name none
   int input_hashed_since = 0;        // records of this schema on hold its hash (calibrations 4; --like,
                                      // --view-matrix, --turbidity-from 5: schema 4 was written without)
   int since_schema = 0;              // the record schema that introduced it (0: always there); a job that

@@ -108,7 +108,7 @@ struct InputFiles {
   std::string image;                       // colour image
   std::string image_layer;                 // its layer in a file with layers (brume/io.hpp: ColorRead); "": plain
   LayerRule image_layer_rule = LayerRule::names;  // --image-layer-rule: no layer named, by name or the first channels
-  Transfer image_transfer = Transfer::automatic;
+  TransferFunction image_transfer = Transfer::automatic;  // --image-transfer (brume/io.hpp)
   NonFinite nonfinite = NonFinite::error;
   DepthSource depth;                       // needs_depth effects only
 };

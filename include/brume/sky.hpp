@@ -260,7 +260,7 @@ struct SkyImageFit {
   nlohmann::json mask_record;    // of the mask; null when none
   double fit_ms = 0.0;
 };
-SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, const std::string& mask,
+SkyImageFit fit_sky_image_file(const std::string& image, const TransferFunction& transfer, const std::string& mask,
                                const SkyViewParams& view, const SunParams& sun, const SkyFitOptions& fit,
                                const std::string& flags = "--", const std::string& layer = "");
 

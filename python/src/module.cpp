@@ -152,6 +152,7 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
   }
   ExecOptions eo;
   if (call.contains("execution")) exec_param_table().from_json(eo, {{"execution", call["execution"]}}, fn);
+  if (const CommandDef* def = find_command(command)) refuse_gpu_without_passes(*def, eo.backend, "backend=");
   const Exec exec = fork_safe(eo.exec());
   ArrayResult out;
   {
@@ -424,8 +425,13 @@ PYBIND11_MODULE(_brume, m) {
       "read_image",
       [](py::object path_obj, py::object transfer, py::object layer_obj) {
         const std::string path = keyword_value(path_spec(), path_obj, "brume.read_image()");
-        Transfer t = Transfer::automatic;
-        if (!transfer.is_none()) t = parse_transfer(py::cast<std::string>(transfer), "transfer");
+        TransferFunction t = Transfer::automatic;
+        if (!transfer.is_none()) {
+          if (!py::isinstance<py::str>(transfer))
+            throw py::type_error("brume.read_image(): transfer takes a str ('auto', 'srgb', 'linear', 'gamma:G' or "
+                                 "'table:FILE') or None, got " + type_name(transfer));
+          t = parse_transfer_function(py::cast<std::string>(transfer), "brume.read_image(): transfer=");
+        }
         ColorRead how;
         how.transfer = t;
         how.layer_flag = "layer=";
@@ -454,7 +460,7 @@ PYBIND11_MODULE(_brume, m) {
       py::arg("path"), py::arg("transfer") = py::none(), py::arg("layer") = py::none(),
       "read_image(path, transfer=None, layer=None) -> Result\n\nA colour image as linear float32 RGB (H x W x 3) by "
       "the CLI's rules: integer files (PNG, JPEG, 8/16-bit TIFF) are sRGB and float files (EXR, PFM, HDR) linear "
-      "unless transfer='srgb'|'linear' says otherwise; grey is expanded, alpha dropped. layer: the layer of a file "
+      "unless transfer='srgb'|'linear'|'gamma:G'|'table:FILE' says otherwise (the CLI's --image-transfer); grey is expanded, alpha dropped. layer: the layer of a file "
       "with layers (a multilayer OpenEXR: 'ViewLayer.Combined' reads ViewLayer.Combined.R, .G, .B), as the CLI's "
       "--image-layer; None: the plain R, G, B, or the file's only colour layer (several: ValueError listing them). "
       "Result: rgb, record (the brume record embedded in the file's ImageDescription, or None), file (format, bits, "

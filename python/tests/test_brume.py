@@ -256,6 +256,24 @@ def test_uint8_with_transfer_equals_reading_the_png(demo, tmp_path):
     same(lin, brume.blur(rgb8.astype(np.float32) * np.float32(1 / 255), sigma=1.0).rgb)
 
 
+def test_read_image_takes_a_gamma_or_a_camera_response(tmp_path):
+    # As the CLI's --image-transfer: each 8-bit code through code/255 ** G in
+    # double, rounded once to float; a table's entries at the codes exactly.
+    codes = (np.arange(16 * 16 * 3) % 256).astype(np.uint8).reshape(16, 16, 3)
+    brume.write_image(tmp_path / "c.png", codes.astype(np.float32) / 255, transfer="linear", bits="8")
+    got = brume.read_image(tmp_path / "c.png", transfer="gamma:2.2")
+    assert got.file["transfer"] == "gamma:2.2"
+    same(got.rgb, ((codes / 255.0) ** 2.2).astype(np.float32))
+    table = (np.arange(256) / 255.0) ** 2.6
+    (tmp_path / "t.txt").write_text("# response\n" + "\n".join(repr(float(v)) for v in table))
+    got = brume.read_image(tmp_path / "c.png", transfer="table:" + str(tmp_path / "t.txt"))
+    same(got.rgb, table[codes].astype(np.float32))
+    with pytest.raises(ValueError, match=r"transfer= 'gamma:0'.*\(0, 10\]"):
+        brume.read_image(tmp_path / "c.png", transfer="gamma:0")
+    with pytest.raises(TypeError, match=r"transfer takes a str"):
+        brume.read_image(tmp_path / "c.png", transfer=2.2)
+
+
 # ---- errors -----------------------------------------------------------------------------------------
 def test_unknown_keyword_names_the_nearest(demo):
     with pytest.raises(TypeError, match=r"visibilty.*did you mean: visibility"):

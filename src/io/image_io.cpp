@@ -20,6 +20,7 @@
 
 #include "brume/error.hpp"
 #include "brume/io.hpp"
+#include "core/text.hpp"
 #include "io/codec.hpp"
 #include "io/formats/exr.hpp"
 #include "io/formats/format.hpp"
@@ -36,7 +37,113 @@ const EnumNames<Transfer>& transfer_names() {
 namespace fs = std::filesystem;
 
 Transfer parse_transfer(const std::string& s, const std::string& flag) { return parse_enum(transfer_names(), s, flag); }
-std::string to_string(Transfer t) { return enum_name(transfer_names(), t); }
+std::string to_string(Transfer t) {
+  if (t == Transfer::gamma) return "gamma";
+  if (t == Transfer::table) return "table";
+  return enum_name(transfer_names(), t);
+}
+
+// ---- transfers with a parameter (gamma:G, table:FILE) -----------------------------------
+namespace {
+constexpr double kMaxGamma = 10.0;
+constexpr std::size_t kMaxTableEntries = 65536;  // one entry per 16-bit code
+
+std::string transfer_fix() {
+  return "allowed: auto, srgb, linear, gamma:G (0 < G <= 10, e.g. gamma:2.2) or table:FILE (a camera response: "
+         "N >= 2 non-decreasing linear values at equally spaced codes from 0 to 1)";
+}
+
+std::vector<double> read_transfer_table(const std::string& path, const std::string& flag, const std::string& text) {
+  const std::string what = flag + " table:";
+  std::string body;
+  try {
+    body = read_input_file(path, what, {4u << 20, "a transfer table is at most 65536 numbers"});
+  } catch (const Error& e) {
+    throw Error(std::string(e.what()) + " (" + flag + " '" + text + "')");
+  }
+  std::vector<double> v;
+  std::istringstream lines(body);
+  std::string line;
+  int line_no = 0;
+  while (std::getline(lines, line)) {
+    ++line_no;
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    for (char& c : line)
+      if (c == ',' || c == ';' || c == '\t' || c == '\r') c = ' ';
+    std::istringstream items(line);
+    std::string item;
+    while (items >> item) {
+      double x = 0.0;
+      if (!text::parse_number(item, x) || !std::isfinite(x))
+        throw Error(flag + " '" + text + "': line " + std::to_string(line_no) + " of '" + path + "' holds '" +
+                    item + "', not a finite number; a transfer table is numbers only (the linear values "
+                    "at equally spaced codes from 0 to 1), with '#' comments");
+      if (v.size() == kMaxTableEntries)
+        throw Error(flag + " '" + text + "': '" + path + "' holds more than " + std::to_string(kMaxTableEntries) +
+                    " values; a transfer table has one per code at most (65536 for 16-bit files)");
+      v.push_back(x);
+    }
+  }
+  if (v.size() < 2)
+    throw Error(flag + " '" + text + "': '" + path + "' holds " + std::to_string(v.size()) + " value" +
+                (v.size() == 1 ? "" : "s") + "; a transfer table needs at least 2 (the linear values at codes 0 "
+                "and 1, and any number equally spaced between)");
+  for (std::size_t i = 1; i < v.size(); ++i)
+    if (v[i] < v[i - 1])
+      throw Error(flag + " '" + text + "': '" + path + "' decreases at entry " + std::to_string(i) + " (" +
+                  text::g(v[i - 1]) + " then " + text::g(v[i]) +
+                  "); a camera's response is non-decreasing: fix the table (entry i is the linear value at code "
+                  "i / (N - 1))");
+  return v;
+}
+}  // namespace
+
+double TransferFunction::apply(double v) const {
+  if (kind == Transfer::gamma) return v < 0.0 ? -std::pow(-v, gamma) : std::pow(v, gamma);
+  if (kind != Transfer::table) return v;
+  const std::size_t n = table.size();
+  const double x = v * static_cast<double>(n - 1);
+  const double i0 = std::floor(x);
+  const std::size_t i = static_cast<std::size_t>(std::clamp(i0, 0.0, static_cast<double>(n - 2)));
+  const double f = x - static_cast<double>(i);
+  return f == 0.0 ? table[i] : table[i] + f * (table[i + 1] - table[i]);
+}
+
+TransferFunction parse_transfer_function(const std::string& text, const std::string& flag) {
+  for (const auto& [e, n] : transfer_names())
+    if (text == n) return TransferFunction(e);
+  const auto colon = text.find(':');
+  const std::string head = text.substr(0, colon), arg = colon == std::string::npos ? "" : text.substr(colon + 1);
+  TransferFunction t;
+  if (head == "gamma" && colon != std::string::npos) {
+    double g = 0.0;
+    if (!text::parse_number(arg, g) || !(g > 0.0 && g <= kMaxGamma))
+      throw Error(flag + " '" + text + "': the gamma must be a number in (0, 10] (linear = v^G: 2.2 for a "
+                  "plain 1/2.2 encoding, 1 for linear); " + transfer_fix());
+    if (g == 1.0) return TransferFunction(Transfer::linear);  // v^1: the linear read, bit for bit
+    t.kind = Transfer::gamma;
+    t.gamma = g;
+    return t;
+  }
+  if (head == "table" && colon != std::string::npos) {
+    if (arg.empty())
+      throw Error(flag + " '" + text + "' names no file; " + transfer_fix());
+    t.kind = Transfer::table;
+    t.table_path = arg;
+    t.table = read_transfer_table(arg, flag, text);
+    t.table_sha256 = sha256_file(arg);
+    return t;
+  }
+  throw Error(flag + " '" + text + "' is not allowed; " + transfer_fix());
+}
+
+std::string to_string(const TransferFunction& t) {
+  // The shortest text that reads back as the same double (JSON's): records repeat.
+  if (t.kind == Transfer::gamma) return "gamma:" + nlohmann::json(t.gamma).dump();
+  if (t.kind == Transfer::table) return "table:" + t.table_path;
+  return to_string(t.kind);
+}
 
 namespace {
 thread_local int t_io_threads = 0;  // an IoThreads scope's count (0: none)
@@ -101,7 +208,8 @@ enum class Want { values, counts, srgb_linear, with_alpha };
 // Every channel of the first subimage as float, by the file's row or else
 // OpenImageIO. `name` names the file in messages; `extra`: the channels of
 // the caller's copy, for the memory check before any allocation.
-io::Decoded decode(const std::string& path, const std::string& name, Want want, int extra, float pad = 0.0f) {
+io::Decoded decode(const std::string& path, const std::string& name, Want want, int extra, float pad = 0.0f,
+                   const TransferFunction* curve = nullptr) {
   const auto check_size = [&](int w, int h, int c) {
     check_declared_size(path, w, h, c);
     const std::uint64_t px = static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h);
@@ -115,6 +223,12 @@ io::Decoded decode(const std::string& path, const std::string& name, Want want, 
     if (want == Want::counts)
       req.map = [](float v, int bits) { return static_cast<float>(std::nearbyint(v * (std::ldexp(1.0, bits) - 1.0))); };
     if (want == Want::srgb_linear) req.map = [](float v, int) { return srgb_to_linear(v); };
+    // A gamma or table of the count's exact value (the float value is its nearest float).
+    if (want == Want::values && curve)
+      req.map = [curve](float v, int bits) {
+        const double max = std::ldexp(1.0, bits) - 1.0;
+        return static_cast<float>(curve->apply(std::nearbyint(v * max) / max));
+      };
     req.with_alpha = want == Want::with_alpha;
     req.threads = std::min(io::io_threads(), 64);
     req.pad = pad;
@@ -399,9 +513,39 @@ Image read_color(const std::string& path, Transfer transfer, FileInfo* info) {
   return read_color(path, how, info, nullptr);
 }
 
+namespace {
+bool is_curve(const TransferFunction& t) { return t.kind == Transfer::gamma || t.kind == Transfer::table; }
+
+// A gamma or table transfer on the colour channels of `s` (channel `alpha_ch`
+// untouched; -1: none), for the values a row did not map during its decode
+// (float files; integer files with alpha, which OpenImageIO reads associated:
+// the curve then meets the associated values, as the sRGB decode does). A
+// table says nothing outside [0, 1]: a value there is refused.
+void apply_curve(Image& s, const TransferFunction& t, int alpha_ch, const std::string& path) {
+  const int C = s.channels;
+  if (t.kind == Transfer::table) {
+    for (std::size_t i = 0; i < s.pixels(); ++i)
+      for (int k = 0; k < C; ++k) {
+        const float v = s.data[i * C + k];
+        if (k == alpha_ch || !std::isfinite(v) || (v >= 0.0f && v <= 1.0f)) continue;
+        throw Error("'" + path + "' holds " + text::g(v) + " at x " + std::to_string(i % s.width) + ", y " +
+                    std::to_string(i / s.width) + ", channel " + std::to_string(k) + ", outside [0, 1], where the "
+                    "transfer table:" + t.table_path + " says nothing (its entries are the linear values at codes "
+                    "0 to 1); a float file is usually linear already: use the transfer linear or auto, or gamma:G");
+      }
+  }
+  for (std::size_t i = 0; i < s.pixels(); ++i)
+    for (int k = 0; k < C; ++k) {
+      if (k == alpha_ch) continue;
+      float& v = s.data[i * C + k];
+      if (std::isfinite(v)) v = static_cast<float>(t.apply(v));
+    }
+}
+}  // namespace
+
 Image read_color(const std::string& path, const ColorRead& how, FileInfo* info, Image* alpha) {
   check_readable(path);
-  const Transfer transfer = how.transfer;
+  const TransferFunction& transfer = how.transfer;
   if (alpha) *alpha = Image();
   io::ExrLayout L;
   const bool exr = layout_of(path, L);
@@ -414,8 +558,9 @@ Image read_color(const std::string& path, const ColorRead& how, FileInfo* info, 
     d.info.path = path;
     d.info.layer = f.name;
     d.info.channel_rule = how.layer.empty() ? "the file's one colour layer" : "named by " + how.layer_flag;
-    const Transfer t = transfer == Transfer::automatic ? Transfer::linear : transfer;
+    const TransferFunction t = transfer == Transfer::automatic ? TransferFunction(Transfer::linear) : transfer;
     d.info.transfer = t;
+    if (is_curve(t)) apply_curve(d.img, t, f.alpha.empty() ? -1 : d.img.channels - 1, path);
     const Image& s = d.img;
     const int C = s.channels, grey = static_cast<int>(f.colour.size()) == 1;
     Image out(s.width, s.height, 3);
@@ -438,8 +583,11 @@ Image read_color(const std::string& path, const ColorRead& how, FileInfo* info, 
                 "; drop " + how.layer_flag);
   // An integer file's automatic transfer is sRGB, which a row decodes during
   // its read.
-  io::Decoded d = decode(path, "'" + path + "'", transfer == Transfer::linear ? Want::values : Want::srgb_linear, 3);
-  Transfer t = transfer;
+  // A gamma or table: the rows map each count as they decode (once per count).
+  io::Decoded d = decode(path, "'" + path + "'",
+                         transfer == Transfer::linear || is_curve(transfer) ? Want::values : Want::srgb_linear, 3, 0.0f,
+                         is_curve(transfer) ? &transfer : nullptr);
+  TransferFunction t = transfer;
   if (t == Transfer::automatic) t = d.info.integer ? Transfer::srgb : Transfer::linear;
   d.info.transfer = t;
   Image& s = d.img;
@@ -457,6 +605,7 @@ Image read_color(const std::string& path, const ColorRead& how, FileInfo* info, 
   int a = d.alpha;
   if (a < 0 && (s.channels == 2 || s.channels == 4)) a = s.channels - 1;
   if (a >= s.channels || (s.channels != 2 && s.channels != 4)) a = -1;
+  if (is_curve(t) && !(d.mapped && d.info.integer)) apply_curve(s, t, a, path);
   d.info.channels_read = plain_colour_channels(d.info, s.channels, alpha ? a : -1);
   d.info.channel_rule = how.rule == LayerRule::first && !plain_channels(d.info.channel_names)
                             ? "the file's first channels, in its order (layer rule 'first': records before schema 4)"

@@ -243,7 +243,11 @@ std::vector<BatchFrame> plan_batch(const BatchOptions& o) {
                                  std::any_of(e.specs.begin(), e.specs.end(),
                                              [&name = canon](const ParamSpec& s) { return s.output_of == name; });
             std::error_code fec;
-            value = is_file || (!t.empty() && fs::exists(base / t, fec)) ? resolve_path(t) : t;
+            const std::string& pre = sp->input_file_prefix;
+            if (!pre.empty())  // a file only after its prefix (table:FILE): that part is relative to the manifest
+              value = t.rfind(pre, 0) == 0 ? pre + resolve_path(t.substr(pre.size())) : t;
+            else
+              value = is_file || (!t.empty() && fs::exists(base / t, fec)) ? resolve_path(t) : t;
             sp->check(value);
           } else if (!v.is_string() && !v.is_null() && !v.is_array() && sp->kind != ParamKind::choice) {
             value = v;  // a JSON number or boolean: checked as it is

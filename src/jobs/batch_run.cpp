@@ -218,6 +218,7 @@ BatchSummary run_batch(const BatchOptions& o) {
   const int asked = o.workers > 0 ? o.workers : hw;
   const int workers = std::max(1, std::min<int>(asked, static_cast<int>(frames.size())));
   ExecOptions exec = o.exec;
+  for (const BatchFrame* f : frames) refuse_gpu_without_passes(def_of(f->effect), exec.backend, "--backend");
   // Results do not depend on threads; frames in flight share the cores. From
   // the workers asked for, not those a small shard uses, so that the records'
   // execution.threads is the same in every shard.

@@ -65,6 +65,13 @@ const std::vector<CommandGroup>& command_groups() {
   return g;
 }
 
+void refuse_gpu_without_passes(const CommandDef& c, Backend requested, const std::string& flag) {
+  if (requested != Backend::gpu || !c.gpu_passes.empty()) return;
+  throw Error(flag + " gpu: " + c.name + " runs on the CPU only (it has no GPU pass yet; those that have: " +
+              command_names([](const CommandDef& d) { return !d.gpu_passes.empty(); }) + "); use " + flag +
+              " cpu or auto");
+}
+
 const CommandDef* find_command(std::string_view name) {
   for (const CommandDef& c : commands())
     if (c.name == name) return &c;

@@ -78,6 +78,10 @@ void require_input_hashes(const CommandDef& c, const nlohmann::json& job, const 
     if (v == b->end() || !v->is_string()) continue;
     std::string path = v->get<std::string>();
     if (path.empty() || path == s.input_file_none) continue;
+    if (!s.input_file_prefix.empty()) {
+      if (path.rfind(s.input_file_prefix, 0) != 0) continue;  // a value that names no file ("gamma:2.2")
+      path = path.substr(s.input_file_prefix.size());
+    }
     if (s.input_file_cut) path = path.substr(0, path.rfind(s.input_file_cut));
     const auto h = hashes.find(path);
     if (h == hashes.end()) {
@@ -258,6 +262,7 @@ nlohmann::json rerun(const nlohmann::json& record, const ExecOptions& exec, cons
   for (const char* block : {"inputs", "depth", "fog"})
     if (record.contains(block)) verify_inputs(record[block]);
   const CommandDef& c = repeatable(cmd, record);
+  refuse_gpu_without_passes(c, exec.backend, "--backend");
   nlohmann::json job = job_as_recorded(c, record);
   require_input_hashes(c, job, record, inputs);
   redirect_outputs(c, job, out_dir);

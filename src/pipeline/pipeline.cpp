@@ -247,9 +247,9 @@ const ParamTable<InputFiles>& input_param_table(bool with_depth) {
                 "how --image is read when it has layers and no --image-layer is given: names (its only colour layer, "
                 "else refused with the list) or first (its first three channels in the file's order, the rule of "
                 "records before schema 4)")
-        .since(4, "first")
-        .choice("image-transfer", &InputFiles::image_transfer, transfer_names(),
-                "transfer function of the input: auto (integer files sRGB, float files linear), srgb, linear")
+        .since(4, "first");
+    transfer_param(d, "image-transfer", &InputFiles::image_transfer,
+                   "transfer function of the input: " BRUME_TRANSFER_HELP)
         .choice("nonfinite", &InputFiles::nonfinite, nonfinite_names(),
                 "NaN or inf in the colour image: error (default; names the count and the first pixel) or zero "
                 "(replaced by 0, the count recorded)");
@@ -358,9 +358,12 @@ bool is_output_file(const ParamSpec& s) { return s.output_file; }
 
 bool is_input_file(const ParamSpec& s) {
   if ((s.block != "input" && s.block != "depth") || s.kind != ParamKind::text) return false;
-  const std::string suffix = "-layer";
-  const bool layer = s.name.size() > suffix.size() && s.name.compare(s.name.size() - suffix.size(), suffix.size(), suffix) == 0;
-  return s.name != "depth-channel" && !layer;
+  // How a file is read, not a file: --image-layer, --image-transfer (whose
+  // table:FILE the record hashes with the image: file_record).
+  const auto ends_with = [&n = s.name](const std::string& suffix) {
+    return n.size() > suffix.size() && n.compare(n.size() - suffix.size(), suffix.size(), suffix) == 0;
+  };
+  return s.name != "depth-channel" && !ends_with("-layer") && !ends_with("-transfer");
 }
 
 std::vector<ArrayArg> rgb_range_args(ArrayArg::As as) {

@@ -30,6 +30,11 @@ nlohmann::json file_record(const std::string& path, const FileInfo& info, const 
                       {"layer", info.layer},
                       {"channels_read", info.channels_read}};
   if (!info.part.empty()) j["part"] = info.part;
+  // A table's file, hashed when it was read: brume run checks it as any input.
+  if (info.transfer == Transfer::table)
+    j["transfer_table"] = {{"path", info.transfer.table_path},
+                           {"sha256", info.transfer.table_sha256},
+                           {"entries", info.transfer.table.size()}};
   if (info.blender) j["blender_multilayer"] = true;
   if (info.padded) {
     const auto box = [](const PixelWindow& w) { return nlohmann::json::array({w.x0, w.y0, w.x1, w.y1}); };

@@ -71,6 +71,7 @@ std::vector<Command> add_commands(CLI::App& app) {
                      const nlohmann::json job = def->build(values);
                      ExecOptions exec;
                      if (eflags) eflags->apply(exec);
+                     refuse_gpu_without_passes(*def, exec.backend, "--backend");
                      const IoThreads io(exec.threads);  // --threads bounds the codecs too (0: OpenMP's count)
                      const nlohmann::json result = def->cli_run ? def->cli_run(job, exec, ctx) : def->run(job, exec, ctx);
                      if (def->report) def->report(job, result);

@@ -24,7 +24,7 @@ struct AerialJob {
   // (--sky-projection, --sky-yaw, --sky-sun-zenith, --sky-date, --sky-samples, ...).
   std::string sky_image;                           // --sky-image
   std::string sky_image_layer;                     // --sky-image-layer: its layer in a file with layers
-  Transfer sky_image_transfer = Transfer::automatic;  // --sky-image-transfer
+  TransferFunction sky_image_transfer = Transfer::automatic;  // --sky-image-transfer
   std::string sky_mask;                            // --sky-mask
   SkyViewParams sky_view;                          // --sky-projection ...
   SunParams sky_sun;                               // --sky-sun ...

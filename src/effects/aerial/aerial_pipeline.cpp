@@ -180,9 +180,9 @@ const ParamTable<AerialJob>& aerial_job_table() {
               "carry --sky-")
         .reads_file()
         .text("sky-image-layer", &AerialJob::sky_image_layer,
-              "the layer of a --sky-image with layers (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR)")
-        .choice("sky-image-transfer", &AerialJob::sky_image_transfer, transfer_names(),
-                "transfer function of an integer --sky-image (auto: sRGB for integer files, linear for float)")
+              "the layer of a --sky-image with layers (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR)");
+    transfer_param(d, "sky-image-transfer", &AerialJob::sky_image_transfer,
+                   "transfer function of --sky-image: " BRUME_TRANSFER_HELP)
         .text("sky-mask", &AerialJob::sky_mask, "grey image of --sky-image's size: > half scale marks usable sky")
         .reads_file()
         .nest(&AerialJob::sky_view, sky_view_param_table(), "sky-")

@@ -20,7 +20,7 @@ nlohmann::json run_sky_render_job(const SkyRenderJob& job, const ExecOptions& ex
 struct SkyFitJob {
   std::string image;                      // --image (hdr, exr, png, jpg, tiff)
   std::string image_layer;                // --image-layer: its layer in a file with layers (brume/io.hpp)
-  Transfer image_transfer = Transfer::automatic;  // --image-transfer
+  TransferFunction image_transfer = Transfer::automatic;  // --image-transfer
   std::string mask;                       // --mask: > 0.5 (or 128) marks usable sky
   SkyViewParams view;
   SunParams sun;

@@ -142,9 +142,8 @@ const ParamTable<SkyFitJob>& sky_fit_job_table() {
         .reads_file()
         .text("image-layer", &SkyFitJob::image_layer,
               "the layer of a file with layers read as the photo (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR); "
-              "empty: the plain R, G, B, or the file's only colour layer")
-        .choice("image-transfer", &SkyFitJob::image_transfer, transfer_names(),
-                "transfer function of an integer image (auto: sRGB for integer files, linear for float)")
+              "empty: the plain R, G, B, or the file's only colour layer");
+    transfer_param(d, "image-transfer", &SkyFitJob::image_transfer, "transfer function of the photo: " BRUME_TRANSFER_HELP)
         .text("mask", &SkyFitJob::mask, "grey image of the same size: > half scale marks usable sky (default: all)")
         .reads_file()
         .nest(&SkyFitJob::view, sky_view_param_table())
@@ -205,7 +204,7 @@ SkyImageFit fit_sky_data(DenseImageRef rgb, bool integer_image, const Image* mas
   return out;
 }
 
-SkyImageFit fit_sky_image_file(const std::string& image, Transfer transfer, const std::string& mask_path,
+SkyImageFit fit_sky_image_file(const std::string& image, const TransferFunction& transfer, const std::string& mask_path,
                                const SkyViewParams& view, const SunParams& sun_params, const SkyFitOptions& fit,
                                const std::string& flags, const std::string& layer) {
   if (flags != "--") {
