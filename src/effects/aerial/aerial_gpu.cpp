@@ -37,6 +37,15 @@ gl::Texture table_texture(const AttenuationTable& t) {
   return gpu::make_texture(GL_RGBA32F, static_cast<int>(n), 1, GL_RGBA, GL_FLOAT, px.data());
 }
 
+// --path slant: ln Gamma over (s_R, s_M) as an nr x nm RGBA32F texture (row j
+// holds s_M = j step_m), read with texelFetch only.
+gl::Texture slant_table_texture(const SlantAttenuationTable& t) {
+  std::vector<float> px(static_cast<std::size_t>(t.nr) * t.nm * 4, 0.0f);
+  for (std::size_t i = 0; i < t.log_gamma.size(); ++i)
+    for (int c = 0; c < 3; ++c) px[i * 4 + c] = t.log_gamma[i][c];
+  return gpu::make_texture(GL_RGBA32F, t.nr, t.nm, GL_RGBA, GL_FLOAT, px.data());
+}
+
 }  // namespace
 
 struct GpuAerial::State {
@@ -75,8 +84,20 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
     s.precision = p.diffusion.precision;
   }
   // Per render: the tables and the sky mask belong to the analysis.
+  const bool slant = p.path == AerialPath::slant;
+  if (slant && (a.slant_dh.width != w_ || a.slant_dh.height != h_ || a.slant_gamma.log_gamma.empty() ||
+                (a.mode == AerialMode::rerender && a.slant_gamma_from.log_gamma.empty())))
+    throw Error("GPU aerial: --path slant, but the analysis holds no slant tables for this image (analyse it with "
+                "--path slant and the geometry)");
   gl::Texture table = table_texture(a.gamma);
   gl::Texture table_from = table_texture(a.mode == AerialMode::rerender ? a.gamma_from : a.gamma);
+  // The slant path's inputs (level: the level table stands in, never read).
+  gl::Texture slant_dh, slant_table, slant_table_from;
+  if (slant) {
+    slant_dh = gpu::make_texture(GL_RG32F, w_, h_, GL_RG, GL_FLOAT, a.slant_dh.data.data());
+    slant_table = slant_table_texture(a.slant_gamma);
+    slant_table_from = slant_table_texture(a.mode == AerialMode::rerender ? a.slant_gamma_from : a.slant_gamma);
+  }
   std::vector<float> sky(static_cast<std::size_t>(w_) * h_, 0.0f);
   if (!a.sky.data.empty()) sky = a.sky.data;
   gl::Texture sky_tex = gpu::make_texture(GL_R32F, w_, h_, GL_RED, GL_FLOAT, sky.data());
@@ -92,8 +113,14 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
   const gpu::Program& pr = g.program(kAerialPremultiplyPass);
   g.begin(s.premultiply);
   glUseProgram(pr.id());
-  const GLuint inputs[] = {s.in.image.id(), s.in.range.id(), table.id(), table_from.id()};
-  for (int k = 0; k < 4; ++k) {
+  const GLuint inputs[] = {s.in.image.id(),
+                           s.in.range.id(),
+                           table.id(),
+                           table_from.id(),
+                           slant ? slant_dh.id() : table.id(),
+                           slant ? slant_table.id() : table.id(),
+                           slant ? slant_table_from.id() : table.id()};
+  for (int k = 0; k < 7; ++k) {
     glActiveTexture(GL_TEXTURE0 + k);
     glBindTexture(GL_TEXTURE_2D, inputs[k]);
   }
@@ -114,6 +141,13 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
   glUniform1i(pr.loc("uXyz"), xyz ? 1 : 0);
   glUniform3f(pr.loc("uA"), A[0], A[1], A[2]);
   glUniform1f(pr.loc("uFloor"), static_cast<float>(p.gamma_floor));
+  glUniform1i(pr.loc("uSlant"), slant ? 1 : 0);
+  glUniform2f(pr.loc("uInvScaleHeight"), static_cast<float>(1.0 / kRayleighScaleHeightM),
+              static_cast<float>(1.0 / kMieScaleHeightM));
+  glUniform2f(pr.loc("uSlantInvStep"), slant ? static_cast<float>(1.0 / a.slant_gamma.step_r_m) : 0.0f,
+              slant ? static_cast<float>(1.0 / a.slant_gamma.step_m_m) : 0.0f);
+  glUniform1i(pr.loc("uSlantNr"), slant ? a.slant_gamma.nr : 2);
+  glUniform1i(pr.loc("uSlantNm"), slant ? a.slant_gamma.nm : 2);
   GpuContext::Impl::draw();
   gpu::check_gl("aerial premultiply");
   if (blur) gpu_diffusion_rates(ctx_, aerial_tex(s.aux, w_, h_), aerial_tex(s.rates, w_, h_), p.diffusion, a.plan);
@@ -168,8 +202,19 @@ AerialResult GpuAerial::render(const AerialParams& p, const AerialAnalysis& a, G
     for (std::size_t i = 0; i < s.in.range_host.size(); ++i) {
       const float r = s.in.range_host[i];
       if (!(r > 0.0f) || (!a.sky.data.empty() && a.sky.data[i] > 0.0f)) continue;
-      const std::array<float, 3> gl = (a.mode == AerialMode::rerender ? a.gamma_from : a.gamma)
-                                          .at(static_cast<double>(r) * p.distance_scale);
+      const double sd = static_cast<double>(r) * p.distance_scale;
+      std::array<float, 3> gl{};
+      if (slant) {  // the CPU row's look-up (aerial.cpp), in double up to the grid's cells
+        const float* k = a.slant_dh.data.data() + 2 * i;
+        const double dh = sd * static_cast<double>(k[0]) + static_cast<double>(k[1]);
+        const SlantDistances d = slant_distances(sd, std::isfinite(dh) ? dh : 0.0);
+        const SlantAttenuationTable& t = a.mode == AerialMode::rerender ? a.slant_gamma_from : a.slant_gamma;
+        const std::array<float, 3> l = t.log_at(static_cast<float>(d.rayleigh_m / t.step_r_m),
+                                                static_cast<float>(d.mie_m / t.step_m_m));
+        for (int c = 0; c < 3; ++c) gl[c] = AttenuationTable::exp_f(l[c]);
+      } else {
+        gl = (a.mode == AerialMode::rerender ? a.gamma_from : a.gamma).at(sd);
+      }
       res.floored_pixels += (gl[0] < floor_g || gl[1] < floor_g || gl[2] < floor_g) ? 1 : 0;
     }
   return res;

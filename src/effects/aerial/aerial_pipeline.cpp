@@ -91,8 +91,8 @@ PreviewFrame aerial_preview(const nlohmann::json& job, const PreviewInputs& in) 
     throw Error("the preview takes the turbidity as a number; --turbidity " + p.turbidity_rule +
                 " is fitted by brume aerial (its record's turbidity_fit gives T): preview with --turbidity T");
   if (p.path == AerialPath::slant)
-    throw Error("the preview draws the level path (its passes bind a 1-D attenuation table); --path slant runs in "
-                "brume aerial on the CPU: preview with --path level");
+    throw Error("the preview draws the level path (the page binds the 1-D attenuation table; the slant path's "
+                "per-pixel dh and 2-D table run in brume aerial, CPU or --backend gpu): preview with --path level");
   AerialAnalysis a = analyse_aerial(in.rgb, in.measured, p);
   const bool rerender = a.mode == AerialMode::rerender;
   PreviewFrame frame;
@@ -110,7 +110,8 @@ PreviewFrame aerial_preview(const nlohmann::json& job, const PreviewInputs& in) 
                      {"out", "RGBA32F"}, {"att", "RGBA32F"}};
   plan["steps"] = nlohmann::json::array();
   plan["steps"].push_back({{"pass", "aerial.premultiply"},
-                           {"in", {"image", "range", table, table_from}},
+                           // the slant path's three inputs: the level table stands in (uSlant 0: never read)
+                           {"in", {"image", "range", table, table_from, table, table, table}},
                            {"out", {"f0", "f1", "aux"}},
                            {"uniforms",
                             {{"uStep", f(a.gamma.step_m)},
@@ -126,7 +127,13 @@ PreviewFrame aerial_preview(const nlohmann::json& job, const PreviewInputs& in) 
                              {"uMode", preview_i(aerial_mode_index(a.mode))},
                              {"uXyz", preview_i(a.sensitivity.space == SensitivitySpace::xyz ? 1 : 0)},
                              {"uA", preview_f3(A.data())},
-                             {"uFloor", f(p.gamma_floor)}}}});
+                             {"uFloor", f(p.gamma_floor)},
+                             {"uSlant", preview_i(0)},
+                             {"uInvScaleHeight", preview_f2(static_cast<float>(1.0 / kRayleighScaleHeightM),
+                                                            static_cast<float>(1.0 / kMieScaleHeightM))},
+                             {"uSlantInvStep", preview_f2(0.0f, 0.0f)},
+                             {"uSlantNr", preview_i(2)},
+                             {"uSlantNm", preview_i(2)}}}});
   std::string f0 = "f0", f1 = "f1";
   if (blur) {  // F0 and F1 diffused with the same rates: the CPU's six channels with one sigma map
     preview_rates_step(plan, p.diffusion, a.plan, "aux");
@@ -233,18 +240,9 @@ AerialRun run_aerial_at(DenseImageRef rgb, DenseImageRef measured, const AerialP
   analyse_aerial(rgb, measured, p, run.analysis, exec.threads, geometry);
   PreparedRange prep = prepare_step(measured.view(), prepare, given, exec.threads);
   prep.record["complete"] = done.record;
-  // The slant path's per-pixel closed form and 2-D table are the CPU's (the
-  // GPU passes and the preview bind the level path's 1-D table).
-  Exec where = exec;
-  const bool slant_on_cpu = p.path == AerialPath::slant && exec.backend != Backend::cpu;
-  if (slant_on_cpu) {
-    if (exec.backend == Backend::gpu)
-      throw Error("--path slant runs on the CPU (its 2-D attenuation table is not in the GPU passes yet); give "
-                  "--backend cpu or auto, or --path level on the GPU");
-    where.backend = Backend::cpu;
-  }
-  BackendChoice backend = choose_backend(where);
-  if (slant_on_cpu) backend.record["backend_requested"] = "auto (--path slant: the CPU)";
+  // The slant path on the GPU: the premultiply pass takes each pixel's dh and
+  // the 2-D table (aerial_premultiply.frag).
+  BackendChoice backend = choose_backend(exec);
   const auto t0 = std::chrono::steady_clock::now();
   nlohmann::json timing;
   if (backend.gpu) {
@@ -252,7 +250,7 @@ AerialRun run_aerial_at(DenseImageRef rgb, DenseImageRef measured, const AerialP
     run.result = ga.render(p, run.analysis, exec.gpu_filter);
     timing = gpu_timing_record(ga.timing());
   } else {
-    run.result = apply_aerial(rgb, prep.range, p, run.analysis, where);
+    run.result = apply_aerial(rgb, prep.range, p, run.analysis, exec);
     timing = cpu_timing_record(t0, run.analysis.plan.iterations);
   }
   run.record["aerial"] = aerial_record(p, run.analysis, run.result.floored_pixels);
