@@ -705,7 +705,13 @@ def browser(brume, tmp, screenshot, bench):
         p = serve("aerial")
         # (A value typed as its default leaves the page's values: the removal's command has no --lambda, which
         # --remove refuses even at 0, and no --from-turbidity.)
-        for values, flags in [({"turbidity": "3", "lambda": "0"}, ["--turbidity", "3"]),
+        # The slant path first (issue #59: each pixel's dh from the camera's rays at the page's scale, the 2-D
+        # table), then back to the level path.
+        for values, flags in [({"turbidity": "3", "lambda": "6", "path": "slant", "pitch": "-5", "altitude": "800"},
+                               ["--turbidity", "3", "--lambda", "6", "--path", "slant", "--pitch", "-5",
+                                "--altitude", "800"]),
+                              ({"turbidity": "3", "lambda": "0", "path": "level", "pitch": "0", "altitude": "0"},
+                               ["--turbidity", "3"]),
                               ({"turbidity": "8", "lambda": "6"}, ["--turbidity", "8", "--lambda", "6"]),
                               ({"turbidity": "3", "from-turbidity": "6", "lambda": "0"},
                                ["--turbidity", "3", "--from-turbidity", "6"]),

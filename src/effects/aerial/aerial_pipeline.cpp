@@ -75,6 +75,14 @@ nlohmann::json aerial_record(const AerialParams& p, const AerialAnalysis& a, std
 // Its maps: the ln Gamma table(s) (N x 1, read with texelFetch; one table in
 // both slots unless re-rendering, as the native path binds them) and the sky
 // mask (1 where the measured range is unknown).
+// The slant path's 2-D table as an nr x nm map (row j: s_M = j step), as the GPU's.
+Image slant_gamma_map(const SlantAttenuationTable& t) {
+  Image m(t.nr, t.nm, 3);
+  for (std::size_t i = 0; i < t.log_gamma.size(); ++i)
+    for (int c = 0; c < 3; ++c) m.data[i * 3 + c] = t.log_gamma[i][c];
+  return m;
+}
+
 Image log_gamma_map(const AttenuationTable& t) {
   Image m(static_cast<int>(std::max<std::size_t>(2, t.log_gamma.size())), 1, 3);  // 2 x 1 at least, as the GPU's
   for (std::size_t i = 0; i < t.log_gamma.size(); ++i)
@@ -90,10 +98,24 @@ PreviewFrame aerial_preview(const nlohmann::json& job, const PreviewInputs& in) 
   if (!p.turbidity_rule.empty())
     throw Error("the preview takes the turbidity as a number; --turbidity " + p.turbidity_rule +
                 " is fitted by brume aerial (its record's turbidity_fit gives T): preview with --turbidity T");
-  if (p.path == AerialPath::slant)
-    throw Error("the preview draws the level path (the page binds the 1-D attenuation table; the slant path's "
-                "per-pixel dh and 2-D table run in brume aerial, CPU or --backend gpu): preview with --path level");
-  AerialAnalysis a = analyse_aerial(in.rgb, in.measured, p);
+  // --path slant: the files' camera for the inputs at 1/scale (its rays'
+  // elevations give each pixel's dh); a target-altitude file is the files'
+  // size, which the page's smaller scales do not have.
+  const bool slant = p.path == AerialPath::slant;
+  AerialGeometry geo;
+  if (slant) {
+    if (!j.target_altitude.empty())
+      throw Error("the preview takes the slant path's altitudes from the camera (--pitch, --roll and the "
+                  "intrinsics); --target-altitude '" + j.target_altitude + "' is a map of the files' size, which "
+                  "the page's scales do not have: run brume aerial with it, or preview with the camera's pose");
+    Image none;
+    geo = aerial_geometry(j, j.input.depth, preview_full_width(in), preview_full_height(in), none);
+    geo.camera->k = preview_intrinsics(geo.camera->k, in.scale);
+    geo.camera->width = in.rgb.width;
+    geo.camera->height = in.rgb.height;
+  }
+  AerialAnalysis a;
+  analyse_aerial(in.rgb, in.measured, p, a, 0, slant ? &geo : nullptr);
   const bool rerender = a.mode == AerialMode::rerender;
   PreviewFrame frame;
   nlohmann::json& plan = frame.plan;
@@ -101,6 +123,11 @@ PreviewFrame aerial_preview(const nlohmann::json& job, const PreviewInputs& in) 
   const std::string table_from = rerender ? frame.add_map("aerial.gamma-from", log_gamma_map(a.gamma_from)) : table;
   const std::string sky =
       frame.add_map("aerial.sky", a.sky.data.empty() ? Image(in.rgb.width, in.rgb.height, 1) : std::move(a.sky));
+  // The slant path's inputs; level: the level table stands in (uSlant 0: never read).
+  const std::string slant_dh = slant ? frame.add_map("aerial.slant-dh", std::move(a.slant_dh)) : table;
+  const std::string slant_table = slant ? frame.add_map("aerial.slant-gamma", slant_gamma_map(a.slant_gamma)) : table;
+  const std::string slant_table_from =
+      slant && rerender ? frame.add_map("aerial.slant-gamma-from", slant_gamma_map(a.slant_gamma_from)) : slant_table;
   const AttenuationTable& tf = rerender ? a.gamma_from : a.gamma;
   const std::array<float, 3> A = aerial_working_colour(a, a.airlight), A1 = aerial_working_colour(a, a.from_airlight);
   const bool blur = a.plan.iterations > 0 && a.mode != AerialMode::remove;
@@ -110,8 +137,7 @@ PreviewFrame aerial_preview(const nlohmann::json& job, const PreviewInputs& in) 
                      {"out", "RGBA32F"}, {"att", "RGBA32F"}};
   plan["steps"] = nlohmann::json::array();
   plan["steps"].push_back({{"pass", "aerial.premultiply"},
-                           // the slant path's three inputs: the level table stands in (uSlant 0: never read)
-                           {"in", {"image", "range", table, table_from, table, table, table}},
+                           {"in", {"image", "range", table, table_from, slant_dh, slant_table, slant_table_from}},
                            {"out", {"f0", "f1", "aux"}},
                            {"uniforms",
                             {{"uStep", f(a.gamma.step_m)},
@@ -128,12 +154,13 @@ PreviewFrame aerial_preview(const nlohmann::json& job, const PreviewInputs& in) 
                              {"uXyz", preview_i(a.sensitivity.space == SensitivitySpace::xyz ? 1 : 0)},
                              {"uA", preview_f3(A.data())},
                              {"uFloor", f(p.gamma_floor)},
-                             {"uSlant", preview_i(0)},
+                             {"uSlant", preview_i(slant ? 1 : 0)},
                              {"uInvScaleHeight", preview_f2(static_cast<float>(1.0 / kRayleighScaleHeightM),
                                                             static_cast<float>(1.0 / kMieScaleHeightM))},
-                             {"uSlantInvStep", preview_f2(0.0f, 0.0f)},
-                             {"uSlantNr", preview_i(2)},
-                             {"uSlantNm", preview_i(2)}}}});
+                             {"uSlantInvStep", preview_f2(slant ? static_cast<float>(1.0 / a.slant_gamma.step_r_m) : 0.0f,
+                                                          slant ? static_cast<float>(1.0 / a.slant_gamma.step_m_m) : 0.0f)},
+                             {"uSlantNr", preview_i(slant ? a.slant_gamma.nr : 2)},
+                             {"uSlantNm", preview_i(slant ? a.slant_gamma.nm : 2)}}}});
   std::string f0 = "f0", f1 = "f1";
   if (blur) {  // F0 and F1 diffused with the same rates: the CPU's six channels with one sigma map
     preview_rates_step(plan, p.diffusion, a.plan, "aux");
