@@ -17,6 +17,7 @@
 #include "brume/pipeline.hpp"
 #include "brume/record.hpp"
 #include "brume/wet.hpp"
+#include "pipeline/camera_scan_arrays.hpp"
 #include "pipeline/scan_job.hpp"
 
 namespace brume {
@@ -338,22 +339,15 @@ CommandDef wet_command() {
         check_camera_wet(k.p.wet, k.p.ground, false, false);
         check_range_step(k.prepare, g);
         ArrayResult r;
-        if (in.size() > 2 && in[2].present) {  // the scan first (as the CLI: its errors before the image's work)
-          const std::string what = "brume.wet(): lidar";
-          const LidarWetParams lp{k.p.wet, k.p.scan};
-          LidarWetStats st;
-          ArrayResult scan = scan_array_result(in[2].view, what,
-                                               [&](const float* src, float* out, std::size_t n, std::uint8_t* labels) {
-                                                 st = lidar_wet(src, out, n, lp, labels, what);
-                                                 return st.lost;
-                                               });
-          r.images["lidar"] = std::move(scan.images["points"]);
-          r.bytes["lidar_labels"] = std::move(scan.bytes["labels"]);
+        // the scan first (as the CLI: its errors before the image's work)
+        const std::string what = "brume.wet(): lidar";
+        const LidarWetParams lp{k.p.wet, k.p.scan};
+        LidarWetStats st;
+        if (camera_scan_arrays(in, 2, what, r, [&](const float* src, float* out, std::size_t n, std::uint8_t* labels) {
+              st = lidar_wet(src, out, n, lp, labels, what);
+              return st.lost;
+            }))
           r.record["lidar_wet"] = lidar_wet_record(lp, st);
-        } else {
-          r.images["lidar"] = Image();  // None
-          r.more["lidar_labels"] = nullptr;
-        }
         CameraWetRun run = run_camera_wet(in[0].dense.view(), in[1].dense.view(), k.depth, k.p.wet, k.p.ground,
                                           ConstImageView(), k.prepare, e, g);
         r.images["rgb"] = std::move(run.rgb);
@@ -365,14 +359,7 @@ CommandDef wet_command() {
         check_camera_wet(k.p.wet, k.p.ground, false, false);
         check_range_step(k.prepare, g);
       });
-  // A call that wetted a scan says so in its job, as rain's: an empty lidar block (the scan's settings
-  // are the call's film and scan blocks).
-  c.arrays->run = [inner = c.arrays->run](const std::vector<ArrayIn>& in, const nlohmann::json& call,
-                                          const Exec& e, const std::set<std::string>& g) {
-    ArrayResult r = inner(in, call, e, g);
-    if (in.size() > 2 && in[2].present) r.job["lidar"] = nlohmann::json::object();
-    return r;
-  };
+  mark_scan_in_job(*c.arrays, 2);  // a call that wetted a scan says so in its job, as rain's
   return c;
 }
 
