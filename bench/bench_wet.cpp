@@ -7,6 +7,9 @@
 // size when absent).
 // Targets: issue #57, the camera <= 30 ms at 1242x375 on 2 cores; the LiDAR <= 5 ms per 120 k points.
 //
+// The output's bits are hashed (FNV-1a over the floats' bytes, each thread count): two builds that
+// print the same hash wrote the same image (how a speed-up is checked to change no bit).
+//
 // Usage: brume_bench_wet [ROUNDS]
 #include <omp.h>
 
@@ -14,7 +17,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -37,6 +42,16 @@ std::string load() {
   return a + " " + b + " " + c;
 }
 
+std::uint64_t fnv1a(const Image& im) {
+  std::uint64_t h = 14695981039346656037ull;
+  for (const float v : im.data) {
+    std::uint32_t b;
+    std::memcpy(&b, &v, 4);
+    for (int k = 0; k < 4; ++k) h = (h ^ ((b >> (8 * k)) & 0xffu)) * 1099511628211ull;
+  }
+  return h;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -56,7 +71,8 @@ int main(int argc, char** argv) {
   s.sky = {0.5f, 0.6f, 0.8f};
   WetFilm w;
   w.film_mm = 1.5;
-  std::vector<double> t[2], ratio;
+  std::vector<double> t[2], ratio, maps[2], march[2];
+  std::uint64_t hash[2] = {0, 0};
   WetStats st;
   for (int r = 0; r <= rounds; ++r) {  // round 0 warms up
     double ms[2];
@@ -67,6 +83,8 @@ int main(int argc, char** argv) {
       const auto a = Clock::now();
       const Image out = render_wet(s, w, e, &st);
       ms[i] = std::chrono::duration<double, std::milli>(Clock::now() - a).count();
+      if (r == 0) hash[i] = fnv1a(out);
+      if (r > 0) maps[i].push_back(st.maps_ms), march[i].push_back(st.march_ms);
     }
     if (r == 0) continue;
     t[0].push_back(ms[0]), t[1].push_back(ms[1]), ratio.push_back(ms[0] / ms[1]);
@@ -76,6 +94,11 @@ int main(int argc, char** argv) {
               "2 threads %7.2f ms [%.2f..%.2f]  1/2: %.2fx [%.2f..%.2f]\n",
               st.ground, st.hits, st.sky_pixels, st.left_frame, a.median, a.lo, a.hi, b.median, b.lo, b.hi, q.median,
               q.lo, q.hi);
+  for (int i = 0; i < 2; ++i)
+    std::printf("    %d thread%s: depth map and pyramids %.2f ms, ground and march %.2f ms (medians); output hash "
+                "%016llx\n",
+                i + 1, i ? "s" : " ", bench::spread(maps[i]).median, bench::spread(march[i]).median,
+                static_cast<unsigned long long>(hash[i]));
 
   const std::string bin = std::string(BRUME_DATA_DIR) + "/kitti_object_000001/velodyne/000001.bin";
   std::vector<float> scan;

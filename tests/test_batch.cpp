@@ -16,6 +16,7 @@
 #include <iterator>
 #include <map>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -786,6 +787,52 @@ TEST_F(Batch, RainFramesDrawTheirDropsAndRepeatWithTheirScans) {
     EXPECT_TRUE(!scan.empty() && scan == slurp(p("alone.bin"))) << k;
   }
   EXPECT_EQ(seeds.size(), keys.size());  // no two frames share their drops
+  r = run("run " + p("out/a/f0.json") + " --out-dir " + p("again"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  expect_same_pixels(p("out/a/f0.png"), p("again/f0.png"));
+  EXPECT_EQ(slurp(p("out/a/f0.bin")), slurp(p("again/f0.bin")));
+}
+
+// Wet ground in a batch (issue #57): each frame draws its film and its scan's detection seed
+// (scan-seed=seed()); a lidar column wets the frame's scan, written beside the image as <key
+// stem>.bin with its labels as <key stem>.labels.u8 (brume lidar wet's bytes with the drawn values),
+// and `brume run` of a frame's record repeats its image and its scan bit for bit.
+TEST_F(Batch, WetFramesDrawTheirFilmAndRepeatWithTheirScans) {
+  const std::vector<std::string> keys = make_frames(2);
+  std::vector<float> pts;
+  for (int i = 0; i < 1000; ++i) {  // every other point on the ground 1.73 m below the sensor
+    const double a = 0.01 * i, r = 2.0 + 0.015 * i;
+    pts.insert(pts.end(), {static_cast<float>(r * std::cos(a)), static_cast<float>(r * std::sin(a)),
+                           i % 2 ? -1.73f : 0.5f, static_cast<float>((i % 5 + 1) / 50.0)});
+  }
+  std::ofstream(p("data/s.bin"), std::ios::binary)
+      .write(reinterpret_cast<const char*>(pts.data()), static_cast<std::streamsize>(pts.size() * 4));
+  const std::string m = csv(keys, "effect,fx,camera-height,lidar", "wet,60,1.5,s.bin");
+  CliRun r = run("batch --manifest " + m + " --out-dir " + p("out") + " --seed 5 --quiet --param " +
+                 "'film=loguniform(0.05, 2)' --param 'scan-seed=seed()' --param noise-floor=0.01");
+  ASSERT_EQ(r.status, 0) << r.output;
+  std::set<std::uint64_t> seeds;
+  for (const std::string& k : keys) {
+    const std::string stem = k.substr(0, k.size() - 4);
+    const nlohmann::json rec = nlohmann::json::parse(slurp(p("out/" + stem + ".json")));
+    const double film = rec["job"]["wet"]["film"].get<double>();
+    const auto seed = rec["job"]["scan"]["scan-seed"].get<std::uint64_t>();
+    EXPECT_EQ(seed, static_cast<std::uint64_t>(sample_unit(5, k, "scan-seed") * 0x1p53)) << k;
+    EXPECT_TRUE(film >= 0.05 && film < 2.0) << film;
+    EXPECT_EQ(rec["batch"]["sampling"]["specs"]["scan-seed"], "seed()");
+    seeds.insert(seed);
+    std::ostringstream f;
+    f.precision(17);
+    f << film;
+    r = run("lidar wet --points " + p("data/s.bin") + " --film " + f.str() + " --noise-floor 0.01 --scan-seed " +
+            std::to_string(seed) + " --out " + p("alone.bin") + " --labels " + p("alone.u8"));
+    ASSERT_EQ(r.status, 0) << r.output;
+    const std::string scan = slurp(p("out/" + stem + ".bin"));
+    EXPECT_TRUE(!scan.empty() && scan == slurp(p("alone.bin"))) << k;
+    EXPECT_EQ(slurp(p("out/" + stem + ".labels.u8")), slurp(p("alone.u8"))) << k;
+    EXPECT_GT(rec["lidar_wet"]["lost"].get<std::size_t>(), 0u) << k;  // (so that the seed matters)
+  }
+  EXPECT_EQ(seeds.size(), keys.size());
   r = run("run " + p("out/a/f0.json") + " --out-dir " + p("again"));
   ASSERT_EQ(r.status, 0) << r.output;
   expect_same_pixels(p("out/a/f0.png"), p("again/f0.png"));

@@ -363,3 +363,23 @@ TEST(Sample, SeedDrawsTheHashsTop53Bits) {
   m = err(seed, "seed(3)");
   EXPECT_NE(m.find("no arguments"), std::string::npos) << m;
 }
+
+// Wet ground's sampling (issue #57): the film log-uniform over 0.05-2 mm, the dry albedo uniform over
+// 0.05-0.25 and the scan's detection seed per key (seed()); every corner of the ranges passes the
+// command's checks; a fixed seed is kept.
+TEST(Sample, WetDrawsItsFilmAlbedoAndScanSeedPerKey) {
+  const nlohmann::json a = random_params("wet", 7, "frame/0", {}), b = random_params("wet", 7, "frame/1", {});
+  ASSERT_EQ(a.size(), 3u) << a.dump();
+  EXPECT_TRUE(a["film"].get<double>() >= 0.05 && a["film"].get<double>() < 2.0) << a.dump();
+  EXPECT_TRUE(a["ground-albedo"].get<double>() >= 0.05 && a["ground-albedo"].get<double>() < 0.25) << a.dump();
+  // loguniform's inverse CDF at the sampler's u (exp/log rounding only)
+  const double u = sample_unit(7, "frame/0", "film");
+  EXPECT_NEAR(a["film"].get<double>(), 0.05 * std::pow(40.0, u), 1e-12);
+  EXPECT_EQ(a["scan-seed"].get<std::uint64_t>(),
+            static_cast<std::uint64_t>(sample_unit(7, "frame/0", "scan-seed") * 0x1p53));
+  EXPECT_NE(a["scan-seed"], b["scan-seed"]);
+  EXPECT_EQ(random_params("wet", 7, "frame/0", {{"scan-seed", "4"}})["scan-seed"], 4u);
+  const std::vector<nlohmann::json> ends = sample_corners("wet", {{"scan-seed", "4"}}, 16);
+  ASSERT_EQ(ends.size(), 4u);  // the film's two ends by the albedo's two
+  for (const nlohmann::json& e : ends) EXPECT_NO_THROW(find_command("wet")->sampling->validate(e)) << e.dump();
+}

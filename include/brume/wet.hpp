@@ -127,6 +127,7 @@ struct WetScene {
 };
 struct WetStats {
   std::size_t ground = 0, hits = 0, sky_pixels = 0, left_frame = 0;
+  double maps_ms = 0.0, march_ms = 0.0;  // the phases' wall time: depth map and pyramids; the ground and its march
 };
 // The wet image; `ground` (may be null): 1 on the ground, 0 elsewhere.
 Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats* stats = nullptr,

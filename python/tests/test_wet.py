@@ -1,9 +1,23 @@
-"""brume.lidar.wet (issue #57): the scan `brume lidar wet` writes, bit for bit."""
+"""Wet ground from Python (issue #57): brume.lidar.wet, the scan `brume lidar wet`
+writes, bit for bit; brume.wet, the image, the ground and the scan `brume wet`
+writes on the demo scene, bit for bit, its job replayed, its errors in Python's
+words; the Wet transform (keyed draws, lidar_target, replay) and wet's sampling."""
+import json
+
 import numpy as np
 import pytest
 
 import brume
+import brume.transforms as T
 from conftest import run_cli, scan
+
+# The demo scene's camera (brume demo: 1.6 m up, 5 degrees down, 55 degrees vertical field of view).
+POSE = dict(fov_y=55, camera_height=1.6, pitch=-5)
+
+
+def same(a, b):
+    assert a.shape == b.shape and a.dtype == b.dtype
+    assert np.array_equal(a, b, equal_nan=True), f"max |diff| {np.nanmax(np.abs(a - b))}"
 
 
 def ground_scan():
@@ -34,3 +48,81 @@ def test_lidar_wet_equals_cli_bit_for_bit(tmp_path):
         brume.lidar.wet(pts)
     with pytest.raises(ValueError, match="film=-1"):
         brume.lidar.wet(pts, film=-1.0)
+
+
+def test_wet_equals_cli_bit_for_bit(demo, tmp_path):
+    """brume.wet on the demo's arrays: the image, the ground map and the scan of lidar= are
+    `brume wet`'s with --lidar, bit for bit; the record's counts are the CLI's; its job repeats it."""
+    d = demo["dir"]
+    pts = ground_scan()
+    pts.tofile(tmp_path / "in.bin")
+    run_cli("wet", "--image", d / "clean.png", "--range", d / "range.exr", "--fov-y", 55, "--camera-height", 1.6,
+            "--pitch", -5, "--film", 0.7, "--ground-albedo", 0.2, "--noise-floor", 2e-4,
+            "--lidar", tmp_path / "in.bin", "--lidar-out", tmp_path / "out.bin", "--lidar-labels", tmp_path / "l.u8",
+            "--out", tmp_path / "o.exr", "--bits", "float", "--record", tmp_path / "o.json")
+    r = brume.wet(demo["rgb"], demo["range"], film=0.7, ground_albedo=0.2, noise_floor=2e-4, lidar=pts, **POSE)
+    same(r.rgb, brume.read_image(tmp_path / "o.exr").rgb)
+    same(r.lidar, np.fromfile(tmp_path / "out.bin", np.float32).reshape(-1, 4))
+    assert np.array_equal(r.lidar_labels, np.fromfile(tmp_path / "l.u8", np.uint8))
+    alone = brume.lidar.wet(pts, film=0.7, ground_albedo=0.2, noise_floor=2e-4)  # one film: the scan's own form
+    same(r.lidar, alone.points)
+    cli = json.loads((tmp_path / "o.json").read_text())
+    for k in ("ground_pixels", "mirror_hits", "mirror_sky_pixels", "mirror_left_frame", "k_eff"):
+        assert r.record["wet"][k] == cli["wet"][k], k
+    assert r.ground.shape == r.rgb.shape[:2] and set(np.unique(r.ground)) <= {0.0, 1.0}
+    assert int(r.ground.sum()) == r.record["wet"]["ground_pixels"] > 1000 and r.record["lidar_wet"]["lost"] == cli["lidar_wet"]["lost"]
+    assert r.record["command"] == "wet" and r.record["job"]["lidar"] == {}
+    again = brume.wet(demo["rgb"], demo["range"], job=json.loads(json.dumps(r.record["job"])), lidar=pts)
+    same(again.rgb, r.rgb)
+    same(again.lidar, r.lidar)
+    no_scan = brume.wet(demo["rgb"], demo["range"], film=0.7, ground_albedo=0.2, **POSE)
+    assert no_scan.lidar is None and no_scan.lidar_labels is None and "lidar" not in no_scan.record["job"]
+    same(no_scan.rgb, r.rgb)
+    # film 0: the image back, bit for bit
+    same(brume.wet(demo["rgb"], demo["range"], film=0, **POSE).rgb, demo["rgb"])
+
+
+def test_wet_errors_speak_python(demo):
+    rgb, rng = demo["rgb"], demo["range"]
+    cases = [
+        (dict(POSE), "film"),                                      # the film is required
+        (dict(POSE, film=-1), "film"),
+        (dict(POSE, film=1, ground_albedo=1.5), "ground_albedo"),
+        (dict(fov_y=55, film=1), "camera_height"),                 # the plane needs the camera's height
+    ]
+    for kw, word in cases:
+        with pytest.raises(ValueError, match=word) as e:
+            brume.wet(rgb, rng, **kw)
+        assert "--" not in str(e.value) and "ground_mask" not in str(e.value), str(e.value)
+    with pytest.raises(ValueError, match=r"\(N, 4\)"):
+        brume.wet(rgb, rng, film=1, lidar=ground_scan()[:, :3], **POSE)
+    with pytest.raises(TypeError, match="film"):
+        brume.wet(rgb, rng, flim=1, **POSE)
+
+
+def test_wet_sampling_and_transform(demo):
+    """random_params draws the film, the albedo and the scan's seed per key; the Wet transform applies
+    brume.wet with them, replays them, and wets the frame's scan with lidar_target."""
+    a, b = brume.random_params("wet", 7, "frame/0"), brume.random_params("wet", 7, "frame/1")
+    assert set(a) == {"film", "ground-albedo", "scan-seed"}
+    assert 0.05 <= a["film"] < 2 and 0.05 <= a["ground-albedo"] < 0.25 and a["scan-seed"] != b["scan-seed"]
+    assert a["scan-seed"] == int(T._unit(7, "frame/0", "scan-seed") * 2.0 ** 53)
+    rgb, rng = demo["rgb"], demo["range"]
+    pts = ground_scan()
+    t = T.Wet(seed=7, lidar_target="points", **POSE)
+    out = t(image=rgb, depth=rng, points=pts, key="frame/0")
+    v = out["params"]["values"]
+    assert v == a
+    direct = brume.wet(rgb, rng, film=v["film"], ground_albedo=v["ground-albedo"], scan_seed=v["scan-seed"],
+                       lidar=pts, **POSE)
+    same(out["image"], direct.rgb)
+    same(out["points"], direct.lidar)
+    params = json.loads(json.dumps(out["params"]))
+    again = T.Wet(seed=99, lidar_target="points", **POSE).replay(params)(image=rgb, depth=rng, points=pts)
+    same(again["image"], out["image"])
+    same(again["points"], out["points"])
+    # refused when made, in Python's words: a range outside the table's, a transform without the plane
+    with pytest.raises(ValueError, match="film"):
+        T.Wet(film=(1, 200), **POSE)
+    with pytest.raises(ValueError, match="camera_height"):
+        T.Wet(fov_y=55)

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <set>
 #include <string>
 
 #include "brume/command.hpp"
@@ -16,6 +17,7 @@
 #include "brume/pipeline.hpp"
 #include "brume/record.hpp"
 #include "brume/wet.hpp"
+#include "pipeline/camera_scan_arrays.hpp"
 #include "pipeline/scan_job.hpp"
 
 namespace brume {
@@ -79,29 +81,112 @@ const ParamTable<CameraWetJob>& camera_wet_job_table() {
               "--lidar-out with the image")
         .reads_file()
         .text("lidar-out", &CameraWetJob::lidar_out, "the wet scan of --lidar (KITTI .bin: the points that return)")
-        .writes_file_of("lidar", "bin")
+        .writes_file_of("lidar", ".bin")
         .text("lidar-labels", &CameraWetJob::lidar_labels,
               "one byte per point of --lidar: 0 off the ground, 1 wet ground kept, 2 lost")
-        .writes_file()
+        .writes_file_of("lidar", ".labels.u8")
         .nest(&CameraWetJob::scan, wet_scan_param_table());
     return d;
   }();
   return t;
 }
 
+// The camera's settings that name no file (brume.wet's keywords): the film, the ground less its
+// mask's file, the scan's.
+struct CameraWetParams {
+  WetFilm wet;
+  WetGround ground;
+  WetScan scan;
+};
+
+const ParamTable<CameraWetParams>& camera_wet_param_table() {
+  static const ParamTable<CameraWetParams> t = [] {
+    ParamTable<CameraWetParams> d("wet");
+    d.nest(&CameraWetParams::wet, wet_film_param_table())
+        .nest_except(&CameraWetParams::ground, wet_ground_param_table(), {"ground-mask"})
+        .nest(&CameraWetParams::scan, wet_scan_param_table());
+    return d;
+  }();
+  return t;
+}
+
+// The film's and the ground's checks that need no pixels (the CLI's and brume.wet's); `masked`: a
+// ground mask is given (the CLI's --ground-mask; brume.wet takes none).
+void check_camera_wet(const WetFilm& film, const WetGround& g, bool masked, bool mask_flag) {
+  validate_wet_film(film);
+  if (!masked && std::isnan(g.camera.height_m) && g.camera.view_matrix_file.empty())
+    throw Error(std::string("wet ground needs the ground: give --camera-height M (with --pitch and --roll: the ground "
+                            "plane)") +
+                (mask_flag ? ", or --ground-mask FILE" : ""));
+}
+
 void check_camera_wet_job(const CameraWetJob& j) {
-  validate_wet_film(j.wet);
+  check_camera_wet(j.wet, j.ground, !j.ground.mask.empty(), true);
   if (j.lidar.empty() != j.lidar_out.empty())
     throw Error(j.lidar.empty() ? "--lidar-out names the wet scan of --lidar IN.bin: give --lidar too, or drop "
                                   "--lidar-out"
                                 : "--lidar wets a scan's ground: give --lidar-out OUT.bin for it, or drop --lidar");
   if (j.lidar.empty() && !j.lidar_labels.empty())
     throw Error("--lidar-labels labels the points of --lidar IN.bin: give --lidar and --lidar-out, or drop it");
-  if (!j.lidar.empty()) check_kitti_bin_output(j.lidar_out, "--lidar-out");
-  if (!j.lidar_labels.empty()) check_output_dir(j.lidar_labels, "--lidar-labels");
-  if (j.ground.mask.empty() && std::isnan(j.ground.camera.height_m) && j.ground.camera.view_matrix_file.empty())
-    throw Error("wet ground needs the ground: give --camera-height M (with --pitch and --roll: the ground plane), or "
-                "--ground-mask FILE");
+  // (--lidar-out's name and the folders are checked when the job runs: brume batch plans before it makes the
+  // frames' folders)
+}
+
+// The camera's wet ground on an image and its measured range (the CLI's job and brume.wet's array
+// form): completed and prepared as haze does it, haze's airlight for the mirrored rays that leave the
+// frame, the film; the record's blocks. `mask`: the ground (1 channel in [0, 1]) or empty.
+struct CameraWetRun {
+  Image rgb, ground;
+  nlohmann::json record;
+};
+CameraWetRun run_camera_wet(ConstImageView rgb, ConstImageView measured_range, const DepthSource& depth,
+                            const WetFilm& film, const WetGround& g, ConstImageView mask, const RangeStep& step,
+                            const Exec& exec, const std::set<std::string>& given) {
+  const int W = rgb.width(), H = rgb.height();
+  const Camera cam = depth_camera(depth, W, H, g.camera);
+  const CompletedRange done = complete_step(measured_range, rgb, step, given, exec.threads);
+  const ConstImageView measured = done.view(measured_range);
+  // Haze's analysis for its airlight: the sky a mirrored ray leaving the frame sees.
+  HazeParams hp;
+  hp.airlight = g.airlight;
+  hp.kappa_s = 0.0;
+  const HazeAnalysis ha = analyse_haze(rgb, measured, hp);
+  PreparedRange prep = prepare_step(measured, step, given, exec.threads, true);
+  prep.record["complete"] = done.record;
+
+  WetScene scene;
+  scene.rgb = rgb;
+  scene.range = prep.range;
+  scene.camera = cam;
+  scene.ground_tolerance_m = g.ground_tolerance_m;
+  scene.sky = ha.airlight;
+  scene.mask = mask;
+  const auto t0 = std::chrono::steady_clock::now();
+  WetStats st;
+  CameraWetRun run;
+  run.rgb = render_wet(scene, film, exec, &st, &run.ground);
+  const WetOptics o(film);
+  nlohmann::json& rec = run.record;
+  rec["wet"] = wet_optics_record(film, o);
+  rec["wet"]["camera"] = camera_record(cam);
+  rec["wet"]["ground_rule"] = mask.width() == 0 ? "the pixel's 3-D point within ground_tolerance of the plane y = 0"
+                                                : "the ground mask above 1/2 (the pose gives the plane's normal)";
+  rec["wet"]["ground_pixels"] = st.ground;
+  rec["wet"]["mirror_hits"] = st.hits;
+  rec["wet"]["mirror_sky_pixels"] = st.sky_pixels;
+  rec["wet"]["mirror_left_frame"] = st.left_frame;
+  rec["wet"]["mirror_rule"] =
+      "the pixel's ray mirrored about the plane's normal, marched in screen space through the range map in "
+      "steps of " + std::to_string(kWetMarchStepPx) +
+      " px, hit where it passes a pixel's range by more than " + std::to_string(kWetHitMargin) +
+      " of it (bisected to 1/64 step); at its vanishing point it takes the pixel there; leaving the frame, the "
+      "airlight";
+  rec["wet"]["airlight_linear_rgb"] = ha.airlight;
+  rec["wet"]["airlight_source"] = ha.airlight_source;
+  rec["prepare"] = prep.record;
+  rec["execution"]["backend"] = "cpu";
+  rec["execution"]["timing"] = cpu_timing_record(t0, 0);
+  return run;
 }
 
 LidarWetParams camera_wet_lidar_params(const CameraWetJob& j) { return {j.wet, j.scan}; }
@@ -111,6 +196,8 @@ nlohmann::json run_camera_wet_job(const CameraWetJob& job, const ExecOptions& eo
   if (!job.lidar.empty()) {
     // The scan does not depend on the image: wetted first, written with the image's outputs.
     check_camera_wet_job(job);
+    check_kitti_bin_output(job.lidar_out, "--lidar-out");
+    if (!job.lidar_labels.empty()) check_output_dir(job.lidar_labels, "--lidar-labels");
     const LidarWetParams lp = camera_wet_lidar_params(job);
     const std::vector<float> in = read_kitti_bin(job.lidar, "--lidar");
     const std::size_t n = in.size() / 4;
@@ -133,24 +220,6 @@ nlohmann::json run_camera_wet_job(const CameraWetJob& job, const ExecOptions& eo
       [&](const CameraWetJob& j, LoadedInputs& in, const Exec& exec) {
         if (!j.ground.airlight) check_airlight_sky(in, "wet");
         const int W = in.rgb.width, H = in.rgb.height;
-        const Camera cam = depth_camera(j.input.depth, W, H, j.ground.camera);
-        const RangeStep step = with_camera(j.prepare, in.depth);
-        const CompletedRange done = complete_step(in.depth.range, in.rgb, step, ctx.given, exec.threads);
-        const ConstImageView measured = done.view(in.depth.range);
-        // Haze's analysis for its airlight: the sky a mirrored ray leaving the frame sees.
-        HazeParams hp;
-        hp.airlight = j.ground.airlight;
-        hp.kappa_s = 0.0;
-        const HazeAnalysis ha = analyse_haze(in.rgb, measured, hp);
-        PreparedRange prep = prepare_step(measured, step, ctx.given, exec.threads, true);
-        prep.record["complete"] = done.record;
-
-        WetScene scene;
-        scene.rgb = in.rgb;
-        scene.range = prep.range;
-        scene.camera = cam;
-        scene.ground_tolerance_m = j.ground.ground_tolerance_m;
-        scene.sky = ha.airlight;
         Image mask;
         if (!j.ground.mask.empty()) {
           FileInfo minfo;
@@ -165,35 +234,11 @@ nlohmann::json run_camera_wet_job(const CameraWetJob& job, const ExecOptions& eo
             v /= full;
           }
           in.record["ground_mask"] = file_record(j.ground.mask, minfo, mask);
-          scene.mask = mask;
         }
-        const auto t0 = std::chrono::steady_clock::now();
-        WetStats st;
-        Image ground;
-        Image out = render_wet(scene, j.wet, exec, &st, &ground);
-        const WetOptics o(j.wet);
-        nlohmann::json rec;
-        rec["wet"] = wet_optics_record(j.wet, o);
-        rec["wet"]["camera"] = camera_record(cam);
-        rec["wet"]["ground_rule"] = j.ground.mask.empty()
-                                        ? "the pixel's 3-D point within ground_tolerance of the plane y = 0"
-                                        : "the ground mask above 1/2 (the pose gives the plane's normal)";
-        rec["wet"]["ground_pixels"] = st.ground;
-        rec["wet"]["mirror_hits"] = st.hits;
-        rec["wet"]["mirror_sky_pixels"] = st.sky_pixels;
-        rec["wet"]["mirror_left_frame"] = st.left_frame;
-        rec["wet"]["mirror_rule"] =
-            "the pixel's ray mirrored about the plane's normal, marched in screen space through the range map in "
-            "steps of " + std::to_string(kWetMarchStepPx) +
-            " px, hit where it passes a pixel's range by more than " + std::to_string(kWetHitMargin) +
-            " of it (bisected to 1/64 step); at its vanishing point it takes the pixel there; leaving the frame, the "
-            "airlight";
-        rec["wet"]["airlight_linear_rgb"] = ha.airlight;
-        rec["wet"]["airlight_source"] = ha.airlight_source;
-        rec["prepare"] = prep.record;
-        rec["execution"]["backend"] = "cpu";
-        rec["execution"]["timing"] = cpu_timing_record(t0, 0);
-        return EffectOutput{std::move(out), {{"ground", std::move(ground)}}, std::move(rec), "", {}};
+        CameraWetRun run = run_camera_wet(in.rgb, in.depth.range, j.input.depth, j.wet, j.ground,
+                                          mask.width > 0 ? ConstImageView(mask) : ConstImageView(),
+                                          with_camera(j.prepare, in.depth), exec, ctx.given);
+        return EffectOutput{std::move(run.rgb), {{"ground", std::move(run.ground)}}, std::move(run.record), "", {}};
       }};
   return run_effect_job(e, job, eo, ctx);
 }
@@ -241,6 +286,7 @@ CommandDef wet_command() {
       .table = &camera_wet_job_table(),
       .takes_exec_flags = true,
       .writes_record = true,
+      .batchable = true,
       .check = [](const CameraWetJob& j, const std::set<std::string>& g) {
         check_camera_wet_job(j);
         check_range_step(j.prepare, g);
@@ -261,6 +307,59 @@ CommandDef wet_command() {
   // The extinction a LiDAR beam sees in this job's media (brume/lidar_camera.hpp's hook): none, the
   // film lies on the ground, not in the air.
   c.extinction_per_m = [](const nlohmann::json&, double) -> std::optional<double> { return 0.0; };
+  // The film log-uniform over 0.05-2 mm: a damp road (a twentieth of the default 1 mm roughness
+  // wetted) to a road under water (the film over its texture: f = 1 from 1 mm on, about a fifth of
+  // the draws); log because the look follows f = h/d, which a damp road spans in tenths of a
+  // millimetre. The dry albedo uniform over 0.05-0.25: fresh (dark) to aged (grey) asphalt, which a
+  // dataset's roads span; concrete's 0.3-0.4 is given by hand. The scan's detection draws get a seed
+  // per frame (seed()), as rain's drop field: a fixed one would keep or lose the same point indices
+  // in every frame's ground.
+  c.sampling = make_sampling<LidarWetParams>(
+      lidar_wet_param_table(),
+      {{"film", "loguniform(0.05, 2)", {}}, {"ground-albedo", "uniform(0.05, 0.25)", {}}, {"scan-seed", "seed()", {}}},
+      [](const LidarWetParams& p, const std::set<std::string>&) { validate_lidar_wet(p); });
+  // brume.wet(rgb, range, lidar=points): the image and its range dense (in place when C-contiguous);
+  // a scan given as lidar= passes the same film (brume lidar wet's model and defaults, as --lidar),
+  // its points and labels returned. No ground mask (the CLI's --ground-mask): the plane finds the ground.
+  static const auto call = array_call_table(camera_wet_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
+  std::vector<ArrayArg> args = rgb_range_args(ArrayArg::As::dense);
+  args.push_back({"lidar", 1, true, ArrayArg::As::view, true, true});
+  c.arrays = make_array_form<CameraWetParams>(
+      "wet", "",
+      "Wet ground on an RGB-D image: the ground (the plane from camera_height, pitch and roll) darker by Lekner & "
+      "Dorf's factor for its albedo and wetted fraction, holding the scene's mirror image (Fresnel's R_F at each "
+      "pixel's incidence, the mirrored ray marched through the range map). film in mm is required; the intrinsics "
+      "(fx.. or fov_x/fov_y) and camera_height are keywords. lidar=points (an (N, 4) float32 array of x, y, z, "
+      "intensity) passes the frame's scan through the same film (brume.lidar.wet's model and defaults): lidar holds "
+      "the points that return, lidar_labels one uint8 per input point (0 off the ground, 1 wet ground, 2 lost). "
+      "ground is 1 on the ground the film covers. As `brume wet`.",
+      args, call, {"rgb", "ground", "lidar", "lidar_labels", "record"}, true,
+      [](const std::vector<ArrayIn>& in, ArrayCall<CameraWetParams>& k, const Exec& e,
+         const std::set<std::string>& g) {
+        check_camera_wet(k.p.wet, k.p.ground, false, false);
+        check_range_step(k.prepare, g);
+        ArrayResult r;
+        // the scan first (as the CLI: its errors before the image's work)
+        const std::string what = "brume.wet(): lidar";
+        const LidarWetParams lp{k.p.wet, k.p.scan};
+        LidarWetStats st;
+        if (camera_scan_arrays(in, 2, what, r, [&](const float* src, float* out, std::size_t n, std::uint8_t* labels) {
+              st = lidar_wet(src, out, n, lp, labels, what);
+              return st.lost;
+            }))
+          r.record["lidar_wet"] = lidar_wet_record(lp, st);
+        CameraWetRun run = run_camera_wet(in[0].dense.view(), in[1].dense.view(), k.depth, k.p.wet, k.p.ground,
+                                          ConstImageView(), k.prepare, e, g);
+        r.images["rgb"] = std::move(run.rgb);
+        r.images["ground"] = std::move(run.ground);
+        for (auto& [name, v] : run.record.items()) r.record[name] = std::move(v);
+        return r;
+      },
+      [](const ArrayCall<CameraWetParams>& k, const std::set<std::string>& g) {
+        check_camera_wet(k.p.wet, k.p.ground, false, false);
+        check_range_step(k.prepare, g);
+      });
+  mark_scan_in_job(*c.arrays, 2);  // a call that wetted a scan says so in its job, as rain's
   return c;
 }
 
