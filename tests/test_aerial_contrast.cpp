@@ -12,6 +12,7 @@
 #include "brume/aerial.hpp"
 #include "brume/camera.hpp"
 #include "brume/error.hpp"
+#include "brume/insert.hpp"
 #include "test_util.hpp"
 
 using namespace brume;
@@ -118,6 +119,41 @@ TEST(AerialContrast, RecoversTheTurbidityOfASlantRender) {
 // No haze at all: the contrast does not fall with distance, which even pure
 // air (T = 1, Rayleigh alone) would make it do; the fit sits on T = 1 and
 // says so.
+// brume insert renders its object into the air the photo shows: with
+// --turbidity contrast the fit runs on the photo and its scene range first,
+// and the insertion is the one at the fitted T, bit for bit.
+TEST(AerialContrast, InsertRendersTheObjectAtTheFittedTurbidity) {
+  Image clean, range;
+  textured_rows(clean, range);
+  AerialParams r;
+  r.atmosphere = {6.0, 300.0};
+  const Image photo = render(clean, range, r);
+  // A grey opaque panel at 2 km over the middle of the frame.
+  Image object(kRowsW, kRowsH, 4, 0.0f), object_range(kRowsW, kRowsH, 1, NAN);
+  for (int y = 60; y < 100; ++y)
+    for (int x = 80; x < 120; ++x) {
+      for (int c = 0; c < 3; ++c) object.at(x, y, c) = 0.4f;
+      object.at(x, y, 3) = 1.0f;
+      object_range.at(x, y) = 2000.0f;
+    }
+  AerialParams p;
+  p.atmosphere.altitude_m = 300.0;
+  p.airlight = Rgb{0.6f, 0.7f, 0.9f};
+  p.atmosphere.turbidity = NAN;
+  p.turbidity_rule = "contrast";
+  RangeStep off;
+  off.mode = PrepareMode::off;
+  const InsertRun fitted = insert_object(photo, range, object, object_range, p, off);
+  const double t = fitted.record["turbidity_fit"]["turbidity"].get<double>();
+  EXPECT_NEAR(t, 6.0, 0.005 * 6.0) << fitted.record["turbidity_fit"].dump();
+  AerialParams at = p;
+  at.turbidity_rule.clear();
+  at.atmosphere.turbidity = t;
+  const InsertRun direct = insert_object(photo, range, object, object_range, at, off);
+  EXPECT_EQ(fitted.result.rgb.data, direct.result.rgb.data);
+  EXPECT_EQ(fitted.record["insert"], direct.record["insert"]);
+}
+
 TEST(AerialContrast, AClearSceneSitsOnTheLowerBoundAndSaysSo) {
   Image clean, range;
   textured_rows(clean, range);

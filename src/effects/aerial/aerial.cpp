@@ -152,7 +152,7 @@ const ParamTable<AerialParams>& aerial_param_table() {
     d.real_or_word("turbidity", &AerialParams::atmosphere, &Atmosphere::turbidity, &AerialParams::turbidity_rule,
                    {"contrast"}, "1", Range::closed(1.0, 20.0),
                    "atmospheric turbidity T (1: pure air; by Table 3.1 corrected: clear from about 2.7, light haze "
-                   "4.5, haze 9.8, fog 19.3); auto: fitted on --sky-image; contrast (--remove): fitted on the image "
+                   "4.5, haze 9.8, fog 19.3); auto: fitted on --sky-image; contrast (--remove, and brume insert): fitted on the image "
                    "from how its terrain's contrast falls with distance",
                    NAN)
         .nest(&AerialParams::atmosphere, aerial_atmosphere_table())

@@ -84,6 +84,15 @@ void validate_insert(const AerialParams& p, const std::set<std::string>& given) 
   if (p.remove || p.from_turbidity || p.from_airlight)
     throw Error("insert renders the object at --turbidity; --remove, --from-turbidity and --from-horizon belong to "
                 "`brume aerial` (remove or re-render the photo there first, then insert into the result)");
+  if (p.turbidity_rule == "contrast") {
+    // The T the photo shows, fitted by insert_object before the analysis: the
+    // rest is checked as at any T.
+    AerialParams q = p;
+    q.turbidity_rule.clear();
+    q.atmosphere.turbidity = 1.0;
+    validate_aerial(q, given);
+    return;
+  }
   validate_aerial(p, given);
 }
 

@@ -5,6 +5,7 @@
 // record, write.
 #include <cstdio>
 #include <chrono>
+#include <optional>
 
 #include "brume/command.hpp"
 #include "brume/error.hpp"
@@ -84,9 +85,9 @@ const ParamTable<InsertJob>& insert_job_table() {
 }
 
 InsertRun insert_object(const Image& photo, const Image& scene_range, const Image& object_rgba,
-                        const Image& object_range, const AerialParams& p, const RangeStep& prepare, const Exec& exec,
-                        const std::set<std::string>& given) {
-  validate_insert(p, given);
+                        const Image& object_range, const AerialParams& asked, const RangeStep& prepare,
+                        const Exec& exec, const std::set<std::string>& given) {
+  validate_insert(asked, given);
   if (exec.backend == Backend::gpu)
     throw Error("insert runs on the CPU only (no GPU passes yet); use --backend cpu (or auto)");
   InsertRun run;
@@ -95,6 +96,16 @@ InsertRun insert_object(const Image& photo, const Image& scene_range, const Imag
   // A sparse map is completed first (guided by the photo), when the step says so.
   const CompletedRange done = complete_step(scene_range, photo, prepare, given, exec.threads);
   const Image& scene = done.applied ? done.range : scene_range;
+  // --turbidity contrast: the T the photo shows, fitted on the photo and its
+  // scene range as `brume aerial --remove` fits it (the object is rendered
+  // into that air); everything after runs at the fitted T.
+  AerialParams p = asked;
+  std::optional<TurbidityContrastFit> contrast;
+  if (p.turbidity_rule == "contrast") {
+    contrast = fit_turbidity_contrast(photo, scene, p, nullptr, exec.threads);
+    p.atmosphere.turbidity = contrast->turbidity;
+    p.turbidity_rule.clear();
+  }
   run.analysis = analyse_insert(photo, scene, object_rgba, object_range, p, exec.threads);
   PreparedRange prep = prepare_step(scene, prepare, given, exec.threads);
   prep.record["complete"] = done.record;
@@ -104,6 +115,13 @@ InsertRun insert_object(const Image& photo, const Image& scene_range, const Imag
   const auto t0 = std::chrono::steady_clock::now();
   run.result = apply_insert(photo, prep.range, object_rgba, object_range, p, run.analysis, cpu);
   run.record["insert"] = insert_record(p, run.analysis);
+  if (contrast) {
+    run.record["turbidity_fit"] = contrast->record;
+    if (!contrast->warning.empty()) {
+      run.record["insert"]["warnings"].push_back(contrast->warning);
+      std::fprintf(stderr, "brume insert: warning: %s\n", contrast->warning.c_str());
+    }
+  }
   run.record["prepare"] = prep.record;
   run.record["execution"] = backend.record;
   run.record["execution"]["backend_requested"] = enum_name(backend_names(), exec.backend);
