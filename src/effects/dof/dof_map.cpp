@@ -126,6 +126,24 @@ void horiz_row(const float* rc, const Axis& ax, float* o, int W) {
   for (int x = 0; x < W; ++x) o[x] = rc[x0[x]] + a[x] * (rc[x1[x]] - rc[x0[x]]);
 }
 
+// The coarse pixel (x, y) of band j at 1/k resolution: the mean of the k x
+// k block's values (sigma at the band's members, s0 elsewhere; clipped at
+// the borders), summed in double row by row; members counts the block's.
+float block_average(const signed char* band, const Image& sigma, int k, int x, int y, int j, float s0, int& members) {
+  const int W = sigma.width, H = sigma.height;
+  double acc = 0.0;
+  int n = 0;
+  for (int yy = y * k; yy < std::min(H, (y + 1) * k); ++yy)
+    for (int xx = x * k; xx < std::min(W, (x + 1) * k); ++xx) {
+      const std::size_t i = static_cast<std::size_t>(yy) * W + xx;
+      const bool in = band[i] == j;
+      acc += in ? sigma.data[i] : s0;
+      members += in;
+      ++n;
+    }
+  return static_cast<float>(acc / n);
+}
+
 // §3.4's foreground rule (stated in dof.hpp): the near field's scale map is
 // split into octave bands of sigma, [2^j, 2^{j+1}) px, band j (sigma0
 // elsewhere) is blurred by a Gaussian of 2^j px, and every pixel takes the
@@ -191,19 +209,7 @@ void near_field_raise(const Image& z, float zf, float s0, float limit, Image& si
     } else {
 #pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk) reduction(+ : members)
       for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-          double acc = 0.0;
-          int n = 0;
-          for (int yy = y * k; yy < std::min(H, (y + 1) * k); ++yy)
-            for (int xx = x * k; xx < std::min(W, (x + 1) * k); ++xx) {
-              const std::size_t i = static_cast<std::size_t>(yy) * W + xx;
-              const bool in = band[i] == j;
-              acc += in ? sigma.data[i] : s0;
-              members += in;
-              ++n;
-            }
-          small.at(x, y) = static_cast<float>(acc / n);
-        }
+        for (int x = 0; x < w; ++x) small.at(x, y) = block_average(band.data(), sigma, k, x, y, j, s0, members);
     }
     if (members == 0) continue;
     const double s_small = std::max(1.0, static_cast<double>(s_band) / k);
@@ -388,7 +394,7 @@ void near_field_raise_rows(float s0, float limit, Image& sigma, const signed cha
     bool full = false;       // the reference's full-resolution read (the map is W x H)
     Axis ay;                 // (coarse) the bilinear read down
     std::unique_ptr<float[]> horiz;  // (coarse) holding coarse rows read along x at every pixel centre
-    std::vector<float> cx;           // (coarse) a coarse row of c read along x: c
+    std::vector<float> cx;           // W values c: a row that holds none (coarse: read along x)
     const float* hrow(int cy) const {
       return map.holds(cy) ? horiz.get() + static_cast<std::size_t>(cy) * cx.size() : cx.data();
     }
@@ -423,28 +429,17 @@ void near_field_raise_rows(float s0, float limit, Image& sigma, const signed cha
       c.map = sparse_blur(w, h, s0, wk, lo, hi, [&](int y, float* o) {
         std::fill(o, o + w, s0);
         int m = 0;
-        for (int x = lo[static_cast<std::size_t>(y)]; x < hi[static_cast<std::size_t>(y)]; ++x) {
-          double acc = 0.0;
-          int n = 0;
-          for (int yy = y * k; yy < std::min(H, (y + 1) * k); ++yy)
-            for (int xx = x * k; xx < std::min(W, (x + 1) * k); ++xx) {
-              const std::size_t i = static_cast<std::size_t>(yy) * W + xx;
-              const bool in = band[i] == j;
-              acc += in ? sigma.data[i] : s0;
-              m += in;
-              ++n;
-            }
-          o[x] = static_cast<float>(acc / n);
-        }
+        for (int x = lo[static_cast<std::size_t>(y)]; x < hi[static_cast<std::size_t>(y)]; ++x)
+          o[x] = block_average(band, sigma, k, x, y, j, s0, m);
         return m;
       }, members, nt);
     }
     if (members == 0) continue;
     c.full = w == W && h == H;
+    c.cx.assign(static_cast<std::size_t>(W), c.map.c);  // (coarse: c + a (c - c) = c)
     if (!c.full) {
       const Axis ax = axis(W, k, w);
       c.ay = axis(H, k, h);
-      c.cx.assign(static_cast<std::size_t>(W), c.map.c);  // c + a (c - c) = c
       c.horiz.reset(new float[static_cast<std::size_t>(W) * h]);
 #pragma omp parallel for num_threads(nt) schedule(dynamic, kRowChunk)
       for (int cy = 0; cy < h; ++cy) {
@@ -464,13 +459,13 @@ void near_field_raise_rows(float s0, float limit, Image& sigma, const signed cha
       if (c.full) {
         const SparseRows& m = c.map;
         if (!m.holds(y)) {
-          dof_max_const(v, m.c, W);
+          dof_max_row(v, c.cx.data(), W);
           continue;
         }
         const int a = m.lo[static_cast<std::size_t>(y)], b = m.hi[static_cast<std::size_t>(y)];
-        dof_max_const(v, m.c, a);
+        dof_max_row(v, c.cx.data(), a);
         dof_max_row(v + a, m.row(y) + a, b - a);
-        dof_max_const(v + b, m.c, W - b);
+        dof_max_row(v + b, c.cx.data(), W - b);
         continue;
       }
       const std::size_t yi = static_cast<std::size_t>(y);

@@ -42,8 +42,6 @@ void dof_blur_cols(const float* const* rows, const float* k, int taps, float* ou
 int dof_band_values(const signed char* band, const float* sigma, int j, float s0, float* out, int n);
 // v[x] = max(v[x], r[x]) (std::max's operand order), x in [0, n).
 void dof_max_row(float* v, const float* r, int n);
-// v[x] = max(v[x], c).
-void dof_max_const(float* v, float c, int n);
 // v[x] = max(v[x], t[x] + a (b[x] - t[x])): a bilinear read between two rows.
 void dof_max_lerp(float* v, const float* t, const float* b, float a, int n);
 // v[x] = min(limit, v[x]).

@@ -245,18 +245,6 @@ void DofMaxRowK(float* v, const float* r, int n) {
   for (; x < n; ++x) v[x] = v[x] < r[x] ? r[x] : v[x];
 }
 
-void DofMaxConstK(float* v, float c, int n) {
-  const hn::ScalableTag<float> d;
-  const int N = static_cast<int>(hn::Lanes(d));
-  const auto b = hn::Set(d, c);
-  int x = 0;
-  for (; x + N <= n; x += N) {
-    const auto a = hn::LoadU(d, v + x);
-    hn::StoreU(hn::IfThenElse(hn::Lt(a, b), b, a), d, v + x);
-  }
-  for (; x < n; ++x) v[x] = v[x] < c ? c : v[x];
-}
-
 void DofMaxLerpK(float* v, const float* t, const float* b, float a, int n) {
   const hn::ScalableTag<float> d;
   const int N = static_cast<int>(hn::Lanes(d));
@@ -297,7 +285,6 @@ HWY_EXPORT(DofBlurRowK);
 HWY_EXPORT(DofBlurColsK);
 HWY_EXPORT(DofBandValuesK);
 HWY_EXPORT(DofMaxRowK);
-HWY_EXPORT(DofMaxConstK);
 HWY_EXPORT(DofMaxLerpK);
 HWY_EXPORT(DofCapRowK);
 
@@ -312,7 +299,6 @@ int dof_band_values(const signed char* band, const float* sigma, int j, float s0
   return HWY_DYNAMIC_DISPATCH(DofBandValuesK)(band, sigma, j, s0, out, n);
 }
 void dof_max_row(float* v, const float* r, int n) { HWY_DYNAMIC_DISPATCH(DofMaxRowK)(v, r, n); }
-void dof_max_const(float* v, float c, int n) { HWY_DYNAMIC_DISPATCH(DofMaxConstK)(v, c, n); }
 void dof_max_lerp(float* v, const float* t, const float* b, float a, int n) {
   HWY_DYNAMIC_DISPATCH(DofMaxLerpK)(v, t, b, a, n);
 }
