@@ -4,10 +4,10 @@
 // paper's eq. 16 (`bertalmio`, N = 2 sigma^2 = 798 iterations) and its
 // symmetric form (`standard`), same image, same run, interleaved rounds (one
 // warm-up round first) so that a busy host slows all alike; each figure is
-// the median (min..max) of its rounds. Issue #13's target: default >= 15x
-// faster than bertalmio.
+// the median (min..max) of its rounds. Issue #55's target (item 6): default
+// >= 30x faster than bertalmio (issue #13's was 15x).
 //
-// Usage: brume_bench_dof [ROUNDS] [map|invariant-exact|bertalmio|standard|leaky]   (one part alone, below)
+// Usage: brume_bench_dof [ROUNDS] [map|map-reference|invariant-exact|bertalmio|standard|leaky]   (one part alone, below)
 #include <omp.h>
 
 #include <algorithm>
@@ -21,6 +21,7 @@
 #include "bench_util.hpp"
 #include "brume/demo_scene.hpp"
 #include "brume/dof.hpp"
+#include "effects/dof/dof_map.hpp"
 
 using namespace brume;
 
@@ -49,17 +50,18 @@ int main(int argc, char** argv) {
 
   // One part alone, for a profiler or for CPU-time differencing on a busy
   // host (`time` of ROUNDS = 1 and 11: the difference / 10 is one call's CPU
-  // time, start-up and the scene render cancel): the scale map, or a
-  // scheme's whole apply.
+  // time, start-up and the scene render cancel): the scale map (on the
+  // vector rows; map-reference: the scalar loops they replace, the same
+  // bits), or a scheme's whole apply.
   const std::string only = argc > 2 ? argv[2] : "";
   if (!only.empty()) {
-    const bool map = only == "map";
+    const bool reference = only == "map-reference", map = only == "map" || reference;
     if (!map) p.scheme = parse_enum(dof_scheme_names(), only, "brume_bench_dof PART");
     std::vector<double> tm;
     for (int r = 0; r <= rounds; ++r) {
       DofAnalysis a;
       const auto t0 = Clock::now();
-      if (map) dof_scale_map(z, p, a);
+      if (map) detail::dof_scale_map_rows(z, p, a, Exec{}, !reference);
       else apply_dof(s.rgb, z, p, a);
       if (r > 0) tm.push_back(ms_since(t0));
     }

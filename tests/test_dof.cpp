@@ -2,14 +2,19 @@
 // constant depth against a true Gaussian of the predicted scale for every
 // scheme, leakage around an in-focus object (default leak-free on all four
 // sides; the paper's eq. 16 and eq. 14 measured), the foreground rule, the
-// GPU against the CPU, real data, bad inputs and the command line.
+// GPU against the CPU, real data, bad inputs and the command line; the
+// scale map's vector rows against its scalar loops, bit for bit.
 #include <unistd.h>
 
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
+#include <random>
 
 #include "brume/dof.hpp"
 #include "brume/io.hpp"
+#include "core/simd.hpp"
+#include "effects/dof/dof_map.hpp"
 #include "test_util.hpp"
 
 using namespace brume;
@@ -340,6 +345,117 @@ TEST(DofForeground, NearFieldRaiseMatchesItsDefinition) {
   // Nothing is raised far from the near squares, and nothing is lowered.
   for (std::size_t i = 0; i < got.pixels(); ++i) ASSERT_GE(got.data[i], own.data[i]);
   EXPECT_NEAR(got.at(W - 1, 0), 1.0f, 1e-5);  // 8 blur scales from every square
+}
+
+// The scale map's vector rows (dof_map_kernels.cpp, on the schedule that
+// blurs only near the foreground rule's members) against the scalar loops
+// they replace: the same bits, on every SIMD target this CPU runs (forced in
+// turn: the baseline fallback, SSE4, AVX2, AVX-512 on such a host), and on
+// two threads (the schedule of maps from 4 Mpx, forced here on a small one).
+// Exact equality: the same IEEE operations in the same order. The maps, on
+// an in-focus background (sigma = sigma0, so that the smallest raises, the
+// blurred bands' tails, decide pixels): widths that leave vector tails (203,
+// 37; 5 and 1, narrower than a vector and than the blur's radius, whose
+// mirror bounces), depths of every kind (NaN, +-inf, 0, negative: finite and
+// nearer than zf, so a member of the foreground rule, as the reference has
+// it), members in every band up to sigma 40 px or in bands 0 and 1 alone (no
+// coarse band to hide their rims), sparse (squares, and members on the four
+// borders) or dense (noise), scales at and a hair from powers of two (caps at
+// 16 px and at the float below 32 px, whose log2f rounds up to 5: floor(log2
+// sigma) by libm where the exponent does not decide it), the soft and the
+// sharp foreground.
+TEST(DofScaleMap, VectorRowsGiveTheReferenceBits) {
+  struct Case {
+    int w, h;
+    bool dense;
+    int bands;  // squares of sigma 1.3 2^i, i < bands (sparse)
+    double limit;
+    Foreground fg;
+  };
+  const Case cases[] = {{203, 57, false, 2, 40.0, Foreground::soft},
+                        {203, 57, false, 6, 40.0, Foreground::soft},
+                        {37, 91, true, 0, std::nextafter(32.0f, 0.0f), Foreground::soft},
+                        {50, 31, false, 5, 16.0, Foreground::soft},
+                        {5, 3, true, 0, 20.0, Foreground::soft},
+                        {1, 1, true, 0, 20.0, Foreground::soft},
+                        {64, 40, true, 0, 16.0, Foreground::sharp}};
+  const double zf = 10.0, alpha = 120.0;
+  // Z for a target scale s (sigma0 = 1): c = alpha (zf - Z) / Z = 4 sqrt(s^2 - 1).
+  auto z_for = [&](double s) { return static_cast<float>(alpha * zf / (4.0 * std::sqrt(s * s - 1.0) + alpha)); };
+  std::mt19937 rng(55);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  int checked = 0;
+  for (const Case& cs : cases) {
+    SCOPED_TRACE(std::to_string(cs.w) + "x" + std::to_string(cs.h) + (cs.dense ? " dense" : " sparse"));
+    DofParams p;
+    p.focus_distance_m = zf;
+    p.coc_infinity_px = alpha;
+    p.coc_limit_px = cs.limit;
+    p.foreground = cs.fg;
+    Image z(cs.w, cs.h, 1, static_cast<float>(zf));
+    for (int y = 0; y < cs.h; ++y)
+      for (int x = 0; x < cs.w; ++x) {
+        float& v = z.at(x, y);
+        if (cs.dense && u(rng) < 0.3f) v = static_cast<float>(zf) * (0.3f + 1.2f * u(rng));
+        // 5 x 5 squares 24 px apart, and a member on each border.
+        const int sq = x / 24 + 3 * (y / 24);
+        if (!cs.dense && x % 24 >= 8 && x % 24 < 13 && y % 24 >= 8 && y % 24 < 13)
+          v = z_for(std::ldexp(1.3, sq % cs.bands) * (sq % 3 ? 1.0 : 1.2));
+        if (!cs.dense && (x == 0 || y == 0 || x == cs.w - 1 || y == cs.h - 1) && (x + y) % 41 == 7)
+          v = z_for(1.5 + (x + y) % 2);
+      }
+    // Scales at powers of two and a hair from them: Z for sigma = 2^e (1 + d).
+    const double hair[] = {0.0, 3e-8, -3e-8, 6e-5, -6e-5, 1e-3};
+    for (int e = 1; e <= (cs.bands == 2 ? 1 : 5); ++e)
+      for (int i = 0; i < 6; ++i)
+        z.data[static_cast<std::size_t>(7 * e + 13 * i) % z.data.size()] = z_for(std::ldexp(1.0, e) * (1.0 + hair[i]));
+    const float odd[] = {NAN, INFINITY, -INFINITY, 0.0f, -2.0f, 1e-30f, 9.99999f, 10.0f};
+    for (int i = 0; i < 8; ++i) z.data[static_cast<std::size_t>(5 * i + 3) % z.data.size()] = odd[i];
+    DofAnalysis ra;
+    const Image ref = detail::dof_scale_map_rows(z, p, ra, Exec{}, false);
+    auto expect_same = [&](const Image& got, const DofAnalysis& a) {
+      ASSERT_EQ(got.data.size(), ref.data.size());
+      std::size_t diff = 0, first = 0;
+      for (std::size_t i = 0; i < ref.data.size(); ++i)
+        if (std::memcmp(&got.data[i], &ref.data[i], sizeof(float)) != 0 && diff++ == 0) first = i;
+      EXPECT_EQ(diff, 0u) << "first at pixel " << first << ": " << got.data[first] << " vs " << ref.data[first];
+      EXPECT_EQ(a.unknown_pixels, ra.unknown_pixels);
+      EXPECT_EQ(a.near_pixels, ra.near_pixels);
+      EXPECT_EQ(a.capped_pixels, ra.capped_pixels);
+      EXPECT_EQ(a.z_min_m, ra.z_min_m);
+      EXPECT_EQ(a.z_max_m, ra.z_max_m);
+      EXPECT_EQ(a.sigma_max, ra.sigma_max);
+      EXPECT_EQ(a.plan.iterations, ra.plan.iterations);
+      ++checked;
+    };
+    for (std::int64_t t : simd::targets()) {
+      SCOPED_TRACE(simd::target_name(t));
+      simd::force_target(t);
+      DofAnalysis a;
+      const Image got = detail::dof_scale_map_rows(z, p, a, Exec{}, true);
+      simd::force_target(0);
+      expect_same(got, a);
+    }
+    if (cs.bands == 6) {  // (one case: two threads wait for each other on a loaded host)
+      SCOPED_TRACE("two threads");
+      Exec two;
+      two.threads = 2;
+      DofAnalysis a;
+      expect_same(detail::dof_scale_map_rows(z, p, a, two, true, 0), a);
+    }
+    // The case is not empty: the rule raised pixels (soft), some were capped.
+    if (cs.fg == Foreground::soft && cs.w > 30) {
+      DofAnalysis a0;
+      DofParams sharp = p;
+      sharp.foreground = Foreground::sharp;
+      const Image own = detail::dof_scale_map_rows(z, sharp, a0, Exec{}, false);
+      std::size_t raised = 0;
+      for (std::size_t i = 0; i < own.data.size(); ++i) raised += ref.data[i] > own.data[i];
+      EXPECT_GT(raised, ref.data.size() / 20);
+      EXPECT_GT(ra.capped_pixels, 0u);
+    }
+  }
+  EXPECT_GE(checked, 7 + 1);
 }
 
 TEST(DofGpu, MatchesCpu) {
