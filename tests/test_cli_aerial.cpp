@@ -271,6 +271,45 @@ TEST_F(CliAerial, MatterhornSlantAttenuationIsTheClosedForm) {
   const nlohmann::json& j = rec["aerial"]["derived"];
   EXPECT_NEAR(j["slant_path"]["dh_max_m"].get<double>(), 1568.0, 30.0);  // the summit, 4,478 m
   EXPECT_LT(j["negative_pixels"]["fraction"].get<double>(), 0.40);
+  // Issue #59's removal targets per band of distance (< 5, 5-10, > 10 km):
+  // at most 40 % of the ground pixels with a channel <= 0, the least
+  // channel's 1st percentile >= -0.25; and the far land's contrast (mean
+  // |Y difference| of right neighbours on one surface, ranges within 1 %,
+  // beyond 10 km) raised by x1.08-1.5 from the photo's.
+  const Image out = read_color(p("o.exr")), photo = read_color(m + "photo.jpg");
+  std::vector<float> least[3];
+  std::size_t ground[3] = {0, 0, 0}, below[3] = {0, 0, 0};
+  double dy_out = 0.0, dy_in = 0.0;
+  const auto luma = [](const Image& im, int x, int y) {
+    return 0.2126 * im.at(x, y, 0) + 0.7152 * im.at(x, y, 1) + 0.0722 * im.at(x, y, 2);
+  };
+  for (int y = 0; y < out.height; ++y)
+    for (int x = 0; x < out.width; ++x) {
+      const float s = d.at(x, y);
+      if (!(s > 0.0f)) continue;
+      const int band = s < 5000.0f ? 0 : s < 10000.0f ? 1 : 2;
+      const float lo = std::min({out.at(x, y, 0), out.at(x, y, 1), out.at(x, y, 2)});
+      ++ground[band];
+      below[band] += lo <= 0.0f ? 1 : 0;
+      least[band].push_back(lo);
+      const float s2 = x + 1 < out.width ? d.at(x + 1, y) : NAN;
+      if (band == 2 && s2 > 0.0f && std::abs(s2 - s) < 0.01f * s) {
+        dy_out += std::abs(luma(out, x + 1, y) - luma(out, x, y));
+        dy_in += std::abs(luma(photo, x + 1, y) - luma(photo, x, y));
+      }
+    }
+  for (int b = 0; b < 3; ++b) {
+    ASSERT_GT(ground[b], 1000u) << "band " << b;
+    auto k = least[b].begin() + static_cast<std::ptrdiff_t>(least[b].size() / 100);
+    std::nth_element(least[b].begin(), k, least[b].end());
+    std::printf("Matterhorn band %d: %.1f %% of %zu ground pixels <= 0, 1st percentile of the least channel %.3f\n", b,
+                100.0 * below[b] / ground[b], ground[b], *k);
+    EXPECT_LE(static_cast<double>(below[b]) / ground[b], 0.40) << "band " << b;
+    EXPECT_GE(*k, -0.25f) << "band " << b;
+  }
+  std::printf("Matterhorn far contrast x%.3f (Y, beyond 10 km)\n", dy_out / dy_in);
+  EXPECT_GE(dy_out / dy_in, 1.08);
+  EXPECT_LE(dy_out / dy_in, 1.5);
   // The horizon's airlight: within 10 % of the sky just above the far ridges
   // in G and B (about 0.45, 0.85 linear, measured on the photo for issue #59).
   EXPECT_NEAR(j["airlight_linear_rgb"][1].get<double>(), 0.45, 0.045);
