@@ -183,7 +183,6 @@ TEST_F(CliAerial, SlantPathRecordsRepeatsAndRefuses) {
   const std::string io = " --image " + img + " --range " + range + " --out " + p("o.exr") + " --record " + p("r.json");
   const Case cases[] = {
       {"aerial" + io + " --path slant", "--target-altitude FILE"},
-      {"aerial" + io + " --path slant --fov-x 40 --backend gpu", "--backend cpu"},
       {"aerial" + io + " --fov-x 40 --pitch 3", "--path slant"},
       {"aerial" + io + " --target-altitude " + p("small.exr"), "--path slant"},
       {"aerial" + io + " --path slant --target-altitude " + p("small.exr"), "20x10"},

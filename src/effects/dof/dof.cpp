@@ -40,7 +40,7 @@ const ParamTable<DofParams>& dof_param_table() {
               "f-number n of the lens (with the camera's --focal-length and --sensor-width)", "none")
         .real("coc-infinity", &DofParams::coc_infinity_px, "px", Range::at_least(0.0),
               "CoC diameter at infinity, alpha in pixels, instead of the lens (for artists)", "none")
-        .real("coc-limit", &DofParams::coc_limit_px, "px", Range::above(0.0),
+        .real("coc-limit", &DofParams::coc_limit_px, "px", Range::left_open(0.0, 1e6),
               "cap on the target scale sigma = sqrt(sigma0^2 + (c/4)^2), so that a near pixel cannot set the "
               "iteration count")
         .choice("scheme", &DofParams::scheme, dof_scheme_names(),

@@ -259,7 +259,8 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
       const double w0 = 1.0 / Pz;
       // w falls towards 0 (the vanishing point) when D_z > 0, rises (towards the image plane) else.
       const double dw = (Dz > 0.0 ? -1.0 : 1.0) * kWetMarchStepPx / std::max(major, 1e-30);
-      const auto inside = [&](double u, double v) { return u >= -0.5 && u < W - 0.5 && v >= -0.5 && v < H - 0.5; };
+      // (-0.5 itself rounds away from zero to -1: outside, as W - 0.5 is.)
+      const auto inside = [&](double u, double v) { return u > -0.5 && u < W - 0.5 && v > -0.5 && v < H - 0.5; };
       const auto zat = [&](double u, double v) {
         return zmap[static_cast<std::size_t>(round_half_away(v)) * W + static_cast<std::size_t>(round_half_away(u))];
       };

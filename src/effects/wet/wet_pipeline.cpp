@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <set>
 #include <string>
 
@@ -21,6 +22,7 @@
 #include "pipeline/scan_job.hpp"
 
 namespace brume {
+namespace fs = std::filesystem;
 
 namespace {
 
@@ -92,7 +94,7 @@ const ParamTable<CameraWetJob>& camera_wet_job_table() {
 }
 
 // The camera's settings that name no file (brume.wet's keywords): the film, the ground less its
-// mask's file, the scan's.
+// mask's and its view matrix's files, the scan's.
 struct CameraWetParams {
   WetFilm wet;
   WetGround ground;
@@ -103,7 +105,7 @@ const ParamTable<CameraWetParams>& camera_wet_param_table() {
   static const ParamTable<CameraWetParams> t = [] {
     ParamTable<CameraWetParams> d("wet");
     d.nest(&CameraWetParams::wet, wet_film_param_table())
-        .nest_except(&CameraWetParams::ground, wet_ground_param_table(), {"ground-mask"})
+        .nest_except(&CameraWetParams::ground, wet_ground_param_table(), {"ground-mask", "view-matrix"})
         .nest(&CameraWetParams::scan, wet_scan_param_table());
     return d;
   }();
@@ -128,8 +130,10 @@ void check_camera_wet_job(const CameraWetJob& j) {
                                 : "--lidar wets a scan's ground: give --lidar-out OUT.bin for it, or drop --lidar");
   if (j.lidar.empty() && !j.lidar_labels.empty())
     throw Error("--lidar-labels labels the points of --lidar IN.bin: give --lidar and --lidar-out, or drop it");
-  // (--lidar-out's name and the folders are checked when the job runs: brume batch plans before it makes the
-  // frames' folders)
+  // --lidar-out's name here (a batch row or a record is refused when planned, as rain's); its folder when the
+  // job runs (brume batch plans before it makes the frames' folders).
+  if (!j.lidar_out.empty() && fs::path(j.lidar_out).extension() != ".bin")
+    check_kitti_bin_output(j.lidar_out, "--lidar-out");  // throws: names the flag, the file and the fix
 }
 
 // The camera's wet ground on an image and its measured range (the CLI's job and brume.wet's array
