@@ -1,0 +1,82 @@
+// brume — the camera pass every falling-particle effect shares (rain's drops, snow's flakes;
+// brume/rain.hpp, "rain on a camera's image", states the equations): the scene through the
+// analytic media, the particles of a field in the camera's frustum, and their streaks over the
+// exposure, composited far to near tile by tile. Internal (not installed).
+#pragma once
+
+#include <cmath>
+#include <cstddef>
+#include <functional>
+#include <vector>
+
+#include "brume/image.hpp"
+#include "brume/rain.hpp"
+
+namespace brume {
+
+// A particle's streak in the camera's cv frame (x right, y down, z forward).
+struct Streak {
+  double c[3];        // position at mid-exposure [m]
+  double u[3];        // velocity [m/s]
+  double area;        // [px² m²] (π/4)·D²·fx·fy: its image area at (r, z) is area·r/z³
+  double sigma_px;    // the splat kernel's σ
+  double range;       // [m] at mid-exposure
+  float e[3];         // its radiance through the media in front of it, linear RGB
+  double t0, t1;      // [s] the part of the exposure it is drawn over (z >= z_clip)
+  int v_lo, v_hi;     // rows it can touch
+  int u_lo, u_hi;     // and columns
+  std::size_t order;  // enumeration index (ties)
+};
+
+struct StreakCamera {
+  int width = 0, height = 0;
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+};
+
+// A range the scene knows (finite, > 0; else the sky).
+inline bool streak_range_known(float r) { return std::isfinite(r) && r > 0.0f; }
+
+// 1. The scene through the analytic media: per pixel the transmission e^{−front_tau(r, cos θ)}
+// (0 where the range is unknown and the media's σ > 0; blended by the sky weight), composed by
+// s.composite or as T·C + (1 − T)·A; `transmission` receives it.
+Image streak_background(const CameraRainScene& s, const std::function<double(double r, double cos_theta)>& front_tau,
+                        double sigma_total, int threads, Image* transmission);
+
+// 2. The particles of `field` with D >= threshold_mm(z) at planar depths in [z_near, z_split),
+// slab by slab of the field's cells (x forward in the vehicle frame: the camera's z), each slab's
+// lateral extent the frustum widened by grow_m(z0, z1) [m]; make(at, d_mm, k) fills a streak
+// (false: not drawn). Returns them in the slabs' order, each with its `order`.
+std::vector<Streak> frustum_streaks(const RainField& field, const std::function<double(double z)>& threshold_mm,
+                                    double z_near, double z_split,
+                                    const std::function<double(double z0, double z1)>& grow_m,
+                                    const StreakCamera& cam, int threads,
+                                    const std::function<bool(const Vec3& at, double d_mm, Streak& k)>& make,
+                                    std::size_t& cells, std::size_t& seen);
+
+// The part of the exposure [−T/2, T/2] a streak (c, u, sigma_px set) spends at z >= z_clip, and
+// the rows and columns it can touch; false when none is left or it stays out of the image.
+bool bound_streak(Streak& k, double exposure_s, double z_clip, const StreakCamera& cam);
+
+// 3. The streaks sorted far to near (ties: their order) and composited into `out`, each pixel
+// I ← (1 − α)·I + α·E with α its coverage, hidden where the scene's range is nearer
+// (kRainDepthSoftness); returns how many α were clamped to 1.
+std::size_t splat_streaks(std::vector<Streak>& streaks, ConstImageView range, Image& out, const StreakCamera& cam,
+                          int threads);
+// The mean length of the streaks' paths in the image [px].
+double mean_streak_px(const std::vector<Streak>& streaks, const StreakCamera& cam);
+
+// An image's box mean over (2h+1)² about a pixel (clamped), per channel, by a summed-area table.
+class StreakBoxMean {
+ public:
+  StreakBoxMean(ConstImageView rgb, int h);
+  double mean(int x, int y, int c) const;
+  double total(int c) const;
+
+ private:
+  double& at(int x, int y, int c) { return s_[(static_cast<std::size_t>(y) * (w_ + 1) + x) * 3 + c]; }
+  double get(int x, int y, int c) const { return s_[(static_cast<std::size_t>(y) * (w_ + 1) + x) * 3 + c]; }
+  int w_, h_, r_;
+  std::vector<double> s_;
+};
+
+}  // namespace brume
