@@ -66,7 +66,7 @@ def bev(a):
                    vmin=0, vmax=1, linewidths=0)
         if pts is foggy and fog.any():
             ax.scatter(pts[fog, 0], pts[fog, 1], s=1.5, c=[np.array(FOG_RGB) / 255], linewidths=0,
-                       label=f"fog returns ({fog.sum()} of {len(pts)})")
+                       label=f"{a.echoes} ({fog.sum()} of {len(pts)})")
             ax.legend(loc="upper right", markerscale=6)
         ax.set_title(name)
         ax.set_aspect("equal")
@@ -118,6 +118,7 @@ def main():
     b.add_argument("--title", default="")
     b.add_argument("--range", type=float, default=60.0, help="metres shown ahead of the sensor")
     b.add_argument("--dpi", type=int, default=100)
+    b.add_argument("--echoes", default="fog returns", help="the legend's name of the moved points")
     p = sub.add_parser("proj")
     for k in ("clear", "foggy", "calib", "clear_image", "foggy_image", "out"):
         p.add_argument(k)

@@ -141,7 +141,8 @@ namespace {
 
 // A beam's outcome: the strongest flake echo (power < 0: none) and the target's share.
 struct BeamOutcome {
-  double power = -1.0, range = 0.0, reported = 0.0, target_share = 1.0;
+  double power = -1.0, range = 0.0, reported = 0.0;
+  double left = 1.0, area = 0.0;  // the target's share is left·e^{−area}: Π(1 − a) of the drawn flakes, A(r)
   std::size_t drawn = 0;
 };
 
@@ -216,13 +217,13 @@ class SnowFootprint {
                                          float_bits(q[2]));
       double s = 0.0, a_prev = 0.0;  // a_prev: A at the previous flake (detail)
       for (std::uint64_t k = 0;; ++k) {
-        const std::uint64_t hk = hash_fold(hb, k);
-        s += -std::log1p(-hash_unit(hash_mix(hk)));
+        const std::uint64_t hk = hash_fold(hb, k);  // (mixed: its top bits are a uniform draw)
+        s += -std::log1p(-hash_unit(hk));
         if (!(s < l_r)) break;
         const double x = range_at(s);
         if (!(x < r)) break;
         ++o.drawn;
-        const double d = ct_mm_ * x * x - std::log1p(-hash_unit(hash_fold(hk, 1))) / lam_;  // D_t + Exp(Λ_f) [mm]
+        const double d = ct_mm_ * x * x - std::log1p(-hash_unit(hash_mix(hk))) / lam_;  // D_t + Exp(Λ_f) [mm]
         const double w = d / (1e3 * theta_ * x);
         const double a = std::min(w * w, 1.0);
         const double bound = p_.flake_reflectance * a * T / (x * x);  // its echo with no undrawn flake nearer
@@ -242,8 +243,9 @@ class SnowFootprint {
     } else if (detail) {
       detail->undrawn_share = 1.0 - std::exp(-area_at(r));
     }
-    o.target_share = T * std::exp(-area_at(r));
-    if (detail) detail->target_share = o.target_share;
+    o.area = area_at(r);
+    o.left = T;
+    if (detail) detail->target_share = T * std::exp(-o.area);
     return o;
   }
 
@@ -334,7 +336,8 @@ class LidarSnow final : public Medium {
       const double r = std::sqrt(x * x + y * y + z * z);
       const BeamOutcome o = fp_.beam(q, r);
       drawn_ += o.drawn;
-      if (o.target_share < 1.0) tau_[i] = -0.5 * std::log(o.target_share);  // +inf at share 0
+      // τ = −½·ln(share) = ½·(A(r) − ln Π(1 − a)): +inf at share 0.
+      if (o.area > 0.0 || o.left < 1.0) tau_[i] = 0.5 * (o.area - (o.left < 1.0 ? std::log(o.left) : 0.0));
       if (o.power >= 0.0) echoes_.push_back({i, o.range, o.power * r * r, o.reported});
     }
   }
