@@ -44,37 +44,8 @@ const ParamTable<CameraRainParams>& camera_rain_param_table() {
   static const ParamTable<CameraRainParams> t = [] {
     using P = CameraRainParams;
     ParamTable<P> d("rain");
-    d.nest(&P::drops, rain_drops_param_table())
-        .real("exposure-time", &P::exposure_s, "s", Range::left_open(0.0, 10.0),
-              "exposure T: a drop's streak is its image's path over T")
-        .count("rain-seed", &P::seed, "1", Range::at_least(0.0), "seed of the drop field (same seed, same drops)")
-        .text("wind", &P::wind,
-              "wind X,Y,Z in m/s in the vehicle frame (x forward, y left, z up; the camera level, looking along +x)")
-        .real("ego-speed", &P::ego_speed_m_s, "m/s", Range::closed(-100.0, 100.0),
-              "the camera's speed along its forward axis: the drops move back past it")
-        .real("f-number", &P::f_number, "1", Range::above(0.0),
-              "f-number n of the lens (with the camera's --focal-length and --sensor-width, as dof takes them): "
-              "streaks widen to the thin lens's circle of confusion; none: a pinhole",
-              "none")
-        .real("focus-distance", &P::focus_distance_m, "m", Range::above(0.0),
-              "planar depth of the plane in focus (with --f-number)", "none")
-        .real("q-eff", &P::q_eff, "1", Range::closed(1.0, 2.0),
-              "the camera's extinction efficiency Q_eff: sigma_cam = Q_eff/2 sigma_lidar (default fitted to the "
-              "international visibility code's rain rows, docs/rain.md)")
-        .real("z-split", &P::z_split_m, "m", Range::left_open(0.0, 1000.0),
-              "drops are drawn up to this planar depth; beyond it the rain is an analytic medium")
-        .real("z-near", &P::z_near_m, "m", Range::above(0.0),
-              "drops are drawn from this planar depth (nearer ones are analytic)")
-        .real("epsilon", &P::epsilon, "1", Range::closed(0.0, 1.0),
-              "thinning: a drop whose estimated coverage of a pixel is below epsilon is not drawn (its extinction "
-              "is analytic); 0 draws every drop")
-        .real("visibility", &P::visibility_m, "m", Range::above(0.0),
-              "haze's meteorological visibility (extinction 3.912/V, Koschmieder) composed with the rain in haze's "
-              "composite; none: rain is the only medium",
-              "none")
-        .rgb("airlight", &P::airlight, "linear RGB", Range::at_least(0.0),
-             "colour of the medium; auto: haze's estimate (the median sky colour, else a grey at the 99th "
-             "percentile of luminance)");
+    d.nest(&P::drops, rain_drops_param_table());
+    streak_camera_params(d, "rain-seed", "drop", "drops", "rain", "streaks");
     return d;
   }();
   return t;

@@ -7,9 +7,11 @@
 #include <cmath>
 #include <cstddef>
 #include <functional>
+#include <string>
 #include <vector>
 
 #include "brume/image.hpp"
+#include "brume/params.hpp"
 #include "brume/rain.hpp"
 
 namespace brume {
@@ -32,6 +34,48 @@ struct StreakCamera {
   int width = 0, height = 0;
   double fx = 0, fy = 0, cx = 0, cy = 0;
 };
+
+// The camera pass's flags after the particles' own (rain's, snow's: the same member names), in
+// this order; `seed_flag` names the seed, `one` and `many` the particle ("drop", "drops"),
+// `medium` the effect ("rain"), `paths` what the lens widens ("streaks").
+template <class P>
+void streak_camera_params(ParamTable<P>& d, const char* seed_flag, const std::string& one, const std::string& many,
+                          const std::string& medium, const std::string& paths) {
+  d.real("exposure-time", &P::exposure_s, "s", Range::left_open(0.0, 10.0),
+         ("exposure T: a " + one + "'s streak is its image's path over T").c_str())
+      .count(seed_flag, &P::seed, "1", Range::at_least(0.0),
+             ("seed of the " + one + " field (same seed, same " + many + ")").c_str())
+      .text("wind", &P::wind,
+            "wind X,Y,Z in m/s in the vehicle frame (x forward, y left, z up; the camera level, looking along +x)")
+      .real("ego-speed", &P::ego_speed_m_s, "m/s", Range::closed(-100.0, 100.0),
+            ("the camera's speed along its forward axis: the " + many + " move back past it").c_str())
+      .real("f-number", &P::f_number, "1", Range::above(0.0),
+            ("f-number n of the lens (with the camera's --focal-length and --sensor-width, as dof takes them): " +
+             paths + " widen to the thin lens's circle of confusion; none: a pinhole")
+                .c_str(),
+            "none")
+      .real("focus-distance", &P::focus_distance_m, "m", Range::above(0.0),
+            "planar depth of the plane in focus (with --f-number)", "none")
+      .real("q-eff", &P::q_eff, "1", Range::closed(1.0, 2.0),
+            "the camera's extinction efficiency Q_eff: sigma_cam = Q_eff/2 sigma_lidar (default fitted to the "
+            "international visibility code's rain rows, docs/rain.md)")
+      .real("z-split", &P::z_split_m, "m", Range::left_open(0.0, 1000.0),
+            (many + " are drawn up to this planar depth; beyond it the " + medium + " is an analytic medium").c_str())
+      .real("z-near", &P::z_near_m, "m", Range::above(0.0),
+            (many + " are drawn from this planar depth (nearer ones are analytic)").c_str())
+      .real("epsilon", &P::epsilon, "1", Range::closed(0.0, 1.0),
+            ("thinning: a " + one + " whose estimated coverage of a pixel is below epsilon is not drawn (its " +
+             "extinction is analytic); 0 draws every " + one)
+                .c_str())
+      .real("visibility", &P::visibility_m, "m", Range::above(0.0),
+            ("haze's meteorological visibility (extinction 3.912/V, Koschmieder) composed with the " + medium +
+             " in haze's composite; none: " + medium + " is the only medium")
+                .c_str(),
+            "none")
+      .rgb("airlight", &P::airlight, "linear RGB", Range::at_least(0.0),
+           "colour of the medium; auto: haze's estimate (the median sky colour, else a grey at the 99th "
+           "percentile of luminance)");
+}
 
 // A range the scene knows (finite, > 0; else the sky).
 inline bool streak_range_known(float r) { return std::isfinite(r) && r > 0.0f; }

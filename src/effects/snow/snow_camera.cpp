@@ -49,40 +49,11 @@ const ParamTable<CameraSnowParams>& camera_snow_param_table() {
   static const ParamTable<CameraSnowParams> t = [] {
     using P = CameraSnowParams;
     ParamTable<P> d("snow");
-    d.nest(&P::flakes, snow_flakes_param_table())
-        .real("exposure-time", &P::exposure_s, "s", Range::left_open(0.0, 10.0),
-              "exposure T: a flake is drawn along its image's path over T")
-        .count("snow-seed", &P::seed, "1", Range::at_least(0.0), "seed of the flakes (same seed, same flakes)")
-        .text("wind", &P::wind,
-              "wind X,Y,Z in m/s in the vehicle frame (x forward, y left, z up; the camera level, looking along +x)")
-        .real("ego-speed", &P::ego_speed_m_s, "m/s", Range::closed(-100.0, 100.0),
-              "the camera's speed along its forward axis: the flakes move back past it")
-        .real("f-number", &P::f_number, "1", Range::above(0.0),
-              "f-number n of the lens (with the camera's --focal-length and --sensor-width, as dof takes them): "
-              "flakes widen to the thin lens's circle of confusion, their energy kept; none: a pinhole",
-              "none")
-        .real("focus-distance", &P::focus_distance_m, "m", Range::above(0.0),
-              "planar depth of the plane in focus (with --f-number)", "none")
-        .real("albedo", &P::albedo, "1", Range::closed(0.0, 1.0),
-              "a flake's Lambertian albedo a: its radiance a (L_sky + L_ground)/2 under the sky and ground light "
-              "estimated from the image")
-        .real("q-eff", &P::q_eff, "1", Range::closed(1.0, 2.0),
-              "the camera's extinction efficiency Q_eff: sigma_cam = Q_eff/2 of the flakes' Q = 2 extinction (rain's "
-              "default)")
-        .real("z-split", &P::z_split_m, "m", Range::left_open(0.0, 1000.0),
-              "flakes are drawn up to this planar depth; beyond it the snow is an analytic medium")
-        .real("z-near", &P::z_near_m, "m", Range::above(0.0),
-              "flakes are drawn from this planar depth (nearer ones are analytic)")
-        .real("epsilon", &P::epsilon, "1", Range::closed(0.0, 1.0),
-              "thinning: a flake whose estimated coverage of a pixel is below epsilon is not drawn (its extinction "
-              "is analytic); 0 draws every flake")
-        .real("visibility", &P::visibility_m, "m", Range::above(0.0),
-              "haze's meteorological visibility (extinction 3.912/V, Koschmieder) composed with the snow in haze's "
-              "composite; none: snow is the only medium",
-              "none")
-        .rgb("airlight", &P::airlight, "linear RGB", Range::at_least(0.0),
-             "colour of the medium; auto: haze's estimate (the median sky colour, else a grey at the 99th "
-             "percentile of luminance)");
+    d.nest(&P::flakes, snow_flakes_param_table());
+    streak_camera_params(d, "snow-seed", "flake", "flakes", "snow", "flakes");
+    d.real("albedo", &P::albedo, "1", Range::closed(0.0, 1.0),
+           "a flake's Lambertian albedo a: its radiance a (L_sky + L_ground)/2 under the sky and ground light "
+           "estimated from the image");
     return d;
   }();
   return t;
