@@ -55,7 +55,14 @@ def read_calib(path):
 
 def bev(a):
     clear, foggy = read_bin(a.clear), read_bin(a.foggy)
-    fog = moved_to_fog(clear, foggy)
+    if a.labels:  # one byte per input point (0 kept, 1 moved, 2 lost): the output holds those not lost
+        labels = np.fromfile(a.labels, dtype=np.uint8)
+        if len(labels) != len(clear) or (labels != 2).sum() != len(foggy):
+            raise SystemExit(f"{a.labels}: {len(labels)} labels do not match the scans ({len(clear)} and "
+                             f"{len(foggy)} points)")
+        fog = labels[labels != 2] == 1
+    else:
+        fog = moved_to_fog(clear, foggy)
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -98,7 +105,14 @@ def project(img_path, pts, fog, m, near, far):
 
 def proj(a):
     clear, foggy = read_bin(a.clear), read_bin(a.foggy)
-    fog = moved_to_fog(clear, foggy)
+    if a.labels:  # one byte per input point (0 kept, 1 moved, 2 lost): the output holds those not lost
+        labels = np.fromfile(a.labels, dtype=np.uint8)
+        if len(labels) != len(clear) or (labels != 2).sum() != len(foggy):
+            raise SystemExit(f"{a.labels}: {len(labels)} labels do not match the scans ({len(clear)} and "
+                             f"{len(foggy)} points)")
+        fog = labels[labels != 2] == 1
+    else:
+        fog = moved_to_fog(clear, foggy)
     m = read_calib(a.calib)
     top = project(a.clear_image, clear, np.zeros(len(clear), bool), m, a.near, a.far)
     bottom = project(a.foggy_image, foggy, fog, m, a.near, a.far)
@@ -119,6 +133,7 @@ def main():
     b.add_argument("--range", type=float, default=60.0, help="metres shown ahead of the sensor")
     b.add_argument("--dpi", type=int, default=100)
     b.add_argument("--echoes", default="fog returns", help="the legend's name of the moved points")
+    b.add_argument("--labels", default="", help="the effect's labels (--labels): points lost, points moved")
     p = sub.add_parser("proj")
     for k in ("clear", "foggy", "calib", "clear_image", "foggy_image", "out"):
         p.add_argument(k)

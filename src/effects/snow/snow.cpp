@@ -10,6 +10,8 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <utility>
+#include <vector>
 
 #include "brume/error.hpp"
 #include "core/math_constants.hpp"  // kPi: one definition (unity builds)
@@ -153,7 +155,8 @@ struct BeamOutcome {
 // σ(Q = 1) (every flake undrawn, none as wide as the footprint).
 class SnowFootprint {
  public:
-  explicit SnowFootprint(const LidarSnowParams& p) : p_(p), sizes_(snow_sizes(p.flakes)) {
+  // Tabulated out to the farthest point, r_max (the values at the nodes do not depend on it).
+  SnowFootprint(const LidarSnowParams& p, double r_max) : p_(p), sizes_(snow_sizes(p.flakes)) {
     theta_ = p.divergence_mrad * 1e-3;
     lam_ = sizes_.lambda_flake_per_mm;
     r_min_ = p.blind_range_m;
@@ -171,10 +174,14 @@ class SnowFootprint {
     }
     draws_ = x_draw > r_min_;
     // α is σ(Q = 1) to e^{−60} once the footprint is 60/Λ_f wide.
-    const double x_end = std::max({x_draw, 60.0 / (lam_ * 1e3 * theta_), r_min_ + h_});
-    h_ = 0.01;
+    const double x_end =
+        std::min(std::max(x_draw, 60.0 / (lam_ * 1e3 * theta_)), std::max(r_max, r_min_)) + h_;
     constexpr double kMaxNodes = 1 << 22;
-    if ((x_end - r_min_) / h_ > kMaxNodes) h_ = (x_end - r_min_) / kMaxNodes;
+    if ((x_end - r_min_) / h_ > kMaxNodes)
+      throw Error("a point lies " + text::g(r_max) + " m from the sensor, and with --noise-floor " +
+                  text::g(p.noise_floor) + " flakes are detectable out to " + text::g(x_draw) +
+                  " m; the footprint model tabulates its beams on " + text::g(h_ * 100) + " cm steps out to " +
+                  text::g(r_min_ + kMaxNodes * h_) + " m: leave out points that far, or give a larger --noise-floor");
     const std::size_t nodes = static_cast<std::size_t>(std::ceil((x_end - r_min_) / h_)) + 1;
     lambda_.resize(nodes), cum_.resize(nodes), alpha_.resize(nodes), area_.resize(nodes);
     const double k_cone = kPi / 4.0 * theta_ * theta_ * sizes_.flakes_per_m3;  // λ = k_cone·x²·e^{−Λ_f D_t}
@@ -215,11 +222,33 @@ class SnowFootprint {
       const std::uint64_t hb = hash_fold(hash_fold(key_, static_cast<std::uint64_t>(float_bits(q[0])) |
                                                               static_cast<std::uint64_t>(float_bits(q[1])) << 32),
                                          float_bits(q[2]));
-      double s = 0.0, a_prev = 0.0;  // a_prev: A at the previous flake (detail)
-      for (std::uint64_t k = 0;; ++k) {
-        const std::uint64_t hk = hash_fold(hb, k);  // (mixed: its top bits are a uniform draw)
-        s += -std::log1p(-hash_unit(hk));
-        if (!(s < l_r)) break;
+      // The drawn flakes as points of L over [0, L(r)): a Poisson number of mean L(r), by inversion
+      // of one uniform (where L(r) <= 30; beyond, as sums of unit exponentials), each at u·L(r),
+      // sorted (near to far: L increases), with its own hash for its diameter.
+      thread_local std::vector<std::pair<double, std::uint64_t>> pts;
+      pts.clear();
+      if (l_r <= 30.0) {
+        const double u0 = hash_unit(hash_fold(hb, 0));  // (hash_fold mixes: its top bits are uniform)
+        double pk = std::exp(-l_r), c = pk;
+        for (std::uint64_t k = 1; u0 >= c; ++k) {
+          const std::uint64_t hk = hash_fold(hb, k);
+          pts.push_back({hash_unit(hk) * l_r, hk});
+          pk *= l_r / static_cast<double>(k);
+          if (!(pk > 1e-17 * c)) break;  // the rest of the distribution is below rounding
+          c += pk;
+        }
+        std::sort(pts.begin(), pts.end());
+      } else {
+        double s = 0.0;
+        for (std::uint64_t k = 1;; ++k) {
+          const std::uint64_t hk = hash_fold(hb, k);
+          s += -std::log1p(-hash_unit(hk));
+          if (!(s < l_r)) break;
+          pts.push_back({s, hk});
+        }
+      }
+      double a_prev = 0.0;  // A at the previous flake (detail)
+      for (const auto& [s, hk] : pts) {
         const double x = range_at(s);
         if (!(x < r)) break;
         ++o.drawn;
@@ -301,14 +330,24 @@ class SnowFootprint {
   std::vector<std::uint32_t> bucket_;
 };
 
+// The farthest point's range [m] (0 for none).
+double farthest(const float* points, std::size_t n) {
+  double r2 = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = points[4 * i], y = points[4 * i + 1], z = points[4 * i + 2];
+    r2 = std::max(r2, x * x + y * y + z * z);
+  }
+  return std::sqrt(r2);
+}
+
 class LidarSnow final : public Medium {
  public:
-  explicit LidarSnow(const LidarSnowParams& p) : p_(p), fp_(p) {}
+  explicit LidarSnow(const LidarSnowParams& p) : p_(p), sigma1_(snow_sizes(p.flakes).extinction_per_m(1.0)) {}
 
   // The expected one-way occlusion as a two-way optical depth: e^{−2τ} = e^{−σ(Q=1)·(t − r_min)}.
-  double extinction_per_m() const override { return fp_.sigma1() / 2.0; }
+  double extinction_per_m() const override { return sigma1_ / 2.0; }
   double optical_depth(const MediumRay&, double range_m) const override {
-    return fp_.sigma1() / 2.0 * std::max(0.0, range_m - p_.blind_range_m);
+    return sigma1_ / 2.0 * std::max(0.0, range_m - p_.blind_range_m);
   }
 
   // Each beam drawn once: its target's share as τ = −½·ln(share), its
@@ -329,12 +368,13 @@ class LidarSnow final : public Medium {
     for_ = points;
     tau_.assign(n, 0.0);
     echoes_.clear();
-    if (!fp_.active()) return;
+    const SnowFootprint fp(p_, farthest(points, n));
+    if (!fp.active()) return;
     for (std::size_t i = 0; i < n; ++i) {
       const float* q = points + 4 * i;
       const double x = q[0], y = q[1], z = q[2];
       const double r = std::sqrt(x * x + y * y + z * z);
-      const BeamOutcome o = fp_.beam(q, r);
+      const BeamOutcome o = fp.beam(q, r);
       drawn_ += o.drawn;
       // τ = −½·ln(share) = ½·(A(r) − ln Π(1 − a)): +inf at share 0.
       if (o.area > 0.0 || o.left < 1.0) tau_[i] = 0.5 * (o.area - (o.left < 1.0 ? std::log(o.left) : 0.0));
@@ -343,7 +383,7 @@ class LidarSnow final : public Medium {
   }
 
   LidarSnowParams p_;
-  SnowFootprint fp_;
+  double sigma1_;
   mutable const float* for_ = nullptr;
   mutable std::vector<double> tau_;
   mutable std::vector<ScanEcho> echoes_;
@@ -354,7 +394,7 @@ class LidarSnow final : public Medium {
 
 std::vector<SnowBeam> lidar_snow_beams(const LidarSnowParams& p, const float* points, std::size_t n) {
   validate_lidar_snow(p);
-  const SnowFootprint fp(p);
+  const SnowFootprint fp(p, farthest(points, n));
   std::vector<SnowBeam> beams(n);
   for (std::size_t i = 0; i < n; ++i) {
     const float* q = points + 4 * i;
