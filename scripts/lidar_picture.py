@@ -33,6 +33,18 @@ def read_bin(path):
     return a.reshape(-1, 4)
 
 
+def moved_points(a, clear, foggy):
+    """The output's points that moved: by the effect's labels (one byte per input point: 0 kept,
+    1 moved, 2 lost; the output holds those not lost) when given, else by comparing the scans."""
+    if not a.labels:
+        return moved_to_fog(clear, foggy)
+    labels = np.fromfile(a.labels, dtype=np.uint8)
+    if len(labels) != len(clear) or (labels != 2).sum() != len(foggy):
+        raise SystemExit(f"{a.labels}: {len(labels)} labels do not match the scans ({len(clear)} and "
+                         f"{len(foggy)} points)")
+    return labels[labels != 2] == 1
+
+
 def moved_to_fog(clear, foggy):
     if clear.shape != foggy.shape:
         raise SystemExit(f"the scans differ in point count: {len(clear)} and {len(foggy)}")
@@ -55,14 +67,7 @@ def read_calib(path):
 
 def bev(a):
     clear, foggy = read_bin(a.clear), read_bin(a.foggy)
-    if a.labels:  # one byte per input point (0 kept, 1 moved, 2 lost): the output holds those not lost
-        labels = np.fromfile(a.labels, dtype=np.uint8)
-        if len(labels) != len(clear) or (labels != 2).sum() != len(foggy):
-            raise SystemExit(f"{a.labels}: {len(labels)} labels do not match the scans ({len(clear)} and "
-                             f"{len(foggy)} points)")
-        fog = labels[labels != 2] == 1
-    else:
-        fog = moved_to_fog(clear, foggy)
+    fog = moved_points(a, clear, foggy)
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -105,14 +110,7 @@ def project(img_path, pts, fog, m, near, far):
 
 def proj(a):
     clear, foggy = read_bin(a.clear), read_bin(a.foggy)
-    if a.labels:  # one byte per input point (0 kept, 1 moved, 2 lost): the output holds those not lost
-        labels = np.fromfile(a.labels, dtype=np.uint8)
-        if len(labels) != len(clear) or (labels != 2).sum() != len(foggy):
-            raise SystemExit(f"{a.labels}: {len(labels)} labels do not match the scans ({len(clear)} and "
-                             f"{len(foggy)} points)")
-        fog = labels[labels != 2] == 1
-    else:
-        fog = moved_to_fog(clear, foggy)
+    fog = moved_points(a, clear, foggy)
     m = read_calib(a.calib)
     top = project(a.clear_image, clear, np.zeros(len(clear), bool), m, a.near, a.far)
     bottom = project(a.foggy_image, foggy, fog, m, a.near, a.far)
@@ -139,6 +137,7 @@ def main():
         p.add_argument(k)
     p.add_argument("--near", type=float, default=4.0, help="range [m] at the red end")
     p.add_argument("--far", type=float, default=80.0, help="range [m] at the blue end")
+    p.add_argument("--labels", default="", help="the effect's labels (--labels): points lost, points moved")
     a = ap.parse_args()
     bev(a) if a.kind == "bev" else proj(a)
 

@@ -177,13 +177,8 @@ double CameraRainOptics::tau(double r, double cos_theta) const {
 Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, const Exec& exec,
                          CameraRainStats* stats, Image* transmission) {
   validate_camera_rain(p);
+  check_streak_scene(s, "rain");
   const int W = s.rgb.width(), H = s.rgb.height();
-  if (s.rgb.channels() != 3) throw Error("rain needs an RGB image, got " + std::to_string(s.rgb.channels()) + " channels");
-  if (s.range.channels() != 1 || s.range.width() != W || s.range.height() != H)
-    throw Error("the range map " + s.range.size_string() + " does not match the image " + s.rgb.size_string() +
-                "; they must be the same size");
-  if (!s.sky_weight.empty() && (s.sky_weight.width() != W || s.sky_weight.height() != H))
-    throw Error("internal: the sky weight is " + s.sky_weight.size_string() + ", the image " + s.rgb.size_string());
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const double rate = *p.drops.rate_mm_h, T = p.exposure_s;
   const double fx = s.k.fx, fy = s.k.fy, cx = s.k.cx, cy = s.k.cy;
@@ -210,27 +205,16 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
   const StreakBoxMean env(s.rgb, std::max(1, H / 4));
   double env_total[3];
   for (int k = 0; k < 3; ++k) env_total[k] = env.total(k);
-  const double alpha = s.coc_infinity_px, zf = p.focus_distance_m.value_or(0.0);
-  const auto blur_px = [&](double z) { return alpha > 0.0 ? alpha * std::abs(z - zf) / z : 0.0; };
+  const StreakLens lens{s.coc_infinity_px, p.focus_distance_m.value_or(0.0)};
   const double z_clip = 0.5 * p.z_near_m;
   const auto grow_m = [&](double z0, double z1) {
-    const double kpx = 3.0 * std::sqrt(std::pow(blur_px(z0) / 4.0, 2) + std::pow(blur_px(z1) / 4.0, 2) +
-                                       std::pow(fx * p.drops.drop_max_mm * 1e-3 / z0 / 4.0, 2)) +
-                       2.0;
-    return margin_m + kpx * z1 / std::min(fx, fy);
+    return streak_grow_m(z0, z1, p.drops.drop_max_mm, margin_m, lens, cam);
   };
   const auto make = [&](const Vec3& at, double d_mm, Streak& k) {
     const double z = at.x;
-    const double v = atlas_terminal_velocity_m_per_s(d_mm);
-    k.c[0] = -at.y, k.c[1] = -at.z, k.c[2] = at.x;
-    k.u[0] = -wind.y, k.u[1] = v - wind.z, k.u[2] = wind.x - s_ego;
-    const double r = std::sqrt(k.c[0] * k.c[0] + k.c[1] * k.c[1] + z * z);
-    const double dm = d_mm * 1e-3;
-    k.area = kCamPi / 4.0 * dm * dm * fx * fy;
-    const double dpx = fx * dm / z, b = blur_px(z);
-    k.sigma_px = std::sqrt(dpx * dpx + b * b) / 4.0;
-    k.range = r;
-    if (!bound_streak(k, T, z_clip, cam)) return false;
+    const double u[3] = {-wind.y, atlas_terminal_velocity_m_per_s(d_mm) - wind.z, wind.x - s_ego};
+    if (!place_streak(k, at, d_mm, u, lens, T, z_clip, cam)) return false;
+    const double r = k.range;
     // E: what the drop refracts (the image about it) and reflects (the image's mean),
     // seen through the analytic media in front of it.
     const double um = fx * k.c[0] / z + cx, vm = fy * k.c[1] / z + cy;

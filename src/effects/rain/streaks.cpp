@@ -8,11 +8,15 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <string>
+
+#include "brume/error.hpp"
 
 namespace brume {
 
 namespace {
 constexpr double kStreakInf = std::numeric_limits<double>::infinity();
+constexpr double kStreakPi = 3.14159265358979323846;
 }  // namespace
 
 StreakBoxMean::StreakBoxMean(ConstImageView rgb, int h)
@@ -129,6 +133,39 @@ std::vector<Streak> frustum_streaks(const RainField& field, const std::function<
     }
   }
   return all;
+}
+
+double streak_grow_m(double z0, double z1, double d_max_mm, double motion_m, const StreakLens& lens,
+                     const StreakCamera& cam) {
+  const double kpx = 3.0 * std::sqrt(std::pow(lens.blur_px(z0) / 4.0, 2) + std::pow(lens.blur_px(z1) / 4.0, 2) +
+                                     std::pow(cam.fx * d_max_mm * 1e-3 / z0 / 4.0, 2)) +
+                     2.0;
+  return motion_m + kpx * z1 / std::min(cam.fx, cam.fy);
+}
+
+bool place_streak(Streak& k, const Vec3& at, double d_mm, const double u[3], const StreakLens& lens, double T,
+                  double z_clip, const StreakCamera& cam) {
+  const double z = at.x;
+  k.c[0] = -at.y, k.c[1] = -at.z, k.c[2] = at.x;
+  k.u[0] = u[0], k.u[1] = u[1], k.u[2] = u[2];
+  const double r = std::sqrt(k.c[0] * k.c[0] + k.c[1] * k.c[1] + z * z);
+  const double dm = d_mm * 1e-3;
+  k.area = kStreakPi / 4.0 * dm * dm * cam.fx * cam.fy;
+  const double dpx = cam.fx * dm / z, b = lens.blur_px(z);
+  k.sigma_px = std::sqrt(dpx * dpx + b * b) / 4.0;
+  k.range = r;
+  return bound_streak(k, T, z_clip, cam);
+}
+
+void check_streak_scene(const CameraRainScene& s, const std::string& effect) {
+  const int W = s.rgb.width(), H = s.rgb.height();
+  if (s.rgb.channels() != 3)
+    throw Error(effect + " needs an RGB image, got " + std::to_string(s.rgb.channels()) + " channels");
+  if (s.range.channels() != 1 || s.range.width() != W || s.range.height() != H)
+    throw Error("the range map " + s.range.size_string() + " does not match the image " + s.rgb.size_string() +
+                "; they must be the same size");
+  if (!s.sky_weight.empty() && (s.sky_weight.width() != W || s.sky_weight.height() != H))
+    throw Error("internal: the sky weight is " + s.sky_weight.size_string() + ", the image " + s.rgb.size_string());
 }
 
 bool bound_streak(Streak& k, double T, double z_clip, const StreakCamera& cam) {

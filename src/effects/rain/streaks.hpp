@@ -97,6 +97,27 @@ std::vector<Streak> frustum_streaks(const RainField& field, const std::function<
                                     const std::function<bool(const Vec3& at, double d_mm, Streak& k)>& make,
                                     std::size_t& cells, std::size_t& seen);
 
+// The thin lens's blur [px] at planar depth z: the circle of confusion α·|z − z_f|/z (α at
+// infinity, 0: a pinhole).
+struct StreakLens {
+  double alpha = 0, focus_m = 0;
+  double blur_px(double z) const { return alpha > 0.0 ? alpha * std::abs(z - focus_m) / z : 0.0; }
+};
+
+// A slab's lateral margin [m] between planar depths z0 and z1: the particles' motion over half
+// the exposure (`motion_m`) and 3 σ of the widest kernel (a particle of d_max_mm) in metres.
+double streak_grow_m(double z0, double z1, double d_max_mm, double motion_m, const StreakLens& lens,
+                     const StreakCamera& cam);
+
+// A particle of the field (vehicle frame, `at`; diameter d_mm; cv velocity u) as a streak: its
+// position, image area, kernel (its width and the lens's blur: σ = w/4) and range; then
+// bound_streak. False when it leaves nothing in the image.
+bool place_streak(Streak& k, const Vec3& at, double d_mm, const double u[3], const StreakLens& lens, double exposure_s,
+                  double z_clip, const StreakCamera& cam);
+
+// The scene's checks every camera pass makes (`effect` names it: "rain needs an RGB image").
+void check_streak_scene(const CameraRainScene& s, const std::string& effect);
+
 // The part of the exposure [−T/2, T/2] a streak (c, u, sigma_px set) spends at z >= z_clip, and
 // the rows and columns it can touch; false when none is left or it stays out of the image.
 bool bound_streak(Streak& k, double exposure_s, double z_clip, const StreakCamera& cam);

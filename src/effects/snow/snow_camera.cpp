@@ -17,7 +17,6 @@
 namespace brume {
 
 namespace {
-constexpr double kSnowCamPi = 3.14159265358979323846;
 constexpr double kFlakeTail = 40.0;                        // Λ_f·D_max: e^{−40} of the flakes beyond
 constexpr std::uint64_t kSnowFieldTag = 0x736e6f776669656cull;  // "snowfiel"
 
@@ -75,13 +74,8 @@ LidarSnowParams camera_snow_lidar_params(const CameraSnowParams& p) {
 Image render_camera_snow(const CameraRainScene& s, const CameraSnowParams& p, const Exec& exec,
                          CameraSnowStats* stats, Image* transmission) {
   validate_camera_snow(p);
+  check_streak_scene(s, "snow");
   const int W = s.rgb.width(), H = s.rgb.height();
-  if (s.rgb.channels() != 3) throw Error("snow needs an RGB image, got " + std::to_string(s.rgb.channels()) + " channels");
-  if (s.range.channels() != 1 || s.range.width() != W || s.range.height() != H)
-    throw Error("the range map " + s.range.size_string() + " does not match the image " + s.rgb.size_string() +
-                "; they must be the same size");
-  if (!s.sky_weight.empty() && (s.sky_weight.width() != W || s.sky_weight.height() != H))
-    throw Error("internal: the sky weight is " + s.sky_weight.size_string() + ", the image " + s.rgb.size_string());
   const int nt = exec.threads > 0 ? exec.threads : omp_get_max_threads();
   const double T = p.exposure_s;
   const double fx = s.k.fx, fy = s.k.fy, cx = s.k.cx, cy = s.k.cy;
@@ -130,28 +124,15 @@ Image render_camera_snow(const CameraRainScene& s, const CameraSnowParams& p, co
     const double s_ego = p.ego_speed_m_s, v = p.flakes.fall_speed_m_s;
     const double speed_max = std::sqrt(wind.x * wind.x + wind.y * wind.y + wind.z * wind.z) + std::abs(s_ego) + v;
     const double margin_m = speed_max * T / 2.0 + 0.01;
-    const double alpha = s.coc_infinity_px, zf = pop.focus_distance_m;
-    const auto blur_px = [&](double z) { return alpha > 0.0 ? alpha * std::abs(z - zf) / z : 0.0; };
+    const StreakLens lens{s.coc_infinity_px, pop.focus_distance_m};
     const double z_clip = 0.5 * p.z_near_m;
-    const auto grow_m = [&](double z0, double z1) {
-      const double kpx = 3.0 * std::sqrt(std::pow(blur_px(z0) / 4.0, 2) + std::pow(blur_px(z1) / 4.0, 2) +
-                                         std::pow(fx * pop.d_max_mm * 1e-3 / z0 / 4.0, 2)) +
-                         2.0;
-      return margin_m + kpx * z1 / std::min(fx, fy);
-    };
+    const auto grow_m = [&](double z0, double z1) { return streak_grow_m(z0, z1, pop.d_max_mm, margin_m, lens, cam); };
     double e[3];
     for (int q = 0; q < 3; ++q) e[q] = s.drop_radiance ? (*s.drop_radiance)[q] : p.albedo * (st.sky[q] + st.ground[q]) / 2.0;
+    const double u[3] = {-wind.y, v - wind.z, wind.x - s_ego};
     const auto make = [&](const Vec3& at, double d_mm, Streak& k) {
-      const double z = at.x;
-      k.c[0] = -at.y, k.c[1] = -at.z, k.c[2] = at.x;
-      k.u[0] = -wind.y, k.u[1] = v - wind.z, k.u[2] = wind.x - s_ego;
-      const double r = std::sqrt(k.c[0] * k.c[0] + k.c[1] * k.c[1] + z * z);
-      const double dm = d_mm * 1e-3;
-      k.area = kSnowCamPi / 4.0 * dm * dm * fx * fy;
-      const double dpx = fx * dm / z, b = blur_px(z);
-      k.sigma_px = std::sqrt(dpx * dpx + b * b) / 4.0;
-      k.range = r;
-      if (!bound_streak(k, T, z_clip, cam)) return false;
+      if (!place_streak(k, at, d_mm, u, lens, T, z_clip, cam)) return false;
+      const double z = at.x, r = k.range;
       const double tf = std::exp(-front_tau(r, z / r));
       for (int q = 0; q < 3; ++q) k.e[q] = static_cast<float>(tf * e[q] + (1.0 - tf) * s.airlight[q]);
       return true;
