@@ -108,6 +108,7 @@ CommandDef snow_command() {
       .table = &camera_snow_job_table(),
       .takes_exec_flags = true,
       .writes_record = true,
+      .batchable = true,
       .check = [](const CameraSnowJob& j, const std::set<std::string>& g) {
         check_camera_snow_job(j);
         check_range_step(j.prepare, g);
@@ -132,6 +133,75 @@ CommandDef snow_command() {
     if (!j.snow.flakes.rate_mm_h) return std::nullopt;
     return snow_sizes(j.snow.flakes).extinction_per_m(kLidarSnowQ) +
            (j.snow.visibility_m ? 3.912 / *j.snow.visibility_m : 0.0);
+  };
+  // Rate log-uniform over 0.2-5 mm/h water equivalent: light snow (a few tenths of a mm/h) to a
+  // heavy snowfall (5 mm/h: several centimetres of fresh snow an hour); log because the flakes'
+  // look changes over decades of the rate. The flakes' seed is drawn per frame (seed()), as
+  // rain's: a fixed seed would draw the same flakes at the same pixels in every frame.
+  c.sampling = make_sampling<CameraSnowParams>(
+      camera_snow_param_table(), {{"rate", "loguniform(0.2, 5)", {}}, {"snow-seed", "seed()", {}}},
+      [](const CameraSnowParams& p, const std::set<std::string>&) { validate_camera_snow(p); });
+  // brume.snow(rgb, range, lidar=points): as brume.rain (the image and its range dense; a scan
+  // given as lidar= is snowed on with the same snowfall and seed, its points and labels returned).
+  static const auto call =
+      array_call_table(camera_snow_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
+  std::vector<ArrayArg> args = rgb_range_args(ArrayArg::As::dense);
+  args.push_back({"lidar", 1, true, ArrayArg::As::view, true, true});
+  c.arrays = make_array_form<CameraSnowParams>(
+      "snow", "",
+      "Snow on an RGB-D image: the flakes of a snowfall over the exposure, lit by the image's sky and ground, "
+      "depth-tested against the range, and the snow not drawn as extinction (with visibility, haze's too, in haze's "
+      "composite). rate in mm/h (water equivalent) is required; the intrinsics (fx.. or fov_x/fov_y) are keywords. "
+      "lidar=points (an (N, 4) float32 array of x, y, z, intensity) snows on the frame's scan with the same snowfall "
+      "and snow_seed (brume.lidar.snow's model and defaults): lidar holds the points that return, lidar_labels one "
+      "uint8 per input point (0 kept, 1 moved to a flake, 2 lost). As `brume snow`.",
+      args, call, {"rgb", "transmission", "lidar", "lidar_labels", "record"}, true,
+      [](const std::vector<ArrayIn>& in, ArrayCall<CameraSnowParams>& k, const Exec& e,
+         const std::set<std::string>& g) {
+        ArrayResult r;
+        if (in.size() > 2 && in[2].present) {  // the scan first (as the CLI: its errors before the image's work)
+          const std::string what = "brume.snow(): lidar";
+          const LidarSnowParams lp = camera_snow_lidar_params(k.p);
+          LidarSnowStats st;
+          ArrayResult scan = scan_array_result(in[2].view, what,
+                                               [&](const float* src, float* out, std::size_t n, std::uint8_t* labels) {
+                                                 st = lidar_snow(src, out, n, lp, labels, what);
+                                                 return st.run.lost;
+                                               });
+          r.images["lidar"] = std::move(scan.images["points"]);
+          r.bytes["lidar_labels"] = std::move(scan.bytes["labels"]);
+          r.record["lidar_snow"] = lidar_snow_record(lp, st);
+        } else {
+          r.images["lidar"] = Image();  // None
+          r.more["lidar_labels"] = nullptr;
+        }
+        const CameraSnowParams& p = k.p;
+        const ConstImageView rgb = in[0].dense.view();
+        const double coc = streak_coc_px(p.f_number, p.focus_distance_m, k.depth, rgb.width(), rgb.height());
+        StreakRun run = run_camera_streaks(
+            rgb, in[1].dense.view(), k.depth, k.prepare, e, g, coc, p.visibility_m, p.airlight, "snow",
+            [&](const CameraRainScene& scene, Image* tr, nlohmann::json& block) {
+              CameraSnowStats st;
+              Image out = render_camera_snow(scene, p, e, &st, tr);
+              block = camera_snow_record(p, st);
+              return out;
+            });
+        r.images["rgb"] = std::move(run.rgb);
+        r.images["transmission"] = std::move(run.transmission);
+        for (auto& [name, v] : run.record.items()) r.record[name] = std::move(v);
+        return r;
+      },
+      [](const ArrayCall<CameraSnowParams>& k, const std::set<std::string>& g) {
+        validate_camera_snow(k.p);
+        check_streak_lens(k.p.f_number, k.depth, "the flakes");
+        check_range_step(k.prepare, g);
+      });
+  // A call that snowed on a scan says so in its job (an empty lidar block), as brume.rain's.
+  c.arrays->run = [inner = c.arrays->run](const std::vector<ArrayIn>& in, const nlohmann::json& call,
+                                          const Exec& e, const std::set<std::string>& g) {
+    ArrayResult r = inner(in, call, e, g);
+    if (in.size() > 2 && in[2].present) r.job["lidar"] = nlohmann::json::object();
+    return r;
   };
   return c;
 }
