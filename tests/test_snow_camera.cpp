@@ -12,6 +12,7 @@
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "brume/snow.hpp"
+#include "streak_scene.hpp"
 #include "test_util.hpp"
 
 namespace fs = std::filesystem;
@@ -27,31 +28,6 @@ CameraSnowParams params(double rate, std::uint64_t seed) {
   return p;
 }
 
-struct Flat {
-  Image rgb, range;
-  Intrinsics k;
-};
-Flat flat(int w, int h, double f, float grey, double range_m) {
-  Flat s{Image(w, h, 3, grey), Image(w, h, 1, static_cast<float>(range_m)), {}};
-  s.k.fx = s.k.fy = f;
-  s.k.cx = (w - 1) / 2.0;
-  s.k.cy = (h - 1) / 2.0;
-  return s;
-}
-CameraRainScene scene_of(const Flat& f, bool analytic, std::optional<std::array<float, 3>> e) {
-  CameraRainScene s;
-  s.rgb = f.rgb;
-  s.range = f.range;
-  s.k = f.k;
-  s.analytic = analytic;
-  s.drop_radiance = e;
-  return s;
-}
-Exec two_threads() {
-  Exec e;
-  e.threads = 2;
-  return e;
-}
 
 // A wall at 2 m (planar depth) over the left half hides every flake behind it: there the image is
 // at most as covered as the same seed's flakes drawn up to z_split = 2.02 m (a splat's footprint
@@ -125,7 +101,7 @@ TEST(CameraSnow, RateZeroGivesTheImageBackAndFlakesAreLitBySkyAndGround) {
   Flat f = flat(96, 64, 80.0, 0.5f, 10.0);
   f.rgb = sc.rgb, f.range = sc.range;
   {
-    CameraRainScene s = scene_of(f, true, std::nullopt);
+    CameraRainScene s = scene_of(f, true);
     s.airlight = {0.7f, 0.7f, 0.8f};
     const Image out = render_camera_snow(s, params(0.0, 1), two_threads());
     ASSERT_EQ(out.data.size(), f.rgb.data.size());
