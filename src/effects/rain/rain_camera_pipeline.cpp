@@ -193,41 +193,22 @@ CommandDef rain_command() {
       args, call, {"rgb", "transmission", "lidar", "lidar_labels", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<CameraRainParams>& k, const Exec& e,
          const std::set<std::string>& g) {
-        ArrayResult r;
-        if (in.size() > 2 && in[2].present) {  // the scan first (as the CLI: its errors before the image's work)
-          const std::string what = "brume.rain(): lidar";
-          const LidarRainParams lp = camera_rain_lidar_params(k.p);
-          LidarRainStats st;
-          ArrayResult scan = scan_array_result(in[2].view, what,
-                                               [&](const float* src, float* out, std::size_t n, std::uint8_t* labels) {
-                                                 st = lidar_rain(src, out, n, lp, labels, what);
-                                                 return st.run.lost;
-                                               });
-          r.images["lidar"] = std::move(scan.images["points"]);
-          r.bytes["lidar_labels"] = std::move(scan.bytes["labels"]);
-          r.record["lidar_rain"] = lidar_rain_record(lp, st);
-        } else {
-          r.images["lidar"] = Image();  // None
-          r.more["lidar_labels"] = nullptr;
-        }
-        CameraRainRun run = run_camera_rain(in[0].dense.view(), in[1].dense.view(), k.depth, k.p, k.prepare, e, g);
-        r.images["rgb"] = std::move(run.rgb);
-        r.images["transmission"] = std::move(run.transmission);
-        for (auto& [name, v] : run.record.items()) r.record[name] = std::move(v);
-        return r;
+        const LidarRainParams lp = camera_rain_lidar_params(k.p);
+        return streak_array_result(
+            in, "brume.rain(): lidar", "lidar_rain",
+            [&](const float* src, float* out, std::size_t n, std::uint8_t* labels, nlohmann::json& block) {
+              const LidarRainStats st = lidar_rain(src, out, n, lp, labels, "brume.rain(): lidar");
+              block = lidar_rain_record(lp, st);
+              return st.run.lost;
+            },
+            [&] { return run_camera_rain(in[0].dense.view(), in[1].dense.view(), k.depth, k.p, k.prepare, e, g); });
       },
       [](const ArrayCall<CameraRainParams>& k, const std::set<std::string>& g) {
         check_camera_rain(k.p, k.depth);
         check_range_step(k.prepare, g);
       });
-  // A call that rained on a scan says so in its job, as the camera effects' lidar= does: an empty
-  // lidar block (the scan's rain has no settings of its own: the rain's rate, seed and drops).
-  c.arrays->run = [inner = c.arrays->run](const std::vector<ArrayIn>& in, const nlohmann::json& call,
-                                          const Exec& e, const std::set<std::string>& g) {
-    ArrayResult r = inner(in, call, e, g);
-    if (in.size() > 2 && in[2].present) r.job["lidar"] = nlohmann::json::object();
-    return r;
-  };
+  // A call that rained on a scan says so in its job (an empty lidar block).
+  streak_array_lidar_job(c);
   return c;
 }
 

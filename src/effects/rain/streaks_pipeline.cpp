@@ -122,6 +122,40 @@ void run_streak_lidar(RunContext& ctx, const std::string& lidar, const std::stri
   ctx.extra[block] = std::move(rec);
 }
 
+ArrayResult streak_array_result(
+    const std::vector<ArrayIn>& in, const std::string& what, const std::string& lidar_block,
+    const std::function<std::size_t(const float*, float*, std::size_t, std::uint8_t*, nlohmann::json&)>& scan,
+    const std::function<StreakRun()>& image) {
+  ArrayResult r;
+  if (in.size() > 2 && in[2].present) {  // the scan first (as the CLI: its errors before the image's work)
+    nlohmann::json block;
+    ArrayResult points = scan_array_result(
+        in[2].view, what, [&](const float* src, float* out, std::size_t n, std::uint8_t* labels) {
+          return scan(src, out, n, labels, block);
+        });
+    r.images["lidar"] = std::move(points.images["points"]);
+    r.bytes["lidar_labels"] = std::move(points.bytes["labels"]);
+    r.record[lidar_block] = std::move(block);
+  } else {
+    r.images["lidar"] = Image();  // None
+    r.more["lidar_labels"] = nullptr;
+  }
+  StreakRun run = image();
+  r.images["rgb"] = std::move(run.rgb);
+  r.images["transmission"] = std::move(run.transmission);
+  for (auto& [name, v] : run.record.items()) r.record[name] = std::move(v);
+  return r;
+}
+
+void streak_array_lidar_job(CommandDef& c) {
+  c.arrays->run = [inner = c.arrays->run](const std::vector<ArrayIn>& in, const nlohmann::json& call, const Exec& e,
+                                          const std::set<std::string>& g) {
+    ArrayResult r = inner(in, call, e, g);
+    if (in.size() > 2 && in[2].present) r.job["lidar"] = nlohmann::json::object();
+    return r;
+  };
+}
+
 void apply_streak_mask(Image& out, const Image& rgb, const std::string& mask_path, nlohmann::json& record) {
   const int W = rgb.width, H = rgb.height;
   FileInfo minfo;

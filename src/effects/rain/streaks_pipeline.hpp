@@ -7,9 +7,11 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
+#include "brume/command.hpp"
 #include "brume/depth_source.hpp"
 #include "brume/exec.hpp"
 #include "brume/image.hpp"
@@ -46,6 +48,19 @@ StreakRun run_camera_streaks(ConstImageView rgb, ConstImageView measured_range, 
 void run_streak_lidar(RunContext& ctx, const std::string& lidar, const std::string& lidar_out, const std::string& block,
                       const std::function<std::size_t(const float* in, float* out, std::size_t n,
                                                       const std::string& what, nlohmann::json& block)>& run);
+
+// brume.rain's and brume.snow's array forms: the scan of lidar= (in[2], when present) first,
+// through `scan` (it fills the record's block `lidar_block` and returns the points lost: "lidar"
+// and "lidar_labels"; else None for both), then the image through `image` ("rgb",
+// "transmission" and its record's blocks).
+ArrayResult streak_array_result(
+    const std::vector<ArrayIn>& in, const std::string& what, const std::string& lidar_block,
+    const std::function<std::size_t(const float* in, float* out, std::size_t n, std::uint8_t* labels,
+                                    nlohmann::json& block)>& scan,
+    const std::function<StreakRun()>& image);
+// A call that went through a scan says so in its job, as the camera effects' lidar= does: an
+// empty lidar block (the scan has no settings of its own: the particles').
+void streak_array_lidar_job(CommandDef& c);
 
 // --mask: `out` where the grey image is white, `rgb` where black, mixed between; its file record.
 void apply_streak_mask(Image& out, const Image& rgb, const std::string& mask, nlohmann::json& record);

@@ -59,6 +59,21 @@ void check_camera_snow_job(const CameraSnowJob& j) {
   if (!j.lidar.empty()) validate_lidar_snow(camera_snow_lidar_params(j.snow));
 }
 
+// The camera's snow on an image and its measured range (the CLI's job and brume.snow's array
+// form): rain's steps around render_camera_snow; the record's blocks.
+StreakRun run_camera_snow(ConstImageView rgb, ConstImageView measured_range, const DepthSource& depth,
+                          const CameraSnowParams& p, const RangeStep& step, const Exec& exec,
+                          const std::set<std::string>& given) {
+  const double coc = streak_coc_px(p.f_number, p.focus_distance_m, depth, rgb.width(), rgb.height());
+  return run_camera_streaks(rgb, measured_range, depth, step, exec, given, coc, p.visibility_m, p.airlight, "snow",
+                            [&](const CameraRainScene& scene, Image* tr, nlohmann::json& block) {
+                              CameraSnowStats st;
+                              Image out = render_camera_snow(scene, p, exec, &st, tr);
+                              block = camera_snow_record(p, st);
+                              return out;
+                            });
+}
+
 nlohmann::json run_camera_snow_job(const CameraSnowJob& job, const ExecOptions& eo, const RunContext& given_ctx) {
   RunContext ctx = given_ctx;
   if (!job.lidar.empty()) {
@@ -80,16 +95,8 @@ nlohmann::json run_camera_snow_job(const CameraSnowJob& job, const ExecOptions& 
       [&](const CameraSnowJob& j, const ExecOptions&) { check_camera_snow_job(j); },
       [&](const CameraSnowJob& j, LoadedInputs& in, const Exec& exec) {
         if (!j.snow.airlight) check_airlight_sky(in, "snow");
-        const CameraSnowParams& p = j.snow;
-        const double coc = streak_coc_px(p.f_number, p.focus_distance_m, j.input.depth, in.rgb.width, in.rgb.height);
-        StreakRun run = run_camera_streaks(
-            in.rgb, in.depth.range, j.input.depth, with_camera(j.prepare, in.depth), exec, ctx.given, coc,
-            p.visibility_m, p.airlight, "snow", [&](const CameraRainScene& scene, Image* tr, nlohmann::json& block) {
-              CameraSnowStats st;
-              Image out = render_camera_snow(scene, p, exec, &st, tr);
-              block = camera_snow_record(p, st);
-              return out;
-            });
+        StreakRun run = run_camera_snow(in.rgb, in.depth.range, j.input.depth, j.snow, with_camera(j.prepare, in.depth),
+                                        exec, ctx.given);
         if (!j.mask.empty()) apply_streak_mask(run.rgb, in.rgb, j.mask, in.record);
         return EffectOutput{std::move(run.rgb), {{"transmission", std::move(run.transmission)}}, std::move(run.record),
                             "", {}};
@@ -158,38 +165,16 @@ CommandDef snow_command() {
       args, call, {"rgb", "transmission", "lidar", "lidar_labels", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<CameraSnowParams>& k, const Exec& e,
          const std::set<std::string>& g) {
-        ArrayResult r;
-        if (in.size() > 2 && in[2].present) {  // the scan first (as the CLI: its errors before the image's work)
-          const std::string what = "brume.snow(): lidar";
-          const LidarSnowParams lp = camera_snow_lidar_params(k.p);
-          LidarSnowStats st;
-          ArrayResult scan = scan_array_result(in[2].view, what,
-                                               [&](const float* src, float* out, std::size_t n, std::uint8_t* labels) {
-                                                 st = lidar_snow(src, out, n, lp, labels, what);
-                                                 return st.run.lost;
-                                               });
-          r.images["lidar"] = std::move(scan.images["points"]);
-          r.bytes["lidar_labels"] = std::move(scan.bytes["labels"]);
-          r.record["lidar_snow"] = lidar_snow_record(lp, st);
-        } else {
-          r.images["lidar"] = Image();  // None
-          r.more["lidar_labels"] = nullptr;
-        }
         const CameraSnowParams& p = k.p;
-        const ConstImageView rgb = in[0].dense.view();
-        const double coc = streak_coc_px(p.f_number, p.focus_distance_m, k.depth, rgb.width(), rgb.height());
-        StreakRun run = run_camera_streaks(
-            rgb, in[1].dense.view(), k.depth, k.prepare, e, g, coc, p.visibility_m, p.airlight, "snow",
-            [&](const CameraRainScene& scene, Image* tr, nlohmann::json& block) {
-              CameraSnowStats st;
-              Image out = render_camera_snow(scene, p, e, &st, tr);
-              block = camera_snow_record(p, st);
-              return out;
-            });
-        r.images["rgb"] = std::move(run.rgb);
-        r.images["transmission"] = std::move(run.transmission);
-        for (auto& [name, v] : run.record.items()) r.record[name] = std::move(v);
-        return r;
+        const LidarSnowParams lp = camera_snow_lidar_params(p);
+        return streak_array_result(
+            in, "brume.snow(): lidar", "lidar_snow",
+            [&](const float* src, float* out, std::size_t n, std::uint8_t* labels, nlohmann::json& block) {
+              const LidarSnowStats st = lidar_snow(src, out, n, lp, labels, "brume.snow(): lidar");
+              block = lidar_snow_record(lp, st);
+              return st.run.lost;
+            },
+            [&] { return run_camera_snow(in[0].dense.view(), in[1].dense.view(), k.depth, p, k.prepare, e, g); });
       },
       [](const ArrayCall<CameraSnowParams>& k, const std::set<std::string>& g) {
         validate_camera_snow(k.p);
@@ -197,12 +182,7 @@ CommandDef snow_command() {
         check_range_step(k.prepare, g);
       });
   // A call that snowed on a scan says so in its job (an empty lidar block), as brume.rain's.
-  c.arrays->run = [inner = c.arrays->run](const std::vector<ArrayIn>& in, const nlohmann::json& call,
-                                          const Exec& e, const std::set<std::string>& g) {
-    ArrayResult r = inner(in, call, e, g);
-    if (in.size() > 2 && in[2].present) r.job["lidar"] = nlohmann::json::object();
-    return r;
-  };
+  streak_array_lidar_job(c);
   return c;
 }
 
