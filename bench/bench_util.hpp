@@ -57,6 +57,14 @@ inline std::string cpu_name() {
   return name;
 }
 
+// The host's load averages over 1, 5 and 15 minutes (/proc/loadavg), for the report.
+inline std::string load_average() {
+  std::ifstream f("/proc/loadavg");
+  std::string a, b, c;
+  f >> a >> b >> c;
+  return a + " " + b + " " + c;
+}
+
 // A LiDAR-like scan of n points (x, y, z, intensity; float32 each): uniform
 // azimuth, elevations in [-0.36, 0.09] rad, ranges 3..80 m (denser near),
 // intensities uniform in [0, 1); the same for the same n.

@@ -52,6 +52,18 @@ for r in 5 25 100; do
   $B rain --image "$K/image_2/000001.png" "${kl[@]}" --rate "$r" --rain-seed 1 \
      --out "$OUT/kitti-000001-rain$r.jpg" "${q[@]}" >/dev/null
 done
+# snow (docs/snow.md) on the same frame at 2 mm/h water equivalent: the flakes lit by the image's sky and
+# ground, the rest as extinction, the scan through the same snowfall (a bird's-eye view clear and snowy);
+# and on the demo scene
+$B snow --image "$K/image_2/000001.png" "${kl[@]}" --rate 2 --snow-seed 1 --out "$OUT/kitti-000001-snow2.jpg" "${q[@]}" \
+   --lidar "$K/velodyne/000001.bin" --lidar-out "$tmp/snow2.bin" >/dev/null
+$B lidar snow --points "$K/velodyne/000001.bin" --rate 2 --seed 1 --out "$tmp/snow2-alone.bin" \
+   --labels "$tmp/snow2.u8" >/dev/null  # (the same scan, with its labels)
+${PYTHON:-/usr/bin/python3} scripts/lidar_picture.py bev "$K/velodyne/000001.bin" "$tmp/snow2.bin" \
+   "$OUT/kitti-000001-snow-bev.jpg" --title "snow 2 mm/h" --echoes "flake returns" --labels "$tmp/snow2.u8" --dpi 80
+$B demo --out-dir "$tmp/demo-snow" --width 640 --height 448 >/dev/null
+$B snow --image "$tmp/demo-snow/clean.png" --range "$tmp/demo-snow/range.exr" --fov-y 55 --rate 2 --snow-seed 1 \
+   --out "$OUT/demo-snow.jpg" "${q[@]}" >/dev/null
 # wet ground (docs/wet-ground.md) on the same frame: a 1 mm film on the road (KITTI's camera 1.65 m up), its
 # mirror image marched through the completed range; and on the demo scene (brume demo; 1.6 m up, 5 deg down)
 $B wet --image "$K/image_2/000001.png" "${kl[@]}" --camera-height 1.65 --film 1 \

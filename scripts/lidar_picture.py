@@ -33,6 +33,18 @@ def read_bin(path):
     return a.reshape(-1, 4)
 
 
+def moved_points(a, clear, foggy):
+    """The output's points that moved: by the effect's labels (one byte per input point: 0 kept,
+    1 moved, 2 lost; the output holds those not lost) when given, else by comparing the scans."""
+    if not a.labels:
+        return moved_to_fog(clear, foggy)
+    labels = np.fromfile(a.labels, dtype=np.uint8)
+    if len(labels) != len(clear) or (labels != 2).sum() != len(foggy):
+        raise SystemExit(f"{a.labels}: {len(labels)} labels do not match the scans ({len(clear)} and "
+                         f"{len(foggy)} points)")
+    return labels[labels != 2] == 1
+
+
 def moved_to_fog(clear, foggy):
     if clear.shape != foggy.shape:
         raise SystemExit(f"the scans differ in point count: {len(clear)} and {len(foggy)}")
@@ -55,7 +67,7 @@ def read_calib(path):
 
 def bev(a):
     clear, foggy = read_bin(a.clear), read_bin(a.foggy)
-    fog = moved_to_fog(clear, foggy)
+    fog = moved_points(a, clear, foggy)
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -66,7 +78,7 @@ def bev(a):
                    vmin=0, vmax=1, linewidths=0)
         if pts is foggy and fog.any():
             ax.scatter(pts[fog, 0], pts[fog, 1], s=1.5, c=[np.array(FOG_RGB) / 255], linewidths=0,
-                       label=f"fog returns ({fog.sum()} of {len(pts)})")
+                       label=f"{a.echoes} ({fog.sum()} of {len(pts)})")
             ax.legend(loc="upper right", markerscale=6)
         ax.set_title(name)
         ax.set_aspect("equal")
@@ -98,7 +110,7 @@ def project(img_path, pts, fog, m, near, far):
 
 def proj(a):
     clear, foggy = read_bin(a.clear), read_bin(a.foggy)
-    fog = moved_to_fog(clear, foggy)
+    fog = moved_points(a, clear, foggy)
     m = read_calib(a.calib)
     top = project(a.clear_image, clear, np.zeros(len(clear), bool), m, a.near, a.far)
     bottom = project(a.foggy_image, foggy, fog, m, a.near, a.far)
@@ -118,11 +130,14 @@ def main():
     b.add_argument("--title", default="")
     b.add_argument("--range", type=float, default=60.0, help="metres shown ahead of the sensor")
     b.add_argument("--dpi", type=int, default=100)
+    b.add_argument("--echoes", default="fog returns", help="the legend's name of the moved points")
+    b.add_argument("--labels", default="", help="the effect's labels (--labels): points lost, points moved")
     p = sub.add_parser("proj")
     for k in ("clear", "foggy", "calib", "clear_image", "foggy_image", "out"):
         p.add_argument(k)
     p.add_argument("--near", type=float, default=4.0, help="range [m] at the red end")
     p.add_argument("--far", type=float, default=80.0, help="range [m] at the blue end")
+    p.add_argument("--labels", default="", help="the effect's labels (--labels): points lost, points moved")
     a = ap.parse_args()
     bev(a) if a.kind == "bev" else proj(a)
 

@@ -15,7 +15,10 @@
 #               exposures of the splat the other CameraRain cases run under
 #               the sanitizers too: 65 s of the ASan run's test time,
 #               measured 2026-12-06 on a Zen 5); the --ci form leaves them
-#               to the uninstrumented suite, as the TSan run does
+#               to the uninstrumented suite, as the TSan run does; and
+#               snow's Monte Carlo of 2 x 100 000 beams and its camera's
+#               Beer-Lambert case (0.45 s and 0.37 s in Release on a loaded
+#               host: several seconds each under ASan)
 # and the labels derived from the declarations and the sources:
 #   part:NAME   the cases of the suites that part NAME's test files define
 #               (brume_part(NAME FOLDER TESTS ...) in CMakeLists.txt, passed
@@ -37,7 +40,7 @@ set(brume_label_rules
   gpu "Gpu|GPU"
   study "Study"
   effect_cli "^([^.]*/)?Batch\\.|Cli([A-Z_./]|$)"
-  statistics "^CameraRain\\.(EnergyIsIndependentOfExposure|FluctuationGoesAsTheInverseRootOfExposure)$")
+  statistics "^CameraRain\\.(EnergyIsIndependentOfExposure|FluctuationGoesAsTheInverseRootOfExposure)$|^LidarSnow\\.WallMovedShareAgreesWithAMonteCarloOfTheFootprintModel$|^CameraSnow\\.DrawnAndAnalyticTransmittanceIsBeerLambert$")
 
 # The data cases, as Suite.Name (a TEST_P's ctest names add the instantiation
 # before and the parameter after: Schemes/GaussianAccuracy.X/standard_2).

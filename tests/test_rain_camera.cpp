@@ -15,6 +15,7 @@
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "brume/rain.hpp"
+#include "streak_scene.hpp"
 #include "test_util.hpp"
 
 namespace fs = std::filesystem;
@@ -33,32 +34,6 @@ CameraRainParams params(double rate, double exposure_s, std::uint64_t seed) {
   return p;
 }
 
-// A flat grey scene at a constant range, seen by a camera of focal length f.
-struct Flat {
-  Image rgb, range;
-  Intrinsics k;
-};
-Flat flat(int w, int h, double f, float grey, double range_m) {
-  Flat s{Image(w, h, 3, grey), Image(w, h, 1, static_cast<float>(range_m)), {}};
-  s.k.fx = s.k.fy = f;
-  s.k.cx = (w - 1) / 2.0;
-  s.k.cy = (h - 1) / 2.0;
-  return s;
-}
-CameraRainScene scene_of(const Flat& f, bool analytic, std::array<float, 3> e) {
-  CameraRainScene s;
-  s.rgb = f.rgb;
-  s.range = f.range;
-  s.k = f.k;
-  s.analytic = analytic;
-  s.drop_radiance = e;
-  return s;
-}
-Exec two_threads() {
-  Exec e;
-  e.threads = 2;
-  return e;
-}
 
 // σ_cam is Q_eff/2 of the LiDAR's σ, bit for bit (the same ∫D²N), at the rates; Q_eff's
 // default is the least-squares fit in ln V of 3.912/σ_cam to the visibility code's rain rows.

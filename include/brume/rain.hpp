@@ -127,6 +127,10 @@ struct RainCell {
 class RainField {
  public:
   RainField(double rate_mm_h, double d_min_mm, double d_max_mm, std::uint64_t seed, std::uint64_t frame = 0);
+  // Any exponential N(D) = n0·e^{−λD} [m⁻³ mm⁻¹] truncated to [d_min, d_max] (snow's flakes), its
+  // draws keyed by `tag` (another tag, other particles): the same cells, hash and order.
+  RainField(double n0, double lambda_per_mm, double d_min_mm, double d_max_mm, std::uint64_t seed,
+            std::uint64_t frame, std::uint64_t tag);
   double drops_per_m3() const { return n_; }
   // The drops of `cell` with D >= d_floor_mm (clamped up to D_min), largest
   // first, appended to `out`. With d_floor_mm <= D_min: every drop of the
@@ -166,7 +170,7 @@ class RainField {
   void for_each_drop_hashed(const RainCell& cell, std::uint64_t h, double m, F&& f) const;
 
  private:
-  double rate_, d_min_, d_max_, lambda_ = 0.0, n_ = 0.0, tail_ = 0.0, scale_ = 0.0;
+  double d_min_, d_max_, lambda_ = 0.0, n_ = 0.0, tail_ = 0.0, scale_ = 0.0;
   std::uint64_t key_;
 };
 
@@ -327,6 +331,12 @@ const ParamTable<CameraRainParams>& camera_rain_param_table();
 void validate_camera_rain(const CameraRainParams& p);
 // --wind parsed (X,Y,Z, finite); throws naming --wind.
 Vec3 camera_rain_wind(const CameraRainParams& p);
+Vec3 parse_wind_m_s(const std::string& wind);
+// The camera pass's cross-field rules (rain's, snow's): z_split > z_near, the lens's two flags
+// together, the wind parsed; `particles` names what is drawn ("drops").
+void validate_streak_camera(double z_split_m, double z_near_m, const std::optional<double>& f_number,
+                            const std::optional<double>& focus_distance_m, const std::string& wind,
+                            const std::string& particles);
 
 // What the renderer takes besides the parameters.
 struct CameraRainScene {
@@ -353,20 +363,32 @@ struct CameraRainStats {
 // the image composed: returns the rainy image; `transmission`: the analytic media's (may be null).
 Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, const Exec& exec,
                          CameraRainStats* stats = nullptr, Image* transmission = nullptr);
+// What the thinning rule and the analytic part need of a population of falling particles (rain's
+// drops; snow's flakes, brume/snow.hpp, by the same rule).
+struct StreakPopulation {
+  bool any = false;                     // false: none (rate 0)
+  double d_min_mm = 0, d_max_mm = 0;    // the drawn diameters
+  double exposure_s = 0, z_near_m = 0, z_split_m = 0, epsilon = 0;
+  double focus_distance_m = 0;          // the lens's plane in focus (0: none)
+  double sigma_cam = 0;                 // [1/m] the whole population's extinction for the camera
+  std::function<double(double d_mm)> speed_m_s;                // the fall speed v(D)
+  std::function<double(double a_mm, double b_mm)> d2_between;  // ∫_a^b D²·N dD [mm² m⁻³]
+};
 // The thinning table and the analytic optical depth of a ray (exposed for tests): D_t [mm] at
 // planar depth z, and τ_rain to range r along a ray whose cos θ = z/r is `cos_theta`.
 class CameraRainOptics {
  public:
   CameraRainOptics(const CameraRainParams& p, const Intrinsics& k, double coc_infinity_px);
+  CameraRainOptics(StreakPopulation pop, const Intrinsics& k, double coc_infinity_px);
   double threshold_mm(double z) const;
   double tau(double r, double cos_theta) const;
-  double sigma_cam() const { return sigma_cam_; }
+  double sigma_cam() const { return pop_.sigma_cam; }
   // p(D, z) of the thinning rule.
   double estimate(double d_mm, double z) const;
 
  private:
-  CameraRainParams p_;
-  double fx_, alpha_, zf_, sigma_cam_, dz_;
+  StreakPopulation pop_;
+  double fx_, alpha_, zf_, dz_;
   std::vector<double> dt_, g_, sd_;  // D_t, G and σ_d at the nodes
 };
 nlohmann::json camera_rain_record(const CameraRainParams& p, const CameraRainStats& st);

@@ -19,10 +19,10 @@ GIL is released while an effect runs. See docs/python.md.
 # commands (src/jobs/commands.cpp) is the source: each command's public name
 # must resolve here, or test_every_command_of_the_list_reaches_python fails.
 from ._brume import (__version__, aerial, blur, dof, fog, haze, haze_dof, max_pixels, rain, random_params, read_image,
-                     set_max_pixels, wet, write_image)
+                     set_max_pixels, snow, wet, write_image)
 from ._result import Result
 from . import depth, lidar, sky
 from ._rerun import rerun
 
 __all__ = ["Result", "__version__", "aerial", "blur", "depth", "dof", "fog", "haze", "haze_dof", "lidar", "max_pixels", "rain", "random_params",
-           "read_image", "rerun", "set_max_pixels", "sky", "wet", "write_image"]
+           "read_image", "rerun", "set_max_pixels", "sky", "snow", "wet", "write_image"]

@@ -650,6 +650,7 @@ def test_rerun_of_an_older_schema_keeps_its_sky_rule(demo):
 CAMERA = {"fog": {"fov_y": 55, "camera_height": 1.6}, "dof": {"fov_x": 2 * math.degrees(math.atan(18 / 50))},
           "rain": {"fov_y": 55},  # the drops are placed by the intrinsics
           "wet": {"fov_y": 55, "camera_height": 1.6, "pitch": -5},  # the ground plane
+          "snow": {"fov_y": 55},  # the flakes too
           # the chain samples per stage (brume.transforms); here a fixed lens after haze's defaults
           "haze+dof": {"visibility": 2000, "dof_focus_distance": 20, "dof_coc_infinity": 4, "fov_x": 40}}
 

@@ -26,12 +26,14 @@ namespace brume {
   X(fog_command) \
   X(dof_command) \
   X(rain_command) \
+  X(snow_command) \
   X(wet_command) \
   X(compare_command) \
   X(sky_render_command) \
   X(sky_fit_command) \
   X(lidar_fog_command) \
   X(lidar_rain_command) \
+  X(lidar_snow_command) \
   X(lidar_wet_command) \
   X(view_command)
 
@@ -60,7 +62,7 @@ const std::vector<CommandGroup>& command_groups() {
   static const std::vector<CommandGroup> g = {
       {"depth", "depth maps: convert any depth source to range or planar z, prepare it, complete a sparse one, match a stereo pair"},
       {"sky", "the Preetham sky: render one, or fit the turbidity of a sky photo (Morales ch. 2)"},
-      {"lidar", "LiDAR scans: fog one (attenuation and fog returns, Hahner et al. 2021), rain on one (drop echoes, lost points) or wet its ground (weaker ground returns, lost points)"},
+      {"lidar", "LiDAR scans: fog one (attenuation and fog returns, Hahner et al. 2021), rain or snow on one (drop or flake echoes, lost points) or wet its ground (weaker ground returns, lost points)"},
   };
   return g;
 }

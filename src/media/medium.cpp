@@ -8,6 +8,7 @@
 
 #include "brume/error.hpp"
 #include "core/text.hpp"
+#include "media/scan_points_check.hpp"
 
 namespace brume {
 
@@ -46,6 +47,17 @@ void Medium::scan_echoes(const float* points, std::size_t n, std::vector<ScanEch
     particles(b, r, points[4 * i + 3], met);
     for (const Particle& p : met)
       if (p.range_m > 0.0 && p.range_m < r) out.push_back({i, p.range_m, p.echo});
+  }
+}
+
+void check_scan_points(const float* points, std::size_t n, const std::string& what) {
+  for (std::size_t i = 0; i < n; ++i) {
+    const float* q = points + 4 * i;
+    if (!(std::isfinite(q[0]) && std::isfinite(q[1]) && std::isfinite(q[2]) && std::isfinite(q[3])))
+      throw Error(what + ": point " + std::to_string(i) + " has a non-finite coordinate or intensity");
+    if (q[3] < 0.0f)
+      throw Error(what + ": point " + std::to_string(i) + " has a negative intensity " + text::g(q[3]) +
+                  "; intensities are reflectances >= 0");
   }
 }
 

@@ -3,6 +3,7 @@
 #include "brume/rain.hpp"
 
 #include "effects/rain/rain_internal.hpp"
+#include "media/scan_points_check.hpp"
 
 #include <algorithm>
 #include <array>
@@ -56,12 +57,19 @@ double rain_drops_per_m3(double rate_mm_h, double d_min_mm, double d_max_mm) {
 // ---- the drop field ---------------------------------------------------------------------
 
 RainField::RainField(double rate_mm_h, double d_min_mm, double d_max_mm, std::uint64_t seed, std::uint64_t frame)
-    : rate_(rate_mm_h), d_min_(d_min_mm), d_max_(d_max_mm), key_(hash_fold(hash_fold(seed, kRainFieldTag), frame)) {
-  if (rate_ > 0.0) {
-    lambda_ = marshall_palmer_lambda_per_mm(rate_);
-    n_ = rain_drops_per_m3(rate_, d_min_, d_max_);
+    : RainField(rate_mm_h > 0.0 ? kMarshallPalmerN0 : 0.0,
+                rate_mm_h > 0.0 ? marshall_palmer_lambda_per_mm(rate_mm_h) : 0.0, d_min_mm, d_max_mm, seed, frame,
+                kRainFieldTag) {}
+
+RainField::RainField(double n0, double lambda_per_mm, double d_min_mm, double d_max_mm, std::uint64_t seed,
+                     std::uint64_t frame, std::uint64_t tag)
+    : d_min_(d_min_mm), d_max_(d_max_mm), key_(hash_fold(hash_fold(seed, tag), frame)) {
+  if (n0 > 0.0 && lambda_per_mm > 0.0) {
+    lambda_ = lambda_per_mm;
+    // rain_drops_per_m3's expression, for any n0 and λ.
+    n_ = n0 / lambda_ * (std::exp(-lambda_ * d_min_) - std::exp(-lambda_ * d_max_));
     tail_ = std::exp(-lambda_ * d_max_);
-    scale_ = kRainCellM * kRainCellM * kRainCellM * kMarshallPalmerN0 / lambda_;
+    scale_ = kRainCellM * kRainCellM * kRainCellM * n0 / lambda_;
   }
 }
 
@@ -674,14 +682,7 @@ std::unique_ptr<Medium> lidar_rain_as_medium_searching(const LidarRainParams& p,
 LidarRainStats lidar_rain(const float* in, float* out, std::size_t n, const LidarRainParams& p, std::uint8_t* labels,
                           const std::string& what) {
   validate_lidar_rain(p);
-  for (std::size_t i = 0; i < n; ++i) {
-    const float* q = in + 4 * i;
-    if (!(std::isfinite(q[0]) && std::isfinite(q[1]) && std::isfinite(q[2]) && std::isfinite(q[3])))
-      throw Error(what + ": point " + std::to_string(i) + " has a non-finite coordinate or intensity");
-    if (q[3] < 0.0f)
-      throw Error(what + ": point " + std::to_string(i) + " has a negative intensity " + text::g(q[3]) +
-                  "; intensities are reflectances >= 0");
-  }
+  check_scan_points(in, n, what);
   const LidarRain m(p);
   const ScanDetection detection{p.noise_floor, p.seed};
   LidarRainStats st;

@@ -1,0 +1,61 @@
+// brume benchmark — snow on a LiDAR scan (brume/snow.hpp, issue #58): lidar_snow (the footprint
+// model, one thread, reading and writing left out) on KITTI 000001's scan (../shared/data; a
+// synthetic wall of its size when absent) at 0.5, 1, 2 and 5 mm/h water equivalent.
+// Target: issue #58, <= 30 ms per 120 k points on one core without a precomputed set.
+//
+// Usage: brume_bench_snow [ROUNDS]
+#include <time.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "bench_util.hpp"
+#include "brume/depth.hpp"
+#include "brume/snow.hpp"
+
+using namespace brume;
+
+int main(int argc, char** argv) {
+  const int rounds = argc > 1 ? std::max(1, std::atoi(argv[1])) : 15;
+  std::printf("brume snow benchmark: %s, %d rounds (median [min..max]); load average %s\n", bench::cpu_name().c_str(),
+              rounds, bench::load_average().c_str());
+  const std::string bin = std::string(BRUME_DATA_DIR) + "/kitti_object_000001/velodyne/000001.bin";
+  std::vector<float> scan;
+  if (std::filesystem::exists(bin)) {
+    scan = read_kitti_bin(bin, "--points");
+  } else {
+    std::printf("  (%s is absent: a synthetic wall of its size)\n", bin.c_str());
+    for (int i = 0; i < 120268; ++i)
+      scan.insert(scan.end(), {20.0f, static_cast<float>(-8.0 + 16.0 * (i % 1000) / 1000.0),
+                               static_cast<float>(-2.0 + 4.0 * (i / 1000) / 121.0), 0.5f});
+  }
+  const std::size_t n = scan.size() / 4;
+  std::vector<float> out(scan.size());
+  std::vector<std::uint8_t> labels(n);
+  for (double rate : {0.5, 1.0, 2.0, 5.0}) {
+    LidarSnowParams p;
+    p.flakes.rate_mm_h = rate;
+    LidarSnowStats st;
+    std::vector<double> cpu;
+    const bench::Spread t = bench::time_ms(
+        [&] {
+          timespec a, b;
+          clock_gettime(CLOCK_THREAD_CPUTIME_ID, &a);
+          st = lidar_snow(scan.data(), out.data(), n, p, labels.data());
+          clock_gettime(CLOCK_THREAD_CPUTIME_ID, &b);
+          cpu.push_back((b.tv_sec - a.tv_sec) * 1e3 + (b.tv_nsec - a.tv_nsec) * 1e-6);
+        },
+        rounds);
+    cpu.erase(cpu.begin());  // the warm-up
+    const bench::Spread c = bench::spread(cpu);
+    std::printf("  %4.1f mm/h, %zu points: %zu moved to flakes, %zu lost, %zu flakes drawn  1 thread %7.2f ms "
+                "[%.2f..%.2f] wall, %7.2f ms [%.2f..%.2f] of CPU\n",
+                rate, n, st.run.echoes, st.run.lost, st.flakes_drawn, t.median, t.lo, t.hi, c.median, c.lo, c.hi);
+  }
+  std::printf(" load average at the end %s\n", bench::load_average().c_str());
+  return 0;
+}

@@ -1,0 +1,310 @@
+// brume — the camera pass of falling particles (effects/rain/streaks.hpp): rain's, moved here
+// unchanged so that snow's flakes take the same steps (issue #58).
+#include "effects/rain/streaks.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+
+#include "brume/error.hpp"
+
+namespace brume {
+
+namespace {
+constexpr double kStreakInf = std::numeric_limits<double>::infinity();
+constexpr double kStreakPi = 3.14159265358979323846;
+}  // namespace
+
+StreakBoxMean::StreakBoxMean(ConstImageView rgb, int h)
+    : w_(rgb.width()), h_(rgb.height()), r_(h), s_((w_ + 1) * (h_ + 1) * 3, 0.0) {
+  for (int y = 0; y < h_; ++y)
+    for (int x = 0; x < w_; ++x)
+      for (int c = 0; c < 3; ++c) at(x + 1, y + 1, c) = rgb.at(x, y, c) + at(x, y + 1, c) + at(x + 1, y, c) - at(x, y, c);
+}
+
+double StreakBoxMean::mean(int x, int y, int c) const {
+  const int x0 = std::max(0, x - r_), x1 = std::min(w_, x + r_ + 1), y0 = std::max(0, y - r_),
+            y1 = std::min(h_, y + r_ + 1);
+  const double s = get(x1, y1, c) - get(x0, y1, c) - get(x1, y0, c) + get(x0, y0, c);
+  return s / (static_cast<double>(x1 - x0) * (y1 - y0));
+}
+
+double StreakBoxMean::total(int c) const { return get(w_, h_, c) / (static_cast<double>(w_) * h_); }
+
+Image streak_background(const CameraRainScene& s, const std::function<double(double, double)>& front_tau,
+                        double sigma_total, int nt, Image* transmission) {
+  const int W = s.rgb.width(), H = s.rgb.height();
+  const double fx = s.k.fx, fy = s.k.fy, cx = s.k.cx, cy = s.k.cy;
+  const auto ray_cos = [&](double u, double v) {
+    const double x = (u - cx) / fx, y = (v - cy) / fy;
+    return 1.0 / std::sqrt(x * x + y * y + 1.0);
+  };
+  Image tau0(W, H, 1);
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const float r = s.range.at(x, y);
+      float t = 1.0f;
+      if (s.analytic) {
+        // Unknown range (the sky) lies beyond the unbounded media: transmission 0 when there are any.
+        t = streak_range_known(r) ? static_cast<float>(std::exp(-front_tau(r, ray_cos(x, y))))
+                                  : (sigma_total > 0.0 ? 0.0f : 1.0f);
+        if (!s.sky_weight.empty()) {
+          const float w = s.sky_weight.at(x, y);
+          const float t_sky = sigma_total > 0.0 ? 0.0f : 1.0f;
+          t = w <= 0.0f ? t : w >= 1.0f ? t_sky : (1.0f - w) * t + w * t_sky;
+        }
+      }
+      tau0.data[static_cast<std::size_t>(y) * W + x] = t;
+    }
+  Image out;
+  if (s.composite) {
+    out = s.composite(tau0);
+  } else {
+    out = Image(W, H, 3);
+#pragma omp parallel for num_threads(nt) schedule(static)
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const std::size_t i = static_cast<std::size_t>(y) * W + x;
+        const float t = tau0.data[i];
+        for (int c = 0; c < 3; ++c) out.data[i * 3 + c] = t * s.rgb.at(x, y, c) + (1.0f - t) * s.airlight[c];
+      }
+  }
+  if (transmission) *transmission = tau0;
+  return out;
+}
+
+std::vector<Streak> frustum_streaks(const RainField& field, const std::function<double(double)>& threshold_mm,
+                                    double z_near, double z_split, const std::function<double(double, double)>& grow_m,
+                                    const StreakCamera& cam, int nt,
+                                    const std::function<bool(const Vec3&, double, Streak&)>& make, std::size_t& cells_out,
+                                    std::size_t& seen_out) {
+  const int W = cam.width, H = cam.height;
+  const double fx = cam.fx, fy = cam.fy, cx = cam.cx, cy = cam.cy;
+  const double xa = (-0.5 - cx) / fx, xb = (W - 0.5 - cx) / fx, ya = (-0.5 - cy) / fy, yb = (H - 0.5 - cy) / fy;
+  const double c = kRainCellM;
+  const std::int64_t ix0 = static_cast<std::int64_t>(std::floor(z_near / c));
+  const std::int64_t ix1 = static_cast<std::int64_t>(std::floor(z_split / c));
+  const std::size_t slabs = static_cast<std::size_t>(ix1 - ix0 + 1);
+  std::vector<std::vector<Streak>> found(slabs);
+  std::vector<std::size_t> seen(slabs, 0), cells(slabs, 0);
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 4)
+  for (std::int64_t ix = ix0; ix <= ix1; ++ix) {
+    const std::size_t si = static_cast<std::size_t>(ix - ix0);
+    const double z0 = std::max(static_cast<double>(ix) * c, z_near), z1 = static_cast<double>(ix + 1) * c;
+    if (!(z0 < z_split)) continue;
+    const double m = field.measure_above(threshold_mm(z0));
+    if (!(m > 0.0)) continue;
+    // The slab's lateral extent: the frustum widened by the particles' motion and their kernel.
+    const double grow = grow_m(z0, z1);
+    const double xlo = std::min(xa * z0, xa * z1) - grow, xhi = std::max(xb * z0, xb * z1) + grow;
+    const double ylo = std::min(ya * z0, ya * z1) - grow, yhi = std::max(yb * z0, yb * z1) + grow;
+    // Vehicle frame: y = −x_cv, z = −y_cv.
+    const std::int64_t jy0 = static_cast<std::int64_t>(std::floor(-xhi / c)),
+                       jy1 = static_cast<std::int64_t>(std::floor(-xlo / c));
+    const std::int64_t jz0 = static_cast<std::int64_t>(std::floor(-yhi / c)),
+                       jz1 = static_cast<std::int64_t>(std::floor(-ylo / c));
+    std::vector<Streak>& list = found[si];
+    for (std::int64_t jy = jy0; jy <= jy1; ++jy)
+      for (std::int64_t jz = jz0; jz <= jz1; ++jz) {
+        ++cells[si];
+        field.for_each_drop_within(RainCell{ix, jy, jz}, m, [&](const Vec3& at, double sm) {
+          ++seen[si];
+          const double d_mm = field.diameter_mm(sm);
+          if (d_mm < threshold_mm(at.x)) return;
+          Streak k;
+          if (!make(at, d_mm, k)) return;
+          k.order = list.size();
+          list.push_back(k);
+        });
+      }
+  }
+  std::vector<Streak> all;
+  for (std::size_t i = 0; i < slabs; ++i) {
+    cells_out += cells[i];
+    seen_out += seen[i];
+    for (Streak& k : found[i]) {
+      k.order = all.size();
+      all.push_back(k);
+    }
+  }
+  return all;
+}
+
+double streak_grow_m(double z0, double z1, double d_max_mm, double motion_m, const StreakLens& lens,
+                     const StreakCamera& cam) {
+  const double kpx = 3.0 * std::sqrt(std::pow(lens.blur_px(z0) / 4.0, 2) + std::pow(lens.blur_px(z1) / 4.0, 2) +
+                                     std::pow(cam.fx * d_max_mm * 1e-3 / z0 / 4.0, 2)) +
+                     2.0;
+  return motion_m + kpx * z1 / std::min(cam.fx, cam.fy);
+}
+
+bool place_streak(Streak& k, const Vec3& at, double d_mm, const double u[3], const StreakLens& lens, double T,
+                  double z_clip, const StreakCamera& cam) {
+  const double z = at.x;
+  k.c[0] = -at.y, k.c[1] = -at.z, k.c[2] = at.x;
+  k.u[0] = u[0], k.u[1] = u[1], k.u[2] = u[2];
+  const double r = std::sqrt(k.c[0] * k.c[0] + k.c[1] * k.c[1] + z * z);
+  const double dm = d_mm * 1e-3;
+  k.area = kStreakPi / 4.0 * dm * dm * cam.fx * cam.fy;
+  const double dpx = cam.fx * dm / z, b = lens.blur_px(z);
+  k.sigma_px = std::sqrt(dpx * dpx + b * b) / 4.0;
+  k.range = r;
+  return bound_streak(k, T, z_clip, cam);
+}
+
+void check_streak_scene(const CameraRainScene& s, const std::string& effect) {
+  const int W = s.rgb.width(), H = s.rgb.height();
+  if (s.rgb.channels() != 3)
+    throw Error(effect + " needs an RGB image, got " + std::to_string(s.rgb.channels()) + " channels");
+  if (s.range.channels() != 1 || s.range.width() != W || s.range.height() != H)
+    throw Error("the range map " + s.range.size_string() + " does not match the image " + s.rgb.size_string() +
+                "; they must be the same size");
+  if (!s.sky_weight.empty() && (s.sky_weight.width() != W || s.sky_weight.height() != H))
+    throw Error("internal: the sky weight is " + s.sky_weight.size_string() + ", the image " + s.rgb.size_string());
+}
+
+bool bound_streak(Streak& k, double T, double z_clip, const StreakCamera& cam) {
+  const int W = cam.width, H = cam.height;
+  // The part of the exposure in front of the camera (z >= z_clip).
+  k.t0 = -T / 2.0, k.t1 = T / 2.0;
+  if (k.u[2] != 0.0) {
+    const double tc = (z_clip - k.c[2]) / k.u[2];  // z(tc) = z_clip
+    if (k.u[2] < 0.0) k.t1 = std::min(k.t1, tc);
+    else k.t0 = std::max(k.t0, tc);
+  }
+  if (!(k.t1 > k.t0)) return false;
+  // Its rows over the exposure (a straight path: the ends bound it), widened by the kernel.
+  double vmin = kStreakInf, vmax = -kStreakInf, umin = kStreakInf, umax = -kStreakInf;
+  for (double t : {k.t0, k.t1}) {
+    const double zz = k.c[2] + k.u[2] * t;
+    const double uu = cam.fx * (k.c[0] + k.u[0] * t) / zz + cam.cx, vv = cam.fy * (k.c[1] + k.u[1] * t) / zz + cam.cy;
+    vmin = std::min(vmin, vv), vmax = std::max(vmax, vv), umin = std::min(umin, uu), umax = std::max(umax, uu);
+  }
+  const double kr = 3.0 * k.sigma_px + 1.0;
+  if (umax + kr < -0.5 || umin - kr > W - 0.5 || vmax + kr < -0.5 || vmin - kr > H - 0.5) return false;
+  k.v_lo = static_cast<int>(std::max(0.0, std::floor(vmin - kr)));
+  k.v_hi = static_cast<int>(std::min(H - 1.0, std::ceil(vmax + kr)));
+  k.u_lo = static_cast<int>(std::max(0.0, std::floor(umin - kr)));
+  k.u_hi = static_cast<int>(std::min(W - 1.0, std::ceil(umax + kr)));
+  return true;
+}
+
+// The streaks, composited far to near, tile by tile: a tile's pixels stay in cache while the
+// streaks that can touch it (listed in their order) are splatted, each pixel taking the same
+// updates in the same order as a single pass over them would give it (the same image on any
+// number of threads). A streak's rows and columns (v_lo..v_hi, u_lo..u_hi) bound every pixel its
+// samples touch; its tiles are taken one pixel wider.
+std::size_t splat_streaks(std::vector<Streak>& drops, ConstImageView range, Image& out, const StreakCamera& cam,
+                          int nt) {
+  std::sort(drops.begin(), drops.end(), [](const Streak& a, const Streak& b) {
+    return a.range != b.range ? a.range > b.range : a.order < b.order;
+  });
+  const int W = cam.width, H = cam.height;
+  const double fx = cam.fx, fy = cam.fy, cx = cam.cx, cy = cam.cy;
+  constexpr int kTileW = 128, kTileH = 32;
+  const int tiles_x = (W + kTileW - 1) / kTileW, tiles_y = (H + kTileH - 1) / kTileH;
+  std::vector<std::vector<std::uint32_t>> in_tile(static_cast<std::size_t>(tiles_x) * tiles_y);
+  for (std::size_t d = 0; d < drops.size(); ++d) {
+    const Streak& k = drops[d];
+    const int ty0 = std::max(0, k.v_lo - 1) / kTileH, ty1 = std::min(H - 1, k.v_hi + 1) / kTileH;
+    const int tx0 = std::max(0, k.u_lo - 1) / kTileW, tx1 = std::min(W - 1, k.u_hi + 1) / kTileW;
+    for (int ty = ty0; ty <= ty1; ++ty)
+      for (int tx = tx0; tx <= tx1; ++tx)
+        in_tile[static_cast<std::size_t>(ty) * tiles_x + tx].push_back(static_cast<std::uint32_t>(d));
+  }
+  std::vector<std::size_t> clamped(static_cast<std::size_t>(nt), 0);
+#pragma omp parallel num_threads(nt)
+  {
+    const int tid = omp_get_thread_num();
+    std::vector<double> wx, wy;
+#pragma omp for schedule(dynamic, 1)
+    for (int tile = 0; tile < tiles_x * tiles_y; ++tile) {
+      const int y_lo = tile / tiles_x * kTileH, y_hi = std::min(H, y_lo + kTileH);
+      const int x_lo = tile % tiles_x * kTileW, x_hi = std::min(W, x_lo + kTileW);
+      for (const std::uint32_t d : in_tile[static_cast<std::size_t>(tile)]) {
+        const Streak& k = drops[d];
+        double pz = 0.0;
+        const auto at = [&](double t, double& u, double& v, double& r) {
+          const double px = k.c[0] + k.u[0] * t, py = k.c[1] + k.u[1] * t;
+          pz = k.c[2] + k.u[2] * t;
+          u = fx * px / pz + cx, v = fy * py / pz + cy, r = std::sqrt(px * px + py * py + pz * pz);
+        };
+        double ua, va, ub, vb, rr;
+        at(k.t0, ua, va, rr);
+        at(k.t1, ub, vb, rr);
+        const double len = std::hypot(ub - ua, vb - va);
+        const double h = std::max(0.5, 0.5 * k.sigma_px);
+        const int n = std::min(1 << 16, static_cast<int>(std::ceil(len / h)) + 1);
+        const bool gauss = k.sigma_px >= 0.5;
+        const int rad = gauss ? static_cast<int>(std::ceil(3.0 * k.sigma_px)) : 0;
+        for (int i = 0; i < n; ++i) {
+          const double t = k.t0 + (k.t1 - k.t0) * (i + 0.5) / n;
+          double u, v, r;
+          at(t, u, v, r);
+          // The coverage over the exposure is the time average of the particle's image area there.
+          const double a_sample = k.area * r / (pz * pz * pz) / n;
+          const double inv_soft = 1.0 / (kRainDepthSoftness * r);
+          const auto put = [&](int x, int y, double w) {
+            if (x < x_lo || x >= x_hi || y < y_lo || y >= y_hi || !(w > 0.0)) return;
+            const float rs = range.at(x, y);
+            double vis = 1.0;
+            if (streak_range_known(rs)) vis = std::min(1.0, std::max(0.0, (rs - r) * inv_soft));
+            double a = w * a_sample * vis;
+            if (!(a > 0.0)) return;
+            if (a > 1.0) a = 1.0, ++clamped[static_cast<std::size_t>(tid)];
+            float* o = &out.data[(static_cast<std::size_t>(y) * W + x) * 3];
+            for (int q = 0; q < 3; ++q) o[q] += static_cast<float>(a) * (k.e[q] - o[q]);
+          };
+          if (!gauss) {
+            const double fu = std::floor(u), fv = std::floor(v);
+            const int x0 = static_cast<int>(fu), y0 = static_cast<int>(fv);
+            if (x0 + 1 < x_lo || x0 >= x_hi || y0 + 1 < y_lo || y0 >= y_hi) continue;  // no tap in the tile
+            const double ax = u - fu, ay = v - fv;
+            put(x0, y0, (1 - ax) * (1 - ay));
+            put(x0 + 1, y0, ax * (1 - ay));
+            put(x0, y0 + 1, (1 - ax) * ay);
+            put(x0 + 1, y0 + 1, ax * ay);
+          } else {
+            const int xc = static_cast<int>(std::lround(u)), yc = static_cast<int>(std::lround(v));
+            if (yc + rad < y_lo || yc - rad >= y_hi || xc + rad < x_lo || xc - rad >= x_hi) continue;
+            wx.assign(2 * rad + 1, 0.0), wy.assign(2 * rad + 1, 0.0);
+            double sx = 0.0, sy = 0.0;
+            const double inv = 1.0 / (2.0 * k.sigma_px * k.sigma_px);
+            for (int j = -rad; j <= rad; ++j) {
+              sx += wx[j + rad] = std::exp(-std::pow(xc + j - u, 2) * inv);
+              sy += wy[j + rad] = std::exp(-std::pow(yc + j - v, 2) * inv);
+            }
+            for (int jy = -rad; jy <= rad; ++jy) {
+              const int y = yc + jy;
+              if (y < y_lo || y >= y_hi) continue;
+              for (int jx = -rad; jx <= rad; ++jx) put(xc + jx, y, wx[jx + rad] * wy[jy + rad] / (sx * sy));
+            }
+          }
+        }
+      }
+    }
+  }
+  std::size_t total = 0;
+  for (std::size_t i = 0; i < clamped.size(); ++i) total += clamped[i];
+  return total;
+}
+
+double mean_streak_px(const std::vector<Streak>& drops, const StreakCamera& cam) {
+  double total_len = 0.0;
+  for (const Streak& k : drops) {
+    double e[2][2];
+    for (int j = 0; j < 2; ++j) {
+      const double t = j ? k.t1 : k.t0, pz = k.c[2] + k.u[2] * t;
+      e[j][0] = cam.fx * (k.c[0] + k.u[0] * t) / pz, e[j][1] = cam.fy * (k.c[1] + k.u[1] * t) / pz;
+    }
+    total_len += std::hypot(e[1][0] - e[0][0], e[1][1] - e[0][1]);
+  }
+  return drops.empty() ? 0.0 : total_len / static_cast<double>(drops.size());
+}
+
+}  // namespace brume
