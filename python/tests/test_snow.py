@@ -66,3 +66,24 @@ def test_snow_equals_cli(demo, tmp_path):
          out["image"])
     with pytest.raises(ValueError, match="rate"):
         brume.snow(demo["rgb"], demo["range"], fov_y=55)
+
+
+def test_snow_transform_lidar_target(demo):
+    """lidar_target="points": the frame's scan through the same draw (brume.lidar.snow at the drawn
+    rate and snow-seed), the image as drawn without a scan, both replayed; refusals name the keyword."""
+    import brume.transforms as T
+    rgb, rng = demo["rgb"], demo["range"]
+    pts = scan(n=2000)
+    t = T.Snow(seed=3, fov_y=55, lidar_target="points")
+    out = t(image=rgb, depth=rng, points=pts, key="f")
+    v = out["params"]["values"]
+    same(out["points"], brume.lidar.snow(pts, rate=v["rate"], seed=v["snow-seed"]).points)
+    same(out["image"], T.Snow(seed=3, fov_y=55)(image=rgb, depth=rng, key="f")["image"])
+    params = json.loads(json.dumps(out["params"]))
+    again = t.replay(params)(image=rgb, depth=rng, points=pts)
+    same(again["image"], out["image"])
+    same(again["points"], out["points"])
+    with pytest.raises(ValueError, match="lidar_target"):
+        T.Snow(seed=3, fov_y=55).replay(params)
+    with pytest.raises(ValueError, match="points"):
+        t(image=rgb, depth=rng, key="f")
