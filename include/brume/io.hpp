@@ -66,15 +66,18 @@ struct TransferFunction {
 TransferFunction parse_transfer_function(const std::string& text, const std::string& flag);
 // The text --image-transfer takes: "auto", "srgb", "linear", "gamma:2.2", "table:FILE".
 std::string to_string(const TransferFunction& t);
+// What --image-transfer's words and forms mean (every transfer parameter's help ends with it).
+std::string transfer_help();
 // Declares the TransferFunction member `m` as the text parameter `name` of
 // `d` (the CLI's --NAME, a record's value, a Python keyword): its value is
-// to_string's text, parsed (a table read) when the job is built.
+// to_string's text, parsed (a table read) when the job is built. `of`: what
+// it linearises ("the input").
 template <class P>
-ParamTable<P>& transfer_param(ParamTable<P>& d, const char* name, TransferFunction P::*m, const char* help) {
+ParamTable<P>& transfer_param(ParamTable<P>& d, const char* name, TransferFunction P::*m, const std::string& of) {
   ParamSpec s;
   s.name = name;
   s.kind = ParamKind::text;
-  s.help = help;
+  s.help = "transfer function of " + of + ": " + transfer_help();
   s.input_file = true;  // table:FILE: hashed with the image (file_record), checked by brume run
   s.input_file_prefix = "table:";
   return d.custom(
@@ -83,11 +86,6 @@ ParamTable<P>& transfer_param(ParamTable<P>& d, const char* name, TransferFuncti
         p.*m = parse_transfer_function(v.get<std::string>(), flag);
       });
 }
-// The help of such a parameter (what the words and forms mean).
-#define BRUME_TRANSFER_HELP                                                                                          \
-  "auto (integer files sRGB, float files linear), srgb, linear, gamma:G (linear = v^G, 0 < G <= 10, e.g. gamma:2.2 " \
-  "for a plain 1/2.2 encoding) or table:FILE (a camera's measured response: N >= 2 non-decreasing linear values at " \
-  "equally spaced codes from 0 to 1, linear between; docs/conventions.md)"
 
 // A rectangle of pixels, corners included (OpenEXR's data and display
 // windows: x0, y0 the top-left pixel, x1, y1 the bottom-right one).

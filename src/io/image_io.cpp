@@ -138,6 +138,12 @@ TransferFunction parse_transfer_function(const std::string& text, const std::str
   throw Error(flag + " '" + text + "' is not allowed; " + transfer_fix());
 }
 
+std::string transfer_help() {
+  return "auto (integer files sRGB, float files linear), srgb, linear, gamma:G (linear = v^G, 0 < G <= 10, e.g. "
+         "gamma:2.2 for a plain 1/2.2 encoding) or table:FILE (a camera's measured response: N >= 2 non-decreasing "
+         "linear values at equally spaced codes from 0 to 1, linear between; docs/conventions.md)";
+}
+
 std::string to_string(const TransferFunction& t) {
   // The shortest text that reads back as the same double (JSON's): records repeat.
   if (t.kind == Transfer::gamma) return "gamma:" + nlohmann::json(t.gamma).dump();

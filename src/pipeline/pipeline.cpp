@@ -249,7 +249,7 @@ const ParamTable<InputFiles>& input_param_table(bool with_depth) {
                 "records before schema 4)")
         .since(4, "first");
     transfer_param(d, "image-transfer", &InputFiles::image_transfer,
-                   "transfer function of the input: " BRUME_TRANSFER_HELP)
+                   "the input")
         .choice("nonfinite", &InputFiles::nonfinite, nonfinite_names(),
                 "NaN or inf in the colour image: error (default; names the count and the first pixel) or zero "
                 "(replaced by 0, the count recorded)");

@@ -216,7 +216,7 @@ const ParamTable<AerialJob>& aerial_job_table() {
         .text("sky-image-layer", &AerialJob::sky_image_layer,
               "the layer of a --sky-image with layers (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR)");
     transfer_param(d, "sky-image-transfer", &AerialJob::sky_image_transfer,
-                   "transfer function of --sky-image: " BRUME_TRANSFER_HELP)
+                   "--sky-image")
         .text("sky-mask", &AerialJob::sky_mask, "grey image of --sky-image's size: > half scale marks usable sky")
         .reads_file()
         .nest(&AerialJob::sky_view, sky_view_param_table(), "sky-")

@@ -5,7 +5,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <optional>
 
 #include "brume/command.hpp"
@@ -19,6 +18,7 @@
 #include "brume/rain.hpp"
 #include "brume/record.hpp"
 #include "effects/rain/streaks_pipeline.hpp"
+#include "pipeline/camera_scan_arrays.hpp"
 
 namespace brume {
 
@@ -79,7 +79,7 @@ void check_camera_rain(const CameraRainParams& p, const DepthSource& depth) {
 
 void check_camera_rain_job(const CameraRainJob& j) {
   check_camera_rain(j.rain, j.input.depth);
-  check_streak_lidar(j.lidar, j.lidar_out, "rains on a scan");
+  check_camera_scan_flags(j.lidar, j.lidar_out, "rains on a scan");
   if (!j.lidar.empty()) validate_lidar_rain(camera_rain_lidar_params(j.rain));
 }
 
@@ -106,9 +106,10 @@ nlohmann::json run_camera_rain_job(const CameraRainJob& job, const ExecOptions& 
     // The scan does not depend on the image: rained on first, written with the image's outputs.
     check_camera_rain_job(job);
     const LidarRainParams lp = camera_rain_lidar_params(job.rain);
-    run_streak_lidar(ctx, job.lidar, job.lidar_out, "lidar_rain",
-                     [&](const float* in, float* out, std::size_t n, const std::string& what, nlohmann::json& block) {
-                       const LidarRainStats st = lidar_rain(in, out, n, lp, nullptr, what);
+    run_camera_scan_file(ctx, job.lidar, job.lidar_out, "", "lidar_rain",
+                         [&](const float* in, float* out, std::size_t n, std::uint8_t* labels, const std::string& what,
+                             nlohmann::json& block) {
+                       const LidarRainStats st = lidar_rain(in, out, n, lp, labels, what);
                        block = lidar_rain_record(lp, st);
                        return st.run.lost;
                      });

@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <filesystem>
 
 #include "brume/depth.hpp"
 #include "brume/dof.hpp"
@@ -19,7 +18,6 @@
 
 namespace brume {
 
-namespace fs = std::filesystem;
 
 double streak_coc_px(std::optional<double> f_number, std::optional<double> focus_distance_m, const DepthSource& depth,
                      int width, int height) {
@@ -36,17 +34,6 @@ void check_streak_lens(std::optional<double> f_number, const DepthSource& depth,
   if (f_number && !depth.lens.focal_length_mm)
     throw Error("--f-number blurs " + particles + " by the thin lens, which needs the camera in millimetres: give "
                 "--focal-length MM and --sensor-width MM, or drop --f-number (a pinhole)");
-}
-
-void check_streak_lidar(const std::string& lidar, const std::string& lidar_out, const std::string& verb) {
-  if (lidar.empty() != lidar_out.empty())
-    throw Error(lidar.empty() ? "--lidar-out names the output scan of --lidar IN.bin: give --lidar too, or drop "
-                                "--lidar-out"
-                              : "--lidar " + verb + ": give --lidar-out OUT.bin for it, or drop --lidar");
-  // (its folder is checked when the job runs: brume batch plans before it makes the frames' folders)
-  if (!lidar.empty() && fs::path(lidar_out).extension() != ".bin")
-    throw Error("--lidar-out '" + lidar_out + "': a scan is written as a KITTI .bin (float32 x, y, z, "
-                "intensity); name it *.bin");
 }
 
 StreakRun run_camera_streaks(ConstImageView rgb, ConstImageView measured_range, const DepthSource& depth,
@@ -106,21 +93,6 @@ StreakRun run_camera_streaks(ConstImageView rgb, ConstImageView measured_range, 
   rec["execution"]["backend"] = "cpu";
   rec["execution"]["timing"] = cpu_timing_record(t0, 0);
   return run;
-}
-
-void run_streak_lidar(RunContext& ctx, const std::string& lidar, const std::string& lidar_out, const std::string& block,
-                      const std::function<std::size_t(const float*, float*, std::size_t, const std::string&,
-                                                      nlohmann::json&)>& run) {
-  check_kitti_bin_output(lidar_out, "--lidar-out");
-  const std::vector<float> in = read_kitti_bin(lidar, "--lidar");
-  const std::size_t n = in.size() / 4;
-  std::vector<float> out(in.size());
-  nlohmann::json rec;
-  const std::size_t lost = run(in.data(), out.data(), n, "--lidar '" + lidar + "'", rec);
-  ctx.files.push_back({lidar_out, kitti_bin_bytes(out.data(), n - lost), "--lidar-out"});
-  if (!ctx.extra.is_object()) ctx.extra = nlohmann::json::object();
-  ctx.extra["inputs"]["lidar"] = {{"path", lidar}, {"sha256", sha256_file(lidar)}, {"points", n}};
-  ctx.extra[block] = std::move(rec);
 }
 
 ArrayResult streak_array_result(

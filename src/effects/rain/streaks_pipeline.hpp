@@ -26,8 +26,6 @@ double streak_coc_px(std::optional<double> f_number, std::optional<double> focus
                      int width, int height);
 // --f-number needs the camera in millimetres; `particles` names what it blurs ("the streaks").
 void check_streak_lens(std::optional<double> f_number, const DepthSource& depth, const std::string& particles);
-// --lidar and --lidar-out come together, the latter a .bin; `verb` says what --lidar does ("rains on a scan").
-void check_streak_lidar(const std::string& lidar, const std::string& lidar_out, const std::string& verb);
 
 // The camera's particles on an image and its measured range: completed and prepared as haze
 // does it, haze's airlight (and with `visibility_m` its medium and composite), then `render` on
@@ -41,13 +39,6 @@ StreakRun run_camera_streaks(ConstImageView rgb, ConstImageView measured_range, 
                              std::optional<double> visibility_m, std::optional<Rgb> airlight, const std::string& block,
                              const std::function<Image(const CameraRainScene& scene, Image* transmission,
                                                        nlohmann::json& block)>& render);
-
-// The scan of --lidar through `run` (it fills the record's block `block` and returns the number
-// of points lost), written to --lidar-out with the job's outputs (ctx.files); the input's hash
-// and the block in the record's extras.
-void run_streak_lidar(RunContext& ctx, const std::string& lidar, const std::string& lidar_out, const std::string& block,
-                      const std::function<std::size_t(const float* in, float* out, std::size_t n,
-                                                      const std::string& what, nlohmann::json& block)>& run);
 
 // brume.rain's and brume.snow's array forms: the scan of lidar= (in[2], when present) first,
 // through `scan` (it fills the record's block `lidar_block` and returns the points lost: "lidar"

@@ -143,7 +143,7 @@ const ParamTable<SkyFitJob>& sky_fit_job_table() {
         .text("image-layer", &SkyFitJob::image_layer,
               "the layer of a file with layers read as the photo (NAME.R, NAME.G, NAME.B of a multilayer OpenEXR); "
               "empty: the plain R, G, B, or the file's only colour layer");
-    transfer_param(d, "image-transfer", &SkyFitJob::image_transfer, "transfer function of the photo: " BRUME_TRANSFER_HELP)
+    transfer_param(d, "image-transfer", &SkyFitJob::image_transfer, "the photo")
         .text("mask", &SkyFitJob::mask, "grey image of the same size: > half scale marks usable sky (default: all)")
         .reads_file()
         .nest(&SkyFitJob::view, sky_view_param_table())

@@ -8,6 +8,7 @@
 #include "brume/pipeline.hpp"
 #include "brume/snow.hpp"
 #include "effects/rain/streaks_pipeline.hpp"
+#include "pipeline/camera_scan_arrays.hpp"
 
 namespace brume {
 
@@ -55,7 +56,7 @@ const ParamTable<CameraSnowJob>& camera_snow_job_table() {
 void check_camera_snow_job(const CameraSnowJob& j) {
   validate_camera_snow(j.snow);
   check_streak_lens(j.snow.f_number, j.input.depth, "the flakes");
-  check_streak_lidar(j.lidar, j.lidar_out, "snows on a scan");
+  check_camera_scan_flags(j.lidar, j.lidar_out, "snows on a scan");
   if (!j.lidar.empty()) validate_lidar_snow(camera_snow_lidar_params(j.snow));
 }
 
@@ -80,9 +81,10 @@ nlohmann::json run_camera_snow_job(const CameraSnowJob& job, const ExecOptions& 
     // The scan does not depend on the image: snowed on first, written with the image's outputs.
     check_camera_snow_job(job);
     const LidarSnowParams lp = camera_snow_lidar_params(job.snow);
-    run_streak_lidar(ctx, job.lidar, job.lidar_out, "lidar_snow",
-                     [&](const float* in, float* out, std::size_t n, const std::string& what, nlohmann::json& block) {
-                       const LidarSnowStats st = lidar_snow(in, out, n, lp, nullptr, what);
+    run_camera_scan_file(ctx, job.lidar, job.lidar_out, "", "lidar_snow",
+                         [&](const float* in, float* out, std::size_t n, std::uint8_t* labels, const std::string& what,
+                             nlohmann::json& block) {
+                       const LidarSnowStats st = lidar_snow(in, out, n, lp, labels, what);
                        block = lidar_snow_record(lp, st);
                        return st.run.lost;
                      });

@@ -5,7 +5,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <set>
 #include <string>
 
@@ -22,7 +21,6 @@
 #include "pipeline/scan_job.hpp"
 
 namespace brume {
-namespace fs = std::filesystem;
 
 namespace {
 
@@ -124,16 +122,7 @@ void check_camera_wet(const WetFilm& film, const WetGround& g, bool masked, bool
 
 void check_camera_wet_job(const CameraWetJob& j) {
   check_camera_wet(j.wet, j.ground, !j.ground.mask.empty(), true);
-  if (j.lidar.empty() != j.lidar_out.empty())
-    throw Error(j.lidar.empty() ? "--lidar-out names the wet scan of --lidar IN.bin: give --lidar too, or drop "
-                                  "--lidar-out"
-                                : "--lidar wets a scan's ground: give --lidar-out OUT.bin for it, or drop --lidar");
-  if (j.lidar.empty() && !j.lidar_labels.empty())
-    throw Error("--lidar-labels labels the points of --lidar IN.bin: give --lidar and --lidar-out, or drop it");
-  // --lidar-out's name here (a batch row or a record is refused when planned, as rain's); its folder when the
-  // job runs (brume batch plans before it makes the frames' folders).
-  if (!j.lidar_out.empty() && fs::path(j.lidar_out).extension() != ".bin")
-    check_kitti_bin_output(j.lidar_out, "--lidar-out");  // throws: names the flag, the file and the fix
+  check_camera_scan_flags(j.lidar, j.lidar_out, "wets a scan's ground", j.lidar_labels);
 }
 
 // The camera's wet ground on an image and its measured range (the CLI's job and brume.wet's array
@@ -200,20 +189,14 @@ nlohmann::json run_camera_wet_job(const CameraWetJob& job, const ExecOptions& eo
   if (!job.lidar.empty()) {
     // The scan does not depend on the image: wetted first, written with the image's outputs.
     check_camera_wet_job(job);
-    check_kitti_bin_output(job.lidar_out, "--lidar-out");
-    if (!job.lidar_labels.empty()) check_output_dir(job.lidar_labels, "--lidar-labels");
     const LidarWetParams lp = camera_wet_lidar_params(job);
-    const std::vector<float> in = read_kitti_bin(job.lidar, "--lidar");
-    const std::size_t n = in.size() / 4;
-    std::vector<float> out(in.size());
-    std::string labels(n, '\0');
-    const LidarWetStats st = lidar_wet(in.data(), out.data(), n, lp, reinterpret_cast<std::uint8_t*>(labels.data()),
-                                       "--lidar '" + job.lidar + "'");
-    ctx.files.push_back({job.lidar_out, kitti_bin_bytes(out.data(), n - st.lost), "--lidar-out"});
-    if (!job.lidar_labels.empty()) ctx.files.push_back({job.lidar_labels, labels, "--lidar-labels"});
-    if (!ctx.extra.is_object()) ctx.extra = nlohmann::json::object();
-    ctx.extra["inputs"]["lidar"] = {{"path", job.lidar}, {"sha256", sha256_file(job.lidar)}, {"points", n}};
-    ctx.extra["lidar_wet"] = lidar_wet_record(lp, st);
+    run_camera_scan_file(ctx, job.lidar, job.lidar_out, job.lidar_labels, "lidar_wet",
+                         [&](const float* in, float* out, std::size_t n, std::uint8_t* labels, const std::string& what,
+                             nlohmann::json& block) {
+                           const LidarWetStats st = lidar_wet(in, out, n, lp, labels, what);
+                           block = lidar_wet_record(lp, st);
+                           return st.lost;
+                         });
   }
   const EffectJob<CameraWetJob> e{
       "wet",

@@ -133,10 +133,8 @@ nlohmann::json run_insert_job(const InsertJob& job, const ExecOptions& eo, const
   const EffectJob<InsertJob> e{
       "insert", insert_job_table(), insert_map_outputs(),
       190,  // aerial's measured peak (insert runs aerial; its own is not measured)
-      [&](const InsertJob& j, const ExecOptions& x) {
+      [&](const InsertJob& j, const ExecOptions&) {
         validate_insert(j.aerial, ctx.given);
-        if (x.backend == Backend::gpu)
-          throw Error("insert runs on the CPU only (no GPU passes yet); use --backend cpu (or auto)");
         if (j.object.object.empty()) throw Error("no object given: use --object FILE (RGBA, same size as --image)");
         if (j.object.object_range.empty())
           throw Error("no object range given: use --object-range FILE (metres along the ray, unknown where the "
