@@ -103,6 +103,9 @@ struct ArrayArg {
   As as = As::view;
   bool keyword = false;
   bool points = false;
+  // A mask (brume.wet's ground_mask=): an H x W bool array or a float one
+  // whose values above 1/2 mark it, taken as an owned Image of 0 and 1 (As::image).
+  bool mask = false;
 };
 // One array as the run gets it, filled as its ArrayArg asks: `view` always,
 // `dense` for As::dense, `image` (the call's own copy, free to change) for

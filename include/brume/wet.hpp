@@ -117,6 +117,14 @@ nlohmann::json wet_optics_record(const WetFilm& w, const WetOptics& o);
 constexpr double kWetMarchStepPx = 1.0;
 constexpr double kWetHitMargin = 0.01;
 constexpr double kWetThickness = 0.05;
+// Which pixels a mirrored ray can meet. `blocks` (records before it): every pixel, the march
+// skipping the stretches whose min-depth blocks it clears. `above_ground`: once the ray is higher
+// above the plane than ground_tolerance_m, the plane's own pixels (within the tolerance of it,
+// seen from above) no longer occlude it — a ray above the plane cannot pass behind the plane's
+// surface, which those pixels are — and its min-depth blocks leave them out, so a ray over open
+// ground crosses it a block at a time. Needs the camera's height (else `blocks` runs, recorded).
+enum class WetMarch { blocks, above_ground };
+const EnumNames<WetMarch>& wet_march_names();
 struct WetScene {
   ConstImageView rgb;    // linear RGB
   ConstImageView range;  // [m] along the ray; NaN, inf, <= 0: unknown (the sky)
@@ -124,9 +132,11 @@ struct WetScene {
   ConstImageView mask;   // 1 channel in [0, 1]: the ground (where > 1/2); empty: from the plane
   double ground_tolerance_m = 0.15;
   std::array<float, 3> sky{};  // the airlight: what a ray leaving the frame sees
+  WetMarch march = WetMarch::above_ground;
 };
 struct WetStats {
   std::size_t ground = 0, hits = 0, sky_pixels = 0, left_frame = 0;
+  WetMarch march = WetMarch::blocks;  // the rule that ran
   double maps_ms = 0.0, march_ms = 0.0;  // the phases' wall time: depth map and pyramids; the ground and its march
 };
 // The wet image; `ground` (may be null): 1 on the ground, 0 elsewhere.

@@ -121,6 +121,9 @@ Input read_input(py::handle obj, const std::string& arg, int channels, Transfer 
                  long long max_rows = 1 << 20);
 // A LiDAR scan: an (N, 4) float32 (in place) or float64 (converted once) array of x, y, z, intensity.
 Input read_points(py::handle obj, const std::string& arg, const std::string& fn);
+// A mask (ArrayArg::mask): H x W (or x 1) bool, or float32/float64 whose values above 1/2 mark it; an
+// owned Image of 0 and 1. Integer arrays are refused (0/1 or 0/255? the caller says so with a bool).
+Input read_mask(py::handle obj, const std::string& arg, const std::string& fn);
 DenseImageRef as_dense(Input& in, const std::string& arg);
 const Image& as_image(Input& in, const std::string& arg);
 py::array to_numpy(Image&& img);

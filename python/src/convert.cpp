@@ -201,6 +201,46 @@ Input read_points(py::handle obj, const std::string& arg, const std::string& fn)
   return in;
 }
 
+Input read_mask(py::handle obj, const std::string& arg, const std::string& fn) {
+  const std::string expected = "an H x W bool array (True marks it) or a float32/float64 one whose values above 0.5 "
+                               "mark it";
+  if (!py::isinstance<py::array>(obj))
+    throw py::type_error(fn + "(): " + arg + " must be a numpy.ndarray, " + expected + "; got " + type_name(obj));
+  py::array a = py::reinterpret_borrow<py::array>(obj);
+  const std::string dtype = py::cast<std::string>(py::str(a.dtype()));
+  const char kind = a.dtype().kind();
+  auto bad = [&](const std::string& why) {
+    return py::value_error(fn + "(): " + arg + " has shape " + shape_text(a) + " and dtype " + dtype + ": " + why +
+                           "; expected " + expected);
+  };
+  if (kind == 'u' || kind == 'i')
+    throw bad("an integer mask is ambiguous (0/1 or 0/255?); pass " + arg + "=m > 0 (bool) or a float array");
+  if (kind != 'b' && kind != 'f') throw bad("dtype not supported");
+  if (!(a.ndim() == 2 || (a.ndim() == 3 && a.shape(2) == 1))) throw bad("not H x W");
+  if (a.shape(0) < 1 || a.shape(1) < 1) throw bad("it is empty");
+  if (a.shape(0) > (1 << 20) || a.shape(1) > (1 << 20)) throw bad("it is too large");
+  // one conversion, whatever the strides: numpy casts to float64 (bool to 0/1), then > 1/2
+  py::module_ np = py::module_::import("numpy");
+  auto d = np.attr("ascontiguousarray")(a, "float64").cast<py::array_t<double, py::array::c_style>>();
+  const int h = static_cast<int>(a.shape(0)), w = static_cast<int>(a.shape(1));
+  Input in;
+  in.owned = Image(w, h, 1);
+  const double* src = d.data();
+  std::size_t marked = 0;
+  for (std::size_t i = 0; i < in.owned.data.size(); ++i) {
+    if (std::isnan(src[i]))
+      throw py::value_error(fn + "(): " + arg + " holds NaN at pixel (" + std::to_string(i % w) + ", " +
+                            std::to_string(i / w) + "); give " + expected);
+    in.owned.data[i] = src[i] > 0.5 ? 1.0f : 0.0f;
+    marked += src[i] > 0.5;
+  }
+  in.view = ConstImageView(in.owned);
+  in.record = {{"source", "numpy"}, {"shape", json::array()}, {"dtype", dtype}, {"marked", marked}};
+  for (py::ssize_t i = 0; i < a.ndim(); ++i) in.record["shape"].push_back(a.shape(i));
+  g_last_inputs[arg] = {reinterpret_cast<std::uintptr_t>(in.owned.data.data()), true, "copied: a mask of 0 and 1"};
+  return in;
+}
+
 // Library functions that take a dense image (DenseImageRef: aerial, fog,
 // dof, depth.prepare, sky.fit): a C-contiguous float32 array is read in
 // place, like haze's and blur's views. A strided float32 array (a crop, the

@@ -124,6 +124,7 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
     const ArrayArg& g = a.args[i];
     if (all[i].is_none() && g.optional) continue;
     inputs[i] = g.points ? read_points(all[i], g.name, fn)
+                : g.mask ? read_mask(all[i], g.name, fn)
                          : read_input(all[i], g.name, g.channels, g.channels == 3 ? tr : Transfer::automatic, fn);
     in[i].present = true;
     in[i].integer = py::isinstance<py::array>(all[i]) &&
@@ -200,10 +201,11 @@ void def_array_command(py::module_& m, const CommandDef& c) {
   }
   for (const ArrayArg& g : a.args)
     if (g.keyword)
-      extras.push_back({g.name, "npt.NDArray[np.float32] | None",
+      extras.push_back({g.name, g.mask ? "npt.NDArray[np.bool_] | npt.NDArray[np.float32] | None" : "npt.NDArray[np.float32] | None",
                         g.points ? "the frame's LiDAR scan: an (N, 4) float32 array of x, y, z [m] and intensity "
                                    "(KITTI's velodyne layout; read in place, float64 converted once), fogged by the "
                                    "same medium and returned as the Result's " + g.name
+                        : g.mask ? "an H x W bool array (True marks it) or a float one whose values above 0.5 mark it"
                                  : "an array"});
   if (a.replays)
     extras.push_back({"job", "dict[str, Any] | None",

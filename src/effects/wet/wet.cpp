@@ -148,6 +148,11 @@ nlohmann::json wet_optics_record(const WetFilm& w, const WetOptics& o) {
 
 // ---- the camera ----------------------------------------------------------------------------
 
+const EnumNames<WetMarch>& wet_march_names() {
+  static const EnumNames<WetMarch> n = {{WetMarch::blocks, "blocks"}, {WetMarch::above_ground, "above-ground"}};
+  return n;
+}
+
 namespace {
 
 // std::lround, inline: the nearest integer, halves away from zero, for |x| < 2^52 (x − trunc(x)
@@ -192,19 +197,27 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
     int bw = 0, bh = 0;
     std::vector<float> m;
   };
-  std::array<Pyramid, 2> pyr;  // the coarse blocks, then the fine ones
+  // above_ground (WetMarch): a second depth map and pyramid without the plane's pixels, for rays
+  // higher above the plane than the tolerance.
+  const bool lift = s.march == WetMarch::above_ground && std::isfinite(h);
+  st.march = lift ? WetMarch::above_ground : WetMarch::blocks;
+  std::array<Pyramid, 2> pyr, pyr_off;  // the coarse blocks, then the fine ones; off the plane
   for (int l = 0; l < 2; ++l) {
     const int b = l == 0 ? kWetCoarseBlock : kWetFineBlock;
-    pyr[l].bw = (W + b - 1) / b, pyr[l].bh = (H + b - 1) / b;
-    pyr[l].m.assign(static_cast<std::size_t>(pyr[l].bw) * pyr[l].bh, INFINITY);
+    for (Pyramid* p : {&pyr[l], &pyr_off[l]}) {
+      if (p == &pyr_off[l] && !lift) continue;
+      p->bw = (W + b - 1) / b, p->bh = (H + b - 1) / b;
+      p->m.assign(static_cast<std::size_t>(p->bw) * p->bh, INFINITY);
+    }
   }
   // The planar depth z = range/|ray| of each pixel (inf: the sky): a point of planar depth Z
   // on a pixel's ray is behind the pixel's surface when Z > z. The fine blocks in the same pass,
   // a band of 8 rows at a time (one parallel region: on a busy host each region's barrier waits
   // for the slowest core); the coarse blocks as the minima of 4 x 4 fine ones (the blocks nest
   // from the origin: the same minima, min being exact).
-  std::vector<float> zmap(static_cast<std::size_t>(W) * H);
+  std::vector<float> zmap(static_cast<std::size_t>(W) * H), zmap_off(lift ? zmap.size() : 0);
   Pyramid& f = pyr[1];
+  Pyramid& f_off = pyr_off[1];
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int by = 0; by < f.bh; ++by)
     for (int y = by * kWetFineBlock; y < std::min(H, (by + 1) * kWetFineBlock); ++y) {
@@ -212,20 +225,31 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
       float* fm = f.m.data() + static_cast<std::size_t>(by) * f.bw;
       for (int x = 0; x < W; ++x) {
         const float r = s.range.at(x, y);
-        const double rx = (x - cx) / fx, ry = (y - cy) / fy;
-        const float z =
-            std::isfinite(r) && r > 0.0f ? static_cast<float>(r / std::sqrt(rx * rx + ry * ry + 1.0)) : INFINITY;
+        const double rx = (x - cx) / fx, ry = (y - cy) / fy, inv = 1.0 / std::sqrt(rx * rx + ry * ry + 1.0);
+        const bool known = std::isfinite(r) && r > 0.0f;
+        const float z = known ? static_cast<float>(r / std::sqrt(rx * rx + ry * ry + 1.0)) : INFINITY;
         row[x] = z;
         fm[x / kWetFineBlock] = std::min(fm[x / kWetFineBlock], z);
+        if (lift) {
+          // the plane's own pixels: seen from above (the ray goes down) within the tolerance of it
+          // (the march's own test of a ground pixel, the same expressions)
+          const double dn = rx * inv * nx + ry * inv * ny + inv * nz;
+          const bool plane = known && dn < 0.0 && std::fabs(h + z / inv * dn) <= s.ground_tolerance_m;
+          const float zo = plane ? INFINITY : z;
+          zmap_off[static_cast<std::size_t>(y) * W + x] = zo;
+          float& m = f_off.m[static_cast<std::size_t>(by) * f_off.bw + x / kWetFineBlock];
+          m = std::min(m, zo);
+        }
       }
     }
-  {
-    Pyramid& c = pyr[0];
+  for (int l = 0; l < (lift ? 2 : 1); ++l) {
+    std::array<Pyramid, 2>& p = l == 0 ? pyr : pyr_off;
+    Pyramid &c = p[0], &fi = p[1];
     constexpr int r = kWetCoarseBlock / kWetFineBlock;
-    for (int by = 0; by < f.bh; ++by)
-      for (int bx = 0; bx < f.bw; ++bx) {
+    for (int by = 0; by < fi.bh; ++by)
+      for (int bx = 0; bx < fi.bw; ++bx) {
         float& m = c.m[static_cast<std::size_t>(by / r) * c.bw + bx / r];
-        m = std::min(m, f.m[static_cast<std::size_t>(by) * f.bw + bx]);
+        m = std::min(m, fi.m[static_cast<std::size_t>(by) * fi.bw + bx]);
       }
   }
   const auto t_march = std::chrono::steady_clock::now();
@@ -261,8 +285,26 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
       const double dw = (Dz > 0.0 ? -1.0 : 1.0) * kWetMarchStepPx / std::max(major, 1e-30);
       // (-0.5 itself rounds away from zero to -1: outside, as W - 0.5 is.)
       const auto inside = [&](double u, double v) { return u > -0.5 && u < W - 0.5 && v > -0.5 && v < H - 0.5; };
+      // above_ground: the ray is above the plane's tolerance from w_lift on (its height h0 + t·(−dn)
+      // grows along the march, t = (1/w − P_z)/D_z), after which the maps without the plane's
+      // pixels serve; `zm` and `pm` are the maps the march asks now.
+      const float* zm = zmap.data();
+      const std::array<Pyramid, 2>* pm = &pyr;
+      bool lifted = false;
+      double w_lift = 0.0;
+      bool can_lift = false;
+      if (lift) {
+        const double t_lift = (s.ground_tolerance_m - (h + r0 * dn)) / -dn;
+        const double z_lift = Pz + std::max(t_lift, 0.0) * Dz;
+        if (t_lift <= 0.0) {
+          lifted = true;
+          zm = zmap_off.data(), pm = &pyr_off;
+        } else if (z_lift > 0.0) {
+          can_lift = true, w_lift = 1.0 / z_lift;
+        }
+      }
       const auto zat = [&](double u, double v) {
-        return zmap[static_cast<std::size_t>(round_half_away(v)) * W + static_cast<std::size_t>(round_half_away(u))];
+        return zm[static_cast<std::size_t>(round_half_away(v)) * W + static_cast<std::size_t>(round_half_away(u))];
       };
       std::array<float, 3> L = s.sky;
       enum { leaves, hit, infinity } end = leaves;
@@ -290,17 +332,21 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
           end = infinity;
           break;
         }
+        if (can_lift && !lifted && (Dz > 0.0 ? wc <= w_lift : wc >= w_lift)) {
+          lifted = true;
+          zm = zmap_off.data(), pm = &pyr_off;
+        }
         // A whole block's step where the pyramid clears it; where it does not, the next 8 steps
         // are single pixels without asking it again (asking before every pixel cost more than
         // the pixels: 2.3 M block steps and 6.6 M pixel steps on the demo at 1242x375).
         if (fine_left == 0) {
           const double wa = wc + kWetCoarseBlock * dw;
-          if (wa > 0.0 && clears.template operator()<kWetCoarseBlock>(pyr[0], wa)) {
+          if (wa > 0.0 && clears.template operator()<kWetCoarseBlock>((*pm)[0], wa)) {
             wc = wa, front = true;
             continue;
           }
           const double wb = wc + kWetFineBlock * dw;
-          if (wb > 0.0 && clears.template operator()<kWetFineBlock>(pyr[1], wb)) {
+          if (wb > 0.0 && clears.template operator()<kWetFineBlock>((*pm)[1], wb)) {
             wc = wb, front = true;
             continue;
           }

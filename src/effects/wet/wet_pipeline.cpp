@@ -30,6 +30,7 @@ struct WetGround {
   double ground_tolerance_m = 0.15;  // [m] > 0
   std::string mask;                  // --ground-mask: a grey image, the ground where > 1/2
   std::optional<Rgb> airlight;       // the sky a ray leaving the frame sees; unset: haze's estimate
+  WetMarch march = WetMarch::above_ground;  // --mirror-march
 };
 
 const ParamTable<WetGround>& wet_ground_param_table() {
@@ -45,7 +46,13 @@ const ParamTable<WetGround>& wet_ground_param_table() {
         .reads_file()
         .rgb("airlight", &WetGround::airlight, "linear RGB", Range::at_least(0.0),
              "the sky's colour a mirrored ray that leaves the frame sees; default: haze's estimate from the image",
-             "auto");
+             "auto")
+        .choice("mirror-march", &WetGround::march, wet_march_names(),
+                "which pixels a mirrored ray can meet: above-ground leaves the plane's own pixels out once the ray "
+                "is higher above the plane than --ground-tolerance (it cannot pass behind the plane's surface), so "
+                "a ray over open ground crosses it a block at a time (needs --camera-height, else blocks runs); "
+                "blocks asks every pixel (the rule of records before it)")
+        .since(4, "blocks");
     return d;
   }();
   return t;
@@ -111,13 +118,13 @@ const ParamTable<CameraWetParams>& camera_wet_param_table() {
 }
 
 // The film's and the ground's checks that need no pixels (the CLI's and brume.wet's); `masked`: a
-// ground mask is given (the CLI's --ground-mask; brume.wet takes none).
+// ground mask is given (the CLI's --ground-mask FILE, brume.wet's ground_mask= array).
 void check_camera_wet(const WetFilm& film, const WetGround& g, bool masked, bool mask_flag) {
   validate_wet_film(film);
   if (!masked && std::isnan(g.camera.height_m) && g.camera.view_matrix_file.empty())
     throw Error(std::string("wet ground needs the ground: give --camera-height M (with --pitch and --roll: the ground "
                             "plane)") +
-                (mask_flag ? ", or --ground-mask FILE" : ""));
+                (mask_flag ? ", or --ground-mask FILE" : ", or ground_mask=ARRAY"));
 }
 
 void check_camera_wet_job(const CameraWetJob& j) {
@@ -154,6 +161,7 @@ CameraWetRun run_camera_wet(ConstImageView rgb, ConstImageView measured_range, c
   scene.ground_tolerance_m = g.ground_tolerance_m;
   scene.sky = ha.airlight;
   scene.mask = mask;
+  scene.march = g.march;
   const auto t0 = std::chrono::steady_clock::now();
   WetStats st;
   CameraWetRun run;
@@ -174,6 +182,9 @@ CameraWetRun run_camera_wet(ConstImageView rgb, ConstImageView measured_range, c
       " px, hit where it passes a pixel's range by more than " + std::to_string(kWetHitMargin) +
       " of it (bisected to 1/64 step); at its vanishing point it takes the pixel there; leaving the frame, the "
       "airlight";
+  rec["wet"]["mirror_march"] = enum_name(wet_march_names(), st.march);
+  if (st.march != g.march)
+    rec["wet"]["mirror_march_because"] = "no camera height: the plane's pixels are not known, every pixel is asked";
   rec["wet"]["airlight_linear_rgb"] = ha.airlight;
   rec["wet"]["airlight_source"] = ha.airlight_source;
   rec["prepare"] = prep.record;
@@ -307,10 +318,12 @@ CommandDef wet_command() {
       [](const LidarWetParams& p, const std::set<std::string>&) { validate_lidar_wet(p); });
   // brume.wet(rgb, range, lidar=points): the image and its range dense (in place when C-contiguous);
   // a scan given as lidar= passes the same film (brume lidar wet's model and defaults, as --lidar),
-  // its points and labels returned. No ground mask (the CLI's --ground-mask): the plane finds the ground.
+  // its points and labels returned. ground_mask= (the CLI's --ground-mask): an H x W bool or float array, the
+  // ground where True or above 1/2, taken as the CLI takes a mask file's pixels over its full scale.
   static const auto call = array_call_table(camera_wet_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
   std::vector<ArrayArg> args = rgb_range_args(ArrayArg::As::dense);
   args.push_back({"lidar", 1, true, ArrayArg::As::view, true, true});
+  args.push_back({"ground_mask", 1, true, ArrayArg::As::image, true, false, true});
   c.arrays = make_array_form<CameraWetParams>(
       "wet", "",
       "Wet ground on an RGB-D image: the ground (the plane from camera_height, pitch and roll) darker by Lekner & "
@@ -319,12 +332,18 @@ CommandDef wet_command() {
       "(fx.. or fov_x/fov_y) and camera_height are keywords. lidar=points (an (N, 4) float32 array of x, y, z, "
       "intensity) passes the frame's scan through the same film (brume.lidar.wet's model and defaults): lidar holds "
       "the points that return, lidar_labels one uint8 per input point (0 off the ground, 1 wet ground, 2 lost). "
-      "ground is 1 on the ground the film covers. As `brume wet`.",
+      "ground_mask (an H x W bool array, or float above 0.5) gives the ground instead of the plane's tolerance, as "
+      "--ground-mask. ground is 1 on the ground the film covers. As `brume wet`.",
       args, call, {"rgb", "ground", "lidar", "lidar_labels", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<CameraWetParams>& k, const Exec& e,
          const std::set<std::string>& g) {
-        check_camera_wet(k.p.wet, k.p.ground, false, false);
+        const bool masked = in[3].present;
+        check_camera_wet(k.p.wet, k.p.ground, masked, false);
         check_range_step(k.prepare, g);
+        if (masked && (in[3].view.width() != in[0].view.width() || in[3].view.height() != in[0].view.height()))
+          throw Error("brume.wet(): ground_mask is " + in[3].view.size_string() + " but rgb is " +
+                      in[0].view.size_string() +
+                      "; give a mask of the image's size");
         ArrayResult r;
         // the scan first (as the CLI: its errors before the image's work)
         const std::string what = "brume.wet(): lidar";
@@ -336,7 +355,7 @@ CommandDef wet_command() {
             }))
           r.record["lidar_wet"] = lidar_wet_record(lp, st);
         CameraWetRun run = run_camera_wet(in[0].dense.view(), in[1].dense.view(), k.depth, k.p.wet, k.p.ground,
-                                          ConstImageView(), k.prepare, e, g);
+                                          masked ? in[3].view : ConstImageView(), k.prepare, e, g);
         r.images["rgb"] = std::move(run.rgb);
         r.images["ground"] = std::move(run.ground);
         for (auto& [name, v] : run.record.items()) r.record[name] = std::move(v);
