@@ -139,7 +139,8 @@ CommandDef rain_command() {
       .name = "rain",
       .cli = "rain",
       .summary = "rain on an RGB-D image: streaks of the drop field depth-tested against the scene (Garg & Nayar), "
-                 "the rest as extinction in haze's composite",
+                 "the rest as extinction in haze's composite (--backend gpu: the per-pixel passes on the GPU, the "
+                 "streaks' splat on the CPU)",
       .table = &camera_rain_job_table(),
       .takes_exec_flags = true,
       .writes_record = true,

@@ -29,9 +29,10 @@ Image streak_background_gpu(GpuContext& ctx, const CameraRainScene& s, const Cam
   const int W = s.rgb.width(), H = s.rgb.height();
   (void)ctx.impl();
   timing = {};
-  gpu::ColorAndRange in = gpu::upload_color_and_range(copy_of(s.rgb), copy_of(s.range), "rain", &timing.upload_ms);
+  gpu::ColorAndRange in =
+      gpu::upload_color_and_range(copy_of(s.rgb), copy_of(s.range), "camera pass", &timing.upload_ms);
   const Image weight = s.sky_weight.empty() ? Image() : copy_of(s.sky_weight);
-  const gl::Texture sky = gpu::upload_sky_weight(&weight, W, H, "rain", &timing.upload_ms);
+  const gl::Texture sky = gpu::upload_sky_weight(&weight, W, H, "camera pass", &timing.upload_ms);
   // The optical depth's table: step i = 1 .. n as (G at its start, σ_d on it, its start), in double
   // on the CPU, stored as float.
   const int n = kRainThinningSteps;

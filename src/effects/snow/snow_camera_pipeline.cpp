@@ -114,7 +114,8 @@ CommandDef snow_command() {
       .name = "snow",
       .cli = "snow",
       .summary = "snow on an RGB-D image: the flakes of a snowfall lit by the scene's sky and ground, depth-tested "
-                 "and blurred over the exposure, the rest as extinction in haze's composite",
+                 "and blurred over the exposure, the rest as extinction in haze's composite (--backend gpu: the "
+                 "per-pixel passes on the GPU, the flakes' splat on the CPU)",
       .table = &camera_snow_job_table(),
       .takes_exec_flags = true,
       .writes_record = true,
