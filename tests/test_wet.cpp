@@ -11,6 +11,7 @@
 #include "brume/demo_scene.hpp"
 #include "brume/error.hpp"
 #include "brume/wet.hpp"
+#include "wet_demo.hpp"
 
 using namespace brume;
 
@@ -242,15 +243,7 @@ TEST(WetCamera, DemoSceneFitsLeknerDorfAndFilmZeroIsIdentity) {
   // 5 % of Lekner & Dorf (independent integral), residual <= 4 % of the mean; off the ground unchanged.
   const int W = 256, H = 144;
   const DemoScene d = render_demo_scene(W, H);
-  CameraPose p;
-  p.height_m = 1.6;
-  p.pitch_deg = -5.0;
-  WetScene sc;
-  sc.rgb = d.rgb;
-  sc.range = d.range;
-  sc.camera = make_camera(intrinsics_from_fov(W, H, NAN, d.fov_y_deg), W, H, p);
-  sc.ground_tolerance_m = 0.02;
-  sc.sky = {0.55f, 0.65f, 0.8f};
+  const WetScene sc = test::demo_wet_scene(d, W, H);
   Exec exec;
   exec.threads = 2;
   Image ground;

@@ -18,6 +18,7 @@
 #include "effects/wet/wet_gpu.hpp"
 #include "shared/prelude_cpp.h"
 #include "test_util.hpp"
+#include "wet_demo.hpp"
 
 using namespace brume;
 
@@ -49,15 +50,7 @@ TEST(WetGpu, DemoSceneMatchesTheCpu) {
   BRUME_REQUIRE_GPU(ctx);
   const int W = 160, H = 120;
   const DemoScene d = render_demo_scene(W, H);
-  CameraPose pose;
-  pose.height_m = 1.6;
-  pose.pitch_deg = -5.0;
-  WetScene sc;
-  sc.rgb = d.rgb;
-  sc.range = d.range;
-  sc.camera = make_camera(intrinsics_from_fov(W, H, NAN, d.fov_y_deg), W, H, pose);
-  sc.ground_tolerance_m = 0.02;
-  sc.sky = {0.55f, 0.65f, 0.8f};
+  WetScene sc = test::demo_wet_scene(d, W, H);
   Exec exec;
   exec.threads = 2;
   const WetFilm w = film(1.5);
