@@ -79,6 +79,29 @@ TEST(WetGpu, DemoSceneMatchesTheCpu) {
   GpuTiming t0;
   const Image dry = render_wet_gpu(*ctx, sc, film(0.0), nullptr, nullptr, t0);
   EXPECT_EQ(std::memcmp(dry.data.data(), d.rgb.data.data(), d.rgb.data.size() * sizeof(float)), 0);
+  // A ground mask (the plane's ground on the right half only): the mask's ground on both.
+  Image mask = g_cpu;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W / 2; ++x) mask.at(x, y) = 0.0f;
+  WetScene masked = sc;
+  masked.mask = mask;
+  Image gm_cpu, gm_gpu;
+  const Image m_cpu = render_wet(masked, w, exec, nullptr, &gm_cpu);
+  const Image m_gpu = render_wet_gpu(*ctx, masked, w, nullptr, &gm_gpu, t0);
+  EXPECT_EQ(std::memcmp(gm_cpu.data.data(), gm_gpu.data.data(), gm_cpu.data.size() * sizeof(float)), 0);
+  std::size_t m_ground = 0, m_changed = 0, m_far = 0;
+  for (std::size_t i = 0; i < gm_gpu.pixels(); ++i) {
+    m_ground += gm_gpu.data[i] != 0.0f;
+    for (int c = 0; c < 3; ++c) {
+      const float a = m_gpu.data[i * 3 + c], b = d.rgb.data[i * 3 + c];
+      if (gm_gpu.data[i] == 0.0f) m_changed += std::memcmp(&a, &b, sizeof a) != 0;
+      else m_far += std::fabs(a - m_cpu.data[i * 3 + c]) > 1e-5f;
+    }
+  }
+  EXPECT_GT(m_ground, 1000u);
+  EXPECT_LT(m_ground, s_cpu.ground);
+  EXPECT_EQ(m_changed, 0u);
+  EXPECT_LE(m_far, far);  // a subset of the ground above: its pixels that took another pixel at most
 
   // Each pixel's colour its coordinates ((x + 1/2)/W, (y + 1/2)/H, 1/2): the mirror's L, (wet −
   // K_eff dry)/(f R_F), names the pixel the ray took (the sky: 4, 4, 4, out of [0, 1]).
