@@ -384,9 +384,9 @@ TEST_F(Cli, BackendFlags) {
   EXPECT_NE(bad.output.find("--backend"), std::string::npos) << bad.output;
   EXPECT_FALSE(fs::exists(p("b.png")));
   // A command with no GPU pass refuses the GPU before it reads anything.
-  CliRun rain = run("rain --image " + img + " --range " + range + " --rate 10 --backend gpu --out " + p("r.png"));
-  EXPECT_NE(rain.status, 0);
-  EXPECT_NE(rain.output.find("rain runs on the CPU only"), std::string::npos) << rain.output;
+  CliRun insert = run("insert --image " + img + " --range " + range + " --backend gpu --out " + p("r.png"));
+  EXPECT_NE(insert.status, 0);
+  EXPECT_NE(insert.output.find("insert runs on the CPU only"), std::string::npos) << insert.output;
   EXPECT_FALSE(fs::exists(p("r.png")));
   CliRun both = run("blur --image " + img + " --sigma 3 --backend gpu --reference --out " + p("b.png"));
   EXPECT_NE(both.status, 0);

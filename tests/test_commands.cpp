@@ -83,8 +83,8 @@ TEST(Commands, ListIsWellFormed) {
 }
 
 // A command with no GPU pass refuses --backend gpu (it ran on the CPU
-// without a word: rain and wet, issue #56); one with passes takes it (the
-// context is another matter); cpu and auto pass everywhere.
+// without a word: rain and wet, issue #56, before they had passes); one with
+// passes takes it (the context is another matter); cpu and auto pass everywhere.
 TEST(Commands, OnlyCommandsWithGpuPassesTakeTheGpu) {
   int cpu_only = 0;
   for (const CommandDef& c : commands()) {
@@ -106,7 +106,7 @@ TEST(Commands, OnlyCommandsWithGpuPassesTakeTheGpu) {
       EXPECT_NE(m.find("haze"), std::string::npos) << m;  // the list of those that have passes
     }
   }
-  EXPECT_GE(cpu_only, 3);  // rain, wet and insert at least
+  EXPECT_GE(cpu_only, 3);  // insert and the LiDAR's commands at least
 }
 
 // Every command with a subcommand is listed by its parent's --help, and its

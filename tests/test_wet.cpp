@@ -11,6 +11,7 @@
 #include "brume/demo_scene.hpp"
 #include "brume/error.hpp"
 #include "brume/wet.hpp"
+#include "wet_demo.hpp"
 
 using namespace brume;
 
@@ -61,22 +62,6 @@ bool leaves_through_top(const Camera& cam, const Image& range, const Vec3& ray, 
     const double dist = std::sqrt((q.x - c.x) * (q.x - c.x) + (q.y - c.y) * (q.y - c.y) + (q.z - c.z) * (q.z - c.z));
     if (std::isfinite(rs) && dist > rs * 1.01) return false;
   }
-}
-
-// The demo scene's wet ground (brume demo's camera: 1.6 m up, 5 deg down, its field of view),
-// views of d's pixels; a blue-grey sky.
-WetScene demo_wet_scene(const DemoScene& d, double tolerance_m) {
-  const int W = d.rgb.width, H = d.rgb.height;
-  CameraPose p;
-  p.height_m = 1.6;
-  p.pitch_deg = -5.0;
-  WetScene sc;
-  sc.rgb = d.rgb;
-  sc.range = d.range;
-  sc.camera = make_camera(intrinsics_from_fov(W, H, NAN, d.fov_y_deg), W, H, p);
-  sc.ground_tolerance_m = tolerance_m;
-  sc.sky = {0.55f, 0.65f, 0.8f};
-  return sc;
 }
 
 WetFilm film(double mm, double albedo = 0.12, double rough = 1.0) {
@@ -264,7 +249,7 @@ TEST(WetCamera, DemoSceneFitsLeknerDorfAndFilmZeroIsIdentity) {
   // 5 % of Lekner & Dorf (independent integral), residual <= 4 % of the mean; off the ground unchanged.
   const int W = 256, H = 144;
   const DemoScene d = render_demo_scene(W, H);
-  WetScene sc = demo_wet_scene(d, 0.02);
+  const WetScene sc = test::demo_wet_scene(d, W, H);
   Exec exec;
   exec.threads = 2;
   Image ground;
@@ -320,7 +305,8 @@ TEST(WetCamera, AboveGroundMarchAgreesWithBlocksOffThePlane) {
   // camera's height (a mask gives the ground) the plane is unknown: blocks runs, and says so.
   const int W = 400, H = 224;
   const DemoScene d = render_demo_scene(W, H);
-  WetScene sc = demo_wet_scene(d, 0.15);
+  WetScene sc = test::demo_wet_scene(d, W, H);
+  sc.ground_tolerance_m = 0.15;  // brume wet's default
   Exec exec;
   exec.threads = 2;
   Image g_old, g_new;

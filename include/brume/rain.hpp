@@ -74,6 +74,7 @@
 // attenuates it again.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -338,6 +339,8 @@ void validate_streak_camera(double z_split_m, double z_near_m, const std::option
                             const std::optional<double>& focus_distance_m, const std::string& wind,
                             const std::string& particles);
 
+class CameraRainOptics;
+
 // What the renderer takes besides the parameters.
 struct CameraRainScene {
   ConstImageView rgb;          // linear RGB
@@ -353,6 +356,10 @@ struct CameraRainScene {
   // The scene through the analytic media from their transmission τ0 (haze's composite with its
   // scattering blur); unset: T·C + (1 − T)·A per pixel.
   std::function<Image(const Image& tau0)> composite;
+  // Step 1 of the pass (the scene through the analytic media, and their transmission) done
+  // elsewhere, from the population's optics (the GPU's passes: src/effects/rain/rain_gpu.hpp);
+  // unset: on the CPU, with `composite`.
+  std::function<Image(const CameraRainOptics& optics, Image* transmission)> background;
 };
 struct CameraRainStats {
   double sigma_cam = 0.0, sigma_lidar = 0.0;
@@ -385,6 +392,14 @@ class CameraRainOptics {
   double sigma_cam() const { return pop_.sigma_cam; }
   // p(D, z) of the thinning rule.
   double estimate(double d_mm, double z) const;
+  // tau's table (the GPU's pass reads it, src/effects/rain/rain_gpu.cpp): kRainThinningSteps
+  // steps of dz = z_split / kRainThinningSteps; on step i (1-based: ((i − 1)·dz, i·dz]) G is
+  // g_start(i) + sigma_drawn(i)·(z − z_start(i)) for z >= z_start(i) = max((i − 1)·dz, z_near).
+  double step_m() const { return dz_; }
+  double g_start(int i) const { return g_[i - 1]; }
+  double sigma_drawn(int i) const { return sd_[i]; }
+  double z_start(int i) const { return std::max((i - 1) * dz_, pop_.z_near_m); }
+  const StreakPopulation& population() const { return pop_; }
 
  private:
   StreakPopulation pop_;

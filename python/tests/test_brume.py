@@ -464,6 +464,30 @@ def test_gpu_haze_and_blur_match_cpu(demo, gpu):
     assert math.sqrt(np.mean((gb - brume.blur(rgb, sigma=3).rgb) ** 2)) < 1e-3
 
 
+def test_gpu_rain_snow_wet_match_cpu(demo, gpu):
+    """backend="gpu" on the camera effects of falling particles and wet ground: the record says
+    which backend ran and what stayed on the CPU; the same particles; the image within the float
+    bounds of tests/test_rain_gpu.cpp and tests/test_wet_gpu.cpp (per pixel 1e-5; the wet
+    ground's mirrored rays may take the pixel beside the CPU's in a small share)."""
+    rgb, rng = demo["rgb"], demo["range"]
+    for fn, kw, block in ((brume.rain, dict(rate=25, z_split=5), "rain"), (brume.snow, dict(rate=1, z_split=5), "snow")):
+        cpu = fn(rgb, rng, fov_y=55, prepare="off", **kw)
+        g = fn(rgb, rng, fov_y=55, prepare="off", backend="gpu", **kw)
+        assert g.record["execution"]["backend"] == "gpu" and cpu.record["execution"]["backend"] == "cpu"
+        assert "on the CPU" in g.record["execution"]["split"]
+        assert g.record[block] == cpu.record[block]
+        assert np.max(np.abs(g.rgb - cpu.rgb)) < 1e-5 and np.max(np.abs(g.transmission - cpu.transmission)) < 1e-5
+    pose = dict(fov_y=55, camera_height=1.6, pitch=-5)
+    cpu = brume.wet(rgb, rng, film=1.5, **pose)
+    g = brume.wet(rgb, rng, film=1.5, backend="gpu", **pose)
+    assert g.record["execution"]["backend"] == "gpu" and "march" in g.record["execution"]
+    assert np.array_equal(g.ground, cpu.ground)
+    off = g.ground == 0
+    assert np.array_equal(g.rgb[off], rgb[off])  # off the ground: the input, bit for bit
+    far = np.max(np.abs(g.rgb - cpu.rgb), axis=-1) > 1e-5
+    assert far.sum() <= 0.02 * cpu.ground.sum()
+
+
 def test_gpu_from_threads(demo, gpu):
     """Each thread makes its own context on its first GPU call and reuses it
     for its later ones (the same context, the same bits); two threads hold two

@@ -174,6 +174,9 @@ void scatter_first_pass(GpuContext& ctx, ScatterTargets& s, const PassSpec& pass
 // The diffusion and the composite, timed into timing.diffuse_ms and composite_ms.
 void scatter_diffuse_composite(GpuContext& ctx, ScatterTargets& s, const DiffusionParams& d, const DiffusionPlan& plan,
                                GpuFilter filter, const std::array<float, 3>& airlight, bool naive, GpuTiming& timing);
+// Haze's composite alone, of f[last] (no blur: f[0] with last = 0), timed into timing.composite_ms.
+void scatter_composite(GpuContext& ctx, ScatterTargets& s, const std::array<float, 3>& airlight, bool naive,
+                       GpuTiming& timing);
 
 double ms_since(Clock::time_point t0);
 

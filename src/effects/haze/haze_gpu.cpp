@@ -82,7 +82,12 @@ void scatter_diffuse_composite(GpuContext& ctx, ScatterTargets& s, const Diffusi
   gpu_diffuse_textures(ctx, tex(s.f[0], s.w, s.h), tex(s.f[1], s.w, s.h), tex(s.rates, s.w, s.h), d, plan, filter,
                        &s.last);
   timing.diffuse_ms = t2.stop();
+  scatter_composite(ctx, s, airlight, naive, timing);
+}
 
+void scatter_composite(GpuContext& ctx, ScatterTargets& s, const std::array<float, 3>& airlight, bool naive,
+                       GpuTiming& timing) {
+  GpuContext::Impl& g = ctx.impl();
   StageTimer t3(g, &timing.gpu_timer);
   const Program& pc = g.program(kCompositePass);
   g.begin(s.composite);
@@ -132,6 +137,7 @@ HazeResult GpuHaze::render(const HazeParams& p, const HazeAnalysis& a, GpuFilter
         glUniform1f(pr.loc("uSigmaMax"), static_cast<float>(a.sigma_max));
         glUniform1i(pr.loc("uNaive"), naive ? 1 : 0);
         glUniform1f(pr.loc("uSkyTau"), a.sky_transmission);
+        glUniform1i(pr.loc("uParticles"), 0);  // the program is shared with rain's and snow's pass
       },
       p.diffusion, a.plan, true, timing_);
   gpu::scatter_diffuse_composite(ctx_, s.t, p.diffusion, a.plan, filter, a.airlight, naive, timing_);

@@ -50,3 +50,15 @@ BRUME_FN float brume_sky_blend(float tau_scene, float tau_sky, float w) {
   if (w >= 1.0f) return tau_sky;
   return (1.0f - w) * tau_scene + w * tau_sky;
 }
+
+// A medium drawn in part as particles (rain's drops, snow's flakes; brume/rain.hpp, "Extinction
+// counted once"): what the camera's particles do not draw is analytic, its optical depth to range r
+// along a ray whose cos theta = z/r is sigma r - G(min(r cos theta, z_split)) / cos theta, never
+// below 0, with G(z) = g_start + sigma_drawn (z - z_start) on z's step of the tabulated, piecewise
+// linear G (z_start the step's start, g_start = G there, sigma_drawn the drawn particles' optical
+// depth per metre on it). Ranges in metres, coefficients per metre.
+BRUME_FN float brume_particles_optical_depth(float sigma, float r, float cos_theta, float g_start, float sigma_drawn,
+                                             float z_start, float z) {
+  float g = g_start + sigma_drawn * max(0.0f, z - z_start);
+  return max(0.0f, sigma * r - g / cos_theta);
+}

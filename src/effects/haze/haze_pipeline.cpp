@@ -154,7 +154,7 @@ PreviewFrame haze_preview_frame(const HazeParams& p, const PreviewInputs& in) {
   plan["targets"] = {{"f0", f}, {"f1", f}, {"aux", "RG32F"}, {"out", "RGBA32F"}};
   plan["steps"] = nlohmann::json::array();
   plan["steps"].push_back({{"pass", "haze.premultiply"},
-                           {"in", {"image", "range", "sky"}},
+                           {"in", {"image", "range", "sky", "range"}},
                            {"out", {"f0", "aux"}},
                            {"uniforms",
                             {{"uInvRangeMax", preview_f(static_cast<float>(1.0 / a.range_max_m))},
@@ -163,7 +163,13 @@ PreviewFrame haze_preview_frame(const HazeParams& p, const PreviewInputs& in) {
                              {"uSigmaMax", preview_f(static_cast<float>(a.sigma_max))},
                              {"uNaive", preview_i(naive ? 1 : 0)},
                              {"uSkyBlend", preview_i(blend ? 1 : 0)},
-                             {"uSkyTau", preview_f(a.sky_transmission)}}}});
+                             {"uSkyTau", preview_f(a.sky_transmission)},
+                             // haze alone: the falling particles' terms (rain's, snow's) unused, and
+                             // their table's sampler given the range (never read)
+                             {"uParticles", preview_i(0)},
+                             {"uRay", preview_f4(1.0f, 1.0f, 0.0f, 0.0f)},
+                             {"uParticleDepth", preview_f4(0.0f, 0.0f, 1.0f, 0.0f)},
+                             {"uParticleStepCount", preview_i(1)}}}});
   preview_diffusion_steps(plan, p.diffusion, a.plan, "aux", "f0", "f1", "blurred");
   plan["steps"].push_back({{"pass", "haze.composite"},
                            {"in", {"blurred", "aux"}},

@@ -193,7 +193,8 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
   };
 
   // 1. The scene through the analytic media (haze's composite, or the pipeline's).
-  Image out = streak_background(s, front_tau, sigma_total, nt, transmission);
+  Image out = s.background ? s.background(optics, transmission)
+                           : streak_background(s, front_tau, sigma_total, nt, transmission);
 
   // 2. The drops of the field in the frustum, z_near <= z < z_split at mid-exposure.
   const RainField field(rate, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);

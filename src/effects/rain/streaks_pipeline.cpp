@@ -13,6 +13,7 @@
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/record.hpp"
+#include "effects/rain/rain_gpu.hpp"
 #include "pipeline/camera_scan_arrays.hpp"
 #include "shared/prelude_cpp.h"
 
@@ -77,6 +78,15 @@ StreakRun run_camera_streaks(ConstImageView rgb, ConstImageView measured_range, 
       return scatter_blur(rgb, tau0, scale, ha.sigma_max, hp.diffusion, hp.composite, ha.airlight, exec).rgb;
     };
   }
+  // The GPU's backend: the per-pixel step (the analytic media and haze's composite) on the GPU, the
+  // particles' streaks on the CPU over it (effects/rain/rain_gpu.hpp).
+  BackendChoice backend = choose_backend(exec);
+  GpuTiming gpu_timing;
+  if (backend.gpu)
+    scene.background = [&](const CameraRainOptics& optics, Image* tr) {
+      return streak_background_gpu(*backend.gpu, scene, optics, hp, ha, hp.visibility_m.has_value(), exec.gpu_filter,
+                                   tr, gpu_timing);
+    };
   const auto t0 = std::chrono::steady_clock::now();
   StreakRun run;
   nlohmann::json& rec = run.record;
@@ -90,8 +100,12 @@ StreakRun run_camera_streaks(ConstImageView rgb, ConstImageView measured_range, 
       " or haze, blended across the horizon margin by the preparation's sky weight";
   if (hp.visibility_m) rec["haze"] = haze_record(hp, ha);
   rec["prepare"] = prep.record;
-  rec["execution"]["backend"] = "cpu";
+  rec["execution"] = backend.record;
   rec["execution"]["timing"] = cpu_timing_record(t0, 0);
+  if (backend.gpu) {
+    rec["execution"]["gpu_timing"] = gpu_timing_record(gpu_timing);
+    rec["execution"]["split"] = streak_gpu_split();
+  }
   return run;
 }
 

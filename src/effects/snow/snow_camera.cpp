@@ -114,7 +114,8 @@ Image render_camera_snow(const CameraRainScene& s, const CameraSnowParams& p, co
   }
 
   // 1. The scene through the analytic media (haze's composite, or the pipeline's).
-  Image out = streak_background(s, front_tau, sigma_total, nt, transmission);
+  Image out = s.background ? s.background(optics, transmission)
+                           : streak_background(s, front_tau, sigma_total, nt, transmission);
 
   // 2. The flakes of the field in the frustum, z_near <= z < z_split at mid-exposure.
   if (pop.any) {

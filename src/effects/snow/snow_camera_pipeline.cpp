@@ -7,6 +7,7 @@
 #include "brume/command.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/snow.hpp"
+#include "effects/rain/rain_gpu.hpp"
 #include "effects/rain/streaks_pipeline.hpp"
 #include "pipeline/camera_scan_arrays.hpp"
 
@@ -113,7 +114,8 @@ CommandDef snow_command() {
       .name = "snow",
       .cli = "snow",
       .summary = "snow on an RGB-D image: the flakes of a snowfall lit by the scene's sky and ground, depth-tested "
-                 "and blurred over the exposure, the rest as extinction in haze's composite",
+                 "and blurred over the exposure, the rest as extinction in haze's composite (--backend gpu: the "
+                 "per-pixel passes on the GPU, the flakes' splat on the CPU)",
       .table = &camera_snow_job_table(),
       .takes_exec_flags = true,
       .writes_record = true,
@@ -147,6 +149,8 @@ CommandDef snow_command() {
   // heavy snowfall (5 mm/h: several centimetres of fresh snow an hour); log because the flakes'
   // look changes over decades of the rate. The flakes' seed is drawn per frame (seed()), as
   // rain's: a fixed seed would draw the same flakes at the same pixels in every frame.
+  // --backend gpu: the per-pixel passes on the GPU, the streaks' splat on the CPU (effects/rain/rain_gpu.hpp).
+  c.gpu_passes = streak_gpu_passes();
   c.sampling = make_sampling<CameraSnowParams>(
       camera_snow_param_table(), {{"rate", "loguniform(0.2, 5)", {}}, {"snow-seed", "seed()", {}}},
       [](const CameraSnowParams& p, const std::set<std::string>&) { validate_camera_snow(p); });

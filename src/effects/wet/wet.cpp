@@ -15,6 +15,7 @@
 #include "brume/error.hpp"
 #include "brume/medium.hpp"
 #include "core/text.hpp"
+#include "effects/wet/wet_gpu.hpp"
 
 namespace brume {
 
@@ -168,7 +169,7 @@ constexpr int kWetCoarseBlock = 32, kWetFineBlock = 8;
 
 }  // namespace
 
-Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats* stats, Image* ground_out) {
+void check_wet_scene(const WetScene& s) {
   const int W = s.rgb.width(), H = s.rgb.height();
   if (s.range.width() != W || s.range.height() != H)
     throw Error("the range is " + std::to_string(s.range.width()) + "x" + std::to_string(s.range.height()) +
@@ -178,6 +179,12 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
     throw Error("the ground mask is " + std::to_string(s.mask.width()) + "x" + std::to_string(s.mask.height()) +
                 " but the image is " + std::to_string(W) + "x" + std::to_string(H) + "; give a mask of the image's size");
   if (!masked) s.camera.require_height("wet ground (the ground plane; or give a ground mask)");
+}
+
+Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats* stats, Image* ground_out) {
+  check_wet_scene(s);
+  const int W = s.rgb.width(), H = s.rgb.height();
+  const bool masked = s.mask.width() > 0;
   const WetOptics o(w);
   Image out = s.rgb.to_image();
   Image ground(W, H, 1);
