@@ -635,7 +635,7 @@ TEST(LidarRain, LastReturnKeepsTheDetectedTargetElseTheFarthestDrop) {
   LidarRainParams p = rain(100.0);
   p.divergence_mrad = 20.0;
   p.seed = 5;
-  const std::size_t n = 300;
+  const std::size_t n = 200;
   std::vector<float> in = scan(n, 2.0, 30.0, 0.0, 8);
   for (std::size_t i = 0; i < n; ++i) in[4 * i + 3] = static_cast<float>((i % 10) * 0.02);
   std::vector<float> out(in.size()), out_s(in.size());
@@ -689,10 +689,10 @@ TEST(LidarRain, GeneralPassRepeatsTheCellPassAtFrameZero) {
   if (!have_data(k)) GTEST_SKIP() << data_absent(k);
   const std::vector<float> all = read_kitti_bin(data_path(k), "--points");
   std::vector<float> v;
-  for (std::size_t i = 0; i < all.size() / 4; i += 7) v.insert(v.end(), all.begin() + 4 * i, all.begin() + 4 * i + 4);
+  for (std::size_t i = 0; i < all.size() / 4; i += 60) v.insert(v.end(), all.begin() + 4 * i, all.begin() + 4 * i + 4);
   p = rain(25.0);
   p.seed = 1;
-  same_echoes(v, p, LidarRainSearch::general, LidarRainSearch::by_cell, "KITTI, every 7th point");
+  same_echoes(v, p, LidarRainSearch::general, LidarRainSearch::by_cell, "KITTI, every 60th point");
 }
 
 std::string text_of(double x) {
@@ -881,7 +881,7 @@ TEST_F(LidarRainFrames, ConsecutiveFramesShowTheSameDropsMovedInClosedForm) {
 // an ego speed or the poses of frame 0 (and its calibration) is the scan without them; a frame > 0
 // is a different scan with the same statistics (the field stays Poisson: the fraction of points
 // moved to drops at frame 1000 with wind, 100 s, every drop having wrapped in its layer, agrees
-// with frame 0's over 6 seeds within 4 standard errors of the difference); bad poses are refused
+// with frame 0's over 3 seeds within 4 standard errors of the difference); bad poses are refused
 // naming the flag and line.
 TEST_F(LidarRainFrames, FrameZeroRepeatsTheScanAndFramesKeepTheStatistics) {
   std::ofstream(p("calib.txt")) << kitti_calib_text();
@@ -889,13 +889,14 @@ TEST_F(LidarRainFrames, FrameZeroRepeatsTheScanAndFramesKeepTheStatistics) {
     std::ofstream f(p("poses.txt"));
     f << row_3x4(yaw(0.3, {1, 2, 3})) << "\n" << row_3x4(yaw(0.35, {1, 2, 4})) << "\n";
   }
-  // A sector ahead (azimuth ±30°, elevation −15° to +2°, 2-15 m, reflectance 0), as a spinning
-  // LiDAR's beams: the moving field's pass draws each column of its layer the cones cross.
+  // A sector ahead (azimuth ±15°, elevation −10° to +2°, 2-6 m, reflectance 0) of 6 mrad beams at
+  // 100 mm/h, which meet drops often: the moving field's pass draws each column of its layer the
+  // cones cross, so a near sector keeps it cheap.
   std::vector<float> in;
   {
     std::mt19937 g(31);
-    std::uniform_real_distribution<double> az(-0.52, 0.52), el(-0.26, 0.035), rr(2.0, 15.0);
-    for (int i = 0; i < 3000; ++i) {
+    std::uniform_real_distribution<double> az(-0.26, 0.26), el(-0.17, 0.035), rr(2.0, 6.0);
+    for (int i = 0; i < 2000; ++i) {
       const double a = az(g), e = el(g), r = rr(g);
       in.insert(in.end(), {static_cast<float>(r * std::cos(e) * std::cos(a)), static_cast<float>(r * std::cos(e) * std::sin(a)),
                            static_cast<float>(r * std::sin(e)), 0.0f});
@@ -908,8 +909,8 @@ TEST_F(LidarRainFrames, FrameZeroRepeatsTheScanAndFramesKeepTheStatistics) {
     out.resize(4 * (st.run.points - st.run.lost));
     return std::make_pair(out, st);
   };
-  LidarRainParams p0 = rain(25.0);
-  p0.seed = 2;
+  LidarRainParams p0 = rain(100.0);
+  p0.seed = 2, p0.divergence_mrad = 6.0;
   const auto ref = run_scan(p0);
   LidarRainParams q = p0;
   q.wind = "3,1,0", q.ego_speed_m_s = 20.0;
@@ -922,18 +923,18 @@ TEST_F(LidarRainFrames, FrameZeroRepeatsTheScanAndFramesKeepTheStatistics) {
   EXPECT_EQ(run_scan(c).first, cal.first);  // frame 0 of a sequence
   c.frame = 1;
   EXPECT_NE(run_scan(c).first, cal.first);
-  // Frame 1000 (100 s: every drop has crossed its layer) against frame 0, 6 seeds.
+  // Frame 1000 (100 s: every drop has crossed its layer) against frame 0, 3 seeds.
   double m0 = 0, m1 = 0;
-  const double n = static_cast<double>(in.size() / 4) * 6;
-  for (std::uint64_t seed = 0; seed < 6; ++seed) {
-    LidarRainParams a = rain(25.0), b = rain(25.0);
+  const double n = static_cast<double>(in.size() / 4) * 3;
+  for (std::uint64_t seed = 0; seed < 3; ++seed) {
+    LidarRainParams a = p0, b = p0;
     a.seed = b.seed = seed;
     b.frame = 1000, b.wind = "2,-1,0.5";
     m0 += static_cast<double>(run_scan(a).second.run.echoes);
     m1 += static_cast<double>(run_scan(b).second.run.echoes);
   }
   const double f0 = m0 / n, f1 = m1 / n, se = std::sqrt(2.0 * f0 * (1 - f0) / n);
-  EXPECT_GT(f0, 0.02);
+  EXPECT_GT(f0, 0.3);
   EXPECT_NEAR(f1, f0, 4.0 * se) << "moved fractions " << f0 << " at frame 0, " << f1 << " at frame 1000";
   // Refusals.
   {
