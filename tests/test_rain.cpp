@@ -270,7 +270,9 @@ TEST(LidarRain, RateZeroGivesTheScanBackByteForByte) {
 struct Strongest {
   double power = -1.0, range = 0.0, reported = 0.0;
 };
-Strongest strongest_drop(const RainField& field, const MediumRay& b, double r, const LidarRainParams& p) {
+// The farthest one above the floor instead with `farthest`.
+Strongest strongest_drop(const RainField& field, const MediumRay& b, double r, const LidarRainParams& p,
+                         bool farthest = false) {
   const double theta = p.divergence_mrad * 1e-3, sigma = rain_extinction_per_m(*p.drops.rate_mm_h);
   Strongest s;
   std::vector<RainDrop> drops;
@@ -283,7 +285,7 @@ Strongest strongest_drop(const RainField& field, const MediumRay& b, double r, c
       if (t < p.blind_range_m || t >= r || perp2 > (t * theta / 2) * (t * theta / 2)) continue;
       const double a = std::min(1.0, (d.d_mm * 1e-3 / (theta * t)) * (d.d_mm * 1e-3 / (theta * t)));
       const double rep = p.drop_reflectance * std::exp(-2.0 * sigma * t) * a;
-      if (rep / (t * t) >= p.noise_floor && rep / (t * t) > s.power) s = {rep / (t * t), t, rep};
+      if (rep / (t * t) >= p.noise_floor && (farthest ? t > s.range : rep / (t * t) > s.power)) s = {rep / (t * t), t, rep};
     }
   }
   return s;
@@ -606,30 +608,9 @@ void same_echoes(const std::vector<float>& pts, const LidarRainParams& p, LidarR
   }
 }
 
-// The farthest drop echo above the floor on a beam, over every drop of the unthinned field near
-// its axis (written here, as strongest_drop).
-Strongest farthest_drop(const RainField& field, const MediumRay& b, double r, const LidarRainParams& p) {
-  const double theta = p.divergence_mrad * 1e-3, sigma = rain_extinction_per_m(*p.drops.rate_mm_h);
-  Strongest s;
-  std::vector<RainDrop> drops;
-  for (const auto& c : brute_cells(b, p.blind_range_m, std::min(r, 40.0))) {
-    drops.clear();
-    field.cell_drops({c[0], c[1], c[2]}, 0.0, drops);
-    for (const RainDrop& d : drops) {
-      const double t = d.at.x * b.dir.x + d.at.y * b.dir.y + d.at.z * b.dir.z;
-      const double perp2 = d.at.x * d.at.x + d.at.y * d.at.y + d.at.z * d.at.z - t * t;
-      if (t < p.blind_range_m || t >= r || perp2 > (t * theta / 2) * (t * theta / 2)) continue;
-      const double a = std::min(1.0, (d.d_mm * 1e-3 / (theta * t)) * (d.d_mm * 1e-3 / (theta * t)));
-      const double rep = p.drop_reflectance * std::exp(-2.0 * sigma * t) * a;
-      if (rep / (t * t) >= p.noise_floor && t > s.range) s = {rep / (t * t), t, rep};
-    }
-  }
-  return s;
-}
-
 // --return-mode last: a point is kept wherever the detection rule keeps its target (the same draw
 // as the strongest mode's, so the lost points are the same ones), else it moves to the farthest
-// drop echo above the floor (found here over the unthinned field), else it is lost. The three
+// drop echo above the floor (found here over the unthinned field, strongest_drop's), else it is lost. The three
 // searches (beam by beam, cell by cell, the general pass) give the same echoes.
 TEST(LidarRain, LastReturnKeepsTheDetectedTargetElseTheFarthestDrop) {
   LidarRainParams p = rain(100.0);
@@ -651,7 +632,7 @@ TEST(LidarRain, LastReturnKeepsTheDetectedTargetElseTheFarthestDrop) {
     const float* q = in.data() + 4 * i;
     const double r = std::sqrt(double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2]);
     const MediumRay b{{0, 0, 0}, {q[0] / r, q[1] / r, q[2] / r}};
-    const Strongest far = farthest_drop(field, b, r, p), strong = strongest_drop(field, b, r, p);
+    const Strongest far = strongest_drop(field, b, r, p, true), strong = strongest_drop(field, b, r, p);
     EXPECT_EQ(labels[i] == 2, labels_s[i] == 2);       // the same detection draws
     if (labels[i] == 1) EXPECT_EQ(labels_s[i], 1);     // a target lost in last mode is lost (or beaten) in strongest
     if (labels[i] == 2) EXPECT_LT(far.power, 0.0);     // lost only without a drop above the floor

@@ -595,6 +595,38 @@ double diamond_angle(double x, double y) {
   return x < 0.0 ? 2.0 - y / (-x - y) : 3.0 + x / (x - y);
 }
 
+// The scan's beams from the sensor into S.all (their directions, through `rotation` when given,
+// unit length) and S.point_of; e_lo, e_hi their directions' z range. Beams within the blind zone
+// or reaching no cell before r_reach are left out.
+void gather_beams(CellPassScratch& S, const float* points, std::size_t n, double r_min, double reach,
+                  const Mat3* rotation, double& e_lo, double& e_hi) {
+  S.all.clear(), S.point_of.clear();
+  e_lo = 2.0, e_hi = -2.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = points[4 * i], y = points[4 * i + 1], z = points[4 * i + 2];
+    const double r = std::sqrt(x * x + y * y + z * z);
+    if (!(r > r_min)) continue;
+    Vec3 u{x / r, y / r, z / r};
+    if (rotation) {  // unit length again (a calibration's rotation is orthonormal to its digits only)
+      const Vec3 d = *rotation * Vec3{x, y, z};
+      const double dn = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+      u = {d.x / dn, d.y / dn, d.z / dn};
+    }
+    const CellPassBeam b{u, r, std::min(r, reach)};
+    if (!(b.t1 > r_min)) continue;  // visit() meets no cell
+    e_lo = std::min(e_lo, b.dir.z), e_hi = std::max(e_hi, b.dir.z);
+    S.all.push_back(b), S.point_of.push_back(i);
+  }
+}
+
+// The pass's beams in their points' order.
+const std::vector<std::uint32_t>& beams_in_point_order(CellPassScratch& S) {
+  S.order.resize(S.beams.size());
+  for (std::size_t k = 0; k < S.beams.size(); ++k) S.order[k] = static_cast<std::uint32_t>(k);
+  std::sort(S.order.begin(), S.order.end(), [&](std::uint32_t a, std::uint32_t b) { return S.point[a] < S.point[b]; });
+  return S.order;
+}
+
 // The beams binned by direction (diamond angle, sin elevation; bins of w in both, at least 2ψ, at
 // most 4 M bins), each in every bin its cone (half-angle ψ, rounded up) can reach: S.beams and
 // S.point (from S.all and S.point_of) in their bins' order, S.start and S.in_bin the bins' beams,
@@ -714,20 +746,9 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
   const double psi = std::atan(hw) * (1.0 + 1e-6) + 1e-9;  // the cone's half-angle, rounded up
   // Scratch reused from call to call (a scan's worth of arrays: no page faults after the first).
   thread_local CellPassScratch S;
-  std::vector<CellPassBeam>& all = S.all;
-  std::vector<std::size_t>& point_of = S.point_of;
-  all.clear(), point_of.clear();
-  double e_lo = 2.0, e_hi = -2.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const double x = points[4 * i], y = points[4 * i + 1], z = points[4 * i + 2];
-    const double r = std::sqrt(x * x + y * y + z * z);
-    if (!(r > r_min)) continue;
-    const CellPassBeam b{{x / r, y / r, z / r}, r, std::min(r, reach_)};
-    if (!(b.t1 > r_min)) continue;  // visit() meets no cell
-    e_lo = std::min(e_lo, b.dir.z), e_hi = std::max(e_hi, b.dir.z);
-    all.push_back(b), point_of.push_back(i);
-  }
-  if (all.empty()) return;
+  double e_lo, e_hi;
+  gather_beams(S, points, n, r_min, reach_, nullptr, e_lo, e_hi);
+  if (S.all.empty()) return;
   const BeamBins bb = bin_beams(S, psi, e_lo, e_hi);
   const int nD = bb.nD, nE = bb.nE;
   const auto e_bin = [&](double e) { return bb.e_bin(e); };
@@ -868,11 +889,7 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
   }
   drawn_ += drawn;
   // In the points' order; the beams the pass cannot vouch for, beam by beam.
-  std::vector<std::uint32_t>& order = S.order;
-  order.resize(beams.size());
-  for (std::size_t k = 0; k < beams.size(); ++k) order[k] = static_cast<std::uint32_t>(k);
-  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return point[a] < point[b]; });
-  for (const std::uint32_t k : order) {
+  for (const std::uint32_t k : beams_in_point_order(S)) {
     CellPassBest& o = best[k];
     const CellPassBeam& b = beams[k];
     if (o.redo) {
@@ -900,23 +917,9 @@ void LidarRain::scan_echoes_general(const float* points, std::size_t n, std::vec
   const double o[3] = {O.x, O.y, O.z};
   const double psi = std::atan(hw) * (1.0 + 1e-6) + 1e-9;
   thread_local CellPassScratch S;
-  std::vector<CellPassBeam>& all = S.all;
-  std::vector<std::size_t>& point_of = S.point_of;
-  all.clear(), point_of.clear();
-  double e_lo = 2.0, e_hi = -2.0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const double x = points[4 * i], y = points[4 * i + 1], z = points[4 * i + 2];
-    const double r = std::sqrt(x * x + y * y + z * z);
-    if (!(r > r_min)) continue;
-    // The direction in the world, unit length (a calibration's rotation is orthonormal to its digits only).
-    const Vec3 d = R * Vec3{x, y, z};
-    const double dn = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
-    const CellPassBeam b{{d.x / dn, d.y / dn, d.z / dn}, r, std::min(r, reach_)};
-    if (!(b.t1 > r_min)) continue;
-    e_lo = std::min(e_lo, b.dir.z), e_hi = std::max(e_hi, b.dir.z);
-    all.push_back(b), point_of.push_back(i);
-  }
-  if (all.empty()) return;
+  double e_lo, e_hi;
+  gather_beams(S, points, n, r_min, reach_, &R, e_lo, e_hi);
+  if (S.all.empty()) return;
   const BeamBins bb = bin_beams(S, psi, e_lo, e_hi);
   std::vector<CellPassBeam>& beams = S.beams;
   std::vector<std::size_t>& point = S.point;
@@ -1055,11 +1058,7 @@ void LidarRain::scan_echoes_general(const float* points, std::size_t n, std::vec
       }
     }
   drawn_ += drawn;
-  std::vector<std::uint32_t>& order = S.order;
-  order.resize(beams.size());
-  for (std::size_t k = 0; k < beams.size(); ++k) order[k] = static_cast<std::uint32_t>(k);
-  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return point[a] < point[b]; });
-  for (const std::uint32_t k : order)
+  for (const std::uint32_t k : beams_in_point_order(S))
     if (best[k].power >= 0.0) out.push_back({point[k], best[k].t, best[k].power * beams[k].r * beams[k].r, best[k].reported});
 }
 
