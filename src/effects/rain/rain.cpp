@@ -1091,6 +1091,9 @@ LidarRainStats lidar_rain(const float* in, float* out, std::size_t n, const Lida
 nlohmann::json lidar_rain_record(const LidarRainParams& p, const LidarRainStats& st) {
   const double r = p.drops.rate_mm_h.value_or(0.0);
   const std::size_t moved = st.run.echoes, lost = st.run.lost;
+  nlohmann::json files = nlohmann::json::object();  // the files the pose was read from, hashed (brume run checks them)
+  if (!p.poses.empty()) files["poses"] = {{"path", p.poses}, {"sha256", sha256_file(p.poses)}};
+  if (!p.kitti_calib.empty()) files["kitti_calib"] = {{"path", p.kitti_calib}, {"sha256", sha256_file(p.kitti_calib)}};
   return {{"model",
            "Marshall-Palmer 1948 drop sizes, Atlas et al. 1973 fall speed; per beam the drops in its cone echo "
            "(Kilic et al. 2021, from the paper's equations), the strongest return wins, speckle detection against "
@@ -1119,6 +1122,7 @@ nlohmann::json lidar_rain_record(const LidarRainParams& p, const LidarRainStats&
           {"wind_m_s", p.wind},
           {"ego_speed_m_s", p.ego_speed_m_s},
           {"field_frame", st.field_frame},
+          {"pose_files", files},
           {"layer_m", kRainLayerM},
           {"layer_base_m", kRainLayerBaseM},
           {"layer_from",
