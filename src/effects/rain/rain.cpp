@@ -988,13 +988,14 @@ void LidarRain::scan_echoes_general(const float* points, std::size_t n, std::vec
           // Which source heights land in [z_lo, z_hi]: at t = 0 those; else per layer, the landing
           // heights moved up by the fall over t, f·t with f in [v(D_lo) − w_z, v(D_max) − w_z].
           spans.clear();
+          double f_lo = 0.0;  // [m/s] the slowest fall (less the wind's w_z) of a drop drawn in this column
           if (t_s == 0.0) {
             spans.push_back({zc[0], zc[1]});
           } else {
             const double r_lo = std::max(r_min, std::sqrt(gxy) * cos_half_ * (1.0 - 1e-12));
             const double d_lo = std::max(p_.drops.drop_min_mm, k_ * r_lo * r_lo * 1e3 * (1.0 - 1e-12));
             if (d_lo > p_.drops.drop_max_mm) continue;
-            const double f_lo = atlas_terminal_velocity_m_per_s(d_lo) - wind.z;
+            f_lo = atlas_terminal_velocity_m_per_s(d_lo) - wind.z;
             const std::int64_t j0 = static_cast<std::int64_t>(std::floor((z_lo - base0) / H)),
                                j1 = static_cast<std::int64_t>(std::floor((z_hi - base0) / H));
             for (std::int64_t j = j0; j <= j1; ++j) {
@@ -1033,7 +1034,23 @@ void LidarRain::scan_echoes_general(const float* points, std::size_t n, std::vec
               const std::size_t jq = static_cast<std::size_t>(dist2 * inv_dq);
               if (jq > static_cast<std::size_t>(nq) || RainField::first_unit(h) > u_max[jq]) continue;
               const double r_near = std::max(r_min, std::sqrt(dist2) * cos_half_);
-              const double m = field_.measure_above(k_ * r_near * r_near * 1e3);
+              double d_cut = k_ * r_near * r_near * 1e3;
+              if (t_s != 0.0) {
+                // A drop of this cell lands in [z_lo, z_hi] (within its layer) only when f·t ≡ z_s − z
+                // (mod H), f = v(D) − w_z: the smallest such f >= f_lo gives the smallest diameter that
+                // can (v increases with D), below which the cell's drops, drawn largest first, are not drawn.
+                const double lz = static_cast<double>(iz) * c;
+                const double lb = base0 + std::floor((lz - base0) / H) * H;
+                const double top = std::min(z_hi, lb + H), bottom = std::max(z_lo, lb);
+                if (top < bottom) continue;
+                const double a = lz - top - 1e-6, b = lz + c - bottom + 1e-6;
+                const double ft_lo = f_lo * t_s - 1e-9 * (1.0 + std::abs(f_lo * t_s));
+                const double ft = std::max(ft_lo, a + std::ceil((ft_lo - b) / H) * H);
+                if (ft / t_s > v_hi + 1e-9) continue;  // no drop falls that fast
+                const double v = ft / t_s + wind.z;   // v(D*) of the smallest diameter D* that can land here
+                if (v > 0.0 && v < 9.65) d_cut = std::max(d_cut, -std::log((9.65 - v) / 10.3) / 0.6 * (1.0 - 1e-9));
+              }
+              const double m = field_.measure_above(d_cut);
               if (!(m > 0.0)) continue;
               field_.for_each_drop_hashed({ix, iy, iz}, h, m, [&](const Vec3& at0, double s) {
                 ++drawn;
