@@ -344,23 +344,29 @@ TEST(LidarRain, EchoesAreTheStrongestDropOfTheBeamsCone) {
   EXPECT_GT(st.drops_drawn, 0u);
 }
 
-// The echoes of the cell-major pass and of the beam-by-beam search, field by field, exactly.
-void same_echoes_cell_and_beam(const std::vector<float>& pts, const LidarRainParams& p, const char* what) {
+// The echoes of two searches, field by field, exactly.
+void same_echoes(const std::vector<float>& pts, const LidarRainParams& p, LidarRainSearch a_search,
+                 LidarRainSearch b_search, const char* what) {
   SCOPED_TRACE(what);
   const std::size_t n = pts.size() / 4;
-  const std::unique_ptr<Medium> cell = lidar_rain_as_medium_searching(p, LidarRainSearch::by_cell),
-                                beam = lidar_rain_as_medium_searching(p, LidarRainSearch::by_beam);
+  const std::unique_ptr<Medium> ma = lidar_rain_as_medium_searching(p, a_search),
+                                mb = lidar_rain_as_medium_searching(p, b_search);
   std::vector<ScanEcho> a, b;
-  cell->scan_echoes(pts.data(), n, a);
-  beam->scan_echoes(pts.data(), n, b);
+  ma->scan_echoes(pts.data(), n, a);
+  mb->scan_echoes(pts.data(), n, b);
   ASSERT_EQ(a.size(), b.size());
-  EXPECT_GT(a.size(), n / 50);  // the beams met drops
+  EXPECT_GT(a.size(), n / 50);
   for (std::size_t k = 0; k < a.size(); ++k) {
     ASSERT_EQ(a[k].point, b[k].point) << k;
     EXPECT_EQ(a[k].range_m, b[k].range_m) << a[k].point;
     EXPECT_EQ(a[k].intensity, b[k].intensity) << a[k].point;
     EXPECT_EQ(a[k].reported, b[k].reported) << a[k].point;
   }
+}
+
+// The echoes of the cell-major pass and of the beam-by-beam search.
+void same_echoes_cell_and_beam(const std::vector<float>& pts, const LidarRainParams& p, const char* what) {
+  same_echoes(pts, p, LidarRainSearch::by_cell, LidarRainSearch::by_beam, what);
 }
 
 // The scan's echoes drawn cell by cell (each cell once, its drops against the
@@ -587,26 +593,6 @@ TEST_F(LidarRainCli, BadInputsWriteNothing) {
 
 
 // ---- --return-mode last, the field's motion and frames, the camera's frame (issue #56) ----------
-
-// The echoes of two searches, field by field, exactly.
-void same_echoes(const std::vector<float>& pts, const LidarRainParams& p, LidarRainSearch a_search,
-                 LidarRainSearch b_search, const char* what) {
-  SCOPED_TRACE(what);
-  const std::size_t n = pts.size() / 4;
-  const std::unique_ptr<Medium> ma = lidar_rain_as_medium_searching(p, a_search),
-                                mb = lidar_rain_as_medium_searching(p, b_search);
-  std::vector<ScanEcho> a, b;
-  ma->scan_echoes(pts.data(), n, a);
-  mb->scan_echoes(pts.data(), n, b);
-  ASSERT_EQ(a.size(), b.size());
-  EXPECT_GT(a.size(), n / 50);
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    ASSERT_EQ(a[k].point, b[k].point) << k;
-    EXPECT_EQ(a[k].range_m, b[k].range_m) << a[k].point;
-    EXPECT_EQ(a[k].intensity, b[k].intensity) << a[k].point;
-    EXPECT_EQ(a[k].reported, b[k].reported) << a[k].point;
-  }
-}
 
 // --return-mode last: a point is kept wherever the detection rule keeps its target (the same draw
 // as the strongest mode's, so the lost points are the same ones), else it moves to the farthest

@@ -522,6 +522,20 @@ class LidarRain final : public Medium {
   }
 
   void scan_echoes_by_cell(const float* points, std::size_t n, std::vector<ScanEcho>& out) const;
+  // u_max[j] (kMeasureBounds + 1 of them, j = dist2·inv_dq for squared distances up to r_far²):
+  // an upper bound of the first uniform draw of a cell at least √dist2 away that holds a drop the
+  // thinning keeps (its measure M(k·r_near²), r_near >= √dist2·cos(θ/2), with a margin); returns inv_dq.
+  static constexpr int kMeasureBounds = 4096;
+  double measure_bounds(double r_far, std::vector<double>& u_max) const {
+    const double inv_dq = kMeasureBounds / (r_far * r_far);
+    u_max.resize(kMeasureBounds + 1);
+    for (int j = 0; j <= kMeasureBounds; ++j) {
+      const double r_lo = std::max(p_.blind_range_m, std::sqrt(j / inv_dq) * cos_half_ * (1.0 - 1e-12));
+      const double m_up = field_.measure_above(k_ * r_lo * r_lo * 1e3 * (1.0 - 1e-12));
+      u_max[j] = m_up > 0.0 ? -std::expm1(-m_up * (1.0 + 1e-6)) + 1e-12 : 0.0;
+    }
+    return inv_dq;
+  }
   void scan_echoes_general(const float* points, std::size_t n, std::vector<ScanEcho>& out) const;
 
   // Calls f(t, P_d, ρ_d·e^{−2σt}·a) for every drop in the beam's cone over
@@ -821,16 +835,9 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
   // 3. An upper bound of a cell's measure by its squared distance: visit()
   // draws to M(k·r_near²), r_near >= √dist2·cos(θ/2); the cell holds no drop
   // when its first draw u > 1 − e^{−M} (with a margin).
-  const double q_max = r_far * r_far;
-  const int nq = 4096;
-  const double inv_dq = nq / q_max;
-  std::vector<double>& u_max = S.u_max;
-  u_max.resize(nq + 1);
-  for (int j = 0; j <= nq; ++j) {
-    const double r_lo = std::max(r_min, std::sqrt(j / inv_dq) * cos_half_ * (1.0 - 1e-12));
-    const double m_up = field_.measure_above(k_ * r_lo * r_lo * 1e3 * (1.0 - 1e-12));
-    u_max[j] = m_up > 0.0 ? -std::expm1(-m_up * (1.0 + 1e-6)) + 1e-12 : 0.0;
-  }
+  const int nq = kMeasureBounds;
+  const double inv_dq = measure_bounds(r_far, S.u_max);
+  const std::vector<double>& u_max = S.u_max;
   // 4. The cells' drops against the beams of their bins.
   std::size_t drawn = 0;
   for (const std::int64_t id : bricks) {
@@ -956,16 +963,9 @@ void LidarRain::scan_echoes_general(const float* points, std::size_t n, std::vec
     }
   }
   // A cell's measure bound by the squared distance of its drops' landing place (as the cell pass).
-  const double q_max = r_far * r_far;
-  const int nq = 4096;
-  const double inv_dq = nq / q_max;
-  std::vector<double>& u_max = S.u_max;
-  u_max.resize(nq + 1);
-  for (int j = 0; j <= nq; ++j) {
-    const double r_lo = std::max(r_min, std::sqrt(j / inv_dq) * cos_half_ * (1.0 - 1e-12));
-    const double m_up = field_.measure_above(k_ * r_lo * r_lo * 1e3 * (1.0 - 1e-12));
-    u_max[j] = m_up > 0.0 ? -std::expm1(-m_up * (1.0 + 1e-6)) + 1e-12 : 0.0;
-  }
+  const int nq = kMeasureBounds;
+  const double inv_dq = measure_bounds(r_far, S.u_max);
+  const std::vector<double>& u_max = S.u_max;
   const double T2 = r_far * r_far;
   const double H = kRainLayerM, base0 = kRainLayerBaseM;
   const std::int64_t cells_per_layer = static_cast<std::int64_t>(H / c);
