@@ -9,17 +9,20 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <memory>
 #include <random>
 #include <set>
+#include <sstream>
 
 #include "brume/depth.hpp"
 #include "brume/error.hpp"
 #include "brume/rain.hpp"
 #include "effects/rain/rain_internal.hpp"
+#include "streak_scene.hpp"
 #include "test_util.hpp"
 
 namespace fs = std::filesystem;
@@ -267,7 +270,9 @@ TEST(LidarRain, RateZeroGivesTheScanBackByteForByte) {
 struct Strongest {
   double power = -1.0, range = 0.0, reported = 0.0;
 };
-Strongest strongest_drop(const RainField& field, const MediumRay& b, double r, const LidarRainParams& p) {
+// The farthest one above the floor instead with `farthest`.
+Strongest strongest_drop(const RainField& field, const MediumRay& b, double r, const LidarRainParams& p,
+                         bool farthest = false) {
   const double theta = p.divergence_mrad * 1e-3, sigma = rain_extinction_per_m(*p.drops.rate_mm_h);
   Strongest s;
   std::vector<RainDrop> drops;
@@ -280,7 +285,7 @@ Strongest strongest_drop(const RainField& field, const MediumRay& b, double r, c
       if (t < p.blind_range_m || t >= r || perp2 > (t * theta / 2) * (t * theta / 2)) continue;
       const double a = std::min(1.0, (d.d_mm * 1e-3 / (theta * t)) * (d.d_mm * 1e-3 / (theta * t)));
       const double rep = p.drop_reflectance * std::exp(-2.0 * sigma * t) * a;
-      if (rep / (t * t) >= p.noise_floor && rep / (t * t) > s.power) s = {rep / (t * t), t, rep};
+      if (rep / (t * t) >= p.noise_floor && (farthest ? t > s.range : rep / (t * t) > s.power)) s = {rep / (t * t), t, rep};
     }
   }
   return s;
@@ -339,23 +344,29 @@ TEST(LidarRain, EchoesAreTheStrongestDropOfTheBeamsCone) {
   EXPECT_GT(st.drops_drawn, 0u);
 }
 
-// The echoes of the cell-major pass and of the beam-by-beam search, field by field, exactly.
-void same_echoes_cell_and_beam(const std::vector<float>& pts, const LidarRainParams& p, const char* what) {
+// The echoes of two searches, field by field, exactly.
+void same_echoes(const std::vector<float>& pts, const LidarRainParams& p, LidarRainSearch a_search,
+                 LidarRainSearch b_search, const char* what) {
   SCOPED_TRACE(what);
   const std::size_t n = pts.size() / 4;
-  const std::unique_ptr<Medium> cell = lidar_rain_as_medium_searching(p, LidarRainSearch::by_cell),
-                                beam = lidar_rain_as_medium_searching(p, LidarRainSearch::by_beam);
+  const std::unique_ptr<Medium> ma = lidar_rain_as_medium_searching(p, a_search),
+                                mb = lidar_rain_as_medium_searching(p, b_search);
   std::vector<ScanEcho> a, b;
-  cell->scan_echoes(pts.data(), n, a);
-  beam->scan_echoes(pts.data(), n, b);
+  ma->scan_echoes(pts.data(), n, a);
+  mb->scan_echoes(pts.data(), n, b);
   ASSERT_EQ(a.size(), b.size());
-  EXPECT_GT(a.size(), n / 50);  // the beams met drops
+  EXPECT_GT(a.size(), n / 50);
   for (std::size_t k = 0; k < a.size(); ++k) {
     ASSERT_EQ(a[k].point, b[k].point) << k;
     EXPECT_EQ(a[k].range_m, b[k].range_m) << a[k].point;
     EXPECT_EQ(a[k].intensity, b[k].intensity) << a[k].point;
     EXPECT_EQ(a[k].reported, b[k].reported) << a[k].point;
   }
+}
+
+// The echoes of the cell-major pass and of the beam-by-beam search.
+void same_echoes_cell_and_beam(const std::vector<float>& pts, const LidarRainParams& p, const char* what) {
+  same_echoes(pts, p, LidarRainSearch::by_cell, LidarRainSearch::by_beam, what);
 }
 
 // The scan's echoes drawn cell by cell (each cell once, its drops against the
@@ -578,6 +589,407 @@ TEST_F(LidarRainCli, BadInputsWriteNothing) {
   const CliRun r = run("lidar rain --points " + p("ok.bin") + " --rate 5 --out " + p("o.ply"));
   EXPECT_NE(r.status, 0);
   EXPECT_NE(r.output.find(".bin"), std::string::npos) << r.output;
+}
+
+
+// ---- --return-mode last, the field's motion and frames, the camera's frame (issue #56) ----------
+
+// --return-mode last: a point is kept wherever the detection rule keeps its target (the same draw
+// as the strongest mode's, so the lost points are the same ones), else it moves to the farthest
+// drop echo above the floor (found here over the unthinned field, strongest_drop's), else it is lost. The three
+// searches (beam by beam, cell by cell, the general pass) give the same echoes.
+TEST(LidarRain, LastReturnKeepsTheDetectedTargetElseTheFarthestDrop) {
+  LidarRainParams p = rain(100.0);
+  p.divergence_mrad = 20.0;
+  p.seed = 5;
+  const std::size_t n = 200;
+  std::vector<float> in = scan(n, 2.0, 30.0, 0.0, 8);
+  for (std::size_t i = 0; i < n; ++i) in[4 * i + 3] = static_cast<float>((i % 10) * 0.02);
+  std::vector<float> out(in.size()), out_s(in.size());
+  std::vector<std::uint8_t> labels(n), labels_s(n);
+  LidarRainParams ps = p;
+  p.return_mode = "last";
+  const LidarRainStats st = lidar_rain(in.data(), out.data(), n, p, labels.data());
+  lidar_rain(in.data(), out_s.data(), n, ps, labels_s.data());
+  const RainField field(100.0, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);
+  std::size_t k = 0, moved = 0, beaten = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    SCOPED_TRACE(i);
+    const float* q = in.data() + 4 * i;
+    const double r = std::sqrt(double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2]);
+    const MediumRay b{{0, 0, 0}, {q[0] / r, q[1] / r, q[2] / r}};
+    const Strongest far = strongest_drop(field, b, r, p, true), strong = strongest_drop(field, b, r, p);
+    EXPECT_EQ(labels[i] == 2, labels_s[i] == 2);       // the same detection draws
+    if (labels[i] == 1) EXPECT_EQ(labels_s[i], 1);     // a target lost in last mode is lost (or beaten) in strongest
+    if (labels[i] == 2) EXPECT_LT(far.power, 0.0);     // lost only without a drop above the floor
+    if (labels_s[i] == 1 && labels[i] == 0) ++beaten;  // a drop outshone a target the last return keeps
+    if (labels[i] == 2) continue;
+    const float* o = out.data() + 4 * k++;
+    if (labels[i] == 1) {
+      ++moved;
+      ASSERT_GE(far.power, 0.0);
+      const double ro = std::sqrt(double(o[0]) * o[0] + double(o[1]) * o[1] + double(o[2]) * o[2]);
+      EXPECT_NEAR(ro, far.range, 2e-6 * far.range);
+      EXPECT_NEAR(o[3], far.reported, 1e-6 * far.reported);
+      if (strong.range != far.range) EXPECT_LT(far.power, strong.power);
+    } else {
+      EXPECT_EQ(o[0], q[0]);
+    }
+  }
+  EXPECT_EQ(moved, st.run.echoes);
+  EXPECT_GT(moved, 3u);
+  EXPECT_GT(beaten, 10u);
+  // The searches agree on the farthest echoes.
+  same_echoes(in, p, LidarRainSearch::by_cell, LidarRainSearch::by_beam, "last: cell and beam");
+  same_echoes(in, p, LidarRainSearch::general, LidarRainSearch::by_beam, "last: general and beam");
+}
+
+// The general pass (the one every moving or calibrated field takes), run on a scan in its own frame
+// at frame 0, finds the cell-major pass's echoes bit for bit (random beams, the axes, KITTI).
+TEST(LidarRain, GeneralPassRepeatsTheCellPassAtFrameZero) {
+  LidarRainParams p = rain(25.0);
+  same_echoes(scan(400, 0.5, 40.0, 0.1, 21), p, LidarRainSearch::general, LidarRainSearch::by_cell, "defaults");
+  p = rain(100.0);
+  p.divergence_mrad = 20.0, p.blind_range_m = 0.0, p.seed = 3;
+  same_echoes(scan(150, 0.2, 15.0, 0.2, 23), p, LidarRainSearch::general, LidarRainSearch::by_cell, "20 mrad");
+  const std::string k = kKitti;
+  if (!have_data(k)) GTEST_SKIP() << data_absent(k);
+  const std::vector<float> all = read_kitti_bin(data_path(k), "--points");
+  std::vector<float> v;
+  for (std::size_t i = 0; i < all.size() / 4; i += 60) v.insert(v.end(), all.begin() + 4 * i, all.begin() + 4 * i + 4);
+  p = rain(25.0);
+  p.seed = 1;
+  same_echoes(v, p, LidarRainSearch::general, LidarRainSearch::by_cell, "KITTI, every 60th point");
+}
+
+std::string text_of(double x) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.17g", x);
+  return b;
+}
+
+// A 4x4 rigid transform, written here (row-major, x' = M x).
+struct M4 {
+  double m[4][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}};
+  M4 operator*(const M4& b) const {
+    M4 r;
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) {
+        r.m[i][j] = 0;
+        for (int k = 0; k < 4; ++k) r.m[i][j] += m[i][k] * b.m[k][j];
+      }
+    return r;
+  }
+  Vec3 apply(const Vec3& p) const {
+    return {m[0][0] * p.x + m[0][1] * p.y + m[0][2] * p.z + m[0][3], m[1][0] * p.x + m[1][1] * p.y + m[1][2] * p.z + m[1][3],
+            m[2][0] * p.x + m[2][1] * p.y + m[2][2] * p.z + m[2][3]};
+  }
+  M4 inverse() const {  // rigid: [Rᵀ | −Rᵀt]
+    M4 r;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) r.m[i][j] = m[j][i];
+    for (int i = 0; i < 3; ++i) r.m[i][3] = -(r.m[i][0] * m[0][3] + r.m[i][1] * m[1][3] + r.m[i][2] * m[2][3]);
+    return r;
+  }
+};
+M4 from_3x4(const std::vector<double>& v) {
+  M4 r;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 4; ++j) r.m[i][j] = v[4 * i + j];
+  return r;
+}
+M4 yaw(double a, Vec3 t) {  // about camera 0's y axis (down), then t
+  M4 r;
+  r.m[0][0] = std::cos(a), r.m[0][2] = std::sin(a), r.m[2][0] = -std::sin(a), r.m[2][2] = std::cos(a);
+  r.m[0][3] = t.x, r.m[1][3] = t.y, r.m[2][3] = t.z;
+  return r;
+}
+std::string row_3x4(const M4& a) {
+  std::string s;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 4; ++j) s += text_of(a.m[i][j]) + (i == 2 && j == 3 ? "" : " ");
+  return s;
+}
+
+// A KITTI calibration written here: camera 0 looks along the Velodyne's x (x_cam = −y_velo,
+// y_cam = −z_velo, z_cam = x_velo) from 0.27 m ahead and 0.08 m below it, slightly turned; R0_rect
+// a small rotation; P2 with camera 2's 6 cm baseline.
+const std::vector<double> kTr = {0.0, -1.0, 0.0, -0.01, 0.0, 0.0, -1.0, -0.08, 1.0, 0.0, 0.0, -0.27};
+std::vector<double> small_rotation() {  // about z by 0.0099 rad, then about y by −0.0074: KITTI's R0_rect's size
+  const double a = 0.0099, b = -0.0074;
+  const double z[3][3] = {{std::cos(a), -std::sin(a), 0}, {std::sin(a), std::cos(a), 0}, {0, 0, 1}};
+  const double y[3][3] = {{std::cos(b), 0, std::sin(b)}, {0, 1, 0}, {-std::sin(b), 0, std::cos(b)}};
+  std::vector<double> r(9, 0.0);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) r[3 * i + j] += y[i][k] * z[k][j];
+  return r;
+}
+const std::vector<double> kR0 = small_rotation();
+const double kFx = 721.5, kCx = 609.6, kCy = 172.9;
+const std::vector<double> kP2 = {kFx, 0, kCx, 44.86, 0, kFx, kCy, 0.2164, 0, 0, 1, 0.002746};
+std::string kitti_calib_text() {
+  const auto line = [](const char* key, const std::vector<double>& v) {
+    std::string s = key;
+    for (double x : v) s += " " + text_of(x);
+    return s + "\n";
+  };
+  return line("P0:", {kFx, 0, kCx, 0, 0, kFx, kCy, 0, 0, 0, 1, 0}) + line("P1:", {kFx, 0, kCx, -386, 0, kFx, kCy, 0, 0, 0, 1, 0}) +
+         line("P2:", kP2) + line("P3:", {kFx, 0, kCx, -339.5, 0, kFx, kCy, 2.2, 0, 0, 1, 0.0027}) + line("R0_rect:", kR0) +
+         line("Tr_velo_to_cam:", kTr) + line("Tr_imu_to_velo:", {1, 0, 0, -0.8, 0, 1, 0, 0.3, 0, 0, 1, -0.8});
+}
+// The drop field's frame from the Velodyne's, written here: camera 2's cv frame (R0·Tr, then
+// P2's offset K⁻¹·P2[:, 3]) with the vehicle's axes (x = z_cv, y = −x_cv, z = −y_cv).
+M4 field_from_velo() {
+  M4 r0;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) r0.m[i][j] = kR0[3 * i + j];
+  const double bz = kP2[11], by = (kP2[7] - kCy * bz) / kFx, bx = (kP2[3] - kCx * bz) / kFx;
+  M4 off, axes;
+  off.m[0][3] = bx, off.m[1][3] = by, off.m[2][3] = bz;
+  axes.m[0][0] = 0, axes.m[0][2] = 1, axes.m[1][0] = -1, axes.m[1][1] = 0, axes.m[2][1] = -1, axes.m[2][2] = 0;
+  return axes * off * r0 * from_3x4(kTr);
+}
+double atlas(double d) { return 9.65 - 10.3 * std::exp(-0.6 * d); }  // written again
+
+class LidarRainFrames : public ScratchDirTest {};
+
+// Consecutive frames show the same drops moved: drops of the field (large ones, 2.5-7 m from the
+// sensor) are found at frame K on beams aimed where the closed form puts them -- their hashed
+// centre c moved by (w_x, w_y, w_z − v(D))·K·Δt, seen from the sensor's pose at K -- and at
+// frame K + 1 displaced by (w − v(D)·z)·Δt. The poses are a KITTI poses file (camera 0 turning
+// and driving) with the calibration above; then --ego-speed without a calibration. The echo's range
+// equals the drop's distance within 1e−6 m (float32 beam directions at 8 m: ~1e−6 rad of aim).
+TEST_F(LidarRainFrames, ConsecutiveFramesShowTheSameDropsMovedInClosedForm) {
+  {
+    std::ofstream(p("calib.txt")) << kitti_calib_text();
+    std::ofstream f(p("poses.txt"));
+    for (int k = 0; k < 8; ++k) f << row_3x4(yaw(0.01 + 0.03 * k, {0.02 * k * k, -0.01 * k, 1.1 * k})) << "\n";
+  }
+  struct Case {
+    const char* what;
+    bool calib;
+    double ego;
+  };
+  for (const Case& c : {Case{"poses and calibration", true, 0.0}, Case{"ego speed, the scan's frame", false, 12.0}}) {
+    SCOPED_TRACE(c.what);
+    LidarRainParams p = rain(50.0);
+    p.seed = 11, p.wind = "1.5,-2,0.25", p.frame_interval_s = 0.1, p.ego_speed_m_s = c.ego;
+    if (c.calib) p.kitti_calib = this->p("calib.txt"), p.poses = this->p("poses.txt");
+    const Vec3 w{1.5, -2.0, 0.25};
+    const RainField field(50.0, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);
+    // The sensor's pose at frame k in the field's world, written here.
+    std::vector<std::vector<double>> poses;
+    {
+      std::ifstream f(this->p("poses.txt"));
+      for (std::string line; std::getline(f, line);) {
+        std::istringstream ls(line);
+        std::vector<double> v(12);
+        for (double& x : v) ls >> x;
+        poses.push_back(v);
+      }
+    }
+    const auto world_from_sensor = [&](int k) {
+      if (!c.calib) {
+        M4 t;
+        t.m[0][3] = c.ego * 0.1 * k;
+        return t;
+      }
+      M4 r0;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) r0.m[i][j] = kR0[3 * i + j];
+      const M4 cam0_from_velo = r0 * from_3x4(kTr);
+      return field_from_velo() * cam0_from_velo.inverse() * from_3x4(poses[0]).inverse() * from_3x4(poses[k]) *
+             cam0_from_velo;
+    };
+    // Large drops of the field in front of the sensor at frame 0.
+    std::vector<RainDrop> drops, chosen;
+    for (int ix = 16; ix < 48 && chosen.size() < 12; ++ix)
+      for (int iy = -16; iy < 16; ++iy)
+        for (int iz = -8; iz < 8; ++iz) {
+          drops.clear();
+          field.cell_drops({ix, iy, iz}, 3.0, drops);
+          for (const RainDrop& d : drops) chosen.push_back(d);
+        }
+    ASSERT_GE(chosen.size(), 8u);
+    // Those 2.5-7 m from the sensor at frame 3 (the sensor has moved 3-4 m).
+    std::vector<char> use(chosen.size(), 0);
+    for (int K : {3, 4}) {
+      p.frame = static_cast<std::uint64_t>(K);
+      const M4 S = world_from_sensor(K), Sinv = S.inverse();
+      std::vector<float> pts;
+      std::vector<double> expect;
+      for (std::size_t j = 0; j < chosen.size(); ++j) {
+        const RainDrop& d = chosen[j];
+        const double t = 0.1 * K;
+        const Vec3 at{d.at.x + w.x * t, d.at.y + w.y * t, d.at.z + (w.z - atlas(d.d_mm)) * t};  // no layer crossed
+        const Vec3 q = Sinv.apply(at);  // in the sensor's frame
+        const double r = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z);
+        if (K == 3) use[j] = r > 2.5 && r < 7.0;
+        if (!use[j]) continue;
+        // The target 5 cm behind the drop, the last return: no other drop of the cone is farther.
+        pts.insert(pts.end(), {static_cast<float>(q.x / r * (r + 0.05)), static_cast<float>(q.y / r * (r + 0.05)),
+                               static_cast<float>(q.z / r * (r + 0.05)), 0.0f});
+        expect.push_back(r);
+      }
+      ASSERT_GE(expect.size(), 5u);
+      p.return_mode = "last";
+      const std::unique_ptr<Medium> m = lidar_rain_as_medium(p);
+      std::vector<ScanEcho> e;
+      m->scan_echoes(pts.data(), expect.size(), e);
+      std::vector<double> got(expect.size(), -1.0);
+      for (const ScanEcho& x : e) got[x.point] = x.range_m;
+      for (std::size_t i = 0; i < expect.size(); ++i) EXPECT_NEAR(got[i], expect[i], 1e-5) << "frame " << K << ", drop " << i;
+    }
+  }
+}
+
+// Frame 0 and no motion give today's scan bit for bit (the flags' since()): --frame 0 with a wind,
+// an ego speed or the poses of frame 0 (and its calibration) is the scan without them; a frame > 0
+// is a different scan with the same statistics (the field stays Poisson: the fraction of points
+// moved to drops at frame 1000 with wind, 100 s, every drop having wrapped in its layer, agrees
+// with frame 0's over 3 seeds within 4 standard errors of the difference); bad poses are refused
+// naming the flag and line.
+TEST_F(LidarRainFrames, FrameZeroRepeatsTheScanAndFramesKeepTheStatistics) {
+  std::ofstream(p("calib.txt")) << kitti_calib_text();
+  {
+    std::ofstream f(p("poses.txt"));
+    f << row_3x4(yaw(0.3, {1, 2, 3})) << "\n" << row_3x4(yaw(0.35, {1, 2, 4})) << "\n";
+  }
+  // A sector ahead (azimuth ±15°, elevation −10° to +2°, 2-6 m, reflectance 0) of 6 mrad beams at
+  // 100 mm/h, which meet drops often: the moving field's pass draws each column of its layer the
+  // cones cross, so a near sector keeps it cheap.
+  std::vector<float> in;
+  {
+    std::mt19937 g(31);
+    std::uniform_real_distribution<double> az(-0.26, 0.26), el(-0.17, 0.035), rr(2.0, 6.0);
+    for (int i = 0; i < 2000; ++i) {
+      const double a = az(g), e = el(g), r = rr(g);
+      in.insert(in.end(), {static_cast<float>(r * std::cos(e) * std::cos(a)), static_cast<float>(r * std::cos(e) * std::sin(a)),
+                           static_cast<float>(r * std::sin(e)), 0.0f});
+    }
+  }
+  const auto run_scan = [&](const LidarRainParams& q) {
+    std::vector<float> out(in.size());
+    std::vector<std::uint8_t> labels(in.size() / 4);
+    const LidarRainStats st = lidar_rain(in.data(), out.data(), in.size() / 4, q, labels.data());
+    out.resize(4 * (st.run.points - st.run.lost));
+    return std::make_pair(out, st);
+  };
+  LidarRainParams p0 = rain(100.0);
+  p0.seed = 2, p0.divergence_mrad = 6.0;
+  const auto ref = run_scan(p0);
+  LidarRainParams q = p0;
+  q.wind = "3,1,0", q.ego_speed_m_s = 20.0;
+  EXPECT_EQ(run_scan(q).first, ref.first);
+  LidarRainParams c = p0;
+  c.kitti_calib = p("calib.txt");
+  const auto cal = run_scan(c);
+  EXPECT_NE(cal.first, ref.first);  // the camera's frame: other drops
+  c.poses = p("poses.txt");
+  EXPECT_EQ(run_scan(c).first, cal.first);  // frame 0 of a sequence
+  c.frame = 1;
+  EXPECT_NE(run_scan(c).first, cal.first);
+  // Frame 1000 (100 s: every drop has crossed its layer) against frame 0, 3 seeds.
+  double m0 = 0, m1 = 0;
+  const double n = static_cast<double>(in.size() / 4) * 3;
+  for (std::uint64_t seed = 0; seed < 3; ++seed) {
+    LidarRainParams a = p0, b = p0;
+    a.seed = b.seed = seed;
+    b.frame = 1000, b.wind = "2,-1,0.5";
+    m0 += static_cast<double>(run_scan(a).second.run.echoes);
+    m1 += static_cast<double>(run_scan(b).second.run.echoes);
+  }
+  const double f0 = m0 / n, f1 = m1 / n, se = std::sqrt(2.0 * f0 * (1 - f0) / n);
+  EXPECT_GT(f0, 0.3);
+  EXPECT_NEAR(f1, f0, 4.0 * se) << "moved fractions " << f0 << " at frame 0, " << f1 << " at frame 1000";
+  // Refusals.
+  {
+    std::ofstream(p("bad.txt")) << "1 0 0 0 0 1 0 0 0 0 1\n";
+    std::ofstream(p("skew.txt")) << "1 0 0 0 0 1 0 0 0 0 1 0\n2 0 0 0 0 1 0 0 0 0 1 0\n";
+  }
+  LidarRainParams b = p0;
+  b.poses = p("poses.txt");
+  EXPECT_NE(error_of([&] { validate_lidar_rain(b); }).find("--kitti-calib"), std::string::npos);
+  b.kitti_calib = p("calib.txt");
+  b.ego_speed_m_s = 3;
+  EXPECT_NE(error_of([&] { validate_lidar_rain(b); }).find("--ego-speed"), std::string::npos);
+  b.ego_speed_m_s = 0, b.frame = 2;
+  EXPECT_NE(error_of([&] { lidar_rain_as_medium(b); }).find("needs line 3"), std::string::npos);
+  b.poses = p("bad.txt"), b.frame = 0;
+  EXPECT_NE(error_of([&] { lidar_rain_as_medium(b); }).find("line 1 has 11 numbers"), std::string::npos);
+  b.poses = p("skew.txt"), b.frame = 1;
+  EXPECT_NE(error_of([&] { lidar_rain_as_medium(b); }).find("not a rotation"), std::string::npos);
+  b = p0;
+  b.wind = "1,2";
+  EXPECT_NE(error_of([&] { validate_lidar_rain(b); }).find("--wind"), std::string::npos);
+  b = p0;
+  b.return_mode = "first";
+  EXPECT_NE(error_of([&] { validate_lidar_rain(b); }).find("return-mode"), std::string::npos);
+}
+
+// One frame for the camera's and the scan's drops: with the calibration, every drop the scan echoes
+// (beams from the Velodyne into the camera's view, targets 5.5 m away, only drops of 4-8 mm) that
+// projects into the image projects through KITTI's P2·R0_rect·Tr_velo_to_cam onto a pixel the camera pass brightened (its
+// drops white on black, 0.1 ms: no streak; within a pixel of it). Without the calibration the
+// scan's drops are other drops: most of their projections land on black.
+TEST_F(LidarRainFrames, ADropTheScanEchoesIsWhereTheCameraDrawsIt) {
+  std::ofstream(p("calib.txt")) << kitti_calib_text();
+  const int W = 240, Hh = 120;
+  Flat f = flat(W, Hh, kFx, 0.0f, 1000.0);
+  f.k.cx = kCx - 500.0, f.k.cy = kCy - 110.0;  // a crop of KITTI's frame about its centre (the same P2 shifted)
+  CameraRainParams cp;
+  cp.drops.rate_mm_h = 100.0, cp.drops.drop_min_mm = 4.0;
+  cp.seed = 4, cp.exposure_s = 1e-4, cp.z_split_m = 6.0, cp.epsilon = 0.0;
+  const Image img = render_camera_rain(scene_of(f, false, {1.0f, 1.0f, 1.0f}), cp, two_threads());
+  // The beams: through pixels of the crop at 8 m in camera 2's frame, from the Velodyne.
+  const M4 v2f = field_from_velo(), f2v = v2f.inverse();
+  std::vector<float> pts;
+  for (int v = 0; v < Hh; v += 1)
+    for (int u = 0; u < W; u += 1) {
+      const double x = (u - f.k.cx) / kFx, y = (v - f.k.cy) / kFx;  // cv at depth 1
+      const Vec3 cv{x * 8, y * 8, 8};
+      const Vec3 q = f2v.apply({cv.z, -cv.x, -cv.y});
+      const double r = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z);
+      pts.insert(pts.end(), {static_cast<float>(q.x / r * 5.5), static_cast<float>(q.y / r * 5.5),
+                             static_cast<float>(q.z / r * 5.5), 0.0f});
+    }
+  const auto hits = [&](bool calib) {
+    LidarRainParams lp;
+    lp.drops = cp.drops, lp.seed = cp.seed;
+    if (calib) lp.kitti_calib = p("calib.txt");
+    std::vector<ScanEcho> e;
+    lidar_rain_as_medium(lp)->scan_echoes(pts.data(), pts.size() / 4, e);
+    std::size_t lit = 0, inside = 0;
+    for (const ScanEcho& x : e) {
+      const float* q = pts.data() + 4 * x.point;
+      const double r = std::sqrt(double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2]);
+      const Vec3 pv{q[0] / r * x.range_m, q[1] / r * x.range_m, q[2] / r * x.range_m};
+      // KITTI's projection, written here: P2·R0_rect·Tr_velo_to_cam.
+      M4 r0;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) r0.m[i][j] = kR0[3 * i + j];
+      const Vec3 c0 = (r0 * from_3x4(kTr)).apply(pv);
+      const double X = kP2[0] * c0.x + kP2[2] * c0.z + kP2[3], Y = kP2[5] * c0.y + kP2[6] * c0.z + kP2[7],
+                   Z = c0.z + kP2[11];
+      const double u = X / Z - 500.0, v = Y / Z - 110.0;  // in the crop
+      if (!(u >= 1.0 && u <= W - 2.0 && v >= 1.0 && v <= Hh - 2.0)) continue;  // a cone's edge beyond the crop
+      ++inside;
+      float best = 0.0f;
+      for (int dv = -1; dv <= 1; ++dv)
+        for (int du = -1; du <= 1; ++du) {
+          const int uu = static_cast<int>(std::lround(u)) + du, vv = static_cast<int>(std::lround(v)) + dv;
+          if (uu >= 0 && uu < W && vv >= 0 && vv < Hh) best = std::max(best, img.at(uu, vv, 0));
+        }
+      lit += best > 0.02f;
+    }
+    return std::make_pair(inside, lit);
+  };
+  const auto [n_cal, lit_cal] = hits(true);
+  const auto [n_own, lit_own] = hits(false);
+  EXPECT_GE(n_cal, 20u);  // the beams met drops that project into the crop
+  EXPECT_EQ(lit_cal, n_cal) << "echoed drops the camera did not draw where they project";
+  EXPECT_LT(lit_own, n_own / 2) << "the scan's own frame: other drops";
 }
 
 }  // namespace rain_tests

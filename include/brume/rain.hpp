@@ -221,7 +221,44 @@ struct LidarRainParams {
   double noise_floor = 5e-6;         // [1/m²] > 0, F on the scan's intensity scale per m²
   double blind_range_m = 1.0;        // [m] >= 0, r_min: no drop echo nearer
   std::uint64_t seed = 0;            // the drop field's and the speckle's seed
+  // Which return a beam reports (docs/rain.md): "strongest" (the target or the strongest drop
+  // echo above the floor), "last" (the farthest return above the floor: the target when it is
+  // detected, else the farthest drop echo).
+  std::string return_mode = "strongest";
+  // The field's time and the sensor's pose (docs/rain.md, "Sequences"): frame K of a sequence is
+  // the field at t = K·Δt, every drop advected in closed form from its hashed centre c (its place
+  // at t = 0) by its fall, the wind and the sensor's motion:
+  //   p(t) = c + (w_x·t, w_y·t, wrap(c_z + (w_z − v(D))·t))  [world: the field's frame at frame 0]
+  // (wrap: within its layer of kRainLayerM, below); the sensor at frame K sits at its pose
+  // (--poses line K relative to line 0, or x = s·t for --ego-speed s).
+  std::uint64_t frame = 0;           // K
+  double frame_interval_s = 0.1;     // [s] Δt (KITTI's scans: 10 Hz)
+  std::string wind = "0,0,0";        // [m/s] X,Y,Z in the field's frame (x forward, y left, z up)
+  double ego_speed_m_s = 0.0;        // [m/s] the sensor's speed along its x axis (no --poses)
+  std::string poses;                 // KITTI odometry poses (camera 0 to world, 12 numbers a line)
+  // KITTI calibration (Tr_velo_to_cam, R0_rect, P2): the field's frame becomes camera 2's, the
+  // frame `brume rain` draws its streaks in (x forward, y left, z up, origin at camera 2's centre),
+  // so that a drop the camera draws is one the scan sees; empty: the scan's own frame.
+  std::string kitti_calib;
 };
+// The layers the falling drops wrap in (the field stays a homogeneous Poisson field at every t:
+// a drop leaving a layer's bottom re-enters at its top): [kRainLayerBaseM + j·kRainLayerM,
+// kRainLayerBaseM + (j + 1)·kRainLayerM), multiples of the cell.
+constexpr double kRainLayerM = 32.0;
+constexpr double kRainLayerBaseM = -16.0;
+// The hashed centre c [m] of a drop of diameter d_mm at time t [s] in the world frame, advected by
+// its fall v(D) and the wind w (m/s), wrapped in c's layer.
+Vec3 rain_drop_at(const Vec3& c, double d_mm, double t_s, const Vec3& wind);
+// The scan's beams in the drop field's world (its frame at frame 0) at the frame's time, from
+// --kitti-calib, --poses or --ego-speed and --frame (reads the files; errors name the flags).
+struct LidarRainPose {
+  RigidTransform world_from_sensor;  // x_world = rotation·x_scan + translation
+  double t_s = 0.0;                  // K·Δt
+  Vec3 wind;                         // [m/s]
+  bool general = false;              // not the identity at t = 0 (the scan's frame, the field as hashed)
+  std::string frame;                 // the field's frame, in words
+};
+LidarRainPose lidar_rain_pose(const LidarRainParams& p);
 const ParamTable<LidarRainParams>& lidar_rain_param_table();
 // The table's ranges and the drops' rules (validate_rain_drops).
 void validate_lidar_rain(const LidarRainParams& p);
@@ -230,6 +267,7 @@ void validate_lidar_rain(const LidarRainParams& p);
 struct LidarRainStats {
   ScanRun run;
   std::size_t drops_drawn = 0;  // drops the thinned sampler drew: each cell's once (and again for a beam redone alone)
+  std::string field_frame;      // LidarRainPose::frame
 };
 
 // Rain on n points (x, y, z [m] in the sensor frame, intensity >= 0; float32
@@ -327,6 +365,7 @@ struct CameraRainParams {
   double epsilon = 0.002;                  // [1] thinning threshold ε
   std::optional<double> visibility_m;      // [m] haze's Koschmieder visibility; unset: rain alone
   std::optional<Rgb> airlight;             // linear RGB; unset: haze's estimate
+  std::string return_mode = "strongest";   // the scan's (--lidar): LidarRainParams::return_mode
 };
 const ParamTable<CameraRainParams>& camera_rain_param_table();
 void validate_camera_rain(const CameraRainParams& p);

@@ -9,6 +9,7 @@
 #include "brume/error.hpp"
 #include "core/text.hpp"
 #include "media/scan_points_check.hpp"
+#include "media/scan_returns.hpp"
 
 namespace brume {
 
@@ -65,6 +66,13 @@ bool Medium::scan_alone(const float*, float*, std::size_t, const std::string&) c
 
 ScanRun scan_through_media(const std::vector<const Medium*>& media, const float* in, float* out, std::size_t n,
                            const std::string& what, const ScanDetection* detection, std::uint8_t* labels) {
+  return scan_through_media(media, in, out, n, what, detection, labels, ScanReturn::strongest);
+}
+
+ScanRun scan_through_media(const std::vector<const Medium*>& media, const float* in, float* out, std::size_t n,
+                           const std::string& what, const ScanDetection* detection, std::uint8_t* labels,
+                           ScanReturn mode) {
+  const bool last = mode == ScanReturn::last;
   ScanRun run;
   run.points = n;
   if (!detection && media.size() == 1 && media[0]->scan_alone(in, out, n, what)) {
@@ -101,7 +109,7 @@ ScanRun scan_through_media(const std::vector<const Medium*>& media, const float*
         throw Error(what + ": point " + std::to_string(e.point) + " gets an echo of intensity " + text::g(v) +
                     " from a medium; an echo must be finite");
       if (detection && v < floor * r0 * r0) continue;  // below the floor: never detected
-      if (v > best[e.point])
+      if (last ? best[e.point] < 0.0 || e.range_m > best_range[e.point] : v > best[e.point])
         best[e.point] = v, best_range[e.point] = e.range_m,
         best_reported[e.point] = std::isnan(e.reported) ? v : e.reported * t;
     }
@@ -116,7 +124,7 @@ ScanRun scan_through_media(const std::vector<const Medium*>& media, const float*
     // The target's clear power on its own scale: at least the floor where it was detected.
     const double clear = detection ? std::max<double>(q[3], floor * r0 * r0) : q[3];
     ScanLabel label = ScanLabel::kept;
-    if (best[i] > clear * trans && r0 > 0.0) {  // ties: the target
+    if (!last && best[i] > clear * trans && r0 > 0.0) {  // ties: the target
       label = ScanLabel::moved;
     } else if (detection && trans < 1.0 && clear > 0.0) {
       const double keep = std::exp(-(floor * r0 * r0 / clear) * (1.0 / trans - 1.0));

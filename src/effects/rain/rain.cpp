@@ -4,6 +4,7 @@
 
 #include "effects/rain/rain_internal.hpp"
 #include "media/scan_points_check.hpp"
+#include "media/scan_returns.hpp"
 
 #include <algorithm>
 #include <array>
@@ -11,8 +12,11 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <sstream>
 
+#include "brume/depth.hpp"
 #include "brume/error.hpp"
+#include "brume/io.hpp"
 #include "core/math_constants.hpp"  // kPi: one definition (unity builds)
 #include "core/text.hpp"
 
@@ -197,7 +201,39 @@ const ParamTable<LidarRainParams>& lidar_rain_param_table() {
         .real("blind-range", &LidarRainParams::blind_range_m, "m", Range::at_least(0.0),
               "r_min: the sensor reports no return nearer (no drop echo there)")
         .count("seed", &LidarRainParams::seed, "1", Range::at_least(0.0),
-               "seed of the drop field and of the detection draws (same seed, same scan)");
+               "seed of the drop field and of the detection draws (same seed, same scan)")
+        .choice("return-mode", &LidarRainParams::return_mode, {"strongest", "last"},
+                "which return a beam reports: strongest (the target or the strongest drop echo above the noise "
+                "floor), last (the farthest return above the floor: the target whenever it is detected, else the "
+                "farthest drop echo)")
+        .since(4, "strongest")
+        .count("frame", &LidarRainParams::frame, "1", Range::at_least(0.0),
+               "frame K of a sequence: the drop field at t = K * --frame-interval, each drop moved in closed form "
+               "by its fall speed v(D), --wind and the sensor's motion (--ego-speed or --poses); 0: the field as "
+               "hashed")
+        .since(4, 0)
+        .real("frame-interval", &LidarRainParams::frame_interval_s, "s", Range::left_open(0.0, 3600.0),
+              "time between frames (KITTI's Velodyne: 0.1 s, 10 Hz)")
+        .since(4, 0.1)
+        .text("wind", &LidarRainParams::wind,
+              "wind X,Y,Z in m/s in the drop field's frame (x forward, y left, z up), moving the drops between "
+              "frames")
+        .since(4, "0,0,0")
+        .real("ego-speed", &LidarRainParams::ego_speed_m_s, "m/s", Range::closed(-100.0, 100.0),
+              "the sensor's speed along its forward (x) axis: at frame K it has moved s * K * --frame-interval "
+              "(not with --poses)")
+        .since(4, 0.0)
+        .text("poses", &LidarRainParams::poses,
+              "KITTI odometry poses: one line of 12 numbers per frame, camera 0's 3x4 [R|t] into the world (no "
+              "header); the sensor at --frame K is placed by line K relative to line 0 (needs --kitti-calib: its "
+              "Tr_velo_to_cam and R0_rect)")
+        .reads_file()
+        .since(4, "")
+        .text("kitti-calib", &LidarRainParams::kitti_calib,
+              "KITTI calibration (Tr_velo_to_cam, R0_rect, P2): the drop field in camera 2's frame, the one brume "
+              "rain draws its streaks in, so that the scan's drops are the camera's; none: the scan's own frame")
+        .reads_file()
+        .since(4, "");
     return d;
   }();
   return t;
@@ -206,6 +242,138 @@ const ParamTable<LidarRainParams>& lidar_rain_param_table() {
 void validate_lidar_rain(const LidarRainParams& p) {
   lidar_rain_param_table().validate(p);
   validate_rain_drops(p.drops);
+  (void)parse_wind_m_s(p.wind);
+  if (!p.poses.empty() && p.kitti_calib.empty())
+    throw Error("--poses '" + p.poses +
+                "' holds camera 0's poses; the scan's pose needs --kitti-calib FILE (its Tr_velo_to_cam and R0_rect "
+                "place the Velodyne relative to camera 0)");
+  if (!p.poses.empty() && p.ego_speed_m_s != 0.0)
+    throw Error("--ego-speed " + text::g(p.ego_speed_m_s) + " with --poses '" + p.poses +
+                "': the poses already move the sensor; give one of them");
+  const double t = static_cast<double>(p.frame) * p.frame_interval_s;
+  if (!(t <= 1e6))
+    throw Error("--frame " + std::to_string(p.frame) + " at --frame-interval " + text::g(p.frame_interval_s) +
+                " s is " + text::g(t) + " s into the sequence; at most 1e6 s (11 days) is supported");
+}
+
+Vec3 rain_drop_at(const Vec3& c, double d_mm, double t_s, const Vec3& wind) {
+  if (t_s == 0.0) return c;
+  const double base = std::floor((c.z - kRainLayerBaseM) / kRainLayerM) * kRainLayerM + kRainLayerBaseM;
+  double dz = std::fmod(c.z - base + (wind.z - atlas_terminal_velocity_m_per_s(d_mm)) * t_s, kRainLayerM);
+  if (dz < 0.0) dz += kRainLayerM;
+  if (dz >= kRainLayerM) dz = 0.0;  // rounding of a tiny negative remainder
+  return {c.x + wind.x * t_s, c.y + wind.y * t_s, base + dz};
+}
+
+// ---- the scan's pose in the drop field ------------------------------------------------------
+
+namespace {
+
+RigidTransform compose(const RigidTransform& a, const RigidTransform& b) {  // a after b
+  const Vec3 t = a.rotation * b.translation;
+  return {a.rotation * b.rotation, {t.x + a.translation.x, t.y + a.translation.y, t.z + a.translation.z}};
+}
+RigidTransform inverse(const RigidTransform& a) {
+  const Mat3 rt = a.rotation.transposed();
+  const Vec3 t = rt * a.translation;
+  return {rt, {-t.x, -t.y, -t.z}};
+}
+RigidTransform rigid_3x4(const double* m) {  // row-major 3x4 [R|t]
+  RigidTransform r;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) r.rotation.m[i][j] = m[4 * i + j];
+  r.translation = {m[3], m[7], m[11]};
+  return r;
+}
+
+// Line `k` (from 0) of a KITTI poses file as a rigid transform; errors name --poses.
+RigidTransform read_kitti_pose(const std::string& path, std::uint64_t k) {
+  static const InputLimit kPosesLimit{1u << 28, "a poses file is a line of 12 numbers per frame"};
+  std::istringstream in(read_input_file(path, "--poses", kPosesLimit));
+  std::string line;
+  std::uint64_t n = 0;
+  while (std::getline(in, line)) {
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    if (n++ != k) continue;
+    std::istringstream ls(line);
+    double m[12];
+    int got = 0;
+    std::string tok;
+    while (ls >> tok) {
+      char* end = nullptr;
+      const double v = std::strtod(tok.c_str(), &end);
+      if (got >= 12 || end != tok.c_str() + tok.size() || !std::isfinite(v))
+        throw Error("--poses '" + path + "': line " + std::to_string(n) + " is not 12 finite numbers (a 3x4 [R|t] " +
+                    "row by row, KITTI odometry's format without a header)");
+      m[got++] = v;
+    }
+    if (got != 12)
+      throw Error("--poses '" + path + "': line " + std::to_string(n) + " has " + std::to_string(got) +
+                  " numbers; each line is 12 (a 3x4 [R|t] row by row)");
+    const RigidTransform r = rigid_3x4(m);
+    const Mat3 q = r.rotation * r.rotation.transposed();
+    double err = 0.0;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) err = std::max(err, std::abs(q.m[i][j] - (i == j ? 1.0 : 0.0)));
+    const Mat3& a = r.rotation;
+    const double det = a.m[0][0] * (a.m[1][1] * a.m[2][2] - a.m[1][2] * a.m[2][1]) -
+                       a.m[0][1] * (a.m[1][0] * a.m[2][2] - a.m[1][2] * a.m[2][0]) +
+                       a.m[0][2] * (a.m[1][0] * a.m[2][1] - a.m[1][1] * a.m[2][0]);
+    if (err > 1e-3 || det < 0.0)
+      throw Error("--poses '" + path + "': line " + std::to_string(n) +
+                  "'s 3x3 part is not a rotation (orthonormal within 1e-3, determinant +1)");
+    return r;
+  }
+  throw Error("--poses '" + path + "' has " + std::to_string(n) + " poses; --frame " + std::to_string(k) +
+              " needs line " + std::to_string(k + 1) + " (frames count from 0)");
+}
+
+}  // namespace
+
+LidarRainPose lidar_rain_pose(const LidarRainParams& p) {
+  LidarRainPose pose;
+  pose.t_s = static_cast<double>(p.frame) * p.frame_interval_s;
+  pose.wind = parse_wind_m_s(p.wind);
+  RigidTransform field_from_velo;  // identity without a calibration
+  RigidTransform cam0_from_velo;
+  if (!p.kitti_calib.empty()) {
+    const KittiCalib c = read_kitti_calib(p.kitti_calib);
+    RigidTransform r0;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) r0.rotation.m[i][j] = c.R0[3 * i + j];
+    cam0_from_velo = compose(r0, rigid_3x4(c.Tr));  // camera 0, rectified
+    // Camera 2's centre: P2 = K·[I | b], b = K⁻¹·P2[:, 3].
+    const double* P = c.P2;
+    const double bz = P[11], by = (P[7] - P[6] * bz) / P[5], bx = (P[3] - P[1] * by - P[2] * bz) / P[0];
+    RigidTransform cam2_from_cam0;
+    cam2_from_cam0.translation = {bx, by, bz};
+    // The field's axes from the cv frame: x = z_cv, y = −x_cv, z = −y_cv (brume rain's camera).
+    RigidTransform field_from_cv;
+    field_from_cv.rotation.m[0][0] = 0, field_from_cv.rotation.m[0][2] = 1;
+    field_from_cv.rotation.m[1][0] = -1, field_from_cv.rotation.m[1][1] = 0;
+    field_from_cv.rotation.m[2][1] = -1, field_from_cv.rotation.m[2][2] = 0;
+    field_from_velo = compose(field_from_cv, compose(cam2_from_cam0, cam0_from_velo));
+    pose.frame = "camera 2's (KITTI calibration: x forward, y left, z up, origin at its centre)";
+  } else {
+    pose.frame = "the scan's own";
+  }
+  if (!p.poses.empty() && p.frame != 0) {
+    // The Velodyne at frame K in the field's frame at frame 0: V·C⁻¹·P0⁻¹·PK·C.
+    const RigidTransform p0 = read_kitti_pose(p.poses, 0), pk = read_kitti_pose(p.poses, p.frame);
+    const RigidTransform rel = compose(inverse(p0), pk);  // camera 0 at K into camera 0 at 0
+    pose.world_from_sensor =
+        compose(field_from_velo, compose(inverse(cam0_from_velo), compose(rel, cam0_from_velo)));
+  } else {
+    if (!p.poses.empty()) (void)read_kitti_pose(p.poses, 0);  // checked even at frame 0
+    pose.world_from_sensor = field_from_velo;
+    pose.world_from_sensor.translation.x += p.ego_speed_m_s * pose.t_s;
+  }
+  const RigidTransform& w = pose.world_from_sensor;
+  bool identity = w.translation.x == 0.0 && w.translation.y == 0.0 && w.translation.z == 0.0;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) identity = identity && w.rotation.m[i][j] == (i == j ? 1.0 : 0.0);
+  pose.general = !identity || pose.t_s != 0.0;
+  return pose;
 }
 
 // ---- rain on a LiDAR scan ------------------------------------------------------------------
@@ -222,6 +390,7 @@ struct CellPassEntry {  // a beam in a bin: its test's inputs inline (one read p
   std::uint32_t k;  // its index in the pass's beams
 };
 struct CellPassBest {
+  double key = -1.0;  // what the return mode compares: the power (strongest) or the range (last)
   double power = -1.0, t = 0.0, reported = 0.0;
   bool redo = false;
 };
@@ -253,7 +422,9 @@ class LidarRain final : public Medium {
         sigma_(rain_extinction_per_m(*p.drops.rate_mm_h, kLidarRainQ)),
         field_(*p.drops.rate_mm_h, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed),
         theta_(p.divergence_mrad * 1e-3),
-        cos_half_(1.0 / std::sqrt(1.0 + theta_ / 2.0 * (theta_ / 2.0))) {
+        cos_half_(1.0 / std::sqrt(1.0 + theta_ / 2.0 * (theta_ / 2.0))),
+        last_(p.return_mode == "last"),
+        pose_(lidar_rain_pose(p)) {
     // D_t(r) = θ·r²·√(F/ρ_d) [m]: the smallest drop whose echo can reach F at r.
     if (field_.drops_per_m3() > 0.0 && p.drop_reflectance > 0.0) {
       k_ = theta_ * std::sqrt(p.noise_floor / p.drop_reflectance);
@@ -264,6 +435,14 @@ class LidarRain final : public Medium {
   double extinction_per_m() const override { return sigma_; }
 
   void particles(const MediumRay& ray, double range_m, double, std::vector<Particle>& out) const override {
+    if (pose_.general) {  // the beam's best drop in the field's world (a beam from the scan's origin)
+      const float q[4] = {static_cast<float>(ray.dir.x * range_m), static_cast<float>(ray.dir.y * range_m),
+                          static_cast<float>(ray.dir.z * range_m), 0.0f};
+      std::vector<ScanEcho> e;
+      scan_echoes_general(q, 1, e);
+      for (const ScanEcho& x : e) out.push_back({x.range_m, x.intensity, 0.0, {}});
+      return;
+    }
     visit(ray, range_m, [&](double t, double power, double) { out.push_back({t, power * range_m * range_m, 0.0, {}}); });
   }
 
@@ -274,6 +453,7 @@ class LidarRain final : public Medium {
   // is redone by visit() alone); for fewer, beam by beam (the same echoes).
   void scan_echoes(const float* points, std::size_t n, std::vector<ScanEcho>& out) const override {
     if (reach_ <= 0.0) return;
+    if (pose_.general || search_ == LidarRainSearch::general) return scan_echoes_general(points, n, out);
     const bool by_cell = search_ == LidarRainSearch::by_cell ||
                          (search_ == LidarRainSearch::chosen && n >= kLidarRainByCellBeams);
     if (by_cell) scan_echoes_by_cell(points, n, out);
@@ -295,10 +475,11 @@ class LidarRain final : public Medium {
   }
 
   nlohmann::json scan_record(const ScanRun& run) const override {
-    return lidar_rain_record(p_, {run, drawn_});
+    return lidar_rain_record(p_, {run, drawn_, pose_.frame});
   }
 
   std::size_t drawn() const { return drawn_; }
+  const std::string& field_frame() const { return pose_.frame; }
   LidarRain(const LidarRain&) = delete;
 
  private:
@@ -336,11 +517,26 @@ class LidarRain final : public Medium {
   void beam_best(double x, double y, double z, double r, double& best, double& best_t, double& best_rep) const {
     const MediumRay b{{0.0, 0.0, 0.0}, {x / r, y / r, z / r}};
     visit(b, r, [&](double t, double power, double reported) {
-      if (power > best) best = power, best_t = t, best_rep = reported;
+      if (last_ ? best < 0.0 || t > best_t : power > best) best = power, best_t = t, best_rep = reported;
     });
   }
 
   void scan_echoes_by_cell(const float* points, std::size_t n, std::vector<ScanEcho>& out) const;
+  // u_max[j] (kMeasureBounds + 1 of them, j = dist2·inv_dq for squared distances up to r_far²):
+  // an upper bound of the first uniform draw of a cell at least √dist2 away that holds a drop the
+  // thinning keeps (its measure M(k·r_near²), r_near >= √dist2·cos(θ/2), with a margin); returns inv_dq.
+  static constexpr int kMeasureBounds = 4096;
+  double measure_bounds(double r_far, std::vector<double>& u_max) const {
+    const double inv_dq = kMeasureBounds / (r_far * r_far);
+    u_max.resize(kMeasureBounds + 1);
+    for (int j = 0; j <= kMeasureBounds; ++j) {
+      const double r_lo = std::max(p_.blind_range_m, std::sqrt(j / inv_dq) * cos_half_ * (1.0 - 1e-12));
+      const double m_up = field_.measure_above(k_ * r_lo * r_lo * 1e3 * (1.0 - 1e-12));
+      u_max[j] = m_up > 0.0 ? -std::expm1(-m_up * (1.0 + 1e-6)) + 1e-12 : 0.0;
+    }
+    return inv_dq;
+  }
+  void scan_echoes_general(const float* points, std::size_t n, std::vector<ScanEcho>& out) const;
 
   // Calls f(t, P_d, ρ_d·e^{−2σt}·a) for every drop in the beam's cone over
   // [r_min, range) whose echo power P_d reaches the floor.
@@ -398,6 +594,8 @@ class LidarRain final : public Medium {
   double sigma_;
   RainField field_;
   double theta_, cos_half_, k_ = 0.0, reach_ = 0.0;
+  bool last_;
+  LidarRainPose pose_;
   mutable std::vector<RainCell> cells_;
   mutable std::vector<Slot> cache_;
   mutable std::size_t drawn_ = 0;
@@ -411,46 +609,62 @@ double diamond_angle(double x, double y) {
   return x < 0.0 ? 2.0 - y / (-x - y) : 3.0 + x / (x - y);
 }
 
-// The scan's drop echoes cell by cell (what scan_echoes_by_beam finds beam by
-// beam, bit for bit):
-//  1. the beams are binned by direction (diamond angle, sin elevation), each
-//     in every bin its cone (half-angle atan(θ/2), rounded up) can reach;
-//  2. coarse groups of beams mark the bricks (B³ cells) their cones cross,
-//     out to min(range, 1.01·r_reach), with the farthest range of the group;
-//  3. each cell of a marked brick is drawn once, to the measure visit() draws
-//     it to (its nearest range: the same for every beam from the origin); a
-//     cell whose first draw already exceeds an upper bound of that measure
-//     (tabulated by distance) holds no such drop and costs three hashes;
-//  4. each drop is tested, by visit()'s own arithmetic (echo()), against the
-//     beams of its direction's bin; it counts for a beam when visit() would
-//     have met its cell there (nearest range below min(range, r_reach)).
-// visit() meets a cell when the DDA's widened boxes hold it: a drop at least
-// 1 nm inside the cone and strictly inside its cell is in them whatever the
-// rounding. A beam with a drop nearer the cone's edge, past r_reach, or on its
-// cell's upper face, or with two strongest echoes of equal power (visit()'s
-// order decides), is redone by visit() alone.
-void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vector<ScanEcho>& out) const {
-  const double hw = theta_ / 2.0, c = kRainCellM, r_min = p_.blind_range_m;
-  const double o0[3] = {0.0, 0.0, 0.0};
-  const double psi = std::atan(hw) * (1.0 + 1e-6) + 1e-9;  // the cone's half-angle, rounded up
-  const double sin_psi = std::sin(psi);
-  // Scratch reused from call to call (a scan's worth of arrays: no page faults after the first).
-  thread_local CellPassScratch S;
-  std::vector<CellPassBeam>& all = S.all;
-  std::vector<std::size_t>& point_of = S.point_of;
-  all.clear(), point_of.clear();
-  double e_lo = 2.0, e_hi = -2.0;
+// The scan's beams from the sensor into S.all (their directions, through `rotation` when given,
+// unit length) and S.point_of; e_lo, e_hi their directions' z range. Beams within the blind zone
+// or reaching no cell before r_reach are left out.
+void gather_beams(CellPassScratch& S, const float* points, std::size_t n, double r_min, double reach,
+                  const Mat3* rotation, double& e_lo, double& e_hi) {
+  S.all.clear(), S.point_of.clear();
+  e_lo = 2.0, e_hi = -2.0;
   for (std::size_t i = 0; i < n; ++i) {
     const double x = points[4 * i], y = points[4 * i + 1], z = points[4 * i + 2];
     const double r = std::sqrt(x * x + y * y + z * z);
     if (!(r > r_min)) continue;
-    const CellPassBeam b{{x / r, y / r, z / r}, r, std::min(r, reach_)};
+    Vec3 u{x / r, y / r, z / r};
+    if (rotation) {  // unit length again (a calibration's rotation is orthonormal to its digits only)
+      const Vec3 d = *rotation * Vec3{x, y, z};
+      const double dn = std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+      u = {d.x / dn, d.y / dn, d.z / dn};
+    }
+    const CellPassBeam b{u, r, std::min(r, reach)};
     if (!(b.t1 > r_min)) continue;  // visit() meets no cell
     e_lo = std::min(e_lo, b.dir.z), e_hi = std::max(e_hi, b.dir.z);
-    all.push_back(b), point_of.push_back(i);
+    S.all.push_back(b), S.point_of.push_back(i);
   }
-  if (all.empty()) return;
-  // 1. The bins: w in both coordinates, at least 2ψ, at most 4 M bins.
+}
+
+// The pass's beams in their points' order.
+const std::vector<std::uint32_t>& beams_in_point_order(CellPassScratch& S) {
+  S.order.resize(S.beams.size());
+  for (std::size_t k = 0; k < S.beams.size(); ++k) S.order[k] = static_cast<std::uint32_t>(k);
+  std::sort(S.order.begin(), S.order.end(), [&](std::uint32_t a, std::uint32_t b) { return S.point[a] < S.point[b]; });
+  return S.order;
+}
+
+// The beams binned by direction (diamond angle, sin elevation; bins of w in both, at least 2ψ, at
+// most 4 M bins), each in every bin its cone (half-angle ψ, rounded up) can reach: S.beams and
+// S.point (from S.all and S.point_of) in their bins' order, S.start and S.in_bin the bins' beams,
+// S.held which bins hold one.
+struct BeamBins {
+  double e_lo = 0.0, inv_w = 0.0, inv_wD = 0.0;
+  int nD = 1, nE = 1;
+  int e_bin(double e) const { return std::min(nE - 1, std::max(0, static_cast<int>(std::floor((e - e_lo) * inv_w)))); }
+  int d_bin(const Vec3& d) const { return std::min(nD - 1, static_cast<int>(diamond_angle(d.x, d.y) * inv_wD)); }
+  // The bin of a drop at p (from the beams' origin; q2 = |p|²) when it holds a beam, else -1.
+  std::ptrdiff_t bin(double x, double y, double z, double q2, double e_hi,
+                     const std::vector<std::uint64_t>& held) const {
+    const double e = z / std::sqrt(q2);
+    if (!(e >= e_lo && e <= e_hi)) return -1;
+    const int je = std::min(nE - 1, static_cast<int>((e - e_lo) * inv_w));
+    int jd = static_cast<int>(diamond_angle(x, y) * inv_wD);
+    if (jd >= nD) jd -= nD;
+    const std::size_t b = static_cast<std::size_t>(je) * nD + jd;
+    return held[b / 64] >> (b % 64) & 1u ? static_cast<std::ptrdiff_t>(b) : -1;
+  }
+};
+BeamBins bin_beams(CellPassScratch& S, double psi, double& e_lo, double& e_hi) {
+  BeamBins bb;
+  const double sin_psi = std::sin(psi);
   e_lo = std::max(-1.0, e_lo - psi - 1e-9), e_hi = std::min(1.0, e_hi + psi + 1e-9);
   double w = std::max(2.0 * psi, 5e-4);
   while ((4.0 / w) * ((e_hi - e_lo) / w + 1.0) > 4e6) w *= 2.0;
@@ -458,8 +672,11 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
   const double wD = 4.0 / nD, inv_wD = nD / 4.0, inv_w = 1.0 / w;
   const int nE = std::max(1, static_cast<int>(std::ceil((e_hi - e_lo) * inv_w)));
   const std::size_t bins = static_cast<std::size_t>(nD) * nE;
-  const auto e_bin = [&](double e) { return std::min(nE - 1, std::max(0, static_cast<int>(std::floor((e - e_lo) * inv_w)))); };
-  const auto d_bin = [&](const Vec3& d) { return std::min(nD - 1, static_cast<int>(diamond_angle(d.x, d.y) * inv_wD)); };
+  bb.e_lo = e_lo, bb.inv_w = inv_w, bb.inv_wD = inv_wD, bb.nD = nD, bb.nE = nE;
+  const auto e_bin = [&](double e) { return bb.e_bin(e); };
+  const auto d_bin = [&](const Vec3& d) { return bb.d_bin(d); };
+  std::vector<CellPassBeam>& all = S.all;
+  std::vector<std::size_t>& point_of = S.point_of;
   // The beams in the order of their bins (neighbouring drops read neighbouring beams).
   std::vector<CellPassBeam>& beams = S.beams;
   std::vector<std::size_t>& point = S.point;
@@ -477,8 +694,6 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
       beams[j] = all[k], point[j] = point_of[k];
     }
   }
-  std::vector<CellPassBest>& best = S.best;
-  best.assign(beams.size(), CellPassBest{});
   std::vector<CellPassSpan>& spans = S.spans;
   spans.resize(beams.size());
   std::vector<std::uint32_t>& start = S.start;
@@ -518,6 +733,47 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
           in_bin[fill[static_cast<std::size_t>(e) * nD + ((j % nD) + nD) % nD]++] = {beams[k], static_cast<std::uint32_t>(k)};
     }
   }
+  return bb;
+}
+
+// The scan's drop echoes cell by cell (what scan_echoes_by_beam finds beam by
+// beam, bit for bit):
+//  1. the beams are binned by direction (diamond angle, sin elevation), each
+//     in every bin its cone (half-angle atan(θ/2), rounded up) can reach;
+//  2. coarse groups of beams mark the bricks (B³ cells) their cones cross,
+//     out to min(range, 1.01·r_reach), with the farthest range of the group;
+//  3. each cell of a marked brick is drawn once, to the measure visit() draws
+//     it to (its nearest range: the same for every beam from the origin); a
+//     cell whose first draw already exceeds an upper bound of that measure
+//     (tabulated by distance) holds no such drop and costs three hashes;
+//  4. each drop is tested, by visit()'s own arithmetic (echo()), against the
+//     beams of its direction's bin; it counts for a beam when visit() would
+//     have met its cell there (nearest range below min(range, r_reach)).
+// visit() meets a cell when the DDA's widened boxes hold it: a drop at least
+// 1 nm inside the cone and strictly inside its cell is in them whatever the
+// rounding. A beam with a drop nearer the cone's edge, past r_reach, or on its
+// cell's upper face, or with two strongest echoes of equal power (visit()'s
+// order decides), is redone by visit() alone.
+void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vector<ScanEcho>& out) const {
+  const double hw = theta_ / 2.0, c = kRainCellM, r_min = p_.blind_range_m;
+  const double o0[3] = {0.0, 0.0, 0.0};
+  const double psi = std::atan(hw) * (1.0 + 1e-6) + 1e-9;  // the cone's half-angle, rounded up
+  // Scratch reused from call to call (a scan's worth of arrays: no page faults after the first).
+  thread_local CellPassScratch S;
+  double e_lo, e_hi;
+  gather_beams(S, points, n, r_min, reach_, nullptr, e_lo, e_hi);
+  if (S.all.empty()) return;
+  const BeamBins bb = bin_beams(S, psi, e_lo, e_hi);
+  const int nD = bb.nD, nE = bb.nE;
+  const auto e_bin = [&](double e) { return bb.e_bin(e); };
+  const auto d_bin = [&](const Vec3& d) { return bb.d_bin(d); };
+  std::vector<CellPassBeam>& beams = S.beams;
+  std::vector<std::size_t>& point = S.point;
+  std::vector<CellPassBest>& best = S.best;
+  best.assign(beams.size(), CellPassBest{});
+  const std::vector<std::uint32_t>& start = S.start;
+  const std::vector<std::uint64_t>& held = S.held;
+  const std::vector<CellPassEntry>& in_bin = S.in_bin;
   // 2. The bricks the cones cross: groups of G×G bins, each group's direction
   // box (its beams' unit vectors, widened by ψ) swept over its ranges.
   constexpr int B = 4;  // cells per brick edge
@@ -579,16 +835,9 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
   // 3. An upper bound of a cell's measure by its squared distance: visit()
   // draws to M(k·r_near²), r_near >= √dist2·cos(θ/2); the cell holds no drop
   // when its first draw u > 1 − e^{−M} (with a margin).
-  const double q_max = r_far * r_far;
-  const int nq = 4096;
-  const double inv_dq = nq / q_max;
-  std::vector<double>& u_max = S.u_max;
-  u_max.resize(nq + 1);
-  for (int j = 0; j <= nq; ++j) {
-    const double r_lo = std::max(r_min, std::sqrt(j / inv_dq) * cos_half_ * (1.0 - 1e-12));
-    const double m_up = field_.measure_above(k_ * r_lo * r_lo * 1e3 * (1.0 - 1e-12));
-    u_max[j] = m_up > 0.0 ? -std::expm1(-m_up * (1.0 + 1e-6)) + 1e-12 : 0.0;
-  }
+  const int nq = kMeasureBounds;
+  const double inv_dq = measure_bounds(r_far, S.u_max);
+  const std::vector<double>& u_max = S.u_max;
   // 4. The cells' drops against the beams of their bins.
   std::size_t drawn = 0;
   for (const std::int64_t id : bricks) {
@@ -619,13 +868,8 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
           field_.for_each_drop_hashed(cell, h, m, [&](const Vec3& at, double s) {
             ++drawn;
             const double q2 = at.x * at.x + at.y * at.y + at.z * at.z;
-            const double e = at.z / std::sqrt(q2);
-            if (!(e >= e_lo && e <= e_hi)) return;
-            const int je = std::min(nE - 1, static_cast<int>((e - e_lo) * inv_w));
-            int jd = static_cast<int>(diamond_angle(at.x, at.y) * inv_wD);
-            if (jd >= nD) jd -= nD;
-            const std::size_t bin = static_cast<std::size_t>(je) * nD + jd;
-            if (!(held[bin / 64] >> (bin % 64) & 1u)) return;
+            const std::ptrdiff_t bin = bb.bin(at.x, at.y, at.z, q2, e_hi, held);
+            if (bin < 0) return;
             for (std::uint32_t q = start[bin]; q < start[bin + 1]; ++q) {
               const CellPassBeam& b = in_bin[q].beam;
               double t, power, reported;
@@ -638,9 +882,10 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
               if (!(in > 0.0 && perp2 + 1e-14 * (q2 + 1.0) <= in * in && t <= b.t1 * (1.0 - 1e-9) &&
                     at.x < cell_hi[0] && at.y < cell_hi[1] && at.z < cell_hi[2]))
                 o.redo = true;
-              if (power > o.power) {
-                o.power = power, o.t = t, o.reported = reported;
-              } else if (power == o.power) {
+              const double key = last_ ? t : power;
+              if (key > o.key) {
+                o.key = key, o.power = power, o.t = t, o.reported = reported;
+              } else if (key == o.key) {
                 o.redo = true;  // visit()'s order would choose
               }
             }
@@ -651,11 +896,7 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
   }
   drawn_ += drawn;
   // In the points' order; the beams the pass cannot vouch for, beam by beam.
-  std::vector<std::uint32_t>& order = S.order;
-  order.resize(beams.size());
-  for (std::size_t k = 0; k < beams.size(); ++k) order[k] = static_cast<std::uint32_t>(k);
-  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return point[a] < point[b]; });
-  for (const std::uint32_t k : order) {
+  for (const std::uint32_t k : beams_in_point_order(S)) {
     CellPassBest& o = best[k];
     const CellPassBeam& b = beams[k];
     if (o.redo) {
@@ -665,6 +906,177 @@ void LidarRain::scan_echoes_by_cell(const float* points, std::size_t n, std::vec
     }
     if (o.power >= 0.0) out.push_back({point[k], o.t, o.power * b.r * b.r, o.reported});
   }
+}
+
+// The scan's drop echoes where the field is not the scan's frame as hashed (a calibration, a pose,
+// a frame K > 0): the beams in the field's world (origin O, rotated directions), binned by
+// direction as above; every cell whose drops can land in a cone at time t (its layer's column
+// above the cones, as far as the drops' fall speeds reach over t) drawn once, to the diameter the
+// nearest landing range needs; each drop moved by rain_drop_at and tested against the beams of its
+// direction's bin by echo(). The same model as visit()'s; no beam-by-beam reference (none exists
+// for a moving field), the ties to the first met.
+void LidarRain::scan_echoes_general(const float* points, std::size_t n, std::vector<ScanEcho>& out) const {
+  if (reach_ <= 0.0) return;
+  const double hw = theta_ / 2.0, c = kRainCellM, r_min = p_.blind_range_m, t_s = pose_.t_s;
+  const Mat3& R = pose_.world_from_sensor.rotation;
+  const Vec3& O = pose_.world_from_sensor.translation;
+  const Vec3& wind = pose_.wind;
+  const double o[3] = {O.x, O.y, O.z};
+  const double psi = std::atan(hw) * (1.0 + 1e-6) + 1e-9;
+  thread_local CellPassScratch S;
+  double e_lo, e_hi;
+  gather_beams(S, points, n, r_min, reach_, &R, e_lo, e_hi);
+  if (S.all.empty()) return;
+  const BeamBins bb = bin_beams(S, psi, e_lo, e_hi);
+  std::vector<CellPassBeam>& beams = S.beams;
+  std::vector<std::size_t>& point = S.point;
+  std::vector<CellPassBest>& best = S.best;
+  best.assign(beams.size(), CellPassBest{});
+  // The source columns: bricks of B×B cells, shifted back by the wind, that a cone's horizontal
+  // extent crosses (each beam swept in steps of a brick).
+  constexpr int B = 4;
+  const double bm = B * c;
+  const double r_far = 1.01 * reach_ * std::sqrt(1.0 + hw * hw) * (1.0 + 1e-9) + 1e-9;
+  const double sx = wind.x * t_s, sy = wind.y * t_s;  // the drops' horizontal drift since t = 0
+  const std::int64_t gx0 = static_cast<std::int64_t>(std::floor((O.x - sx - r_far) / bm)) - 1,
+                     gy0 = static_cast<std::int64_t>(std::floor((O.y - sy - r_far) / bm)) - 1;
+  const std::int64_t gn = static_cast<std::int64_t>(std::ceil(2.0 * r_far / bm)) + 3;
+  // Per brick column, the cells' heights [lo, hi] the cones reach there (lo > hi: none).
+  std::vector<std::int64_t> column(static_cast<std::size_t>(2 * gn * gn), 0);
+  for (std::size_t k = 0; k < column.size(); k += 2) column[k] = INT64_MAX, column[k + 1] = INT64_MIN;
+  for (const CellPassBeam& b : beams) {
+    for (double ta = r_min; ta < b.t1; ta += bm) {
+      const double tb = std::min(b.t1, ta + bm), w = tb * hw * 1.01 + 1e-6;
+      const double xa = O.x + ta * b.dir.x, xb = O.x + tb * b.dir.x, ya = O.y + ta * b.dir.y, yb = O.y + tb * b.dir.y;
+      const double za = O.z + ta * b.dir.z, zb = O.z + tb * b.dir.z;
+      const std::int64_t cz0 = static_cast<std::int64_t>(std::floor((std::min(za, zb) - w) / c)),
+                         cz1 = static_cast<std::int64_t>(std::floor((std::max(za, zb) + w) / c));
+      const std::int64_t x0 = static_cast<std::int64_t>(std::floor((std::min(xa, xb) - w - sx) / bm)) - gx0,
+                         x1 = static_cast<std::int64_t>(std::floor((std::max(xa, xb) + w - sx) / bm)) - gx0,
+                         y0 = static_cast<std::int64_t>(std::floor((std::min(ya, yb) - w - sy) / bm)) - gy0,
+                         y1 = static_cast<std::int64_t>(std::floor((std::max(ya, yb) + w - sy) / bm)) - gy0;
+      for (std::int64_t gx = std::max<std::int64_t>(0, x0); gx <= std::min(gn - 1, x1); ++gx)
+        for (std::int64_t gy = std::max<std::int64_t>(0, y0); gy <= std::min(gn - 1, y1); ++gy) {
+          std::int64_t* z = &column[static_cast<std::size_t>(2 * (gx * gn + gy))];
+          z[0] = std::min(z[0], cz0), z[1] = std::max(z[1], cz1);
+        }
+    }
+  }
+  // A cell's measure bound by the squared distance of its drops' landing place (as the cell pass).
+  const int nq = kMeasureBounds;
+  const double inv_dq = measure_bounds(r_far, S.u_max);
+  const std::vector<double>& u_max = S.u_max;
+  const double T2 = r_far * r_far;
+  const double H = kRainLayerM, base0 = kRainLayerBaseM;
+  const std::int64_t cells_per_layer = static_cast<std::int64_t>(H / c);
+  const double v_hi = atlas_terminal_velocity_m_per_s(p_.drops.drop_max_mm) - wind.z;
+  std::size_t drawn = 0;
+  std::vector<std::pair<std::int64_t, std::int64_t>> spans;  // source cells [iz0, iz1]
+  for (std::int64_t gx = 0; gx < gn; ++gx)
+    for (std::int64_t gy = 0; gy < gn; ++gy) {
+      const std::int64_t* zc = &column[static_cast<std::size_t>(2 * (gx * gn + gy))];
+      if (zc[0] > zc[1]) continue;
+      // The heights drops must land at in this column.
+      const double z_lo = static_cast<double>(zc[0]) * c, z_hi = static_cast<double>(zc[1] + 1) * c;
+      for (std::int64_t ix = (gx0 + gx) * B; ix < (gx0 + gx) * B + B; ++ix) {
+        // The landing place's horizontal gap to O (the cell shifted by the drift).
+        const double lx = static_cast<double>(ix) * c + sx, dx = std::max({lx - O.x, 0.0, O.x - (lx + c)});
+        for (std::int64_t iy = (gy0 + gy) * B; iy < (gy0 + gy) * B + B; ++iy) {
+          const double ly = static_cast<double>(iy) * c + sy, dy = std::max({ly - O.y, 0.0, O.y - (ly + c)});
+          const double gxy = dx * dx + dy * dy;
+          if (gxy >= T2) continue;
+          // Which source heights land in [z_lo, z_hi]: at t = 0 those; else per layer, the landing
+          // heights moved up by the fall over t, f·t with f in [v(D_lo) − w_z, v(D_max) − w_z].
+          spans.clear();
+          double f_lo = 0.0;  // [m/s] the slowest fall (less the wind's w_z) of a drop drawn in this column
+          if (t_s == 0.0) {
+            spans.push_back({zc[0], zc[1]});
+          } else {
+            const double r_lo = std::max(r_min, std::sqrt(gxy) * cos_half_ * (1.0 - 1e-12));
+            const double d_lo = std::max(p_.drops.drop_min_mm, k_ * r_lo * r_lo * 1e3 * (1.0 - 1e-12));
+            if (d_lo > p_.drops.drop_max_mm) continue;
+            f_lo = atlas_terminal_velocity_m_per_s(d_lo) - wind.z;
+            const std::int64_t j0 = static_cast<std::int64_t>(std::floor((z_lo - base0) / H)),
+                               j1 = static_cast<std::int64_t>(std::floor((z_hi - base0) / H));
+            for (std::int64_t j = j0; j <= j1; ++j) {
+              const double lb = base0 + static_cast<double>(j) * H;
+              const std::int64_t cb = static_cast<std::int64_t>(std::llround(lb / c));  // the layer's first cell
+              const double a = std::max(z_lo, lb), e = std::min(z_hi, lb + H);
+              const double s0 = a + f_lo * t_s - c, s1 = e + v_hi * t_s + c;  // source heights, unwrapped
+              if (s1 - s0 >= H) {
+                spans.push_back({cb, cb + cells_per_layer - 1});
+                continue;
+              }
+              double m0 = std::fmod(s0 - lb, H);
+              if (m0 < 0.0) m0 += H;
+              const double m1 = m0 + (s1 - s0);
+              const std::int64_t i0 = static_cast<std::int64_t>(std::floor(m0 / c));
+              const std::int64_t i1 = static_cast<std::int64_t>(std::floor(m1 / c));
+              if (i1 < cells_per_layer) {
+                spans.push_back({cb + i0, cb + i1});
+              } else {
+                spans.push_back({cb + i0, cb + cells_per_layer - 1});
+                spans.push_back({cb, cb + std::min(i0 - 1, i1 - cells_per_layer)});
+              }
+            }
+          }
+          const std::uint64_t col = field_.column_hash(ix, iy);
+          for (const auto& [iz0, iz1] : spans)
+            for (std::int64_t iz = iz0; iz <= iz1; ++iz) {
+              // The nearest landing range: at t = 0 the cell's own distance, else the column's.
+              double dist2 = gxy;
+              if (t_s == 0.0) {
+                const double lz = static_cast<double>(iz) * c, dz = std::max({lz - O.z, 0.0, O.z - (lz + c)});
+                dist2 += dz * dz;
+              }
+              if (dist2 >= T2) continue;
+              const std::uint64_t h = RainField::cell_hash(col, iz);
+              const std::size_t jq = static_cast<std::size_t>(dist2 * inv_dq);
+              if (jq > static_cast<std::size_t>(nq) || RainField::first_unit(h) > u_max[jq]) continue;
+              const double r_near = std::max(r_min, std::sqrt(dist2) * cos_half_);
+              double d_cut = k_ * r_near * r_near * 1e3;
+              if (t_s != 0.0) {
+                // A drop of this cell lands in [z_lo, z_hi] (within its layer) only when f·t ≡ z_s − z
+                // (mod H), f = v(D) − w_z: the smallest such f >= f_lo gives the smallest diameter that
+                // can (v increases with D), below which the cell's drops, drawn largest first, are not drawn.
+                const double lz = static_cast<double>(iz) * c;
+                const double lb = base0 + std::floor((lz - base0) / H) * H;
+                const double top = std::min(z_hi, lb + H), bottom = std::max(z_lo, lb);
+                if (top < bottom) continue;
+                const double a = lz - top - 1e-6, b = lz + c - bottom + 1e-6;
+                const double ft_lo = f_lo * t_s - 1e-9 * (1.0 + std::abs(f_lo * t_s));
+                const double ft = std::max(ft_lo, a + std::ceil((ft_lo - b) / H) * H);
+                if (ft / t_s > v_hi + 1e-9) continue;  // no drop falls that fast
+                const double v = ft / t_s + wind.z;   // v(D*) of the smallest diameter D* that can land here
+                if (v > 0.0 && v < 9.65) d_cut = std::max(d_cut, -std::log((9.65 - v) / 10.3) / 0.6 * (1.0 - 1e-9));
+              }
+              const double m = field_.measure_above(d_cut);
+              if (!(m > 0.0)) continue;
+              field_.for_each_drop_hashed({ix, iy, iz}, h, m, [&](const Vec3& at0, double s) {
+                ++drawn;
+                const Vec3 at = t_s == 0.0 ? at0 : rain_drop_at(at0, field_.diameter_mm(s), t_s, wind);
+                if (!(at.z >= z_lo && at.z <= z_hi)) return;
+                const double px = at.x - O.x, py = at.y - O.y, pz = at.z - O.z;
+                const double q2 = px * px + py * py + pz * pz;
+                if (!(q2 < T2 && q2 > 0.0)) return;
+                const std::ptrdiff_t bin = bb.bin(px, py, pz, q2, e_hi, S.held);
+                if (bin < 0) return;
+                for (std::uint32_t q = S.start[bin]; q < S.start[bin + 1]; ++q) {
+                  const CellPassBeam& b = S.in_bin[q].beam;
+                  double t, power, reported;
+                  if (!echo(at, s, o, b.dir, b.r, t, power, reported)) continue;
+                  CellPassBest& ob = best[S.in_bin[q].k];
+                  const double key = last_ ? t : power;
+                  if (key > ob.key) ob.key = key, ob.power = power, ob.t = t, ob.reported = reported;
+                }
+              });
+            }
+        }
+      }
+    }
+  drawn_ += drawn;
+  for (const std::uint32_t k : beams_in_point_order(S))
+    if (best[k].power >= 0.0) out.push_back({point[k], best[k].t, best[k].power * beams[k].r * beams[k].r, best[k].reported});
 }
 
 }  // namespace
@@ -686,7 +1098,9 @@ LidarRainStats lidar_rain(const float* in, float* out, std::size_t n, const Lida
   const LidarRain m(p);
   const ScanDetection detection{p.noise_floor, p.seed};
   LidarRainStats st;
-  st.run = scan_through_media({&m}, in, out, n, what, &detection, labels);
+  st.field_frame = m.field_frame();
+  st.run = scan_through_media({&m}, in, out, n, what, &detection, labels,
+                              p.return_mode == "last" ? ScanReturn::last : ScanReturn::strongest);
   st.drops_drawn = m.drawn();
   return st;
 }
@@ -694,6 +1108,9 @@ LidarRainStats lidar_rain(const float* in, float* out, std::size_t n, const Lida
 nlohmann::json lidar_rain_record(const LidarRainParams& p, const LidarRainStats& st) {
   const double r = p.drops.rate_mm_h.value_or(0.0);
   const std::size_t moved = st.run.echoes, lost = st.run.lost;
+  nlohmann::json files = nlohmann::json::object();  // the files the pose was read from, hashed (brume run checks them)
+  if (!p.poses.empty()) files["poses"] = {{"path", p.poses}, {"sha256", sha256_file(p.poses)}};
+  if (!p.kitti_calib.empty()) files["kitti_calib"] = {{"path", p.kitti_calib}, {"sha256", sha256_file(p.kitti_calib)}};
   return {{"model",
            "Marshall-Palmer 1948 drop sizes, Atlas et al. 1973 fall speed; per beam the drops in its cone echo "
            "(Kilic et al. 2021, from the paper's equations), the strongest return wins, speckle detection against "
@@ -715,7 +1132,20 @@ nlohmann::json lidar_rain_record(const LidarRainParams& p, const LidarRainStats&
           {"drop_max_mm", p.drops.drop_max_mm},
           {"cell_m", kRainCellM},
           {"seed", p.seed},
-          {"frame", 0},
+          {"return_mode", p.return_mode},
+          {"frame", p.frame},
+          {"frame_interval_s", p.frame_interval_s},
+          {"time_s", static_cast<double>(p.frame) * p.frame_interval_s},
+          {"wind_m_s", p.wind},
+          {"ego_speed_m_s", p.ego_speed_m_s},
+          {"field_frame", st.field_frame},
+          {"pose_files", files},
+          {"layer_m", kRainLayerM},
+          {"layer_base_m", kRainLayerBaseM},
+          {"layer_from",
+           "a falling drop wraps within its layer of the field's world frame (it leaves at the bottom, re-enters at "
+           "the top), so that the field stays a homogeneous Poisson field at every time; the layers' edges lie "
+           "16 m below and above the sensor at frame 0"},
           {"points", st.run.points},
           {"kept", st.run.points - moved - lost},
           {"moved_to_drops", moved},

@@ -46,6 +46,12 @@ const ParamTable<CameraRainParams>& camera_rain_param_table() {
     ParamTable<P> d("rain");
     d.nest(&P::drops, rain_drops_param_table());
     streak_camera_params(d, "rain-seed", "drop", "drops", "rain", "streaks");
+    // The scan's (--lidar, lidar=): brume lidar rain's --return-mode.
+    d.choice("return-mode", &P::return_mode, {"strongest", "last"},
+             "which return the scan of --lidar reports: strongest (the target or the strongest drop echo above the "
+             "noise floor), last (the farthest above the floor: the target whenever it is detected, else the "
+             "farthest drop echo)")
+        .since(4, "strongest");
     return d;
   }();
   return t;

@@ -32,6 +32,7 @@ struct CameraRainJob {
   std::string mask;
   OutputFiles output;
   std::string lidar, lidar_out;  // --lidar IN.bin --lidar-out OUT.bin: the scan through the same rain
+  std::string lidar_frame = "camera";  // the scan's drops in camera 2's frame (with --kitti-calib) or its own
 };
 
 const std::vector<MapOutput>& camera_rain_map_outputs() {
@@ -58,18 +59,46 @@ const ParamTable<CameraRainJob>& camera_rain_job_table() {
               "lidar rain's model and its defaults), written to --lidar-out with the image")
         .reads_file()
         .text("lidar-out", &CameraRainJob::lidar_out, "the rainy scan of --lidar (KITTI .bin: the points that return)")
-        .writes_file_of("lidar", ".bin");
+        .writes_file_of("lidar", ".bin")
+        .choice("lidar-frame", &CameraRainJob::lidar_frame, {"camera", "scan"},
+                "the frame the scan of --lidar draws its drops in: camera (with --kitti-calib, camera 2's: the drops "
+                "the image shows are the ones the scan sees; without it the scan's own, with a warning), scan (the "
+                "scan's own frame: brume lidar rain without --kitti-calib)")
+        .since(4, "scan");
     return d;
   }();
   return t;
 }
 
-// The scan's rain: brume lidar rain's parameters with the camera's rate, seed and drop sizes.
-LidarRainParams camera_rain_lidar_params(const CameraRainParams& p) {
+// The scan's rain: brume lidar rain's parameters with the camera's rate, seed, drop sizes and return
+// mode; with `kitti_calib` (the depth block's, when the scan is drawn in the camera's frame) the
+// drops are the camera's.
+LidarRainParams camera_rain_lidar_params(const CameraRainParams& p, const std::string& kitti_calib = "") {
   LidarRainParams lp;
   lp.drops = p.drops;
   lp.seed = p.seed;
+  lp.return_mode = p.return_mode;
+  lp.kitti_calib = kitti_calib;
   return lp;
+}
+
+// The scan's block of a camera's rain: brume lidar rain's, and a warning when its drops are not the
+// image's (no calibration places the scan in the camera's frame).
+nlohmann::json camera_rain_lidar_block(const LidarRainParams& lp, const LidarRainStats& st, bool camera_frame_wanted,
+                                       const std::string& how, bool print) {
+  nlohmann::json block = lidar_rain_record(lp, st);
+  if (camera_frame_wanted && lp.kitti_calib.empty()) {
+    const std::string w = "the scan's drops are drawn in the scan's own frame, not the camera's (no KITTI calibration "
+                          "places it): the image's streaks and the scan's drop echoes are not the same drops; " + how;
+    block["warnings"].push_back(w);
+    if (print) std::fprintf(stderr, "brume rain: warning: %s\n", w.c_str());
+  }
+  return block;
+}
+
+// The calibration that places the job's scan in the camera's frame (none: its own frame).
+std::string camera_rain_lidar_calib(const CameraRainJob& j) {
+  return j.lidar_frame == "camera" ? j.input.depth.kitti_calib : std::string();
 }
 
 // The rain's checks that need no pixels (the CLI's and brume.rain's).
@@ -81,7 +110,7 @@ void check_camera_rain(const CameraRainParams& p, const DepthSource& depth) {
 void check_camera_rain_job(const CameraRainJob& j) {
   check_camera_rain(j.rain, j.input.depth);
   check_camera_scan_flags(j.lidar, j.lidar_out, "rains on a scan");
-  if (!j.lidar.empty()) validate_lidar_rain(camera_rain_lidar_params(j.rain));
+  if (!j.lidar.empty()) validate_lidar_rain(camera_rain_lidar_params(j.rain, camera_rain_lidar_calib(j)));
 }
 
 // The camera's rain on an image and its measured range (the CLI's job and brume.rain's array
@@ -106,12 +135,13 @@ nlohmann::json run_camera_rain_job(const CameraRainJob& job, const ExecOptions& 
   if (!job.lidar.empty()) {
     // The scan does not depend on the image: rained on first, written with the image's outputs.
     check_camera_rain_job(job);
-    const LidarRainParams lp = camera_rain_lidar_params(job.rain);
+    const LidarRainParams lp = camera_rain_lidar_params(job.rain, camera_rain_lidar_calib(job));
     run_camera_scan_file(ctx, job.lidar, job.lidar_out, "", "lidar_rain",
                          [&](const float* in, float* out, std::size_t n, std::uint8_t* labels, const std::string& what,
                              nlohmann::json& block) {
                        const LidarRainStats st = lidar_rain(in, out, n, lp, labels, what);
-                       block = lidar_rain_record(lp, st);
+                       block = camera_rain_lidar_block(lp, st, job.lidar_frame == "camera",
+                                                       "give --kitti-calib (KITTI's Tr_velo_to_cam, R0_rect, P2)", true);
                        return st.run.lost;
                      });
   }
@@ -203,7 +233,8 @@ CommandDef rain_command() {
             in, "brume.rain(): lidar", "lidar_rain",
             [&](const float* src, float* out, std::size_t n, std::uint8_t* labels, nlohmann::json& block) {
               const LidarRainStats st = lidar_rain(src, out, n, lp, labels, "brume.rain(): lidar");
-              block = lidar_rain_record(lp, st);
+              block = camera_rain_lidar_block(lp, st, true,
+                                              "brume.rain() takes no calibration: use brume rain --kitti-calib", false);
               return st.run.lost;
             },
             [&] { return run_camera_rain(in[0].dense.view(), in[1].dense.view(), k.depth, k.p, k.prepare, e, g); });

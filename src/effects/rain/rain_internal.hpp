@@ -15,8 +15,11 @@ namespace brume {
 //            against the beams binned by direction: a cost that grows with
 //            the volume the cones sweep, ~0.3 s for a KITTI scan;
 //   chosen:  by_cell for scans of kLidarRainByCellBeams points or more, else by_beam
-//            (lidar_rain, lidar_rain_as_medium).
-enum class LidarRainSearch { chosen, by_beam, by_cell };
+//            (lidar_rain, lidar_rain_as_medium);
+//   general: the pass of a field that is not the scan's frame as hashed (a calibration, a pose,
+//            a frame K > 0), which a scan in its own frame at frame 0 must repeat too.
+// A field that is not the scan's frame as hashed always takes the general pass.
+enum class LidarRainSearch { chosen, by_beam, by_cell, general };
 constexpr std::size_t kLidarRainByCellBeams = 16384;
 std::unique_ptr<Medium> lidar_rain_as_medium_searching(const LidarRainParams& p, LidarRainSearch search);
 
