@@ -10,9 +10,10 @@
 //   camera: render_camera_rain at 1242x375 (the demo scene's range and colour
 //           at KITTI's size, KITTI's focal length 721.5 px), 25 mm/h, 1/60 s, on
 //           2 threads, against the same call at rate 0 (the no-op: the analytic
-//           pass and composite alone), interleaved. Target: <= 100 ms beyond the no-op.
-// Each figure: median [min..max] over the rounds, wall time and the calling
-// thread's CPU time; the CPU (family, model), the SIMD level Highway picks (the
+//           pass and composite alone), interleaved, with the image's hash
+//           (bench_camera.hpp). Target: <= 100 ms beyond the no-op.
+// Each figure: median [min..max] over the rounds, wall time and CPU time (the
+// calling thread's for the LiDAR, the process's for the camera); the CPU (family, model), the SIMD level Highway picks (the
 // rain code itself is scalar, built for the x86-64 baseline) and the load
 // average at the start and the end are printed.
 //
@@ -33,6 +34,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_camera.hpp"
 #include "bench_util.hpp"
 #include "brume/demo_scene.hpp"
 #include "brume/depth.hpp"
@@ -132,42 +134,26 @@ int lidar(int rounds, const std::vector<double>& rates, bool alone) {
 }
 
 int camera(int rounds, const std::vector<double>& rates) {
-  const int W = 1242, H = 375;
-  const DemoScene d = render_demo_scene(W, H);
-  CameraRainScene sc;
-  sc.rgb = d.rgb;
-  sc.range = d.range;
-  sc.k.fx = sc.k.fy = 721.5377;  // KITTI 000001's camera 2 (calib P2)
-  sc.k = resolve(sc.k, W, H);
-  sc.airlight = {0.7f, 0.72f, 0.75f};
+  DemoScene d;
+  const CameraRainScene sc = bench::kitti_sized_demo(d);
   Exec ex;
   ex.threads = 2;
-  std::printf(" camera rain, the demo scene at %dx%d (fx %.1f px), 1/60 s, 2 threads, ms (wall; calling thread's CPU):\n",
-              W, H, sc.k.fx);
+  std::printf(" camera rain, the demo scene at %dx%d (fx %.1f px), 1/60 s, 2 threads, ms (wall; the process's CPU):\n",
+              sc.rgb.width(), sc.rgb.height(), sc.k.fx);
   for (const double rate : rates) {
     CameraRainParams p, none;
     p.drops.rate_mm_h = rate;
     none.drops.rate_mm_h = 0.0;
-    std::vector<double> wa, ca, wb, cb, extra;
     CameraRainStats st;
-    Image out;
-    for (int r = 0; r <= rounds; ++r) {  // round 0 warms up
-      Timing ta{}, tb{};
-      for (int k = 0; k < 2; ++k) {
-        if ((k == 0) == (r % 2 == 0)) ta = timed([&] { out = render_camera_rain(sc, p, ex, &st); });
-        else tb = timed([&] { out = render_camera_rain(sc, none, ex); });
-      }
-      if (r == 0) continue;
-      wa.push_back(ta.wall), ca.push_back(ta.cpu), wb.push_back(tb.wall), cb.push_back(tb.cpu);
-      extra.push_back(ta.wall - tb.wall);
-    }
-    std::printf("  %5g mm/h: rain wall", rate);
-    print_spread("", wa);
-    std::printf(" | rate 0 wall");
-    print_spread("", wb);
-    std::printf(" | rain beyond it");
-    print_spread("", extra);
-    std::printf(" (%zu cells, %zu drops seen, %zu drawn)\n", st.cells, st.drops_seen, st.drops_drawn);
+    char label[32];
+    std::snprintf(label, sizeof label, "%5g mm/h", rate);
+    bench::camera_against_noop(
+        label, rounds, [&] { return render_camera_rain(sc, p, ex, &st); },
+        [&] { return render_camera_rain(sc, none, ex); },
+        [&] {
+          return std::to_string(st.cells) + " cells, " + std::to_string(st.drops_seen) + " drops seen, " +
+                 std::to_string(st.drops_drawn) + " drawn";
+        });
   }
   return 0;
 }
