@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <string>
 
@@ -15,6 +16,7 @@
 namespace brume {
 
 namespace {
+constexpr std::size_t kAhead = 8;  // how many streaks ahead a tile's loop fetches
 constexpr double kStreakInf = std::numeric_limits<double>::infinity();
 constexpr double kStreakPi = 3.14159265358979323846;
 }  // namespace
@@ -78,7 +80,7 @@ Image streak_background(const CameraRainScene& s, const std::function<double(dou
   return out;
 }
 
-std::vector<Streak> frustum_streaks(const RainField& field, const std::function<double(double)>& threshold_mm,
+StreakSlabs frustum_streaks(const RainField& field, const std::function<double(double)>& threshold_mm,
                                     double z_near, double z_split, const std::function<double(double, double)>& grow_m,
                                     const StreakCamera& cam, int nt,
                                     const std::function<bool(const Vec3&, double, Streak&)>& make, std::size_t& cells_out,
@@ -90,7 +92,7 @@ std::vector<Streak> frustum_streaks(const RainField& field, const std::function<
   const std::int64_t ix0 = static_cast<std::int64_t>(std::floor(z_near / c));
   const std::int64_t ix1 = static_cast<std::int64_t>(std::floor(z_split / c));
   const std::size_t slabs = static_cast<std::size_t>(ix1 - ix0 + 1);
-  std::vector<std::vector<Streak>> found(slabs);
+  StreakSlabs found(slabs);
   std::vector<std::size_t> seen(slabs, 0), cells(slabs, 0);
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 4)
   for (std::int64_t ix = ix0; ix <= ix1; ++ix) {
@@ -109,6 +111,10 @@ std::vector<Streak> frustum_streaks(const RainField& field, const std::function<
     const std::int64_t jz0 = static_cast<std::int64_t>(std::floor(-yhi / c)),
                        jz1 = static_cast<std::int64_t>(std::floor(-ylo / c));
     std::vector<Streak>& list = found[si];
+    // Room for the slab's mean count of drops and four standard deviations (a Poisson count):
+    // the list seldom grows, whose copies of large lists cost more than the drawing.
+    const double mean = m * static_cast<double>(jy1 - jy0 + 1) * static_cast<double>(jz1 - jz0 + 1);
+    list.reserve(static_cast<std::size_t>(std::min(mean + 4.0 * std::sqrt(mean) + 16.0, 1e8)));
     for (std::int64_t jy = jy0; jy <= jy1; ++jy)
       for (std::int64_t jz = jz0; jz <= jz1; ++jz) {
         ++cells[si];
@@ -123,16 +129,13 @@ std::vector<Streak> frustum_streaks(const RainField& field, const std::function<
         });
       }
   }
-  std::vector<Streak> all;
+  std::size_t order = 0;
   for (std::size_t i = 0; i < slabs; ++i) {
     cells_out += cells[i];
     seen_out += seen[i];
-    for (Streak& k : found[i]) {
-      k.order = all.size();
-      all.push_back(k);
-    }
+    for (Streak& k : found[i]) k.order = order++;
   }
-  return all;
+  return found;
 }
 
 double streak_grow_m(double z0, double z1, double d_max_mm, double motion_m, const StreakLens& lens,
@@ -194,28 +197,122 @@ bool bound_streak(Streak& k, double T, double z_clip, const StreakCamera& cam) {
   return true;
 }
 
+namespace {
+
+// The permutation that lists the streaks far to near, ties by their order: a least-significant-
+// digit radix sort (stable, 16-bit digits) of the ranges' bits, complemented (a positive double's
+// bits order as its value), over the streaks listed by their order. The same permutation as a
+// comparison sort by (range descending, order ascending).
+std::vector<std::uint32_t> far_to_near(const std::vector<const Streak*>& drops) {
+  const std::size_t n = drops.size();
+  std::vector<std::uint32_t> idx(n), tmp(n);
+  for (std::size_t i = 0; i < n; ++i) idx[i] = static_cast<std::uint32_t>(i);
+  bool by_order = true;
+  for (std::size_t i = 1; i < n && by_order; ++i) by_order = drops[i - 1]->order < drops[i]->order;
+  if (!by_order)
+    std::stable_sort(idx.begin(), idx.end(),
+                     [&](std::uint32_t a, std::uint32_t b) { return drops[a]->order < drops[b]->order; });
+  std::vector<std::uint64_t> key(n), key_tmp(n);
+  bool positive = true;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double r = drops[idx[i]]->range;
+    positive = positive && r > 0.0 && std::isfinite(r);
+    std::uint64_t bits;
+    std::memcpy(&bits, &r, sizeof bits);
+    key[i] = ~bits;
+  }
+  if (!positive) {  // not a range a streak can have: the comparison sort
+    std::stable_sort(idx.begin(), idx.end(),
+                     [&](std::uint32_t a, std::uint32_t b) { return drops[a]->range > drops[b]->range; });
+    return idx;
+  }
+  std::vector<std::uint32_t> count(1u << 16);
+  for (int shift = 0; shift < 64 && n > 0; shift += 16) {
+    std::fill(count.begin(), count.end(), 0u);
+    for (std::size_t i = 0; i < n; ++i) ++count[(key[i] >> shift) & 0xffffu];
+    if (count[(key[0] >> shift) & 0xffffu] == n) continue;  // one digit: the pass keeps the order
+    std::uint32_t run = 0;
+    for (std::uint32_t& c : count) {
+      const std::uint32_t k = c;
+      c = run;
+      run += k;
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint32_t at = count[(key[i] >> shift) & 0xffffu]++;
+      key_tmp[at] = key[i], tmp[at] = idx[i];
+    }
+    key.swap(key_tmp), idx.swap(tmp);
+  }
+  return idx;
+}
+
+}  // namespace
+
 // The streaks, composited far to near, tile by tile: a tile's pixels stay in cache while the
 // streaks that can touch it (listed in their order) are splatted, each pixel taking the same
 // updates in the same order as a single pass over them would give it (the same image on any
 // number of threads). A streak's rows and columns (v_lo..v_hi, u_lo..u_hi) bound every pixel its
-// samples touch; its tiles are taken one pixel wider.
-std::size_t splat_streaks(std::vector<Streak>& drops, ConstImageView range, Image& out, const StreakCamera& cam,
+// samples touch; its tiles are taken one pixel wider. The streaks stay where they were drawn:
+// their order far to near is a radix sort's permutation, the tiles' lists one array (counted,
+// then filled), and a tile's loop fetches the streaks a few ahead of the one it draws.
+StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image& out, const StreakCamera& cam,
                           int nt) {
-  std::sort(drops.begin(), drops.end(), [](const Streak& a, const Streak& b) {
-    return a.range != b.range ? a.range > b.range : a.order < b.order;
-  });
+  std::vector<const Streak*> drops;
+  {
+    std::size_t n = 0;
+    for (const std::vector<Streak>& s : slabs) n += s.size();
+    if (n > std::numeric_limits<std::uint32_t>::max())
+      throw Error("internal: " + std::to_string(n) + " streaks, more than the splat's 32-bit lists hold");
+    drops.reserve(n);
+    for (const std::vector<Streak>& s : slabs)
+      for (const Streak& k : s) drops.push_back(&k);
+  }
+  const std::size_t n = drops.size();
+  const std::vector<std::uint32_t> order = far_to_near(drops);  // far to near: storage indices
   const int W = cam.width, H = cam.height;
   const double fx = cam.fx, fy = cam.fy, cx = cam.cx, cy = cam.cy;
   constexpr int kTileW = 128, kTileH = 32;
   const int tiles_x = (W + kTileW - 1) / kTileW, tiles_y = (H + kTileH - 1) / kTileH;
-  std::vector<std::vector<std::uint32_t>> in_tile(static_cast<std::size_t>(tiles_x) * tiles_y);
-  for (std::size_t d = 0; d < drops.size(); ++d) {
-    const Streak& k = drops[d];
-    const int ty0 = std::max(0, k.v_lo - 1) / kTileH, ty1 = std::min(H - 1, k.v_hi + 1) / kTileH;
-    const int tx0 = std::max(0, k.u_lo - 1) / kTileW, tx1 = std::min(W - 1, k.u_hi + 1) / kTileW;
-    for (int ty = ty0; ty <= ty1; ++ty)
-      for (int tx = tx0; tx <= tx1; ++tx)
-        in_tile[static_cast<std::size_t>(ty) * tiles_x + tx].push_back(static_cast<std::uint32_t>(d));
+  const std::size_t n_tiles = static_cast<std::size_t>(tiles_x) * tiles_y;
+  // Each streak's tiles and its path's length, in the order the streaks lie in memory (the
+  // passes far to near below then read these, not the streaks).
+  struct Span {
+    std::uint16_t tx0, tx1, ty0, ty1;
+  };
+  if (tiles_x > 65535 || tiles_y > 65535)
+    throw Error("internal: " + std::to_string(W) + "x" + std::to_string(H) + " is more tiles than the splat counts");
+  std::vector<Span> span(n);
+  std::vector<double> path(n);
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (std::size_t i = 0; i < n; ++i) {
+    const Streak& k = *drops[i];
+    span[i] = {static_cast<std::uint16_t>(std::max(0, k.u_lo - 1) / kTileW),
+               static_cast<std::uint16_t>(std::min(W - 1, k.u_hi + 1) / kTileW),
+               static_cast<std::uint16_t>(std::max(0, k.v_lo - 1) / kTileH),
+               static_cast<std::uint16_t>(std::min(H - 1, k.v_hi + 1) / kTileH)};
+    double e[2][2];
+    for (int j = 0; j < 2; ++j) {
+      const double t = j ? k.t1 : k.t0, pz = k.c[2] + k.u[2] * t;
+      e[j][0] = cam.fx * (k.c[0] + k.u[0] * t) / pz, e[j][1] = cam.fy * (k.c[1] + k.u[1] * t) / pz;
+    }
+    path[i] = std::hypot(e[1][0] - e[0][0], e[1][1] - e[0][1]);
+  }
+  // The tiles' lists, far to near: counted, then filled.
+  std::vector<std::size_t> first(n_tiles + 1, 0);
+  for (const std::uint32_t d : order) {
+    const Span& sp = span[d];
+    for (int ty = sp.ty0; ty <= sp.ty1; ++ty)
+      for (int tx = sp.tx0; tx <= sp.tx1; ++tx) ++first[static_cast<std::size_t>(ty) * tiles_x + tx + 1];
+  }
+  for (std::size_t t = 0; t < n_tiles; ++t) first[t + 1] += first[t];
+  std::vector<const Streak*> in_tile(first[n_tiles]);
+  {
+    std::vector<std::size_t> fill(first.begin(), first.end() - 1);
+    for (const std::uint32_t d : order) {
+      const Span& sp = span[d];
+      for (int ty = sp.ty0; ty <= sp.ty1; ++ty)
+        for (int tx = sp.tx0; tx <= sp.tx1; ++tx) in_tile[fill[static_cast<std::size_t>(ty) * tiles_x + tx]++] = drops[d];
+    }
   }
   std::vector<std::size_t> clamped(static_cast<std::size_t>(nt), 0);
 #pragma omp parallel num_threads(nt)
@@ -226,8 +323,15 @@ std::size_t splat_streaks(std::vector<Streak>& drops, ConstImageView range, Imag
     for (int tile = 0; tile < tiles_x * tiles_y; ++tile) {
       const int y_lo = tile / tiles_x * kTileH, y_hi = std::min(H, y_lo + kTileH);
       const int x_lo = tile % tiles_x * kTileW, x_hi = std::min(W, x_lo + kTileW);
-      for (const std::uint32_t d : in_tile[static_cast<std::size_t>(tile)]) {
-        const Streak& k = drops[d];
+      const std::size_t e0 = first[static_cast<std::size_t>(tile)], e1 = first[static_cast<std::size_t>(tile) + 1];
+      for (std::size_t e = e0; e < e1; ++e) {
+        if (e + kAhead < e1) {
+          const char* next = reinterpret_cast<const char*>(in_tile[e + kAhead]);
+          __builtin_prefetch(next);
+          __builtin_prefetch(next + 64);
+          __builtin_prefetch(next + sizeof(Streak) - 1);
+        }
+        const Streak& k = *in_tile[e];
         double pz = 0.0;
         const auto at = [&](double t, double& u, double& v, double& r) {
           const double px = k.c[0] + k.u[0] * t, py = k.c[1] + k.u[1] * t;
@@ -289,22 +393,14 @@ std::size_t splat_streaks(std::vector<Streak>& drops, ConstImageView range, Imag
       }
     }
   }
-  std::size_t total = 0;
-  for (std::size_t i = 0; i < clamped.size(); ++i) total += clamped[i];
-  return total;
-}
-
-double mean_streak_px(const std::vector<Streak>& drops, const StreakCamera& cam) {
+  StreakSplat done;
+  for (std::size_t i = 0; i < clamped.size(); ++i) done.alpha_clamped += clamped[i];
+  // The mean length of the paths, summed far to near.
   double total_len = 0.0;
-  for (const Streak& k : drops) {
-    double e[2][2];
-    for (int j = 0; j < 2; ++j) {
-      const double t = j ? k.t1 : k.t0, pz = k.c[2] + k.u[2] * t;
-      e[j][0] = cam.fx * (k.c[0] + k.u[0] * t) / pz, e[j][1] = cam.fy * (k.c[1] + k.u[1] * t) / pz;
-    }
-    total_len += std::hypot(e[1][0] - e[0][0], e[1][1] - e[0][1]);
-  }
-  return drops.empty() ? 0.0 : total_len / static_cast<double>(drops.size());
+  for (const std::uint32_t d : order) total_len += path[d];
+  done.drawn = drops.size();
+  done.mean_streak_px = drops.empty() ? 0.0 : total_len / static_cast<double>(drops.size());
+  return done;
 }
 
 }  // namespace brume
