@@ -115,10 +115,17 @@ StreakSlabs frustum_streaks(const RainField& field, const std::function<double(d
     // the list seldom grows, whose copies of large lists cost more than the drawing.
     const double mean = m * static_cast<double>(jy1 - jy0 + 1) * static_cast<double>(jz1 - jz0 + 1);
     list.reserve(static_cast<std::size_t>(std::min(mean + 4.0 * std::sqrt(mean) + 16.0, 1e8)));
-    for (std::int64_t jy = jy0; jy <= jy1; ++jy)
+    // A cell holds a drop within measure m iff its first unit exponential −ln(1 − u) <= m: a first
+    // draw u above 1 − e^{−m(1 + 1e−9)} cannot (the margin far above the logarithms' rounding),
+    // and the cell is passed over without them; the column's hash is taken once for its cells.
+    const double u_max = -std::expm1(-m * (1.0 + 1e-9)) + 1e-15;
+    for (std::int64_t jy = jy0; jy <= jy1; ++jy) {
+      const std::uint64_t column = field.column_hash(ix, jy);
       for (std::int64_t jz = jz0; jz <= jz1; ++jz) {
         ++cells[si];
-        field.for_each_drop_within(RainCell{ix, jy, jz}, m, [&](const Vec3& at, double sm) {
+        const std::uint64_t h = RainField::cell_hash(column, jz);
+        if (RainField::first_unit(h) > u_max) continue;
+        field.for_each_drop_hashed(RainCell{ix, jy, jz}, h, m, [&](const Vec3& at, double sm) {
           ++seen[si];
           const double d_mm = field.diameter_mm(sm);
           if (d_mm < threshold_mm(at.x)) return;
@@ -128,6 +135,7 @@ StreakSlabs frustum_streaks(const RainField& field, const std::function<double(d
           list.push_back(k);
         });
       }
+    }
   }
   std::size_t order = 0;
   for (std::size_t i = 0; i < slabs; ++i) {
@@ -332,15 +340,16 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
           __builtin_prefetch(next + sizeof(Streak) - 1);
         }
         const Streak& k = *in_tile[e];
-        double pz = 0.0;
-        const auto at = [&](double t, double& u, double& v, double& r) {
-          const double px = k.c[0] + k.u[0] * t, py = k.c[1] + k.u[1] * t;
+        // The image position at time t (and its depth pz); the range only where a sample is drawn.
+        double px = 0.0, py = 0.0, pz = 0.0;
+        const auto at = [&](double t, double& u, double& v) {
+          px = k.c[0] + k.u[0] * t, py = k.c[1] + k.u[1] * t;
           pz = k.c[2] + k.u[2] * t;
-          u = fx * px / pz + cx, v = fy * py / pz + cy, r = std::sqrt(px * px + py * py + pz * pz);
+          u = fx * px / pz + cx, v = fy * py / pz + cy;
         };
-        double ua, va, ub, vb, rr;
-        at(k.t0, ua, va, rr);
-        at(k.t1, ub, vb, rr);
+        double ua, va, ub, vb;
+        at(k.t0, ua, va);
+        at(k.t1, ub, vb);
         const double len = std::hypot(ub - ua, vb - va);
         const double h = std::max(0.5, 0.5 * k.sigma_px);
         const int n = std::min(1 << 16, static_cast<int>(std::ceil(len / h)) + 1);
@@ -348,11 +357,14 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
         const int rad = gauss ? static_cast<int>(std::ceil(3.0 * k.sigma_px)) : 0;
         for (int i = 0; i < n; ++i) {
           const double t = k.t0 + (k.t1 - k.t0) * (i + 0.5) / n;
-          double u, v, r;
-          at(t, u, v, r);
+          double u, v, r = 0.0, a_sample = 0.0, inv_soft = 0.0;
+          at(t, u, v);
           // The coverage over the exposure is the time average of the particle's image area there.
-          const double a_sample = k.area * r / (pz * pz * pz) / n;
-          const double inv_soft = 1.0 / (kRainDepthSoftness * r);
+          const auto weigh = [&] {
+            r = std::sqrt(px * px + py * py + pz * pz);
+            a_sample = k.area * r / (pz * pz * pz) / n;
+            inv_soft = 1.0 / (kRainDepthSoftness * r);
+          };
           const auto put = [&](int x, int y, double w) {
             if (x < x_lo || x >= x_hi || y < y_lo || y >= y_hi || !(w > 0.0)) return;
             const float rs = range.at(x, y);
@@ -368,6 +380,7 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
             const double fu = std::floor(u), fv = std::floor(v);
             const int x0 = static_cast<int>(fu), y0 = static_cast<int>(fv);
             if (x0 + 1 < x_lo || x0 >= x_hi || y0 + 1 < y_lo || y0 >= y_hi) continue;  // no tap in the tile
+            weigh();
             const double ax = u - fu, ay = v - fv;
             put(x0, y0, (1 - ax) * (1 - ay));
             put(x0 + 1, y0, ax * (1 - ay));
@@ -376,6 +389,7 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
           } else {
             const int xc = static_cast<int>(std::lround(u)), yc = static_cast<int>(std::lround(v));
             if (yc + rad < y_lo || yc - rad >= y_hi || xc + rad < x_lo || xc - rad >= x_hi) continue;
+            weigh();
             wx.assign(2 * rad + 1, 0.0), wy.assign(2 * rad + 1, 0.0);
             double sx = 0.0, sy = 0.0;
             const double inv = 1.0 / (2.0 * k.sigma_px * k.sigma_px);
