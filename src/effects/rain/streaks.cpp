@@ -208,7 +208,7 @@ bool bound_streak(Streak& k, double T, double z_clip, const StreakCamera& cam) {
 namespace {
 
 // The permutation that lists the streaks far to near, ties by their order: a least-significant-
-// digit radix sort (stable, 16-bit digits) of the ranges' bits, complemented (a positive double's
+// digit radix sort (stable, 11-bit digits) of the ranges' bits, complemented (a positive double's
 // bits order as its value), over the streaks listed by their order. The same permutation as a
 // comparison sort by (range descending, order ascending).
 std::vector<std::uint32_t> far_to_near(const std::vector<const Streak*>& drops) {
@@ -234,19 +234,23 @@ std::vector<std::uint32_t> far_to_near(const std::vector<const Streak*>& drops) 
                      [&](std::uint32_t a, std::uint32_t b) { return drops[a]->range > drops[b]->range; });
     return idx;
   }
-  std::vector<std::uint32_t> count(1u << 16);
-  for (int shift = 0; shift < 64 && n > 0; shift += 16) {
-    std::fill(count.begin(), count.end(), 0u);
-    for (std::size_t i = 0; i < n; ++i) ++count[(key[i] >> shift) & 0xffffu];
-    if (count[(key[0] >> shift) & 0xffffu] == n) continue;  // one digit: the pass keeps the order
+  // Six digits of 11 bits, their counts taken in one pass; a digit the same for every key is skipped.
+  constexpr int kBits = 11, kDigits = 6;
+  constexpr std::uint64_t kMask = (1u << kBits) - 1;
+  std::vector<std::uint32_t> count(static_cast<std::size_t>(kDigits) << kBits, 0u);
+  for (std::size_t i = 0; i < n; ++i)
+    for (int d = 0; d < kDigits; ++d) ++count[(static_cast<std::size_t>(d) << kBits) + ((key[i] >> (d * kBits)) & kMask)];
+  for (int d = 0; d < kDigits && n > 0; ++d) {
+    std::uint32_t* c = &count[static_cast<std::size_t>(d) << kBits];
+    if (c[(key[0] >> (d * kBits)) & kMask] == n) continue;  // one digit: the pass keeps the order
     std::uint32_t run = 0;
-    for (std::uint32_t& c : count) {
-      const std::uint32_t k = c;
-      c = run;
+    for (std::size_t b = 0; b <= kMask; ++b) {
+      const std::uint32_t k = c[b];
+      c[b] = run;
       run += k;
     }
     for (std::size_t i = 0; i < n; ++i) {
-      const std::uint32_t at = count[(key[i] >> shift) & 0xffffu]++;
+      const std::uint32_t at = c[(key[i] >> (d * kBits)) & kMask]++;
       key_tmp[at] = key[i], tmp[at] = idx[i];
     }
     key.swap(key_tmp), idx.swap(tmp);
@@ -355,7 +359,34 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
         const int n = std::min(1 << 16, static_cast<int>(std::ceil(len / h)) + 1);
         const bool gauss = k.sigma_px >= 0.5;
         const int rad = gauss ? static_cast<int>(std::ceil(3.0 * k.sigma_px)) : 0;
-        for (int i = 0; i < n; ++i) {
+        // The samples that can have a tap in the tile's rows: the image path is straight and its
+        // row monotone in t, so they are a run of indices, found by bisection on rows a pixel
+        // beyond any tap's reach (far above the rounding of v); the others are not computed.
+        int i_lo = 0, i_hi = n;
+        if (n > 8) {
+          const double row_lo = y_lo - rad - 2.0, row_hi = y_hi + rad + 1.0;
+          const auto row = [&](int i) {
+            const double t = k.t0 + (k.t1 - k.t0) * (i + 0.5) / n;
+            return fy * (k.c[1] + k.u[1] * t) / (k.c[2] + k.u[2] * t) + cy;
+          };
+          const auto first = [n](const auto& holds) {  // the first index where `holds` turns true
+            int a = 0, b = n;
+            while (a < b) {
+              const int mid = a + (b - a) / 2;
+              if (holds(mid)) b = mid;
+              else a = mid + 1;
+            }
+            return a;
+          };
+          if (vb >= va) {
+            i_lo = first([&](int i) { return row(i) >= row_lo; });
+            i_hi = first([&](int i) { return row(i) >= row_hi; });
+          } else {
+            i_lo = first([&](int i) { return row(i) < row_hi; });
+            i_hi = first([&](int i) { return row(i) < row_lo; });
+          }
+        }
+        for (int i = i_lo; i < i_hi; ++i) {
           const double t = k.t0 + (k.t1 - k.t0) * (i + 0.5) / n;
           double u, v, r = 0.0, a_sample = 0.0, inv_soft = 0.0;
           at(t, u, v);
