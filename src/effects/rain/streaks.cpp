@@ -207,37 +207,31 @@ bool bound_streak(Streak& k, double T, double z_clip, const StreakCamera& cam) {
 
 namespace {
 
-// The permutation that lists the streaks far to near, ties by their order: a least-significant-
-// digit radix sort (stable, 11-bit digits) of the ranges' bits, complemented (a positive double's
-// bits order as its value), over the streaks listed by their order. The same permutation as a
-// comparison sort by (range descending, order ascending).
-std::vector<std::uint32_t> far_to_near(const std::vector<const Streak*>& drops) {
+// The permutation that lists the streaks far to near, ties by their order (the same as a
+// comparison sort by range descending, then order ascending): a least-significant-digit radix sort
+// (stable, three digits of 11 bits) of `key`, each streak's range rounded to single precision,
+// its bits complemented (a positive float's bits order as its value; the rounding keeps the
+// order, but not every difference), over the streaks listed by their order; then each run of
+// equal keys (few, and short) sorted by the exact ranges, stably.
+std::vector<std::uint32_t> far_to_near(const std::vector<const Streak*>& drops, std::vector<std::uint32_t> key) {
   const std::size_t n = drops.size();
   std::vector<std::uint32_t> idx(n), tmp(n);
   for (std::size_t i = 0; i < n; ++i) idx[i] = static_cast<std::uint32_t>(i);
-  bool by_order = true;
-  for (std::size_t i = 1; i < n && by_order; ++i) by_order = drops[i - 1]->order < drops[i]->order;
-  if (!by_order)
+  const auto exact = [&](std::uint32_t a, std::uint32_t b) { return drops[a]->range > drops[b]->range; };
+  bool by_order = true, positive = true;
+  for (std::size_t i = 0; i < n; ++i) {
+    by_order = by_order && (i == 0 || drops[i - 1]->order < drops[i]->order);
+    positive = positive && drops[i]->range > 0.0 && std::isfinite(drops[i]->range);
+  }
+  if (!by_order || !positive) {  // not as the pass lists them: the comparison sort
     std::stable_sort(idx.begin(), idx.end(),
                      [&](std::uint32_t a, std::uint32_t b) { return drops[a]->order < drops[b]->order; });
-  std::vector<std::uint64_t> key(n), key_tmp(n);
-  bool positive = true;
-  for (std::size_t i = 0; i < n; ++i) {
-    const double r = drops[idx[i]]->range;
-    positive = positive && r > 0.0 && std::isfinite(r);
-    std::uint64_t bits;
-    std::memcpy(&bits, &r, sizeof bits);
-    key[i] = ~bits;
-  }
-  if (!positive) {  // not a range a streak can have: the comparison sort
-    std::stable_sort(idx.begin(), idx.end(),
-                     [&](std::uint32_t a, std::uint32_t b) { return drops[a]->range > drops[b]->range; });
+    std::stable_sort(idx.begin(), idx.end(), exact);
     return idx;
   }
-  // Six digits of 11 bits, their counts taken in one pass; a digit the same for every key is skipped.
-  constexpr int kBits = 11, kDigits = 6;
-  constexpr std::uint64_t kMask = (1u << kBits) - 1;
-  std::vector<std::uint32_t> count(static_cast<std::size_t>(kDigits) << kBits, 0u);
+  constexpr int kBits = 11, kDigits = 3;
+  constexpr std::uint32_t kMask = (1u << kBits) - 1;
+  std::vector<std::uint32_t> count(static_cast<std::size_t>(kDigits) << kBits, 0u), key_tmp(n);
   for (std::size_t i = 0; i < n; ++i)
     for (int d = 0; d < kDigits; ++d) ++count[(static_cast<std::size_t>(d) << kBits) + ((key[i] >> (d * kBits)) & kMask)];
   for (int d = 0; d < kDigits && n > 0; ++d) {
@@ -254,6 +248,12 @@ std::vector<std::uint32_t> far_to_near(const std::vector<const Streak*>& drops) 
       key_tmp[at] = key[i], tmp[at] = idx[i];
     }
     key.swap(key_tmp), idx.swap(tmp);
+  }
+  for (std::size_t i = 0; i < n;) {
+    std::size_t j = i + 1;
+    while (j < n && key[j] == key[i]) ++j;
+    if (j - i > 1) std::stable_sort(idx.begin() + static_cast<std::ptrdiff_t>(i), idx.begin() + static_cast<std::ptrdiff_t>(j), exact);
+    i = j;
   }
   return idx;
 }
@@ -280,42 +280,51 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
       for (const Streak& k : s) drops.push_back(&k);
   }
   const std::size_t n = drops.size();
-  const std::vector<std::uint32_t> order = far_to_near(drops);  // far to near: storage indices
   const int W = cam.width, H = cam.height;
   const double fx = cam.fx, fy = cam.fy, cx = cam.cx, cy = cam.cy;
   constexpr int kTileW = 128, kTileH = 32;
   const int tiles_x = (W + kTileW - 1) / kTileW, tiles_y = (H + kTileH - 1) / kTileH;
   const std::size_t n_tiles = static_cast<std::size_t>(tiles_x) * tiles_y;
-  // Each streak's tiles and its path's length, in the order the streaks lie in memory (the
-  // passes far to near below then read these, not the streaks).
+  // Each streak's sort key, tiles and path length, and the tiles' counts, in one pass over the
+  // streaks as they lie in memory (the passes far to near below read these, not the streaks).
   struct Span {
     std::uint16_t tx0, tx1, ty0, ty1;
   };
   if (tiles_x > 65535 || tiles_y > 65535)
     throw Error("internal: " + std::to_string(W) + "x" + std::to_string(H) + " is more tiles than the splat counts");
+  std::vector<std::uint32_t> key(n);
   std::vector<Span> span(n);
   std::vector<double> path(n);
-#pragma omp parallel for num_threads(nt) schedule(static)
-  for (std::size_t i = 0; i < n; ++i) {
-    const Streak& k = *drops[i];
-    span[i] = {static_cast<std::uint16_t>(std::max(0, k.u_lo - 1) / kTileW),
-               static_cast<std::uint16_t>(std::min(W - 1, k.u_hi + 1) / kTileW),
-               static_cast<std::uint16_t>(std::max(0, k.v_lo - 1) / kTileH),
-               static_cast<std::uint16_t>(std::min(H - 1, k.v_hi + 1) / kTileH)};
-    double e[2][2];
-    for (int j = 0; j < 2; ++j) {
-      const double t = j ? k.t1 : k.t0, pz = k.c[2] + k.u[2] * t;
-      e[j][0] = cam.fx * (k.c[0] + k.u[0] * t) / pz, e[j][1] = cam.fy * (k.c[1] + k.u[1] * t) / pz;
-    }
-    path[i] = std::hypot(e[1][0] - e[0][0], e[1][1] - e[0][1]);
-  }
-  // The tiles' lists, far to near: counted, then filled.
   std::vector<std::size_t> first(n_tiles + 1, 0);
-  for (const std::uint32_t d : order) {
-    const Span& sp = span[d];
-    for (int ty = sp.ty0; ty <= sp.ty1; ++ty)
-      for (int tx = sp.tx0; tx <= sp.tx1; ++tx) ++first[static_cast<std::size_t>(ty) * tiles_x + tx + 1];
+#pragma omp parallel num_threads(nt)
+  {
+    std::vector<std::size_t> count(n_tiles, 0);
+#pragma omp for schedule(static)
+    for (std::size_t i = 0; i < n; ++i) {
+      const Streak& k = *drops[i];
+      const float r = static_cast<float>(k.range);
+      std::uint32_t bits;
+      std::memcpy(&bits, &r, sizeof bits);
+      key[i] = ~bits;
+      const Span sp = {static_cast<std::uint16_t>(std::max(0, k.u_lo - 1) / kTileW),
+                       static_cast<std::uint16_t>(std::min(W - 1, k.u_hi + 1) / kTileW),
+                       static_cast<std::uint16_t>(std::max(0, k.v_lo - 1) / kTileH),
+                       static_cast<std::uint16_t>(std::min(H - 1, k.v_hi + 1) / kTileH)};
+      span[i] = sp;
+      for (int ty = sp.ty0; ty <= sp.ty1; ++ty)
+        for (int tx = sp.tx0; tx <= sp.tx1; ++tx) ++count[static_cast<std::size_t>(ty) * tiles_x + tx];
+      double e[2][2];
+      for (int j = 0; j < 2; ++j) {
+        const double t = j ? k.t1 : k.t0, pz = k.c[2] + k.u[2] * t;
+        e[j][0] = cam.fx * (k.c[0] + k.u[0] * t) / pz, e[j][1] = cam.fy * (k.c[1] + k.u[1] * t) / pz;
+      }
+      path[i] = std::hypot(e[1][0] - e[0][0], e[1][1] - e[0][1]);
+    }
+#pragma omp critical
+    for (std::size_t t = 0; t < n_tiles; ++t) first[t + 1] += count[t];
   }
+  const std::vector<std::uint32_t> order = far_to_near(drops, std::move(key));  // storage indices
+  // The tiles' lists, far to near.
   for (std::size_t t = 0; t < n_tiles; ++t) first[t + 1] += first[t];
   std::vector<const Streak*> in_tile(first[n_tiles]);
   {
