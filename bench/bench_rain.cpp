@@ -17,7 +17,7 @@
 // rain code itself is scalar, built for the x86-64 baseline) and the load
 // average at the start and the end are printed.
 //
-// Usage: brume_bench_rain [ROUNDS] [lidar|lidar-alone|camera] [RATE ...]
+// Usage: brume_bench_rain [ROUNDS] [lidar|lidar-alone|camera] [RATE ...] [epsilon=E] (the camera's thinning ε)
 // (lidar-alone: the cell-major pass only, for profiling)
 #include <omp.h>
 #include <time.h>
@@ -133,7 +133,7 @@ int lidar(int rounds, const std::vector<double>& rates, bool alone) {
   return bad;
 }
 
-int camera(int rounds, const std::vector<double>& rates) {
+int camera(int rounds, const std::vector<double>& rates, double epsilon) {
   DemoScene d;
   const CameraRainScene sc = bench::kitti_sized_demo(d);
   Exec ex;
@@ -143,10 +143,11 @@ int camera(int rounds, const std::vector<double>& rates) {
   for (const double rate : rates) {
     CameraRainParams p, none;
     p.drops.rate_mm_h = rate;
+    if (epsilon >= 0.0) p.epsilon = epsilon;
     none.drops.rate_mm_h = 0.0;
     CameraRainStats st;
-    char label[32];
-    std::snprintf(label, sizeof label, "%5g mm/h", rate);
+    char label[48];
+    std::snprintf(label, sizeof label, "%5g mm/h, epsilon %g", rate, p.epsilon);
     bench::camera_against_noop(
         label, rounds, [&] { return render_camera_rain(sc, p, ex, &st); },
         [&] { return render_camera_rain(sc, none, ex); },
@@ -164,7 +165,11 @@ int main(int argc, char** argv) {
   const int rounds = argc > 1 ? std::max(1, std::atoi(argv[1])) : 5;
   const std::string only = argc > 2 ? argv[2] : "";
   std::vector<double> rates;
-  for (int i = 3; i < argc; ++i) rates.push_back(std::atof(argv[i]));
+  double epsilon = -1.0;  // epsilon=E among the rates: the thinning's ε (else the default)
+  for (int i = 3; i < argc; ++i) {
+    if (std::strncmp(argv[i], "epsilon=", 8) == 0) epsilon = std::atof(argv[i] + 8);
+    else rates.push_back(std::atof(argv[i]));
+  }
   if (rates.empty()) rates = {5.0, 25.0, 100.0};
   const std::vector<std::int64_t> t = simd::targets();
   std::printf("brume rain benchmark: %s, Highway target %s (rain: scalar, x86-64 baseline), %d interleaved rounds; "
@@ -173,7 +178,7 @@ int main(int argc, char** argv) {
               load().c_str());
   int bad = 0;
   if (only.empty() || only == "lidar" || only == "lidar-alone") bad += lidar(rounds, rates, only == "lidar-alone");
-  if (only.empty() || only == "camera") bad += camera(rounds, only.empty() ? std::vector<double>{25.0} : rates);
+  if (only.empty() || only == "camera") bad += camera(rounds, only.empty() ? std::vector<double>{25.0} : rates, epsilon);
   std::printf(" load average at the end %s\n", load().c_str());
   return bad ? 1 : 0;
 }

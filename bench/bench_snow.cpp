@@ -7,12 +7,13 @@
 //           s, 2 threads, against the same call at rate 0, interleaved, with the image's hash
 //           (bench_camera.hpp), at 2 mm/h (or the rates given). Target: <= 150 ms on 2 cores.
 //
-// Usage: brume_bench_snow [ROUNDS] [lidar|camera] [RATE ...]
+// Usage: brume_bench_snow [ROUNDS] [lidar|camera] [RATE ...] [epsilon=E] (the camera's thinning ε; else its default)
 #include <time.h>
 
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -32,7 +33,7 @@ std::string simd_target() {
   return t.empty() ? "none" : simd::target_name(t.front());
 }
 
-void camera(int rounds, const std::vector<double>& rates) {
+void camera(int rounds, const std::vector<double>& rates, double epsilon) {
   DemoScene d;
   const CameraRainScene sc = bench::kitti_sized_demo(d);
   Exec ex;
@@ -42,10 +43,11 @@ void camera(int rounds, const std::vector<double>& rates) {
   for (const double rate : rates) {
     CameraSnowParams p, none;
     p.flakes.rate_mm_h = rate;
+    if (epsilon >= 0.0) p.epsilon = epsilon;
     none.flakes.rate_mm_h = 0.0;
     CameraSnowStats st;
-    char label[32];
-    std::snprintf(label, sizeof label, "%4.1f mm/h", rate);
+    char label[48];
+    std::snprintf(label, sizeof label, "%4.1f mm/h, epsilon %g", rate, p.epsilon);
     bench::camera_against_noop(
         label, rounds, [&] { return render_camera_snow(sc, p, ex, &st); },
         [&] { return render_camera_snow(sc, none, ex); },
@@ -98,12 +100,16 @@ int main(int argc, char** argv) {
   const int rounds = argc > 1 ? std::max(1, std::atoi(argv[1])) : 15;
   const std::string only = argc > 2 ? argv[2] : "";
   std::vector<double> rates;
-  for (int i = 3; i < argc; ++i) rates.push_back(std::atof(argv[i]));
+  double epsilon = -1.0;  // epsilon=E among the rates: the thinning's ε (else the default)
+  for (int i = 3; i < argc; ++i) {
+    if (std::strncmp(argv[i], "epsilon=", 8) == 0) epsilon = std::atof(argv[i] + 8);
+    else rates.push_back(std::atof(argv[i]));
+  }
   std::printf("brume snow benchmark: %s, Highway target %s (snow: scalar, x86-64 baseline), %d rounds (median "
               "[min..max]); load average %s\n",
               bench::cpu_name().c_str(), simd_target().c_str(), rounds, bench::load_average().c_str());
   if (only.empty() || only == "lidar") lidar(rounds);
-  if (only.empty() || only == "camera") camera(rounds, rates.empty() ? std::vector<double>{2.0} : rates);
+  if (only.empty() || only == "camera") camera(rounds, rates.empty() ? std::vector<double>{2.0} : rates, epsilon);
   std::printf(" load average at the end %s\n", bench::load_average().c_str());
   return 0;
 }

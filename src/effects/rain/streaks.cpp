@@ -252,7 +252,8 @@ std::vector<std::uint32_t> far_to_near(const std::vector<const Streak*>& drops, 
   for (std::size_t i = 0; i < n;) {
     std::size_t j = i + 1;
     while (j < n && key[j] == key[i]) ++j;
-    if (j - i > 1) std::stable_sort(idx.begin() + static_cast<std::ptrdiff_t>(i), idx.begin() + static_cast<std::ptrdiff_t>(j), exact);
+    for (std::size_t a = i + 1; a < j; ++a)  // an insertion sort: stable, and the runs are short
+      for (std::size_t b = a; b > i && exact(idx[b], idx[b - 1]); --b) std::swap(idx[b], idx[b - 1]);
     i = j;
   }
   return idx;
@@ -280,6 +281,7 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
       for (const Streak& k : s) drops.push_back(&k);
   }
   const std::size_t n = drops.size();
+  if (n == 0) return {};
   const int W = cam.width, H = cam.height;
   const double fx = cam.fx, fy = cam.fy, cx = cam.cx, cy = cam.cy;
   constexpr int kTileW = 128, kTileH = 32;
@@ -335,13 +337,20 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
         for (int tx = sp.tx0; tx <= sp.tx1; ++tx) in_tile[fill[static_cast<std::size_t>(ty) * tiles_x + tx]++] = drops[d];
     }
   }
+  // The tiles taken longest list first (a tile's pixels depend on its list alone: any order, the
+  // same image), so that no thread is left with a long tile at the end.
+  std::vector<int> by_work(n_tiles);
+  for (std::size_t t = 0; t < n_tiles; ++t) by_work[t] = static_cast<int>(t);
+  std::stable_sort(by_work.begin(), by_work.end(),
+                   [&](int a, int b) { return first[a + 1] - first[a] > first[b + 1] - first[b]; });
   std::vector<std::size_t> clamped(static_cast<std::size_t>(nt), 0);
 #pragma omp parallel num_threads(nt)
   {
     const int tid = omp_get_thread_num();
     std::vector<double> wx, wy;
 #pragma omp for schedule(dynamic, 1)
-    for (int tile = 0; tile < tiles_x * tiles_y; ++tile) {
+    for (std::size_t w = 0; w < n_tiles; ++w) {
+      const int tile = by_work[w];
       const int y_lo = tile / tiles_x * kTileH, y_hi = std::min(H, y_lo + kTileH);
       const int x_lo = tile % tiles_x * kTileW, x_hi = std::min(W, x_lo + kTileW);
       const std::size_t e0 = first[static_cast<std::size_t>(tile)], e1 = first[static_cast<std::size_t>(tile) + 1];
