@@ -213,17 +213,15 @@ namespace {
 // its bits complemented (a positive float's bits order as its value; the rounding keeps the
 // order, but not every difference), over the streaks listed by their order; then each run of
 // equal keys (few, and short) sorted by the exact ranges, stably.
-std::vector<std::uint32_t> far_to_near(const std::vector<const Streak*>& drops, std::vector<std::uint32_t> key) {
+// `listed`: every streak's order is its index and its range positive and finite (as the pass
+// draws them); else the comparison sort.
+std::vector<std::uint32_t> far_to_near(const std::vector<const Streak*>& drops, std::vector<std::uint32_t> key,
+                                       bool listed) {
   const std::size_t n = drops.size();
   std::vector<std::uint32_t> idx(n), tmp(n);
   for (std::size_t i = 0; i < n; ++i) idx[i] = static_cast<std::uint32_t>(i);
   const auto exact = [&](std::uint32_t a, std::uint32_t b) { return drops[a]->range > drops[b]->range; };
-  bool by_order = true, positive = true;
-  for (std::size_t i = 0; i < n; ++i) {
-    by_order = by_order && (i == 0 || drops[i - 1]->order < drops[i]->order);
-    positive = positive && drops[i]->range > 0.0 && std::isfinite(drops[i]->range);
-  }
-  if (!by_order || !positive) {  // not as the pass lists them: the comparison sort
+  if (!listed) {
     std::stable_sort(idx.begin(), idx.end(),
                      [&](std::uint32_t a, std::uint32_t b) { return drops[a]->order < drops[b]->order; });
     std::stable_sort(idx.begin(), idx.end(), exact);
@@ -298,12 +296,14 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
   std::vector<Span> span(n);
   std::vector<double> path(n);
   std::vector<std::size_t> first(n_tiles + 1, 0);
-#pragma omp parallel num_threads(nt)
+  bool listed = true;
+#pragma omp parallel num_threads(nt) reduction(&& : listed)
   {
     std::vector<std::size_t> count(n_tiles, 0);
 #pragma omp for schedule(static)
     for (std::size_t i = 0; i < n; ++i) {
       const Streak& k = *drops[i];
+      listed = listed && k.order == i && k.range > 0.0 && std::isfinite(k.range);
       const float r = static_cast<float>(k.range);
       std::uint32_t bits;
       std::memcpy(&bits, &r, sizeof bits);
@@ -325,7 +325,7 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
 #pragma omp critical
     for (std::size_t t = 0; t < n_tiles; ++t) first[t + 1] += count[t];
   }
-  const std::vector<std::uint32_t> order = far_to_near(drops, std::move(key));  // storage indices
+  const std::vector<std::uint32_t> order = far_to_near(drops, std::move(key), listed);  // storage indices
   // The tiles' lists, far to near.
   for (std::size_t t = 0; t < n_tiles; ++t) first[t + 1] += first[t];
   std::vector<const Streak*> in_tile(first[n_tiles]);
