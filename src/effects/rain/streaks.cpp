@@ -348,6 +348,10 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
   {
     const int tid = omp_get_thread_num();
     std::vector<double> wx, wy;
+    struct Sample {
+      double u, v, r, a, inv_soft;
+    };
+    std::vector<Sample> samples;
 #pragma omp for schedule(dynamic, 1)
     for (std::size_t w = 0; w < n_tiles; ++w) {
       const int tile = by_work[w];
@@ -404,16 +408,20 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
             i_hi = first([&](int i) { return row(i) < row_lo; });
           }
         }
+        // The samples' positions and weights first (independent of one another: their divisions
+        // overlap), then their taps in order.
+        samples.resize(static_cast<std::size_t>(std::max(0, i_hi - i_lo)));
         for (int i = i_lo; i < i_hi; ++i) {
           const double t = k.t0 + (k.t1 - k.t0) * (i + 0.5) / n;
-          double u, v, r = 0.0, a_sample = 0.0, inv_soft = 0.0;
-          at(t, u, v);
+          Sample& q = samples[static_cast<std::size_t>(i - i_lo)];
+          at(t, q.u, q.v);
           // The coverage over the exposure is the time average of the particle's image area there.
-          const auto weigh = [&] {
-            r = std::sqrt(px * px + py * py + pz * pz);
-            a_sample = k.area * r / (pz * pz * pz) / n;
-            inv_soft = 1.0 / (kRainDepthSoftness * r);
-          };
+          q.r = std::sqrt(px * px + py * py + pz * pz);
+          q.a = k.area * q.r / (pz * pz * pz) / n;
+          q.inv_soft = 1.0 / (kRainDepthSoftness * q.r);
+        }
+        for (const Sample& q : samples) {
+          const double u = q.u, v = q.v, r = q.r, a_sample = q.a, inv_soft = q.inv_soft;
           const auto put = [&](int x, int y, double w) {
             if (x < x_lo || x >= x_hi || y < y_lo || y >= y_hi || !(w > 0.0)) return;
             const float rs = range.at(x, y);
@@ -429,7 +437,6 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
             const double fu = std::floor(u), fv = std::floor(v);
             const int x0 = static_cast<int>(fu), y0 = static_cast<int>(fv);
             if (x0 + 1 < x_lo || x0 >= x_hi || y0 + 1 < y_lo || y0 >= y_hi) continue;  // no tap in the tile
-            weigh();
             const double ax = u - fu, ay = v - fv;
             put(x0, y0, (1 - ax) * (1 - ay));
             put(x0 + 1, y0, ax * (1 - ay));
@@ -438,7 +445,6 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
           } else {
             const int xc = static_cast<int>(std::lround(u)), yc = static_cast<int>(std::lround(v));
             if (yc + rad < y_lo || yc - rad >= y_hi || xc + rad < x_lo || xc - rad >= x_hi) continue;
-            weigh();
             wx.assign(2 * rad + 1, 0.0), wy.assign(2 * rad + 1, 0.0);
             double sx = 0.0, sy = 0.0;
             const double inv = 1.0 / (2.0 * k.sigma_px * k.sigma_px);
