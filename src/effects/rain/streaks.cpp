@@ -94,8 +94,11 @@ StreakSlabs frustum_streaks(const RainField& field, const std::function<double(d
   const std::size_t slabs = static_cast<std::size_t>(ix1 - ix0 + 1);
   StreakSlabs found(slabs);
   std::vector<std::size_t> seen(slabs, 0), cells(slabs, 0);
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 4)
-  for (std::int64_t ix = ix0; ix <= ix1; ++ix) {
+  // The far slabs first, one at a time (the widest: the last taken are the cheapest, so that no
+  // thread is left with a far slab at the end); each slab's list is its own, whoever draws it.
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1)
+  for (std::int64_t back = 0; back <= ix1 - ix0; ++back) {
+    const std::int64_t ix = ix1 - back;
     const std::size_t si = static_cast<std::size_t>(ix - ix0);
     const double z0 = std::max(static_cast<double>(ix) * c, z_near), z1 = static_cast<double>(ix + 1) * c;
     if (!(z0 < z_split)) continue;
