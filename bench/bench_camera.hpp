@@ -92,4 +92,32 @@ inline void camera_against_noop(const std::string& label, int rounds, const std:
   std::printf(") | %s; image %016llx\n", counts().c_str(), static_cast<unsigned long long>(hash));
 }
 
+// An effect's camera pass (`what`: "rain") at each rate on the scene above, 2 threads, against
+// rate 0: P its parameters (the rate set by `set_rate`; `epsilon` >= 0 replaces the thinning's ε),
+// `render` the pass (S its counts, told by `counts`).
+template <class P, class S>
+void camera_rates(const std::string& what, int rounds, const std::vector<double>& rates, double epsilon,
+                  const std::function<void(P&, double)>& set_rate,
+                  const std::function<Image(const CameraRainScene&, const P&, const Exec&, S*)>& render,
+                  const std::function<std::string(const S&)>& counts) {
+  DemoScene d;
+  const CameraRainScene sc = kitti_sized_demo(d);
+  Exec ex;
+  ex.threads = 2;
+  std::printf(" camera %s, the demo scene at %dx%d (fx %.1f px), 1/60 s, 2 threads, ms (wall; the process's CPU):\n",
+              what.c_str(), sc.rgb.width(), sc.rgb.height(), sc.k.fx);
+  for (const double rate : rates) {
+    P p, none;
+    set_rate(p, rate);
+    if (epsilon >= 0.0) p.epsilon = epsilon;
+    set_rate(none, 0.0);
+    S st;
+    char label[48];
+    std::snprintf(label, sizeof label, "%5g mm/h, epsilon %g", rate, p.epsilon);
+    camera_against_noop(
+        label, rounds, [&] { return render(sc, p, ex, &st); }, [&] { return render(sc, none, ex, nullptr); },
+        [&] { return counts(st); });
+  }
+}
+
 }  // namespace brume::bench

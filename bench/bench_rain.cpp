@@ -134,28 +134,15 @@ int lidar(int rounds, const std::vector<double>& rates, bool alone) {
 }
 
 int camera(int rounds, const std::vector<double>& rates, double epsilon) {
-  DemoScene d;
-  const CameraRainScene sc = bench::kitti_sized_demo(d);
-  Exec ex;
-  ex.threads = 2;
-  std::printf(" camera rain, the demo scene at %dx%d (fx %.1f px), 1/60 s, 2 threads, ms (wall; the process's CPU):\n",
-              sc.rgb.width(), sc.rgb.height(), sc.k.fx);
-  for (const double rate : rates) {
-    CameraRainParams p, none;
-    p.drops.rate_mm_h = rate;
-    if (epsilon >= 0.0) p.epsilon = epsilon;
-    none.drops.rate_mm_h = 0.0;
-    CameraRainStats st;
-    char label[48];
-    std::snprintf(label, sizeof label, "%5g mm/h, epsilon %g", rate, p.epsilon);
-    bench::camera_against_noop(
-        label, rounds, [&] { return render_camera_rain(sc, p, ex, &st); },
-        [&] { return render_camera_rain(sc, none, ex); },
-        [&] {
-          return std::to_string(st.cells) + " cells, " + std::to_string(st.drops_seen) + " drops seen, " +
-                 std::to_string(st.drops_drawn) + " drawn";
-        });
-  }
+  bench::camera_rates<CameraRainParams, CameraRainStats>(
+      "rain", rounds, rates, epsilon, [](CameraRainParams& p, double rate) { p.drops.rate_mm_h = rate; },
+      [](const CameraRainScene& sc, const CameraRainParams& p, const Exec& ex, CameraRainStats* st) {
+        return render_camera_rain(sc, p, ex, st);
+      },
+      [](const CameraRainStats& st) {
+        return std::to_string(st.cells) + " cells, " + std::to_string(st.drops_seen) + " drops seen, " +
+               std::to_string(st.drops_drawn) + " drawn";
+      });
   return 0;
 }
 

@@ -34,28 +34,15 @@ std::string simd_target() {
 }
 
 void camera(int rounds, const std::vector<double>& rates, double epsilon) {
-  DemoScene d;
-  const CameraRainScene sc = bench::kitti_sized_demo(d);
-  Exec ex;
-  ex.threads = 2;
-  std::printf(" camera snow, the demo scene at %dx%d (fx %.1f px), 1/60 s, 2 threads, ms (wall; the process's CPU):\n",
-              sc.rgb.width(), sc.rgb.height(), sc.k.fx);
-  for (const double rate : rates) {
-    CameraSnowParams p, none;
-    p.flakes.rate_mm_h = rate;
-    if (epsilon >= 0.0) p.epsilon = epsilon;
-    none.flakes.rate_mm_h = 0.0;
-    CameraSnowStats st;
-    char label[48];
-    std::snprintf(label, sizeof label, "%4.1f mm/h, epsilon %g", rate, p.epsilon);
-    bench::camera_against_noop(
-        label, rounds, [&] { return render_camera_snow(sc, p, ex, &st); },
-        [&] { return render_camera_snow(sc, none, ex); },
-        [&] {
-          return std::to_string(st.cells) + " cells, " + std::to_string(st.flakes_seen) + " flakes seen, " +
-                 std::to_string(st.flakes_drawn) + " drawn";
-        });
-  }
+  bench::camera_rates<CameraSnowParams, CameraSnowStats>(
+      "snow", rounds, rates, epsilon, [](CameraSnowParams& p, double rate) { p.flakes.rate_mm_h = rate; },
+      [](const CameraRainScene& sc, const CameraSnowParams& p, const Exec& ex, CameraSnowStats* st) {
+        return render_camera_snow(sc, p, ex, st);
+      },
+      [](const CameraSnowStats& st) {
+        return std::to_string(st.cells) + " cells, " + std::to_string(st.flakes_seen) + " flakes seen, " +
+               std::to_string(st.flakes_drawn) + " drawn";
+      });
 }
 
 void lidar(int rounds) {
