@@ -12,6 +12,7 @@
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <functional>
 #include <string>
@@ -90,6 +91,16 @@ inline void camera_against_noop(const std::string& label, int rounds, const std:
   std::printf(" (cpu");
   put("", extra_cpu);
   std::printf(") | %s; image %016llx\n", counts().c_str(), static_cast<unsigned long long>(hash));
+}
+
+// The rates among argv[from..]; an argument epsilon=E sets `epsilon` (the thinning's ε; else left).
+inline std::vector<double> rates_from(int argc, char** argv, int from, double& epsilon) {
+  std::vector<double> rates;
+  for (int i = from; i < argc; ++i) {
+    if (std::strncmp(argv[i], "epsilon=", 8) == 0) epsilon = std::atof(argv[i] + 8);
+    else rates.push_back(std::atof(argv[i]));
+  }
+  return rates;
 }
 
 // An effect's camera pass (`what`: "rain") at each rate on the scene above, 2 threads, against

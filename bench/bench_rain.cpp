@@ -151,12 +151,8 @@ int camera(int rounds, const std::vector<double>& rates, double epsilon) {
 int main(int argc, char** argv) {
   const int rounds = argc > 1 ? std::max(1, std::atoi(argv[1])) : 5;
   const std::string only = argc > 2 ? argv[2] : "";
-  std::vector<double> rates;
-  double epsilon = -1.0;  // epsilon=E among the rates: the thinning's ε (else the default)
-  for (int i = 3; i < argc; ++i) {
-    if (std::strncmp(argv[i], "epsilon=", 8) == 0) epsilon = std::atof(argv[i] + 8);
-    else rates.push_back(std::atof(argv[i]));
-  }
+  double epsilon = -1.0;
+  std::vector<double> rates = bench::rates_from(argc, argv, 3, epsilon);
   if (rates.empty()) rates = {5.0, 25.0, 100.0};
   const std::vector<std::int64_t> t = simd::targets();
   std::printf("brume rain benchmark: %s, Highway target %s (rain: scalar, x86-64 baseline), %d interleaved rounds; "

@@ -86,12 +86,8 @@ void lidar(int rounds) {
 int main(int argc, char** argv) {
   const int rounds = argc > 1 ? std::max(1, std::atoi(argv[1])) : 15;
   const std::string only = argc > 2 ? argv[2] : "";
-  std::vector<double> rates;
-  double epsilon = -1.0;  // epsilon=E among the rates: the thinning's ε (else the default)
-  for (int i = 3; i < argc; ++i) {
-    if (std::strncmp(argv[i], "epsilon=", 8) == 0) epsilon = std::atof(argv[i] + 8);
-    else rates.push_back(std::atof(argv[i]));
-  }
+  double epsilon = -1.0;
+  std::vector<double> rates = bench::rates_from(argc, argv, 3, epsilon);
   std::printf("brume snow benchmark: %s, Highway target %s (snow: scalar, x86-64 baseline), %d rounds (median "
               "[min..max]); load average %s\n",
               bench::cpu_name().c_str(), simd_target().c_str(), rounds, bench::load_average().c_str());
