@@ -114,10 +114,10 @@ StreakSlabs frustum_streaks(const RainField& field, const std::function<double(d
     const std::int64_t jz0 = static_cast<std::int64_t>(std::floor(-yhi / c)),
                        jz1 = static_cast<std::int64_t>(std::floor(-ylo / c));
     std::vector<Streak>& list = found[si];
-    // Room for the slab's mean count of drops and four standard deviations (a Poisson count):
-    // the list seldom grows, whose copies of large lists cost more than the drawing.
+    // Room for the slab's mean count of drops and four standard deviations (a Poisson count), up
+    // to 2^22 of them: the list seldom grows, whose copies of large lists cost more than the drawing.
     const double mean = m * static_cast<double>(jy1 - jy0 + 1) * static_cast<double>(jz1 - jz0 + 1);
-    list.reserve(static_cast<std::size_t>(std::min(mean + 4.0 * std::sqrt(mean) + 16.0, 1e8)));
+    list.reserve(static_cast<std::size_t>(std::min(mean + 4.0 * std::sqrt(mean) + 16.0, 4194304.0)));
     // A cell holds a drop within measure m iff its first unit exponential −ln(1 − u) <= m: a first
     // draw u above 1 − e^{−m(1 + 1e−9)} cannot (the margin far above the logarithms' rounding),
     // and the cell is passed over without them; the column's hash is taken once for its cells.
