@@ -394,7 +394,7 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
             const double t = k.t0 + (k.t1 - k.t0) * (i + 0.5) / n;
             return fy * (k.c[1] + k.u[1] * t) / (k.c[2] + k.u[2] * t) + cy;
           };
-          const auto first = [n](const auto& holds) {  // the first index where `holds` turns true
+          const auto first_true = [n](const auto& holds) {  // the first index where `holds` turns true
             int a = 0, b = n;
             while (a < b) {
               const int mid = a + (b - a) / 2;
@@ -404,11 +404,11 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
             return a;
           };
           if (vb >= va) {
-            i_lo = first([&](int i) { return row(i) >= row_lo; });
-            i_hi = first([&](int i) { return row(i) >= row_hi; });
+            i_lo = first_true([&](int i) { return row(i) >= row_lo; });
+            i_hi = first_true([&](int i) { return row(i) >= row_hi; });
           } else {
-            i_lo = first([&](int i) { return row(i) < row_hi; });
-            i_hi = first([&](int i) { return row(i) < row_lo; });
+            i_lo = first_true([&](int i) { return row(i) < row_hi; });
+            i_hi = first_true([&](int i) { return row(i) < row_lo; });
           }
         }
         // The samples' positions and weights first (independent of one another: their divisions
