@@ -10,13 +10,14 @@
 //   camera: render_camera_rain at 1242x375 (the demo scene's range and colour
 //           at KITTI's size, KITTI's focal length 721.5 px), 25 mm/h, 1/60 s, on
 //           2 threads, against the same call at rate 0 (the no-op: the analytic
-//           pass and composite alone), interleaved. Target: <= 100 ms beyond the no-op.
-// Each figure: median [min..max] over the rounds, wall time and the calling
-// thread's CPU time; the CPU (family, model), the SIMD level Highway picks (the
+//           pass and composite alone), interleaved, with the image's hash
+//           (bench_camera.hpp). Target: <= 100 ms beyond the no-op.
+// Each figure: median [min..max] over the rounds, wall time and CPU time (the
+// calling thread's for the LiDAR, the process's for the camera); the CPU (family, model), the SIMD level Highway picks (the
 // rain code itself is scalar, built for the x86-64 baseline) and the load
 // average at the start and the end are printed.
 //
-// Usage: brume_bench_rain [ROUNDS] [lidar|lidar-alone|camera] [RATE ...]
+// Usage: brume_bench_rain [ROUNDS] [lidar|lidar-alone|camera] [RATE ...] [epsilon=E] (the camera's thinning ε)
 // (lidar-alone: the cell-major pass only, for profiling)
 #include <omp.h>
 #include <time.h>
@@ -33,6 +34,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_camera.hpp"
 #include "bench_util.hpp"
 #include "brume/demo_scene.hpp"
 #include "brume/depth.hpp"
@@ -131,44 +133,16 @@ int lidar(int rounds, const std::vector<double>& rates, bool alone) {
   return bad;
 }
 
-int camera(int rounds, const std::vector<double>& rates) {
-  const int W = 1242, H = 375;
-  const DemoScene d = render_demo_scene(W, H);
-  CameraRainScene sc;
-  sc.rgb = d.rgb;
-  sc.range = d.range;
-  sc.k.fx = sc.k.fy = 721.5377;  // KITTI 000001's camera 2 (calib P2)
-  sc.k = resolve(sc.k, W, H);
-  sc.airlight = {0.7f, 0.72f, 0.75f};
-  Exec ex;
-  ex.threads = 2;
-  std::printf(" camera rain, the demo scene at %dx%d (fx %.1f px), 1/60 s, 2 threads, ms (wall; calling thread's CPU):\n",
-              W, H, sc.k.fx);
-  for (const double rate : rates) {
-    CameraRainParams p, none;
-    p.drops.rate_mm_h = rate;
-    none.drops.rate_mm_h = 0.0;
-    std::vector<double> wa, ca, wb, cb, extra;
-    CameraRainStats st;
-    Image out;
-    for (int r = 0; r <= rounds; ++r) {  // round 0 warms up
-      Timing ta{}, tb{};
-      for (int k = 0; k < 2; ++k) {
-        if ((k == 0) == (r % 2 == 0)) ta = timed([&] { out = render_camera_rain(sc, p, ex, &st); });
-        else tb = timed([&] { out = render_camera_rain(sc, none, ex); });
-      }
-      if (r == 0) continue;
-      wa.push_back(ta.wall), ca.push_back(ta.cpu), wb.push_back(tb.wall), cb.push_back(tb.cpu);
-      extra.push_back(ta.wall - tb.wall);
-    }
-    std::printf("  %5g mm/h: rain wall", rate);
-    print_spread("", wa);
-    std::printf(" | rate 0 wall");
-    print_spread("", wb);
-    std::printf(" | rain beyond it");
-    print_spread("", extra);
-    std::printf(" (%zu cells, %zu drops seen, %zu drawn)\n", st.cells, st.drops_seen, st.drops_drawn);
-  }
+int camera(int rounds, const std::vector<double>& rates, double epsilon) {
+  bench::camera_rates<CameraRainParams, CameraRainStats>(
+      "rain", rounds, rates, epsilon, [](CameraRainParams& p, double rate) { p.drops.rate_mm_h = rate; },
+      [](const CameraRainScene& sc, const CameraRainParams& p, const Exec& ex, CameraRainStats* st) {
+        return render_camera_rain(sc, p, ex, st);
+      },
+      [](const CameraRainStats& st) {
+        return std::to_string(st.cells) + " cells, " + std::to_string(st.drops_seen) + " drops seen, " +
+               std::to_string(st.drops_drawn) + " drawn";
+      });
   return 0;
 }
 
@@ -177,8 +151,8 @@ int camera(int rounds, const std::vector<double>& rates) {
 int main(int argc, char** argv) {
   const int rounds = argc > 1 ? std::max(1, std::atoi(argv[1])) : 5;
   const std::string only = argc > 2 ? argv[2] : "";
-  std::vector<double> rates;
-  for (int i = 3; i < argc; ++i) rates.push_back(std::atof(argv[i]));
+  double epsilon = -1.0;
+  std::vector<double> rates = bench::rates_from(argc, argv, 3, epsilon);
   if (rates.empty()) rates = {5.0, 25.0, 100.0};
   const std::vector<std::int64_t> t = simd::targets();
   std::printf("brume rain benchmark: %s, Highway target %s (rain: scalar, x86-64 baseline), %d interleaved rounds; "
@@ -187,7 +161,7 @@ int main(int argc, char** argv) {
               load().c_str());
   int bad = 0;
   if (only.empty() || only == "lidar" || only == "lidar-alone") bad += lidar(rounds, rates, only == "lidar-alone");
-  if (only.empty() || only == "camera") bad += camera(rounds, only.empty() ? std::vector<double>{25.0} : rates);
+  if (only.empty() || only == "camera") bad += camera(rounds, only.empty() ? std::vector<double>{25.0} : rates, epsilon);
   std::printf(" load average at the end %s\n", load().c_str());
   return bad ? 1 : 0;
 }

@@ -235,14 +235,13 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
     }
     return true;
   };
-  std::vector<Streak> drops =
+  const StreakSlabs drops =
       frustum_streaks(field, [&](double z) { return optics.threshold_mm(z); }, p.z_near_m, p.z_split_m, grow_m, cam,
                       nt, make, st.cells, st.drops_seen);
-  st.drops_drawn = drops.size();
 
   // 3. The streaks, composited far to near (ties: the enumeration's order), tile by tile.
-  st.alpha_clamped = splat_streaks(drops, s.range, out, cam, nt);
-  st.mean_streak_px = mean_streak_px(drops, cam);
+  const StreakSplat splat = splat_streaks(drops, s.range, out, cam, nt);
+  st.drops_drawn = splat.drawn, st.alpha_clamped = splat.alpha_clamped, st.mean_streak_px = splat.mean_streak_px;
   if (stats) *stats = st;
   return out;
 }

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <string>
 
@@ -15,6 +16,7 @@
 namespace brume {
 
 namespace {
+constexpr std::size_t kAhead = 8;  // how many streaks ahead a tile's loop fetches
 constexpr double kStreakInf = std::numeric_limits<double>::infinity();
 constexpr double kStreakPi = 3.14159265358979323846;
 }  // namespace
@@ -78,7 +80,7 @@ Image streak_background(const CameraRainScene& s, const std::function<double(dou
   return out;
 }
 
-std::vector<Streak> frustum_streaks(const RainField& field, const std::function<double(double)>& threshold_mm,
+StreakSlabs frustum_streaks(const RainField& field, const std::function<double(double)>& threshold_mm,
                                     double z_near, double z_split, const std::function<double(double, double)>& grow_m,
                                     const StreakCamera& cam, int nt,
                                     const std::function<bool(const Vec3&, double, Streak&)>& make, std::size_t& cells_out,
@@ -90,10 +92,13 @@ std::vector<Streak> frustum_streaks(const RainField& field, const std::function<
   const std::int64_t ix0 = static_cast<std::int64_t>(std::floor(z_near / c));
   const std::int64_t ix1 = static_cast<std::int64_t>(std::floor(z_split / c));
   const std::size_t slabs = static_cast<std::size_t>(ix1 - ix0 + 1);
-  std::vector<std::vector<Streak>> found(slabs);
+  StreakSlabs found(slabs);
   std::vector<std::size_t> seen(slabs, 0), cells(slabs, 0);
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 4)
-  for (std::int64_t ix = ix0; ix <= ix1; ++ix) {
+  // The far slabs first, one at a time (the widest: the last taken are the cheapest, so that no
+  // thread is left with a far slab at the end); each slab's list is its own, whoever draws it.
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1)
+  for (std::int64_t back = 0; back <= ix1 - ix0; ++back) {
+    const std::int64_t ix = ix1 - back;
     const std::size_t si = static_cast<std::size_t>(ix - ix0);
     const double z0 = std::max(static_cast<double>(ix) * c, z_near), z1 = static_cast<double>(ix + 1) * c;
     if (!(z0 < z_split)) continue;
@@ -109,10 +114,21 @@ std::vector<Streak> frustum_streaks(const RainField& field, const std::function<
     const std::int64_t jz0 = static_cast<std::int64_t>(std::floor(-yhi / c)),
                        jz1 = static_cast<std::int64_t>(std::floor(-ylo / c));
     std::vector<Streak>& list = found[si];
-    for (std::int64_t jy = jy0; jy <= jy1; ++jy)
+    // Room for the slab's mean count of drops and four standard deviations (a Poisson count), up
+    // to 2^22 of them: the list seldom grows, whose copies of large lists cost more than the drawing.
+    const double mean = m * static_cast<double>(jy1 - jy0 + 1) * static_cast<double>(jz1 - jz0 + 1);
+    list.reserve(static_cast<std::size_t>(std::min(mean + 4.0 * std::sqrt(mean) + 16.0, 4194304.0)));
+    // A cell holds a drop within measure m iff its first unit exponential −ln(1 − u) <= m: a first
+    // draw u above 1 − e^{−m(1 + 1e−9)} cannot (the margin far above the logarithms' rounding),
+    // and the cell is passed over without them; the column's hash is taken once for its cells.
+    const double u_max = -std::expm1(-m * (1.0 + 1e-9)) + 1e-15;
+    for (std::int64_t jy = jy0; jy <= jy1; ++jy) {
+      const std::uint64_t column = field.column_hash(ix, jy);
       for (std::int64_t jz = jz0; jz <= jz1; ++jz) {
         ++cells[si];
-        field.for_each_drop_within(RainCell{ix, jy, jz}, m, [&](const Vec3& at, double sm) {
+        const std::uint64_t h = RainField::cell_hash(column, jz);
+        if (RainField::first_unit(h) > u_max) continue;
+        field.for_each_drop_hashed(RainCell{ix, jy, jz}, h, m, [&](const Vec3& at, double sm) {
           ++seen[si];
           const double d_mm = field.diameter_mm(sm);
           if (d_mm < threshold_mm(at.x)) return;
@@ -122,17 +138,15 @@ std::vector<Streak> frustum_streaks(const RainField& field, const std::function<
           list.push_back(k);
         });
       }
+    }
   }
-  std::vector<Streak> all;
+  std::size_t order = 0;
   for (std::size_t i = 0; i < slabs; ++i) {
     cells_out += cells[i];
     seen_out += seen[i];
-    for (Streak& k : found[i]) {
-      k.order = all.size();
-      all.push_back(k);
-    }
+    for (Streak& k : found[i]) k.order = order++;
   }
-  return all;
+  return found;
 }
 
 double streak_grow_m(double z0, double z1, double d_max_mm, double motion_m, const StreakLens& lens,
@@ -194,61 +208,223 @@ bool bound_streak(Streak& k, double T, double z_clip, const StreakCamera& cam) {
   return true;
 }
 
+namespace {
+
+// The permutation that lists the streaks far to near, ties by their order (the same as a
+// comparison sort by range descending, then order ascending): a least-significant-digit radix sort
+// (stable, three digits of 11 bits) of `key`, each streak's range rounded to single precision,
+// its bits complemented (a positive float's bits order as its value; the rounding keeps the
+// order, but not every difference), over the streaks listed by their order; then each run of
+// equal keys (few, and short) sorted by the exact ranges, stably.
+// `listed`: every streak's order is its index and its range positive and finite (as the pass
+// draws them); else the comparison sort.
+std::vector<std::uint32_t> far_to_near(const std::vector<const Streak*>& drops, std::vector<std::uint32_t> key,
+                                       bool listed) {
+  const std::size_t n = drops.size();
+  std::vector<std::uint32_t> idx(n), tmp(n);
+  for (std::size_t i = 0; i < n; ++i) idx[i] = static_cast<std::uint32_t>(i);
+  const auto exact = [&](std::uint32_t a, std::uint32_t b) { return drops[a]->range > drops[b]->range; };
+  if (!listed) {
+    std::stable_sort(idx.begin(), idx.end(),
+                     [&](std::uint32_t a, std::uint32_t b) { return drops[a]->order < drops[b]->order; });
+    std::stable_sort(idx.begin(), idx.end(), exact);
+    return idx;
+  }
+  constexpr int kBits = 11, kDigits = 3;
+  constexpr std::uint32_t kMask = (1u << kBits) - 1;
+  std::vector<std::uint32_t> count(static_cast<std::size_t>(kDigits) << kBits, 0u), key_tmp(n);
+  for (std::size_t i = 0; i < n; ++i)
+    for (int d = 0; d < kDigits; ++d) ++count[(static_cast<std::size_t>(d) << kBits) + ((key[i] >> (d * kBits)) & kMask)];
+  for (int d = 0; d < kDigits && n > 0; ++d) {
+    std::uint32_t* c = &count[static_cast<std::size_t>(d) << kBits];
+    if (c[(key[0] >> (d * kBits)) & kMask] == n) continue;  // one digit: the pass keeps the order
+    std::uint32_t run = 0;
+    for (std::size_t b = 0; b <= kMask; ++b) {
+      const std::uint32_t k = c[b];
+      c[b] = run;
+      run += k;
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint32_t at = c[(key[i] >> (d * kBits)) & kMask]++;
+      key_tmp[at] = key[i], tmp[at] = idx[i];
+    }
+    key.swap(key_tmp), idx.swap(tmp);
+  }
+  for (std::size_t i = 0; i < n;) {
+    std::size_t j = i + 1;
+    while (j < n && key[j] == key[i]) ++j;
+    for (std::size_t a = i + 1; a < j; ++a)  // an insertion sort: stable, and the runs are short
+      for (std::size_t b = a; b > i && exact(idx[b], idx[b - 1]); --b) std::swap(idx[b], idx[b - 1]);
+    i = j;
+  }
+  return idx;
+}
+
+}  // namespace
+
 // The streaks, composited far to near, tile by tile: a tile's pixels stay in cache while the
 // streaks that can touch it (listed in their order) are splatted, each pixel taking the same
 // updates in the same order as a single pass over them would give it (the same image on any
 // number of threads). A streak's rows and columns (v_lo..v_hi, u_lo..u_hi) bound every pixel its
-// samples touch; its tiles are taken one pixel wider.
-std::size_t splat_streaks(std::vector<Streak>& drops, ConstImageView range, Image& out, const StreakCamera& cam,
+// samples touch; its tiles are taken one pixel wider. The streaks stay where they were drawn:
+// their order far to near is a radix sort's permutation, the tiles' lists one array (counted,
+// then filled), and a tile's loop fetches the streaks a few ahead of the one it draws.
+StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image& out, const StreakCamera& cam,
                           int nt) {
-  std::sort(drops.begin(), drops.end(), [](const Streak& a, const Streak& b) {
-    return a.range != b.range ? a.range > b.range : a.order < b.order;
-  });
+  std::vector<const Streak*> drops;
+  {
+    std::size_t n = 0;
+    for (const std::vector<Streak>& s : slabs) n += s.size();
+    if (n > std::numeric_limits<std::uint32_t>::max())
+      throw Error("internal: " + std::to_string(n) + " streaks, more than the splat's 32-bit lists hold");
+    drops.reserve(n);
+    for (const std::vector<Streak>& s : slabs)
+      for (const Streak& k : s) drops.push_back(&k);
+  }
+  const std::size_t n = drops.size();
+  if (n == 0) return {};
   const int W = cam.width, H = cam.height;
   const double fx = cam.fx, fy = cam.fy, cx = cam.cx, cy = cam.cy;
   constexpr int kTileW = 128, kTileH = 32;
   const int tiles_x = (W + kTileW - 1) / kTileW, tiles_y = (H + kTileH - 1) / kTileH;
-  std::vector<std::vector<std::uint32_t>> in_tile(static_cast<std::size_t>(tiles_x) * tiles_y);
-  for (std::size_t d = 0; d < drops.size(); ++d) {
-    const Streak& k = drops[d];
-    const int ty0 = std::max(0, k.v_lo - 1) / kTileH, ty1 = std::min(H - 1, k.v_hi + 1) / kTileH;
-    const int tx0 = std::max(0, k.u_lo - 1) / kTileW, tx1 = std::min(W - 1, k.u_hi + 1) / kTileW;
-    for (int ty = ty0; ty <= ty1; ++ty)
-      for (int tx = tx0; tx <= tx1; ++tx)
-        in_tile[static_cast<std::size_t>(ty) * tiles_x + tx].push_back(static_cast<std::uint32_t>(d));
+  const std::size_t n_tiles = static_cast<std::size_t>(tiles_x) * tiles_y;
+  // Each streak's sort key, tiles and path length, and the tiles' counts, in one pass over the
+  // streaks as they lie in memory (the passes far to near below read these, not the streaks).
+  struct Span {
+    std::uint16_t tx0, tx1, ty0, ty1;
+  };
+  if (tiles_x > 65535 || tiles_y > 65535)
+    throw Error("internal: " + std::to_string(W) + "x" + std::to_string(H) + " is more tiles than the splat counts");
+  std::vector<std::uint32_t> key(n);
+  std::vector<Span> span(n);
+  std::vector<double> path(n);
+  std::vector<std::size_t> first(n_tiles + 1, 0);
+  bool listed = true;
+#pragma omp parallel num_threads(nt) reduction(&& : listed)
+  {
+    std::vector<std::size_t> count(n_tiles, 0);
+#pragma omp for schedule(static)
+    for (std::size_t i = 0; i < n; ++i) {
+      const Streak& k = *drops[i];
+      listed = listed && k.order == i && k.range > 0.0 && std::isfinite(k.range);
+      const float r = static_cast<float>(k.range);
+      std::uint32_t bits;
+      std::memcpy(&bits, &r, sizeof bits);
+      key[i] = ~bits;
+      const Span sp = {static_cast<std::uint16_t>(std::max(0, k.u_lo - 1) / kTileW),
+                       static_cast<std::uint16_t>(std::min(W - 1, k.u_hi + 1) / kTileW),
+                       static_cast<std::uint16_t>(std::max(0, k.v_lo - 1) / kTileH),
+                       static_cast<std::uint16_t>(std::min(H - 1, k.v_hi + 1) / kTileH)};
+      span[i] = sp;
+      for (int ty = sp.ty0; ty <= sp.ty1; ++ty)
+        for (int tx = sp.tx0; tx <= sp.tx1; ++tx) ++count[static_cast<std::size_t>(ty) * tiles_x + tx];
+      double e[2][2];
+      for (int j = 0; j < 2; ++j) {
+        const double t = j ? k.t1 : k.t0, pz = k.c[2] + k.u[2] * t;
+        e[j][0] = cam.fx * (k.c[0] + k.u[0] * t) / pz, e[j][1] = cam.fy * (k.c[1] + k.u[1] * t) / pz;
+      }
+      path[i] = std::hypot(e[1][0] - e[0][0], e[1][1] - e[0][1]);
+    }
+#pragma omp critical
+    for (std::size_t t = 0; t < n_tiles; ++t) first[t + 1] += count[t];
   }
+  const std::vector<std::uint32_t> order = far_to_near(drops, std::move(key), listed);  // storage indices
+  // The tiles' lists, far to near.
+  for (std::size_t t = 0; t < n_tiles; ++t) first[t + 1] += first[t];
+  std::vector<const Streak*> in_tile(first[n_tiles]);
+  {
+    std::vector<std::size_t> fill(first.begin(), first.end() - 1);
+    for (const std::uint32_t d : order) {
+      const Span& sp = span[d];
+      for (int ty = sp.ty0; ty <= sp.ty1; ++ty)
+        for (int tx = sp.tx0; tx <= sp.tx1; ++tx) in_tile[fill[static_cast<std::size_t>(ty) * tiles_x + tx]++] = drops[d];
+    }
+  }
+  // The tiles taken longest list first (a tile's pixels depend on its list alone: any order, the
+  // same image), so that no thread is left with a long tile at the end.
+  std::vector<int> by_work(n_tiles);
+  for (std::size_t t = 0; t < n_tiles; ++t) by_work[t] = static_cast<int>(t);
+  std::stable_sort(by_work.begin(), by_work.end(),
+                   [&](int a, int b) { return first[a + 1] - first[a] > first[b + 1] - first[b]; });
   std::vector<std::size_t> clamped(static_cast<std::size_t>(nt), 0);
 #pragma omp parallel num_threads(nt)
   {
     const int tid = omp_get_thread_num();
     std::vector<double> wx, wy;
+    struct Sample {
+      double u, v, r, a, inv_soft;
+    };
+    std::vector<Sample> samples;
 #pragma omp for schedule(dynamic, 1)
-    for (int tile = 0; tile < tiles_x * tiles_y; ++tile) {
+    for (std::size_t w = 0; w < n_tiles; ++w) {
+      const int tile = by_work[w];
       const int y_lo = tile / tiles_x * kTileH, y_hi = std::min(H, y_lo + kTileH);
       const int x_lo = tile % tiles_x * kTileW, x_hi = std::min(W, x_lo + kTileW);
-      for (const std::uint32_t d : in_tile[static_cast<std::size_t>(tile)]) {
-        const Streak& k = drops[d];
-        double pz = 0.0;
-        const auto at = [&](double t, double& u, double& v, double& r) {
-          const double px = k.c[0] + k.u[0] * t, py = k.c[1] + k.u[1] * t;
+      const std::size_t e0 = first[static_cast<std::size_t>(tile)], e1 = first[static_cast<std::size_t>(tile) + 1];
+      for (std::size_t e = e0; e < e1; ++e) {
+        if (e + kAhead < e1) {
+          const char* next = reinterpret_cast<const char*>(in_tile[e + kAhead]);
+          __builtin_prefetch(next);
+          __builtin_prefetch(next + 64);
+          __builtin_prefetch(next + sizeof(Streak) - 1);
+        }
+        const Streak& k = *in_tile[e];
+        // The image position at time t (and its depth pz); the range only where a sample is drawn.
+        double px = 0.0, py = 0.0, pz = 0.0;
+        const auto at = [&](double t, double& u, double& v) {
+          px = k.c[0] + k.u[0] * t, py = k.c[1] + k.u[1] * t;
           pz = k.c[2] + k.u[2] * t;
-          u = fx * px / pz + cx, v = fy * py / pz + cy, r = std::sqrt(px * px + py * py + pz * pz);
+          u = fx * px / pz + cx, v = fy * py / pz + cy;
         };
-        double ua, va, ub, vb, rr;
-        at(k.t0, ua, va, rr);
-        at(k.t1, ub, vb, rr);
+        double ua, va, ub, vb;
+        at(k.t0, ua, va);
+        at(k.t1, ub, vb);
         const double len = std::hypot(ub - ua, vb - va);
         const double h = std::max(0.5, 0.5 * k.sigma_px);
         const int n = std::min(1 << 16, static_cast<int>(std::ceil(len / h)) + 1);
         const bool gauss = k.sigma_px >= 0.5;
         const int rad = gauss ? static_cast<int>(std::ceil(3.0 * k.sigma_px)) : 0;
-        for (int i = 0; i < n; ++i) {
+        // The samples that can have a tap in the tile's rows: the image path is straight and its
+        // row monotone in t, so they are a run of indices, found by bisection on rows a pixel
+        // beyond any tap's reach (far above the rounding of v); the others are not computed.
+        int i_lo = 0, i_hi = n;
+        if (n > 8) {
+          const double row_lo = y_lo - rad - 2.0, row_hi = y_hi + rad + 1.0;
+          const auto row = [&](int i) {
+            const double t = k.t0 + (k.t1 - k.t0) * (i + 0.5) / n;
+            return fy * (k.c[1] + k.u[1] * t) / (k.c[2] + k.u[2] * t) + cy;
+          };
+          const auto first_true = [n](const auto& holds) {  // the first index where `holds` turns true
+            int a = 0, b = n;
+            while (a < b) {
+              const int mid = a + (b - a) / 2;
+              if (holds(mid)) b = mid;
+              else a = mid + 1;
+            }
+            return a;
+          };
+          if (vb >= va) {
+            i_lo = first_true([&](int i) { return row(i) >= row_lo; });
+            i_hi = first_true([&](int i) { return row(i) >= row_hi; });
+          } else {
+            i_lo = first_true([&](int i) { return row(i) < row_hi; });
+            i_hi = first_true([&](int i) { return row(i) < row_lo; });
+          }
+        }
+        // The samples' positions and weights first (independent of one another: their divisions
+        // overlap), then their taps in order.
+        samples.resize(static_cast<std::size_t>(std::max(0, i_hi - i_lo)));
+        for (int i = i_lo; i < i_hi; ++i) {
           const double t = k.t0 + (k.t1 - k.t0) * (i + 0.5) / n;
-          double u, v, r;
-          at(t, u, v, r);
+          Sample& q = samples[static_cast<std::size_t>(i - i_lo)];
+          at(t, q.u, q.v);
           // The coverage over the exposure is the time average of the particle's image area there.
-          const double a_sample = k.area * r / (pz * pz * pz) / n;
-          const double inv_soft = 1.0 / (kRainDepthSoftness * r);
+          q.r = std::sqrt(px * px + py * py + pz * pz);
+          q.a = k.area * q.r / (pz * pz * pz) / n;
+          q.inv_soft = 1.0 / (kRainDepthSoftness * q.r);
+        }
+        for (const Sample& q : samples) {
+          const double u = q.u, v = q.v, r = q.r, a_sample = q.a, inv_soft = q.inv_soft;
           const auto put = [&](int x, int y, double w) {
             if (x < x_lo || x >= x_hi || y < y_lo || y >= y_hi || !(w > 0.0)) return;
             const float rs = range.at(x, y);
@@ -289,22 +465,14 @@ std::size_t splat_streaks(std::vector<Streak>& drops, ConstImageView range, Imag
       }
     }
   }
-  std::size_t total = 0;
-  for (std::size_t i = 0; i < clamped.size(); ++i) total += clamped[i];
-  return total;
-}
-
-double mean_streak_px(const std::vector<Streak>& drops, const StreakCamera& cam) {
+  StreakSplat done;
+  for (std::size_t i = 0; i < clamped.size(); ++i) done.alpha_clamped += clamped[i];
+  // The mean length of the paths, summed far to near.
   double total_len = 0.0;
-  for (const Streak& k : drops) {
-    double e[2][2];
-    for (int j = 0; j < 2; ++j) {
-      const double t = j ? k.t1 : k.t0, pz = k.c[2] + k.u[2] * t;
-      e[j][0] = cam.fx * (k.c[0] + k.u[0] * t) / pz, e[j][1] = cam.fy * (k.c[1] + k.u[1] * t) / pz;
-    }
-    total_len += std::hypot(e[1][0] - e[0][0], e[1][1] - e[0][1]);
-  }
-  return drops.empty() ? 0.0 : total_len / static_cast<double>(drops.size());
+  for (const std::uint32_t d : order) total_len += path[d];
+  done.drawn = drops.size();
+  done.mean_streak_px = drops.empty() ? 0.0 : total_len / static_cast<double>(drops.size());
+  return done;
 }
 
 }  // namespace brume

@@ -86,11 +86,14 @@ inline bool streak_range_known(float r) { return std::isfinite(r) && r > 0.0f; }
 Image streak_background(const CameraRainScene& s, const std::function<double(double r, double cos_theta)>& front_tau,
                         double sigma_total, int threads, Image* transmission);
 
+// The streaks of a pass slab by slab (a slab's in their order within it).
+using StreakSlabs = std::vector<std::vector<Streak>>;
+
 // 2. The particles of `field` with D >= threshold_mm(z) at planar depths in [z_near, z_split),
 // slab by slab of the field's cells (x forward in the vehicle frame: the camera's z), each slab's
 // lateral extent the frustum widened by grow_m(z0, z1) [m]; make(at, d_mm, k) fills a streak
-// (false: not drawn). Returns them in the slabs' order, each with its `order`.
-std::vector<Streak> frustum_streaks(const RainField& field, const std::function<double(double z)>& threshold_mm,
+// (false: not drawn). Returns them slab by slab, each with its `order` (its index over the slabs).
+StreakSlabs frustum_streaks(const RainField& field, const std::function<double(double z)>& threshold_mm,
                                     double z_near, double z_split,
                                     const std::function<double(double z0, double z1)>& grow_m,
                                     const StreakCamera& cam, int threads,
@@ -122,13 +125,16 @@ void check_streak_scene(const CameraRainScene& s, const std::string& effect);
 // the rows and columns it can touch; false when none is left or it stays out of the image.
 bool bound_streak(Streak& k, double exposure_s, double z_clip, const StreakCamera& cam);
 
-// 3. The streaks sorted far to near (ties: their order) and composited into `out`, each pixel
+// 3. The streaks taken far to near (ties: their order) and composited into `out`, each pixel
 // I ← (1 − α)·I + α·E with α its coverage, hidden where the scene's range is nearer
-// (kRainDepthSoftness); returns how many α were clamped to 1.
-std::size_t splat_streaks(std::vector<Streak>& streaks, ConstImageView range, Image& out, const StreakCamera& cam,
+// (kRainDepthSoftness): how many were drawn, how many α were clamped to 1, and the mean length of
+// their paths in the image [px] (summed far to near).
+struct StreakSplat {
+  std::size_t drawn = 0, alpha_clamped = 0;
+  double mean_streak_px = 0.0;
+};
+StreakSplat splat_streaks(const StreakSlabs& streaks, ConstImageView range, Image& out, const StreakCamera& cam,
                           int threads);
-// The mean length of the streaks' paths in the image [px].
-double mean_streak_px(const std::vector<Streak>& streaks, const StreakCamera& cam);
 
 // An image's box mean over (2h+1)² about a pixel (clamped), per channel, by a summed-area table.
 class StreakBoxMean {

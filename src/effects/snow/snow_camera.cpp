@@ -138,13 +138,12 @@ Image render_camera_snow(const CameraRainScene& s, const CameraSnowParams& p, co
       for (int q = 0; q < 3; ++q) k.e[q] = static_cast<float>(tf * e[q] + (1.0 - tf) * s.airlight[q]);
       return true;
     };
-    std::vector<Streak> flakes =
+    const StreakSlabs flakes =
         frustum_streaks(field, [&](double z) { return optics.threshold_mm(z); }, p.z_near_m, p.z_split_m, grow_m, cam,
                         nt, make, st.cells, st.flakes_seen);
-    st.flakes_drawn = flakes.size();
     // 3. Composited far to near, tile by tile.
-    st.alpha_clamped = splat_streaks(flakes, s.range, out, cam, nt);
-    st.mean_streak_px = mean_streak_px(flakes, cam);
+    const StreakSplat splat = splat_streaks(flakes, s.range, out, cam, nt);
+    st.flakes_drawn = splat.drawn, st.alpha_clamped = splat.alpha_clamped, st.mean_streak_px = splat.mean_streak_px;
   }
   if (stats) *stats = st;
   return out;
