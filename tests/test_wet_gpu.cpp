@@ -3,7 +3,9 @@
 // against wet.cpp's double one; on the demo scene (160x120, camera 1.6 m up, 5 deg down) pixels
 // off the ground unchanged bit for bit, film 0 the identity, the darkening and the mirror within
 // float rounding, and the mirrored rays' source pixels, read from an image that carries each
-// pixel's coordinates as its colour, the same but for a small bounded share.
+// pixel's coordinates as its colour, the same but for a small bounded share; each mirror march
+// (blocks, above-ground) against the CPU's same march, the above-ground lift where the CPU's, and
+// the record's mirror_march from a GPU run.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -49,6 +51,14 @@ TEST(WetGpu, FresnelInFloatIsTheDoubleOne) {
   EXPECT_LE(worst, 2e-6);
 }
 
+// The scene's size in these tests (cheap on llvmpipe) and the CPU's threads.
+constexpr int W = 160, H = 120;
+Exec two_threads() {
+  Exec e;
+  e.threads = 2;
+  return e;
+}
+
 // The source pixels' comparison of one march on one scene (below).
 struct SourceCompare {
   std::size_t ground = 0, hits = 0, differ = 0, same_far = 0;
@@ -59,9 +69,8 @@ struct SourceCompare {
 
 // The scene with each pixel's colour its coordinates ((x + 1/2)/W, (y + 1/2)/H, 1/2): the mirror's
 // L, (wet − K_eff dry)/(f R_F), names the pixel the ray took (the sky: 4, 4, 4, out of [0, 1]), on
-// the CPU and on the GPU with the scene's march.
+// the CPU and on the GPU with the scene's march (a scene of W x H).
 SourceCompare compare_sources(GpuContext& ctx, WetScene sc, const WetFilm& w, const Exec& exec) {
-  const int W = sc.rgb.width(), H = sc.rgb.height();
   const WetOptics o(w);
   Image coded(W, H, 3), g_cpu;
   for (int y = 0; y < H; ++y)
@@ -123,10 +132,8 @@ void expect_sources_match(const SourceCompare& r, WetMarch march) {
 // The demo scene with real colours, on each march: the ground, the pixels off it, film 0, a mask.
 TEST(WetGpu, DemoSceneMatchesTheCpu) {
   BRUME_REQUIRE_GPU(ctx);
-  const int W = 160, H = 120;
   const DemoScene d = render_demo_scene(W, H);
-  Exec exec;
-  exec.threads = 2;
+  const Exec exec = two_threads();
   const WetFilm w = film(1.5);
   for (const WetMarch march : {WetMarch::blocks, WetMarch::above_ground}) {
     SCOPED_TRACE(enum_name(wet_march_names(), march));
@@ -212,10 +219,8 @@ TEST(WetGpu, DemoSceneMatchesTheCpu) {
 // 379 rays here, and 171 at DemoSceneMatchesTheCpu's 0.02 m, by up to 158 px.
 TEST(WetGpu, AboveGroundLiftsWhereTheCpuDoes) {
   BRUME_REQUIRE_GPU(ctx);
-  const int W = 160, H = 120;
   const DemoScene d = render_demo_scene(W, H);
-  Exec exec;
-  exec.threads = 2;
+  const Exec exec = two_threads();
   WetScene sc = test::demo_wet_scene(d, W, H);
   sc.ground_tolerance_m = 0.15;
   sc.march = WetMarch::blocks;
@@ -245,7 +250,6 @@ TEST(WetGpu, AboveGroundLiftsWhereTheCpuDoes) {
 // mask without the camera's height.
 TEST(WetGpu, RecordNamesTheMarchThatRan) {
   BRUME_REQUIRE_GPU(ctx);
-  const int W = 160, H = 120;
   const DemoScene d = render_demo_scene(W, H);
   Image mask(W, H, 1);  // the lower half
   for (int y = H / 2; y < H; ++y)
@@ -275,8 +279,7 @@ TEST(WetGpu, RecordNamesTheMarchThatRan) {
       in[i].dense = DenseImageRef(im);
     }
     if (c.masked) in[3].present = true, in[3].view = ConstImageView(mask);
-    Exec e;
-    e.threads = 2;
+    Exec e = two_threads();
     const ArrayResult cpu = a.run(in, call, e, given);
     e.backend = Backend::gpu;
     e.gpu = ctx;
