@@ -486,6 +486,11 @@ def test_gpu_rain_snow_wet_match_cpu(demo, gpu):
     assert np.array_equal(g.rgb[off], rgb[off])  # off the ground: the input, bit for bit
     far = np.max(np.abs(g.rgb - cpu.rgb), axis=-1) > 1e-5
     assert far.sum() <= 0.02 * cpu.ground.sum()
+    # the march that ran, on both backends: the default above-ground, blocks when asked
+    assert g.record["wet"]["mirror_march"] == cpu.record["wet"]["mirror_march"] == "above-ground"
+    assert "mirror_march_because" not in g.record["wet"]
+    gb = brume.wet(rgb, rng, film=1.5, backend="gpu", mirror_march="blocks", **pose)
+    assert gb.record["wet"]["mirror_march"] == "blocks" and np.array_equal(gb.rgb[off], rgb[off])
 
 
 def test_gpu_from_threads(demo, gpu):

@@ -181,6 +181,11 @@ void check_wet_scene(const WetScene& s) {
   if (!masked) s.camera.require_height("wet ground (the ground plane; or give a ground mask)");
 }
 
+WetMarch wet_march_that_runs(const WetScene& s) {
+  return s.march == WetMarch::above_ground && std::isfinite(s.camera.position_m.y) ? WetMarch::above_ground
+                                                                                  : WetMarch::blocks;
+}
+
 Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats* stats, Image* ground_out) {
   check_wet_scene(s);
   const int W = s.rgb.width(), H = s.rgb.height();
@@ -206,8 +211,8 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
   };
   // above_ground (WetMarch): a second depth map and pyramid without the plane's pixels, for rays
   // higher above the plane than the tolerance.
-  const bool lift = s.march == WetMarch::above_ground && std::isfinite(h);
-  st.march = lift ? WetMarch::above_ground : WetMarch::blocks;
+  st.march = wet_march_that_runs(s);
+  const bool lift = st.march == WetMarch::above_ground;
   std::array<Pyramid, 2> pyr, pyr_off;  // the coarse blocks, then the fine ones; off the plane
   for (int l = 0; l < 2; ++l) {
     const int b = l == 0 ? kWetCoarseBlock : kWetFineBlock;

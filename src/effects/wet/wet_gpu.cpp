@@ -25,6 +25,8 @@ Image render_wet_gpu(GpuContext& ctx, const WetScene& s, const WetFilm& w, WetSt
   const Image rgb = copy_of(s.rgb);
   const gpu::ColorAndRange in = gpu::upload_color_and_range(rgb, copy_of(s.range), "wet", &timing.upload_ms);
   const bool masked = s.mask.width() > 0;
+  WetStats st;
+  st.march = wet_march_that_runs(s);
   gl::Texture mask;
   if (masked) {
     const Image m = copy_of(s.mask);
@@ -61,6 +63,7 @@ Image render_wet_gpu(GpuContext& ctx, const WetScene& s, const WetFilm& w, WetSt
     glUniform1f(pr.loc("uFrontK"), static_cast<float>(1.0 + kWetHitMargin));
     glUniform1f(pr.loc("uThickK"), static_cast<float>(1.0 + kWetHitMargin + kWetThickness));
     glUniform1i(pr.loc("uMaxSteps"), 4 * (W + H));
+    glUniform1i(pr.loc("uMarch"), st.march == WetMarch::above_ground ? 1 : 0);
     GpuContext::Impl::draw();
     for (int i = 2; i >= 0; --i) {
       glActiveTexture(GL_TEXTURE0 + i);
@@ -75,7 +78,6 @@ Image render_wet_gpu(GpuContext& ctx, const WetScene& s, const WetFilm& w, WetSt
   timing.readback_ms = gpu::ms_since(t4);
 
   Image result(W, H, 3), ground(W, H, 1);
-  WetStats st;
   for (std::size_t i = 0; i < result.pixels(); ++i) {
     for (int c = 0; c < 3; ++c) result.data[i * 3 + c] = o_px[i * 4 + c];
     if (i_px[i * 4] != 1.0f) continue;
