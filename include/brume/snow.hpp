@@ -172,7 +172,7 @@ struct CameraSnowParams {
   double q_eff = 1.64;                     // [1] in [1, 2] (rain's kCameraRainQEff)
   double z_split_m = 20.0;                 // [m] flakes drawn up to this planar depth
   double z_near_m = 0.2;                   // [m] and from this one
-  double epsilon = 0.002;                  // [1] thinning threshold ε
+  double epsilon = 0.01;                   // [1] thinning threshold ε (rain's 0.002: docs/snow.md, "Time")
   std::optional<double> visibility_m;      // [m] haze's Koschmieder visibility; unset: snow alone
   std::optional<Rgb> airlight;             // linear RGB; unset: haze's estimate
 };
