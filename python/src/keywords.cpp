@@ -355,8 +355,11 @@ JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const 
     // settings alone.
     if (block == "lidar" && vals.contains("lidar") && vals["lidar"] == "") continue;
     const bool files = block == "input" || block == "output" || block == "depth" || block == "stereo";
-    // The camera's LiDAR block ("lidar.lidar-…"); brume lidar fog's own "lidar" block is its parameters.
-    const auto camera_lidar = [&](const std::string& name) { return block == "lidar" && name.rfind("lidar", 0) == 0; };
+    // The camera's scan settings that no array form has: haze's and fog's "lidar.lidar-…" (brume lidar
+    // fog's own "lidar" block is its parameters), and those the camera effects keep in their own block
+    // (rain's "rain.lidar", "rain.lidar-out", "rain.lidar-frame" -- which a record of schema 4 without
+    // it reads as "scan"): the array form takes the scan as the lidar= array, in its own frame.
+    const auto camera_lidar = [&](const std::string& name) { return name.rfind("lidar", 0) == 0; };
     for (const auto& [name, v] : vals.items()) {
       const ParamSpec* d = nullptr;
       for (const ParamSpec& q : specs)
