@@ -201,7 +201,7 @@ CameraWetRun run_camera_wet(ConstImageView rgb, ConstImageView measured_range, c
                                   {"read_back_ms", gpu_timing.readback_ms}};
     rec["execution"]["march"] =
         "the GPU marches every pixel of the mirrored ray's image (the CPU skips the blocks its min-depth pyramids "
-        "clear: the same samples; above-ground, it tests each sample for the plane's pixels, the CPU reads a second "
+        "clear: the same samples up to rounding; above-ground, it tests each sample for the plane's pixels, the CPU reads a second "
         "depth map without them), in float from the ray's pixel (the CPU from the vanishing point, in double): a "
         "bisection's midpoint halfway between two pixels rounds to either, so a ray may take the pixel beside the "
         "CPU's (0.3-0.7 % of the ground in the tests)";
