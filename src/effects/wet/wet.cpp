@@ -214,13 +214,14 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
   st.march = wet_march_that_runs(s);
   const bool lift = st.march == WetMarch::above_ground;
   std::array<Pyramid, 2> pyr, pyr_off;  // the coarse blocks, then the fine ones; off the plane
+  const auto blocks_of = [&](Pyramid& p, int b) {
+    p.bw = (W + b - 1) / b, p.bh = (H + b - 1) / b;
+    p.m.assign(static_cast<std::size_t>(p.bw) * p.bh, INFINITY);
+  };
   for (int l = 0; l < 2; ++l) {
     const int b = l == 0 ? kWetCoarseBlock : kWetFineBlock;
-    for (Pyramid* p : {&pyr[l], &pyr_off[l]}) {
-      if (p == &pyr_off[l] && !lift) continue;
-      p->bw = (W + b - 1) / b, p->bh = (H + b - 1) / b;
-      p->m.assign(static_cast<std::size_t>(p->bw) * p->bh, INFINITY);
-    }
+    blocks_of(pyr[l], b);
+    if (lift) blocks_of(pyr_off[l], b);
   }
   // The planar depth z = range/|ray| of each pixel (inf: the sky): a point of planar depth Z
   // on a pixel's ray is behind the pixel's surface when Z > z. The fine blocks in the same pass,
@@ -237,7 +238,7 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
       float* fm = f.m.data() + static_cast<std::size_t>(by) * f.bw;
       for (int x = 0; x < W; ++x) {
         const float r = s.range.at(x, y);
-        const double rx = (x - cx) / fx, ry = (y - cy) / fy, inv = 1.0 / std::sqrt(rx * rx + ry * ry + 1.0);
+        const double rx = (x - cx) / fx, ry = (y - cy) / fy;
         const bool known = std::isfinite(r) && r > 0.0f;
         const float z = known ? static_cast<float>(r / std::sqrt(rx * rx + ry * ry + 1.0)) : INFINITY;
         row[x] = z;
@@ -245,6 +246,7 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
         if (lift) {
           // the plane's own pixels: seen from above (the ray goes down) within the tolerance of it
           // (the march's own test of a ground pixel, the same expressions)
+          const double inv = 1.0 / std::sqrt(rx * rx + ry * ry + 1.0);
           const double dn = rx * inv * nx + ry * inv * ny + inv * nz;
           const bool plane = known && dn < 0.0 && std::fabs(h + z / inv * dn) <= s.ground_tolerance_m;
           const float zo = plane ? INFINITY : z;
