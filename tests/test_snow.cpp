@@ -255,6 +255,89 @@ TEST(LidarSnow, ScanTakesEachBeamsStrongestFlake) {
   EXPECT_EQ(checked, st.run.echoes);
 }
 
+// --return-mode last: a point keeps its target wherever strongest keeps it (the same detection
+// draw), else moves to its beam's farthest flake whose echo reaches the floor as lidar_snow_beams
+// spells the flakes out (strongest's answer differs where a nearer flake is brighter), else is
+// lost -- and only when no flake reaches the floor.
+TEST(LidarSnow, LastReturnKeepsTheDetectedTargetElseTheFarthestFlake) {
+  LidarSnowParams p = snow(2.0);
+  p.seed = 4;
+  p.divergence_mrad = 6.0;  // several detectable flakes in many beams
+  const std::size_t n = 3000;
+  const std::vector<float> in = random_scan(n, 1.5, 50.0, 0.02, 9);
+  std::vector<float> out(in.size()), out_s(in.size());
+  std::vector<std::uint8_t> labels(n), labels_s(n);
+  LidarSnowParams ps = p;
+  p.return_mode = "last";
+  const LidarSnowStats st = lidar_snow(in.data(), out.data(), n, p, labels.data());
+  lidar_snow(in.data(), out_s.data(), n, ps, labels_s.data());
+  const std::vector<SnowBeam> beams = lidar_snow_beams(p, in.data(), n);
+  std::size_t k = 0, moved = 0, other_than_strongest = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    SCOPED_TRACE(i);
+    const SnowBeamFlake *far = nullptr, *strong = nullptr;
+    for (const SnowBeamFlake& f : beams[i].flakes) {
+      if (!(f.power >= p.noise_floor)) continue;
+      far = &f;  // near to far
+      if (!strong || f.power > strong->power) strong = &f;
+    }
+    if (labels_s[i] == 0) {
+      EXPECT_EQ(labels[i], 0) << "a target strongest keeps is kept";
+    }
+    if (labels[i] == 2) {
+      EXPECT_EQ(far, nullptr) << "lost only without a detectable flake";
+      continue;
+    }
+    const float* q = &in[4 * i];
+    const float* o = &out[4 * k++];
+    if (labels[i] == 1) {
+      ++moved;
+      ASSERT_NE(far, nullptr);
+      const double r = std::sqrt(double(q[0]) * q[0] + double(q[1]) * q[1] + double(q[2]) * q[2]);
+      const double ro = std::sqrt(double(o[0]) * o[0] + double(o[1]) * o[1] + double(o[2]) * o[2]);
+      EXPECT_NEAR(ro, far->range_m, 1e-5 * r);  // float32 output
+      EXPECT_NEAR(o[3], p.flake_reflectance * far->share, 1e-6);
+      other_than_strongest += far != strong;
+    } else {
+      EXPECT_NEAR(o[3], q[3] * beams[i].target_share, 1e-6);
+    }
+  }
+  EXPECT_EQ(moved, st.run.echoes);
+  EXPECT_GT(moved, 30u);
+  EXPECT_GT(other_than_strongest, 0u);  // the two rules differ on this scan: the test can fail
+}
+
+// --frame K draws each beam's flakes afresh: frame 0 is the draws of a single scan (the record's
+// frame 0 repeats), frames 1 and 2 move other points to flakes at the same rate (binomial: the
+// moved counts within 5 standard errors of frame 0's), and a frame repeats itself.
+TEST(LidarSnow, FramesDrawOtherFlakesAtTheSameRate) {
+  const std::size_t n = 20000;
+  const std::vector<float> in = random_scan(n, 1.5, 40.0, 0.3, 11);
+  const auto moved = [&](std::uint64_t frame) {
+    LidarSnowParams p = snow(2.0);
+    p.frame = frame;
+    std::vector<float> out(in.size());
+    std::vector<std::uint8_t> labels(n);
+    lidar_snow(in.data(), out.data(), n, p, labels.data());
+    return labels;
+  };
+  const std::vector<std::uint8_t> f0 = moved(0), f1 = moved(1), f2 = moved(2), again = moved(1);
+  EXPECT_EQ(f1, again);
+  const auto count = [](const std::vector<std::uint8_t>& l) {
+    return static_cast<double>(std::count(l.begin(), l.end(), std::uint8_t{1}));
+  };
+  const double c0 = count(f0);
+  ASSERT_GT(c0, 100.0);
+  for (const auto* f : {&f1, &f2}) {
+    std::size_t same = 0;
+    for (std::size_t i = 0; i < n; ++i) same += (*f)[i] == 1 && f0[i] == 1;
+    // Other flakes: the same draws would move the same c0 points; independent ones move a point in
+    // both frames with the product of its chances (about 0.23·c0 here: far beams move more often).
+    EXPECT_LT(static_cast<double>(same), 0.5 * c0);
+    EXPECT_LE(std::abs(count(*f) - c0), 5.0 * std::sqrt(2.0 * c0));
+  }
+}
+
 TEST(LidarSnow, BadInputsAreRefused) {
   LidarSnowParams p;
   EXPECT_NE(error_of([&] { validate_lidar_snow(p); }).find("--rate"), std::string::npos);
@@ -263,6 +346,9 @@ TEST(LidarSnow, BadInputsAreRefused) {
             std::string::npos);
   EXPECT_NE(error_of([&] { lidar_snow_param_table().set_text(p, "flake-density", "1.5"); }).find("--flake-density"),
             std::string::npos);
+  EXPECT_NE(error_of([&] { lidar_snow_param_table().set_text(p, "return-mode", "first"); }).find("--return-mode"),
+            std::string::npos);
+  EXPECT_NE(error_of([&] { lidar_snow_param_table().set_text(p, "frame", "-1"); }).find("--frame"), std::string::npos);
   std::vector<float> in = random_scan(10, 2.0, 20.0, 0.3, 1), out(40);
   in[4 * 3 + 1] = NAN;
   EXPECT_NE(error_of([&] { lidar_snow(in.data(), out.data(), 10, snow(1.0)); }).find("point 3"), std::string::npos);
@@ -308,6 +394,20 @@ TEST_F(LidarSnowCli, RunsAndBrumeRunRepeatsIt) {
     const std::string a = file_bytes(p(std::string("first/") + f)), b = file_bytes(p(std::string("again/") + f));
     EXPECT_TRUE(!a.empty() && a == b) << f;
   }
+  // The last return of frame 2: recorded in the job and the block, repeated by brume run.
+  fs::create_directories(p("last"));
+  const CliRun last = run("lidar snow --points " + p("in.bin") + " --rate 2 --seed 3 --return-mode last --frame 2 --out " +
+                          p("last/o.bin") + " --record " + p("last/o.json"));
+  ASSERT_EQ(last.status, 0) << last.output;
+  const nlohmann::json lrec = read_json(p("last/o.json"));
+  EXPECT_EQ(lrec["job"]["snow"]["return-mode"], "last");
+  EXPECT_EQ(lrec["job"]["snow"]["frame"], 2);
+  EXPECT_EQ(lrec["snow"]["return_mode"], "last");
+  EXPECT_EQ(lrec["snow"]["frame"], 2);
+  EXPECT_NE(file_bytes(p("last/o.bin")), file_bytes(p("first/o.bin")));
+  const CliRun last_again = run("run " + p("last/o.json") + " --out-dir " + p("last_again"));
+  ASSERT_EQ(last_again.status, 0) << last_again.output;
+  EXPECT_EQ(file_bytes(p("last_again/o.bin")), file_bytes(p("last/o.bin")));
   const CliRun zero = run("lidar snow --points " + p("in.bin") + " --rate 0 --out " + p("zero.bin"));
   ASSERT_EQ(zero.status, 0) << zero.output;
   EXPECT_EQ(file_bytes(p("zero.bin")), file_bytes(p("in.bin")));

@@ -114,6 +114,12 @@ struct LidarSnowParams {
   double noise_floor = 5e-6;       // [1/m²] > 0, F
   double blind_range_m = 1.0;      // [m] >= 0, r_min
   std::uint64_t seed = 0;          // the flakes' and the speckle's seed
+  // Which return a beam reports (docs/rain.md, "Which return"): "strongest" or "last".
+  std::string return_mode = "strongest";
+  // Frame K of a sequence: each beam's flakes drawn from (seed, K, beam) -- a fresh draw per
+  // frame (a flake crosses a footprint, at most a few cm wide where flakes are detectable, in
+  // a few ms of its fall; a scan of KITTI's 10 Hz comes 0.1 s later): docs/snow.md, "Frames".
+  std::uint64_t frame = 0;
 };
 const ParamTable<LidarSnowParams>& lidar_snow_param_table();
 void validate_lidar_snow(const LidarSnowParams& p);
@@ -175,6 +181,7 @@ struct CameraSnowParams {
   double epsilon = 0.01;                   // [1] thinning threshold ε (rain's 0.002: docs/snow.md, "Time")
   std::optional<double> visibility_m;      // [m] haze's Koschmieder visibility; unset: snow alone
   std::optional<Rgb> airlight;             // linear RGB; unset: haze's estimate
+  std::string return_mode = "strongest";   // the scan's (--lidar): brume lidar snow's --return-mode
 };
 const ParamTable<CameraSnowParams>& camera_snow_param_table();
 void validate_camera_snow(const CameraSnowParams& p);

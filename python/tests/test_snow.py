@@ -23,6 +23,14 @@ def test_lidar_snow_equals_cli_bit_for_bit(tmp_path):
     counts = np.bincount(r.labels, minlength=3)
     assert counts[1] == r.record["snow"]["moved_to_flakes"] > 0
     assert r.record["command"] == "lidar snow"
+    # The last return of frame 3, as the command line's --return-mode last --frame 3.
+    run_cli("lidar", "snow", "--points", tmp_path / "in.bin", "--rate", 2, "--seed", 4, "--return-mode", "last",
+            "--frame", 3, "--out", tmp_path / "last.bin")
+    last = brume.lidar.snow(pts, rate=2.0, seed=4, return_mode="last", frame=3)
+    assert np.array_equal(last.points, np.fromfile(tmp_path / "last.bin", dtype=np.float32).reshape(-1, 4))
+    assert last.record["snow"]["return_mode"] == "last" and last.record["snow"]["frame"] == 3
+    with pytest.raises(ValueError, match="return_mode="):
+        brume.lidar.snow(pts, rate=1.0, return_mode="first")
     assert np.array_equal(brume.lidar.snow(pts, rate=0.0).points, pts)
     with pytest.raises(ValueError, match="rate"):
         brume.lidar.snow(pts)

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "brume/medium.hpp"
+#include "brume/params.hpp"
 
 namespace brume {
 
@@ -21,5 +22,22 @@ enum class ScanReturn { strongest, last };
 ScanRun scan_through_media(const std::vector<const Medium*>& media, const float* in, float* out, std::size_t n,
                            const std::string& what, const ScanDetection* detection, std::uint8_t* labels,
                            ScanReturn mode);
+
+// A --return-mode value ("strongest" or "last", validated by its declaration) as the rule.
+inline ScanReturn scan_return(const std::string& mode) {
+  return mode == "last" ? ScanReturn::last : ScanReturn::strongest;
+}
+
+// The --return-mode declaration every scan through particles shares (brume lidar rain and snow,
+// and brume rain and snow's --lidar): `beam` says what reports ("a beam", "the scan of --lidar"),
+// `particle` names the particle ("drop", "flake").
+template <class P>
+void declare_return_mode(ParamTable<P>& d, std::string P::*m, const std::string& beam, const std::string& particle) {
+  const std::string help = "which return " + beam + " reports: strongest (the target or the strongest " + particle +
+                           " echo above the noise floor), last (the farthest return above the floor: the target "
+                           "whenever it is detected, else the farthest " +
+                           particle + " echo)";
+  d.choice("return-mode", m, {"strongest", "last"}, help.c_str()).since(4, "strongest");
+}
 
 }  // namespace brume

@@ -201,13 +201,9 @@ const ParamTable<LidarRainParams>& lidar_rain_param_table() {
         .real("blind-range", &LidarRainParams::blind_range_m, "m", Range::at_least(0.0),
               "r_min: the sensor reports no return nearer (no drop echo there)")
         .count("seed", &LidarRainParams::seed, "1", Range::at_least(0.0),
-               "seed of the drop field and of the detection draws (same seed, same scan)")
-        .choice("return-mode", &LidarRainParams::return_mode, {"strongest", "last"},
-                "which return a beam reports: strongest (the target or the strongest drop echo above the noise "
-                "floor), last (the farthest return above the floor: the target whenever it is detected, else the "
-                "farthest drop echo)")
-        .since(4, "strongest")
-        .count("frame", &LidarRainParams::frame, "1", Range::at_least(0.0),
+               "seed of the drop field and of the detection draws (same seed, same scan)");
+    declare_return_mode(d, &LidarRainParams::return_mode, "a beam", "drop");
+    d.count("frame", &LidarRainParams::frame, "1", Range::at_least(0.0),
                "frame K of a sequence: the drop field at t = K * --frame-interval, each drop moved in closed form "
                "by its fall speed v(D), --wind and the sensor's motion (--ego-speed or --poses); 0: the field as "
                "hashed")
@@ -1099,8 +1095,7 @@ LidarRainStats lidar_rain(const float* in, float* out, std::size_t n, const Lida
   const ScanDetection detection{p.noise_floor, p.seed};
   LidarRainStats st;
   st.field_frame = m.field_frame();
-  st.run = scan_through_media({&m}, in, out, n, what, &detection, labels,
-                              p.return_mode == "last" ? ScanReturn::last : ScanReturn::strongest);
+  st.run = scan_through_media({&m}, in, out, n, what, &detection, labels, scan_return(p.return_mode));
   st.drops_drawn = m.drawn();
   return st;
 }

@@ -15,6 +15,7 @@
 #include "brume/rain.hpp"
 #include "core/text.hpp"
 #include "effects/rain/streaks.hpp"
+#include "media/scan_returns.hpp"
 
 namespace brume {
 
@@ -47,11 +48,7 @@ const ParamTable<CameraRainParams>& camera_rain_param_table() {
     d.nest(&P::drops, rain_drops_param_table());
     streak_camera_params(d, "rain-seed", "drop", "drops", "rain", "streaks");
     // The scan's (--lidar, lidar=): brume lidar rain's --return-mode.
-    d.choice("return-mode", &P::return_mode, {"strongest", "last"},
-             "which return the scan of --lidar reports: strongest (the target or the strongest drop echo above the "
-             "noise floor), last (the farthest above the floor: the target whenever it is detected, else the "
-             "farthest drop echo)")
-        .since(4, "strongest");
+    declare_return_mode(d, &P::return_mode, "the scan of --lidar", "drop");
     return d;
   }();
   return t;

@@ -17,6 +17,7 @@
 #include "core/math_constants.hpp"  // kPi: one definition (unity builds)
 #include "core/text.hpp"
 #include "media/scan_points_check.hpp"
+#include "media/scan_returns.hpp"
 
 namespace brume {
 
@@ -127,6 +128,11 @@ const ParamTable<LidarSnowParams>& lidar_snow_param_table() {
               "r_min: the sensor reports no return nearer; no flake is drawn there")
         .count("seed", &LidarSnowParams::seed, "1", Range::at_least(0.0),
                "seed of the flakes and of the detection draws (same seed, same scan)");
+    declare_return_mode(d, &LidarSnowParams::return_mode, "a beam", "flake");
+    d.count("frame", &LidarSnowParams::frame, "1", Range::at_least(0.0),
+            "frame K of a sequence: each beam's flakes drawn afresh from (seed, K, the beam), as the flakes in a "
+            "footprint a few cm wide are others 0.1 s later; 0: the draws of a single scan")
+        .since(4, 0);
     return d;
   }();
   return t;
@@ -156,14 +162,15 @@ struct BeamOutcome {
 class SnowFootprint {
  public:
   // Tabulated out to the farthest point, r_max (the values at the nodes do not depend on it).
-  SnowFootprint(const LidarSnowParams& p, double r_max) : p_(p), sizes_(snow_sizes(p.flakes)) {
+  SnowFootprint(const LidarSnowParams& p, double r_max)
+      : p_(p), sizes_(snow_sizes(p.flakes)), last_(scan_return(p.return_mode) == ScanReturn::last) {
     theta_ = p.divergence_mrad * 1e-3;
     lam_ = sizes_.lambda_flake_per_mm;
     r_min_ = p.blind_range_m;
     if (!(sizes_.n0_flake > 0.0)) return;
     active_ = true;
     sigma1_ = sizes_.extinction_per_m(1.0);
-    key_ = hash_fold(hash_fold(p.seed, kSnowTag), 0);  // frame 0
+    key_ = hash_fold(hash_fold(p.seed, kSnowTag), p.frame);
     // D_t(x) = θ·x²·√(F/ρ_f) [m]; none detectable where ρ_f = 0 or beyond
     // √(ρ_f/F) (a flake filling the footprint stays below F).
     double x_draw = r_min_;
@@ -256,9 +263,11 @@ class SnowFootprint {
         const double w = d / (1e3 * theta_ * x);
         const double a = std::min(w * w, 1.0);
         const double bound = p_.flake_reflectance * a * T / (x * x);  // its echo with no undrawn flake nearer
-        if (detail || (bound > o.power && bound >= p_.noise_floor)) {
+        // strongest: a flake whose echo can beat the best so far; last: any that can reach F (the
+        // flakes come near to far, so the last detectable one met is the farthest).
+        if (detail || (bound >= p_.noise_floor && (last_ || bound > o.power))) {
           const double ax = area_at(x), share = a * T * std::exp(-ax), power = p_.flake_reflectance * share / (x * x);
-          if (power > o.power && power >= p_.noise_floor)
+          if (power >= p_.noise_floor && (last_ || power > o.power))
             o.power = power, o.range = x, o.reported = p_.flake_reflectance * share;
           if (detail) {
             detail->undrawn_share += T * (std::exp(-a_prev) - std::exp(-ax));
@@ -323,7 +332,7 @@ class SnowFootprint {
 
   LidarSnowParams p_;
   SnowSizes sizes_;
-  bool active_ = false, draws_ = false;
+  bool last_, active_ = false, draws_ = false;
   double theta_ = 0, lam_ = 0, r_min_ = 0, sigma1_ = 0, ct_mm_ = 0, h_ = 0.01, inv_dl_ = 0;
   std::uint64_t key_ = 0;
   std::vector<double> lambda_, cum_, alpha_, area_;
@@ -416,7 +425,7 @@ LidarSnowStats lidar_snow(const float* in, float* out, std::size_t n, const Lida
   const LidarSnow m(p);
   const ScanDetection detection{p.noise_floor, p.seed};
   LidarSnowStats st;
-  st.run = scan_through_media({&m}, in, out, n, what, &detection, labels);
+  st.run = scan_through_media({&m}, in, out, n, what, &detection, labels, scan_return(p.return_mode));
   st.flakes_drawn = m.drawn();
   return st;
 }
@@ -451,7 +460,8 @@ nlohmann::json lidar_snow_record(const LidarSnowParams& p, const LidarSnowStats&
           {"noise_floor_per_m2", p.noise_floor},
           {"blind_range_m", p.blind_range_m},
           {"seed", p.seed},
-          {"frame", 0},
+          {"frame", p.frame},
+          {"return_mode", p.return_mode},
           {"points", st.run.points},
           {"kept", st.run.points - moved - lost},
           {"moved_to_flakes", moved},

@@ -13,6 +13,7 @@
 #include "brume/snow.hpp"
 #include "core/text.hpp"
 #include "effects/rain/streaks.hpp"
+#include "media/scan_returns.hpp"
 
 namespace brume {
 
@@ -53,6 +54,8 @@ const ParamTable<CameraSnowParams>& camera_snow_param_table() {
     d.real("albedo", &P::albedo, "1", Range::closed(0.0, 1.0),
            "a flake's Lambertian albedo a: its radiance a (L_sky + L_ground)/2 under the sky and ground light "
            "estimated from the image");
+    // The scan's (--lidar, lidar=): brume lidar snow's --return-mode.
+    declare_return_mode(d, &P::return_mode, "the scan of --lidar", "flake");
     return d;
   }();
   return t;
@@ -68,6 +71,7 @@ LidarSnowParams camera_snow_lidar_params(const CameraSnowParams& p) {
   LidarSnowParams lp;
   lp.flakes = p.flakes;
   lp.seed = p.seed;
+  lp.return_mode = p.return_mode;
   return lp;
 }
 
