@@ -158,7 +158,20 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
   ArrayResult out;
   {
     py::gil_scoped_release nogil;
-    run_fork_safe(exec, [&] { out = a.run(in, call, with_thread_gpu(exec), given); });
+    // What the run refuses names the function, as the keywords' errors do ("brume.wet(): ...").
+    const auto named = [&fn](const Error& e) {
+      const std::string m = e.what();
+      return m.rfind(fn + "()", 0) == 0 ? m : fn + "(): " + m;
+    };
+    try {
+      run_fork_safe(exec, [&] { out = a.run(in, call, with_thread_gpu(exec), given); });
+    } catch (const FileNotFound& e) {
+      throw FileNotFound(named(e));
+    } catch (const GpuUnavailable& e) {
+      throw GpuUnavailable(named(e));
+    } catch (const Error& e) {
+      throw Error(named(e));
+    }
   }
   json rec = python_header(command, fn);
   rec["job"] = std::move(out.job);

@@ -359,7 +359,8 @@ def test_missing_gpu_is_a_runtime_error():
     env = dict(os.environ, BRUME_EGL_PLATFORM="none-such")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.startswith("RuntimeError no OpenGL ES 3.2 context"), out.stdout + out.stderr
+    assert out.stdout.startswith("RuntimeError brume.blur(): no OpenGL ES 3.2 context: no headless EGL platform "
+                                 "(device or Mesa surfaceless); install Mesa"), out.stdout + out.stderr
 
 
 # ---- the GIL, threads -------------------------------------------------------------------------------

@@ -94,6 +94,7 @@ def test_wet_errors_speak_python(demo):
         with pytest.raises(ValueError, match=word) as e:
             brume.wet(rgb, rng, **kw)
         assert "--" not in str(e.value), str(e.value)
+        assert str(e.value).startswith("brume.wet(): "), str(e.value)  # the run's errors name the function too
     with pytest.raises(ValueError, match=r"\(N, 4\)"):
         brume.wet(rgb, rng, film=1, lidar=ground_scan()[:, :3], **POSE)
     with pytest.raises(TypeError, match="film"):

@@ -175,7 +175,7 @@ void GpuContext::Impl::create() {
     try_display(get_display(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr), "surfaceless", why);
   if (ctx == EGL_NO_CONTEXT)
     throw GpuUnavailable("no OpenGL ES 3.2 context: " +
-                (why.empty() ? std::string("no headless EGL platform (device or Mesa surfaceless)") : why) +
+                (why.empty() ? std::string("no headless EGL platform (device or Mesa surfaceless); ") : why) +
                 "install Mesa (libegl-mesa0, libgl1-mesa-dri) or a GPU driver, or use --backend cpu");
   info.renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
   info.version = reinterpret_cast<const char*>(glGetString(GL_VERSION));
