@@ -12,6 +12,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include "brume/command.hpp"
 #include "brume/demo_scene.hpp"
@@ -290,6 +291,58 @@ TEST_F(Hostile, ScansAreValidatedAndTablesBounded) {
   const CliRun ok =
       run("lidar fog --points " + p("ok.bin") + " --visibility 50 --out " + p("o.bin") + " --soft-curve " + p("c.csv"));
   EXPECT_EQ(ok.status, 0) << ok.output;
+}
+
+// KITTI odometry's calib.txt (P0-P3 and Tr:, the velodyne into camera 0's rectified frame) reads
+// as the object benchmark's R0_rect and Tr_velo_to_cam with R0_rect = I: the object file's
+// calibration rewritten in that form (Tr = R0_rect Tr_velo_to_cam, composed here in double and
+// printed to 17 digits) projects a scan onto the same pixels at the same range (1e-6 relative:
+// the two products round differently in the last bits); Tr: beside Tr_velo_to_cam: is a repeat.
+TEST_F(Hostile, KittiOdometryCalibReadsAsTheObjectForm) {
+  std::istringstream in(kKittiCalib);
+  std::string line, p2;
+  double r0[9], tr[12];
+  while (std::getline(in, line)) {
+    std::istringstream ls(line);
+    std::string key;
+    ls >> key;
+    if (key == "P2:") p2 = line;
+    if (key == "R0_rect:")
+      for (double& v : r0) ls >> v;
+    if (key == "Tr_velo_to_cam:")
+      for (double& v : tr) ls >> v;
+  }
+  std::ostringstream odo;
+  odo.precision(17);
+  odo << "P0: 707.0493 0 604.0814 0 0 707.0493 180.5066 0 0 0 1 0\n" << p2 << "\nTr:";
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 4; ++j) {
+      double v = 0.0;
+      for (int k = 0; k < 3; ++k) v += r0[3 * i + k] * tr[4 * k + j];
+      odo << ' ' << v;
+    }
+  odo << '\n';
+  std::ofstream(p("odo.txt")) << odo.str();
+  std::ofstream(p("obj.txt")) << kKittiCalib;
+  std::vector<float> pts;
+  for (int k = 0; k < 400; ++k)  // ahead of the camera (x forward), across the view
+    pts.insert(pts.end(), {5.0f + 0.2f * static_cast<float>(k % 50), -6.0f + 0.03f * static_cast<float>(k),
+                           -1.5f + 0.004f * static_cast<float>(k), 0.3f});
+  write_scan("s.bin", pts);
+  const KittiCalib co = read_kitti_calib(p("odo.txt")), cb = read_kitti_calib(p("obj.txt"));
+  for (int i = 0; i < 9; ++i) EXPECT_EQ(co.R0[i], i % 4 == 0 ? 1.0 : 0.0);
+  const LidarImage a = project_velodyne(p("s.bin"), co, 1242, 375), b = project_velodyne(p("s.bin"), cb, 1242, 375);
+  ASSERT_GT(b.pixels_hit, 300u);
+  EXPECT_EQ(a.pixels_hit, b.pixels_hit);
+  for (std::size_t i = 0; i < b.range.data.size(); ++i) {
+    const float x = a.range.data[i], y = b.range.data[i];
+    ASSERT_EQ(std::isnan(x), std::isnan(y)) << "pixel " << i;
+    if (!std::isnan(y)) {
+      ASSERT_NEAR(x, y, 1e-6 * y) << "pixel " << i;
+    }
+  }
+  std::ofstream(p("both.txt")) << kKittiCalib << "Tr: 1 0 0 0 0 1 0 0 0 0 1 0\n";
+  EXPECT_NE(error_of([&] { read_kitti_calib(p("both.txt")); }).find("repeats 'Tr_velo_to_cam:'"), std::string::npos);
 }
 
 // Defect 5. depth convert --velodyne accepted a singular R0_rect, an all-zero

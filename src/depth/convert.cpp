@@ -371,7 +371,7 @@ KittiCalib read_kitti_calib(const std::string& path) {
   // Where each matrix was given (line numbers from 1): a key given twice is
   // refused rather than the last one kept silently.
   std::map<std::string, int> seen;
-  int got_p2 = 0, got_r0 = 0, got_tr = 0, got_p3 = 0;
+  int got_p2 = 0, got_r0 = 0, got_tr = 0, got_p3 = 0, odometry_tr = 0;
   std::string line;
   int lineno = 0;
   while (std::getline(in, line)) {
@@ -380,8 +380,12 @@ KittiCalib read_kitti_calib(const std::string& path) {
     std::string key;
     s >> key;
     if (key.empty()) continue;
-    // R_rect: and Tr_velo_cam: are the raw recordings' names of the same matrices.
-    const std::string canon = key == "R_rect:" ? "R0_rect:" : key == "Tr_velo_cam:" ? "Tr_velo_to_cam:" : key;
+    // R_rect: and Tr_velo_cam: are the raw recordings' names of the same matrices; Tr: is the
+    // odometry benchmark's (its calib.txt: P0-P3 and Tr, velodyne -> rectified camera 0).
+    if (key == "Tr:") odometry_tr = lineno;
+    const std::string canon = key == "R_rect:"                        ? "R0_rect:"
+                              : key == "Tr_velo_cam:" || key == "Tr:" ? "Tr_velo_to_cam:"
+                                                                      : key;
     if (!seen.emplace(canon, lineno).second)
       throw Error(what + ": '" + key + "' on line " + std::to_string(lineno) + " repeats " +
                   (canon == key ? "the key" : "'" + canon + "'") + " of line " + std::to_string(seen[canon]) +
@@ -399,9 +403,17 @@ KittiCalib read_kitti_calib(const std::string& path) {
     else if (canon == "P3:") read(c.P3, 12, got_p3);
   }
   c.has_p3 = got_p3 > 0;
+  // The odometry benchmark's Tr maps into camera 0's rectified frame already: its R0_rect is I
+  // (its readme: "Tr transforms a point from velodyne coordinates into the left rectified camera
+  // coordinate system"). An R0_rect beside it is read as given.
+  if (odometry_tr && !got_r0) {
+    for (int i = 0; i < 9; ++i) c.R0[i] = i % 4 == 0 ? 1.0 : 0.0;
+    got_r0 = odometry_tr;
+  }
   if (!got_p2 || !got_r0 || !got_tr)
     throw Error(what + " lacks " + std::string(!got_p2 ? "P2: " : "") + (!got_r0 ? "R0_rect: " : "") +
-                (!got_tr ? "Tr_velo_to_cam: " : "") + "(a KITTI object calib file has all three)");
+                (!got_tr ? "Tr_velo_to_cam: " : "") +
+                "(a KITTI object or raw calib file has all three; an odometry calib.txt has P0-P3 and Tr:)");
   double r0[3][3], tr[3][3];
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) r0[i][j] = c.R0[3 * i + j], tr[i][j] = c.Tr[4 * i + j];
