@@ -5,6 +5,7 @@
 #include <optional>
 
 #include "brume/command.hpp"
+#include "brume/error.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/snow.hpp"
 #include "effects/rain/rain_gpu.hpp"
@@ -54,11 +55,24 @@ const ParamTable<CameraSnowJob>& camera_snow_job_table() {
   return t;
 }
 
+// The scan's flakes are per-beam draws keyed by (seed, beam), not the camera's field: no frame K > 0 yet.
+void check_camera_snow_lidar_frame(const CameraSnowParams& p) {
+  if (p.frame != 0)
+    throw Error("--frame " + std::to_string(p.frame) +
+                " with --lidar: the scan's snow has no frames of a sequence yet (its flakes are drawn per beam, not "
+                "moved with the camera's field); give --frame 0, or run the scan without --lidar");
+}
+
 void check_camera_snow_job(const CameraSnowJob& j) {
   validate_camera_snow(j.snow);
   check_streak_lens(j.snow.f_number, j.input.depth, "the flakes");
+  check_streak_frames(j.snow.frame, j.snow.frame_interval_s, j.snow.ego_speed_m_s, j.snow.poses,
+                      j.input.depth.kitti_calib, kStreakCalibHowCli);
   check_camera_scan_flags(j.lidar, j.lidar_out, "snows on a scan");
-  if (!j.lidar.empty()) validate_lidar_snow(camera_snow_lidar_params(j.snow));
+  if (!j.lidar.empty()) {
+    check_camera_snow_lidar_frame(j.snow);
+    validate_lidar_snow(camera_snow_lidar_params(j.snow));
+  }
 }
 
 // The camera's snow on an image and its measured range (the CLI's job and brume.snow's array
@@ -176,6 +190,7 @@ CommandDef snow_command() {
         return streak_array_result(
             in, "brume.snow(): lidar", "lidar_snow",
             [&](const float* src, float* out, std::size_t n, std::uint8_t* labels, nlohmann::json& block) {
+              check_camera_snow_lidar_frame(p);
               const LidarSnowStats st = lidar_snow(src, out, n, lp, labels, "brume.snow(): lidar");
               block = lidar_snow_record(lp, st);
               return st.run.lost;
@@ -185,6 +200,8 @@ CommandDef snow_command() {
       [](const ArrayCall<CameraSnowParams>& k, const std::set<std::string>& g) {
         validate_camera_snow(k.p);
         check_streak_lens(k.p.f_number, k.depth, "the flakes");
+        check_streak_frames(k.p.frame, k.p.frame_interval_s, k.p.ego_speed_m_s, k.p.poses, k.depth.kitti_calib,
+                            kStreakCalibHowPython);
         check_range_step(k.prepare, g);
       });
   // A call that snowed on a scan says so in its job (an empty lidar block), as brume.rain's.
