@@ -14,6 +14,7 @@
 #include "brume/error.hpp"
 #include "brume/rain.hpp"
 #include "core/text.hpp"
+#include "effects/rain/rain_internal.hpp"
 #include "effects/rain/streaks.hpp"
 
 namespace brume {
@@ -182,6 +183,11 @@ double CameraRainOptics::tau(double r, double cos_theta) const {
 
 Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, const Exec& exec,
                          CameraRainStats* stats, Image* transmission) {
+  return render_camera_rain_drawn(s, p, exec, stats, transmission, nullptr);
+}
+
+Image render_camera_rain_drawn(const CameraRainScene& s, const CameraRainParams& p, const Exec& exec,
+                               CameraRainStats* stats, Image* transmission, StreakSlabs* drawn) {
   validate_camera_rain(p);
   check_streak_scene(s, "rain");
   const int W = s.rgb.width(), H = s.rgb.height();
@@ -239,7 +245,7 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
     return true;
   };
   const auto threshold = [&](double z) { return optics.threshold_mm(z); };
-  const StreakSlabs drops =
+  StreakSlabs drops =
       pose.moved ? moving_frustum_streaks(field, threshold, p.z_near_m, p.z_split_m, grow_m, cam, nt, pose, wind,
                                           atlas_terminal_velocity_m_per_s, p.drops.drop_max_mm,
                                           atlas_diameter_below_mm, make, st.cells, st.drops_seen)
@@ -250,6 +256,7 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
   const StreakSplat splat = splat_streaks(drops, s.range, out, cam, nt);
   st.drops_drawn = splat.drawn, st.alpha_clamped = splat.alpha_clamped, st.mean_streak_px = splat.mean_streak_px;
   if (stats) *stats = st;
+  if (drawn) *drawn = std::move(drops);
   return out;
 }
 

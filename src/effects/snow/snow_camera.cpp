@@ -13,6 +13,7 @@
 #include "brume/snow.hpp"
 #include "core/text.hpp"
 #include "effects/rain/streaks.hpp"
+#include "effects/snow/snow_internal.hpp"
 
 namespace brume {
 
@@ -73,6 +74,11 @@ LidarSnowParams camera_snow_lidar_params(const CameraSnowParams& p) {
 
 Image render_camera_snow(const CameraRainScene& s, const CameraSnowParams& p, const Exec& exec,
                          CameraSnowStats* stats, Image* transmission) {
+  return render_camera_snow_drawn(s, p, exec, stats, transmission, nullptr);
+}
+
+Image render_camera_snow_drawn(const CameraRainScene& s, const CameraSnowParams& p, const Exec& exec,
+                               CameraSnowStats* stats, Image* transmission, StreakSlabs* drawn) {
   validate_camera_snow(p);
   check_streak_scene(s, "snow");
   const int W = s.rgb.width(), H = s.rgb.height();
@@ -142,7 +148,7 @@ Image render_camera_snow(const CameraRainScene& s, const CameraSnowParams& p, co
       return true;
     };
     const auto threshold = [&](double z) { return optics.threshold_mm(z); };
-    const StreakSlabs flakes =
+    StreakSlabs flakes =
         pose.moved ? moving_frustum_streaks(field, threshold, p.z_near_m, p.z_split_m, grow_m, cam, nt, pose, wind,
                                             [v](double) { return v; }, pop.d_max_mm, nullptr, make, st.cells,
                                             st.flakes_seen)
@@ -151,6 +157,7 @@ Image render_camera_snow(const CameraRainScene& s, const CameraSnowParams& p, co
     // 3. Composited far to near, tile by tile.
     const StreakSplat splat = splat_streaks(flakes, s.range, out, cam, nt);
     st.flakes_drawn = splat.drawn, st.alpha_clamped = splat.alpha_clamped, st.mean_streak_px = splat.mean_streak_px;
+    if (drawn) *drawn = std::move(flakes);
   }
   if (stats) *stats = st;
   return out;
