@@ -232,6 +232,8 @@ CommandDef rain_command() {
       args, call, {"rgb", "transmission", "lidar", "lidar_labels", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<CameraRainParams>& k, const Exec& e,
          const std::set<std::string>& g) {
+        check_streak_frames(k.p.frame, k.p.frame_interval_s, k.p.ego_speed_m_s, k.p.poses, k.depth.kitti_calib,
+                            kStreakCalibHowPython);
         const LidarRainParams lp = camera_rain_lidar_params(k.p);
         return streak_array_result(
             in, "brume.rain(): lidar", "lidar_rain",

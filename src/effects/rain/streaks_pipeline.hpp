@@ -30,8 +30,7 @@ double streak_coc_px(std::optional<double> f_number, std::optional<double> focus
 constexpr const char* kStreakCalibHowCli =
     "give --kitti-calib FILE (its P2), or --ego-speed instead of --poses";
 constexpr const char* kStreakCalibHowPython =
-    "the array forms take no calibration; give ego_speed instead, or run the command line with --poses and "
-    "--kitti-calib";
+    "the array forms take none; give ego_speed instead, or use the command line with its KITTI calibration";
 void check_streak_lens(std::optional<double> f_number, const DepthSource& depth, const std::string& particles);
 
 // The camera's particles on an image and its measured range: completed and prepared as haze

@@ -186,6 +186,8 @@ CommandDef snow_command() {
       [](const std::vector<ArrayIn>& in, ArrayCall<CameraSnowParams>& k, const Exec& e,
          const std::set<std::string>& g) {
         const CameraSnowParams& p = k.p;
+        check_streak_frames(p.frame, p.frame_interval_s, p.ego_speed_m_s, p.poses, k.depth.kitti_calib,
+                            kStreakCalibHowPython);
         const LidarSnowParams lp = camera_snow_lidar_params(p);
         return streak_array_result(
             in, "brume.snow(): lidar", "lidar_snow",
