@@ -251,17 +251,23 @@ StreakSlabs moving_frustum_streaks(const RainField& field, const std::function<d
           if (t == 0.0) spans.push_back({zc[0], zc[1]});
           else falling_source_spans(z_lo, z_hi, f_lo, f_hi, t, spans);
           const std::uint64_t col = field.column_hash(ix, iy);
+          // A cell holds a particle within measure m iff its first unit draw u <= 1 − e^{−m} (as
+          // frustum_streaks): the column's measure bounds every cell's, and only a cell that passes
+          // it pays for its own (the fall that can bring its particles here).
+          const double u_col = -std::expm1(-m_col * (1.0 + 1e-9)) + 1e-15;
           for (const auto& [iz0, iz1] : spans)
             for (std::int64_t iz = iz0; iz <= iz1; ++iz) {
               ++cells[static_cast<std::size_t>(gx)];
+              const std::uint64_t h = RainField::cell_hash(col, iz);
+              const double u = RainField::first_unit(h);
+              if (u > u_col) continue;
               double m = m_col;
               if (t != 0.0) {
                 double f;
                 if (!falling_min_speed(iz, z_lo, z_hi, f_lo, f_hi, t, f)) continue;
                 if (d_below) m = field.measure_above(std::max(thr, d_below(f + wind.z)));
+                if (u > -std::expm1(-m * (1.0 + 1e-9)) + 1e-15) continue;
               }
-              const std::uint64_t h = RainField::cell_hash(col, iz);
-              if (RainField::first_unit(h) > -std::expm1(-m * (1.0 + 1e-9)) + 1e-15) continue;
               field.for_each_drop_hashed(RainCell{ix, iy, iz}, h, m, [&](const Vec3& at0, double sm) {
                 ++seen[static_cast<std::size_t>(gx)];
                 const double d_mm = field.diameter_mm(sm);
