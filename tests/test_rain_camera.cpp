@@ -600,11 +600,27 @@ TEST_F(CameraRainCli, FramesOfASequence) {
     for (const char* w : words) EXPECT_NE(b.output.find(w), std::string::npos) << flags << ": " << b.output;
     EXPECT_FALSE(fs::exists(p("bad.exr"))) << flags;
   };
+  // A poses file: the record hashes it, and brume run repeats the frame (and refuses an edited file).
+  fs::create_directories(p("posed"));
+  const CliRun posed = run("rain" + in + "--rate 25 --rain-seed 2 --poses " + p("poses.txt") + " --kitti-calib " +
+                           p("calib.txt") + " --frame 1 --out " + p("posed/o.exr") + " --record " + p("posed/o.json"));
+  ASSERT_EQ(posed.status, 0) << posed.output;
+  EXPECT_EQ(read_json(p("posed/o.json"))["rain"]["pose_files"]["poses"]["path"], p("poses.txt"));
+  const CliRun posed_again = run("run " + p("posed/o.json") + " --out-dir " + p("posed2"));
+  ASSERT_EQ(posed_again.status, 0) << posed_again.output;
+  expect_same_pixels(p("posed/o.exr"), p("posed2/o.exr"));
+  {
+    std::ofstream g(p("poses.txt"), std::ios::app);
+    g << "1 0 0 0 0 1 0 0 0 0 1 3\n";
+  }
+  const CliRun edited = run("run " + p("posed/o.json") + " --out-dir " + p("posed3"));
+  EXPECT_NE(edited.status, 0);
+  EXPECT_NE(edited.output.find("poses.txt"), std::string::npos) << edited.output;
   refused("--poses " + p("poses.txt") + " --frame 1", {"--poses", "--kitti-calib", "camera 2"});
   refused("--poses " + p("poses.txt") + " --kitti-calib " + p("calib.txt") + " --ego-speed 5 --frame 1",
           {"--ego-speed 5", "--poses", "give one of them"});
   refused("--poses " + p("poses.txt") + " --kitti-calib " + p("calib.txt") + " --frame 7",
-          {"--poses", "3 poses", "--frame 7", "line 8"});
+          {"--poses", "4 poses", "--frame 7", "line 8"});
 }
 
 // KITTI object 000001 (image and Velodyne scan), 25 mm/h: runs, draws streaks, changes the image,

@@ -114,6 +114,10 @@ void check_camera_rain(const CameraRainParams& p, const DepthSource& depth, cons
 void check_camera_rain_job(const CameraRainJob& j) {
   check_camera_rain(j.rain, j.input.depth, kStreakCalibHowCli);
   check_camera_scan_flags(j.lidar, j.lidar_out, "rains on a scan");
+  if (!j.lidar.empty() && !j.rain.poses.empty() && j.lidar_frame == "scan")
+    throw Error("--poses '" + j.rain.poses +
+                "' with --lidar-frame scan: the scan's pose from camera 0's poses needs its drops in camera 2's frame; "
+                "give --lidar-frame camera (with --kitti-calib), or --ego-speed instead of --poses");
   if (!j.lidar.empty()) validate_lidar_rain(camera_rain_lidar_params(j.rain, camera_rain_lidar_calib(j)));
 }
 
@@ -130,6 +134,7 @@ CameraRainRun run_camera_rain(ConstImageView rgb, ConstImageView measured_range,
                               CameraRainStats st;
                               Image out = render_camera_rain(scene, p, exec, &st, tr);
                               block = camera_rain_record(p, st);
+                              block["pose_files"] = streak_pose_files(p.poses, depth.kitti_calib);
                               return out;
                             });
 }

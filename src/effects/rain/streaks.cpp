@@ -12,6 +12,7 @@
 #include <string>
 
 #include "brume/error.hpp"
+#include "brume/io.hpp"
 
 namespace brume {
 
@@ -295,6 +296,14 @@ StreakSlabs moving_frustum_streaks(const RainField& field, const std::function<d
   for (std::vector<Streak>& slab : out)
     for (Streak& k : slab) k.order = order++;
   return out;
+}
+
+nlohmann::json streak_pose_files(const std::string& poses, const std::string& kitti_calib) {
+  nlohmann::json files = nlohmann::json::object();
+  if (poses.empty()) return files;
+  files["poses"] = {{"path", poses}, {"sha256", sha256_file(poses)}};
+  if (!kitti_calib.empty()) files["kitti_calib"] = {{"path", kitti_calib}, {"sha256", sha256_file(kitti_calib)}};
+  return files;
 }
 
 double streak_grow_m(double z0, double z1, double d_max_mm, double motion_m, const StreakLens& lens,

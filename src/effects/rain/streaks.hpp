@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "brume/image.hpp"
 #include "brume/params.hpp"
 #include "brume/rain.hpp"
@@ -145,6 +147,10 @@ inline void streak_velocity(const StreakPose& pose, const Vec3& wind, double fal
   if (rotated) w = r.transposed() * w;
   u[0] = -w.y, u[1] = -w.z, u[2] = w.x;  // the cv frame: x = −y, y = −z, z = x
 }
+
+// The record's {poses, kitti_calib: {path, sha256}} of a camera pass's --poses and the calibration that
+// places camera 2 (brume run checks them); {} without --poses.
+nlohmann::json streak_pose_files(const std::string& poses, const std::string& kitti_calib);
 
 // The camera's speed [m/s] for the streaks' margin (--ego-speed's |s| as such).
 inline double streak_speed(const StreakPose& pose) {

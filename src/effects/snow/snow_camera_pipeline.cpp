@@ -86,6 +86,7 @@ StreakRun run_camera_snow(ConstImageView rgb, ConstImageView measured_range, con
                               CameraSnowStats st;
                               Image out = render_camera_snow(scene, p, exec, &st, tr);
                               block = camera_snow_record(p, st);
+                              block["pose_files"] = streak_pose_files(p.poses, depth.kitti_calib);
                               return out;
                             });
 }
