@@ -411,6 +411,78 @@ TEST(CameraRainFrames, TheCamerasDropsAtFrameKAreTheScans) {
   }
 }
 
+// A turning camera (--poses: camera 0 yawed 30° and pitched 4° at frame 2, moved 1.5 m; the
+// calibration's camera 2 at camera 0, so that its pose is the line's): the drops it draws are the
+// field's moved by rain_drop_at and taken into its axes here (cv: R^T·(x − t), written again from
+// KITTI's convention, not the library's composition), both ways as in the test above, within 1e-9 m
+// (a rotation's rounding, ~1e-15 m at these distances).
+TEST(CameraRainFrames, ATurningCameraDrawsTheFieldInItsAxes) {
+  const fs::path dir = fs::temp_directory_path() / ("brume_rain_turn_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string calib = (dir / "calib.txt").string(), poses = (dir / "poses.txt").string();
+  const double yaw = 30.0 * kPi / 180.0, pitch = 4.0 * kPi / 180.0;
+  // R = R_y(yaw)·R_x(pitch) in the cv frame (y down: a yaw about y turns the view to the right).
+  const double cy_ = std::cos(yaw), sy_ = std::sin(yaw), cp = std::cos(pitch), sp = std::sin(pitch);
+  const double R[3][3] = {{cy_, sy_ * sp, sy_ * cp}, {0.0, cp, -sp}, {-sy_, cy_ * sp, cy_ * cp}};
+  const double T[3] = {0.4, -0.1, 1.5};
+  {
+    std::ofstream f(calib);
+    f << "P2: 60 0 31.5 0 0 60 23.5 0 0 0 1 0\nR0_rect: 1 0 0 0 1 0 0 0 1\nTr_velo_to_cam: 0 -1 0 0 0 0 -1 0 1 0 0 0\n";
+    std::ofstream g(poses);
+    g.precision(17);
+    g << "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1 0.7\n";
+    for (int k = 2; k < 4; ++k) {
+      for (int i = 0; i < 3; ++i) g << R[i][0] << " " << R[i][1] << " " << R[i][2] << " " << T[i] * (k - 1) << " ";
+      g << "\n";
+    }
+  }
+  const Flat fl = flat(64, 48, 60.0, 0.3f, 1000.0);
+  CameraRainParams p = params(40.0, 1.0 / 60.0, 5);
+  p.drops.drop_min_mm = 2.5, p.wind = "1,-2,0.5", p.z_split_m = 4.0, p.frame = 2, p.poses = poses;
+  CameraRainScene s = scene_of(fl, false, {1, 1, 1});
+  s.kitti_calib = calib;
+  const std::vector<Drawn> cam = drawn_drops(s, p);
+  ASSERT_GT(cam.size(), 20u);
+  const Vec3 wind{1.0, -2.0, 0.5};
+  const double t = 0.2;
+  const CameraRainOptics optics(p, fl.k, 0.0);
+  const RainField field(40.0, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);
+  std::vector<RainDrop> cell;
+  std::vector<char> used(cam.size(), 0);
+  std::size_t expected = 0;
+  // The camera's centre in the field's axes: (z, −x, −y) of T.
+  const double ox = T[2], oy = -T[0], oz = -T[1], c = kRainCellM, reach = 6.0;
+  for (std::int64_t ix = static_cast<std::int64_t>(std::floor((ox - reach - wind.x * t) / c));
+       ix <= static_cast<std::int64_t>(std::floor((ox + reach - wind.x * t) / c)); ++ix)
+    for (std::int64_t iy = static_cast<std::int64_t>(std::floor((oy - reach - wind.y * t) / c));
+         iy <= static_cast<std::int64_t>(std::floor((oy + reach - wind.y * t) / c)); ++iy)
+      for (std::int64_t iz = static_cast<std::int64_t>(kRainLayerBaseM / c);
+           iz < static_cast<std::int64_t>((kRainLayerBaseM + kRainLayerM) / c); ++iz) {
+        cell.clear();
+        field.cell_drops({ix, iy, iz}, p.drops.drop_min_mm, cell);
+        for (const RainDrop& d : cell) {
+          const Vec3 w = rain_drop_at(d.at, d.d_mm, t, wind);
+          const double x[3] = {-w.y - T[0], -w.z - T[1], w.x - T[2]};  // cv, less the camera's centre
+          double v[3];
+          for (int i = 0; i < 3; ++i) v[i] = R[0][i] * x[0] + R[1][i] * x[1] + R[2][i] * x[2];  // R^T·x
+          const Vec3 q{v[2], -v[0], -v[1]};
+          if (!(q.x >= p.z_near_m && q.x < p.z_split_m) || d.d_mm < optics.threshold_mm(q.x)) continue;
+          const double u = 60.0 * v[0] / v[2] + fl.k.cx, vv = 60.0 * v[1] / v[2] + fl.k.cy;
+          const Drawn* got = find_drop(cam, q, 1e-9);
+          if (got) used[static_cast<std::size_t>(got - cam.data())] = 1;
+          if (u >= 0.5 && u <= 62.5 && vv >= 0.5 && vv <= 46.5) {
+            ++expected;
+            EXPECT_TRUE(got) << "the field's drop at " << q.x << ", " << q.y << ", " << q.z << " is not drawn";
+          }
+        }
+      }
+  EXPECT_GT(expected, 20u);
+  for (std::size_t i = 0; i < cam.size(); ++i)
+    EXPECT_TRUE(used[i]) << "a drawn drop at " << cam[i].at.x << ", " << cam[i].at.y << ", " << cam[i].at.z
+                         << " is none of the field's";
+  fs::remove_all(dir);
+}
+
 // --ego-speed s moves the field back past the camera by s·t: at frame 4 every drop drawn at speed 8
 // is one drawn at speed 0 moved by (−s·t, 0, 0) (within 1e-9 m), wherever that one is in the
 // picture (a pixel inside, before z_split, above the thinning's D_t), and it comes at the camera s
