@@ -318,6 +318,24 @@ const Drawn* find_drop(const std::vector<Drawn>& drops, const Vec3& at, double t
   return nullptr;
 }
 
+// Every drop of `field` whose place at t (rain_drop_at: the scan's closed form) can lie over the
+// landing box [x0, x1] × [y0, y1] [m], as f(place, D): the cells under the box shifted back by the
+// wind's drift, over the whole of the layer's height (every source a wrapped fall can come from).
+template <class F>
+void for_each_field_drop_at(const RainField& field, double d_min_mm, double t, const Vec3& wind, double x0, double x1,
+                            double y0, double y1, F&& f) {
+  const double c = kRainCellM;
+  const auto cell_of = [c](double v) { return static_cast<std::int64_t>(std::floor(v / c)); };
+  std::vector<RainDrop> cell;
+  for (std::int64_t ix = cell_of(x0 - wind.x * t); ix <= cell_of(x1 - wind.x * t); ++ix)
+    for (std::int64_t iy = cell_of(y0 - wind.y * t); iy <= cell_of(y1 - wind.y * t); ++iy)
+      for (std::int64_t iz = cell_of(kRainLayerBaseM); iz < cell_of(kRainLayerBaseM + kRainLayerM); ++iz) {
+        cell.clear();
+        field.cell_drops({ix, iy, iz}, d_min_mm, cell);
+        for (const RainDrop& d : cell) f(rain_drop_at(d.at, d.d_mm, t, wind), d.d_mm);
+      }
+}
+
 // The key test: at frame K the camera draws the scan's drops. The field is enumerated here cell by
 // cell over the whole of a layer's height (every source a wrapped fall can come from), each drop
 // moved by rain_drop_at (the scan's closed form) and taken to the camera at x = s·t: every drop the
@@ -342,42 +360,29 @@ TEST(CameraRainFrames, TheCamerasDropsAtFrameKAreTheScans) {
     const std::vector<Drawn> cam = drawn_drops(scene_of(fl, false, {1, 1, 1}), p);
     ASSERT_GT(cam.size(), 50u) << "frame " << K;
     const RainField field(40.0, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);
-    std::vector<RainDrop> cell;
     std::size_t expected = 0, matched = 0;
     std::vector<char> used(cam.size(), 0);
-    const double c = kRainCellM;
-    const std::int64_t x0 = static_cast<std::int64_t>(std::floor((ox - 1.0 - wind.x * t) / c)),
-                       x1 = static_cast<std::int64_t>(std::floor((ox + 5.0 - wind.x * t) / c)),
-                       y0 = static_cast<std::int64_t>(std::floor((-4.5 - wind.y * t) / c)),
-                       y1 = static_cast<std::int64_t>(std::floor((4.5 - wind.y * t) / c));
-    for (std::int64_t ix = x0; ix <= x1; ++ix)
-      for (std::int64_t iy = y0; iy <= y1; ++iy)
-        for (std::int64_t iz = static_cast<std::int64_t>(kRainLayerBaseM / c);
-             iz < static_cast<std::int64_t>((kRainLayerBaseM + kRainLayerM) / c); ++iz) {
-          cell.clear();
-          field.cell_drops({ix, iy, iz}, p.drops.drop_min_mm, cell);
-          for (const RainDrop& d : cell) {
-            const Vec3 w = rain_drop_at(d.at, d.d_mm, t, wind);
-            const Vec3 q{w.x - ox, w.y, w.z};
-            if (!(q.x >= p.z_near_m && q.x < p.z_split_m) || d.d_mm < optics.threshold_mm(q.x)) continue;
-            const double u = fl.k.fx * -q.y / q.x + fl.k.cx, v = fl.k.fy * -q.z / q.x + fl.k.cy;
-            const bool inside = u >= 0.5 && u <= 64 - 1.5 && v >= 0.5 && v <= 48 - 1.5;
-            const Drawn* got = find_drop(cam, q, 1e-9);
-            if (got) {
-              ++matched;
-              used[static_cast<std::size_t>(got - cam.data())] = 1;
-              EXPECT_NEAR(got->d_mm, d.d_mm, 1e-9 * d.d_mm);
-              // Its motion: fall, wind and the camera's speed, in the cv frame.
-              const double uu[3] = {-wind.y, atlas_terminal_velocity_m_per_s(d.d_mm) - wind.z, wind.x - p.ego_speed_m_s};
-              for (int a = 0; a < 3; ++a) EXPECT_NEAR(got->u[a], uu[a], 1e-12);
-            }
-            if (inside) {
-              ++expected;
-              EXPECT_TRUE(got) << "frame " << K << ": the field's drop at " << q.x << ", " << q.y << ", " << q.z
-                               << " (D " << d.d_mm << " mm, pixel " << u << ", " << v << ") is not drawn";
-            }
-          }
-        }
+    for_each_field_drop_at(field, p.drops.drop_min_mm, t, wind, ox - 1.0, ox + 5.0, -4.5, 4.5,
+                           [&](const Vec3& w, double d_mm) {
+      const Vec3 q{w.x - ox, w.y, w.z};
+      if (!(q.x >= p.z_near_m && q.x < p.z_split_m) || d_mm < optics.threshold_mm(q.x)) return;
+      const double u = fl.k.fx * -q.y / q.x + fl.k.cx, v = fl.k.fy * -q.z / q.x + fl.k.cy;
+      const bool inside = u >= 0.5 && u <= 64 - 1.5 && v >= 0.5 && v <= 48 - 1.5;
+      const Drawn* got = find_drop(cam, q, 1e-9);
+      if (got) {
+        ++matched;
+        used[static_cast<std::size_t>(got - cam.data())] = 1;
+        EXPECT_NEAR(got->d_mm, d_mm, 1e-9 * d_mm);
+        // Its motion: fall, wind and the camera's speed, in the cv frame.
+        const double uu[3] = {-wind.y, atlas_terminal_velocity_m_per_s(d_mm) - wind.z, wind.x - p.ego_speed_m_s};
+        for (int a = 0; a < 3; ++a) EXPECT_NEAR(got->u[a], uu[a], 1e-12);
+      }
+      if (inside) {
+        ++expected;
+        EXPECT_TRUE(got) << "frame " << K << ": the field's drop at " << q.x << ", " << q.y << ", " << q.z << " (D "
+                         << d_mm << " mm, pixel " << u << ", " << v << ") is not drawn";
+      }
+    });
     EXPECT_GT(expected, 30u);
     for (std::size_t i = 0; i < cam.size(); ++i)
       EXPECT_TRUE(used[i]) << "frame " << K << ": a drawn drop at " << cam[i].at.x << ", " << cam[i].at.y << ", "
@@ -447,35 +452,25 @@ TEST(CameraRainFrames, ATurningCameraDrawsTheFieldInItsAxes) {
   const double t = 0.2;
   const CameraRainOptics optics(p, fl.k, 0.0);
   const RainField field(40.0, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);
-  std::vector<RainDrop> cell;
   std::vector<char> used(cam.size(), 0);
   std::size_t expected = 0;
   // The camera's centre in the field's axes: (z, −x, −y) of T.
-  const double ox = T[2], oy = -T[0], oz = -T[1], c = kRainCellM, reach = 6.0;
-  for (std::int64_t ix = static_cast<std::int64_t>(std::floor((ox - reach - wind.x * t) / c));
-       ix <= static_cast<std::int64_t>(std::floor((ox + reach - wind.x * t) / c)); ++ix)
-    for (std::int64_t iy = static_cast<std::int64_t>(std::floor((oy - reach - wind.y * t) / c));
-         iy <= static_cast<std::int64_t>(std::floor((oy + reach - wind.y * t) / c)); ++iy)
-      for (std::int64_t iz = static_cast<std::int64_t>(kRainLayerBaseM / c);
-           iz < static_cast<std::int64_t>((kRainLayerBaseM + kRainLayerM) / c); ++iz) {
-        cell.clear();
-        field.cell_drops({ix, iy, iz}, p.drops.drop_min_mm, cell);
-        for (const RainDrop& d : cell) {
-          const Vec3 w = rain_drop_at(d.at, d.d_mm, t, wind);
-          const double x[3] = {-w.y - T[0], -w.z - T[1], w.x - T[2]};  // cv, less the camera's centre
-          double v[3];
-          for (int i = 0; i < 3; ++i) v[i] = R[0][i] * x[0] + R[1][i] * x[1] + R[2][i] * x[2];  // R^T·x
-          const Vec3 q{v[2], -v[0], -v[1]};
-          if (!(q.x >= p.z_near_m && q.x < p.z_split_m) || d.d_mm < optics.threshold_mm(q.x)) continue;
-          const double u = 60.0 * v[0] / v[2] + fl.k.cx, vv = 60.0 * v[1] / v[2] + fl.k.cy;
-          const Drawn* got = find_drop(cam, q, 1e-9);
-          if (got) used[static_cast<std::size_t>(got - cam.data())] = 1;
-          if (u >= 0.5 && u <= 62.5 && vv >= 0.5 && vv <= 46.5) {
-            ++expected;
-            EXPECT_TRUE(got) << "the field's drop at " << q.x << ", " << q.y << ", " << q.z << " is not drawn";
-          }
-        }
-      }
+  const double ox = T[2], oy = -T[0], reach = 6.0;
+  for_each_field_drop_at(field, p.drops.drop_min_mm, t, wind, ox - reach, ox + reach, oy - reach, oy + reach,
+                         [&](const Vec3& w, double d_mm) {
+    const double x[3] = {-w.y - T[0], -w.z - T[1], w.x - T[2]};  // cv, less the camera's centre
+    double v[3];
+    for (int i = 0; i < 3; ++i) v[i] = R[0][i] * x[0] + R[1][i] * x[1] + R[2][i] * x[2];  // R^T·x
+    const Vec3 q{v[2], -v[0], -v[1]};
+    if (!(q.x >= p.z_near_m && q.x < p.z_split_m) || d_mm < optics.threshold_mm(q.x)) return;
+    const double u = 60.0 * v[0] / v[2] + fl.k.cx, vv = 60.0 * v[1] / v[2] + fl.k.cy;
+    const Drawn* got = find_drop(cam, q, 1e-9);
+    if (got) used[static_cast<std::size_t>(got - cam.data())] = 1;
+    if (u >= 0.5 && u <= 62.5 && vv >= 0.5 && vv <= 46.5) {
+      ++expected;
+      EXPECT_TRUE(got) << "the field's drop at " << q.x << ", " << q.y << ", " << q.z << " is not drawn";
+    }
+  });
   EXPECT_GT(expected, 20u);
   for (std::size_t i = 0; i < cam.size(); ++i)
     EXPECT_TRUE(used[i]) << "a drawn drop at " << cam[i].at.x << ", " << cam[i].at.y << ", " << cam[i].at.z
