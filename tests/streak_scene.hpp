@@ -4,6 +4,8 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
+#include <functional>
 
 #include "brume/exec.hpp"
 #include "brume/image.hpp"
@@ -42,6 +44,26 @@ inline Exec two_threads() {
   Exec e;
   e.threads = 2;
   return e;
+}
+
+// FNV-1a over an image's floats: a bit-for-bit fingerprint (the frames' tests compare with main's).
+inline std::uint64_t fingerprint(const Image& im) {
+  std::uint64_t h = 1469598103934665603ull;
+  const unsigned char* b = reinterpret_cast<const unsigned char*>(im.data.data());
+  for (std::size_t i = 0; i < im.data.size() * sizeof(float); ++i) h = (h ^ b[i]) * 1099511628211ull;
+  return h;
+}
+// The fingerprints of frames 0, 1 and 2 of `render(frame, exec)` on two threads; each must be the
+// same on one thread (the moving pass's order does not depend on the threads), else 0.
+inline std::array<std::uint64_t, 3> frame_fingerprints(const std::function<Image(std::uint64_t, const Exec&)>& render) {
+  Exec one;
+  one.threads = 1;
+  std::array<std::uint64_t, 3> h{};
+  for (std::uint64_t k = 0; k < 3; ++k) {
+    h[k] = fingerprint(render(k, two_threads()));
+    if (fingerprint(render(k, one)) != h[k]) h[k] = 0;
+  }
+  return h;
 }
 
 }  // namespace brume::test

@@ -15,6 +15,7 @@
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "brume/rain.hpp"
+#include "effects/rain/rain_internal.hpp"
 #include "streak_scene.hpp"
 #include "test_util.hpp"
 
@@ -256,6 +257,291 @@ TEST(CameraRain, BadParametersAreRefused) {
   EXPECT_NE(error_of([&] { validate_camera_rain(p); }).find("--z-split"), std::string::npos);
 }
 
+// ---- frames of a sequence (--frame, --frame-interval, --poses) --------------------------------
+
+// The frames' scene: a flat grey scene of 96 x 64 px, f = 60 px, at 40 m.
+Flat frames_scene() { return flat(96, 64, 60.0, 0.3f, 40.0); }
+CameraRainParams frames_params() {
+  CameraRainParams p = params(40.0, 1.0 / 60.0, 5);
+  p.wind = "1,-2,0.5", p.ego_speed_m_s = 8.0, p.z_split_m = 8.0;
+  return p;
+}
+
+// Frame 0 (its flags' defaults, and --frame 0 given) is today's image bit for bit: the fingerprint
+// main's library (fbf627f, before the frames) gives for this scene, wind and ego speed.
+TEST(CameraRainFrames, FrameZeroIsTodaysImage) {
+  const Flat fl = frames_scene();
+  CameraRainParams p = frames_params();
+  EXPECT_EQ(fingerprint(render_camera_rain(scene_of(fl, true), p, two_threads())), 0x9c975f190cb1b4ddull);
+  p.frame = 0, p.frame_interval_s = 0.05;
+  EXPECT_EQ(fingerprint(render_camera_rain(scene_of(fl, true), p, two_threads())), 0x9c975f190cb1b4ddull);
+}
+
+// Frames 1 and 2 are other images, each the same on one thread and on two (the moving pass's
+// order does not depend on the threads).
+TEST(CameraRainFrames, FramesDifferAndAreDeterministic) {
+  const Flat fl = frames_scene();
+  CameraRainParams p = frames_params();
+  const auto h = frame_fingerprints([&](std::uint64_t k, const Exec& e) {
+    p.frame = k;
+    return render_camera_rain(scene_of(fl, true), p, e);
+  });
+  EXPECT_EQ(h[0], 0x9c975f190cb1b4ddull);
+  EXPECT_NE(h[1], 0u);
+  EXPECT_NE(h[2], 0u);
+  EXPECT_NE(h[1], h[0]);
+  EXPECT_NE(h[2], h[1]);
+  EXPECT_NE(h[2], h[0]);
+}
+
+// A drawn drop: its mid-exposure centre in the field's axes at the camera (x forward, y left, z
+// up), its diameter (from the streak's area, (π/4)·D²·fx·fy) and its cv velocity.
+struct Drawn {
+  Vec3 at;
+  double d_mm;
+  double u[3];
+};
+std::vector<Drawn> drawn_drops(const CameraRainScene& s, const CameraRainParams& p) {
+  StreakSlabs slabs;
+  (void)render_camera_rain_drawn(s, p, two_threads(), nullptr, nullptr, &slabs);
+  std::vector<Drawn> out;
+  for (const std::vector<Streak>& slab : slabs)
+    for (const Streak& k : slab)
+      out.push_back({{k.c[2], -k.c[0], -k.c[1]}, std::sqrt(k.area / (kPi / 4.0 * s.k.fx * s.k.fy)) * 1e3,
+                     {k.u[0], k.u[1], k.u[2]}});
+  return out;
+}
+// The drawn drop at `at` within `tol` [m] (null: none).
+const Drawn* find_drop(const std::vector<Drawn>& drops, const Vec3& at, double tol) {
+  for (const Drawn& d : drops)
+    if (std::abs(d.at.x - at.x) <= tol && std::abs(d.at.y - at.y) <= tol && std::abs(d.at.z - at.z) <= tol) return &d;
+  return nullptr;
+}
+
+// Every drop of `field` whose place at t (rain_drop_at: the scan's closed form) can lie over the
+// landing box [x0, x1] × [y0, y1] [m], as f(place, D): the cells under the box shifted back by the
+// wind's drift, over the whole of the layer's height (every source a wrapped fall can come from).
+template <class F>
+void for_each_field_drop_at(const RainField& field, double d_min_mm, double t, const Vec3& wind, double x0, double x1,
+                            double y0, double y1, F&& f) {
+  const double c = kRainCellM;
+  const auto cell_of = [c](double v) { return static_cast<std::int64_t>(std::floor(v / c)); };
+  std::vector<RainDrop> cell;
+  for (std::int64_t ix = cell_of(x0 - wind.x * t); ix <= cell_of(x1 - wind.x * t); ++ix)
+    for (std::int64_t iy = cell_of(y0 - wind.y * t); iy <= cell_of(y1 - wind.y * t); ++iy)
+      for (std::int64_t iz = cell_of(kRainLayerBaseM); iz < cell_of(kRainLayerBaseM + kRainLayerM); ++iz) {
+        cell.clear();
+        field.cell_drops({ix, iy, iz}, d_min_mm, cell);
+        for (const RainDrop& d : cell) f(rain_drop_at(d.at, d.d_mm, t, wind), d.d_mm);
+      }
+}
+
+// The key test: at frame K the camera draws the scan's drops. The field is enumerated here cell by
+// cell over the whole of a layer's height (every source a wrapped fall can come from), each drop
+// moved by rain_drop_at (the scan's closed form) and taken to the camera at x = s·t: every drop the
+// camera draws is one of these (the same place within 1e-9 m: the same closed form and the same
+// subtraction, exact but for the order of a sum; the same diameter within 1e-9 relative: from the
+// streak's area), and every one of these whose centre projects at least a pixel inside the image,
+// at planar depth [z_near, z_split) and above the thinning's D_t there, is drawn. Frame 3 (0.3 s:
+// no drop wraps) and frame 200 (20 s: every drop has wrapped several times). Then the scan: beams
+// aimed at large drawn drops (D >= 2.5 mm, 2.5-4 m away) of a scan at the same frame, wind and ego
+// speed (brume lidar rain's LidarRainParams) report them at their range (within 1e-4 m: float32
+// points).
+TEST(CameraRainFrames, TheCamerasDropsAtFrameKAreTheScans) {
+  const Flat fl = flat(64, 48, 60.0, 0.3f, 1000.0);
+  CameraRainParams p = params(40.0, 1.0 / 60.0, 5);
+  p.drops.drop_min_mm = 2.0;  // a few drops a cubic metre: the field is enumerated here whole
+  p.wind = "1,-2,0.5", p.ego_speed_m_s = 8.0, p.z_split_m = 4.0;
+  const Vec3 wind{1.0, -2.0, 0.5};
+  const CameraRainOptics optics(p, fl.k, 0.0);
+  for (const std::uint64_t K : {std::uint64_t{3}, std::uint64_t{200}}) {
+    p.frame = K;
+    const double t = static_cast<double>(K) * p.frame_interval_s, ox = p.ego_speed_m_s * t;
+    const std::vector<Drawn> cam = drawn_drops(scene_of(fl, false, {1, 1, 1}), p);
+    ASSERT_GT(cam.size(), 50u) << "frame " << K;
+    const RainField field(40.0, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);
+    std::size_t expected = 0, matched = 0;
+    std::vector<char> used(cam.size(), 0);
+    for_each_field_drop_at(field, p.drops.drop_min_mm, t, wind, ox - 1.0, ox + 5.0, -4.5, 4.5,
+                           [&](const Vec3& w, double d_mm) {
+      const Vec3 q{w.x - ox, w.y, w.z};
+      if (!(q.x >= p.z_near_m && q.x < p.z_split_m) || d_mm < optics.threshold_mm(q.x)) return;
+      const double u = fl.k.fx * -q.y / q.x + fl.k.cx, v = fl.k.fy * -q.z / q.x + fl.k.cy;
+      const bool inside = u >= 0.5 && u <= 64 - 1.5 && v >= 0.5 && v <= 48 - 1.5;
+      const Drawn* got = find_drop(cam, q, 1e-9);
+      if (got) {
+        ++matched;
+        used[static_cast<std::size_t>(got - cam.data())] = 1;
+        EXPECT_NEAR(got->d_mm, d_mm, 1e-9 * d_mm);
+        // Its motion: fall, wind and the camera's speed, in the cv frame.
+        const double uu[3] = {-wind.y, atlas_terminal_velocity_m_per_s(d_mm) - wind.z, wind.x - p.ego_speed_m_s};
+        for (int a = 0; a < 3; ++a) EXPECT_NEAR(got->u[a], uu[a], 1e-12);
+      }
+      if (inside) {
+        ++expected;
+        EXPECT_TRUE(got) << "frame " << K << ": the field's drop at " << q.x << ", " << q.y << ", " << q.z << " (D "
+                         << d_mm << " mm, pixel " << u << ", " << v << ") is not drawn";
+      }
+    });
+    EXPECT_GT(expected, 30u);
+    for (std::size_t i = 0; i < cam.size(); ++i)
+      EXPECT_TRUE(used[i]) << "frame " << K << ": a drawn drop at " << cam[i].at.x << ", " << cam[i].at.y << ", "
+                           << cam[i].at.z << " is none of the field's";
+    EXPECT_EQ(matched, cam.size());
+
+    // The scan at the same frame: beams at the large drawn drops, a faint target 3 m beyond each.
+    LidarRainParams lp;
+    lp.drops = p.drops, lp.seed = p.seed, lp.wind = p.wind, lp.ego_speed_m_s = p.ego_speed_m_s, lp.frame = K;
+    std::vector<float> pts;
+    std::vector<double> range;
+    for (const Drawn& d : cam) {
+      const double r = std::sqrt(d.at.x * d.at.x + d.at.y * d.at.y + d.at.z * d.at.z);
+      if (d.d_mm < 2.5 || r < 2.5 || r > 4.0) continue;
+      const double k = (r + 3.0) / r;
+      pts.insert(pts.end(), {static_cast<float>(d.at.x * k), static_cast<float>(d.at.y * k),
+                             static_cast<float>(d.at.z * k), 0.02f});
+      range.push_back(r);
+    }
+    ASSERT_GE(range.size(), 3u) << "frame " << K;
+    std::vector<float> out(pts.size());
+    std::vector<std::uint8_t> labels(range.size());
+    (void)lidar_rain(pts.data(), out.data(), range.size(), lp, labels.data());
+    std::size_t at = 0;
+    for (std::size_t i = 0; i < range.size(); ++i) {
+      if (labels[i] == 2) continue;  // lost
+      const float* q = &out[4 * at++];
+      EXPECT_EQ(labels[i], 1) << "frame " << K << ": the beam at drop " << i << " reports its target";
+      EXPECT_NEAR(std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]), range[i], 1e-4) << "frame " << K;
+    }
+  }
+}
+
+// A turning camera (--poses: camera 0 yawed 30° and pitched 4° at frame 2, moved 1.5 m; the
+// calibration's camera 2 at camera 0, so that its pose is the line's): the drops it draws are the
+// field's moved by rain_drop_at and taken into its axes here (cv: R^T·(x − t), written again from
+// KITTI's convention, not the library's composition), both ways as in the test above, within 1e-9 m
+// (a rotation's rounding, ~1e-15 m at these distances).
+TEST(CameraRainFrames, ATurningCameraDrawsTheFieldInItsAxes) {
+  const fs::path dir = fs::temp_directory_path() / ("brume_rain_turn_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string calib = (dir / "calib.txt").string(), poses = (dir / "poses.txt").string();
+  const double yaw = 30.0 * kPi / 180.0, pitch = 4.0 * kPi / 180.0;
+  // R = R_y(yaw)·R_x(pitch) in the cv frame (y down: a yaw about y turns the view to the right).
+  const double cy_ = std::cos(yaw), sy_ = std::sin(yaw), cp = std::cos(pitch), sp = std::sin(pitch);
+  const double R[3][3] = {{cy_, sy_ * sp, sy_ * cp}, {0.0, cp, -sp}, {-sy_, cy_ * sp, cy_ * cp}};
+  const double T[3] = {0.4, -0.1, 1.5};
+  {
+    std::ofstream f(calib);
+    f << "P2: 60 0 31.5 0 0 60 23.5 0 0 0 1 0\nR0_rect: 1 0 0 0 1 0 0 0 1\nTr_velo_to_cam: 0 -1 0 0 0 0 -1 0 1 0 0 0\n";
+    std::ofstream g(poses);
+    g.precision(17);
+    g << "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1 0.7\n";
+    for (int k = 2; k < 4; ++k) {
+      for (int i = 0; i < 3; ++i) g << R[i][0] << " " << R[i][1] << " " << R[i][2] << " " << T[i] * (k - 1) << " ";
+      g << "\n";
+    }
+  }
+  const Flat fl = flat(64, 48, 60.0, 0.3f, 1000.0);
+  CameraRainParams p = params(40.0, 1.0 / 60.0, 5);
+  p.drops.drop_min_mm = 2.5, p.wind = "1,-2,0.5", p.z_split_m = 4.0, p.frame = 2, p.poses = poses;
+  CameraRainScene s = scene_of(fl, false, {1, 1, 1});
+  s.kitti_calib = calib;
+  const std::vector<Drawn> cam = drawn_drops(s, p);
+  ASSERT_GT(cam.size(), 20u);
+  const Vec3 wind{1.0, -2.0, 0.5};
+  const double t = 0.2;
+  const CameraRainOptics optics(p, fl.k, 0.0);
+  const RainField field(40.0, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);
+  std::vector<char> used(cam.size(), 0);
+  std::size_t expected = 0;
+  // The camera's centre in the field's axes: (z, −x, −y) of T.
+  const double ox = T[2], oy = -T[0], reach = 6.0;
+  for_each_field_drop_at(field, p.drops.drop_min_mm, t, wind, ox - reach, ox + reach, oy - reach, oy + reach,
+                         [&](const Vec3& w, double d_mm) {
+    const double x[3] = {-w.y - T[0], -w.z - T[1], w.x - T[2]};  // cv, less the camera's centre
+    double v[3];
+    for (int i = 0; i < 3; ++i) v[i] = R[0][i] * x[0] + R[1][i] * x[1] + R[2][i] * x[2];  // R^T·x
+    const Vec3 q{v[2], -v[0], -v[1]};
+    if (!(q.x >= p.z_near_m && q.x < p.z_split_m) || d_mm < optics.threshold_mm(q.x)) return;
+    const double u = 60.0 * v[0] / v[2] + fl.k.cx, vv = 60.0 * v[1] / v[2] + fl.k.cy;
+    const Drawn* got = find_drop(cam, q, 1e-9);
+    if (got) used[static_cast<std::size_t>(got - cam.data())] = 1;
+    if (u >= 0.5 && u <= 62.5 && vv >= 0.5 && vv <= 46.5) {
+      ++expected;
+      EXPECT_TRUE(got) << "the field's drop at " << q.x << ", " << q.y << ", " << q.z << " is not drawn";
+    }
+  });
+  EXPECT_GT(expected, 20u);
+  for (std::size_t i = 0; i < cam.size(); ++i)
+    EXPECT_TRUE(used[i]) << "a drawn drop at " << cam[i].at.x << ", " << cam[i].at.y << ", " << cam[i].at.z
+                         << " is none of the field's";
+  fs::remove_all(dir);
+}
+
+// --ego-speed s moves the field back past the camera by s·t: at frame 4 every drop drawn at speed 8
+// is one drawn at speed 0 moved by (−s·t, 0, 0) (within 1e-9 m), wherever that one is in the
+// picture (a pixel inside, before z_split, above the thinning's D_t), and it comes at the camera s
+// faster.
+TEST(CameraRainFrames, EgoSpeedMovesTheFieldBackBySpeedTimesTime) {
+  const Flat fl = flat(64, 48, 60.0, 0.3f, 1000.0);
+  CameraRainParams p = params(40.0, 1.0 / 60.0, 7);
+  p.drops.drop_min_mm = 2.0, p.wind = "0.5,1,0", p.z_split_m = 8.0, p.frame = 4, p.epsilon = 0.0;  // every drop drawn
+  const std::vector<Drawn> still = drawn_drops(scene_of(fl, false, {1, 1, 1}), p);
+  p.ego_speed_m_s = 8.0;
+  const std::vector<Drawn> moving = drawn_drops(scene_of(fl, false, {1, 1, 1}), p);
+  const double st = 8.0 * 0.4;
+  const CameraRainOptics optics(p, fl.k, 0.0);
+  std::size_t checked = 0;
+  for (const Drawn& d : moving) {
+    const Vec3 q{d.at.x + st, d.at.y, d.at.z};  // where the camera standing still sees it
+    if (!(q.x < p.z_split_m) || d.d_mm < optics.threshold_mm(q.x)) continue;
+    const double u = fl.k.fx * -q.y / q.x + fl.k.cx, v = fl.k.fy * -q.z / q.x + fl.k.cy;
+    if (!(u >= 0.5 && u <= 62.5 && v >= 0.5 && v <= 46.5)) continue;
+    ++checked;
+    const Drawn* got = find_drop(still, q, 1e-9);
+    ASSERT_TRUE(got) << "the drop at " << d.at.x << " m is not drawn " << st << " m farther without the ego speed";
+    EXPECT_NEAR(d.u[2], got->u[2] - 8.0, 1e-12);
+  }
+  EXPECT_GT(checked, 30u);
+}
+
+// A KITTI poses file of a pure translation along camera 0's forward axis, s·Δt a line, places the
+// camera as --ego-speed s does: the same drops (within 1e-9 m: camera 2's offset from the
+// calibration is added and taken off again), the same motion, the same image within 1e-5.
+TEST(CameraRainFrames, PosesOfAPureTranslationAreTheEgoSpeed) {
+  const fs::path dir = fs::temp_directory_path() / ("brume_rain_poses_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string calib = (dir / "calib.txt").string(), poses = (dir / "poses.txt").string();
+  {
+    std::ofstream f(calib);
+    f << "P2: 60 0 31.5 3.6 0 60 23.5 0.3 0 0 1 0.004\nR0_rect: 1 0 0 0 1 0 0 0 1\n"
+         "Tr_velo_to_cam: 0 -1 0 0 0 0 -1 -0.08 1 0 0 -0.27\n";
+    std::ofstream g(poses);
+    for (int k = 0; k < 6; ++k) g << "1 0 0 0 0 1 0 0 0 0 1 " << 0.8 * k << "\n";
+  }
+  const Flat fl = flat(64, 48, 60.0, 0.3f, 1000.0);
+  CameraRainParams p = params(40.0, 1.0 / 60.0, 3);
+  p.drops.drop_min_mm = 1.5, p.wind = "0.5,1,0.2", p.z_split_m = 6.0, p.frame = 3;
+  p.ego_speed_m_s = 8.0;
+  const std::vector<Drawn> ego = drawn_drops(scene_of(fl, false, {1, 1, 1}), p);
+  const Image ego_img = render_camera_rain(scene_of(fl, false, {1, 1, 1}), p, two_threads());
+  p.ego_speed_m_s = 0.0, p.poses = poses;
+  CameraRainScene s = scene_of(fl, false, {1, 1, 1});
+  s.kitti_calib = calib;
+  const std::vector<Drawn> posed = drawn_drops(s, p);
+  const Image posed_img = render_camera_rain(s, p, two_threads());
+  ASSERT_GT(ego.size(), 30u);
+  EXPECT_EQ(posed.size(), ego.size());
+  for (const Drawn& d : ego) {
+    const Drawn* got = find_drop(posed, d.at, 1e-9);
+    ASSERT_TRUE(got) << "the drop at " << d.at.x << ", " << d.at.y << ", " << d.at.z;
+    for (int a = 0; a < 3; ++a) EXPECT_NEAR(got->u[a], d.u[a], 1e-9);
+  }
+  ASSERT_EQ(posed_img.data.size(), ego_img.data.size());
+  for (std::size_t i = 0; i < ego_img.data.size(); ++i) ASSERT_NEAR(posed_img.data[i], ego_img.data[i], 1e-5f) << i;
+  fs::remove_all(dir);
+}
+
 class CameraRainCli : public ScratchDirTest {};
 
 // `brume rain` from files, and `brume run` of its record: the same image bit for bit. Rate 0
@@ -328,6 +614,80 @@ TEST_F(CameraRainCli, RunsAndBrumeRunRepeatsIt) {
   EXPECT_NE(bad.status, 0);
   EXPECT_NE(bad.output.find("--wind"), std::string::npos) << bad.output;
   EXPECT_FALSE(fs::exists(p("bad.exr")));
+}
+
+// A frame of a sequence from the command line: the record holds it, `brume run` repeats it bit for
+// bit, and --lidar rains on the scan at the same frame (brume lidar rain's bytes with the same
+// --frame, --wind and --ego-speed). Bad sequences are refused naming the flag, nothing written.
+TEST_F(CameraRainCli, FramesOfASequence) {
+  const Scene s = scene(96, 64, 12);
+  write_image(p("in.exr"), s.rgb, WriteOptions{});
+  write_image(p("range.exr"), s.range, WriteOptions{});
+  std::vector<float> pts;
+  for (int i = 0; i < 1500; ++i) {
+    const double a = 0.004 * i, r = 3.0 + 0.02 * i;
+    pts.insert(pts.end(), {static_cast<float>(r * std::cos(a)), static_cast<float>(r * std::sin(a)), -1.0f, 0.3f});
+  }
+  {
+    std::ofstream f(p("scan.bin"), std::ios::binary);
+    f.write(reinterpret_cast<const char*>(pts.data()), static_cast<std::streamsize>(pts.size() * 4));
+  }
+  fs::create_directories(p("first"));
+  const std::string in = " --image " + p("in.exr") + " --range " + p("range.exr") + " --fx 80 ";
+  const std::string seq = "--rate 50 --rain-seed 9 --wind 0,2,0 --ego-speed 10 ";
+  const CliRun r = run("rain" + in + seq + "--frame 2 --lidar " + p("scan.bin") + " --lidar-out " + p("first/o.bin") +
+                       " --out " + p("first/o.exr") + " --record " + p("first/o.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const nlohmann::json rec = read_json(p("first/o.json"));
+  EXPECT_EQ(rec["job"]["rain"]["frame"], 2);
+  EXPECT_EQ(rec["rain"]["frame"], 2);
+  EXPECT_DOUBLE_EQ(rec["rain"]["time_s"].get<double>(), 0.2);
+  EXPECT_EQ(rec["lidar_rain"]["frame"], 2);
+  const CliRun again = run("run " + p("first/o.json") + " --out-dir " + p("again"));
+  ASSERT_EQ(again.status, 0) << again.output;
+  expect_same_pixels(p("first/o.exr"), p("again/o.exr"));
+  EXPECT_EQ(file_bytes(p("first/o.bin")), file_bytes(p("again/o.bin")));
+  const CliRun alone = run("lidar rain --points " + p("scan.bin") + " --rate 50 --seed 9 --wind 0,2,0 --ego-speed 10 "
+                           "--frame 2 --out " + p("alone.bin"));
+  ASSERT_EQ(alone.status, 0) << alone.output;
+  EXPECT_EQ(file_bytes(p("first/o.bin")), file_bytes(p("alone.bin")));
+  const CliRun zero = run("rain" + in + seq + "--out " + p("zero.exr"));
+  ASSERT_EQ(zero.status, 0) << zero.output;
+  EXPECT_NE(file_bytes(p("zero.exr")), file_bytes(p("first/o.exr")));
+  // Bad sequences.
+  {
+    std::ofstream g(p("poses.txt"));
+    for (int k = 0; k < 3; ++k) g << "1 0 0 0 0 1 0 0 0 0 1 " << k << "\n";
+    std::ofstream c(p("calib.txt"));
+    c << "P2: 80 0 47.5 0 0 80 31.5 0 0 0 1 0\nR0_rect: 1 0 0 0 1 0 0 0 1\nTr_velo_to_cam: 0 -1 0 0 0 0 -1 0 1 0 0 0\n";
+  }
+  const auto refused = [&](const std::string& flags, std::initializer_list<const char*> words) {
+    const CliRun b = run("rain" + in + "--rate 25 " + flags + " --out " + p("bad.exr"));
+    EXPECT_NE(b.status, 0) << flags;
+    for (const char* w : words) EXPECT_NE(b.output.find(w), std::string::npos) << flags << ": " << b.output;
+    EXPECT_FALSE(fs::exists(p("bad.exr"))) << flags;
+  };
+  // A poses file: the record hashes it, and brume run repeats the frame (and refuses an edited file).
+  fs::create_directories(p("posed"));
+  const CliRun posed = run("rain" + in + "--rate 25 --rain-seed 2 --poses " + p("poses.txt") + " --kitti-calib " +
+                           p("calib.txt") + " --frame 1 --out " + p("posed/o.exr") + " --record " + p("posed/o.json"));
+  ASSERT_EQ(posed.status, 0) << posed.output;
+  EXPECT_EQ(read_json(p("posed/o.json"))["rain"]["pose_files"]["poses"]["path"], p("poses.txt"));
+  const CliRun posed_again = run("run " + p("posed/o.json") + " --out-dir " + p("posed2"));
+  ASSERT_EQ(posed_again.status, 0) << posed_again.output;
+  expect_same_pixels(p("posed/o.exr"), p("posed2/o.exr"));
+  {
+    std::ofstream g(p("poses.txt"), std::ios::app);
+    g << "1 0 0 0 0 1 0 0 0 0 1 3\n";
+  }
+  const CliRun edited = run("run " + p("posed/o.json") + " --out-dir " + p("posed3"));
+  EXPECT_NE(edited.status, 0);
+  EXPECT_NE(edited.output.find("poses.txt"), std::string::npos) << edited.output;
+  refused("--poses " + p("poses.txt") + " --frame 1", {"--poses", "--kitti-calib", "camera 2"});
+  refused("--poses " + p("poses.txt") + " --kitti-calib " + p("calib.txt") + " --ego-speed 5 --frame 1",
+          {"--ego-speed 5", "--poses", "give one of them"});
+  refused("--poses " + p("poses.txt") + " --kitti-calib " + p("calib.txt") + " --frame 7",
+          {"--poses", "4 poses", "--frame 7", "line 8"});
 }
 
 // KITTI object 000001 (image and Velodyne scan), 25 mm/h: runs, draws streaks, changes the image,

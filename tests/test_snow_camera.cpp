@@ -12,6 +12,7 @@
 #include "brume/error.hpp"
 #include "brume/io.hpp"
 #include "brume/snow.hpp"
+#include "effects/snow/snow_internal.hpp"
 #include "streak_scene.hpp"
 #include "test_util.hpp"
 
@@ -189,6 +190,102 @@ TEST_F(CameraSnowCli, RunsAndBrumeRunRepeatsIt) {
   EXPECT_NE(bad.status, 0);
   EXPECT_NE(bad.output.find("--lidar-out"), std::string::npos) << bad.output;
   EXPECT_FALSE(fs::exists(p("bad.exr")));
+}
+
+// ---- frames of a sequence -------------------------------------------------------------------
+
+// Frame 0 is today's image bit for bit (the fingerprint of main's library, fbf627f, for this scene,
+// wind and ego speed); frames 1 and 2 are other images, the same on one thread and two.
+TEST(CameraSnowFrames, FrameZeroIsTodaysAndFramesDifferAndRepeat) {
+  const Flat fl = flat(96, 64, 60.0, 0.3f, 40.0);
+  CameraSnowParams p = params(2.0, 5);
+  p.wind = "1,-2,0.5", p.ego_speed_m_s = 8.0, p.z_split_m = 8.0;
+  EXPECT_EQ(fingerprint(render_camera_snow(scene_of(fl, true), p, two_threads())), 0xbd15f61b90e58943ull);
+  const auto h = frame_fingerprints([&](std::uint64_t k, const Exec& e) {
+    p.frame = k;
+    return render_camera_snow(scene_of(fl, true), p, e);
+  });
+  EXPECT_EQ(h[0], 0xbd15f61b90e58943ull);
+  EXPECT_NE(h[1], 0u);
+  EXPECT_NE(h[1], h[0]);
+  EXPECT_NE(h[2], h[1]);
+}
+
+// At frame 3 (0.3 s: no flake reaches its layer's edge) every flake drawn is one of frame 0's moved
+// by the wind and the one fall speed, (w_x, w_y, w_z − v_t)·t, less the camera's s·t (within 1e-9 m:
+// the closed form's rounding), wherever frame 0's is in the picture (a pixel inside, from z_near,
+// above the thinning's D_t).
+TEST(CameraSnowFrames, FlakesFallAtOneSpeedBetweenFrames) {
+  const Flat fl = flat(64, 48, 60.0, 0.3f, 1000.0);
+  CameraSnowParams p = params(2.0, 3);
+  p.wind = "0.5,1,0.2", p.ego_speed_m_s = 4.0, p.z_split_m = 5.0, p.flakes.fall_speed_m_s = 1.5;
+  const auto drawn = [&](std::uint64_t frame) {
+    p.frame = frame;
+    StreakSlabs slabs;
+    (void)render_camera_snow_drawn(scene_of(fl, false, {1, 1, 1}), p, two_threads(), nullptr, nullptr, &slabs);
+    std::vector<std::array<double, 4>> out;  // x, y, z (the field's axes at the camera), D [mm]
+    for (const std::vector<Streak>& slab : slabs)
+      for (const Streak& k : slab)
+        out.push_back({k.c[2], -k.c[0], -k.c[1], std::sqrt(k.area / (3.14159265358979323846 / 4.0 * 3600.0)) * 1e3});
+    return out;
+  };
+  const auto f0 = drawn(0), f3 = drawn(3);
+  const double t = 0.3;
+  const double m[3] = {0.5 * t - 4.0 * t, 1.0 * t, (0.2 - 1.5) * t};
+  std::size_t checked = 0;
+  for (const auto& a : f3) {
+    const double q[3] = {a[0] - m[0], a[1] - m[1], a[2] - m[2]};  // where frame 0 had it
+    if (!(q[0] >= p.z_near_m && q[0] < p.z_split_m)) continue;
+    const double u = 60.0 * -q[1] / q[0] + fl.k.cx, v = 60.0 * -q[2] / q[0] + fl.k.cy;
+    if (!(u >= 0.5 && u <= 62.5 && v >= 0.5 && v <= 46.5)) continue;
+    bool found = false, thinned = true;
+    for (const auto& b : f0) {
+      if (std::abs(b[0] - q[0]) <= 1e-9 && std::abs(b[1] - q[1]) <= 1e-9 && std::abs(b[2] - q[2]) <= 1e-9) {
+        found = true;
+        EXPECT_NEAR(b[3], a[3], 1e-9 * a[3]);
+      }
+    }
+    // A flake frame 0 did not draw must be one its thinning drops: D_t is non-decreasing in depth, so
+    // no flake frame 0 drew as far or farther may be as small or smaller.
+    if (!found)
+      for (const auto& b : f0)
+        if (b[0] >= q[0] && b[3] <= a[3]) thinned = false;
+    EXPECT_TRUE(found || thinned) << "a flake at " << a[0] << ", " << a[1] << ", " << a[2] << " (D " << a[3]
+                                  << " mm) is not frame 0's moved";
+    checked += found;
+  }
+  EXPECT_GT(checked, 30u);
+}
+
+// The command line: a frame's record repeats bit for bit; the scan's snow has no frames yet.
+TEST_F(CameraSnowCli, FramesOfASequence) {
+  const Scene s = scene(96, 64, 12);
+  write_image(p("in.exr"), s.rgb, WriteOptions{});
+  write_image(p("range.exr"), s.range, WriteOptions{});
+  fs::create_directories(p("first"));
+  const std::string in = " --image " + p("in.exr") + " --range " + p("range.exr") + " --fx 80 ";
+  const CliRun r = run("snow" + in + "--rate 2 --snow-seed 4 --wind 0,2,0 --ego-speed 10 --frame 3 --out " +
+                       p("first/o.exr") + " --record " + p("first/o.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const nlohmann::json rec = read_json(p("first/o.json"));
+  EXPECT_EQ(rec["job"]["snow"]["frame"], 3);
+  EXPECT_EQ(rec["snow"]["frame"], 3);
+  const CliRun again = run("run " + p("first/o.json") + " --out-dir " + p("again"));
+  ASSERT_EQ(again.status, 0) << again.output;
+  expect_same_pixels(p("first/o.exr"), p("again/o.exr"));
+  const std::vector<float> pts = {5.0f, 0.0f, -1.0f, 0.3f, 6.0f, 1.0f, -1.0f, 0.3f};
+  {
+    std::ofstream f(p("scan.bin"), std::ios::binary);
+    f.write(reinterpret_cast<const char*>(pts.data()), static_cast<std::streamsize>(pts.size() * 4));
+  }
+  // The scan at the same frame: brume lidar snow's --frame (its flakes drawn afresh per beam), with
+  // the camera's seed.
+  const CliRun with_scan = run("snow" + in + "--rate 2 --snow-seed 4 --frame 1 --lidar " + p("scan.bin") +
+                               " --lidar-out " + p("b.bin") + " --out " + p("b.exr"));
+  ASSERT_EQ(with_scan.status, 0) << with_scan.output;
+  const CliRun alone = run("lidar snow --points " + p("scan.bin") + " --rate 2 --seed 4 --frame 1 --out " + p("c.bin"));
+  ASSERT_EQ(alone.status, 0) << alone.output;
+  EXPECT_EQ(file_bytes(p("b.bin")), file_bytes(p("c.bin")));
 }
 
 }  // namespace snow_camera_tests

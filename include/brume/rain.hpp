@@ -357,6 +357,13 @@ struct CameraRainParams {
   std::uint64_t seed = 0;                  // --rain-seed: the drop field's seed
   std::string wind = "0,0,0";              // [m/s] X,Y,Z in the vehicle frame (x forward, y left, z up)
   double ego_speed_m_s = 0.0;              // [m/s] the camera's speed along its forward axis
+  // The field at frame K of a sequence (docs/rain.md, "Frames of a sequence"): the scan's drops at
+  // t = K·Δt (LidarRainParams' frame, rain_drop_at), the camera at its frame-K pose (x = s·t for
+  // --ego-speed s, or --poses line K relative to line 0, camera 2 placed by the depth block's
+  // --kitti-calib); the exposure is centred on t.
+  std::uint64_t frame = 0;                 // K
+  double frame_interval_s = 0.1;           // [s] Δt
+  std::string poses;                       // KITTI odometry poses (camera 0 to world, 12 numbers a line)
   std::optional<double> f_number;          // [1] the lens (with --focal-length, --sensor-width); unset: pinhole
   std::optional<double> focus_distance_m;  // [m] the plane in focus (with --f-number)
   double q_eff = kCameraRainQEff;          // [1] in [1, 2]
@@ -392,6 +399,9 @@ struct CameraRainScene {
   // For tests: without the analytic media, and a fixed drop radiance.
   bool analytic = true;
   std::optional<std::array<float, 3>> drop_radiance;
+  // The KITTI calibration that places camera 2 (the image's) relative to camera 0 for --poses (the
+  // depth block's --kitti-calib); empty: none.
+  std::string kitti_calib;
   // The scene through the analytic media from their transmission τ0 (haze's composite with its
   // scattering blur); unset: T·C + (1 − T)·A per pixel.
   std::function<Image(const Image& tau0)> composite;

@@ -172,6 +172,9 @@ struct CameraSnowParams {
   std::uint64_t seed = 0;                  // --snow-seed: the flakes' seed
   std::string wind = "0,0,0";              // [m/s] X,Y,Z in the vehicle frame (x forward, y left, z up)
   double ego_speed_m_s = 0.0;              // [m/s] the camera's speed along its forward axis
+  std::uint64_t frame = 0;                 // K: the field at t = K·Δt (CameraRainParams' frame)
+  double frame_interval_s = 0.1;           // [s] Δt
+  std::string poses;                       // KITTI odometry poses (camera 0 to world, 12 numbers a line)
   std::optional<double> f_number;          // [1] the lens; unset: pinhole
   std::optional<double> focus_distance_m;  // [m] the plane in focus (with --f-number)
   double albedo = 0.9;                     // [1] in [0, 1], a

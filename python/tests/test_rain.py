@@ -71,6 +71,32 @@ def test_rain_equals_cli(demo, tmp_path, extra):
     same(no_scan.rgb, r.rgb)
 
 
+def test_rain_frames_equal_cli(demo, tmp_path):
+    """frame= (and frame_interval=) is --frame: the image and the scan at frame 2 of a sequence as
+    `brume rain` draws them, bit for bit; its job repeats it; frame 0 is the call without it."""
+    d = demo["dir"]
+    pts = rain_scan()
+    pts.tofile(tmp_path / "in.bin")
+    run_cli("rain", "--image", d / "clean.png", "--range", d / "range.exr", "--fov-y", 55, "--rate", 25,
+            "--rain-seed", 3, "--wind", "1,2,0", "--ego-speed", 10, "--frame", 2, "--frame-interval", 0.05,
+            "--lidar", tmp_path / "in.bin", "--lidar-out", tmp_path / "out.bin",
+            "--out", tmp_path / "o.exr", "--bits", "float", "--record", tmp_path / "o.json")
+    kw = dict(fov_y=55, rate=25, rain_seed=3, wind="1,2,0", ego_speed=10)
+    r = brume.rain(demo["rgb"], demo["range"], frame=2, frame_interval=0.05, lidar=pts, **kw)
+    same(r.rgb, brume.read_image(tmp_path / "o.exr").rgb)
+    same(r.lidar, np.fromfile(tmp_path / "out.bin", np.float32).reshape(-1, 4))
+    assert r.record["rain"]["frame"] == 2 and r.record["lidar_rain"]["frame"] == 2
+    again = brume.rain(demo["rgb"], demo["range"], job=json.loads(json.dumps(r.record["job"])), lidar=pts)
+    same(again.rgb, r.rgb)
+    zero = brume.rain(demo["rgb"], demo["range"], frame=0, **kw)
+    same(zero.rgb, brume.rain(demo["rgb"], demo["range"], **kw).rgb)
+    assert not np.array_equal(zero.rgb, r.rgb)
+    # poses= needs a KITTI calibration, which the array forms do not take
+    with pytest.raises(ValueError, match="poses") as e:
+        brume.rain(demo["rgb"], demo["range"], frame=1, poses=str(tmp_path / "poses.txt"), **dict(kw, ego_speed=0))
+    assert "--" not in str(e.value) and "ego_speed" in str(e.value), str(e.value)
+
+
 def test_rain_errors_speak_python(demo):
     rgb, rng = demo["rgb"], demo["range"]
     cases = [

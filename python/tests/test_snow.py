@@ -76,6 +76,25 @@ def test_snow_equals_cli(demo, tmp_path):
         brume.snow(demo["rgb"], demo["range"], fov_y=55)
 
 
+def test_snow_frames_equal_cli(demo, tmp_path):
+    """frame= is --frame: frame 3 of a sequence as `brume snow` draws it, bit for bit, and the Snow
+    transform passes it on; lidar= at frame 1 is brume.lidar.snow's frame=1 (fresh flakes per beam)."""
+    import brume.transforms as T
+    d = demo["dir"]
+    run_cli("snow", "--image", d / "clean.png", "--range", d / "range.exr", "--fov-y", 55, "--rate", 2,
+            "--snow-seed", 3, "--wind", "0,2,0", "--ego-speed", 5, "--frame", 3,
+            "--out", tmp_path / "o.exr", "--bits", "float")
+    kw = dict(fov_y=55, rate=2, snow_seed=3, wind="0,2,0", ego_speed=5)
+    r = brume.snow(demo["rgb"], demo["range"], frame=3, **kw)
+    same(r.rgb, brume.read_image(tmp_path / "o.exr").rgb)
+    assert r.record["snow"]["frame"] == 3
+    out = T.Snow(seed=5, frame=3, **kw)(image=demo["rgb"], depth=demo["range"], key="k")
+    same(out["image"], r.rgb)
+    pts = scan(n=50)
+    with_scan = brume.snow(demo["rgb"], demo["range"], frame=1, lidar=pts, **kw)
+    same(with_scan.lidar, brume.lidar.snow(pts, rate=2, seed=3, frame=1).points)
+
+
 def test_snow_transform_lidar_target(demo):
     """lidar_target="points": the frame's scan through the same draw (brume.lidar.snow at the drawn
     rate and snow-seed), the image as drawn without a scan, both replayed; refusals name the keyword."""

@@ -2,6 +2,7 @@
 // particle medium (brume/rain.hpp states the equations; docs/rain.md).
 #include "brume/rain.hpp"
 
+#include "effects/rain/falling.hpp"
 #include "effects/rain/rain_internal.hpp"
 #include "media/scan_points_check.hpp"
 #include "media/scan_returns.hpp"
@@ -239,26 +240,71 @@ void validate_lidar_rain(const LidarRainParams& p) {
   lidar_rain_param_table().validate(p);
   validate_rain_drops(p.drops);
   (void)parse_wind_m_s(p.wind);
-  if (!p.poses.empty() && p.kitti_calib.empty())
-    throw Error("--poses '" + p.poses +
-                "' holds camera 0's poses; the scan's pose needs --kitti-calib FILE (its Tr_velo_to_cam and R0_rect "
-                "place the Velodyne relative to camera 0)");
-  if (!p.poses.empty() && p.ego_speed_m_s != 0.0)
-    throw Error("--ego-speed " + text::g(p.ego_speed_m_s) + " with --poses '" + p.poses +
-                "': the poses already move the sensor; give one of them");
-  const double t = static_cast<double>(p.frame) * p.frame_interval_s;
-  if (!(t <= 1e6))
-    throw Error("--frame " + std::to_string(p.frame) + " at --frame-interval " + text::g(p.frame_interval_s) +
-                " s is " + text::g(t) + " s into the sequence; at most 1e6 s (11 days) is supported");
+  check_sequence_flags(p.frame, p.frame_interval_s, p.ego_speed_m_s, p.poses, p.kitti_calib,
+                       "the scan's pose needs --kitti-calib FILE (its Tr_velo_to_cam and R0_rect place the Velodyne "
+                       "relative to camera 0)");
 }
 
 Vec3 rain_drop_at(const Vec3& c, double d_mm, double t_s, const Vec3& wind) {
   if (t_s == 0.0) return c;
+  return falling_at(c, atlas_terminal_velocity_m_per_s(d_mm), t_s, wind);
+}
+
+Vec3 falling_at(const Vec3& c, double fall_m_s, double t_s, const Vec3& wind) {
+  if (t_s == 0.0) return c;
   const double base = std::floor((c.z - kRainLayerBaseM) / kRainLayerM) * kRainLayerM + kRainLayerBaseM;
-  double dz = std::fmod(c.z - base + (wind.z - atlas_terminal_velocity_m_per_s(d_mm)) * t_s, kRainLayerM);
+  double dz = std::fmod(c.z - base + (wind.z - fall_m_s) * t_s, kRainLayerM);
   if (dz < 0.0) dz += kRainLayerM;
   if (dz >= kRainLayerM) dz = 0.0;  // rounding of a tiny negative remainder
   return {c.x + wind.x * t_s, c.y + wind.y * t_s, base + dz};
+}
+
+void falling_source_spans(double z_lo, double z_hi, double f_lo, double f_hi, double t_s,
+                          std::vector<std::pair<std::int64_t, std::int64_t>>& spans) {
+  const double c = kRainCellM, H = kRainLayerM, base0 = kRainLayerBaseM;
+  const std::int64_t cells_per_layer = static_cast<std::int64_t>(H / c);
+  const std::int64_t j0 = static_cast<std::int64_t>(std::floor((z_lo - base0) / H)),
+                     j1 = static_cast<std::int64_t>(std::floor((z_hi - base0) / H));
+  for (std::int64_t j = j0; j <= j1; ++j) {
+    const double lb = base0 + static_cast<double>(j) * H;
+    const std::int64_t cb = static_cast<std::int64_t>(std::llround(lb / c));  // the layer's first cell
+    const double a = std::max(z_lo, lb), e = std::min(z_hi, lb + H);
+    const double s0 = a + f_lo * t_s - c, s1 = e + f_hi * t_s + c;  // source heights, unwrapped
+    if (s1 - s0 >= H) {
+      spans.push_back({cb, cb + cells_per_layer - 1});
+      continue;
+    }
+    double m0 = std::fmod(s0 - lb, H);
+    if (m0 < 0.0) m0 += H;
+    const double m1 = m0 + (s1 - s0);
+    const std::int64_t i0 = static_cast<std::int64_t>(std::floor(m0 / c));
+    const std::int64_t i1 = static_cast<std::int64_t>(std::floor(m1 / c));
+    if (i1 < cells_per_layer) {
+      spans.push_back({cb + i0, cb + i1});
+    } else {
+      spans.push_back({cb + i0, cb + cells_per_layer - 1});
+      spans.push_back({cb, cb + std::min(i0 - 1, i1 - cells_per_layer)});
+    }
+  }
+}
+
+bool falling_min_speed(std::int64_t iz, double z_lo, double z_hi, double f_lo, double f_hi, double t_s, double& f) {
+  // A particle of this cell lands in [z_lo, z_hi] (within its layer) only when f·t ≡ z_s − z (mod H):
+  // the smallest such f >= f_lo.
+  const double c = kRainCellM, H = kRainLayerM, base0 = kRainLayerBaseM;
+  const double lz = static_cast<double>(iz) * c;
+  const double lb = base0 + std::floor((lz - base0) / H) * H;
+  const double top = std::min(z_hi, lb + H), bottom = std::max(z_lo, lb);
+  if (top < bottom) return false;
+  const double a = lz - top - 1e-6, b = lz + c - bottom + 1e-6;
+  const double ft_lo = f_lo * t_s - 1e-9 * (1.0 + std::abs(f_lo * t_s));
+  const double ft = std::max(ft_lo, a + std::ceil((ft_lo - b) / H) * H);
+  f = ft / t_s;
+  return !(f > f_hi + 1e-9);  // no particle falls that fast
+}
+
+double atlas_diameter_below_mm(double v) {
+  return v > 0.0 && v < 9.65 ? -std::log((9.65 - v) / 10.3) / 0.6 * (1.0 - 1e-9) : 0.0;
 }
 
 // ---- the scan's pose in the drop field ------------------------------------------------------
@@ -324,7 +370,95 @@ RigidTransform read_kitti_pose(const std::string& path, std::uint64_t k) {
               " needs line " + std::to_string(k + 1) + " (frames count from 0)");
 }
 
+// Camera 2's centre from camera 0's (rectified): P2 = K·[I | b], b = K⁻¹·P2[:, 3].
+RigidTransform cam2_from_cam0(const KittiCalib& c) {
+  const double* P = c.P2;
+  const double bz = P[11], by = (P[7] - P[6] * bz) / P[5], bx = (P[3] - P[1] * by - P[2] * bz) / P[0];
+  RigidTransform r;
+  r.translation = {bx, by, bz};
+  return r;
+}
+// The field's axes from the cv frame: x = z_cv, y = −x_cv, z = −y_cv (brume rain's camera).
+RigidTransform field_from_cv() {
+  RigidTransform f;
+  f.rotation.m[0][0] = 0, f.rotation.m[0][2] = 1;
+  f.rotation.m[1][0] = -1, f.rotation.m[1][1] = 0;
+  f.rotation.m[2][1] = -1, f.rotation.m[2][2] = 0;
+  return f;
+}
+bool is_identity(const RigidTransform& w) {
+  bool identity = w.translation.x == 0.0 && w.translation.y == 0.0 && w.translation.z == 0.0;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) identity = identity && w.rotation.m[i][j] == (i == j ? 1.0 : 0.0);
+  return identity;
+}
+
+// How many pose lines a KITTI poses file holds (not checked: read_kitti_pose checks the lines it reads).
+std::uint64_t kitti_pose_count(const std::string& path) {
+  static const InputLimit kPosesLimit{1u << 28, "a poses file is a line of 12 numbers per frame"};
+  std::istringstream in(read_input_file(path, "--poses", kPosesLimit));
+  std::string line;
+  std::uint64_t n = 0;
+  while (std::getline(in, line))
+    if (line.find_first_not_of(" \t\r") != std::string::npos) ++n;
+  return n;
+}
+
 }  // namespace
+
+void check_sequence_flags(std::uint64_t frame, double frame_interval_s, double ego_speed_m_s, const std::string& poses,
+                          const std::string& kitti_calib, const std::string& calib_why) {
+  if (!poses.empty() && kitti_calib.empty())
+    throw Error("--poses '" + poses + "' holds camera 0's poses; " + calib_why);
+  if (!poses.empty() && ego_speed_m_s != 0.0)
+    throw Error("--ego-speed " + text::g(ego_speed_m_s) + " with --poses '" + poses +
+                "': the poses already move the sensor; give one of them");
+  const double t = static_cast<double>(frame) * frame_interval_s;
+  if (!(t <= 1e6))
+    throw Error("--frame " + std::to_string(frame) + " at --frame-interval " + text::g(frame_interval_s) +
+                " s is " + text::g(t) + " s into the sequence; at most 1e6 s (11 days) is supported");
+}
+
+void check_streak_frames(std::uint64_t frame, double frame_interval_s, double ego_speed_m_s, const std::string& poses,
+                         const std::string& kitti_calib, const std::string& calib_how) {
+  check_sequence_flags(frame, frame_interval_s, ego_speed_m_s, poses, kitti_calib,
+                       "the camera's pose needs a KITTI calibration to place camera 2 (the image's) relative to "
+                       "camera 0: " + calib_how);
+}
+
+StreakPose streak_camera_pose(std::uint64_t frame, double frame_interval_s, double ego_speed_m_s,
+                              const std::string& poses, const std::string& kitti_calib) {
+  StreakPose pose;
+  pose.t_s = static_cast<double>(frame) * frame_interval_s;
+  if (poses.empty()) {
+    pose.world_from_camera.translation.x = ego_speed_m_s * pose.t_s;
+    pose.velocity = {ego_speed_m_s, 0.0, 0.0};
+    pose.moved = pose.t_s != 0.0;
+    return pose;
+  }
+  // Camera 2 at frame k in the field's world (camera 2 at frame 0, the field's axes): F·C2·P0⁻¹·Pk·C2⁻¹·F⁻¹.
+  pose.from_poses = true;
+  const RigidTransform c2 = cam2_from_cam0(read_kitti_calib(kitti_calib)), f = field_from_cv();
+  const RigidTransform to_cam0 = compose(c2, inverse(read_kitti_pose(poses, 0)));
+  const auto at = [&](std::uint64_t k) {
+    if (k == 0) return RigidTransform{};
+    const RigidTransform rel = compose(to_cam0, compose(read_kitti_pose(poses, k), inverse(c2)));
+    return compose(f, compose(rel, inverse(f)));
+  };
+  const std::uint64_t n = kitti_pose_count(poses);
+  if (n < 2)
+    throw Error("--poses '" + poses + "' has " + std::to_string(n) +
+                " pose; the camera's motion over the exposure needs two (frames K and K + 1, or K - 1 and K)");
+  if (frame >= n) (void)read_kitti_pose(poses, frame);  // its error: the line missing
+  pose.world_from_camera = at(frame);
+  const bool last = frame + 1 >= n;
+  const RigidTransform a = last ? at(frame - 1) : pose.world_from_camera, b = last ? pose.world_from_camera : at(frame + 1);
+  const Vec3& pa = a.translation;
+  const Vec3& pb = b.translation;
+  pose.velocity = {(pb.x - pa.x) / frame_interval_s, (pb.y - pa.y) / frame_interval_s, (pb.z - pa.z) / frame_interval_s};
+  pose.moved = !is_identity(pose.world_from_camera) || pose.t_s != 0.0;
+  return pose;
+}
 
 LidarRainPose lidar_rain_pose(const LidarRainParams& p) {
   LidarRainPose pose;
@@ -338,17 +472,7 @@ LidarRainPose lidar_rain_pose(const LidarRainParams& p) {
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) r0.rotation.m[i][j] = c.R0[3 * i + j];
     cam0_from_velo = compose(r0, rigid_3x4(c.Tr));  // camera 0, rectified
-    // Camera 2's centre: P2 = K·[I | b], b = K⁻¹·P2[:, 3].
-    const double* P = c.P2;
-    const double bz = P[11], by = (P[7] - P[6] * bz) / P[5], bx = (P[3] - P[1] * by - P[2] * bz) / P[0];
-    RigidTransform cam2_from_cam0;
-    cam2_from_cam0.translation = {bx, by, bz};
-    // The field's axes from the cv frame: x = z_cv, y = −x_cv, z = −y_cv (brume rain's camera).
-    RigidTransform field_from_cv;
-    field_from_cv.rotation.m[0][0] = 0, field_from_cv.rotation.m[0][2] = 1;
-    field_from_cv.rotation.m[1][0] = -1, field_from_cv.rotation.m[1][1] = 0;
-    field_from_cv.rotation.m[2][1] = -1, field_from_cv.rotation.m[2][2] = 0;
-    field_from_velo = compose(field_from_cv, compose(cam2_from_cam0, cam0_from_velo));
+    field_from_velo = compose(field_from_cv(), compose(cam2_from_cam0(c), cam0_from_velo));
     pose.frame = "camera 2's (KITTI calibration: x forward, y left, z up, origin at its centre)";
   } else {
     pose.frame = "the scan's own";
@@ -364,11 +488,7 @@ LidarRainPose lidar_rain_pose(const LidarRainParams& p) {
     pose.world_from_sensor = field_from_velo;
     pose.world_from_sensor.translation.x += p.ego_speed_m_s * pose.t_s;
   }
-  const RigidTransform& w = pose.world_from_sensor;
-  bool identity = w.translation.x == 0.0 && w.translation.y == 0.0 && w.translation.z == 0.0;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) identity = identity && w.rotation.m[i][j] == (i == j ? 1.0 : 0.0);
-  pose.general = !identity || pose.t_s != 0.0;
+  pose.general = !is_identity(pose.world_from_sensor) || pose.t_s != 0.0;
   return pose;
 }
 
@@ -963,8 +1083,6 @@ void LidarRain::scan_echoes_general(const float* points, std::size_t n, std::vec
   const double inv_dq = measure_bounds(r_far, S.u_max);
   const std::vector<double>& u_max = S.u_max;
   const double T2 = r_far * r_far;
-  const double H = kRainLayerM, base0 = kRainLayerBaseM;
-  const std::int64_t cells_per_layer = static_cast<std::int64_t>(H / c);
   const double v_hi = atlas_terminal_velocity_m_per_s(p_.drops.drop_max_mm) - wind.z;
   std::size_t drawn = 0;
   std::vector<std::pair<std::int64_t, std::int64_t>> spans;  // source cells [iz0, iz1]
@@ -992,29 +1110,7 @@ void LidarRain::scan_echoes_general(const float* points, std::size_t n, std::vec
             const double d_lo = std::max(p_.drops.drop_min_mm, k_ * r_lo * r_lo * 1e3 * (1.0 - 1e-12));
             if (d_lo > p_.drops.drop_max_mm) continue;
             f_lo = atlas_terminal_velocity_m_per_s(d_lo) - wind.z;
-            const std::int64_t j0 = static_cast<std::int64_t>(std::floor((z_lo - base0) / H)),
-                               j1 = static_cast<std::int64_t>(std::floor((z_hi - base0) / H));
-            for (std::int64_t j = j0; j <= j1; ++j) {
-              const double lb = base0 + static_cast<double>(j) * H;
-              const std::int64_t cb = static_cast<std::int64_t>(std::llround(lb / c));  // the layer's first cell
-              const double a = std::max(z_lo, lb), e = std::min(z_hi, lb + H);
-              const double s0 = a + f_lo * t_s - c, s1 = e + v_hi * t_s + c;  // source heights, unwrapped
-              if (s1 - s0 >= H) {
-                spans.push_back({cb, cb + cells_per_layer - 1});
-                continue;
-              }
-              double m0 = std::fmod(s0 - lb, H);
-              if (m0 < 0.0) m0 += H;
-              const double m1 = m0 + (s1 - s0);
-              const std::int64_t i0 = static_cast<std::int64_t>(std::floor(m0 / c));
-              const std::int64_t i1 = static_cast<std::int64_t>(std::floor(m1 / c));
-              if (i1 < cells_per_layer) {
-                spans.push_back({cb + i0, cb + i1});
-              } else {
-                spans.push_back({cb + i0, cb + cells_per_layer - 1});
-                spans.push_back({cb, cb + std::min(i0 - 1, i1 - cells_per_layer)});
-              }
-            }
+            falling_source_spans(z_lo, z_hi, f_lo, v_hi, t_s, spans);
           }
           const std::uint64_t col = field_.column_hash(ix, iy);
           for (const auto& [iz0, iz1] : spans)
@@ -1035,16 +1131,9 @@ void LidarRain::scan_echoes_general(const float* points, std::size_t n, std::vec
                 // A drop of this cell lands in [z_lo, z_hi] (within its layer) only when f·t ≡ z_s − z
                 // (mod H), f = v(D) − w_z: the smallest such f >= f_lo gives the smallest diameter that
                 // can (v increases with D), below which the cell's drops, drawn largest first, are not drawn.
-                const double lz = static_cast<double>(iz) * c;
-                const double lb = base0 + std::floor((lz - base0) / H) * H;
-                const double top = std::min(z_hi, lb + H), bottom = std::max(z_lo, lb);
-                if (top < bottom) continue;
-                const double a = lz - top - 1e-6, b = lz + c - bottom + 1e-6;
-                const double ft_lo = f_lo * t_s - 1e-9 * (1.0 + std::abs(f_lo * t_s));
-                const double ft = std::max(ft_lo, a + std::ceil((ft_lo - b) / H) * H);
-                if (ft / t_s > v_hi + 1e-9) continue;  // no drop falls that fast
-                const double v = ft / t_s + wind.z;   // v(D*) of the smallest diameter D* that can land here
-                if (v > 0.0 && v < 9.65) d_cut = std::max(d_cut, -std::log((9.65 - v) / 10.3) / 0.6 * (1.0 - 1e-9));
+                double f;
+                if (!falling_min_speed(iz, z_lo, z_hi, f_lo, v_hi, t_s, f)) continue;
+                d_cut = std::max(d_cut, atlas_diameter_below_mm(f + wind.z));  // v(D*) of the smallest that can land
               }
               const double m = field_.measure_above(d_cut);
               if (!(m > 0.0)) continue;

@@ -14,6 +14,7 @@
 #include "brume/error.hpp"
 #include "brume/rain.hpp"
 #include "core/text.hpp"
+#include "effects/rain/rain_internal.hpp"
 #include "effects/rain/streaks.hpp"
 #include "media/scan_returns.hpp"
 
@@ -179,6 +180,11 @@ double CameraRainOptics::tau(double r, double cos_theta) const {
 
 Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, const Exec& exec,
                          CameraRainStats* stats, Image* transmission) {
+  return render_camera_rain_drawn(s, p, exec, stats, transmission, nullptr);
+}
+
+Image render_camera_rain_drawn(const CameraRainScene& s, const CameraRainParams& p, const Exec& exec,
+                               CameraRainStats* stats, Image* transmission, StreakSlabs* drawn) {
   validate_camera_rain(p);
   check_streak_scene(s, "rain");
   const int W = s.rgb.width(), H = s.rgb.height();
@@ -200,11 +206,13 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
                            : streak_background(s, front_tau, sigma_total, nt, transmission);
 
   // 2. The drops of the field in the frustum, z_near <= z < z_split at mid-exposure.
+  // At frame K the field as the scan draws it (LidarRainParams' frame: hashed at frame 0, each drop
+  // moved by rain_drop_at), the camera at its pose then.
   const RainField field(rate, p.drops.drop_min_mm, p.drops.drop_max_mm, p.seed);
   const Vec3 wind = camera_rain_wind(p);
-  const double s_ego = p.ego_speed_m_s;
+  const StreakPose pose = streak_camera_pose(p.frame, p.frame_interval_s, p.ego_speed_m_s, p.poses, s.kitti_calib);
   const double v_max = atlas_terminal_velocity_m_per_s(p.drops.drop_max_mm);
-  const double speed_max = std::sqrt(wind.x * wind.x + wind.y * wind.y + wind.z * wind.z) + std::abs(s_ego) + v_max;
+  const double speed_max = std::sqrt(wind.x * wind.x + wind.y * wind.y + wind.z * wind.z) + streak_speed(pose) + v_max;
   const double margin_m = speed_max * T / 2.0 + 0.01;
   const StreakBoxMean env(s.rgb, std::max(1, H / 4));
   double env_total[3];
@@ -216,7 +224,8 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
   };
   const auto make = [&](const Vec3& at, double d_mm, Streak& k) {
     const double z = at.x;
-    const double u[3] = {-wind.y, atlas_terminal_velocity_m_per_s(d_mm) - wind.z, wind.x - s_ego};
+    double u[3];
+    streak_velocity(pose, wind, atlas_terminal_velocity_m_per_s(d_mm), u);
     if (!place_streak(k, at, d_mm, u, lens, T, z_clip, cam)) return false;
     const double r = k.range;
     // E: what the drop refracts (the image about it) and reflects (the image's mean),
@@ -232,14 +241,19 @@ Image render_camera_rain(const CameraRainScene& s, const CameraRainParams& p, co
     }
     return true;
   };
-  const StreakSlabs drops =
-      frustum_streaks(field, [&](double z) { return optics.threshold_mm(z); }, p.z_near_m, p.z_split_m, grow_m, cam,
-                      nt, make, st.cells, st.drops_seen);
+  const auto threshold = [&](double z) { return optics.threshold_mm(z); };
+  StreakSlabs drops =
+      pose.moved ? moving_frustum_streaks(field, threshold, p.z_near_m, p.z_split_m, grow_m, cam, nt, pose, wind,
+                                          atlas_terminal_velocity_m_per_s, p.drops.drop_max_mm,
+                                          atlas_diameter_below_mm, make, st.cells, st.drops_seen)
+                 : frustum_streaks(field, threshold, p.z_near_m, p.z_split_m, grow_m, cam, nt, make, st.cells,
+                                   st.drops_seen);
 
   // 3. The streaks, composited far to near (ties: the enumeration's order), tile by tile.
   const StreakSplat splat = splat_streaks(drops, s.range, out, cam, nt);
   st.drops_drawn = splat.drawn, st.alpha_clamped = splat.alpha_clamped, st.mean_streak_px = splat.mean_streak_px;
   if (stats) *stats = st;
+  if (drawn) *drawn = std::move(drops);
   return out;
 }
 
@@ -262,7 +276,11 @@ nlohmann::json camera_rain_record(const CameraRainParams& p, const CameraRainSta
           {"rain_visibility_m", st.sigma_cam > 0.0 ? nlohmann::json(3.912 / st.sigma_cam) : nlohmann::json(nullptr)},
           {"exposure_s", p.exposure_s},
           {"seed", p.seed},
-          {"frame", 0},
+          {"frame", p.frame},
+          {"frame_interval_s", p.frame_interval_s},
+          {"time_s", static_cast<double>(p.frame) * p.frame_interval_s},
+          {"layer_m", kRainLayerM},
+          {"layer_base_m", kRainLayerBaseM},
           {"cell_m", kRainCellM},
           {"drop_min_mm", p.drops.drop_min_mm},
           {"drop_max_mm", p.drops.drop_max_mm},

@@ -79,6 +79,9 @@ LidarRainParams camera_rain_lidar_params(const CameraRainParams& p, const std::s
   lp.seed = p.seed;
   lp.return_mode = p.return_mode;
   lp.kitti_calib = kitti_calib;
+  // The scan at the image's frame of the sequence: the same time, wind and motion.
+  lp.frame = p.frame, lp.frame_interval_s = p.frame_interval_s;
+  lp.wind = p.wind, lp.ego_speed_m_s = p.ego_speed_m_s, lp.poses = p.poses;
   return lp;
 }
 
@@ -102,14 +105,19 @@ std::string camera_rain_lidar_calib(const CameraRainJob& j) {
 }
 
 // The rain's checks that need no pixels (the CLI's and brume.rain's).
-void check_camera_rain(const CameraRainParams& p, const DepthSource& depth) {
+void check_camera_rain(const CameraRainParams& p, const DepthSource& depth, const std::string& calib_how) {
   validate_camera_rain(p);
   check_streak_lens(p.f_number, depth, "the streaks");
+  check_streak_frames(p.frame, p.frame_interval_s, p.ego_speed_m_s, p.poses, depth.kitti_calib, calib_how);
 }
 
 void check_camera_rain_job(const CameraRainJob& j) {
-  check_camera_rain(j.rain, j.input.depth);
+  check_camera_rain(j.rain, j.input.depth, kStreakCalibHowCli);
   check_camera_scan_flags(j.lidar, j.lidar_out, "rains on a scan");
+  if (!j.lidar.empty() && !j.rain.poses.empty() && j.lidar_frame == "scan")
+    throw Error("--poses '" + j.rain.poses +
+                "' with --lidar-frame scan: the scan's pose from camera 0's poses needs its drops in camera 2's frame; "
+                "give --lidar-frame camera (with --kitti-calib), or --ego-speed instead of --poses");
   if (!j.lidar.empty()) validate_lidar_rain(camera_rain_lidar_params(j.rain, camera_rain_lidar_calib(j)));
 }
 
@@ -126,6 +134,7 @@ CameraRainRun run_camera_rain(ConstImageView rgb, ConstImageView measured_range,
                               CameraRainStats st;
                               Image out = render_camera_rain(scene, p, exec, &st, tr);
                               block = camera_rain_record(p, st);
+                              block["pose_files"] = streak_pose_files(p.poses, depth.kitti_calib);
                               return out;
                             });
 }
@@ -228,6 +237,8 @@ CommandDef rain_command() {
       args, call, {"rgb", "transmission", "lidar", "lidar_labels", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<CameraRainParams>& k, const Exec& e,
          const std::set<std::string>& g) {
+        check_streak_frames(k.p.frame, k.p.frame_interval_s, k.p.ego_speed_m_s, k.p.poses, k.depth.kitti_calib,
+                            kStreakCalibHowPython);
         const LidarRainParams lp = camera_rain_lidar_params(k.p);
         return streak_array_result(
             in, "brume.rain(): lidar", "lidar_rain",
@@ -240,7 +251,7 @@ CommandDef rain_command() {
             [&] { return run_camera_rain(in[0].dense.view(), in[1].dense.view(), k.depth, k.p, k.prepare, e, g); });
       },
       [](const ArrayCall<CameraRainParams>& k, const std::set<std::string>& g) {
-        check_camera_rain(k.p, k.depth);
+        check_camera_rain(k.p, k.depth, kStreakCalibHowPython);
         check_range_step(k.prepare, g);
       });
   // A call that rained on a scan says so in its job (an empty lidar block).

@@ -5,6 +5,7 @@
 #include <memory>
 
 #include "brume/rain.hpp"
+#include "effects/rain/streaks.hpp"
 
 namespace brume {
 
@@ -22,5 +23,10 @@ namespace brume {
 enum class LidarRainSearch { chosen, by_beam, by_cell, general };
 constexpr std::size_t kLidarRainByCellBeams = 16384;
 std::unique_ptr<Medium> lidar_rain_as_medium_searching(const LidarRainParams& p, LidarRainSearch search);
+
+// render_camera_rain with the streaks it drew (slab by slab, before the splat) in `drawn` (may be
+// null): the tests compare them with the scan's field.
+Image render_camera_rain_drawn(const CameraRainScene& s, const CameraRainParams& p, const Exec& exec,
+                               CameraRainStats* stats, Image* transmission, StreakSlabs* drawn);
 
 }  // namespace brume

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "brume/error.hpp"
+#include "brume/io.hpp"
 
 namespace brume {
 
@@ -147,6 +148,162 @@ StreakSlabs frustum_streaks(const RainField& field, const std::function<double(d
     for (Streak& k : found[i]) k.order = order++;
   }
   return found;
+}
+
+StreakSlabs moving_frustum_streaks(const RainField& field, const std::function<double(double)>& threshold_mm,
+                                   double z_near, double z_split, const std::function<double(double, double)>& grow_m,
+                                   const StreakCamera& cam, int nt, const StreakPose& pose, const Vec3& wind,
+                                   const std::function<double(double)>& fall_m_s, double d_max_mm,
+                                   const std::function<double(double)>& d_below,
+                                   const std::function<bool(const Vec3&, double, Streak&)>& make,
+                                   std::size_t& cells_out, std::size_t& seen_out) {
+  const int W = cam.width, H = cam.height;
+  const double xa = (-0.5 - cam.cx) / cam.fx, xb = (W - 0.5 - cam.cx) / cam.fx, ya = (-0.5 - cam.cy) / cam.fy,
+               yb = (H - 0.5 - cam.cy) / cam.fy;
+  const double c = kRainCellM, t = pose.t_s;
+  const Mat3& R = pose.world_from_camera.rotation;
+  const Vec3& O = pose.world_from_camera.translation;
+  const Mat3 Rt = R.transposed();
+  const std::int64_t ix0 = static_cast<std::int64_t>(std::floor(z_near / c));
+  const std::int64_t ix1 = static_cast<std::int64_t>(std::floor(z_split / c));
+  const std::size_t slabs = static_cast<std::size_t>(ix1 - ix0 + 1);
+  // The frustum in pieces (depth steps of a brick, 8 x 4 across the image), each piece's corners in
+  // the world widened by its lateral margin (√3 of it: a margin along the camera's axes, any world
+  // axis), marking the brick columns (B x B cells, shifted back by the drift w·t) and the heights
+  // their particles must land at.
+  constexpr int B = 4, nU = 8, nV = 4;
+  const double bm = B * c, sx = wind.x * t, sy = wind.y * t;
+  struct Box {
+    double lo[3], hi[3];
+  };
+  std::vector<Box> pieces;
+  for (double z0 = z_near; z0 < z_split; z0 += bm) {
+    const double z1 = std::min(z_split, z0 + bm), g = grow_m(z0, z1) * std::sqrt(3.0);
+    for (int iu = 0; iu < nU; ++iu)
+      for (int iv = 0; iv < nV; ++iv) {
+        Box b{{kStreakInf, kStreakInf, kStreakInf}, {-kStreakInf, -kStreakInf, -kStreakInf}};
+        for (int corner = 0; corner < 8; ++corner) {
+          const double z = corner & 1 ? z1 : z0;
+          const double xn = xa + (xb - xa) * (iu + ((corner >> 1) & 1)) / nU;
+          const double yn = ya + (yb - ya) * (iv + ((corner >> 2) & 1)) / nV;
+          const Vec3 q = R * Vec3{z, -xn * z, -yn * z};  // the camera's field axes into the world
+          const double w[3] = {q.x + O.x, q.y + O.y, q.z + O.z};
+          for (int a = 0; a < 3; ++a) b.lo[a] = std::min(b.lo[a], w[a] - g), b.hi[a] = std::max(b.hi[a], w[a] + g);
+        }
+        pieces.push_back(b);
+      }
+  }
+  double lo[2] = {kStreakInf, kStreakInf}, hi[2] = {-kStreakInf, -kStreakInf};
+  for (const Box& b : pieces)
+    for (int a = 0; a < 2; ++a) lo[a] = std::min(lo[a], b.lo[a]), hi[a] = std::max(hi[a], b.hi[a]);
+  const std::int64_t gx0 = static_cast<std::int64_t>(std::floor((lo[0] - sx) / bm)),
+                     gy0 = static_cast<std::int64_t>(std::floor((lo[1] - sy) / bm));
+  const std::int64_t gnx = static_cast<std::int64_t>(std::floor((hi[0] - sx) / bm)) - gx0 + 1,
+                     gny = static_cast<std::int64_t>(std::floor((hi[1] - sy) / bm)) - gy0 + 1;
+  std::vector<std::int64_t> column(static_cast<std::size_t>(2 * gnx * gny));
+  for (std::size_t k = 0; k < column.size(); k += 2) column[k] = INT64_MAX, column[k + 1] = INT64_MIN;
+  for (const Box& b : pieces) {
+    const std::int64_t cz0 = static_cast<std::int64_t>(std::floor(b.lo[2] / c)),
+                       cz1 = static_cast<std::int64_t>(std::floor(b.hi[2] / c));
+    const std::int64_t x0 = static_cast<std::int64_t>(std::floor((b.lo[0] - sx) / bm)) - gx0,
+                       x1 = static_cast<std::int64_t>(std::floor((b.hi[0] - sx) / bm)) - gx0,
+                       y0 = static_cast<std::int64_t>(std::floor((b.lo[1] - sy) / bm)) - gy0,
+                       y1 = static_cast<std::int64_t>(std::floor((b.hi[1] - sy) / bm)) - gy0;
+    for (std::int64_t gx = std::max<std::int64_t>(0, x0); gx <= std::min(gnx - 1, x1); ++gx)
+      for (std::int64_t gy = std::max<std::int64_t>(0, y0); gy <= std::min(gny - 1, y1); ++gy) {
+        std::int64_t* z = &column[static_cast<std::size_t>(2 * (gx * gny + gy))];
+        z[0] = std::min(z[0], cz0), z[1] = std::max(z[1], cz1);
+      }
+  }
+  // Each brick row's particles (slab, streak) in their order, whoever draws them.
+  struct Found {
+    std::size_t slab;
+    Streak k;
+  };
+  std::vector<std::vector<Found>> rows(static_cast<std::size_t>(gnx));
+  std::vector<std::size_t> cells(static_cast<std::size_t>(gnx), 0), seen(static_cast<std::size_t>(gnx), 0);
+  const Vec3 fwd{R.m[0][0], R.m[1][0], R.m[2][0]};  // the camera's depth axis in the world
+  const double f_hi = fall_m_s(d_max_mm) - wind.z;
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1)
+  for (std::int64_t gx = 0; gx < gnx; ++gx) {
+    std::vector<std::pair<std::int64_t, std::int64_t>> spans;
+    std::vector<Found>& list = rows[static_cast<std::size_t>(gx)];
+    for (std::int64_t gy = 0; gy < gny; ++gy) {
+      const std::int64_t* zc = &column[static_cast<std::size_t>(2 * (gx * gny + gy))];
+      if (zc[0] > zc[1]) continue;
+      const double z_lo = static_cast<double>(zc[0]) * c, z_hi = static_cast<double>(zc[1] + 1) * c;
+      for (std::int64_t ix = (gx0 + gx) * B; ix < (gx0 + gx) * B + B; ++ix)
+        for (std::int64_t iy = (gy0 + gy) * B; iy < (gy0 + gy) * B + B; ++iy) {
+          // The landing box (the cell shifted by the drift, the column's heights): its nearest depth
+          // gives the smallest diameter drawn there (D_t non-decreasing in z).
+          const double blo[3] = {static_cast<double>(ix) * c + sx - O.x, static_cast<double>(iy) * c + sy - O.y,
+                                 z_lo - O.z};
+          const double bhi[3] = {blo[0] + c, blo[1] + c, z_hi - O.z};
+          const double f3[3] = {fwd.x, fwd.y, fwd.z};
+          double dmin = 0.0, dmax = 0.0;
+          for (int a = 0; a < 3; ++a)
+            dmin += std::min(f3[a] * blo[a], f3[a] * bhi[a]), dmax += std::max(f3[a] * blo[a], f3[a] * bhi[a]);
+          if (dmax < z_near || dmin >= z_split) continue;
+          const double thr = threshold_mm(std::max(dmin, z_near));
+          const double m_col = field.measure_above(thr);
+          if (!(m_col > 0.0)) continue;
+          const double f_lo = fall_m_s(thr) - wind.z;  // the slowest fall (less w_z) drawn here
+          spans.clear();
+          if (t == 0.0) spans.push_back({zc[0], zc[1]});
+          else falling_source_spans(z_lo, z_hi, f_lo, f_hi, t, spans);
+          const std::uint64_t col = field.column_hash(ix, iy);
+          // A cell holds a particle within measure m iff its first unit draw u <= 1 − e^{−m} (as
+          // frustum_streaks): the column's measure bounds every cell's, and only a cell that passes
+          // it pays for its own (the fall that can bring its particles here).
+          const double u_col = -std::expm1(-m_col * (1.0 + 1e-9)) + 1e-15;
+          for (const auto& [iz0, iz1] : spans)
+            for (std::int64_t iz = iz0; iz <= iz1; ++iz) {
+              ++cells[static_cast<std::size_t>(gx)];
+              const std::uint64_t h = RainField::cell_hash(col, iz);
+              const double u = RainField::first_unit(h);
+              if (u > u_col) continue;
+              double m = m_col;
+              if (t != 0.0) {
+                double f;
+                if (!falling_min_speed(iz, z_lo, z_hi, f_lo, f_hi, t, f)) continue;
+                if (d_below) m = field.measure_above(std::max(thr, d_below(f + wind.z)));
+                if (u > -std::expm1(-m * (1.0 + 1e-9)) + 1e-15) continue;
+              }
+              field.for_each_drop_hashed(RainCell{ix, iy, iz}, h, m, [&](const Vec3& at0, double sm) {
+                ++seen[static_cast<std::size_t>(gx)];
+                const double d_mm = field.diameter_mm(sm);
+                const Vec3 p = falling_at(at0, fall_m_s(d_mm), t, wind);
+                const Vec3 q = Rt * Vec3{p.x - O.x, p.y - O.y, p.z - O.z};
+                if (!(q.x >= z_near && q.x < z_split) || d_mm < threshold_mm(q.x)) return;
+                Found found;
+                if (!make(q, d_mm, found.k)) return;
+                const std::int64_t si = static_cast<std::int64_t>(std::floor(q.x / c)) - ix0;
+                found.slab = static_cast<std::size_t>(std::min<std::int64_t>(std::max<std::int64_t>(si, 0),
+                                                                             static_cast<std::int64_t>(slabs) - 1));
+                list.push_back(found);
+              });
+            }
+        }
+    }
+  }
+  StreakSlabs out(slabs);
+  std::size_t order = 0;
+  for (std::size_t r = 0; r < rows.size(); ++r) {
+    cells_out += cells[r];
+    seen_out += seen[r];
+    for (Found& f : rows[r]) out[f.slab].push_back(f.k);
+  }
+  for (std::vector<Streak>& slab : out)
+    for (Streak& k : slab) k.order = order++;
+  return out;
+}
+
+nlohmann::json streak_pose_files(const std::string& poses, const std::string& kitti_calib) {
+  nlohmann::json files = nlohmann::json::object();
+  if (poses.empty()) return files;
+  files["poses"] = {{"path", poses}, {"sha256", sha256_file(poses)}};
+  if (!kitti_calib.empty()) files["kitti_calib"] = {{"path", kitti_calib}, {"sha256", sha256_file(kitti_calib)}};
+  return files;
 }
 
 double streak_grow_m(double z0, double z1, double d_max_mm, double motion_m, const StreakLens& lens,

@@ -10,9 +10,12 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "brume/image.hpp"
 #include "brume/params.hpp"
 #include "brume/rain.hpp"
+#include "effects/rain/falling.hpp"
 
 namespace brume {
 
@@ -48,7 +51,23 @@ void streak_camera_params(ParamTable<P>& d, const char* seed_flag, const std::st
       .text("wind", &P::wind,
             "wind X,Y,Z in m/s in the vehicle frame (x forward, y left, z up; the camera level, looking along +x)")
       .real("ego-speed", &P::ego_speed_m_s, "m/s", Range::closed(-100.0, 100.0),
-            ("the camera's speed along its forward axis: the " + many + " move back past it").c_str())
+            ("the camera's speed along its forward axis: the " + many + " move back past it (not with --poses)").c_str())
+      .count("frame", &P::frame, "1", Range::at_least(0.0),
+             ("frame K of a sequence: the " + many + " of the field at t = K * --frame-interval, each moved in "
+              "closed form by its fall and --wind, the camera at its frame-K pose (moved s * t by --ego-speed s, or "
+              "placed by --poses); the exposure is centred on t; 0: the field as hashed")
+                 .c_str())
+      .since(4, 0)
+      .real("frame-interval", &P::frame_interval_s, "s", Range::left_open(0.0, 3600.0),
+            "time between frames (KITTI's cameras: 0.1 s, 10 Hz)")
+      .since(4, 0.1)
+      .text("poses", &P::poses,
+            "KITTI odometry poses: one line of 12 numbers per frame, camera 0's 3x4 [R|t] into the world (no "
+            "header); the camera at --frame K is placed by line K relative to line 0, its motion over the exposure "
+            "from lines K and K + 1 (the last: K - 1 and K); needs --kitti-calib (its P2 places camera 2, the "
+            "image's, relative to camera 0)")
+      .reads_file()
+      .since(4, "")
       .real("f-number", &P::f_number, "1", Range::above(0.0),
             ("f-number n of the lens (with the camera's --focal-length and --sensor-width, as dof takes them): " +
              paths + " widen to the thin lens's circle of confusion; none: a pinhole")
@@ -99,6 +118,45 @@ StreakSlabs frustum_streaks(const RainField& field, const std::function<double(d
                                     const StreakCamera& cam, int threads,
                                     const std::function<bool(const Vec3& at, double d_mm, Streak& k)>& make,
                                     std::size_t& cells, std::size_t& seen);
+
+// The same particles at a frame of a sequence where the field has moved or the camera is not at the
+// field's origin (pose.moved): the field's source cells whose particles can land in the frustum at
+// t (as the scan's general pass finds them: falling_source_spans, falling_min_speed), each particle
+// moved by falling_at with its fall speed fall_m_s(d) (non-decreasing in d; `d_below(v)`: the
+// largest diameter falling slower than v, or null where any diameter falls at one speed) and the
+// wind, then taken into the camera's axes at its pose; make(at, d_mm, k) as above (`at` in the
+// camera's field axes). Slab by slab of the particles' depths, in an order that does not depend on
+// the threads.
+StreakSlabs moving_frustum_streaks(const RainField& field, const std::function<double(double z)>& threshold_mm,
+                                   double z_near, double z_split,
+                                   const std::function<double(double z0, double z1)>& grow_m,
+                                   const StreakCamera& cam, int threads, const StreakPose& pose, const Vec3& wind,
+                                   const std::function<double(double d_mm)>& fall_m_s, double d_max_mm,
+                                   const std::function<double(double v)>& d_below,
+                                   const std::function<bool(const Vec3& at, double d_mm, Streak& k)>& make,
+                                   std::size_t& cells, std::size_t& seen);
+
+// A particle's velocity relative to the camera in the camera's cv frame: its fall f [m/s] and the
+// wind (world) less the camera's velocity, in the camera's axes at its pose.
+inline void streak_velocity(const StreakPose& pose, const Vec3& wind, double fall_m_s, double u[3]) {
+  Vec3 w{wind.x - pose.velocity.x, wind.y - pose.velocity.y, wind.z - fall_m_s - pose.velocity.z};
+  const Mat3& r = pose.world_from_camera.rotation;
+  bool rotated = false;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) rotated = rotated || r.m[i][j] != (i == j ? 1.0 : 0.0);
+  if (rotated) w = r.transposed() * w;
+  u[0] = -w.y, u[1] = -w.z, u[2] = w.x;  // the cv frame: x = −y, y = −z, z = x
+}
+
+// The record's {poses, kitti_calib: {path, sha256}} of a camera pass's --poses and the calibration that
+// places camera 2 (brume run checks them); {} without --poses.
+nlohmann::json streak_pose_files(const std::string& poses, const std::string& kitti_calib);
+
+// The camera's speed [m/s] for the streaks' margin (--ego-speed's |s| as such).
+inline double streak_speed(const StreakPose& pose) {
+  const Vec3& v = pose.velocity;
+  return v.y == 0.0 && v.z == 0.0 ? std::abs(v.x) : std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z);
+}
 
 // The thin lens's blur [px] at planar depth z: the circle of confusion α·|z − z_f|/z (α at
 // infinity, 0: a pinhole).

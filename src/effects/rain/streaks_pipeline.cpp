@@ -61,6 +61,7 @@ StreakRun run_camera_streaks(ConstImageView rgb, ConstImageView measured_range, 
   if (!prep.sky_weight.empty()) scene.sky_weight = prep.sky_weight;
   scene.k = cam.k;
   scene.coc_infinity_px = coc;
+  scene.kitti_calib = depth.kitti_calib;
   scene.airlight = ha.airlight;
   scene.haze_sigma_per_m = hp.visibility_m ? ha.extinction_per_m : 0.0;
   if (hp.visibility_m) {

@@ -25,6 +25,12 @@ namespace brume {
 double streak_coc_px(std::optional<double> f_number, std::optional<double> focus_distance_m, const DepthSource& depth,
                      int width, int height);
 // --f-number needs the camera in millimetres; `particles` names what it blurs ("the streaks").
+// How a camera pass's --poses gets its calibration (check_streak_frames' `calib_how`): the command
+// line's depth block, or none in the array forms.
+constexpr const char* kStreakCalibHowCli =
+    "give --kitti-calib FILE (its P2), or --ego-speed instead of --poses";
+constexpr const char* kStreakCalibHowPython =
+    "the array forms take none; give ego_speed instead, or use the command line with its KITTI calibration";
 void check_streak_lens(std::optional<double> f_number, const DepthSource& depth, const std::string& particles);
 
 // The camera's particles on an image and its measured range: completed and prepared as haze

@@ -13,6 +13,7 @@
 #include "brume/snow.hpp"
 #include "core/text.hpp"
 #include "effects/rain/streaks.hpp"
+#include "effects/snow/snow_internal.hpp"
 #include "media/scan_returns.hpp"
 
 namespace brume {
@@ -72,11 +73,17 @@ LidarSnowParams camera_snow_lidar_params(const CameraSnowParams& p) {
   lp.flakes = p.flakes;
   lp.seed = p.seed;
   lp.return_mode = p.return_mode;
+  lp.frame = p.frame;  // the scan's flakes drawn afresh at frame K (brume lidar snow's --frame)
   return lp;
 }
 
 Image render_camera_snow(const CameraRainScene& s, const CameraSnowParams& p, const Exec& exec,
                          CameraSnowStats* stats, Image* transmission) {
+  return render_camera_snow_drawn(s, p, exec, stats, transmission, nullptr);
+}
+
+Image render_camera_snow_drawn(const CameraRainScene& s, const CameraSnowParams& p, const Exec& exec,
+                               CameraSnowStats* stats, Image* transmission, StreakSlabs* drawn) {
   validate_camera_snow(p);
   check_streak_scene(s, "snow");
   const int W = s.rgb.width(), H = s.rgb.height();
@@ -125,16 +132,19 @@ Image render_camera_snow(const CameraRainScene& s, const CameraSnowParams& p, co
   if (pop.any) {
     const RainField field(sizes.n0_flake, sizes.lambda_flake_per_mm, pop.d_min_mm, pop.d_max_mm, p.seed, 0,
                           kSnowFieldTag);
+    // At frame K the field moved (falling_at: every flake at v_t, wrapped in its layer), the camera at its pose.
     const Vec3 wind = parse_wind_m_s(p.wind);
-    const double s_ego = p.ego_speed_m_s, v = p.flakes.fall_speed_m_s;
-    const double speed_max = std::sqrt(wind.x * wind.x + wind.y * wind.y + wind.z * wind.z) + std::abs(s_ego) + v;
+    const StreakPose pose = streak_camera_pose(p.frame, p.frame_interval_s, p.ego_speed_m_s, p.poses, s.kitti_calib);
+    const double v = p.flakes.fall_speed_m_s;
+    const double speed_max = std::sqrt(wind.x * wind.x + wind.y * wind.y + wind.z * wind.z) + streak_speed(pose) + v;
     const double margin_m = speed_max * T / 2.0 + 0.01;
     const StreakLens lens{s.coc_infinity_px, pop.focus_distance_m};
     const double z_clip = 0.5 * p.z_near_m;
     const auto grow_m = [&](double z0, double z1) { return streak_grow_m(z0, z1, pop.d_max_mm, margin_m, lens, cam); };
     double e[3];
     for (int q = 0; q < 3; ++q) e[q] = s.drop_radiance ? (*s.drop_radiance)[q] : p.albedo * (st.sky[q] + st.ground[q]) / 2.0;
-    const double u[3] = {-wind.y, v - wind.z, wind.x - s_ego};
+    double u[3];
+    streak_velocity(pose, wind, v, u);
     const auto make = [&](const Vec3& at, double d_mm, Streak& k) {
       if (!place_streak(k, at, d_mm, u, lens, T, z_clip, cam)) return false;
       const double z = at.x, r = k.range;
@@ -142,12 +152,17 @@ Image render_camera_snow(const CameraRainScene& s, const CameraSnowParams& p, co
       for (int q = 0; q < 3; ++q) k.e[q] = static_cast<float>(tf * e[q] + (1.0 - tf) * s.airlight[q]);
       return true;
     };
-    const StreakSlabs flakes =
-        frustum_streaks(field, [&](double z) { return optics.threshold_mm(z); }, p.z_near_m, p.z_split_m, grow_m, cam,
-                        nt, make, st.cells, st.flakes_seen);
+    const auto threshold = [&](double z) { return optics.threshold_mm(z); };
+    StreakSlabs flakes =
+        pose.moved ? moving_frustum_streaks(field, threshold, p.z_near_m, p.z_split_m, grow_m, cam, nt, pose, wind,
+                                            [v](double) { return v; }, pop.d_max_mm, nullptr, make, st.cells,
+                                            st.flakes_seen)
+                   : frustum_streaks(field, threshold, p.z_near_m, p.z_split_m, grow_m, cam, nt, make, st.cells,
+                                     st.flakes_seen);
     // 3. Composited far to near, tile by tile.
     const StreakSplat splat = splat_streaks(flakes, s.range, out, cam, nt);
     st.flakes_drawn = splat.drawn, st.alpha_clamped = splat.alpha_clamped, st.mean_streak_px = splat.mean_streak_px;
+    if (drawn) *drawn = std::move(flakes);
   }
   if (stats) *stats = st;
   return out;
@@ -179,7 +194,11 @@ nlohmann::json camera_snow_record(const CameraSnowParams& p, const CameraSnowSta
           {"snow_visibility_m", st.sigma_cam > 0.0 ? nlohmann::json(3.912 / st.sigma_cam) : nlohmann::json(nullptr)},
           {"exposure_s", p.exposure_s},
           {"seed", p.seed},
-          {"frame", 0},
+          {"frame", p.frame},
+          {"frame_interval_s", p.frame_interval_s},
+          {"time_s", static_cast<double>(p.frame) * p.frame_interval_s},
+          {"layer_m", kRainLayerM},
+          {"layer_base_m", kRainLayerBaseM},
           {"cell_m", kRainCellM},
           {"z_near_m", p.z_near_m},
           {"z_split_m", p.z_split_m},

@@ -5,6 +5,7 @@
 #include <optional>
 
 #include "brume/command.hpp"
+#include "brume/error.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/snow.hpp"
 #include "effects/rain/rain_gpu.hpp"
@@ -57,6 +58,8 @@ const ParamTable<CameraSnowJob>& camera_snow_job_table() {
 void check_camera_snow_job(const CameraSnowJob& j) {
   validate_camera_snow(j.snow);
   check_streak_lens(j.snow.f_number, j.input.depth, "the flakes");
+  check_streak_frames(j.snow.frame, j.snow.frame_interval_s, j.snow.ego_speed_m_s, j.snow.poses,
+                      j.input.depth.kitti_calib, kStreakCalibHowCli);
   check_camera_scan_flags(j.lidar, j.lidar_out, "snows on a scan");
   if (!j.lidar.empty()) validate_lidar_snow(camera_snow_lidar_params(j.snow));
 }
@@ -72,6 +75,7 @@ StreakRun run_camera_snow(ConstImageView rgb, ConstImageView measured_range, con
                               CameraSnowStats st;
                               Image out = render_camera_snow(scene, p, exec, &st, tr);
                               block = camera_snow_record(p, st);
+                              block["pose_files"] = streak_pose_files(p.poses, depth.kitti_calib);
                               return out;
                             });
 }
@@ -172,6 +176,8 @@ CommandDef snow_command() {
       [](const std::vector<ArrayIn>& in, ArrayCall<CameraSnowParams>& k, const Exec& e,
          const std::set<std::string>& g) {
         const CameraSnowParams& p = k.p;
+        check_streak_frames(p.frame, p.frame_interval_s, p.ego_speed_m_s, p.poses, k.depth.kitti_calib,
+                            kStreakCalibHowPython);
         const LidarSnowParams lp = camera_snow_lidar_params(p);
         return streak_array_result(
             in, "brume.snow(): lidar", "lidar_snow",
@@ -185,6 +191,8 @@ CommandDef snow_command() {
       [](const ArrayCall<CameraSnowParams>& k, const std::set<std::string>& g) {
         validate_camera_snow(k.p);
         check_streak_lens(k.p.f_number, k.depth, "the flakes");
+        check_streak_frames(k.p.frame, k.p.frame_interval_s, k.p.ego_speed_m_s, k.p.poses, k.depth.kitti_calib,
+                            kStreakCalibHowPython);
         check_range_step(k.prepare, g);
       });
   // A call that snowed on a scan says so in its job (an empty lidar block), as brume.rain's.

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "brume/snow.hpp"
+#include "effects/rain/streaks.hpp"
 
 namespace brume {
 
@@ -20,5 +21,9 @@ struct SnowBeam {
 };
 // The beams to n points (x, y, z, intensity each), as lidar_snow draws them (validated parameters).
 std::vector<SnowBeam> lidar_snow_beams(const LidarSnowParams& p, const float* points, std::size_t n);
+
+// render_camera_snow with the streaks it drew (slab by slab, before the splat) in `drawn` (may be null).
+Image render_camera_snow_drawn(const CameraRainScene& s, const CameraSnowParams& p, const Exec& exec,
+                               CameraSnowStats* stats, Image* transmission, StreakSlabs* drawn);
 
 }  // namespace brume
