@@ -373,6 +373,9 @@ struct CameraRainParams {
   std::optional<double> visibility_m;      // [m] haze's Koschmieder visibility; unset: rain alone
   std::optional<Rgb> airlight;             // linear RGB; unset: haze's estimate
   std::string return_mode = "strongest";   // the scan's (--lidar): LidarRainParams::return_mode
+  // The frame the scan (--lidar, lidar=) draws its drops in: "camera" (camera 2's, placed by the
+  // KITTI calibration: the image's drops) or "scan" (its own).
+  std::string lidar_frame = "camera";
 };
 const ParamTable<CameraRainParams>& camera_rain_param_table();
 void validate_camera_rain(const CameraRainParams& p);

@@ -91,10 +91,55 @@ def test_rain_frames_equal_cli(demo, tmp_path):
     zero = brume.rain(demo["rgb"], demo["range"], frame=0, **kw)
     same(zero.rgb, brume.rain(demo["rgb"], demo["range"], **kw).rgb)
     assert not np.array_equal(zero.rgb, r.rgb)
-    # poses= needs a KITTI calibration, which the array forms do not take
+    # poses= needs a KITTI calibration (kitti_calib=)
     with pytest.raises(ValueError, match="poses") as e:
         brume.rain(demo["rgb"], demo["range"], frame=1, poses=str(tmp_path / "poses.txt"), **dict(kw, ego_speed=0))
-    assert "--" not in str(e.value) and "ego_speed" in str(e.value), str(e.value)
+    assert "--" not in str(e.value) and "kitti_calib=" in str(e.value), str(e.value)
+
+
+# KITTI object 000000's calibration (training): P2's translation places camera 2, Tr_velo_to_cam and
+# R0_rect the scan.
+KITTI_CALIB = (
+    "P0: 707.0493 0 604.0814 0 0 707.0493 180.5066 0 0 0 1 0\n"
+    "P2: 707.0493 0 604.0814 45.75831 0 707.0493 180.5066 -0.3454157 0 0 1 0.004981016\n"
+    "R0_rect: 0.9999128 0.01009263 -0.008511932 -0.01012729 0.9999406 -0.004037671 0.008470675 0.004123522 "
+    "0.9999556\n"
+    "Tr_velo_to_cam: 0.006927964 -0.9999722 -0.002757829 -0.02457729 -0.001162982 0.002749836 -0.9999955 "
+    "-0.06127237 0.9999753 0.006931141 -0.001143899 -0.3321029\n")
+
+
+def test_rain_kitti_calib_equals_cli(demo, tmp_path):
+    """kitti_calib= is the depth block's --kitti-calib: lidar= draws its drops in camera 2's frame (the
+    image's drops: brume.lidar.rain with kitti_calib, no warning), poses= places the camera at frame K,
+    both as `brume rain` does, bit for bit; a calibration that changes nothing is refused."""
+    d = demo["dir"]
+    calib = tmp_path / "calib.txt"
+    calib.write_text(KITTI_CALIB)
+    poses = tmp_path / "poses.txt"  # camera 0 moving 1 m forward (its z) a frame
+    poses.write_text("".join(f"1 0 0 0 0 1 0 0 0 0 1 {k} \n" for k in range(3)))
+    pts = rain_scan()
+    pts.tofile(tmp_path / "in.bin")
+    run_cli("rain", "--image", d / "clean.png", "--range", d / "range.exr", "--fov-y", 55, "--rate", 25,
+            "--rain-seed", 3, "--kitti-calib", calib, "--poses", poses, "--frame", 1,
+            "--lidar", tmp_path / "in.bin", "--lidar-out", tmp_path / "out.bin",
+            "--out", tmp_path / "o.exr", "--bits", "float", "--record", tmp_path / "o.json")
+    kw = dict(fov_y=55, rate=25, rain_seed=3)
+    r = brume.rain(demo["rgb"], demo["range"], kitti_calib=str(calib), poses=str(poses), frame=1, lidar=pts, **kw)
+    same(r.rgb, brume.read_image(tmp_path / "o.exr").rgb)
+    same(r.lidar, np.fromfile(tmp_path / "out.bin", np.float32).reshape(-1, 4))
+    assert "warnings" not in r.record["lidar_rain"], r.record["lidar_rain"]
+    # the scan in the camera's frame at frame 0: brume.lidar.rain's with the calibration
+    r0 = brume.rain(demo["rgb"], demo["range"], kitti_calib=str(calib), lidar=pts, **kw)
+    same(r0.lidar, brume.lidar.rain(pts, rate=25, seed=3, kitti_calib=str(calib)).points)
+    own = brume.rain(demo["rgb"], demo["range"], lidar=pts, **kw)  # no calibration: the scan's frame, warned
+    assert "warnings" in own.record["lidar_rain"] and "warnings" not in r0.record["lidar_rain"]
+    again = brume.rain(demo["rgb"], demo["range"], job=json.loads(json.dumps(r.record["job"])), lidar=pts)
+    same(again.rgb, r.rgb)
+    same(again.lidar, r.lidar)
+    for bad in (dict(kitti_calib=str(calib)), dict(kitti_calib=str(calib), lidar=pts, lidar_frame="scan")):
+        with pytest.raises(ValueError, match="kitti_calib=") as e:
+            brume.rain(demo["rgb"], demo["range"], **bad, **kw)
+        assert "--" not in str(e.value), str(e.value)
 
 
 def test_rain_errors_speak_python(demo):

@@ -93,6 +93,19 @@ def test_snow_frames_equal_cli(demo, tmp_path):
     pts = scan(n=50)
     with_scan = brume.snow(demo["rgb"], demo["range"], frame=1, lidar=pts, **kw)
     same(with_scan.lidar, brume.lidar.snow(pts, rate=2, seed=3, frame=1).points)
+    # kitti_calib= places the camera of poses= (as --kitti-calib), and alone changes nothing: refused
+    from test_rain import KITTI_CALIB
+    calib, poses = tmp_path / "calib.txt", tmp_path / "poses.txt"
+    calib.write_text(KITTI_CALIB)
+    poses.write_text("".join(f"1 0 0 0 0 1 0 0 0 0 1 {0.5 * k} \n" for k in range(3)))
+    run_cli("snow", "--image", d / "clean.png", "--range", d / "range.exr", "--fov-y", 55, "--rate", 2,
+            "--snow-seed", 3, "--kitti-calib", calib, "--poses", poses, "--frame", 2,
+            "--out", tmp_path / "p.exr", "--bits", "float")
+    kp = dict(fov_y=55, rate=2, snow_seed=3)
+    same(brume.snow(demo["rgb"], demo["range"], kitti_calib=str(calib), poses=str(poses), frame=2, **kp).rgb,
+         brume.read_image(tmp_path / "p.exr").rgb)
+    with pytest.raises(ValueError, match="kitti_calib="):
+        brume.snow(demo["rgb"], demo["range"], kitti_calib=str(calib), **kp)
 
 
 def test_snow_transform_lidar_target(demo):

@@ -193,7 +193,9 @@ const ParamTable<DepthSource>& depth_param_table() {
         .infinite()
         .real_or_unset("inverse-scale", &DepthSource::inverse_scale, "1/m", Range::any(), "A in z = 1/(A v + B)", NAN)
         .real("inverse-shift", &DepthSource::inverse_shift, "1/m", Range::any(), "B in z = 1/(A v + B)")
-        .text("kitti-calib", &DepthSource::kitti_calib, "KITTI calibration file for --velodyne")
+        .text("kitti-calib", &DepthSource::kitti_calib,
+              "KITTI calibration file (calib/N.txt, or an odometry sequence's calib.txt): --velodyne's projection, "
+              "--stereo-right's baseline, and rain's and snow's --poses and scan frame")
         .reads_file("", 0, 4)
         .text("like", &DepthSource::like, "image whose size a --velodyne scan is projected to (when no --image is given)")
         .reads_file("", 0, 5)

@@ -50,6 +50,11 @@ const ParamTable<CameraRainParams>& camera_rain_param_table() {
     streak_camera_params(d, "rain-seed", "drop", "drops", "rain", "streaks");
     // The scan's (--lidar, lidar=): brume lidar rain's --return-mode.
     declare_return_mode(d, &P::return_mode, "the scan of --lidar", "drop");
+    d.choice("lidar-frame", &P::lidar_frame, {"camera", "scan"},
+             "the frame the scan of --lidar draws its drops in: camera (with --kitti-calib, camera 2's: the drops "
+             "the image shows are the ones the scan sees; without it the scan's own, with a warning), scan (the "
+             "scan's own frame: brume lidar rain without --kitti-calib)")
+        .since(4, "scan");
     return d;
   }();
   return t;

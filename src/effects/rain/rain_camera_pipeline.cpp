@@ -32,7 +32,6 @@ struct CameraRainJob {
   std::string mask;
   OutputFiles output;
   std::string lidar, lidar_out;  // --lidar IN.bin --lidar-out OUT.bin: the scan through the same rain
-  std::string lidar_frame = "camera";  // the scan's drops in camera 2's frame (with --kitti-calib) or its own
 };
 
 const std::vector<MapOutput>& camera_rain_map_outputs() {
@@ -59,12 +58,7 @@ const ParamTable<CameraRainJob>& camera_rain_job_table() {
               "lidar rain's model and its defaults), written to --lidar-out with the image")
         .reads_file()
         .text("lidar-out", &CameraRainJob::lidar_out, "the rainy scan of --lidar (KITTI .bin: the points that return)")
-        .writes_file_of("lidar", ".bin")
-        .choice("lidar-frame", &CameraRainJob::lidar_frame, {"camera", "scan"},
-                "the frame the scan of --lidar draws its drops in: camera (with --kitti-calib, camera 2's: the drops "
-                "the image shows are the ones the scan sees; without it the scan's own, with a warning), scan (the "
-                "scan's own frame: brume lidar rain without --kitti-calib)")
-        .since(4, "scan");
+        .writes_file_of("lidar", ".bin");
     return d;
   }();
   return t;
@@ -101,7 +95,7 @@ nlohmann::json camera_rain_lidar_block(const LidarRainParams& lp, const LidarRai
 
 // The calibration that places the job's scan in the camera's frame (none: its own frame).
 std::string camera_rain_lidar_calib(const CameraRainJob& j) {
-  return j.lidar_frame == "camera" ? j.input.depth.kitti_calib : std::string();
+  return j.rain.lidar_frame == "camera" ? j.input.depth.kitti_calib : std::string();
 }
 
 // The rain's checks that need no pixels (the CLI's and brume.rain's).
@@ -114,7 +108,7 @@ void check_camera_rain(const CameraRainParams& p, const DepthSource& depth, cons
 void check_camera_rain_job(const CameraRainJob& j) {
   check_camera_rain(j.rain, j.input.depth, kStreakCalibHowCli);
   check_camera_scan_flags(j.lidar, j.lidar_out, "rains on a scan");
-  if (!j.lidar.empty() && !j.rain.poses.empty() && j.lidar_frame == "scan")
+  if (!j.lidar.empty() && !j.rain.poses.empty() && j.rain.lidar_frame == "scan")
     throw Error("--poses '" + j.rain.poses +
                 "' with --lidar-frame scan: the scan's pose from camera 0's poses needs its drops in camera 2's frame; "
                 "give --lidar-frame camera (with --kitti-calib), or --ego-speed instead of --poses");
@@ -149,7 +143,7 @@ nlohmann::json run_camera_rain_job(const CameraRainJob& job, const ExecOptions& 
                          [&](const float* in, float* out, std::size_t n, std::uint8_t* labels, const std::string& what,
                              nlohmann::json& block) {
                        const LidarRainStats st = lidar_rain(in, out, n, lp, labels, what);
-                       block = camera_rain_lidar_block(lp, st, job.lidar_frame == "camera",
+                       block = camera_rain_lidar_block(lp, st, job.rain.lidar_frame == "camera",
                                                        "give --kitti-calib (KITTI's Tr_velo_to_cam, R0_rect, P2)", true);
                        return st.run.lost;
                      });
@@ -222,8 +216,7 @@ CommandDef rain_command() {
   // brume.rain(rgb, range, lidar=points): the image and its range dense (in place when
   // C-contiguous); a scan given as lidar= is rained on with the same rate, seed and drop sizes
   // (brume lidar rain's model and defaults, as --lidar), its points and labels returned.
-  static const auto call =
-      array_call_table(camera_rain_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
+  static const auto call = streak_array_call_table(camera_rain_param_table());
   std::vector<ArrayArg> args = rgb_range_args(ArrayArg::As::dense);
   args.push_back({"lidar", 1, true, ArrayArg::As::view, true, true});
   c.arrays = make_array_form<CameraRainParams>(
@@ -233,19 +226,28 @@ CommandDef rain_command() {
       "haze's composite). rate in mm/h is required; the intrinsics (fx.. or fov_x/fov_y) are keywords. "
       "lidar=points (an (N, 4) float32 array of x, y, z, intensity) rains on the frame's scan with the same rate, "
       "rain_seed and drop sizes (brume.lidar.rain's model and defaults): lidar holds the points that return, "
-      "lidar_labels one uint8 per input point (0 kept, 1 moved to a drop, 2 lost). As `brume rain`.",
+      "lidar_labels one uint8 per input point (0 kept, 1 moved to a drop, 2 lost); kitti_calib=FILE (KITTI's "
+      "calib/N.txt) draws the scan's drops in the camera's frame (lidar_frame='camera': the image's drops) and "
+      "places the camera of poses=. As `brume rain`.",
       args, call, {"rgb", "transmission", "lidar", "lidar_labels", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<CameraRainParams>& k, const Exec& e,
          const std::set<std::string>& g) {
         check_streak_frames(k.p.frame, k.p.frame_interval_s, k.p.ego_speed_m_s, k.p.poses, k.depth.kitti_calib,
                             kStreakCalibHowPython);
-        const LidarRainParams lp = camera_rain_lidar_params(k.p);
+        const bool scan = in.size() > 2 && in[2].present;
+        check_streak_array_calib(k.depth.kitti_calib, !k.p.poses.empty() || (scan && k.p.lidar_frame == "camera"),
+                                 "brume.rain");
+        if (scan && !k.p.poses.empty() && k.p.lidar_frame == "scan")
+          throw Error("brume.rain(): poses= with lidar_frame='scan': the poses place camera 0, and the scan in its "
+                      "own frame has no pose among them; give lidar_frame='camera' (with kitti_calib=)");
+        const LidarRainParams lp =
+            camera_rain_lidar_params(k.p, k.p.lidar_frame == "camera" ? k.depth.kitti_calib : std::string());
         return streak_array_result(
             in, "brume.rain(): lidar", "lidar_rain",
             [&](const float* src, float* out, std::size_t n, std::uint8_t* labels, nlohmann::json& block) {
               const LidarRainStats st = lidar_rain(src, out, n, lp, labels, "brume.rain(): lidar");
-              block = camera_rain_lidar_block(lp, st, true,
-                                              "brume.rain() takes no calibration: use brume rain --kitti-calib", false);
+              block = camera_rain_lidar_block(lp, st, k.p.lidar_frame == "camera",
+                                              "give kitti_calib=FILE (KITTI's Tr_velo_to_cam, R0_rect, P2)", false);
               return st.run.lost;
             },
             [&] { return run_camera_rain(in[0].dense.view(), in[1].dense.view(), k.depth, k.p, k.prepare, e, g); });

@@ -146,4 +146,11 @@ void apply_streak_mask(Image& out, const Image& rgb, const std::string& mask_pat
   record["mask"] = file_record(mask_path, minfo, mask);
 }
 
+void check_streak_array_calib(const std::string& kitti_calib, bool uses, const std::string& fn) {
+  if (!kitti_calib.empty() && !uses)
+    throw Error(fn + "(): kitti_calib='" + kitti_calib +
+                "' places the camera of poses= (and rain's lidar= scan in the camera's frame), but this call has "
+                "neither: it would change nothing; drop it, or give poses= (or lidar= to brume.rain)");
+}
+
 }  // namespace brume

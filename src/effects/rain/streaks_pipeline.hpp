@@ -30,7 +30,7 @@ double streak_coc_px(std::optional<double> f_number, std::optional<double> focus
 constexpr const char* kStreakCalibHowCli =
     "give --kitti-calib FILE (its P2), or --ego-speed instead of --poses";
 constexpr const char* kStreakCalibHowPython =
-    "the array forms take none; give ego_speed instead, or use the command line with its KITTI calibration";
+    "give kitti_calib=FILE (KITTI's calib/N.txt: its P2), or ego_speed instead of poses";
 void check_streak_lens(std::optional<double> f_number, const DepthSource& depth, const std::string& particles);
 
 // The camera's particles on an image and its measured range: completed and prepared as haze
@@ -55,6 +55,23 @@ ArrayResult streak_array_result(
     const std::function<std::size_t(const float* in, float* out, std::size_t n, std::uint8_t* labels,
                                     nlohmann::json& block)>& scan,
     const std::function<StreakRun()>& image);
+// brume.rain's and brume.snow's keywords: the command's own, the range's preparation, the
+// intrinsics and the execution (array_call_table's), and the depth block's kitti_calib= (the
+// command line's --kitti-calib, in the same block of the job): the KITTI calibration that places
+// the camera of poses= and rain's lidar= scan in the camera's frame.
+template <class P>
+ParamTable<ArrayCall<P>> streak_array_call_table(const ParamTable<P>& own) {
+  ParamTable<ArrayCall<P>> t = array_call_table(own, kArrayPrepare | kArrayIntrinsics | kArrayExec);
+  std::set<std::string> others;
+  for (const auto& d : depth_param_table().params())
+    if (d.spec.name != "kitti-calib") others.insert(d.spec.name);
+  t.nest_except(&ArrayCall<P>::depth, depth_param_table(), others);
+  return t;
+}
+// kitti_calib= changes nothing unless the call uses it (`uses`: poses=, or rain's lidar= in the
+// camera's frame): refused then, naming the function.
+void check_streak_array_calib(const std::string& kitti_calib, bool uses, const std::string& fn);
+
 // A call that went through a scan says so in its job, as the camera effects' lidar= does: an
 // empty lidar block (the scan has no settings of its own: the particles').
 void streak_array_lidar_job(CommandDef& c);

@@ -160,8 +160,7 @@ CommandDef snow_command() {
       [](const CameraSnowParams& p, const std::set<std::string>&) { validate_camera_snow(p); });
   // brume.snow(rgb, range, lidar=points): as brume.rain (the image and its range dense; a scan
   // given as lidar= is snowed on with the same snowfall and seed, its points and labels returned).
-  static const auto call =
-      array_call_table(camera_snow_param_table(), kArrayPrepare | kArrayIntrinsics | kArrayExec);
+  static const auto call = streak_array_call_table(camera_snow_param_table());
   std::vector<ArrayArg> args = rgb_range_args(ArrayArg::As::dense);
   args.push_back({"lidar", 1, true, ArrayArg::As::view, true, true});
   c.arrays = make_array_form<CameraSnowParams>(
@@ -171,13 +170,15 @@ CommandDef snow_command() {
       "composite). rate in mm/h (water equivalent) is required; the intrinsics (fx.. or fov_x/fov_y) are keywords. "
       "lidar=points (an (N, 4) float32 array of x, y, z, intensity) snows on the frame's scan with the same snowfall "
       "and snow_seed (brume.lidar.snow's model and defaults): lidar holds the points that return, lidar_labels one "
-      "uint8 per input point (0 kept, 1 moved to a flake, 2 lost). As `brume snow`.",
+      "uint8 per input point (0 kept, 1 moved to a flake, 2 lost); kitti_calib=FILE (KITTI's calib/N.txt) places "
+      "the camera of poses=. As `brume snow`.",
       args, call, {"rgb", "transmission", "lidar", "lidar_labels", "record"}, true,
       [](const std::vector<ArrayIn>& in, ArrayCall<CameraSnowParams>& k, const Exec& e,
          const std::set<std::string>& g) {
         const CameraSnowParams& p = k.p;
         check_streak_frames(p.frame, p.frame_interval_s, p.ego_speed_m_s, p.poses, k.depth.kitti_calib,
                             kStreakCalibHowPython);
+        check_streak_array_calib(k.depth.kitti_calib, !p.poses.empty(), "brume.snow");
         const LidarSnowParams lp = camera_snow_lidar_params(p);
         return streak_array_result(
             in, "brume.snow(): lidar", "lidar_snow",
