@@ -389,7 +389,11 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
         const double u = uinf + wc * cu, v = vinf + wc * cv;
         if (!(wc > 0.0) || !inside(u, v)) break;  // leaves the frame (or the ray turns behind the camera)
         const bool behind = 1.0 / wc > zat(u, v) * front_k;
-        if (behind && front) {
+        // The crossing (behind the map after a point in front of it) as one flag: a branch taken at
+        // each crossing only (`behind` alone changes too often to predict).
+        const unsigned cross = static_cast<unsigned>(behind) & static_cast<unsigned>(front);
+        front = !behind;
+        if (cross != 0u) {
           double lo = wprev, hi = wc;  // bisection to the crossing: within 1/64 of a step
           for (int b = 0; b < 6; ++b) {
             const double mid = 0.5 * (lo + hi);
@@ -405,7 +409,6 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
             break;
           }
         }
-        front = !behind;
         if (step + 1 == max_steps) end = infinity;
       }
       if (end == infinity) {
