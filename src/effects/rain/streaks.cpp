@@ -508,15 +508,25 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
   {
     const int tid = omp_get_thread_num();
     std::vector<double> wx, wy;
-    struct Sample {
-      double u, v, r, a, inv_soft;
-    };
-    std::vector<Sample> samples;
+    // A streak's samples in the tile, a column each (their image position u, v, range r, coverage
+    // a and 1/(depth softness)): the loops that fill them are vectorised.
+    std::vector<double> sample_col[6];
+    std::vector<float> depth(static_cast<std::size_t>(kTileW) * kTileH);
+    float* const pixels = out.data.data();
 #pragma omp for schedule(dynamic, 1)
     for (std::size_t w = 0; w < n_tiles; ++w) {
       const int tile = by_work[w];
       const int y_lo = tile / tiles_x * kTileH, y_hi = std::min(H, y_lo + kTileH);
       const int x_lo = tile % tiles_x * kTileW, x_hi = std::min(W, x_lo + kTileW);
+      // The tile's ranges, an unknown one (the sky) as +inf: its depth test below gives 1, as
+      // the test's visibility 1 there.
+      for (int y = y_lo; y < y_hi; ++y)
+        for (int x = x_lo; x < x_hi; ++x) {
+          const float rs = range.at(x, y);
+          depth[static_cast<std::size_t>(y - y_lo) * kTileW + (x - x_lo)] =
+              streak_range_known(rs) ? rs : std::numeric_limits<float>::infinity();
+        }
+      std::size_t tile_clamped = 0;
       const std::size_t e0 = first[static_cast<std::size_t>(tile)], e1 = first[static_cast<std::size_t>(tile) + 1];
       for (std::size_t e = e0; e < e1; ++e) {
         if (e + kAhead < e1) {
@@ -551,7 +561,24 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
             const double t = k.t0 + (k.t1 - k.t0) * (i + 0.5) / n;
             return fy * (k.c[1] + k.u[1] * t) / (k.c[2] + k.u[2] * t) + cy;
           };
-          const auto first_true = [n](const auto& holds) {  // the first index where `holds` turns true
+          // The index where the exact path's row crosses R (t from v(t) = R, the projection
+          // inverted), a guess: the first index where `holds` turns true is looked for about it,
+          // a few steps each way, else by bisection. `holds` is monotone in i but for rounding
+          // within far less than a pixel of R, where no sample has a tap in the tile: any index
+          // there lists the same taps.
+          const auto guess = [&](double R) {
+            const double t = (fy * k.c[1] - (R - cy) * k.c[2]) / ((R - cy) * k.u[2] - fy * k.u[1]);
+            return (t - k.t0) * n / (k.t1 - k.t0) - 0.5;
+          };
+          const auto first_true = [n](const auto& holds, double g) {  // the first index where `holds` turns true
+            if (!std::isnan(g)) {
+              int i = static_cast<int>(std::ceil(std::min(static_cast<double>(n), std::max(0.0, g))));
+              for (int step = 0; step < 4; ++step) {
+                if (i > 0 && holds(i - 1)) --i;
+                else if (i < n && !holds(i)) ++i;
+                else return i;
+              }
+            }
             int a = 0, b = n;
             while (a < b) {
               const int mid = a + (b - a) / 2;
@@ -561,37 +588,55 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
             return a;
           };
           if (vb >= va) {
-            i_lo = first_true([&](int i) { return row(i) >= row_lo; });
-            i_hi = first_true([&](int i) { return row(i) >= row_hi; });
+            i_lo = first_true([&](int i) { return row(i) >= row_lo; }, guess(row_lo));
+            i_hi = first_true([&](int i) { return row(i) >= row_hi; }, guess(row_hi));
           } else {
-            i_lo = first_true([&](int i) { return row(i) < row_hi; });
-            i_hi = first_true([&](int i) { return row(i) < row_lo; });
+            i_lo = first_true([&](int i) { return row(i) < row_hi; }, guess(row_hi));
+            i_hi = first_true([&](int i) { return row(i) < row_lo; }, guess(row_lo));
           }
         }
-        // The samples' positions and weights first (independent of one another: their divisions
-        // overlap), then their taps in order.
-        samples.resize(static_cast<std::size_t>(std::max(0, i_hi - i_lo)));
-        for (int i = i_lo; i < i_hi; ++i) {
-          const double t = k.t0 + (k.t1 - k.t0) * (i + 0.5) / n;
-          Sample& q = samples[static_cast<std::size_t>(i - i_lo)];
-          at(t, q.u, q.v);
+        // The samples' positions and weights first (independent of one another: a column each,
+        // the divisions two at a time in vector registers, the same quotients), then their taps in
+        // order.
+        const int m = std::max(0, i_hi - i_lo);
+        if (sample_col[0].size() < static_cast<std::size_t>(m))
+          for (std::vector<double>& c : sample_col) c.resize(static_cast<std::size_t>(m));
+        double* __restrict su = sample_col[0].data();
+        double* __restrict sv = sample_col[1].data();
+        double* __restrict sr = sample_col[2].data();
+        double* __restrict sa = sample_col[3].data();
+        double* __restrict si = sample_col[4].data();
+        double* __restrict sz = sample_col[5].data();
+        {
+          // (The streak's fields as locals: the stores below could alias them.)
+          const double c0 = k.c[0], c1 = k.c[1], c2 = k.c[2], u0 = k.u[0], u1 = k.u[1], u2 = k.u[2];
+          const double t0 = k.t0, dt = k.t1 - k.t0, area = k.area, nd = n;
+          for (int j = 0; j < m; ++j) {
+            const double t = t0 + dt * ((i_lo + j) + 0.5) / nd;
+            const double x = c0 + u0 * t, y = c1 + u1 * t, z = c2 + u2 * t;
+            su[j] = fx * x / z + cx, sv[j] = fy * y / z + cy;
+            sr[j] = x * x + y * y + z * z;
+            sz[j] = z * z * z;
+          }
+          for (int j = 0; j < m; ++j) sr[j] = std::sqrt(sr[j]);
           // The coverage over the exposure is the time average of the particle's image area there.
-          q.r = std::sqrt(px * px + py * py + pz * pz);
-          q.a = k.area * q.r / (pz * pz * pz) / n;
-          q.inv_soft = 1.0 / (kRainDepthSoftness * q.r);
+          for (int j = 0; j < m; ++j) {
+            sa[j] = area * sr[j] / sz[j] / nd;
+            si[j] = 1.0 / (kRainDepthSoftness * sr[j]);
+          }
         }
-        for (const Sample& q : samples) {
-          const double u = q.u, v = q.v, r = q.r, a_sample = q.a, inv_soft = q.inv_soft;
+        const float ke[3] = {k.e[0], k.e[1], k.e[2]};
+        for (int j = 0; j < m; ++j) {
+          const double u = su[j], v = sv[j], r = sr[j], a_sample = sa[j], inv_soft = si[j];
           const auto put = [&](int x, int y, double w) {
             if (x < x_lo || x >= x_hi || y < y_lo || y >= y_hi || !(w > 0.0)) return;
-            const float rs = range.at(x, y);
-            double vis = 1.0;
-            if (streak_range_known(rs)) vis = std::min(1.0, std::max(0.0, (rs - r) * inv_soft));
+            const float rs = depth[static_cast<std::size_t>(y - y_lo) * kTileW + (x - x_lo)];
+            const double vis = std::min(1.0, std::max(0.0, (rs - r) * inv_soft));
             double a = w * a_sample * vis;
             if (!(a > 0.0)) return;
-            if (a > 1.0) a = 1.0, ++clamped[static_cast<std::size_t>(tid)];
-            float* o = &out.data[(static_cast<std::size_t>(y) * W + x) * 3];
-            for (int q = 0; q < 3; ++q) o[q] += static_cast<float>(a) * (k.e[q] - o[q]);
+            if (a > 1.0) a = 1.0, ++tile_clamped;
+            float* o = pixels + (static_cast<std::size_t>(y) * W + x) * 3;
+            for (int q = 0; q < 3; ++q) o[q] += static_cast<float>(a) * (ke[q] - o[q]);
           };
           if (!gauss) {
             const double fu = std::floor(u), fv = std::floor(v);
@@ -620,6 +665,7 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
           }
         }
       }
+      clamped[static_cast<std::size_t>(tid)] += tile_clamped;
     }
   }
   StreakSplat done;

@@ -164,6 +164,13 @@ inline long round_half_away(double x) {
   return t + (f >= 0.5) - (f <= -0.5);
 }
 
+// round_half_away for x > −0.5 (a coordinate inside the frame): x − trunc(x) >= 0 there, so the
+// half below zero is never taken; the same integer.
+inline long round_inside(double x) {
+  const long t = static_cast<long>(x);
+  return t + (x - static_cast<double>(t) >= 0.5);
+}
+
 // The min-depth pyramids' block sizes [px] (the march asks the coarse one first).
 constexpr int kWetCoarseBlock = 32, kWetFineBlock = 8;
 
@@ -317,8 +324,8 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
           can_lift = true, w_lift = 1.0 / z_lift;
         }
       }
-      const auto zat = [&](double u, double v) {
-        return zm[static_cast<std::size_t>(round_half_away(v)) * W + static_cast<std::size_t>(round_half_away(u))];
+      const auto zat = [&](double u, double v) {  // (u, v) inside the frame
+        return zm[static_cast<std::size_t>(round_inside(v)) * W + static_cast<std::size_t>(round_inside(u))];
       };
       std::array<float, 3> L = s.sky;
       enum { leaves, hit, infinity } end = leaves;
@@ -336,8 +343,19 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
         const int by0 = std::max(0, static_cast<int>(std::min(v0, v1) - 1.0) / S);
         const int by1 = std::min(p.bh - 1, static_cast<int>(std::max(v0, v1) + 2.0) / S);
         float near = INFINITY;
-        for (int by = by0; by <= by1; ++by)
-          for (int bx = bx0; bx <= bx1; ++bx) near = std::min(near, p.m[static_cast<std::size_t>(by) * p.bw + bx]);
+        if (bx0 <= bx1 && by0 <= by1 && bx1 - bx0 <= 2 && by1 - by0 <= 2) {
+          // Up to 3 x 3 blocks (a step of S px and its margins spans no more), read as 3 x 3 with
+          // the last row and column repeated: no loop to mispredict, the same minimum (min is
+          // exact and the depths hold no NaN).
+          const int bxm = std::min(bx0 + 1, bx1);
+          const float* r[3] = {p.m.data() + static_cast<std::size_t>(by0) * p.bw,
+                               p.m.data() + static_cast<std::size_t>(std::min(by0 + 1, by1)) * p.bw,
+                               p.m.data() + static_cast<std::size_t>(by1) * p.bw};
+          for (const float* row : r) near = std::min(near, std::min(std::min(row[bx0], row[bxm]), row[bx1]));
+        } else {
+          for (int by = by0; by <= by1; ++by)
+            for (int bx = bx0; bx <= bx1; ++bx) near = std::min(near, p.m[static_cast<std::size_t>(by) * p.bw + bx]);
+        }
         return 1.0 / std::min(wc, w1) <= near * front_k;
       };
       const int max_steps = 4 * (W + H);
@@ -371,7 +389,11 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
         const double u = uinf + wc * cu, v = vinf + wc * cv;
         if (!(wc > 0.0) || !inside(u, v)) break;  // leaves the frame (or the ray turns behind the camera)
         const bool behind = 1.0 / wc > zat(u, v) * front_k;
-        if (behind && front) {
+        // The crossing (behind the map after a point in front of it) as one flag: a branch taken at
+        // each crossing only (`behind` alone changes too often to predict).
+        const unsigned cross = static_cast<unsigned>(behind) & static_cast<unsigned>(front);
+        front = !behind;
+        if (cross != 0u) {
           double lo = wprev, hi = wc;  // bisection to the crossing: within 1/64 of a step
           for (int b = 0; b < 6; ++b) {
             const double mid = 0.5 * (lo + hi);
@@ -387,7 +409,6 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
             break;
           }
         }
-        front = !behind;
         if (step + 1 == max_steps) end = infinity;
       }
       if (end == infinity) {
