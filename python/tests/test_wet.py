@@ -192,3 +192,19 @@ def test_wet_old_records_repeat_with_the_blocks_march(demo, tmp_path):
     a, b = brume.read_image(tmp_path / "new.exr").rgb, brume.read_image(tmp_path / "old.exr").rgb
     ground = brume.wet(demo["rgb"], demo["range"], film=0.7, **POSE).ground > 0.5
     assert np.array_equal(a[~ground], b[~ground])
+
+
+def test_wet_warns_when_the_plane_misses_the_ground(demo, tmp_path):
+    """A pose whose plane holds under 2 % of the known pixels that look down (a camera said to be 6 m
+    up on the demo scene, 1.6 m up) wets almost nothing: the record's wet block warns, naming the
+    height and the fix, and the command line prints it; the demo's own pose gives no warning."""
+    rgb, rng = demo["rgb"], demo["range"]
+    assert "warnings" not in brume.wet(rgb, rng, film=1, **POSE).record["wet"]
+    r = brume.wet(rgb, rng, film=1, **dict(POSE, camera_height=6))
+    assert r.record["wet"]["ground_pixels"] == 0
+    (w,) = r.record["wet"]["warnings"]
+    assert "6 m below the camera" in w and "mask" in w, w
+    d = demo["dir"]
+    out = run_cli("wet", "--image", d / "clean.png", "--range", d / "range.exr", "--fov-y", 55, "--camera-height", 6,
+                  "--pitch", -5, "--film", 1, "--out", tmp_path / "w.png")
+    assert "brume wet: warning: the ground plane 6 m below the camera" in out.stderr, out.stderr

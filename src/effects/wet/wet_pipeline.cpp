@@ -17,6 +17,7 @@
 #include "brume/pipeline.hpp"
 #include "brume/record.hpp"
 #include "brume/wet.hpp"
+#include "core/text.hpp"
 #include "effects/wet/wet_gpu.hpp"
 #include "pipeline/camera_scan_arrays.hpp"
 #include "pipeline/scan_job.hpp"
@@ -101,6 +102,10 @@ const ParamTable<CameraWetJob>& camera_wet_job_table() {
 
 // The camera's settings that name no file (brume.wet's keywords): the film, the ground less its
 // mask's and its view matrix's files, the scan's.
+// The plane's share of the known downward pixels below which the record warns of a pose that
+// misses the ground (KITTI 000001 at its pose: about half; a wrong height: under 1 %).
+constexpr double kWetGroundShareWarn = 0.02;
+
 struct CameraWetParams {
   WetFilm wet;
   WetGround ground;
@@ -190,6 +195,28 @@ CameraWetRun run_camera_wet(ConstImageView rgb, ConstImageView measured_range, c
   rec["wet"]["mirror_march"] = enum_name(wet_march_names(), st.march);
   if (st.march != g.march)
     rec["wet"]["mirror_march_because"] = "no camera height: the plane's pixels are not known, every pixel is asked";
+  if (mask.width() == 0) {
+    // A pose that misses the ground wets next to nothing without a word: compared, on every 4th
+    // pixel of every 4th row, with the known pixels whose rays go down (the ground can only be
+    // there), the plane's share below kWetGroundShareWarn says so.
+    std::size_t down = 0, on = 0;
+    for (int y = 2; y < H; y += 4)
+      for (int x = 2; x < W; x += 4) {
+        const float r = prep.range.at(x, y);
+        if (!(std::isfinite(r) && r > 0.0f) || !(cam.world_ray(x, y).y < 0.0)) continue;
+        ++down;
+        on += run.ground.at(x, y) > 0.5f;
+      }
+    if (down > 0 && static_cast<double>(on) < kWetGroundShareWarn * static_cast<double>(down)) {
+      const YawPitchRoll a = cam.ypr();
+      rec["wet"]["warnings"].push_back(
+          "the ground plane " + text::g(cam.position_m.y, 4) + " m below the camera (pitch " +
+          text::g(a.pitch_deg + 0.0, 3) + " deg, roll " + text::g(a.roll_deg + 0.0, 3) + " deg) holds " +
+          text::g(100.0 * static_cast<double>(on) / static_cast<double>(down), 2) +
+          " % of the known pixels that look down (sampled 1 in 16): the film wets almost nothing; check the "
+          "camera's height, pitch and roll, or give the ground as a mask");
+    }
+  }
   rec["wet"]["airlight_linear_rgb"] = ha.airlight;
   rec["wet"]["airlight_source"] = ha.airlight_source;
   rec["prepare"] = prep.record;
@@ -318,6 +345,8 @@ CommandDef wet_command() {
                          r["k_eff"].get<double>(), r["ground_pixels"].get<std::size_t>(),
                          r["mirror_hits"].get<std::size_t>(), r["mirror_sky_pixels"].get<std::size_t>(),
                          r["mirror_left_frame"].get<std::size_t>());
+            if (r.contains("warnings"))
+              for (const auto& w : r["warnings"]) std::fprintf(stderr, "brume wet: warning: %s\n", w.get<std::string>().c_str());
           },
   });
   // The extinction a LiDAR beam sees in this job's media (brume/lidar_camera.hpp's hook): none, the
