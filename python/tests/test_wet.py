@@ -204,6 +204,13 @@ def test_wet_warns_when_the_plane_misses_the_ground(demo, tmp_path):
     assert r.record["wet"]["ground_pixels"] == 0
     (w,) = r.record["wet"]["warnings"]
     assert "6 m below the camera" in w and "mask" in w, w
+    # ... and names the plane the lower half's points lie on: the demo's own pose (1.6 m, 5 degrees
+    # down, level), within the fit's noise (5 cm, 0.2 degree: a sampled RANSAC refined by least squares)
+    import re
+    m = re.search(r"lie on a plane ([-0-9.e]+) m below the camera at pitch ([-0-9.e]+) deg, roll ([-0-9.e]+) deg", w)
+    assert m, w
+    height, pitch, roll = map(float, m.groups())
+    assert abs(height - 1.6) < 0.05 and abs(pitch + 5) < 0.2 and abs(roll) < 0.2, w
     d = demo["dir"]
     out = run_cli("wet", "--image", d / "clean.png", "--range", d / "range.exr", "--fov-y", 55, "--camera-height", 6,
                   "--pitch", -5, "--film", 1, "--out", tmp_path / "w.png")

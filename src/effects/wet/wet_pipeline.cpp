@@ -3,10 +3,12 @@
 // (brume/wet.hpp; docs/wet-ground.md).
 #include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <cmath>
 #include <cstdio>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "brume/command.hpp"
 #include "brume/depth.hpp"
@@ -123,6 +125,94 @@ const ParamTable<CameraWetParams>& camera_wet_param_table() {
   return t;
 }
 
+// What a pose that misses the ground could be instead: the plane that most of the lower half's
+// points (every 4th pixel of every 4th row, in the camera's frame) lie on -- RANSAC over 256
+// deterministic triples, inliers within 5 cm + 1 % of their range, refined by least squares (the
+// inliers' covariance's least eigenvector) -- as the camera's height above it, pitch and roll
+// (those whose up vector, cv_from_world·y, is the plane's normal). "" when no plane holds a third
+// of the points, or the plane is steeper than 45 degrees to the camera's up.
+std::string fitted_ground_hint(const Image& range, const Camera& cam) {
+  std::vector<Vec3> pts;
+  for (int y = cam.height / 2 + 2; y < cam.height; y += 4)
+    for (int x = 2; x < cam.width; x += 4) {
+      const float r = range.at(x, y);
+      if (!(std::isfinite(r) && r > 0.0f)) continue;
+      const Vec3 d = cam.pixel_ray_cv(x, y);
+      const double k = r / std::sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+      pts.push_back({d.x * k, d.y * k, d.z * k});
+    }
+  if (pts.size() < 30) return "";
+  const auto near = [](const Vec3& n, double off, const Vec3& q) {
+    const double r = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z);
+    return std::fabs(n.x * q.x + n.y * q.y + n.z * q.z + off) <= 0.05 + 0.01 * r;
+  };
+  std::uint64_t state = 0x9e3779b97f4a7c15ull;
+  const auto pick = [&] {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return static_cast<std::size_t>((state >> 33) % pts.size());
+  };
+  Vec3 best_n{0, 0, 0};
+  double best_off = 0.0;
+  std::size_t best = 0;
+  for (int it = 0; it < 256; ++it) {
+    const Vec3 &a = pts[pick()], &b = pts[pick()], &c = pts[pick()];
+    const Vec3 u{b.x - a.x, b.y - a.y, b.z - a.z}, v{c.x - a.x, c.y - a.y, c.z - a.z};
+    Vec3 n{u.y * v.z - u.z * v.y, u.z * v.x - u.x * v.z, u.x * v.y - u.y * v.x};
+    const double len = std::sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
+    if (!(len > 1e-9)) continue;
+    n = {n.x / len, n.y / len, n.z / len};
+    double off = -(n.x * a.x + n.y * a.y + n.z * a.z);
+    if (off < 0.0) n = {-n.x, -n.y, -n.z}, off = -off;  // the camera (the origin) on the normal's side
+    if (!(-n.y > std::sqrt(0.5))) continue;             // the cv frame's up is -y: within 45 degrees
+    std::size_t in = 0;
+    for (const Vec3& q : pts) in += near(n, off, q);
+    if (in > best) best = in, best_n = n, best_off = off;
+  }
+  if (3 * best < pts.size()) return "";
+  // Least squares on the inliers: the normal is the covariance's least eigenvector (power iteration
+  // on tr(C)·I − C), the offset through their centroid.
+  Vec3 m{0, 0, 0};
+  std::vector<Vec3> in;
+  for (const Vec3& q : pts)
+    if (near(best_n, best_off, q)) in.push_back(q), m.x += q.x, m.y += q.y, m.z += q.z;
+  const double k = 1.0 / static_cast<double>(in.size());
+  m = {m.x * k, m.y * k, m.z * k};
+  double C[3][3] = {};
+  for (const Vec3& q : in) {
+    const double d[3] = {q.x - m.x, q.y - m.y, q.z - m.z};
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) C[i][j] += d[i] * d[j] * k;
+  }
+  const double tr = C[0][0] + C[1][1] + C[2][2];
+  double n[3] = {best_n.x, best_n.y, best_n.z};
+  for (int it = 0; it < 100; ++it) {
+    double w[3];
+    for (int i = 0; i < 3; ++i) w[i] = tr * n[i] - (C[i][0] * n[0] + C[i][1] * n[1] + C[i][2] * n[2]);
+    const double len = std::sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    for (int i = 0; i < 3; ++i) n[i] = w[i] / len;
+  }
+  if (n[0] * best_n.x + n[1] * best_n.y + n[2] * best_n.z < 0.0)
+    for (double& x : n) x = -x;
+  const double height = -(n[0] * m.x + n[1] * m.y + n[2] * m.z);  // the plane n·P + height = 0: the camera above
+  // The pose whose up vector in the cv frame is n: try the angles' signs against the camera's own
+  // convention (rotation_from_ypr, world_from_camera) and keep the one that gives n back.
+  const double pitch = std::asin(std::max(-1.0, std::min(1.0, n[2]))) * 180.0 / 3.14159265358979323846;
+  const double roll0 = std::atan2(n[0], -n[1]) * 180.0 / 3.14159265358979323846;
+  double best_err = 1e9, bp = 0.0, br = 0.0;
+  for (double sp : {1.0, -1.0})
+    for (double sr : {1.0, -1.0}) {
+      Camera c = cam;
+      c.orientation = rotation_from_ypr(0.0, sp * pitch, sr * roll0);
+      const Mat3 r = c.world_from_camera().rotation;  // cv into world: its second row is the world's up
+      const double e = std::fabs(r.m[1][0] - n[0]) + std::fabs(r.m[1][1] - n[1]) + std::fabs(r.m[1][2] - n[2]);
+      if (e < best_err) best_err = e, bp = sp * pitch, br = sr * roll0;
+    }
+  if (best_err > 1e-6) return "";
+  return "; the lower half's points (" + text::g(100.0 * static_cast<double>(in.size()) / pts.size(), 2) +
+         " % of them) lie on a plane " + text::g(height, 3) + " m below the camera at pitch " + text::g(bp + 0.0, 3) +
+         " deg, roll " + text::g(br + 0.0, 3) + " deg: the ground's pose, if that plane is the ground";
+}
+
 // The film's and the ground's checks that need no pixels (the CLI's and brume.wet's); `masked`: a
 // ground mask is given (the CLI's --ground-mask FILE, brume.wet's ground_mask= array).
 void check_camera_wet(const WetFilm& film, const WetGround& g, bool masked, bool mask_flag) {
@@ -214,7 +304,8 @@ CameraWetRun run_camera_wet(ConstImageView rgb, ConstImageView measured_range, c
           text::g(a.pitch_deg + 0.0, 3) + " deg, roll " + text::g(a.roll_deg + 0.0, 3) + " deg) holds " +
           text::g(100.0 * static_cast<double>(on) / static_cast<double>(down), 2) +
           " % of the known pixels that look down (sampled 1 in 16): the film wets almost nothing; check the "
-          "camera's height, pitch and roll, or give the ground as a mask");
+          "camera's height, pitch and roll, or give the ground as a mask" +
+          fitted_ground_hint(prep.range, cam));
     }
   }
   rec["wet"]["airlight_linear_rgb"] = ha.airlight;
