@@ -37,6 +37,7 @@ struct StreakPose {
   Vec3 velocity;                     // [m/s] the camera's, in the world
   double t_s = 0.0;                  // K·Δt
   bool moved = false;                // not the identity (a frame K > 0, or a rotation)
+  bool rotated = false;              // world_from_camera's rotation is not the identity
   bool from_poses = false;           // placed by --poses
 };
 // From --frame, --frame-interval, --ego-speed (along +x) or --poses (camera 0's KITTI poses; line

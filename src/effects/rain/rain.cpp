@@ -457,6 +457,7 @@ StreakPose streak_camera_pose(std::uint64_t frame, double frame_interval_s, doub
   const Vec3& pb = b.translation;
   pose.velocity = {(pb.x - pa.x) / frame_interval_s, (pb.y - pa.y) / frame_interval_s, (pb.z - pa.z) / frame_interval_s};
   pose.moved = !is_identity(pose.world_from_camera) || pose.t_s != 0.0;
+  pose.rotated = !is_identity(RigidTransform{pose.world_from_camera.rotation, {}});
   return pose;
 }
 

@@ -140,11 +140,7 @@ StreakSlabs moving_frustum_streaks(const RainField& field, const std::function<d
 // wind (world) less the camera's velocity, in the camera's axes at its pose.
 inline void streak_velocity(const StreakPose& pose, const Vec3& wind, double fall_m_s, double u[3]) {
   Vec3 w{wind.x - pose.velocity.x, wind.y - pose.velocity.y, wind.z - fall_m_s - pose.velocity.z};
-  const Mat3& r = pose.world_from_camera.rotation;
-  bool rotated = false;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) rotated = rotated || r.m[i][j] != (i == j ? 1.0 : 0.0);
-  if (rotated) w = r.transposed() * w;
+  if (pose.rotated) w = pose.world_from_camera.rotation.transposed() * w;
   u[0] = -w.y, u[1] = -w.z, u[2] = w.x;  // the cv frame: x = −y, y = −z, z = x
 }
 
@@ -152,10 +148,11 @@ inline void streak_velocity(const StreakPose& pose, const Vec3& wind, double fal
 // places camera 2 (brume run checks them); {} without --poses.
 nlohmann::json streak_pose_files(const std::string& poses, const std::string& kitti_calib);
 
-// The camera's speed [m/s] for the streaks' margin (--ego-speed's |s| as such).
+// The camera's speed [m/s] for the streaks' margin (--ego-speed's |s| exactly: the square root of
+// a double's rounded square is its magnitude).
 inline double streak_speed(const StreakPose& pose) {
   const Vec3& v = pose.velocity;
-  return v.y == 0.0 && v.z == 0.0 ? std::abs(v.x) : std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z);
+  return std::sqrt(v.x * v.x + v.y * v.y + v.z * v.z);
 }
 
 // The thin lens's blur [px] at planar depth z: the circle of confusion α·|z − z_f|/z (α at

@@ -16,6 +16,7 @@
 #include "brume/error.hpp"
 #include "brume/haze.hpp"
 #include "brume/io.hpp"
+#include "brume/medium.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/record.hpp"
 #include "brume/wet.hpp"
@@ -146,10 +147,9 @@ std::string fitted_ground_hint(const Image& range, const Camera& cam) {
     const double r = std::sqrt(q.x * q.x + q.y * q.y + q.z * q.z);
     return std::fabs(n.x * q.x + n.y * q.y + n.z * q.z + off) <= 0.05 + 0.01 * r;
   };
-  std::uint64_t state = 0x9e3779b97f4a7c15ull;
+  std::uint64_t draw = 0;  // the triples: brume/medium.hpp's counter-based hash of their count
   const auto pick = [&] {
-    state = state * 6364136223846793005ull + 1442695040888963407ull;
-    return static_cast<std::size_t>((state >> 33) % pts.size());
+    return static_cast<std::size_t>(hash_unit(hash_fold(0x6772'6f75'6e64ull, draw++)) * static_cast<double>(pts.size()));
   };
   Vec3 best_n{0, 0, 0};
   double best_off = 0.0;
