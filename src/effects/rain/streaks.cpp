@@ -456,10 +456,17 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
   std::vector<Span> span(n);
   std::vector<double> path(n);
   std::vector<std::size_t> first(n_tiles + 1, 0);
-  bool listed = true;
-#pragma omp parallel num_threads(nt) reduction(&& : listed)
+  // Each thread counts into its own row and the rows are summed after the region (no critical
+  // section or reduction: LLVM's OpenMP runtime under ThreadSanitizer crashed in the critical
+  // section's end when batch frames ran this region from several threads at once).
+  const std::size_t rows = static_cast<std::size_t>(std::max(1, nt));
+  std::vector<std::size_t> counts(rows * n_tiles, 0);
+  std::vector<unsigned char> listed_by(rows, 1);
+#pragma omp parallel num_threads(nt)
   {
-    std::vector<std::size_t> count(n_tiles, 0);
+    const std::size_t tid = static_cast<std::size_t>(omp_get_thread_num());
+    std::size_t* const count = counts.data() + tid * n_tiles;
+    bool listed = true;
 #pragma omp for schedule(static)
     for (std::size_t i = 0; i < n; ++i) {
       const Streak& k = *drops[i];
@@ -482,8 +489,12 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
       }
       path[i] = std::hypot(e[1][0] - e[0][0], e[1][1] - e[0][1]);
     }
-#pragma omp critical
-    for (std::size_t t = 0; t < n_tiles; ++t) first[t + 1] += count[t];
+    listed_by[tid] = listed;
+  }
+  bool listed = true;
+  for (std::size_t r = 0; r < rows; ++r) {
+    listed = listed && listed_by[r];
+    for (std::size_t t = 0; t < n_tiles; ++t) first[t + 1] += counts[r * n_tiles + t];
   }
   const std::vector<std::uint32_t> order = far_to_near(drops, std::move(key), listed);  // storage indices
   // The tiles' lists, far to near.
