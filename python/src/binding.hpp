@@ -52,7 +52,10 @@ ParamSpec path_spec();
 const ParamSpec* find_keyword(const std::vector<ParamSpec>& specs, const std::string& k);
 JobValues keyword_values(const std::vector<ParamSpec>& specs, const py::dict& kw, const std::string& fn,
                          std::set<std::string>& given);
-JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const std::string& fn);
+// A record's "job" as the form's values; cli: the command the record's CLI run was (its camera
+// LiDAR files and settings that no array form has are passed over), or null.
+JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const std::string& fn,
+                     const CommandDef* cli);
 
 // ---- docstrings and stubs (keywords.cpp) -------------------------------------------------------
 struct Extra {  // a keyword of the binding itself (not a parameter of the run)

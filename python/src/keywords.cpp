@@ -339,7 +339,8 @@ JobValues keyword_values(const std::vector<ParamSpec>& specs, const py::dict& kw
 // Result stand for: their camera keywords (fx, fov-y ...) are read where
 // these declarations have them, the rest skipped. Anything else unknown is
 // refused.
-JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const std::string& fn) {
+JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const std::string& fn,
+                     const CommandDef* cli) {
   if (!py::isinstance<py::dict>(job))
     throw py::type_error(fn + "(): job takes a record's \"job\" dict ({block: {name: value}}), got " +
                          type_name(job));
@@ -359,7 +360,13 @@ JobValues job_values(const std::vector<ParamSpec>& specs, py::handle job, const 
     // fog's own "lidar" block is its parameters), and those the camera effects keep in their own block
     // (rain's "rain.lidar", "rain.lidar-out", "rain.lidar-frame" -- which a record of schema 4 without
     // it reads as "scan"): the array form takes the scan as the lidar= array, in its own frame.
-    const auto camera_lidar = [&](const std::string& name) { return name.rfind("lidar", 0) == 0; };
+    // Only the names the command declares are passed over: a mistyped one ("lidar-gamam") is refused.
+    const auto camera_lidar = [&](const std::string& name) {
+      if (name.rfind("lidar", 0) != 0 || !cli) return false;
+      for (const ParamSpec& q : cli->specs)
+        if (q.block == block && q.name == name) return true;
+      return false;
+    };
     for (const auto& [name, v] : vals.items()) {
       const ParamSpec* d = nullptr;
       for (const ParamSpec& q : specs)

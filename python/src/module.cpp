@@ -112,7 +112,7 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
   if (a.replays && k.contains("job")) {
     py::object job = k["job"];
     PyDict_DelItemString(k.ptr(), "job");
-    if (!job.is_none()) values = job_values(a.specs, job, fn);
+    if (!job.is_none()) values = job_values(a.specs, job, fn, find_command(command));
   }
   std::set<std::string> given;
   for (auto& v : keyword_values(a.specs, k, fn, given)) values.push_back(std::move(v));

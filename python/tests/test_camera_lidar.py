@@ -158,7 +158,7 @@ def test_replay_rerun_and_brume_run_of_the_record(demo, tmp_path):
     bit for bit; without lidar= it is refused; a CLI record that fogged a
     scan replays with the scan as lidar=; `brume run` of the Python record's
     job (in a CLI record of the same pixels and scan as files) writes the
-    same scan and image."""
+    same scan and image; a mistyped scan setting in a job is refused."""
     pts = scan()
     rgb, rng = demo["rgb"], demo["range"]
     r = brume.haze(rgb, rng, visibility=250.0, lidar=pts, lidar_seed=4)
@@ -191,6 +191,11 @@ def test_replay_rerun_and_brume_run_of_the_record(demo, tmp_path):
     # a CLI record that fogged a scan: its job with the scan as lidar=
     back = brume.haze(rgb, rng, job=cli["job"], lidar=pts)
     assert np.array_equal(back.lidar, r.lidar)
+    # a hand-edited job's mistyped scan setting is refused, not passed over as the CLI's files are
+    typo = json.loads(json.dumps(cli["job"]))
+    typo["lidar"]["lidar-gamam"] = 1e-5
+    with pytest.raises(ValueError, match="'lidar.lidar-gamam' is not a parameter of brume.haze"):
+        brume.haze(rgb, rng, job=typo, lidar=pts)
     # a CLI record without a scan (its lidar block names no file) replays as before, without one
     run_cli("haze", "--image", tmp_path / "rgb.pfm", "--range", tmp_path / "range.pfm", "--out", tmp_path / "n.pfm",
             "--bits", "float", "--visibility", 250, "--record", tmp_path / "n.json")
