@@ -28,6 +28,7 @@
 #include "brume/depth_source.hpp"
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
+#include "depth/sky_check.hpp"
 #include "eth3d_scan.hpp"
 #include "ip_basic.hpp"
 #include "test_util.hpp"
@@ -444,6 +445,40 @@ TEST(Complete, PlanarContinuationOfAVerticalWall) {
   EXPECT_GT(rec["continued_fraction"].get<double>(), 0.4);
 }
 
+// The preparation's sky checked against the image (src/depth/sky_check.hpp):
+// an unknown region reaching the top is counted as sky by Hansard's rule,
+// and its pixels whose 5x5 window of sRGB luma varies by more than the
+// roughness are counted as not sky-like. Exact counts on a synthetic frame:
+// a flat image gives none (every window constant), a checkerboard of 2 px
+// squares (luma 0.2 and 0.8 in sRGB: a window's standard deviation is 0.29 or
+// more) gives every sky pixel; a hole of 1 % of the frame away from the top is
+// a hole, not sky (below --sky-large-fraction's 5 %).
+TEST(Complete, PreparedSkyCheckCountsRoughUnknownRegions) {
+  const int W = 64, H = 48;
+  Image range(W, H, 1, 10.0f);
+  for (int y = 0; y < 12; ++y)
+    for (int x = 0; x < W; ++x) range.at(x, y) = NAN;  // the top quarter: sky by the rule
+  for (int y = 30; y < 33; ++y)
+    for (int x = 20; x < 30; ++x) range.at(x, y) = 0.0f;  // 30 px, 1 %: a hole
+  const auto linear = [](double srgb) { return static_cast<float>(std::pow((srgb + 0.055) / 1.055, 2.4)); };
+  Image flat(W, H, 3, linear(0.6)), checker(W, H, 3);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      for (int c = 0; c < 3; ++c) checker.at(x, y, c) = linear(((x / 2 + y / 2) % 2) ? 0.8 : 0.2);
+  const PrepareParams p;
+  const CompleteParams c;
+  const PreparedSkyCheck a = check_prepared_sky(ConstImageView(range), ConstImageView(flat), p, c);
+  EXPECT_EQ(a.pixels, static_cast<std::size_t>(W * H));
+  EXPECT_EQ(a.sky, static_cast<std::size_t>(12 * W));
+  EXPECT_EQ(a.unlike, 0u);
+  const PreparedSkyCheck b = check_prepared_sky(ConstImageView(range), ConstImageView(checker), p, c);
+  EXPECT_EQ(b.sky, static_cast<std::size_t>(12 * W));
+  EXPECT_EQ(b.unlike, b.sky);
+  PrepareParams strict;
+  strict.sky_min_fraction = strict.sky_large_fraction = 0.5;  // the top region (25 %) no longer counts as sky
+  EXPECT_EQ(check_prepared_sky(ConstImageView(range), ConstImageView(checker), strict, c).sky, 0u);
+}
+
 class CompleteCli : public ScratchDirTest {};
 
 // Bad inputs through the command line: a scan with no point in view, an image
@@ -688,4 +723,39 @@ TEST_F(CompleteCli, CompleteMethodFlag) {
   EXPECT_FALSE(read_json(p("b.json"))["complete"].contains("complete_method"));
   r = run("run " + p("a.json") + " --out-dir " + p("again"));
   ASSERT_EQ(r.status, 0) << r.output;
+}
+
+// ETH3D's ground-truth disparity has holes where the laser saw nothing
+// (shadows under the tables, glass, a building's far facade): the preparation
+// takes the regions that reach the top as sky, and an effect paints them with
+// the airlight. The command says so (stderr and the record), names the fix,
+// and --complete on completes them instead; a real sky (GeoPose3K's
+// Matterhorn, a deep blue sky dark beside the snow) warns nothing.
+TEST_F(CompleteCli, PreparedSkyThatIsNotSkyWarns) {
+  BRUME_REQUIRE_DATA("eth3d_two_view/terrace/disp0.pfm");
+  const std::string e = data_path("eth3d_two_view/terrace/");
+  const std::string in =
+      "--image " + e + "im0.png --disparity " + e + "disp0.pfm --calib " + e + "calib.txt --visibility 100";
+  CliRun r = run("haze " + in + " --out " + p("t.png") + " --record " + p("t.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("brume haze: warning: the range's unknown regions that the preparation takes as sky"),
+            std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("give --complete on"), std::string::npos) << r.output;
+  const nlohmann::json c = read_json(p("t.json"))["prepare"]["complete"];
+  ASSERT_TRUE(c.contains("warnings")) << c.dump();
+  // Measured: 36.7 % of the frame taken as sky, 13.1 % of the frame among it rough (the threshold 5 %).
+  EXPECT_NEAR(c["prepared_sky_fraction"].get<double>(), 0.367, 0.005);
+  EXPECT_GT(c["prepared_sky_unlike_fraction"].get<double>(), 0.10);
+  r = run("haze " + in + " --complete on --out " + p("on.png") + " --record " + p("on.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(r.output.find("warning"), std::string::npos) << r.output;
+  EXPECT_LT(read_json(p("on.json"))["prepare"]["complete"]["sky_fraction"].get<double>(), 0.05);
+  if (!have_data("geopose3k_matterhorn/distance.pfm")) return;
+  const std::string g = data_path("geopose3k_matterhorn/");
+  r = run("haze --image " + g + "photo.jpg --range " + g + "distance.pfm --unknown-value -1 --visibility 30000 --out " +
+          p("g.png") + " --record " + p("g.json"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(r.output.find("warning"), std::string::npos) << r.output;
+  EXPECT_LT(read_json(p("g.json"))["prepare"]["complete"]["prepared_sky_unlike_fraction"].get<double>(), 0.05);
 }

@@ -81,6 +81,7 @@
 
 #include "brume_opencv.hpp"
 #include "core/schedule.hpp"
+#include "depth/sky_check.hpp"
 
 namespace brume {
 
@@ -397,7 +398,7 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
     const int* st = stats.ptr<int>(l);
     const double area = st[cv::CC_STAT_AREA];
     const bool top = st[cv::CC_STAT_TOP] == 0;
-    const bool sky = (top && area >= p.sky_min_fraction * dN) || area >= p.sky_large_fraction * dN;
+    const bool sky = prepare_takes_as_sky(top, area, dN, p);
     if (sky) {
       hole_id[l] = -2;
       res.sky_pixels += static_cast<std::size_t>(area);
