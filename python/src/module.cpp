@@ -75,6 +75,28 @@ bool takes_nonfinite(const ArrayForm& a, const std::string& command) {
   return !a.args.empty() && a.args.front().channels == 3 && c && c->spec("nonfinite");
 }
 
+// The run's warnings -- every "warnings" list of its record (the preparation's sky, wet's ground
+// plane, a scan's frame ...) -- as Python warnings (UserWarning) in Python's words, so that a result
+// brume cannot vouch for does not pass unseen; the record keeps them as the command line's do.
+void warn_record(const json& j, const std::string& fn) {
+  if (j.is_object()) {
+    for (const auto& [k, v] : j.items()) {
+      if (k == "job") continue;
+      if (k == "warnings" && v.is_array()) {
+        for (const auto& w : v)
+          if (w.is_string()) {
+            const std::string m = fn + "(): " + python_spelling(w.get<std::string>());
+            if (PyErr_WarnEx(PyExc_UserWarning, m.c_str(), 1) < 0) throw py::error_already_set();
+          }
+      } else {
+        warn_record(v, fn);
+      }
+    }
+  } else if (j.is_array()) {
+    for (const auto& v : j) warn_record(v, fn);
+  }
+}
+
 py::object call_array_form(const ArrayForm& a, const std::string& command, const std::vector<py::object>& arrays,
                            py::kwargs kw) {
   const std::string& fn = a.public_name;
@@ -193,6 +215,7 @@ py::object call_array_form(const ArrayForm& a, const std::string& command, const
   for (const auto& [name, v] : out.more.items()) more[name] = to_py(v);
   for (const auto& [name, v] : out.bytes)
     more[name] = py::array_t<std::uint8_t>(static_cast<py::ssize_t>(v.size()), v.data());
+  warn_record(rec, fn);
   return make_result(std::move(out.images), rec, more);
 }
 

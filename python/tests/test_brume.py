@@ -723,3 +723,26 @@ def test_every_command_of_the_list_reaches_python(demo):
         assert arrays
         for k in arrays:
             same(getattr(again, k), getattr(r, k))
+
+
+def test_record_warnings_are_python_warnings():
+    """What the record warns of is a UserWarning in Python's words (the CLI
+    prints it on stderr): here the preparation's sky that is not smooth in the
+    image -- the top quarter's range unknown over a checkerboard of 2 px
+    squares -- whose remedy the warning names as complete='on'. A smooth
+    (flat) top warns nothing; the record keeps the warning either way."""
+    import warnings
+    h, w = 48, 64
+    rng = np.full((h, w), 10.0, np.float32)
+    rng[:12] = np.nan
+    yy, xx = np.mgrid[0:h, 0:w]
+    checker = np.where(((xx // 2 + yy // 2) % 2)[..., None] == 1, 0.6, 0.03).astype(np.float32).repeat(3, 2)
+    with pytest.warns(UserWarning, match=r"brume\.haze\(\): the range's unknown regions .* give complete='on'"):
+        r = brume.haze(checker, rng, visibility=100)
+    assert r.record["prepare"]["complete"]["warnings"]
+    flat = np.full((h, w, 3), 0.3, np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        plain = brume.haze(flat, rng, visibility=100)
+    assert "warnings" not in plain.record["prepare"]["complete"]
+    assert plain.record["prepare"]["complete"]["prepared_sky_unlike_fraction"] == 0.0
