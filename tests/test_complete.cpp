@@ -445,38 +445,41 @@ TEST(Complete, PlanarContinuationOfAVerticalWall) {
   EXPECT_GT(rec["continued_fraction"].get<double>(), 0.4);
 }
 
-// The preparation's sky checked against the image (src/depth/sky_check.hpp):
-// an unknown region reaching the top is counted as sky by Hansard's rule,
-// and its pixels whose 5x5 window of sRGB luma varies by more than the
-// roughness are counted as not sky-like. Exact counts on a synthetic frame:
-// a flat image gives none (every window constant), a checkerboard of 2 px
-// squares (luma 0.2 and 0.8 in sRGB: a window's standard deviation is 0.29 or
-// more) gives every sky pixel; a hole of 1 % of the frame away from the top is
-// a hole, not sky (below --sky-large-fraction's 5 %).
-TEST(Complete, PreparedSkyCheckCountsRoughUnknownRegions) {
+// The preparation's sky checked against the scene (src/depth/sky_check.hpp):
+// an unknown region reaching the top is counted as sky by Hansard's rule, and
+// its pixels below a known pixel of their column as under a surface. Exact
+// counts on a synthetic frame: the top quarter unknown (sky, none under a
+// surface); a "table" of known range across rows 14-15 of columns 10-49 with
+// unknown range beneath it down to row 25 joined to the sky by column 5
+// (one region: 12x64 + 40x10 + a 1 px wide joint), whose pixels under the
+// table are under a surface; a hole of 30 px (1 %) away from the top is a
+// hole, not sky.
+TEST(Complete, PreparedSkyCheckCountsSkyUnderSurfaces) {
   const int W = 64, H = 48;
   Image range(W, H, 1, 10.0f);
   for (int y = 0; y < 12; ++y)
-    for (int x = 0; x < W; ++x) range.at(x, y) = NAN;  // the top quarter: sky by the rule
-  for (int y = 30; y < 33; ++y)
-    for (int x = 20; x < 30; ++x) range.at(x, y) = 0.0f;  // 30 px, 1 %: a hole
-  const auto linear = [](double srgb) { return static_cast<float>(std::pow((srgb + 0.055) / 1.055, 2.4)); };
-  Image flat(W, H, 3, linear(0.6)), checker(W, H, 3);
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x)
-      for (int c = 0; c < 3; ++c) checker.at(x, y, c) = linear(((x / 2 + y / 2) % 2) ? 0.8 : 0.2);
+    for (int x = 0; x < W; ++x) range.at(x, y) = NAN;
   const PrepareParams p;
-  const CompleteParams c;
-  const PreparedSkyCheck a = check_prepared_sky(ConstImageView(range), ConstImageView(flat), p, c);
+  PreparedSkyCheck a = check_prepared_sky(ConstImageView(range), p);
   EXPECT_EQ(a.pixels, static_cast<std::size_t>(W * H));
   EXPECT_EQ(a.sky, static_cast<std::size_t>(12 * W));
-  EXPECT_EQ(a.unlike, 0u);
-  const PreparedSkyCheck b = check_prepared_sky(ConstImageView(range), ConstImageView(checker), p, c);
-  EXPECT_EQ(b.sky, static_cast<std::size_t>(12 * W));
-  EXPECT_EQ(b.unlike, b.sky);
+  EXPECT_EQ(a.under, 0u);
+  for (int y = 16; y < 26; ++y)
+    for (int x = 10; x < 50; ++x) range.at(x, y) = NAN;  // beneath the table (rows 14-15 stay known)
+  for (int y = 12; y < 16; ++y) range.at(5, y) = NAN;     // the joint: column 5, rows 12-15 (left of the table)
+  for (int y = 16; y < 17; ++y)
+    for (int x = 5; x < 10; ++x) range.at(x, y) = NAN;  // row 16, columns 5-9: reaching beneath the table
+  for (int y = 30; y < 33; ++y)
+    for (int x = 52; x < 62; ++x) range.at(x, y) = 0.0f;  // a hole of 30 px
+  a = check_prepared_sky(ConstImageView(range), p);
+  // Sky: the top rows, the joint (4 + 5 px) and the region beneath the table (400 px).
+  EXPECT_EQ(a.sky, static_cast<std::size_t>(12 * W + 4 + 5 + 400));
+  // Under a surface: those below a known pixel of their column -- beneath the table, the joint's row 16
+  // (columns 6-9 have row 12-15 known above them; column 5 has none).
+  EXPECT_EQ(a.under, static_cast<std::size_t>(400 + 4));
   PrepareParams strict;
-  strict.sky_min_fraction = strict.sky_large_fraction = 0.5;  // the top region (25 %) no longer counts as sky
-  EXPECT_EQ(check_prepared_sky(ConstImageView(range), ConstImageView(checker), strict, c).sky, 0u);
+  strict.sky_min_fraction = strict.sky_large_fraction = 0.5;  // the region (38 %) no longer counts as sky
+  EXPECT_EQ(check_prepared_sky(ConstImageView(range), strict).sky, 0u);
 }
 
 class CompleteCli : public ScratchDirTest {};
@@ -729,8 +732,8 @@ TEST_F(CompleteCli, CompleteMethodFlag) {
 // (shadows under the tables, glass, a building's far facade): the preparation
 // takes the regions that reach the top as sky, and an effect paints them with
 // the airlight. The command says so (stderr and the record), names the fix,
-// and --complete on completes them instead; a real sky (GeoPose3K's
-// Matterhorn, a deep blue sky dark beside the snow) warns nothing.
+// and --complete on completes them instead; a real sky above a mountain
+// (GeoPose3K's Matterhorn) warns nothing.
 TEST_F(CompleteCli, PreparedSkyThatIsNotSkyWarns) {
   BRUME_REQUIRE_DATA("eth3d_two_view/terrace/disp0.pfm");
   const std::string e = data_path("eth3d_two_view/terrace/");
@@ -744,9 +747,9 @@ TEST_F(CompleteCli, PreparedSkyThatIsNotSkyWarns) {
   EXPECT_NE(r.output.find("give --complete on"), std::string::npos) << r.output;
   const nlohmann::json c = read_json(p("t.json"))["prepare"]["complete"];
   ASSERT_TRUE(c.contains("warnings")) << c.dump();
-  // Measured: 36.7 % of the frame taken as sky, 13.1 % of the frame among it rough (the threshold 5 %).
+  // Measured: 36.7 % of the frame taken as sky, 26.7 % of the frame among it under a surface (warns at 5 %).
   EXPECT_NEAR(c["prepared_sky_fraction"].get<double>(), 0.367, 0.005);
-  EXPECT_GT(c["prepared_sky_unlike_fraction"].get<double>(), 0.10);
+  EXPECT_NEAR(c["prepared_sky_under_surface_fraction"].get<double>(), 0.267, 0.005);
   r = run("haze " + in + " --complete on --out " + p("on.png") + " --record " + p("on.json"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(r.output.find("warning"), std::string::npos) << r.output;
@@ -757,5 +760,5 @@ TEST_F(CompleteCli, PreparedSkyThatIsNotSkyWarns) {
           p("g.png") + " --record " + p("g.json"));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(r.output.find("warning"), std::string::npos) << r.output;
-  EXPECT_LT(read_json(p("g.json"))["prepare"]["complete"]["prepared_sky_unlike_fraction"].get<double>(), 0.05);
+  EXPECT_EQ(read_json(p("g.json"))["prepare"]["complete"]["prepared_sky_under_surface_fraction"].get<double>(), 0.0);
 }

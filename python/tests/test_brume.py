@@ -727,22 +727,25 @@ def test_every_command_of_the_list_reaches_python(demo):
 
 def test_record_warnings_are_python_warnings():
     """What the record warns of is a UserWarning in Python's words (the CLI
-    prints it on stderr): here the preparation's sky that is not smooth in the
-    image -- the top quarter's range unknown over a checkerboard of 2 px
-    squares -- whose remedy the warning names as complete='on'. A smooth
-    (flat) top warns nothing; the record keeps the warning either way."""
+    prints it on stderr): here the preparation's sky under a measured surface
+    -- the top quarter's range unknown, joined by a column to unknown range
+    beneath a "table" of known range -- whose remedy the warning names as
+    complete='on'. The top quarter alone warns nothing; the record keeps the
+    warning either way."""
     import warnings
     h, w = 48, 64
+    rgb = np.full((h, w, 3), 0.3, np.float32)
     rng = np.full((h, w), 10.0, np.float32)
     rng[:12] = np.nan
-    yy, xx = np.mgrid[0:h, 0:w]
-    checker = np.where(((xx // 2 + yy // 2) % 2)[..., None] == 1, 0.6, 0.03).astype(np.float32).repeat(3, 2)
-    with pytest.warns(UserWarning, match=r"brume\.haze\(\): the range's unknown regions .* give complete='on'"):
-        r = brume.haze(checker, rng, visibility=100)
-    assert r.record["prepare"]["complete"]["warnings"]
-    flat = np.full((h, w, 3), 0.3, np.float32)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        plain = brume.haze(flat, rng, visibility=100)
+        plain = brume.haze(rgb, rng, visibility=100)
     assert "warnings" not in plain.record["prepare"]["complete"]
-    assert plain.record["prepare"]["complete"]["prepared_sky_unlike_fraction"] == 0.0
+    assert plain.record["prepare"]["complete"]["prepared_sky_under_surface_fraction"] == 0.0
+    rng[16:26, 10:50] = np.nan   # beneath the table (rows 12-15 stay known)
+    rng[12:17, 5] = np.nan       # the joint to the sky
+    rng[16, 5:10] = np.nan
+    with pytest.warns(UserWarning, match=r"brume\.haze\(\): the range's unknown regions .* give complete='on'"):
+        r = brume.haze(rgb, rng, visibility=100)
+    assert r.record["prepare"]["complete"]["warnings"]
+    assert r.record["prepare"]["complete"]["prepared_sky_under_surface_fraction"] == pytest.approx(404 / (h * w))

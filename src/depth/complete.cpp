@@ -11,14 +11,12 @@
 #include <string>
 #include <vector>
 
-#include "brume/depth.hpp"
 #include "brume/error.hpp"
 
 #include "brume_opencv.hpp"
 #include "core/schedule.hpp"
 #include "core/srgb_curve.hpp"
 #include "core/text.hpp"
-#include "depth/sky_check.hpp"
 
 namespace brume {
 
@@ -595,46 +593,6 @@ nlohmann::json complete_record(const CompleteParams& p, const CompleteResult& r)
     j["occluded_returns"] = r.occluded;
   }
   return j;
-}
-
-PreparedSkyCheck check_prepared_sky(ConstImageView range, ConstImageView rgb, const PrepareParams& p,
-                                    const CompleteParams& c) {
-  PreparedSkyCheck out;
-  const int W = range.width(), H = range.height();
-  if (W <= 0 || H <= 0 || rgb.width() != W || rgb.height() != H || rgb.channels() < 3) return out;
-  const std::size_t N = static_cast<std::size_t>(W) * static_cast<std::size_t>(H);
-  out.pixels = N;
-  cv::Mat unknown(H, W, CV_8U);
-  std::vector<float> luma(N);
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * W + x;
-      unknown.data[i] = known_range(range.at(x, y)) ? 0 : 1;
-      luma[i] = 0.2126f * srgb_encode(rgb.at(x, y, 0)) + 0.7152f * srgb_encode(rgb.at(x, y, 1)) +
-                0.0722f * srgb_encode(rgb.at(x, y, 2));
-    }
-  cv::Mat labels, stats, centroids;
-  const int n = cv::connectedComponentsWithStats(unknown, labels, stats, centroids, 8, CV_32S);
-  std::vector<std::uint8_t> sky(static_cast<std::size_t>(n), 0);
-  for (int l = 1; l < n; ++l) {
-    const int* st = stats.ptr<int>(l);
-    sky[static_cast<std::size_t>(l)] =
-        prepare_takes_as_sky(st[cv::CC_STAT_TOP] == 0, st[cv::CC_STAT_AREA], static_cast<double>(N), p) ? 1 : 0;
-  }
-  // The completion's roughness test of a sky pixel (its rule 3). Its brightness test is left out:
-  // a deep blue sky (GeoPose3K's Matterhorn: median luma 0.41 of a 99th percentile of 0.80) is dark
-  // beside snow, and smooth.
-  const float rough2 = static_cast<float>(c.sky_roughness * c.sky_roughness);
-  cv::Mat Y(H, W, CV_32F, luma.data()), m1, m2;
-  cv::boxFilter(Y, m1, CV_32F, cv::Size(5, 5));
-  cv::boxFilter(Y.mul(Y), m2, CV_32F, cv::Size(5, 5));
-  for (std::size_t i = 0; i < N; ++i) {
-    if (!sky[static_cast<std::size_t>(labels.ptr<int>()[i])]) continue;
-    ++out.sky;
-    const float mean = m1.ptr<float>()[i], var = m2.ptr<float>()[i] - mean * mean;
-    if (!(var <= rough2)) ++out.unlike;
-  }
-  return out;
 }
 
 }  // namespace brume

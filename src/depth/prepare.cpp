@@ -644,4 +644,37 @@ PrepareResult prepare_range(DenseImageRef range, const PrepareParams& p, int thr
   return res;
 }
 
+PreparedSkyCheck check_prepared_sky(ConstImageView range, const PrepareParams& p) {
+  PreparedSkyCheck out;
+  const int W = range.width(), H = range.height();
+  if (W <= 0 || H <= 0) return out;
+  const std::size_t N = static_cast<std::size_t>(W) * static_cast<std::size_t>(H);
+  out.pixels = N;
+  cv::Mat unknown(H, W, CV_8U);
+  std::vector<int> first_known(static_cast<std::size_t>(W), H);  // each column's topmost known row
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const bool known = !is_unknown(range.at(x, y));
+      unknown.data[static_cast<std::size_t>(y) * W + x] = known ? 0 : 1;
+      if (known && y < first_known[static_cast<std::size_t>(x)]) first_known[static_cast<std::size_t>(x)] = y;
+    }
+  cv::Mat labels, stats, centroids;
+  const int n = cv::connectedComponentsWithStats(unknown, labels, stats, centroids, 8, CV_32S);
+  std::vector<std::uint8_t> sky(static_cast<std::size_t>(n), 0);
+  for (int l = 1; l < n; ++l) {
+    const int* st = stats.ptr<int>(l);
+    sky[static_cast<std::size_t>(l)] =
+        prepare_takes_as_sky(st[cv::CC_STAT_TOP] == 0, st[cv::CC_STAT_AREA], static_cast<double>(N), p) ? 1 : 0;
+  }
+  for (int y = 0; y < H; ++y) {
+    const int* L = labels.ptr<int>(y);
+    for (int x = 0; x < W; ++x) {
+      if (!sky[static_cast<std::size_t>(L[x])]) continue;
+      ++out.sky;
+      if (y > first_known[static_cast<std::size_t>(x)]) ++out.under;
+    }
+  }
+  return out;
+}
+
 }  // namespace brume
