@@ -131,6 +131,9 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
   rec["depth"] = ld.record;
   if (!image_record.is_null()) rec["image"] = image_record;
   rec["complete"] = done.record;
+  if (done.record.contains("warnings"))
+    for (const auto& w : done.record["warnings"])
+      std::fprintf(stderr, "brume depth prepare: warning: %s\n", w.get<std::string>().c_str());
   rec["prepare"] = prepare_record(job.prepare, pr);
   WriteOptions w = data;
   w.description = rec.dump();
