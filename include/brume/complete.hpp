@@ -65,14 +65,27 @@
 //       the scan's upper limit: in each column, its topmost measurement
 //         (median over 5 columns); only pixels above it can be sky;
 //       candidate sky: pixels above the limit, with no measurement within 1 px, that are bright
-//         (sRGB luma >= complete-sky-luminance x the image's 99th percentile
-//         luma) and smooth (standard deviation of luma in a 5x5 window <=
+//         (brightness >= complete-sky-luminance x the image's 99th percentile
+//         of it; brightness: complete-sky-brightness max, the largest sRGB
+//         channel, or luma, sRGB luma, the rule of records before it) and
+//         smooth (standard deviation of luma in a 5x5 window <=
 //         complete-sky-roughness), closed with a 5x5 kernel (thin wires and
 //         twigs against the sky stay sky), then cut back to above the limit;
+//         by luma a clear blue sky (KITTI 000001's: sRGB (0.55, 0.85, 1),
+//         luma 0.8) is darker than a saturated white one, and GeoPose3K's
+//         Matterhorn's deep blue (0.14, 0.45, 0.82), luma 0.41, fell under
+//         0.7 x its snow's 0.80; by the largest channel both are 0.82-1;
 //       sky: the 8-connected regions of candidates that touch the top row
-//         of the image; they are unknown (NaN) in the output, also where the
-//         pilot's 31x31 fill had reached them (the pilot does not know the
-//         sky);
+//         of the image, then grown by up to complete-sky-edge (3) 8-connected
+//         steps into pixels above the limit, with no measurement within 1 px,
+//         that are bright (as above; smooth or not): the 5x5 roughness window
+//         straddles the sky's border with a treeline, so the regions stop
+//         2 px short of it, and the sky between the leaves of the crown's rim
+//         is rough too (0: no growth, the rule of records before it: on KITTI
+//         000001 the 2-4 px rim of blue sky took the trees' depth and
+//         stayed blue under haze or rain, a cyan halo); the sky is unknown
+//         (NaN) in the output, also where the pilot's 31x31 fill had reached
+//         it (the pilot does not know the sky);
 //       structure: every other pixel without a value; it takes the value of
 //         the nearest estimate below it in its column (above the scan's
 //         upper limit: Ku's "extend to top"), else above it, with
@@ -146,6 +159,11 @@ const EnumNames<CompleteMethod>& complete_method_names();
 // stereo map, a depth camera), where no return is hidden from it.
 enum class CompleteOcclusion { off, on, automatic };
 const EnumNames<CompleteOcclusion>& complete_occlusion_names();
+// What the sky rule calls bright (step 3): sRGB luma (the rule of records
+// before it) or the largest sRGB channel (a clear blue sky is as bright as a
+// white one by it: KITTI 000001's and GeoPose3K's blue skies).
+enum class CompleteSkyBrightness { luma, max_channel };
+const EnumNames<CompleteSkyBrightness>& complete_sky_brightness_names();
 
 struct CompleteParams {
   // The refinement's defaults: near the smallest RMSE at KITTI 000001's
@@ -157,6 +175,14 @@ struct CompleteParams {
   double sigma_range = 0.15;        // [1] s_r, range scale relative to the pilot, > 0
   double sky_luminance = 0.7;       // [1] sky: luma >= this x the image's 99th percentile, [0, 1]
   double sky_roughness = 0.03;      // [1] sky: 5x5 standard deviation of luma <= this, >= 0
+  // Bright by the largest channel (issue: the blue sky beside a saturated
+  // one; luma is the rule of records before it: since(4, "luma")).
+  CompleteSkyBrightness sky_brightness = CompleteSkyBrightness::max_channel;
+  // [px] the sky grows by up to this many pixels (8-connected steps) into
+  // bright unmeasured pixels above the scan: its edge, which the roughness
+  // window (it straddles the sky's edge) leaves out, 0..16; 0: none (the
+  // rule of records before it: since(4, 0)).
+  int sky_edge_px = 3;
   // Structure above the scan: planar (3c, issue #52) or column (3b, the rule
   // of records before it: since(4, "column")).
   CompleteMethod method = CompleteMethod::planar;
