@@ -65,8 +65,9 @@ const ParamTable<CompleteParams>& complete_param_table() {
         .since(4, "luma")
         .integer("complete-sky-edge", &CompleteParams::sky_edge_px, "px", Range::closed(0, 16),
                  "sky rule: the sky then grows by up to this many pixels into unmeasured pixels above the scan "
-                 "that are bright (as --complete-sky-luminance), not only smooth: the sky's edge, where the 5x5 "
-                 "roughness window straddles a treeline; 0: no growth (the rule of records before it)")
+                 "that are bright (as --complete-sky-luminance) and within 0.3 (sRGB) of a sky neighbour's colour, "
+                 "smooth or not: the sky's edge, where the 5x5 roughness window straddles a treeline; 0: no "
+                 "growth (the rule of records before it)")
         .since(4, 0)
         .choice("complete-method", &CompleteParams::method, complete_method_names(),
                 "structure above the scan (not sky, no measurement near): planar continues each column's planar "
