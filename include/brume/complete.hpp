@@ -78,7 +78,9 @@
 //       sky: the 8-connected regions of candidates that touch the top row
 //         of the image, then grown by up to complete-sky-edge (3) 8-connected
 //         steps into pixels above the limit, with no measurement within 1 px,
-//         that are bright (as above; smooth or not): the 5x5 roughness window
+//         that are bright (as above; smooth or not) and within 0.3 (sRGB) of
+//         a sky neighbour's colour (a bright edge unlike the sky, KITTI's
+//         bluish truck roof beside the white sky, stays): the 5x5 roughness window
 //         straddles the sky's border with a treeline, so the regions stop
 //         2 px short of it, and the sky between the leaves of the crown's rim
 //         is rough too (0: no growth, the rule of records before it: on KITTI
