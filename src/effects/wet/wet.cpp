@@ -215,6 +215,10 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
   struct Pyramid {
     int bw = 0, bh = 0;
     std::vector<float> m;
+    // The minimum of every rectangle of 1 to 3 x 1 to 3 blocks, 9 to a block (its top-left one):
+    // rect[9 (by·bw + bx) + 3 (rows − 1) + (columns − 1)]. An ask meets at most 3 x 3 blocks, so it
+    // reads one number where it read nine (the same minimum: min is exact, the depths hold no NaN).
+    std::vector<float> rect;
   };
   // above_ground (WetMarch): a second depth map and pyramid without the plane's pixels, for rays
   // higher above the plane than the tolerance.
@@ -272,6 +276,21 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
         float& m = c.m[static_cast<std::size_t>(by / r) * c.bw + bx / r];
         m = std::min(m, fi.m[static_cast<std::size_t>(by) * fi.bw + bx]);
       }
+    for (Pyramid* q : {&c, &fi}) {
+      q->rect.assign(9 * q->m.size(), INFINITY);
+      for (int by = 0; by < q->bh; ++by)
+        for (int bx = 0; bx < q->bw; ++bx) {
+          float* e = q->rect.data() + 9 * (static_cast<std::size_t>(by) * q->bw + bx);
+          for (int ny = 0; ny < 3; ++ny)
+            for (int nx = 0; nx < 3; ++nx) {
+              float v = INFINITY;  // the blocks past the edge are never asked (the ask's indices are clamped)
+              for (int y = by; y <= std::min(by + ny, q->bh - 1); ++y)
+                for (int x = bx; x <= std::min(bx + nx, q->bw - 1); ++x)
+                  v = std::min(v, q->m[static_cast<std::size_t>(y) * q->bw + x]);
+              e[3 * ny + nx] = v;
+            }
+        }
+    }
   }
   const auto t_march = std::chrono::steady_clock::now();
   const float front_k = static_cast<float>(1.0 + kWetHitMargin), thick_k = static_cast<float>(1.0 + kWetHitMargin + kWetThickness);
@@ -344,14 +363,9 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
         const int by1 = std::min(p.bh - 1, static_cast<int>(std::max(v0, v1) + 2.0) / S);
         float near = INFINITY;
         if (bx0 <= bx1 && by0 <= by1 && bx1 - bx0 <= 2 && by1 - by0 <= 2) {
-          // Up to 3 x 3 blocks (a step of S px and its margins spans no more), read as 3 x 3 with
-          // the last row and column repeated: no loop to mispredict, the same minimum (min is
-          // exact and the depths hold no NaN).
-          const int bxm = std::min(bx0 + 1, bx1);
-          const float* r[3] = {p.m.data() + static_cast<std::size_t>(by0) * p.bw,
-                               p.m.data() + static_cast<std::size_t>(std::min(by0 + 1, by1)) * p.bw,
-                               p.m.data() + static_cast<std::size_t>(by1) * p.bw};
-          for (const float* row : r) near = std::min(near, std::min(std::min(row[bx0], row[bxm]), row[bx1]));
+          // Up to 3 x 3 blocks (a step of S px and its margins spans no more): their rectangle's
+          // minimum, one read.
+          near = p.rect[9 * (static_cast<std::size_t>(by0) * p.bw + bx0) + 3 * (by1 - by0) + (bx1 - bx0)];
         } else {
           for (int by = by0; by <= by1; ++by)
             for (int bx = bx0; bx <= bx1; ++bx) near = std::min(near, p.m[static_cast<std::size_t>(by) * p.bw + bx]);
