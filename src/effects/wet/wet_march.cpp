@@ -1,0 +1,283 @@
+// brume — the camera's mirror march (wet_march.hpp): a batch of rays, as many side by side as a
+// SIMD vector of doubles holds (the baseline fallback: 2; AVX2, 4; AVX-512, 8), written once
+// with Highway and compiled for every target of core/simd.hpp, the CPU choosing at run time
+// (HWY_DYNAMIC_DISPATCH).
+//
+// Each lane runs one ray's march, the loop render_wet ran a ray at a time before (wet.cpp; docs/
+// wet-ground.md, "The mirror"), one iteration a round: at its top the vanishing point's and the
+// lift's tests; where 8 single steps are done, the 32-px blocks asked for a whole step, then the 8-px
+// ones; else one pixel's step and its depth test. A lane whose ray ends takes the batch's next
+// ray. The rare crossing is bisected lane by lane in scalar code (the same expressions). Every
+// lane performs the scalar loop's IEEE operations in its order: w is added a step at a time as
+// before, the products and sums are the same (-ffp-contract=off on this file, CMakeLists.txt:
+// AVX2's and AVX-512's FMA never fuse them), Div is correctly rounded as divsd, a pixel's rounding
+// is Trunc plus the half's test (round_inside), the depths' products with the margins are taken in
+// float as before, and a block index's integer division by the block's size is the floor of the
+// truncated coordinate times 1/S (a power of two: exact). Test: WetCamera.MarchGivesTheSameBitsOnEveryTarget.
+#include "core/simd.hpp"  // first: the targets
+
+#ifndef BRUME_WET_MARCH_SHARED
+#define BRUME_WET_MARCH_SHARED
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+
+#include "effects/wet/wet_march.hpp"
+
+namespace brume::detail {
+
+void WetMarchRays::clear() {
+  for (auto* v : {&w0, &dw, &uinf, &vinf, &cu, &cv, &major, &w_lift, &hu, &hv}) v->clear();
+  flags.clear(), end.clear();
+}
+
+void WetMarchRays::push(double w0_, double dw_, double uinf_, double vinf_, double cu_, double cv_, double major_,
+                        double w_lift_, std::uint8_t flags_) {
+  w0.push_back(w0_), dw.push_back(dw_), uinf.push_back(uinf_), vinf.push_back(vinf_), cu.push_back(cu_);
+  cv.push_back(cv_), major.push_back(major_), w_lift.push_back(w_lift_), flags.push_back(flags_);
+}
+
+}  // namespace brume::detail
+#endif
+
+#undef HWY_TARGET_INCLUDE
+#define HWY_TARGET_INCLUDE "effects/wet/wet_march.cpp"
+#include <hwy/foreach_target.h>  // IWYU pragma: keep
+#include <hwy/aligned_allocator.h>
+#include <hwy/highway.h>
+
+HWY_BEFORE_NAMESPACE();
+namespace brume::detail {
+namespace HWY_NAMESPACE {
+namespace hn = hwy::HWY_NAMESPACE;
+
+// (the march's lambdas inlined: GCC left the asks' a call with vectors passed through memory)
+#define HWY_INLINE_LAMBDA __attribute__((always_inline))
+
+namespace {
+
+// wet.cpp's round_inside: the nearest integer of x > −0.5, halves up.
+inline long wet_round_inside(double x) {
+  const long t = static_cast<long>(x);
+  return t + (x - static_cast<double>(t) >= 0.5);
+}
+
+}  // namespace
+
+void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
+  const hn::ScalableTag<double> dd;
+  const hn::Rebind<float, decltype(dd)> df;
+  const hn::Rebind<std::int32_t, decltype(dd)> di;
+  using VD = hn::Vec<decltype(dd)>;
+  using MD = hn::Mask<decltype(dd)>;
+  const std::size_t N = hn::Lanes(dd);
+  constexpr std::size_t kMaxLanes = HWY_MAX_BYTES / sizeof(double);
+#ifndef BRUME_WET_GROUPS
+#define BRUME_WET_GROUPS 4
+#endif
+  const std::size_t n = r.size();
+  r.end.assign(n, WetMarchRays::leaves), r.hu.assign(n, 0.0), r.hv.assign(n, 0.0);
+  const int W = m.width, H = m.height;
+
+  // The lanes' state, in memory between rounds (a lane taking a new ray writes it here): kGroups
+  // vectors of rays, their rounds side by side (each round's reads wait on the last's: one vector
+  // alone leaves the core idle).
+  constexpr std::size_t kGroups = BRUME_WET_GROUPS;
+  const std::size_t L = kGroups * N;
+  enum { kWc, kDw, kUinf, kVinf, kCu, kCv, kMajor, kWlift, kDzPos, kCanLift, kLifted, kFront, kFine, kStep, kBusy,
+         kEvent, kWprev, kU, kV, kStates };
+  auto st = hwy::AllocateAligned<double>(kStates * L);
+  double* S[kStates];
+  for (int k = 0; k < kStates; ++k) S[k] = st.get() + k * L;
+  std::vector<std::size_t> ray(L, 0);
+  std::size_t next = 0;
+  const auto take = [&](std::size_t l) {  // lane l takes the next ray, if any
+    S[kBusy][l] = next < n ? 1.0 : 0.0;
+    S[kEvent][l] = 0.0;
+    if (next >= n) return;
+    const std::size_t i = next++;
+    ray[l] = i;
+    S[kWc][l] = r.w0[i], S[kDw][l] = r.dw[i], S[kUinf][l] = r.uinf[i], S[kVinf][l] = r.vinf[i];
+    S[kCu][l] = r.cu[i], S[kCv][l] = r.cv[i], S[kMajor][l] = r.major[i], S[kWlift][l] = r.w_lift[i];
+    S[kDzPos][l] = (r.flags[i] & WetMarchRays::dz_positive) ? 1.0 : 0.0;
+    S[kCanLift][l] = (r.flags[i] & WetMarchRays::can_lift) ? 1.0 : 0.0;
+    S[kLifted][l] = (r.flags[i] & WetMarchRays::lifted) ? 1.0 : 0.0;
+    S[kFront][l] = 1.0, S[kFine][l] = 0.0, S[kStep][l] = 0.0;
+  };
+  for (std::size_t l = 0; l < L; ++l) take(l);
+  // a round's events, a lane's bits
+  enum { kVanish = 1, kLeave = 2, kCross = 4, kAtMax = 8, kStepped = 16 };
+
+  const VD zero = hn::Zero(dd), one = hn::Set(dd, 1.0), half = hn::Set(dd, 0.5), mhalf = hn::Set(dd, -0.5);
+  const VD Wm = hn::Set(dd, W - 0.5), Hm = hn::Set(dd, H - 0.5), Wd = hn::Set(dd, static_cast<double>(W));
+  const VD z_off = hn::Set(dd, static_cast<double>(m.z_off));
+  const auto fk = hn::Set(df, m.front_k);
+  const VD max_steps = hn::Set(dd, static_cast<double>(m.max_steps));
+  const auto inside = [&](VD u, VD v) -> MD {
+    return hn::And(hn::And(hn::Gt(u, mhalf), hn::Lt(u, Wm)), hn::And(hn::Gt(v, mhalf), hn::Lt(v, Hm)));
+  };
+  const auto round_inside = [&](VD x) -> VD {
+    const VD t = hn::Trunc(x);
+    return hn::Add(t, hn::IfThenElseZero(hn::Ge(hn::Sub(x, t), half), one));
+  };
+  // A map's value at the index (a whole number, exact in double) times a margin, in float as the
+  // scalar march's product, widened; lanes outside `on` read index 0.
+  const auto read = [&](const float* base, VD idx, MD on, decltype(fk) k) -> VD {
+    const auto i32 = hn::DemoteTo(di, hn::IfThenElseZero(on, idx));
+    return hn::PromoteTo(dd, hn::Mul(hn::GatherIndex(df, base, i32), k));
+  };
+  // Whether the step from wc to w1 clears the blocks of level lv (size S) it meets, for the lanes
+  // of `on` (render_wet's `clears`).
+  const auto clears = [&](int lv, double S, VD wc, VD w1, VD uinf, VD vinf, VD cu, VD cv, VD lifted, MD on)
+                          HWY_INLINE_LAMBDA -> MD {
+    const VD u0 = hn::Add(uinf, hn::Mul(wc, cu)), v0 = hn::Add(vinf, hn::Mul(wc, cv));
+    const VD u1 = hn::Add(uinf, hn::Mul(w1, cu)), v1 = hn::Add(vinf, hn::Mul(w1, cv));
+    on = hn::And(on, inside(u1, v1));
+    const VD inv_s = hn::Set(dd, 1.0 / S);
+    // std::max(0, int(x) / S) = floor(max(int(x), 0) / S); std::min(last, int(y) / S), y > 0
+    const auto lo = [&](VD a) { return hn::Floor(hn::Mul(hn::Max(hn::Trunc(hn::Sub(a, one)), zero), inv_s)); };
+    const auto hi = [&](VD a, double last) {
+      return hn::Min(hn::Floor(hn::Mul(hn::Trunc(hn::Add(a, hn::Set(dd, 2.0))), inv_s)), hn::Set(dd, last));
+    };
+    const VD bx0 = lo(hn::Min(u0, u1)), by0 = lo(hn::Min(v0, v1));
+    const VD bx1 = hi(hn::Max(u0, u1), m.bw[lv] - 1.0), by1 = hi(hn::Max(v0, v1), m.bh[lv] - 1.0);
+    const VD nx = hn::Sub(bx1, bx0), ny = hn::Sub(by1, by0);
+    const VD two = hn::Set(dd, 2.0);
+    const MD fits = hn::And(hn::And(hn::Ge(nx, zero), hn::Le(nx, two)), hn::And(hn::Ge(ny, zero), hn::Le(ny, two)));
+    MD other = hn::FirstN(dd, 0);  // the lanes whose blocks the table does not hold, asked one by one
+    if (!hn::AllTrue(dd, hn::Or(fits, hn::Not(on)))) {
+      // (not seen: a step of S px and its margins spans at most 3 x 3 blocks) render_wet's loop
+      // over the blocks, lane by lane
+      HWY_ALIGN double a[8][kMaxLanes];
+      hn::Store(bx0, dd, a[0]), hn::Store(bx1, dd, a[1]), hn::Store(by0, dd, a[2]), hn::Store(by1, dd, a[3]);
+      hn::Store(hn::IfThenElseZero(hn::AndNot(fits, on), one), dd, a[4]);
+      hn::Store(lifted, dd, a[5]), hn::Store(wc, dd, a[6]), hn::Store(w1, dd, a[7]);
+      for (std::size_t l = 0; l < N; ++l) {
+        if (!(a[4][l] > 0.0)) continue;
+        const float* b = m.blocks[lv] + (a[5][l] > 0.0 ? m.blocks_off[lv] : 0);
+        float near = INFINITY;
+        for (int y = static_cast<int>(a[2][l]); y <= static_cast<int>(a[3][l]); ++y)
+          for (int x = static_cast<int>(a[0][l]); x <= static_cast<int>(a[1][l]); ++x)
+            near = std::min(near, b[static_cast<std::size_t>(y) * m.bw[lv] + x]);
+        a[4][l] = 1.0 / std::min(a[6][l], a[7][l]) <= near * m.front_k ? 1.0 : 0.0;
+      }
+      other = hn::Gt(hn::Load(dd, a[4]), zero);
+    }
+    const VD idx = hn::Add(hn::Add(hn::Mul(hn::Set(dd, 9.0), hn::Add(hn::Mul(by0, hn::Set(dd, m.bw[lv])), bx0)),
+                                   hn::Add(hn::Mul(hn::Set(dd, 3.0), ny), nx)),
+                           hn::IfThenElseZero(hn::Gt(lifted, zero), hn::Set(dd, static_cast<double>(m.rect_off[lv]))));
+    const VD nearfk = read(m.rect[lv], idx, hn::And(on, fits), fk);
+    return hn::Or(other, hn::And(hn::And(on, fits), hn::Le(hn::Div(one, hn::Min(wc, w1)), nearfk)));
+  };
+
+  // One round of group g: each lane's ray one iteration of render_wet's loop; true where a lane's
+  // ray met an event (ended, or crossed the map).
+  const auto round = [&](std::size_t g) HWY_INLINE_LAMBDA -> bool {
+    const std::size_t o = g * N;
+      VD wc = hn::Load(dd, S[kWc] + o);
+      const VD dw = hn::Load(dd, S[kDw] + o), uinf = hn::Load(dd, S[kUinf] + o), vinf = hn::Load(dd, S[kVinf] + o);
+      const VD cu = hn::Load(dd, S[kCu] + o), cv = hn::Load(dd, S[kCv] + o), major = hn::Load(dd, S[kMajor] + o);
+      const VD wlift = hn::Load(dd, S[kWlift] + o);
+      const MD dzpos = hn::Gt(hn::Load(dd, S[kDzPos] + o), zero), canlift = hn::Gt(hn::Load(dd, S[kCanLift] + o), zero);
+      VD lifted = hn::Load(dd, S[kLifted] + o), front = hn::Load(dd, S[kFront] + o), fine = hn::Load(dd, S[kFine] + o);
+      VD step = hn::Load(dd, S[kStep] + o);
+      const MD act = hn::Gt(hn::Load(dd, S[kBusy] + o), zero);
+      // the top of the loop: within half a pixel of the vanishing point; the lift
+      const MD vanish = hn::And(act, hn::And(dzpos, hn::Lt(hn::Mul(wc, major), half)));
+      const MD top = hn::AndNot(vanish, act);
+      const MD lift_now = hn::And(hn::And(top, canlift),
+                                  hn::And(hn::Eq(lifted, zero), hn::Or(hn::And(dzpos, hn::Le(wc, wlift)), hn::AndNot(dzpos, hn::Ge(wc, wlift)))));
+      lifted = hn::IfThenElse(lift_now, one, lifted);
+      // The blocks, where the single steps are done: 32 px, then 8 where 32 did not clear; else one
+      // pixel's step. All three from the same w (a failed ask leaves it), their reads side by side.
+      const MD ask = hn::And(top, hn::Eq(fine, zero));
+      const VD wa = hn::Add(wc, hn::Mul(hn::Set(dd, static_cast<double>(kWetCoarseBlock)), dw));
+      const VD wb = hn::Add(wc, hn::Mul(hn::Set(dd, static_cast<double>(kWetFineBlock)), dw));
+      const VD wn = hn::Add(wc, dw);
+      const MD ca = clears(0, kWetCoarseBlock, wc, wa, uinf, vinf, cu, cv, lifted, hn::And(ask, hn::Gt(wa, zero)));
+      const MD cb = hn::AndNot(ca, clears(1, kWetFineBlock, wc, wb, uinf, vinf, cu, cv, lifted, hn::And(ask, hn::Gt(wb, zero))));
+      const VD u = hn::Add(uinf, hn::Mul(wn, cu)), v = hn::Add(vinf, hn::Mul(wn, cv));
+      const MD in_n = hn::And(top, hn::And(hn::Gt(wn, zero), inside(u, v)));
+      const VD idx = hn::Add(hn::Add(hn::Mul(round_inside(v), Wd), round_inside(u)),
+                             hn::IfThenElseZero(hn::Gt(lifted, zero), z_off));
+      const MD behind = hn::Gt(hn::Div(one, wn), read(m.z, idx, in_n, fk));
+      const MD cleared = hn::Or(ca, cb);
+      const MD single = hn::AndNot(cleared, top);
+      fine = hn::IfThenElse(single, hn::IfThenElse(hn::Gt(fine, zero), hn::Sub(fine, one), hn::Set(dd, kWetFineBlock - 1.0)), fine);
+      const MD leave = hn::AndNot(in_n, single);
+      const MD stepped = hn::And(single, in_n);
+      const MD cross = hn::And(hn::And(stepped, behind), hn::Gt(front, zero));
+      const VD wprev = wc;
+      front = hn::IfThenElse(stepped, hn::IfThenElseZero(hn::Not(behind), one), hn::IfThenElse(cleared, one, front));
+      wc = hn::IfThenElse(stepped, wn, hn::IfThenElse(ca, wa, hn::IfThenElse(cb, wb, wc)));
+      // the iteration's end: the step count (the scalar loop's bound: a single step that reaches it
+      // ends at infinity, a block step leaves)
+      const MD counted = hn::Or(cleared, stepped);
+      const MD at_max = hn::And(counted, hn::Eq(hn::Add(step, one), max_steps));
+      step = hn::IfThenElse(counted, hn::Add(step, one), step);
+      hn::Store(wc, dd, S[kWc] + o), hn::Store(lifted, dd, S[kLifted] + o), hn::Store(front, dd, S[kFront] + o);
+      hn::Store(fine, dd, S[kFine] + o), hn::Store(step, dd, S[kStep] + o);
+      const VD ev = hn::Add(hn::Add(hn::IfThenElseZero(vanish, hn::Set(dd, kVanish)), hn::IfThenElseZero(leave, hn::Set(dd, kLeave))),
+                            hn::Add(hn::Add(hn::IfThenElseZero(cross, hn::Set(dd, kCross)), hn::IfThenElseZero(at_max, hn::Set(dd, kAtMax))),
+                                    hn::IfThenElseZero(stepped, hn::Set(dd, kStepped))));
+      hn::Store(ev, dd, S[kEvent] + o), hn::Store(wprev, dd, S[kWprev] + o);
+      hn::Store(u, dd, S[kU] + o), hn::Store(v, dd, S[kV] + o);
+      return !hn::AllFalse(dd, hn::Or(hn::Or(vanish, leave), hn::Or(cross, at_max)));
+  };
+  bool any = N > 0 && n > 0;
+  while (any) {
+    bool event = false;
+    for (std::size_t g = 0; g < kGroups; ++g) event |= round(g);
+    if (!event) continue;
+    for (std::size_t l = 0; l < L; ++l) {
+      const int e = static_cast<int>(S[kEvent][l]);
+      if (!(S[kBusy][l] > 0.0) || (e & ~kStepped) == 0) continue;
+      const std::size_t i = ray[l];
+      WetMarchRays::End end = WetMarchRays::leaves;
+      bool over = false;
+      if (e & kVanish) over = true, end = WetMarchRays::infinity;
+      if (e & kLeave) over = true, end = WetMarchRays::leaves;
+      if (e & kCross) {
+        // the crossing, bisected to 1/64 of a step (render_wet's expressions)
+        const double ui = S[kUinf][l], vi = S[kVinf][l], cui = S[kCu][l], cvi = S[kCv][l];
+        const float* zm = m.z + (S[kLifted][l] > 0.0 ? m.z_off : 0);
+        const auto in = [&](double a, double b) { return a > -0.5 && a < W - 0.5 && b > -0.5 && b < H - 0.5; };
+        const auto zat = [&](double a, double b) {
+          return zm[static_cast<std::size_t>(wet_round_inside(b)) * W + static_cast<std::size_t>(wet_round_inside(a))];
+        };
+        double lo = S[kWprev][l], hi = S[kWc][l];
+        for (int b = 0; b < 6; ++b) {
+          const double mid = 0.5 * (lo + hi);
+          const double mu = ui + mid * cui, mv = vi + mid * cvi;
+          if (in(mu, mv) && 1.0 / mid > zat(mu, mv) * m.front_k) hi = mid; else lo = mid;
+        }
+        double hu = ui + hi * cui, hv = vi + hi * cvi;
+        if (!in(hu, hv)) hu = S[kU][l], hv = S[kV][l];
+        if (1.0 / hi <= zat(hu, hv) * m.thick_k) {
+          over = true, end = WetMarchRays::hit;
+          r.hu[i] = hu, r.hv[i] = hv;
+        }
+      }
+      if (!over && (e & kAtMax)) over = true, end = (e & kStepped) ? WetMarchRays::infinity : WetMarchRays::leaves;
+      S[kEvent][l] = 0.0;
+      if (!over) continue;
+      r.end[i] = end;
+      take(l);
+    }
+    any = false;
+    for (std::size_t l = 0; l < L; ++l) any = any || S[kBusy][l] > 0.0;
+  }
+}
+
+}  // namespace HWY_NAMESPACE
+}  // namespace brume::detail
+HWY_AFTER_NAMESPACE();
+
+#if HWY_ONCE
+namespace brume::detail {
+HWY_EXPORT(WetMarchRaysK);
+
+void wet_march_rays(const WetMarchMaps& m, WetMarchRays& r) { HWY_DYNAMIC_DISPATCH(WetMarchRaysK)(m, r); }
+}  // namespace brume::detail
+#endif  // HWY_ONCE
