@@ -287,21 +287,23 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
         }
     }
   }
-  // The march's maps: each level's tables, then (lift) the same without the plane's pixels.
+  // The march's maps in one array (its lanes read any of them in one gather): the depth (and the
+  // depth without the plane's pixels), then each level's rectangle minima (and without the plane's).
   detail::WetMarchMaps mm;
   mm.width = W, mm.height = H;
-  mm.z = zmap.data(), mm.z_off = lift ? wh : 0;
-  std::array<std::vector<float>, 2> rects, blocks;
+  mm.z_at = 0, mm.z_off = lift ? wh : 0;
+  std::array<std::vector<float>, 2> blocks;
   for (int l = 0; l < 2; ++l) {
-    rects[l] = pyr[l].rect, blocks[l] = pyr[l].m;
-    if (lift) {
-      rects[l].insert(rects[l].end(), pyr_off[l].rect.begin(), pyr_off[l].rect.end());
-      blocks[l].insert(blocks[l].end(), pyr_off[l].m.begin(), pyr_off[l].m.end());
-    }
-    mm.rect[l] = rects[l].data(), mm.rect_off[l] = lift ? pyr[l].rect.size() : 0;
+    mm.rect_at[l] = zmap.size();
+    zmap.insert(zmap.end(), pyr[l].rect.begin(), pyr[l].rect.end());
+    mm.rect_off[l] = lift ? pyr[l].rect.size() : 0;
+    if (lift) zmap.insert(zmap.end(), pyr_off[l].rect.begin(), pyr_off[l].rect.end());
+    blocks[l] = pyr[l].m;
+    if (lift) blocks[l].insert(blocks[l].end(), pyr_off[l].m.begin(), pyr_off[l].m.end());
     mm.blocks[l] = blocks[l].data(), mm.blocks_off[l] = lift ? pyr[l].m.size() : 0;
     mm.bw[l] = pyr[l].bw, mm.bh[l] = pyr[l].bh;
   }
+  mm.maps = zmap.data();
   mm.front_k = static_cast<float>(1.0 + kWetHitMargin);
   mm.thick_k = static_cast<float>(1.0 + kWetHitMargin + kWetThickness);
   mm.max_steps = 4 * (W + H);

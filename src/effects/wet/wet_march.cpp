@@ -22,6 +22,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 
 #include "effects/wet/wet_march.hpp"
 
@@ -86,7 +87,7 @@ void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   constexpr std::size_t kGroups = BRUME_WET_GROUPS;
   const std::size_t L = kGroups * N;
   enum { kWc, kDw, kUinf, kVinf, kCu, kCv, kMajor, kWlift, kDzPos, kCanLift, kLifted, kFront, kFine, kStep, kBusy,
-         kEvent, kWprev, kU, kV, kStates };
+         kPhase, kEvent, kWprev, kU, kV, kStates };
   auto st = hwy::AllocateAligned<double>(kStates * L);
   double* S[kStates];
   for (int k = 0; k < kStates; ++k) S[k] = st.get() + k * L;
@@ -103,7 +104,7 @@ void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     S[kDzPos][l] = (r.flags[i] & WetMarchRays::dz_positive) ? 1.0 : 0.0;
     S[kCanLift][l] = (r.flags[i] & WetMarchRays::can_lift) ? 1.0 : 0.0;
     S[kLifted][l] = (r.flags[i] & WetMarchRays::lifted) ? 1.0 : 0.0;
-    S[kFront][l] = 1.0, S[kFine][l] = 0.0, S[kStep][l] = 0.0;
+    S[kFront][l] = 1.0, S[kFine][l] = 0.0, S[kStep][l] = 0.0, S[kPhase][l] = 0.0;
   };
   for (std::size_t l = 0; l < L; ++l) take(l);
   // a round's events, a lane's bits
@@ -121,41 +122,68 @@ void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     const VD t = hn::Trunc(x);
     return hn::Add(t, hn::IfThenElseZero(hn::Ge(hn::Sub(x, t), half), one));
   };
-  // A map's value at the index (a whole number, exact in double) times a margin, in float as the
-  // scalar march's product, widened; lanes outside `on` read index 0.
-  const auto read = [&](const float* base, VD idx, MD on, decltype(fk) k) -> VD {
-    const auto i32 = hn::DemoteTo(di, hn::IfThenElseZero(on, idx));
-    return hn::PromoteTo(dd, hn::Mul(hn::GatherIndex(df, base, i32), k));
-  };
-  // Whether the step from wc to w1 clears the blocks of level lv (size S) it meets, for the lanes
-  // of `on` (render_wet's `clears`).
-  const auto clears = [&](int lv, double S, VD wc, VD w1, VD uinf, VD vinf, VD cu, VD cv, VD lifted, MD on)
-                          HWY_INLINE_LAMBDA -> MD {
-    const VD u0 = hn::Add(uinf, hn::Mul(wc, cu)), v0 = hn::Add(vinf, hn::Mul(wc, cv));
+  // One round of group g: each lane's ray one phase of an iteration of render_wet's loop (the
+  // 32-px blocks asked; the 8-px blocks asked, where 32 did not clear; one pixel's step, where
+  // those did not clear or the last ask's 8 single steps are not done): one read of the maps and
+  // one division a lane. True where a lane's ray met an event (ended, or crossed the map).
+  const VD two = hn::Set(dd, 2.0);
+  const auto round = [&](std::size_t g) HWY_INLINE_LAMBDA -> std::uint64_t {
+    const std::size_t o = g * N;
+    const VD wc = hn::Load(dd, S[kWc] + o);
+    const VD dw = hn::Load(dd, S[kDw] + o), uinf = hn::Load(dd, S[kUinf] + o), vinf = hn::Load(dd, S[kVinf] + o);
+    const VD cu = hn::Load(dd, S[kCu] + o), cv = hn::Load(dd, S[kCv] + o);
+    VD lifted = hn::Load(dd, S[kLifted] + o), front = hn::Load(dd, S[kFront] + o), fine = hn::Load(dd, S[kFine] + o);
+    VD step = hn::Load(dd, S[kStep] + o), ph = hn::Load(dd, S[kPhase] + o);
+    const MD act = hn::Gt(hn::Load(dd, S[kBusy] + o), zero);
+    const MD dzpos = hn::Gt(hn::Load(dd, S[kDzPos] + o), zero);
+    // the top of the loop: within half a pixel of the vanishing point; the lift
+    const MD start = hn::And(act, hn::Eq(ph, zero));
+    const MD vanish = hn::And(start, hn::And(dzpos, hn::Lt(hn::Mul(wc, hn::Load(dd, S[kMajor] + o)), half)));
+    const MD go = hn::AndNot(vanish, start);
+    const VD wlift = hn::Load(dd, S[kWlift] + o);
+    const MD lift_now =
+        hn::And(hn::And(go, hn::Gt(hn::Load(dd, S[kCanLift] + o), zero)),
+                hn::And(hn::Eq(lifted, zero), hn::Or(hn::And(dzpos, hn::Le(wc, wlift)), hn::AndNot(dzpos, hn::Ge(wc, wlift)))));
+    lifted = hn::IfThenElse(lift_now, one, lifted);
+    const MD on_lift = hn::Gt(lifted, zero);
+    // the phase: A asks the 32-px blocks, B the 8-px ones, C steps a pixel
+    const MD doA = hn::And(go, hn::Eq(fine, zero));
+    const MD doB = hn::And(act, hn::Eq(ph, one));
+    const MD ask = hn::Or(doA, doB);
+    const MD doC = hn::Or(hn::AndNot(doA, go), hn::And(act, hn::Eq(ph, two)));
+    // the step's end: w + 32·dw, w + 8·dw, w + dw (1·dw is dw)
+    const VD k = hn::IfThenElse(doA, hn::Set(dd, static_cast<double>(kWetCoarseBlock)),
+                                hn::IfThenElse(doB, hn::Set(dd, static_cast<double>(kWetFineBlock)), one));
+    const VD w1 = hn::Add(wc, hn::Mul(k, dw));
     const VD u1 = hn::Add(uinf, hn::Mul(w1, cu)), v1 = hn::Add(vinf, hn::Mul(w1, cv));
-    on = hn::And(on, inside(u1, v1));
-    const VD inv_s = hn::Set(dd, 1.0 / S);
-    // std::max(0, int(x) / S) = floor(max(int(x), 0) / S); std::min(last, int(y) / S), y > 0
+    const MD ok = hn::And(hn::Gt(w1, zero), inside(u1, v1));
+    // An ask: the blocks the step and its margins meet, std::max(0, int(x) / S) = floor(max(int(x),
+    // 0)/S) and std::min(last, int(y) / S) (y > 0), S a power of two.
+    const VD u0 = hn::Add(uinf, hn::Mul(wc, cu)), v0 = hn::Add(vinf, hn::Mul(wc, cv));
+    const VD inv_s = hn::IfThenElse(doA, hn::Set(dd, 1.0 / kWetCoarseBlock), hn::Set(dd, 1.0 / kWetFineBlock));
+    const VD bw = hn::IfThenElse(doA, hn::Set(dd, m.bw[0]), hn::Set(dd, m.bw[1]));
+    const VD bh = hn::IfThenElse(doA, hn::Set(dd, m.bh[0]), hn::Set(dd, m.bh[1]));
     const auto lo = [&](VD a) { return hn::Floor(hn::Mul(hn::Max(hn::Trunc(hn::Sub(a, one)), zero), inv_s)); };
-    const auto hi = [&](VD a, double last) {
-      return hn::Min(hn::Floor(hn::Mul(hn::Trunc(hn::Add(a, hn::Set(dd, 2.0))), inv_s)), hn::Set(dd, last));
-    };
+    const auto hi = [&](VD a, VD n) { return hn::Min(hn::Floor(hn::Mul(hn::Trunc(hn::Add(a, two)), inv_s)), hn::Sub(n, one)); };
     const VD bx0 = lo(hn::Min(u0, u1)), by0 = lo(hn::Min(v0, v1));
-    const VD bx1 = hi(hn::Max(u0, u1), m.bw[lv] - 1.0), by1 = hi(hn::Max(v0, v1), m.bh[lv] - 1.0);
+    const VD bx1 = hi(hn::Max(u0, u1), bw), by1 = hi(hn::Max(v0, v1), bh);
     const VD nx = hn::Sub(bx1, bx0), ny = hn::Sub(by1, by0);
-    const VD two = hn::Set(dd, 2.0);
     const MD fits = hn::And(hn::And(hn::Ge(nx, zero), hn::Le(nx, two)), hn::And(hn::Ge(ny, zero), hn::Le(ny, two)));
+    const MD asked = hn::And(ask, ok);
     MD other = hn::FirstN(dd, 0);  // the lanes whose blocks the table does not hold, asked one by one
-    if (!hn::AllTrue(dd, hn::Or(fits, hn::Not(on)))) {
+    if (HWY_UNLIKELY(!hn::AllFalse(dd, hn::AndNot(fits, asked)))) {
       // (not seen: a step of S px and its margins spans at most 3 x 3 blocks) render_wet's loop
       // over the blocks, lane by lane
       HWY_ALIGN double a[8][kMaxLanes];
       hn::Store(bx0, dd, a[0]), hn::Store(bx1, dd, a[1]), hn::Store(by0, dd, a[2]), hn::Store(by1, dd, a[3]);
-      hn::Store(hn::IfThenElseZero(hn::AndNot(fits, on), one), dd, a[4]);
-      hn::Store(lifted, dd, a[5]), hn::Store(wc, dd, a[6]), hn::Store(w1, dd, a[7]);
+      hn::Store(hn::IfThenElseZero(hn::AndNot(fits, asked), one), dd, a[4]);
+      hn::Store(hn::IfThenElseZero(doA, one), dd, a[5]), hn::Store(wc, dd, a[6]), hn::Store(w1, dd, a[7]);
+      HWY_ALIGN double lf[kMaxLanes];
+      hn::Store(lifted, dd, lf);
       for (std::size_t l = 0; l < N; ++l) {
         if (!(a[4][l] > 0.0)) continue;
-        const float* b = m.blocks[lv] + (a[5][l] > 0.0 ? m.blocks_off[lv] : 0);
+        const int lv = a[5][l] > 0.0 ? 0 : 1;
+        const float* b = m.blocks[lv] + (lf[l] > 0.0 ? m.blocks_off[lv] : 0);
         float near = INFINITY;
         for (int y = static_cast<int>(a[2][l]); y <= static_cast<int>(a[3][l]); ++y)
           for (int x = static_cast<int>(a[0][l]); x <= static_cast<int>(a[1][l]); ++x)
@@ -164,75 +192,59 @@ void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
       }
       other = hn::Gt(hn::Load(dd, a[4]), zero);
     }
-    const VD idx = hn::Add(hn::Add(hn::Mul(hn::Set(dd, 9.0), hn::Add(hn::Mul(by0, hn::Set(dd, m.bw[lv])), bx0)),
-                                   hn::Add(hn::Mul(hn::Set(dd, 3.0), ny), nx)),
-                           hn::IfThenElseZero(hn::Gt(lifted, zero), hn::Set(dd, static_cast<double>(m.rect_off[lv]))));
-    const VD nearfk = read(m.rect[lv], idx, hn::And(on, fits), fk);
-    return hn::Or(other, hn::And(hn::And(on, fits), hn::Le(hn::Div(one, hn::Min(wc, w1)), nearfk)));
+    const VD rect_at = hn::IfThenElse(doA, hn::Set(dd, static_cast<double>(m.rect_at[0])),
+                                      hn::Set(dd, static_cast<double>(m.rect_at[1])));
+    const VD rect_off = hn::IfThenElse(doA, hn::Set(dd, static_cast<double>(m.rect_off[0])),
+                                       hn::Set(dd, static_cast<double>(m.rect_off[1])));
+    const VD ridx = hn::Add(hn::Add(hn::Mul(hn::Set(dd, 9.0), hn::Add(hn::Mul(by0, bw), bx0)), hn::Add(hn::Mul(hn::Set(dd, 3.0), ny), nx)),
+                            hn::Add(rect_at, hn::IfThenElseZero(on_lift, rect_off)));
+    // a step: the pixel's planar depth
+    const VD zidx = hn::Add(hn::Add(hn::Mul(round_inside(v1), Wd), round_inside(u1)), hn::IfThenElseZero(on_lift, z_off));
+    const MD read_on = hn::And(ok, hn::Or(hn::And(ask, fits), doC));
+    const auto i32 = hn::DemoteTo(di, hn::IfThenElseZero(read_on, hn::IfThenElse(ask, ridx, zidx)));
+    // the depth times the margin in float, as the scalar march's product, widened
+    const VD near = hn::PromoteTo(dd, hn::Mul(hn::GatherIndex(df, m.maps, i32), fk));
+    const VD inv = hn::Div(one, hn::IfThenElse(doC, w1, hn::Min(wc, w1)));
+    const MD clear = hn::Or(other, hn::And(hn::And(asked, fits), hn::Le(inv, near)));
+    const MD behind = hn::Gt(inv, near);
+    const MD ca = hn::And(doA, clear), cb = hn::And(doB, clear);
+    const MD leave = hn::AndNot(ok, doC);
+    const MD stepped = hn::And(doC, ok);
+    const MD cross = hn::And(hn::And(stepped, behind), hn::Gt(front, zero));
+    fine = hn::IfThenElse(doC, hn::IfThenElse(hn::Gt(fine, zero), hn::Sub(fine, one), hn::Set(dd, kWetFineBlock - 1.0)), fine);
+    const MD cleared = hn::Or(ca, cb);
+    front = hn::IfThenElse(stepped, hn::IfThenElseZero(hn::Not(behind), one), hn::IfThenElse(cleared, one, front));
+    const MD moved = hn::Or(cleared, stepped);
+    // the next phase: B after a failed A, C after a failed B, else a new iteration
+    ph = hn::IfThenElse(hn::AndNot(clear, doA), one, hn::IfThenElseZero(hn::AndNot(clear, doB), two));
+    // the iteration's end: the step count (the scalar loop's bound: a single step that reaches it
+    // ends at infinity, a block step leaves)
+    const MD at_max = hn::And(moved, hn::Eq(hn::Add(step, one), max_steps));
+    step = hn::IfThenElse(moved, hn::Add(step, one), step);
+    hn::Store(hn::IfThenElse(moved, w1, wc), dd, S[kWc] + o), hn::Store(lifted, dd, S[kLifted] + o);
+    hn::Store(front, dd, S[kFront] + o), hn::Store(fine, dd, S[kFine] + o), hn::Store(step, dd, S[kStep] + o);
+    hn::Store(ph, dd, S[kPhase] + o);
+    const MD event = hn::Or(hn::Or(vanish, leave), hn::Or(cross, at_max));
+    const VD ev = hn::Add(hn::Add(hn::IfThenElseZero(vanish, hn::Set(dd, kVanish)), hn::IfThenElseZero(leave, hn::Set(dd, kLeave))),
+                          hn::Add(hn::Add(hn::IfThenElseZero(cross, hn::Set(dd, kCross)), hn::IfThenElseZero(at_max, hn::Set(dd, kAtMax))),
+                                  hn::IfThenElseZero(stepped, hn::Set(dd, kStepped))));
+    hn::Store(ev, dd, S[kEvent] + o), hn::Store(wc, dd, S[kWprev] + o);
+    hn::Store(u1, dd, S[kU] + o), hn::Store(v1, dd, S[kV] + o);
+    std::uint8_t bits[8] = {};
+    hn::StoreMaskBits(dd, event, bits);
+    std::uint64_t b = 0;
+    std::memcpy(&b, bits, sizeof b);
+    return b;
   };
-
-  // One round of group g: each lane's ray one iteration of render_wet's loop; true where a lane's
-  // ray met an event (ended, or crossed the map).
-  const auto round = [&](std::size_t g) HWY_INLINE_LAMBDA -> bool {
-    const std::size_t o = g * N;
-      VD wc = hn::Load(dd, S[kWc] + o);
-      const VD dw = hn::Load(dd, S[kDw] + o), uinf = hn::Load(dd, S[kUinf] + o), vinf = hn::Load(dd, S[kVinf] + o);
-      const VD cu = hn::Load(dd, S[kCu] + o), cv = hn::Load(dd, S[kCv] + o), major = hn::Load(dd, S[kMajor] + o);
-      const VD wlift = hn::Load(dd, S[kWlift] + o);
-      const MD dzpos = hn::Gt(hn::Load(dd, S[kDzPos] + o), zero), canlift = hn::Gt(hn::Load(dd, S[kCanLift] + o), zero);
-      VD lifted = hn::Load(dd, S[kLifted] + o), front = hn::Load(dd, S[kFront] + o), fine = hn::Load(dd, S[kFine] + o);
-      VD step = hn::Load(dd, S[kStep] + o);
-      const MD act = hn::Gt(hn::Load(dd, S[kBusy] + o), zero);
-      // the top of the loop: within half a pixel of the vanishing point; the lift
-      const MD vanish = hn::And(act, hn::And(dzpos, hn::Lt(hn::Mul(wc, major), half)));
-      const MD top = hn::AndNot(vanish, act);
-      const MD lift_now = hn::And(hn::And(top, canlift),
-                                  hn::And(hn::Eq(lifted, zero), hn::Or(hn::And(dzpos, hn::Le(wc, wlift)), hn::AndNot(dzpos, hn::Ge(wc, wlift)))));
-      lifted = hn::IfThenElse(lift_now, one, lifted);
-      // The blocks, where the single steps are done: 32 px, then 8 where 32 did not clear; else one
-      // pixel's step. All three from the same w (a failed ask leaves it), their reads side by side.
-      const MD ask = hn::And(top, hn::Eq(fine, zero));
-      const VD wa = hn::Add(wc, hn::Mul(hn::Set(dd, static_cast<double>(kWetCoarseBlock)), dw));
-      const VD wb = hn::Add(wc, hn::Mul(hn::Set(dd, static_cast<double>(kWetFineBlock)), dw));
-      const VD wn = hn::Add(wc, dw);
-      const MD ca = clears(0, kWetCoarseBlock, wc, wa, uinf, vinf, cu, cv, lifted, hn::And(ask, hn::Gt(wa, zero)));
-      const MD cb = hn::AndNot(ca, clears(1, kWetFineBlock, wc, wb, uinf, vinf, cu, cv, lifted, hn::And(ask, hn::Gt(wb, zero))));
-      const VD u = hn::Add(uinf, hn::Mul(wn, cu)), v = hn::Add(vinf, hn::Mul(wn, cv));
-      const MD in_n = hn::And(top, hn::And(hn::Gt(wn, zero), inside(u, v)));
-      const VD idx = hn::Add(hn::Add(hn::Mul(round_inside(v), Wd), round_inside(u)),
-                             hn::IfThenElseZero(hn::Gt(lifted, zero), z_off));
-      const MD behind = hn::Gt(hn::Div(one, wn), read(m.z, idx, in_n, fk));
-      const MD cleared = hn::Or(ca, cb);
-      const MD single = hn::AndNot(cleared, top);
-      fine = hn::IfThenElse(single, hn::IfThenElse(hn::Gt(fine, zero), hn::Sub(fine, one), hn::Set(dd, kWetFineBlock - 1.0)), fine);
-      const MD leave = hn::AndNot(in_n, single);
-      const MD stepped = hn::And(single, in_n);
-      const MD cross = hn::And(hn::And(stepped, behind), hn::Gt(front, zero));
-      const VD wprev = wc;
-      front = hn::IfThenElse(stepped, hn::IfThenElseZero(hn::Not(behind), one), hn::IfThenElse(cleared, one, front));
-      wc = hn::IfThenElse(stepped, wn, hn::IfThenElse(ca, wa, hn::IfThenElse(cb, wb, wc)));
-      // the iteration's end: the step count (the scalar loop's bound: a single step that reaches it
-      // ends at infinity, a block step leaves)
-      const MD counted = hn::Or(cleared, stepped);
-      const MD at_max = hn::And(counted, hn::Eq(hn::Add(step, one), max_steps));
-      step = hn::IfThenElse(counted, hn::Add(step, one), step);
-      hn::Store(wc, dd, S[kWc] + o), hn::Store(lifted, dd, S[kLifted] + o), hn::Store(front, dd, S[kFront] + o);
-      hn::Store(fine, dd, S[kFine] + o), hn::Store(step, dd, S[kStep] + o);
-      const VD ev = hn::Add(hn::Add(hn::IfThenElseZero(vanish, hn::Set(dd, kVanish)), hn::IfThenElseZero(leave, hn::Set(dd, kLeave))),
-                            hn::Add(hn::Add(hn::IfThenElseZero(cross, hn::Set(dd, kCross)), hn::IfThenElseZero(at_max, hn::Set(dd, kAtMax))),
-                                    hn::IfThenElseZero(stepped, hn::Set(dd, kStepped))));
-      hn::Store(ev, dd, S[kEvent] + o), hn::Store(wprev, dd, S[kWprev] + o);
-      hn::Store(u, dd, S[kU] + o), hn::Store(v, dd, S[kV] + o);
-      return !hn::AllFalse(dd, hn::Or(hn::Or(vanish, leave), hn::Or(cross, at_max)));
-  };
-  bool any = N > 0 && n > 0;
-  while (any) {
-    bool event = false;
-    for (std::size_t g = 0; g < kGroups; ++g) event |= round(g);
-    if (!event) continue;
-    for (std::size_t l = 0; l < L; ++l) {
+  std::size_t busy = std::min(L, n);
+  while (busy > 0) {
+    std::uint64_t bits[kGroups], any = 0;
+    for (std::size_t g = 0; g < kGroups; ++g) any |= bits[g] = round(g);
+    if (HWY_LIKELY(any == 0)) continue;
+    for (std::size_t g = 0; g < kGroups; ++g)
+      for (std::uint64_t bs = bits[g]; bs != 0; bs &= bs - 1) {
+      const std::size_t l = g * N + static_cast<std::size_t>(hwy::Num0BitsBelowLS1Bit_Nonzero64(bs));
       const int e = static_cast<int>(S[kEvent][l]);
-      if (!(S[kBusy][l] > 0.0) || (e & ~kStepped) == 0) continue;
       const std::size_t i = ray[l];
       WetMarchRays::End end = WetMarchRays::leaves;
       bool over = false;
@@ -241,13 +253,13 @@ void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
       if (e & kCross) {
         // the crossing, bisected to 1/64 of a step (render_wet's expressions)
         const double ui = S[kUinf][l], vi = S[kVinf][l], cui = S[kCu][l], cvi = S[kCv][l];
-        const float* zm = m.z + (S[kLifted][l] > 0.0 ? m.z_off : 0);
+        const float* zm = m.maps + m.z_at + (S[kLifted][l] > 0.0 ? m.z_off : 0);
         const auto in = [&](double a, double b) { return a > -0.5 && a < W - 0.5 && b > -0.5 && b < H - 0.5; };
         const auto zat = [&](double a, double b) {
           return zm[static_cast<std::size_t>(wet_round_inside(b)) * W + static_cast<std::size_t>(wet_round_inside(a))];
         };
         double lo = S[kWprev][l], hi = S[kWc][l];
-        for (int b = 0; b < 6; ++b) {
+        for (int it = 0; it < 6; ++it) {
           const double mid = 0.5 * (lo + hi);
           const double mu = ui + mid * cui, mv = vi + mid * cvi;
           if (in(mu, mv) && 1.0 / mid > zat(mu, mv) * m.front_k) hi = mid; else lo = mid;
@@ -260,13 +272,11 @@ void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
         }
       }
       if (!over && (e & kAtMax)) over = true, end = (e & kStepped) ? WetMarchRays::infinity : WetMarchRays::leaves;
-      S[kEvent][l] = 0.0;
       if (!over) continue;
       r.end[i] = end;
       take(l);
+      busy -= S[kBusy][l] > 0.0 ? 0 : 1;
     }
-    any = false;
-    for (std::size_t l = 0; l < L; ++l) any = any || S[kBusy][l] > 0.0;
   }
 }
 

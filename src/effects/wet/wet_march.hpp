@@ -16,10 +16,9 @@ constexpr int kWetCoarseBlock = 32, kWetFineBlock = 8;
 // the offsets *_off (0: no such copy).
 struct WetMarchMaps {
   int width = 0, height = 0;
-  const float* z = nullptr;  // planar depth, width x height (inf: the sky)
-  std::size_t z_off = 0;
-  const float* rect[2] = {nullptr, nullptr};  // coarse, fine: 9 rectangle minima a block
-  std::size_t rect_off[2] = {0, 0};
+  const float* maps = nullptr;  // one array: the march's lanes read any of the maps in one gather
+  std::size_t z_at = 0, z_off = 0;  // planar depth, width x height (inf: the sky)
+  std::size_t rect_at[2] = {0, 0}, rect_off[2] = {0, 0};  // coarse, fine: 9 rectangle minima a block
   int bw[2] = {0, 0}, bh[2] = {0, 0};
   const float* blocks[2] = {nullptr, nullptr};  // the blocks' own minima (bw x bh), for a rectangle the table lacks
   std::size_t blocks_off[2] = {0, 0};
