@@ -93,9 +93,23 @@ void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   for (int k = 0; k < kStates; ++k) S[k] = st.get() + k * L;
   std::vector<std::size_t> ray(L, 0);
   std::size_t next = 0;
-  const auto take = [&](std::size_t l) {  // lane l takes the next ray, if any
-    S[kBusy][l] = next < n ? 1.0 : 0.0;
+  // A crossing's ray waits for its bisection (kept with its state, so that a ray that passed behind
+  // a surface goes on); the bisections run side by side once a vector's worth wait.
+  struct Waiting {
+    std::size_t ray;
+    double st[kStates];
+  };
+  std::vector<Waiting> waiting, again;  // crossed; to go on
+  const auto take = [&](std::size_t l) {  // lane l takes a ray that goes on, else the next ray, if any
     S[kEvent][l] = 0.0;
+    if (!again.empty()) {
+      const Waiting& a = again.back();
+      for (int k = 0; k < kStates; ++k) S[k][l] = a.st[k];
+      ray[l] = a.ray;
+      again.pop_back();
+      return;
+    }
+    S[kBusy][l] = next < n ? 1.0 : 0.0;
     if (next >= n) return;
     const std::size_t i = next++;
     ray[l] = i;
@@ -236,8 +250,62 @@ void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     std::memcpy(&b, bits, sizeof b);
     return b;
   };
-  std::size_t busy = std::min(L, n);
-  while (busy > 0) {
+  // The crossings of waiting[0, c), N at a time, bisected to 1/64 of a step (render_wet's
+  // expressions): a hit ends the ray; else it goes on (or, at the step bound, ends at infinity).
+  std::size_t busy = std::min(L, n);  // lanes holding a ray
+  const auto bisect = [&]() {
+    for (std::size_t c0 = 0; c0 < waiting.size(); c0 += N) {
+      const std::size_t c = std::min(N, waiting.size() - c0);
+      HWY_ALIGN double a[9][kMaxLanes];
+      for (std::size_t j = 0; j < N; ++j) {
+        const double* q = waiting[c0 + (j < c ? j : 0)].st;
+        a[0][j] = q[kWprev], a[1][j] = q[kWc], a[2][j] = q[kUinf], a[3][j] = q[kVinf], a[4][j] = q[kCu];
+        a[5][j] = q[kCv], a[6][j] = q[kLifted], a[7][j] = q[kU], a[8][j] = q[kV];
+      }
+      VD lo = hn::Load(dd, a[0]), hi = hn::Load(dd, a[1]);
+      const VD ui = hn::Load(dd, a[2]), vi = hn::Load(dd, a[3]), cui = hn::Load(dd, a[4]), cvi = hn::Load(dd, a[5]);
+      const VD zo = hn::IfThenElseZero(hn::Gt(hn::Load(dd, a[6]), zero), z_off);
+      const auto depth = [&](VD mu, VD mv, MD on, decltype(fk) k) {
+        const VD idx = hn::Add(hn::Add(hn::Mul(round_inside(mv), Wd), round_inside(mu)), zo);
+        const auto i32 = hn::DemoteTo(di, hn::IfThenElseZero(on, idx));
+        return hn::PromoteTo(dd, hn::Mul(hn::GatherIndex(df, m.maps + m.z_at, i32), k));
+      };
+      for (int it = 0; it < 6; ++it) {
+        const VD mid = hn::Mul(half, hn::Add(lo, hi));
+        const VD mu = hn::Add(ui, hn::Mul(mid, cui)), mv = hn::Add(vi, hn::Mul(mid, cvi));
+        const MD in = inside(mu, mv);
+        const MD c_hi = hn::And(in, hn::Gt(hn::Div(one, mid), depth(mu, mv, in, fk)));
+        hi = hn::IfThenElse(c_hi, mid, hi), lo = hn::IfThenElse(c_hi, lo, mid);
+      }
+      VD hu = hn::Add(ui, hn::Mul(hi, cui)), hv = hn::Add(vi, hn::Mul(hi, cvi));
+      const MD in = inside(hu, hv);
+      hu = hn::IfThenElse(in, hu, hn::Load(dd, a[7])), hv = hn::IfThenElse(in, hv, hn::Load(dd, a[8]));
+      const MD hit = hn::Le(hn::Div(one, hi), depth(hu, hv, hn::FirstN(dd, N), hn::Set(df, m.thick_k)));
+      hn::Store(hu, dd, a[0]), hn::Store(hv, dd, a[1]), hn::Store(hn::IfThenElseZero(hit, one), dd, a[2]);
+      for (std::size_t j = 0; j < c; ++j) {
+        Waiting& w = waiting[c0 + j];
+        const std::size_t i = w.ray;
+        if (a[2][j] > 0.0) {
+          r.end[i] = WetMarchRays::hit, r.hu[i] = a[0][j], r.hv[i] = a[1][j];
+        } else if (static_cast<int>(w.st[kEvent]) & kAtMax) {
+          r.end[i] = WetMarchRays::infinity;
+        } else {
+          w.st[kEvent] = 0.0;
+          again.push_back(w);
+        }
+      }
+    }
+    waiting.clear();
+    for (std::size_t l = 0; l < L && !again.empty(); ++l)
+      if (!(S[kBusy][l] > 0.0)) {
+        S[kBusy][l] = 1.0;
+        take(l);
+        ++busy;
+      }
+  };
+  while (busy > 0 || !waiting.empty()) {
+    if (waiting.size() >= N || busy == 0) bisect();
+    if (busy == 0) continue;
     std::uint64_t bits[kGroups], any = 0;
     for (std::size_t g = 0; g < kGroups; ++g) any |= bits[g] = round(g);
     if (HWY_LIKELY(any == 0)) continue;
@@ -250,26 +318,14 @@ void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
       bool over = false;
       if (e & kVanish) over = true, end = WetMarchRays::infinity;
       if (e & kLeave) over = true, end = WetMarchRays::leaves;
-      if (e & kCross) {
-        // the crossing, bisected to 1/64 of a step (render_wet's expressions)
-        const double ui = S[kUinf][l], vi = S[kVinf][l], cui = S[kCu][l], cvi = S[kCv][l];
-        const float* zm = m.maps + m.z_at + (S[kLifted][l] > 0.0 ? m.z_off : 0);
-        const auto in = [&](double a, double b) { return a > -0.5 && a < W - 0.5 && b > -0.5 && b < H - 0.5; };
-        const auto zat = [&](double a, double b) {
-          return zm[static_cast<std::size_t>(wet_round_inside(b)) * W + static_cast<std::size_t>(wet_round_inside(a))];
-        };
-        double lo = S[kWprev][l], hi = S[kWc][l];
-        for (int it = 0; it < 6; ++it) {
-          const double mid = 0.5 * (lo + hi);
-          const double mu = ui + mid * cui, mv = vi + mid * cvi;
-          if (in(mu, mv) && 1.0 / mid > zat(mu, mv) * m.front_k) hi = mid; else lo = mid;
-        }
-        double hu = ui + hi * cui, hv = vi + hi * cvi;
-        if (!in(hu, hv)) hu = S[kU][l], hv = S[kV][l];
-        if (1.0 / hi <= zat(hu, hv) * m.thick_k) {
-          over = true, end = WetMarchRays::hit;
-          r.hu[i] = hu, r.hv[i] = hv;
-        }
+      if (e & kCross) {  // (kVanish and kLeave exclude it) bisected below
+        Waiting w;
+        w.ray = i;
+        for (int k = 0; k < kStates; ++k) w.st[k] = S[k][l];
+        waiting.push_back(w);
+        take(l);
+        busy -= S[kBusy][l] > 0.0 ? 0 : 1;
+        continue;
       }
       if (!over && (e & kAtMax)) over = true, end = (e & kStepped) ? WetMarchRays::infinity : WetMarchRays::leaves;
       if (!over) continue;
