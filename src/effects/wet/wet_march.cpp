@@ -66,7 +66,7 @@ inline long wet_round_inside(double x) {
 
 }  // namespace
 
-void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
+bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   const hn::ScalableTag<double> dd;
   const hn::Rebind<float, decltype(dd)> df;
   const hn::Rebind<std::int32_t, decltype(dd)> di;
@@ -77,6 +77,7 @@ void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
 #ifndef BRUME_WET_GROUPS
 #define BRUME_WET_GROUPS 4
 #endif
+  if (N < 8) return false;
   const std::size_t n = r.size();
   r.end.assign(n, WetMarchRays::leaves), r.hu.assign(n, 0.0), r.hv.assign(n, 0.0);
   const int W = m.width, H = m.height;
@@ -334,6 +335,7 @@ void WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
       busy -= S[kBusy][l] > 0.0 ? 0 : 1;
     }
   }
+  return true;
 }
 
 }  // namespace HWY_NAMESPACE
@@ -344,6 +346,6 @@ HWY_AFTER_NAMESPACE();
 namespace brume::detail {
 HWY_EXPORT(WetMarchRaysK);
 
-void wet_march_rays(const WetMarchMaps& m, WetMarchRays& r) { HWY_DYNAMIC_DISPATCH(WetMarchRaysK)(m, r); }
+bool wet_march_rays(const WetMarchMaps& m, WetMarchRays& r) { return HWY_DYNAMIC_DISPATCH(WetMarchRaysK)(m, r); }
 }  // namespace brume::detail
 #endif  // HWY_ONCE

@@ -42,8 +42,10 @@ struct WetMarchRays {
             double w_lift_, std::uint8_t flags_);
 };
 
-// Marches every ray of `r` and fills its end, hu and hv: the same steps, tests and bisection as
-// the scalar march it replaced, lane by lane (the same bits).
-void wet_march_rays(const WetMarchMaps& m, WetMarchRays& r);
+// Marches every ray of `r` and fills its end, hu and hv, several rays side by side: the same
+// steps, tests and bisection as render_wet's march a ray at a time, lane by lane (the same bits).
+// False, and nothing done, where the CPU's vectors hold fewer than 8 doubles: there the lanes
+// were measured slower than a ray at a time (docs/wet-ground.md).
+bool wet_march_rays(const WetMarchMaps& m, WetMarchRays& r);
 
 }  // namespace brume::detail
