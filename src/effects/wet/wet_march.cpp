@@ -1,19 +1,26 @@
-// brume — the camera's mirror march (wet_march.hpp): a batch of rays, as many side by side as a
-// SIMD vector of doubles holds (the baseline fallback: 2; AVX2, 4; AVX-512, 8), written once
-// with Highway and compiled for every target of core/simd.hpp, the CPU choosing at run time
-// (HWY_DYNAMIC_DISPATCH).
+// brume — the camera's mirror march (wet_march.hpp): a batch of rays, 8 side by side in a vector
+// of doubles (AVX-512), written once with Highway and compiled for every target of core/simd.hpp,
+// the CPU choosing at run time (HWY_DYNAMIC_DISPATCH). Where a vector holds fewer than 8 doubles
+// (AVX2: 4, SSE4 and the fallback: 2) the lanes were measured slower than render_wet's march a
+// ray at a time (1.16x, 1.8x and 5x the time on KITTI 000001), so the kernel declines there and
+// wet.cpp marches a ray at a time.
 //
-// Each lane runs one ray's march, the loop render_wet ran a ray at a time before (wet.cpp; docs/
-// wet-ground.md, "The mirror"), one iteration a round: at its top the vanishing point's and the
-// lift's tests; where 8 single steps are done, the 32-px blocks asked for a whole step, then the 8-px
-// ones; else one pixel's step and its depth test. A lane whose ray ends takes the batch's next
-// ray. The rare crossing is bisected lane by lane in scalar code (the same expressions). Every
-// lane performs the scalar loop's IEEE operations in its order: w is added a step at a time as
-// before, the products and sums are the same (-ffp-contract=off on this file, CMakeLists.txt:
-// AVX2's and AVX-512's FMA never fuse them), Div is correctly rounded as divsd, a pixel's rounding
-// is Trunc plus the half's test (round_inside), the depths' products with the margins are taken in
-// float as before, and a block index's integer division by the block's size is the floor of the
-// truncated coordinate times 1/S (a power of two: exact). Test: WetCamera.MarchGivesTheSameBitsOnEveryTarget.
+// Each lane runs one ray's march, render_wet's loop (wet.cpp, march_rays_one_by_one; docs/
+// wet-ground.md, "The mirror"), one phase of an iteration a round: at the iteration's top the
+// vanishing point's and the lift's tests, then (where the last ask's 8 single steps are done) the
+// 32-px blocks asked for a whole step, next round the 8-px ones where those did not clear, and one
+// pixel's step and its depth test where neither cleared or single steps are left. A phase reads
+// the maps once (one gather: the maps lie in one array) and divides once. Four vectors of rays take
+// their rounds in turn (their reads overlap). A lane whose ray ends takes the batch's next ray; a
+// ray that crosses the map waits with its state while its lane takes another, and the crossings
+// are bisected 8 at a time (a hit ends the ray, else it goes on from where it was).
+//
+// Every lane performs the scalar loop's IEEE operations in its order: w is added a step at a time
+// as before, the products and sums are the same (-ffp-contract=off on this file, CMakeLists.txt:
+// AVX-512's FMA never fuses them), Div is correctly rounded as divsd, a pixel's rounding is Trunc
+// plus the half's test (round_inside), the depths' products with the margins are taken in float as
+// before, and a block index's integer division by the block's size is the floor of the truncated
+// coordinate times 1/S (a power of two: exact). Test: WetCamera.MarchGivesTheSameBitsOnEveryTarget.
 #include "core/simd.hpp"  // first: the targets
 
 #ifndef BRUME_WET_MARCH_SHARED
@@ -25,6 +32,9 @@
 #include <cstring>
 
 #include "effects/wet/wet_march.hpp"
+
+// (the march's lambdas inlined: GCC left one a call with its vectors passed through memory)
+#define BRUME_WET_INLINE __attribute__((always_inline))
 
 namespace brume::detail {
 
@@ -44,17 +54,14 @@ void WetMarchRays::push(double w0_, double dw_, double uinf_, double vinf_, doub
 
 #undef HWY_TARGET_INCLUDE
 #define HWY_TARGET_INCLUDE "effects/wet/wet_march.cpp"
-#include <hwy/foreach_target.h>  // IWYU pragma: keep
 #include <hwy/aligned_allocator.h>
+#include <hwy/foreach_target.h>  // IWYU pragma: keep
 #include <hwy/highway.h>
 
 HWY_BEFORE_NAMESPACE();
 namespace brume::detail {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
-
-// (the march's lambdas inlined: GCC left the asks' a call with vectors passed through memory)
-#define HWY_INLINE_LAMBDA __attribute__((always_inline))
 
 namespace {
 
@@ -74,9 +81,6 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   using MD = hn::Mask<decltype(dd)>;
   const std::size_t N = hn::Lanes(dd);
   constexpr std::size_t kMaxLanes = HWY_MAX_BYTES / sizeof(double);
-#ifndef BRUME_WET_GROUPS
-#define BRUME_WET_GROUPS 4
-#endif
   if (N < 8) return false;
   const std::size_t n = r.size();
   r.end.assign(n, WetMarchRays::leaves), r.hu.assign(n, 0.0), r.hv.assign(n, 0.0);
@@ -85,10 +89,31 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   // The lanes' state, in memory between rounds (a lane taking a new ray writes it here): kGroups
   // vectors of rays, their rounds side by side (each round's reads wait on the last's: one vector
   // alone leaves the core idle).
-  constexpr std::size_t kGroups = BRUME_WET_GROUPS;
+  constexpr std::size_t kGroups = 4;  // (2 and 6 measured the same)
   const std::size_t L = kGroups * N;
-  enum { kWc, kDw, kUinf, kVinf, kCu, kCv, kMajor, kWlift, kDzPos, kCanLift, kLifted, kFront, kFine, kStep, kBusy,
-         kPhase, kEvent, kWprev, kU, kV, kStates };
+  enum {
+    kWc,
+    kDw,
+    kUinf,
+    kVinf,
+    kCu,
+    kCv,
+    kMajor,
+    kWlift,
+    kDzPos,
+    kCanLift,
+    kLifted,
+    kFront,
+    kFine,
+    kStep,
+    kBusy,
+    kPhase,
+    kEvent,
+    kWprev,
+    kU,
+    kV,
+    kStates
+  };
   auto st = hwy::AllocateAligned<double>(kStates * L);
   double* S[kStates];
   for (int k = 0; k < kStates; ++k) S[k] = st.get() + k * L;
@@ -100,7 +125,7 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     std::size_t ray;
     double st[kStates];
   };
-  std::vector<Waiting> waiting, again;  // crossed; to go on
+  std::vector<Waiting> waiting, again;    // crossed; to go on
   const auto take = [&](std::size_t l) {  // lane l takes a ray that goes on, else the next ray, if any
     S[kEvent][l] = 0.0;
     if (!again.empty()) {
@@ -142,7 +167,7 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   // those did not clear or the last ask's 8 single steps are not done): one read of the maps and
   // one division a lane. True where a lane's ray met an event (ended, or crossed the map).
   const VD two = hn::Set(dd, 2.0);
-  const auto round = [&](std::size_t g) HWY_INLINE_LAMBDA -> std::uint64_t {
+  const auto round = [&](std::size_t g) BRUME_WET_INLINE -> std::uint64_t {
     const std::size_t o = g * N;
     const VD wc = hn::Load(dd, S[kWc] + o);
     const VD dw = hn::Load(dd, S[kDw] + o), uinf = hn::Load(dd, S[kUinf] + o), vinf = hn::Load(dd, S[kVinf] + o);
@@ -156,9 +181,9 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     const MD vanish = hn::And(start, hn::And(dzpos, hn::Lt(hn::Mul(wc, hn::Load(dd, S[kMajor] + o)), half)));
     const MD go = hn::AndNot(vanish, start);
     const VD wlift = hn::Load(dd, S[kWlift] + o);
-    const MD lift_now =
-        hn::And(hn::And(go, hn::Gt(hn::Load(dd, S[kCanLift] + o), zero)),
-                hn::And(hn::Eq(lifted, zero), hn::Or(hn::And(dzpos, hn::Le(wc, wlift)), hn::AndNot(dzpos, hn::Ge(wc, wlift)))));
+    const MD lift_now = hn::And(
+        hn::And(go, hn::Gt(hn::Load(dd, S[kCanLift] + o), zero)),
+        hn::And(hn::Eq(lifted, zero), hn::Or(hn::And(dzpos, hn::Le(wc, wlift)), hn::AndNot(dzpos, hn::Ge(wc, wlift)))));
     lifted = hn::IfThenElse(lift_now, one, lifted);
     const MD on_lift = hn::Gt(lifted, zero);
     // the phase: A asks the 32-px blocks, B the 8-px ones, C steps a pixel
@@ -179,7 +204,9 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     const VD bw = hn::IfThenElse(doA, hn::Set(dd, m.bw[0]), hn::Set(dd, m.bw[1]));
     const VD bh = hn::IfThenElse(doA, hn::Set(dd, m.bh[0]), hn::Set(dd, m.bh[1]));
     const auto lo = [&](VD a) { return hn::Floor(hn::Mul(hn::Max(hn::Trunc(hn::Sub(a, one)), zero), inv_s)); };
-    const auto hi = [&](VD a, VD n) { return hn::Min(hn::Floor(hn::Mul(hn::Trunc(hn::Add(a, two)), inv_s)), hn::Sub(n, one)); };
+    const auto hi = [&](VD a, VD n) {
+      return hn::Min(hn::Floor(hn::Mul(hn::Trunc(hn::Add(a, two)), inv_s)), hn::Sub(n, one));
+    };
     const VD bx0 = lo(hn::Min(u0, u1)), by0 = lo(hn::Min(v0, v1));
     const VD bx1 = hi(hn::Max(u0, u1), bw), by1 = hi(hn::Max(v0, v1), bh);
     const VD nx = hn::Sub(bx1, bx0), ny = hn::Sub(by1, by0);
@@ -211,10 +238,12 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
                                       hn::Set(dd, static_cast<double>(m.rect_at[1])));
     const VD rect_off = hn::IfThenElse(doA, hn::Set(dd, static_cast<double>(m.rect_off[0])),
                                        hn::Set(dd, static_cast<double>(m.rect_off[1])));
-    const VD ridx = hn::Add(hn::Add(hn::Mul(hn::Set(dd, 9.0), hn::Add(hn::Mul(by0, bw), bx0)), hn::Add(hn::Mul(hn::Set(dd, 3.0), ny), nx)),
-                            hn::Add(rect_at, hn::IfThenElseZero(on_lift, rect_off)));
+    const VD ridx = hn::Add(
+        hn::Add(hn::Mul(hn::Set(dd, 9.0), hn::Add(hn::Mul(by0, bw), bx0)), hn::Add(hn::Mul(hn::Set(dd, 3.0), ny), nx)),
+        hn::Add(rect_at, hn::IfThenElseZero(on_lift, rect_off)));
     // a step: the pixel's planar depth
-    const VD zidx = hn::Add(hn::Add(hn::Mul(round_inside(v1), Wd), round_inside(u1)), hn::IfThenElseZero(on_lift, z_off));
+    const VD zidx = hn::Add(hn::Add(hn::Mul(round_inside(v1), Wd), round_inside(u1)),
+                            hn::IfThenElseZero(on_lift, z_off));
     const MD read_on = hn::And(ok, hn::Or(hn::And(ask, fits), doC));
     const auto i32 = hn::DemoteTo(di, hn::IfThenElseZero(read_on, hn::IfThenElse(ask, ridx, zidx)));
     // the depth times the margin in float, as the scalar march's product, widened
@@ -226,7 +255,8 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     const MD leave = hn::AndNot(ok, doC);
     const MD stepped = hn::And(doC, ok);
     const MD cross = hn::And(hn::And(stepped, behind), hn::Gt(front, zero));
-    fine = hn::IfThenElse(doC, hn::IfThenElse(hn::Gt(fine, zero), hn::Sub(fine, one), hn::Set(dd, kWetFineBlock - 1.0)), fine);
+    fine = hn::IfThenElse(doC, hn::IfThenElse(hn::Gt(fine, zero), hn::Sub(fine, one), hn::Set(dd, kWetFineBlock - 1.0)),
+                          fine);
     const MD cleared = hn::Or(ca, cb);
     front = hn::IfThenElse(stepped, hn::IfThenElseZero(hn::Not(behind), one), hn::IfThenElse(cleared, one, front));
     const MD moved = hn::Or(cleared, stepped);
@@ -240,9 +270,11 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     hn::Store(front, dd, S[kFront] + o), hn::Store(fine, dd, S[kFine] + o), hn::Store(step, dd, S[kStep] + o);
     hn::Store(ph, dd, S[kPhase] + o);
     const MD event = hn::Or(hn::Or(vanish, leave), hn::Or(cross, at_max));
-    const VD ev = hn::Add(hn::Add(hn::IfThenElseZero(vanish, hn::Set(dd, kVanish)), hn::IfThenElseZero(leave, hn::Set(dd, kLeave))),
-                          hn::Add(hn::Add(hn::IfThenElseZero(cross, hn::Set(dd, kCross)), hn::IfThenElseZero(at_max, hn::Set(dd, kAtMax))),
-                                  hn::IfThenElseZero(stepped, hn::Set(dd, kStepped))));
+    const VD ev = hn::Add(
+        hn::Add(hn::IfThenElseZero(vanish, hn::Set(dd, kVanish)), hn::IfThenElseZero(leave, hn::Set(dd, kLeave))),
+        hn::Add(
+            hn::Add(hn::IfThenElseZero(cross, hn::Set(dd, kCross)), hn::IfThenElseZero(at_max, hn::Set(dd, kAtMax))),
+            hn::IfThenElseZero(stepped, hn::Set(dd, kStepped))));
     hn::Store(ev, dd, S[kEvent] + o), hn::Store(wc, dd, S[kWprev] + o);
     hn::Store(u1, dd, S[kU] + o), hn::Store(v1, dd, S[kV] + o);
     std::uint8_t bits[8] = {};
@@ -312,28 +344,28 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     if (HWY_LIKELY(any == 0)) continue;
     for (std::size_t g = 0; g < kGroups; ++g)
       for (std::uint64_t bs = bits[g]; bs != 0; bs &= bs - 1) {
-      const std::size_t l = g * N + static_cast<std::size_t>(hwy::Num0BitsBelowLS1Bit_Nonzero64(bs));
-      const int e = static_cast<int>(S[kEvent][l]);
-      const std::size_t i = ray[l];
-      WetMarchRays::End end = WetMarchRays::leaves;
-      bool over = false;
-      if (e & kVanish) over = true, end = WetMarchRays::infinity;
-      if (e & kLeave) over = true, end = WetMarchRays::leaves;
-      if (e & kCross) {  // (kVanish and kLeave exclude it) bisected below
-        Waiting w;
-        w.ray = i;
-        for (int k = 0; k < kStates; ++k) w.st[k] = S[k][l];
-        waiting.push_back(w);
+        const std::size_t l = g * N + static_cast<std::size_t>(hwy::Num0BitsBelowLS1Bit_Nonzero64(bs));
+        const int e = static_cast<int>(S[kEvent][l]);
+        const std::size_t i = ray[l];
+        WetMarchRays::End end = WetMarchRays::leaves;
+        bool over = false;
+        if (e & kVanish) over = true, end = WetMarchRays::infinity;
+        if (e & kLeave) over = true, end = WetMarchRays::leaves;
+        if (e & kCross) {  // (kVanish and kLeave exclude it) bisected below
+          Waiting w;
+          w.ray = i;
+          for (int k = 0; k < kStates; ++k) w.st[k] = S[k][l];
+          waiting.push_back(w);
+          take(l);
+          busy -= S[kBusy][l] > 0.0 ? 0 : 1;
+          continue;
+        }
+        if (!over && (e & kAtMax)) over = true, end = (e & kStepped) ? WetMarchRays::infinity : WetMarchRays::leaves;
+        if (!over) continue;
+        r.end[i] = end;
         take(l);
         busy -= S[kBusy][l] > 0.0 ? 0 : 1;
-        continue;
       }
-      if (!over && (e & kAtMax)) over = true, end = (e & kStepped) ? WetMarchRays::infinity : WetMarchRays::leaves;
-      if (!over) continue;
-      r.end[i] = end;
-      take(l);
-      busy -= S[kBusy][l] > 0.0 ? 0 : 1;
-    }
   }
   return true;
 }

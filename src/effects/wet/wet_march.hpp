@@ -16,7 +16,7 @@ constexpr int kWetCoarseBlock = 32, kWetFineBlock = 8;
 // the offsets *_off (0: no such copy).
 struct WetMarchMaps {
   int width = 0, height = 0;
-  const float* maps = nullptr;  // one array: the march's lanes read any of the maps in one gather
+  const float* maps = nullptr;      // one array: the march's lanes read any of the maps in one gather
   std::size_t z_at = 0, z_off = 0;  // planar depth, width x height (inf: the sky)
   std::size_t rect_at[2] = {0, 0}, rect_off[2] = {0, 0};  // coarse, fine: 9 rectangle minima a block
   int bw[2] = {0, 0}, bh[2] = {0, 0};
@@ -38,8 +38,8 @@ struct WetMarchRays {
   std::vector<double> hu, hv;
   std::size_t size() const { return w0.size(); }
   void clear();
-  void push(double w0_, double dw_, double uinf_, double vinf_, double cu_, double cv_, double major_,
-            double w_lift_, std::uint8_t flags_);
+  void push(double w0_, double dw_, double uinf_, double vinf_, double cu_, double cv_, double major_, double w_lift_,
+            std::uint8_t flags_);
 };
 
 // Marches every ray of `r` and fills its end, hu and hv, several rays side by side: the same
