@@ -116,6 +116,7 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   };
   auto st = hwy::AllocateAligned<double>(kStates * L);
   double* S[kStates];
+  std::fill(st.get(), st.get() + kStates * L, 0.0);  // (a lane without a ray computes on zeros)
   for (int k = 0; k < kStates; ++k) S[k] = st.get() + k * L;
   std::vector<std::size_t> ray(L, 0);
   std::size_t next = 0;
