@@ -165,7 +165,6 @@ inline long round_half_away(double x) {
   return t + (f >= 0.5) - (f <= -0.5);
 }
 
-
 // round_half_away for x > −0.5 (a coordinate inside the frame): x − trunc(x) >= 0 there, so the
 // half below zero is never taken; the same integer.
 inline long round_inside(double x) {
