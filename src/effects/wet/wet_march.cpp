@@ -63,16 +63,6 @@ namespace brume::detail {
 namespace HWY_NAMESPACE {
 namespace hn = hwy::HWY_NAMESPACE;
 
-namespace {
-
-// wet.cpp's round_inside: the nearest integer of x > −0.5, halves up.
-inline long wet_round_inside(double x) {
-  const long t = static_cast<long>(x);
-  return t + (x - static_cast<double>(t) >= 0.5);
-}
-
-}  // namespace
-
 bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   const hn::ScalableTag<double> dd;
   const hn::Rebind<float, decltype(dd)> df;
@@ -166,7 +156,7 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   // One round of group g: each lane's ray one phase of an iteration of render_wet's loop (the
   // 32-px blocks asked; the 8-px blocks asked, where 32 did not clear; one pixel's step, where
   // those did not clear or the last ask's 8 single steps are not done): one read of the maps and
-  // one division a lane. True where a lane's ray met an event (ended, or crossed the map).
+  // one division a lane. The lanes whose ray met an event (ended, or crossed the map), a bit each.
   const VD two = hn::Set(dd, 2.0);
   const auto round = [&](std::size_t g) BRUME_WET_INLINE -> std::uint64_t {
     const std::size_t o = g * N;
