@@ -20,7 +20,7 @@
 // AVX-512's FMA never fuses them), Div is correctly rounded as divsd, a pixel's rounding is Trunc
 // plus the half's test (round_inside), the depths' products with the margins are taken in float as
 // before, and a block index's integer division by the block's size is the floor of the truncated
-// coordinate times 1/S (a power of two: exact). Test: WetCamera.MarchGivesTheSameBitsOnEveryTarget.
+// coordinate times 1/S (a power of two: exact). Test: WetCamera.MarchSideBySideGivesTheSameBits.
 #include "core/simd.hpp"  // first: the targets
 
 #ifndef BRUME_WET_MARCH_SHARED
