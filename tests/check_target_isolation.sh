@@ -33,7 +33,7 @@ shift 2
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 files="src/diffusion/diffusion_fast_kernels.cpp src/diffusion/diffusion_fast_f16.cpp src/effects/fog/fog_fast.cpp
-  src/effects/dof/dof_map_kernels.cpp"
+  src/effects/dof/dof_map_kernels.cpp src/effects/wet/wet_march.cpp"
 status=0
 for f in $files; do
   for opt in -O0 -O2; do

@@ -11,6 +11,7 @@
 #include "brume/demo_scene.hpp"
 #include "brume/error.hpp"
 #include "brume/wet.hpp"
+#include "core/simd.hpp"
 #include "wet_demo.hpp"
 
 using namespace brume;
@@ -352,6 +353,48 @@ TEST(WetCamera, AboveGroundMarchAgreesWithBlocksOffThePlane) {
   EXPECT_EQ(s_mask.march, WetMarch::blocks);
   EXPECT_EQ(s_mask.ground, s_old.ground);
   EXPECT_EQ(m.data, a.data);  // the same ground by the mask, the same march: the same image
+}
+
+TEST(WetCamera, MarchSideBySideGivesTheSameBits) {
+  // The march runs several rays side by side where a vector holds 8 doubles (AVX-512:
+  // effects/wet/wet_march.cpp), a ray at a time elsewhere (wet.cpp's loop, the same code for every
+  // narrower target); both must give the same image bit for bit. The best SIMD target this CPU
+  // runs (simd::targets(), best first) against the baseline fallback (last: a ray at a time) on
+  // the demo scene, both marches: the image and the counts. On a CPU without AVX-512 both run a
+  // ray at a time and the test shows only that.
+  const int W = 256, H = 144;
+  const DemoScene d = render_demo_scene(W, H);
+  WetScene sc = test::demo_wet_scene(d, W, H);
+  sc.ground_tolerance_m = 0.15;
+  Exec exec;
+  exec.threads = 2;
+  const WetFilm w = film(1.5, 0.12, 1.0);
+  const std::vector<std::int64_t> targets = simd::targets();
+  ASSERT_FALSE(targets.empty());
+  for (const WetMarch m : {WetMarch::blocks, WetMarch::above_ground}) {
+    sc.march = m;
+    simd::force_target(targets.back());
+    WetStats ref_st;
+    const Image ref = render_wet(sc, w, exec, &ref_st);
+    ASSERT_GT(ref_st.hits, 5000u);  // every end a ray can have, and many
+    ASSERT_GT(ref_st.sky_pixels, 500u);
+    ASSERT_GT(ref_st.left_frame, 5000u);
+    for (const std::int64_t t : {targets.front(), targets.back()}) {
+      SCOPED_TRACE(simd::target_name(t) + ", " + enum_name(wet_march_names(), m));
+      simd::force_target(t);
+      WetStats st;
+      const Image got = render_wet(sc, w, exec, &st);
+      const bool same = std::memcmp(got.data.data(), ref.data.data(), ref.data.size() * sizeof(float)) == 0;
+      EXPECT_TRUE(same);
+      EXPECT_EQ(st.hits, ref_st.hits);
+      EXPECT_EQ(st.sky_pixels, ref_st.sky_pixels);
+      EXPECT_EQ(st.left_frame, ref_st.left_frame);
+      std::printf("wet march, %s, %s: %zu hits, %zu sky, %zu leave, %s\n", simd::target_name(t).c_str(),
+                  enum_name(wet_march_names(), m).c_str(), st.hits, st.sky_pixels, st.left_frame,
+                  same ? "the same bits" : "OTHER BITS");
+    }
+  }
+  simd::force_target(0);
 }
 
 namespace {

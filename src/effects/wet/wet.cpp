@@ -16,6 +16,7 @@
 #include "brume/medium.hpp"
 #include "core/text.hpp"
 #include "effects/wet/wet_gpu.hpp"
+#include "effects/wet/wet_march.hpp"
 
 namespace brume {
 
@@ -171,8 +172,118 @@ inline long round_inside(double x) {
   return t + (x - static_cast<double>(t) >= 0.5);
 }
 
-// The min-depth pyramids' block sizes [px] (the march asks the coarse one first).
-constexpr int kWetCoarseBlock = 32, kWetFineBlock = 8;
+// The march a ray at a time (wet_march.hpp's rays and maps): the reference the lanes of
+// wet_march.cpp reproduce bit for bit, and the march where a vector holds fewer than 8 doubles
+// (there the lanes measured slower: docs/wet-ground.md).
+void march_rays_one_by_one(const detail::WetMarchMaps& m, detail::WetMarchRays& r) {
+  using Rays = detail::WetMarchRays;
+  const int W = m.width, H = m.height;
+  const float front_k = m.front_k, thick_k = m.thick_k;
+  const std::size_t n = r.size();
+  r.end.assign(n, Rays::leaves), r.hu.assign(n, 0.0), r.hv.assign(n, 0.0);
+  // (-0.5 itself rounds away from zero to -1: outside, as W - 0.5 is.)
+  const auto inside = [&](double u, double v) { return u > -0.5 && u < W - 0.5 && v > -0.5 && v < H - 0.5; };
+  for (std::size_t i = 0; i < n; ++i) {
+    const double uinf = r.uinf[i], vinf = r.vinf[i], cu = r.cu[i], cv = r.cv[i], major = r.major[i], dw = r.dw[i];
+    const bool dz_positive = r.flags[i] & Rays::dz_positive, can_lift = r.flags[i] & Rays::can_lift;
+    const double w_lift = r.w_lift[i];
+    // the maps the march asks now: above_ground's without the plane's pixels once the ray is lifted
+    bool lifted = r.flags[i] & Rays::lifted;
+    const float* zm = nullptr;
+    const float *rect[2] = {nullptr, nullptr}, *blocks[2] = {nullptr, nullptr};
+    const auto maps = [&] {
+      zm = m.maps + m.z_at + (lifted ? m.z_off : 0);
+      for (int l = 0; l < 2; ++l) {
+        rect[l] = m.maps + m.rect_at[l] + (lifted ? m.rect_off[l] : 0);
+        blocks[l] = m.blocks[l] + (lifted ? m.blocks_off[l] : 0);
+      }
+    };
+    maps();
+    const auto zat = [&](double u, double v) {  // (u, v) inside the frame
+      return zm[static_cast<std::size_t>(round_inside(v)) * W + static_cast<std::size_t>(round_inside(u))];
+    };
+    Rays::End end = Rays::leaves;
+    double hu = 0.0, hv = 0.0;
+    double wc = r.w0[i];
+    bool front = true;  // the ray's last point lay in front of the depth map
+    int fine_left = 0;  // single-pixel steps before the pyramid is asked again
+    // Whether the step from w = wc to w1 clears the blocks of S px it meets (level l; S a
+    // constant: the block indices without an integer division).
+    const auto clears = [&]<int S>(int l, double w1) {
+      const double u0 = uinf + wc * cu, v0 = vinf + wc * cv, u1 = uinf + w1 * cu, v1 = vinf + w1 * cv;
+      if (!inside(u1, v1)) return false;
+      const int bx0 = std::max(0, static_cast<int>(std::min(u0, u1) - 1.0) / S);
+      const int bx1 = std::min(m.bw[l] - 1, static_cast<int>(std::max(u0, u1) + 2.0) / S);
+      const int by0 = std::max(0, static_cast<int>(std::min(v0, v1) - 1.0) / S);
+      const int by1 = std::min(m.bh[l] - 1, static_cast<int>(std::max(v0, v1) + 2.0) / S);
+      float near = INFINITY;
+      if (bx0 <= bx1 && by0 <= by1 && bx1 - bx0 <= 2 && by1 - by0 <= 2) {
+        // Up to 3 x 3 blocks (a step of S px and its margins spans no more): their rectangle's
+        // minimum, one read.
+        near = rect[l][9 * (static_cast<std::size_t>(by0) * m.bw[l] + bx0) + 3 * (by1 - by0) + (bx1 - bx0)];
+      } else {
+        for (int by = by0; by <= by1; ++by)
+          for (int bx = bx0; bx <= bx1; ++bx) near = std::min(near, blocks[l][static_cast<std::size_t>(by) * m.bw[l] + bx]);
+      }
+      return 1.0 / std::min(wc, w1) <= near * front_k;
+    };
+    const int max_steps = m.max_steps;
+    for (int step = 0; step < max_steps; ++step) {
+      if (dz_positive && wc * major < 0.5) {  // within half a pixel of its vanishing point
+        end = Rays::infinity;
+        break;
+      }
+      if (can_lift && !lifted && (dz_positive ? wc <= w_lift : wc >= w_lift)) {
+        lifted = true;
+        maps();
+      }
+      // A whole block's step where the pyramid clears it; where it does not, the next 8 steps
+      // are single pixels without asking it again (asking before every pixel cost more than
+      // the pixels: 2.3 M block steps and 6.6 M pixel steps on the demo at 1242x375).
+      if (fine_left == 0) {
+        const double wa = wc + detail::kWetCoarseBlock * dw;
+        if (wa > 0.0 && clears.template operator()<detail::kWetCoarseBlock>(0, wa)) {
+          wc = wa, front = true;
+          continue;
+        }
+        const double wb = wc + detail::kWetFineBlock * dw;
+        if (wb > 0.0 && clears.template operator()<detail::kWetFineBlock>(1, wb)) {
+          wc = wb, front = true;
+          continue;
+        }
+      }
+      fine_left = fine_left > 0 ? fine_left - 1 : detail::kWetFineBlock - 1;
+      const double wprev = wc;
+      wc += dw;
+      const double u = uinf + wc * cu, v = vinf + wc * cv;
+      if (!(wc > 0.0) || !inside(u, v)) break;  // leaves the frame (or the ray turns behind the camera)
+      const bool behind = 1.0 / wc > zat(u, v) * front_k;
+      // The crossing (behind the map after a point in front of it) as one flag: a branch taken at
+      // each crossing only (`behind` alone changes too often to predict).
+      const unsigned cross = static_cast<unsigned>(behind) & static_cast<unsigned>(front);
+      front = !behind;
+      if (cross != 0u) {
+        double lo = wprev, hi = wc;  // bisection to the crossing: within 1/64 of a step
+        for (int b = 0; b < 6; ++b) {
+          const double mid = 0.5 * (lo + hi);
+          const double mu = uinf + mid * cu, mv = vinf + mid * cv;
+          if (inside(mu, mv) && 1.0 / mid > zat(mu, mv) * front_k) hi = mid; else lo = mid;
+        }
+        hu = uinf + hi * cu, hv = vinf + hi * cv;
+        if (!inside(hu, hv)) hu = u, hv = v;
+        // Within the surfaces' thickness behind the pixel's depth: a hit; further behind, the
+        // ray passed behind an occluder (as the camera sees it) and goes on.
+        if (1.0 / hi <= zat(hu, hv) * thick_k) {
+          end = Rays::hit;
+          break;
+        }
+      }
+      if (step + 1 == max_steps) end = Rays::infinity;
+    }
+    r.end[i] = end;
+    if (end == Rays::hit) r.hu[i] = hu, r.hv[i] = hv;
+  }
+}
 
 }  // namespace
 
@@ -215,6 +326,10 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
   struct Pyramid {
     int bw = 0, bh = 0;
     std::vector<float> m;
+    // The minimum of every rectangle of 1 to 3 x 1 to 3 blocks, 9 to a block (its top-left one):
+    // rect[9 (by·bw + bx) + 3 (rows − 1) + (columns − 1)]. An ask meets at most 3 x 3 blocks, so it
+    // reads one number where it read nine (the same minimum: min is exact, the depths hold no NaN).
+    std::vector<float> rect;
   };
   // above_ground (WetMarch): a second depth map and pyramid without the plane's pixels, for rays
   // higher above the plane than the tolerance.
@@ -226,7 +341,7 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
     p.m.assign(static_cast<std::size_t>(p.bw) * p.bh, INFINITY);
   };
   for (int l = 0; l < 2; ++l) {
-    const int b = l == 0 ? kWetCoarseBlock : kWetFineBlock;
+    const int b = l == 0 ? detail::kWetCoarseBlock : detail::kWetFineBlock;
     blocks_of(pyr[l], b);
     if (lift) blocks_of(pyr_off[l], b);
   }
@@ -235,12 +350,15 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
   // a band of 8 rows at a time (one parallel region: on a busy host each region's barrier waits
   // for the slowest core); the coarse blocks as the minima of 4 x 4 fine ones (the blocks nest
   // from the origin: the same minima, min being exact).
-  std::vector<float> zmap(static_cast<std::size_t>(W) * H), zmap_off(lift ? zmap.size() : 0);
+  // (the map without the plane's pixels follows the map, in the same array: the march's lanes
+  // read either at an offset)
+  const std::size_t wh = static_cast<std::size_t>(W) * H;
+  std::vector<float> zmap(lift ? 2 * wh : wh);
   Pyramid& f = pyr[1];
   Pyramid& f_off = pyr_off[1];
 #pragma omp parallel for num_threads(nt) schedule(static)
   for (int by = 0; by < f.bh; ++by)
-    for (int y = by * kWetFineBlock; y < std::min(H, (by + 1) * kWetFineBlock); ++y) {
+    for (int y = by * detail::kWetFineBlock; y < std::min(H, (by + 1) * detail::kWetFineBlock); ++y) {
       float* row = zmap.data() + static_cast<std::size_t>(y) * W;
       float* fm = f.m.data() + static_cast<std::size_t>(by) * f.bw;
       for (int x = 0; x < W; ++x) {
@@ -249,7 +367,7 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
         const bool known = std::isfinite(r) && r > 0.0f;
         const float z = known ? static_cast<float>(r / std::sqrt(rx * rx + ry * ry + 1.0)) : INFINITY;
         row[x] = z;
-        fm[x / kWetFineBlock] = std::min(fm[x / kWetFineBlock], z);
+        fm[x / detail::kWetFineBlock] = std::min(fm[x / detail::kWetFineBlock], z);
         if (lift) {
           // the plane's own pixels: seen from above (the ray goes down) within the tolerance of it
           // (the march's own test of a ground pixel, the same expressions)
@@ -257,8 +375,8 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
           const double dn = rx * inv * nx + ry * inv * ny + inv * nz;
           const bool plane = known && dn < 0.0 && std::fabs(h + z / inv * dn) <= s.ground_tolerance_m;
           const float zo = plane ? INFINITY : z;
-          zmap_off[static_cast<std::size_t>(y) * W + x] = zo;
-          float& m = f_off.m[static_cast<std::size_t>(by) * f_off.bw + x / kWetFineBlock];
+          zmap[wh + static_cast<std::size_t>(y) * W + x] = zo;
+          float& m = f_off.m[static_cast<std::size_t>(by) * f_off.bw + x / detail::kWetFineBlock];
           m = std::min(m, zo);
         }
       }
@@ -266,172 +384,133 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
   for (int l = 0; l < (lift ? 2 : 1); ++l) {
     std::array<Pyramid, 2>& p = l == 0 ? pyr : pyr_off;
     Pyramid &c = p[0], &fi = p[1];
-    constexpr int r = kWetCoarseBlock / kWetFineBlock;
+    constexpr int r = detail::kWetCoarseBlock / detail::kWetFineBlock;
     for (int by = 0; by < fi.bh; ++by)
       for (int bx = 0; bx < fi.bw; ++bx) {
         float& m = c.m[static_cast<std::size_t>(by / r) * c.bw + bx / r];
         m = std::min(m, fi.m[static_cast<std::size_t>(by) * fi.bw + bx]);
       }
+    for (Pyramid* q : {&c, &fi}) {
+      q->rect.assign(9 * q->m.size(), INFINITY);
+      for (int by = 0; by < q->bh; ++by)
+        for (int bx = 0; bx < q->bw; ++bx) {
+          float* e = q->rect.data() + 9 * (static_cast<std::size_t>(by) * q->bw + bx);
+          for (int ny = 0; ny < 3; ++ny)
+            for (int nx = 0; nx < 3; ++nx) {
+              float v = INFINITY;  // the blocks past the edge are never asked (the ask's indices are clamped)
+              for (int y = by; y <= std::min(by + ny, q->bh - 1); ++y)
+                for (int x = bx; x <= std::min(bx + nx, q->bw - 1); ++x)
+                  v = std::min(v, q->m[static_cast<std::size_t>(y) * q->bw + x]);
+              e[3 * ny + nx] = v;
+            }
+        }
+    }
   }
+  // The march's maps in one array (its lanes read any of them in one gather): the depth (and the
+  // depth without the plane's pixels), then each level's rectangle minima (and without the plane's).
+  detail::WetMarchMaps mm;
+  mm.width = W, mm.height = H;
+  mm.z_at = 0, mm.z_off = lift ? wh : 0;
+  std::array<std::vector<float>, 2> blocks;
+  for (int l = 0; l < 2; ++l) {
+    mm.rect_at[l] = zmap.size();
+    zmap.insert(zmap.end(), pyr[l].rect.begin(), pyr[l].rect.end());
+    mm.rect_off[l] = lift ? pyr[l].rect.size() : 0;
+    if (lift) zmap.insert(zmap.end(), pyr_off[l].rect.begin(), pyr_off[l].rect.end());
+    blocks[l] = pyr[l].m;
+    if (lift) blocks[l].insert(blocks[l].end(), pyr_off[l].m.begin(), pyr_off[l].m.end());
+    mm.blocks[l] = blocks[l].data(), mm.blocks_off[l] = lift ? pyr[l].m.size() : 0;
+    mm.bw[l] = pyr[l].bw, mm.bh[l] = pyr[l].bh;
+  }
+  mm.maps = zmap.data();
+  mm.front_k = static_cast<float>(1.0 + kWetHitMargin);
+  mm.thick_k = static_cast<float>(1.0 + kWetHitMargin + kWetThickness);
+  mm.max_steps = 4 * (W + H);
   const auto t_march = std::chrono::steady_clock::now();
-  const float front_k = static_cast<float>(1.0 + kWetHitMargin), thick_k = static_cast<float>(1.0 + kWetHitMargin + kWetThickness);
   const float kf = static_cast<float>(o.k_eff);
   std::size_t n_ground = 0, n_hits = 0, n_sky = 0, n_left = 0;
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 4) reduction(+ : n_ground, n_hits, n_sky, n_left)
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      const float z0 = zmap[static_cast<std::size_t>(y) * W + x];
-      if (!std::isfinite(z0)) continue;
-      const double rx = (x - cx) / fx, ry = (y - cy) / fy, inv = 1.0 / std::sqrt(rx * rx + ry * ry + 1.0);
-      const double dx = rx * inv, dy = ry * inv, dz = inv;  // the unit ray (cv)
-      const double dn = dx * nx + dy * ny + dz * nz;        // < 0: the ray goes down
-      if (!(dn < 0.0)) continue;                            // a ray that cannot meet the ground from above
-      const double r0 = z0 / inv;
-      if (masked ? !(s.mask.at(x, y) > 0.5f) : !(std::fabs(h + r0 * dn) <= s.ground_tolerance_m)) continue;
-      ++n_ground;
-      ground.at(x, y) = 1.0f;
-      // The mirrored ray X(t) = P + t·D from the ground point. Its image is a line, and with
-      // w = 1/Z along it (Z = P_z + t·D_z) u = u∞ + w·c_u, v = v∞ + w·c_v exactly (u∞, v∞ the
-      // vanishing point of D): the march steps w, one pixel of the line's major axis a step.
-      const double Px = r0 * dx, Py = r0 * dy, Pz = r0 * dz;
-      const double Dx = dx - 2.0 * dn * nx, Dy = dy - 2.0 * dn * ny;
-      double Dz = dz - 2.0 * dn * nz;
-      if (std::fabs(Dz) < 1e-9) Dz = Dz < 0.0 ? -1e-9 : 1e-9;  // parallel to the image: a far vanishing point
-      const double bu = fx * Dx + cx * Dz, bv = fy * Dy + cy * Dz;
-      const double uinf = bu / Dz, vinf = bv / Dz;
-      const double cu = fx * Px + cx * Pz - bu * Pz / Dz, cv = fy * Py + cy * Pz - bv * Pz / Dz;
-      const double major = std::max(std::fabs(cu), std::fabs(cv));
-      const double w0 = 1.0 / Pz;
-      // w falls towards 0 (the vanishing point) when D_z > 0, rises (towards the image plane) else.
-      const double dw = (Dz > 0.0 ? -1.0 : 1.0) * kWetMarchStepPx / std::max(major, 1e-30);
-      // (-0.5 itself rounds away from zero to -1: outside, as W - 0.5 is.)
-      const auto inside = [&](double u, double v) { return u > -0.5 && u < W - 0.5 && v > -0.5 && v < H - 0.5; };
-      // above_ground: the ray is above the plane's tolerance from w_lift on (its height h0 + t·(−dn)
-      // grows along the march, t = (1/w − P_z)/D_z), after which the maps without the plane's
-      // pixels serve; `zm` and `pm` are the maps the march asks now.
-      const float* zm = zmap.data();
-      const std::array<Pyramid, 2>* pm = &pyr;
-      bool lifted = false;
-      double w_lift = 0.0;
-      bool can_lift = false;
-      if (lift) {
-        const double t_lift = (s.ground_tolerance_m - (h + r0 * dn)) / -dn;
-        const double z_lift = Pz + std::max(t_lift, 0.0) * Dz;
-        if (t_lift <= 0.0) {
-          lifted = true;
-          zm = zmap_off.data(), pm = &pyr_off;
-        } else if (z_lift > 0.0) {
-          can_lift = true, w_lift = 1.0 / z_lift;
+  // Bands of 4 rows: each band's ground pixels set their rays up, the march takes them (several
+  // side by side), and the pixels are written from where each ended.
+  constexpr int kBand = 4;
+  const int bands = (H + kBand - 1) / kBand;
+#pragma omp parallel num_threads(nt) reduction(+ : n_ground, n_hits, n_sky, n_left)
+  {
+    detail::WetMarchRays rays;
+    std::vector<int> rx_, ry_;
+    std::vector<double> rdn;
+#pragma omp for schedule(dynamic, 1)
+    for (int band = 0; band < bands; ++band) {
+      rays.clear(), rx_.clear(), ry_.clear(), rdn.clear();
+      for (int y = band * kBand; y < std::min(H, (band + 1) * kBand); ++y)
+        for (int x = 0; x < W; ++x) {
+          const float z0 = zmap[static_cast<std::size_t>(y) * W + x];
+          if (!std::isfinite(z0)) continue;
+          const double rx = (x - cx) / fx, ry = (y - cy) / fy, inv = 1.0 / std::sqrt(rx * rx + ry * ry + 1.0);
+          const double dx = rx * inv, dy = ry * inv, dz = inv;  // the unit ray (cv)
+          const double dn = dx * nx + dy * ny + dz * nz;        // < 0: the ray goes down
+          if (!(dn < 0.0)) continue;                            // a ray that cannot meet the ground from above
+          const double r0 = z0 / inv;
+          if (masked ? !(s.mask.at(x, y) > 0.5f) : !(std::fabs(h + r0 * dn) <= s.ground_tolerance_m)) continue;
+          ++n_ground;
+          ground.at(x, y) = 1.0f;
+          // The mirrored ray X(t) = P + t·D from the ground point. Its image is a line, and with
+          // w = 1/Z along it (Z = P_z + t·D_z) u = u∞ + w·c_u, v = v∞ + w·c_v exactly (u∞, v∞ the
+          // vanishing point of D): the march steps w, one pixel of the line's major axis a step.
+          const double Px = r0 * dx, Py = r0 * dy, Pz = r0 * dz;
+          const double Dx = dx - 2.0 * dn * nx, Dy = dy - 2.0 * dn * ny;
+          double Dz = dz - 2.0 * dn * nz;
+          if (std::fabs(Dz) < 1e-9) Dz = Dz < 0.0 ? -1e-9 : 1e-9;  // parallel to the image: a far vanishing point
+          const double bu = fx * Dx + cx * Dz, bv = fy * Dy + cy * Dz;
+          const double uinf = bu / Dz, vinf = bv / Dz;
+          const double cu = fx * Px + cx * Pz - bu * Pz / Dz, cv = fy * Py + cy * Pz - bv * Pz / Dz;
+          const double major = std::max(std::fabs(cu), std::fabs(cv));
+          const double w0 = 1.0 / Pz;
+          // w falls towards 0 (the vanishing point) when D_z > 0, rises (towards the image plane) else.
+          const double dw = (Dz > 0.0 ? -1.0 : 1.0) * kWetMarchStepPx / std::max(major, 1e-30);
+          // above_ground: the ray is above the plane's tolerance from w_lift on (its height h0 + t·(−dn)
+          // grows along the march, t = (1/w − P_z)/D_z), after which the maps without the plane's
+          // pixels serve.
+          std::uint8_t flags = Dz > 0.0 ? detail::WetMarchRays::dz_positive : 0;
+          double w_lift = 0.0;
+          if (lift) {
+            const double t_lift = (s.ground_tolerance_m - (h + r0 * dn)) / -dn;
+            const double z_lift = Pz + std::max(t_lift, 0.0) * Dz;
+            if (t_lift <= 0.0)
+              flags |= detail::WetMarchRays::lifted;
+            else if (z_lift > 0.0)
+              flags |= detail::WetMarchRays::can_lift, w_lift = 1.0 / z_lift;
+          }
+          rays.push(w0, dw, uinf, vinf, cu, cv, major, w_lift, flags);
+          rx_.push_back(x), ry_.push_back(y), rdn.push_back(dn);
         }
-      }
-      const auto zat = [&](double u, double v) {  // (u, v) inside the frame
-        return zm[static_cast<std::size_t>(round_inside(v)) * W + static_cast<std::size_t>(round_inside(u))];
-      };
-      std::array<float, 3> L = s.sky;
-      enum { leaves, hit, infinity } end = leaves;
-      double hu = 0.0, hv = 0.0;
-      double wc = w0;
-      bool front = true;  // the ray's last point lay in front of the depth map
-      int fine_left = 0;  // single-pixel steps before the pyramid is asked again
-      // Whether the step from w = wc to w1 clears the blocks of S px it meets (S a constant: the
-      // block indices without an integer division).
-      const auto clears = [&]<int S>(const Pyramid& p, double w1) {
-        const double u0 = uinf + wc * cu, v0 = vinf + wc * cv, u1 = uinf + w1 * cu, v1 = vinf + w1 * cv;
-        if (!inside(u1, v1)) return false;
-        const int bx0 = std::max(0, static_cast<int>(std::min(u0, u1) - 1.0) / S);
-        const int bx1 = std::min(p.bw - 1, static_cast<int>(std::max(u0, u1) + 2.0) / S);
-        const int by0 = std::max(0, static_cast<int>(std::min(v0, v1) - 1.0) / S);
-        const int by1 = std::min(p.bh - 1, static_cast<int>(std::max(v0, v1) + 2.0) / S);
-        float near = INFINITY;
-        if (bx0 <= bx1 && by0 <= by1 && bx1 - bx0 <= 2 && by1 - by0 <= 2) {
-          // Up to 3 x 3 blocks (a step of S px and its margins spans no more), read as 3 x 3 with
-          // the last row and column repeated: no loop to mispredict, the same minimum (min is
-          // exact and the depths hold no NaN).
-          const int bxm = std::min(bx0 + 1, bx1);
-          const float* r[3] = {p.m.data() + static_cast<std::size_t>(by0) * p.bw,
-                               p.m.data() + static_cast<std::size_t>(std::min(by0 + 1, by1)) * p.bw,
-                               p.m.data() + static_cast<std::size_t>(by1) * p.bw};
-          for (const float* row : r) near = std::min(near, std::min(std::min(row[bx0], row[bxm]), row[bx1]));
+      if (!detail::wet_march_rays(mm, rays)) march_rays_one_by_one(mm, rays);
+      for (std::size_t i = 0; i < rays.size(); ++i) {
+        const int x = rx_[i], y = ry_[i];
+        std::array<float, 3> L = s.sky;
+        double hu = rays.hu[i], hv = rays.hv[i];
+        bool hit = rays.end[i] == detail::WetMarchRays::hit;
+        if (rays.end[i] == detail::WetMarchRays::infinity) {
+          // The vanishing point's pixel: the sky there (or a surface the ray would meet at infinity).
+          const double uinf = rays.uinf[i], vinf = rays.vinf[i];
+          if ((rays.flags[i] & detail::WetMarchRays::dz_positive) && uinf > -0.5 && uinf < W - 0.5 && vinf > -0.5 &&
+              vinf < H - 0.5) {
+            hu = uinf, hv = vinf, hit = true;
+            ++n_sky;
+          }
+        } else if (hit) {
+          ++n_hits;
+        }
+        if (hit) {
+          const int iu = static_cast<int>(round_half_away(hu)), iv = static_cast<int>(round_half_away(hv));
+          for (int c = 0; c < 3; ++c) L[c] = s.rgb.at(iu, iv, c);
         } else {
-          for (int by = by0; by <= by1; ++by)
-            for (int bx = bx0; bx <= bx1; ++bx) near = std::min(near, p.m[static_cast<std::size_t>(by) * p.bw + bx]);
+          ++n_left;
         }
-        return 1.0 / std::min(wc, w1) <= near * front_k;
-      };
-      const int max_steps = 4 * (W + H);
-      for (int step = 0; step < max_steps; ++step) {
-        if (Dz > 0.0 && wc * major < 0.5) {  // within half a pixel of its vanishing point
-          end = infinity;
-          break;
-        }
-        if (can_lift && !lifted && (Dz > 0.0 ? wc <= w_lift : wc >= w_lift)) {
-          lifted = true;
-          zm = zmap_off.data(), pm = &pyr_off;
-        }
-        // A whole block's step where the pyramid clears it; where it does not, the next 8 steps
-        // are single pixels without asking it again (asking before every pixel cost more than
-        // the pixels: 2.3 M block steps and 6.6 M pixel steps on the demo at 1242x375).
-        if (fine_left == 0) {
-          const double wa = wc + kWetCoarseBlock * dw;
-          if (wa > 0.0 && clears.template operator()<kWetCoarseBlock>((*pm)[0], wa)) {
-            wc = wa, front = true;
-            continue;
-          }
-          const double wb = wc + kWetFineBlock * dw;
-          if (wb > 0.0 && clears.template operator()<kWetFineBlock>((*pm)[1], wb)) {
-            wc = wb, front = true;
-            continue;
-          }
-        }
-        fine_left = fine_left > 0 ? fine_left - 1 : kWetFineBlock - 1;
-        const double wprev = wc;
-        wc += dw;
-        const double u = uinf + wc * cu, v = vinf + wc * cv;
-        if (!(wc > 0.0) || !inside(u, v)) break;  // leaves the frame (or the ray turns behind the camera)
-        const bool behind = 1.0 / wc > zat(u, v) * front_k;
-        // The crossing (behind the map after a point in front of it) as one flag: a branch taken at
-        // each crossing only (`behind` alone changes too often to predict).
-        const unsigned cross = static_cast<unsigned>(behind) & static_cast<unsigned>(front);
-        front = !behind;
-        if (cross != 0u) {
-          double lo = wprev, hi = wc;  // bisection to the crossing: within 1/64 of a step
-          for (int b = 0; b < 6; ++b) {
-            const double mid = 0.5 * (lo + hi);
-            const double mu = uinf + mid * cu, mv = vinf + mid * cv;
-            if (inside(mu, mv) && 1.0 / mid > zat(mu, mv) * front_k) hi = mid; else lo = mid;
-          }
-          hu = uinf + hi * cu, hv = vinf + hi * cv;
-          if (!inside(hu, hv)) hu = u, hv = v;
-          // Within the surfaces' thickness behind the pixel's depth: a hit; further behind, the
-          // ray passed behind an occluder (as the camera sees it) and goes on.
-          if (1.0 / hi <= zat(hu, hv) * thick_k) {
-            end = hit;
-            break;
-          }
-        }
-        if (step + 1 == max_steps) end = infinity;
+        const float m = static_cast<float>(o.mirror(-rdn[i]));
+        for (int c = 0; c < 3; ++c) out.at(x, y, c) = kf * s.rgb.at(x, y, c) + m * L[c];
       }
-      if (end == infinity) {
-        // The vanishing point's pixel: the sky there (or a surface the ray would meet at infinity).
-        if (Dz > 0.0 && inside(uinf, vinf)) {
-          hu = uinf, hv = vinf;
-          end = hit;
-          ++n_sky;
-        } else {
-          end = leaves;
-        }
-      } else if (end == hit) {
-        ++n_hits;
-      }
-      if (end == hit) {
-        const int iu = static_cast<int>(round_half_away(hu)), iv = static_cast<int>(round_half_away(hv));
-        for (int c = 0; c < 3; ++c) L[c] = s.rgb.at(iu, iv, c);
-      } else {
-        ++n_left;
-      }
-      const float m = static_cast<float>(o.mirror(-dn));
-      for (int c = 0; c < 3; ++c) out.at(x, y, c) = kf * s.rgb.at(x, y, c) + m * L[c];
     }
+  }
   st.ground = n_ground, st.hits = n_hits, st.sky_pixels = n_sky, st.left_frame = n_left;
   const auto t_end = std::chrono::steady_clock::now();
   st.maps_ms = std::chrono::duration<double, std::milli>(t_march - t_maps).count();
