@@ -214,6 +214,8 @@ TEST(Sample, BadSpecsGiveClearErrors) {
   EXPECT_NE(m.find("[0, 1]"), std::string::npos) << m;
   m = err(albedo, "uniform(0.5, 1.5)");
   EXPECT_NE(m.find("upper bound 1.5"), std::string::npos) << m;
+  m = err(albedo, "2");  // a constant: the declaration's message, said once
+  EXPECT_EQ(m, "sampling --albedo '2': " + error_of([&] { albedo.check(2.0); })) << m;
   m = err(vis, "loguniform(0, 10)");
   EXPECT_NE(m.find("0 < a"), std::string::npos) << m;
   m = err(vis, "uniform(0, 10)");  // visibility > 0: the lower bound 0 is not a visibility

@@ -214,7 +214,8 @@ Distribution parse_distribution(const ParamSpec& spec, std::string_view text_in)
     try {
       spec.check(v);
     } catch (const Error& e) {
-      throw Error(where + ": " + role + " is not allowed: " + e.what());
+      // A constant: the declaration's own message names the value already.
+      throw Error(where + ": " + (role.empty() ? std::string() : role + " is not allowed: ") + e.what());
     }
     return v;
   };
@@ -225,7 +226,7 @@ Distribution parse_distribution(const ParamSpec& spec, std::string_view text_in)
     } catch (const Error& e) {
       throw Error(where + ": " + e.what());
     }
-    return checked(v, role + " '" + item + "'");
+    return checked(v, role.empty() ? role : role + " '" + item + "'");
   };
 
   Distribution d;
@@ -239,7 +240,7 @@ Distribution parse_distribution(const ParamSpec& spec, std::string_view text_in)
                      std::all_of(fn.begin(), fn.end(), [](char c) { return std::isalpha(static_cast<unsigned char>(c)); });
   if (open == std::string::npos || !(known || wordy)) {
     d.kind = Distribution::Kind::fixed;
-    d.values.push_back(parsed(text, "the value"));
+    d.values.push_back(parsed(text, ""));
     return d;
   }
   if (text.back() != ')') return fail("missing the closing ')'; " + std::string(kAllowed));
