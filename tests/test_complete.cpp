@@ -833,10 +833,12 @@ TEST_F(CompleteCli, PreparedSkyThatIsNotSkyWarns) {
             std::string::npos)
       << r.output;
   EXPECT_NE(r.output.find("give --complete on"), std::string::npos) << r.output;
-  const nlohmann::json c = read_json(p("t.json"))["prepare"]["complete"];
+  const nlohmann::json prep = read_json(p("t.json"))["prepare"], c = prep["complete"];
   ASSERT_TRUE(c.contains("warnings")) << c.dump();
-  // Measured: 36.7 % of the frame taken as sky, 26.7 % of the frame among it under a surface (warns at 5 %).
-  EXPECT_NEAR(c["prepared_sky_fraction"].get<double>(), 0.367, 0.005);
+  // Measured 2026-12-07: 36.7 % of the frame taken as sky, 26.7 % of it under a surface (warns at 5 %).
+  // The counts are exact for this file; 0.005 only lets a reader that rounds disparity differently by a
+  // few pixels pass, far from the 5 % that decides the warning.
+  EXPECT_NEAR(prep["sky_fraction"].get<double>(), 0.367, 0.005);
   EXPECT_NEAR(c["prepared_sky_under_surface_fraction"].get<double>(), 0.267, 0.005);
   r = run("haze " + in + " --complete on --out " + p("on.png") + " --record " + p("on.json"));
   ASSERT_EQ(r.status, 0) << r.output;

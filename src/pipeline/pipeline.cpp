@@ -574,8 +574,7 @@ void warn_sky_under_surfaces(nlohmann::json& record, ConstImageView measured, co
   const PreparedSkyCheck c = check_prepared_sky(measured, step.params);
   if (c.pixels == 0) return;
   const double n = static_cast<double>(c.pixels), under = static_cast<double>(c.under) / n;
-  record["prepared_sky_fraction"] = static_cast<double>(c.sky) / n;
-  record["prepared_sky_under_surface_fraction"] = under;
+  record["prepared_sky_under_surface_fraction"] = under;  // (the share taken as sky: prepare.sky_fraction)
   if (under < kSkyUnderSurfaceWarn) return;
   char pct[160];
   std::snprintf(pct, sizeof pct, "%.1f %% of the frame, and %.1f %% of the frame among them lies", 100.0 * c.sky / n,
@@ -611,6 +610,7 @@ CompletedRange complete_step(ConstImageView measured, ConstImageView rgb, const 
   const double fraction = static_cast<double>(known) / static_cast<double>(measured.pixels());
   // A stereo view to fuse: completed whatever the coverage (the fusion is the completion's).
   if (!step.stereo && !completes(step, fraction)) {
+    // Checked where its remedy, --complete on, can run: an image beside the map.
     if (step.complete == CompleteMode::automatic && step.mode == PrepareMode::automatic && !rgb.empty() &&
         known < measured.pixels())
       warn_sky_under_surfaces(out.record, measured, step);
@@ -804,9 +804,8 @@ nlohmann::json job_record(const std::string& command, const RunContext& ctx, nlo
       else rec[k] = v;
   }
   // The depth's warnings (the completion's record, within the preparation's).
-  if (rec.contains("prepare") && rec["prepare"].is_object() && rec["prepare"].contains("complete") &&
-      rec["prepare"]["complete"].is_object() && rec["prepare"]["complete"].contains("warnings"))
-    for (const auto& w : rec["prepare"]["complete"]["warnings"])
+  if (const nlohmann::json::json_pointer at("/prepare/complete/warnings"); rec.contains(at))
+    for (const auto& w : rec[at])
       if (w.is_string()) std::fprintf(stderr, "brume %s: warning: %s\n", command.c_str(), w.get<std::string>().c_str());
   if (print_timing && rec.contains("execution"))
     std::fprintf(stderr, "brume %s: %s: %s\n", command.c_str(), rec["execution"].value("backend", "cpu").c_str(),
