@@ -185,6 +185,17 @@ struct CompleteParams {
   // window (it straddles the sky's edge) leaves out, 0..16; 0: none (the
   // rule of records before it: since(4, 0)).
   int sky_edge_px = 3;
+  // [1] a pixel whose blue exceeds its red by at least this (sRGB), and is
+  // no smaller than its green, is bright enough for the sky: a clear sky
+  // darker than the scene's snow or clouds (GeoPose3K's alpine sky), [0, 1];
+  // 0: off (the rule of records before it: since(4, 0)).
+  double sky_blue = 0.2;
+  // [1] unmeasured pixels no brighter than this (largest sRGB channel) and
+  // connected to the frame's edge through such pixels are a border outside
+  // the picture (a panorama's warp, a letterbox): they join the sky above
+  // the scan, which touches the top row through them, [0, 0.2]; 0: none
+  // (the rule of records before it: since(4, 0)).
+  double sky_border = 0.03;
   // Structure above the scan: planar (3c, issue #52) or column (3b, the rule
   // of records before it: since(4, "column")).
   CompleteMethod method = CompleteMethod::planar;

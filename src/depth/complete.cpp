@@ -69,6 +69,17 @@ const ParamTable<CompleteParams>& complete_param_table() {
                  "smooth or not: the sky's edge, where the 5x5 roughness window straddles a treeline; 0: no "
                  "growth (the rule of records before it)")
         .since(4, 0)
+        .real("complete-sky-blue", &CompleteParams::sky_blue, "1", Range::closed(0.0, 1.0),
+              "sky rule: an unmeasured pixel whose blue exceeds its red by at least this (sRGB) and is no smaller "
+              "than its green is bright enough for the sky, however dark (a clear sky darker than the scene's "
+              "snow or clouds); 0: brightness only (the rule of records before it)")
+        .since(4, 0)
+        .real("complete-sky-border", &CompleteParams::sky_border, "1", Range::closed(0.0, 0.2),
+              "sky rule: unmeasured pixels no brighter than this (largest sRGB channel) and connected to the "
+              "frame's edge through such pixels are a border outside the picture (a panorama's warp, a "
+              "letterbox): above the scan they join the sky, and the sky touches the top row through them; 0: "
+              "no border (the rule of records before it)")
+        .since(4, 0)
         .choice("complete-method", &CompleteParams::method, complete_method_names(),
                 "structure above the scan (not sky, no measurement near): planar continues each column's planar "
                 "depth up from its topmost measurements, along image segments (issue 52); column takes the "
@@ -384,6 +395,30 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
         break;
       }
     const float lum_min = static_cast<float>(p.sky_luminance * (b99 + 0.5) / 1024.0);
+    // Bright enough for the sky: by brightness, or blue (a clear sky, by
+    // Rayleigh's λ⁻⁴, darker than snow or clouds beside it; complete-sky-blue).
+    const float blue_min = static_cast<float>(p.sky_blue);
+    auto sky_bright = [&](std::size_t i) {
+      if (bright[i] >= lum_min) return true;
+      const float* c = &g[3 * i];
+      return blue_min > 0.0f && c[2] - c[0] >= blue_min && c[2] >= c[1];
+    };
+    // A border outside the picture (complete-sky-border): unmeasured pixels
+    // no brighter than sky_border connected to the frame's edge through such
+    // pixels (4-connected).
+    std::vector<std::uint8_t> border(N, 0);
+    if (p.sky_border > 0.0) {
+      cv::Mat dark(H, W, CV_8U), dl;
+      const float dark_max = static_cast<float>(p.sky_border);
+      for (std::size_t i = 0; i < N; ++i)
+        dark.data[i] = (!known[i] && std::max({g[3 * i], g[3 * i + 1], g[3 * i + 2]}) <= dark_max) ? 1 : 0;
+      const int nd = cv::connectedComponents(dark, dl, 4, CV_32S);
+      std::vector<std::uint8_t> edge(static_cast<std::size_t>(nd), 0);
+      for (int x = 0; x < W; ++x) edge[dl.at<int>(0, x)] = edge[dl.at<int>(H - 1, x)] = 1;
+      for (int y = 0; y < H; ++y) edge[dl.at<int>(y, 0)] = edge[dl.at<int>(y, W - 1)] = 1;
+      edge[0] = 0;  // background
+      for (std::size_t i = 0; i < N; ++i) border[i] = edge[dl.ptr<int>()[i]];
+    }
     cv::Mat Y(H, W, CV_32F, luma.data()), m1, m2;
     cv::boxFilter(Y, m1, CV_32F, cv::Size(5, 5));
     cv::boxFilter(Y.mul(Y), m2, CV_32F, cv::Size(5, 5));
@@ -410,7 +445,7 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
       const float mean = m1.ptr<float>()[i];
       const float var = m2.ptr<float>()[i] - mean * mean;
       const bool above = static_cast<int>(i / W) < top_row[i % W];
-      cand.data[i] = (above && !near.data[i] && bright[i] >= lum_min && var <= rough2) ? 1 : 0;
+      cand.data[i] = (above && ((!near.data[i] && sky_bright(i) && var <= rough2) || border[i])) ? 1 : 0;
     }
     cv::morphologyEx(cand, cand, cv::MORPH_CLOSE, cv::Mat::ones(5, 5, CV_8U));
     for (std::size_t i = 0; i < N; ++i)
@@ -436,7 +471,7 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
       for (int y = 0; y < H; ++y)
         for (int x = 0; x < W; ++x) {
           const std::size_t i = static_cast<std::size_t>(y) * W + x;
-          if (sky[i] || known[i] || near.data[i] || y >= top_row[x] || bright[i] < lum_min) continue;
+          if (sky[i] || known[i] || near.data[i] || y >= top_row[x] || !sky_bright(i)) continue;
           const float* gp = &g[3 * i];
           bool next = false;
           for (int v = std::max(0, y - 1); v <= std::min(H - 1, y + 1) && !next; ++v)
@@ -647,6 +682,8 @@ nlohmann::json complete_record(const CompleteParams& p, const CompleteResult& r)
   if (p.sky_brightness != CompleteSkyBrightness::luma)
     j["sky_brightness"] = enum_name(complete_sky_brightness_names(), p.sky_brightness);
   if (p.sky_edge_px != 0) j["sky_edge_px"] = p.sky_edge_px;
+  if (p.sky_blue != 0.0) j["sky_blue"] = p.sky_blue;  // (records before it have neither key: 0)
+  if (p.sky_border != 0.0) j["sky_border"] = p.sky_border;
   if (p.method == CompleteMethod::planar) {  // (the column method's record is as before issue #52)
     j["method"] = std::string(pilot) +
                   "structure above each column's topmost measurement continues the median planar depth of its "
