@@ -225,6 +225,19 @@ TEST(Params, OptionalsTakeTheirUnsetWord) {
   EXPECT_THROW(t.set_text(p, "rho-max", "0"), Error);
 }
 
+// A real flag takes a ratio p/q (Middlebury's third-size disparities:
+// --disparity-scale 1/3), kept as the quotient; what is not one number nor
+// one ratio of finite numbers with q != 0 stays an error.
+TEST(Params, ARealTakesARatio) {
+  HazeParams p;
+  const auto& t = haze_param_table();
+  t.set_text(p, "range-max", "200/3");
+  ASSERT_TRUE(p.range_max_m.has_value());
+  EXPECT_EQ(*p.range_max_m, 200.0 / 3.0);
+  for (const char* bad : {"1/0", "1/", "/3", "1/3/2", "inf/2", "1/nan", "a/b"})
+    EXPECT_THROW(t.set_text(p, "range-max", bad), Error) << bad;
+}
+
 // The output block marks the parameters that name files it writes (brume
 // batch renames them after the key, brume run moves them): --out, --record
 // and every declared map, never a setting such as --compression or --bits.

@@ -4,6 +4,7 @@
 #include "core/text.hpp"
 
 #include <cctype>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <sstream>
@@ -14,6 +15,19 @@ namespace {
 
 // strtod over the whole text ("1e-3", "inf", "nan"), nothing left over.
 using text::parse_number;
+
+// A ratio of two finite numbers, "1/3" or "30000/1001", as a real flag's
+// value (Middlebury's third-size disparities are scaled by 1/3): p / q with q
+// != 0. The quotient is what the record keeps.
+bool parse_ratio(const std::string& t, double& v) {
+  const std::size_t slash = t.find('/');
+  if (slash == std::string::npos || t.find('/', slash + 1) != std::string::npos) return false;
+  double p = 0, q = 0;
+  if (!parse_number(t.substr(0, slash), p) || !parse_number(t.substr(slash + 1), q)) return false;
+  if (!std::isfinite(p) || !std::isfinite(q) || q == 0.0) return false;
+  v = p / q;
+  return true;
+}
 
 }  // namespace
 
@@ -174,7 +188,7 @@ nlohmann::json ParamSpec::parse(const std::string& t) const {
       for (const std::string& w : words)
         if (t == w) return t;
       double v = 0;
-      if (!parse_number(t, v))
+      if (!parse_number(t, v) && !parse_ratio(t, v))
         throw Error(flag + " '" + t + "' is not a number" + (optional ? " (or " + unset_word + ")" : "") + "; " +
                     describe());
       return v;
