@@ -488,6 +488,43 @@ TEST_F(Batch, CorruptFrameIsReportedAndOthersWritten) {
   EXPECT_TRUE(res["a/f0.png"]["seconds"].is_number());
 }
 
+// A frame's warnings name it on stderr (frames in flight print side by
+// side: a bare "brume haze: warning" did not say which of a thousand frames
+// it was) and join its results line, as its record holds them; a frame
+// without one has no "warnings" key. b/f1's range is unknown in its left
+// half but for row 2 (a table): the preparation takes the hole below it as
+// sky (>= 5 % of the frame), under a measured surface, and warns.
+TEST_F(Batch, WarningsNameTheirFrameAndJoinItsResultsLine) {
+  const std::vector<std::string> keys = make_frames(2);
+  Image r = read_scalar(p("data/b/f1.exr"));
+  for (int y = 0; y < r.height; ++y)
+    for (int x = 0; x < r.width / 2; ++x)
+      if (y != 2) r.at(x, y) = NAN;
+  WriteOptions f;
+  f.is_color = false;
+  f.float_reason = "metres";
+  write_image(p("data/b/f1.exr"), r, f);
+  const std::string m = csv(keys, "effect,visibility", "haze,400");
+  const CliRun out = run("batch --manifest " + m + " --out-dir " + p("out") + " --workers 2");
+  ASSERT_EQ(out.status, 0) << out.output;
+  EXPECT_NE(out.output.find("brume haze: frame 'b/f1.png': warning: the range's unknown regions"), std::string::npos)
+      << out.output;
+  EXPECT_EQ(out.output.find("frame 'a/f0.png': warning"), std::string::npos) << out.output;
+  EXPECT_NE(out.output.find("1 with warnings"), std::string::npos) << out.output;
+  std::ifstream in(p("out/results.jsonl"));
+  std::map<std::string, nlohmann::json> res;
+  for (std::string l; std::getline(in, l);) {
+    const nlohmann::json j = nlohmann::json::parse(l);
+    res[j["key"]] = j;
+  }
+  ASSERT_EQ(res.size(), 2u);
+  EXPECT_FALSE(res["a/f0.png"].contains("warnings"));
+  const nlohmann::json rec = nlohmann::json::parse(slurp(p("out/b/f1.json")));
+  const nlohmann::json::json_pointer at("/prepare/complete/warnings");
+  ASSERT_TRUE(rec.contains(at)) << rec.dump();
+  EXPECT_EQ(res["b/f1.png"]["warnings"], rec[at]);
+}
+
 // Issue #51: a FIFO in a manifest hung the batch. An entry that is not a
 // regular file fails its frame, naming it, and the batch goes on (exit 1).
 TEST_F(Batch, FifoInTheManifestFailsItsFrameOnly) {

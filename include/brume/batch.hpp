@@ -125,6 +125,7 @@ struct BatchFrameResult {
   std::string status;   // "ok", "skipped" (done before, --resume) or "failed"
   double seconds = 0.0;
   std::string error;    // failed: the message
+  std::vector<std::string> warnings;  // what the run warned about (also in its record)
   nlohmann::json line;  // the results manifest's line
 };
 // Runs one frame through its effect's pipeline; never throws for the frame's
@@ -134,6 +135,7 @@ BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, c
 struct BatchSummary {
   std::size_t frames = 0;  // in this shard
   std::size_t ok = 0, skipped = 0, failed = 0;
+  std::size_t warned = 0;  // frames run now that warned (their results lines say what)
   double seconds = 0.0;
   std::string results;     // the results manifest's path
 };

@@ -11,6 +11,7 @@
 #include "brume/record.hpp"
 #include "brume/stereo.hpp"
 #include "core/text.hpp"
+#include "core/warnings.hpp"
 
 namespace brume {
 
@@ -292,7 +293,7 @@ LoadedDepth fused_depth(const DepthSource& s, int width, int height) {
   if (fill.record.contains("warning")) {
     const std::string w = "--stereo-right '" + s.stereo_right + "': " + fill.record["warning"].get<std::string>();
     out.record["warnings"].push_back(w);
-    std::fprintf(stderr, "brume: warning: %s\n", w.c_str());
+    print_warning("", w);
   }
   out.record["stereo"] = {{"left", lrec},      {"right", rrec},   {"geometry", g.record},
                           {"search", search}, {"matching", st.record}, {"fit", fill.record}};
@@ -509,7 +510,7 @@ LoadedDepth load_depth_as_read(const DepthSource& s, int width, int height) {
                           (distance && s.render_background == RenderBackground::off ? ", or --renderer-background auto" : "") +
                           "), or the wrong unit (--depth-scale)";
     rec["warnings"].push_back(w);
-    std::fprintf(stderr, "brume: warning: %s\n", w.c_str());
+    print_warning("", w);
   }
   return out;
 }

@@ -30,6 +30,7 @@
 #include "brume/io.hpp"
 #include "brume/pipeline.hpp"
 #include "brume/rerun.hpp"
+#include "core/warnings.hpp"
 
 namespace fs = std::filesystem;
 
@@ -160,6 +161,7 @@ nlohmann::json result_line(const BatchFrame& f, const BatchFrameResult& r) {
                       {"outputs", outputs},  {"parameters", params}, {"sampling", f.batch["sampling"]},
                       {"seconds", r.seconds}};
   if (!r.error.empty()) l["error"] = r.error;
+  if (!r.warnings.empty()) l["warnings"] = r.warnings;
   return l;
 }
 
@@ -179,7 +181,16 @@ BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, c
     ctx.argv = argv;
     ctx.given = f.given;
     ctx.extra = {{"batch", f.batch}};
-    def_of(f.effect).run(f.job, exec, ctx);
+    // Its warnings name the frame on stderr (frames in flight print side
+    // by side) and join its results line.
+    const FrameWarnings warned(f.key);
+    try {
+      def_of(f.effect).run(f.job, exec, ctx);
+    } catch (...) {
+      r.warnings = warned.texts();
+      throw;
+    }
+    r.warnings = warned.texts();
     r.status = "ok";
   } catch (const std::exception& e) {
     r.status = "failed";
@@ -310,6 +321,7 @@ BatchSummary run_batch(const BatchOptions& o) {
         ++journal_lines;
       ++finished;
       if (r.status == "ok") ++s.ok, ++worked;
+      if (!r.warnings.empty()) ++s.warned;
       if (r.status == "skipped") ++s.skipped;
       if (r.status == "failed") {
         ++s.failed, ++worked;

@@ -21,6 +21,7 @@
 #include "core/text.hpp"
 #include "core/timing.hpp"
 #include "depth/sky_check.hpp"
+#include "core/warnings.hpp"
 
 namespace fs = std::filesystem;
 
@@ -806,7 +807,7 @@ nlohmann::json job_record(const std::string& command, const RunContext& ctx, nlo
   // The depth's warnings (the completion's record, within the preparation's).
   if (const nlohmann::json::json_pointer at("/prepare/complete/warnings"); rec.contains(at))
     for (const auto& w : rec[at])
-      if (w.is_string()) std::fprintf(stderr, "brume %s: warning: %s\n", command.c_str(), w.get<std::string>().c_str());
+      if (w.is_string()) print_warning(command, w.get<std::string>());
   if (print_timing && rec.contains("execution"))
     std::fprintf(stderr, "brume %s: %s: %s\n", command.c_str(), rec["execution"].value("backend", "cpu").c_str(),
                  rec["execution"].value("timing", nlohmann::json::object()).dump().c_str());

@@ -99,8 +99,11 @@ Command add_batch(CLI::App& app) {
             }
             if (o.out_dir.empty()) throw Error("--out-dir is required: the folder the outputs and records go to");
             const BatchSummary s = run_batch(o);
-            std::fprintf(stderr, "brume batch: %zu frames in %.1f s: %zu done, %zu skipped (done before), %zu failed; %s\n",
-                         s.frames, s.seconds, s.ok, s.skipped, s.failed, s.results.c_str());
+            std::fprintf(stderr, "brume batch: %zu frames in %.1f s: %zu done, %zu skipped (done before), %zu failed%s; %s\n",
+                         s.frames, s.seconds, s.ok, s.skipped, s.failed,
+                         s.warned ? (", " + std::to_string(s.warned) + " with warnings (each frame's results line lists them)").c_str()
+                                  : "",
+                         s.results.c_str());
             return s.failed > 0 ? 1 : 0;
           }};
 }

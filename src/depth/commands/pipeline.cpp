@@ -11,6 +11,7 @@
 #include "brume/io.hpp"
 #include "brume/prepare.hpp"
 #include "brume/record.hpp"
+#include "core/warnings.hpp"
 
 namespace fs = std::filesystem;
 
@@ -133,7 +134,7 @@ nlohmann::json run_depth_prepare_job(const DepthPrepareJob& job, const RunContex
   rec["complete"] = done.record;
   if (done.record.contains("warnings"))
     for (const auto& w : done.record["warnings"])
-      std::fprintf(stderr, "brume depth prepare: warning: %s\n", w.get<std::string>().c_str());
+      print_warning("depth prepare", w.get<std::string>());
   rec["prepare"] = prepare_record(job.prepare, pr);
   WriteOptions w = data;
   w.description = rec.dump();

@@ -16,6 +16,7 @@
 #include "brume/record.hpp"
 #include "effects/aerial/aerial_job.hpp"
 #include "core/text.hpp"
+#include "core/warnings.hpp"
 
 namespace brume {
 
@@ -325,7 +326,7 @@ AerialRun run_aerial_at(DenseImageRef rgb, DenseImageRef measured, const AerialP
                                          "holds (a lower --from-turbidity, or the photo's own --from-horizon)"
                                        : ": the input image has negative values");
       run.record["aerial"]["warnings"].push_back(w);
-      std::fprintf(stderr, "brume aerial: warning: %s\n", w.c_str());
+      print_warning("aerial", w);
     }
   }
   run.record["prepare"] = prep.record;
@@ -363,7 +364,7 @@ AerialRun run_aerial(DenseImageRef rgb, DenseImageRef measured_range, const Aeri
     run.record["turbidity_fit"] = contrast->record;
     if (!contrast->warning.empty()) {
       run.record["aerial"]["warnings"].push_back(contrast->warning);
-      std::fprintf(stderr, "brume aerial: warning: %s\n", contrast->warning.c_str());
+      print_warning("aerial", contrast->warning);
     }
   }
   return run;

@@ -20,6 +20,7 @@
 #include "effects/rain/rain_gpu.hpp"
 #include "effects/rain/streaks_pipeline.hpp"
 #include "pipeline/camera_scan_arrays.hpp"
+#include "core/warnings.hpp"
 
 namespace brume {
 
@@ -88,7 +89,7 @@ nlohmann::json camera_rain_lidar_block(const LidarRainParams& lp, const LidarRai
     const std::string w = "the scan's drops are drawn in the scan's own frame, not the camera's (no KITTI calibration "
                           "places it): the image's streaks and the scan's drop echoes are not the same drops; " + how;
     block["warnings"].push_back(w);
-    if (print) std::fprintf(stderr, "brume rain: warning: %s\n", w.c_str());
+    if (print) print_warning("rain", w);
   }
   return block;
 }

@@ -24,6 +24,7 @@
 #include "effects/wet/wet_gpu.hpp"
 #include "pipeline/camera_scan_arrays.hpp"
 #include "pipeline/scan_job.hpp"
+#include "core/warnings.hpp"
 
 namespace brume {
 
@@ -437,7 +438,7 @@ CommandDef wet_command() {
                          r["mirror_hits"].get<std::size_t>(), r["mirror_sky_pixels"].get<std::size_t>(),
                          r["mirror_left_frame"].get<std::size_t>());
             if (r.contains("warnings"))
-              for (const auto& w : r["warnings"]) std::fprintf(stderr, "brume wet: warning: %s\n", w.get<std::string>().c_str());
+              for (const auto& w : r["warnings"]) print_warning("wet", w.get<std::string>());
           },
   });
   // The extinction a LiDAR beam sees in this job's media (brume/lidar_camera.hpp's hook): none, the

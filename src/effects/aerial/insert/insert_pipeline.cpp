@@ -12,6 +12,7 @@
 #include "brume/insert.hpp"
 #include "brume/record.hpp"
 #include "effects/aerial/insert/insert_job.hpp"
+#include "core/warnings.hpp"
 
 namespace brume {
 
@@ -119,7 +120,7 @@ InsertRun insert_object(const Image& photo, const Image& scene_range, const Imag
     run.record["turbidity_fit"] = contrast->record;
     if (!contrast->warning.empty()) {
       run.record["insert"]["warnings"].push_back(contrast->warning);
-      std::fprintf(stderr, "brume insert: warning: %s\n", contrast->warning.c_str());
+      print_warning("insert", contrast->warning);
     }
   }
   run.record["prepare"] = prep.record;
