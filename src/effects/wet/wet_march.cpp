@@ -49,6 +49,11 @@ void WetMarchRays::push(double w0_, double dw_, double uinf_, double vinf_, doub
   cv.push_back(cv_), major.push_back(major_), w_lift.push_back(w_lift_), flags.push_back(flags_);
 }
 
+void WetMarchRays::resize(std::size_t n) {
+  for (auto* v : {&w0, &dw, &uinf, &vinf, &cu, &cv, &major, &w_lift}) v->resize(n);
+  flags.resize(n);
+}
+
 }  // namespace brume::detail
 #endif
 
@@ -361,6 +366,138 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   return true;
 }
 
+
+// ---- render_wet's pixels around the march (wet_march.hpp): the scalar expressions they
+// replaced, operation for operation (no contraction on this file; Div and Sqrt correctly rounded
+// as divsd and sqrtsd; float's rounding of a double as static_cast's), so the same bits.
+
+// std::max's and std::min's own choice ((a < b) ? b : a; (b < a) ? b : a): the scalar code's
+// value whatever the zeros' signs.
+template <class V>
+HWY_INLINE V StdMax(V a, V b) {
+  return hn::IfThenElse(hn::Lt(a, b), b, a);
+}
+template <class V>
+HWY_INLINE V StdMin(V a, V b) {
+  return hn::IfThenElse(hn::Lt(b, a), b, a);
+}
+// The first `count` lanes from p (the rest `pad`), and back: a row's or a batch's last vector.
+template <class D, class T>
+HWY_INLINE hn::Vec<D> LoadPart(D d, const T* p, std::size_t count, T pad) {
+  if (count == hn::Lanes(d)) return hn::LoadU(d, p);
+  HWY_ALIGN T b[HWY_MAX_BYTES / sizeof(T)];
+  for (std::size_t j = 0; j < hn::Lanes(d); ++j) b[j] = j < count ? p[j] : pad;
+  return hn::Load(d, b);
+}
+template <class D, class T>
+HWY_INLINE void StorePart(D d, hn::Vec<D> v, T* p, std::size_t count) {
+  if (count == hn::Lanes(d)) return hn::StoreU(v, d, p);
+  HWY_ALIGN T b[HWY_MAX_BYTES / sizeof(T)];
+  hn::Store(v, d, b);
+  std::copy(b, b + count, p);
+}
+
+void WetDepthRowK(const WetPixelFrame& f, const double* rx, double ry, const float* range, int width, float* z,
+                  float* zo, std::uint8_t* flags) {
+  const hn::ScalableTag<double> dd;
+  const hn::Rebind<float, decltype(dd)> df;
+  using VD = hn::Vec<decltype(dd)>;
+  const std::size_t N = hn::Lanes(dd), W = static_cast<std::size_t>(width);
+  const VD zero = hn::Zero(dd), one = hn::Set(dd, 1.0), inf = hn::Set(dd, INFINITY);
+  const VD ryv = hn::Set(dd, ry), ry2 = hn::Set(dd, ry * ry);
+  const VD nx = hn::Set(dd, f.nx), ny = hn::Set(dd, f.ny), nz = hn::Set(dd, f.nz);
+  const VD h = hn::Set(dd, f.h), tol = hn::Set(dd, f.tol);
+  HWY_ALIGN double fl[HWY_MAX_BYTES / sizeof(double)];
+  for (std::size_t x = 0; x < W; x += N) {
+    const std::size_t c = std::min(N, W - x);
+    const VD r = hn::PromoteTo(dd, LoadPart(df, range + x, c, 0.0f));
+    const VD rxv = LoadPart(dd, rx + x, c, 0.0);
+    // |ray| for the ray (rx, ry, 1); a known range: finite and > 0
+    const VD len = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rxv, rxv), ry2), one));
+    const auto known = hn::And(hn::Gt(r, zero), hn::Lt(r, inf));
+    const auto zf = hn::DemoteTo(df, hn::IfThenElse(known, hn::Div(r, len), inf));
+    StorePart(df, zf, z + x, c);
+    // the unit ray's d·n (< 0: down), and the pixel's 3-D point within the tolerance of the plane
+    const VD inv = hn::Div(one, len);
+    const VD dn = hn::Add(hn::Add(hn::Mul(hn::Mul(rxv, inv), nx), hn::Mul(hn::Mul(ryv, inv), ny)), hn::Mul(inv, nz));
+    const auto down = hn::And(known, hn::Lt(dn, zero));
+    const VD zd = hn::PromoteTo(dd, zf);
+    const auto plane = hn::And(down, hn::Le(hn::Abs(hn::Add(h, hn::Mul(hn::Div(zd, inv), dn))), tol));
+    if (zo) StorePart(df, hn::DemoteTo(df, hn::IfThenElse(plane, inf, zd)), zo + x, c);
+    hn::Store(hn::Add(hn::IfThenElseZero(down, hn::Set(dd, kWetDown)), hn::IfThenElseZero(plane, hn::Set(dd, kWetOnPlane))),
+              dd, fl);
+    for (std::size_t j = 0; j < c; ++j) flags[x + j] = static_cast<std::uint8_t>(fl[j]);
+  }
+}
+
+void WetSetupRaysK(const WetPixelFrame& f, const std::int32_t* xs, const std::int32_t* ys, const float* z0s,
+                   std::size_t n, WetMarchRays& r, float* mirror) {
+  const hn::ScalableTag<double> dd;
+  const hn::Rebind<float, decltype(dd)> df;
+  const hn::Rebind<std::int32_t, decltype(dd)> di;
+  using VD = hn::Vec<decltype(dd)>;
+  const std::size_t N = hn::Lanes(dd);
+  r.resize(n);
+  const VD zero = hn::Zero(dd), one = hn::Set(dd, 1.0), two = hn::Set(dd, 2.0), half = hn::Set(dd, 0.5);
+  const VD fx = hn::Set(dd, f.fx), fy = hn::Set(dd, f.fy), cx = hn::Set(dd, f.cx), cy = hn::Set(dd, f.cy);
+  const VD nx = hn::Set(dd, f.nx), ny = hn::Set(dd, f.ny), nz = hn::Set(dd, f.nz);
+  const VD h = hn::Set(dd, f.h), tol = hn::Set(dd, f.tol), step = hn::Set(dd, f.step_px);
+  const VD wf = hn::Set(dd, f.f), wn = hn::Set(dd, f.n), wnn = hn::Set(dd, f.n * f.n);
+  const VD tiny = hn::Set(dd, 1e-9), far = hn::Set(dd, 1e-30);
+  HWY_ALIGN double fl[HWY_MAX_BYTES / sizeof(double)];
+  for (std::size_t i = 0; i < n; i += N) {
+    const std::size_t c = std::min(N, n - i);
+    const VD x = hn::PromoteTo(dd, LoadPart(di, xs + i, c, std::int32_t{0}));
+    const VD y = hn::PromoteTo(dd, LoadPart(di, ys + i, c, std::int32_t{0}));
+    // the unit ray (cv) and d·n (< 0: the ray goes down)
+    const VD rx = hn::Div(hn::Sub(x, cx), fx), ry = hn::Div(hn::Sub(y, cy), fy);
+    const VD inv = hn::Div(one, hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), one)));
+    const VD dx = hn::Mul(rx, inv), dy = hn::Mul(ry, inv), dz = inv;
+    const VD dn = hn::Add(hn::Add(hn::Mul(dx, nx), hn::Mul(dy, ny)), hn::Mul(dz, nz));
+    const VD r0 = hn::Div(hn::PromoteTo(dd, LoadPart(df, z0s + i, c, 1.0f)), inv);
+    // the mirrored ray X(t) = P + t·D and its image u = uinf + w·cu, v = vinf + w·cv (w = 1/Z)
+    const VD Px = hn::Mul(r0, dx), Py = hn::Mul(r0, dy), Pz = hn::Mul(r0, dz);
+    const VD dn2 = hn::Mul(two, dn);
+    const VD Dx = hn::Sub(dx, hn::Mul(dn2, nx)), Dy = hn::Sub(dy, hn::Mul(dn2, ny));
+    VD Dz = hn::Sub(dz, hn::Mul(dn2, nz));
+    Dz = hn::IfThenElse(hn::Lt(hn::Abs(Dz), tiny), hn::IfThenElse(hn::Lt(Dz, zero), hn::Neg(tiny), tiny), Dz);
+    const VD bu = hn::Add(hn::Mul(fx, Dx), hn::Mul(cx, Dz)), bv = hn::Add(hn::Mul(fy, Dy), hn::Mul(cy, Dz));
+    const VD cu = hn::Sub(hn::Add(hn::Mul(fx, Px), hn::Mul(cx, Pz)), hn::Div(hn::Mul(bu, Pz), Dz));
+    const VD cv = hn::Sub(hn::Add(hn::Mul(fy, Py), hn::Mul(cy, Pz)), hn::Div(hn::Mul(bv, Pz), Dz));
+    const VD major = StdMax(hn::Abs(cu), hn::Abs(cv));
+    const auto dzpos = hn::Gt(Dz, zero);
+    const VD dw = hn::Div(hn::Mul(hn::IfThenElse(dzpos, hn::Neg(one), one), step), StdMax(major, far));
+    StorePart(dd, hn::Div(one, Pz), r.w0.data() + i, c);
+    StorePart(dd, dw, r.dw.data() + i, c);
+    StorePart(dd, hn::Div(bu, Dz), r.uinf.data() + i, c), StorePart(dd, hn::Div(bv, Dz), r.vinf.data() + i, c);
+    StorePart(dd, cu, r.cu.data() + i, c), StorePart(dd, cv, r.cv.data() + i, c);
+    StorePart(dd, major, r.major.data() + i, c);
+    // above_ground's lift: the ray leaves the plane's tolerance at t_lift (Z = z_lift)
+    VD flags = hn::IfThenElseZero(dzpos, hn::Set(dd, WetMarchRays::dz_positive));
+    VD w_lift = zero;
+    if (f.lift) {
+      const VD t_lift = hn::Div(hn::Sub(tol, hn::Add(h, hn::Mul(r0, dn))), hn::Neg(dn));
+      const VD z_lift = hn::Add(Pz, hn::Mul(StdMax(t_lift, zero), Dz));
+      const auto lifted = hn::Le(t_lift, zero);
+      const auto can = hn::AndNot(lifted, hn::Gt(z_lift, zero));
+      flags = hn::Add(flags, hn::Add(hn::IfThenElseZero(lifted, hn::Set(dd, WetMarchRays::lifted)),
+                                     hn::IfThenElseZero(can, hn::Set(dd, WetMarchRays::can_lift))));
+      w_lift = hn::IfThenElseZero(can, hn::Div(one, z_lift));
+    }
+    StorePart(dd, w_lift, r.w_lift.data() + i, c);
+    hn::Store(flags, dd, fl);
+    for (std::size_t j = 0; j < c; ++j) r.flags[i + j] = static_cast<std::uint8_t>(fl[j]);
+    // the mirror's weight f·R_F(θ), cos θ = −d·n (fresnel_air_to's unpolarised R)
+    const VD ci = StdMin(one, StdMax(zero, hn::Neg(dn)));
+    const VD s2 = StdMax(zero, hn::Sub(one, hn::Mul(ci, ci)));
+    const VD ct = hn::Sqrt(StdMax(zero, hn::Sub(one, hn::Div(s2, wnn))));
+    const VD ds = hn::Add(ci, hn::Mul(wn, ct)), dp = hn::Add(hn::Mul(wn, ci), ct);
+    const VD rs = hn::Div(hn::Sub(ci, hn::Mul(wn, ct)), ds), rp = hn::Div(hn::Sub(hn::Mul(wn, ci), ct), dp);
+    const VD R = hn::Mul(half, hn::Add(hn::Mul(rs, rs), hn::Mul(rp, rp)));
+    StorePart(df, hn::DemoteTo(df, hn::Mul(wf, R)), mirror + i, c);
+  }
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace brume::detail
 HWY_AFTER_NAMESPACE();
@@ -369,6 +506,19 @@ HWY_AFTER_NAMESPACE();
 namespace brume::detail {
 HWY_EXPORT(WetMarchRaysK);
 
+HWY_EXPORT(WetDepthRowK);
+HWY_EXPORT(WetSetupRaysK);
+
 bool wet_march_rays(const WetMarchMaps& m, WetMarchRays& r) { return HWY_DYNAMIC_DISPATCH(WetMarchRaysK)(m, r); }
+
+void wet_depth_row(const WetPixelFrame& f, const double* rx, double ry, const float* range, int width, float* z,
+                   float* zo, std::uint8_t* flags) {
+  HWY_DYNAMIC_DISPATCH(WetDepthRowK)(f, rx, ry, range, width, z, zo, flags);
+}
+
+void wet_setup_rays(const WetPixelFrame& f, const std::int32_t* x, const std::int32_t* y, const float* z0,
+                    std::size_t n, WetMarchRays& r, float* mirror) {
+  HWY_DYNAMIC_DISPATCH(WetSetupRaysK)(f, x, y, z0, n, r, mirror);
+}
 }  // namespace brume::detail
 #endif  // HWY_ONCE
