@@ -163,13 +163,26 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   // those did not clear or the last ask's 8 single steps are not done): one read of the maps and
   // one division a lane. The lanes whose ray met an event (ended, or crossed the map), a bit each.
   const VD two = hn::Set(dd, 2.0);
-  const auto round = [&](std::size_t g) BRUME_WET_INLINE -> std::uint64_t {
+  // A round in two halves, each group's first half before any group's second: the first computes
+  // the step, issues the read of the maps and the division, the second waits on them and decides
+  // (the groups' reads and divisions in flight together, not one group's after another's
+  // decisions). Between them, per group: the read, the inverse, the step's end, and the masks.
+  enum { kNear, kInv, kW1, kTemps };
+  enum { kMDoA, kMDoB, kMDoC, kMOk, kMAskedFits, kMOther, kMVanish, kMasks };
+  constexpr std::size_t kMaskBytes = 16;  // (LoadMaskBits reads up to 8 bytes; a mask of up to 64 lanes)
+  auto tmp = hwy::AllocateAligned<double>(kTemps * L);
+  double* T[kTemps];
+  for (int k = 0; k < kTemps; ++k) T[k] = tmp.get() + k * L;
+  HWY_ALIGN std::uint8_t mb[kGroups][kMasks][kMaskBytes] = {};
+  const auto put = [&](std::size_t g, int k, MD m) BRUME_WET_INLINE { hn::StoreMaskBits(dd, m, mb[g][k]); };
+  const auto get = [&](std::size_t g, int k) BRUME_WET_INLINE -> MD { return hn::LoadMaskBits(dd, mb[g][k]); };
+  const auto round_a = [&](std::size_t g) BRUME_WET_INLINE {
     const std::size_t o = g * N;
     const VD wc = hn::Load(dd, S[kWc] + o);
     const VD dw = hn::Load(dd, S[kDw] + o), uinf = hn::Load(dd, S[kUinf] + o), vinf = hn::Load(dd, S[kVinf] + o);
     const VD cu = hn::Load(dd, S[kCu] + o), cv = hn::Load(dd, S[kCv] + o);
-    VD lifted = hn::Load(dd, S[kLifted] + o), front = hn::Load(dd, S[kFront] + o), fine = hn::Load(dd, S[kFine] + o);
-    VD step = hn::Load(dd, S[kStep] + o), ph = hn::Load(dd, S[kPhase] + o);
+    VD lifted = hn::Load(dd, S[kLifted] + o);
+    const VD fine = hn::Load(dd, S[kFine] + o), ph = hn::Load(dd, S[kPhase] + o);
     const MD act = hn::Gt(hn::Load(dd, S[kBusy] + o), zero);
     const MD dzpos = hn::Gt(hn::Load(dd, S[kDzPos] + o), zero);
     // the top of the loop: within half a pixel of the vanishing point; the lift
@@ -245,7 +258,20 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     // the depth times the margin in float, as the scalar march's product, widened
     const VD near = hn::PromoteTo(dd, hn::Mul(hn::GatherIndex(df, m.maps, i32), fk));
     const VD inv = hn::Div(one, hn::IfThenElse(doC, w1, hn::Min(wc, w1)));
-    const MD clear = hn::Or(other, hn::And(hn::And(asked, fits), hn::Le(inv, near)));
+    hn::Store(near, dd, T[kNear] + o), hn::Store(inv, dd, T[kInv] + o), hn::Store(w1, dd, T[kW1] + o);
+    hn::Store(lifted, dd, S[kLifted] + o);
+    hn::Store(u1, dd, S[kU] + o), hn::Store(v1, dd, S[kV] + o);
+    put(g, kMDoA, doA), put(g, kMDoB, doB), put(g, kMDoC, doC), put(g, kMOk, ok);
+    put(g, kMAskedFits, hn::And(asked, fits)), put(g, kMOther, other), put(g, kMVanish, vanish);
+  };
+  const auto round_b = [&](std::size_t g) BRUME_WET_INLINE -> std::uint64_t {
+    const std::size_t o = g * N;
+    const VD wc = hn::Load(dd, S[kWc] + o), w1 = hn::Load(dd, T[kW1] + o);
+    const VD near = hn::Load(dd, T[kNear] + o), inv = hn::Load(dd, T[kInv] + o);
+    VD front = hn::Load(dd, S[kFront] + o), fine = hn::Load(dd, S[kFine] + o), step = hn::Load(dd, S[kStep] + o);
+    const MD doA = get(g, kMDoA), doB = get(g, kMDoB), doC = get(g, kMDoC), ok = get(g, kMOk);
+    const MD other = get(g, kMOther), vanish = get(g, kMVanish), asked_fits = get(g, kMAskedFits);
+    const MD clear = hn::Or(other, hn::And(asked_fits, hn::Le(inv, near)));
     const MD behind = hn::Gt(inv, near);
     const MD ca = hn::And(doA, clear), cb = hn::And(doB, clear);
     const MD leave = hn::AndNot(ok, doC);
@@ -257,12 +283,12 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     front = hn::IfThenElse(stepped, hn::IfThenElseZero(hn::Not(behind), one), hn::IfThenElse(cleared, one, front));
     const MD moved = hn::Or(cleared, stepped);
     // the next phase: B after a failed A, C after a failed B, else a new iteration
-    ph = hn::IfThenElse(hn::AndNot(clear, doA), one, hn::IfThenElseZero(hn::AndNot(clear, doB), two));
+    const VD ph = hn::IfThenElse(hn::AndNot(clear, doA), one, hn::IfThenElseZero(hn::AndNot(clear, doB), two));
     // the iteration's end: the step count (the scalar loop's bound: a single step that reaches it
     // ends at infinity, a block step leaves)
     const MD at_max = hn::And(moved, hn::Eq(hn::Add(step, one), max_steps));
     step = hn::IfThenElse(moved, hn::Add(step, one), step);
-    hn::Store(hn::IfThenElse(moved, w1, wc), dd, S[kWc] + o), hn::Store(lifted, dd, S[kLifted] + o);
+    hn::Store(hn::IfThenElse(moved, w1, wc), dd, S[kWc] + o);
     hn::Store(front, dd, S[kFront] + o), hn::Store(fine, dd, S[kFine] + o), hn::Store(step, dd, S[kStep] + o);
     hn::Store(ph, dd, S[kPhase] + o);
     const MD event = hn::Or(hn::Or(vanish, leave), hn::Or(cross, at_max));
@@ -272,7 +298,6 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
             hn::Add(hn::IfThenElseZero(cross, hn::Set(dd, kCross)), hn::IfThenElseZero(at_max, hn::Set(dd, kAtMax))),
             hn::IfThenElseZero(stepped, hn::Set(dd, kStepped))));
     hn::Store(ev, dd, S[kEvent] + o), hn::Store(wc, dd, S[kWprev] + o);
-    hn::Store(u1, dd, S[kU] + o), hn::Store(v1, dd, S[kV] + o);
     std::uint8_t bits[8] = {};
     hn::StoreMaskBits(dd, event, bits);
     std::uint64_t b = 0;
@@ -336,7 +361,8 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     if (waiting.size() >= N || busy == 0) bisect();
     if (busy == 0) continue;
     std::uint64_t bits[kGroups], any = 0;
-    for (std::size_t g = 0; g < kGroups; ++g) any |= bits[g] = round(g);
+    for (std::size_t g = 0; g < kGroups; ++g) round_a(g);
+    for (std::size_t g = 0; g < kGroups; ++g) any |= bits[g] = round_b(g);
     if (HWY_LIKELY(any == 0)) continue;
     for (std::size_t g = 0; g < kGroups; ++g)
       for (std::uint64_t bs = bits[g]; bs != 0; bs &= bs - 1) {
