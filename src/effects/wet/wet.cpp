@@ -377,7 +377,7 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
 #pragma omp parallel num_threads(nt)
   {
     std::vector<float> row(dense ? 0 : W);
-#pragma omp for schedule(static)
+#pragma omp for schedule(dynamic, 1)
     for (int by = 0; by < f.bh; ++by)
       for (int y = by * detail::kWetFineBlock; y < std::min(H, (by + 1) * detail::kWetFineBlock); ++y) {
         const float* range = s.range.data() + static_cast<std::ptrdiff_t>(y) * s.range.row_stride();
