@@ -431,17 +431,21 @@ void WetDepthRowK(const WetPixelFrame& f, const double* rx, double ry, const flo
   const std::size_t N = hn::Lanes(dd), W = static_cast<std::size_t>(width);
   const VD zero = hn::Zero(dd), one = hn::Set(dd, 1.0), inf = hn::Set(dd, INFINITY);
   const VD ryv = hn::Set(dd, ry), ry2 = hn::Set(dd, ry * ry);
+  const auto zero_f = hn::Zero(df), inf_f = hn::Set(df, INFINITY);
   const VD nx = hn::Set(dd, f.nx), ny = hn::Set(dd, f.ny), nz = hn::Set(dd, f.nz);
   const VD h = hn::Set(dd, f.h), tol = hn::Set(dd, f.tol);
   HWY_ALIGN double fl[HWY_MAX_BYTES / sizeof(double)];
   for (std::size_t x = 0; x < W; x += N) {
     const std::size_t c = std::min(N, W - x);
-    const VD r = hn::PromoteTo(dd, LoadPart(df, range + x, c, 0.0f));
+    const auto rf = LoadPart(df, range + x, c, 0.0f);
+    const VD r = hn::PromoteTo(dd, rf);
     const VD rxv = LoadPart(dd, rx + x, c, 0.0);
-    // |ray| for the ray (rx, ry, 1); a known range: finite and > 0
+    // |ray| for the ray (rx, ry, 1); a known range: finite and > 0. (inf chosen among floats:
+    // Highway's one-lane DemoteTo gives the largest float for inf.)
     const VD len = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rxv, rxv), ry2), one));
     const auto known = hn::And(hn::Gt(r, zero), hn::Lt(r, inf));
-    const auto zf = hn::DemoteTo(df, hn::IfThenElse(known, hn::Div(r, len), inf));
+    const auto known_f = hn::And(hn::Gt(rf, zero_f), hn::Lt(rf, inf_f));
+    const auto zf = hn::IfThenElse(known_f, hn::DemoteTo(df, hn::Div(r, len)), inf_f);
     StorePart(df, zf, z + x, c);
     // the unit ray's d·n (< 0: down), and the pixel's 3-D point within the tolerance of the plane
     const VD inv = hn::Div(one, len);
@@ -449,7 +453,10 @@ void WetDepthRowK(const WetPixelFrame& f, const double* rx, double ry, const flo
     const auto down = hn::And(known, hn::Lt(dn, zero));
     const VD zd = hn::PromoteTo(dd, zf);
     const auto plane = hn::And(down, hn::Le(hn::Abs(hn::Add(h, hn::Mul(hn::Div(zd, inv), dn))), tol));
-    if (zo) StorePart(df, hn::DemoteTo(df, hn::IfThenElse(plane, inf, zd)), zo + x, c);
+    if (zo) {
+      const auto plane_f = hn::Gt(hn::DemoteTo(df, hn::IfThenElseZero(plane, one)), zero_f);
+      StorePart(df, hn::IfThenElse(plane_f, inf_f, zf), zo + x, c);
+    }
     hn::Store(hn::Add(hn::IfThenElseZero(down, hn::Set(dd, kWetDown)), hn::IfThenElseZero(plane, hn::Set(dd, kWetOnPlane))),
               dd, fl);
     for (std::size_t j = 0; j < c; ++j) flags[x + j] = static_cast<std::uint8_t>(fl[j]);
