@@ -1,6 +1,7 @@
 // brume benchmark — wet ground (brume/wet.hpp, issue #57): the camera's pass (render_wet: the
 // ground test, the darkening and the mirror march) on the demo scene at KITTI's size
-// (1242x375; camera 1.6 m up, 5 deg down, 55 deg vertical field of view), on one thread and
+// (1242x375; the tests' scene, tests/wet_demo.hpp: camera 1.6 m up, 5 deg down, the demo's
+// vertical field of view, a ground tolerance of 2 cm), on one thread and
 // on two, interleaved (each round runs all, in a turning order, so that a busy host slows
 // all alike). And the LiDAR's pass
 // (lidar_wet, one thread) on KITTI 000001's scan (../shared/data; a synthetic ground of its
@@ -30,6 +31,7 @@
 #include "brume/demo_scene.hpp"
 #include "brume/depth.hpp"
 #include "brume/wet.hpp"
+#include "wet_demo.hpp"
 
 using namespace brume;
 using Clock = std::chrono::steady_clock;
@@ -61,15 +63,7 @@ int main(int argc, char** argv) {
               bench::cpu_name().c_str(), rounds, load().c_str());
   const int W = 1242, H = 375;
   const DemoScene d = render_demo_scene(W, H);
-  CameraPose pose;
-  pose.height_m = 1.6;
-  pose.pitch_deg = -5.0;
-  WetScene s;
-  s.rgb = d.rgb;
-  s.range = d.range;
-  s.camera = make_camera(intrinsics_from_fov(W, H, NAN, d.fov_y_deg), W, H, pose);
-  s.ground_tolerance_m = 0.02;
-  s.sky = {0.5f, 0.6f, 0.8f};
+  WetScene s = test::demo_wet_scene(d, W, H);  // the tests' scene (tests/wet_demo.hpp)
   WetFilm w;
   w.film_mm = 1.5;
   // Four runs a round: the blocks march (every pixel asked; records before --mirror-march) and the
