@@ -309,7 +309,9 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
   const int W = s.rgb.width(), H = s.rgb.height();
   const bool masked = s.mask.width() > 0;
   const WetOptics o(w);
-  Image out = s.rgb.to_image();
+  // the output starts as the input, its rows copied with the depth's (below)
+  const int nc = s.rgb.channels();
+  Image out(W, H, nc);
   Image ground(W, H, 1);
   WetStats st;
   const Camera& cam = s.camera;
@@ -399,6 +401,14 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
         };
         block_minima(z, f);
         if (lift) block_minima(zo, f_off);
+        const float* src = s.rgb.row(y);
+        float* dst = out.row(y);
+        if (s.rgb.pixel_stride() == nc) {
+          std::copy(src, src + static_cast<std::size_t>(W) * nc, dst);
+        } else {
+          for (int x = 0; x < W; ++x)
+            for (int c = 0; c < nc; ++c) dst[x * nc + c] = src[x * s.rgb.pixel_stride() + c];
+        }
       }
   }
   for (int l = 0; l < (lift ? 2 : 1); ++l) {
