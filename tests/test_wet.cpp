@@ -299,6 +299,18 @@ TEST(WetCamera, DemoSceneFitsLeknerDorfAndFilmZeroIsIdentity) {
   // Film 0: the image back bit for bit.
   const Image same = render_wet(sc, film(0.0), exec);
   EXPECT_EQ(std::memcmp(same.data.data(), d.rgb.data.data(), d.rgb.data.size() * sizeof(float)), 0);
+  // The image and the range as strided views (an RGBA buffer's RGB, the range as a second channel
+  // of two): the same image bit for bit (render_wet reads them row by row where they are dense).
+  Image rgba(W, H, 4), range2(W, H, 2);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      for (int c = 0; c < 3; ++c) rgba.at(x, y, c) = d.rgb.at(x, y, c);
+      rgba.at(x, y, 3) = 0.5f, range2.at(x, y, 0) = -7.0f, range2.at(x, y, 1) = d.range.at(x, y);
+    }
+  WetScene strided = sc;
+  strided.rgb = ConstImageView(rgba.data.data(), W, H, 3, 4 * W, 4);
+  strided.range = ConstImageView(range2.data.data() + 1, W, H, 1, 2 * W, 2);
+  EXPECT_EQ(render_wet(strided, w, exec).data, out.data);
 }
 
 TEST(WetCamera, AboveGroundMarchAgreesWithBlocksOffThePlane) {
