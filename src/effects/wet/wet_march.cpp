@@ -21,6 +21,11 @@
 // plus the half's test (round_inside), the depths' products with the margins are taken in float as
 // before, and a block index's integer division by the block's size is the floor of the truncated
 // coordinate times 1/S (a power of two: exact). Test: WetCamera.MarchSideBySideGivesTheSameBits.
+//
+// Below the march, render_wet's work on every pixel around it (wet_march.hpp: a row's planar depth
+// and ground flags, the rays' set-up and the mirror's Fresnel weight), side by side on every
+// target, each the scalar expression's IEEE operations in its order. Test:
+// WetCamera.PixelKernelsGiveTheScalarBits.
 #include "core/simd.hpp"  // first: the targets
 
 #ifndef BRUME_WET_MARCH_SHARED
