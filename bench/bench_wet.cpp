@@ -1,6 +1,8 @@
 // brume benchmark — wet ground (brume/wet.hpp, issue #57): the camera's pass (render_wet: the
 // ground test, the darkening and the mirror march) on the demo scene at KITTI's size
-// (1242x375; camera 1.6 m up, 5 deg down, 55 deg vertical field of view), on one thread and
+// (1242x375; the tests' scene, tests/wet_demo.hpp: camera 1.6 m up, 5 deg down, the demo's
+// vertical field of view, a ground tolerance of 2 cm) and on KITTI 000001 as `brume wet
+// --velodyne` sees it (completed, camera 1.65 m up; ../shared/data), on one thread and
 // on two, interleaved (each round runs all, in a turning order, so that a busy host slows
 // all alike). And the LiDAR's pass
 // (lidar_wet, one thread) on KITTI 000001's scan (../shared/data; a synthetic ground of its
@@ -29,7 +31,13 @@
 #include "bench_util.hpp"
 #include "brume/demo_scene.hpp"
 #include "brume/depth.hpp"
+#include "brume/depth_source.hpp"
+#include "brume/haze.hpp"
+#include "brume/io.hpp"
+#include "brume/pipeline.hpp"
+#include "brume/range_step.hpp"
 #include "brume/wet.hpp"
+#include "wet_demo.hpp"
 
 using namespace brume;
 using Clock = std::chrono::steady_clock;
@@ -53,27 +61,10 @@ std::uint64_t fnv1a(const Image& im) {
   return h;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  const int rounds = argc > 1 ? std::max(1, std::atoi(argv[1])) : 15;
-  std::printf("brume wet benchmark: %s, %d interleaved rounds (median [min..max]); load average %s\n",
-              bench::cpu_name().c_str(), rounds, load().c_str());
-  const int W = 1242, H = 375;
-  const DemoScene d = render_demo_scene(W, H);
-  CameraPose pose;
-  pose.height_m = 1.6;
-  pose.pitch_deg = -5.0;
-  WetScene s;
-  s.rgb = d.rgb;
-  s.range = d.range;
-  s.camera = make_camera(intrinsics_from_fov(W, H, NAN, d.fov_y_deg), W, H, pose);
-  s.ground_tolerance_m = 0.02;
-  s.sky = {0.5f, 0.6f, 0.8f};
-  WetFilm w;
-  w.film_mm = 1.5;
-  // Four runs a round: the blocks march (every pixel asked; records before --mirror-march) and the
-  // above-ground one (the default), each on one thread and on two, in an order that turns each round.
+// The camera's pass on one scene: both marches (WetMarch: blocks asks every pixel, records before
+// --mirror-march; above-ground, the default), each on one thread and on two, four runs a round in
+// an order that turns each round; medians, the phases' times and the output's hash.
+void bench_camera(const char* name, WetScene s, const WetFilm& w, int rounds) {
   const WetMarch marches[2] = {WetMarch::blocks, WetMarch::above_ground};
   std::vector<double> t[2][2], maps[2][2], march[2][2], speedup[2];
   std::uint64_t hash[2][2] = {};
@@ -98,9 +89,9 @@ int main(int argc, char** argv) {
   }
   for (int m = 0; m < 2; ++m) {
     const bench::Spread a = bench::spread(t[m][0]), b = bench::spread(t[m][1]);
-    std::printf("  camera, demo 1242x375, --mirror-march %s (%zu ground px: %zu hits, %zu sky, %zu leave)  1 thread "
+    std::printf("  camera, %s, --mirror-march %s (%zu ground px: %zu hits, %zu sky, %zu leave)  1 thread "
                 "%7.2f ms [%.2f..%.2f]  2 threads %7.2f ms [%.2f..%.2f]\n",
-                enum_name(wet_march_names(), marches[m]).c_str(), st[m].ground, st[m].hits, st[m].sky_pixels,
+                name, enum_name(wet_march_names(), marches[m]).c_str(), st[m].ground, st[m].hits, st[m].sky_pixels,
                 st[m].left_frame, a.median, a.lo, a.hi, b.median, b.lo, b.hi);
     for (int i = 0; i < 2; ++i)
       std::printf("    %d thread%s: depth map and pyramids %.2f ms, ground and march %.2f ms (medians); output hash "
@@ -113,8 +104,49 @@ int main(int argc, char** argv) {
     std::printf("  blocks / above-ground, %d thread%s: %.2fx [%.2f..%.2f]\n", i + 1, i ? "s" : "", q.median, q.lo,
                 q.hi);
   }
+}
 
-  const std::string bin = std::string(BRUME_DATA_DIR) + "/kitti_object_000001/velodyne/000001.bin";
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int rounds = argc > 1 ? std::max(1, std::atoi(argv[1])) : 15;
+  std::printf("brume wet benchmark: %s, %d interleaved rounds (median [min..max]); load average %s\n",
+              bench::cpu_name().c_str(), rounds, load().c_str());
+  const int W = 1242, H = 375;
+  const DemoScene d = render_demo_scene(W, H);
+  WetFilm w;
+  w.film_mm = 1.5;
+  bench_camera("demo 1242x375", test::demo_wet_scene(d, W, H), w, rounds);  // the tests' scene (tests/wet_demo.hpp)
+
+  // KITTI 000001 as `brume wet --image .. --velodyne .. --kitti-calib .. --camera-height 1.65 --film 1`
+  // sees it (wet_pipeline.cpp's run_camera_wet): the scan projected and completed, haze's airlight,
+  // the range prepared; issue #57's target scene.
+  const std::string kd = std::string(BRUME_DATA_DIR) + "/kitti_object_000001";
+  const std::string kimg = kd + "/image_2/000001.png", bin = kd + "/velodyne/000001.bin",
+                    kcal = kd + "/calib/000001.txt";
+  if (std::filesystem::exists(kimg) && std::filesystem::exists(bin) && std::filesystem::exists(kcal)) {
+    const Image rgb = read_color(kimg);
+    DepthSource src;
+    src.velodyne = bin, src.kitti_calib = kcal;
+    LoadedDepth depth = load_depth(src, rgb.width, rgb.height);
+    depth.offset_scan = true;  // a scan from beside the camera (as the pipeline's inputs mark --velodyne)
+    const RangeStep step = with_camera(RangeStep{}, depth);
+    const CompletedRange done = complete_step(depth.range, rgb, step);
+    HazeParams hp;
+    hp.kappa_s = 0.0;
+    const HazeAnalysis ha = analyse_haze(rgb, done.view(depth.range), hp);
+    const PreparedRange prep = prepare_step(done.view(depth.range), step, {}, 0, true);
+    CameraPose pose;
+    pose.height_m = 1.65;
+    WetScene k;
+    k.rgb = rgb, k.range = prep.range, k.camera = depth_camera(src, rgb.width, rgb.height, pose), k.sky = ha.airlight;
+    WetFilm wk;
+    wk.film_mm = 1.0;
+    bench_camera("KITTI 000001", k, wk, rounds);
+  } else {
+    std::printf("  (%s is absent: no KITTI camera run)\n", kd.c_str());
+  }
+
   std::vector<float> scan;
   if (std::filesystem::exists(bin)) {
     scan = read_kitti_bin(bin, "--points");

@@ -2,7 +2,10 @@
 // camera's darkening and mirror image, the LiDAR's ground returns.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <map>
 #include <vector>
@@ -12,6 +15,7 @@
 #include "brume/error.hpp"
 #include "brume/wet.hpp"
 #include "core/simd.hpp"
+#include "effects/wet/wet_march.hpp"
 #include "wet_demo.hpp"
 
 using namespace brume;
@@ -295,6 +299,18 @@ TEST(WetCamera, DemoSceneFitsLeknerDorfAndFilmZeroIsIdentity) {
   // Film 0: the image back bit for bit.
   const Image same = render_wet(sc, film(0.0), exec);
   EXPECT_EQ(std::memcmp(same.data.data(), d.rgb.data.data(), d.rgb.data.size() * sizeof(float)), 0);
+  // The image and the range as strided views (an RGBA buffer's RGB, the range as a second channel
+  // of two): the same image bit for bit (render_wet reads them row by row where they are dense).
+  Image rgba(W, H, 4), range2(W, H, 2);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      for (int c = 0; c < 3; ++c) rgba.at(x, y, c) = d.rgb.at(x, y, c);
+      rgba.at(x, y, 3) = 0.5f, range2.at(x, y, 0) = -7.0f, range2.at(x, y, 1) = d.range.at(x, y);
+    }
+  WetScene strided = sc;
+  strided.rgb = ConstImageView(rgba.data.data(), W, H, 3, 4 * W, 4);
+  strided.range = ConstImageView(range2.data.data() + 1, W, H, 1, 2 * W, 2);
+  EXPECT_EQ(render_wet(strided, w, exec).data, out.data);
 }
 
 TEST(WetCamera, AboveGroundMarchAgreesWithBlocksOffThePlane) {
@@ -361,7 +377,8 @@ TEST(WetCamera, MarchSideBySideGivesTheSameBits) {
   // narrower target); both must give the same image bit for bit. The best SIMD target this CPU
   // runs (simd::targets(), best first) against the baseline fallback (last: a ray at a time) on
   // the demo scene, both marches: the image and the counts. On a CPU without AVX-512 both run a
-  // ray at a time and the test shows only that.
+  // ray at a time and the test shows only that. (The pixels around the march run side by side on
+  // every target: PixelKernelsGiveTheScalarBits checks each against the scalar expressions.)
   const int W = 256, H = 144;
   const DemoScene d = render_demo_scene(W, H);
   WetScene sc = test::demo_wet_scene(d, W, H);
@@ -393,6 +410,133 @@ TEST(WetCamera, MarchSideBySideGivesTheSameBits) {
                   enum_name(wet_march_names(), m).c_str(), st.hits, st.sky_pixels, st.left_frame,
                   same ? "the same bits" : "OTHER BITS");
     }
+  }
+  simd::force_target(0);
+}
+
+TEST(WetCamera, PixelKernelsGiveTheScalarBits) {
+  // render_wet's pixels around the march run side by side (wet_depth_row, wet_setup_rays:
+  // effects/wet/wet_march.cpp, compiled for every target) and must give what the scalar
+  // expressions they replaced gave (render_wet's loops before 2026-12-07, written out below), bit
+  // for bit, on every target this CPU runs: the planar depth, the depth without the plane's pixels,
+  // the ground flags, every field of the rays and the mirror's weight (WetOptics::mirror: the
+  // library's scalar Fresnel). A tilted camera (pitch and roll: the plane's normal has three
+  // components in the camera's frame), rows of 61 pixels (each row's last vector partial), ranges
+  // on the plane, near it, far, and unknown (inf, NaN, 0, negative). (It caught Highway's one-lane
+  // DemoteTo, which turns inf into the largest float.)
+  const int W = 61, H = 40;
+  CameraPose pose;
+  pose.height_m = 1.6, pose.pitch_deg = -7.0, pose.roll_deg = 4.0;
+  const Camera cam = make_camera(intrinsics_from_fov(W, H, 70.0, NAN), W, H, pose);
+  const Mat3 R = cam.world_from_camera().rotation;
+  const WetOptics o(film(0.6, 0.12, 1.0));
+  ASSERT_GT(o.f, 0.0);
+  ASSERT_LT(o.f, 1.0);
+  detail::WetPixelFrame f;
+  f.fx = cam.k.fx, f.fy = cam.k.fy, f.cx = cam.k.cx, f.cy = cam.k.cy;
+  f.nx = R.m[1][0], f.ny = R.m[1][1], f.nz = R.m[1][2], f.h = cam.position_m.y, f.tol = 0.15;
+  f.f = o.f, f.n = o.n, f.step_px = kWetMarchStepPx, f.lift = true;
+  Image range(W, H, 1);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const Vec3 d = cam.world_ray(x, y);
+      const double t = d.y < 0.0 ? 1.6 / -d.y : 40.0;  // along the ray to the plane
+      const float unknown[4] = {INFINITY, NAN, 0.0f, -1.0f};
+      const int k = (3 * x + y) % 6;
+      range.at(x, y) = k < 2 ? static_cast<float>(t * (k == 0 ? 1.0 : 1.08)) : k < 5 ? static_cast<float>(2.0 + 0.37 * x + 0.11 * y)
+                                                                                   : unknown[(x + y) % 4];
+    }
+  // the scalar expressions
+  std::vector<float> z_ref(W * H), zo_ref(W * H);
+  std::vector<std::uint8_t> fl_ref(W * H);
+  std::vector<std::int32_t> px, py;
+  std::vector<float> pz;
+  std::vector<std::array<double, 8>> ray_ref;  // w0, dw, uinf, vinf, cu, cv, major, w_lift
+  std::vector<std::uint8_t> flags_ref;
+  std::vector<float> mirror_ref;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * W + x;
+      const float r = range.at(x, y);
+      const double rx = (x - f.cx) / f.fx, ry = (y - f.cy) / f.fy;
+      const bool known = std::isfinite(r) && r > 0.0f;
+      const float z = known ? static_cast<float>(r / std::sqrt(rx * rx + ry * ry + 1.0)) : INFINITY;
+      const double inv = 1.0 / std::sqrt(rx * rx + ry * ry + 1.0);
+      const double dn = rx * inv * f.nx + ry * inv * f.ny + inv * f.nz;
+      const bool plane = known && dn < 0.0 && std::fabs(f.h + z / inv * dn) <= f.tol;
+      z_ref[i] = z, zo_ref[i] = plane ? INFINITY : z;
+      const bool down = std::isfinite(z) && dn < 0.0;
+      fl_ref[i] = (down ? detail::kWetDown : 0) | (plane ? detail::kWetOnPlane : 0);
+      if (!down) continue;
+      const double dx = rx * inv, dy = ry * inv, dz = inv, r0 = z / inv;
+      const double Px = r0 * dx, Py = r0 * dy, Pz = r0 * dz;
+      const double Dx = dx - 2.0 * dn * f.nx, Dy = dy - 2.0 * dn * f.ny;
+      double Dz = dz - 2.0 * dn * f.nz;
+      if (std::fabs(Dz) < 1e-9) Dz = Dz < 0.0 ? -1e-9 : 1e-9;
+      const double bu = f.fx * Dx + f.cx * Dz, bv = f.fy * Dy + f.cy * Dz;
+      const double cu = f.fx * Px + f.cx * Pz - bu * Pz / Dz, cv = f.fy * Py + f.cy * Pz - bv * Pz / Dz;
+      const double major = std::max(std::fabs(cu), std::fabs(cv));
+      std::uint8_t fl = Dz > 0.0 ? detail::WetMarchRays::dz_positive : 0;
+      double w_lift = 0.0;
+      const double t_lift = (f.tol - (f.h + r0 * dn)) / -dn;
+      const double z_lift = Pz + std::max(t_lift, 0.0) * Dz;
+      if (t_lift <= 0.0)
+        fl |= detail::WetMarchRays::lifted;
+      else if (z_lift > 0.0)
+        fl |= detail::WetMarchRays::can_lift, w_lift = 1.0 / z_lift;
+      ray_ref.push_back({1.0 / Pz, (Dz > 0.0 ? -1.0 : 1.0) * kWetMarchStepPx / std::max(major, 1e-30), bu / Dz, bv / Dz,
+                         cu, cv, major, w_lift});
+      flags_ref.push_back(fl);
+      mirror_ref.push_back(static_cast<float>(o.mirror(-dn)));
+      px.push_back(x), py.push_back(y), pz.push_back(z);
+    }
+  ASSERT_GT(px.size(), 600u);
+  std::size_t on_plane = 0, lifted = 0, can_lift = 0;
+  for (const auto fl : fl_ref) on_plane += (fl & detail::kWetOnPlane) != 0;
+  for (const auto fl : flags_ref)
+    lifted += (fl & detail::WetMarchRays::lifted) != 0, can_lift += (fl & detail::WetMarchRays::can_lift) != 0;
+  ASSERT_GT(on_plane, 200u);  // every branch, and often
+  ASSERT_GT(lifted, 100u);
+  ASSERT_GT(can_lift, 100u);
+  std::vector<double> rxs(W);
+  for (int x = 0; x < W; ++x) rxs[x] = (x - f.cx) / f.fx;
+  const auto same = [](const auto& a, const auto& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(a[0])) == 0;
+  };
+  for (const std::int64_t t : simd::targets()) {
+    SCOPED_TRACE(simd::target_name(t));
+    simd::force_target(t);
+    std::vector<float> z(W * H), zo(W * H);
+    std::vector<std::uint8_t> fl(W * H);
+    for (int y = 0; y < H; ++y) {
+      const std::size_t o0 = static_cast<std::size_t>(y) * W;
+      detail::wet_depth_row(f, rxs.data(), (y - f.cy) / f.fy, &range.at(0, y), W, z.data() + o0, zo.data() + o0,
+                            fl.data() + o0);
+    }
+    EXPECT_TRUE(same(z, z_ref));
+    EXPECT_TRUE(same(zo, zo_ref));
+    EXPECT_EQ(fl, fl_ref);
+    detail::WetMarchRays rays;
+    std::vector<float> mirror(px.size());
+    detail::wet_setup_rays(f, px.data(), py.data(), pz.data(), px.size(), rays, mirror.data());
+    ASSERT_EQ(rays.size(), px.size());
+    const std::vector<double>* got[8] = {&rays.w0, &rays.dw, &rays.uinf, &rays.vinf, &rays.cu, &rays.cv, &rays.major, &rays.w_lift};
+    for (int k = 0; k < 8; ++k) {
+      std::vector<double> want(px.size());
+      for (std::size_t i = 0; i < px.size(); ++i) want[i] = ray_ref[i][k];
+      EXPECT_TRUE(same(*got[k], want)) << "field " << k;
+    }
+    EXPECT_EQ(rays.flags, flags_ref);
+    EXPECT_TRUE(same(mirror, mirror_ref));
+    // blocks (no lift): the same rays without the lift's flags and w_lift
+    detail::WetPixelFrame fb = f;
+    fb.lift = false;
+    detail::wet_setup_rays(fb, px.data(), py.data(), pz.data(), px.size(), rays, mirror.data());
+    std::vector<std::uint8_t> dz_only(flags_ref);
+    for (auto& q : dz_only) q &= detail::WetMarchRays::dz_positive;
+    EXPECT_EQ(rays.flags, dz_only);
+    EXPECT_TRUE(std::all_of(rays.w_lift.begin(), rays.w_lift.end(), [](double v) { return v == 0.0; }));
+    for (std::size_t i = 0; i < px.size(); ++i) ASSERT_EQ(rays.cu[i], ray_ref[i][4]) << i;
   }
   simd::force_target(0);
 }

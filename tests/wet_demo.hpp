@@ -1,4 +1,5 @@
-// The demo scene as wet ground's camera tests see it (tests/test_wet.cpp, tests/test_wet_gpu.cpp):
+// The demo scene as wet ground's camera tests and bench see it (tests/test_wet.cpp,
+// tests/test_wet_gpu.cpp, bench/bench_wet.cpp):
 // `brume demo`'s scene at W x H, the camera 1.6 m up and 5 deg down with the demo's vertical field
 // of view, a ground tolerance of 2 cm, a blue-grey sky.
 #pragma once

@@ -309,7 +309,9 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
   const int W = s.rgb.width(), H = s.rgb.height();
   const bool masked = s.mask.width() > 0;
   const WetOptics o(w);
-  Image out = s.rgb.to_image();
+  // the output starts as the input, its rows copied with the depth's (below)
+  const int nc = s.rgb.channels();
+  Image out(W, H, nc);
   Image ground(W, H, 1);
   WetStats st;
   const Camera& cam = s.camera;
@@ -326,10 +328,10 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
   struct Pyramid {
     int bw = 0, bh = 0;
     std::vector<float> m;
-    // The minimum of every rectangle of 1 to 3 x 1 to 3 blocks, 9 to a block (its top-left one):
-    // rect[9 (by·bw + bx) + 3 (rows − 1) + (columns − 1)]. An ask meets at most 3 x 3 blocks, so it
-    // reads one number where it read nine (the same minimum: min is exact, the depths hold no NaN).
-    std::vector<float> rect;
+    // With the march's maps (mm.rect_at): the minimum of every rectangle of 1 to 3 x 1 to 3
+    // blocks, 9 to a block (its top-left one): rect[9 (by·bw + bx) + 3 (rows − 1) + (columns − 1)].
+    // An ask meets at most 3 x 3 blocks, so it reads one number where it read nine (the same
+    // minimum: min is exact, the depths hold no NaN).
   };
   // above_ground (WetMarch): a second depth map and pyramid without the plane's pixels, for rays
   // higher above the plane than the tolerance.
@@ -345,42 +347,70 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
     blocks_of(pyr[l], b);
     if (lift) blocks_of(pyr_off[l], b);
   }
-  // The planar depth z = range/|ray| of each pixel (inf: the sky): a point of planar depth Z
-  // on a pixel's ray is behind the pixel's surface when Z > z. The fine blocks in the same pass,
-  // a band of 8 rows at a time (one parallel region: on a busy host each region's barrier waits
-  // for the slowest core); the coarse blocks as the minima of 4 x 4 fine ones (the blocks nest
-  // from the origin: the same minima, min being exact).
-  // (the map without the plane's pixels follows the map, in the same array: the march's lanes
-  // read either at an offset)
+  // The march's maps in one array (its lanes read any of them in one gather): the planar depth
+  // z = range/|ray| of each pixel (inf: the sky; a point of planar depth Z on a pixel's ray is
+  // behind the pixel's surface when Z > z), and above_ground the depth without the plane's pixels,
+  // then each level's rectangle minima (and without the plane's).
   const std::size_t wh = static_cast<std::size_t>(W) * H;
-  std::vector<float> zmap(lift ? 2 * wh : wh);
+  detail::WetMarchMaps mm;
+  mm.width = W, mm.height = H;
+  mm.z_at = 0, mm.z_off = lift ? wh : 0;
+  std::size_t size = lift ? 2 * wh : wh;
+  for (int l = 0; l < 2; ++l) {
+    const std::size_t n = 9 * pyr[l].m.size();
+    mm.rect_at[l] = size, mm.rect_off[l] = lift ? n : 0;
+    size += lift ? 2 * n : n;
+  }
+  std::vector<float> maps(size);
+  // Each pixel's flags (detail::kWetDown, kWetOnPlane): its ray goes down; it lies on the plane.
+  std::vector<std::uint8_t> flags(wh);
+  detail::WetPixelFrame pf;
+  pf.fx = fx, pf.fy = fy, pf.cx = cx, pf.cy = cy, pf.nx = nx, pf.ny = ny, pf.nz = nz;
+  pf.h = h, pf.tol = s.ground_tolerance_m, pf.f = o.f, pf.n = o.n, pf.step_px = kWetMarchStepPx, pf.lift = lift;
+  std::vector<double> rxs(W);
+  for (int x = 0; x < W; ++x) rxs[x] = (x - cx) / fx;
+  // The depth, the flags and the fine blocks a band of 8 rows at a time (one parallel region: on a
+  // busy host each region's barrier waits for the slowest core), a row's pixels side by side
+  // (wet_depth_row); the coarse blocks as the minima of 4 x 4 fine ones (the blocks nest from the
+  // origin: the same minima, min being exact).
   Pyramid& f = pyr[1];
   Pyramid& f_off = pyr_off[1];
-#pragma omp parallel for num_threads(nt) schedule(static)
-  for (int by = 0; by < f.bh; ++by)
-    for (int y = by * detail::kWetFineBlock; y < std::min(H, (by + 1) * detail::kWetFineBlock); ++y) {
-      float* row = zmap.data() + static_cast<std::size_t>(y) * W;
-      float* fm = f.m.data() + static_cast<std::size_t>(by) * f.bw;
-      for (int x = 0; x < W; ++x) {
-        const float r = s.range.at(x, y);
-        const double rx = (x - cx) / fx, ry = (y - cy) / fy;
-        const bool known = std::isfinite(r) && r > 0.0f;
-        const float z = known ? static_cast<float>(r / std::sqrt(rx * rx + ry * ry + 1.0)) : INFINITY;
-        row[x] = z;
-        fm[x / detail::kWetFineBlock] = std::min(fm[x / detail::kWetFineBlock], z);
-        if (lift) {
-          // the plane's own pixels: seen from above (the ray goes down) within the tolerance of it
-          // (the march's own test of a ground pixel, the same expressions)
-          const double inv = 1.0 / std::sqrt(rx * rx + ry * ry + 1.0);
-          const double dn = rx * inv * nx + ry * inv * ny + inv * nz;
-          const bool plane = known && dn < 0.0 && std::fabs(h + z / inv * dn) <= s.ground_tolerance_m;
-          const float zo = plane ? INFINITY : z;
-          zmap[wh + static_cast<std::size_t>(y) * W + x] = zo;
-          float& m = f_off.m[static_cast<std::size_t>(by) * f_off.bw + x / detail::kWetFineBlock];
-          m = std::min(m, zo);
+  const bool dense = s.range.pixel_stride() == 1;
+#pragma omp parallel num_threads(nt)
+  {
+    std::vector<float> row(dense ? 0 : W);
+#pragma omp for schedule(dynamic, 1)
+    for (int by = 0; by < f.bh; ++by)
+      for (int y = by * detail::kWetFineBlock; y < std::min(H, (by + 1) * detail::kWetFineBlock); ++y) {
+        const float* range = s.range.data() + static_cast<std::ptrdiff_t>(y) * s.range.row_stride();
+        if (!dense) {
+          for (int x = 0; x < W; ++x) row[x] = s.range.at(x, y);
+          range = row.data();
+        }
+        float* z = maps.data() + static_cast<std::size_t>(y) * W;
+        float* zo = lift ? z + wh : nullptr;
+        detail::wet_depth_row(pf, rxs.data(), (y - cy) / fy, range, W, z, zo, flags.data() + static_cast<std::size_t>(y) * W);
+        const auto block_minima = [&](const float* zr, Pyramid& p) {
+          float* fm = p.m.data() + static_cast<std::size_t>(by) * p.bw;
+          for (int bx = 0; bx < p.bw; ++bx) {
+            float m = fm[bx];
+            for (int x = bx * detail::kWetFineBlock; x < std::min(W, (bx + 1) * detail::kWetFineBlock); ++x)
+              m = std::min(m, zr[x]);
+            fm[bx] = m;
+          }
+        };
+        block_minima(z, f);
+        if (lift) block_minima(zo, f_off);
+        const float* src = s.rgb.row(y);
+        float* dst = out.row(y);
+        if (s.rgb.pixel_stride() == nc) {
+          std::copy(src, src + static_cast<std::size_t>(W) * nc, dst);
+        } else {
+          for (int x = 0; x < W; ++x)
+            for (int c = 0; c < nc; ++c) dst[x * nc + c] = src[x * s.rgb.pixel_stride() + c];
         }
       }
-    }
+  }
   for (int l = 0; l < (lift ? 2 : 1); ++l) {
     std::array<Pyramid, 2>& p = l == 0 ? pyr : pyr_off;
     Pyramid &c = p[0], &fi = p[1];
@@ -390,39 +420,36 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
         float& m = c.m[static_cast<std::size_t>(by / r) * c.bw + bx / r];
         m = std::min(m, fi.m[static_cast<std::size_t>(by) * fi.bw + bx]);
       }
-    for (Pyramid* q : {&c, &fi}) {
-      q->rect.assign(9 * q->m.size(), INFINITY);
+    for (int k = 0; k < 2; ++k) {
+      const Pyramid* q = &p[k];
+      float* rect = maps.data() + mm.rect_at[k] + (l == 1 ? mm.rect_off[k] : 0);
       for (int by = 0; by < q->bh; ++by)
         for (int bx = 0; bx < q->bw; ++bx) {
-          float* e = q->rect.data() + 9 * (static_cast<std::size_t>(by) * q->bw + bx);
-          for (int ny = 0; ny < 3; ++ny)
+          // rect[9 (by·bw + bx) + 3 ny + nx]: the minimum over rows by .. by + ny and columns
+          // bx .. bx + nx (the blocks past the edge left out: they are never asked, the ask's
+          // indices are clamped), each column's minimum carried down the rows
+          float* e = rect + 9 * (static_cast<std::size_t>(by) * q->bw + bx);
+          float col[3] = {INFINITY, INFINITY, INFINITY};
+          for (int ny = 0; ny < 3; ++ny) {
+            float v = INFINITY;
             for (int nx = 0; nx < 3; ++nx) {
-              float v = INFINITY;  // the blocks past the edge are never asked (the ask's indices are clamped)
-              for (int y = by; y <= std::min(by + ny, q->bh - 1); ++y)
-                for (int x = bx; x <= std::min(bx + nx, q->bw - 1); ++x)
-                  v = std::min(v, q->m[static_cast<std::size_t>(y) * q->bw + x]);
+              if (by + ny < q->bh && bx + nx < q->bw)
+                col[nx] = std::min(col[nx], q->m[static_cast<std::size_t>(by + ny) * q->bw + bx + nx]);
+              v = std::min(v, col[nx]);
               e[3 * ny + nx] = v;
             }
+          }
         }
     }
   }
-  // The march's maps in one array (its lanes read any of them in one gather): the depth (and the
-  // depth without the plane's pixels), then each level's rectangle minima (and without the plane's).
-  detail::WetMarchMaps mm;
-  mm.width = W, mm.height = H;
-  mm.z_at = 0, mm.z_off = lift ? wh : 0;
   std::array<std::vector<float>, 2> blocks;
   for (int l = 0; l < 2; ++l) {
-    mm.rect_at[l] = zmap.size();
-    zmap.insert(zmap.end(), pyr[l].rect.begin(), pyr[l].rect.end());
-    mm.rect_off[l] = lift ? pyr[l].rect.size() : 0;
-    if (lift) zmap.insert(zmap.end(), pyr_off[l].rect.begin(), pyr_off[l].rect.end());
     blocks[l] = pyr[l].m;
     if (lift) blocks[l].insert(blocks[l].end(), pyr_off[l].m.begin(), pyr_off[l].m.end());
     mm.blocks[l] = blocks[l].data(), mm.blocks_off[l] = lift ? pyr[l].m.size() : 0;
     mm.bw[l] = pyr[l].bw, mm.bh[l] = pyr[l].bh;
   }
-  mm.maps = zmap.data();
+  mm.maps = maps.data();
   mm.front_k = static_cast<float>(1.0 + kWetHitMargin);
   mm.thick_k = static_cast<float>(1.0 + kWetHitMargin + kWetThickness);
   mm.max_steps = 4 * (W + H);
@@ -436,56 +463,35 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
 #pragma omp parallel num_threads(nt) reduction(+ : n_ground, n_hits, n_sky, n_left)
   {
     detail::WetMarchRays rays;
-    std::vector<int> rx_, ry_;
-    std::vector<double> rdn;
+    std::vector<std::int32_t> px, py;
+    std::vector<float> pz, mirror;
 #pragma omp for schedule(dynamic, 1)
     for (int band = 0; band < bands; ++band) {
-      rays.clear(), rx_.clear(), ry_.clear(), rdn.clear();
-      for (int y = band * kBand; y < std::min(H, (band + 1) * kBand); ++y)
+      // The band's ground pixels: a ray that goes down (it can meet the ground from above) whose
+      // point lies within the tolerance of the plane, or in the mask.
+      px.clear(), py.clear(), pz.clear();
+      for (int y = band * kBand; y < std::min(H, (band + 1) * kBand); ++y) {
+        const std::uint8_t* fl = flags.data() + static_cast<std::size_t>(y) * W;
         for (int x = 0; x < W; ++x) {
-          const float z0 = zmap[static_cast<std::size_t>(y) * W + x];
-          if (!std::isfinite(z0)) continue;
-          const double rx = (x - cx) / fx, ry = (y - cy) / fy, inv = 1.0 / std::sqrt(rx * rx + ry * ry + 1.0);
-          const double dx = rx * inv, dy = ry * inv, dz = inv;  // the unit ray (cv)
-          const double dn = dx * nx + dy * ny + dz * nz;        // < 0: the ray goes down
-          if (!(dn < 0.0)) continue;                            // a ray that cannot meet the ground from above
-          const double r0 = z0 / inv;
-          if (masked ? !(s.mask.at(x, y) > 0.5f) : !(std::fabs(h + r0 * dn) <= s.ground_tolerance_m)) continue;
-          ++n_ground;
+          if (!(fl[x] & detail::kWetDown)) continue;
+          if (masked ? !(s.mask.at(x, y) > 0.5f) : !(fl[x] & detail::kWetOnPlane)) continue;
           ground.at(x, y) = 1.0f;
-          // The mirrored ray X(t) = P + t·D from the ground point. Its image is a line, and with
-          // w = 1/Z along it (Z = P_z + t·D_z) u = u∞ + w·c_u, v = v∞ + w·c_v exactly (u∞, v∞ the
-          // vanishing point of D): the march steps w, one pixel of the line's major axis a step.
-          const double Px = r0 * dx, Py = r0 * dy, Pz = r0 * dz;
-          const double Dx = dx - 2.0 * dn * nx, Dy = dy - 2.0 * dn * ny;
-          double Dz = dz - 2.0 * dn * nz;
-          if (std::fabs(Dz) < 1e-9) Dz = Dz < 0.0 ? -1e-9 : 1e-9;  // parallel to the image: a far vanishing point
-          const double bu = fx * Dx + cx * Dz, bv = fy * Dy + cy * Dz;
-          const double uinf = bu / Dz, vinf = bv / Dz;
-          const double cu = fx * Px + cx * Pz - bu * Pz / Dz, cv = fy * Py + cy * Pz - bv * Pz / Dz;
-          const double major = std::max(std::fabs(cu), std::fabs(cv));
-          const double w0 = 1.0 / Pz;
-          // w falls towards 0 (the vanishing point) when D_z > 0, rises (towards the image plane) else.
-          const double dw = (Dz > 0.0 ? -1.0 : 1.0) * kWetMarchStepPx / std::max(major, 1e-30);
-          // above_ground: the ray is above the plane's tolerance from w_lift on (its height h0 + t·(−dn)
-          // grows along the march, t = (1/w − P_z)/D_z), after which the maps without the plane's
-          // pixels serve.
-          std::uint8_t flags = Dz > 0.0 ? detail::WetMarchRays::dz_positive : 0;
-          double w_lift = 0.0;
-          if (lift) {
-            const double t_lift = (s.ground_tolerance_m - (h + r0 * dn)) / -dn;
-            const double z_lift = Pz + std::max(t_lift, 0.0) * Dz;
-            if (t_lift <= 0.0)
-              flags |= detail::WetMarchRays::lifted;
-            else if (z_lift > 0.0)
-              flags |= detail::WetMarchRays::can_lift, w_lift = 1.0 / z_lift;
-          }
-          rays.push(w0, dw, uinf, vinf, cu, cv, major, w_lift, flags);
-          rx_.push_back(x), ry_.push_back(y), rdn.push_back(dn);
+          px.push_back(x), py.push_back(y), pz.push_back(maps[static_cast<std::size_t>(y) * W + x]);
         }
+      }
+      n_ground += px.size();
+      // The mirrored ray X(t) = P + t·D from each ground point (side by side: wet_setup_rays). Its
+      // image is a line, and with w = 1/Z along it (Z = P_z + t·D_z) u = u∞ + w·c_u, v = v∞ + w·c_v
+      // exactly (u∞, v∞ the vanishing point of D): the march steps w, one pixel of the line's major
+      // axis a step (w falls towards 0, the vanishing point, when D_z > 0, rises towards the image
+      // plane else). above_ground: the ray is above the plane's tolerance from w_lift on (its height
+      // h0 + t·(−dn) grows along the march, t = (1/w − P_z)/D_z), after which the maps without the
+      // plane's pixels serve. With each ray, the mirror's weight f·R_F(θ) (WetOptics::mirror).
+      mirror.resize(px.size());
+      detail::wet_setup_rays(pf, px.data(), py.data(), pz.data(), px.size(), rays, mirror.data());
       if (!detail::wet_march_rays(mm, rays)) march_rays_one_by_one(mm, rays);
       for (std::size_t i = 0; i < rays.size(); ++i) {
-        const int x = rx_[i], y = ry_[i];
+        const int x = px[i], y = py[i];
         std::array<float, 3> L = s.sky;
         double hu = rays.hu[i], hv = rays.hv[i];
         bool hit = rays.end[i] == detail::WetMarchRays::hit;
@@ -506,8 +512,7 @@ Image render_wet(const WetScene& s, const WetFilm& w, const Exec& exec, WetStats
         } else {
           ++n_left;
         }
-        const float m = static_cast<float>(o.mirror(-rdn[i]));
-        for (int c = 0; c < 3; ++c) out.at(x, y, c) = kf * s.rgb.at(x, y, c) + m * L[c];
+        for (int c = 0; c < 3; ++c) out.at(x, y, c) = kf * s.rgb.at(x, y, c) + mirror[i] * L[c];
       }
     }
   }

@@ -21,6 +21,11 @@
 // plus the half's test (round_inside), the depths' products with the margins are taken in float as
 // before, and a block index's integer division by the block's size is the floor of the truncated
 // coordinate times 1/S (a power of two: exact). Test: WetCamera.MarchSideBySideGivesTheSameBits.
+//
+// Below the march, render_wet's work on every pixel around it (wet_march.hpp: a row's planar depth
+// and ground flags, the rays' set-up and the mirror's Fresnel weight), side by side on every
+// target, each the scalar expression's IEEE operations in its order. Test:
+// WetCamera.PixelKernelsGiveTheScalarBits.
 #include "core/simd.hpp"  // first: the targets
 
 #ifndef BRUME_WET_MARCH_SHARED
@@ -47,6 +52,11 @@ void WetMarchRays::push(double w0_, double dw_, double uinf_, double vinf_, doub
                         double w_lift_, std::uint8_t flags_) {
   w0.push_back(w0_), dw.push_back(dw_), uinf.push_back(uinf_), vinf.push_back(vinf_), cu.push_back(cu_);
   cv.push_back(cv_), major.push_back(major_), w_lift.push_back(w_lift_), flags.push_back(flags_);
+}
+
+void WetMarchRays::resize(std::size_t n) {
+  for (auto* v : {&w0, &dw, &uinf, &vinf, &cu, &cv, &major, &w_lift}) v->resize(n);
+  flags.resize(n);
 }
 
 }  // namespace brume::detail
@@ -158,13 +168,26 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   // those did not clear or the last ask's 8 single steps are not done): one read of the maps and
   // one division a lane. The lanes whose ray met an event (ended, or crossed the map), a bit each.
   const VD two = hn::Set(dd, 2.0);
-  const auto round = [&](std::size_t g) BRUME_WET_INLINE -> std::uint64_t {
+  // A round in two halves, each group's first half before any group's second: the first computes
+  // the step, issues the read of the maps and the division, the second waits on them and decides
+  // (the groups' reads and divisions in flight together, not one group's after another's
+  // decisions). Between them, per group: the read, the inverse, the step's end, and the masks.
+  enum { kNear, kInv, kW1, kTemps };
+  enum { kMDoA, kMDoB, kMDoC, kMOk, kMAskedFits, kMOther, kMVanish, kMasks };
+  constexpr std::size_t kMaskBytes = 16;  // (LoadMaskBits reads up to 8 bytes; a mask of up to 64 lanes)
+  auto tmp = hwy::AllocateAligned<double>(kTemps * L);
+  double* T[kTemps];
+  for (int k = 0; k < kTemps; ++k) T[k] = tmp.get() + k * L;
+  HWY_ALIGN std::uint8_t mb[kGroups][kMasks][kMaskBytes] = {};
+  const auto put = [&](std::size_t g, int k, MD m) BRUME_WET_INLINE { hn::StoreMaskBits(dd, m, mb[g][k]); };
+  const auto get = [&](std::size_t g, int k) BRUME_WET_INLINE -> MD { return hn::LoadMaskBits(dd, mb[g][k]); };
+  const auto round_a = [&](std::size_t g) BRUME_WET_INLINE {
     const std::size_t o = g * N;
     const VD wc = hn::Load(dd, S[kWc] + o);
     const VD dw = hn::Load(dd, S[kDw] + o), uinf = hn::Load(dd, S[kUinf] + o), vinf = hn::Load(dd, S[kVinf] + o);
     const VD cu = hn::Load(dd, S[kCu] + o), cv = hn::Load(dd, S[kCv] + o);
-    VD lifted = hn::Load(dd, S[kLifted] + o), front = hn::Load(dd, S[kFront] + o), fine = hn::Load(dd, S[kFine] + o);
-    VD step = hn::Load(dd, S[kStep] + o), ph = hn::Load(dd, S[kPhase] + o);
+    VD lifted = hn::Load(dd, S[kLifted] + o);
+    const VD fine = hn::Load(dd, S[kFine] + o), ph = hn::Load(dd, S[kPhase] + o);
     const MD act = hn::Gt(hn::Load(dd, S[kBusy] + o), zero);
     const MD dzpos = hn::Gt(hn::Load(dd, S[kDzPos] + o), zero);
     // the top of the loop: within half a pixel of the vanishing point; the lift
@@ -240,7 +263,20 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     // the depth times the margin in float, as the scalar march's product, widened
     const VD near = hn::PromoteTo(dd, hn::Mul(hn::GatherIndex(df, m.maps, i32), fk));
     const VD inv = hn::Div(one, hn::IfThenElse(doC, w1, hn::Min(wc, w1)));
-    const MD clear = hn::Or(other, hn::And(hn::And(asked, fits), hn::Le(inv, near)));
+    hn::Store(near, dd, T[kNear] + o), hn::Store(inv, dd, T[kInv] + o), hn::Store(w1, dd, T[kW1] + o);
+    hn::Store(lifted, dd, S[kLifted] + o);
+    hn::Store(u1, dd, S[kU] + o), hn::Store(v1, dd, S[kV] + o);
+    put(g, kMDoA, doA), put(g, kMDoB, doB), put(g, kMDoC, doC), put(g, kMOk, ok);
+    put(g, kMAskedFits, hn::And(asked, fits)), put(g, kMOther, other), put(g, kMVanish, vanish);
+  };
+  const auto round_b = [&](std::size_t g) BRUME_WET_INLINE -> std::uint64_t {
+    const std::size_t o = g * N;
+    const VD wc = hn::Load(dd, S[kWc] + o), w1 = hn::Load(dd, T[kW1] + o);
+    const VD near = hn::Load(dd, T[kNear] + o), inv = hn::Load(dd, T[kInv] + o);
+    VD front = hn::Load(dd, S[kFront] + o), fine = hn::Load(dd, S[kFine] + o), step = hn::Load(dd, S[kStep] + o);
+    const MD doA = get(g, kMDoA), doB = get(g, kMDoB), doC = get(g, kMDoC), ok = get(g, kMOk);
+    const MD other = get(g, kMOther), vanish = get(g, kMVanish), asked_fits = get(g, kMAskedFits);
+    const MD clear = hn::Or(other, hn::And(asked_fits, hn::Le(inv, near)));
     const MD behind = hn::Gt(inv, near);
     const MD ca = hn::And(doA, clear), cb = hn::And(doB, clear);
     const MD leave = hn::AndNot(ok, doC);
@@ -252,12 +288,12 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     front = hn::IfThenElse(stepped, hn::IfThenElseZero(hn::Not(behind), one), hn::IfThenElse(cleared, one, front));
     const MD moved = hn::Or(cleared, stepped);
     // the next phase: B after a failed A, C after a failed B, else a new iteration
-    ph = hn::IfThenElse(hn::AndNot(clear, doA), one, hn::IfThenElseZero(hn::AndNot(clear, doB), two));
+    const VD ph = hn::IfThenElse(hn::AndNot(clear, doA), one, hn::IfThenElseZero(hn::AndNot(clear, doB), two));
     // the iteration's end: the step count (the scalar loop's bound: a single step that reaches it
     // ends at infinity, a block step leaves)
     const MD at_max = hn::And(moved, hn::Eq(hn::Add(step, one), max_steps));
     step = hn::IfThenElse(moved, hn::Add(step, one), step);
-    hn::Store(hn::IfThenElse(moved, w1, wc), dd, S[kWc] + o), hn::Store(lifted, dd, S[kLifted] + o);
+    hn::Store(hn::IfThenElse(moved, w1, wc), dd, S[kWc] + o);
     hn::Store(front, dd, S[kFront] + o), hn::Store(fine, dd, S[kFine] + o), hn::Store(step, dd, S[kStep] + o);
     hn::Store(ph, dd, S[kPhase] + o);
     const MD event = hn::Or(hn::Or(vanish, leave), hn::Or(cross, at_max));
@@ -267,7 +303,6 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
             hn::Add(hn::IfThenElseZero(cross, hn::Set(dd, kCross)), hn::IfThenElseZero(at_max, hn::Set(dd, kAtMax))),
             hn::IfThenElseZero(stepped, hn::Set(dd, kStepped))));
     hn::Store(ev, dd, S[kEvent] + o), hn::Store(wc, dd, S[kWprev] + o);
-    hn::Store(u1, dd, S[kU] + o), hn::Store(v1, dd, S[kV] + o);
     std::uint8_t bits[8] = {};
     hn::StoreMaskBits(dd, event, bits);
     std::uint64_t b = 0;
@@ -331,7 +366,8 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
     if (waiting.size() >= N || busy == 0) bisect();
     if (busy == 0) continue;
     std::uint64_t bits[kGroups], any = 0;
-    for (std::size_t g = 0; g < kGroups; ++g) any |= bits[g] = round(g);
+    for (std::size_t g = 0; g < kGroups; ++g) round_a(g);
+    for (std::size_t g = 0; g < kGroups; ++g) any |= bits[g] = round_b(g);
     if (HWY_LIKELY(any == 0)) continue;
     for (std::size_t g = 0; g < kGroups; ++g)
       for (std::uint64_t bs = bits[g]; bs != 0; bs &= bs - 1) {
@@ -361,6 +397,145 @@ bool WetMarchRaysK(const WetMarchMaps& m, WetMarchRays& r) {
   return true;
 }
 
+
+// ---- render_wet's pixels around the march (wet_march.hpp): the scalar expressions they
+// replaced, operation for operation (no contraction on this file; Div and Sqrt correctly rounded
+// as divsd and sqrtsd; float's rounding of a double as static_cast's), so the same bits.
+
+// std::max's and std::min's own choice ((a < b) ? b : a; (b < a) ? b : a): the scalar code's
+// value whatever the zeros' signs.
+template <class V>
+HWY_INLINE V StdMax(V a, V b) {
+  return hn::IfThenElse(hn::Lt(a, b), b, a);
+}
+template <class V>
+HWY_INLINE V StdMin(V a, V b) {
+  return hn::IfThenElse(hn::Lt(b, a), b, a);
+}
+// The first `count` lanes from p (the rest `pad`), and back: a row's or a batch's last vector.
+template <class D, class T>
+HWY_INLINE hn::Vec<D> LoadPart(D d, const T* p, std::size_t count, T pad) {
+  if (count == hn::Lanes(d)) return hn::LoadU(d, p);
+  HWY_ALIGN T b[HWY_MAX_BYTES / sizeof(T)];
+  for (std::size_t j = 0; j < hn::Lanes(d); ++j) b[j] = j < count ? p[j] : pad;
+  return hn::Load(d, b);
+}
+template <class D, class T>
+HWY_INLINE void StorePart(D d, hn::Vec<D> v, T* p, std::size_t count) {
+  if (count == hn::Lanes(d)) return hn::StoreU(v, d, p);
+  HWY_ALIGN T b[HWY_MAX_BYTES / sizeof(T)];
+  hn::Store(v, d, b);
+  std::copy(b, b + count, p);
+}
+
+void WetDepthRowK(const WetPixelFrame& f, const double* rx, double ry, const float* range, int width, float* z,
+                  float* zo, std::uint8_t* flags) {
+  const hn::ScalableTag<double> dd;
+  const hn::Rebind<float, decltype(dd)> df;
+  using VD = hn::Vec<decltype(dd)>;
+  const std::size_t N = hn::Lanes(dd), W = static_cast<std::size_t>(width);
+  const VD zero = hn::Zero(dd), one = hn::Set(dd, 1.0), inf = hn::Set(dd, INFINITY);
+  const VD ryv = hn::Set(dd, ry), ry2 = hn::Set(dd, ry * ry);
+  const auto zero_f = hn::Zero(df), inf_f = hn::Set(df, INFINITY);
+  const VD nx = hn::Set(dd, f.nx), ny = hn::Set(dd, f.ny), nz = hn::Set(dd, f.nz);
+  const VD h = hn::Set(dd, f.h), tol = hn::Set(dd, f.tol);
+  HWY_ALIGN double fl[HWY_MAX_BYTES / sizeof(double)];
+  for (std::size_t x = 0; x < W; x += N) {
+    const std::size_t c = std::min(N, W - x);
+    const auto rf = LoadPart(df, range + x, c, 0.0f);
+    const VD r = hn::PromoteTo(dd, rf);
+    const VD rxv = LoadPart(dd, rx + x, c, 0.0);
+    // |ray| for the ray (rx, ry, 1); a known range: finite and > 0. (inf chosen among floats:
+    // Highway's one-lane DemoteTo gives the largest float for inf.)
+    const VD len = hn::Sqrt(hn::Add(hn::Add(hn::Mul(rxv, rxv), ry2), one));
+    const auto known = hn::And(hn::Gt(r, zero), hn::Lt(r, inf));
+    const auto known_f = hn::And(hn::Gt(rf, zero_f), hn::Lt(rf, inf_f));
+    const auto zf = hn::IfThenElse(known_f, hn::DemoteTo(df, hn::Div(r, len)), inf_f);
+    StorePart(df, zf, z + x, c);
+    // the unit ray's d·n (< 0: down), and the pixel's 3-D point within the tolerance of the plane
+    const VD inv = hn::Div(one, len);
+    const VD dn = hn::Add(hn::Add(hn::Mul(hn::Mul(rxv, inv), nx), hn::Mul(hn::Mul(ryv, inv), ny)), hn::Mul(inv, nz));
+    const auto down = hn::And(known, hn::Lt(dn, zero));
+    const VD zd = hn::PromoteTo(dd, zf);
+    const auto plane = hn::And(down, hn::Le(hn::Abs(hn::Add(h, hn::Mul(hn::Div(zd, inv), dn))), tol));
+    if (zo) {
+      const auto plane_f = hn::Gt(hn::DemoteTo(df, hn::IfThenElseZero(plane, one)), zero_f);
+      StorePart(df, hn::IfThenElse(plane_f, inf_f, zf), zo + x, c);
+    }
+    hn::Store(hn::Add(hn::IfThenElseZero(down, hn::Set(dd, kWetDown)), hn::IfThenElseZero(plane, hn::Set(dd, kWetOnPlane))),
+              dd, fl);
+    for (std::size_t j = 0; j < c; ++j) flags[x + j] = static_cast<std::uint8_t>(fl[j]);
+  }
+}
+
+void WetSetupRaysK(const WetPixelFrame& f, const std::int32_t* xs, const std::int32_t* ys, const float* z0s,
+                   std::size_t n, WetMarchRays& r, float* mirror) {
+  const hn::ScalableTag<double> dd;
+  const hn::Rebind<float, decltype(dd)> df;
+  const hn::Rebind<std::int32_t, decltype(dd)> di;
+  using VD = hn::Vec<decltype(dd)>;
+  const std::size_t N = hn::Lanes(dd);
+  r.resize(n);
+  const VD zero = hn::Zero(dd), one = hn::Set(dd, 1.0), two = hn::Set(dd, 2.0), half = hn::Set(dd, 0.5);
+  const VD fx = hn::Set(dd, f.fx), fy = hn::Set(dd, f.fy), cx = hn::Set(dd, f.cx), cy = hn::Set(dd, f.cy);
+  const VD nx = hn::Set(dd, f.nx), ny = hn::Set(dd, f.ny), nz = hn::Set(dd, f.nz);
+  const VD h = hn::Set(dd, f.h), tol = hn::Set(dd, f.tol), step = hn::Set(dd, f.step_px);
+  const VD wf = hn::Set(dd, f.f), wn = hn::Set(dd, f.n), wnn = hn::Set(dd, f.n * f.n);
+  const VD tiny = hn::Set(dd, 1e-9), far = hn::Set(dd, 1e-30);
+  HWY_ALIGN double fl[HWY_MAX_BYTES / sizeof(double)];
+  for (std::size_t i = 0; i < n; i += N) {
+    const std::size_t c = std::min(N, n - i);
+    const VD x = hn::PromoteTo(dd, LoadPart(di, xs + i, c, std::int32_t{0}));
+    const VD y = hn::PromoteTo(dd, LoadPart(di, ys + i, c, std::int32_t{0}));
+    // the unit ray (cv) and d·n (< 0: the ray goes down)
+    const VD rx = hn::Div(hn::Sub(x, cx), fx), ry = hn::Div(hn::Sub(y, cy), fy);
+    const VD inv = hn::Div(one, hn::Sqrt(hn::Add(hn::Add(hn::Mul(rx, rx), hn::Mul(ry, ry)), one)));
+    const VD dx = hn::Mul(rx, inv), dy = hn::Mul(ry, inv), dz = inv;
+    const VD dn = hn::Add(hn::Add(hn::Mul(dx, nx), hn::Mul(dy, ny)), hn::Mul(dz, nz));
+    const VD r0 = hn::Div(hn::PromoteTo(dd, LoadPart(df, z0s + i, c, 1.0f)), inv);
+    // the mirrored ray X(t) = P + t·D and its image u = uinf + w·cu, v = vinf + w·cv (w = 1/Z)
+    const VD Px = hn::Mul(r0, dx), Py = hn::Mul(r0, dy), Pz = hn::Mul(r0, dz);
+    const VD dn2 = hn::Mul(two, dn);
+    const VD Dx = hn::Sub(dx, hn::Mul(dn2, nx)), Dy = hn::Sub(dy, hn::Mul(dn2, ny));
+    VD Dz = hn::Sub(dz, hn::Mul(dn2, nz));
+    Dz = hn::IfThenElse(hn::Lt(hn::Abs(Dz), tiny), hn::IfThenElse(hn::Lt(Dz, zero), hn::Neg(tiny), tiny), Dz);
+    const VD bu = hn::Add(hn::Mul(fx, Dx), hn::Mul(cx, Dz)), bv = hn::Add(hn::Mul(fy, Dy), hn::Mul(cy, Dz));
+    const VD cu = hn::Sub(hn::Add(hn::Mul(fx, Px), hn::Mul(cx, Pz)), hn::Div(hn::Mul(bu, Pz), Dz));
+    const VD cv = hn::Sub(hn::Add(hn::Mul(fy, Py), hn::Mul(cy, Pz)), hn::Div(hn::Mul(bv, Pz), Dz));
+    const VD major = StdMax(hn::Abs(cu), hn::Abs(cv));
+    const auto dzpos = hn::Gt(Dz, zero);
+    const VD dw = hn::Div(hn::Mul(hn::IfThenElse(dzpos, hn::Neg(one), one), step), StdMax(major, far));
+    StorePart(dd, hn::Div(one, Pz), r.w0.data() + i, c);
+    StorePart(dd, dw, r.dw.data() + i, c);
+    StorePart(dd, hn::Div(bu, Dz), r.uinf.data() + i, c), StorePart(dd, hn::Div(bv, Dz), r.vinf.data() + i, c);
+    StorePart(dd, cu, r.cu.data() + i, c), StorePart(dd, cv, r.cv.data() + i, c);
+    StorePart(dd, major, r.major.data() + i, c);
+    // above_ground's lift: the ray leaves the plane's tolerance at t_lift (Z = z_lift)
+    VD flags = hn::IfThenElseZero(dzpos, hn::Set(dd, WetMarchRays::dz_positive));
+    VD w_lift = zero;
+    if (f.lift) {
+      const VD t_lift = hn::Div(hn::Sub(tol, hn::Add(h, hn::Mul(r0, dn))), hn::Neg(dn));
+      const VD z_lift = hn::Add(Pz, hn::Mul(StdMax(t_lift, zero), Dz));
+      const auto lifted = hn::Le(t_lift, zero);
+      const auto can = hn::AndNot(lifted, hn::Gt(z_lift, zero));
+      flags = hn::Add(flags, hn::Add(hn::IfThenElseZero(lifted, hn::Set(dd, WetMarchRays::lifted)),
+                                     hn::IfThenElseZero(can, hn::Set(dd, WetMarchRays::can_lift))));
+      w_lift = hn::IfThenElseZero(can, hn::Div(one, z_lift));
+    }
+    StorePart(dd, w_lift, r.w_lift.data() + i, c);
+    hn::Store(flags, dd, fl);
+    for (std::size_t j = 0; j < c; ++j) r.flags[i + j] = static_cast<std::uint8_t>(fl[j]);
+    // the mirror's weight f·R_F(θ), cos θ = −d·n (fresnel_air_to's unpolarised R)
+    const VD ci = StdMin(one, StdMax(zero, hn::Neg(dn)));
+    const VD s2 = StdMax(zero, hn::Sub(one, hn::Mul(ci, ci)));
+    const VD ct = hn::Sqrt(StdMax(zero, hn::Sub(one, hn::Div(s2, wnn))));
+    const VD ds = hn::Add(ci, hn::Mul(wn, ct)), dp = hn::Add(hn::Mul(wn, ci), ct);
+    const VD rs = hn::Div(hn::Sub(ci, hn::Mul(wn, ct)), ds), rp = hn::Div(hn::Sub(hn::Mul(wn, ci), ct), dp);
+    const VD R = hn::Mul(half, hn::Add(hn::Mul(rs, rs), hn::Mul(rp, rp)));
+    StorePart(df, hn::DemoteTo(df, hn::Mul(wf, R)), mirror + i, c);
+  }
+}
+
 }  // namespace HWY_NAMESPACE
 }  // namespace brume::detail
 HWY_AFTER_NAMESPACE();
@@ -369,6 +544,19 @@ HWY_AFTER_NAMESPACE();
 namespace brume::detail {
 HWY_EXPORT(WetMarchRaysK);
 
+HWY_EXPORT(WetDepthRowK);
+HWY_EXPORT(WetSetupRaysK);
+
 bool wet_march_rays(const WetMarchMaps& m, WetMarchRays& r) { return HWY_DYNAMIC_DISPATCH(WetMarchRaysK)(m, r); }
+
+void wet_depth_row(const WetPixelFrame& f, const double* rx, double ry, const float* range, int width, float* z,
+                   float* zo, std::uint8_t* flags) {
+  HWY_DYNAMIC_DISPATCH(WetDepthRowK)(f, rx, ry, range, width, z, zo, flags);
+}
+
+void wet_setup_rays(const WetPixelFrame& f, const std::int32_t* x, const std::int32_t* y, const float* z0,
+                    std::size_t n, WetMarchRays& r, float* mirror) {
+  HWY_DYNAMIC_DISPATCH(WetSetupRaysK)(f, x, y, z0, n, r, mirror);
+}
 }  // namespace brume::detail
 #endif  // HWY_ONCE
