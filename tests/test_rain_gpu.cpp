@@ -1,14 +1,15 @@
 // Rain's and snow's camera pass on the GPU (effects/rain/rain_gpu.hpp; issues #56 and #58, "GPU
-// for the per-pixel passes"): brume.rain's and brume.snow's array forms (in process) with
+// for the per-pixel passes", and the streaks' splat): brume.rain's and brume.snow's array forms (in process) with
 // backend gpu against backend cpu on the same inputs, a synthetic scene and the demo scene at
 // 160x120, with and without haze's medium (visibility, its blur). The particles are enumerated
-// and splatted on the CPU in both runs (the same particles: the record's block is equal); only
-// the scene through the analytic media differs, by the GPU's float arithmetic:
+// on the CPU in both runs (the same particles: the record's block is equal) and splatted on the
+// GPU in the GPU's run (its bounds: SplatMatchesTheCpuSplat below, within 7e-6 there, 1e-6 on
+// these scenes); the scene through the analytic media differs by the GPU's float arithmetic:
 //  - per pixel (the transmission map, and the image without visibility): tau = exp(-(sigma_haze
 //    r + sigma r - G/cos theta)) in float on the GPU, in double on the CPU (G's table stored as
 //    float). GLSL ES 3.00 lets exp be off by (3 + 2|x|) ULP, and the optical depths here stay
 //    below 10: within 1e-5 of values <= 1 (measured on llvmpipe: 1.8e-7; the image, whose streaks
-//    mix over it with weights <= 1: 1.2e-7);
+//    mix over it with weights <= 1, splatted on the GPU: 1.8e-7);
 //  - with visibility the ~20 diffusion passes run in f32 on both sides, in different orders: max
 //    1e-4, RMS 1e-5 (measured on llvmpipe: max 1.3e-5, RMS 1.3e-7; haze's own GPU test holds the
 //    GPU to the CPU's double path within RMS 1e-3, tests/test_gpu.cpp).
@@ -75,7 +76,10 @@ void expect_match(const Both& b, const std::string& block, const std::string& dr
   EXPECT_LE(dt.max_abs, 1e-5) << what << " transmission: " << dt;
   EXPECT_EQ(b.cpu.record["execution"]["backend"], "cpu") << what;
   EXPECT_EQ(b.gpu.record["execution"]["backend"], "gpu") << what;
-  EXPECT_NE(b.gpu.record["execution"]["split"].get<std::string>().find("on the CPU"), std::string::npos) << what;
+  const std::string split = b.gpu.record["execution"]["split"];
+  EXPECT_NE(split.find("on the CPU: the particles' enumeration"), std::string::npos) << what;
+  EXPECT_NE(split.find("rain.splat"), std::string::npos) << what;  // the splat on the GPU
+  EXPECT_GT(b.gpu.record["execution"]["gpu_splat_timing"]["list_entries"].get<std::size_t>(), 0u) << what;
   EXPECT_GT(b.cpu.record[block][drawn].get<std::size_t>(), 0u) << what;
   EXPECT_EQ(b.cpu.record[block], b.gpu.record[block]) << what;
 }
@@ -107,13 +111,16 @@ TEST(RainGpu, DemoSceneMatchesTheCpu) {
 // at one place (ties: the enumeration's order), at 1/60 s and 1/8 s (long streaks over many
 // tiles). Order matters: they overlap, with radiances from 0 to 2 on a grey of 0.3, and the
 // near ones clamp their coverage to 1.
-// Tolerance: the GPU runs the CPU's arithmetic in float. A sample's image position is then off by
-// about 1e-4 px (|u| <= 100 px, a few float roundings of 6e-8 relative), which moves a bilinear
-// weight by as much and a Gaussian one by 1e-4/sigma; the coverage's other factors are off by a few
-// 1e-7 relative, and each update I += a (E - I) rounds as on the CPU. A pixel's error is about the
-// sum over its taps of (the error of a) |E - I|: max 1e-3 for the up to ~100 taps a pixel takes
-// here (measured on llvmpipe: see the printed figures), RMS 1e-5. The count of clamped coverages
-// may differ where a lands within float rounding of 1: by at most 1 in 1000.
+// Tolerance: the GPU runs the CPU's arithmetic (double) in float. A sample's image position
+// u = fx X.x/X.z + cx is off by a few float roundings of |u - cx| <= 60 px here: about 1e-5 px,
+// which moves a bilinear weight by as much and a Gaussian one (sigma >= 0.5 px) by at most 1.2x
+// that; the coverage's other factors are off by a few 1e-7 relative, and each update
+// I += a (E - I) rounds as on the CPU. A pixel's error is then at most about 1.5e-5 x the sum of
+// its taps' coverages x |E - I| (<= 2 here): bound 1e-4 for a sum up to ~3, RMS 2e-6 (measured on
+// llvmpipe: max 6.9e-6, RMS 2.5e-7). The count of clamped coverages may differ where a lands
+// within float rounding of 1: by at most 1 in 1000 (measured: equal). The window of samples a
+// pixel walks (rain_splat.frag) skipping one with a tap would move a pixel by that tap's
+// a |E - I|, far beyond the bound: the near, long and defocused streaks here test it.
 StreakSlabs random_streaks(const StreakCamera& cam, int n, double T, std::uint32_t seed) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> U(0.0, 1.0);
@@ -162,8 +169,8 @@ TEST(RainGpu, SplatMatchesTheCpuSplat) {
                 (std::ostringstream() << d).str().c_str());
     EXPECT_GT(moved.max_abs, 0.5) << "the streaks must change the image";
     EXPECT_GT(a.alpha_clamped, 0u) << "some coverages must clamp";
-    EXPECT_LE(d.max_abs, 1e-3) << d;
-    EXPECT_LE(d.rms, 1e-5) << d;
+    EXPECT_LE(d.max_abs, 1e-4) << d;
+    EXPECT_LE(d.rms, 2e-6) << d;
     EXPECT_EQ(a.drawn, b.drawn);
     EXPECT_EQ(a.mean_streak_px, b.mean_streak_px);
     EXPECT_LE(std::abs(static_cast<double>(b.alpha_clamped) - static_cast<double>(a.alpha_clamped)),
