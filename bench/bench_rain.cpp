@@ -12,12 +12,19 @@
 //           2 threads, against the same call at rate 0 (the no-op: the analytic
 //           pass and composite alone), interleaved, with the image's hash
 //           (bench_camera.hpp). Target: <= 100 ms beyond the no-op.
+//   splat:  the streaks' splat alone on the same scene (the drops drawn once, at each rate), the
+//           CPU's splat_streaks on 2 threads against the GPU's (GpuStreakSplatter, issue #56 item
+//           2: bin on the CPU, upload, the rain.splat pass, read back), interleaved, each stage
+//           timed (the pass by timer queries where the driver has them), the GPU's image against
+//           the CPU's (max |difference|); where no GPU context can be made, the CPU's alone and
+//           the reason. On llvmpipe (Mesa's software rasteriser) the GPU's times say nothing
+//           about a GPU: bench/nvidia_visit.sh runs this mode on one.
 // Each figure: median [min..max] over the rounds, wall time and CPU time (the
 // calling thread's for the LiDAR, the process's for the camera); the CPU (family, model), the SIMD level Highway picks (the
 // rain code itself is scalar, built for the x86-64 baseline) and the load
 // average at the start and the end are printed.
 //
-// Usage: brume_bench_rain [ROUNDS] [lidar|lidar-alone|camera] [RATE ...] [epsilon=E] (the camera's thinning ε)
+// Usage: brume_bench_rain [ROUNDS] [lidar|lidar-alone|camera|splat] [RATE ...] [epsilon=E] (the camera's thinning ε)
 // (lidar-alone: the cell-major pass only, for profiling)
 #include <omp.h>
 #include <time.h>
@@ -30,16 +37,22 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
+#include <optional>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "bench_camera.hpp"
 #include "bench_util.hpp"
 #include "brume/demo_scene.hpp"
 #include "brume/depth.hpp"
+#include "brume/error.hpp"
+#include "brume/gpu_context.hpp"
 #include "brume/rain.hpp"
 #include "core/simd.hpp"
+#include "effects/rain/rain_gpu.hpp"
 #include "effects/rain/rain_internal.hpp"
 
 using namespace brume;
@@ -146,6 +159,78 @@ int camera(int rounds, const std::vector<double>& rates, double epsilon) {
   return 0;
 }
 
+// The splat alone: CPU against GPU on the same drawn streaks and background (the scene through
+// the analytic media, rendered once with the splat made a no-op by taking the streaks out).
+int splat(int rounds, const std::vector<double>& rates, double epsilon) {
+  DemoScene d;
+  CameraRainScene sc = bench::kitti_sized_demo(d);
+  const int W = sc.rgb.width(), H = sc.rgb.height();
+  const StreakCamera cam{W, H, sc.k.fx, sc.k.fy, sc.k.cx, sc.k.cy};
+  std::unique_ptr<GpuContext> ctx;
+  try {
+    ctx = std::make_unique<GpuContext>();
+  } catch (const Error& e) {
+    std::printf("  (no GPU context: %s; the CPU's splat alone)\n", e.what());
+  }
+  std::printf(" the splat alone, the demo scene at %dx%d (fx %.1f px), 1/60 s; CPU: 2 threads; GPU: %s; ms:\n", W, H,
+              sc.k.fx, ctx ? (ctx->info().renderer + ", " + ctx->info().version).c_str() : "none");
+  if (ctx && ctx->info().software)
+    std::printf("  (a software renderer: its times are a sanity figure only and say nothing about a GPU)\n");
+  Exec ex;
+  ex.threads = 2;
+  int bad = 0;
+  for (const double rate : rates) {
+    CameraRainParams p;
+    p.drops.rate_mm_h = rate;
+    if (epsilon >= 0.0) p.epsilon = epsilon;
+    StreakSlabs slabs;
+    CameraRainStats st;
+    (void)render_camera_rain_drawn(sc, p, ex, &st, nullptr, &slabs);
+    CameraRainParams none = p;
+    none.drops.rate_mm_h = 0.0;
+    const Image base = render_camera_rain(sc, none, ex);  // a background of the same kind
+    StreakSplatTiming tm;
+    std::optional<GpuStreakSplatter> gs;
+    if (ctx) gs.emplace(*ctx, tm);
+    std::vector<double> cpu_ms, gpu_ms, bin, up, pass, back;
+    Image a, b;
+    std::size_t clamped[2] = {0, 0};
+    for (int r = 0; r <= rounds; ++r) {  // round 0 warms up (the pass compiles)
+      for (int k = 0; k < 2; ++k) {
+        const bool gpu = (k == 0) == (r % 2 == 0);
+        if (gpu && !gs) continue;
+        Image im = base;
+        const auto t0 = Clock::now();
+        const StreakSplat s = gpu ? gs->splat(slabs, sc.range, im, cam, ex.threads)
+                                  : splat_streaks(slabs, sc.range, im, cam, ex.threads);
+        const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        clamped[gpu] = s.alpha_clamped;
+        if (r == 0) continue;
+        (gpu ? gpu_ms : cpu_ms).push_back(ms);
+        if (gpu) bin.push_back(tm.bin_ms), up.push_back(tm.upload_ms), pass.push_back(tm.splat_ms),
+            back.push_back(tm.readback_ms);
+        (gpu ? b : a) = std::move(im);
+      }
+    }
+    std::printf("  %5g mm/h: %zu streaks; CPU", rate, st.drops_drawn);
+    print_spread("", cpu_ms);
+    if (gs) {
+      double max_diff = 0.0;
+      for (std::size_t i = 0; i < a.data.size(); ++i)
+        max_diff = std::max(max_diff, static_cast<double>(std::abs(a.data[i] - b.data[i])));
+      const std::string pass_what = std::string("+ pass (") + (tm.gpu_timer ? "timer query)" : "wall)");
+      const std::pair<const char*, const std::vector<double>*> parts[] = {
+          {"| GPU", &gpu_ms}, {"= bin+pack", &bin}, {"+ upload", &up}, {pass_what.c_str(), &pass}, {"+ read back", &back}};
+      for (const auto& [what, v] : parts) print_spread(what, *v);
+      std::printf(" | %zu list entries; clamped %zu (CPU %zu); max |GPU - CPU| %.3g", tm.list_entries, clamped[1],
+                  clamped[0], max_diff);
+      if (!(max_diff <= 1e-4)) ++bad, std::printf(" ** beyond the test's bound, 1e-4");
+    }
+    std::printf("\n");
+  }
+  return bad;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -162,6 +247,7 @@ int main(int argc, char** argv) {
   int bad = 0;
   if (only.empty() || only == "lidar" || only == "lidar-alone") bad += lidar(rounds, rates, only == "lidar-alone");
   if (only.empty() || only == "camera") bad += camera(rounds, only.empty() ? std::vector<double>{25.0} : rates, epsilon);
+  if (only == "splat") bad += splat(rounds, rates, epsilon);
   std::printf(" load average at the end %s\n", load().c_str());
   return bad ? 1 : 0;
 }

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # One prepared visit to an NVIDIA machine: the GPU figures the README still
-# lacks (haze backend, aerial, fog, sky passes, the study's GPU column) and the
+# lacks (haze backend, aerial, fog, sky passes, rain's and snow's splat, the study's GPU column) and the
 # GPU tests on real hardware. Run from the repository root with an existing
 # Release build in build/; results go to ${OUT:-nvidia-out}/ (at most 8 files).
 #
@@ -27,6 +27,22 @@ d=$(mktemp -d)
   done
   build/brume compare --a "$d/a_gpu.exr" --b "$d/a_cpu.exr"
 } > "$OUT/effects.txt" 2>&1
+# Rain's and snow's streak splat on the GPU against the CPU's (bench_rain.cpp's splat mode: the
+# same streaks, each stage timed, the images' max difference), and the two commands end to end.
+{ timeout 150 build/bench/brume_bench_rain 3 splat 5 25 100
+  K=../shared/data/kitti_object_000001
+  if [ -d "$K" ]; then
+    for be in gpu cpu; do
+      build/brume rain --image $K/image_2/000001.png --velodyne $K/velodyne/000001.bin --kitti-calib $K/calib/000001.txt \
+        --rate 25 --rain-seed 1 --out "$d/rain_$be.exr" --record "$d/rain_$be.json" --backend $be --timing
+      build/brume snow --image $K/image_2/000001.png --velodyne $K/velodyne/000001.bin --kitti-calib $K/calib/000001.txt \
+        --rate 2 --out "$d/snow_$be.exr" --backend $be --timing
+    done
+    grep -A9 '"gpu_splat_timing"' "$d/rain_gpu.json"
+    build/brume compare --a "$d/rain_gpu.exr" --b "$d/rain_cpu.exr"
+    build/brume compare --a "$d/snow_gpu.exr" --b "$d/snow_cpu.exr"
+  fi
+} > "$OUT/rain_splat.txt" 2>&1
 { BRUME_REQUIRE_GPU=1 timeout 120 build/tests/brume_tests --gtest_filter='*Gpu*:*GPU*' --gtest_brief=1; echo "gpu tests rc=$?"; } > "$OUT/tests.log" 2>&1
 timeout 60 build/brume study diffusion --quick --backend gpu --out-dir "$d/sq" > "$OUT/study_quick.md" 2>&1
 cat "$d/sq/summary.md" >> "$OUT/study_quick.md" 2>/dev/null

@@ -389,6 +389,7 @@ void validate_streak_camera(double z_split_m, double z_near_m, const std::option
                             const std::string& particles);
 
 class CameraRainOptics;
+class StreakSplatter;  // the camera pass's splat elsewhere (internal: effects/rain/streaks.hpp)
 
 // What the renderer takes besides the parameters.
 struct CameraRainScene {
@@ -412,6 +413,9 @@ struct CameraRainScene {
   // elsewhere, from the population's optics (the GPU's passes: src/effects/rain/rain_gpu.hpp);
   // unset: on the CPU, with `composite`.
   std::function<Image(const CameraRainOptics& optics, Image* transmission)> background;
+  // Step 3 of the pass (the streaks' splat over the image) done elsewhere (the GPU's pass:
+  // src/effects/rain/rain_gpu.hpp); null: on the CPU. Not owned.
+  const StreakSplatter* splatter = nullptr;
 };
 struct CameraRainStats {
   double sigma_cam = 0.0, sigma_lidar = 0.0;

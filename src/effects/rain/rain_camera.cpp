@@ -254,8 +254,9 @@ Image render_camera_rain_drawn(const CameraRainScene& s, const CameraRainParams&
                  : frustum_streaks(field, threshold, p.z_near_m, p.z_split_m, grow_m, cam, nt, make, st.cells,
                                    st.drops_seen);
 
-  // 3. The streaks, composited far to near (ties: the enumeration's order), tile by tile.
-  const StreakSplat splat = splat_streaks(drops, s.range, out, cam, nt);
+  // 3. The streaks, composited far to near (ties: the enumeration's order), tile by tile (on the
+  // CPU, or by the scene's splatter: the GPU's pass).
+  const StreakSplat splat = splat_scene_streaks(s, drops, out, cam, nt);
   st.drops_drawn = splat.drawn, st.alpha_clamped = splat.alpha_clamped, st.mean_streak_px = splat.mean_streak_px;
   if (stats) *stats = st;
   if (drawn) *drawn = std::move(drops);

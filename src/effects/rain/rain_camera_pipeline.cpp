@@ -175,8 +175,8 @@ CommandDef rain_command() {
       .name = "rain",
       .cli = "rain",
       .summary = "rain on an RGB-D image: streaks of the drop field depth-tested against the scene (Garg & Nayar), "
-                 "the rest as extinction in haze's composite (--backend gpu: the per-pixel passes on the GPU, the "
-                 "streaks' splat on the CPU)",
+                 "the rest as extinction in haze's composite (--backend gpu: the per-pixel passes and the "
+                 "streaks' splat on the GPU, the drops' enumeration on the CPU)",
       .table = &camera_rain_job_table(),
       .takes_exec_flags = true,
       .writes_record = true,
@@ -211,7 +211,7 @@ CommandDef rain_command() {
   // is drawn per frame (seed(): 53 bits of the frame's hash), so that no two frames share their
   // drops: a fixed seed would draw the same streaks at the same pixels in every frame of a
   // dataset shot from one camera.
-  // --backend gpu: the per-pixel passes on the GPU, the streaks' splat on the CPU (effects/rain/rain_gpu.hpp).
+  // --backend gpu: the per-pixel passes and the streaks' splat on the GPU (effects/rain/rain_gpu.hpp).
   c.gpu_passes = streak_gpu_passes();
   c.sampling = make_sampling<CameraRainParams>(
       camera_rain_param_table(), {{"rate", "loguniform(1, 100)", {}}, {"rain-seed", "seed()", {}}},

@@ -419,16 +419,11 @@ std::vector<std::uint32_t> far_to_near(const std::vector<const Streak*>& drops, 
 
 }  // namespace
 
-// The streaks, composited far to near, tile by tile: a tile's pixels stay in cache while the
-// streaks that can touch it (listed in their order) are splatted, each pixel taking the same
-// updates in the same order as a single pass over them would give it (the same image on any
-// number of threads). A streak's rows and columns (v_lo..v_hi, u_lo..u_hi) bound every pixel its
-// samples touch; its tiles are taken one pixel wider. The streaks stay where they were drawn:
-// their order far to near is a radix sort's permutation, the tiles' lists one array (counted,
-// then filled), and a tile's loop fetches the streaks a few ahead of the one it draws.
-StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image& out, const StreakCamera& cam,
-                          int nt) {
-  std::vector<const Streak*> drops;
+// The streaks binned tile by tile (StreakBins): they stay where they were drawn; their order far
+// to near is a radix sort's permutation, the tiles' lists one array (counted, then filled).
+StreakBins bin_streaks(const StreakSlabs& slabs, const StreakCamera& cam, int kTileW, int kTileH, int nt) {
+  StreakBins bins;
+  std::vector<const Streak*>& drops = bins.drops;
   {
     std::size_t n = 0;
     for (const std::vector<Streak>& s : slabs) n += s.size();
@@ -439,12 +434,13 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
       for (const Streak& k : s) drops.push_back(&k);
   }
   const std::size_t n = drops.size();
-  if (n == 0) return {};
   const int W = cam.width, H = cam.height;
-  const double fx = cam.fx, fy = cam.fy, cx = cam.cx, cy = cam.cy;
-  constexpr int kTileW = 128, kTileH = 32;
   const int tiles_x = (W + kTileW - 1) / kTileW, tiles_y = (H + kTileH - 1) / kTileH;
   const std::size_t n_tiles = static_cast<std::size_t>(tiles_x) * tiles_y;
+  bins.tiles_x = tiles_x, bins.tiles_y = tiles_y;
+  bins.first.assign(n_tiles + 1, 0);
+  if (n == 0) return bins;
+  std::vector<std::size_t>& first = bins.first;
   // Each streak's sort key, tiles and path length, and the tiles' counts, in one pass over the
   // streaks as they lie in memory (the passes far to near below read these, not the streaks).
   struct Span {
@@ -455,7 +451,6 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
   std::vector<std::uint32_t> key(n);
   std::vector<Span> span(n);
   std::vector<double> path(n);
-  std::vector<std::size_t> first(n_tiles + 1, 0);
   // Each thread counts into its own row and the rows are summed after the region (no critical
   // section or reduction: LLVM's OpenMP runtime under ThreadSanitizer crashed in the critical
   // section's end when batch frames ran this region from several threads at once).
@@ -499,15 +494,40 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
   const std::vector<std::uint32_t> order = far_to_near(drops, std::move(key), listed);  // storage indices
   // The tiles' lists, far to near.
   for (std::size_t t = 0; t < n_tiles; ++t) first[t + 1] += first[t];
-  std::vector<const Streak*> in_tile(first[n_tiles]);
+  bins.in_tile.resize(first[n_tiles]);
   {
     std::vector<std::size_t> fill(first.begin(), first.end() - 1);
     for (const std::uint32_t d : order) {
       const Span& sp = span[d];
       for (int ty = sp.ty0; ty <= sp.ty1; ++ty)
-        for (int tx = sp.tx0; tx <= sp.tx1; ++tx) in_tile[fill[static_cast<std::size_t>(ty) * tiles_x + tx]++] = drops[d];
+        for (int tx = sp.tx0; tx <= sp.tx1; ++tx) bins.in_tile[fill[static_cast<std::size_t>(ty) * tiles_x + tx]++] = d;
     }
   }
+  // The mean length of the paths, summed far to near.
+  double total_len = 0.0;
+  for (const std::uint32_t d : order) total_len += path[d];
+  bins.mean_streak_px = total_len / static_cast<double>(n);
+  return bins;
+}
+
+// The streaks, composited far to near, tile by tile: a tile's pixels stay in cache while the
+// streaks that can touch it (listed in their order: bin_streaks) are splatted, each pixel taking
+// the same updates in the same order as a single pass over them would give it (the same image on
+// any number of threads). A streak's rows and columns (v_lo..v_hi, u_lo..u_hi) bound every pixel
+// its samples touch; its tiles are taken one pixel wider. A tile's loop fetches the streaks a few
+// ahead of the one it draws.
+StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image& out, const StreakCamera& cam,
+                          int nt) {
+  constexpr int kTileW = 128, kTileH = 32;
+  const StreakBins bins = bin_streaks(slabs, cam, kTileW, kTileH, nt);
+  const std::vector<const Streak*>& drops = bins.drops;
+  if (drops.empty()) return {};
+  const int W = cam.width, H = cam.height;
+  const double fx = cam.fx, fy = cam.fy, cx = cam.cx, cy = cam.cy;
+  const int tiles_x = bins.tiles_x;
+  const std::size_t n_tiles = static_cast<std::size_t>(tiles_x) * bins.tiles_y;
+  const std::vector<std::size_t>& first = bins.first;
+  const std::vector<std::uint32_t>& in_tile = bins.in_tile;
   // The tiles taken longest list first (a tile's pixels depend on its list alone: any order, the
   // same image), so that no thread is left with a long tile at the end.
   std::vector<int> by_work(n_tiles);
@@ -541,27 +561,16 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
       const std::size_t e0 = first[static_cast<std::size_t>(tile)], e1 = first[static_cast<std::size_t>(tile) + 1];
       for (std::size_t e = e0; e < e1; ++e) {
         if (e + kAhead < e1) {
-          const char* next = reinterpret_cast<const char*>(in_tile[e + kAhead]);
+          const char* next = reinterpret_cast<const char*>(drops[in_tile[e + kAhead]]);
           __builtin_prefetch(next);
           __builtin_prefetch(next + 64);
           __builtin_prefetch(next + sizeof(Streak) - 1);
         }
-        const Streak& k = *in_tile[e];
-        // The image position at time t (and its depth pz); the range only where a sample is drawn.
-        double px = 0.0, py = 0.0, pz = 0.0;
-        const auto at = [&](double t, double& u, double& v) {
-          px = k.c[0] + k.u[0] * t, py = k.c[1] + k.u[1] * t;
-          pz = k.c[2] + k.u[2] * t;
-          u = fx * px / pz + cx, v = fy * py / pz + cy;
-        };
-        double ua, va, ub, vb;
-        at(k.t0, ua, va);
-        at(k.t1, ub, vb);
-        const double len = std::hypot(ub - ua, vb - va);
-        const double h = std::max(0.5, 0.5 * k.sigma_px);
-        const int n = std::min(1 << 16, static_cast<int>(std::ceil(len / h)) + 1);
-        const bool gauss = k.sigma_px >= 0.5;
-        const int rad = gauss ? static_cast<int>(std::ceil(3.0 * k.sigma_px)) : 0;
+        const Streak& k = *drops[in_tile[e]];
+        const StreakSampling smp = streak_sampling(k, cam);
+        const double va = smp.va, vb = smp.vb;
+        const int n = smp.n, rad = smp.rad;
+        const bool gauss = smp.gauss;
         // The samples that can have a tap in the tile's rows: the image path is straight and its
         // row monotone in t, so they are a run of indices, found by bisection on rows a pixel
         // beyond any tap's reach (far above the rounding of v); the others are not computed.
@@ -681,11 +690,8 @@ StreakSplat splat_streaks(const StreakSlabs& slabs, ConstImageView range, Image&
   }
   StreakSplat done;
   for (std::size_t i = 0; i < clamped.size(); ++i) done.alpha_clamped += clamped[i];
-  // The mean length of the paths, summed far to near.
-  double total_len = 0.0;
-  for (const std::uint32_t d : order) total_len += path[d];
   done.drawn = drops.size();
-  done.mean_streak_px = drops.empty() ? 0.0 : total_len / static_cast<double>(drops.size());
+  done.mean_streak_px = bins.mean_streak_px;
   return done;
 }
 

@@ -4,8 +4,10 @@
 // exposure, composited far to near tile by tile. Internal (not installed).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <vector>
@@ -190,6 +192,60 @@ struct StreakSplat {
 };
 StreakSplat splat_streaks(const StreakSlabs& streaks, ConstImageView range, Image& out, const StreakCamera& cam,
                           int threads);
+
+// The streaks binned for a splat: in storage order (`drops`), and tile by tile of tile_w x tile_h
+// pixels far to near (ties: their order), each tile's list in_tile[first[t] .. first[t + 1]) of
+// indices into `drops` (a streak is listed in every tile its rows and columns, one pixel wider,
+// touch); the mean length of their paths in the image [px], summed far to near. The CPU's splat
+// and the GPU's (effects/rain/rain_gpu.hpp) take the same lists.
+struct StreakBins {
+  std::vector<const Streak*> drops;
+  int tiles_x = 0, tiles_y = 0;
+  std::vector<std::size_t> first;
+  std::vector<std::uint32_t> in_tile;
+  double mean_streak_px = 0.0;
+};
+StreakBins bin_streaks(const StreakSlabs& streaks, const StreakCamera& cam, int tile_w, int tile_h, int threads);
+
+// How a streak is sampled: its path's ends (ua, va) at t0 and (ub, vb) at t1 in the image, n
+// samples uniform in time (a sample's time t0 + (t1 − t0)·(i + 0.5)/n), each spread bilinearly
+// (gauss false: σ < 0.5 px) or across a Gaussian of σ = sigma_px truncated at rad = ⌈3σ⌉ pixels.
+struct StreakSampling {
+  double ua, va, ub, vb;
+  int n;
+  bool gauss;
+  int rad;
+};
+inline StreakSampling streak_sampling(const Streak& k, const StreakCamera& cam) {
+  StreakSampling s;
+  const auto at = [&](double t, double& u, double& v) {
+    const double px = k.c[0] + k.u[0] * t, py = k.c[1] + k.u[1] * t, pz = k.c[2] + k.u[2] * t;
+    u = cam.fx * px / pz + cam.cx, v = cam.fy * py / pz + cam.cy;
+  };
+  at(k.t0, s.ua, s.va);
+  at(k.t1, s.ub, s.vb);
+  const double len = std::hypot(s.ub - s.ua, s.vb - s.va);
+  const double h = std::max(0.5, 0.5 * k.sigma_px);
+  s.n = std::min(1 << 16, static_cast<int>(std::ceil(len / h)) + 1);
+  s.gauss = k.sigma_px >= 0.5;
+  s.rad = s.gauss ? static_cast<int>(std::ceil(3.0 * k.sigma_px)) : 0;
+  return s;
+}
+
+// Step 3 done elsewhere (CameraRainScene::splatter: the GPU's pass, effects/rain/rain_gpu.hpp):
+// the same streaks into the same image, as splat_streaks.
+class StreakSplatter {
+ public:
+  virtual ~StreakSplatter() = default;
+  virtual StreakSplat splat(const StreakSlabs& streaks, ConstImageView range, Image& out, const StreakCamera& cam,
+                            int threads) const = 0;
+};
+// The scene's splatter where it has one, else splat_streaks.
+inline StreakSplat splat_scene_streaks(const CameraRainScene& s, const StreakSlabs& streaks, Image& out,
+                                       const StreakCamera& cam, int threads) {
+  return s.splatter ? s.splatter->splat(streaks, s.range, out, cam, threads)
+                    : splat_streaks(streaks, s.range, out, cam, threads);
+}
 
 // An image's box mean over (2h+1)² about a pixel (clamped), per channel, by a summed-area table.
 class StreakBoxMean {

@@ -79,15 +79,20 @@ StreakRun run_camera_streaks(ConstImageView rgb, ConstImageView measured_range, 
       return scatter_blur(rgb, tau0, scale, ha.sigma_max, hp.diffusion, hp.composite, ha.airlight, exec).rgb;
     };
   }
-  // The GPU's backend: the per-pixel step (the analytic media and haze's composite) on the GPU, the
-  // particles' streaks on the CPU over it (effects/rain/rain_gpu.hpp).
+  // The GPU's backend: the per-pixel step (the analytic media and haze's composite) and the streaks'
+  // splat on the GPU, the particles' enumeration on the CPU (effects/rain/rain_gpu.hpp).
   BackendChoice backend = choose_backend(exec);
   GpuTiming gpu_timing;
-  if (backend.gpu)
+  StreakSplatTiming splat_timing;
+  std::optional<GpuStreakSplatter> splatter;
+  if (backend.gpu) {
     scene.background = [&](const CameraRainOptics& optics, Image* tr) {
       return streak_background_gpu(*backend.gpu, scene, optics, hp, ha, hp.visibility_m.has_value(), exec.gpu_filter,
                                    tr, gpu_timing);
     };
+    splatter.emplace(*backend.gpu, splat_timing);
+    scene.splatter = &*splatter;
+  }
   const auto t0 = std::chrono::steady_clock::now();
   StreakRun run;
   nlohmann::json& rec = run.record;
@@ -105,6 +110,7 @@ StreakRun run_camera_streaks(ConstImageView rgb, ConstImageView measured_range, 
   rec["execution"]["timing"] = cpu_timing_record(t0, 0);
   if (backend.gpu) {
     rec["execution"]["gpu_timing"] = gpu_timing_record(gpu_timing);
+    rec["execution"]["gpu_splat_timing"] = streak_splat_timing_record(splat_timing);
     rec["execution"]["split"] = streak_gpu_split();
   }
   return run;

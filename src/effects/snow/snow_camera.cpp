@@ -160,7 +160,7 @@ Image render_camera_snow_drawn(const CameraRainScene& s, const CameraSnowParams&
                    : frustum_streaks(field, threshold, p.z_near_m, p.z_split_m, grow_m, cam, nt, make, st.cells,
                                      st.flakes_seen);
     // 3. Composited far to near, tile by tile.
-    const StreakSplat splat = splat_streaks(flakes, s.range, out, cam, nt);
+    const StreakSplat splat = splat_scene_streaks(s, flakes, out, cam, nt);
     st.flakes_drawn = splat.drawn, st.alpha_clamped = splat.alpha_clamped, st.mean_streak_px = splat.mean_streak_px;
     if (drawn) *drawn = std::move(flakes);
   }

@@ -119,7 +119,7 @@ CommandDef snow_command() {
       .cli = "snow",
       .summary = "snow on an RGB-D image: the flakes of a snowfall lit by the scene's sky and ground, depth-tested "
                  "and blurred over the exposure, the rest as extinction in haze's composite (--backend gpu: the "
-                 "per-pixel passes on the GPU, the flakes' splat on the CPU)",
+                 "per-pixel passes and the flakes' splat on the GPU, their enumeration on the CPU)",
       .table = &camera_snow_job_table(),
       .takes_exec_flags = true,
       .writes_record = true,
@@ -153,7 +153,7 @@ CommandDef snow_command() {
   // heavy snowfall (5 mm/h: several centimetres of fresh snow an hour); log because the flakes'
   // look changes over decades of the rate. The flakes' seed is drawn per frame (seed()), as
   // rain's: a fixed seed would draw the same flakes at the same pixels in every frame.
-  // --backend gpu: the per-pixel passes on the GPU, the streaks' splat on the CPU (effects/rain/rain_gpu.hpp).
+  // --backend gpu: the per-pixel passes and the streaks' splat on the GPU (effects/rain/rain_gpu.hpp).
   c.gpu_passes = streak_gpu_passes();
   c.sampling = make_sampling<CameraSnowParams>(
       camera_snow_param_table(), {{"rate", "loguniform(0.2, 5)", {}}, {"snow-seed", "seed()", {}}},
