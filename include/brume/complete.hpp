@@ -222,6 +222,12 @@ struct CompleteParams {
   // (image) or the pilot's nearest (the rule of records before it:
   // since(4, "nearest")).
   CompleteEdges edges = CompleteEdges::image;
+  // [px] fusion with a second view (brume/fuse.hpp step 4): a stereo value
+  // nearer than the completion's estimate does not replace it where the
+  // pair sees the estimate's depth within this distance (the matcher's
+  // foreground fattening), 0..32; 0: no guard (the rule of records before
+  // it: since(4, 0)).
+  int stereo_fattening_px = 5;
   // Not a parameter: the range map is a scan projected from a sensor beside
   // the camera (--velodyne; LoadedDepth::offset_scan), for occlusion auto.
   bool offset_scan = false;

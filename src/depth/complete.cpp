@@ -93,7 +93,13 @@ const ParamTable<CompleteParams>& complete_param_table() {
                 "far depth layer where it holds 3x the near layer's weight, so that a pixel takes the measurements "
                 "of its own side (issue 52); nearest keeps the layer of the nearest measurement (the rule of "
                 "records before it)")
-        .since(4, "nearest");
+        .since(4, "nearest")
+        .integer("complete-stereo-fattening", &CompleteParams::stereo_fattening_px, "px", Range::closed(0, 32),
+                 "with --stereo-right: a stereo value nearer than the completion's estimate does not replace it "
+                 "where the pair itself sees the estimate's depth (within 5 %) within this many pixels: the "
+                 "matcher's foreground fattening beside a nearer object, about one matching block (--stereo-block "
+                 "5); 0: no such guard (the rule of records before it)")
+        .since(4, 0);
     return d;
   }();
   return t;
