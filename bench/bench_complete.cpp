@@ -107,9 +107,11 @@ int main(int argc, char** argv) {
   scan_p.offset_scan = true;
   CompleteParams column;
   column.method = CompleteMethod::column;
+  CompleteParams nearest = scan_p;  // without step 2b (the rule before complete-edges image)
+  nearest.edges = CompleteEdges::nearest;
   std::printf("| threads | brume complete_range (planar, the default), wall [ms] | its CPU time [ms] | "
-              "--complete-method column, wall [ms] | Ku et al. (OpenCV) alone, wall [ms] |\n"
-              "|---|---|---|---|---|\n");
+              "--complete-edges nearest, wall [ms] | --complete-method column, wall [ms] | Ku et al. (OpenCV) alone, "
+              "wall [ms] |\n|---|---|---|---|---|---|\n");
   for (int t : {1, 2}) {
     cv::setNumThreads(t);
     omp_set_num_threads(t);
@@ -120,19 +122,23 @@ int main(int argc, char** argv) {
       fn();
       return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     };
-    std::vector<double> ta, tc, tb, cpu;
+    std::vector<double> ta, tn, tc, tb, cpu;
     for (int i = 0; i < runs + 1; ++i) {
       const double a1 = wall([&] { (void)complete_range(scan.range, rgb, scan_p, t, &cam); });
+      const double n1 = wall([&] { (void)complete_range(scan.range, rgb, nearest, t, &cam); });
       const double c1 = wall([&] { (void)complete_range(scan.range, rgb, column, t, &cam); });
       const double b1 = wall([&] { (void)ku(scan.range); });
       cpu.push_back(cpu_ms([&] { (void)complete_range(scan.range, rgb, scan_p, t, &cam); }));
       if (i == 0) continue;  // the warm-up
-      ta.push_back(a1), tc.push_back(c1), tb.push_back(b1);
+      ta.push_back(a1), tn.push_back(n1), tc.push_back(c1), tb.push_back(b1);
     }
     cpu.erase(cpu.begin());
-    const bench::Spread a = bench::spread(ta), cc = bench::spread(tc), b = bench::spread(tb), c = bench::spread(cpu);
-    std::printf("| %d | %.1f (%.1f..%.1f) | %.1f (%.1f..%.1f) | %.1f (%.1f..%.1f) | %.1f (%.1f..%.1f) |\n", t,
-                a.median, a.lo, a.hi, c.median, c.lo, c.hi, cc.median, cc.lo, cc.hi, b.median, b.lo, b.hi);
+    const bench::Spread a = bench::spread(ta), nn = bench::spread(tn), cc = bench::spread(tc), b = bench::spread(tb),
+                        c = bench::spread(cpu);
+    std::printf("| %d | %.1f (%.1f..%.1f) | %.1f (%.1f..%.1f) | %.1f (%.1f..%.1f) | %.1f (%.1f..%.1f) | %.1f "
+                "(%.1f..%.1f) |\n",
+                t, a.median, a.lo, a.hi, c.median, c.lo, c.hi, nn.median, nn.lo, nn.hi, cc.median, cc.lo, cc.hi,
+                b.median, b.lo, b.hi);
   }
 
   // KITTI depth completion's metrics at held-out returns, ten seeds: on the

@@ -84,13 +84,16 @@ double median_in(const Image& im, int l, int t, int r, int b) {
 // should not reproduce it, so neither method is scored there. Both are
 // scored on the same set. All held-out returns are printed too.
 //
-// Targets: on that truth, brume's MAE <= IP-Basic's (the issue's target)
-// and RMSE <= 0.95x IP-Basic's. The issue asks 0.9x; brume reaches 0.942x
-// (2026-12-05), so 0.95 holds today's result with the small margin that
-// float rounding across compilers needs, and fails on any real regression.
-// On all held-out returns brume's RMSE is 1.036x (its completion replaces
-// the dropped background returns by the foreground): checked only against
-// 1.1x, a regression bound.
+// Targets (issue 52): on that truth, brume's MAE <= IP-Basic's and RMSE
+// <= 0.9x IP-Basic's. With step 2b (complete-edges image) brume reaches
+// 0.861x and 0.899x (2026-12-07; seeds 101-110, a check against tuning to
+// these: 0.859x, 0.897x), so the RMSE bound has a margin of 0.1 %: the
+// computation is deterministic (row bands, fixed order) and the same on
+// every thread count, but another compiler's float rounding could move the
+// some 1 800 errors' mean by that much; a failure there is worth a look, not a
+// widened bound. On all held-out returns brume's RMSE is 0.997x (its
+// completion replaces the dropped background returns by the foreground):
+// checked against 1.02x, a regression bound.
 TEST(Complete, HeldOutReturnsAgainstIpBasicTenSeeds) {
   BRUME_REQUIRE_DATA(kKitti + "velodyne/000001.bin");
   const KittiFrame f = load_kitti();
@@ -134,8 +137,8 @@ TEST(Complete, HeldOutReturnsAgainstIpBasicTenSeeds) {
   // 0.5 % (an isolated return off a wire or a twig that the sky rule takes).
   EXPECT_LE(missing, held_n / 200);
   EXPECT_LE(mean[0][0].mae_mm, mean[1][0].mae_mm);
-  EXPECT_LE(mean[0][0].rmse_mm, 0.95 * mean[1][0].rmse_mm);
-  EXPECT_LE(mean[0][1].rmse_mm, 1.1 * mean[1][1].rmse_mm);
+  EXPECT_LE(mean[0][0].rmse_mm, 0.9 * mean[1][0].rmse_mm);
+  EXPECT_LE(mean[0][1].rmse_mm, 1.02 * mean[1][1].rmse_mm);
 }
 
 // The occlusion rule itself: a background return (40 m) seen between the
@@ -292,6 +295,37 @@ TEST(Complete, DepthEdgesFollowImageEdges) {
     }
 }
 
+// Step 2b (complete-edges image): a foreground object and the background
+// beside it of the same colour (a dark car before a dark shadow), told apart
+// only by the object's outline, a 1 px bright line. The pilot keeps the
+// nearest return, so with complete-edges nearest (the rule of records before
+// issue 52) the background beside the outline takes the object's 10 m; with
+// image the returns behind the outline no longer count as the pixel's side
+// and the far layer (50 m) is taken. Both layers are constant: the only
+// tolerance is float rounding of the weighted mean (1e-4 relative).
+TEST(Complete, DepthEdgeTakesTheLayerOfItsOwnSide) {
+  const int W = 96, H = 64, edge = 49;
+  Image rgb(W, H, 3), sparse(W, H, 1, NAN);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      for (int c = 0; c < 3; ++c) rgb.at(x, y, c) = x == edge ? 0.8f : 0.05f;
+      if (y % 4 == 1 && x % 4 == 0 && x != edge) sparse.at(x, y) = x > edge ? 50.0f : 10.0f;
+    }
+  CompleteParams image, nearest;
+  nearest.edges = CompleteEdges::nearest;
+  const CompleteResult a = complete_range(sparse, rgb, image), b = complete_range(sparse, rgb, nearest);
+  std::size_t wrong_nearest = 0;
+  for (int y = 8; y < H - 8; ++y)
+    for (int x = 0; x < W; ++x) {
+      if (x == edge) continue;  // the outline itself belongs to either side
+      const float want = x > edge ? 50.0f : 10.0f, r = a.range.at(x, y);
+      ASSERT_NEAR(r, want, 1e-4f * want) << x << "," << y;
+      wrong_nearest += std::abs(b.range.at(x, y) - want) > 0.1f * want;
+    }
+  // The old rule's error, which step 2b mends: at least a column's worth.
+  EXPECT_GE(wrong_nearest, static_cast<std::size_t>(H - 16)) << "the nearest layer no longer crosses the outline";
+}
+
 // The result does not depend on the thread count (row bands, fixed order).
 TEST(Complete, SameResultOnOneAndTwoThreads) {
   BRUME_REQUIRE_DATA(kKitti + "velodyne/000001.bin");
@@ -364,6 +398,47 @@ TEST(Complete, AboveTheScanStructureContinuesOnEth3d) {
     // Below the scan's top the methods agree (the planar rule changes only
     // what lies above each column's topmost return).
     EXPECT_NEAR(low_b, low_a, 0.005) << scene;
+  }
+}
+
+// Step 2b does not make a dense map worse between the scan lines: ETH3D
+// with the simulated scan of the "above the scan" test (48 full rows over
+// the lower 60 %; the pixels between them with ground truth), the MAE, RMSE
+// and share off by > 10 % with complete-edges image at most nearest's
+// (terrace 8.0/40.3 mm against 8.0/40.6 mm, playground_1l 26.7/124.0 mm
+// against 26.8/126.0 mm, 2026-12-07); the tolerance 0.2 % is float rounding
+// of sums over 10^5 pixels, far below a real change (step 2b moves them by
+// 1-2 %).
+TEST(Complete, DepthEdgesNoWorseBetweenScanLinesOnEth3d) {
+  BRUME_REQUIRE_DATA("eth3d_two_view/terrace/disp0.pfm");
+  for (const char* scene : {"terrace", "playground_1l"}) {
+    if (!have_data(std::string("eth3d_two_view/") + scene + "/im0.png")) continue;
+    const SimulatedScan e = eth3d_kitti_like(scene);
+    double m[2][3] = {};  // [image, nearest][MAE, RMSE, share off]
+    for (int k = 0; k < 2; ++k) {
+      CompleteParams p;
+      if (k) p.edges = CompleteEdges::nearest;
+      const Image r = complete_range(e.sparse, e.rgb, p, 0, &e.k).range;
+      double a = 0, a2 = 0;
+      std::size_t n = 0, off = 0;
+      for (int y = e.top; y < e.truth.height; ++y)
+        for (int x = 0; x < e.truth.width; ++x) {
+          const float t = e.truth.at(x, y), v = r.at(x, y);
+          if (!std::isfinite(t) || std::isfinite(e.sparse.at(x, y))) continue;
+          ++n;
+          if (!std::isfinite(v)) {
+            ++off;
+            continue;
+          }
+          a += std::abs(v - t), a2 += (v - t) * (v - t), off += std::abs(v - t) > 0.1f * t;
+        }
+      ASSERT_GT(n, 10000u) << scene;
+      m[k][0] = a / n, m[k][1] = std::sqrt(a2 / n), m[k][2] = static_cast<double>(off) / n;
+    }
+    std::printf("%s between the scan lines: complete-edges image MAE %.2f mm RMSE %.2f mm off %.3f %%; nearest %.2f "
+                "mm, %.2f mm, %.3f %%\n",
+                scene, 1e3 * m[0][0], 1e3 * m[0][1], 100 * m[0][2], 1e3 * m[1][0], 1e3 * m[1][1], 100 * m[1][2]);
+    for (int j = 0; j < 3; ++j) EXPECT_LE(m[0][j], 1.002 * m[1][j]) << scene << " figure " << j;
   }
 }
 
@@ -918,6 +993,8 @@ TEST_F(CompleteCli, CompleteMethodFlag) {
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_EQ(read_json(p("a.json"))["job"]["complete"]["complete-method"], "planar");
   EXPECT_EQ(read_json(p("a.json"))["complete"]["complete_method"], "planar");
+  EXPECT_EQ(read_json(p("a.json"))["job"]["complete"]["complete-edges"], "image");
+  EXPECT_EQ(read_json(p("a.json"))["complete"]["complete_edges"], "image");
   EXPECT_EQ(read_json(p("a.json"))["complete"]["complete_occlusion"],
             "off (auto: the range map is not a scan from beside the camera)");
   r = run(in + " --complete-method column --out " + p("b.pfm") + " --record " + p("b.json"));

@@ -163,7 +163,8 @@ StereoFill fit_stereo_to_scan(DenseImageRef scan, const StereoResult& st, const 
   return out;
 }
 
-nlohmann::json fuse_stereo(CompleteResult& done, DenseImageRef scan, const StereoFill& fill, int radius) {
+nlohmann::json fuse_stereo(CompleteResult& done, DenseImageRef scan, const StereoFill& fill, int radius,
+                           int fattening_px) {
   const int W = scan.width, H = scan.height;
   if (fill.range.width != W || fill.range.height != H || done.range.width != W || done.range.height != H)
     throw Error("the stereo view's range is " + fill.range.size_string() + " but the completed scan is " +
@@ -178,7 +179,19 @@ nlohmann::json fuse_stereo(CompleteResult& done, DenseImageRef scan, const Stere
   std::size_t taken = 0, over_sky = 0, over_unknown = 0, over_estimate = 0, scan_supported = 0, agreed = 0,
               kept = 0, by_region = 0;
   // Per pixel: an estimate the pair replaced, or one it disagreed with but left.
-  constexpr std::uint8_t kOverEstimate = 1, kKept = 2;
+  constexpr std::uint8_t kOverEstimate = 1, kKept = 2, kFattened = 3;
+  std::size_t fattened = 0;
+  // The matcher's foreground fattening (fattening_px > 0): does the pair
+  // itself see the estimate r's depth within fattening_px of (x, y)?
+  auto pair_sees = [&](int x, int y, float r) {
+    for (int yy = std::max(0, y - fattening_px); yy <= std::min(H - 1, y + fattening_px); ++yy)
+      for (int xx = std::max(0, x - fattening_px); xx <= std::min(W - 1, x + fattening_px); ++xx) {
+        const float v = fill.range.at(xx, yy);
+        if (std::isfinite(v) && fill.confidence.at(xx, yy) >= kFuseMinConfidence && std::abs(v - r) <= kFuseAgree * v)
+          return true;
+      }
+    return false;
+  };
   std::vector<std::uint8_t> state(static_cast<std::size_t>(W) * H, 0);
   for (int y = 0; y < H; ++y) {
     const int y0 = std::max(0, y - radius), y1 = std::min(H, y + radius + 1);
@@ -205,6 +218,14 @@ nlohmann::json fuse_stereo(CompleteResult& done, DenseImageRef scan, const Stere
         if (c < kFuseOverrideConfidence || x < fill.border_px) {
           ++kept;
           state[static_cast<std::size_t>(y) * W + x] = kKept;
+          continue;
+        }
+        if (fattening_px > 0 && v < r && pair_sees(x, y, r)) {
+          // Nearer, beside where the pair sees the estimate's depth: the
+          // matcher's fattening of a nearer object; the estimate stays (and
+          // the region pass below does not take it either).
+          ++kept, ++fattened;
+          state[static_cast<std::size_t>(y) * W + x] = kFattened;
           continue;
         }
         ++over_estimate;
@@ -238,7 +259,7 @@ nlohmann::json fuse_stereo(CompleteResult& done, DenseImageRef scan, const Stere
   for (float v : done.range.data) finite += std::isfinite(v) ? 1 : 0;
   const double px = static_cast<double>(std::max<std::size_t>(1, done.range.pixels()));
   done.completed_fraction = finite / px;
-  return {{"rule", "where a measurement lies within the refinement's window (complete-radius) the scan's completion "
+  nlohmann::json rec = {{"rule", "where a measurement lies within the refinement's window (complete-radius) the scan's completion "
                    "stays; elsewhere a stereo pixel of confidence >= " + text::g(kFuseMinConfidence, 3) +
                        " fills what the completion left unknown or took for sky, confirms an estimate within " +
                        text::g(100 * kFuseAgree, 3) + " % of it (the estimate stays, its confidence the larger), "
@@ -255,6 +276,14 @@ nlohmann::json fuse_stereo(CompleteResult& done, DenseImageRef scan, const Stere
           {"estimate_confirmed_fraction", agreed / px},
           {"estimate_kept_fraction", kept / px},
           {"completed_fraction", done.completed_fraction}};
+  if (fattening_px > 0) {  // (records before the guard say nothing of it)
+    rec["rule"] = rec["rule"].get<std::string>() + "; never by a nearer value where the pair sees the estimate's depth "
+                  "(within " + text::g(100 * kFuseAgree, 3) + " %) within " + std::to_string(fattening_px) +
+                  " px: the matcher's foreground fattening";
+    rec["stereo_fattening_px"] = fattening_px;
+    rec["estimate_kept_as_fattening_fraction"] = fattened / px;
+  }
+  return rec;
 }
 
 }  // namespace brume

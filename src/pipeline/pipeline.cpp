@@ -632,7 +632,8 @@ CompletedRange complete_step(ConstImageView measured, ConstImageView rgb, const 
   const DenseImageRef guide = guide_copy.empty() ? DenseImageRef(rgb) : DenseImageRef(guide_copy);
   CompleteResult cr = complete_range(range, guide, step.completion, threads, step.camera ? &*step.camera : nullptr);
   nlohmann::json fusion;
-  if (step.stereo) fusion = fuse_stereo(cr, range, *step.stereo, step.completion.radius_px);
+  if (step.stereo) fusion = fuse_stereo(cr, range, *step.stereo, step.completion.radius_px,
+                                        step.completion.stereo_fattening_px);
   out.record.update(complete_record(step.completion, cr));
   if (step.stereo) out.record["stereo_fusion"] = fusion, out.record["stereo_fusion"]["fit"] = step.stereo->record;
   out.record["applied"] = true;

@@ -188,7 +188,7 @@ nlohmann::json run_depth_complete_job(const DepthCompleteJob& job, const ExecOpt
   CompleteResult cr = complete_range(in.depth.range, in.rgb, cp, eo.threads,
                                      in.depth.camera ? &*in.depth.camera : nullptr);
   nlohmann::json fusion;
-  if (in.depth.fusion) fusion = fuse_stereo(cr, in.depth.range, *in.depth.fusion, cp.radius_px);
+  if (in.depth.fusion) fusion = fuse_stereo(cr, in.depth.range, *in.depth.fusion, cp.radius_px, cp.stereo_fattening_px);
   nlohmann::json rec = run_record_header("depth complete", ctx.argv);
   rec["job"] = depth_complete_job_table().to_json(job);
   rec["inputs"] = in.record;
