@@ -806,6 +806,34 @@ TEST_F(CompleteCli, BadInputs) {
   for (const char* f : {"b.exr", "c.exr", "d.exr"}) EXPECT_FALSE(fs::exists(p(f))) << f;
 }
 
+// --complete-stereo-fattening guards the fusion with --stereo-right's view:
+// given where no second view is fused (a sparse map alone, an effect's
+// completion alone) it would change nothing, and is refused, naming the
+// flag and the fix; nothing is written. Without it the same runs work.
+TEST_F(CompleteCli, StereoFatteningWithoutASecondViewIsRefused) {
+  Image rgb(64, 48, 3, 0.4f), sparse(64, 48, 1, NAN);
+  for (int y = 24; y < 48; y += 4)
+    for (int x = 0; x < 64; ++x) sparse.at(x, y) = 8.0f;
+  write_image(p("im.png"), rgb, WriteOptions{});
+  WriteOptions data;
+  data.is_color = false;
+  write_image(p("sparse.exr"), sparse, data);
+  const std::string in = " --image " + p("im.png") + " --range " + p("sparse.exr");
+  CliRun r = run("depth complete" + in + " --complete-stereo-fattening 3 --out " + p("a.exr"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--complete-stereo-fattening guards the fusion"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--stereo-right"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p("a.exr")));
+  r = run("haze" + in + " --complete on --visibility 100 --complete-stereo-fattening 3 --out " + p("h.png"));
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find("--complete-stereo-fattening guards the fusion"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(p("h.png")));
+  r = run("depth complete" + in + " --out " + p("a.exr"));
+  EXPECT_EQ(r.status, 0) << r.output;
+  r = run("haze" + in + " --complete on --visibility 100 --out " + p("h.png"));
+  EXPECT_EQ(r.status, 0) << r.output;
+}
+
 // `brume depth complete` on KITTI end to end: the dense map, its confidence
 // and the record naming the method and its parameters.
 TEST_F(CompleteCli, DepthCompleteOnKitti) {

@@ -165,6 +165,8 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <set>
+#include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -245,6 +247,10 @@ struct CompleteParams {
   bool offset_scan = false;
 };
 const ParamTable<CompleteParams>& complete_param_table();
+// --complete-stereo-fattening given (`given`: the names set explicitly)
+// where no second view is fused (`fused` false: no --stereo-right, or
+// arrays) is refused: a parameter the run would ignore.
+void check_stereo_fattening_given(bool fused, const std::set<std::string>& given);
 
 struct CompleteResult {
   Image range;       // metres along the ray; NaN at the sky and where no rule gives a value

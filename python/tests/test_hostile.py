@@ -55,3 +55,18 @@ def test_scan_arrays_are_validated_as_files_are():
     pts[7] = (np.nan, 0.0, 0.0, 0.5)
     with pytest.raises(ValueError, match="point 7 has a non-finite x"):
         brume.lidar.fog(pts, visibility=40.0)
+
+
+def test_stereo_fattening_without_a_second_view_is_refused(demo):
+    """complete_stereo_fattening= guards the fusion with --stereo-right's
+    view; arrays have none, so it would change nothing: refused in Python's
+    words, as the CLI refuses --complete-stereo-fattening without a second
+    view."""
+    rgb = np.full((48, 64, 3), 0.4, np.float32)
+    sparse = np.full((48, 64), np.nan, np.float32)
+    sparse[24::4] = 8.0
+    with pytest.raises(ValueError, match=r"complete_stereo_fattening= guards the fusion"):
+        brume.depth.complete(rgb, sparse, complete_stereo_fattening=3)
+    with pytest.raises(ValueError, match=r"complete_stereo_fattening= guards the fusion"):
+        brume.haze(rgb, sparse, visibility=100, complete="on", complete_stereo_fattening=3)
+    assert np.isfinite(brume.depth.complete(rgb, sparse).range[30]).all()

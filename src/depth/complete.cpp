@@ -749,6 +749,13 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
   return res;
 }
 
+void check_stereo_fattening_given(bool fused, const std::set<std::string>& given) {
+  if (!fused && given.count("complete-stereo-fattening"))
+    throw Error("--complete-stereo-fattening guards the fusion with a second view (--stereo-right), and none is "
+                "fused here: it would change nothing; drop --complete-stereo-fattening, or give --stereo-right R "
+                "beside the sparse depth source");
+}
+
 nlohmann::json complete_record(const CompleteParams& p, const CompleteResult& r) {
   const double n = static_cast<double>(r.range.pixels());
   const char* pilot =

@@ -183,6 +183,7 @@ nlohmann::json run_depth_complete_job(const DepthCompleteJob& job, const ExecOpt
   if (!job.confidence.empty()) check_writable(job.confidence, conf, "--confidence");
   if (!job.record.empty()) check_record_path(job.record);
   LoadedInputs in = load_inputs(job.input, true);
+  check_stereo_fattening_given(in.depth.fusion != nullptr, ctx.given);
   CompleteParams cp = job.complete;
   cp.offset_scan = in.depth.offset_scan;
   CompleteResult cr = complete_range(in.depth.range, in.rgb, cp, eo.threads,
@@ -241,8 +242,10 @@ CommandDef depth_complete_command() {
       "(metres along the ray; NaN at the sky) with a per-pixel confidence. As `brume depth complete`, on arrays.",
       {{"rgb", 3, false, ArrayArg::As::dense}, {"range", 1, false, ArrayArg::As::dense}}, call,
       {"range", "confidence", "sky_mask", "record"}, true,
-      [](const std::vector<ArrayIn>& in, ArrayCall<CompleteParams>& k, const Exec& exec, const std::set<std::string>&) {
+      [](const std::vector<ArrayIn>& in, ArrayCall<CompleteParams>& k, const Exec& exec,
+         const std::set<std::string>& given) {
         complete_param_table().validate(k.p);
+        check_stereo_fattening_given(false, given);  // (arrays have no second view)
         CompleteResult cr = complete_range(in[1].dense, in[0].dense, k.p, exec.threads);
         ArrayResult r;
         r.record["complete"] = complete_record(k.p, cr);
