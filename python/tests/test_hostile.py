@@ -65,8 +65,8 @@ def test_stereo_fattening_without_a_second_view_is_refused(demo):
     rgb = np.full((48, 64, 3), 0.4, np.float32)
     sparse = np.full((48, 64), np.nan, np.float32)
     sparse[24::4] = 8.0
-    with pytest.raises(ValueError, match=r"complete_stereo_fattening= guards the fusion"):
+    with pytest.raises(ValueError, match=r"complete_stereo_fattening guards the fusion"):
         brume.depth.complete(rgb, sparse, complete_stereo_fattening=3)
-    with pytest.raises(ValueError, match=r"complete_stereo_fattening= guards the fusion"):
+    with pytest.raises(ValueError, match=r"complete_stereo_fattening guards the fusion"):
         brume.haze(rgb, sparse, visibility=100, complete="on", complete_stereo_fattening=3)
     assert np.isfinite(brume.depth.complete(rgb, sparse).range[30]).all()

@@ -751,9 +751,9 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
 
 void check_stereo_fattening_given(bool fused, const std::set<std::string>& given) {
   if (!fused && given.count("complete-stereo-fattening"))
-    throw Error("--complete-stereo-fattening guards the fusion with a second view (--stereo-right), and none is "
-                "fused here: it would change nothing; drop --complete-stereo-fattening, or give --stereo-right R "
-                "beside the sparse depth source");
+    throw Error("--complete-stereo-fattening guards the fusion with the second view of a stereo pair, and none is "
+                "fused here: it would change nothing; drop --complete-stereo-fattening (the command line fuses a "
+                "second view given by --stereo-right beside the sparse depth source)");
 }
 
 nlohmann::json complete_record(const CompleteParams& p, const CompleteResult& r) {

@@ -599,7 +599,7 @@ bool completes(const RangeStep& step, double known_fraction) {
 CompletedRange complete_step(ConstImageView measured, ConstImageView rgb, const RangeStep& step,
                              const std::set<std::string>& given, int threads) {
   check_range_step(step, given);
-  check_stereo_fattening_given(step.stereo, given);
+  check_stereo_fattening_given(step.stereo != nullptr, given);
   CompletedRange out;
   out.record = {{"mode", enum_name(complete_mode_names(), step.complete)}, {"applied", false}};
   if (step.stereo && step.complete == CompleteMode::off)
