@@ -474,12 +474,13 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
     cv::dilate(km, near, cv::Mat::ones(3, 3, CV_8U));
     // Brightness: luma, or the largest sRGB channel (a clear blue sky, luma
     // ~0.8 of a white one's, is as bright as it).
+    // (The largest channel also tells a black border: complete-sky-border.)
     std::vector<float> max_channel;
-    if (p.sky_brightness == CompleteSkyBrightness::max_channel) {
+    if (p.sky_brightness == CompleteSkyBrightness::max_channel || p.sky_border > 0.0) {
       max_channel.resize(N);
       for (std::size_t i = 0; i < N; ++i) max_channel[i] = std::max({g[3 * i], g[3 * i + 1], g[3 * i + 2]});
     }
-    const std::vector<float>& bright = max_channel.empty() ? luma : max_channel;
+    const std::vector<float>& bright = p.sky_brightness == CompleteSkyBrightness::max_channel ? max_channel : luma;
     // Its 99th percentile (1024 bins over [0, 1]).
     std::vector<std::size_t> hist(1025, 0);
     for (float y : bright) ++hist[static_cast<int>(std::clamp(y, 0.0f, 1.0f) * 1024.0f)];
@@ -507,7 +508,7 @@ CompleteResult complete_range(DenseImageRef range, DenseImageRef guide, const Co
       cv::Mat dark(H, W, CV_8U), dl;
       const float dark_max = static_cast<float>(p.sky_border);
       for (std::size_t i = 0; i < N; ++i)
-        dark.data[i] = (!known[i] && std::max({g[3 * i], g[3 * i + 1], g[3 * i + 2]}) <= dark_max) ? 1 : 0;
+        dark.data[i] = (!known[i] && max_channel[i] <= dark_max) ? 1 : 0;
       const int nd = cv::connectedComponents(dark, dl, 4, CV_32S);
       std::vector<std::uint8_t> edge(static_cast<std::size_t>(nd), 0);
       for (int x = 0; x < W; ++x) edge[dl.at<int>(0, x)] = edge[dl.at<int>(H - 1, x)] = 1;

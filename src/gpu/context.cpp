@@ -343,6 +343,21 @@ GLint Program::loc(const char* uniform) const {
 
 // ---------------------------------------------------------------- textures and targets
 
+BoundTextures::BoundTextures(std::initializer_list<GLuint> ids) : count_(static_cast<int>(ids.size())) {
+  int unit = 0;
+  for (GLuint id : ids) {
+    glActiveTexture(GL_TEXTURE0 + unit++);
+    glBindTexture(GL_TEXTURE_2D, id);
+  }
+}
+
+BoundTextures::~BoundTextures() {
+  for (int unit = count_ - 1; unit >= 0; --unit) {
+    glActiveTexture(GL_TEXTURE0 + unit);
+    glBindTexture(GL_TEXTURE_2D, 0);
+  }
+}
+
 gl::Texture make_texture(GLenum internal, int w, int h, GLenum format, GLenum type, const void* data) {
   gl::Texture t = gl::Texture::make();
   glBindTexture(GL_TEXTURE_2D, t.id());

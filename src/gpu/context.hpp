@@ -85,6 +85,19 @@ ColorAndRange upload_color_and_range(DenseImageRef rgb, const Image& range, cons
 // added to *upload_ms; an empty texture (id 0) for null or an empty image.
 gl::Texture upload_sky_weight(const Image* sky_weight, int w, int h, const char* what, double* upload_ms);
 
+// A pass's input textures bound to units 0, 1, ... in order (an id of 0
+// leaves its unit empty), unbound (the last unit first) when the pass ends.
+class BoundTextures {
+ public:
+  explicit BoundTextures(std::initializer_list<GLuint> ids);
+  ~BoundTextures();
+  BoundTextures(const BoundTextures&) = delete;
+  BoundTextures& operator=(const BoundTextures&) = delete;
+
+ private:
+  int count_;
+};
+
 // Reads `tex` (any float colour format) back as RGBA floats, w * h * 4.
 std::vector<float> read_rgba(GpuTexture tex);
 

@@ -171,6 +171,9 @@ BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, c
   keep_freed_heap();  // a frame after another: the next reuses the last one's buffers
   BatchFrameResult r;
   const auto t0 = std::chrono::steady_clock::now();
+  // The frame's warnings name it on stderr (frames in flight print side by
+  // side) and join its results line, failed or not.
+  const FrameWarnings warned(f.key);
   try {
     remove_stale_temporaries(f);
     // The frame's folders are made as its outputs are written, so that a
@@ -181,16 +184,7 @@ BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, c
     ctx.argv = argv;
     ctx.given = f.given;
     ctx.extra = {{"batch", f.batch}};
-    // Its warnings name the frame on stderr (frames in flight print side
-    // by side) and join its results line.
-    const FrameWarnings warned(f.key);
-    try {
-      def_of(f.effect).run(f.job, exec, ctx);
-    } catch (...) {
-      r.warnings = warned.texts();
-      throw;
-    }
-    r.warnings = warned.texts();
+    def_of(f.effect).run(f.job, exec, ctx);
     r.status = "ok";
   } catch (const std::exception& e) {
     r.status = "failed";
@@ -201,6 +195,7 @@ BatchFrameResult run_batch_frame(const BatchFrame& f, const ExecOptions& exec, c
     std::error_code ec;
     for (const std::string& o : f.outputs) fs::remove(o, ec);
   }
+  r.warnings = warned.texts();
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   r.line = result_line(f, r);
   return r;

@@ -192,11 +192,7 @@ StreakSplat GpuStreakSplatter::splat(const StreakSlabs& slabs, ConstImageView ra
     const gpu::Program& pr = g.program(kSplatPass);
     g.begin(target);
     glUseProgram(pr.id());
-    const GLuint textures[5] = {image.id(), rtex.id(), stex.id(), ftex.id(), ltex.id()};
-    for (int i = 0; i < 5; ++i) {
-      glActiveTexture(GL_TEXTURE0 + i);
-      glBindTexture(GL_TEXTURE_2D, textures[i]);
-    }
+    const gpu::BoundTextures bound{image.id(), rtex.id(), stex.id(), ftex.id(), ltex.id()};
     glUniform4f(pr.loc("uK"), static_cast<float>(cam.fx), static_cast<float>(cam.fy), static_cast<float>(cam.cx),
                 static_cast<float>(cam.cy));
     glUniform2i(pr.loc("uTile"), kStreakGpuTile, kStreakGpuTile);
@@ -205,10 +201,6 @@ StreakSplat GpuStreakSplatter::splat(const StreakSlabs& slabs, ConstImageView ra
     glUniform1i(pr.loc("uIndexWidth"), width);
     glUniform1f(pr.loc("uSoftness"), static_cast<float>(kRainDepthSoftness));
     GpuContext::Impl::draw();
-    for (int i = 4; i >= 0; --i) {
-      glActiveTexture(GL_TEXTURE0 + i);
-      glBindTexture(GL_TEXTURE_2D, 0);
-    }
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     gpu::check_gl("rain.splat");
     tm.splat_ms = timer.stop();

@@ -44,11 +44,7 @@ Image render_wet_gpu(GpuContext& ctx, const WetScene& s, const WetFilm& w, WetSt
     const gpu::Program& pr = g.program(kWetPass);
     g.begin(target);
     glUseProgram(pr.id());
-    const GLuint textures[3] = {in.image.id(), in.range.id(), masked ? mask.id() : 0u};
-    for (int i = 0; i < 3; ++i) {
-      glActiveTexture(GL_TEXTURE0 + i);
-      glBindTexture(GL_TEXTURE_2D, textures[i]);
-    }
+    const gpu::BoundTextures bound{in.image.id(), in.range.id(), masked ? mask.id() : 0u};
     glUniform1i(pr.loc("uMasked"), masked ? 1 : 0);
     glUniform4f(pr.loc("uK"), static_cast<float>(cam.k.fx), static_cast<float>(cam.k.fy), static_cast<float>(cam.k.cx),
                 static_cast<float>(cam.k.cy));
@@ -65,10 +61,6 @@ Image render_wet_gpu(GpuContext& ctx, const WetScene& s, const WetFilm& w, WetSt
     glUniform1i(pr.loc("uMaxSteps"), 4 * (W + H));
     glUniform1i(pr.loc("uMarch"), st.march == WetMarch::above_ground ? 1 : 0);
     GpuContext::Impl::draw();
-    for (int i = 2; i >= 0; --i) {
-      glActiveTexture(GL_TEXTURE0 + i);
-      glBindTexture(GL_TEXTURE_2D, 0);
-    }
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     gpu::check_gl("wet");
     timing.composite_ms = t.stop();
